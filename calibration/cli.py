@@ -1,0 +1,148 @@
+"""``soakcal calibrate`` and ``soakcal compensate`` (contract: ``shared/spec/cli.md``).
+
+The argparse wiring lives in ``service/cli.py``; these functions take its
+Namespace and return the exit status: 0 on success, 2 with one line on stderr
+for bad input, in which case no output file is written (every check runs
+before the single atomic write).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from calibration.errors import CalibrationError, RecordingError
+from calibration.model_file import load_model, save_model
+from calibration.recording import Recording, atomic_write_text, read_recording
+from calibration.temperature_conditioning import smooth_over_time
+from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalModel, fit_campaign
+
+OUTPUT_COLUMNS = ("cx", "cy", "cz")
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """Fit the SFEM-cubic model to ``args.recording`` and write ``args.output``."""
+    method = getattr(args, "method", None) or DEFAULT_METHOD
+    if method not in METHODS:
+        return _fail(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
+    try:
+        rec = read_recording(args.recording)
+        fit = fit_campaign(rec, method=method)
+    except RecordingError as exc:
+        return _fail(str(exc))
+    except CalibrationError as exc:
+        return _fail(f"{args.recording}: {exc}")
+    try:
+        save_model(args.output, fit.model)
+    except OSError as exc:
+        return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
+
+    from calibration import report  # matplotlib is only needed from here on
+
+    figures: list[Path] = []
+    report_dir = getattr(args, "report_dir", None)
+    if report_dir:
+        figures = report.write_figures(fit, rec, report_dir)
+    if getattr(args, "json", False):
+        doc = report.report_dict(fit)
+        doc["model_file"] = str(args.output)
+        doc["figures"] = [str(p) for p in figures]
+        print(json.dumps(doc, indent=2, allow_nan=False))
+    else:
+        print(report.format_table6(fit))
+        print(f"\nmodel written to {args.output}")
+        for p in figures:
+            print(f"figure: {p}")
+    return EXIT_OK
+
+
+def run_compensate(args: argparse.Namespace) -> int:
+    """Apply ``args.model`` to ``args.recording``; write every input column plus cx, cy, cz."""
+    try:
+        model = load_model(args.model)
+        rec = read_recording(args.recording)
+    except CalibrationError as exc:  # ModelFileError, RecordingError
+        return _fail(str(exc))
+    clash = [c for c in OUTPUT_COLUMNS if c in rec.header]
+    if clash:
+        return _fail(str(RecordingError(
+            rec.path, 1, clash[0], "the input already has this output column; "
+            "compensate would overwrite it")))
+    extrapolate = bool(getattr(args, "extrapolate", False))
+    try:
+        temp_c = _temperatures(model, rec, extrapolate, args)
+        cal = model.compensate(rec.raw_g, temp_c, extrapolate=True)
+    except CalibrationError as exc:
+        return _fail(str(exc))
+    try:
+        atomic_write_text(args.output, _output_csv(rec, cal))
+    except OSError as exc:
+        return _fail(f"{args.output}: cannot write ({exc.strerror or exc})")
+    print(f"compensated {len(rec)} rows with {model.model_version} ({model.mode} mode) "
+          f"-> {args.output}")
+    return EXIT_OK
+
+
+def _temperatures(
+    model: ThermalModel, rec: Recording, extrapolate: bool, args_smooth: object = None
+) -> np.ndarray:
+    """The model's temperature for each row; RecordingError for missing/out-of-range ones.
+
+    With ``--smooth-temperature-s S`` (optional attribute of the Namespace) the
+    temperature is first smoothed over S seconds (:func:`smooth_over_time`).
+    """
+    if not model.temperature_dependent:
+        return np.full(len(rec), np.nan)
+    if not rec.has_temperature:
+        raise RecordingError(
+            rec.path, None, "sensor_c",
+            "no temperature in the recording, but the model depends on temperature",
+        )
+    temp_c = rec.temperature_c()
+    smooth_s = getattr(args_smooth, "smooth_temperature_s", None) or 0.0
+    if smooth_s > 0:
+        temp_c = smooth_over_time(rec.t_s, temp_c, float(smooth_s))
+    if model.temperature_source in ("sensor_c", "chamber_c") and \
+            rec.temperature_source != model.temperature_source:
+        print(f"warning: the model was fitted on {model.temperature_source} but "
+              f"{rec.path} only has {rec.temperature_source}; offsets between the two "
+              f"channels go uncompensated", file=sys.stderr)
+    if not extrapolate:
+        i = model.first_out_of_range(temp_c)
+        if i is not None:
+            lo, hi = model.valid_c  # type: ignore[misc]
+            raise RecordingError(
+                rec.path, i + 2, rec.temperature_source,
+                f"temperature {temp_c[i]:.2f} °C is outside the model's valid range "
+                f"[{lo:.2f}, {hi:.2f}] °C (use --extrapolate to compensate anyway)",
+            )
+    return temp_c
+
+
+def _output_csv(rec: Recording, cal_g: np.ndarray) -> str:
+    """Input rows verbatim (raw cell text) plus cx, cy, cz."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(list(rec.header) + list(OUTPUT_COLUMNS))
+    cells = rec.cells
+    if cells is None:  # an in-memory recording: format its numbers
+        from calibration.recording import format_value
+
+        cells = [[format_value(rec.columns[h][i], h) for h in rec.header]
+                 for i in range(len(rec))]
+    for row, c in zip(cells, cal_g, strict=True):
+        w.writerow(list(row) + [f"{v:.10f}" for v in c])
+    return buf.getvalue()
+
+
+def _fail(message: str) -> int:
+    print(f"error: {' '.join(message.split())}", file=sys.stderr)
+    return EXIT_BAD_INPUT

@@ -1,0 +1,67 @@
+"""``soakcal diagnose`` (shared/spec/cli.md): ``run_diagnose(args) -> exit code``.
+
+``args`` carries: recording (path), model (path or None), json (bool),
+report_dir (path or None), seed (int), n_null (int). Bad input: one line on
+stderr, exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from calibration.errors import CalibrationError, RecordingError
+
+
+def run_diagnose(args: Any) -> int:
+    from calibration.discrepancy.diagnose import diagnose
+    from calibration.recording import read_recording
+
+    try:
+        rec = read_recording(args.recording)
+    except RecordingError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    model = None
+    model_path = getattr(args, "model", None)
+    if model_path:
+        try:
+            from calibration.model_file import load_model
+
+            model = load_model(model_path)
+        except (CalibrationError, OSError, ValueError) as exc:
+            print(f"{model_path}: {exc}", file=sys.stderr)
+            return 2
+    n_null = int(getattr(args, "n_null", 200) or 200)
+    if n_null < 10:
+        print(f"--n-null must be at least 10, got {n_null}", file=sys.stderr)
+        return 2
+    try:
+        diag = diagnose(rec, model, seed=int(getattr(args, "seed", 0) or 0), n_null=n_null)
+    except (CalibrationError, ValueError, np_linalg_error()) as exc:
+        print(f"{args.recording}: cannot diagnose: {exc}", file=sys.stderr)
+        return 2
+    if getattr(args, "json", False):
+        print(diag.to_json())
+    else:
+        print(diag.report())
+    report_dir = getattr(args, "report_dir", None)
+    if report_dir:
+        from calibration.discrepancy.report import write_diagnosis_figures
+
+        out = Path(report_dir)
+        write_diagnosis_figures(diag, out)
+        (out / "diagnosis.json").write_text(diag.to_json(), encoding="utf-8")
+        (out / "diagnosis.txt").write_text(diag.report() + "\n", encoding="utf-8")
+        if model_path:
+            from calibration.discrepancy.extensions import write_extended_model
+
+            write_extended_model(diag, model_path, str(out / "model_extended.json"))
+    return 0
+
+
+def np_linalg_error() -> type[Exception]:
+    import numpy as np
+
+    return np.linalg.LinAlgError

@@ -1,0 +1,515 @@
+"""``diagnose``: locate, explain, model and verify what the base model leaves out (issue 5).
+
+Forward selection (docs/diagnosis.md §5): at each stage every identifiable
+candidate effect is scored after projecting out the current model; the
+smallest multiplicity-adjusted p-value is compared with its parametric-
+bootstrap null (min over candidates → family-wise p). The winner is added
+only if it is significant at α *and* improves the held-out RMS (whole
+plateaus held out); then the rest are re-tested against a new null.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibration.discrepancy import stats
+from calibration.discrepancy.context import AXES
+from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, EffectModule
+from calibration.discrepancy.heldout import folds, heldout_rms_ug
+from calibration.discrepancy.locate import locate_residuals, where_of
+from calibration.discrepancy.problem import LinearProblem, build_problem
+from calibration.recording import Recording
+
+MAX_STAGES = 8
+EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
+BASE_MODEL = "sfem-cubic"
+
+
+@dataclass
+class Term:
+    """One accepted model term: an effect at a fixed nonlinear parameter."""
+
+    effect_id: str
+    theta: float
+    X: np.ndarray  # (m,k) unweighted columns in residual space (k=1 offset when fixed gain)
+    fixed_gain: bool
+    rows: tuple[int, ...] = ()  # outlier rows
+    Xn: np.ndarray | None = None  # free nuisance columns that come with a fixed-gain term
+
+
+@dataclass
+class Finding:
+    effect: str
+    axes: list[str]
+    where: dict[str, Any]
+    explanation: str
+    parameters: dict[str, float]
+    parameter_sd: dict[str, float]
+    rmse_before_ug: float
+    rmse_after_ug: float
+    heldout_rmse_before_ug: float
+    heldout_rmse_after_ug: float
+    p_value: float
+    test: str
+    confusers: list[dict[str, Any]] = field(default_factory=list)
+    theta: float = float("nan")
+    rows: list[int] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "effect": self.effect, "axes": self.axes, "where": self.where,
+            "explanation": self.explanation, "parameters": self.parameters,
+            "parameter_sd": self.parameter_sd,
+            "rmse_before_ug": _r(self.rmse_before_ug), "rmse_after_ug": _r(self.rmse_after_ug),
+            "heldout_rmse_before_ug": _r(self.heldout_rmse_before_ug),
+            "heldout_rmse_after_ug": _r(self.heldout_rmse_after_ug),
+            "evidence": {"test": self.test, "p_value": float(f"{self.p_value:.3g}")},
+            "confusers": self.confusers,
+        }
+
+
+@dataclass
+class Diagnosis:
+    recording: str
+    mode: str
+    rmse_ug: float
+    noise_ug: float
+    noise_source: str
+    findings: list[Finding]
+    not_identifiable: list[dict[str, str]]
+    located: dict[str, Any]
+    heldout_scheme: str
+    n_null: int
+    alpha: float
+    notes: list[str]
+    final_rmse_ug: float
+    residuals_before_ug: np.ndarray  # (N,3) or (N,1)
+    residuals_after_ug: np.ndarray
+    t_s: np.ndarray
+    steps: np.ndarray
+    positions: np.ndarray
+    stage_log: list[dict[str, Any]] = field(default_factory=list)
+    unexplained: dict[str, Any] = field(default_factory=dict)
+    problem: LinearProblem | None = field(default=None, repr=False)  # for model extensions
+
+    @property
+    def mismatch(self) -> bool:
+        """A named finding, or residuals well above the recorded noise that nothing names."""
+        return bool(self.findings) or bool(self.unexplained.get("significant", False))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "recording": self.recording,
+            "baseline": {"model": BASE_MODEL, "rmse_ug": _r(self.rmse_ug),
+                         "noise_ug": _r(self.noise_ug), "mode": self.mode,
+                         "noise_source": self.noise_source},
+            "mismatch": self.mismatch,
+            "findings": [f.to_json() for f in self.findings],
+            "not_identifiable": self.not_identifiable,
+            "final_rmse_ug": _r(self.final_rmse_ug),
+            "heldout": self.heldout_scheme,
+            "null": {"method": "parametric bootstrap of the fitted model", "n_null": self.n_null,
+                     "alpha": self.alpha},
+            "unexplained": self.unexplained,
+            "located": self.located,
+            "notes": self.notes,
+        }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        return json.dumps(self.to_dict(), indent=indent, ensure_ascii=False)
+
+    def report(self) -> str:
+        from calibration.discrepancy.report import text_report
+        return text_report(self)
+
+
+def _r(v: float) -> float:
+    return float(round(float(v), 2))
+
+
+# --- the pipeline ------------------------------------------------------------
+def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0,
+             n_null: int = 200, alpha: float = 0.01,
+             effects: tuple[EffectModule, ...] = ALL_EFFECTS) -> Diagnosis:
+    """Diagnose ``recording`` against the base model (docs/diagnosis.md).
+
+    ``model`` (a ThermalModel) is accepted for the contract; the statistics
+    always refit the base on the recording, because the effects must be tested
+    after projecting out everything the base could absorb.
+    """
+    notes: list[str] = []
+    given_rmse = _given_model_rmse_ug(model, recording, notes)
+    pb = build_problem(recording)
+    ctx = pb.ctx
+    rng = np.random.default_rng(seed)
+    fold_masks, scheme = folds(ctx)
+    if not pb.noise_from_sd:
+        notes.append("no sd_* columns: noise estimated from the residuals (MAD)")
+    if ctx.temperature_source == "none":
+        notes.append("no temperature recorded: one plateau, base model has no temperature terms")
+
+    # Protocol-level identifiability first; the absorbed fraction is checked per stage.
+    live: list[EffectModule] = []
+    not_ident: dict[str, dict[str, str]] = {}
+    for eff in effects:
+        ok, why, exp = eff.identifiable(ctx)
+        if ok:
+            live.append(eff)
+        else:
+            not_ident[eff.effect_id] = {"effect": eff.effect_id, "why": why, "experiment": exp}
+
+    raw_cache: dict[tuple[str, float], np.ndarray] = {}
+
+    def lifted(eff: EffectModule, theta: float) -> np.ndarray:
+        key = (eff.effect_id, theta)
+        if key not in raw_cache:
+            raw_cache[key] = pb.lift(eff.regressors(ctx, theta))
+        return raw_cache[key]
+
+    terms: list[Term] = []
+    findings: list[Finding] = []
+    rejected: set[str] = set()
+    stage_log: list[dict[str, Any]] = []
+    base_res = _residual(pb, [])
+    prev_tests: dict[str, stats.CandidateTest] = {}
+    for _stage in range(MAX_STAGES):
+        Xw, yw = _design(pb, terms)
+        U = stats.orthonormal_basis(Xw)
+        e = yw - U @ (U.T @ yw)
+        dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
+        s = float(stats.robust_scale(e[:, None], dof)[0])
+        E = rng.standard_normal((pb.m, n_null))
+        E -= U @ (U.T @ E)
+        s_null = stats.robust_scale(E, dof)
+        tests = _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident)
+        if not tests:
+            break
+        pmin_null = np.min(np.vstack([t.p_adj_null for t in tests.values()]), axis=0)
+        best = min(tests.values(), key=lambda t: t.p_adj)
+        count = int(np.sum(pmin_null <= best.p_adj))
+        p_family = (1 + count) / (n_null + 1)
+        if count == 0:  # beyond the bootstrap's resolution: Bonferroni over the families
+            p_family = min(p_family, float(best.p_adj) * len(tests))
+        stage_log.append({"best": best.effect_id, "p_family": p_family,
+                          "p_adj": {k: float(t.p_adj) for k, t in tests.items()}})
+        for k in prev_tests:  # confuser p after the last accepted term
+            if findings and k in tests:
+                for c in findings[-1].confusers:
+                    if c["effect"] == k:
+                        c["p_after"] = float(f"{tests[k].p_adj:.3g}")
+        if p_family > alpha:
+            break
+        eff = BY_ID[best.effect_id]
+        term = _make_term(pb, eff, best, lifted)
+        excl_before = _flagged(pb, terms)
+        excl_after = _flagged(pb, terms + [term])
+        X_before, y_before = _design(pb, terms, whiten=False)
+        X_after, y_after = _design(pb, terms + [term], whiten=False)
+        # Flagged readings leave the data: "after" is judged without them (docs §6).
+        ho_before = heldout_rms_ug(y_before, X_before, pb.w, pb.row, fold_masks, excl_before)
+        ho_after = heldout_rms_ug(y_after, X_after, pb.w, pb.row, fold_masks, excl_after)
+        if not ho_after < ho_before:
+            rejected.add(eff.effect_id)
+            stage_log[-1]["rejected_heldout"] = [ho_before, ho_after]
+            continue
+        res_before = _residual(pb, terms)
+        terms.append(term)
+        res_after = _residual(pb, terms)
+        findings.append(_finding(pb, eff, best, term, terms, tests, p_family,
+                                 _rms(res_before, excl_before), _rms(res_after, excl_after),
+                                 ho_before, ho_after))
+        prev_tests = tests
+    findings = _merge_outliers(findings)
+    final_res = _residual(pb, terms)
+    flagged = _flagged(pb, terms)
+    n = ctx.n
+    shape = (n, 3) if pb.mode == "reference" else (n, 1)
+    noise = float(np.sqrt(np.mean((1.0 / pb.w) ** 2)) * 1e6)
+    if not pb.noise_from_sd:
+        noise = float(stats.robust_scale((base_res * pb.w)[:, None], 1.0)[0]
+                      * np.sqrt(np.mean((1.0 / pb.w) ** 2)) * 1e6)
+    unexplained = _excess_test(pb, final_res, flagged, terms, alpha)
+    base_rmse = _rms(base_res, np.zeros(n, bool)) if given_rmse is None else given_rmse
+    return Diagnosis(
+        unexplained=unexplained,
+        recording=str(recording.path), mode=pb.mode,
+        rmse_ug=base_rmse, noise_ug=noise,
+        noise_source="sd/sqrt(n)" if pb.noise_from_sd else "residual MAD",
+        findings=findings, not_identifiable=list(not_ident.values()),
+        located=locate_residuals(pb, base_res, final_res, flagged), heldout_scheme=scheme,
+        n_null=n_null, alpha=alpha, notes=notes, final_rmse_ug=_rms(final_res, flagged),
+        residuals_before_ug=(base_res * 1e6).reshape(shape),
+        residuals_after_ug=(final_res * 1e6).reshape(shape),
+        t_s=ctx.t_s, steps=ctx.steps, positions=ctx.positions, stage_log=stage_log, problem=pb,
+    )
+
+
+def _given_model_rmse_ug(model: object | None, rec: Recording, notes: list[str]) -> float | None:
+    """Residual RMS of a given model on this recording (the baseline the user asked about).
+
+    The statistics still refit the base: effects must be tested after projecting
+    out everything the base model could absorb, whatever model was given.
+    """
+    if model is None or not hasattr(model, "compensate"):
+        return None
+    T = rec.temperature_c() if rec.has_temperature else np.full(len(rec), np.nan)
+    try:
+        cal = model.compensate(rec.raw_g, T, extrapolate=True)  # type: ignore[attr-defined]
+    except TypeError:
+        cal = model.compensate(rec.raw_g, T)  # type: ignore[attr-defined]
+    ref = rec.ref_g
+    res = cal - ref if ref is not None else np.linalg.norm(cal, axis=1) - 1.0
+    notes.append("baseline RMS is the given model's; the tests refit the base model so that "
+                 "effects are tested after projecting out all it can absorb")
+    return float(np.sqrt(np.mean(res**2)) * 1e6)
+
+
+def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
+                 terms: list[Term], alpha: float) -> dict[str, Any]:
+    """χ² of the final residual against the recorded noise sd/√n (only when sd is recorded).
+
+    Significant only if p < α *and* χ²/dof > :data:`EXCESS_CHI2_RED`: sd/√n of real
+    averages is often optimistic by a few tens of %, which is not physics.
+    """
+    if not pb.noise_from_sd:
+        return {"test": "not run: no sd_* columns, noise estimated from the residuals"}
+    from scipy.stats import chi2
+
+    z = (res_g * pb.w)[~flagged[pb.row]]
+    Xw, _ = _design(pb, terms)
+    dof = max(z.size - Xw.shape[1], 1)
+    c2 = float(z @ z)
+    p = float(chi2.sf(c2, dof))
+    red = c2 / dof
+    return {"test": "chi-square of the residuals against sd/sqrt(n)", "chi2_per_dof":
+            round(red, 3), "dof": dof, "p_value": float(f"{p:.3g}"),
+            "significant": bool(p < alpha and red > EXCESS_CHI2_RED),
+            "rms_over_noise": round(float(np.sqrt(red)), 3)}
+
+
+def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident):
+    tests: dict[str, stats.CandidateTest] = {}
+    chosen = {t.effect_id for t in terms if t.effect_id != "outlier"}
+    for eff in live:
+        if eff.effect_id in chosen or eff.effect_id in rejected:
+            continue
+        if eff.effect_id == "outlier":
+            skip = {r for t in terms for r in t.rows}
+            t_row, tn, g = stats.row_stats(U, e, E, pb.row, pb.ctx.n, s, s_null, skip)
+            i = int(np.argmax(t_row))
+            mult = pb.ctx.n - len(skip)
+            p = float(stats.chi2_sf(t_row[i], g))
+            tests["outlier"] = stats.CandidateTest(
+                "outlier", p, mult, float(stats.sidak(p, mult)),
+                stats.sidak(stats.chi2_sf(tn, g), mult), float(i), 0.0, float(t_row[i]))
+            continue
+        grid = eff.grid(pb.ctx)
+        best_t, best_theta, k_best, absorbed_min = -np.inf, float("nan"), 1, 1.0
+        profile: dict[float, float] = {}
+        null_max = np.full(E.shape[1], -np.inf)
+        null_p = np.ones(E.shape[1])
+        usable = 0
+        for theta in grid:
+            Xw = pb.whiten(lifted(eff, theta))
+            if Xw.shape[1] == 0 or not np.any(Xw):
+                continue
+            if eff.fixed_gain:
+                Nw = pb.whiten(pb.lift(eff.nuisance(pb.ctx, theta)))
+                t, tn, absorbed = stats.fixed_gain_stats(U, Xw[:, 0], Nw, e, E, s, s_null)
+                k = 1 + Nw.shape[1]
+            else:
+                t, tn, k, absorbed = stats.linear_stats(U, Xw, e, E, s, s_null)
+            absorbed_min = min(absorbed_min, absorbed)
+            if k == 0 or absorbed > stats.ABSORBED_MAX:
+                continue
+            usable += 1
+            profile[theta] = t
+            null_p = np.minimum(null_p, stats.chi2_sf(tn, k))
+            null_max = np.maximum(null_max, tn)
+            if t > best_t:
+                best_t, best_theta, k_best = t, theta, k
+        if usable == 0:
+            if not terms and eff.effect_id not in not_ident:
+                not_ident[eff.effect_id] = {
+                    "effect": eff.effect_id,
+                    "why": (f"the base model absorbs {100 * absorbed_min:.1f} % of it in this "
+                            "protocol"),
+                    "experiment": eff.experiment}
+            continue
+        p = float(np.min([stats.chi2_sf(v, k_best) for v in profile.values()])) \
+            if profile else 1.0
+        p = float(stats.chi2_sf(best_t, k_best))
+        tests[eff.effect_id] = stats.CandidateTest(
+            eff.effect_id, p, usable, float(stats.sidak(p, usable)),
+            stats.sidak(null_p, usable), best_theta, absorbed_min, float(best_t), profile)
+    return tests
+
+
+def _make_term(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, lifted) -> Term:
+    if eff.effect_id == "outlier":
+        i = int(test.theta)
+        X = pb.lift(eff.regressors(pb.ctx, float(i)))
+        return Term("outlier", float(i), X, False, (i,))
+    Xn = pb.lift(eff.nuisance(pb.ctx, test.theta)) if eff.fixed_gain else None
+    return Term(eff.effect_id, test.theta, lifted(eff, test.theta), eff.fixed_gain, (), Xn)
+
+
+def _design(pb: LinearProblem, terms: list[Term], whiten: bool = True):
+    cols = [pb.X0]
+    for t in terms:
+        cols.append(t.Xn if t.fixed_gain and t.Xn is not None else t.X)
+    X = np.hstack(cols)
+    y = pb.y.copy()
+    for t in terms:
+        if t.fixed_gain:
+            y = y - t.X[:, 0]
+    if whiten:
+        return X * pb.w[:, None], y * pb.w
+    return X, y
+
+
+def _fit(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """WLS of the current model: coefficients, covariance (× reduced χ²), residual (g)."""
+    Xw, yw = _design(pb, terms)
+    G = Xw.T @ Xw
+    Ginv = np.linalg.pinv(G, rcond=1e-12, hermitian=True)
+    beta = Ginv @ (Xw.T @ yw)
+    r = yw - Xw @ beta
+    dof = max(pb.m - int(round(np.trace(Ginv @ G))), 1)
+    chi2_red = float(r @ r) / dof
+    cov = Ginv * chi2_red
+    return beta, cov, r / pb.w
+
+
+def _residual(pb: LinearProblem, terms: list[Term]) -> np.ndarray:
+    return _fit(pb, terms)[2]
+
+
+def _flagged(pb: LinearProblem, terms: list[Term]) -> np.ndarray:
+    m = np.zeros(pb.ctx.n, bool)
+    for t in terms:
+        m[list(t.rows)] = True
+    return m
+
+
+def _rms(res_g: np.ndarray, flagged_rows: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(res_g**2)) * 1e6) if res_g.size else 0.0
+
+
+def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a) -> Finding:
+    beta, cov, _ = _fit(pb, terms)
+    p0 = pb.X0.shape[1]
+    offset = p0
+    for t in terms:
+        if t is term:
+            break
+        offset += t.Xn.shape[1] if (t.fixed_gain and t.Xn is not None) else t.X.shape[1]
+    if term.fixed_gain:
+        coef = np.array([1.0])
+        se = np.array([_profile_sd(test)])
+        contrib = term.X[:, 0]
+    else:
+        k = term.X.shape[1]
+        coef = beta[offset:offset + k]
+        se = np.sqrt(np.clip(np.diag(cov)[offset:offset + k], 0, None))
+        contrib = term.X @ coef
+    params, sd = eff.parameters(coef, se, term.theta, pb.ctx)
+    axes = eff.axes(coef, se)
+    if pb.mode == "norm" and eff.effect_id == "outlier":
+        axes = ["norm"]  # a |g| residual has no axis
+    conf = []
+    for c in eff.confusers:
+        if c in tests:
+            conf.append({"effect": c, "p_before": float(f"{tests[c].p_adj:.3g}"),
+                         "p_after": None, "how_told_apart": _told_apart(eff.effect_id, c)})
+    test_name = "score test after projecting out the model, min-p over candidates " \
+        "(parametric bootstrap)"
+    if eff.effect_id == "outlier":
+        test_name = "leave-one-reading-out statistic, max over readings, min-p over candidates"
+    elif eff.fixed_gain:
+        test_name = ("profile likelihood over τ with gain locked to ∂output/∂T, "
+                     "min-p over candidates")
+    return Finding(
+        effect=eff.effect_id, axes=axes, where=where_of(pb, contrib, term.rows),
+        explanation=_sentence(eff, params, sd, axes), parameters=_round(params),
+        parameter_sd=_round(sd), rmse_before_ug=rms_b, rmse_after_ug=rms_a,
+        heldout_rmse_before_ug=ho_b, heldout_rmse_after_ug=ho_a, p_value=p_family,
+        test=test_name, confusers=conf, theta=term.theta, rows=list(term.rows),
+    )
+
+
+def _sentence(eff: EffectModule, params, sd, axes) -> str:
+    text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES))
+    return text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")
+
+
+def _round(d: dict[str, float]) -> dict[str, float]:
+    return {k: float(f"{v:.4g}") if np.isfinite(v) else None for k, v in d.items()}
+
+
+def _profile_sd(test: stats.CandidateTest) -> float:
+    """Half-width of the Δstat ≤ 1 region of the profile over θ (grid resolution)."""
+    if not test.profile:
+        return float("nan")
+    top = max(test.profile.values())
+    inside = [th for th, v in test.profile.items() if v >= top - 1.0]
+    return float((max(inside) - min(inside)) / 2.0) if len(inside) > 1 else float("nan")
+
+
+TOLD_APART = {
+    frozenset({"thermal_lag", "thermal_hysteresis"}):
+        "a lag decays with time since the step, hysteresis persists through the plateau",
+    frozenset({"thermal_lag", "bias_drift"}):
+        "a lag follows each step and decays; drift grows with elapsed time",
+    frozenset({"thermal_hysteresis", "bias_drift"}):
+        ("hysteresis flips with heating/cooling at revisited temperatures; "
+         "drift is monotonic in time"),
+    frozenset({"thermal_lag", "temperature_rate"}):
+        "a lag's gain is locked to the model's ∂output/∂T; a rate effect has free gains",
+    frozenset({"scale_nonlinearity", "cross_coupling"}):
+        "own-axis a², a³ versus products of two axes' inputs",
+    frozenset({"session_offset", "thermal_hysteresis"}):
+        "a session jump happens once; hysteresis flips with each change of direction",
+    frozenset({"session_offset", "bias_drift"}):
+        "a session offset is a step in time; drift is a ramp",
+}
+
+
+def _told_apart(a: str, b: str) -> str:
+    return TOLD_APART.get(frozenset({a, b}), "compared by their p-values after projection")
+
+
+def _merge_outliers(findings: list[Finding]) -> list[Finding]:
+    """All flagged readings become one ``outlier`` finding, at the place of the first."""
+    outs = [f for f in findings if f.effect == "outlier"]
+    if len(outs) <= 1:
+        return findings
+    first = outs[0]
+    rows = [r for f in outs for r in f.rows]
+    steps = sorted({s for f in outs for s in f.where["steps"]})
+    pos = sorted({p for f in outs for p in f.where["positions"]})
+    t_lo = min(f.where["time_s"][0] for f in outs)
+    t_hi = max(f.where["time_s"][1] for f in outs)
+    merged = Finding(
+        effect="outlier", axes=sorted({a for f in outs for a in f.axes}),
+        where={"steps": steps, "positions": pos, "time_s": [t_lo, t_hi], "rows": rows},
+        explanation=first.explanation.replace("1 reading(s)", f"{len(rows)} reading(s)", 1),
+        parameters={**first.parameters, "n_rows": float(len(rows))},
+        parameter_sd=first.parameter_sd, rmse_before_ug=first.rmse_before_ug,
+        rmse_after_ug=outs[-1].rmse_after_ug,
+        heldout_rmse_before_ug=first.heldout_rmse_before_ug,
+        heldout_rmse_after_ug=outs[-1].heldout_rmse_after_ug,
+        p_value=first.p_value, test=first.test, confusers=first.confusers, rows=rows)
+    out, placed = [], False
+    for f in findings:
+        if f.effect == "outlier":
+            if not placed:
+                out.append(merged)
+                placed = True
+            continue
+        out.append(f)
+    return out

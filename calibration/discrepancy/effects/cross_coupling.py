@@ -1,0 +1,62 @@
+"""``cross_coupling``: products of two axes' inputs, one coefficient per axis pair (effects.md).
+
+``raw_x += k_xy a_x a_y + k_xz a_x a_z`` and likewise (each pair couples into
+both of its axes, as ``simulators/effects.py`` models it). Axis-aligned
+positions make every product zero: not identifiable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration.discrepancy.context import DesignContext
+from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm
+
+PAIRS = (("xy", 0, 1), ("xz", 0, 2), ("yz", 1, 2))
+
+
+@dataclass(frozen=True)
+class CrossCoupling(EffectModule):
+    effect_id: str = "cross_coupling"
+    confusers: tuple[str, ...] = ("scale_nonlinearity", "turntable_geometry")
+    experiment: str = ("add oblique positions where two axes see gravity at once "
+                       "(45° between axes, e.g. table1 or cube14)")
+
+    def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
+        a = ctx.input_g
+        out = np.zeros((ctx.n, 3, 3))
+        for k, (_, i, j) in enumerate(PAIRS):
+            prod = a[:, i] * a[:, j]
+            out[:, i, k] = prod
+            out[:, j, k] = prod
+        return out
+
+    def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
+        a = ctx.input_g
+        top = max(float(np.max(np.abs(a[:, i] * a[:, j]))) for _, i, j in PAIRS)
+        if top < 0.05:
+            return (False, "axis-aligned positions only: every product of two axes' inputs is "
+                    "zero", self.experiment)
+        return True, "", self.experiment
+
+    def parameters(self, coef, se, theta, ctx):
+        p = {f"k_{name}_ug_per_g2": float(coef[k] * UG) for k, (name, _, _) in enumerate(PAIRS)}
+        s = {f"k_{name}_ug_per_g2": float(se[k] * UG) for k, (name, _, _) in enumerate(PAIRS)}
+        return p, s
+
+    def axes(self, coef, se):
+        z = np.abs(coef / np.where(se > 0, se, np.inf))
+        hit: set[str] = set()
+        for k, (name, _, _) in enumerate(PAIRS):
+            if z[k] >= 3.0:
+                hit.update(name)
+        return sorted(hit) or list(PAIRS[int(np.argmax(z))][0])
+
+    def sentence(self, params, sd, axes):
+        names = sorted(params, key=lambda k: -abs(params[k]) / max(sd[k], 1e-12))
+        top = names[0]
+        pair = top.split("_")[1]
+        return (f"the {pair[0]} and {pair[1]} outputs pick up the product of their two inputs: "
+                f"K_{pair} = {fmt_pm(params[top], sd[top], 'µg/g²')}")

@@ -1,0 +1,55 @@
+"""``session_offset``: a constant bias jump per power session (effects.md).
+
+With a ``session`` column the sessions are known; otherwise the jump is
+profiled over the plateau boundary where it occurred (one power cycle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration.discrepancy.context import DesignContext
+from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
+
+
+@dataclass(frozen=True)
+class SessionOffset(EffectModule):
+    effect_id: str = "session_offset"
+    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift")
+    experiment: str = ("power-cycle the sensor at one plateau and take the same positions "
+                       "before and after the cycle")
+
+    def grid(self, ctx: DesignContext) -> list[float]:
+        if ctx.session is not None:
+            return [float("nan")]
+        return [float(s) for s in ctx.step_ids[1:]]
+
+    def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
+        if ctx.session is not None:
+            first = ctx.session[0]
+            levels = [s for s in np.unique(ctx.session) if s != first]
+            cols = [per_axis(ctx, (ctx.session == s).astype(float)) for s in levels]
+            return np.concatenate(cols, axis=2) if cols else np.zeros((ctx.n, 3, 0))
+        return per_axis(ctx, (ctx.steps >= theta).astype(float))
+
+    def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
+        if ctx.session is not None and len(np.unique(ctx.session)) < 2:
+            return False, "one continuous power session", self.experiment
+        if ctx.session is None and len(ctx.step_ids) < 3:
+            return False, "fewer than three plateaus: a jump is a temperature term", \
+                self.experiment
+        return True, "", self.experiment
+
+    def parameters(self, coef, se, theta, ctx):
+        p, s = axis_params("offset", "ug", coef[:3], se[:3], UG)
+        if np.isfinite(theta):
+            p["from_step"], s["from_step"] = float(theta), 0.0
+        return p, s
+
+    def sentence(self, params, sd, axes):
+        parts = [fmt_pm(params[f"offset_{a}_ug"], sd[f"offset_{a}_ug"], "µg") for a in axes]
+        where = f" from step {int(params['from_step'])} on" if "from_step" in params else ""
+        return (f"{'/'.join(axes)} bias jumps by {', '.join(parts)}{where} and stays there, as "
+                "after a power cycle")

@@ -1,0 +1,42 @@
+"""``temperature_rate``: output ∝ dT/dt with free per-axis gains (effects.md).
+
+Regressor: the within-plateau slope of the recorded temperature (°C/min) on
+each axis. A soak measures at dT/dt ≈ 0, so it is usually not identifiable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration.discrepancy.context import DesignContext
+from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
+
+MIN_RATE_C_PER_MIN = 0.02
+
+
+@dataclass(frozen=True)
+class TemperatureRate(EffectModule):
+    effect_id: str = "temperature_rate"
+    confusers: tuple[str, ...] = ("thermal_lag",)
+    experiment: str = ("record positions during slow ramps in both directions (e.g. ±0.5 °C/min) "
+                       "with sensor_c as the temperature")
+
+    def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
+        return per_axis(ctx, ctx.rate_c_per_min)
+
+    def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
+        top = float(np.max(np.abs(ctx.rate_c_per_min))) if ctx.n else 0.0
+        if top < MIN_RATE_C_PER_MIN:
+            return (False, f"readings are taken at dT/dt ≈ 0 (largest plateau slope "
+                    f"{top:.3f} °C/min)", self.experiment)
+        return True, "", self.experiment
+
+    def parameters(self, coef, se, theta, ctx):
+        return axis_params("k_rate", "ug_per_c_per_min", coef, se, UG)
+
+    def sentence(self, params, sd, axes):
+        parts = [fmt_pm(params[f"k_rate_{a}_ug_per_c_per_min"],
+                        sd[f"k_rate_{a}_ug_per_c_per_min"], "µg per °C/min") for a in axes]
+        return f"{'/'.join(axes)} output follows the rate of temperature change: {', '.join(parts)}"

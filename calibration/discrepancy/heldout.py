@@ -1,0 +1,51 @@
+"""Held-out residual RMS by whole plateaus (never single rows): docs/diagnosis.md §6.
+
+Folds are the interior temperature steps (leave-one-step-out; the end steps
+are never held out because a cubic does not extrapolate and that would test
+the polynomial, not the effect). A recording with one plateau is split into
+contiguous time intervals (leave-one-interval-out) and says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calibration.discrepancy.context import DesignContext
+
+N_INTERVALS = 5
+
+
+def folds(ctx: DesignContext) -> tuple[list[np.ndarray], str]:
+    """Row masks of the held-out folds and a description of the scheme."""
+    ids = ctx.step_ids
+    if len(ids) >= 4:
+        return [ctx.steps == s for s in ids[1:-1]], "leave-one-step-out (interior steps)"
+    order = np.argsort(ctx.t_s, kind="stable")
+    blocks = np.array_split(order, N_INTERVALS)
+    out = []
+    for b in blocks:
+        m = np.zeros(ctx.n, bool)
+        m[b] = True
+        out.append(m)
+    return out, f"leave-one-interval-out ({N_INTERVALS} contiguous time intervals)"
+
+
+def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
+                   fold_masks: list[np.ndarray], exclude_rows: np.ndarray) -> float:
+    """RMS (µg) of held-out prediction errors, fitting weighted LS on the other folds."""
+    sq, cnt = 0.0, 0
+    Xw, yw = X * w[:, None], y * w
+    G, h = Xw.T @ Xw, Xw.T @ yw
+    for m in fold_masks:
+        test = m[row] & ~exclude_rows[row]
+        hold = m[row]
+        if not test.any() or hold.all():
+            continue
+        # Normal equations with the fold removed: small (p×p), far faster than lstsq per fold.
+        Gt = G - Xw[hold].T @ Xw[hold]
+        ht = h - Xw[hold].T @ yw[hold]
+        beta = np.linalg.pinv(Gt, rcond=1e-12, hermitian=True) @ ht
+        err = y[test] - X[test] @ beta
+        sq += float(err @ err)
+        cnt += int(test.sum())
+    return float(np.sqrt(sq / max(cnt, 1)) * 1e6)

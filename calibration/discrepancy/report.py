@@ -1,0 +1,99 @@
+"""Readable text report and figures of a :class:`~calibration.discrepancy.Diagnosis`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def text_report(diag: Any) -> str:
+    lines = [f"Mismatch diagnosis of {diag.recording} ({diag.mode} mode)",
+             f"  base model sfem-cubic: residual RMS {diag.rmse_ug:.1f} µg, "
+             f"noise {diag.noise_ug:.1f} µg ({diag.noise_source})",
+             f"  null: parametric bootstrap, {diag.n_null} replicates, "
+             f"family-wise α = {diag.alpha}",
+             f"  held out: {diag.heldout_scheme}"]
+    un = diag.unexplained
+    if not diag.findings and not un.get("significant"):
+        lines.append("  No mismatch: the residuals are consistent with noise.")
+    if un.get("significant"):
+        lines.append(f"  Unexplained excess: residuals are {un['rms_over_noise']:.1f}× "
+                     "the recorded "
+                     f"noise (χ²/dof {un['chi2_per_dof']:.2f}, p = {un['p_value']:.2g}) and no "
+                     "catalogue effect is significant at α")
+    for k, f in enumerate(diag.findings, 1):
+        w = f.where
+        lines += [
+            f"{k}. {f.effect} ({', '.join(f.axes)}), p = {f.p_value:.2g}",
+            f"   {f.explanation}",
+            f"   where: steps {w.get('steps')}, positions {w.get('positions')}, "
+            f"t = {w['time_s'][0]:.0f}–{w['time_s'][1]:.0f} s",
+            f"   RMS {f.rmse_before_ug:.1f} → {f.rmse_after_ug:.1f} µg; held out "
+            f"{f.heldout_rmse_before_ug:.1f} → {f.heldout_rmse_after_ug:.1f} µg",
+        ]
+        for c in f.confusers:
+            after = c.get("p_after")
+            lines.append(f"   told apart from {c['effect']} (p {c['p_before']:.2g}"
+                         + (f" → {after:.2g} after this term" if after is not None else "")
+                         + f"): {c['how_told_apart']}")
+    if diag.not_identifiable:
+        lines.append("Not identifiable in this recording:")
+        for n in diag.not_identifiable:
+            lines.append(f"  - {n['effect']}: {n['why']}. Experiment: {n['experiment']}.")
+    for note in diag.notes:
+        lines.append(f"Note: {note}")
+    return "\n".join(lines)
+
+
+def write_diagnosis_figures(diag: Any, out_dir: str | Path) -> list[Path]:
+    """Residuals by step, by position and over time, before and after; found regions shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    before, after = diag.residuals_before_ug, diag.residuals_after_ug
+    labels = ["x", "y", "z"] if before.shape[1] == 3 else ["|g|"]
+    paths = []
+    fig, axs = plt.subplots(len(labels), 1, figsize=(10, 2.4 * len(labels)), sharex=True,
+                            squeeze=False)
+    for a, lab in enumerate(labels):
+        ax = axs[a, 0]
+        ax.plot(diag.t_s / 3600, before[:, a], ".", ms=3, label="base model")
+        ax.plot(diag.t_s / 3600, after[:, a], ".", ms=3, label="with findings")
+        for f in diag.findings:
+            lo, hi = f.where["time_s"]
+            ax.axvspan(lo / 3600, hi / 3600, alpha=0.08, color="C3")
+        ax.set_ylabel(f"{lab} residual, µg")
+    axs[0, 0].legend(loc="upper right", fontsize=8)
+    axs[-1, 0].set_xlabel("elapsed time, h")
+    fig.suptitle("Residuals over time (shaded: where findings act)")
+    fig.tight_layout()
+    p = out / "residuals_time.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    paths.append(p)
+    for key, name in ((diag.steps, "step"), (diag.positions, "position")):
+        fig, ax = plt.subplots(figsize=(10, 3))
+        ids = np.unique(key)
+        rb = [np.sqrt(np.mean(before[key == k] ** 2)) for k in ids]
+        ra = [np.sqrt(np.mean(after[key == k] ** 2)) for k in ids]
+        ax.bar(ids - 0.2, rb, 0.4, label="base model")
+        ax.bar(ids + 0.2, ra, 0.4, label="with findings")
+        ax.axhline(diag.noise_ug, color="k", lw=0.8, ls="--", label="noise")
+        hot = {k for f in diag.findings for k in f.where.get(name + "s", [])}
+        for k in hot:
+            ax.axvspan(k - 0.5, k + 0.5, alpha=0.08, color="C3")
+        ax.set_xlabel(name)
+        ax.set_ylabel("RMS residual, µg")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        p = out / f"residuals_by_{name}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    return paths

@@ -1,0 +1,426 @@
+"""Levenberg–Marquardt fits of the SFEM (Eq. 1) at one temperature (Eq. 4–7).
+
+Two modes:
+
+* **reference mode** -- each reading has a reference specific force ``ref_g``
+  (turntable orientation known): residual ``A(U − b) − ref`` per axis. All 12
+  parameters are identifiable with a rich enough schedule. Start: closed-form
+  linear least squares ``ref = A·U + c``, decomposed by :func:`sfem.from_matrix`.
+* **norm mode** -- only |g| is known (hand-placed or unknown orientation):
+  residual ``|A(U − b)| − g`` (Eq. 3). The misalignment rotation M cannot be
+  seen by a norm, so only b, S and C (9 parameters) are fitted; M is reported
+  as not identifiable. Start: linear ellipsoid fit.
+
+``scipy.optimize.least_squares(method="lm")`` with the analytic Jacobian of
+:func:`sfem.forward_jacobian` implements Eq. 7 (Levenberg–Marquardt with the
+diagonal scaling), weights W = 1/σ² from ``sd_*``/√n when available.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from calibration import sfem
+from calibration.errors import NotIdentifiable
+
+NORM_FREE = np.array([True] * 9 + [False] * 3)  # M is invisible to |g|
+
+
+@dataclass
+class FitResult:
+    """Everything one SFEM fit produced (like scipy's OptimizeResult, but named)."""
+
+    mode: str  # "reference" | "norm"
+    params: sfem.SfemParams
+    covariance: np.ndarray  # (12,12), scaled by reduced chi²; NaN rows/cols where not identifiable
+    identifiable: np.ndarray  # (12,) bool
+    residuals_g: np.ndarray  # reference: (N,3) calibrated − ref; norm: (N,) |cal| − g
+    rmse_norm_ug: float  # Eq. 9 after calibration, µg
+    rmse_norm_before_ug: float  # Eq. 9 on the raw readings, µg
+    rmse_vector_ug: float | None  # reference mode: RMS of per-axis error, µg
+    chi2_red: float
+    n_positions: int
+    nfev: int
+    success: bool
+    message: str
+    g_local: float = 1.0
+    not_identifiable_why: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def stderr(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+
+def fit_reference(
+    raw_g: np.ndarray,
+    ref_g: np.ndarray,
+    sigma_g: np.ndarray | None = None,
+    *,
+    g_local: float = 1.0,
+) -> FitResult:
+    """Fit all 12 SFEM parameters from readings with known references (Eq. 4–7)."""
+    raw, ref = _as_n3(raw_g, "raw_g"), _as_n3(ref_g, "ref_g")
+    if raw.shape != ref.shape:
+        raise ValueError(f"raw_g {raw.shape} and ref_g {ref.shape} differ in shape")
+    n = raw.shape[0]
+    if n < 4:
+        raise NotIdentifiable(f"reference fit needs at least 4 positions, got {n}")
+    sig = _sigma(sigma_g, n)
+    p0 = linear_reference_start(raw, ref, sig)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return ((_forward(p, raw) - ref) / sig).ravel()
+
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        _, jac = sfem.forward_jacobian(p, raw)
+        return (jac / sig[:, :, None]).reshape(3 * n, sfem.N_PARAMS)
+
+    sol = least_squares(residual, p0, jac=jacobian, method="lm", x_scale="jac")
+    params = sfem.SfemParams.from_vector(sol.x)
+    cal = params.apply(raw)
+    res = cal - ref
+    dof = max(3 * n - sfem.N_PARAMS, 1)
+    chi2_red = float(np.sum(sol.fun**2) / dof)
+    cov, ident = _covariance(sol.jac, chi2_red, np.ones(sfem.N_PARAMS, bool))
+    return FitResult(
+        mode="reference",
+        params=params,
+        covariance=cov,
+        identifiable=ident,
+        residuals_g=res,
+        rmse_norm_ug=rmse_norm_ug(cal, g_local),
+        rmse_norm_before_ug=rmse_norm_ug(raw, g_local),
+        rmse_vector_ug=float(np.sqrt(np.mean(res**2)) * 1e6),
+        chi2_red=chi2_red,
+        n_positions=n,
+        nfev=int(sol.nfev),
+        success=bool(sol.success),
+        message=str(sol.message),
+        g_local=g_local,
+        not_identifiable_why=_why(ident),
+    )
+
+
+def fit_norm(
+    raw_g: np.ndarray,
+    sigma_g: np.ndarray | None = None,
+    *,
+    g_local: float = 1.0,
+) -> FitResult:
+    """Fit b, S, C from |g| alone (Eq. 3 as the residual); M is not identifiable."""
+    raw = _as_n3(raw_g, "raw_g")
+    n = raw.shape[0]
+    if n < 10:
+        raise NotIdentifiable(
+            f"norm-mode fit of 9 parameters needs at least 10 positions, got {n}"
+        )
+    sig = _sigma(sigma_g, n)
+    free = NORM_FREE
+    p0 = ellipsoid_start(raw, g_local)
+
+    def full(q: np.ndarray) -> np.ndarray:
+        p = sfem.identity_vector()
+        p[free] = q
+        return p
+
+    def norm_sigma(f: np.ndarray) -> np.ndarray:
+        # σ of |f| from per-axis σ, projected on the reading's direction.
+        u = f / np.linalg.norm(f, axis=1, keepdims=True)
+        return np.sqrt(np.sum((u * sig) ** 2, axis=1))
+
+    def residual(q: np.ndarray) -> np.ndarray:
+        f = _forward(full(q), raw)
+        return (np.linalg.norm(f, axis=1) - g_local) / norm_sigma(f)
+
+    def jacobian(q: np.ndarray) -> np.ndarray:
+        f, jac = sfem.forward_jacobian(full(q), raw)
+        norm = np.linalg.norm(f, axis=1)
+        dn = np.einsum("ni,nik->nk", f / norm[:, None], jac[:, :, free])
+        return dn / norm_sigma(f)[:, None]
+
+    sol = least_squares(residual, p0[free], jac=jacobian, method="lm", x_scale="jac")
+    pv = full(sol.x)
+    params = sfem.SfemParams.from_vector(pv)
+    cal = params.apply(raw)
+    res = np.linalg.norm(cal, axis=1) - g_local
+    dof = max(n - int(free.sum()), 1)
+    chi2_red = float(np.sum(sol.fun**2) / dof)
+    cov, ident = _covariance(sol.jac, chi2_red, free)
+    return FitResult(
+        mode="norm",
+        params=params,
+        covariance=cov,
+        identifiable=ident,
+        residuals_g=res,
+        rmse_norm_ug=rmse_norm_ug(cal, g_local),
+        rmse_norm_before_ug=rmse_norm_ug(raw, g_local),
+        rmse_vector_ug=None,
+        chi2_red=chi2_red,
+        n_positions=n,
+        nfev=int(sol.nfev),
+        success=bool(sol.success),
+        message=str(sol.message),
+        g_local=g_local,
+        not_identifiable_why=_why(ident, norm_mode=True),
+    )
+
+
+def rmse_norm_ug(cal_g: np.ndarray, g_local: float = 1.0) -> float:
+    """Eq. 9: RMS of (|a| − g) over positions, in µg."""
+    return float(np.sqrt(np.mean((np.linalg.norm(cal_g, axis=1) - g_local) ** 2)) * 1e6)
+
+
+def linear_reference_start(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray) -> np.ndarray:
+    """Closed form: ref = A·U + c by weighted linear least squares, then b = −A⁻¹c."""
+    X = np.hstack([raw, np.ones((raw.shape[0], 1))])
+    coef = np.empty((4, 3))
+    for k in range(3):
+        w = 1.0 / sig[:, k]
+        coef[:, k], *_ = np.linalg.lstsq(X * w[:, None], ref[:, k] * w, rcond=None)
+    A = coef[:3].T
+    c = coef[3]
+    try:
+        b = -np.linalg.solve(A, c)
+        return sfem.from_matrix(A, b).to_vector()
+    except (np.linalg.LinAlgError, ValueError):
+        return sfem.identity_vector()
+
+
+def ellipsoid_start(raw: np.ndarray, g_local: float = 1.0) -> np.ndarray:
+    """Linear fit of the quadric (U − b)ᵀ Q (U − b) = g², Q = Aᵀ A with A lower triangular."""
+    x, y, z = raw.T
+    D = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z])
+    try:
+        v, *_ = np.linalg.lstsq(D, np.ones(len(raw)), rcond=None)
+        Q = np.array([[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]])
+        b = -np.linalg.solve(Q, v[6:9])
+        k = 1.0 + b @ Q @ b
+        Q = Q / k * g_local**2
+        if np.any(np.linalg.eigvalsh(Q) <= 0):
+            raise np.linalg.LinAlgError("not an ellipsoid")
+        # A lower-triangular with AᵀA = Q: reverse Cholesky (M = I in norm mode).
+        J = np.eye(3)[::-1]
+        L = J @ np.linalg.cholesky(J @ Q @ J).T @ J
+        p = sfem.from_matrix(L, b).to_vector()
+        p[sfem.MISALIGN] = 0.0
+        return p
+    except (np.linalg.LinAlgError, ValueError):
+        return sfem.identity_vector()
+
+
+def _forward(p: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    return (raw - p[sfem.BIAS]) @ sfem.matrix_from_vector(p).T
+
+
+def _as_n3(a: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(a, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains non-finite values")
+    return arr
+
+
+def _sigma(sigma_g: np.ndarray | None, n: int) -> np.ndarray:
+    if sigma_g is None:
+        return np.ones((n, 3))
+    sig = np.broadcast_to(np.asarray(sigma_g, dtype=float), (n, 3)).copy()
+    bad = ~np.isfinite(sig) | (sig <= 0)
+    if bad.all():
+        return np.ones((n, 3))
+    # Rows without a usable σ get the median of the others rather than infinite weight.
+    sig[bad] = np.median(sig[~bad])
+    return sig
+
+
+def _covariance(
+    jac_free: np.ndarray, chi2_red: float, free: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """cov = (JᵀWJ)⁻¹ · χ²_red on the free parameters; NaN for those not identifiable."""
+    cov = np.full((sfem.N_PARAMS, sfem.N_PARAMS), np.nan)
+    ident = free.copy()
+    JtJ = jac_free.T @ jac_free
+    sv = np.linalg.svd(jac_free, compute_uv=False)
+    rank_ok = sv.size > 0 and sv[-1] > 1e-10 * sv[0]
+    if rank_ok:
+        inv = np.linalg.inv(JtJ) * max(chi2_red, 1e-300)
+        idx = np.flatnonzero(free)
+        cov[np.ix_(idx, idx)] = inv
+    else:
+        ident[:] = False
+    return cov, ident
+
+
+def _why(ident: np.ndarray, *, norm_mode: bool = False) -> dict[str, str]:
+    why: dict[str, str] = {}
+    for name, ok in zip(sfem.PARAM_NAMES, ident, strict=True):
+        if ok:
+            continue
+        if norm_mode and name in ("mx", "my", "mz"):
+            why[name] = "a rotation of the sensor frame leaves |g| unchanged (norm mode)"
+        else:
+            why[name] = "the positions do not constrain it (rank-deficient Jacobian)"
+    return why
+
+
+# --- many small reference fits at once ---------------------------------------
+@dataclass
+class BatchFitResult:
+    """K reference-mode fits (:func:`fit_reference_batch`); row k equals ``fit_reference`` k."""
+
+    params: np.ndarray  # (K,12) SFEM vectors
+    covariance: np.ndarray  # (K,12,12), scaled by reduced chi²; NaN where rank-deficient
+    rmse_norm_ug: np.ndarray  # (K,) Eq. 9 after calibration
+    rmse_norm_before_ug: np.ndarray  # (K,)
+    rmse_vector_ug: np.ndarray  # (K,)
+    chi2_red: np.ndarray  # (K,)
+    identifiable: np.ndarray  # (K,) bool: all 12 parameters determined
+
+    @property
+    def stderr(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diagonal(self.covariance, axis1=1, axis2=2), 0.0, None))
+
+    def sfem(self, k: int) -> sfem.SfemParams:
+        return sfem.SfemParams.from_vector(self.params[k])
+
+
+def fit_reference_batch(
+    raw_g: np.ndarray,
+    ref_g: np.ndarray,
+    sigma_g: np.ndarray | None = None,
+    *,
+    g_local: float = 1.0,
+    gn_iterations: int = 1,
+) -> BatchFitResult:
+    """K independent reference-mode fits, vectorised: raw, ref (K,N,3), sigma (K,N,3) or None.
+
+    The reference residual A(U − b) − ref is linear in (A, c = −A b), so the weighted
+    linear least squares ``ref = A·U + c`` (per output axis, batched QR) *is* the
+    optimum that :func:`fit_reference`'s LM converges to; (A, b) → (M, C, S, b) is a
+    bijection for det A > 0. ``gn_iterations`` Gauss-Newton steps in the SFEM
+    parameters then only polish rounding and give the Jacobian for the covariance.
+    Problems whose A is not a proper rotation-times-triangular (det ≤ 0) fall back to
+    the single fit, so every row matches :func:`fit_reference`.
+    """
+    from calibration import sfem_batch  # local: sfem_batch is only needed for batches
+
+    raw = np.asarray(raw_g, dtype=float)
+    ref = np.asarray(ref_g, dtype=float)
+    if raw.ndim != 3 or raw.shape[2] != 3:
+        raise ValueError(f"raw_g must have shape (K, N, 3), got {raw.shape}")
+    if ref.shape != raw.shape:
+        raise ValueError(f"raw_g {raw.shape} and ref_g {ref.shape} differ in shape")
+    if not (np.all(np.isfinite(raw)) and np.all(np.isfinite(ref))):
+        raise ValueError("raw_g/ref_g contain non-finite values")
+    K, n, _ = raw.shape
+    if n < 4:
+        raise NotIdentifiable(f"reference fit needs at least 4 positions, got {n}")
+    sig = _sigma_batch(sigma_g, raw.shape)
+
+    # Closed form, per output axis: rows of [U, 1] weighted by 1/σ_k.
+    X = np.concatenate([raw, np.ones((K, n, 1))], axis=2)  # (K,N,4)
+    w = np.moveaxis(1.0 / sig, 2, 1)  # (K,3,N)
+    Xw = X[:, None, :, :] * w[..., None]  # (K,3,N,4)
+    yw = np.moveaxis(ref, 2, 1) * w  # (K,3,N)
+    Q, R = np.linalg.qr(Xw)
+    coef = np.linalg.solve(R, np.swapaxes(Q, 2, 3) @ yw[..., None])[..., 0]  # (K,3,4)
+    A, c = coef[..., :3], coef[..., 3]
+    P = np.empty((K, sfem.N_PARAMS))
+    det = np.linalg.det(A)
+    ok = det > 0
+    P[~ok] = sfem.identity_vector()
+    if ok.any():
+        P[ok] = _decompose_batch(A[ok], -np.linalg.solve(A[ok], c[ok][..., None])[..., 0])
+
+    def weighted(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # f = A(U − b) is linear in v = U − b, so ∂f/∂p is too: evaluate the analytic
+        # Jacobian once per problem at v = e_x, e_y, e_z (3K rows, not NK) and combine.
+        basis = p[:, None, sfem.BIAS] + np.eye(3)[None]  # (K,3,3): raw giving v = e_j
+        _, g = sfem_batch.forward_jacobian(np.repeat(p, 3, axis=0), basis.reshape(-1, 3))
+        g = g.reshape(K, 3, 3, sfem.N_PARAMS)  # [k, j, axis, param]
+        v = raw - p[:, None, sfem.BIAS]
+        A = sfem_batch.matrices(p)
+        f = v @ np.swapaxes(A, 1, 2)
+        jac = np.empty((K, n, 3, sfem.N_PARAMS))
+        jac[..., sfem.BIAS] = -A[:, None]
+        jac[..., 3:] = (v @ g[..., 3:].reshape(K, 3, 27)).reshape(K, n, 3, 9)
+        r = (f - ref) / sig
+        J = jac / sig[..., None]
+        return r.reshape(K, 3 * n), J.reshape(K, 3 * n, sfem.N_PARAMS)
+
+    r, J = weighted(P)
+    for _ in range(max(int(gn_iterations), 0)):
+        Jt = np.swapaxes(J, 1, 2)
+        try:
+            delta = np.linalg.solve(Jt @ J, -(Jt @ r[..., None]))[..., 0]
+        except np.linalg.LinAlgError:
+            break
+        trial = P + np.where(ok[:, None], delta, 0.0)
+        r2, J2 = weighted(trial)
+        better = np.sum(r2**2, axis=1) <= np.sum(r**2, axis=1)
+        P = np.where(better[:, None], trial, P)
+        r = np.where(better[:, None], r2, r)
+        J = np.where(better[:, None, None], J2, J)
+
+    dof = max(3 * n - sfem.N_PARAMS, 1)
+    chi2 = np.sum(r**2, axis=1) / dof
+    cov = np.full((K, sfem.N_PARAMS, sfem.N_PARAMS), np.nan)
+    # Singular values of J via its 12×12 triangular factor: same values, far less work.
+    sv = np.linalg.svd(np.linalg.qr(J, mode="r"), compute_uv=False)
+    full_rank = sv[:, -1] > 1e-10 * sv[:, 0]
+    if full_rank.any():
+        Jf = J[full_rank]
+        JtJ = np.swapaxes(Jf, 1, 2) @ Jf
+        cov[full_rank] = np.linalg.inv(JtJ) * np.maximum(chi2[full_rank], 1e-300)[:, None, None]
+
+    out = BatchFitResult(
+        params=P, covariance=cov, rmse_norm_ug=np.empty(K), rmse_norm_before_ug=np.empty(K),
+        rmse_vector_ug=np.empty(K), chi2_red=chi2, identifiable=full_rank,
+    )
+    cal = (raw - P[:, None, sfem.BIAS]) @ np.swapaxes(sfem_batch.matrices(P), 1, 2)
+    out.rmse_norm_ug[:] = np.sqrt(np.mean((np.linalg.norm(cal, axis=2) - g_local) ** 2, 1)) * 1e6
+    out.rmse_norm_before_ug[:] = (
+        np.sqrt(np.mean((np.linalg.norm(raw, axis=2) - g_local) ** 2, axis=1)) * 1e6)
+    out.rmse_vector_ug[:] = np.sqrt(np.mean((cal - ref) ** 2, axis=(1, 2))) * 1e6
+    for k in np.flatnonzero(~ok):  # rare: let the single LM fit handle it
+        single = fit_reference(raw[k], ref[k], None if sigma_g is None else sig[k],
+                               g_local=g_local)
+        out.params[k] = single.params.to_vector()
+        out.covariance[k] = single.covariance
+        out.rmse_norm_ug[k] = single.rmse_norm_ug
+        out.rmse_vector_ug[k] = single.rmse_vector_ug or np.nan
+        out.chi2_red[k] = single.chi2_red
+        out.identifiable[k] = bool(single.identifiable.all())
+    return out
+
+
+def _sigma_batch(sigma_g: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """:func:`_sigma` for (K,N,3) at once; problems with unusable σ go through _sigma."""
+    if sigma_g is None:
+        return np.ones(shape)
+    sig = np.broadcast_to(np.asarray(sigma_g, dtype=float), shape).copy()
+    bad = ~np.isfinite(sig) | (sig <= 0)
+    for k in np.flatnonzero(bad.any(axis=(1, 2))):
+        sig[k] = _sigma(sig[k], shape[1])
+    return sig
+
+
+def _decompose_batch(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Vectorised :func:`sfem.from_matrix`: A (K,3,3) with det > 0 → SFEM vectors (K,12)."""
+    J = np.eye(3)[::-1]
+    upper = np.swapaxes(np.linalg.cholesky(J @ np.swapaxes(A, 1, 2) @ A @ J), 1, 2)
+    L = J @ upper @ J
+    R = A @ np.linalg.inv(L)
+    scale = np.diagonal(L, axis1=1, axis2=2)
+    C = L / scale[:, None, :]
+    P = np.empty((A.shape[0], sfem.N_PARAMS))
+    P[:, sfem.BIAS] = b
+    P[:, sfem.SCALE] = scale
+    P[:, sfem.ALPHA] = np.stack([C[:, 1, 0], C[:, 2, 0], C[:, 2, 1]], axis=1)
+    P[:, 9] = np.arctan2(R[:, 2, 1], R[:, 2, 2])
+    P[:, 10] = -np.arcsin(np.clip(R[:, 2, 0], -1.0, 1.0))
+    P[:, 11] = np.arctan2(R[:, 1, 0], R[:, 0, 0])
+    return P

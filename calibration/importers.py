@@ -1,0 +1,486 @@
+"""Import static multi-position recordings from other labs into recording format v1.
+
+Four source formats (``/work/shared/realdata``), each read into a :class:`RawImport`
+(time, acceleration in g, and what the file says about its initial rest), then cut
+into static intervals and averaged into one v1 row per interval:
+
+* ``openaxes`` -- OpenAXES IMU logger, semicolon CSV, ADXL355 (or BMI160) in m/s².
+* ``imu_tk``   -- imu_tk / Tedaldi test data: ASCII ``t ax ay az`` in raw ADC counts.
+* ``ferraris`` -- imucal Ferraris session: CSV (m/s²) + session-list JSON, or the
+  annotated CSV (``part`` column, raw counts).
+* ``mpu6050``  -- tomisuarez2/ImuCalibration: 4-line ``key,value`` preamble, int16
+  counts at ±2 g (16384 LSB/g).
+
+None of these files carries a temperature. The rows are written with an empty
+``chamber_c`` column: the recording is one step at an unknown temperature. We
+never invent a temperature.
+
+Static-interval rule (:func:`detect_static_intervals`, after Tedaldi et al. ICRA 2014
+and imu_tk): for every sample, the variance of each axis over a centred window of
+``window_s`` seconds; the sample is *static* when the magnitude of that variance
+vector, ‖(σx², σy², σz²)‖, is below ``threshold`` × the same magnitude measured
+over the initial rest (the first ``init_rest_s`` seconds). Runs of static samples
+lasting at least ``min_duration_s`` are intervals; ``trim_s`` is then cut from both
+ends of each, because the hand placement still rings and settles there (the
+moving window only notices motion half a window late).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calibration.errors import RecordingError
+from calibration.recording import Recording
+
+STANDARD_GRAVITY_M_S2 = 9.80665  # m/s² per g (CGPM 1901), converts m/s² files to g
+FORMATS: tuple[str, ...] = ("openaxes", "imu_tk", "ferraris", "mpu6050")
+
+# imu_tk defaults: the Xsens MTi factory values printed by imu_tk_matlab's calibrate.m
+# (README): 415 counts per m/s² (the x/z entry of diag(415, 413, 415); one nominal
+# sensitivity for all axes, the fit finds the rest) and offsets 33123, 33276, 32360
+# counts. imu_tk's own start guess, a mid-scale 32768, is ~100 mg off: fine for a
+# fit, useless for the "before" figure.
+IMU_TK_COUNTS_PER_G = 415.0 * STANDARD_GRAVITY_M_S2
+IMU_TK_OFFSET_COUNTS: tuple[float, float, float] = (33123.0, 33276.0, 32360.0)
+MPU6050_COUNTS_PER_G = 16384.0  # ±2 g full scale (i2cdevlib initialize() default)
+FERRARIS_COUNTS_PER_G = 2048.0  # annotated imucal session: ±16 g range
+FERRARIS_STATIC_PARTS: dict[str, tuple[float, float, float]] = {
+    # imucal: "x_p" = x axis parallel to gravity reaction (reads +1 g), "x_a" antiparallel.
+    "x_p": (1.0, 0.0, 0.0), "x_a": (-1.0, 0.0, 0.0),
+    "y_p": (0.0, 1.0, 0.0), "y_a": (0.0, -1.0, 0.0),
+    "z_p": (0.0, 0.0, 1.0), "z_a": (0.0, 0.0, -1.0),
+}
+
+
+@dataclass
+class DetectorSettings:
+    """Static-interval detector settings; per-format defaults in :data:`DEFAULT_DETECTOR`."""
+
+    window_s: float = 1.0
+    threshold: float = 6.0  # × initial-rest variance magnitude
+    min_duration_s: float = 1.0
+    trim_s: float = 0.5
+
+
+DEFAULT_DETECTOR: dict[str, DetectorSettings] = {
+    # OpenAXES: ~100 Hz, the logger beeps after 3 s stillness; intervals 2.5-4 s.
+    "openaxes": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=1.5, trim_s=0.5),
+    # imu_tk: Tedaldi's own test data, 100 Hz, 4-11 s per position.
+    "imu_tk": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=2.0, trim_s=0.5),
+    # tomisuarez2: ~3 s per position at 100 Hz.
+    "mpu6050": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=1.5, trim_s=0.5),
+    # Ferraris: the session list gives the sections; the detector is not used by default.
+    "ferraris": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=2.0, trim_s=0.5),
+}
+
+
+@dataclass
+class RawImport:
+    """Samples of one source file, converted to g on the sensor axes."""
+
+    path: str
+    fmt: str
+    t_s: np.ndarray  # (N,) seconds from the first sample
+    acc_g: np.ndarray  # (N,3) nominal-scale acceleration, g
+    init_rest_s: float | None  # length of the initial rest the file declares, if any
+    sections: list[tuple[int, int]] | None = None  # given static sections [start, end)
+    section_refs: list[tuple[float, float, float]] | None = None  # ref per section, g
+    notes: list[str] = field(default_factory=list)
+
+
+# --- static-interval detection ---------------------------------------------
+def moving_variance(acc: np.ndarray, window_n: int) -> np.ndarray:
+    """Per-axis variance over a centred window of ``window_n`` samples, (N,3).
+
+    Cumulative sums (of data minus its first sample, to avoid cancellation); the
+    window shrinks at the ends instead of padding.
+    """
+    x = np.asarray(acc, float) - np.asarray(acc, float)[0]
+    n = x.shape[0]
+    half = max(int(window_n) // 2, 1)
+    c1 = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
+    c2 = np.vstack([np.zeros((1, 3)), np.cumsum(x * x, axis=0)])
+    idx = np.arange(n)
+    lo = np.clip(idx - half, 0, n)
+    hi = np.clip(idx + half + 1, 0, n)
+    cnt = (hi - lo)[:, None].astype(float)
+    mean = (c1[hi] - c1[lo]) / cnt
+    var = (c2[hi] - c2[lo]) / cnt - mean**2
+    return np.clip(var, 0.0, None)
+
+
+def detect_static_intervals(
+    t_s: np.ndarray,
+    acc: np.ndarray,
+    *,
+    window_s: float,
+    threshold: float,
+    min_duration_s: float,
+    init_rest_s: float | None = None,
+    trim_s: float = 0.0,
+) -> list[tuple[int, int]]:
+    """Static intervals as ``(start_idx, end_idx)`` pairs, ``end_idx`` exclusive.
+
+    Rule (Tedaldi/imu_tk): sample i is static when ‖moving variance‖ (window
+    ``window_s``, per axis, centred) < ``threshold`` × ‖variance of the initial
+    rest‖. The initial rest is the first ``init_rest_s`` seconds; without it, the
+    lowest-variance decile of windows stands in (a recording that starts moving
+    at once has no better reference). Runs shorter than ``min_duration_s`` are
+    dropped; ``trim_s`` is removed from each end of the survivors.
+    """
+    t = np.asarray(t_s, float)
+    a = np.asarray(acc, float)
+    if t.ndim != 1 or a.ndim != 2 or a.shape != (t.size, 3):
+        raise ValueError(f"t_s (N,) and acc (N,3) expected, got {t.shape} and {a.shape}")
+    if t.size < 3:
+        return []
+    if window_s <= 0 or threshold <= 0 or min_duration_s < 0 or trim_s < 0:
+        raise ValueError("window_s, threshold must be > 0; min_duration_s, trim_s >= 0")
+    dt = float(np.median(np.diff(t)))
+    if not dt > 0:
+        raise ValueError("t_s must increase (median sample spacing is not positive)")
+    window_n = max(int(round(window_s / dt)), 3)
+    var_mag = np.linalg.norm(moving_variance(a, window_n), axis=1)
+    if init_rest_s is not None and init_rest_s > 0:
+        rest = t < t[0] + init_rest_s
+        ref = float(np.linalg.norm(np.var(a[rest], axis=0))) if rest.sum() >= 3 else 0.0
+    else:
+        ref = float(np.percentile(var_mag, 10))
+    if not ref > 0:
+        ref = float(np.percentile(var_mag[var_mag > 0], 10)) if np.any(var_mag > 0) else 1e-30
+    static = var_mag < threshold * ref
+    edges = np.flatnonzero(np.diff(np.r_[0, static.astype(np.int8), 0]))
+    out: list[tuple[int, int]] = []
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        if t[end - 1] - t[start] < min_duration_s:
+            continue
+        s, e = _trim(t, int(start), int(end), trim_s)
+        if e - s >= 3:
+            out.append((s, e))
+    return out
+
+
+def _trim(t: np.ndarray, start: int, end: int, trim_s: float) -> tuple[int, int]:
+    if trim_s <= 0:
+        return start, end
+    s = int(np.searchsorted(t, t[start] + trim_s, side="left"))
+    e = int(np.searchsorted(t, t[end - 1] - trim_s, side="right"))
+    return s, max(e, s)
+
+
+# --- interval averaging ------------------------------------------------------
+def intervals_to_recording(
+    raw: RawImport, intervals: Sequence[tuple[int, int]], *, path: str = "<memory>"
+) -> Recording:
+    """One v1 row per interval: t_s = middle, mean and sample sd in g, n, position index.
+
+    ``chamber_c`` is present but empty (no temperature in any of these sources).
+    """
+    if not intervals:
+        raise RecordingError(raw.path, None, None, "no static interval found")
+    cols: dict[str, list[float]] = {k: [] for k in (
+        "t_s", "chamber_c", "position", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")}
+    for k, (s, e) in enumerate(intervals):
+        seg = raw.acc_g[s:e]
+        cols["t_s"].append(0.5 * (raw.t_s[s] + raw.t_s[e - 1]))
+        cols["chamber_c"].append(math.nan)
+        cols["position"].append(float(k))
+        mean = seg.mean(axis=0)
+        sd = seg.std(axis=0, ddof=1) if seg.shape[0] > 1 else np.full(3, math.nan)
+        for c, m, d in zip(("x", "y", "z"), mean, sd, strict=True):
+            cols["a" + c].append(float(m))
+            cols["sd_" + c].append(float(d))
+        cols["n"].append(float(seg.shape[0]))
+    if raw.section_refs is not None and len(raw.section_refs) == len(intervals):
+        for j, c in enumerate(("ref_x", "ref_y", "ref_z")):
+            cols[c] = [r[j] for r in raw.section_refs]
+    rec = Recording.from_columns(cols, path=path)
+    rec.notes.extend(raw.notes)
+    return rec
+
+
+def samples_to_recording(raw: RawImport, *, path: str = "<memory>") -> Recording:
+    """Raw time series: one v1 row per sample (``n`` = 1), empty ``chamber_c``."""
+    n = raw.t_s.size
+    cols = {
+        "t_s": raw.t_s, "chamber_c": np.full(n, math.nan),
+        "ax": raw.acc_g[:, 0], "ay": raw.acc_g[:, 1], "az": raw.acc_g[:, 2],
+        "n": np.ones(n),
+    }
+    rec = Recording.from_columns(cols, path=path)
+    rec.notes.extend(raw.notes)
+    return rec
+
+
+def find_intervals(raw: RawImport, settings: DetectorSettings) -> list[tuple[int, int]]:
+    """Given sections (Ferraris session list) trimmed by ``trim_s``, else the detector."""
+    if raw.sections is not None:
+        return [_trim(raw.t_s, s, e, settings.trim_s) for s, e in raw.sections]
+    return detect_static_intervals(
+        raw.t_s, raw.acc_g, window_s=settings.window_s, threshold=settings.threshold,
+        min_duration_s=settings.min_duration_s, init_rest_s=raw.init_rest_s,
+        trim_s=settings.trim_s,
+    )
+
+
+# --- readers -----------------------------------------------------------------
+def read_openaxes(path: str | Path, *, sensor: str = "adxl355") -> RawImport:
+    """OpenAXES semicolon CSV: TIME (µs, host clock), ACCEL_<SENSOR>_0..2 in m/s² → g.
+
+    The 40 s initial rest is the logger's documented procedure.
+    """
+    p = str(path)
+    key = sensor.strip().upper()
+    if key not in ("ADXL355", "BMI160"):
+        raise RecordingError(p, None, None, f"unknown sensor {sensor!r}: adxl355 or bmi160")
+    cols = ("TIME", f"ACCEL_{key}_0", f"ACCEL_{key}_1", f"ACCEL_{key}_2")
+    data = _read_delimited(p, ";", cols)
+    time_us = data[:, 0]
+    _check_monotonic(p, time_us, "TIME", first_line=2)
+    t = (time_us - time_us[0]) * 1e-6
+    acc = data[:, 1:4] / STANDARD_GRAVITY_M_S2
+    return RawImport(p, "openaxes", t, acc, init_rest_s=40.0,
+                     notes=[f"OpenAXES {key}: m/s² / {STANDARD_GRAVITY_M_S2} → g"])
+
+
+def read_imu_tk(
+    path: str | Path,
+    *,
+    counts_per_g: float | Sequence[float] = IMU_TK_COUNTS_PER_G,
+    offset_counts: float | Sequence[float] = IMU_TK_OFFSET_COUNTS,
+    init_rest_s: float = 50.0,
+) -> RawImport:
+    """imu_tk ASCII (``-ascii`` .mat): 4 whitespace columns ``t ax ay az`` in counts.
+
+    g = (counts − offset) / counts_per_g; both scalar or per axis. Defaults: the
+    Xsens factory values (:data:`IMU_TK_COUNTS_PER_G`, :data:`IMU_TK_OFFSET_COUNTS`);
+    imu_tk's example uses a 50 s initial rest.
+    """
+    p = str(path)
+    scale = np.broadcast_to(np.asarray(counts_per_g, float), (3,))
+    if not np.all(scale > 0):
+        raise RecordingError(p, None, None, f"counts per g must be > 0, got {counts_per_g}")
+    names = ("t", "ax", "ay", "az")
+    rows: list[list[float]] = []
+    for line_no, line in enumerate(_read_text(p).splitlines(), start=1):
+        parts = line.split()
+        if not parts:
+            continue
+        if len(parts) != 4:
+            raise RecordingError(
+                p, line_no, None, f"expected 4 columns (t ax ay az), got {len(parts)}")
+        rows.append([_number(p, line_no, names[i], cell) for i, cell in enumerate(parts)])
+    if not rows:
+        raise RecordingError(p, 1, None, "no data rows")
+    data = np.asarray(rows)
+    _check_monotonic(p, data[:, 0], "t", first_line=1)
+    offset = np.broadcast_to(np.asarray(offset_counts, float), (3,))
+    acc = (data[:, 1:4] - offset) / scale
+    return RawImport(p, "imu_tk", data[:, 0] - data[0, 0], acc, init_rest_s=init_rest_s,
+                     notes=[f"imu_tk counts: (c − {_fmt3(offset)}) / {_fmt3(scale)} → g"])
+
+
+def read_mpu6050(path: str | Path, *, counts_per_g: float = MPU6050_COUNTS_PER_G) -> RawImport:
+    """tomisuarez2 CSV: ``Fs,<Hz>``, ``Logging Type``, ``Initialization time,<s|-1>``,
+    ``Waiting time``, then ``ax,ay,az,gx,gy,gz`` in counts; t = i / Fs."""
+    p = str(path)
+    lines = _read_text(p).splitlines()
+    if len(lines) < 6:
+        raise RecordingError(
+            p, len(lines) + 1, None, "expected a 4-line preamble, a header and data")
+    meta: dict[str, float] = {}
+    for i in range(4):
+        parts = lines[i].split(",")
+        if len(parts) != 2:
+            raise RecordingError(p, i + 1, None, f"preamble line must be 'key,value': {lines[i]!r}")
+        meta[parts[0].strip().lower()] = _number(p, i + 1, parts[0].strip(), parts[1])
+    fs = meta.get("fs")
+    if fs is None or not fs > 0:
+        raise RecordingError(p, 1, "Fs", "sampling rate 'Fs' missing or not positive")
+    data = _read_delimited(p, ",", ("ax", "ay", "az"), text="\n".join(lines[4:]), line_offset=4)
+    t = np.arange(data.shape[0]) / fs
+    init = meta.get("initialization time", -1.0)
+    return RawImport(p, "mpu6050", t, data / counts_per_g,
+                     init_rest_s=init if init > 0 else None,
+                     notes=[f"MPU-6050 counts / {counts_per_g:g} → g, t = i / {fs:g} Hz"])
+
+
+def read_ferraris(
+    path: str | Path,
+    *,
+    session_list: str | Path | None = None,
+    counts_per_g: float = FERRARIS_COUNTS_PER_G,
+    rate_hz: float | None = None,
+) -> RawImport:
+    """imucal Ferraris session.
+
+    * session CSV (``n_samples, …, acc_x..z`` in m/s², 102.4 Hz) with a session-list
+      JSON (``{"x_p": {"start", "end"}, …}``; default: ``<stem>_list.json`` beside it);
+    * or the annotated CSV (``part, samples, acc_x..z`` in counts, 204.8 Hz).
+
+    Only the six static parts (±x, ±y, ±z) become sections; their known gravity
+    direction is kept as ``ref_*`` (the rotation parts are not static).
+    """
+    p = str(path)
+    text = _read_text(p)
+    header = [h.strip() for h in text.splitlines()[0].split(",")] if text else []
+    if "part" in header:
+        return _read_ferraris_annotated(p, text, counts_per_g, rate_hz or 204.8)
+    data = _read_delimited(p, ",", ("acc_x", "acc_y", "acc_z"), text=text)
+    fs = rate_hz or 102.4
+    default_list = Path(p).with_name(Path(p).stem + "_list.json")
+    list_path = Path(session_list) if session_list else default_list
+    try:
+        spec = json.loads(list_path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise RecordingError(str(list_path), None, None, "session list JSON not found") from None
+    except json.JSONDecodeError as exc:
+        raise RecordingError(str(list_path), exc.lineno, None, f"invalid JSON: {exc.msg}") from None
+    sections, refs = [], []
+    for part, ref in FERRARIS_STATIC_PARTS.items():
+        entry = spec.get(part) if isinstance(spec, dict) else None
+        if not isinstance(entry, dict) or "start" not in entry or "end" not in entry:
+            raise RecordingError(str(list_path), None, part, "missing {start, end} for this part")
+        s, e = int(entry["start"]), int(entry["end"])
+        if not 0 <= s < e <= data.shape[0]:
+            raise RecordingError(str(list_path), None, part,
+                                 f"section [{s}, {e}) outside the {data.shape[0]} samples")
+        sections.append((s, e))
+        refs.append(ref)
+    order = np.argsort([s for s, _ in sections])
+    return RawImport(
+        p, "ferraris", np.arange(data.shape[0]) / fs, data / STANDARD_GRAVITY_M_S2, None,
+        sections=[sections[i] for i in order], section_refs=[refs[i] for i in order],
+        notes=[f"Ferraris session: m/s² / {STANDARD_GRAVITY_M_S2} → g, t = i / {fs:g} Hz, "
+               f"sections from {list_path.name}"],
+    )
+
+
+def _read_ferraris_annotated(p: str, text: str, counts_per_g: float, fs: float) -> RawImport:
+    reader = csv.reader(io.StringIO(text))
+    header = [h.strip() for h in next(reader)]
+    for name in ("part", "acc_x", "acc_y", "acc_z"):
+        if name not in header:
+            raise RecordingError(p, 1, name, "required column missing")
+    ip = header.index("part")
+    idx = [header.index(c) for c in ("acc_x", "acc_y", "acc_z")]
+    parts: list[str] = []
+    rows: list[list[float]] = []
+    for line_no, row in enumerate(reader, start=2):
+        if not row:
+            continue
+        if len(row) != len(header):
+            raise RecordingError(
+                p, line_no, None, f"has {len(row)} cells, header has {len(header)}")
+        parts.append(row[ip].strip())
+        rows.append([_number(p, line_no, header[i], row[i]) for i in idx])
+    data = np.asarray(rows) / counts_per_g
+    sections, refs = [], []
+    for part, ref in FERRARIS_STATIC_PARTS.items():
+        hit = np.flatnonzero(np.asarray(parts) == part)
+        if hit.size == 0:
+            raise RecordingError(p, None, "part", f"no rows for static part {part!r}")
+        if hit[-1] - hit[0] + 1 != hit.size:
+            raise RecordingError(p, int(hit[0]) + 2, "part", f"part {part!r} is not contiguous")
+        sections.append((int(hit[0]), int(hit[-1]) + 1))
+        refs.append(ref)
+    order = np.argsort([s for s, _ in sections])
+    return RawImport(
+        p, "ferraris", np.arange(data.shape[0]) / fs, data, None,
+        sections=[sections[i] for i in order], section_refs=[refs[i] for i in order],
+        notes=[f"Ferraris annotated: counts / {counts_per_g:g} → g, t = i / {fs:g} Hz "
+               "(parts are concatenated, so t_s is not wall time)"],
+    )
+
+
+def read_source(fmt: str, path: str | Path, **options: object) -> RawImport:
+    """Dispatch on ``fmt`` (one of :data:`FORMATS`); options go to the reader."""
+    readers = {"openaxes": read_openaxes, "imu_tk": read_imu_tk,
+               "ferraris": read_ferraris, "mpu6050": read_mpu6050}
+    if fmt not in readers:
+        raise RecordingError(str(path), None, None,
+                             f"unknown import format {fmt!r}; expected one of {', '.join(FORMATS)}")
+    return readers[fmt](path, **options)  # type: ignore[operator]
+
+
+def import_static(
+    fmt: str, path: str | Path, settings: DetectorSettings | None = None, **options: object
+) -> tuple[RawImport, list[tuple[int, int]], Recording]:
+    """Read, detect and average: the whole import in one call (used by CLI and benchmarks)."""
+    raw = read_source(fmt, path, **options)
+    st = settings or DEFAULT_DETECTOR[fmt]
+    intervals = find_intervals(raw, st)
+    return raw, intervals, intervals_to_recording(raw, intervals, path=str(path))
+
+
+# --- parsing helpers ---------------------------------------------------------
+def _fmt3(v: np.ndarray) -> str:
+    return f"{v[0]:g}" if np.all(v == v[0]) else "(" + ", ".join(f"{x:g}" for x in v) + ")"
+
+
+def _read_text(p: str) -> str:
+    try:
+        return Path(p).read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise RecordingError(p, None, None, "file not found") from None
+    except IsADirectoryError:
+        raise RecordingError(p, None, None, "is a directory, expected a file") from None
+    except UnicodeDecodeError as exc:
+        raise RecordingError(p, None, None, f"not UTF-8 text ({exc.reason})") from None
+
+
+def _number(p: str, line_no: int, column: str, cell: str) -> float:
+    try:
+        v = float(cell.strip())
+    except ValueError:
+        raise RecordingError(p, line_no, column, f"not a number: {cell.strip()!r}") from None
+    if not math.isfinite(v):
+        raise RecordingError(p, line_no, column, f"not a finite number: {cell.strip()!r}")
+    return v
+
+
+def _read_delimited(
+    p: str, delimiter: str, columns: Sequence[str], *, text: str | None = None,
+    line_offset: int = 0,
+) -> np.ndarray:
+    """Numeric columns by header name from a delimited text; errors name line and column."""
+    body = _read_text(p) if text is None else text
+    reader = csv.reader(io.StringIO(body), delimiter=delimiter)
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise RecordingError(
+            p, line_offset + 1, None, "empty file: expected a header row") from None
+    for c in columns:
+        if c not in header:
+            raise RecordingError(p, line_offset + 1, c,
+                                 f"required column missing (header: {delimiter.join(header)})")
+    idx = [header.index(c) for c in columns]
+    rows: list[list[float]] = []
+    for k, row in enumerate(reader, start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        line_no = line_offset + k
+        if len(row) != len(header):
+            raise RecordingError(
+                p, line_no, None, f"has {len(row)} cells, header has {len(header)}")
+        rows.append([_number(p, line_no, columns[j], row[i]) for j, i in enumerate(idx)])
+    if not rows:
+        raise RecordingError(p, line_offset + 2, None, "no data rows after the header")
+    return np.asarray(rows, dtype=float)
+
+
+def _check_monotonic(p: str, t: np.ndarray, column: str, *, first_line: int) -> None:
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise RecordingError(
+            p, first_line + i, column, f"time goes backwards ({t[i]} after {t[i - 1]})")

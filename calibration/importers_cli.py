@@ -1,0 +1,152 @@
+"""``soakcal import``: a lab's raw static recording → recording format v1.
+
+``soakcal import --format openaxes|imu_tk|ferraris|mpu6050 RAW -o REC.csv
+[--min-static-s S] [--threshold X] [--raw]``
+
+The argparse wiring lives in ``service/cli.py``; :func:`run_import` takes its
+Namespace. Attributes: ``format``, ``raw_path``, ``output``, ``min_static_s``,
+``threshold``, ``raw`` (the ``--raw`` flag); a Namespace whose positional is
+``raw`` (the path) with the flag in ``raw_samples`` works too. Optional ones (read with ``getattr``
+so the wiring may add them later): ``sensor`` (openaxes: adxl355|bmi160),
+``counts_per_g`` and ``offset`` (imu_tk: one number or ``x,y,z``),
+``session_list`` (ferraris JSON), ``window_s``, ``trim_s``.
+
+Exit 0 and a summary on stdout; exit 2 with one line on stderr for bad input,
+and then no file is written (the write is the last step and atomic).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from typing import TextIO
+
+import numpy as np
+
+from calibration import importers
+from calibration.errors import CalibrationError
+from calibration.recording import Recording, write_recording
+
+
+def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Run one import; returns the process exit code (0 ok, 2 bad input)."""
+    out = out or sys.stdout
+    try:
+        fmt = str(args.format)
+        if fmt not in importers.FORMATS:
+            raise CalibrationError(
+                f"unknown --format {fmt!r}; expected one of {', '.join(importers.FORMATS)}")
+        settings = _settings(args, fmt)
+        src, raw_rows = _source_and_mode(args)
+        raw = importers.read_source(fmt, src, **_reader_options(args, fmt))
+        intervals = importers.find_intervals(raw, settings)
+        if raw_rows:
+            rec = importers.samples_to_recording(raw, path=str(args.output))
+        else:
+            rec = importers.intervals_to_recording(raw, intervals, path=str(args.output))
+        write_recording(args.output, rec)
+    except (CalibrationError, OSError, ValueError) as exc:
+        print(f"soakcal import: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    print(summary(raw, intervals, rec, str(args.output), raw_rows=raw_rows), file=out)
+    return 0
+
+
+def _source_and_mode(args: argparse.Namespace) -> tuple[str, bool]:
+    """(input path, write raw sample rows?) from either Namespace layout.
+
+    The brief's layout is ``raw_path`` (str) + ``raw`` (bool, ``--raw``); a wiring
+    whose positional is named ``raw`` carries the path there and the flag as
+    ``raw_samples``.
+    """
+    path = getattr(args, "raw_path", None)
+    flag = getattr(args, "raw", False)
+    if path is None and isinstance(flag, str):
+        return flag, bool(getattr(args, "raw_samples", False))
+    if path is None:
+        raise CalibrationError("no RAW input file given")
+    return str(path), bool(flag) or bool(getattr(args, "raw_samples", False))
+
+
+def summary(
+    raw: importers.RawImport,
+    intervals: list[tuple[int, int]],
+    rec: Recording,
+    output: str,
+    *,
+    raw_rows: bool = False,
+) -> str:
+    """Human summary: intervals, durations, per-axis noise (µg), |g| range of the means."""
+    lines = [f"{raw.path} ({raw.fmt}): {raw.t_s.size} samples over {raw.t_s[-1]:.1f} s"]
+    lines += [f"  note: {n}" for n in raw.notes]
+    dur = np.array([raw.t_s[e - 1] - raw.t_s[s] for s, e in intervals])
+    lines.append(f"static intervals: {len(intervals)}")
+    if dur.size:
+        lines.append(f"  duration s: min {dur.min():.2f}  median {np.median(dur):.2f}  "
+                     f"max {dur.max():.2f}")
+        sd = np.array([raw.acc_g[s:e].std(axis=0, ddof=1) for s, e in intervals])
+        n = np.array([e - s for s, e in intervals])
+        noise_ug = np.median(sd, axis=0) * 1e6
+        floor_ug = np.median(sd / np.sqrt(n)[:, None], axis=0) * 1e6
+        lines.append("  noise per sample, median µg: " + _xyz(noise_ug))
+        lines.append("  noise of each mean (sd/√n), median µg: " + _xyz(floor_ug, 2))
+        means = np.array([raw.acc_g[s:e].mean(axis=0) for s, e in intervals])
+        g = np.linalg.norm(means, axis=1)
+        lines.append(f"  |g| of interval means: {g.min():.6f} .. {g.max():.6f} g "
+                     "(nominal scale, uncalibrated)")
+    kind = "raw sample rows" if raw_rows else "rows (one per static interval)"
+    lines.append(f"wrote {len(rec)} {kind} to {output}; temperature columns empty "
+                 "(source has none: one step at unknown temperature)")
+    return "\n".join(lines)
+
+
+def _settings(args: argparse.Namespace, fmt: str) -> importers.DetectorSettings:
+    st = importers.DEFAULT_DETECTOR[fmt]
+    changes: dict[str, float] = {}
+    for attr, field in (("min_static_s", "min_duration_s"), ("threshold", "threshold"),
+                        ("window_s", "window_s"), ("trim_s", "trim_s")):
+        v = getattr(args, attr, None)
+        if v is None:
+            continue
+        v = float(v)
+        if not np.isfinite(v) or v < 0 or (field in ("threshold", "window_s") and v == 0):
+            raise CalibrationError(f"--{attr.replace('_', '-')} must be a positive number, "
+                                   f"got {v}")
+        changes[field] = v
+    return replace(st, **changes)
+
+
+def _reader_options(args: argparse.Namespace, fmt: str) -> dict[str, object]:
+    opts: dict[str, object] = {}
+    if fmt == "openaxes" and getattr(args, "sensor", None):
+        opts["sensor"] = str(args.sensor)
+    if fmt == "imu_tk":
+        if getattr(args, "counts_per_g", None) is not None:
+            opts["counts_per_g"] = _numbers(args.counts_per_g, "--counts-per-g")
+        if getattr(args, "offset", None) is not None:
+            opts["offset_counts"] = _numbers(args.offset, "--offset")
+    if fmt == "ferraris" and getattr(args, "session_list", None):
+        opts["session_list"] = str(args.session_list)
+    return opts
+
+
+def _numbers(value: object, flag: str) -> float | tuple[float, ...]:
+    """One number or ``x,y,z`` (string or sequence)."""
+    items = value.split(",") if isinstance(value, str) else (
+        list(value) if isinstance(value, list | tuple) else [value])
+    try:
+        nums = tuple(float(v) for v in items)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{flag} expects a number or x,y,z, got {value!r}") from None
+    if len(nums) not in (1, 3) or not all(np.isfinite(nums)):
+        raise CalibrationError(f"{flag} expects a number or x,y,z, got {value!r}")
+    return nums[0] if len(nums) == 1 else nums
+
+
+def _xyz(v: np.ndarray, digits: int = 0) -> str:
+    return "  ".join(f"{c} {x:.{digits}f}" for c, x in zip("xyz", v, strict=True))
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__

@@ -1,0 +1,259 @@
+"""The versioned JSON model document (schema: ``docs/model-file.md``).
+
+``{"format": "soakcal-model", "version": 1, "model_version": "sfem-cubic-1", ...}``
+
+:func:`dump_model_dict` / :func:`load_model_dict` convert a :class:`ThermalModel`
+to and from the JSON-able dict the service stores and returns;
+:func:`save_model` writes it atomically, :func:`load_model` reads a file.
+Every rejection is a :class:`ModelFileError` naming the offending field.
+NaN (a stderr that does not exist) is written as ``null``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration import sfem
+from calibration.errors import ModelFileError
+from calibration.recording import atomic_write_text
+from calibration.thermal import MODEL_VERSION, StepParams, ThermalModel
+
+FORMAT = "soakcal-model"
+VERSION = 1
+MODES = ("reference", "norm")
+
+
+# --- writing ------------------------------------------------------------------
+def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
+    """The model as a JSON-able dict (format ``soakcal-model`` version 1)."""
+    names = sfem.PARAM_NAMES
+    d = model.degree
+    phys = model.physical_coeffs()
+    se = model.coeff_stderr if model.coeff_stderr is not None else np.full_like(model.coeffs,
+                                                                                np.nan)
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "model_version": model.model_version,
+        "mode": model.mode,
+        "method": model.method,
+        "g_local": model.g_local,
+        "parameters": list(names),
+        "parameter_units": dict(zip(names, sfem.PARAM_UNITS, strict=True)),
+        "identifiable": {n: bool(v) for n, v in zip(names, model.identifiable, strict=True)},
+        "temperature": {
+            "source": model.temperature_source,
+            "conditioning": model.temperature_conditioning,
+            "valid_c": None if model.valid_c is None else [float(v) for v in model.valid_c],
+            "centre_c": model.t_centre_c,
+            "scale_c": model.t_scale_c,
+            "variable": "x = (T - centre_c) / scale_c",
+        },
+        "polynomial": {
+            "degree": d,
+            "basis": "p(T) = sum_j coefficients[j] * x**j",
+            "coefficients": {n: _floats(model.coeffs[k]) for k, n in enumerate(names)},
+            "stderr": {n: _floats(se[k]) for k, n in enumerate(names)},
+            "physical_basis": "p(T) = sum_j physical_coefficients[j] * (T - centre_c)**j",
+            "physical_coefficients": {n: _floats(phys[k]) for k, n in enumerate(names)},
+            "physical_units": {
+                n: [u if j == 0 else f"{u}/degC^{j}" if j > 1 else f"{u}/degC"
+                    for j in range(d + 1)]
+                for n, u in zip(names, sfem.PARAM_UNITS, strict=True)
+            },
+        },
+        "steps": [
+            {
+                "step": st.step,
+                "temperature_c": _float(st.temperature_c),
+                "positions": st.n_positions,
+                "params": dict(zip(names, _floats(st.params), strict=True)),
+                "stderr": dict(zip(names, _floats(st.stderr), strict=True)),
+            }
+            for st in model.steps
+        ],
+        "extensions": [dict(e) for e in model.extensions],
+        "provenance": dict(model.provenance),
+        "notes": list(model.notes),
+    }
+
+
+def save_model(path: str | os.PathLike, model: ThermalModel) -> None:
+    """Write the model JSON atomically (temp file + rename)."""
+    text = json.dumps(dump_model_dict(model), indent=2, allow_nan=False) + "\n"
+    atomic_write_text(path, text)
+
+
+# --- reading ------------------------------------------------------------------
+def load_model(path: str | os.PathLike) -> ThermalModel:
+    """Read a model file; :class:`ModelFileError` names the file and the bad field."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ModelFileError(f"{p}: model file not found") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{p}: not a JSON model file ({exc})") from None
+    try:
+        return load_model_dict(doc)
+    except ModelFileError as exc:
+        raise ModelFileError(f"{p}: {exc}") from None
+
+
+def load_model_dict(doc: Any) -> ThermalModel:
+    """Validate and convert a model document back into a :class:`ThermalModel`."""
+    if not isinstance(doc, dict):
+        raise ModelFileError("model document must be a JSON object")
+    if doc.get("format") != FORMAT:
+        raise _bad("format", f"expected {FORMAT!r}, got {doc.get('format')!r}")
+    if doc.get("version") != VERSION:
+        raise _bad("version", f"this soakcal reads version {VERSION}, got {doc.get('version')!r}")
+    mv = doc.get("model_version")
+    if mv != MODEL_VERSION:
+        raise _bad("model_version", f"expected {MODEL_VERSION!r}, got {mv!r}")
+    mode = doc.get("mode")
+    if mode not in MODES:
+        raise _bad("mode", f"expected one of {MODES}, got {mode!r}")
+    names = sfem.PARAM_NAMES
+    if doc.get("parameters") != list(names):
+        raise _bad("parameters", f"expected {list(names)}")
+    temp = _obj(doc, "temperature")
+    valid = temp.get("valid_c")
+    valid_c: tuple[float, float] | None = None
+    if valid is not None:
+        if not (isinstance(valid, list) and len(valid) == 2):
+            raise _bad("temperature.valid_c", "expected null or [low, high]")
+        lo, hi = (_num(v, "temperature.valid_c") for v in valid)
+        if not lo <= hi:
+            raise _bad("temperature.valid_c", f"low {lo} is above high {hi}")
+        valid_c = (lo, hi)
+    centre = _num(temp.get("centre_c"), "temperature.centre_c")
+    scale = _num(temp.get("scale_c"), "temperature.scale_c")
+    if scale <= 0:
+        raise _bad("temperature.scale_c", f"must be positive, got {scale}")
+    source = temp.get("source", "sensor_c")
+    if source not in ("sensor_c", "chamber_c", "none"):
+        raise _bad("temperature.source", f"expected sensor_c, chamber_c or none, got {source!r}")
+
+    poly = _obj(doc, "polynomial")
+    degree = poly.get("degree")
+    if not isinstance(degree, int) or isinstance(degree, bool) or not 0 <= degree <= 10:
+        raise _bad("polynomial.degree", f"expected an integer 0..10, got {degree!r}")
+    coeffs = _param_table(poly, "coefficients", degree + 1, allow_null=False)
+    stderr = _param_table(poly, "stderr", degree + 1, allow_null=True) if "stderr" in poly \
+        else None
+
+    ident_doc = doc.get("identifiable", {n: True for n in names})
+    if not isinstance(ident_doc, dict) or any(not isinstance(ident_doc.get(n), bool)
+                                              for n in names):
+        raise _bad("identifiable", "expected an object of 12 booleans keyed by parameter")
+    identifiable = np.array([ident_doc[n] for n in names])
+
+    g_local = _num(doc.get("g_local", 1.0), "g_local")
+    steps = [_step(s, i) for i, s in enumerate(_list(doc, "steps"))]
+    exts = _list(doc, "extensions")
+    for i, e in enumerate(exts):
+        if not isinstance(e, dict) or not isinstance(e.get("kind"), str) or not e["kind"]:
+            raise _bad(f"extensions[{i}].kind", "each extension needs a non-empty string 'kind'")
+    prov = doc.get("provenance", {})
+    if not isinstance(prov, dict):
+        raise _bad("provenance", "expected an object")
+    notes = doc.get("notes", [])
+    if not isinstance(notes, list):
+        raise _bad("notes", "expected a list of strings")
+    method = doc.get("method", "per_step")
+    if not isinstance(method, str):
+        raise _bad("method", "expected a string")
+    return ThermalModel(
+        coeffs=coeffs,
+        t_centre_c=centre,
+        t_scale_c=scale,
+        valid_c=valid_c,
+        mode=mode,
+        identifiable=identifiable,
+        coeff_stderr=stderr,
+        method=method,
+        temperature_source=source,
+        temperature_conditioning=str(temp.get("conditioning", "")),
+        g_local=g_local,
+        steps=steps,
+        extensions=[dict(e) for e in exts],
+        notes=[str(n) for n in notes],
+        provenance=dict(prov),
+        model_version=mv,
+    )
+
+
+# --- helpers ------------------------------------------------------------------
+def _bad(field: str, message: str) -> ModelFileError:
+    return ModelFileError(f"model field '{field}': {message}")
+
+
+def _obj(doc: dict[str, Any], key: str) -> dict[str, Any]:
+    v = doc.get(key)
+    if not isinstance(v, dict):
+        raise _bad(key, "missing or not an object")
+    return v
+
+
+def _list(doc: dict[str, Any], key: str) -> list[Any]:
+    v = doc.get(key, [])
+    if not isinstance(v, list):
+        raise _bad(key, "expected a list")
+    return v
+
+
+def _num(v: Any, field: str, *, allow_null: bool = False) -> float:
+    if v is None and allow_null:
+        return math.nan
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise _bad(field, f"expected a finite number, got {v!r}")
+    return float(v)
+
+
+def _param_table(obj: dict[str, Any], key: str, width: int, *, allow_null: bool) -> np.ndarray:
+    table = obj.get(key)
+    if not isinstance(table, dict):
+        raise _bad(f"polynomial.{key}", "missing or not an object keyed by parameter")
+    out = np.empty((sfem.N_PARAMS, width))
+    for k, n in enumerate(sfem.PARAM_NAMES):
+        row = table.get(n)
+        field = f"polynomial.{key}.{n}"
+        if not isinstance(row, list) or len(row) != width:
+            raise _bad(field, f"expected a list of {width} numbers (degree + 1)")
+        out[k] = [_num(v, field, allow_null=allow_null) for v in row]
+    return out
+
+
+def _step(s: Any, i: int) -> StepParams:
+    where = f"steps[{i}]"
+    if not isinstance(s, dict):
+        raise _bad(where, "expected an object")
+    params, stderr = s.get("params"), s.get("stderr", {})
+    if not isinstance(params, dict) or not isinstance(stderr, dict):
+        raise _bad(f"{where}.params", "expected objects keyed by parameter")
+    p = np.array([_num(params.get(n), f"{where}.params.{n}") for n in sfem.PARAM_NAMES])
+    se = np.array([_num(stderr.get(n), f"{where}.stderr.{n}", allow_null=True)
+                   for n in sfem.PARAM_NAMES])
+    step = s.get("step")
+    if not isinstance(step, int) or isinstance(step, bool):
+        raise _bad(f"{where}.step", f"expected an integer, got {step!r}")
+    positions = s.get("positions", 0)
+    if not isinstance(positions, int) or isinstance(positions, bool):
+        raise _bad(f"{where}.positions", f"expected an integer, got {positions!r}")
+    T = _num(s.get("temperature_c"), f"{where}.temperature_c", allow_null=True)
+    return StepParams(step, T, positions, p, se)
+
+
+def _float(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+def _floats(a: np.ndarray) -> list[float | None]:
+    return [_float(float(v)) for v in np.asarray(a, float).ravel()]

@@ -1,0 +1,233 @@
+"""A thin adapter over the pymodbus 3.11 async client: one request in flight, retries, faults.
+
+Every register access of the chamber and turntable drivers goes through
+:class:`ModbusLink`. It owns what pymodbus leaves to the caller:
+
+* one request in flight per client (an ``asyncio.Lock`` around each request),
+* retries with exponential backoff (the backoff waits on the injected clock),
+* reconnect on the next attempt after the transport dropped,
+* translation of every failure into :mod:`drivers.faults`.
+
+pymodbus' own retries and auto-reconnect are switched off so the policy is in
+one place. The reply timeout is wall time on purpose: it guards a socket, not
+physics, and with a :class:`~drivers.clock.VirtualClock` a clock-based timeout
+would fire whenever the loop is briefly idle while a reply is still in flight.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from urllib.parse import parse_qs, urlparse
+
+from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
+from pymodbus.client.base import ModbusBaseClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from pymodbus.pdu import ModbusPDU
+
+from drivers.clock import Clock
+from drivers.faults import (
+    ConnectionLost,
+    DeviceFault,
+    DeviceTimeout,
+    ExceptionReply,
+    ProtocolError,
+    ValueOutOfRange,
+)
+from drivers.registermaps import Field
+
+# pymodbus logs every timeout and dumps frames at ERROR; the fault taxonomy below
+# is how failures reach the caller, so keep its logger quiet unless asked.
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    """How hard to try before a fault reaches the caller."""
+
+    timeout_s: float = 1.0  # wall time per attempt
+    attempts: int = 3  # total tries per request (1 = no retry)
+    backoff_s: float = 0.2  # first backoff, clock time; doubles each retry
+    backoff_max_s: float = 5.0
+
+
+def client_from_url(url: str, timeout_s: float) -> ModbusBaseClient:
+    """``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200&parity=N`` → pymodbus client."""
+    u = urlparse(url)
+    if u.scheme in ("tcp", "modbus+tcp", ""):
+        if not u.hostname:
+            raise ValueError(f"Modbus URL {url!r} has no host (expected tcp://host:port)")
+        return AsyncModbusTcpClient(
+            u.hostname, port=u.port or 502, timeout=timeout_s, retries=0, reconnect_delay=0
+        )
+    if u.scheme == "rtu":
+        q = {k: v[-1] for k, v in parse_qs(u.query).items()}
+        return AsyncModbusSerialClient(
+            u.path,
+            baudrate=int(q.get("baudrate", 19200)),
+            parity=q.get("parity", "N"),
+            stopbits=int(q.get("stopbits", 1)),
+            bytesize=int(q.get("bytesize", 8)),
+            timeout=timeout_s,
+            retries=0,
+            reconnect_delay=0,
+        )
+    raise ValueError(f"unsupported Modbus URL scheme {u.scheme!r} in {url!r} (tcp:// or rtu://)")
+
+
+class ModbusLink:
+    """Serialised, retrying register access to one Modbus device."""
+
+    def __init__(
+        self,
+        url: str,
+        clock: Clock,
+        *,
+        device: str = "modbus",
+        device_id: int = 1,
+        policy: RetryPolicy | None = None,
+    ) -> None:
+        self.url = url
+        self.clock = clock
+        self.device = device
+        self.device_id = device_id
+        self.policy = policy or RetryPolicy()
+        self._client: ModbusBaseClient | None = None
+        self._lock = asyncio.Lock()
+        self._was_connected = False
+        self.stats = {"requests": 0, "retries": 0, "reconnects": 0}
+
+    # --- public -----------------------------------------------------------
+    async def read_field(self, f: Field) -> float:
+        words = await self.read_registers(f.address, f.n_registers)
+        return f.decode(words)
+
+    async def read_fields(self, fields: list[Field], max_gap_words: int = 0) -> list[float]:
+        """Read several fields in as few requests as the device allows.
+
+        Fields whose addresses are at most ``max_gap_words`` apart share one
+        request (a device that rejects reads over undefined registers has 0).
+        """
+        order = sorted(range(len(fields)), key=lambda i: fields[i].address)
+        values: list[float] = [0.0] * len(fields)
+        block: list[int] = []
+        for i in [*order, -1]:
+            if block and (i < 0 or fields[i].address - _end(fields[block[-1]]) > max_gap_words
+                          or _end(fields[i]) - fields[block[0]].address > 125):
+                start = fields[block[0]].address
+                words = await self.read_registers(start, _end(fields[block[-1]]) - start)
+                for j in block:
+                    off = fields[j].address - start
+                    values[j] = fields[j].decode(words[off: off + fields[j].n_registers])
+                block = []
+            if i >= 0:
+                block.append(i)
+        return values
+
+    async def write_field(self, f: Field, value: float) -> None:
+        try:
+            words = f.encode(value)
+        except (ValueError, OverflowError) as exc:
+            raise ValueOutOfRange(self.device, f"{value} at register {f.address}: {exc}") from exc
+        await self.write_registers(f.address, words)
+
+    async def read_registers(self, address: int, count: int) -> list[int]:
+        rr = await self._request(
+            "read", lambda c: c.read_holding_registers(
+                address, count=count, device_id=self.device_id)
+        )
+        if len(rr.registers) != count:  # a short reply is a broken device, not noise
+            raise ProtocolError(
+                self.device, f"asked {count} registers at {address}, got {len(rr.registers)}"
+            )
+        return list(rr.registers)
+
+    async def write_registers(self, address: int, words: list[int]) -> None:
+        await self._request(
+            "write", lambda c: c.write_registers(address, words, device_id=self.device_id)
+        )
+
+    async def close(self) -> None:
+        async with self._lock:
+            self._drop()
+
+    # --- internals ----------------------------------------------------------
+    async def _request(
+        self, what: str, call: Callable[[ModbusBaseClient], Awaitable[ModbusPDU]]
+    ) -> ModbusPDU:
+        async with self._lock:
+            last: DeviceFault | None = None
+            for attempt in range(self.policy.attempts):
+                if attempt:
+                    self.stats["retries"] += 1
+                    delay = min(self.policy.backoff_s * 2 ** (attempt - 1),
+                                self.policy.backoff_max_s)
+                    await self.clock.sleep(delay)
+                try:
+                    client = await self._connected()
+                    self.stats["requests"] += 1
+                    rr = await call(client)
+                except DeviceFault as fault:
+                    last = fault
+                    continue
+                except ConnectionException as exc:
+                    self._drop()
+                    last = ConnectionLost(self.device, f"{what}: {exc}")
+                    continue
+                except ModbusIOException as exc:
+                    # pymodbus turns a cancellation of our task into ModbusIOException;
+                    # give the cancellation back instead of retrying it as a timeout.
+                    task = asyncio.current_task()
+                    if task is not None and task.cancelling():
+                        self._drop()
+                        raise asyncio.CancelledError from exc
+                    if not client.connected:
+                        self._drop()
+                        last = ConnectionLost(self.device, f"{what}: connection lost ({exc})")
+                    else:
+                        last = DeviceTimeout(
+                            self.device, f"{what}: no reply within {self.policy.timeout_s} s")
+                    continue
+                except ModbusException as exc:
+                    raise ProtocolError(self.device, f"{what}: {exc}") from exc
+                if rr.isError():
+                    code = getattr(rr, "exception_code", None)
+                    last = ExceptionReply(self.device, f"{what}: exception code {code}", code)
+                    # Illegal address/value will not heal by retrying: report at once.
+                    if code in (1, 2, 3):
+                        raise last
+                    continue
+                return rr
+            assert last is not None
+            raise last
+
+    async def _connected(self) -> ModbusBaseClient:
+        if self._client is not None and self._client.connected:
+            return self._client
+        if self._client is not None:
+            self._drop()
+        if self._was_connected:
+            self.stats["reconnects"] += 1
+        self._client = client_from_url(self.url, self.policy.timeout_s)
+        try:
+            # pymodbus bounds the connect by ``timeout`` itself (and then idles 0.1 s wall).
+            ok = await self._client.connect()
+        except OSError:
+            ok = False
+        if not ok:
+            self._drop()
+            raise ConnectionLost(self.device, f"cannot connect to {self.url}")
+        self._was_connected = True
+        return self._client
+
+    def _drop(self) -> None:
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+
+def _end(f: Field) -> int:
+    """One past the last register of ``f``."""
+    return f.address + f.n_registers

@@ -1,0 +1,92 @@
+"""Small async device protocols the campaign engine drives.
+
+Real drivers (Modbus chamber and turntable, serial sensor bridge) and the
+in-process simulators implement these; the engine sees nothing else. Units are
+in every name. Faults are raised as :mod:`drivers.faults` exceptions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+
+@dataclass(frozen=True)
+class ChamberStatus:
+    """One read of the chamber controller."""
+
+    process_c: float  # air temperature (PV), °C
+    setpoint_c: float  # target setpoint (SP), °C
+    working_setpoint_c: float  # ramping setpoint the controller is tracking now (WSP), °C
+    ramp_c_per_min: float  # ramp-rate limit, °C/min (0 = step)
+    running: bool
+    alarms: tuple[str, ...] = ()
+
+
+@runtime_checkable
+class Chamber(Protocol):
+    async def read_status(self) -> ChamberStatus: ...
+
+    async def set_setpoint(self, setpoint_c: float) -> None: ...
+
+    async def set_ramp_rate(self, ramp_c_per_min: float) -> None: ...
+
+    async def run(self) -> None: ...
+
+    async def stop(self) -> None: ...
+
+    @property
+    def range_c(self) -> tuple[float, float]:
+        """Allowed setpoint range of this chamber, °C."""
+        ...
+
+
+@dataclass(frozen=True)
+class TurntableStatus:
+    angles_deg: tuple[float, ...]  # one per axis (outer first)
+    in_position: bool
+    moving: bool
+    faults: tuple[str, ...] = ()
+
+
+@runtime_checkable
+class Turntable(Protocol):
+    @property
+    def n_axes(self) -> int: ...
+
+    async def move_to(self, angles_deg: tuple[float, ...]) -> None:
+        """Command all axes; returns once the command is accepted (not when arrived)."""
+        ...
+
+    async def read_status(self) -> TurntableStatus: ...
+
+    async def stop(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class SensorIdentity:
+    model: str  # e.g. "ADXL355"
+    serial: str
+    firmware: str
+
+
+@dataclass(frozen=True)
+class Acquisition:
+    """N raw samples averaged into one recording row (recording format v1 columns)."""
+
+    mean_g: tuple[float, float, float]
+    sd_g: tuple[float, float, float]
+    n: int
+    sensor_c: float  # mean of the sensor's own temperature channel, °C
+    sensor_c_span: float  # max - min of the temperature channel during the capture, °C
+    saturated: bool  # any raw sample at the range limit
+    duration_s: float
+
+
+@runtime_checkable
+class Accelerometer(Protocol):
+    async def identify(self) -> SensorIdentity: ...
+
+    async def configure(self, range_g: float, odr_hz: float) -> None: ...
+
+    async def acquire(self, n_samples: int) -> Acquisition: ...

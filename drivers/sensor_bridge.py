@@ -1,0 +1,220 @@
+"""Accelerometer driver over the serial sensor bridge (docs/sensor-bridge.md).
+
+Works with anything ``serial.serial_for_url`` opens: a real port
+(``/dev/ttyUSB0``), a pseudo-terminal, or ``socket://host:port`` (the simulated
+bridge). pyserial is blocking, so each command runs in a worker thread; one
+command is in flight at a time (``asyncio.Lock``). Acquisition duration is
+measured on the injected clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from typing import Literal
+
+import numpy as np
+import serial
+
+from drivers import adxl355
+from drivers.bridge_protocol import decode_frame, encode_frame
+from drivers.clock import Clock
+from drivers.faults import (
+    ConnectionLost,
+    DeviceFault,
+    DeviceTimeout,
+    ExceptionReply,
+    ProtocolError,
+    ValueOutOfRange,
+)
+from drivers.protocols import Acquisition, SensorIdentity
+
+AcquireMode = Literal["average", "raw"]
+
+
+class SerialAccelerometer:
+    """:class:`drivers.protocols.Accelerometer` for an ADXL355 behind the bridge."""
+
+    def __init__(
+        self,
+        url: str,
+        clock: Clock,
+        *,
+        mode: AcquireMode = "average",
+        baudrate: int = 115200,
+        timeout_s: float = 2.0,
+        attempts: int = 2,
+        device: str = "sensor",
+    ) -> None:
+        self.url = url
+        self.clock = clock
+        self.mode = mode
+        self.baudrate = baudrate
+        self.timeout_s = timeout_s  # wall time per reply line
+        self.attempts = attempts
+        self.device = device
+        self.range_g = 2.0
+        self.odr_hz = 62.5
+        self._port: serial.SerialBase | None = None
+        self._lock = asyncio.Lock()
+
+    # --- protocol -------------------------------------------------------------
+    async def identify(self) -> SensorIdentity:
+        f = await self._command(["ID"], expect="ID")
+        if len(f) != 4:
+            raise ProtocolError(self.device, f"ID reply has {len(f)} fields, expected 4")
+        return SensorIdentity(model=f[1], serial=f[2], firmware=f[3])
+
+    async def configure(self, range_g: float, odr_hz: float) -> None:
+        try:
+            adxl355.lsb_per_g(range_g)  # validate before touching the wire
+        except ValueError as exc:
+            raise ValueOutOfRange(self.device, str(exc)) from exc
+        if odr_hz <= 0:
+            raise ValueOutOfRange(self.device, f"ODR {odr_hz} Hz must be > 0")
+        f = await self._command(["CFG", f"{range_g:g}", f"{odr_hz:g}"], expect="OK")
+        self.range_g, self.odr_hz = float(f[2]), float(f[3])
+
+    async def acquire(self, n_samples: int) -> Acquisition:
+        if n_samples < 1:
+            raise ValueOutOfRange(self.device, f"n_samples must be ≥ 1, got {n_samples}")
+        if self.mode == "raw":
+            return await self._acquire_raw(n_samples)
+        t0 = self.clock.now()
+        f = await self._command(["AVG", n_samples], expect="AVG", n_lines=1,
+                                extra_wait_s=n_samples / self.odr_hz)
+        if len(f) != 12:
+            raise ProtocolError(self.device, f"AVG reply has {len(f)} fields, expected 12")
+        n = int(f[1])
+        mean_c = np.array([float(x) for x in f[2:5]])
+        sd_c = np.array([float(x) for x in f[5:8]])
+        t_mean, t_min, t_max = (float(x) for x in f[8:11])
+        scale = adxl355.lsb_per_g(self.range_g)
+        c_hi, c_lo = adxl355.temp_raw_to_c(t_min), adxl355.temp_raw_to_c(t_max)
+        return Acquisition(
+            mean_g=tuple(float(x) for x in mean_c / scale),  # type: ignore[arg-type]
+            sd_g=tuple(float(x) for x in sd_c / scale),  # type: ignore[arg-type]
+            n=n,
+            sensor_c=float(adxl355.temp_raw_to_c(t_mean)),
+            sensor_c_span=float(abs(c_hi - c_lo)),
+            saturated=f[11] == "1",
+            duration_s=self.clock.now() - t0,
+        )
+
+    async def stream_raw(self, n_samples: int) -> AsyncIterator[tuple[np.ndarray, float]]:
+        """Yield ``(sample_g (3,), sensor_c)`` for each raw frame of one RAW capture."""
+        counts, temps = await self._raw_counts(n_samples)
+        scale = adxl355.lsb_per_g(self.range_g)
+        for c, t in zip(counts, temps, strict=True):
+            yield c / scale, float(adxl355.temp_raw_to_c(t))
+
+    async def close(self) -> None:
+        async with self._lock:
+            await asyncio.to_thread(self._close_port)
+
+    # --- raw path ---------------------------------------------------------------
+    async def _acquire_raw(self, n_samples: int) -> Acquisition:
+        t0 = self.clock.now()
+        counts, temps = await self._raw_counts(n_samples)
+        g = counts / adxl355.lsb_per_g(self.range_g)
+        temps_c = adxl355.temp_raw_to_c(temps)
+        sd = g.std(axis=0, ddof=1) if len(g) > 1 else np.zeros(3)
+        return Acquisition(
+            mean_g=tuple(float(x) for x in g.mean(axis=0)),  # type: ignore[arg-type]
+            sd_g=tuple(float(x) for x in sd),  # type: ignore[arg-type]
+            n=len(g),
+            sensor_c=float(temps_c.mean()),
+            sensor_c_span=float(temps_c.max() - temps_c.min()),
+            saturated=adxl355.is_saturated(counts, self.range_g),
+            duration_s=self.clock.now() - t0,
+        )
+
+    async def _raw_counts(self, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+        lines = await self._exchange(["RAW", n_samples], n_samples + 1,
+                                     n_samples / self.odr_hz)
+        *frames, end = lines
+        if end[0] != "END" or int(end[1]) != n_samples:
+            raise ProtocolError(self.device, f"RAW capture ended with {end!r}")
+        counts = np.empty((n_samples, 3), dtype=np.int64)
+        temps = np.empty(n_samples)
+        for i, f in enumerate(frames):
+            if f[0] != "R" or len(f) != 6:
+                raise ProtocolError(self.device, f"raw frame {i} malformed: {f!r}")
+            counts[i] = [adxl355.counts_from_20bit(int(x, 16)) for x in f[2:5]]
+            temps[i] = float(f[5])
+        return counts, temps
+
+    # --- transport ----------------------------------------------------------------
+    async def _command(self, fields: list[object], *, expect: str, n_lines: int = 1,
+                       extra_wait_s: float = 0.0) -> list[str]:
+        lines = await self._exchange(fields, n_lines, extra_wait_s)
+        f = lines[0]
+        if f[0] != expect:
+            raise ProtocolError(self.device, f"expected {expect} reply, got {f!r}")
+        return f
+
+    async def _exchange(self, fields: list[object], n_lines: int,
+                        extra_wait_s: float) -> list[list[str]]:
+        """Send one command, read ``n_lines`` replies; retry faults that may heal."""
+        async with self._lock:
+            last: DeviceFault | None = None
+            for attempt in range(self.attempts):
+                if attempt:
+                    await self.clock.sleep(0.1 * attempt)
+                try:
+                    port = self._port or await asyncio.to_thread(self._open_port)
+                    io = asyncio.ensure_future(asyncio.to_thread(
+                        self._exchange_blocking, port, fields, n_lines, extra_wait_s))
+                    try:
+                        return await asyncio.shield(io)
+                    except asyncio.CancelledError:
+                        # The worker thread keeps reading until its timeout; hand it the
+                        # port to close and start the next command on a fresh one.
+                        self._port = None
+                        io.add_done_callback(lambda _f, p=port: p.close())
+                        raise
+                except (ConnectionLost, DeviceTimeout, ProtocolError) as fault:
+                    # After a timeout or a garbled line the stream position is unknown:
+                    # reopen so the next command starts clean.
+                    self._close_port()
+                    last = fault
+            assert last is not None
+            raise last
+
+    def _exchange_blocking(self, port: serial.SerialBase, fields: list[object], n_lines: int,
+                           extra_wait_s: float) -> list[list[str]]:
+        try:
+            port.reset_input_buffer()
+            port.write(encode_frame(*fields))
+            out: list[list[str]] = []
+            for i in range(n_lines):
+                # First line of a capture waits for the capture itself (device time).
+                port.timeout = self.timeout_s + (extra_wait_s if i == 0 else 0.0)
+                line = port.read_until(b"\n")
+                if not line.endswith(b"\n"):
+                    raise DeviceTimeout(self.device, f"no reply to {fields[0]} within "
+                                                     f"{port.timeout:.1f} s")
+                f = decode_frame(line, self.device)
+                if f[0] == "ERR":
+                    raise ExceptionReply(self.device, ",".join(f[2:]) or "error",
+                                         int(f[1]) if f[1].isdigit() else None)
+                out.append(f)
+            return out
+        except (serial.SerialException, OSError) as exc:
+            raise ConnectionLost(self.device, f"{self.url}: {exc}") from exc
+
+    def _open_port(self) -> serial.SerialBase:
+        if self._port is None or not self._port.is_open:
+            try:
+                self._port = serial.serial_for_url(self.url, baudrate=self.baudrate,
+                                                   timeout=self.timeout_s)
+            except (serial.SerialException, OSError, ValueError) as exc:
+                raise ConnectionLost(self.device, f"cannot open {self.url}: {exc}") from exc
+        return self._port
+
+    def _close_port(self) -> None:
+        if self._port is not None:
+            try:
+                self._port.close()
+            finally:
+                self._port = None

@@ -1,0 +1,1 @@
+"""soakcal service package."""

@@ -1,0 +1,1 @@
+"""The REST service: FastAPI app factory, auth and one router per resource (spec/api.md)."""

@@ -1,0 +1,92 @@
+"""The FastAPI application factory and its lifespan (migrations, seed, scheduler, engine)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+from starlette.concurrency import run_in_threadpool
+
+from service.api import calibrations, campaigns, health, rigs, schedules, tokens
+from service.campaigns import seed_sim_rig
+from service.config import Settings, service_version
+from service.db.session import make_engine, make_session_factory, session_scope, upgrade_database
+from service.engine.states import IllegalTransition
+from service.scheduler import Scheduler
+
+log = logging.getLogger(__name__)
+
+DESCRIPTION = """Thermal-soak calibration campaigns for triaxial MEMS accelerometers.
+
+Every call except `GET /api/v1/health` needs `Authorization: Bearer <token>`
+(`soakcal token create --role viewer|operator|admin`)."""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The REST service of spec/api.md over ``settings.database_url``."""
+    settings = settings or Settings()
+    engine = make_engine(settings.database_url)
+    app = FastAPI(
+        title="soakcal",
+        version=service_version(),
+        description=DESCRIPTION,
+        lifespan=_lifespan,
+    )
+    app.state.settings = settings
+    app.state.engine = engine
+    app.state.session_factory = make_session_factory(engine)
+    for module in (health, rigs, campaigns, calibrations, schedules, tokens):
+        app.include_router(module.router)
+    app.add_exception_handler(IllegalTransition, _conflict)
+    return app
+
+
+async def _conflict(_request: Request, exc: Exception) -> JSONResponse:
+    """The state machine's refusal (``service.engine.states``) as HTTP 409."""
+    return JSONResponse({"detail": str(exc)}, status_code=409)
+
+
+@asynccontextmanager
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    settings: Settings = app.state.settings
+    factory = app.state.session_factory
+    if settings.migrate:
+        await run_in_threadpool(upgrade_database, settings.database_url)
+    if settings.seed_sim_rig:
+        await run_in_threadpool(_seed, factory)
+    background: list[Any] = []
+    try:
+        if settings.run_scheduler:
+            scheduler = Scheduler(factory, interval_s=settings.scheduler_interval_s)
+            await scheduler.start()
+            background.append(scheduler)
+        if settings.run_engine:
+            manager = _campaign_manager(settings, factory)
+            if manager is not None:
+                await manager.start()
+                background.append(manager)
+        app.state.background = background
+        yield
+    finally:
+        for worker in reversed(background):
+            await worker.stop()
+        app.state.engine.dispose()
+
+
+def _seed(factory: Any) -> None:
+    with session_scope(factory) as session:
+        seed_sim_rig(session)
+
+
+def _campaign_manager(settings: Settings, factory: Any) -> Any | None:
+    """The campaign runner manager, imported lazily: the API works without the engine."""
+    try:
+        from service.engine.manager import CampaignManager
+    except ImportError as exc:
+        log.error("campaign engine unavailable (%s): campaigns will stay queued", exc)
+        return None
+    return CampaignManager(factory, sim_speed=settings.sim_speed, owner=settings.engine_owner)

@@ -1,0 +1,196 @@
+"""``/api/v1/campaigns``: create, inspect, control, export and follow soak campaigns."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi.responses import PlainTextResponse, StreamingResponse
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
+
+from service.api import auth
+from service.api.deps import SessionDep
+from service.api.recording_csv import render_recording_csv
+from service.api.schemas import CampaignCreate, CampaignOut, CampaignState
+from service.campaigns import (
+    CampaignNotFound,
+    apply_action,
+    campaign_out,
+    create_campaign,
+    spec_errors,
+)
+from service.db.models import Campaign, Measurement
+from service.engine.states import TERMINAL
+
+router = APIRouter(prefix="/api/v1/campaigns", tags=["campaigns"])
+
+_NOT_FOUND = {404: {"description": "no such campaign"}}
+_CONFLICT = {409: {"description": "the action is illegal in the campaign's state"}}
+
+
+@router.post("", response_model=CampaignOut, status_code=201, dependencies=[Depends(auth.operator)])
+def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
+    """Queue a campaign; it waits in ``queued`` while its rig is busy."""
+    errors = spec_errors(session, body)
+    if errors:
+        raise HTTPException(status_code=422, detail=errors)
+    campaign = create_campaign(session, body)
+    session.commit()
+    return campaign_out(campaign)
+
+
+@router.get("", response_model=list[CampaignOut], dependencies=[Depends(auth.viewer)])
+def list_campaigns(
+    session: SessionDep,
+    state: Annotated[CampaignState | None, Query()] = None,
+) -> list[CampaignOut]:
+    query = select(Campaign).order_by(Campaign.id.desc())
+    if state is not None:
+        query = query.where(Campaign.state == state)
+    return [campaign_out(c) for c in session.scalars(query)]
+
+
+@router.get(
+    "/{campaign_id}",
+    response_model=CampaignOut,
+    responses=_NOT_FOUND,
+    dependencies=[Depends(auth.viewer)],
+)
+def get_campaign(campaign_id: int, session: SessionDep) -> CampaignOut:
+    return campaign_out(_get_or_404(session, campaign_id))
+
+
+def _control(action: str):  # type: ignore[no-untyped-def]
+    def handler(campaign_id: int, session: SessionDep) -> CampaignOut:
+        try:
+            return campaign_out(apply_action(session, campaign_id, action))
+        except CampaignNotFound as exc:
+            raise HTTPException(status_code=404, detail=str(exc)) from exc
+
+    handler.__name__ = f"{action}_campaign"
+    handler.__doc__ = {
+        "pause": "Pause at the next safe point (a queued campaign pauses at once).",
+        "resume": "Resume a paused campaign from its persisted cursor.",
+        "abort": "Abort: the runner parks the chamber at a safe temperature, the table at rest.",
+    }[action]
+    return handler
+
+
+for _action in ("pause", "resume", "abort"):
+    router.add_api_route(
+        f"/{{campaign_id}}/{_action}",
+        _control(_action),
+        methods=["POST"],
+        response_model=CampaignOut,
+        responses={**_NOT_FOUND, **_CONFLICT},
+        dependencies=[Depends(auth.operator)],
+    )
+
+
+@router.get(
+    "/{campaign_id}/recording.csv",
+    response_class=PlainTextResponse,
+    responses={**_NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "recording v1"}},
+    dependencies=[Depends(auth.viewer)],
+)
+def recording_csv(campaign_id: int, session: SessionDep) -> PlainTextResponse:
+    """The measurements so far, in recording format v1, time order."""
+    _get_or_404(session, campaign_id)
+    rows = session.scalars(
+        select(Measurement)
+        .where(Measurement.campaign_id == campaign_id)
+        .order_by(Measurement.t_s, Measurement.step, Measurement.position)
+    )
+    return PlainTextResponse(
+        render_recording_csv(rows),
+        media_type="text/csv; charset=utf-8",
+        headers={"Content-Disposition": f'attachment; filename="campaign-{campaign_id}.csv"'},
+    )
+
+
+@router.get(
+    "/{campaign_id}/events",
+    response_class=StreamingResponse,
+    responses={
+        **_NOT_FOUND,
+        200: {
+            "content": {"text/event-stream": {}},
+            "description": "`event: progress` with the campaign JSON whenever it changes; "
+            "`event: end` at a terminal state, then the stream closes",
+        },
+    },
+    dependencies=[Depends(auth.viewer)],
+)
+async def campaign_events(campaign_id: int, request: Request) -> StreamingResponse:
+    """Server-sent progress events, read from the database (the runner may be elsewhere)."""
+    factory = request.app.state.session_factory
+    first = await run_in_threadpool(_load_view, factory, campaign_id)
+    if first is None:
+        raise HTTPException(status_code=404, detail=f"campaign {campaign_id} not found")
+    settings = request.app.state.settings
+    return StreamingResponse(
+        _event_stream(
+            factory, campaign_id, first, settings.events_poll_s, settings.events_heartbeat_s
+        ),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+    )
+
+
+async def _event_stream(
+    factory: sessionmaker[Session],
+    campaign_id: int,
+    view: CampaignOut,
+    poll_s: float,
+    heartbeat_s: float,
+) -> AsyncIterator[str]:
+    last_payload = None
+    last_sent = time.monotonic()
+    event_id = 0
+    while True:
+        payload = view.model_dump_json()
+        if payload != last_payload:
+            event_id += 1
+            yield f"event: progress\nid: {event_id}\ndata: {payload}\n\n"
+            last_payload, last_sent = payload, time.monotonic()
+        if view.state in TERMINAL:
+            yield f"event: end\nid: {event_id + 1}\ndata: {_end_data(view)}\n\n"
+            return
+        if time.monotonic() - last_sent >= heartbeat_s:
+            yield ": keep-alive\n\n"  # a comment line: clients ignore it, proxies see traffic
+            last_sent = time.monotonic()
+        await asyncio.sleep(poll_s)
+        reloaded = await run_in_threadpool(_load_view, factory, campaign_id)
+        if reloaded is None:  # deleted under us: nothing more to follow
+            return
+        view = reloaded
+
+
+def _end_data(view: CampaignOut) -> str:
+    import json
+
+    body: dict[str, Any] = {
+        "id": view.id,
+        "state": view.state,
+        "error": view.error,
+        "calibration_id": view.calibration_id,
+    }
+    return json.dumps(body)
+
+
+def _load_view(factory: sessionmaker[Session], campaign_id: int) -> CampaignOut | None:
+    with factory() as session:
+        campaign = session.get(Campaign, campaign_id)
+        return None if campaign is None else campaign_out(campaign)
+
+
+def _get_or_404(session: Session, campaign_id: int) -> Campaign:
+    campaign = session.get(Campaign, campaign_id)
+    if campaign is None:
+        raise HTTPException(status_code=404, detail=f"campaign {campaign_id} not found")
+    return campaign

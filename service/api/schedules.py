@@ -1,0 +1,80 @@
+"""``/api/v1/schedules``: one-shot (``at``) or cron campaigns, fired by ``service.scheduler``."""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException, Response
+from sqlalchemy import select
+
+from service.api import auth
+from service.api.deps import SessionDep
+from service.api.schemas import ScheduleCreate, ScheduleOut
+from service.campaigns import spec_errors
+from service.db.models import Schedule
+from service.db.timestamps import as_utc, utcnow
+from service.scheduler import cron_is_valid, next_cron_run
+
+router = APIRouter(prefix="/api/v1/schedules", tags=["schedules"])
+
+
+@router.post("", response_model=ScheduleOut, status_code=201, dependencies=[Depends(auth.operator)])
+def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
+    errors: list[dict[str, Any]] = spec_errors(session, body.campaign, loc=("body", "campaign"))
+    if body.cron is not None and not cron_is_valid(body.cron):
+        errors.append(
+            {
+                "type": "value_error",
+                "loc": ["body", "cron"],
+                "input": body.cron,
+                "msg": f"invalid cron expression {body.cron!r} (five fields: min hour dom mon dow)",
+            }
+        )
+    if errors:
+        raise HTTPException(status_code=422, detail=errors)
+    at = as_utc(body.at)
+    schedule = Schedule(
+        campaign=body.campaign.model_dump(),
+        at=at,
+        cron=body.cron,
+        next_run_at=at if at is not None else next_cron_run(body.cron or "", utcnow()),
+    )
+    session.add(schedule)
+    session.commit()
+    return _out(schedule)
+
+
+@router.get("", response_model=list[ScheduleOut], dependencies=[Depends(auth.viewer)])
+def list_schedules(session: SessionDep) -> list[ScheduleOut]:
+    return [_out(s) for s in session.scalars(select(Schedule).order_by(Schedule.id))]
+
+
+@router.delete(
+    "/{schedule_id}",
+    status_code=204,
+    response_class=Response,
+    responses={404: {"description": "no such schedule"}},
+    dependencies=[Depends(auth.operator)],
+)
+def delete_schedule(schedule_id: int, session: SessionDep) -> Response:
+    """Remove a schedule; campaigns it already created are not touched."""
+    schedule = session.get(Schedule, schedule_id)
+    if schedule is None:
+        raise HTTPException(status_code=404, detail=f"schedule {schedule_id} not found")
+    session.delete(schedule)
+    session.commit()
+    return Response(status_code=204)
+
+
+def _out(s: Schedule) -> ScheduleOut:
+    return ScheduleOut(
+        id=s.id,
+        campaign=s.campaign,
+        at=as_utc(s.at),
+        cron=s.cron,
+        next_run_at=as_utc(s.next_run_at),
+        last_run_at=as_utc(s.last_run_at),
+        last_campaign_id=s.last_campaign_id,
+        created_at=as_utc(s.created_at) or dt.datetime.now(dt.UTC),
+    )

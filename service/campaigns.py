@@ -1,0 +1,229 @@
+"""Campaign requests and controls shared by the API and the scheduler.
+
+The API never drives hardware: it writes rows. A queued campaign (or a paused
+one that no process holds a rig lease for) is moved by the API directly; a
+campaign that a runner holds gets a ``requested_action`` that the runner
+applies at its next safe point. Every state write is a conditional UPDATE on
+the state it was read in, so a runner in another process can never be
+overwritten with a stale state.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from service.api.schemas import CampaignCreate, CampaignOut, Progress
+from service.db.models import Campaign, Rig, RigLease, Sensor
+from service.db.timestamps import as_utc, utcnow
+from service.engine.states import PHASES, TERMINAL, check_action
+
+SIM_RIG_NAME = "sim"
+SIM_CHAMBER_RANGE_C = (-70.0, 180.0)
+SIM_RIG: dict[str, Any] = {
+    "name": SIM_RIG_NAME,
+    "chamber": {"driver": "sim", "range_c": list(SIM_CHAMBER_RANGE_C)},
+    "turntable": {"driver": "sim"},
+    "sensors": [{"driver": "sim", "model": "ADXL355"}],
+}
+ACTIVE_STATES = ("running", "paused")
+
+
+class CampaignNotFound(LookupError):
+    def __init__(self, campaign_id: int) -> None:
+        super().__init__(f"campaign {campaign_id} not found")
+
+
+def seed_sim_rig(session: Session) -> bool:
+    """Insert the embedded ``sim`` rig if it is missing; True when inserted."""
+    if session.scalar(select(Rig.id).where(Rig.name == SIM_RIG_NAME)) is not None:
+        return False
+    session.add(Rig(**SIM_RIG))
+    session.flush()
+    return True
+
+
+def spec_errors(
+    session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
+) -> list[dict[str, Any]]:
+    """Checks that need the database, in FastAPI's 422 ``detail`` format (empty when fine)."""
+    rig = session.scalar(select(Rig).where(Rig.name == spec.rig))
+    if rig is None:
+        return [_error(loc + ("rig",), f"unknown rig {spec.rig!r}", spec.rig)]
+    errors: list[dict[str, Any]] = []
+    lo_c, hi_c = chamber_range_c(rig)
+    for i, setpoint_c in enumerate(spec.setpoints_c):
+        if not lo_c <= setpoint_c <= hi_c:
+            errors.append(
+                _error(
+                    loc + ("setpoints_c", i),
+                    f"setpoint {setpoint_c} °C is outside rig {rig.name!r}'s chamber range "
+                    f"[{lo_c}, {hi_c}] °C",
+                    setpoint_c,
+                )
+            )
+    if positions_count(spec.positions) is None:
+        errors.append(
+            _error(
+                loc + ("positions",),
+                f"unknown position schedule {spec.positions!r}; "
+                "expected table1, six, cube14, sphere<N> or table1+cube14",
+                spec.positions,
+            )
+        )
+    return errors
+
+
+def chamber_range_c(rig: Rig) -> tuple[float, float]:
+    """The rig's chamber range (``chamber.range_c``); unbounded when not configured."""
+    bounds = (rig.chamber or {}).get("range_c")
+    if not bounds or len(bounds) != 2:
+        return (float("-inf"), float("inf"))
+    return (float(bounds[0]), float(bounds[1]))
+
+
+@functools.lru_cache(maxsize=64)
+def positions_count(name: str) -> int | None:
+    """Number of orientations of a named schedule; None when the name is unknown."""
+    from calibration.schedules import get_schedule  # numpy: only when a name is checked
+
+    try:
+        return int(len(get_schedule(name)))
+    except (ValueError, KeyError):
+        return None
+
+
+def create_campaign(
+    session: Session, spec: CampaignCreate, schedule_id: int | None = None
+) -> Campaign:
+    """A new ``queued`` campaign (caller checked ``spec_errors``); flushed, not committed."""
+    if session.scalar(select(Sensor.id).where(Sensor.serial == spec.sensor)) is None:
+        session.add(Sensor(serial=spec.sensor))
+    campaign = Campaign(
+        rig=spec.rig,
+        sensor=spec.sensor,
+        spec=spec.model_dump(),
+        state="queued",
+        schedule_id=schedule_id,
+        progress={},
+        steps_log=[],
+    )
+    session.add(campaign)
+    session.flush()
+    return campaign
+
+
+def apply_action(session: Session, campaign_id: int, action: str) -> Campaign:
+    """Pause, resume or abort; raises ``IllegalTransition`` (409) or ``CampaignNotFound``."""
+    for _ in range(5):  # a runner may change the state between our read and our write
+        campaign = session.get(Campaign, campaign_id, populate_existing=True)
+        if campaign is None:
+            raise CampaignNotFound(campaign_id)
+        check_action(action, campaign.state)
+        values = _direct_transition(session, campaign, action)
+        if values is None:
+            values = {"requested_action": action}
+        result = session.execute(
+            update(Campaign)
+            .where(Campaign.id == campaign_id, Campaign.state == campaign.state)
+            .values(**values)
+        )
+        if result.rowcount == 1:
+            session.commit()
+            refreshed = session.get(Campaign, campaign_id, populate_existing=True)
+            assert refreshed is not None
+            return refreshed
+        session.rollback()
+    raise RuntimeError(f"campaign {campaign_id} kept changing state; try again")
+
+
+def _direct_transition(session: Session, campaign: Campaign, action: str) -> dict | None:
+    """Column values when no runner holds the campaign, else None (ask the runner)."""
+    if campaign.state == "running" or _held_by_runner(session, campaign.id):
+        return None
+    now = utcnow()
+    if action == "pause":  # queued -> paused: the manager skips it until resumed
+        return {"state": "paused", "requested_action": None}
+    if action == "resume":  # paused -> queued: the manager picks it up from its cursor
+        return {"state": "queued", "requested_action": None}
+    return {"state": "aborted", "requested_action": None, "finished_at": now}
+
+
+def _held_by_runner(session: Session, campaign_id: int) -> bool:
+    lease = session.scalar(select(RigLease).where(RigLease.campaign_id == campaign_id))
+    return lease is not None and (as_utc(lease.lease_until) or utcnow()) > utcnow()
+
+
+def rig_busy(session: Session, rig_name: str) -> bool:
+    """A campaign is running or paused on the rig, or a live lease holds it."""
+    active = session.scalar(
+        select(Campaign.id).where(Campaign.rig == rig_name, Campaign.state.in_(ACTIVE_STATES))
+    )
+    if active is not None:
+        return True
+    lease = session.get(RigLease, rig_name)
+    return lease is not None and (as_utc(lease.lease_until) or utcnow()) > utcnow()
+
+
+def campaign_out(campaign: Campaign) -> CampaignOut:
+    """The API view: contract fields, progress completed from the cursor and the spec."""
+    return CampaignOut(
+        id=campaign.id,
+        rig=campaign.rig,
+        sensor=campaign.sensor,
+        state=campaign.state,  # type: ignore[arg-type]
+        created_at=as_utc(campaign.created_at),  # type: ignore[arg-type]
+        started_at=as_utc(campaign.started_at),
+        finished_at=as_utc(campaign.finished_at),
+        progress=progress_of(campaign),
+        calibration_id=campaign.calibration_id,
+        error=campaign.error,
+        requested_action=campaign.requested_action,
+        suspended_reason=campaign.suspended_reason,
+        spec=campaign.spec or {},
+        schedule_id=campaign.schedule_id,
+    )
+
+
+def progress_of(campaign: Campaign) -> Progress:
+    """``campaign.progress`` as written by the runner, gaps filled from cursor and spec."""
+    live = dict(campaign.progress or {})
+    spec = campaign.spec or {}
+    setpoints_c = list(spec.get("setpoints_c") or [])
+    step = int(_first(live.get("step"), campaign.cursor_step, 0))
+    phase = _first(live.get("phase"), campaign.cursor_phase, "ramp")
+    if phase not in PHASES:
+        phase = "ramp"
+    default_fraction = 1.0 if campaign.state == "completed" else 0.0
+    fraction = float(_first(live.get("fraction"), default_fraction))
+    setpoint_c = live.get("setpoint_c")
+    if setpoint_c is None and 0 <= step < len(setpoints_c):
+        setpoint_c = setpoints_c[step]
+    positions = live.get("positions")
+    if positions is None and spec.get("positions"):
+        positions = positions_count(str(spec["positions"]))
+    eta_s = live.get("eta_s")
+    if campaign.state in TERMINAL:
+        eta_s = 0.0 if campaign.state == "completed" else None
+    return Progress(
+        step=step,
+        steps=int(_first(live.get("steps"), len(setpoints_c))),
+        phase=phase,
+        position=int(_first(live.get("position"), campaign.cursor_position, 0)),
+        positions=positions,
+        fraction=min(1.0, max(0.0, fraction)),
+        chamber_c=live.get("chamber_c"),
+        setpoint_c=setpoint_c,
+        eta_s=eta_s,
+    )
+
+
+def _first(*values: Any) -> Any:
+    return next((v for v in values if v is not None), None)
+
+
+def _error(loc: tuple[str | int, ...], msg: str, value: Any) -> dict[str, Any]:
+    return {"type": "value_error", "loc": list(loc), "msg": msg, "input": value}

@@ -1,0 +1,200 @@
+"""``soakcal``: one command, argparse subcommands per spec/cli.md.
+
+Subcommands owned by other packages are registered here (so ``--help`` lists
+them and their arguments are validated) but imported only when run, so a
+missing module is a clear one-line error for that subcommand, not a crash of
+the whole CLI.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+ROLES = ("viewer", "operator", "admin")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "sim":  # everything after `sim` belongs to the simulators' own parser
+        return _delegate("simulators.cli", "run_sim", "sim")(argv[1:])
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "handler", None):
+        parser.print_help(sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        result = args.handler(args)
+    except KeyboardInterrupt:
+        return 130
+    return EXIT_OK if result is None else int(result)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="soakcal",
+        description="Thermal-soak calibration of triaxial MEMS accelerometers.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_calibration_commands(sub)
+    _add_serve(sub)
+    _add_token(sub)
+    _add_campaign(sub)
+    demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
+    demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
+    demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
+    demo.set_defaults(handler=_delegate("service.demo", "run_demo", "demo"))
+    sub.add_parser(
+        "sim",
+        help="simulated devices (arguments are passed to the simulators' CLI)",
+        add_help=False,
+    )
+    return parser
+
+
+# --- subcommands implemented elsewhere ------------------------------------------------
+
+
+def _add_calibration_commands(sub: Any) -> None:
+    cal = sub.add_parser("calibrate", help="fit the thermal model to a recording")
+    cal.add_argument("recording", metavar="RECORDING", help="recording v1 CSV")
+    cal.add_argument("-o", "--output", required=True, metavar="MODEL", help="model JSON to write")
+    cal.add_argument("--json", action="store_true", help="print the table as JSON")
+    cal.add_argument("--report-dir", metavar="DIR", help="write the report (plots) here")
+    cal.set_defaults(handler=_delegate("calibration.cli", "run_calibrate", "calibrate"))
+
+    comp = sub.add_parser("compensate", help="apply a model to a recording")
+    comp.add_argument("model", metavar="MODEL", help="model JSON")
+    comp.add_argument("recording", metavar="RECORDING", help="recording v1 CSV")
+    comp.add_argument("-o", "--output", required=True, metavar="OUT", help="CSV to write")
+    comp.add_argument(
+        "--extrapolate", action="store_true", help="allow temperatures outside the valid range"
+    )
+    comp.set_defaults(handler=_delegate("calibration.cli", "run_compensate", "compensate"))
+
+    diag = sub.add_parser("diagnose", help="what physics the base model left out")
+    diag.add_argument("recording", metavar="RECORDING", help="recording v1 CSV")
+    diag.add_argument("--model", metavar="MODEL", help="model JSON (default: fit one)")
+    diag.add_argument("--json", action="store_true", help="print JSON")
+    diag.add_argument("--report-dir", metavar="DIR", help="write the report here")
+    diag.add_argument("--seed", type=int, metavar="N", help="random seed")
+    diag.add_argument("--n-null", type=int, metavar="N", help="null-distribution draws")
+    diag.set_defaults(handler=_delegate("calibration.discrepancy.cli", "run_diagnose", "diagnose"))
+
+    imp = sub.add_parser("import", help="convert a raw recording to recording format v1")
+    imp.add_argument("--format", required=True, metavar="FMT", help="raw format name")
+    imp.add_argument("raw", metavar="RAW", help="raw input file")
+    imp.add_argument("-o", "--output", required=True, metavar="REC", help="recording to write")
+    imp.add_argument("--min-static-s", type=float, metavar="S", help="shortest static segment")
+    imp.add_argument("--threshold", type=float, metavar="X", help="static-detection threshold")
+    imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
+
+
+def _delegate(module: str, function: str, command: str) -> Callable[[Any], int]:
+    """A handler importing ``module.function`` when the subcommand runs."""
+
+    def handler(args: Any) -> int:
+        try:
+            target = getattr(importlib.import_module(module), function)
+        except ImportError as exc:
+            missing = getattr(exc, "name", None)
+            if missing and (module == missing or module.startswith(missing + ".")):
+                _fail(f"soakcal {command}: not available in this installation ({module} missing)")
+                return EXIT_FAILED
+            raise
+        except AttributeError:
+            _fail(f"soakcal {command}: {module} has no {function}()")
+            return EXIT_FAILED
+        result = target(args)
+        return EXIT_OK if result is None else int(result)
+
+    return handler
+
+
+# --- serve and token -------------------------------------------------------------------
+
+
+def _add_serve(sub: Any) -> None:
+    serve = sub.add_parser("serve", help="run the REST service (migrates the database first)")
+    serve.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
+    serve.add_argument(
+        "--sim-speed",
+        type=_positive_float,
+        default=600.0,
+        metavar="FACTOR",
+        help="simulated time runs FACTOR times faster than the wall clock (default 600)",
+    )
+    serve.set_defaults(handler=_run_serve)
+
+
+def _run_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from service.api.app import create_app
+    from service.config import Settings
+    from service.db.session import upgrade_database
+
+    settings = Settings(sim_speed=args.sim_speed, migrate=False)
+    print(f"soakcal: database {_redacted(settings.database_url)}", file=sys.stderr)
+    upgrade_database(settings.database_url)
+    uvicorn.run(create_app(settings), host=args.host, port=args.port)
+    return EXIT_OK
+
+
+def _add_token(sub: Any) -> None:
+    token = sub.add_parser("token", help="API tokens")
+    token_sub = token.add_subparsers(dest="token_command", metavar="ACTION", required=True)
+    create = token_sub.add_parser("create", help="create a token; it is printed as the last line")
+    create.add_argument("--role", required=True, choices=ROLES)
+    create.add_argument("--name", help="who or what the token is for")
+    create.set_defaults(handler=_run_token_create)
+
+
+def _run_token_create(args: argparse.Namespace) -> int:
+    from service.api.auth import create_token
+    from service.config import resolve_database_url
+    from service.db.session import make_session_factory, session_scope, upgrade_database
+
+    url = resolve_database_url()
+    upgrade_database(url)  # so a token can be made before the first `serve`
+    factory = make_session_factory(url)
+    try:
+        with session_scope(factory) as session:
+            token = create_token(session, args.role, args.name)
+    finally:
+        factory.kw["bind"].dispose()
+    label = f" '{args.name}'" if args.name else ""
+    print(f"created {args.role} token{label} in {_redacted(url)}; it is shown only once:")
+    print(token)
+    return EXIT_OK
+
+
+def _redacted(url: str) -> str:
+    from sqlalchemy import make_url
+
+    return make_url(url).render_as_string(hide_password=True)
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+# --- campaign (REST client) ------------------------------------------------------------
+
+
+def _add_campaign(sub: Any) -> None:
+    from service import cli_campaign
+
+    cli_campaign.add_parser(sub)
+
+
+def _fail(message: str) -> None:
+    print(message, file=sys.stderr)

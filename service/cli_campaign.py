@@ -1,0 +1,232 @@
+"""``soakcal campaign ...``: a thin REST client (httpx) of the running service."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from typing import Any
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+TERMINAL = ("completed", "failed", "aborted")
+
+
+def add_parser(sub: Any) -> None:
+    campaign = sub.add_parser("campaign", help="start, watch and control campaigns (REST client)")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--url",
+        default=os.environ.get("SOAKCAL_URL", DEFAULT_URL),
+        help=f"service URL (default {DEFAULT_URL})",
+    )
+    common.add_argument("--token", default=None, help="API token (default: $SOAKCAL_TOKEN)")
+    actions = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
+
+    start = actions.add_parser("start", parents=[common], help="queue a campaign")
+    start.add_argument("--rig", default="sim")
+    start.add_argument("--sensor", required=True, help="sensor serial, e.g. SN-0001")
+    start.add_argument(
+        "--setpoints",
+        type=_setpoints,
+        metavar="C,C,...",
+        help="setpoints in °C, e.g. --setpoints=-40,-20,0 (default -40..60 step 10)",
+    )
+    start.add_argument("--soak-min", type=float, help="soak per step in minutes (default 60)")
+    start.add_argument("--positions", help="position schedule (default table1)")
+    start.add_argument("--samples-per-position", type=int, help="default 200")
+    start.add_argument("--watch", action="store_true", help="follow it until it ends")
+    start.set_defaults(handler=_start)
+
+    watch = actions.add_parser("watch", parents=[common], help="live progress until it ends")
+    watch.add_argument("id", type=int)
+    watch.set_defaults(handler=_watch)
+
+    for action in ("pause", "resume", "abort"):
+        p = actions.add_parser(action, parents=[common], help=f"{action} a campaign")
+        p.add_argument("id", type=int)
+        p.set_defaults(handler=_control, action=action)
+
+    listing = actions.add_parser("list", parents=[common], help="list campaigns")
+    listing.add_argument("--state", choices=("queued", "running", "paused", *TERMINAL))
+    listing.add_argument("--json", action="store_true", help="print JSON")
+    listing.set_defaults(handler=_list)
+
+
+def _setpoints(text: str) -> list[float]:
+    try:
+        return [float(part) for part in text.split(",") if part.strip()]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas: {exc}") from exc
+
+
+class ApiError(Exception):
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+def _client(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    import httpx
+
+    token = args.token or os.environ.get("SOAKCAL_TOKEN")
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    return httpx.Client(base_url=args.url.rstrip("/"), headers=headers, timeout=30.0)
+
+
+def _call(args: argparse.Namespace, method: str, path: str, **kwargs: Any) -> Any:
+    import httpx
+
+    try:
+        with _client(args) as client:
+            response = client.request(method, path, **kwargs)
+    except httpx.HTTPError as exc:
+        raise ApiError(0, f"cannot reach {args.url}: {exc}") from exc
+    if response.status_code >= 400:
+        raise ApiError(response.status_code, f"HTTP {response.status_code}: {_detail(response)}")
+    return response.json() if response.content else None
+
+
+def _detail(response: Any) -> str:
+    try:
+        detail = response.json().get("detail")
+    except ValueError:
+        return response.text.strip()[:200]
+    if isinstance(detail, list):  # FastAPI validation errors: "loc: msg" for each
+        return "; ".join(
+            f"{'.'.join(str(p) for p in e.get('loc', []))}: {e.get('msg')}" for e in detail
+        )
+    return str(detail)
+
+
+def _guarded(handler):  # type: ignore[no-untyped-def]
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return handler(args)
+        except ApiError as exc:
+            print(f"soakcal campaign: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT if 400 <= exc.status < 500 else EXIT_FAILED
+
+    return run
+
+
+@_guarded
+def _start(args: argparse.Namespace) -> int:
+    body: dict[str, Any] = {"rig": args.rig, "sensor": args.sensor}
+    optional = {
+        "setpoints_c": args.setpoints,
+        "soak_min": args.soak_min,
+        "positions": args.positions,
+        "samples_per_position": args.samples_per_position,
+    }
+    body.update({k: v for k, v in optional.items() if v is not None})
+    campaign = _call(args, "POST", "/api/v1/campaigns", json=body)
+    print(f"campaign {campaign['id']} {campaign['state']} on rig {campaign['rig']}")
+    if args.watch:
+        args.id = campaign["id"]
+        return _watch(args)
+    return EXIT_OK
+
+
+@_guarded
+def _control(args: argparse.Namespace) -> int:
+    campaign = _call(args, "POST", f"/api/v1/campaigns/{args.id}/{args.action}")
+    pending = campaign.get("requested_action")
+    note = f" ({pending} requested: at the next safe point)" if pending else ""
+    print(f"campaign {campaign['id']} {campaign['state']}{note}")
+    return EXIT_OK
+
+
+@_guarded
+def _list(args: argparse.Namespace) -> int:
+    params = {"state": args.state} if args.state else None
+    campaigns = _call(args, "GET", "/api/v1/campaigns", params=params)
+    if args.json:
+        print(json.dumps(campaigns, indent=2))
+        return EXIT_OK
+    print(f"{'id':>5}  {'state':<10} {'rig':<10} {'sensor':<12} {'step':>7}  {'done':>5}")
+    for c in campaigns:
+        p = c["progress"]
+        print(
+            f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
+            f"{p['step'] + 1:>3}/{p['steps']:<3}  {p['fraction']:>5.0%}"
+        )
+    return EXIT_OK
+
+
+@_guarded
+def _watch(args: argparse.Namespace) -> int:
+    """Follow the SSE stream; fall back to polling if the stream breaks."""
+    last: dict[str, Any] | None = None
+    try:
+        for campaign in _sse_campaigns(args):
+            last = campaign
+            _draw(campaign)
+    except ApiError:
+        raise
+    except Exception:  # stream cut (proxy, restart): poll instead
+        while last is None or last["state"] not in TERMINAL:
+            last = _call(args, "GET", f"/api/v1/campaigns/{args.id}")
+            _draw(last)
+            if last["state"] not in TERMINAL:
+                time.sleep(1.0)
+    sys.stdout.write("\n")
+    if last is None:
+        return EXIT_FAILED
+    if last.get("error"):
+        print(f"error: {last['error']}")
+    return EXIT_OK if last["state"] == "completed" else EXIT_FAILED
+
+
+def _sse_campaigns(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    with (
+        _client(args) as client,
+        client.stream("GET", f"/api/v1/campaigns/{args.id}/events", timeout=None) as response,
+    ):
+        if response.status_code >= 400:
+            response.read()
+            raise ApiError(
+                response.status_code, f"HTTP {response.status_code}: {_detail(response)}"
+            )
+        event, data = "message", []
+        for line in response.iter_lines():
+            if line.startswith("event:"):
+                event = line[6:].strip()
+            elif line.startswith("data:"):
+                data.append(line[5:].strip())
+            elif line == "":
+                if event == "progress" and data:
+                    yield json.loads("\n".join(data))
+                event, data = "message", []
+
+
+def _draw(campaign: dict[str, Any]) -> None:
+    sys.stdout.write("\r" + progress_line(campaign) + "\x1b[K")
+    sys.stdout.flush()
+
+
+def progress_line(campaign: dict[str, Any], width: int = 24) -> str:
+    """``[#####.....]  42% step 5/11 soak 12.3 °C → 10 °C  ETA 1h02m  running``."""
+    p = campaign["progress"]
+    filled = int(round(p["fraction"] * width))
+    bar = "#" * filled + "." * (width - filled)
+    chamber = "–" if p.get("chamber_c") is None else f"{p['chamber_c']:.1f}"
+    setpoint = "–" if p.get("setpoint_c") is None else f"{p['setpoint_c']:g}"
+    return (
+        f"[{bar}] {p['fraction']:4.0%} step {min(p['step'] + 1, p['steps'])}/{p['steps']} "
+        f"{p['phase']:<9} {chamber} °C → {setpoint} °C  ETA {_eta(p.get('eta_s'))}  "
+        f"{campaign['state']}"
+    )
+
+
+def _eta(eta_s: float | None) -> str:
+    if eta_s is None:
+        return "?"
+    minutes = int(eta_s // 60)
+    return (
+        f"{minutes // 60}h{minutes % 60:02d}m"
+        if minutes >= 60
+        else f"{minutes}m{int(eta_s % 60):02d}s"
+    )

@@ -1,0 +1,1 @@
+"""Persistence: SQLAlchemy 2.x models and session handling (schema owned by Alembic)."""

@@ -1,0 +1,176 @@
+"""SQLAlchemy 2.x models: the persisted state of rigs, campaigns, measurements and calibrations.
+
+Invariants the database itself enforces (so they hold with several service
+processes on one PostgreSQL):
+
+* ``measurements``: unique (campaign_id, step, position) -- no measurement is
+  ever stored twice, whatever crashes and restarts happen.
+* ``rig_leases``: one row per rig at most (primary key ``rig``); a process owns
+  a rig -- and runs its one active campaign -- only while it holds the lease.
+  A process that dies stops renewing; another takes over after ``lease_until``.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+
+def utcnow() -> dt.datetime:
+    return dt.datetime.now(dt.UTC)
+
+
+class Base(DeclarativeBase):
+    type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class Rig(Base):
+    """A chamber + turntable + sensor line.
+
+    ``chamber``/``turntable``/``sensors`` hold driver config; the chamber's
+    ``range_c: [lo, hi]`` bounds the setpoints a campaign may ask for.
+    """
+
+    __tablename__ = "rigs"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    chamber: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    turntable: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    sensors: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class RigLease(Base):
+    """Who runs the rig now.
+
+    Claimed with an INSERT, renewed or taken over with a conditional UPDATE.
+    """
+
+    __tablename__ = "rig_leases"
+    rig: Mapped[str] = mapped_column(String(64), ForeignKey("rigs.name"), primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(Integer, ForeignKey("campaigns.id"))
+    owner: Mapped[str] = mapped_column(String(128))  # "<host>:<pid>:<uuid>" of the process
+    lease_until: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
+
+
+class Sensor(Base):
+    __tablename__ = "sensors"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(64), unique=True)
+    model: Mapped[str] = mapped_column(String(64), default="ADXL355")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class Campaign(Base):
+    """A soak campaign: its spec, state machine state and persisted cursor.
+
+    ``spec`` is the validated POST body (setpoints_c, soak_min, positions,
+    samples_per_position, ...). The cursor (``cursor_step``, ``cursor_phase``,
+    ``cursor_position``) says where execution stands; the measurements table is
+    the ground truth for what has been measured, the cursor is a fast hint.
+    ``requested_action`` carries pause/resume/abort from the API (any process)
+    to the runner, which acts on it at its next safe point.
+    """
+
+    __tablename__ = "campaigns"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rig: Mapped[str] = mapped_column(String(64), ForeignKey("rigs.name"), index=True)
+    sensor: Mapped[str] = mapped_column(String(64), index=True)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    state: Mapped[str] = mapped_column(String(16), index=True, default="queued")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+    finished_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+    cursor_step: Mapped[int] = mapped_column(Integer, default=0)
+    cursor_phase: Mapped[str] = mapped_column(String(16), default="ramp")
+    cursor_position: Mapped[int] = mapped_column(Integer, default=0)
+    # Live progress as the API returns it (chamber_c, setpoint_c, eta_s, fraction, ...).
+    progress: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    requested_action: Mapped[str | None] = mapped_column(String(16))
+    suspended_reason: Mapped[str | None] = mapped_column(Text)
+    error: Mapped[str | None] = mapped_column(Text)
+    calibration_id: Mapped[int | None] = mapped_column(Integer)
+    schedule_id: Mapped[int | None] = mapped_column(Integer)
+    # Simulated-campaign time origin (s) so t_s stays continuous across restarts.
+    t0_s: Mapped[float | None] = mapped_column(Float)
+    # Per-step facts (soak start/end, stability decision, flags) as a JSON list.
+    steps_log: Mapped[list[Any]] = mapped_column(JSON, default=list)
+
+
+class Measurement(Base):
+    """One averaged static position: a row of recording format v1."""
+
+    __tablename__ = "measurements"
+    __table_args__ = (UniqueConstraint("campaign_id", "step", "position", name="uq_meas_cursor"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaigns.id"), index=True)
+    step: Mapped[int] = mapped_column(Integer)
+    position: Mapped[int] = mapped_column(Integer)
+    t_s: Mapped[float] = mapped_column(Float)
+    setpoint_c: Mapped[float] = mapped_column(Float)
+    chamber_c: Mapped[float | None] = mapped_column(Float)
+    sensor_c: Mapped[float | None] = mapped_column(Float)
+    ref_x: Mapped[float] = mapped_column(Float)
+    ref_y: Mapped[float] = mapped_column(Float)
+    ref_z: Mapped[float] = mapped_column(Float)
+    ax: Mapped[float] = mapped_column(Float)
+    ay: Mapped[float] = mapped_column(Float)
+    az: Mapped[float] = mapped_column(Float)
+    sd_x: Mapped[float | None] = mapped_column(Float)
+    sd_y: Mapped[float | None] = mapped_column(Float)
+    sd_z: Mapped[float | None] = mapped_column(Float)
+    n: Mapped[int] = mapped_column(Integer)
+    attempts: Mapped[int] = mapped_column(Integer, default=1)
+    flags: Mapped[str | None] = mapped_column(String(256))  # comma list of failed quality checks
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class Calibration(Base):
+    __tablename__ = "calibrations"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    sensor: Mapped[str] = mapped_column(String(64), index=True)
+    campaign_id: Mapped[int | None] = mapped_column(ForeignKey("campaigns.id"))
+    created_at: Mapped[dt.datetime] = mapped_column(
+        DateTime(timezone=True), default=utcnow, index=True
+    )
+    valid_lo_c: Mapped[float] = mapped_column(Float)
+    valid_hi_c: Mapped[float] = mapped_column(Float)
+    rmse_ug: Mapped[float] = mapped_column(Float)
+    model_version: Mapped[str] = mapped_column(String(32))
+    model: Mapped[dict[str, Any]] = mapped_column(JSON)  # the model document (calibrate -o)
+    report: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    provenance: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+
+
+class Schedule(Base):
+    __tablename__ = "schedules"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign: Mapped[dict[str, Any]] = mapped_column(JSON)  # campaign POST body
+    at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+    cron: Mapped[str | None] = mapped_column(String(128))
+    next_run_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), index=True)
+    last_run_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+    last_campaign_id: Mapped[int | None] = mapped_column(Integer)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ApiToken(Base):
+    __tablename__ = "api_tokens"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str | None] = mapped_column(String(128))
+    role: Mapped[str] = mapped_column(String(16))
+    token_hash: Mapped[str] = mapped_column(String(128), unique=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    last_used_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))

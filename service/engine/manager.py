@@ -1,0 +1,207 @@
+"""CampaignManager: picks campaigns per rig, holds the rig lease, runs them.
+
+One loop per service process. For every rig it looks for work:
+
+1. a ``running`` campaign whose lease expired (its process died): crash recovery;
+2. else, when the rig holds no ``paused`` campaign (that one keeps the rig until
+   resumed or aborted, like the API's ``rig_busy``), the oldest ``queued`` one.
+
+It claims the rig lease in the database (INSERT, or a conditional UPDATE
+where the lease expired or is already ours), so two service processes on one
+PostgreSQL never run two campaigns on one rig. The lease is renewed in *wall*
+time (it protects against dead processes, which die in real time) by a
+background task; if a renewal finds the lease taken, the run is cancelled.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import datetime as dt
+import logging
+import os
+import socket
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+from sqlalchemy import delete, insert, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session, sessionmaker
+
+from drivers.clock import Clock, ScaledClock
+from service.db.models import Campaign, Rig, RigLease
+from service.db.timestamps import as_utc, utcnow
+from service.engine.rigs import open_rig
+from service.engine.runner import CampaignRunner
+
+log = logging.getLogger(__name__)
+POLL_WALL_S = 1.0
+
+
+def default_owner() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+class CampaignManager:
+    """Runs queued campaigns (and recovers orphaned ones) on every rig in the database."""
+
+    def __init__(
+        self,
+        session_factory: sessionmaker[Session],
+        *,
+        sim_speed: float = 600.0,
+        clock_factory: Callable[[], Clock] | None = None,
+        owner: str | None = None,
+        lease_s: float = 30.0,
+        poll_wall_s: float = POLL_WALL_S,
+        rig_options: dict[str, Any] | None = None,
+    ) -> None:
+        self.sf = session_factory
+        self.sim_speed = sim_speed
+        self.clock_factory = clock_factory or (lambda: ScaledClock(sim_speed))
+        self.owner = owner or default_owner()
+        self.lease_s = lease_s
+        self.poll_wall_s = poll_wall_s
+        self.rig_options = rig_options or {}
+        self._loop_task: asyncio.Task | None = None
+        self._runs: dict[str, asyncio.Task] = {}  # rig name -> running campaign task
+
+    async def start(self) -> None:
+        if self._loop_task is None:
+            self._loop_task = asyncio.create_task(self._loop(), name="campaign-manager")
+
+    async def stop(self) -> None:
+        """Cancel the loop and every run; leases are released so another process takes over."""
+        tasks = [t for t in (self._loop_task, *self._runs.values()) if t is not None]
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await t
+        self._loop_task = None
+        self._runs.clear()
+
+    async def run_once(self) -> None:
+        """One scan of all rigs (the loop body; tests call it directly)."""
+        with self.sf() as s:
+            rigs = s.execute(select(Rig.name)).scalars().all()
+        for rig in rigs:
+            task = self._runs.get(rig)
+            if task is not None and not task.done():
+                continue
+            campaign_id = self._pick(rig)
+            if campaign_id is None or not self._claim(rig, campaign_id):
+                continue
+            self._runs[rig] = asyncio.create_task(self._run(rig, campaign_id),
+                                                  name=f"campaign-{campaign_id}")
+
+    # --- loop ---------------------------------------------------------------------
+    async def _loop(self) -> None:
+        while True:
+            try:
+                await self.run_once()
+            except Exception:  # a DB hiccup must not kill the service's runner loop
+                log.exception("campaign manager scan failed")
+            await asyncio.sleep(self.poll_wall_s)
+
+    def _pick(self, rig: str) -> int | None:
+        with self.sf() as s:
+            lease = s.get(RigLease, rig)
+            now = utcnow()
+            lease_live = (lease is not None and lease.owner != self.owner
+                          and (as_utc(lease.lease_until) or now) > now)
+            if lease_live:
+                return None
+            orphan = s.execute(
+                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "running")
+                .order_by(Campaign.id).limit(1)
+            ).scalar()
+            if orphan is not None:
+                return int(orphan)
+            paused = s.execute(
+                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "paused").limit(1)
+            ).scalar()
+            if paused is not None:
+                return None
+            queued = s.execute(
+                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "queued")
+                .order_by(Campaign.created_at, Campaign.id).limit(1)
+            ).scalar()
+            return None if queued is None else int(queued)
+
+    def _claim(self, rig: str, campaign_id: int) -> bool:
+        """Take the rig lease for ``campaign_id``; the database arbitrates between processes."""
+        now = utcnow()
+        until = now + dt.timedelta(seconds=self.lease_s)
+        with self.sf() as s:
+            try:
+                s.execute(insert(RigLease).values(rig=rig, campaign_id=campaign_id,
+                                                  owner=self.owner, lease_until=until))
+                s.commit()
+                return True
+            except IntegrityError:
+                s.rollback()
+            res = s.execute(
+                update(RigLease)
+                .where(RigLease.rig == rig,
+                       (RigLease.lease_until < now) | (RigLease.owner == self.owner))
+                .values(campaign_id=campaign_id, owner=self.owner, lease_until=until)
+            )
+            s.commit()
+            return res.rowcount == 1
+
+    def _renew(self, rig: str) -> bool:
+        until = utcnow() + dt.timedelta(seconds=self.lease_s)
+        with self.sf() as s:
+            res = s.execute(
+                update(RigLease).where(RigLease.rig == rig, RigLease.owner == self.owner)
+                .values(lease_until=until)
+            )
+            s.commit()
+            return res.rowcount == 1
+
+    def _release(self, rig: str) -> None:
+        with self.sf() as s:
+            s.execute(delete(RigLease).where(RigLease.rig == rig, RigLease.owner == self.owner))
+            s.commit()
+
+    async def _run(self, rig: str, campaign_id: int) -> None:
+        renewer = asyncio.create_task(self._keep_lease(rig, asyncio.current_task()))
+        try:
+            with self.sf() as s:
+                row = s.execute(select(Rig).where(Rig.name == rig)).scalar_one()
+                rig_cfg = {"name": row.name, "chamber": row.chamber, "turntable": row.turntable,
+                           "sensors": row.sensors}
+            clock = self.clock_factory()
+            async with open_rig(rig_cfg, clock, seed=campaign_id, **self.rig_options) as devices:
+                await CampaignRunner(self.sf, campaign_id, devices, clock).run()
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # an engine bug fails the campaign, not the service
+            log.exception("campaign %s crashed", campaign_id)
+            with self.sf() as s:
+                s.execute(update(Campaign).where(Campaign.id == campaign_id,
+                                                 Campaign.state.in_(("running", "queued")))
+                          .values(state="failed", error=f"engine error: {exc}",
+                                  finished_at=utcnow()))
+                s.commit()
+        finally:
+            renewer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await renewer
+            with contextlib.suppress(Exception):
+                self._release(rig)
+
+    async def _keep_lease(self, rig: str, run_task: asyncio.Task | None) -> None:
+        while True:
+            await asyncio.sleep(self.lease_s / 3.0)
+            try:
+                ok = self._renew(rig)
+            except Exception:
+                log.exception("lease renewal failed for rig %s", rig)
+                continue
+            if not ok and run_task is not None:  # someone else holds the rig now: stop touching it
+                log.error("lost the lease on rig %s; stopping its campaign", rig)
+                run_task.cancel()
+                return

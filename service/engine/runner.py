@@ -1,0 +1,360 @@
+"""The campaign interpreter: one plan (ramp → soak → positions per step, then fitting)
+executed over a persisted cursor.
+
+Crash safety rests on one rule: a measurement row and the cursor move past it
+are committed in one transaction *before the table moves again*. On start the
+runner reads the measurements table (the ground truth, not the cursor), skips
+every (step, position) already stored and resumes at the first missing one;
+a step with some positions measured is re-ramped (idempotent) and re-soaked
+with a short re-check, because the chamber may have drifted while nobody ran
+it. The database's UNIQUE(campaign_id, step, position) turns a duplicate
+insert into "already stored".
+
+Pause, resume, abort and device suspensions are engine features, checked at
+safe points (every soak poll, every position), not per-phase code.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from drivers.clock import Clock
+from drivers.protocols import Acquisition, ChamberStatus
+from service.engine import stability, store
+from service.engine.calibrate import calibrate_columns
+from service.engine.guard import AbortRequested, CampaignFailed, DeviceGuard, FaultPolicy
+from service.engine.progress import EtaModel
+from service.engine.quality import check_acquisition
+from service.engine.rigs import RigDevices
+from service.engine.spec import parse_spec, schedule_refs
+from service.engine.states import TERMINAL
+
+Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
+StepReporter = Callable[[dict[str, Any]], None]
+TURNTABLE_POLL_S = 1.0
+
+
+class CampaignRunner:
+    """Runs one campaign on one rig's devices until it completes, fails or is aborted."""
+
+    def __init__(
+        self,
+        session_factory: store.SessionFactory,
+        campaign_id: int,
+        devices: RigDevices,
+        clock: Clock,
+        *,
+        calibrate: Calibrate = calibrate_columns,
+        on_step: StepReporter | None = None,
+    ) -> None:
+        self.sf = session_factory
+        self.id = campaign_id
+        self.dev = devices
+        self.clock = clock
+        self.calibrate = calibrate
+        self.on_step = on_step
+        self.fit_result: Any = None  # the core's fit object, for the demo's report
+        self._progress: dict[str, Any] = {}
+
+    # --- the plan ---------------------------------------------------------
+    async def run(self) -> str:
+        """Execute (or resume) the campaign; returns its final state."""
+        camp = store.load_campaign(self.sf, self.id)
+        if camp.state in TERMINAL:
+            return camp.state
+        self.spec = spec = parse_spec(camp.spec)
+        self.refs = schedule_refs(spec.positions)
+        self.n_pos = len(self.refs)
+        done = store.measured_positions(self.sf, self.id)
+        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
+        # t_s continues where the stored campaign stopped (a new process has a new clock).
+        self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
+                                                                      if camp.progress else 0.0))
+        self._clock0_s = self.clock.now()
+        self.guard = DeviceGuard(
+            self.clock,
+            FaultPolicy(spec.retry_attempts, spec.retry_backoff_s, spec.suspend_poll_s,
+                        spec.suspend_limit_s),
+            on_suspend=self._suspend, on_resume=self._unsuspend, check_abort=self._abort_asked,
+        )
+        if camp.state == "queued":
+            store.transition(self.sf, self.id, "running", started_at=camp.started_at
+                             or store.now_utc(), t0_s=camp.t0_s if camp.t0_s is not None else 0.0)
+        try:
+            await self.guard.call("accelerometer.configure",
+                                  lambda: self.dev.accelerometer.configure(spec.range_g,
+                                                                           spec.odr_hz))
+            await self._checkpoint()
+            for step in range(spec.n_steps):
+                missing = [p for p in range(self.n_pos) if (step, p) not in done]
+                if not missing:
+                    continue
+                resumed = len(missing) < self.n_pos
+                await self._ramp(step)
+                await self._soak(step, resumed=resumed)
+                await self._positions(step, missing)
+            await self._fitting()
+            await self._safe_state()
+            store.transition(self.sf, self.id, "completed", clear_action=True,
+                             progress={**self._progress, "phase": "fitting", "fraction": 1.0,
+                                       "eta_s": 0.0})
+            return "completed"
+        except AbortRequested:
+            await self._abort()
+            return "aborted"
+        except CampaignFailed as exc:
+            store.transition(self.sf, self.id, "failed", error=str(exc), clear_action=True)
+            await self._safe_state_best_effort()
+            return "failed"
+
+    # --- phases -------------------------------------------------------------
+    async def _ramp(self, step: int) -> None:
+        """Command the setpoint and wait until the working setpoint and PV reach it."""
+        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        store.set_cursor(self.sf, self.id, step, "ramp", 0)
+        ch = self.dev.chamber
+        await self.guard.call("chamber.set_ramp_rate",
+                              lambda: ch.set_ramp_rate(spec.ramp_c_per_min))
+        await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(target_c))
+        await self.guard.call("chamber.run", ch.run)
+        start_s = self.clock.now()
+        status = await self._chamber()
+        limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
+        limit_s += spec.stability.max_soak_s
+        while not (_wsp_at_target(status, target_c)
+                   and abs(status.process_c - target_c) <= spec.stability.tol_c):
+            if self.clock.now() - start_s > limit_s:
+                raise CampaignFailed(
+                    f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
+                    f"(PV {status.process_c:.2f} °C)")
+            self._publish(step, "ramp", 0, status, target_c)
+            await self._checkpoint()
+            await self.clock.sleep(spec.soak_poll_s)
+            status = await self._chamber()
+        self.eta.ramp_done(self.clock.now() - start_s)
+
+    async def _soak(self, step: int, *, resumed: bool) -> None:
+        """Wait for stability (policy of the spec); log the decision in steps_log."""
+        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        cfg = spec.stability
+        if resumed:
+            # The step was soaked before the interruption: re-check, don't re-soak in full.
+            cfg = dataclasses.replace(
+                cfg, policy="predictive" if cfg.policy == "fixed" else cfg.policy,
+                min_soak_s=0.0, soak_s=min(cfg.soak_s, cfg.dwell_s),
+            )
+        store.set_cursor(self.sf, self.id, step, "soak", 0)
+        start_s = self.clock.now()
+        ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
+        decision = stability.Decision(False, "started")
+        while True:
+            status = await self._chamber()
+            now_s = self.clock.now()
+            ch_t.append(now_s)
+            ch_pv.append(status.process_c)
+            ch_wsp.append(status.working_setpoint_c)
+            if cfg.policy == "predictive":
+                probe = await self._acquire(spec.soak_probe_samples)
+                die_t.append(now_s)
+                die_c.append(probe.sensor_c)
+            settled = stability.chamber_settled(
+                np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
+            decision = stability.decide(cfg, now_s - start_s, settled, np.array(die_t),
+                                        np.array(die_c))
+            self._publish(step, "soak", 0, status, target_c,
+                          soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
+            if decision.stable:
+                break
+            await self._checkpoint()
+            await self.clock.sleep(spec.soak_poll_s)
+        soak_s = self.clock.now() - start_s
+        if not resumed:
+            self.eta.soak_done(soak_s)
+        entry = {
+            "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
+            "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
+            "reason": decision.reason, "tau_s": decision.tau_s,
+            "predicted_offset_c": decision.predicted_offset_c, "policy": cfg.policy,
+            "resumed": resumed, "max_soak_reached": decision.max_soak_reached,
+        }
+        store.put_step_log(self.sf, self.id, _clean_json(entry))
+        if self.on_step:
+            self.on_step({**entry, "chamber_c": ch_pv[-1], "steps": spec.n_steps})
+        if decision.max_soak_reached and spec.on_max_soak == "fail":
+            raise CampaignFailed(
+                f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
+
+    async def _positions(self, step: int, missing: list[int]) -> None:
+        """Measure every missing position; each row is committed before the next move."""
+        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        store.set_cursor(self.sf, self.id, step, "positions", missing[0])
+        for k, pos in enumerate(missing):
+            await self._checkpoint()
+            t_start = self.clock.now()
+            ref = self.refs[pos]
+            await self._move_to(self.dev.angles_for(ref))
+            await self.clock.sleep(spec.settle_s)
+            acq, flags, attempts = await self._measure()
+            status = await self._chamber()
+            t_mid = self.clock.now() - acq.duration_s / 2.0
+            row = {
+                "step": step, "position": pos, "t_s": self._t(t_mid), "setpoint_c": target_c,
+                "chamber_c": status.process_c, "sensor_c": acq.sensor_c,
+                "ref_x": float(ref[0]), "ref_y": float(ref[1]), "ref_z": float(ref[2]),
+                "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
+                "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
+                "attempts": attempts, "flags": ",".join(flags) or None,
+            }
+            self.eta.position_done(self.clock.now() - t_start)
+            next_pos = missing[k + 1] if k + 1 < len(missing) else self.n_pos
+            progress = self._publish(step, "positions", pos, status, target_c, write=False)
+            store.commit_measurement(self.sf, self.id, row, next_pos, progress)
+
+    async def _fitting(self) -> None:
+        camp = store.load_campaign(self.sf, self.id)
+        store.set_cursor(self.sf, self.id, self.spec.n_steps - 1, "fitting", self.n_pos,
+                         {**self._progress, "phase": "fitting", "fraction": 1.0, "eta_s": 0.0})
+        if camp.calibration_id is not None:
+            return
+        cols = store.measurement_columns(self.sf, self.id)
+        provenance = {
+            "campaign_id": self.id, "rig": camp.rig, "sensor": camp.sensor,
+            "spec": camp.spec, "positions": self.spec.positions,
+            "steps_log": camp.steps_log, "recording": f"campaign-{self.id}.csv",
+        }
+        try:
+            # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
+            values = await asyncio.to_thread(self.calibrate, cols, provenance)
+        except Exception as exc:  # a fit failure fails this campaign, not the service
+            raise CampaignFailed(f"calibration fit failed: {exc}") from exc
+        self.fit_result = values.pop("_fit", None)
+        store.store_calibration(self.sf, self.id, values)
+
+    # --- device helpers -----------------------------------------------------------
+    async def _chamber(self) -> ChamberStatus:
+        return await self.guard.call("chamber.read_status", self.dev.chamber.read_status)
+
+    async def _acquire(self, n: int) -> Acquisition:
+        return await self.guard.call("accelerometer.acquire",
+                                     lambda: self.dev.accelerometer.acquire(n))
+
+    async def _measure(self) -> tuple[Acquisition, list[str], int]:
+        """Acquire; on a failed quality check measure once more and keep the second capture."""
+        n = self.spec.samples_per_position
+        acq = await self._acquire(n)
+        flags = check_acquisition(acq, n, self.spec.quality)
+        if not flags:
+            return acq, [], 1
+        acq = await self._acquire(n)
+        return acq, check_acquisition(acq, n, self.spec.quality), 2
+
+    async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
+        tt = self.dev.turntable
+        await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
+        start_s = self.clock.now()
+        while True:
+            await self.clock.sleep(TURNTABLE_POLL_S)
+            st = await self.guard.call("turntable.read_status", tt.read_status)
+            if st.in_position and not st.moving:
+                return
+            if self.clock.now() - start_s > self.spec.move_timeout_s:
+                raise CampaignFailed(
+                    f"turntable not in position {angles_deg} after {self.spec.move_timeout_s:.0f} s"
+                    f" (at {st.angles_deg}, faults {st.faults})")
+
+    async def _safe_state(self) -> None:
+        """Chamber to a safe temperature, table home: the end of every campaign."""
+        await self.guard.call("chamber.set_setpoint",
+                              lambda: self.dev.chamber.set_setpoint(self.spec.safe_c))
+        home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
+        await self.guard.call("turntable.move_to", lambda: self.dev.turntable.move_to(home))
+
+    async def _safe_state_best_effort(self) -> None:
+        """After a failure: one unguarded try per device (it may be why we failed)."""
+        home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
+        with contextlib.suppress(Exception):
+            await self.dev.chamber.set_setpoint(self.spec.safe_c)
+        with contextlib.suppress(Exception):
+            await self.dev.turntable.move_to(home)
+
+    # --- control: pause / resume / abort --------------------------------------------
+    async def _checkpoint(self) -> None:
+        """A safe point: apply a pending pause or abort (resume clears a stale request)."""
+        ctl = store.read_control(self.sf, self.id)
+        if ctl.state == "aborted" or ctl.requested_action == "abort":
+            raise AbortRequested("operator")
+        if ctl.requested_action == "resume" and ctl.state == "running":
+            store.clear_action(self.sf, self.id, "resume")
+        if ctl.requested_action == "pause" or ctl.state == "paused":
+            await self._paused()
+
+    async def _paused(self) -> None:
+        """Hold: chamber keeps its setpoint, table at rest; wait for resume or abort."""
+        store.transition(self.sf, self.id, "paused", clear_action=True,
+                         progress={**self._progress, "paused": True})
+        await self.guard.call("turntable.stop", self.dev.turntable.stop)
+        while True:
+            await self.clock.sleep(self.spec.soak_poll_s)
+            ctl = store.read_control(self.sf, self.id)
+            if ctl.state == "aborted" or ctl.requested_action == "abort":
+                raise AbortRequested("operator")
+            if ctl.requested_action == "resume" or ctl.state in ("running", "queued"):
+                store.transition(self.sf, self.id, "running", clear_action=True,
+                                 progress={**self._progress, "paused": False})
+                return
+
+    async def _abort(self) -> None:
+        try:
+            await self._safe_state()
+        finally:
+            store.transition(self.sf, self.id, "aborted", clear_action=True)
+
+    def _abort_asked(self) -> bool:
+        ctl = store.read_control(self.sf, self.id)
+        return ctl.state == "aborted" or ctl.requested_action == "abort"
+
+    def _suspend(self, reason: str) -> None:
+        self._progress = {**self._progress, "suspended_reason": reason}
+        store.update_campaign(self.sf, self.id, suspended_reason=reason, progress=self._progress)
+
+    def _unsuspend(self) -> None:
+        self._progress = {k: v for k, v in self._progress.items() if k != "suspended_reason"}
+        store.update_campaign(self.sf, self.id, suspended_reason=None, progress=self._progress)
+
+    # --- progress -----------------------------------------------------------------------
+    def _t(self, clock_s: float) -> float:
+        """Campaign time t_s (continuous across restarts) from a clock reading."""
+        return self._t_base_s + (clock_s - self._clock0_s)
+
+    def _publish(self, step: int, phase: str, position: int, status: ChamberStatus,
+                 target_c: float, *, soak_remaining_s: float | None = None,
+                 write: bool = True) -> dict[str, Any]:
+        n_done = self.eta.n_done
+        progress = {
+            "step": step, "steps": self.spec.n_steps, "phase": phase, "position": position,
+            "positions": self.n_pos,
+            "fraction": round(n_done / (self.spec.n_steps * self.n_pos), 4),
+            "chamber_c": round(status.process_c, 3), "setpoint_c": target_c,
+            "eta_s": round(self.eta.eta_s(step, phase, soak_remaining_s), 1),
+            "t_s": round(self._t(self.clock.now()), 3),
+        }
+        self._progress = progress
+        if write:
+            store.update_campaign(self.sf, self.id, progress=progress)
+        return progress
+
+
+def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
+    return (abs(status.working_setpoint_c - target_c) < 1e-3
+            and abs(status.setpoint_c - target_c) < 1e-3)
+
+
+def _clean_json(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}

@@ -1,0 +1,1 @@
+"""Alembic migrations of the soakcal schema, kept in the package for installed services."""

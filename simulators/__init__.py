@@ -1,0 +1,1 @@
+"""soakcal simulators package."""

@@ -1,0 +1,181 @@
+"""Simulated sensor bridge: the serial line protocol served on a TCP socket.
+
+Reachable as ``socket://127.0.0.1:PORT`` through ``serial.serial_for_url``.
+Samples come from the sensor truth model at the die temperature of the
+simulated chamber (the die lags the air, see :class:`ChamberPhysics`) and the
+orientation of the simulated table (:mod:`drivers.geometry`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drivers import adxl355
+from drivers.bridge_protocol import decode_frame, encode_frame
+from drivers.clock import Clock
+from drivers.faults import ProtocolError
+from drivers.geometry import reference_for_angles
+from simulators.faults import SimFaults
+
+FIRMWARE = "soakcal-sim-1.0"
+
+
+@dataclass
+class BridgeDevice:
+    """Device-side state and sample generation, independent of the socket.
+
+    ``die_c`` and ``angles_deg`` are callables so the bridge always sees the
+    current simulated chamber and table (each advances its physics on call).
+    """
+
+    truth: Any  # simulators.truth.SensorTruth (duck-typed: sample_g, odr_hz, range_g, serial)
+    clock: Clock
+    rng: np.random.Generator
+    die_c: Callable[[], float]
+    angles_deg: Callable[[], tuple[float, ...]]
+    g_local: float = 1.0
+    faults: SimFaults = field(default_factory=SimFaults)
+    max_samples: int = 100_000
+
+    def reference_g(self) -> np.ndarray:
+        return reference_for_angles(self.angles_deg(), self.g_local)
+
+    async def capture(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Wait the capture time on the clock, then return (counts (n,3), temp raw (n,))."""
+        await self.clock.sleep(n / self.truth.odr_hz)
+        die_c = self.die_c()
+        ref = self.reference_g()
+        g = self.truth.sample_g(ref, die_c, n, self.rng, t_s=self.clock.now())
+        counts = adxl355.g_to_counts(g, self.truth.range_g)
+        temps_c = _temperature_samples(self.truth, die_c, n, self.rng)
+        return counts, adxl355.temp_c_to_raw(temps_c)
+
+    async def handle(self, fields: list[str]) -> list[bytes]:
+        """One command → reply frames."""
+        cmd = fields[0]
+        if cmd == "ID":
+            return [encode_frame("ID", "ADXL355", getattr(self.truth, "serial", "SIM"), FIRMWARE)]
+        if cmd == "CFG" and len(fields) == 3:
+            try:
+                range_g, odr_hz = float(fields[1]), float(fields[2])
+                adxl355.lsb_per_g(range_g)
+            except ValueError:
+                return [encode_frame("ERR", 3, "bad range or ODR")]
+            if odr_hz <= 0:
+                return [encode_frame("ERR", 3, "bad range or ODR")]
+            self.truth.range_g, self.truth.odr_hz = range_g, odr_hz
+            return [encode_frame("OK", "CFG", f"{range_g:g}", f"{odr_hz:g}")]
+        if cmd in ("AVG", "RAW") and len(fields) == 2 and fields[1].isdigit():
+            n = int(fields[1])
+            if not 1 <= n <= self.max_samples:
+                return [encode_frame("ERR", 3, f"n must be 1..{self.max_samples}")]
+            counts, traw = await self.capture(n)
+            return _avg_reply(counts, traw, self.truth.range_g) if cmd == "AVG" else \
+                _raw_reply(counts, traw)
+        return [encode_frame("ERR", 1, f"unknown command {cmd}")]
+
+
+def _temperature_samples(truth: Any, die_c: float, n: int,
+                         rng: np.random.Generator) -> np.ndarray:
+    if hasattr(truth, "temperature_samples_c"):
+        return np.asarray(truth.temperature_samples_c(die_c, n, rng), dtype=float)
+    return die_c + rng.normal(0.0, 0.1, n)
+
+
+def _avg_reply(counts: np.ndarray, traw: np.ndarray, range_g: float) -> list[bytes]:
+    n = len(counts)
+    mean = counts.mean(axis=0)
+    sd = counts.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
+    sat = 1 if adxl355.is_saturated(counts, range_g) else 0
+    return [encode_frame(
+        "AVG", n, *(f"{x:.3f}" for x in mean), *(f"{x:.3f}" for x in sd),
+        f"{traw.mean():.2f}", int(traw.min()), int(traw.max()), sat,
+    )]
+
+
+def _raw_reply(counts: np.ndarray, traw: np.ndarray) -> list[bytes]:
+    out = [
+        encode_frame("R", i, *(f"{adxl355.counts_to_20bit(int(c)):05X}" for c in row), int(t))
+        for i, (row, t) in enumerate(zip(counts, traw, strict=True))
+    ]
+    out.append(encode_frame("END", len(counts)))
+    return out
+
+
+@dataclass
+class BridgeServer:
+    device: BridgeDevice
+    server: asyncio.base_events.Server
+    host: str
+    port: int
+    _tasks: set[asyncio.Task] = field(default_factory=set)
+
+    @property
+    def url(self) -> str:
+        return f"socket://{self.host}:{self.port}"
+
+    async def stop(self) -> None:
+        self.server.close()
+        for t in list(self._tasks):
+            t.cancel()
+        with contextlib.suppress(Exception):
+            await self.server.wait_closed()
+
+
+async def start_bridge_server(device: BridgeDevice, *, host: str = "127.0.0.1",
+                              port: int = 0) -> BridgeServer:
+    """Listen for bridge clients; each connection is served line by line."""
+    holder: dict[str, BridgeServer] = {}
+
+    async def on_client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        if task is not None:
+            holder["srv"]._tasks.add(task)
+        try:
+            await _serve_client(device, reader, writer)
+        finally:
+            if task is not None:
+                holder["srv"]._tasks.discard(task)
+            writer.close()
+
+    server = await asyncio.start_server(on_client, host, port)
+    bound = server.sockets[0].getsockname()[1]
+    holder["srv"] = BridgeServer(device, server, host, bound)
+    return holder["srv"]
+
+
+async def _serve_client(device: BridgeDevice, reader: asyncio.StreamReader,
+                        writer: asyncio.StreamWriter) -> None:
+    faults = device.faults
+    while True:
+        try:
+            line = await reader.readline()
+        except (ConnectionError, asyncio.IncompleteReadError):
+            return
+        if not line:
+            return
+        try:
+            fields = decode_frame(line, "bridge")
+        except ProtocolError:
+            writer.write(encode_frame("ERR", 2, "bad frame or checksum"))
+            await writer.drain()
+            continue
+        if faults.p_drop > 0 and device.rng.random() < faults.p_drop:
+            return  # caller closes the socket
+        if faults.p_no_reply > 0 and device.rng.random() < faults.p_no_reply:
+            continue
+        if faults.p_exception > 0 and device.rng.random() < faults.p_exception:
+            writer.write(encode_frame("ERR", 6, "busy"))
+        else:
+            for frame in await device.handle(fields):
+                writer.write(frame)
+        try:
+            await writer.drain()
+        except ConnectionError:
+            return

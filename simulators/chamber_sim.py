@@ -1,0 +1,151 @@
+"""Chamber physics (air and sensor die) and its Modbus register image.
+
+Physics integrates on read: :meth:`ChamberPhysics.advance_to` brings the state
+to ``clock.now()`` lazily whenever a register is read or written, in substeps
+no longer than ``max_step_s`` so the ramp, the air lag and the die lag compose.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from pymodbus.constants import ExcCodes
+
+from drivers.clock import Clock
+from drivers.registermaps import ChamberMap
+from simulators.faults import SimFaults
+from simulators.modbus_server import read_block
+
+
+@dataclass
+class ChamberPhysics:
+    """Air temperature under a ramping working setpoint, and a sensor die lagging the air.
+
+    * The working setpoint (WSP) moves towards SP at ``ramp_c_per_min`` (0 = step).
+    * The air follows WSP first-order with ``air_tau_s``, never faster than the
+      chamber's own capability ``max_rate_c_per_min``; no overshoot.
+    * Stopped, the air relaxes to ``ambient_c`` with ``off_tau_s``.
+    * The die follows the air first-order with ``die_tau_s`` (mounting + package).
+    """
+
+    clock: Clock
+    rng: np.random.Generator
+    air_c: float = 23.0
+    setpoint_c: float = 23.0
+    ramp_c_per_min: float = 1.0
+    running: bool = False
+    ambient_c: float = 23.0
+    air_tau_s: float = 60.0
+    off_tau_s: float = 1800.0
+    max_rate_c_per_min: float = 5.0
+    die_tau_s: float = 900.0
+    pv_noise_c: float = 0.02
+    deviation_alarm_c: float = 5.0
+    max_step_s: float = 2.0
+    faults: SimFaults = field(default_factory=SimFaults)
+    working_setpoint_c: float = field(init=False)
+    die_c: float = field(init=False)
+    t_s: float = field(init=False)
+    _stuck_pv_c: float | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        self.working_setpoint_c = self.air_c
+        self.die_c = self.air_c
+        self.t_s = self.clock.now()
+
+    # --- public -------------------------------------------------------------
+    def advance_to(self, t_s: float | None = None) -> None:
+        """Integrate from the last update to ``t_s`` (default: now)."""
+        t_end = self.clock.now() if t_s is None else t_s
+        while self.t_s < t_end:
+            dt = min(self.max_step_s, t_end - self.t_s)
+            self._step(dt)
+            self.t_s += dt
+
+    def process_value_c(self) -> float:
+        """What the controller's PV register shows: air + measurement noise, or stuck."""
+        if self.faults.stuck_process_value:
+            if self._stuck_pv_c is None:
+                self._stuck_pv_c = self.air_c
+            return self._stuck_pv_c
+        self._stuck_pv_c = None
+        return self.air_c + float(self.rng.normal(0.0, self.pv_noise_c))
+
+    def alarm_bits(self) -> int:
+        if not self.running:
+            return 0
+        dev = self.air_c - self.working_setpoint_c
+        return (1 if dev > self.deviation_alarm_c else 0) | (
+            2 if dev < -self.deviation_alarm_c else 0)
+
+    # --- internals -----------------------------------------------------------
+    def _step(self, dt: float) -> None:
+        if self.running:
+            if self.ramp_c_per_min <= 0:
+                self.working_setpoint_c = self.setpoint_c
+            else:
+                max_dw = self.ramp_c_per_min / 60.0 * dt
+                diff = self.setpoint_c - self.working_setpoint_c
+                self.working_setpoint_c += max(-max_dw, min(max_dw, diff))
+            target, tau = self.working_setpoint_c, self.air_tau_s
+        else:
+            # Stopped: WSP tracks PV like a real controller in standby.
+            self.working_setpoint_c = self.air_c
+            target, tau = self.ambient_c, self.off_tau_s
+        new_air = target + (self.air_c - target) * math.exp(-dt / tau)
+        max_da = self.max_rate_c_per_min / 60.0 * dt
+        new_air = self.air_c + max(-max_da, min(max_da, new_air - self.air_c))
+        # Die: exact first-order step for the mean air over the substep.
+        mean_air = 0.5 * (self.air_c + new_air)
+        self.die_c = mean_air + (self.die_c - mean_air) * math.exp(-dt / self.die_tau_s)
+        self.air_c = new_air
+
+
+class ChamberRegisterImage:
+    """Renders :class:`ChamberPhysics` into a :class:`ChamberMap` and applies writes."""
+
+    def __init__(self, physics: ChamberPhysics, regmap: ChamberMap) -> None:
+        self.physics = physics
+        self.regmap = regmap
+        self._writable = {
+            regmap.setpoint_c.address: ("setpoint_c", regmap.setpoint_c),
+            regmap.ramp_c_per_min.address: ("ramp_c_per_min", regmap.ramp_c_per_min),
+            regmap.run.address: ("running", regmap.run),
+        }
+
+    def read(self, address: int, count: int) -> list[int] | ExcCodes:
+        p, m = self.physics, self.regmap
+        p.advance_to()
+        image: dict[int, int] = {}
+        for f, value in (
+            (m.process_c, p.process_value_c()),
+            (m.setpoint_c, p.setpoint_c),
+            (m.working_setpoint_c, p.working_setpoint_c),
+            (m.ramp_c_per_min, p.ramp_c_per_min),
+            (m.run, 1.0 if p.running else 0.0),
+            (m.alarms, float(p.alarm_bits())),
+        ):
+            for i, w in enumerate(f.encode(value)):
+                image[f.address + i] = w
+        return read_block(image, address, count)
+
+    def write(self, address: int, values: list[int]) -> None | ExcCodes:
+        p = self.physics
+        p.advance_to()
+        entry = self._writable.get(address)
+        if entry is None:
+            return ExcCodes.ILLEGAL_ADDRESS
+        name, f = entry
+        if len(values) != f.n_registers:
+            return ExcCodes.ILLEGAL_VALUE
+        value = f.decode(values)
+        if name == "setpoint_c":
+            lo, hi = self.regmap.range_c
+            if not lo <= value <= hi:
+                return ExcCodes.ILLEGAL_VALUE
+        if name == "ramp_c_per_min" and value < 0:
+            return ExcCodes.ILLEGAL_VALUE
+        setattr(p, name, bool(value) if name == "running" else value)
+        return None

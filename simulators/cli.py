@@ -1,0 +1,91 @@
+"""``soakcal sim``: run a simulated rig on loopback ports until interrupted.
+
+The lead wires :func:`run_sim` into ``service/cli.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+
+from drivers.clock import RealClock, ScaledClock
+from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
+from simulators.faults import SimFaults
+from simulators.rig import RigFaults, SimRig, start_sim_rig
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="soakcal sim",
+        description="Start a simulated rig (chamber, turntable, sensor bridge) on loopback.",
+    )
+    p.add_argument("--host", default="127.0.0.1", help="interface to bind (default loopback)")
+    p.add_argument("--port", type=int, default=0,
+                   help="base port: chamber, +1 table, +2 sensor (default 0 = ephemeral)")
+    p.add_argument("--chamber-map", choices=sorted(CHAMBER_MAPS), default="eurotherm3216")
+    p.add_argument("--seed", type=int, default=1, help="sensor truth and noise seed")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="simulated seconds per wall second (1 = real time)")
+    p.add_argument("--die-tau-s", type=float, default=900.0,
+                   help="die lag behind chamber air, s")
+    p.add_argument("--p-exception", type=float, default=0.0,
+                   help="probability of an exception reply per request (all devices)")
+    p.add_argument("--p-no-reply", type=float, default=0.0,
+                   help="probability of a swallowed reply per request (all devices)")
+    p.add_argument("--p-drop", type=float, default=0.0,
+                   help="probability of a dropped connection per request (all devices)")
+    p.add_argument("--stuck-pv", action="store_true", help="chamber PV frozen")
+    p.add_argument("--never-in-position", action="store_true",
+                   help="table never reports in-position")
+    p.add_argument("--duration-s", type=float, default=None,
+                   help="stop after this many wall seconds (default: run until Ctrl-C)")
+    return p
+
+
+def run_sim(argv: list[str] | None = None) -> int:
+    """Entry point; returns a process exit code."""
+    args = build_parser().parse_args(argv)
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(_serve(args))
+    return 0
+
+
+def describe(rig: SimRig) -> str:
+    """How to reach each device (printed at start)."""
+    c_host, c_port = rig.chamber_server.host, rig.chamber_server.port
+    m = CHAMBER_MAPS[rig.chamber_map]
+    return "\n".join([
+        "soakcal simulated rig",
+        f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id=1 "
+        f"(PV holding reg {m.process_c.address}, SP {m.setpoint_c.address})",
+        f"  table    modbus {rig.table_url}  map={SOAKCAL_TABLE.name}  axes={rig.table.n_axes}",
+        f"  sensor   serial {rig.sensor_url}  (pyserial serial_for_url; docs/sensor-bridge.md)",
+        "  example:",
+        "    python -c \"import asyncio; from pymodbus.client import AsyncModbusTcpClient as C\n"
+        f"    async def m():\n      c = C('{c_host}', port={c_port}); await c.connect()\n"
+        f"      print((await c.read_holding_registers({m.process_c.address}, "
+        f"count={m.process_c.n_registers}, device_id=1)).registers)\n"
+        "    asyncio.run(m())\"",
+        "  Ctrl-C to stop.",
+    ])
+
+
+async def _serve(args: argparse.Namespace) -> None:
+    def f() -> SimFaults:
+        return SimFaults(p_exception=args.p_exception, p_no_reply=args.p_no_reply,
+                         p_drop=args.p_drop)
+
+    faults = RigFaults(chamber=f(), table=f(), sensor=f())
+    faults.chamber.stuck_process_value = args.stuck_pv
+    faults.table.never_in_position = args.never_in_position
+    clock = RealClock() if args.speed == 1.0 else ScaledClock(args.speed)
+    async with start_sim_rig(clock, seed=args.seed, chamber_map=args.chamber_map,
+                             faults=faults, ports=args.port, host=args.host,
+                             die_tau_s=args.die_tau_s) as rig:
+        print(describe(rig), flush=True)
+        stop = asyncio.Event()
+        if args.duration_s is not None:
+            asyncio.get_running_loop().call_later(args.duration_s, stop.set)
+        with contextlib.suppress(asyncio.CancelledError):
+            await stop.wait()

@@ -1,0 +1,386 @@
+"""Truth-model effects: the physics the base model leaves out (``shared/spec/effects.md``).
+
+Each class implements the :class:`simulators.truth.Effect` protocol with the
+catalogue id as ``effect_id`` and the compact model of effects.md, with its
+physical parameters named with units. Effects act on the **averaged** readings
+of :func:`simulators.campaign_sim.simulate_campaign` (one row per reading).
+
+* ``raw_delta_g(ctx, truth, rng)`` -- additive change of the raw output (N,3) g;
+* ``temperature_delta_c(ctx, rng)`` -- additive change of the temperature channel (N,) °C.
+
+``thermal_lag`` is not an additive effect: the die follows the chamber air
+through the rig's first-order lag ``RigPhysics.die_tau_s``; it shows in a
+recording when only ``chamber_c`` is recorded (the model then regresses on
+the air, not the die). :class:`ThermalLag` sets both.
+
+How large each effect must be to be seen under a protocol ("minimum
+detectable size") is computed by ``benchmarks/blind/detectability.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import ClassVar
+
+import numpy as np
+
+from calibration import sfem_batch
+from simulators.truth import Context, SensorTruth
+
+G0_M_S2 = 9.80665
+
+
+def ideal_raw_batch(truth: SensorTruth, ref_g: np.ndarray, die_c: np.ndarray) -> np.ndarray:
+    """Vectorised base-model raw output ``A(T)⁻¹ f + b(T)``: (N,3) forces at (N,) temperatures."""
+    f = np.atleast_2d(np.asarray(ref_g, float))
+    T = np.broadcast_to(np.asarray(die_c, float), (f.shape[0],))
+    P = truth.params_vector_at(T)
+    A = sfem_batch.matrices(P)
+    return np.linalg.solve(A, f[:, :, None])[:, :, 0] + P[:, 0:3]
+
+
+def _vec3(v: float | Sequence[float] | np.ndarray) -> np.ndarray:
+    return np.broadcast_to(np.asarray(v, float), (3,)).copy()
+
+
+@dataclass
+class _RawOnly:
+    """Mixin: effects that leave the temperature channel alone."""
+
+    def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
+        return np.zeros(ctx.t_s.size)
+
+
+# --- thermal ---------------------------------------------------------------
+@dataclass
+class ThermalLag:
+    """``thermal_lag``: the die follows the chamber air with time constant ``tau_s``.
+
+    Not an additive effect: it is rig physics. :meth:`physics` returns the rig
+    with ``die_tau_s = tau_s``; :data:`COLUMNS` is the temperature recording
+    that exposes it (chamber only: the model regresses on the air). With
+    ``sensor_c`` recorded the lag is regressed away (effects.md: "gone when
+    regressed on the die temperature").
+    """
+
+    tau_s: float
+    effect_id: str = "thermal_lag"
+    COLUMNS: ClassVar[tuple[str, ...]] = ("chamber_c",)
+
+    def physics(self, base: object) -> object:
+        return replace(base, die_tau_s=float(self.tau_s))  # type: ignore[type-var]
+
+
+@dataclass
+class ThermalHysteresis(_RawOnly):
+    """``thermal_hysteresis``: ``raw += direction × h_g`` (±h per axis by last excursion).
+
+    ``direction`` is +1 after heating, −1 after cooling, 0 before any excursion.
+    """
+
+    h_g: np.ndarray
+    effect_id: str = "thermal_hysteresis"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        return ctx.direction.astype(float)[:, None] * _vec3(self.h_g)[None, :]
+
+
+@dataclass
+class TemperatureRate(_RawOnly):
+    """``temperature_rate``: ``raw += k_g_per_c_per_s × dT_die/dt`` per axis."""
+
+    k_g_per_c_per_s: np.ndarray
+    effect_id: str = "temperature_rate"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        return ctx.die_rate_c_per_s[:, None] * _vec3(self.k_g_per_c_per_s)[None, :]
+
+
+@dataclass
+class SelfHeating:
+    """``self_heating``: the die runs ``delta_c`` above the chamber, after a warm-up.
+
+    ``ΔT(t) = delta_c · (1 − exp(−(t − t_on)/warmup_tau_s))`` with ``t_on`` the
+    power-on time of the reading's session (``session_on_s[s]``; default 0 for
+    session 0 and the first reading of each later session). The output follows
+    the warmer die (base model at die + ΔT) and so does the sensor's own
+    temperature channel.
+    """
+
+    delta_c: float
+    warmup_tau_s: float = 0.0
+    session_on_s: tuple[float, ...] | None = None
+    effect_id: str = "self_heating"
+
+    def _delta_c(self, ctx: Context) -> np.ndarray:
+        t_on = np.zeros(ctx.t_s.size)
+        for s in np.unique(ctx.session):
+            m = ctx.session == s
+            if self.session_on_s is not None:
+                t_on[m] = self.session_on_s[int(s)]
+            elif s != ctx.session[0]:
+                t_on[m] = ctx.t_s[m].min()
+        if self.warmup_tau_s <= 0:
+            return np.full(ctx.t_s.size, float(self.delta_c))
+        age = np.clip(ctx.t_s - t_on, 0.0, None)
+        return self.delta_c * (1.0 - np.exp(-age / self.warmup_tau_s))
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        dT = self._delta_c(ctx)
+        return ideal_raw_batch(truth, ctx.ref_g, ctx.die_c + dT) - ideal_raw_batch(
+            truth, ctx.ref_g, ctx.die_c)
+
+    def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
+        return self._delta_c(ctx)
+
+
+@dataclass
+class TemperatureSensor:
+    """``temperature_sensor``: errors of the temperature channel only (output untouched).
+
+    ``T_read += offset_c + k2_per_c · (T_die − 25)²`` plus glitches of
+    ``glitch_c`` on ``glitch_rows`` (or each reading with ``glitch_probability``).
+    """
+
+    offset_c: float = 0.0
+    k2_per_c: float = 0.0
+    glitch_c: float = 0.0
+    glitch_rows: tuple[int, ...] = ()
+    glitch_probability: float = 0.0
+    effect_id: str = "temperature_sensor"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        return np.zeros((ctx.t_s.size, 3))
+
+    def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
+        d = self.offset_c + self.k2_per_c * (ctx.die_c - 25.0) ** 2
+        g = np.zeros(ctx.t_s.size)
+        g[list(self.glitch_rows)] = self.glitch_c
+        if self.glitch_probability > 0:
+            g[rng.random(ctx.t_s.size) < self.glitch_probability] = self.glitch_c
+        return d + g
+
+
+@dataclass
+class VibrationRectification(_RawOnly):
+    """``vibration_rectification``: ``raw += c_per_g × σ²_vib`` per axis (σ_vib in g rms).
+
+    σ_vib comes from the rig (``RigPhysics.vib_sd_g`` or ``vib_sd_g_by_step``,
+    e.g. the compressor running below 0 °C) and also widens ``sd_*``.
+    """
+
+    c_per_g: np.ndarray
+    effect_id: str = "vibration_rectification"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        return (ctx.vib_sd_g**2)[:, None] * _vec3(self.c_per_g)[None, :]
+
+
+# --- input-dependent -------------------------------------------------------
+@dataclass
+class ScaleNonlinearity(_RawOnly):
+    """``scale_nonlinearity``: ``raw_i += K2_i a_i² + K3_i a_i³``, a_i the true input on axis i."""
+
+    k2_per_g: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    k3_per_g2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    effect_id: str = "scale_nonlinearity"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        a = ctx.ref_g
+        return _vec3(self.k2_per_g) * a**2 + _vec3(self.k3_per_g2) * a**3
+
+
+@dataclass
+class CrossCoupling(_RawOnly):
+    """``cross_coupling``: products of two axes' inputs, one coefficient per axis pair.
+
+    ``raw_x += k_xy a_x a_y + k_xz a_x a_z``, ``raw_y += k_xy a_x a_y + k_yz a_y a_z``,
+    ``raw_z += k_xz a_x a_z + k_yz a_y a_z`` (each pair couples into both its axes).
+    """
+
+    k_xy_per_g: float = 0.0
+    k_xz_per_g: float = 0.0
+    k_yz_per_g: float = 0.0
+    effect_id: str = "cross_coupling"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        ax, ay, az = ctx.ref_g.T
+        xy, xz, yz = self.k_xy_per_g * ax * ay, self.k_xz_per_g * ax * az, self.k_yz_per_g * ay * az
+        return np.column_stack([xy + xz, xy + yz, xz + yz])
+
+
+@dataclass
+class LocalGravity(_RawOnly):
+    """``local_gravity``: the true |g| is ``g_local`` (in units of the nominal 1 g).
+
+    ``raw delta = A⁻¹ ref (g_local − 1)``: a common scale factor, unobservable in
+    any static tumble (absorbed by the scale factors).
+    """
+
+    g_local: float
+    effect_id: str = "local_gravity"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        return ideal_raw_batch(truth, ctx.ref_g * self.g_local, ctx.die_c) - ideal_raw_batch(
+            truth, ctx.ref_g, ctx.die_c)
+
+
+def lab_to_sensor(ref_g: np.ndarray) -> np.ndarray:
+    """Orientation of each position: the minimal rotation taking lab up (0,0,1) onto ``ref``.
+
+    The fixture's commanded orientation is only known through ``ref``; this
+    convention fixes the free rotation about gravity (antipode: π about x).
+    """
+    u = np.asarray(ref_g, float) / np.linalg.norm(ref_g, axis=1, keepdims=True)
+    z = np.array([0.0, 0.0, 1.0])
+    R = np.empty((u.shape[0], 3, 3))
+    for i, v in enumerate(u):
+        c = float(z @ v)
+        if c < -1 + 1e-12:
+            R[i] = np.diag([1.0, -1.0, -1.0])
+            continue
+        k = np.cross(z, v)
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        R[i] = np.eye(3) + K + K @ K / (1.0 + c)
+    return R
+
+
+@dataclass
+class TurntableGeometry(_RawOnly):
+    """``turntable_geometry``: the rig's base is tilted by ``base_tilt_rad`` (about lab x, y).
+
+    Gravity is constant in the lab frame but tilted: the true specific force is
+    ``C_pos · R_tilt · up`` instead of ``C_pos · up`` (C_pos: :func:`lab_to_sensor`),
+    so ``raw delta = A⁻¹ (ref' − ref)``. A constant rotation in the *sensor*
+    frame would be misalignment; this one is constant in the lab frame.
+    """
+
+    base_tilt_rad: np.ndarray
+    effect_id: str = "turntable_geometry"
+
+    def true_ref_g(self, ref_g: np.ndarray) -> np.ndarray:
+        tx, ty = np.asarray(self.base_tilt_rad, float)
+        Rx = np.array([[1, 0, 0], [0, np.cos(tx), -np.sin(tx)], [0, np.sin(tx), np.cos(tx)]])
+        Ry = np.array([[np.cos(ty), 0, np.sin(ty)], [0, 1, 0], [-np.sin(ty), 0, np.cos(ty)]])
+        up = Rx @ Ry @ np.array([0.0, 0.0, 1.0])
+        mag = np.linalg.norm(ref_g, axis=1)
+        return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        return ideal_raw_batch(truth, self.true_ref_g(ctx.ref_g), ctx.die_c) - ideal_raw_batch(
+            truth, ctx.ref_g, ctx.die_c)
+
+
+@dataclass
+class LeverArm(_RawOnly):
+    """``lever_arm``: the sensor sits ``r_m`` (sensor frame, m) off the rotation axis.
+
+    Centripetal ``ω × (ω × r) / g0`` while rotating (constant rate: no tangential
+    term); exactly zero for static readings (``ctx.omega_rad_s is None`` or 0).
+    """
+
+    r_m: np.ndarray
+    effect_id: str = "lever_arm"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        N = ctx.t_s.size
+        if ctx.omega_rad_s is None:
+            return np.zeros((N, 3))
+        w = np.asarray(ctx.omega_rad_s, float)
+        a = np.cross(w, np.cross(w, _vec3(self.r_m)[None, :])) / G0_M_S2
+        return ideal_raw_batch(truth, ctx.ref_g + a, ctx.die_c) - ideal_raw_batch(
+            truth, ctx.ref_g, ctx.die_c)
+
+
+@dataclass
+class FilterDelay(_RawOnly):
+    """``filter_delay``: each sample is the input ``delay_s`` earlier than its timestamp.
+
+    Gravity in a frame rotating at ω moves as ``dref/dt = −ω × ref``, so the
+    delayed input is ``ref + delay_s · ω × ref`` (tangential, ∝ ω, sign flips
+    with direction); zero for static readings.
+    """
+
+    delay_s: float
+    effect_id: str = "filter_delay"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        N = ctx.t_s.size
+        if ctx.omega_rad_s is None:
+            return np.zeros((N, 3))
+        d = self.delay_s * np.cross(np.asarray(ctx.omega_rad_s, float), ctx.ref_g)
+        return ideal_raw_batch(truth, ctx.ref_g + d, ctx.die_c) - ideal_raw_batch(
+            truth, ctx.ref_g, ctx.die_c)
+
+
+# --- time / session --------------------------------------------------------
+@dataclass
+class BiasDrift(_RawOnly):
+    """``bias_drift``: ``raw += rate_g_per_h · t_h + relax_g · (1 − exp(−t/relax_tau_h))``."""
+
+    rate_g_per_h: np.ndarray
+    relax_g: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    relax_tau_h: float = 10.0
+    effect_id: str = "bias_drift"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        t_h = ctx.t_s[:, None] / 3600.0
+        relax = _vec3(self.relax_g) * (1.0 - np.exp(-t_h / self.relax_tau_h))
+        return _vec3(self.rate_g_per_h) * t_h + relax
+
+
+@dataclass
+class SessionOffset(_RawOnly):
+    """``session_offset``: ``raw += offsets_g[session]`` (one offset per power session, (S,3))."""
+
+    offsets_g: np.ndarray
+    effect_id: str = "session_offset"
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        off = np.atleast_2d(np.asarray(self.offsets_g, float))
+        if ctx.session.max(initial=0) >= off.shape[0]:
+            raise ValueError(f"offsets_g has {off.shape[0]} sessions, readings reach "
+                             f"session {int(ctx.session.max())}")
+        return off[ctx.session]
+
+
+@dataclass
+class Outlier(_RawOnly):
+    """``outlier``: a few readings far off, isolated in time.
+
+    The recorded row is an average of ``n`` samples. With ``spike_samples``
+    set, a spike of ``size_g`` on that many samples shifts the mean by
+    ``size_g · spike_samples / n``; without it the whole reading is disturbed
+    by ``size_g`` (shock, door opened). Rows are ``rows`` or drawn with
+    ``probability`` per reading.
+    """
+
+    size_g: np.ndarray
+    rows: tuple[int, ...] = ()
+    probability: float = 0.0
+    spike_samples: int | None = None
+    effect_id: str = "outlier"
+
+    def hit_rows(self, n_rows: int, rng: np.random.Generator) -> np.ndarray:
+        hit = np.zeros(n_rows, bool)
+        hit[list(self.rows)] = True
+        if self.probability > 0:
+            hit |= rng.random(n_rows) < self.probability
+        return hit
+
+    def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
+        N = ctx.t_s.size
+        out = np.zeros((N, 3))
+        hit = self.hit_rows(N, rng)
+        frac = np.ones(N) if self.spike_samples is None else self.spike_samples / ctx.n_samples
+        out[hit] = _vec3(self.size_g)[None, :] * frac[hit, None]
+        return out
+
+
+EFFECT_CLASSES: dict[str, type] = {
+    c.effect_id: c  # type: ignore[attr-defined]
+    for c in (ThermalLag, ThermalHysteresis, TemperatureRate, SelfHeating, TemperatureSensor,
+              VibrationRectification, ScaleNonlinearity, CrossCoupling, LocalGravity,
+              TurntableGeometry, LeverArm, FilterDelay, BiasDrift, SessionOffset, Outlier)
+}

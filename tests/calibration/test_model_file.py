@@ -1,0 +1,108 @@
+"""Model JSON document: round trip, atomic save, and field-naming errors on bad documents."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import thermal_sim
+
+from calibration.errors import ModelFileError
+from calibration.model_file import dump_model_dict, load_model, load_model_dict, save_model
+from calibration.thermal import fit_campaign
+
+
+@pytest.fixture(scope="module")
+def model_and_rec() -> tuple:
+    _, rec = thermal_sim.campaign(seed=11)
+    return fit_campaign(rec).model, rec
+
+
+def test_round_trip_through_json_text_gives_the_same_compensation(model_and_rec: tuple) -> None:
+    model, rec = model_and_rec
+    doc = json.loads(json.dumps(dump_model_dict(model), allow_nan=False))
+    back = load_model_dict(doc)
+    T = rec.temperature_c()
+    np.testing.assert_array_equal(back.compensate(rec.raw_g, T), model.compensate(rec.raw_g, T))
+    assert back.valid_c == model.valid_c and back.mode == model.mode
+    assert back.degree == 3 and len(back.steps) == 11
+    np.testing.assert_array_equal(back.steps[4].params, model.steps[4].params)
+    assert dump_model_dict(back) == doc
+
+
+def test_document_has_the_documented_header_units_and_provenance(model_and_rec: tuple) -> None:
+    model, _ = model_and_rec
+    doc = dump_model_dict(model)
+    assert (doc["format"], doc["version"], doc["model_version"]) == (
+        "soakcal-model", 1, "sfem-cubic-1")
+    assert doc["polynomial"]["physical_units"]["bx"] == ["g", "g/degC", "g/degC^2", "g/degC^3"]
+    assert doc["provenance"]["rows"] == 264 and doc["provenance"]["mode"] == "reference"
+    assert doc["extensions"] == []
+    # physical coefficients evaluate to the same parameter as the scaled ones
+    T = 37.0
+    phys = np.array(doc["polynomial"]["physical_coefficients"]["sz"])
+    dT = T - doc["temperature"]["centre_c"]
+    assert abs(np.polyval(phys[::-1], dT) - model.params_at(T).scale[2]) < 1e-12
+
+
+def test_save_and_load_file(tmp_path: Path, model_and_rec: tuple) -> None:
+    model, _ = model_and_rec
+    path = tmp_path / "sub" / "model.json"
+    save_model(path, model)
+    assert [p.name for p in path.parent.iterdir()] == ["model.json"]  # no temp file left
+    back = load_model(path)
+    np.testing.assert_array_equal(back.coeffs, model.coeffs)
+
+
+def _broken(doc: dict, path: str, value: object) -> dict:
+    d = copy.deepcopy(doc)
+    *parents, last = path.split(".")
+    node = d
+    for p in parents:
+        node = node[p]
+    if value is KeyError:
+        del node[last]
+    else:
+        node[last] = value
+    return d
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "field"),
+    [
+        ("format", "something-else", "format"),
+        ("version", 2, "version"),
+        ("model_version", "sfem-quintic-9", "model_version"),
+        ("mode", "magic", "mode"),
+        ("temperature", KeyError, "temperature"),
+        ("temperature.scale_c", 0.0, "temperature.scale_c"),
+        ("temperature.valid_c", [60, -40], "temperature.valid_c"),
+        ("polynomial.degree", "3", "polynomial.degree"),
+        ("polynomial.coefficients.sy", [1.0, 2.0], "polynomial.coefficients.sy"),
+        ("polynomial.coefficients.bx", [0.0, None, 0.0, 0.0], "polynomial.coefficients.bx"),
+        ("extensions", [{"offset": 1}], "extensions[0].kind"),
+        ("identifiable", {"bx": "yes"}, "identifiable"),
+    ],
+)
+def test_bad_documents_are_rejected_naming_the_field(
+    model_and_rec: tuple, path: str, value: object, field: str
+) -> None:
+    doc = dump_model_dict(model_and_rec[0])
+    with pytest.raises(ModelFileError) as info:
+        load_model_dict(_broken(doc, path, value))
+    assert f"'{field}'" in str(info.value)
+
+
+def test_bad_files_name_the_file(tmp_path: Path) -> None:
+    with pytest.raises(ModelFileError, match="not found"):
+        load_model(tmp_path / "missing.json")
+    p = tmp_path / "bad.json"
+    p.write_text("{not json")
+    with pytest.raises(ModelFileError, match="bad.json"):
+        load_model(p)
+    p.write_text("[1, 2]")
+    with pytest.raises(ModelFileError, match="JSON object"):
+        load_model(p)

@@ -1,0 +1,69 @@
+"""The SFEM algebra of Eq. 1: parametrisation, matrix form, decomposition, Jacobian."""
+
+import numpy as np
+import pytest
+
+from calibration import sfem
+
+
+def _random_params(seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    p = sfem.identity_vector()
+    p[sfem.BIAS] = rng.uniform(-0.03, 0.03, 3)
+    p[sfem.SCALE] += rng.normal(0, 0.01, 3)
+    p[sfem.ALPHA] = rng.normal(0, 0.005, 3)
+    p[sfem.MISALIGN] = rng.normal(0, 0.01, 3)
+    return p
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_matrix_form_decomposes_back_to_the_twelve_parameters(seed: int) -> None:
+    p = _random_params(seed)
+    params = sfem.SfemParams.from_vector(p)
+    back = sfem.from_matrix(params.matrix(), params.bias_g)
+    np.testing.assert_allclose(back.to_vector(), p, atol=1e-12)
+
+
+def test_matrix_is_m_c_s_in_that_order() -> None:
+    p = _random_params(7)
+    M = sfem.rotation(p[sfem.MISALIGN])
+    C = sfem.nonorthogonality(p[sfem.ALPHA])
+    S = np.diag(p[sfem.SCALE])
+    np.testing.assert_allclose(sfem.matrix_from_vector(p), M @ C @ S)
+    assert np.allclose(C, np.tril(C)) and np.allclose(np.diag(C), 1.0)
+    np.testing.assert_allclose(M @ M.T, np.eye(3), atol=1e-15)
+
+
+def test_invert_is_the_inverse_of_apply() -> None:
+    params = sfem.SfemParams.from_vector(_random_params(3))
+    f = np.random.default_rng(0).normal(size=(10, 3))
+    np.testing.assert_allclose(params.apply(params.invert(f)), f, atol=1e-13)
+
+
+def test_identity_leaves_readings_unchanged() -> None:
+    f = np.random.default_rng(1).normal(size=(4, 3))
+    np.testing.assert_allclose(sfem.SfemParams.identity().apply(f), f)
+
+
+def test_analytic_jacobian_matches_finite_differences() -> None:
+    p = _random_params(11)
+    raw = np.random.default_rng(2).normal(size=(6, 3))
+    f0, jac = sfem.forward_jacobian(p, raw)
+    eps = 1e-6
+    for k in range(sfem.N_PARAMS):
+        d = p.copy()
+        d[k] += eps
+        f1, _ = sfem.forward_jacobian(d, raw)
+        np.testing.assert_allclose(
+            jac[:, :, k], (f1 - f0) / eps, atol=5e-6, err_msg=sfem.PARAM_NAMES[k]
+        )
+
+
+def test_decomposition_refuses_a_reflection() -> None:
+    with pytest.raises(ValueError, match="positive determinant"):
+        sfem.from_matrix(np.diag([1.0, 1.0, -1.0]), np.zeros(3))
+
+
+def test_vector_length_is_checked() -> None:
+    with pytest.raises(ValueError, match="12 entries"):
+        sfem.SfemParams.from_vector(np.zeros(9))

@@ -1,0 +1,114 @@
+"""Suite-wide fixtures. ``db_url``: every database test runs on SQLite and, when
+``SOAKCAL_TEST_DATABASE_URL`` is set, on PostgreSQL too (skipped otherwise).
+
+On PostgreSQL each test gets its own freshly created schema, selected with the
+connection option ``search_path``, so tests never see each other's rows and
+the schema is dropped afterwards. The URL returned is empty of tables: call
+``service.db.session.upgrade_database(db_url)`` (or use ``migrated_db_url``).
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+import warnings
+from collections.abc import Iterator
+from urllib.parse import quote
+
+import pytest
+
+# starlette's TestClient warns about httpx at import; not ours to fix, and noise in every run.
+warnings.filterwarnings("ignore", message=".*httpx.*starlette.testclient.*")
+warnings.filterwarnings("ignore", message=".*starlette.testclient.*httpx.*")
+
+POSTGRES_ENV = "SOAKCAL_TEST_DATABASE_URL"
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:  # type: ignore[no-untyped-def]
+    """An empty database: a temp SQLite file, or a fresh schema on the test PostgreSQL."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'soakcal-test.db'}"
+        return
+    base = os.environ.get(POSTGRES_ENV)
+    if not base:
+        pytest.skip(f"{POSTGRES_ENV} not set")
+    yield from _postgres_schema(base)
+
+
+@pytest.fixture
+def migrated_db_url(db_url: str) -> str:
+    """``db_url`` with the schema at Alembic head."""
+    from service.db.session import upgrade_database
+
+    upgrade_database(db_url)
+    return db_url
+
+
+@pytest.fixture(scope="session", params=["sqlite", "postgresql"])
+def shared_db_url(request: pytest.FixtureRequest, tmp_path_factory) -> Iterator[str]:  # type: ignore[no-untyped-def]
+    """One migrated database per backend for the whole session (see ``clean_db_url``)."""
+    from service.db.session import upgrade_database
+
+    if request.param == "sqlite":
+        url = f"sqlite:///{tmp_path_factory.mktemp('shared') / 'soakcal-shared.db'}"
+        upgrade_database(url)
+        yield url
+        return
+    base = os.environ.get(POSTGRES_ENV)
+    if not base:
+        pytest.skip(f"{POSTGRES_ENV} not set")
+    for url in _postgres_schema(base):
+        upgrade_database(url)
+        yield url
+
+
+@pytest.fixture
+def clean_db_url(shared_db_url: str) -> str:
+    """The shared migrated database, emptied: much faster than migrating per test.
+
+    For tests of behaviour on a migrated schema; tests of the schema itself
+    (migrations) use ``db_url``, which is fresh and empty.
+    """
+    from sqlalchemy import text
+
+    from service.db.models import Base
+    from service.db.session import make_engine
+
+    engine = make_engine(shared_db_url)
+    tables = [t.name for t in reversed(Base.metadata.sorted_tables)]
+    try:
+        with engine.begin() as conn:
+            # DELETE + sequence restart: 3-4x faster than TRUNCATE on these tiny tables.
+            for name in tables:
+                conn.execute(text(f'DELETE FROM "{name}"'))
+            if conn.dialect.name == "postgresql":
+                sequences = conn.execute(
+                    text(
+                        "SELECT sequence_name FROM information_schema.sequences "
+                        "WHERE sequence_schema = current_schema()"
+                    )
+                ).scalars()
+                for sequence in list(sequences):
+                    conn.execute(text(f'ALTER SEQUENCE "{sequence}" RESTART'))
+    finally:
+        engine.dispose()
+    return shared_db_url
+
+
+def _postgres_schema(base_url: str) -> Iterator[str]:
+    from sqlalchemy import create_engine, text
+
+    schema = f"t_{uuid.uuid4().hex[:16]}"
+    admin = create_engine(base_url, isolation_level="AUTOCOMMIT")
+    try:
+        with admin.connect() as conn:
+            conn.execute(text(f'CREATE SCHEMA "{schema}"'))
+        separator = "&" if "?" in base_url else "?"
+        yield f"{base_url}{separator}options={quote(f'-csearch_path={schema}')}"
+    finally:
+        with admin.connect() as conn:
+            # A leaked connection must not hang the suite: give up on the drop instead.
+            conn.execute(text("SET lock_timeout = '5s'"))
+            conn.execute(text(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE'))
+        admin.dispose()

@@ -1,0 +1,293 @@
+"""Chamber and turntable drivers against the simulators over loopback Modbus TCP."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from drivers.chamber import ModbusChamber
+from drivers.clock import VirtualClock
+from drivers.faults import ConnectionLost, DeviceTimeout, ExceptionReply, ValueOutOfRange
+from drivers.modbus_link import ModbusLink, RetryPolicy
+from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
+from drivers.turntable import ModbusTurntable
+from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
+from simulators.faults import SimFaults
+from simulators.modbus_server import ModbusSimServer, start_modbus_server
+from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage
+
+#: Short wall timeouts keep the fault tests fast; backoff is clock time (virtual).
+FAST = RetryPolicy(timeout_s=0.15, attempts=3, backoff_s=0.5)
+
+
+@dataclass
+class ChamberRig:
+    clock: VirtualClock
+    physics: ChamberPhysics
+    faults: SimFaults
+    server: ModbusSimServer
+    driver: ModbusChamber
+
+
+@dataclass
+class TableRig:
+    clock: VirtualClock
+    physics: TurntablePhysics
+    faults: SimFaults
+    server: ModbusSimServer
+    driver: ModbusTurntable
+
+
+@pytest.fixture(params=sorted(CHAMBER_MAPS))
+async def chamber_rig(request: pytest.FixtureRequest) -> AsyncIterator[ChamberRig]:
+    clock = VirtualClock()
+    faults = SimFaults()
+    rng = np.random.default_rng(7)
+    physics = ChamberPhysics(clock, rng, faults=faults)
+    regmap = CHAMBER_MAPS[request.param]
+    server = await start_modbus_server(ChamberRegisterImage(physics, regmap), faults, rng)
+    driver = ModbusChamber(ModbusLink(server.url, clock, device="chamber", policy=FAST), regmap)
+    yield ChamberRig(clock, physics, faults, server, driver)
+    await driver.link.close()
+    await server.stop()
+
+
+@pytest.fixture
+async def table_rig() -> AsyncIterator[TableRig]:
+    clock = VirtualClock()
+    faults = SimFaults()
+    physics = TurntablePhysics(clock, faults=faults, slew_deg_per_s=10.0, accel_deg_per_s2=20.0,
+                               settle_s=3.0)
+    server = await start_modbus_server(TurntableRegisterImage(physics, SOAKCAL_TABLE), faults,
+                                       np.random.default_rng(8))
+    driver = ModbusTurntable(ModbusLink(server.url, clock, device="turntable", policy=FAST),
+                             SOAKCAL_TABLE)
+    yield TableRig(clock, physics, faults, server, driver)
+    await driver.link.close()
+    await server.stop()
+
+
+
+async def test_chamber_status_roundtrip(chamber_rig: ChamberRig) -> None:
+    ch = chamber_rig.driver
+    await ch.set_ramp_rate(1.5)
+    await ch.set_setpoint(-40.0)
+    st = await ch.read_status()
+    assert st.setpoint_c == -40.0
+    assert st.ramp_c_per_min == 1.5
+    assert not st.running
+    assert st.process_c == pytest.approx(23.0, abs=0.2)
+
+
+async def test_chamber_ramps_then_settles(chamber_rig: ChamberRig) -> None:
+    ch, clock = chamber_rig.driver, chamber_rig.clock
+    await ch.set_ramp_rate(2.0)
+    await ch.set_setpoint(-17.0)
+    await ch.run()
+    await clock.sleep(600.0)  # 10 min at 2 °C/min: WSP 23 → 3 °C
+    st = await ch.read_status()
+    assert st.running
+    assert st.working_setpoint_c == pytest.approx(3.0, abs=0.1)
+    assert st.process_c > st.working_setpoint_c  # the air lags the ramp when cooling
+    await clock.sleep(1800.0)
+    st = await ch.read_status()
+    assert st.working_setpoint_c == pytest.approx(-17.0, abs=0.05)
+    assert st.process_c == pytest.approx(-17.0, abs=0.15)
+    assert st.alarms == ()
+    # The die lags the air: still warmer than the air after the ramp.
+    assert chamber_rig.physics.die_c > chamber_rig.physics.air_c
+
+
+async def test_chamber_rejects_out_of_range_setpoint_locally(chamber_rig: ChamberRig) -> None:
+    with pytest.raises(ValueOutOfRange):
+        await chamber_rig.driver.set_setpoint(500.0)
+    assert chamber_rig.driver.link.stats["requests"] == 0
+
+
+async def test_device_rejects_value_with_exception_reply(chamber_rig: ChamberRig) -> None:
+    link = chamber_rig.driver.link
+    with pytest.raises(ExceptionReply) as err:
+        await link.write_field(chamber_rig.driver.regmap.setpoint_c, -100.0)  # below −70 °C
+    assert err.value.code == 3
+    assert link.stats["retries"] == 0  # illegal value is not retried
+
+
+async def test_illegal_address_is_exception_reply(chamber_rig: ChamberRig) -> None:
+    with pytest.raises(ExceptionReply) as err:
+        await chamber_rig.driver.link.read_registers(9000, 2)
+    assert err.value.code == 2
+
+
+async def test_deviation_alarm(chamber_rig: ChamberRig) -> None:
+    ch = chamber_rig.driver
+    await ch.set_ramp_rate(0.0)  # step change: WSP jumps, the air cannot follow
+    await ch.set_setpoint(60.0)
+    await ch.run()
+    await chamber_rig.clock.sleep(10.0)
+    assert "deviation_low" in (await ch.read_status()).alarms
+
+
+async def test_stuck_process_value(chamber_rig: ChamberRig) -> None:
+    ch = chamber_rig.driver
+    await ch.set_setpoint(0.0)
+    await ch.run()
+    chamber_rig.faults.stuck_process_value = True
+    pv0 = (await ch.read_status()).process_c
+    await chamber_rig.clock.sleep(1200.0)
+    assert (await ch.read_status()).process_c == pv0
+    assert chamber_rig.physics.air_c < pv0 - 5.0  # the air moved, the reading did not
+
+
+async def test_exception_replies_are_retried(chamber_rig: ChamberRig) -> None:
+    chamber_rig.faults.p_exception = 0.3
+    for _ in range(10):
+        await chamber_rig.driver.read_status()
+    assert chamber_rig.driver.link.stats["retries"] > 0
+
+
+async def test_persistent_busy_reports_exception_reply(chamber_rig: ChamberRig) -> None:
+    chamber_rig.faults.p_exception = 1.0
+    with pytest.raises(ExceptionReply) as err:
+        await chamber_rig.driver.read_status()
+    assert err.value.code == 6
+    assert chamber_rig.driver.link.stats["requests"] == FAST.attempts
+
+
+async def test_no_reply_times_out_then_recovers(chamber_rig: ChamberRig) -> None:
+    ch = chamber_rig.driver
+    chamber_rig.faults.p_no_reply = 1.0
+    with pytest.raises(DeviceTimeout):
+        await ch.read_status()
+    chamber_rig.faults.p_no_reply = 0.0
+    st = await ch.read_status()
+    assert st.process_c == pytest.approx(23.0, abs=0.2)
+
+
+async def test_dropped_connection_reported_then_reconnects(chamber_rig: ChamberRig) -> None:
+    ch = chamber_rig.driver
+    await ch.read_status()
+    chamber_rig.faults.p_drop = 1.0
+    with pytest.raises(ConnectionLost):
+        await ch.read_status()
+    chamber_rig.faults.p_drop = 0.0
+    await ch.read_status()
+    assert ch.link.stats["reconnects"] >= 1
+
+
+async def test_intermittent_drops_are_absorbed(chamber_rig: ChamberRig) -> None:
+    chamber_rig.faults.p_drop = 0.2
+    for _ in range(5):
+        await chamber_rig.driver.set_setpoint(10.0)
+    chamber_rig.faults.p_drop = 0.0
+    assert (await chamber_rig.driver.read_status()).setpoint_c == 10.0
+
+
+async def test_nobody_listening_is_connection_lost(chamber_rig: ChamberRig) -> None:
+    await chamber_rig.server.stop()
+    link = ModbusLink(chamber_rig.server.url, chamber_rig.clock, device="gone", policy=FAST)
+    with pytest.raises(ConnectionLost):
+        await link.read_registers(1, 1)
+
+
+async def test_table_moves_and_reports_in_position(table_rig: TableRig) -> None:
+    tt, clock = table_rig.driver, table_rig.clock
+    await tt.move_to((90.0, -45.0, 10.0))
+    st = await tt.read_status()
+    assert st.moving and not st.in_position
+    await clock.sleep(5.0)  # 10 °/s with 20 °/s² ramps: 90° takes 9.5 s
+    mid = await tt.read_status()
+    assert 0.0 < mid.angles_deg[0] < 90.0
+    await clock.sleep(5.0)
+    arrived = await tt.read_status()
+    assert arrived.angles_deg == pytest.approx((90.0, -45.0, 10.0))
+    assert not arrived.moving and not arrived.in_position  # settling
+    await clock.sleep(3.0)
+    assert (await tt.read_status()).in_position
+
+
+async def test_table_never_in_position(table_rig: TableRig) -> None:
+    table_rig.faults.never_in_position = True
+    await table_rig.driver.move_to((10.0, 0.0, 0.0))
+    await table_rig.clock.sleep(60.0)
+    st = await table_rig.driver.read_status()
+    assert st.angles_deg[0] == pytest.approx(10.0) and not st.in_position
+
+
+async def test_table_encoder_error_and_stop(table_rig: TableRig) -> None:
+    table_rig.physics.encoder_error_deg = (0.5, 0.0, 0.0)
+    await table_rig.driver.move_to((20.0, 0.0, 0.0))
+    await table_rig.clock.sleep(1.0)
+    await table_rig.driver.stop()
+    here = table_rig.physics.true_angles_deg()[0]
+    await table_rig.clock.sleep(30.0)
+    st = await table_rig.driver.read_status()
+    assert st.angles_deg[0] == pytest.approx(here + 0.5, abs=1e-4)
+    assert here < 20.0
+
+
+async def test_table_rejects_wrong_axis_count(table_rig: TableRig) -> None:
+    with pytest.raises(ValueOutOfRange):
+        await table_rig.driver.move_to((1.0, 2.0))
+
+
+async def test_in_memory_transport_same_behaviour() -> None:
+    """pymodbus' null modem: the fast path, same drivers and images, no sockets."""
+    from simulators.modbus_server import IN_MEMORY_HOST
+
+    clock = VirtualClock()
+    for i, (name, regmap) in enumerate(sorted(CHAMBER_MAPS.items())):
+        faults = SimFaults()
+        rng = np.random.default_rng(i)
+        physics = ChamberPhysics(clock, rng, faults=faults)
+        server = await start_modbus_server(ChamberRegisterImage(physics, regmap), faults, rng,
+                                           host=IN_MEMORY_HOST, port=46100 + i)
+        assert server.url.startswith("tcp://__pymodbus_nullmodem:"), name
+        ch = ModbusChamber(ModbusLink(server.url, clock, policy=FAST), regmap)
+        await ch.set_setpoint(-55.5)
+        await ch.run()
+        await clock.sleep(3 * 3600.0)
+        st = await ch.read_status()
+        assert st.setpoint_c == -55.5 and st.process_c == pytest.approx(-55.5, abs=0.15)
+        faults.p_exception = 1.0
+        with pytest.raises(ExceptionReply):
+            await ch.read_status()
+        await ch.link.close()
+        await server.stop()
+
+
+async def test_concurrent_callers_share_one_link(chamber_rig: ChamberRig) -> None:
+    ch = chamber_rig.driver
+    results = await asyncio.gather(*(ch.read_status() for _ in range(20)),
+                                   ch.set_setpoint(5.0))
+    assert all(r.process_c == pytest.approx(23.0, abs=0.2) for r in results[:-1])
+    assert (await ch.read_status()).setpoint_c == 5.0
+
+
+async def test_cancellation_is_not_retried(chamber_rig: ChamberRig) -> None:
+    chamber_rig.faults.p_no_reply = 1.0
+    policy = RetryPolicy(timeout_s=2.0, attempts=3)
+    link = ModbusLink(chamber_rig.server.url, chamber_rig.clock, policy=policy)
+    task = asyncio.create_task(link.read_registers(1, 1))
+    await asyncio.sleep(0.3)  # let the request go out (wall time: the reply never comes)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert link.stats["retries"] == 0
+    await link.close()
+
+
+async def test_client_factory_urls() -> None:
+    from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
+
+    from drivers.modbus_link import client_from_url
+
+    assert isinstance(client_from_url("tcp://10.0.0.5:5020", 1.0), AsyncModbusTcpClient)
+    rtu = client_from_url("rtu:///dev/ttyUSB0?baudrate=9600&parity=E", 1.0)
+    assert isinstance(rtu, AsyncModbusSerialClient)
+    assert rtu.comm_params.baudrate == 9600 and rtu.comm_params.parity == "E"
+    with pytest.raises(ValueError):
+        client_from_url("udp://host:502", 1.0)

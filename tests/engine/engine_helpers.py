@@ -1,0 +1,40 @@
+"""Helpers shared by the engine tests: campaign rows and a fake calibration core."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from service.db.models import Campaign, Rig
+
+SMALL_SPEC: dict[str, Any] = {
+    "setpoints_c": [-10.0, 10.0, 30.0],
+    "soak_min": 30,
+    "positions": "six",
+    "samples_per_position": 50,
+    "ramp_c_per_min": 2.0,
+}
+
+
+def add_campaign(sf, spec: dict[str, Any] | None = None, rig: str = "sim",  # type: ignore[no-untyped-def]
+                 state: str = "queued") -> int:
+    with sf() as s:
+        if s.query(Rig).filter_by(name=rig).first() is None:
+            s.add(Rig(name=rig, chamber={"driver": "sim", "range_c": [-70, 180]},
+                      turntable={"driver": "sim"}, sensors=[]))
+            s.flush()
+        c = Campaign(rig=rig, sensor="SN-T", spec=dict(spec or SMALL_SPEC), state=state,
+                     progress={}, steps_log=[])
+        s.add(c)
+        s.commit()
+        return c.id
+
+
+def fake_calibrate(columns, provenance):  # type: ignore[no-untyped-def]
+    """A stand-in for the calibration core: fast, and records what it was given."""
+    fake_calibrate.calls.append(len(columns["t_s"]))
+    return {"valid_lo_c": min(columns["sensor_c"]), "valid_hi_c": max(columns["sensor_c"]),
+            "rmse_ug": 1.0, "model_version": "fake", "model": {"fake": True},
+            "report": {}, "provenance": provenance}
+
+
+fake_calibrate.calls = []  # type: ignore[attr-defined]
