@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 ROLES = ("viewer", "operator", "admin")
@@ -34,8 +34,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     return EXIT_OK if result is None else int(result)
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse whose usage errors are one line on stderr and exit 2 (spec/cli.md)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="soakcal",
         description="Thermal-soak calibration of triaxial MEMS accelerometers.",
     )
@@ -65,6 +72,12 @@ def _add_calibration_commands(sub: Any) -> None:
     cal.add_argument("-o", "--output", required=True, metavar="MODEL", help="model JSON to write")
     cal.add_argument("--json", action="store_true", help="print the table as JSON")
     cal.add_argument("--report-dir", metavar="DIR", help="write the report (plots) here")
+    cal.add_argument(
+        "--method",
+        choices=("joint", "per_step"),
+        help="thermal fit: one joint fit over all steps (default) or per step then per "
+        "parameter; docs/calibration.md compares them",
+    )
     cal.set_defaults(handler=_delegate("calibration.cli", "run_calibrate", "calibrate"))
 
     comp = sub.add_parser("compensate", help="apply a model to a recording")
@@ -73,6 +86,12 @@ def _add_calibration_commands(sub: Any) -> None:
     comp.add_argument("-o", "--output", required=True, metavar="OUT", help="CSV to write")
     comp.add_argument(
         "--extrapolate", action="store_true", help="allow temperatures outside the valid range"
+    )
+    comp.add_argument(
+        "--smooth-temperature-s",
+        type=_positive_float,
+        metavar="S",
+        help="smooth the noisy temperature channel over S seconds before compensating",
     )
     comp.set_defaults(handler=_delegate("calibration.cli", "run_compensate", "compensate"))
 
@@ -91,6 +110,18 @@ def _add_calibration_commands(sub: Any) -> None:
     imp.add_argument("-o", "--output", required=True, metavar="REC", help="recording to write")
     imp.add_argument("--min-static-s", type=float, metavar="S", help="shortest static segment")
     imp.add_argument("--threshold", type=float, metavar="X", help="static-detection threshold")
+    imp.add_argument(
+        "--raw",
+        dest="raw_samples",
+        action="store_true",
+        help="write every raw sample as a row instead of one averaged row per static interval",
+    )
+    imp.add_argument("--sensor", choices=("adxl355", "bmi160"), help="openaxes: which sensor")
+    imp.add_argument("--counts-per-g", metavar="K|KX,KY,KZ", help="imu_tk: counts per g")
+    imp.add_argument("--offset", metavar="O|OX,OY,OZ", help="imu_tk: offset in counts")
+    imp.add_argument("--session-list", metavar="JSON", help="ferraris: the session list")
+    imp.add_argument("--window-s", type=float, metavar="S", help="static-detection window")
+    imp.add_argument("--trim-s", type=float, metavar="S", help="trimmed from each interval end")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
 
 
@@ -198,3 +229,7 @@ def _add_campaign(sub: Any) -> None:
 
 def _fail(message: str) -> None:
     print(message, file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
