@@ -27,6 +27,12 @@ from calibration import sfem
 from calibration.errors import NotIdentifiable
 
 NORM_FREE = np.array([True] * 9 + [False] * 3)  # M is invisible to |g|
+# Singular values of the nominal Jacobian below this fraction of the largest mean
+# "not determined by these positions". Good schedules (Table 1, Table 4 spheres,
+# cube14) have condition numbers 2-3; six axis directions give exact zeros for
+# the α in norm mode, which measured (slightly tilted) directions turn into
+# ~1e-5 -- far from determined, but full rank to a naive check.
+STRUCTURAL_REL_TOL = 1e-3
 
 
 @dataclass
@@ -85,6 +91,12 @@ def fit_reference(
     dof = max(3 * n - sfem.N_PARAMS, 1)
     chi2_red = float(np.sum(sol.fun**2) / dof)
     cov, ident = _covariance(sol.jac, chi2_red, np.ones(sfem.N_PARAMS, bool))
+    unseen = _structurally_undetermined(ref, "reference")
+    if unseen:
+        mask = np.isin(np.array(sfem.PARAM_NAMES), unseen)
+        ident &= ~mask
+        cov[mask, :] = np.nan
+        cov[:, mask] = np.nan
     return FitResult(
         mode="reference",
         params=params,
@@ -118,8 +130,12 @@ def fit_norm(
             f"norm-mode fit of 9 parameters needs at least 10 positions, got {n}"
         )
     sig = _sigma(sigma_g, n)
-    free = NORM_FREE
+    undetermined = _structurally_undetermined(raw, "norm")
+    # Parameters the directions cannot see stay at their nominal value: letting
+    # LM wander along a (near-)null direction would corrupt the others.
+    free = NORM_FREE & ~np.isin(np.array(sfem.PARAM_NAMES), undetermined)
     p0 = ellipsoid_start(raw, g_local)
+    p0[~free] = sfem.identity_vector()[~free]
 
     def full(q: np.ndarray) -> np.ndarray:
         p = sfem.identity_vector()
@@ -149,6 +165,8 @@ def fit_norm(
     dof = max(n - int(free.sum()), 1)
     chi2_red = float(np.sum(sol.fun**2) / dof)
     cov, ident = _covariance(sol.jac, chi2_red, free)
+    why = _why(ident, norm_mode=True)
+    why.update({name: _UNSEEN for name in undetermined if name not in ("mx", "my", "mz")})
     return FitResult(
         mode="norm",
         params=params,
@@ -164,7 +182,7 @@ def fit_norm(
         success=bool(sol.success),
         message=str(sol.message),
         g_local=g_local,
-        not_identifiable_why=_why(ident, norm_mode=True),
+        not_identifiable_why=why,
     )
 
 
@@ -252,6 +270,20 @@ def _covariance(
     else:
         ident[:] = False
     return cov, ident
+
+
+_UNSEEN = (
+    "the positions' directions do not constrain it (nominal Jacobian condition > "
+    f"{1 / STRUCTURAL_REL_TOL:.0f}); held at its nominal value"
+)
+
+
+def _structurally_undetermined(directions_g: np.ndarray, mode: str) -> tuple[str, ...]:
+    """SFEM parameters the positions cannot determine (see :data:`STRUCTURAL_REL_TOL`)."""
+    from calibration.schedules import identifiability  # schedules imports sfem only
+
+    check = identifiability(directions_g, mode, rel_tol=STRUCTURAL_REL_TOL, component_tol=0.1)
+    return check.undetermined
 
 
 def _why(ident: np.ndarray, *, norm_mode: bool = False) -> dict[str, str]:

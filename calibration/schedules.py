@@ -85,11 +85,20 @@ class Identifiability:
         return not self.undetermined
 
 
-def identifiability(ref_g: np.ndarray, mode: str = "reference") -> Identifiability:
+def identifiability(
+    ref_g: np.ndarray,
+    mode: str = "reference",
+    *,
+    rel_tol: float = 1e-9,
+    component_tol: float = 1e-6,
+) -> Identifiability:
     """Which SFEM parameters the schedule determines (Jacobian rank at nominal parameters).
 
-    A parameter is undetermined when the Jacobian's null space has a component
-    along it (> 1e-6 after normalisation).
+    Singular values below ``rel_tol`` × the largest count as zero (the default
+    asks for exact rank deficiency; a fit on measured directions passes ~1e-3 so
+    that an almost-degenerate schedule, e.g. six axis directions a little off
+    true, counts as degenerate). A parameter is undetermined when its unit
+    vector has a projection longer than ``component_tol`` on that null space.
     """
     ref = np.asarray(ref_g, dtype=float)
     p = sfem.identity_vector()
@@ -106,12 +115,13 @@ def identifiability(ref_g: np.ndarray, mode: str = "reference") -> Identifiabili
     else:
         raise ValueError(f"mode must be 'reference' or 'norm', got {mode!r}")
     _, sv, vt = np.linalg.svd(J, full_matrices=True)
-    tol = 1e-9 * (sv[0] if sv.size else 1.0)
+    tol = rel_tol * (sv[0] if sv.size else 1.0)
     rank = int(np.sum(sv > tol))
     null = vt[rank:]
     free_names = [n for n, f in zip(names, free, strict=True) if f]
     undetermined = [
-        n for k, n in enumerate(free_names) if null.size and np.abs(null[:, k]).max() > 1e-6
+        n for k, n in enumerate(free_names)
+        if null.size and np.linalg.norm(null[:, k]) > component_tol
     ]
     if mode == "norm":
         undetermined += ["mx", "my", "mz"]
