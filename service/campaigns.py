@@ -46,6 +46,56 @@ def seed_sim_rig(session: Session) -> bool:
     return True
 
 
+def load_rigs_file(path: str) -> list[dict[str, Any]]:
+    """Rig configs from a JSON file (a list of ``{"name", "chamber", "turntable", "sensors"}``).
+
+    Raises ``ValueError`` naming the file, the rig and the field when a config
+    is unusable, so the service refuses to start rather than fail at 2 a.m.
+    """
+    import json
+
+    from service.engine.rigs import rig_config_errors
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read the rigs file ({exc})") from exc
+    if not isinstance(doc, list):
+        raise ValueError(f"{path}: expected a JSON list of rigs")
+    rigs: list[dict[str, Any]] = []
+    for i, item in enumerate(doc):
+        name = item.get("name") if isinstance(item, dict) else None
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"{path}: rig [{i}]: missing 'name'")
+        rig = {"name": name, "chamber": item.get("chamber") or {},
+               "turntable": item.get("turntable") or {}, "sensors": item.get("sensors") or []}
+        problems = rig_config_errors(rig["chamber"], rig["turntable"], rig["sensors"])
+        if problems:
+            field, why = problems[0]
+            raise ValueError(f"{path}: rig {name!r}: {field}: {why}")
+        rigs.append(rig)
+    return rigs
+
+
+def upsert_rigs(session: Session, rigs: list[dict[str, Any]]) -> list[str]:
+    """Insert rigs, or update the config of idle ones; a busy rig keeps its config (logged)."""
+    changed: list[str] = []
+    for cfg in rigs:
+        row = session.scalar(select(Rig).where(Rig.name == cfg["name"]))
+        if row is None:
+            session.add(Rig(**cfg))
+            changed.append(cfg["name"])
+        elif (row.chamber, row.turntable, row.sensors) != (
+                cfg["chamber"], cfg["turntable"], cfg["sensors"]) and not rig_busy(
+                session, row.name):
+            row.chamber, row.turntable, row.sensors = (
+                cfg["chamber"], cfg["turntable"], cfg["sensors"])
+            changed.append(cfg["name"])
+    session.flush()
+    return changed
+
+
 def spec_errors(
     session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
 ) -> list[dict[str, Any]]:

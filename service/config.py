@@ -8,6 +8,7 @@ from pathlib import Path
 
 DATA_DIR_ENV = "SOAKCAL_DATA_DIR"
 DATABASE_URL_ENV = "SOAKCAL_DATABASE_URL"
+RIGS_FILE_ENV = "SOAKCAL_RIGS_FILE"
 DEFAULT_DATA_DIR = Path("soakcal-data")  # relative to the cwd, like the CLI's other outputs
 SQLITE_FILENAME = "soakcal.db"
 
@@ -50,6 +51,8 @@ class Settings:
     # Bring the schema to head at start (``soakcal serve`` also does it before uvicorn).
     migrate: bool = True
     seed_sim_rig: bool = True
+    # A JSON list of rig configs registered (or updated while idle) at start.
+    rigs_file: str | None = field(default_factory=lambda: os.environ.get(RIGS_FILE_ENV) or None)
     # How often /events re-reads the campaign row (the runner may be another process).
     events_poll_s: float = 0.5
     # A comment line keeps proxies from closing an idle SSE stream.

@@ -12,7 +12,7 @@ from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from service.api import calibrations, campaigns, health, rigs, schedules, tokens
-from service.campaigns import seed_sim_rig
+from service.campaigns import load_rigs_file, seed_sim_rig, upsert_rigs
 from service.config import Settings, service_version
 from service.db.session import make_engine, make_session_factory, session_scope, upgrade_database
 from service.engine.states import IllegalTransition
@@ -58,6 +58,11 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         await run_in_threadpool(upgrade_database, settings.database_url)
     if settings.seed_sim_rig:
         await run_in_threadpool(_seed, factory)
+    if settings.rigs_file:
+        # Read before anything runs: a bad file stops the start with its name and field.
+        rig_configs = load_rigs_file(settings.rigs_file)
+        names = await run_in_threadpool(_upsert, factory, rig_configs)
+        log.info("rigs from %s: %s", settings.rigs_file, ", ".join(names) or "unchanged")
     background: list[Any] = []
     try:
         if settings.run_scheduler:
@@ -80,6 +85,11 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
 def _seed(factory: Any) -> None:
     with session_scope(factory) as session:
         seed_sim_rig(session)
+
+
+def _upsert(factory: Any, rig_configs: list[dict[str, Any]]) -> list[str]:
+    with session_scope(factory) as session:
+        return upsert_rigs(session, rig_configs)
 
 
 def _campaign_manager(settings: Settings, factory: Any) -> Any | None:

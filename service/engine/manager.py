@@ -29,10 +29,10 @@ from sqlalchemy import delete, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from drivers.clock import Clock, ScaledClock
+from drivers.clock import Clock, RealClock, ScaledClock
 from service.db.models import Campaign, Rig, RigLease
 from service.db.timestamps import as_utc, utcnow
-from service.engine.rigs import open_rig
+from service.engine.rigs import open_rig, rig_time_scale
 from service.engine.runner import CampaignRunner
 
 log = logging.getLogger(__name__)
@@ -59,6 +59,9 @@ class CampaignManager:
     ) -> None:
         self.sf = session_factory
         self.sim_speed = sim_speed
+        # An injected clock (tests, demo) serves every rig; otherwise a sim rig runs
+        # at sim_speed and a modbus rig at its own time_scale (1 = wall clock).
+        self._clock_injected = clock_factory is not None
         self.clock_factory = clock_factory or (lambda: ScaledClock(sim_speed))
         self.owner = owner or default_owner()
         self.lease_s = lease_s
@@ -173,7 +176,7 @@ class CampaignManager:
                 row = s.execute(select(Rig).where(Rig.name == rig)).scalar_one()
                 rig_cfg = {"name": row.name, "chamber": row.chamber, "turntable": row.turntable,
                            "sensors": row.sensors}
-            clock = self.clock_factory()
+            clock = self._clock_for(rig_cfg)
             async with open_rig(rig_cfg, clock, seed=campaign_id, **self.rig_options) as devices:
                 await CampaignRunner(self.sf, campaign_id, devices, clock).run()
         except asyncio.CancelledError:
@@ -192,6 +195,12 @@ class CampaignManager:
                 await renewer
             with contextlib.suppress(Exception):
                 self._release(rig)
+
+    def _clock_for(self, rig_cfg: dict[str, Any]) -> Clock:
+        scale = None if self._clock_injected else rig_time_scale(rig_cfg)
+        if scale is None:
+            return self.clock_factory()
+        return RealClock() if scale == 1.0 else ScaledClock(scale)
 
     async def _keep_lease(self, rig: str, run_task: asyncio.Task | None) -> None:
         while True:

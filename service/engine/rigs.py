@@ -1,11 +1,27 @@
 """Rig row → devices: the one place that knows which drivers a rig's config means.
 
 ``open_rig(rig_config, clock)`` is an async context manager yielding
-:class:`RigDevices`. The ``sim`` driver starts the simulated rig
-(``simulators.rig.start_sim_rig``) and connects to it through the real
-drivers over loopback sockets (``simulators.rig.connect_rig``), so the engine
-exercises the same code path as on a real rig. A real rig's config (Modbus
-host/port/unit, serial port) will map to the real drivers here the same way.
+:class:`RigDevices`. Two chamber drivers exist:
+
+* ``sim``: starts the simulated rig in this process
+  (``simulators.rig.start_sim_rig``) and connects to it through the real
+  drivers over loopback sockets (``simulators.rig.connect_rig``).
+* ``modbus``: a real (or remote simulated) rig, reached by URL::
+
+    {"chamber":   {"driver": "modbus", "url": "tcp://10.0.0.5:502",
+                   "map": "eurotherm3216", "device_id": 1, "range_c": [-40, 85]},
+     "turntable": {"url": "tcp://10.0.0.6:502", "device_id": 1, "axes": 3},
+     "sensors":   [{"url": "/dev/ttyUSB0", "baudrate": 115200}],
+     "time_scale": 1}
+
+  ``url`` is ``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200``
+  (drivers/modbus_link.py); a sensor ``url`` is anything pyserial's
+  ``serial_for_url`` opens (a device, ``socket://host:port``, ``rfc2217://``).
+  ``time_scale`` (on the chamber config) is how fast the rig's time runs
+  against the wall clock: 1 for hardware, the ``--speed`` of a remote
+  ``soakcal sim``.
+
+:func:`rig_config_errors` checks a config before it is stored (the API's 422).
 """
 
 from __future__ import annotations
@@ -39,10 +55,14 @@ async def open_rig(
 ) -> AsyncIterator[RigDevices]:
     """Devices for a rig config ``{"name", "chamber", "turntable", "sensors"}``."""
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
+    if driver == "modbus":
+        async with _open_modbus_rig(rig, clock) as devices:
+            yield devices
+        return
     if driver != "sim":
-        raise NotImplementedError(
-            f"rig {rig.get('name')!r}: chamber driver {driver!r} is not wired yet "
-            "(only the simulated rig 'sim' is)")
+        raise RigConfigError(
+            f"rig {rig.get('name')!r}: unknown chamber driver {driver!r} "
+            f"(expected one of {', '.join(DRIVERS)})")
     from drivers.geometry import angles_for_reference
     from simulators.rig import connect_rig, start_sim_rig
 
@@ -61,6 +81,100 @@ async def open_rig(
                 owner = dev if hasattr(dev, "close") else getattr(dev, "link", None)
                 if owner is not None and hasattr(owner, "close"):
                     await _maybe_await(owner.close())
+
+
+DRIVERS = ("sim", "modbus")
+
+
+class RigConfigError(ValueError):
+    """A rig config the drivers cannot use; the message names the key."""
+
+
+def rig_config_errors(
+    chamber: dict[str, Any], turntable: dict[str, Any], sensors: list[Any]
+) -> list[tuple[str, str]]:
+    """``(field path, problem)`` for every problem of a rig config; empty when usable."""
+    from drivers.registermaps import CHAMBER_MAPS
+
+    errors: list[tuple[str, str]] = []
+    driver = chamber.get("driver", "sim")
+    if driver not in DRIVERS:
+        errors.append(("chamber.driver", f"expected one of {', '.join(DRIVERS)}, got {driver!r}"))
+    rng = chamber.get("range_c")
+    if rng is not None and not (
+        isinstance(rng, list | tuple) and len(rng) == 2
+        and all(isinstance(v, int | float) for v in rng) and rng[0] < rng[1]
+    ):
+        errors.append(("chamber.range_c", "expected [lo, hi] in °C with lo < hi"))
+    if driver != "modbus":
+        return errors
+    for path, cfg in (("chamber", chamber), ("turntable", turntable)):
+        url = cfg.get("url")
+        if not isinstance(url, str) or not url.startswith(("tcp://", "rtu://")):
+            errors.append((f"{path}.url", "expected tcp://host:port or rtu:///dev/...?baudrate="))
+        dev_id = cfg.get("device_id", 1)
+        if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
+            errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
+    if chamber.get("map", "eurotherm3216") not in CHAMBER_MAPS:
+        errors.append(("chamber.map", f"expected one of {', '.join(sorted(CHAMBER_MAPS))}"))
+    axes = turntable.get("axes", 3)
+    if axes not in (2, 3):
+        errors.append(("turntable.axes", "expected 2 or 3"))
+    scale = chamber.get("time_scale", 1.0)
+    if not isinstance(scale, int | float) or not scale > 0:
+        errors.append(("chamber.time_scale", "expected a number > 0 (1 for hardware)"))
+    if not sensors or not isinstance(sensors[0], dict) or not isinstance(
+            sensors[0].get("url"), str):
+        errors.append(("sensors[0].url", "expected the sensor bridge's serial port or URL"))
+    return errors
+
+
+def rig_time_scale(rig: dict[str, Any]) -> float | None:
+    """Rig time per wall second for a ``modbus`` rig; ``None`` for ``sim`` (the service's)."""
+    chamber = rig.get("chamber") or {}
+    if chamber.get("driver", "sim") != "modbus":
+        return None
+    return float(chamber.get("time_scale", 1.0))
+
+
+@asynccontextmanager
+async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[RigDevices]:
+    """Real drivers on the URLs of the config (see the module docstring)."""
+    from drivers.chamber import ModbusChamber
+    from drivers.geometry import angles_for_reference
+    from drivers.modbus_link import ModbusLink
+    from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
+    from drivers.sensor_bridge import SerialAccelerometer
+    from drivers.turntable import ModbusTurntable
+
+    chamber_cfg = rig.get("chamber") or {}
+    table_cfg = rig.get("turntable") or {}
+    sensors = rig.get("sensors") or []
+    problems = rig_config_errors(chamber_cfg, table_cfg, sensors)
+    if problems:
+        path, why = problems[0]
+        raise RigConfigError(f"rig {rig.get('name')!r}: {path}: {why}")
+    chamber = ModbusChamber(
+        ModbusLink(chamber_cfg["url"], clock, device="chamber",
+                   device_id=int(chamber_cfg.get("device_id", 1))),
+        CHAMBER_MAPS[chamber_cfg.get("map", "eurotherm3216")],
+    )
+    n_axes = int(table_cfg.get("axes", 3))
+    table = ModbusTurntable(
+        ModbusLink(table_cfg["url"], clock, device="turntable",
+                   device_id=int(table_cfg.get("device_id", 1))),
+        SOAKCAL_TABLE, n_axes=n_axes,
+    )
+    sensor_cfg = sensors[0]
+    accel = SerialAccelerometer(sensor_cfg["url"], clock,
+                                baudrate=int(sensor_cfg.get("baudrate", 115200)))
+    try:
+        yield RigDevices(chamber, table, accel,
+                         lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)))
+    finally:
+        await chamber.link.close()
+        await table.link.close()
+        await accel.close()
 
 
 async def _maybe_await(v: Any) -> Any:

@@ -35,3 +35,56 @@ def test_rig_is_busy_while_a_campaign_runs(client: TestClient, auth, sf) -> None
     set_campaign(sf, campaign["id"], state="running")
     rigs = client.get("/api/v1/rigs", headers=auth["viewer"]).json()
     assert rigs[0]["busy"] is True
+
+
+def test_admin_registers_a_modbus_rig_and_bad_configs_get_422(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    lab = {
+        "name": "lab-1",
+        "chamber": {"driver": "modbus", "url": "tcp://10.0.0.5:502", "map": "watlow_f4t",
+                    "range_c": [-40, 85]},
+        "turntable": {"url": "tcp://10.0.0.6:502", "axes": 2},
+        "sensors": [{"url": "/dev/ttyUSB0"}],
+    }
+    r = client.post("/api/v1/rigs", json=lab, headers=auth["admin"])
+    assert r.status_code == 201, r.text
+    assert r.json()["chamber"]["map"] == "watlow_f4t" and r.json()["busy"] is False
+
+    bad = {**lab, "name": "lab-2", "turntable": {"url": "modbus://nowhere"}, "sensors": []}
+    r = client.post("/api/v1/rigs", json=bad, headers=auth["admin"])
+    assert r.status_code == 422
+    locs = [d["loc"] for d in r.json()["detail"]]
+    assert ["body", "turntable", "url"] in locs and ["body", "sensors", 0, "url"] in locs
+    names = [x["name"] for x in client.get("/api/v1/rigs", headers=auth["viewer"]).json()]
+    assert names == ["lab-1", "sim"]
+    r = client.post("/api/v1/rigs", json=lab, headers=auth["operator"])
+    assert r.status_code == 403
+
+
+def test_rigs_file_registers_rigs_at_start_and_a_bad_one_stops_the_start(  # type: ignore[no-untyped-def]
+    settings, tmp_path
+) -> None:
+    import dataclasses
+    import json
+
+    import pytest
+
+    from service.api.app import create_app
+    from service.api.auth import create_token
+    from service.db.session import session_scope
+
+    rig = {"name": "lab-sim", "chamber": {"driver": "modbus", "url": "tcp://sim-rig:5020",
+                                           "time_scale": 600},
+           "turntable": {"url": "tcp://sim-rig:5021"}, "sensors": [{"url": "socket://sim-rig:5022"}]}
+    path = tmp_path / "rigs.json"
+    path.write_text(json.dumps([rig]))
+    with TestClient(create_app(dataclasses.replace(settings, rigs_file=str(path)))) as c:
+        with session_scope(c.app.state.session_factory) as s:  # type: ignore[attr-defined]
+            token = create_token(s, "viewer")
+        rigs = c.get("/api/v1/rigs", headers={"Authorization": f"Bearer {token}"}).json()
+    assert [r["name"] for r in rigs] == ["lab-sim", "sim"]
+    assert rigs[0]["chamber"]["time_scale"] == 600
+
+    path.write_text(json.dumps([{**rig, "turntable": {"url": "udp://x"}}]))
+    bad_app = create_app(dataclasses.replace(settings, rigs_file=str(path)))
+    with pytest.raises(ValueError, match=r"rig 'lab-sim': turntable.url"), TestClient(bad_app):
+        pass
