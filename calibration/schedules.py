@@ -114,7 +114,8 @@ def identifiability(
         J = J[:, free]
     else:
         raise ValueError(f"mode must be 'reference' or 'norm', got {mode!r}")
-    _, sv, vt = np.linalg.svd(J, full_matrices=True)
+    # Only V is needed; a full U of a 1296-position schedule would be 3888².
+    _, sv, vt = np.linalg.svd(J, full_matrices=J.shape[0] < J.shape[1])
     tol = rel_tol * (sv[0] if sv.size else 1.0)
     rank = int(np.sum(sv > tol))
     null = vt[rank:]
