@@ -43,6 +43,12 @@ DF = {  # free parameters of the compact model a diagnoser fits
 }
 
 
+# Effects on a few unknown readings: dof of the per-reading test (the rows are searched).
+# outlier: a reading off by an unknown 3-vector; glitch: the temperature of a reading off,
+# its direction in the output known from the model (∂raw/∂T), so one dof.
+ROWWISE = {"outlier": 3, "temperature_sensor": 1}
+
+
 @dataclass
 class Concealed:
     effect: Any  # an Effect, or fx.ThermalLag (rig physics)

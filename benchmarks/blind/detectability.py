@@ -9,6 +9,14 @@ the base model at the recorded temperature) is whitened by the reading noise
 ``λ = ‖(I − P_base) x / σ‖``. The effect is "just detectable" when a
 ``df``-parameter test at family level α = 0.01, Bonferroni-split over the
 catalogue's candidates, has 50 % power: λ ≈ 3.4 for one parameter.
+
+Effects that sit on a few unknown readings (``outlier``, temperature-channel
+glitches) are different: *which* readings is itself a free parameter that no
+test can know in advance, so any detector must scan all N readings and pay
+the look-elsewhere factor N, and it can only test one reading's signal at a
+time. For them the criterion is a per-reading test (``df_row`` dof, level
+α/(N_candidates·N)) detecting at least one disturbed reading with probability
+50 %: :func:`minimum_detectable_rows` (docs/blind-benchmark.md).
 """
 
 from __future__ import annotations
@@ -77,3 +85,48 @@ def minimum_detectable(lam_of: Callable[[float], float], *, linear: bool = True,
         else:
             a = m
     return float(np.exp(b))
+
+
+def row_noncentralities(x_g: np.ndarray, ref_g: np.ndarray, temp_c: np.ndarray,
+                        sigma_g: np.ndarray) -> np.ndarray:
+    """Per-reading λ_i of the leave-one-reading-out test: ‖r_i‖ with r = (I − P)x/σ,
+    each axis scaled by 1/√(1 − h_ii) (h the leverage), (N,)."""
+    X = base_design(ref_g, temp_c)
+    sig = np.broadcast_to(np.asarray(sigma_g, float).reshape(len(X), -1), x_g.shape)
+    lam2 = np.zeros(len(X))
+    for i in range(3):
+        w = 1.0 / sig[:, i]
+        Xw, xw = X * w[:, None], x_g[:, i] * w
+        Q, _ = np.linalg.qr(Xw)
+        r = xw - Q @ (Q.T @ xw)
+        h = np.sum(Q**2, axis=1)
+        lam2 += r**2 / np.maximum(1.0 - h, 1e-12)
+    return np.sqrt(lam2)
+
+
+def threshold_rows(df_row: int, n_rows: int, alpha: float = ALPHA,
+                   n_candidates: int = N_CANDIDATES) -> float:
+    """Critical value of a df_row χ² per-reading test scanned over n_rows readings."""
+    return float(stats.chi2.isf(alpha / (n_candidates * n_rows), df_row))
+
+
+def minimum_detectable_rows(lam_rows_1: np.ndarray, df_row: int, n_rows: int,
+                            power: float = POWER) -> float:
+    """Magnitude m at which a scan over all n_rows readings finds at least one disturbed
+    reading with probability ``power``; ``lam_rows_1``: λ_i at m = 1 of the disturbed
+    readings (λ ∝ m). Each disturbed reading's statistic is non-central χ²(df_row, (mλ_i)²)
+    and they are independent (one reading each)."""
+    lam = np.asarray(lam_rows_1, float)
+    lam = lam[lam > 1e-12]
+    if lam.size == 0:
+        return float("inf")
+    crit = threshold_rows(df_row, n_rows)
+
+    def f(m: float) -> float:
+        miss = np.prod([stats.ncx2.cdf(crit, df_row, (m * li) ** 2) for li in lam])
+        return (1.0 - miss) - power
+
+    hi = 1.0 / float(lam.max())
+    while f(hi) < 0:
+        hi *= 2.0
+    return float(optimize.brentq(f, 1e-9 * hi, hi, xtol=1e-10 * hi, rtol=1e-10))

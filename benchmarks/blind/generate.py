@@ -7,7 +7,8 @@ of a protocol) and, apart, ``OUT/keys/NNNN.json`` (effect id, parameters,
 protocol, magnitude, minimum detectable size, λ). Case kinds:
 
 * ``effect``  -- an effect visible under the protocol, at 0.5×…8× its minimum
-  detectable size (computed for that sensor, pattern and protocol);
+  detectable size (computed for that sensor, pattern and protocol; for effects on
+  a few unknown readings including the search over all readings, detectability.py);
 * ``hidden``  -- an effect at a physically typical size that the protocol hides
   (λ < 1): a diagnoser must not name it (ideally lists it as not identifiable);
 * ``decoy``   -- no effect, but base-model terms at the edge of the datasheet
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.blind import twin
-from benchmarks.blind.catalogue import UNIT, draw_pattern, make
+from benchmarks.blind.catalogue import ROWWISE, UNIT, draw_pattern, make
 from benchmarks.blind.protocols import PROTOCOLS
 from calibration.recording import write_recording
 from simulators.truth import SensorTruth
@@ -136,6 +137,12 @@ def build(spec: CaseSpec, out: Path) -> dict:
         key_extra = {"magnitude": mag, "unit": UNIT[spec.effect], "mds": mds, "lambda": lam,
                      "parameters": _jsonable(concealed.parameters),
                      "expected_detectable": bool(np.isfinite(mds) and mag >= mds)}
+        if spec.effect in ROWWISE:  # λ of each disturbed reading (the MDS criterion)
+            lr = twin.row_lambdas(spec.effect, pat, proto, truth, mag)
+            key_extra["lambda_rows"] = [float(lr[r]) for r in pat["rows"]]
+            # The pre-2026-11 criterion (one test of all readings, no search), for reference.
+            key_extra["mds_without_search"] = twin.minimum_detectable_single_test(
+                spec.effect, pat, proto, truth)
     rec = twin.recording(proto, truth, concealed, spec.seed)
     write_recording(out / "cases" / f"{spec.case}.csv", rec)
     key = {**asdict(spec), **key_extra, "sensor_seed": spec.seed,

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from benchmarks.blind import detectability
-from benchmarks.blind.catalogue import DF, NONLINEAR, Concealed, make
+from benchmarks.blind.catalogue import DF, NONLINEAR, ROWWISE, Concealed, make
 from benchmarks.blind.protocols import Protocol
 from calibration.recording import Recording
 from simulators.campaign_sim import SimCampaign, simulate_campaign
@@ -78,9 +78,32 @@ def lambda_fn(effect_id: str, pattern: dict, protocol: Protocol, truth: SensorTr
     return lam
 
 
+def row_lambdas(effect_id: str, pattern: dict, protocol: Protocol, truth: SensorTruth,
+                m: float = 1.0) -> np.ndarray:
+    """Per-reading λ_i at magnitude m (row-wise effects; see detectability.py)."""
+    ctx0 = _context(protocol, truth)
+    T_rec = ctx0.die_c if "sensor_c" in protocol.columns else ctx0.air_c
+    sigma = np.sqrt(truth.sample_sd_g() ** 2 + ctx0.vib_sd_g**2) / np.sqrt(ctx0.n_samples)
+    x = signature(protocol, truth, make(effect_id, m, pattern, protocol), ctx0)
+    return detectability.row_noncentralities(x, ctx0.ref_g, T_rec, sigma)
+
+
+def minimum_detectable_single_test(effect_id: str, pattern: dict, protocol: Protocol,
+                                   truth: SensorTruth) -> float:
+    """The criterion without the search over readings (λ of all of them in one df test)."""
+    lam = lambda_fn(effect_id, pattern, protocol, truth)
+    return detectability.minimum_detectable(lam, linear=True, df=DF[effect_id])
+
+
 def minimum_detectable(effect_id: str, pattern: dict, protocol: Protocol,
                        truth: SensorTruth) -> float:
-    """Magnitude (catalogue.UNIT) at 50 % power, α = 0.01 over the catalogue's candidates."""
+    """Magnitude (catalogue.UNIT) at 50 % power, α = 0.01 over the catalogue's candidates
+    (and, for row-wise effects, over the readings that must be searched)."""
+    if effect_id in ROWWISE:
+        lam_rows = row_lambdas(effect_id, pattern, protocol, truth)
+        rows = [int(r) for r in pattern["rows"]]
+        return detectability.minimum_detectable_rows(lam_rows[rows], ROWWISE[effect_id],
+                                                     lam_rows.size)
     lam = lambda_fn(effect_id, pattern, protocol, truth)
     if effect_id in NONLINEAR:
         return detectability.minimum_detectable(lam, linear=False, df=DF[effect_id],

@@ -7,6 +7,7 @@ which :mod:`calibration.discrepancy.problem` maps into residual space.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,9 @@ class DesignContext:
     sd_g: np.ndarray | None  # (N,3) within-window sd, when recorded
     draw_dtemp_g_per_c: np.ndarray  # (N,3) ∂raw/∂T of the fitted base model
     session: np.ndarray | None  # (N,) when a session column is present
+    # Reference mode: ``refit_shift(dT) -> (Δraw, ∂raw/∂T at T + dT)``, both (N,3) g, of the
+    # base model refitted with its temperature moved by dT (see problem.py); None in norm mode.
+    refit_shift: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
     @property
     def n(self) -> int:

@@ -34,6 +34,10 @@ def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
                    fold_masks: list[np.ndarray], exclude_rows: np.ndarray) -> float:
     """RMS (µg) of held-out prediction errors, fitting weighted LS on the other folds."""
     sq, cnt = 0.0, 0
+    # Columns scaled to unit norm: effect columns can be 10⁷ smaller than the base's
+    # (a vibration term is ∝ sd² ≈ 1e-7 g²), and pinv's relative cut-off would drop them.
+    scale = column_scale(X * w[:, None])
+    X = X / scale
     Xw, yw = X * w[:, None], y * w
     G, h = Xw.T @ Xw, Xw.T @ yw
     for m in fold_masks:
@@ -49,3 +53,9 @@ def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
         sq += float(err @ err)
         cnt += int(test.sum())
     return float(np.sqrt(sq / max(cnt, 1)) * 1e6)
+
+
+def column_scale(Xw: np.ndarray) -> np.ndarray:
+    """Norm of each (whitened) column, 1 for empty columns: divide by it before solving."""
+    nrm = np.sqrt(np.sum(Xw**2, axis=0))
+    return np.where(nrm > 0, nrm, 1.0)

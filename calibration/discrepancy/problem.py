@@ -1,18 +1,23 @@
 """The base model, linearised over the whole recording (docs/diagnosis.md §1).
 
-Reference mode is *exactly* linear: the SFEM (seed Eq. 1) solved for the raw
-output is ``raw = A(T)⁻¹ ref + b(T)``; with each SFEM parameter a cubic in T
-(seed Eq. 8) the entries of ``G = A⁻¹`` are cubics to far below the noise
-(the remainder is products of tempcos, < 0.01 µg), so per axis::
+Reference mode: the SFEM (seed Eq. 1) solved for the raw output is
+``raw = A(T)⁻¹ ref + b(T)``; with each SFEM parameter a cubic in T (seed Eq. 8)
+the entries of ``G = A⁻¹`` are cubics up to higher powers of T (products of
+tempcos), so per axis::
 
     raw_a = Σ_j Σ_p β[a,j,p] · u_j · t^p,   u = (1, ref_x, ref_y, ref_z), p = 0..3
 
-48 coefficients (12 parameters × 4 powers) and a block-diagonal design.
+48 coefficients (12 parameters × 4 powers), a block-diagonal design with the
+SFEM-cubic's tangent space. What the SFEM-cubic predicts beyond that span (the
+higher powers: up to a few µg at the ends of −40…60 °C) is taken from a joint
+fit of the SFEM-cubic itself and removed from the data (:func:`_sfem_remainder`),
+so the linear problem has the SFEM-cubic's residuals, not its surrogate's.
 Norm mode linearises ``|A(T)(raw − b(T))| − 1`` around a Gauss–Newton fit of
 the 9 identifiable parameters (M is invisible to |g|) × powers of T.
 
 Everything is whitened by σ = sd/√n (or a residual estimate when sd is
-absent), so that statistics are in units of the noise.
+absent), plus the recorded temperature's own noise through ∂raw/∂T, so that
+statistics are in units of the noise.
 """
 
 from __future__ import annotations
@@ -74,6 +79,25 @@ def pooled_sigma_g(rec: Recording, steps: np.ndarray) -> np.ndarray | None:
     return pooled / np.sqrt(n)[:, None]
 
 
+def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
+    """Per-reading noise of the recorded temperature (°C), 0 without temperature.
+
+    Robust sd of first differences within each plateau / √2 (insensitive to slow
+    settling), pooled by the median over plateaus (one plateau's 20-odd differences
+    give a noisy estimate; the chamber PV noise does not change from step to step).
+    """
+    if ctx.temperature_source == "none":
+        return np.zeros(ctx.n)
+    per_step = []
+    for s_ in ctx.step_ids:
+        m = np.flatnonzero(ctx.steps == s_)
+        if m.size < 3:
+            continue
+        d = np.diff(ctx.temp_c[m[np.argsort(ctx.t_s[m], kind="stable")]])
+        per_step.append(1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0))
+    return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
+
+
 def build_problem(rec: Recording) -> LinearProblem:
     if rec.has_reference:
         return _reference_problem(rec)
@@ -113,10 +137,59 @@ def _reference_problem(rec: Recording) -> LinearProblem:
         sig = np.broadcast_to(np.maximum(s, 1e-9), (n, 3))
     w = 1.0 / np.asarray(sig, float).ravel()
     beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
-    # ∂raw/∂T of the fitted base, for the lag regressor (its gain is locked to this).
-    dP = np.column_stack([np.zeros(n)] + [p * P[:, p - 1] for p in range(1, degree + 1)]) / half
-    dblock = (u[:, :, None] * dP[:, None, :]).reshape(n, -1)
+    sig_T = temperature_noise_c(ctx)
+    if np.any(sig_T > 0):
+        # Errors in the temperature regressor: a reading's T noise moves the model along
+        # ∂raw/∂T. Without it, a sensor with a large tempco read on a noisy chamber PV
+        # shows "outliers" and lag-like patterns that are only temperature noise.
+        d0 = np.zeros((n, 3))
+        if degree > 0:
+            dP0 = np.column_stack([np.zeros(n)] + [p_ * P[:, p_ - 1] for p_ in
+                                                   range(1, degree + 1)]) / half
+            db0 = (u[:, :, None] * dP0[:, None, :]).reshape(n, -1)
+            d0 = np.column_stack([db0 @ beta[a * k:(a + 1) * k] for a in range(3)])
+        sig = np.sqrt(np.asarray(sig, float) ** 2 + (d0 * sig_T[:, None]) ** 2)
+        w = 1.0 / sig.ravel()
+        beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+    t_scaled = P[:, 1] if degree > 0 else np.zeros(n)
+    remainder = _sfem_remainder(raw, ref, np.asarray(sig, float).reshape(n, 3), t_scaled,
+                                degree, ctx, beta, X0, w)
+    if remainder is not None:  # the data minus what the SFEM-cubic has beyond the design
+
+        y = (raw - remainder).ravel()
+        beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+    ydata = y.reshape(n, 3)
+
+    def blocks(temp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t = (temp - mid) / half
+        Pt = np.column_stack([t**p for p in range(degree + 1)])
+        dP = np.column_stack([np.zeros(n)] + [p * t ** (p - 1) for p in range(1, degree + 1)])
+        return ((u[:, :, None] * Pt[:, None, :]).reshape(n, -1),
+                (u[:, :, None] * (dP / half)[:, None, :]).reshape(n, -1))
+
+    # ∂raw/∂T of the fitted base (norm-mode-compatible fallback for temperature effects).
+    dblock = blocks(ctx.temp_c)[1]
     ctx.draw_dtemp_g_per_c = np.column_stack([dblock @ beta[a * k:(a + 1) * k] for a in range(3)])
+    wn = w.reshape(n, 3)
+
+    def refit_shift(dT_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Base refitted with the die at ``T + dT``: output change from T to T + dT and ∂/∂T there.
+
+        Why: the base fitted on the recorded (air) temperature has absorbed part of a
+        lag and is linear only near T; refitting it on the candidate die temperature
+        and differencing the cubic is exact for any lag size (docs/diagnosis.md §4).
+        """
+        b1, d1 = blocks(ctx.temp_c + dT_c)
+        b0 = blocks(ctx.temp_c)[0]
+        shift = np.empty((n, 3))
+        deriv = np.empty((n, 3))
+        for a in range(3):
+            ba = np.linalg.lstsq(b1 * wn[:, a, None], ydata[:, a] * wn[:, a], rcond=None)[0]
+            shift[:, a] = (b1 - b0) @ ba
+            deriv[:, a] = d1 @ ba
+        return shift, deriv
+
+    ctx.refit_shift = refit_shift
 
     def lift(x: np.ndarray) -> np.ndarray:
         return x.reshape(3 * n, -1)
@@ -125,6 +198,56 @@ def _reference_problem(rec: Recording) -> LinearProblem:
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
         from_sd, degree, mid, half,
     )
+
+
+def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.ndarray,
+                    degree: int, ctx: DesignContext, beta: np.ndarray, X0: np.ndarray,
+                    w: np.ndarray) -> np.ndarray | None:
+    """What the SFEM-cubic predicts beyond the linear design's span, at its own fit (N,3) g.
+
+    Why: ``raw = A(T)⁻¹ref + b(T)`` with cubic SFEM parameters is *not* exactly cubic
+    in T (A⁻¹ has higher powers); the rest reaches a few µg at the ends of the range,
+    is position dependent and would be read by the effect tests (e.g. as an early-plateau
+    lag). The base model is the SFEM-cubic, so its remainder is removed from the data:
+    a joint fit of the 12×(d+1) coefficients (``thermal_joint.fit_joint``), started from
+    the linear fit, and the part of its prediction the linear design cannot represent is
+    subtracted. The linear design then carries the SFEM's tangent space as before.
+    None when there is nothing to correct (d = 0) or the fit fails.
+    """
+    if degree == 0:
+        return None
+    from calibration import sfem_batch
+    from calibration.fit import _decompose_batch
+    from calibration.thermal_joint import fit_joint
+
+    n = raw.shape[0]
+    try:
+        ids = ctx.step_ids
+        ts = np.array([float(np.median(t[ctx.steps == s_])) for s_ in ids])
+        Pt = np.column_stack([ts**p for p in range(degree + 1)])
+        Ps = np.empty((len(ids), 12))
+        coef = beta.reshape(3, 4, degree + 1)  # [axis, (1, ref_x, ref_y, ref_z), power]
+        G = np.einsum("ajp,sp->saj", coef[:, 1:, :], Pt)  # raw = G ref + b at each step
+        b = np.einsum("ap,sp->sa", coef[:, 0, :], Pt)
+        A = np.linalg.inv(G)
+        if np.any(np.linalg.det(A) <= 0):
+            return None
+        Ps[:] = _decompose_batch(A, b)
+        cnt = np.array([np.sum(ctx.steps == s_) for s_ in ids], float)
+        coeffs0 = np.linalg.lstsq(Pt * np.sqrt(cnt)[:, None], Ps * np.sqrt(cnt)[:, None],
+                                  rcond=None)[0].T  # (12, d+1)
+        res = fit_joint(raw, ref, sig, t, coeffs0, np.ones(12, bool))
+        V = np.vander(t, degree + 1, increasing=True)
+        Pn = V @ res.coeffs.T
+        pred = np.linalg.solve(sfem_batch.matrices(Pn), ref[:, :, None])[:, :, 0] + Pn[:, 0:3]
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.all(np.isfinite(pred)):
+        return None
+    Xw = X0 * w[:, None]
+    lin = np.linalg.lstsq(Xw, pred.ravel() * w, rcond=None)[0]
+    rem = pred - (X0 @ lin).reshape(n, 3)
+    return rem
 
 
 def _norm_problem(rec: Recording) -> LinearProblem:

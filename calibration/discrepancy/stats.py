@@ -7,9 +7,11 @@ statistic is a function of the residual ``e = (I − P_X) y``. Under the null
 white noise: the projections are data-independent given the design, and B
 replicates cost a few matrix products.
 
-Statistics are normalised by a robust (MAD) noise scale of the same residual,
-so they are scale-free: the null does not depend on the noise level, and an
-underestimated sd/√n cannot cause false alarms.
+Statistics are normalised by a noise scale of the same residual (F-type: the
+residual after the candidate; outliers: a robust MAD scale), so they are
+scale-free: the null does not depend on the noise level, and an underestimated
+sd/√n cannot cause false alarms. p-values are kept as logs (strong effects are
+far below 1e-300).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats as sps
+from scipy.special import betaln, gammaln
 
 ABSORBED_MAX = 0.99  # beyond this the base model swallows the effect: not identifiable here
 
@@ -50,70 +53,120 @@ def absorbed_fraction(U: np.ndarray, X: np.ndarray) -> float:
 
 @dataclass
 class CandidateTest:
-    """One effect's test at this stage: statistic on the data and on each null replicate."""
+    """One effect's test at this stage: statistic on the data and on each null replicate.
+
+    p-values are kept as natural logs: strong effects give p far below 1e-300, and
+    ranking candidates by p must not be decided by floating-point underflow.
+    """
 
     effect_id: str
-    p_naive: float  # chi² tail of the (max over grid/rows) statistic
+    logp: float  # log p of the best grid value / row (before the multiplicity adjustment)
     multiplicity: int  # grid values or rows the max ran over
-    p_adj: float  # Šidák-adjusted for that multiplicity
-    p_adj_null: np.ndarray  # (B,) the same on the null replicates
-    theta: float  # best grid value (nan when linear)
+    logp_adj: float  # Šidák-adjusted for that multiplicity
+    logp_adj_null: np.ndarray  # (B,) the same on the null replicates
+    theta: float  # best grid value (nan when linear; the row for outliers)
     absorbed: float
     stat: float
-    profile: dict[float, float] = field(default_factory=dict)  # theta → stat (lag τ, boundary)
+    profile: dict[float, float] = field(default_factory=dict)  # theta → log p
+    theta_sd: float = float("nan")  # profile-likelihood sd of a continuous theta
+
+    @property
+    def p_adj(self) -> float:
+        return float(np.exp(self.logp_adj))
 
 
-def sidak(p: np.ndarray | float, mult: int) -> np.ndarray:
-    p = np.clip(np.asarray(p, float), 0.0, 1.0)
-    return -np.expm1(mult * np.log1p(-np.minimum(p, 1 - 1e-16)))
+def sidak_log(logp: np.ndarray | float, mult: int) -> np.ndarray:
+    """log of the Šidák adjustment 1 − (1 − p)^mult, accurate for p down to exp(−1e300)."""
+    lp = np.minimum(np.asarray(logp, float), 0.0)
+    p = np.exp(lp)
+    with np.errstate(divide="ignore"):
+        exact = np.log(-np.expm1(mult * np.log1p(-np.minimum(p, 1 - 1e-16))))
+    return np.where(p > 1e-12, exact, np.log(mult) + lp)
 
 
-def chi2_sf(stat: np.ndarray | float, k: int) -> np.ndarray:
-    return sps.chi2.sf(np.maximum(np.asarray(stat, float), 0.0), k)
+def chi2_logsf(stat: np.ndarray | float, k: int) -> np.ndarray:
+    """log P(χ²_k > stat); the leading asymptotic term where scipy underflows."""
+    x = np.maximum(np.asarray(stat, float), 0.0)
+    with np.errstate(divide="ignore"):
+        v = sps.chi2.logsf(x, k)
+    a, z = k / 2.0, np.maximum(x / 2.0, 1e-300)
+    asym = (a - 1) * np.log(z) - z - gammaln(a) + np.log1p((a - 1) / z)
+    return np.where(np.isfinite(v), v, asym)
+
+
+def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
+    """log P(F_{k,dof} > f); the leading asymptotic term where scipy underflows."""
+    f = np.maximum(np.asarray(f, float), 0.0)
+    with np.errstate(divide="ignore"):
+        v = sps.f.logsf(f, k, dof)
+    a, b = dof / 2.0, k / 2.0
+    x = dof / (dof + k * np.maximum(f, 1e-300))  # sf = I_x(a, b)
+    asym = a * np.log(x) + b * np.log1p(-x) - np.log(a) - betaln(a, b)
+    return np.where(np.isfinite(v), v, asym)
 
 
 def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
-                 s: float, s_null: np.ndarray) -> tuple[float, np.ndarray, int, float]:
-    """Score statistic of free-gain columns: ‖B'e‖²/s² with B an orthonormal basis of (I−P)X."""
-    Z = project_out(U, Xw)
+                 one_sided: bool = False) -> tuple[float, np.ndarray, int, float, float]:
+    """F-type score test of free-gain columns after projecting out U.
+
+    ``one_sided``: the first column's coefficient is physically > 0 (a lag's amplitude)
+    and the others (N, e.g. the lag's unknown start) only exist with it. The evidence
+    is ``‖P_N e‖² + z²`` when z > 0 and none otherwise (z the first column's score
+    after N, whose sign is that of its fitted coefficient): the null law is
+    ½·χ²_{j+1} on z > 0 (j = rank of N; z is independent of P_N e), p = 1 on z ≤ 0.
+    Returns log p on the data, log p on each null replicate, the tested dof k, the
+    absorbed fraction and the explained sum of squares. The noise scale is taken from
+    the residual *after* the candidate, so the effect itself does not inflate it (short
+    recordings, e.g. 33 rows; and strong effects, whose own signal would otherwise hide
+    them): χ²_k tails become F(k, dof) tails.
+    """
     absorbed = absorbed_fraction(U, Xw)
-    B = orthonormal_basis(Z, 1e-6)
+    m = e.size
+    ee, EE = float(e @ e), np.sum(E**2, axis=0)
+    if one_sided:
+        Nb = orthonormal_basis(project_out(U, Xw[:, 1:]), 1e-6)
+        z1 = project_out(np.hstack([U, Nb]), Xw[:, :1])[:, 0]
+        nz = float(np.linalg.norm(z1))
+        if nz > 1e-6 * max(float(np.linalg.norm(Xw[:, 0])), 1e-300):
+            b1 = z1 / nz
+            j = Nb.shape[1]
+            dof = max(m - U.shape[1] - j - 1, 1)
+
+            def stat(qn: np.ndarray, t: np.ndarray, tot: np.ndarray) -> np.ndarray:
+                c = (qn + t**2) / np.maximum((tot - qn - t**2) / dof, 1e-300)
+                return np.where(t > 0, np.log(0.5) + f_logsf(c / (j + 1), j + 1, dof), 0.0)
+
+            qn_d, t_d = float(np.sum((Nb.T @ e) ** 2)), float(b1 @ e)
+            lp = float(stat(np.asarray(qn_d), np.asarray(t_d), np.asarray(ee)))
+            lpn = stat(np.sum((Nb.T @ E) ** 2, axis=0), b1 @ E, EE)
+            return lp, lpn, j + 1, absorbed, (qn_d + t_d**2) if t_d > 0 else 0.0
+    B = orthonormal_basis(project_out(U, Xw), 1e-6)
     k = B.shape[1]
     if k == 0:
-        return 0.0, np.zeros(E.shape[1]), 0, 1.0
-    # F-type: the noise scale is taken from the residual *after* the candidate, so the
-    # effect itself does not inflate it (matters for short recordings, e.g. 33 rows).
-    m, p = e.size, U.shape[1]
-    dof = max(m - p - k, 1)
+        return 0.0, np.zeros(E.shape[1]), 0, 1.0, 0.0
+    dof = max(m - U.shape[1] - k, 1)
     q = float(np.sum((B.T @ e) ** 2))
-    f = q / k / ((float(e @ e) - q) / dof)
+    f = q / k / max((ee - q) / dof, 1e-300)
     qn = np.sum((B.T @ E) ** 2, axis=0)
-    fn = qn / k / ((np.sum(E**2, axis=0) - qn) / dof)
-    # Reported on the χ²(k) scale (same p) so all candidates share one p-value function.
-    return _f_as_chi2(f, k, dof), _f_as_chi2(fn, k, dof), k, absorbed
+    fn = qn / k / ((EE - qn) / dof)
+    return float(f_logsf(f, k, dof)), f_logsf(fn, k, dof), k, absorbed, q
 
 
-def _f_as_chi2(f: np.ndarray | float, k: int, dof: int) -> np.ndarray | float:
-    logp = sps.f.logsf(np.maximum(f, 0.0), k, dof)
-    return sps.chi2.isf(np.exp(np.maximum(logp, -700.0)), k)
+def explained_ss(U: np.ndarray, Xw: np.ndarray, e: np.ndarray,
+                 one_sided: bool = False) -> tuple[float, int]:
+    """‖Bᵀe‖² and k for the columns Xw after projecting out U (for profiling θ).
 
-
-def fixed_gain_stats(
-    U: np.ndarray, xw: np.ndarray, Nw: np.ndarray, e: np.ndarray, E: np.ndarray, s: float,
-    s_null: np.ndarray,
-) -> tuple[float, np.ndarray, float]:
-    """Drop in SS from adding free nuisance columns N and a term x with gain fixed at 1.
-
-    ΔSS = ‖P_N' e‖² + 2 z'e' − z'z with N' = (I−P)N, z = (I−P_[X,N])x: bounded by
-    the (1 + j)-dof score statistic, so its χ²(1 + j) tail is conservative.
+    ``one_sided`` as in :func:`linear_stats`: 0 when the first column's coefficient
+    would be ≤ 0, so a refined θ never trades the physical sign for a better fit.
     """
-    Nb = orthonormal_basis(project_out(U, Nw), 1e-6) if Nw.shape[1] else np.zeros((e.size, 0))
-    U2 = np.hstack([U, Nb])
-    z = project_out(U2, xw[:, None])[:, 0]
-    zz = float(z @ z)
-    t = (float(np.sum((Nb.T @ e) ** 2)) + 2.0 * float(z @ e) - zz) / s**2
-    tn = (np.sum((Nb.T @ E) ** 2, axis=0) + 2.0 * (z @ E) - zz) / s_null**2
-    return t, tn, absorbed_fraction(U, xw[:, None])
+    B = orthonormal_basis(project_out(U, Xw), 1e-6)
+    q = float(np.sum((B.T @ e) ** 2))
+    if one_sided and Xw.shape[1] > 0:
+        Nb = orthonormal_basis(project_out(U, Xw[:, 1:]), 1e-6)
+        z1 = project_out(np.hstack([U, Nb]), Xw[:, :1])[:, 0]
+        if float(z1 @ e) <= 0:
+            q = 0.0
+    return q, B.shape[1]
 
 
 def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_rows: int,

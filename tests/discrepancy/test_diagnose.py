@@ -130,6 +130,10 @@ def test_vibration_rectification_found():
     d = run([E.VibrationRectification(c_per_g=np.array([30.0, 0.0, 0.0]))], seed=11,
             setpoints=UP_DOWN, physics=RigPhysics(vib_sd_g_by_step=vib))
     assert "vibration_rectification" in found(d)
+    # Its column (sd² ≈ 1e-5 g²) is far smaller than the base's: the fit must not drop it.
+    f = d.findings[found(d).index("vibration_rectification")]
+    assert f.parameters["c_x_per_g"] == pytest.approx(30.0, abs=4 * f.parameter_sd["c_x_per_g"])
+    assert f.heldout_rmse_after_ug < f.heldout_rmse_before_ug
 
 
 def test_cli_json_contract(tmp_path, capsys):

@@ -11,6 +11,7 @@ absorbs it is measured, not declared: ``absorbed_fraction`` in
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,8 +28,14 @@ class EffectModule:
     effect_id: str = ""
     confusers: tuple[str, ...] = ()
     experiment: str = ""
-    fixed_gain: bool = False  # True: one column added with coefficient 1 (thermal_lag)
     needs_motion: bool = False
+    # θ is a continuous parameter (e.g. a lag τ): the winner's θ is refined between its grid
+    # neighbours; ``theta_name`` is its name in ``parameters`` (its sd comes from the profile).
+    continuous: bool = False
+    theta_name: str = ""
+    # ``one_sided``: the first regressor's coefficient is physically ≥ 0 (a lag's
+    # amplitude); the test is the likelihood ratio under that constraint (stats.py).
+    one_sided: bool = False
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:
@@ -39,9 +46,15 @@ class EffectModule:
         """(N,3,k) change of raw output (g) per unit of each linear parameter."""
         raise NotImplementedError
 
-    def nuisance(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        """(N,3,j) free-gain columns that come with a fixed-gain term (e.g. unknown start)."""
-        return np.zeros((ctx.n, 3, 0))
+    def refined_regressors(self, ctx: DesignContext, theta: float,
+                           coef_of: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """Regressors of an *accepted* term, which may adapt to the data.
+
+        ``coef_of(X)`` fits (N,3,k) columns to the current residual and returns the k
+        coefficients. Default: the test's regressors unchanged. The test and its null
+        always use :meth:`regressors`.
+        """
+        return self.regressors(ctx, theta)
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         """Protocol-level check: (can this recording show it, why not, experiment that would)."""

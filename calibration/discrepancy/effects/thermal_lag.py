@@ -1,10 +1,24 @@
 """``thermal_lag``: the die follows the chamber air through a first-order lag τ (effects.md).
 
-Regressor: ``−(∂raw/∂T)·(T_recorded − T_die)`` = ``(∂raw/∂T)·(T_die − T_air)``
-with ``T_die`` the recorded air temperature through a first-order lag of τ.
-The gain is locked to the model's own ∂raw/∂T (one τ, no free gain): that is
-what tells a lag from ``temperature_rate`` (free gains) and from hysteresis
-(persists through the plateau) or drift (grows with elapsed time).
+Regressors for a lag τ (profiled over a grid, then refined continuously):
+
+1. the change of the model output when its temperature moves from the recorded
+   air temperature to ``T_die(τ)`` — the recorded air history (plateaus, ramps
+   in between) through a first-order lag τ — with the base model **refitted at
+   T_die(τ)** and the cubic differenced exactly (reference mode; norm mode uses
+   the base's ∂raw/∂T × (T_die − T_air)). Its gain is one free scalar common to
+   all axes and positions: the recording does not hold the ramps, and an
+   unknown ramp rate or air settling behind the setpoint scale every plateau's
+   die–air difference by about the same factor (exactly so once the air has
+   settled). The *shape* stays locked to the model's own temperature
+   sensitivity: that is what tells a lag from ``temperature_rate`` (free
+   per-axis gains), hysteresis (persists through the plateau) and drift
+   (grows with elapsed time).
+2. nuisance: the first plateau's unknown starting die temperature (a free
+   ``∂raw/∂T·e^{−t/τ}`` on the first plateau only).
+
+The test is the likelihood ratio with the amplitude constrained to ≥ 0 (a
+passive die can only lag the air; stats.linear_stats, ``one_sided``).
 """
 
 from __future__ import annotations
@@ -12,13 +26,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 
 from calibration.discrepancy.context import DesignContext
 from calibration.discrepancy.effects.base import EffectModule
 
 RAMP_C_PER_MIN = 2.0  # assumed chamber ramp between steps (seed Table 3: 0.1–5 °C/min)
 AMBIENT_C = 25.0  # assumed start of the campaign: the die at lab ambient before the first ramp
+MAX_AMPLITUDE_ITER = 4
 TAU_GRID_S = tuple(float(v) for v in np.geomspace(120.0, 14400.0, 18))
 
 
@@ -28,24 +42,46 @@ class ThermalLag(EffectModule):
     confusers: tuple[str, ...] = ("thermal_hysteresis", "temperature_rate", "bias_drift")
     experiment: str = ("fit on the chamber air temperature (chamber_c) with soaks shorter than "
                        "3 τ, or log the die with an external probe and compare")
-    fixed_gain: bool = True
+    continuous: bool = True
+    theta_name: str = "tau_s"
+    one_sided: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         return list(TAU_GRID_S)
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        dT = die_minus_air_c(ctx, theta)
-        return (ctx.draw_dtemp_g_per_c * dT[:, None])[:, :, None]
+        return self._columns(ctx, theta, 1.0)
 
-    def nuisance(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        """The first plateau's starting die temperature is unknown: a free decaying column.
+    def refined_regressors(self, ctx, theta, coef_of):
+        """Columns at the fitted amplitude A: the base is refitted at T_air + A·ΔT(τ).
 
-        Why: the recording does not say where the die was before the first plateau;
-        a wrong guess would be read as a jump at step 1 (session offset).
+        Why: with A ≠ 1 the linear gain on a shift computed at A = 1 misses the
+        curvature of the cubic over A·ΔT (a few µg at ΔT ≈ 5 °C), which later stages
+        would otherwise read as hysteresis or session jumps. The first column is
+        divided by A, so its coefficient stays the amplitude itself.
         """
+        amp = 1.0
+        X = self._columns(ctx, theta, amp)
+        for _ in range(MAX_AMPLITUDE_ITER):
+            a = float(coef_of(X)[0])
+            if not np.isfinite(a) or a <= 0.0 or abs(a - amp) <= 1e-3 * amp:
+                break
+            amp = a
+            X = self._columns(ctx, theta, amp)
+        return X
+
+    def _columns(self, ctx: DesignContext, theta: float, amp: float) -> np.ndarray:
+        dT = die_minus_air_c(ctx, theta)
+        if ctx.refit_shift is not None:
+            shift, deriv = ctx.refit_shift(amp * dT)
+            shift = shift / amp
+        else:
+            shift, deriv = ctx.draw_dtemp_g_per_c * dT[:, None], ctx.draw_dtemp_g_per_c
+        # Why the nuisance: the recording does not say where the die was before the first
+        # plateau; a wrong guess would be read as a jump at step 1 (session offset).
         first = ctx.steps == ctx.step_ids[0]
         decay = np.where(first, np.exp(-(ctx.t_s - ctx.t_s[first].min()) / theta), 0.0)
-        return (ctx.draw_dtemp_g_per_c * decay[:, None])[:, :, None]
+        return np.stack([shift, deriv * decay[:, None]], axis=2)
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         if ctx.temperature_source == "none" or len(ctx.step_ids) < 2:
@@ -58,48 +94,61 @@ class ThermalLag(EffectModule):
         return True, "", self.experiment
 
     def parameters(self, coef, se, theta, ctx):
-        return {"tau_s": float(theta)}, {"tau_s": float(se[0]) if se.size else float("nan")}
+        p = {"tau_s": float(theta), "amplitude": float(coef[0]),
+             "first_plateau_offset_c": float(coef[1])}
+        s = {"tau_s": float("nan"), "amplitude": float(se[0]),
+             "first_plateau_offset_c": float(se[1])}
+        return p, s
 
     def axes(self, coef, se):
         return ["x", "y", "z"]
 
     def sentence(self, params, sd, axes):
         tau, s = params["tau_s"], sd.get("tau_s", float("nan"))
-        unc = f" (≈ {s:.0f} s)" if np.isfinite(s) else ""
+        unc = f" (± {s:.0f} s)" if s is not None and np.isfinite(s) else ""
+        amp = params.get("amplitude", 1.0)
         return (f"the sensor die lags the chamber air with a time constant τ = {tau:.0f} s{unc}: "
                 "readings early in each plateau still carry part of the last step, scaled by the "
-                "model's own temperature sensitivity")
+                f"model's own temperature sensitivity ({amp:.2f} × the die–air difference of a "
+                f"{RAMP_C_PER_MIN:g} °C/min ramp)")
 
 
 def die_minus_air_c(ctx: DesignContext, tau_s: float) -> np.ndarray:
     """T_die − T_air at each reading for a first-order lag τ of a reconstructed air history.
 
-    The air history: each plateau at its median temperature; between plateaus a
-    ramp at :data:`RAMP_C_PER_MIN` starting at the previous plateau's last reading
-    (why: the recording does not hold the ramp; the ramp is short next to τ).
-    Before the first plateau the campaign is assumed to start at
-    :data:`AMBIENT_C` and to ramp, then soak as long as the other plateaus do.
+    The air history is piecewise linear: each plateau at its median temperature;
+    between plateaus a ramp at :data:`RAMP_C_PER_MIN` starting at the previous
+    plateau's last reading (why: the recording does not hold the ramp). Before
+    the first plateau the campaign is assumed to start at :data:`AMBIENT_C` and
+    to ramp, then soak as long as the other plateaus do. The lag of a linear
+    segment is solved exactly (δ = die − air: δ' = −δ/τ − r, r the air slope),
+    so the last reading of a plateau is not smeared into the next ramp.
     """
     ids = ctx.step_ids
     t = ctx.t_s
     first = {s: float(t[ctx.steps == s].min()) for s in ids}
     last = {s: float(t[ctx.steps == s].max()) for s in ids}
-    dt = max(min(tau_s / 10.0, 20.0), 1.0)
     rate = RAMP_C_PER_MIN / 60.0
-    soaks = [first[ids[k]] - last[ids[k - 1]]
-             - abs(ctx.step_temp_c[ids[k]] - ctx.step_temp_c[ids[k - 1]]) / rate
+    temp = [ctx.step_temp_c[s] for s in ids]
+    soaks = [first[ids[k]] - last[ids[k - 1]] - abs(temp[k] - temp[k - 1]) / rate
              for k in range(1, len(ids))]
     soak = max(float(np.median(soaks)), 0.0) if soaks else 0.0
-    a0, b0 = AMBIENT_C, ctx.step_temp_c[ids[0]]
-    t0 = first[ids[0]] - soak - abs(b0 - a0) / rate
-    grid = np.arange(t0, float(t.max()) + dt, dt)
-    air = a0 + np.sign(b0 - a0) * np.minimum(rate * (grid - t0), abs(b0 - a0))
+    a0 = AMBIENT_C
+    t0 = first[ids[0]] - soak - abs(temp[0] - a0) / rate
+    # Breakpoints (time, air) of the piecewise-linear air history.
+    bt, bv = [t0, t0 + abs(temp[0] - a0) / rate], [a0, temp[0]]
     for k in range(1, len(ids)):
-        a, b = ctx.step_temp_c[ids[k - 1]], ctx.step_temp_c[ids[k]]
-        start = last[ids[k - 1]]
-        m = grid > start
-        ramp = a + np.sign(b - a) * np.minimum(rate * (grid[m] - start), abs(b - a))
-        air[m] = ramp
-    alpha = float(np.exp(-dt / tau_s))
-    die = lfilter([1.0 - alpha], [1.0, -alpha], air, zi=[alpha * air[0]])[0]
-    return np.interp(t, grid, die) - np.interp(t, grid, air)
+        start = max(last[ids[k - 1]], bt[-1])
+        bt += [start, start + abs(temp[k] - temp[k - 1]) / rate]
+        bv += [temp[k - 1], temp[k]]
+    bt_a, bv_a = np.asarray(bt), np.asarray(bv)
+    dt_seg = np.diff(bt_a)
+    slope = np.divide(np.diff(bv_a), dt_seg, out=np.zeros_like(dt_seg), where=dt_seg > 0)
+    slope = np.append(slope, 0.0)  # constant after the last breakpoint
+    delta = np.zeros(bt_a.size)  # δ at each breakpoint; the die starts at the air (ambient)
+    for i in range(1, bt_a.size):
+        r = slope[i - 1]
+        delta[i] = -r * tau_s + (delta[i - 1] + r * tau_s) * np.exp(-dt_seg[i - 1] / tau_s)
+    i = np.clip(np.searchsorted(bt_a, t, side="right") - 1, 0, bt_a.size - 1)
+    r = slope[i]
+    return -r * tau_s + (delta[i] + r * tau_s) * np.exp(-(t - bt_a[i]) / tau_s)
