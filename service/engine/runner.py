@@ -98,7 +98,7 @@ class CampaignRunner:
                     continue
                 resumed = len(missing) < self.n_pos
                 await self._ramp(step)
-                await self._soak(step, resumed=resumed)
+                await self._soak(step, resumed=resumed, n_positions=len(missing))
                 await self._positions(step, missing)
             await self._fitting()
             await self._safe_state()
@@ -140,10 +140,17 @@ class CampaignRunner:
             status = await self._chamber()
         self.eta.ramp_done(self.clock.now() - start_s)
 
-    async def _soak(self, step: int, *, resumed: bool) -> None:
-        """Wait for stability (policy of the spec); log the decision in steps_log."""
+    async def _soak(self, step: int, *, resumed: bool, n_positions: int) -> None:
+        """Wait for stability (policy of the spec); log the decision in steps_log.
+
+        The predictive policy judges the die against the sweep that follows: its
+        duration (positions left × the measured time per position) and whether
+        this step is the coldest or hottest (it then sets the model's valid range).
+        """
         spec, target_c = self.spec, self.spec.setpoints_c[step]
         cfg = spec.stability
+        sweep_s = n_positions * self.eta.position_s
+        edge = target_c in (min(spec.setpoints_c), max(spec.setpoints_c))
         if resumed:
             # The step was soaked before the interruption: re-check, don't re-soak in full.
             cfg = dataclasses.replace(
@@ -167,7 +174,8 @@ class CampaignRunner:
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
             decision = stability.decide(cfg, now_s - start_s, settled, np.array(die_t),
-                                        np.array(die_c))
+                                        np.array(die_c), sweep_s=sweep_s,
+                                        n_positions=self.n_pos, edge=edge)
             self._publish(step, "soak", 0, status, target_c,
                           soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
             if decision.stable:
@@ -181,7 +189,10 @@ class CampaignRunner:
             "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
             "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
             "reason": decision.reason, "tau_s": decision.tau_s,
-            "predicted_offset_c": decision.predicted_offset_c, "policy": cfg.policy,
+            "predicted_offset_c": decision.predicted_offset_c,
+            "predicted_error_c": decision.predicted_error_c,
+            "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": sweep_s,
+            "edge": edge, "policy": cfg.policy,
             "resumed": resumed, "max_soak_reached": decision.max_soak_reached,
         }
         store.put_step_log(self.sf, self.id, _clean_json(entry))

@@ -14,7 +14,15 @@ from typing import Any
 import numpy as np
 
 from service.engine.quality import QualityLimits
-from service.engine.stability import StabilityConfig
+from service.engine.stability import (
+    DEFAULT_DRIFT_BUDGET,
+    DEFAULT_EDGE_TOL_C,
+    DEFAULT_GRADIENT_LAG_S,
+    DEFAULT_STEP_TOL_C,
+    DEFAULT_TEMPCO_UG_PER_C,
+    StabilityConfig,
+    temperature_budget_c,
+)
 
 DEFAULT_SETPOINTS_C = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
 
@@ -50,6 +58,13 @@ def parse_spec(spec: dict[str, Any]) -> RunSpec:
     """A :class:`RunSpec` from a campaign's JSON spec (defaults = the seed's protocol)."""
     soak_s = float(spec.get("soak_min", 60.0)) * 60.0
     policy = str(spec.get("stability", "predictive"))
+    quality = QualityLimits(
+        expected_sd_g=float(spec.get("expected_sd_g", QualityLimits.expected_sd_g)),
+        max_span_c=float(spec.get("max_span_c", QualityLimits.max_span_c)),
+        temp_noise_c=float(spec.get("temp_noise_c", QualityLimits.temp_noise_c)),
+    )
+    samples = int(spec.get("samples_per_position", 200))
+    die_tol = spec.get("die_tol_c")
     stab = StabilityConfig(
         policy=policy,
         soak_s=soak_s,
@@ -57,12 +72,16 @@ def parse_spec(spec: dict[str, Any]) -> RunSpec:
         max_soak_s=float(spec.get("max_soak_min", 2.0 * soak_s / 60.0)) * 60.0,
         tol_c=float(spec.get("tol_c", 0.3)),
         dwell_s=float(spec.get("dwell_min", min(5.0, soak_s / 60.0))) * 60.0,
-        die_tol_c=float(spec.get("die_tol_c", 0.1)),
-    )
-    quality = QualityLimits(
-        expected_sd_g=float(spec.get("expected_sd_g", QualityLimits.expected_sd_g)),
-        max_span_c=float(spec.get("max_span_c", QualityLimits.max_span_c)),
-        temp_noise_c=float(spec.get("temp_noise_c", QualityLimits.temp_noise_c)),
+        # What the thermal model can absorb: a fraction of one reading's noise over the
+        # sensor's tempco (docs/engine.md, "Stability decision").
+        temp_budget_c=float(spec.get("temp_budget_c", temperature_budget_c(
+            quality.expected_sd_g / max(samples, 1) ** 0.5,
+            float(spec.get("tempco_ug_per_c", DEFAULT_TEMPCO_UG_PER_C)),
+            float(spec.get("drift_budget", DEFAULT_DRIFT_BUDGET))))),
+        gradient_lag_s=float(spec.get("gradient_lag_s", DEFAULT_GRADIENT_LAG_S)),
+        step_tol_c=float(spec.get("step_tol_c", DEFAULT_STEP_TOL_C)),
+        edge_tol_c=float(spec.get("edge_tol_c", DEFAULT_EDGE_TOL_C)),
+        die_tol_c=None if die_tol is None else float(die_tol),
     )
     on_max = str(spec.get("on_max_soak", "continue"))
     if on_max not in ("continue", "fail"):
@@ -76,7 +95,7 @@ def parse_spec(spec: dict[str, Any]) -> RunSpec:
     return RunSpec(
         setpoints_c=[float(v) for v in spec.get("setpoints_c", DEFAULT_SETPOINTS_C)],
         positions=str(spec.get("positions", "table1")),
-        samples_per_position=int(spec.get("samples_per_position", 200)),
+        samples_per_position=samples,
         stability=stab,
         quality=quality,
         on_max_soak=on_max,

@@ -6,10 +6,36 @@ No chamber controller reports "stable", so the engine decides from two sources:
   target while the working setpoint equals the target, for a dwell
   (:func:`chamber_settled`);
 * the sensor die, through the sensor's own temperature channel: a first-order
-  exponential approach T(t) = T∞ − (T∞ − T0)·e^(−t/τ) is fitted to the recent
-  history (:func:`fit_approach`) and the step is declared stable once the
-  predicted residual |T(now) − T∞| is below ``die_tol_c`` and the fit is
-  credible (:func:`decide`).
+  approach T(t) = T∞ − (T∞ − T0)·e^(−t/τ) is fitted to the recent history
+  (:func:`fit_approach`, with its covariance) and extrapolated over the coming
+  position sweep.
+
+What the soak has to achieve follows from how the data are used: every
+position row carries its measured die temperature and the thermal fit
+conditions it per step with a straight line in time (``calibration.
+temperature_conditioning``). A die still approaching its final value during
+the sweep therefore costs accuracy only through
+
+1. the *curvature* of the approach over the sweep, which the per-step line
+   cannot follow (the residual of e^(−u/τ) about its best line), and
+2. the *rate*: while the die moves, package and board lag it by about
+   ``gradient_lag_s``; the stress state the output depends on belongs to a
+   temperature ``gradient_lag_s × dT/dt`` behind the reading.
+
+Both are temperature errors; times the sensor's temperature coefficient they
+become output errors, compared with the noise the campaign has anyway
+(:func:`temperature_budget_c`: a fraction of one reading's noise over the
+tempco). The part that varies from position to position (curvature, change of
+the rate lag) is compared with one reading's noise, ``temp_budget_c``; the
+part common to the whole sweep (the rate lag, taken at the die's rate *now*:
+a slower time constant the history cannot reveal yet would keep it up) shifts
+the step's temperature, is not averaged over the positions, and is compared
+with the noise of the step mean, ``temp_budget_c / √n_positions``. The step is soaked
+when the upper confidence bounds of both (:func:`sweep_error_c`, fit
+covariance by the delta method) are within them. Every position must also be
+within ``step_tol_c`` of the final value (the steps stay where the plan put
+them), and at the coldest and hottest step the sweep-mean offset within
+``edge_tol_c``: those steps set the model's valid range.
 
 The die reading may carry a constant offset, so only its *approach* is used,
 never its absolute value against the setpoint.
@@ -18,11 +44,37 @@ never its absolute value against the setpoint.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 POLICIES = ("predictive", "dwell", "fixed")
+
+# ADXL355 datasheet: offset tempco ±0.15 mg/°C (max), sensitivity tempco 0.01 %/°C
+# (0.1 mg/°C at 1 g): the larger is the output change per °C of temperature error.
+DEFAULT_TEMPCO_UG_PER_C = 150.0
+# A soak-induced error may add this fraction of the reading noise (≈ 3 % in quadrature).
+DEFAULT_DRIFT_BUDGET = 0.25
+# Package/board lag behind the die reading while the die moves: ceramic LCC package
+# ≈ 0.15 J/K on ≈ 30 K/W of pads and board → R·C ≈ 5 s, doubled for margin.
+DEFAULT_GRADIENT_LAG_S = 10.0
+# Every position within this of the step's final temperature: a fifth of the seed's
+# 10 °C spacing, so the steps stay where the plan put them.
+DEFAULT_STEP_TOL_C = 2.0
+# The calibration core's valid range is the step temperatures ± 1 °C; keeping the
+# extreme steps within 0.7 °C of their final value leaves 3 σ of a reading's 0.1 °C.
+DEFAULT_EDGE_TOL_C = 0.7
+SWEEP_POINTS = 25  # samples of the sweep used to evaluate its error (~ one per position)
+
+
+def temperature_budget_c(reading_noise_g: float, tempco_ug_per_c: float = DEFAULT_TEMPCO_UG_PER_C,
+                         fraction: float = DEFAULT_DRIFT_BUDGET) -> float:
+    """rms die-temperature error (°C) whose output effect is ``fraction`` of the reading noise.
+
+    ``reading_noise_g`` is the per-axis noise of one averaged position reading
+    (raw sample sd / √samples); ``tempco_ug_per_c`` the output change per °C.
+    """
+    return fraction * reading_noise_g * 1e6 / tempco_ug_per_c
 
 
 @dataclass(frozen=True)
@@ -35,21 +87,31 @@ class StabilityConfig:
     max_soak_s: float = 7200.0  # after this the step is marked max_soak_reached
     tol_c: float = 0.3  # chamber PV band around the target
     dwell_s: float = 300.0  # PV continuously in band at least this long
-    die_tol_c: float = 0.1  # predicted die residual offset that counts as soaked
-    max_tau_rel_sd: float = 0.35  # a fit whose τ is less certain than this is not credible
+    # rms temperature error the thermal model may see during the sweep (spec.py derives it)
+    temp_budget_c: float = temperature_budget_c(2.5e-4 / math.sqrt(200))
+    gradient_lag_s: float = DEFAULT_GRADIENT_LAG_S  # package/board lag behind the die reading
+    sweep_s: float = 360.0  # expected duration of the step's position sweep (runner passes it)
+    n_positions: int = 24  # positions per step (runner passes it): a step mean's noise is σ/√n
+    step_tol_c: float = DEFAULT_STEP_TOL_C  # every step: |T − T∞| at the sweep start
+    edge_tol_c: float = DEFAULT_EDGE_TOL_C  # extreme steps: sweep-mean offset from final
+    die_tol_c: float | None = None  # optional classic rule: |T(now) − T∞| below this as well
+    confidence_z: float = 2.0  # decisions use estimate + z·σ (fit covariance, delta method)
     max_resid_c: float = 0.15  # rms residual above this: the curve is not a first-order approach
+    min_durbin_watson: float = 1.0  # smoother residuals: a second time constant is still visible
     min_points: int = 6  # sensor history points needed before a prediction is trusted
     window_s: float = 1800.0  # fit only the recent history: early soak is a two-stage lag
-    flat_span_c: float = 0.05  # history flatter than this (max−min of a trend) is already soaked
+    rate_window_s: float = 600.0  # the fit must match the die's measured rate over this much
 
     def __post_init__(self) -> None:
         if self.policy not in POLICIES:
             raise ValueError(f"stability policy must be one of {POLICIES}, got {self.policy!r}")
+        if not self.temp_budget_c > 0:
+            raise ValueError(f"temp_budget_c must be positive, got {self.temp_budget_c}")
 
 
 @dataclass(frozen=True)
 class ApproachFit:
-    """Result of fitting T(t) = T∞ − (T∞ − T0)·e^(−(t − t_first)/τ) to a history."""
+    """Result of fitting T(t) = T∞ − a·e^(−(t − t_first)/τ) to a history."""
 
     t_inf_c: float
     t0_c: float
@@ -58,10 +120,21 @@ class ApproachFit:
     resid_rms_c: float
     n: int
     ok: bool  # the optimiser converged and τ is finite and positive
+    cov: np.ndarray | None = field(default=None, compare=False, repr=False)  # of (T∞, a, τ)
+    durbin_watson: float = 2.0  # of the residuals in time order (≈ 2 for white noise)
+    resid_c: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def amplitude_c(self) -> float:
+        return self.t_inf_c - self.t0_c
+
+    def offset_c(self, t_rel_s: float) -> float:
+        """Signed T∞ − T(t) at ``t_rel_s`` seconds after the first history point."""
+        return self.amplitude_c * math.exp(-t_rel_s / self.tau_s)
 
     def predicted_offset_c(self, t_rel_s: float) -> float:
         """|T(t) − T∞| at ``t_rel_s`` seconds after the first history point."""
-        return abs(self.t_inf_c - self.t0_c) * math.exp(-t_rel_s / self.tau_s)
+        return abs(self.offset_c(t_rel_s))
 
 
 @dataclass(frozen=True)
@@ -69,7 +142,9 @@ class Decision:
     stable: bool
     reason: str  # human sentence-ish tag recorded in steps_log
     tau_s: float | None = None
-    predicted_offset_c: float | None = None
+    predicted_offset_c: float | None = None  # |T∞ − T(now)|, point estimate
+    predicted_error_c: float | None = None  # upper bound of the sweep's error, as °C per reading
+    die_rate_c_per_min: float | None = None  # dT/dt of the die now (fit or trend)
     max_soak_reached: bool = False
 
 
@@ -93,13 +168,46 @@ def chamber_settled(
     return bool(t_s[-1] - t_s[first_good] >= dwell_s)
 
 
+def sweep_error_c(offset_c: float, tau_s: float, sweep_s: float,
+                  gradient_lag_s: float) -> tuple[float, float, float]:
+    """Temperature errors of a sweep that starts ``offset_c`` (= T∞ − T) from the final value.
+
+    The die follows T(u) = T∞ − offset·e^(−u/τ) over the sweep u ∈ [0, sweep_s].
+    The thermal fit sees the straight line through the readings; the output
+    follows T − gradient_lag_s·dT/du. Their difference has a part that varies
+    over the sweep and a mean. Returns
+
+    * the rms of the varying part (curvature the line cannot follow, and the
+      change of the rate lag): it differs from position to position, like noise;
+    * |mean| (the rate lag averaged over the sweep): common to every position
+      of the step, so it is not averaged away and shifts the step's temperature;
+    * the mean |T − T∞| over the sweep (how far the step's mean temperature is
+      from the final one).
+    """
+    if not (math.isfinite(offset_c) and math.isfinite(tau_s) and tau_s > 0):
+        return math.inf, math.inf, math.inf
+    u = np.linspace(0.0, max(sweep_s, 0.0), SWEEP_POINTS)
+    e = np.exp(-u / tau_s)
+    temp = -offset_c * e  # relative to T∞
+    if sweep_s > 0:
+        basis = np.column_stack([np.ones_like(u), u / sweep_s])
+        coef, *_ = np.linalg.lstsq(basis, temp, rcond=None)
+        resid = temp - basis @ coef
+    else:
+        resid = np.zeros_like(u)
+    err = resid - gradient_lag_s * (offset_c / tau_s) * e
+    common = float(np.mean(err))
+    return (float(np.sqrt(np.mean((err - common) ** 2))), abs(common),
+            float(np.mean(np.abs(temp))))
+
+
 def fit_approach(t_s: np.ndarray, temp_c: np.ndarray) -> ApproachFit:
     """Fit a first-order exponential approach to a temperature history.
 
     τ is scanned on a log grid (the model is linear in T∞ and the amplitude for
-    a fixed τ), then refined with ``curve_fit`` for its covariance. A flat or
-    linear history gives a huge τ with a huge uncertainty: not credible, which
-    is what it should be.
+    a fixed τ), then refined by Gauss–Newton, which also gives the covariance
+    of (T∞, a, τ). A flat or linear history gives a huge τ with a huge
+    uncertainty: not credible, which is what it should be.
     """
     t = np.asarray(t_s, float)
     y = np.asarray(temp_c, float)
@@ -120,19 +228,23 @@ def fit_approach(t_s: np.ndarray, temp_c: np.ndarray) -> ApproachFit:
     i = int(np.argmin(sse))
     tau0, amp0 = float(taus[i]), float(-slope[i])
     tinf0 = float(y_mean - slope[i] * e_mean[i])
-    p, tau_sd = _gauss_newton(x, y, np.array([tinf0, amp0, tau0]))
+    p, cov = _gauss_newton(x, y, np.array([tinf0, amp0, tau0]))
     t_inf, amp, tau = (float(v) for v in p)
     resid = y - (t_inf - amp * np.exp(-x / max(tau, 1e-9)))
     ok = bool(math.isfinite(tau) and tau > 0)
+    ss = float(np.sum(resid**2))
+    dw = float(np.sum(np.diff(resid) ** 2) / ss) if ss > 0 else 2.0
+    tau_sd = math.sqrt(cov[2, 2]) if cov is not None and cov[2, 2] >= 0 else math.inf
     return ApproachFit(
         t_inf_c=t_inf, t0_c=t_inf - amp, tau_s=tau, tau_sd_s=tau_sd,
-        resid_rms_c=float(np.sqrt(np.mean(resid**2))), n=n, ok=ok,
+        resid_rms_c=float(np.sqrt(np.mean(resid**2))), n=n, ok=ok, cov=cov, durbin_watson=dw,
+        resid_c=resid,
     )
 
 
 def _gauss_newton(x: np.ndarray, y: np.ndarray, p: np.ndarray,
-                  iterations: int = 8) -> tuple[np.ndarray, float]:
-    """Refine (T∞, a, τ) from the grid optimum; return it and the 1-σ of τ.
+                  iterations: int = 8) -> tuple[np.ndarray, np.ndarray | None]:
+    """Refine (T∞, a, τ) from the grid optimum; return it and its covariance (None if singular).
 
     Hand-rolled (3 parameters, analytic Jacobian) because ``curve_fit`` costs
     ~10 ms per call and the soak loop calls this every poll.
@@ -159,10 +271,11 @@ def _gauss_newton(x: np.ndarray, y: np.ndarray, p: np.ndarray,
     dof = max(1, x.size - 3)
     try:
         cov = np.linalg.inv(J.T @ J) * float(np.sum(r**2)) / dof
-        tau_sd = math.sqrt(cov[2, 2]) if cov[2, 2] >= 0 else math.inf
     except np.linalg.LinAlgError:
-        tau_sd = math.inf
-    return p, tau_sd
+        return p, None
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) < 0):
+        return p, None
+    return p, cov
 
 
 def decide(
@@ -171,11 +284,18 @@ def decide(
     chamber_ok: bool,
     sensor_t_s: np.ndarray,
     sensor_c: np.ndarray,
+    *,
+    sweep_s: float | None = None,
+    n_positions: int | None = None,
+    edge: bool = False,
 ) -> Decision:
     """Is the step soaked, ``elapsed_s`` after the soak started?
 
     ``chamber_ok`` is :func:`chamber_settled` for the soak's chamber polls;
-    ``sensor_t_s``/``sensor_c`` the die temperature history since the soak start.
+    ``sensor_t_s``/``sensor_c`` the die temperature history since the soak start;
+    ``sweep_s`` how long the step's positions will take (default ``cfg.sweep_s``);
+    ``n_positions`` how many positions a step has (default ``cfg.n_positions``);
+    ``edge`` whether this is the coldest or hottest step of the campaign.
     """
     if cfg.policy == "fixed":
         if elapsed_s >= cfg.soak_s:
@@ -191,35 +311,121 @@ def decide(
         return Decision(False, "dwell_waiting")
     if elapsed_s < cfg.min_soak_s:
         return Decision(False, "min_soak_waiting")
-    return _predict(cfg, np.asarray(sensor_t_s, float), np.asarray(sensor_c, float))
+    return _predict(cfg, np.asarray(sensor_t_s, float), np.asarray(sensor_c, float),
+                    cfg.sweep_s if sweep_s is None else float(sweep_s),
+                    cfg.n_positions if n_positions is None else int(n_positions), edge)
 
 
-def _predict(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray) -> Decision:
+def _predict(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s: float,
+             n_positions: int, edge: bool) -> Decision:
     """The die-temperature half of :func:`decide` (policy ``predictive``)."""
     recent = t_s >= t_s[-1] - cfg.window_s if t_s.size else t_s.astype(bool)
     t_s, temp_c = t_s[recent], temp_c[recent]
     if t_s.size < cfg.min_points:
         return Decision(False, "too_few_sensor_points")
-    # A history whose linear trend moves less than flat_span_c is soaked whatever τ is:
-    # an exponential fit to pure noise is ill-posed and would never be "credible".
-    slope, intercept = np.polyfit(t_s - t_s[0], temp_c, 1)
-    trend_span_c = abs(float(slope) * float(t_s[-1] - t_s[0]))
-    resid_lin = temp_c - (slope * (t_s - t_s[0]) + intercept)
-    if trend_span_c < cfg.flat_span_c and float(np.std(resid_lin)) < cfg.max_resid_c:
-        return Decision(True, "die_flat", predicted_offset_c=trend_span_c)
+    flat = _flat(cfg, t_s, temp_c, sweep_s, n_positions)
+    if flat is not None:
+        return flat
     fit = fit_approach(t_s, temp_c)
-    if not fit.ok:
+    if not fit.ok or fit.cov is None:
         return Decision(False, "fit_failed")
-    offset_c = fit.predicted_offset_c(float(t_s[-1] - t_s[0]))
+    span_s = float(t_s[-1] - t_s[0])
+    offset_c = fit.offset_c(span_s)
+    rate = 60.0 * offset_c / fit.tau_s
+    info = {"tau_s": fit.tau_s, "predicted_offset_c": abs(offset_c), "die_rate_c_per_min": rate}
     credible = (
-        fit.tau_sd_s / fit.tau_s <= cfg.max_tau_rel_sd
-        and fit.resid_rms_c <= cfg.max_resid_c
+        fit.resid_rms_c <= cfg.max_resid_c
         # τ longer than the history × 3 is an extrapolation, not a measurement
-        and fit.tau_s <= 3.0 * float(t_s[-1] - t_s[0])
+        and fit.tau_s <= 3.0 * span_s
+        # smooth residuals: not (yet) a single time constant, e.g. a fixture lag still showing
+        and (fit.n < 10 or fit.durbin_watson >= cfg.min_durbin_watson)
+        and not _rate_mismatch(cfg, t_s, fit)
     )
     if not credible:
-        return Decision(False, "fit_not_credible", tau_s=fit.tau_s, predicted_offset_c=offset_c)
-    if offset_c < cfg.die_tol_c:
-        return Decision(True, "die_predicted_within_tol", tau_s=fit.tau_s,
-                        predicted_offset_c=offset_c)
-    return Decision(False, "die_approaching", tau_s=fit.tau_s, predicted_offset_c=offset_c)
+        return Decision(False, "fit_not_credible", **info)
+
+    def bounds(p: np.ndarray) -> np.ndarray:
+        off = p[1] * math.exp(-span_s / p[2]) if p[2] > 0 else math.inf
+        varying, _, mean_off = sweep_error_c(off, p[2], sweep_s, cfg.gradient_lag_s)
+        # The common part with the rate of *now*, not decaying over the sweep: a slower
+        # second time constant the history cannot reveal yet would keep the rate up.
+        common = cfg.gradient_lag_s * abs(off) / p[2]
+        return np.array([varying, common, mean_off, abs(off)])
+
+    p = np.array([fit.t_inf_c, fit.amplitude_c, fit.tau_s])
+    upper = _upper_bounds(bounds, p, fit.cov, cfg.confidence_z)
+    varying_hi, common_hi, mean_off_hi, off_hi = (float(v) for v in upper)
+    common_budget_c = cfg.temp_budget_c / math.sqrt(max(n_positions, 1))
+    info["predicted_error_c"] = max(varying_hi, common_hi * math.sqrt(max(n_positions, 1)))
+    ok = (varying_hi <= cfg.temp_budget_c and common_hi <= common_budget_c
+          and off_hi <= cfg.step_tol_c)
+    if edge:
+        ok = ok and mean_off_hi <= cfg.edge_tol_c
+    if cfg.die_tol_c is not None:
+        ok = ok and off_hi < cfg.die_tol_c
+    if ok:
+        return Decision(True, "die_predicted_within_tol", **info)
+    return Decision(False, "die_approaching", **info)
+
+
+def _rate_mismatch(cfg: StabilityConfig, t_s: np.ndarray, fit: ApproachFit) -> bool:
+    """Do the residuals of the last ``rate_window_s`` have a significant slope?
+
+    Then the die's measured rate differs from the fit's: typically a slow second
+    time constant whose curvature is still below the noise but whose rate is
+    not, and which the first-order prediction would miss.
+    """
+    if fit.resid_c is None:
+        return False
+    last = t_s >= t_s[-1] - cfg.rate_window_s
+    if int(last.sum()) < 5:
+        return False
+    x, r = t_s[last] - t_s[last][0], fit.resid_c[last]
+    sxx = float(np.sum((x - x.mean()) ** 2))
+    slope, intercept = np.polyfit(x, r, 1)
+    s2 = float(np.sum((r - slope * x - intercept) ** 2)) / max(1, x.size - 2)
+    return bool(abs(float(slope)) > cfg.confidence_z * math.sqrt(s2 / sxx))
+
+
+def _upper_bounds(f, p: np.ndarray, cov: np.ndarray, z: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """f(p) + z·σ for each output of ``f``, σ by the delta method with covariance ``cov``."""
+    f0 = f(p)
+    if not np.all(np.isfinite(f0)):
+        return np.full_like(f0, math.inf)
+    grads = np.zeros((f0.size, p.size))
+    for j in range(p.size):
+        h = 1e-6 * max(abs(p[j]), 1e-3)
+        q = p.copy()
+        q[j] += h
+        grads[:, j] = (f(q) - f0) / h
+    var = np.einsum("ij,jk,ik->i", grads, cov, grads)
+    sd = np.sqrt(np.where(np.isfinite(var) & (var >= 0), var, math.inf))
+    return f0 + z * sd
+
+
+def _flat(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s: float,
+          n_positions: int) -> Decision | None:
+    """Stable if even the upper bound of the linear trend keeps the die within the budgets
+    (an exponential fit to pure noise is ill-posed); else None.
+
+    The whole drift over the sweep must fit the per-reading budget (whatever its
+    shape, the line could absorb none of it), and its rate lag the step-mean budget.
+    """
+    x = t_s - t_s[0]
+    n = x.size
+    sxx = float(np.sum((x - x.mean()) ** 2))
+    if n < 3 or sxx <= 0:
+        return None
+    slope, intercept = np.polyfit(x, temp_c, 1)
+    resid = temp_c - (slope * x + intercept)
+    s2 = float(np.sum(resid**2)) / (n - 2)
+    slope_hi = abs(float(slope)) + cfg.confidence_z * math.sqrt(s2 / sxx)
+    drift_c = slope_hi * sweep_s
+    lag_c = slope_hi * cfg.gradient_lag_s
+    if (drift_c <= cfg.temp_budget_c
+            and lag_c <= cfg.temp_budget_c / math.sqrt(max(n_positions, 1))
+            and math.sqrt(s2) <= cfg.max_resid_c):
+        return Decision(True, "die_flat", predicted_offset_c=drift_c,
+                        predicted_error_c=max(drift_c, lag_c * math.sqrt(max(n_positions, 1))),
+                        die_rate_c_per_min=60.0 * float(slope))
+    return None
