@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Query
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
 
 from calibration.errors import CalibrationError, OutOfRange
 from service.api import auth, coefficients
@@ -18,6 +20,12 @@ router = APIRouter(prefix="/api/v1", tags=["calibrations"], dependencies=[Depend
 
 _NEWEST_FIRST = (Calibration.created_at.desc(), Calibration.id.desc())
 
+# _release_before_serialising: a sync handler's ``SessionDep`` session is closed only after
+# FastAPI has validated the response -- itself a thread-pool job. Under load every pool
+# thread can then be waiting for a database connection while the connections' holders wait
+# for a thread: a deadlock that ends in 30 s pool timeouts (HTTP 500). So the handlers here
+# close their session (returning the connection) before they return.
+
 
 @router.get("/sensors/{serial}/calibrations", response_model=list[CalibrationSummary])
 def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
@@ -25,7 +33,9 @@ def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
     rows = session.scalars(
         select(Calibration).where(Calibration.sensor == serial).order_by(*_NEWEST_FIRST)
     )
-    return [_summary(c) for c in rows]
+    summaries = [_summary(c) for c in rows]
+    session.close()  # see _release_before_serialising
+    return summaries
 
 
 @router.get(
@@ -36,6 +46,7 @@ def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
 def calibration_document(calibration_id: int, session: SessionDep) -> dict[str, Any]:
     """The full model document, as ``soakcal calibrate -o`` writes it."""
     row = session.get(Calibration, calibration_id)
+    session.close()  # see _release_before_serialising
     if row is None:
         raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
     return row.model
@@ -49,33 +60,66 @@ def calibration_document(calibration_id: int, session: SessionDep) -> dict[str, 
         422: {"description": "temperature outside valid_c without extrapolate=true"},
     },
 )
-def sensor_coefficients(
+async def sensor_coefficients(
     serial: str,
-    session: SessionDep,
+    request: Request,
     temperature_c: Annotated[float, Query(description="°C", allow_inf_nan=False)],
     extrapolate: bool = False,
 ) -> CoefficientsOut:
     """The latest calibration at ``temperature_c``: calibrated = matrix · (raw − bias_g)."""
-    row = session.scalars(
-        select(Calibration).where(Calibration.sensor == serial).order_by(*_NEWEST_FIRST).limit(1)
-    ).first()
-    if row is None:
-        raise HTTPException(status_code=404, detail=f"sensor {serial!r} has no calibration")
-    outside = not row.valid_lo_c <= temperature_c <= row.valid_hi_c
+    # The hot query path: all blocking work in ONE thread-pool hop (a sync handler with a
+    # session dependency costs four), holding a database connection only for the queries.
+    return await run_in_threadpool(
+        _coefficients,
+        request.app.state.session_factory,
+        _model_cache(request),
+        serial,
+        temperature_c,
+        extrapolate,
+    )
+
+
+def _coefficients(
+    factory: sessionmaker[Session],
+    cache: coefficients.ModelCache,
+    serial: str,
+    temperature_c: float,
+    extrapolate: bool,
+) -> CoefficientsOut:
+    doc: dict[str, Any] | None = None
+    with factory() as session:
+        latest = session.execute(
+            select(Calibration.id, Calibration.valid_lo_c, Calibration.valid_hi_c)
+            .where(Calibration.sensor == serial)
+            .order_by(*_NEWEST_FIRST)
+            .limit(1)
+        ).first()
+        if latest is None:
+            raise HTTPException(status_code=404, detail=f"sensor {serial!r} has no calibration")
+        calibration_id, valid_lo_c, valid_hi_c = latest
+        model = cache.get(calibration_id)
+        if model is None:
+            doc = session.scalar(select(Calibration.model).where(Calibration.id == calibration_id))
+    outside = not valid_lo_c <= temperature_c <= valid_hi_c
     if outside and not extrapolate:
-        raise _out_of_range(temperature_c, row)
+        raise _out_of_range(temperature_c, calibration_id, valid_lo_c, valid_hi_c)
     try:
-        matrix, bias_g = coefficients.evaluate_model(row.model, temperature_c, extrapolate)
+        if model is None:
+            model = coefficients.load_model(doc)  # type: ignore[arg-type]
+            cache.put(calibration_id, model)
+        matrix, bias_g = coefficients.evaluate(model, temperature_c, extrapolate)
     except OutOfRange as exc:
-        raise _out_of_range(temperature_c, row, str(exc)) from exc
+        msg = str(exc)
+        raise _out_of_range(temperature_c, calibration_id, valid_lo_c, valid_hi_c, msg) from exc
     except coefficients.ModelUnavailable as exc:
         raise HTTPException(status_code=503, detail=str(exc)) from exc
     except CalibrationError as exc:  # a bad stored document: our fault, not the caller's
         raise HTTPException(
-            status_code=500, detail=f"calibration {row.id}'s stored model is unusable: {exc}"
+            status_code=500,
+            detail=f"calibration {calibration_id}'s stored model is unusable: {exc}",
         ) from exc
     return CoefficientsOut(
-        calibration_id=row.id,
+        calibration_id=calibration_id,
         temperature_c=temperature_c,
         matrix=matrix,
         bias_g=bias_g,
@@ -83,10 +127,24 @@ def sensor_coefficients(
     )
 
 
-def _out_of_range(temperature_c: float, row: Calibration, msg: str | None = None) -> HTTPException:
+def _model_cache(request: Request) -> coefficients.ModelCache:
+    """The app's cache of loaded models (created on first use; the event loop is one thread)."""
+    cache = getattr(request.app.state, "model_cache", None)
+    if cache is None:
+        cache = request.app.state.model_cache = coefficients.ModelCache()
+    return cache
+
+
+def _out_of_range(
+    temperature_c: float,
+    calibration_id: int,
+    valid_lo_c: float,
+    valid_hi_c: float,
+    msg: str | None = None,
+) -> HTTPException:
     msg = msg or (
-        f"temperature {temperature_c} °C is outside calibration {row.id}'s valid range "
-        f"[{row.valid_lo_c}, {row.valid_hi_c}] °C; pass extrapolate=true to use it anyway"
+        f"temperature {temperature_c} °C is outside calibration {calibration_id}'s valid range "
+        f"[{valid_lo_c}, {valid_hi_c}] °C; pass extrapolate=true to use it anyway"
     )
     detail = [
         {
