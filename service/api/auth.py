@@ -11,14 +11,16 @@ from __future__ import annotations
 
 import hashlib
 import secrets
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy import select
 from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 
+from service.api.deps import db_slot
 from service.db.models import ApiToken
 
 ROLES: tuple[str, ...] = ("viewer", "operator", "admin")
@@ -45,21 +47,25 @@ def role_at_least(role: str, minimum: str) -> bool:
     return ROLES.index(role) >= ROLES.index(minimum)
 
 
-def require_role(minimum: str) -> Callable[..., ApiToken]:
+def require_role(minimum: str) -> Callable[..., Awaitable[ApiToken]]:
     """A dependency that admits tokens of role ``minimum`` or higher (401 / 403 otherwise)."""
     if minimum not in ROLES:
         raise ValueError(f"unknown role {minimum!r}")
 
-    def dependency(
+    async def dependency(
         request: Request,
         credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
     ) -> ApiToken:
         if credentials is None or credentials.scheme.lower() != "bearer":
             raise _unauthorized("missing bearer token (Authorization: Bearer <token>)")
-        with request.app.state.session_factory() as session:
-            row = session.scalar(
-                select(ApiToken).where(ApiToken.token_hash == hash_token(credentials.credentials))
-            )
+        token_hash = hash_token(credentials.credentials)
+
+        def lookup() -> ApiToken | None:
+            with request.app.state.session_factory() as session:
+                return session.scalar(select(ApiToken).where(ApiToken.token_hash == token_hash))
+
+        async with db_slot(request):  # see service/api/deps.py for why
+            row = await run_in_threadpool(lookup)
         if row is None:
             raise _unauthorized("unknown token")
         if not role_at_least(row.role, minimum):

@@ -20,12 +20,6 @@ router = APIRouter(prefix="/api/v1", tags=["calibrations"], dependencies=[Depend
 
 _NEWEST_FIRST = (Calibration.created_at.desc(), Calibration.id.desc())
 
-# _release_before_serialising: a sync handler's ``SessionDep`` session is closed only after
-# FastAPI has validated the response -- itself a thread-pool job. Under load every pool
-# thread can then be waiting for a database connection while the connections' holders wait
-# for a thread: a deadlock that ends in 30 s pool timeouts (HTTP 500). So the handlers here
-# close their session (returning the connection) before they return.
-
 
 @router.get("/sensors/{serial}/calibrations", response_model=list[CalibrationSummary])
 def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
@@ -33,9 +27,7 @@ def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
     rows = session.scalars(
         select(Calibration).where(Calibration.sensor == serial).order_by(*_NEWEST_FIRST)
     )
-    summaries = [_summary(c) for c in rows]
-    session.close()  # see _release_before_serialising
-    return summaries
+    return [_summary(c) for c in rows]
 
 
 @router.get(
@@ -46,7 +38,6 @@ def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
 def calibration_document(calibration_id: int, session: SessionDep) -> dict[str, Any]:
     """The full model document, as ``soakcal calibrate -o`` writes it."""
     row = session.get(Calibration, calibration_id)
-    session.close()  # see _release_before_serialising
     if row is None:
         raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
     return row.model
@@ -68,7 +59,9 @@ async def sensor_coefficients(
 ) -> CoefficientsOut:
     """The latest calibration at ``temperature_c``: calibrated = matrix · (raw − bias_g)."""
     # The hot query path: all blocking work in ONE thread-pool hop (a sync handler with a
-    # session dependency costs four), holding a database connection only for the queries.
+    # session dependency costs several), holding a database connection only for the
+    # queries and needing no second thread while it does (so it cannot take part in the
+    # deadlock service/api/deps.py describes).
     return await run_in_threadpool(
         _coefficients,
         request.app.state.session_factory,

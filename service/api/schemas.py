@@ -8,6 +8,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from pydantic_core import PydanticCustomError
 
+from service.engine.spec import TUNING_KEYS
+
 CampaignState = Literal["queued", "running", "paused", "completed", "failed", "aborted"]
 Phase = Literal["ramp", "soak", "positions", "fitting"]
 Role = Literal["viewer", "operator", "admin"]
@@ -34,12 +36,7 @@ class RigCreate(BaseModel):
 
 
 # Optional keys the engine reads to tune a run (service/engine/spec.py); others are typos.
-ENGINE_TUNING_KEYS = frozenset({
-    "stability", "min_soak_min", "max_soak_min", "tol_c", "dwell_min", "die_tol_c",
-    "expected_sd_g", "max_span_c", "on_max_soak", "ramp_c_per_min", "soak_poll_s",
-    "soak_probe_samples", "settle_s", "safe_c", "range_g", "odr_hz", "retry_attempts",
-    "retry_backoff_s", "suspend_poll_s", "suspend_limit_s", "move_timeout_s",
-})  # fmt: skip
+ENGINE_TUNING_KEYS = TUNING_KEYS
 
 
 class CampaignCreate(BaseModel):

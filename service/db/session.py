@@ -21,16 +21,28 @@ SQLITE_BUSY_TIMEOUT_MS = 10_000
 MIGRATIONS_DIR = Path(__file__).resolve().parent.parent / "migrations"
 
 
+# Sync FastAPI handlers run on a 40-thread pool and validate their response on it while
+# their session still holds a connection. With fewer connections than threads, a burst
+# of 40+ requests can leave every thread waiting for a connection held by a request
+# that waits for a thread (seen by benchmarks/bench_query_latency.py with 15: 500s
+# after the 30 s pool timeout). 45 > 40 removes the common case; two service processes
+# stay under PostgreSQL's default max_connections of 100.
+POOL_SIZE, POOL_MAX_OVERFLOW = 10, 35
+
+
 def make_engine(url: str | None = None) -> Engine:
     """An engine for ``url`` (resolved like the service does when None)."""
     url = resolve_database_url(url)
     parsed = make_url(url)
+    pool = {"pool_size": POOL_SIZE, "max_overflow": POOL_MAX_OVERFLOW}
     if parsed.get_backend_name() != "sqlite":
         # pre_ping: a PostgreSQL restart should cost one retry, not a 500.
-        return create_engine(url, pool_pre_ping=True)
+        return create_engine(url, pool_pre_ping=True, **pool)
     if parsed.database and parsed.database != ":memory:":
         Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
-    engine = create_engine(url, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000})
+    else:
+        pool = {}  # in-memory SQLite uses a single-connection pool
+    engine = create_engine(url, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}, **pool)
     event.listen(engine, "connect", _sqlite_pragmas)
     return engine
 

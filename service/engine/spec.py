@@ -24,6 +24,21 @@ from service.engine.stability import (
     temperature_budget_c,
 )
 
+# RunSpec fields a campaign may set directly (typed like their defaults).
+RUN_TUNING_KEYS = (
+    "ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c", "range_g",
+    "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
+    "move_timeout_s",
+)
+# Every optional key parse_spec reads besides the API contract's fields: the API lets
+# exactly these through and rejects other extras as typos (service/api/schemas.py).
+TUNING_KEYS = frozenset({
+    "stability", "min_soak_min", "max_soak_min", "tol_c", "dwell_min", "die_tol_c",
+    "expected_sd_g", "max_span_c", "temp_noise_c", "on_max_soak", "temp_budget_c",
+    "tempco_ug_per_c", "drift_budget", "gradient_lag_s", "step_tol_c", "edge_tol_c",
+    *RUN_TUNING_KEYS,
+})
+
 DEFAULT_SETPOINTS_C = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
 
 
@@ -86,11 +101,7 @@ def parse_spec(spec: dict[str, Any]) -> RunSpec:
     on_max = str(spec.get("on_max_soak", "continue"))
     if on_max not in ("continue", "fail"):
         raise ValueError(f"on_max_soak must be 'continue' or 'fail', got {on_max!r}")
-    keys = (
-        "ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c", "range_g",
-        "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
-        "move_timeout_s",
-    )
+    keys = RUN_TUNING_KEYS
     tuned = {k: type(getattr(RunSpec, k, 0.0))(spec[k]) for k in keys if k in spec}
     return RunSpec(
         setpoints_c=[float(v) for v in spec.get("setpoints_c", DEFAULT_SETPOINTS_C)],
