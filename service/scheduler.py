@@ -15,6 +15,7 @@ import contextlib
 import datetime as dt
 import logging
 from collections.abc import Callable
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from croniter import croniter
 from pydantic import ValidationError
@@ -32,9 +33,27 @@ log = logging.getLogger(__name__)
 Clock = Callable[[], dt.datetime]
 
 
-def next_cron_run(cron: str, after: dt.datetime) -> dt.datetime:
-    """The first occurrence of ``cron`` (UTC) strictly after ``after``."""
-    return croniter(cron, as_utc(after)).get_next(dt.datetime)
+def next_cron_run(cron: str, after: dt.datetime, timezone: str | None = None) -> dt.datetime:
+    """The first occurrence of ``cron`` strictly after ``after``, as a UTC instant.
+
+    ``cron`` reads in ``timezone`` (an IANA name, e.g. ``Europe/Berlin``; None = UTC),
+    so "0 20 * * 1-5" stays 20:00 on the lab's wall clock across daylight-saving
+    changes. A local time that a spring-forward skips fires at the first valid
+    instant after it (croniter's rule).
+    """
+    start = as_utc(after)
+    assert start is not None
+    if timezone:
+        start = start.astimezone(ZoneInfo(timezone))
+    return croniter(cron, start).get_next(dt.datetime).astimezone(dt.UTC)
+
+
+def timezone_is_valid(name: str) -> bool:
+    try:
+        ZoneInfo(name)
+    except (ZoneInfoNotFoundError, ValueError):
+        return False
+    return True
 
 
 def cron_is_valid(cron: str) -> bool:
@@ -80,13 +99,13 @@ class Scheduler:
         assert now is not None
         with self._factory() as session:
             due = session.execute(
-                select(Schedule.id, Schedule.next_run_at, Schedule.cron)
+                select(Schedule.id, Schedule.next_run_at, Schedule.cron, Schedule.timezone)
                 .where(Schedule.next_run_at.is_not(None), Schedule.next_run_at <= now)
                 .order_by(Schedule.next_run_at)
             ).all()
         created: list[int] = []
-        for schedule_id, seen_next_run_at, cron in due:
-            following = next_cron_run(cron, now) if cron else None
+        for schedule_id, seen_next_run_at, cron, timezone in due:
+            following = next_cron_run(cron, now, timezone) if cron else None
             try:
                 campaign_id = self._fire(schedule_id, seen_next_run_at, following, now)
             except OperationalError:  # SQLite lock contention: the next tick retries

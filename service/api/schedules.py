@@ -14,7 +14,7 @@ from service.api.schemas import ScheduleCreate, ScheduleOut
 from service.campaigns import spec_errors
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
-from service.scheduler import cron_is_valid, next_cron_run
+from service.scheduler import cron_is_valid, next_cron_run, timezone_is_valid
 
 router = APIRouter(prefix="/api/v1/schedules", tags=["schedules"])
 
@@ -31,6 +31,15 @@ def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
                 "msg": f"invalid cron expression {body.cron!r} (five fields: min hour dom mon dow)",
             }
         )
+    if body.timezone is not None and not timezone_is_valid(body.timezone):
+        errors.append(
+            {
+                "type": "value_error",
+                "loc": ["body", "timezone"],
+                "input": body.timezone,
+                "msg": f"unknown time zone {body.timezone!r} (an IANA name, e.g. Europe/Berlin)",
+            }
+        )
     if errors:
         raise HTTPException(status_code=422, detail=errors)
     at = as_utc(body.at)
@@ -38,7 +47,9 @@ def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
         campaign=body.campaign.model_dump(),
         at=at,
         cron=body.cron,
-        next_run_at=at if at is not None else next_cron_run(body.cron or "", utcnow()),
+        timezone=body.timezone,
+        next_run_at=at if at is not None else next_cron_run(body.cron or "", utcnow(),
+                                                            body.timezone),
     )
     session.add(schedule)
     session.commit()
@@ -73,6 +84,7 @@ def _out(s: Schedule) -> ScheduleOut:
         campaign=s.campaign,
         at=as_utc(s.at),
         cron=s.cron,
+        timezone=s.timezone,
         next_run_at=as_utc(s.next_run_at),
         last_run_at=as_utc(s.last_run_at),
         last_campaign_id=s.last_campaign_id,

@@ -126,12 +126,21 @@ class ScheduleCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     campaign: CampaignCreate
     at: dt.datetime | None = Field(default=None, description="ISO-8601; naive means UTC")
-    cron: str | None = Field(default=None, examples=["0 20 * * 1-5"], description="UTC")
+    cron: str | None = Field(
+        default=None, examples=["0 20 * * 1-5"], description="read in `timezone` (default UTC)"
+    )
+    timezone: str | None = Field(
+        default=None,
+        examples=["Europe/Berlin"],
+        description="IANA time zone of the lab's wall clock for `cron`; default UTC",
+    )
 
     @model_validator(mode="after")
     def _exactly_one_trigger(self) -> ScheduleCreate:
         if (self.at is None) == (self.cron is None):
             raise ValueError("give exactly one of 'at' (ISO-8601) or 'cron'")
+        if self.timezone is not None and self.cron is None:
+            raise ValueError("'timezone' applies to 'cron'; give 'at' with its UTC offset")
         return self
 
 
@@ -140,6 +149,7 @@ class ScheduleOut(BaseModel):
     campaign: dict[str, Any]
     at: dt.datetime | None
     cron: str | None
+    timezone: str | None
     next_run_at: dt.datetime | None
     last_run_at: dt.datetime | None
     last_campaign_id: int | None

@@ -160,6 +160,7 @@ class Schedule(Base):
     campaign: Mapped[dict[str, Any]] = mapped_column(JSON)  # campaign POST body
     at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
     cron: Mapped[str | None] = mapped_column(String(128))
+    timezone: Mapped[str | None] = mapped_column(String(64))  # IANA name the cron reads in
     next_run_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), index=True)
     last_run_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
     last_campaign_id: Mapped[int | None] = mapped_column(Integer)

@@ -124,3 +124,27 @@ def test_an_invalid_stored_campaign_is_skipped_not_retried_forever(factories) ->
         assert [s.next_run_at for s in schedules] == [None, None]  # consumed, not retried
         assert all(s.last_campaign_id is None for s in schedules)
     assert _campaigns(factories[0]) == []
+
+
+def test_cron_reads_in_the_labs_time_zone_across_daylight_saving() -> None:
+    from service.scheduler import next_cron_run
+
+    # 20:00 in Berlin is 19:00 UTC in winter and 18:00 UTC in summer.
+    winter = next_cron_run("0 20 * * *", dt.datetime(2030, 3, 30, 12, tzinfo=dt.UTC),
+                           "Europe/Berlin")
+    summer = next_cron_run("0 20 * * *", dt.datetime(2030, 3, 31, 12, tzinfo=dt.UTC),
+                           "Europe/Berlin")
+    assert winter == dt.datetime(2030, 3, 30, 19, tzinfo=dt.UTC)
+    assert summer == dt.datetime(2030, 3, 31, 18, tzinfo=dt.UTC)
+    assert next_cron_run("0 20 * * *", dt.datetime(2030, 3, 31, 12, tzinfo=dt.UTC)) == (
+        dt.datetime(2030, 3, 31, 20, tzinfo=dt.UTC))
+
+
+def test_a_zoned_schedule_fires_and_rearms_in_its_zone(factories) -> None:  # type: ignore[no-untyped-def]
+    now = dt.datetime(2030, 7, 1, 18, 0, 5, tzinfo=dt.UTC)  # 20:00:05 in Berlin (CEST)
+    sid = _add_schedule(factories[0], cron="0 20 * * *", timezone="Europe/Berlin",
+                        next_run_at=now - dt.timedelta(seconds=5))
+    assert len(Scheduler(factories[0], now=lambda: now).run_due()) == 1
+    with factories[0]() as session:
+        rearmed = session.get(Schedule, sid).next_run_at
+    assert rearmed.replace(tzinfo=dt.UTC) == dt.datetime(2030, 7, 2, 18, tzinfo=dt.UTC)

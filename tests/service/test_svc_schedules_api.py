@@ -60,3 +60,25 @@ def test_viewer_cannot_create_schedules(client: TestClient, auth) -> None:  # ty
         json={"campaign": CAMPAIGN, "cron": "0 20 * * *"},
     )
     assert response.status_code == 403
+
+
+def test_cron_in_the_labs_time_zone(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    from zoneinfo import ZoneInfo
+
+    made = client.post("/api/v1/schedules", headers=auth["operator"],
+                       json={"campaign": CAMPAIGN, "cron": "30 21 * * *",
+                             "timezone": "America/New_York"})
+    assert made.status_code == 201, made.text
+    assert made.json()["timezone"] == "America/New_York"
+    local = dt.datetime.fromisoformat(made.json()["next_run_at"]).astimezone(
+        ZoneInfo("America/New_York"))
+    assert (local.hour, local.minute) == (21, 30)
+
+    bad = client.post("/api/v1/schedules", headers=auth["operator"],
+                      json={"campaign": CAMPAIGN, "cron": "0 20 * * *", "timezone": "Mars/Olympus"})
+    assert bad.status_code == 422
+    assert [d["loc"] for d in bad.json()["detail"]] == [["body", "timezone"]]
+    with_at = client.post("/api/v1/schedules", headers=auth["operator"],
+                          json={"campaign": CAMPAIGN, "at": "2030-01-02T20:00:00+01:00",
+                                "timezone": "Europe/Berlin"})
+    assert with_at.status_code == 422
