@@ -102,13 +102,13 @@ def spec_errors(
     """Checks that need the database, in FastAPI's 422 ``detail`` format (empty when fine)."""
     rig = session.scalar(select(Rig).where(Rig.name == spec.rig))
     if rig is None:
-        return [_error(loc + ("rig",), f"unknown rig {spec.rig!r}", spec.rig)]
+        return [field_error(loc + ("rig",), f"unknown rig {spec.rig!r}", spec.rig)]
     errors: list[dict[str, Any]] = []
     lo_c, hi_c = chamber_range_c(rig)
     for i, setpoint_c in enumerate(spec.setpoints_c):
         if not lo_c <= setpoint_c <= hi_c:
             errors.append(
-                _error(
+                field_error(
                     loc + ("setpoints_c", i),
                     f"setpoint {setpoint_c} °C is outside rig {rig.name!r}'s chamber range "
                     f"[{lo_c}, {hi_c}] °C",
@@ -117,7 +117,7 @@ def spec_errors(
             )
     if positions_count(spec.positions) is None:
         errors.append(
-            _error(
+            field_error(
                 loc + ("positions",),
                 f"unknown position schedule {spec.positions!r}; "
                 "expected table1, six, cube14, sphere<N> or table1+cube14",
@@ -275,5 +275,5 @@ def _first(*values: Any) -> Any:
     return next((v for v in values if v is not None), None)
 
 
-def _error(loc: tuple[str | int, ...], msg: str, value: Any) -> dict[str, Any]:
+def field_error(loc: tuple[str | int, ...], msg: str, value: Any) -> dict[str, Any]:
     return {"type": "value_error", "loc": list(loc), "msg": msg, "input": value}

@@ -11,7 +11,7 @@ from sqlalchemy import select
 from service.api import auth
 from service.api.deps import SessionDep
 from service.api.schemas import ScheduleCreate, ScheduleOut
-from service.campaigns import spec_errors
+from service.campaigns import field_error, spec_errors
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
 from service.scheduler import cron_is_valid, next_cron_run, timezone_is_valid
@@ -23,23 +23,17 @@ router = APIRouter(prefix="/api/v1/schedules", tags=["schedules"])
 def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
     errors: list[dict[str, Any]] = spec_errors(session, body.campaign, loc=("body", "campaign"))
     if body.cron is not None and not cron_is_valid(body.cron):
-        errors.append(
-            {
-                "type": "value_error",
-                "loc": ["body", "cron"],
-                "input": body.cron,
-                "msg": f"invalid cron expression {body.cron!r} (five fields: min hour dom mon dow)",
-            }
-        )
+        errors.append(field_error(
+            ("body", "cron"),
+            f"invalid cron expression {body.cron!r} (five fields: min hour dom mon dow)",
+            body.cron,
+        ))
     if body.timezone is not None and not timezone_is_valid(body.timezone):
-        errors.append(
-            {
-                "type": "value_error",
-                "loc": ["body", "timezone"],
-                "input": body.timezone,
-                "msg": f"unknown time zone {body.timezone!r} (an IANA name, e.g. Europe/Berlin)",
-            }
-        )
+        errors.append(field_error(
+            ("body", "timezone"),
+            f"unknown time zone {body.timezone!r} (an IANA name, e.g. Europe/Berlin)",
+            body.timezone,
+        ))
     if errors:
         raise HTTPException(status_code=422, detail=errors)
     at = as_utc(body.at)
