@@ -1,4 +1,4 @@
-"""Recording format v1 (``shared/spec/recording.md``): read, validate, write.
+"""Recording format v1 (``docs/recording.md``): read, validate, write.
 
 A :class:`Recording` keeps every column as a float array (NaN = empty cell)
 plus the raw text cells, so commands that copy rows through (``compensate``)
@@ -12,6 +12,8 @@ import csv
 import io
 import math
 import os
+import re
+import stat
 import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -33,6 +35,16 @@ CANONICAL_ORDER = (
     "ref_x", "ref_y", "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z",
 )
 DEFAULT_RANGE_G = 8.0  # ADXL355's widest range; a reading beyond it cannot be real
+# A `_c` column outside this band is not a chamber or die temperature in °C (kelvin, or
+# Fahrenheit, or a glitch): refused rather than fitted into a model "valid for 232..333 °C".
+PLAUSIBLE_C = (-100.0, 200.0)
+# A reference vector is the local specific force in g: 1.0 ± a few percent anywhere on Earth.
+# Outside this band the column is in another unit (m/s², counts) and would move the bias by g.
+PLAUSIBLE_REF_NORM_G = (0.5, 2.0)
+MAX_CELL_CHARS = 64  # the longest honest number is ~25 characters
+MAX_FILE_BYTES = 2 * 1024**3  # a recording bigger than this is not a recording
+# Plain decimal numbers only: float() also takes "1_6384", "nan", "inf" and non-ASCII digits.
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 
 
 @dataclass
@@ -147,11 +159,25 @@ def read_recording(path: str | os.PathLike, *, range_g: float = DEFAULT_RANGE_G)
     """Read and validate a v1 CSV. Raises :class:`RecordingError` naming file, line, column."""
     p = Path(path)
     try:
+        mode = p.stat().st_mode
+        if stat.S_ISDIR(mode):
+            raise RecordingError(str(p), None, None, "is a directory, not a recording file")
+        if not stat.S_ISREG(mode):
+            # /dev/zero or a FIFO would be read forever
+            raise RecordingError(str(p), None, None, "is not a regular file")
+        if p.stat().st_size > MAX_FILE_BYTES:
+            raise RecordingError(
+                str(p), None, None, f"is larger than {MAX_FILE_BYTES // 1024**3} GiB"
+            )
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise RecordingError(str(p), None, None, "file not found") from None
+    except PermissionError:
+        raise RecordingError(str(p), None, None, "permission denied") from None
     except UnicodeDecodeError as exc:
         raise RecordingError(str(p), None, None, f"not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise RecordingError(str(p), None, None, f"cannot be read ({exc.strerror})") from None
     return parse_recording(text, str(p), range_g=range_g)
 
 
@@ -165,9 +191,7 @@ def parse_recording(
         raise RecordingError(path, 1, None, "empty file: expected a header row") from None
     for name in REQUIRED:
         if name not in header:
-            raise RecordingError(
-                path, 1, name, f"required column missing (header: {','.join(header)})"
-            )
+            raise RecordingError(path, 1, name, _missing_column_message(header))
     if not any(t in header for t in TEMPERATURE):
         raise RecordingError(path, 1, "chamber_c", "needs a chamber_c or sensor_c column")
     dup = {h for h in header if header.count(h) > 1}
@@ -176,7 +200,7 @@ def parse_recording(
     numeric_idx = [(i, h) for i, h in enumerate(header) if h in NUMERIC]
     values: dict[str, list[float]] = {h: [] for _, h in numeric_idx}
     cells: list[list[str]] = []
-    for line_no, row in enumerate(reader, start=2):
+    for line_no, row in _rows(reader, path):
         if not row or all(not c.strip() for c in row):
             continue  # blank line: tolerated (trailing newline)
         if len(row) != len(header):
@@ -188,10 +212,10 @@ def parse_recording(
             if cell == "":
                 values[h].append(math.nan)
                 continue
-            try:
-                v = float(cell)
-            except ValueError:
-                raise RecordingError(path, line_no, h, f"not a number: {cell!r}") from None
+            if len(cell) > MAX_CELL_CHARS or not _NUMBER.fullmatch(cell):
+                shown = cell if len(cell) <= 24 else cell[:24] + "…"
+                raise RecordingError(path, line_no, h, f"not a number: {shown!r}")
+            v = float(cell)
             if not math.isfinite(v):
                 raise RecordingError(path, line_no, h, f"not a finite number: {cell!r}")
             values[h].append(v)
@@ -231,6 +255,7 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
                 path, first_line + i, name,
                 f"reading {rec.columns[name][i]} g is outside the sensor range ±{range_g} g",
             )
+    _validate_plausible(rec, first_line)
     if not any(t in rec.columns for t in TEMPERATURE):
         raise RecordingError(path, None, "chamber_c", "needs a chamber_c or sensor_c column")
     temp = rec.temperature_c()
@@ -243,6 +268,110 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
             path, first_line + int(empty[0]), rec.temperature_source,
             "no temperature in this row (neither sensor_c nor chamber_c)",
         )
+
+
+def _rows(reader: Iterable[list[str]], path: str) -> Iterable[tuple[int, list[str]]]:
+    """Data rows with their 1-based line numbers; csv's own errors (a cell over its field
+    limit, a NUL byte) become a RecordingError on that line."""
+    it = iter(reader)
+    line_no = 1
+    while True:
+        line_no += 1
+        try:
+            row = next(it)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            reason = "a cell is too long" if "field larger" in str(exc) else str(exc)
+            raise RecordingError(path, line_no, None, f"not valid CSV: {reason}") from None
+        yield line_no, row
+
+
+def _validate_plausible(rec: Recording, first_line: int) -> None:
+    """Values no real recording holds: kelvin in a `_c` column, n < 1, negative sd, a
+    reference vector that is not ~1 g, and a reference given on some axes only."""
+    path = rec.path
+
+    def first_bad(name: str, bad: np.ndarray, message: str) -> None:
+        idx = np.flatnonzero(bad)
+        if idx.size:
+            i = int(idx[0])
+            value = rec.columns[name][i]
+            raise RecordingError(path, first_line + i, name, message.format(value=value))
+
+    lo, hi = PLAUSIBLE_C
+    for name in [c for c in rec.columns if c.endswith("_c")]:
+        col = rec.columns[name]
+        first_bad(
+            name, np.isfinite(col) & ((col < lo) | (col > hi)),
+            f"{{value:g}} is not a plausible temperature in °C (expected {lo:g} .. {hi:g} °C;"
+            " kelvin or °F? convert to °C)",
+        )
+    if "n" in rec.columns:
+        n = rec.columns["n"]
+        first_bad("n", np.isfinite(n) & ((n < 1) | (n != np.round(n))),
+                  "n = {value:g}: the number of averaged samples must be a whole number ≥ 1")
+    for name in ("sd_x", "sd_y", "sd_z"):
+        if name in rec.columns:
+            sd = rec.columns[name]
+            first_bad(name, np.isfinite(sd) & (sd < 0),
+                      "standard deviation {value:g} g is negative")
+    refs = [c for c in ("ref_x", "ref_y", "ref_z") if c in rec.columns]
+    if refs:
+        filled = np.column_stack([np.isfinite(rec.columns[c]) for c in refs])
+        partial = filled.any(axis=1) & ~filled.all(axis=1)
+        if len(refs) < 3:
+            partial = filled.any(axis=1)
+        if partial.any():
+            i = int(np.flatnonzero(partial)[0])
+            gap = next(
+                (c for c in ("ref_x", "ref_y", "ref_z")
+                 if c not in rec.columns or not np.isfinite(rec.columns[c][i])),
+                "ref_x",
+            )
+            raise RecordingError(
+                path, first_line + i, gap,
+                "reference vector is incomplete: fill ref_x, ref_y and ref_z, or none of them",
+            )
+        if len(refs) == 3:
+            ref = np.column_stack([rec.columns[c] for c in refs])
+            norm = np.linalg.norm(ref, axis=1)
+            rlo, rhi = PLAUSIBLE_REF_NORM_G
+            bad = np.isfinite(norm) & ((norm < rlo) | (norm > rhi))
+            idx = np.flatnonzero(bad)
+            if idx.size:
+                i = int(idx[0])
+                raise RecordingError(
+                    path, first_line + i, "ref_x",
+                    f"reference vector magnitude {norm[i]:g} g is not local gravity "
+                    f"(expected {rlo:g} .. {rhi:g} g; ref_* are in g, not m/s² or counts)",
+                )
+
+
+def _missing_column_message(header: list[str]) -> str:
+    """Name the missing column and hint at the likely cause (a separator other than ',')."""
+    shown = ",".join(header)
+    if len(shown) > 120:
+        shown = shown[:120] + "…"
+    message = f"required column missing (header: {shown})"
+    if len(header) == 1:
+        for sep, name in ((";", "semicolon"), ("\t", "tab"), ("|", "pipe")):
+            if sep in header[0]:
+                return message + f"; the file looks {name}-separated: recordings use commas"
+    return message
+
+
+def check_output_path(input_path: str | os.PathLike, output_path: str | os.PathLike) -> None:
+    """Refuse an output that would overwrite an input (``-o`` equal to the recording)."""
+    out = Path(output_path)
+    try:
+        same = out.exists() and os.path.samefile(input_path, out)
+    except OSError:
+        same = False
+    if same:
+        raise RecordingError(str(out), None, None, "output would overwrite the input file")
+    if out.is_dir():
+        raise RecordingError(str(out), None, None, "output is a directory; give a file name")
 
 
 # --- writing --------------------------------------------------------------
@@ -268,10 +397,25 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
+        # mkstemp creates 0600; an output file follows the umask like any other
+        os.chmod(tmp, 0o666 & ~_current_umask())
         os.replace(tmp, p)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _current_umask() -> int:
+    """The process umask, read without changing it where the OS allows (threads may write)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def format_value(v: float, name: str = "") -> str:
