@@ -32,13 +32,14 @@ from drivers.protocols import Acquisition, SensorIdentity
 
 AcquireMode = Literal["average", "raw"]
 
-#: ``ERR`` codes (docs/sensor-bridge.md): 1 and 3 are permanent refusals, 2 means the
-#: bridge received our command garbled (a line fault: retried), anything else (6 busy)
-#: is an ordinary retryable exception reply.
+#: ``ERR`` codes (docs/sensor-bridge.md): 1, 3 and 4 are permanent refusals, 2 means the
+#: bridge received our command garbled (a line fault: retried), anything else (5 sensor
+#: not ready, 6 busy) is an ordinary retryable exception reply.
 ERR_UNKNOWN_COMMAND = 1
 ERR_BAD_FRAME = 2
 ERR_BAD_ARGUMENT = 3
-_PERMANENT_ERRS = (ERR_UNKNOWN_COMMAND, ERR_BAD_ARGUMENT)
+ERR_NO_EEPROM = 4
+_PERMANENT_ERRS = (ERR_UNKNOWN_COMMAND, ERR_BAD_ARGUMENT, ERR_NO_EEPROM)
 
 
 class SerialAccelerometer:
@@ -89,6 +90,22 @@ class SerialAccelerometer:
         return SensorIdentity(model=f[1], serial=f[2], firmware=f[3], board_uid=f[4],
                               devid_ad=devid_ad, devid_mst=devid_mst, partid=partid,
                               revid=revid, protocol=self.framing)
+
+    async def bind_serial(self, serial_text: str) -> str:
+        """Write the sensor's serial into the fixture EEPROM (``SN``); returns what was stored.
+
+        The one-time binding step when a sensor is fixed to its fixture
+        (docs/sensor-bridge.md, "Identity"). ERR 4 (no EEPROM) is a
+        ConfigurationFault: bind that fixture in the rig's ``serials`` table.
+        """
+        text = serial_text.strip()
+        if not 1 <= len(text) <= 24 or any(not "!" <= c <= "~" or c in "$*," for c in text):
+            raise ValueOutOfRange(self.device, f"serial {serial_text!r} must be 1..24 printable "
+                                               f"ASCII characters without blanks, $, * or ,")
+        f = await self._command(["SN", text], expect="OK")
+        if f[1:] != ["SN", text]:
+            raise ProtocolError(self.device, f"EEPROM read back {f[2:]!r} after writing {text!r}")
+        return text
 
     async def configure(self, range_g: float, odr_hz: float) -> None:
         try:

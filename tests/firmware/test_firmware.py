@@ -24,7 +24,7 @@ from pty_device import PtyDevice
 from drivers import adxl355
 from drivers.bridge_protocol import encode_frame, parse_frame
 from drivers.clock import VirtualClock
-from drivers.faults import ConfigurationFault, ExceptionReply
+from drivers.faults import ConfigurationFault, ExceptionReply, ValueOutOfRange
 from drivers.sensor_bridge import SerialAccelerometer
 from drivers.sensor_config import StreamFormat
 from drivers.stream_sensor import StreamingAccelerometer
@@ -254,7 +254,9 @@ async def test_serial_binding_through_the_fixture_eeprom(
     try:
         with pytest.raises(SensorMismatch, match="EEPROM blank"):
             await verify_sensor(accel, "SN-0004", SerialBinding("eeprom"))
-        await accel._command(["SN", "SN-0004"], expect="OK")  # what a bind step sends
+        with pytest.raises(ValueOutOfRange):
+            await accel.bind_serial("SN 0004")
+        assert await accel.bind_serial(" SN-0004 ") == "SN-0004"
         assert (await verify_sensor(accel, "SN-0004", SerialBinding())).bound_by == "eeprom"
         with pytest.raises(SensorMismatch, match="names sensor SN-0005 but SN-0004"):
             await verify_sensor(accel, "SN-0005", SerialBinding())
@@ -264,9 +266,12 @@ async def test_serial_binding_through_the_fixture_eeprom(
 
 async def test_unwired_sensor_and_stalled_data() -> None:
     board = make_board(ids=(0, 0, 0, 0))
+    board.bridge.eeprom = None  # and a fixture without EEPROM
     dev = PtyDevice(on_line=board.bridge.handle_line)
     accel = SerialAccelerometer(dev.path, VirtualClock(), timeout_s=1.0)
     try:
+        with pytest.raises(ConfigurationFault, match="ERR 4 no fixture EEPROM"):
+            await accel.bind_serial("SN-1")
         with pytest.raises(SensorMismatch, match="check wiring"):
             await verify_sensor(accel, "SN-1", SerialBinding("any"))
         board.chip.regs[0x2D] = 0x01  # sensor fell back to standby: DATA_RDY never sets
