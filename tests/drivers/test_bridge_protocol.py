@@ -25,7 +25,8 @@ def _flip(line: bytes, bit_a: int, bit_b: int) -> bytes:
     return bytes(b)
 
 
-def test_crc16_ccitt_false_check_value() -> None:
+def test_crc16_ccitt_false_check_value_and_the_documented_example() -> None:
+    assert encode_frame("ID") == b"$ID*A21B\r\n"  # docs/sensor-bridge.md
     # The catalogue check value of CRC-16/CCITT-FALSE (a.k.a. CRC-16/IBM-3740).
     assert crc16_ccitt_false(b"123456789") == 0x29B1
     assert crc16_ccitt_false(b"") == 0xFFFF

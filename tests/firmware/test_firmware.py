@@ -94,7 +94,7 @@ def test_firmware_frames_exactly_like_the_host() -> None:
     bad = bytearray(bridge_proto.frame(["ID"]))
     bad[1] ^= 0x80
     assert bridge_proto.unframe(bytes(bad)) is None
-    assert bridge_proto.unframe(b"$ID*b0c5\r\n") is None  # lower-case hex is refused
+    assert bridge_proto.unframe(b"$ID*a21b\r\n") is None  # lower-case hex is refused
 
 
 def test_integer_statistics_match_numpy() -> None:
