@@ -24,7 +24,7 @@ import numpy as np
 
 from drivers import adxl355
 
-ADXL355_IDS = (0xAD, 0x1D, 0xED, 0x01)
+ADXL355_IDS = (adxl355.DEVID_AD, adxl355.DEVID_MST, adxl355.PARTID, adxl355.REVID_SIM)
 STATUS, TEMP2, XDATA3, ZDATA1 = 0x04, 0x06, 0x08, 0x10
 FILTER, RANGE, POWER_CTL, RESET = 0x28, 0x2C, 0x2D, 0x2F
 _RANGE_G = {1: 2.0, 2: 4.0, 3: 8.0}

@@ -25,7 +25,7 @@ from simulators.faults import SimFaults
 
 FIRMWARE = "soakcal-sim-2.0"
 #: The simulated ADXL355's id registers (datasheet: DEVID_AD, DEVID_MST, PARTID, REVID).
-PART_IDS = (0xAD, 0x1D, 0xED, 0x01)
+PART_IDS = (adxl355.DEVID_AD, adxl355.DEVID_MST, adxl355.PARTID, adxl355.REVID_SIM)
 
 
 @dataclass

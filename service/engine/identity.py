@@ -27,12 +27,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from drivers import adxl355
 from drivers.faults import ConfigurationFault
 from drivers.protocols import Accelerometer, SensorIdentity
 from drivers.sensor_config import BINDING_MODES, BindingMode, parse_sensor_config
 
 #: ADXL355 id registers 0x00-0x02 (data sheet register map).
-ADXL355_IDS = {"devid_ad": 0xAD, "devid_mst": 0x1D, "partid": 0xED}
+ADXL355_IDS = {"devid_ad": adxl355.DEVID_AD, "devid_mst": adxl355.DEVID_MST,
+               "partid": adxl355.PARTID}
 
 
 class SensorMismatch(ConfigurationFault):
