@@ -109,8 +109,8 @@ class Bridge:
         if cmd == "SN" and len(fields) == 2:
             if self.eeprom is None:
                 return [["ERR", 4, "no fixture EEPROM"]]
-            if not 1 <= len(fields[1]) <= 24:
-                return [["ERR", 3, "serial must be 1..24 characters"]]
+            if not 1 <= len(fields[1]) <= 24 or " " in fields[1]:
+                return [["ERR", 3, "serial must be 1..24 characters without blanks"]]
             self.eeprom.write_serial(fields[1])
             return [["OK", "SN", self.eeprom.read_serial()]]
         return [["ERR", 1, "unknown command " + cmd]]
@@ -123,7 +123,7 @@ class Bridge:
             return ["ERR", 3, "bad range or ODR"]
         if range_g not in LSB_PER_G or float(range_text) != range_g or \
                 not 3.9 <= odr_hz <= adx.ODR_MAX_HZ:
-            return ["ERR", 3, "range must be 2, 4 or 8 g and ODR 3.9..4000 Hz"]
+            return ["ERR", 3, "range must be 2 or 4 or 8 g and ODR 3.9..4000 Hz"]
         self.range_g, self.odr_hz = self.sensor.configure(range_g, odr_hz)
         return ["OK", "CFG", str(self.range_g), f"{self.odr_hz:g}"]
 

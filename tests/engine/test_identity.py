@@ -108,3 +108,21 @@ async def test_verify_sensor_through_the_real_driver_and_simulated_bridge() -> N
     finally:
         await accel.close()
         await server.stop()
+
+
+async def test_a_mismatch_fails_the_campaign_at_once_through_the_guard() -> None:
+    """The engine's DeviceGuard neither retries nor suspends on a SensorMismatch."""
+    from service.engine.guard import CampaignFailed, DeviceGuard, FaultPolicy
+
+    clock = VirtualClock()
+    suspended: list[str] = []
+    guard = DeviceGuard(clock, FaultPolicy(), suspended.append, lambda: None)
+    calls = []
+
+    async def check() -> object:
+        calls.append(1)
+        return check_identity(GOOD, "SN-0004", SerialBinding("eeprom"))
+
+    with pytest.raises(CampaignFailed, match="SN-0004 but SN-0001"):
+        await guard.call("verify sensor", check)
+    assert (len(calls), suspended, guard.faults_retried, clock.now()) == (1, [], 0, 0.0)

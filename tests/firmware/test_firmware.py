@@ -225,8 +225,11 @@ async def test_refusal_and_line_faults_over_a_pty(pty_board: tuple[Board, PtyDev
     try:
         with pytest.raises(ConfigurationFault, match=r"ERR 3 n must be 1\.\.100000"):
             await accel.acquire(100_001)
-        with pytest.raises(ConfigurationFault, match="ERR 3"):
+        with pytest.raises(ConfigurationFault, match="ERR 3 range must be 2 or 4 or 8 g"):
             await accel.configure(2.0, 8000.0)  # above the ADXL355's 4 kHz
+        assert sum(b"CFG" in line for line in dev.received) == 1  # refused once, not retried
+        reply = board.bridge.handle_line(encode_frame("SN", "SN 1"))
+        assert parse_frame(reply[0]).fields[:2] == ["ERR", "3"]
         # A high-bit byte in one reply: a framing fault, retried on a fresh port.
         hits = []
 
