@@ -174,6 +174,10 @@ async def _serve_client(device: BridgeDevice, reader: asyncio.StreamReader,
             line = await reader.readline()
         except (ConnectionError, asyncio.IncompleteReadError):
             return
+        except ValueError:
+            # Over the stream limit without a newline: noise, not a command. readline()
+            # has dropped it; answer like the firmware does and resynchronise.
+            line = b"\xff\n"
         if not line:
             return
         try:

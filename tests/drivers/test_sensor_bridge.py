@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from drivers import adxl355
-from drivers.bridge_protocol import decode_frame
+from drivers.bridge_protocol import decode_frame, encode_frame
 from drivers.clock import VirtualClock
 from drivers.faults import (
     ConfigurationFault,
@@ -199,3 +199,16 @@ async def test_cancelled_capture_leaves_driver_usable(bridge: BridgeRig) -> None
     bridge.device.faults.p_no_reply = 0.0
     bridge.sensor.timeout_s = 0.5
     assert (await bridge.sensor.identify()).model == "ADXL355"
+
+
+async def test_noise_without_newline_does_not_kill_the_simulated_bridge(
+        bridge: BridgeRig) -> None:
+    reader, writer = await asyncio.open_connection(bridge.server.host, bridge.server.port)
+    try:
+        writer.write(b"\x80" * 70_000 + b"\n" + encode_frame("ID"))
+        await writer.drain()
+        first = await asyncio.wait_for(reader.readline(), 2.0)
+        assert decode_frame(first)[:2] == ["ERR", "2"]
+        assert decode_frame(await asyncio.wait_for(reader.readline(), 2.0))[0] == "ID"
+    finally:
+        writer.close()
