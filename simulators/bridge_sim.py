@@ -46,6 +46,8 @@ class BridgeDevice:
     max_samples: int = 100_000
     board_uid: str = "SIM-BRIDGE-0001"
     part_ids: tuple[int, int, int, int] = PART_IDS
+    #: The simulated fixture EEPROM; ``None`` reports the truth model's serial.
+    eeprom_serial: str | None = None
 
     def reference_g(self) -> np.ndarray:
         return reference_for_angles(self.angles_deg(), self.g_local)
@@ -72,8 +74,9 @@ class BridgeDevice:
     async def replies(self, fields: list[str], framing: Framing = "v2") -> list[list[object]]:
         cmd = fields[0]
         if cmd == "ID":
-            ident: list[object] = ["ID", "ADXL355", getattr(self.truth, "serial", "SIM"),
-                                   FIRMWARE]
+            serial = self.eeprom_serial if self.eeprom_serial is not None else \
+                getattr(self.truth, "serial", "SIM")
+            ident: list[object] = ["ID", "ADXL355", serial, FIRMWARE]
             if framing == "v2":
                 ident += [self.board_uid, *(f"{v:02X}" for v in self.part_ids)]
             return [ident]
@@ -94,6 +97,11 @@ class BridgeDevice:
             counts, traw = await self.capture(n)
             return _avg_reply(counts, traw, self.truth.range_g) if cmd == "AVG" else \
                 _raw_reply(counts, traw)
+        if cmd == "SN" and len(fields) == 2:
+            if not 1 <= len(fields[1]) <= 24 or " " in fields[1]:
+                return [["ERR", 3, "serial must be 1..24 characters without blanks"]]
+            self.eeprom_serial = fields[1]  # the twin's fixture now names this sensor
+            return [["OK", "SN", self.eeprom_serial]]
         return [["ERR", 1, f"unknown command {cmd}"]]
 
 

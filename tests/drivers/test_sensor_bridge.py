@@ -212,3 +212,11 @@ async def test_noise_without_newline_does_not_kill_the_simulated_bridge(
         assert decode_frame(await asyncio.wait_for(reader.readline(), 2.0))[0] == "ID"
     finally:
         writer.close()
+
+
+async def test_binding_a_serial_on_the_simulated_fixture(bridge: BridgeRig) -> None:
+    assert (await bridge.sensor.identify()).serial == "FAKE-1"
+    assert await bridge.sensor.bind_serial("SN-K9") == "SN-K9"
+    assert (await bridge.sensor.identify()).serial == "SN-K9"
+    with pytest.raises(ValueOutOfRange):
+        await bridge.sensor.bind_serial("")
