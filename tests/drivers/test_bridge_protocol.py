@@ -93,3 +93,25 @@ def test_fields_that_cannot_travel_are_refused_before_sending() -> None:
             encode_frame("ID", bad)
     with pytest.raises(ValueError, match="framing"):
         encode_frame("ID", framing="v3")  # type: ignore[arg-type]
+
+
+def test_every_one_and_two_bit_error_of_a_short_frame_is_caught() -> None:
+    """Exhaustive over a CFG reply, check digits included (only CR LF left alone).
+
+    A body flip changes the CRC by x^(k+16) mod g, of odd weight ≥ 3; one flip in
+    a hex digit changes the value by weight 1 or 2, so the two cannot cancel.
+    """
+    frame = encode_frame("OK", "CFG", "2", "62.5")
+    n_bits = 8 * (len(frame) - 2)
+    for a in range(n_bits):
+        with pytest.raises(ProtocolError):
+            decode_frame(_flip1(frame, a))
+        for b in range(a + 1, n_bits):
+            with pytest.raises(ProtocolError):
+                decode_frame(_flip(frame, a, b))
+
+
+def _flip1(line: bytes, bit: int) -> bytes:
+    b = bytearray(line)
+    b[bit // 8] ^= 1 << (bit % 8)
+    return bytes(b)
