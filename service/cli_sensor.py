@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import sys
 from typing import Any
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -26,6 +27,12 @@ def add_parser(sub: Any) -> None:
     common.add_argument("--baudrate", type=int, default=115200, help="bit/s (default 115200)")
     common.add_argument("--timeout", type=float, default=2.0, metavar="S",
                         help="reply timeout per line in s (default 2)")
+    common.add_argument("--protocol", choices=("bridge", "stream"), default="bridge",
+                        help="framed bridge (default) or a plain x,y,z,t line stream")
+    common.add_argument("--units", choices=("g", "mg", "m/s2"), default="g",
+                        help="stream only: acceleration unit of the lines (default g)")
+    common.add_argument("--columns", default="x,y,z,t", metavar="ORDER",
+                        help="stream only: order of the four values (default x,y,z,t)")
     actions = sensor.add_subparsers(dest="sensor_command", metavar="ACTION", required=True)
     ident = actions.add_parser("id", parents=[common], help="print the bridge's identity")
     ident.add_argument("--json", action="store_true", help="one JSON object")
@@ -39,16 +46,49 @@ def add_parser(sub: Any) -> None:
     read.set_defaults(handler=_run_read)
 
 
+#: Config key paths of drivers.sensor_config → the option that sets them.
+_OPTION_FOR_KEY = {"--.url": "URL", "--.baudrate": "--baudrate", "--.stream.columns": "--columns"}
+
+
+def _link(args: argparse.Namespace) -> Any:
+    """The options as a sensor link config (same validation as a rig's sensors[0])."""
+    from drivers.sensor_config import parse_sensor_config
+
+    return parse_sensor_config({
+        "url": args.url, "baudrate": args.baudrate, "protocol": args.protocol,
+        "framing": args.framing, "serial_binding": "any",
+        "stream": {"units": args.units, "columns": args.columns.split(",")}}, "--")
+
+
 def _accel(args: argparse.Namespace) -> Any:
     from drivers.clock import RealClock
+
+    link = _link(args)
+    if link.protocol == "stream":
+        from drivers.stream_sensor import StreamingAccelerometer
+
+        return StreamingAccelerometer(link.url, RealClock(), fmt=link.stream,
+                                      baudrate=link.baudrate, timeout_s=args.timeout)
     from drivers.sensor_bridge import SerialAccelerometer
 
-    return SerialAccelerometer(args.url, RealClock(), framing=args.framing,
-                               baudrate=args.baudrate, timeout_s=args.timeout)
+    return SerialAccelerometer(link.url, RealClock(), framing=link.framing,
+                               baudrate=link.baudrate, timeout_s=args.timeout)
 
 
 def _run(args: argparse.Namespace, body: Any) -> int:
     from drivers.faults import DeviceFault
+    from drivers.sensor_config import SensorConfigError
+
+    try:
+        _link(args)
+    except SensorConfigError as exc:
+        key, _, why = str(exc).partition(": ")
+        print(f"soakcal sensor: {_OPTION_FOR_KEY.get(key, key)}: {why}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.sensor_command == "bind" and args.protocol == "stream":
+        print("soakcal sensor bind: a plain stream has no fixture EEPROM to write",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
 
     async def go() -> int:
         accel = _accel(args)
@@ -60,7 +100,7 @@ def _run(args: argparse.Namespace, body: Any) -> int:
     try:
         return asyncio.run(go())
     except DeviceFault as exc:
-        print(f"soakcal sensor: {exc}", flush=True)
+        print(f"soakcal sensor: {exc}", file=sys.stderr)
         return EXIT_FAILED
 
 
@@ -97,7 +137,7 @@ def _run_bind(args: argparse.Namespace) -> int:
         try:
             stored = await accel.bind_serial(args.serial)
         except ValueOutOfRange as exc:
-            print(f"soakcal sensor bind: {exc.message}")
+            print(f"soakcal sensor bind: {exc.message}", file=sys.stderr)
             return EXIT_BAD_INPUT
         ident = await accel.identify()
         print(f"bound {stored} to the fixture on bridge {ident.board_uid or '(no uid)'}")
@@ -108,7 +148,7 @@ def _run_bind(args: argparse.Namespace) -> int:
 
 def _run_read(args: argparse.Namespace) -> int:
     if args.samples < 1:
-        print("soakcal sensor read: --samples must be ≥ 1")
+        print("soakcal sensor read: --samples must be ≥ 1", file=sys.stderr)
         return EXIT_BAD_INPUT
 
     async def body(accel: Any) -> int:

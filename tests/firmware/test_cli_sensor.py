@@ -42,6 +42,7 @@ def test_id_bind_read(port: tuple[str, ADXL355Registers],
     assert "(+0.000000, +0.500000, -0.500000) g over 20 samples" in out
     assert "sensor_c   40.0" in out and "°C" in out
     assert main(["sensor", "bind", path, "SN 42"]) == 2
+    assert "must be 1..24 printable" in capsys.readouterr().err
     chip.ids = (0xAD, 0x1D, 0xEC, 0x01)
     chip.reset()
     assert main(["sensor", "id", path]) == 1
@@ -50,4 +51,21 @@ def test_id_bind_read(port: tuple[str, ADXL355Registers],
 
 def test_nothing_on_the_port(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sensor", "id", "/dev/does-not-exist", "--timeout", "0.2"]) == 1
-    assert "cannot open /dev/does-not-exist" in capsys.readouterr().out
+    assert "cannot open /dev/does-not-exist" in capsys.readouterr().err
+    assert main(["sensor", "read", "/dev/x", "--protocol", "stream", "--columns", "x,y,z"]) == 2
+    assert "--columns: expected the four names" in capsys.readouterr().err
+    assert main(["sensor", "bind", "/dev/x", "SN-1", "--protocol", "stream"]) == 2
+    assert main(["sensor", "read", "/dev/x", "-n", "0"]) == 2
+
+
+def test_read_a_plain_stream(capsys: pytest.CaptureFixture[str]) -> None:
+    lines = iter(lambda: b"t=30.0 x=0 y=-1000.0 z=0\r\n", None)
+    dev = PtyDevice(stream=lambda: next(lines))
+    try:
+        assert main(["sensor", "read", dev.path, "--protocol", "stream", "--units", "mg",
+                     "--columns", "t,x,y,z", "-n", "10"]) == 0
+    finally:
+        dev.close()
+    out = capsys.readouterr().out
+    assert "(+0.000000, -1.000000, +0.000000) g over 10 samples" in out
+    assert "sensor_c   30.00 °C" in out
