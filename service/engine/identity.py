@@ -111,7 +111,7 @@ def check_identity(identity: SensorIdentity, expected_serial: str, binding: Seri
         if not uid:
             raise SensorMismatch(device, f"campaign names {expected} but the bridge reports "
                                          f"no board uid to look up in 'serials' "
-                                         f"(a v1 bridge? use serial_binding 'any')")
+                                         f"(a v1 bridge? bind by its serial: 'eeprom')")
         if uid not in binding.table:
             raise SensorMismatch(device, f"campaign names {expected} but bridge {uid} is not "
                                          f"in the rig's 'serials' table "
