@@ -3,8 +3,10 @@
 Protocol v2 frames a line as ``$BODY*CCCC\\r\\n`` where ``CCCC`` is the
 CRC-16/CCITT-FALSE of the body's bytes (poly 0x1021, init 0xFFFF, no
 reflection, no final XOR; check value ``CRC("123456789") = 0x29B1``). Unlike the
-v1 XOR byte, the CRC catches every one- and two-bit error and every burst up to
-16 bits in a line, so two flips of the same bit in two bytes no longer cancel.
+v1 XOR byte, the CRC catches every one- and two-bit error of a line (check
+digits included: tests/drivers/test_bridge_protocol.py enumerates them) and
+every burst up to 16 bits within the body, so two flips of the same bit in two
+bytes no longer cancel.
 
 The v1 framing (``$BODY*CK``, XOR of the bytes, 2 hex digits) stays readable
 for bridges already in the field, but only when the link is configured for it
