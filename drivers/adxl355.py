@@ -10,6 +10,10 @@ COUNT_MIN = -(1 << 19)  # 20-bit two's complement
 COUNT_MAX = (1 << 19) - 1
 TEMP_RAW_AT_25C = 1885.0
 TEMP_LSB_PER_C = -9.05
+#: Fixed id registers 0x00..0x02 (data sheet register map): DEVID_AD, DEVID_MST, PARTID.
+DEVID_AD, DEVID_MST, PARTID = 0xAD, 0x1D, 0xED
+#: REVID (0x03) of the parts the simulators model; the real value varies by silicon revision.
+REVID_SIM = 0x01
 
 
 def lsb_per_g(range_g: float) -> float:

@@ -1,37 +1,130 @@
-"""Sensor bridge framing: ``$BODY*CK\\r\\n`` ASCII lines, XOR checksum (docs/sensor-bridge.md).
+"""Sensor bridge framing (docs/sensor-bridge.md), shared by the driver and the simulated bridge.
 
-Shared by the driver and the simulated bridge so both sides frame identically.
+Protocol v2 frames a line as ``$BODY*CCCC\\r\\n`` where ``CCCC`` is the
+CRC-16/CCITT-FALSE of the body's bytes (poly 0x1021, init 0xFFFF, no
+reflection, no final XOR; check value ``CRC("123456789") = 0x29B1``). Unlike the
+v1 XOR byte, the CRC catches every one- and two-bit error of a line (check
+digits included: tests/drivers/test_bridge_protocol.py enumerates them) and
+every burst up to 16 bits within the body, so two flips of the same bit in two
+bytes no longer cancel.
+
+The v1 framing (``$BODY*CK``, XOR of the bytes, 2 hex digits) stays readable
+for bridges already in the field, but only when the link is configured for it
+(``framing="v1"``): a v2 link refuses a v1 frame instead of guessing, so a line
+error can never downgrade the check. Bytes are decoded without assuming ASCII:
+anything outside printable 7-bit ASCII is a framing fault naming its column.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Literal
+
 from drivers.faults import ProtocolError
 
+Framing = Literal["v2", "v1"]
+FRAMINGS: tuple[Framing, ...] = ("v2", "v1")
 
-def checksum(body: str) -> int:
-    """XOR of the body's bytes (NMEA style)."""
+
+def _crc16_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else crc << 1
+        table.append(crc & 0xFFFF)
+    return tuple(table)
+
+
+_CRC16_TABLE = _crc16_table()
+
+
+def crc16_ccitt_false(data: bytes, crc: int = 0xFFFF) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, MSB first, no final XOR)."""
+    for b in data:
+        crc = ((crc << 8) & 0xFFFF) ^ _CRC16_TABLE[((crc >> 8) ^ b) & 0xFF]
+    return crc
+
+
+def xor_checksum(data: bytes) -> int:
+    """The v1 (NMEA-style) XOR of the body's bytes; kept only to read v1 bridges."""
     ck = 0
-    for b in body.encode("ascii"):
+    for b in data:
         ck ^= b
     return ck
 
 
-def encode_frame(*fields: object) -> bytes:
-    """Fields joined by commas, framed and terminated."""
-    body = ",".join(str(f) for f in fields)
-    return f"${body}*{checksum(body):02X}\r\n".encode("ascii")
+def checksum(body: str) -> int:
+    """v1 XOR checksum of a text body (kept for callers of the v1 API)."""
+    return xor_checksum(body.encode("ascii"))
 
 
-def decode_frame(line: bytes, device: str = "sensor") -> list[str]:
-    """One received line → its fields; ProtocolError on framing or checksum trouble."""
-    text = line.decode("ascii", errors="replace").strip()
-    if not text.startswith("$") or len(text) < 4 or text[-3] != "*":
-        raise ProtocolError(device, f"malformed frame {text[:60]!r}")
-    body, ck_text = text[1:-3], text[-2:]
-    try:
-        ck = int(ck_text, 16)
-    except ValueError:
-        raise ProtocolError(device, f"bad checksum field in {text[:60]!r}") from None
-    if ck != checksum(body):
-        raise ProtocolError(device, f"checksum {ck_text} != {checksum(body):02X} in {text[:60]!r}")
-    return body.split(",")
+def encode_frame(*fields: object, framing: Framing = "v2") -> bytes:
+    """Fields joined by commas, framed and terminated; ValueError on a field that cannot travel."""
+    texts = [str(f) for f in fields]
+    for i, text in enumerate(texts):
+        bad = [c for c in text if not " " <= c <= "~" or c in "$*,"]
+        if bad:
+            raise ValueError(f"field {i} {text[:40]!r}: {bad[0]!r} cannot travel in a bridge frame")
+    body = ",".join(texts).encode("ascii")
+    if framing == "v2":
+        return b"$" + body + b"*%04X\r\n" % crc16_ccitt_false(body)
+    if framing == "v1":
+        return b"$" + body + b"*%02X\r\n" % xor_checksum(body)
+    raise ValueError(f"unknown bridge framing {framing!r} (expected v2 or v1)")
+
+
+@dataclass(frozen=True)
+class Frame:
+    fields: list[str]
+    framing: Framing
+
+
+def parse_frame(line: bytes, device: str = "sensor") -> Frame:
+    """One received line in either framing → its fields and framing; ProtocolError on any fault.
+
+    The framing is told by the checksum's width (4 hex digits v2, 2 hex digits
+    v1); callers that must not accept v1 use :func:`decode_frame`.
+    """
+    raw = line.rstrip(b"\r\n")
+    for col, b in enumerate(raw, start=1):
+        if not 0x20 <= b <= 0x7E:
+            raise ProtocolError(device, f"byte 0x{b:02X} at column {col} is not printable "
+                                        f"ASCII in {_show(raw)}")
+    if not raw.startswith(b"$"):
+        raise ProtocolError(device, f"frame does not start with '$': {_show(raw)}")
+    star = raw.rfind(b"*")
+    if star < 1:
+        raise ProtocolError(device, f"frame has no '*' checksum separator: {_show(raw)}")
+    body, ck_text = raw[1:star], raw[star + 1:]
+    if b"$" in body or b"*" in body:
+        raise ProtocolError(device, f"delimiter inside a frame body: {_show(raw)}")
+    if len(ck_text) not in (2, 4) or any(c not in b"0123456789ABCDEF" for c in ck_text):
+        raise ProtocolError(device, f"bad checksum field {ck_text.decode()!r} in {_show(raw)}")
+    ck = int(ck_text, 16)
+    if len(ck_text) == 4:
+        framing: Framing = "v2"
+        want = crc16_ccitt_false(body)
+        if ck != want:
+            raise ProtocolError(device, f"CRC {ck:04X} != {want:04X} in {_show(raw)}")
+    else:
+        framing = "v1"
+        want = xor_checksum(body)
+        if ck != want:
+            raise ProtocolError(device, f"checksum {ck:02X} != {want:02X} in {_show(raw)}")
+    return Frame(body.decode("ascii").split(","), framing)
+
+
+def decode_frame(line: bytes, device: str = "sensor", framing: Framing = "v2") -> list[str]:
+    """One received line → its fields, refusing a frame of the other framing (no downgrade)."""
+    frame = parse_frame(line, device)
+    if frame.framing != framing:
+        raise ProtocolError(device, f"{frame.framing} frame on a {framing} link "
+                                    f"(set the sensor's framing to {frame.framing} if the "
+                                    f"bridge really speaks it): {_show(line.rstrip())}")
+    return frame.fields
+
+
+def _show(raw: bytes) -> str:
+    """A line for an error message: printable ASCII kept, anything else as \\xNN, 60 bytes max."""
+    return repr(raw[:60].decode("ascii", errors="backslashreplace"))

@@ -38,3 +38,13 @@ class ValueOutOfRange(DeviceFault):
 
 class ProtocolError(DeviceFault):
     """Malformed frame, bad checksum, unexpected reply."""
+
+
+class ConfigurationFault(ExceptionReply):
+    """The device permanently refuses the request (unknown command, argument it never accepts).
+
+    Retrying cannot help: the rig or campaign configuration must change, so the
+    engine fails the campaign at once instead of suspending on it.
+    """
+
+    retryable = False

@@ -65,9 +65,37 @@ class Turntable(Protocol):
 
 @dataclass(frozen=True)
 class SensorIdentity:
+    """What the sensor side says it is (docs/sensor-bridge.md, "Identity").
+
+    ``serial`` is the serial the bridge reports (from the fixture EEPROM; ""
+    when it holds none). The remaining fields default to "unknown" so v1
+    bridges, streaming sensors and fakes that report only the first three
+    still fit.
+    """
+
     model: str  # e.g. "ADXL355"
     serial: str
     firmware: str
+    board_uid: str = ""  # the bridge board's / fixture's unique id, "" when not reported
+    devid_ad: int | None = None  # ADXL355 register 0x00, 0xAD (Analog Devices)
+    devid_mst: int | None = None  # register 0x01, 0x1D (Analog Devices MEMS)
+    partid: int | None = None  # register 0x02, 0xED for the ADXL355
+    revid: int | None = None  # register 0x03, silicon revision
+    protocol: str = ""  # link that reported it: "v2", "v1", "stream", ... ("" unknown)
+
+    def as_dict(self) -> dict[str, str | None]:
+        """JSON-ready form for the recording and calibration metadata; ids as ``0xNN``."""
+
+        def hex_id(v: int | None) -> str | None:
+            return None if v is None else f"0x{v:02X}"
+
+        return {
+            "model": self.model, "serial": self.serial, "firmware": self.firmware,
+            "board_uid": self.board_uid or None,
+            "devid_ad": hex_id(self.devid_ad), "devid_mst": hex_id(self.devid_mst),
+            "partid": hex_id(self.partid), "revid": hex_id(self.revid),
+            "protocol": self.protocol or None,
+        }
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,10 @@ import numpy as np
 import serial
 
 from drivers import adxl355
-from drivers.bridge_protocol import decode_frame, encode_frame
+from drivers.bridge_protocol import FRAMINGS, Framing, decode_frame, encode_frame
 from drivers.clock import Clock
 from drivers.faults import (
+    ConfigurationFault,
     ConnectionLost,
     DeviceFault,
     DeviceTimeout,
@@ -30,6 +31,15 @@ from drivers.faults import (
 from drivers.protocols import Acquisition, SensorIdentity
 
 AcquireMode = Literal["average", "raw"]
+
+#: ``ERR`` codes (docs/sensor-bridge.md): 1, 3 and 4 are permanent refusals, 2 means the
+#: bridge received our command garbled (a line fault: retried), anything else (5 sensor
+#: not ready, 6 busy) is an ordinary retryable exception reply.
+ERR_UNKNOWN_COMMAND = 1
+ERR_BAD_FRAME = 2
+ERR_BAD_ARGUMENT = 3
+ERR_NO_EEPROM = 4
+_PERMANENT_ERRS = (ERR_UNKNOWN_COMMAND, ERR_BAD_ARGUMENT, ERR_NO_EEPROM)
 
 
 class SerialAccelerometer:
@@ -45,8 +55,13 @@ class SerialAccelerometer:
         timeout_s: float = 2.0,
         attempts: int = 2,
         device: str = "sensor",
+        framing: Framing = "v2",
     ) -> None:
+        if framing not in FRAMINGS:
+            raise ValueError(f"sensor framing must be one of {', '.join(FRAMINGS)}, "
+                             f"got {framing!r}")
         self.url = url
+        self.framing: Framing = framing
         self.clock = clock
         self.mode = mode
         self.baudrate = baudrate
@@ -60,10 +75,37 @@ class SerialAccelerometer:
 
     # --- protocol -------------------------------------------------------------
     async def identify(self) -> SensorIdentity:
+        """``ID`` → identity; v2 bridges add the board uid and the ADXL355 id registers."""
         f = await self._command(["ID"], expect="ID")
-        if len(f) != 4:
-            raise ProtocolError(self.device, f"ID reply has {len(f)} fields, expected 4")
-        return SensorIdentity(model=f[1], serial=f[2], firmware=f[3])
+        if len(f) == 4:  # v1 bridge: model, serial, firmware only
+            return SensorIdentity(model=f[1], serial=f[2], firmware=f[3],
+                                  protocol=self.framing)
+        if len(f) != 9:
+            raise ProtocolError(self.device, f"ID reply has {len(f)} fields, expected 9 "
+                                             f"(or 4 from a v1 bridge)")
+        try:
+            devid_ad, devid_mst, partid, revid = (int(x, 16) for x in f[5:9])
+        except ValueError:
+            raise ProtocolError(self.device, f"ID reply has a non-hex part id: {f!r}") from None
+        return SensorIdentity(model=f[1], serial=f[2], firmware=f[3], board_uid=f[4],
+                              devid_ad=devid_ad, devid_mst=devid_mst, partid=partid,
+                              revid=revid, protocol=self.framing)
+
+    async def bind_serial(self, serial_text: str) -> str:
+        """Write the sensor's serial into the fixture EEPROM (``SN``); returns what was stored.
+
+        The one-time binding step when a sensor is fixed to its fixture
+        (docs/sensor-bridge.md, "Identity"). ERR 4 (no EEPROM) is a
+        ConfigurationFault: bind that fixture in the rig's ``serials`` table.
+        """
+        text = serial_text.strip()
+        if not 1 <= len(text) <= 24 or any(not "!" <= c <= "~" or c in "$*," for c in text):
+            raise ValueOutOfRange(self.device, f"serial {serial_text!r} must be 1..24 printable "
+                                               f"ASCII characters without blanks, $, * or ,")
+        f = await self._command(["SN", text], expect="OK")
+        if f[1:] != ["SN", text]:
+            raise ProtocolError(self.device, f"EEPROM read back {f[2:]!r} after writing {text!r}")
+        return text
 
     async def configure(self, range_g: float, odr_hz: float) -> None:
         try:
@@ -73,7 +115,10 @@ class SerialAccelerometer:
         if odr_hz <= 0:
             raise ValueOutOfRange(self.device, f"ODR {odr_hz} Hz must be > 0")
         f = await self._command(["CFG", f"{range_g:g}", f"{odr_hz:g}"], expect="OK")
-        self.range_g, self.odr_hz = float(f[2]), float(f[3])
+        try:
+            self.range_g, self.odr_hz = float(f[2]), float(f[3])
+        except (ValueError, IndexError):
+            raise ProtocolError(self.device, f"CFG reply malformed: {f!r}") from None
 
     async def acquire(self, n_samples: int) -> Acquisition:
         if n_samples < 1:
@@ -85,10 +130,13 @@ class SerialAccelerometer:
                                 extra_wait_s=n_samples / self.odr_hz)
         if len(f) != 12:
             raise ProtocolError(self.device, f"AVG reply has {len(f)} fields, expected 12")
-        n = int(f[1])
-        mean_c = np.array([float(x) for x in f[2:5]])
-        sd_c = np.array([float(x) for x in f[5:8]])
-        t_mean, t_min, t_max = (float(x) for x in f[8:11])
+        try:
+            n = int(f[1])
+            mean_c = np.array([float(x) for x in f[2:5]])
+            sd_c = np.array([float(x) for x in f[5:8]])
+            t_mean, t_min, t_max = (float(x) for x in f[8:11])
+        except ValueError as exc:
+            raise ProtocolError(self.device, f"AVG reply has a non-number: {exc}") from None
         scale = adxl355.lsb_per_g(self.range_g)
         c_hi, c_lo = adxl355.temp_raw_to_c(t_min), adxl355.temp_raw_to_c(t_max)
         return Acquisition(
@@ -133,15 +181,18 @@ class SerialAccelerometer:
         lines = await self._exchange(["RAW", n_samples], n_samples + 1,
                                      n_samples / self.odr_hz)
         *frames, end = lines
-        if end[0] != "END" or int(end[1]) != n_samples:
+        if end != ["END", str(n_samples)]:
             raise ProtocolError(self.device, f"RAW capture ended with {end!r}")
         counts = np.empty((n_samples, 3), dtype=np.int64)
         temps = np.empty(n_samples)
         for i, f in enumerate(frames):
             if f[0] != "R" or len(f) != 6:
                 raise ProtocolError(self.device, f"raw frame {i} malformed: {f!r}")
-            counts[i] = [adxl355.counts_from_20bit(int(x, 16)) for x in f[2:5]]
-            temps[i] = float(f[5])
+            try:
+                counts[i] = [adxl355.counts_from_20bit(int(x, 16)) for x in f[2:5]]
+                temps[i] = float(f[5])
+            except ValueError:
+                raise ProtocolError(self.device, f"raw frame {i} has a non-number: {f!r}") from None
         return counts, temps
 
     # --- transport ----------------------------------------------------------------
@@ -185,7 +236,7 @@ class SerialAccelerometer:
                            extra_wait_s: float) -> list[list[str]]:
         try:
             port.reset_input_buffer()
-            port.write(encode_frame(*fields))
+            port.write(encode_frame(*fields, framing=self.framing))
             out: list[list[str]] = []
             for i in range(n_lines):
                 # First line of a capture waits for the capture itself (device time).
@@ -194,14 +245,25 @@ class SerialAccelerometer:
                 if not line.endswith(b"\n"):
                     raise DeviceTimeout(self.device, f"no reply to {fields[0]} within "
                                                      f"{port.timeout:.1f} s")
-                f = decode_frame(line, self.device)
+                f = decode_frame(line, self.device, self.framing)
                 if f[0] == "ERR":
-                    raise ExceptionReply(self.device, ",".join(f[2:]) or "error",
-                                         int(f[1]) if f[1].isdigit() else None)
+                    raise self._err_fault(f, fields)
                 out.append(f)
             return out
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(self.device, f"{self.url}: {exc}") from exc
+
+    def _err_fault(self, f: list[str], fields: list[object]) -> DeviceFault:
+        """An ``ERR,<code>,<text>`` reply → the fault class its code means."""
+        code = int(f[1]) if len(f) > 1 and f[1].isdigit() else None
+        text = ",".join(f[2:]) or "error"
+        command = ",".join(str(x) for x in fields)
+        if code == ERR_BAD_FRAME:
+            return ProtocolError(self.device, f"bridge received {command!r} garbled: {text}")
+        if code in _PERMANENT_ERRS:
+            return ConfigurationFault(self.device, f"bridge refuses {command!r}: ERR {code} "
+                                                   f"{text}", code)
+        return ExceptionReply(self.device, f"ERR {code} {text}", code)
 
     def _open_port(self) -> serial.SerialBase:
         if self._port is None or not self._port.is_open:

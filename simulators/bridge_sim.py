@@ -17,13 +17,15 @@ from typing import Any
 import numpy as np
 
 from drivers import adxl355
-from drivers.bridge_protocol import decode_frame, encode_frame
+from drivers.bridge_protocol import Framing, encode_frame, parse_frame
 from drivers.clock import Clock
 from drivers.faults import ProtocolError
 from drivers.geometry import reference_for_angles
 from simulators.faults import SimFaults
 
-FIRMWARE = "soakcal-sim-1.0"
+FIRMWARE = "soakcal-sim-2.0"
+#: The simulated ADXL355's id registers (datasheet: DEVID_AD, DEVID_MST, PARTID, REVID).
+PART_IDS = (adxl355.DEVID_AD, adxl355.DEVID_MST, adxl355.PARTID, adxl355.REVID_SIM)
 
 
 @dataclass
@@ -42,6 +44,10 @@ class BridgeDevice:
     g_local: float = 1.0
     faults: SimFaults = field(default_factory=SimFaults)
     max_samples: int = 100_000
+    board_uid: str = "SIM-BRIDGE-0001"
+    part_ids: tuple[int, int, int, int] = PART_IDS
+    #: The simulated fixture EEPROM; ``None`` reports the truth model's serial.
+    eeprom_serial: str | None = None
 
     def reference_g(self) -> np.ndarray:
         return reference_for_angles(self.angles_deg(), self.g_local)
@@ -56,29 +62,47 @@ class BridgeDevice:
         temps_c = _temperature_samples(self.truth, die_c, n, self.rng)
         return counts, adxl355.temp_c_to_raw(temps_c)
 
-    async def handle(self, fields: list[str]) -> list[bytes]:
-        """One command → reply frames."""
+    async def handle(self, fields: list[str], framing: Framing = "v2") -> list[bytes]:
+        """One command → reply frames, in the framing the command arrived in.
+
+        A v2 bridge answers a v1 host in v1 (and the 4-field v1 ``ID``), so
+        hosts not yet updated keep working against new firmware.
+        """
+        return [encode_frame(*reply, framing=framing)
+                for reply in await self.replies(fields, framing)]
+
+    async def replies(self, fields: list[str], framing: Framing = "v2") -> list[list[object]]:
         cmd = fields[0]
         if cmd == "ID":
-            return [encode_frame("ID", "ADXL355", getattr(self.truth, "serial", "SIM"), FIRMWARE)]
+            serial = self.eeprom_serial if self.eeprom_serial is not None else \
+                getattr(self.truth, "serial", "SIM")
+            ident: list[object] = ["ID", "ADXL355", serial, FIRMWARE]
+            if framing == "v2":
+                ident += [self.board_uid, *(f"{v:02X}" for v in self.part_ids)]
+            return [ident]
         if cmd == "CFG" and len(fields) == 3:
             try:
                 range_g, odr_hz = float(fields[1]), float(fields[2])
                 adxl355.lsb_per_g(range_g)
             except ValueError:
-                return [encode_frame("ERR", 3, "bad range or ODR")]
+                return [["ERR", 3, "bad range or ODR"]]
             if odr_hz <= 0:
-                return [encode_frame("ERR", 3, "bad range or ODR")]
+                return [["ERR", 3, "bad range or ODR"]]
             self.truth.range_g, self.truth.odr_hz = range_g, odr_hz
-            return [encode_frame("OK", "CFG", f"{range_g:g}", f"{odr_hz:g}")]
+            return [["OK", "CFG", f"{range_g:g}", f"{odr_hz:g}"]]
         if cmd in ("AVG", "RAW") and len(fields) == 2 and fields[1].isdigit():
             n = int(fields[1])
             if not 1 <= n <= self.max_samples:
-                return [encode_frame("ERR", 3, f"n must be 1..{self.max_samples}")]
+                return [["ERR", 3, f"n must be 1..{self.max_samples}"]]
             counts, traw = await self.capture(n)
             return _avg_reply(counts, traw, self.truth.range_g) if cmd == "AVG" else \
                 _raw_reply(counts, traw)
-        return [encode_frame("ERR", 1, f"unknown command {cmd}")]
+        if cmd == "SN" and len(fields) == 2:
+            if not 1 <= len(fields[1]) <= 24 or " " in fields[1]:
+                return [["ERR", 3, "serial must be 1..24 characters without blanks"]]
+            self.eeprom_serial = fields[1]  # the twin's fixture now names this sensor
+            return [["OK", "SN", self.eeprom_serial]]
+        return [["ERR", 1, f"unknown command {cmd}"]]
 
 
 def _temperature_samples(truth: Any, die_c: float, n: int,
@@ -88,23 +112,23 @@ def _temperature_samples(truth: Any, die_c: float, n: int,
     return die_c + rng.normal(0.0, 0.1, n)
 
 
-def _avg_reply(counts: np.ndarray, traw: np.ndarray, range_g: float) -> list[bytes]:
+def _avg_reply(counts: np.ndarray, traw: np.ndarray, range_g: float) -> list[list[object]]:
     n = len(counts)
     mean = counts.mean(axis=0)
     sd = counts.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
     sat = 1 if adxl355.is_saturated(counts, range_g) else 0
-    return [encode_frame(
+    return [[
         "AVG", n, *(f"{x:.3f}" for x in mean), *(f"{x:.3f}" for x in sd),
         f"{traw.mean():.2f}", int(traw.min()), int(traw.max()), sat,
-    )]
+    ]]
 
 
-def _raw_reply(counts: np.ndarray, traw: np.ndarray) -> list[bytes]:
-    out = [
-        encode_frame("R", i, *(f"{adxl355.counts_to_20bit(int(c)):05X}" for c in row), int(t))
+def _raw_reply(counts: np.ndarray, traw: np.ndarray) -> list[list[object]]:
+    out: list[list[object]] = [
+        ["R", i, *(f"{adxl355.counts_to_20bit(int(c)):05X}" for c in row), int(t)]
         for i, (row, t) in enumerate(zip(counts, traw, strict=True))
     ]
-    out.append(encode_frame("END", len(counts)))
+    out.append(["END", len(counts)])
     return out
 
 
@@ -158,10 +182,14 @@ async def _serve_client(device: BridgeDevice, reader: asyncio.StreamReader,
             line = await reader.readline()
         except (ConnectionError, asyncio.IncompleteReadError):
             return
+        except ValueError:
+            # Over the stream limit without a newline: noise, not a command. readline()
+            # has dropped it; answer like the firmware does and resynchronise.
+            line = b"\xff\n"
         if not line:
             return
         try:
-            fields = decode_frame(line, "bridge")
+            frame = parse_frame(line, "bridge")
         except ProtocolError:
             writer.write(encode_frame("ERR", 2, "bad frame or checksum"))
             await writer.drain()
@@ -171,10 +199,10 @@ async def _serve_client(device: BridgeDevice, reader: asyncio.StreamReader,
         if faults.p_no_reply > 0 and device.rng.random() < faults.p_no_reply:
             continue
         if faults.p_exception > 0 and device.rng.random() < faults.p_exception:
-            writer.write(encode_frame("ERR", 6, "busy"))
+            writer.write(encode_frame("ERR", 6, "busy", framing=frame.framing))
         else:
-            for frame in await device.handle(fields):
-                writer.write(frame)
+            for reply in await device.handle(frame.fields, frame.framing):
+                writer.write(reply)
         try:
             await writer.drain()
         except ConnectionError:

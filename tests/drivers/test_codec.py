@@ -102,9 +102,10 @@ def test_saturation_flag() -> None:
 def test_bridge_frame_roundtrip_and_checksum() -> None:
     frame = encode_frame("AVG", 200, "1.5", -3)
     assert frame.startswith(b"$AVG,200,1.5,-3*") and frame.endswith(b"\r\n")
+    assert len(frame.split(b"*")[1].strip()) == 4  # v2: four hex digits of CRC-16
     assert decode_frame(frame) == ["AVG", "200", "1.5", "-3"]
     corrupted = frame.replace(b"1.5", b"1.6")
-    with pytest.raises(ProtocolError, match="checksum"):
+    with pytest.raises(ProtocolError, match="CRC"):
         decode_frame(corrupted)
     with pytest.raises(ProtocolError):
         decode_frame(b"AVG,200\r\n")

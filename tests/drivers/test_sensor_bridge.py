@@ -12,9 +12,15 @@ import numpy as np
 import pytest
 
 from drivers import adxl355
-from drivers.bridge_protocol import decode_frame
+from drivers.bridge_protocol import decode_frame, encode_frame
 from drivers.clock import VirtualClock
-from drivers.faults import ConnectionLost, DeviceTimeout, ExceptionReply, ValueOutOfRange
+from drivers.faults import (
+    ConfigurationFault,
+    ConnectionLost,
+    DeviceTimeout,
+    ExceptionReply,
+    ValueOutOfRange,
+)
 from drivers.sensor_bridge import SerialAccelerometer
 from simulators.bridge_sim import BridgeDevice, BridgeServer, start_bridge_server
 from simulators.faults import SimFaults
@@ -63,6 +69,9 @@ async def bridge() -> AsyncIterator[BridgeRig]:
 async def test_identify_and_configure(bridge: BridgeRig) -> None:
     ident = await bridge.sensor.identify()
     assert (ident.model, ident.serial) == ("ADXL355", "FAKE-1")
+    assert (ident.devid_ad, ident.devid_mst, ident.partid) == (0xAD, 0x1D, 0xED)
+    assert ident.board_uid == "SIM-BRIDGE-0001" and ident.protocol == "v2"
+    assert ident.as_dict()["partid"] == "0xED"
     await bridge.sensor.configure(4.0, 250.0)
     assert bridge.device.truth.range_g == 4.0 and bridge.sensor.odr_hz == 250.0
     with pytest.raises(ValueOutOfRange):
@@ -95,9 +104,25 @@ async def test_stream_raw(bridge: BridgeRig) -> None:
     np.testing.assert_allclose(frames[0][0], (0.01, 0.98, 0.0), atol=1e-5)
 
 
-async def test_bad_request_is_exception_reply(bridge: BridgeRig) -> None:
-    with pytest.raises(ExceptionReply):
+async def test_permanent_refusal_is_a_configuration_fault(bridge: BridgeRig) -> None:
+    with pytest.raises(ConfigurationFault, match=r"ERR 3 n must be 1\.\.100000") as err:
         await bridge.sensor.acquire(10**6)
+    assert not err.value.retryable and err.value.code == 3
+    assert isinstance(err.value, ExceptionReply)  # older callers' except clauses still match
+
+
+async def test_v1_host_against_a_v2_bridge(bridge: BridgeRig) -> None:
+    """A host configured for v1 framing (bridges in the field) gets v1 answers."""
+    old = SerialAccelerometer(bridge.server.url, bridge.clock, timeout_s=0.3, framing="v1")
+    try:
+        ident = await old.identify()
+        assert (ident.serial, ident.partid, ident.protocol) == ("FAKE-1", None, "v1")
+        acq = await old.acquire(20)
+        np.testing.assert_allclose(acq.mean_g, (0.01, 0.98, 0.0), atol=1 / 256_000)
+    finally:
+        await old.close()
+    with pytest.raises(ValueError, match="framing"):
+        SerialAccelerometer("socket://x:1", bridge.clock, framing="v3")  # type: ignore[arg-type]
 
 
 async def test_faults_recovered_or_reported(bridge: BridgeRig) -> None:
@@ -174,3 +199,24 @@ async def test_cancelled_capture_leaves_driver_usable(bridge: BridgeRig) -> None
     bridge.device.faults.p_no_reply = 0.0
     bridge.sensor.timeout_s = 0.5
     assert (await bridge.sensor.identify()).model == "ADXL355"
+
+
+async def test_noise_without_newline_does_not_kill_the_simulated_bridge(
+        bridge: BridgeRig) -> None:
+    reader, writer = await asyncio.open_connection(bridge.server.host, bridge.server.port)
+    try:
+        writer.write(b"\x80" * 70_000 + b"\n" + encode_frame("ID"))
+        await writer.drain()
+        first = await asyncio.wait_for(reader.readline(), 2.0)
+        assert decode_frame(first)[:2] == ["ERR", "2"]
+        assert decode_frame(await asyncio.wait_for(reader.readline(), 2.0))[0] == "ID"
+    finally:
+        writer.close()
+
+
+async def test_binding_a_serial_on_the_simulated_fixture(bridge: BridgeRig) -> None:
+    assert (await bridge.sensor.identify()).serial == "FAKE-1"
+    assert await bridge.sensor.bind_serial("SN-K9") == "SN-K9"
+    assert (await bridge.sensor.identify()).serial == "SN-K9"
+    with pytest.raises(ValueOutOfRange):
+        await bridge.sensor.bind_serial("")

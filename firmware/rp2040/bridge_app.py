@@ -1,0 +1,177 @@
+# soakcal sensor bridge application: framed commands in, ADXL355 samples out.
+#
+# Protocol v2 (docs/sensor-bridge.md): ID, CFG, AVG, RAW, SN; replies in the
+# framing the command came in (v2 CRC-16, or v1 XOR for hosts not yet updated).
+# Averages are computed in exact integer arithmetic: the RP2040 port of
+# MicroPython has single-precision floats only, which would round a mean of
+# 256000 counts to 1/64 count; integers are exact and identical under CPython.
+# MicroPython-safe: no typing, no f-strings, no math.isqrt, no int.bit_length.
+
+import adxl355_spi as adx
+import bridge_proto as proto
+
+FIRMWARE = "soakcal-fw-2.0"
+MODEL = "ADXL355"
+MAX_SAMPLES = 100000
+LSB_PER_G = {2: 256000, 4: 128000, 8: 64000}
+COUNT_MAX = (1 << 19) - 1
+POLL_US = 100  # DATA_RDY polling period
+
+
+class SensorStalled(Exception):
+    pass
+
+
+def fixed(num, den, places):
+    """num / den rounded half away from zero to ``places`` decimals, as text (exact)."""
+    scale = 10 ** places
+    q = (abs(num) * scale * 2 + den) // (2 * den)
+    sign = "-" if (num < 0 and q) else ""
+    if places == 0:
+        return sign + str(q)
+    frac = str(q % scale)
+    return sign + str(q // scale) + "." + "0" * (places - len(frac)) + frac
+
+
+def isqrt(v):
+    """Floor square root of a non-negative integer (Newton)."""
+    if v <= 0:
+        return 0
+    x = v
+    y = (x + 1) // 2
+    while y < x:
+        x = y
+        y = (x + v // x) // 2
+    return x
+
+
+def temp_c_text(code):
+    """12-bit temperature code -> degC text: 25 + (code - 1885) / (-9.05), 2 decimals."""
+    return fixed(211125 - 100 * code, 905, 2)
+
+
+class Bridge:
+    """Command handler; ``sensor`` is an adxl355_spi.ADXL355, ``eeprom`` may be None.
+
+    ``sleep_us`` is the only way this code waits (time.sleep_us on the board, a
+    no-op or a virtual clock in the tests).
+    """
+
+    def __init__(self, sensor, board_uid, eeprom=None, sleep_us=None):
+        self.sensor = sensor
+        self.board_uid = board_uid
+        self.eeprom = eeprom
+        self.sleep_us = sleep_us or (lambda us: None)
+        self.range_g = 2
+        self.odr_hz = 62.5
+        self.range_g, self.odr_hz = sensor.configure(self.range_g, self.odr_hz)
+
+    # --- sample source --------------------------------------------------------------
+    def next_sample(self):
+        """Wait for DATA_RDY (up to 4 sample periods), then read one sample."""
+        polls = int(4 * 1000000 / self.odr_hz / POLL_US) + 10
+        for _ in range(polls):
+            if self.sensor.data_ready():
+                return self.sensor.sample()
+            self.sleep_us(POLL_US)
+        raise SensorStalled()
+
+    # --- commands -------------------------------------------------------------------
+    def handle_line(self, line):
+        """One received line -> list of reply frames (bytes)."""
+        parsed = proto.unframe(line)
+        if parsed is None:
+            return [proto.frame(["ERR", 2, "bad frame or checksum"])]
+        fields, v1 = parsed
+        try:
+            replies = self.replies(fields, v1)
+        except SensorStalled:
+            replies = [["ERR", 5, "sensor not ready (no DATA_RDY)"]]
+        return [proto.frame(r, v1) for r in replies]
+
+    def replies(self, fields, v1=False):
+        cmd = fields[0]
+        if cmd == "ID" and len(fields) == 1:
+            serial = self.eeprom.read_serial() if self.eeprom is not None else ""
+            reply = ["ID", MODEL, serial, FIRMWARE]
+            if not v1:
+                ids = self.sensor.ids()
+                reply.append(self.board_uid)
+                reply.extend([f"{v:02X}" for v in ids])
+            return [reply]
+        if cmd == "CFG" and len(fields) == 3:
+            return [self._cfg(fields[1], fields[2])]
+        if cmd in ("AVG", "RAW") and len(fields) == 2:
+            n = int(fields[1]) if fields[1].isdigit() else 0
+            if not 1 <= n <= MAX_SAMPLES:
+                return [["ERR", 3, "n must be 1.." + str(MAX_SAMPLES)]]
+            return self._avg(n) if cmd == "AVG" else self._raw(n)
+        if cmd == "SN" and len(fields) == 2:
+            if self.eeprom is None:
+                return [["ERR", 4, "no fixture EEPROM"]]
+            if not 1 <= len(fields[1]) <= 24 or " " in fields[1]:
+                return [["ERR", 3, "serial must be 1..24 characters without blanks"]]
+            self.eeprom.write_serial(fields[1])
+            return [["OK", "SN", self.eeprom.read_serial()]]
+        return [["ERR", 1, "unknown command " + cmd]]
+
+    def _cfg(self, range_text, odr_text):
+        try:
+            range_g = int(float(range_text))
+            odr_hz = float(odr_text)
+        except ValueError:
+            return ["ERR", 3, "bad range or ODR"]
+        if range_g not in LSB_PER_G or float(range_text) != range_g or \
+                not 3.9 <= odr_hz <= adx.ODR_MAX_HZ:
+            return ["ERR", 3, "range must be 2 or 4 or 8 g and ODR 3.9..4000 Hz"]
+        self.range_g, self.odr_hz = self.sensor.configure(range_g, odr_hz)
+        return ["OK", "CFG", str(self.range_g), f"{self.odr_hz:g}"]
+
+    def _saturation_limit(self):
+        return min(self.range_g * LSB_PER_G[self.range_g], COUNT_MAX)
+
+    def _avg(self, n):
+        s = [0, 0, 0]
+        ss = [0, 0, 0]
+        t_sum = 0
+        t_min = 4095
+        t_max = 0
+        sat = 0
+        limit = self._saturation_limit()
+        for _ in range(n):
+            xyz, t = self.next_sample()
+            for k in range(3):
+                c = xyz[k]
+                s[k] += c
+                ss[k] += c * c
+                if c >= limit or -c >= limit:
+                    sat = 1
+            t_sum += t
+            t_min = min(t_min, t)
+            t_max = max(t_max, t)
+        means = [fixed(s[k], n, 3) for k in range(3)]
+        sds = []
+        for k in range(3):
+            if n < 2:
+                sds.append("0.000")
+                continue
+            # sample variance (ddof = 1) in counts^2 x 1e6, square-rooted to milli-counts
+            var_micro = (n * ss[k] - s[k] * s[k]) * 1000000 // (n * (n - 1))
+            sds.append(fixed(isqrt(var_micro), 1000, 3))
+        return [["AVG", n] + means + sds + [fixed(t_sum, n, 2), t_min, t_max, sat]]
+
+    def _raw(self, n):
+        out = []
+        for i in range(n):
+            xyz, t = self.next_sample()
+            out.append(["R", i] + [f"{c & 0xFFFFF:05X}" for c in xyz] + [t])
+        out.append(["END", n])
+        return out
+
+    # --- plain streaming mode ---------------------------------------------------------
+    def stream_line(self):
+        """One plain text line per sample: ``x_g,y_g,z_g,temp_c`` (no framing, no checksum)."""
+        xyz, t = self.next_sample()
+        lsb = LSB_PER_G[self.range_g]
+        return (",".join([fixed(c, lsb, 6) for c in xyz]) + "," + temp_c_text(t)
+                + "\r\n").encode()
