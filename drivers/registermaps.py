@@ -35,6 +35,21 @@ CHAMBER_OPTIONAL = ("alarms",)
 TABLE_REQUIRED = ("position_deg", "target_deg", "command", "status")
 TABLE_OPTIONAL = ("faults",)
 
+#: Keys a map file may use; anything else is a typo and refused with its key.
+TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
+            "safe", "identity", "run", "setup", "registers", "axes", "command"}
+REGISTER_KEYS = {"address", "type", "scale", "word_order", "access", "unit", "source", "note",
+                 "bits", "info_bits"}
+SECTION_KEYS = {
+    "defaults": {"word_order"},
+    "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
+    "safe": {"setpoint_c", "angles_deg"},
+    "identity": {"register", "expect"},
+    "run": {"register", "on", "off"},
+    "axes": {"count", "stride"},
+    "command": {"move", "stop"},
+}
+
 #: Older rig configs and scripts name the maps like this; they mean the shipped files.
 ALIASES = {"eurotherm3216": "eurotherm-3216", "watlow_f4t": "watlow-f4t",
            "soakcal_table": "soakcal-table"}
@@ -219,6 +234,17 @@ class _MapReader:
         d = self.doc
         if d.get("schema") != SCHEMA:
             raise self.fail("schema", f"expected \"{SCHEMA}\", got {d.get('schema')!r}")
+        for key in d:
+            if key not in TOP_KEYS:
+                raise self.fail(key, f"unknown key (expected one of {', '.join(sorted(TOP_KEYS))})")
+        for section, allowed in SECTION_KEYS.items():
+            value = d.get(section, {})
+            if not isinstance(value, dict):
+                raise self.fail(section, "expected a table")
+            for key in value:
+                if key not in allowed:
+                    raise self.fail(f"{section}.{key}", "unknown key (expected one of "
+                                    f"{', '.join(sorted(allowed))})")
         kind = d.get("kind")
         if kind not in ("chamber", "turntable"):
             raise self.fail("kind", f"expected \"chamber\" or \"turntable\", got {kind!r}")
@@ -246,6 +272,10 @@ class _MapReader:
         key = f"registers.{reg}"
         if not isinstance(spec, dict):
             raise self.fail(key, "expected a table (address, type, ...)")
+        for extra in spec:
+            if extra not in REGISTER_KEYS:
+                raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
+                                f"{', '.join(sorted(REGISTER_KEYS))})")
         address = spec.get("address")
         if not isinstance(address, int) or isinstance(address, bool) or not 0 <= address <= 65535:
             raise self.fail(f"{key}.address", f"expected a protocol address 0…65535, got "

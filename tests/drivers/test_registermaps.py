@@ -149,3 +149,16 @@ def test_sim_refuses_a_bad_map_file_with_exit_2(tmp_path: Path,
     assert run_sim(["--chamber-map", str(path), "--duration-s", "0"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "registers.ramp_c_per_min.type" in err
+
+
+def test_a_misspelt_key_is_refused_not_ignored(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD.replace("scale = 10\naccess = \"rw\"",
+                                         "scale = 10\nacess = \"rw\"", 1))
+    with pytest.raises(MapError, match=r"registers\.setpoint_c\.acess: unknown key"):
+        load_map(path)
+    path = _write(tmp_path, GOOD + "[limit]\nrange_c = [-40, 85]\n")
+    with pytest.raises(MapError, match=r": limit: unknown key"):
+        load_map(path)
+    path = _write(tmp_path, GOOD + "[limits]\nrange = [-40, 85]\n")
+    with pytest.raises(MapError, match=r"limits\.range: unknown key"):
+        load_map(path)
