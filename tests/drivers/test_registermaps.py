@@ -162,3 +162,11 @@ def test_a_misspelt_key_is_refused_not_ignored(tmp_path: Path) -> None:
     path = _write(tmp_path, GOOD + "[limits]\nrange = [-40, 85]\n")
     with pytest.raises(MapError, match=r"limits\.range: unknown key"):
         load_map(path)
+
+
+def test_the_documented_example_map_loads(tmp_path: Path) -> None:
+    doc = (Path(__file__).parents[2] / "docs" / "registers.md").read_text()
+    example = doc.split("```toml\n", 1)[1].split("```", 1)[0]
+    m = load_chamber_map(str(_write(tmp_path, example)))
+    assert m.name == "our-chamber" and m.identity is not None and m.run is not None
+    assert m.max_ramp_c_per_min == 3.0 and m.process_c.word_order == "low_first"
