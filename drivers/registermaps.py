@@ -37,7 +37,8 @@ TABLE_OPTIONAL = ("faults",)
 
 #: Keys a map file may use; anything else is a typo and refused with its key.
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
-            "safe", "identity", "run", "setup", "registers", "axes", "command"}
+            "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
+CHECK_KEYS = {"register", "expect", "what", "fix"}
 REGISTER_KEYS = {"address", "type", "scale", "word_order", "access", "unit", "source", "note",
                  "bits", "info_bits"}
 SECTION_KEYS = {
@@ -106,6 +107,17 @@ class Identity:
 
 
 @dataclass(frozen=True)
+class RegisterCheck:
+    """A register ``rig check`` reads and compares (e.g. the F4T's display units = °C)."""
+
+    register: str
+    field: Field
+    expect: float
+    what: str  # what a pass means, e.g. "temperature units are °C"
+    fix: str = ""
+
+
+@dataclass(frozen=True)
 class ChamberMap:
     """Where a chamber controller keeps PV, SP, WSP, ramp rate, run/stop and alarms."""
 
@@ -123,6 +135,7 @@ class ChamberMap:
     identity: Identity | None = None
     # Written once before the first ramp-rate write (e.g. the F4T's ramp action and scale).
     setup: tuple[tuple[Field, float], ...] = ()
+    checks: tuple[RegisterCheck, ...] = ()
     registers: dict[str, Field] = field(default_factory=dict)  # every named register
     range_c: tuple[float, float] = (-70.0, 180.0)
     max_ramp_c_per_min: float | None = None
@@ -158,6 +171,7 @@ class TurntableMap:
     in_position_bit: int = 0
     moving_bit: int = 1
     identity: Identity | None = None
+    checks: tuple[RegisterCheck, ...] = ()
     registers: dict[str, Field] = field(default_factory=dict)
     range_deg: float = 720.0  # |target| the table accepts
     safe_angles_deg: tuple[float, ...] = ()
@@ -346,7 +360,29 @@ class _MapReader:
             raise self.fail("identity.expect", "expected the number the register reads")
         return Identity(str(ident["register"]), f, float(expect))
 
-    def common(self) -> dict[str, Any]:
+    def checks(self, regs: dict[str, Field]) -> tuple[RegisterCheck, ...]:
+        raw = self.doc.get("checks", [])
+        if not isinstance(raw, list):
+            raise self.fail("checks", "expected a list of {register, expect, what, fix}")
+        out = []
+        for i, c in enumerate(raw):
+            key = f"checks[{i}]"
+            if not isinstance(c, dict):
+                raise self.fail(key, "expected {register, expect, what, fix}")
+            for extra in c:
+                if extra not in CHECK_KEYS:
+                    raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
+                                    f"{', '.join(sorted(CHECK_KEYS))})")
+            f = self.ref(regs, f"{key}.register", c.get("register"))
+            expect = self.number(f"{key}.expect", c.get("expect"), None)
+            if expect is None:
+                raise self.fail(f"{key}.expect", "missing")
+            what = c.get("what", f"{c['register']} = {expect:g}")
+            out.append(RegisterCheck(str(c["register"]), f, expect, str(what),
+                                     str(c.get("fix", ""))))
+        return tuple(out)
+
+    def common(self, regs: dict[str, Field]) -> dict[str, Any]:
         d = self.doc
         notes = d.get("undocumented", [])
         if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
@@ -355,7 +391,8 @@ class _MapReader:
         if not isinstance(gap, int) or gap < 0:
             raise self.fail("limits.block_read_max_gap", "expected an integer ≥ 0")
         return {"title": str(d.get("title", "")), "source": str(self.path),
-                "undocumented": tuple(notes), "block_read_max_gap": gap}
+                "undocumented": tuple(notes), "block_read_max_gap": gap,
+                "checks": self.checks(regs), "identity": self.identity(regs), "registers": regs}
 
     def number(self, key: str, value: Any, default: float | None) -> float | None:
         if value is None:
@@ -410,13 +447,11 @@ class _MapReader:
             alarms=alarms,
             alarm_bits=self.bits("registers.alarms.bits", raw_alarms.get("bits")),
             info_bits=self.bits("registers.alarms.info_bits", raw_alarms.get("info_bits")),
-            identity=self.identity(regs),
             setup=tuple(setup),
-            registers=regs,
             range_c=(float(rng[0]), float(rng[1])),
             max_ramp_c_per_min=max_ramp,
             safe_setpoint_c=safe,
-            **self.common(),
+            **self.common(regs),
         )
 
     def turntable(self, name: str, regs: dict[str, Field]) -> TurntableMap:
@@ -445,7 +480,7 @@ class _MapReader:
         if not isinstance(safe, list) or len(safe) != n_axes:
             raise self.fail("safe.angles_deg", f"expected {n_axes} angles")
         faults_raw = d["registers"].get("faults", {})
-        common = self.common()
+        common = self.common(regs)
         common["block_read_max_gap"] = d.get("limits", {}).get("block_read_max_gap", 8)
         return TurntableMap(
             name=name, n_axes=n_axes,
@@ -455,7 +490,6 @@ class _MapReader:
             fault_bits=self.bits("registers.faults.bits", faults_raw.get("bits")),
             move_value=move, stop_value=stop,
             in_position_bit=by_name["in_position"], moving_bit=by_name["moving"],
-            identity=self.identity(regs), registers=regs,
             range_deg=float(rng or 720.0),
             safe_angles_deg=tuple(float(a) for a in safe),
             **common,

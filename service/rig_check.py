@@ -99,8 +99,9 @@ async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
         value = await driver.read_status()  # still proves the device answers
         del value
         rec.add(device, "connect", "pass", f"answers at {driver.link.url}")
-        return rec.add(device, "identity", "skip",
-                       f"map {regmap.name} has no identity register (none documented)")
+        rec.add(device, "identity", "skip",
+                f"map {regmap.name} has no identity register (none documented)")
+        return await _map_checks(rec, device, driver)
     got = await driver.read_identity()
     rec.add(device, "connect", "pass", f"answers at {driver.link.url}")
     if got != ident.expect:
@@ -109,8 +110,26 @@ async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
             f"register {ident.register} reads {got:g}, map {regmap.name} expects "
             f"{ident.expect:g}",
             "another device answers at this URL/unit id, or the rig names the wrong map")
-    return rec.add(device, "identity", "pass",
-                   f"register {ident.register} = {got:g} as map {regmap.name} expects")
+    rec.add(device, "identity", "pass",
+            f"register {ident.register} = {got:g} as map {regmap.name} expects")
+    return await _map_checks(rec, device, driver)
+
+
+async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
+    """The map's own ``[[checks]]``: registers that must read a given value.
+
+    A wrong setting (say °F display units) is reported, and the device's
+    remaining checks still run: it is the right device, set up wrongly.
+    """
+    for c in driver.regmap.checks:
+        got = await driver.link.read_field(c.field)
+        if got != c.expect:
+            rec.add(device, f"register:{c.register}", "fail",
+                    f"{c.register} reads {got:g}, map {driver.regmap.name} expects "
+                    f"{c.expect:g} ({c.what})", c.fix or "set it on the controller")
+        else:
+            rec.add(device, f"register:{c.register}", "pass", c.what)
+    return True
 
 
 async def _check_chamber(rec: _Recorder, chamber: Any, move: bool,

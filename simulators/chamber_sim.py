@@ -134,10 +134,12 @@ class ChamberRegisterImage:
         role_fields = {id(f) for f in (m.process_c, m.setpoint_c, m.working_setpoint_c,
                                        m.ramp_c_per_min, m.run, m.alarms) if f is not None}
         self._stored: dict[int, tuple[Field, list[int]]] = {}
+        # A well-set-up controller: registers the map checks read what the map expects.
+        checked = {id(c.field): c.expect for c in m.checks}
         for f in m.registers.values():
             if id(f) not in role_fields:
                 value = self._identity if m.identity is not None and f is m.identity.field \
-                    else 0.0
+                    else checked.get(id(f), 0.0)
                 self._stored[f.address] = (f, f.encode(value or 0.0))
 
     def _alarm_word(self) -> int:

@@ -115,6 +115,9 @@ class TurntableRegisterImage:
             value = ident.expect if identity_value is None else identity_value
             self._identity_words = {ident.field.address + k: w
                                     for k, w in enumerate(ident.field.encode(value))}
+        for check in regmap.checks:  # registers the map checks read what it expects
+            self._identity_words.update({check.field.address + k: w for k, w in
+                                         enumerate(check.field.encode(check.expect))})
         m = regmap
         self._targets: list[float] = [0.0] * physics.n_axes
         self._target_addrs = {

@@ -170,3 +170,11 @@ def test_the_documented_example_map_loads(tmp_path: Path) -> None:
     m = load_chamber_map(str(_write(tmp_path, example)))
     assert m.name == "our-chamber" and m.identity is not None and m.run is not None
     assert m.max_ramp_c_per_min == 3.0 and m.process_c.word_order == "low_first"
+
+
+def test_map_checks_load_and_refer_to_registers(tmp_path: Path) -> None:
+    checks = {c.register: c.expect for c in CHAMBER_MAPS["watlow-f4t"].checks}
+    assert checks == {"device_status": 138.0, "display_units": 15.0}
+    path = _write(tmp_path, GOOD + "[[checks]]\nregister = \"units\"\nexpect = 15\n")
+    with pytest.raises(MapError, match=r"checks\[0\]\.register: names no register"):
+        load_map(path)

@@ -156,3 +156,20 @@ async def test_sensor_serial_named_in_the_rig_must_be_connected() -> None:
         checks = await check_rig(cfg, clock=clock)
     bad = _by(checks, "sensor", "identity")
     assert bad.status == "fail" and "SN-K9" in bad.detail and "SN-0001" in bad.detail
+
+
+async def test_a_map_check_register_set_wrongly_fails_naming_both_values() -> None:
+    from drivers.modbus_link import ModbusLink
+
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t") as sim:
+        link = ModbusLink(sim.chamber_url, clock)
+        # The F4T left at its factory default display units, °F (30).
+        await link.write_field(CHAMBER_MAPS["watlow-f4t"].registers["display_units"], 30)
+        await link.close()
+        checks = await check_rig(_config(sim, "watlow-f4t"), clock=clock)
+    bad = _by(checks, "chamber", "register:display_units")
+    assert bad.status == "fail" and "reads 30" in bad.detail and "expects 15" in bad.detail
+    assert "C (15)" in bad.fix
+    assert _by(checks, "chamber", "register:device_status").status == "pass"
+    assert _by(checks, "chamber", "status").status == "pass"  # the rest still ran
