@@ -211,7 +211,11 @@ async def _check_table(rec: _Recorder, table: Any, move: bool, clock: Clock) -> 
         return
 
     async def one_move() -> bool:
-        start = tuple((await table.read_status()).angles_deg)
+        st0 = await table.read_status()
+        if st0.moving:  # someone else commands the table: moving it now would fight them
+            return rec.add("turntable", "table_move", "fail", "the table is moving already",
+                           "wait until nothing else commands the table, then check again")
+        start = tuple(st0.angles_deg)
         limit = getattr(getattr(table, "regmap", None), "range_deg", 720.0)
         step = TABLE_STEP_DEG if start[0] + TABLE_STEP_DEG <= limit else -TABLE_STEP_DEG
         target = (start[0] + step, *start[1:])
@@ -303,24 +307,31 @@ def add_parser(sub: Any) -> None:
 
 
 def run_check_cli(args: argparse.Namespace) -> int:
-    from sqlalchemy import select
+    from sqlalchemy import make_url, select
+    from sqlalchemy.exc import SQLAlchemyError
 
     from service.config import resolve_database_url
     from service.db.models import Rig
     from service.db.session import make_session_factory, session_scope, upgrade_database
 
     url = resolve_database_url()
-    upgrade_database(url)
-    factory = make_session_factory(url)
     try:
-        with session_scope(factory) as session:
-            row = session.scalar(select(Rig).where(Rig.name == args.name))
-            known = session.scalars(select(Rig.name).order_by(Rig.name)).all()
-            rig = None if row is None else {
-                "name": row.name, "chamber": row.chamber or {},
-                "turntable": row.turntable or {}, "sensors": row.sensors or []}
-    finally:
-        factory.kw["bind"].dispose()
+        upgrade_database(url)
+        factory = make_session_factory(url)
+        try:
+            with session_scope(factory) as session:
+                row = session.scalar(select(Rig).where(Rig.name == args.name))
+                known = session.scalars(select(Rig.name).order_by(Rig.name)).all()
+                rig = None if row is None else {
+                    "name": row.name, "chamber": row.chamber or {},
+                    "turntable": row.turntable or {}, "sensors": row.sensors or []}
+        finally:
+            factory.kw["bind"].dispose()
+    except SQLAlchemyError as exc:
+        where = make_url(url).render_as_string(hide_password=True)
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"soakcal rig check: cannot read rigs from {where}: {first}", file=sys.stderr)
+        return 1
     if rig is None:
         print(f"soakcal rig check: no rig named {args.name!r} (known: "
               f"{', '.join(known) or 'none'})", file=sys.stderr)

@@ -173,3 +173,12 @@ async def test_a_map_check_register_set_wrongly_fails_naming_both_values() -> No
     assert "C (15)" in bad.fix
     assert _by(checks, "chamber", "register:device_status").status == "pass"
     assert _by(checks, "chamber", "status").status == "pass"  # the rest still ran
+
+
+async def test_a_table_moving_already_is_not_moved() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        sim.table.move_to((90.0, 0.0, 0.0))  # someone else's move, 4.5 s long
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    bad = _by(checks, "turntable", "table_move")
+    assert bad.status == "fail" and "moving already" in bad.detail
