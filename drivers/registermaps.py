@@ -331,6 +331,20 @@ class _MapReader:
             if reg not in regs:
                 raise self.fail(f"registers.{reg}", f"missing (required in a {kind} map)")
 
+    def writable(self, regs: dict[str, Field], names: tuple[str, ...]) -> None:
+        """Registers the driver writes must say so: a read-only one is a wrong map."""
+        for reg in names:
+            if "w" not in regs[reg].access:
+                raise self.fail(f"registers.{reg}.access",
+                                f"the driver writes this register: expected \"rw\" or \"w\", "
+                                f"got {regs[reg].access!r}")
+
+    def bit_word(self, regs: dict[str, Field], names: tuple[str, ...]) -> None:
+        for reg in names:
+            if reg in regs and regs[reg].encoding not in ("uint16", "int16"):
+                raise self.fail(f"registers.{reg}.type",
+                                f"a bit word is one 16-bit register, got {regs[reg].encoding!r}")
+
     def ref(self, regs: dict[str, Field], key: str, reg: Any) -> Field:
         if not isinstance(reg, str) or reg not in regs:
             raise self.fail(key, f"names no register in [registers] ({reg!r})")
@@ -405,6 +419,8 @@ class _MapReader:
     # --- kinds ---------------------------------------------------------------------
     def chamber(self, name: str, regs: dict[str, Field]) -> ChamberMap:
         self.require(regs, CHAMBER_REQUIRED, "chamber")
+        self.writable(regs, ("setpoint_c", "ramp_c_per_min"))
+        self.bit_word(regs, ("alarms",))
         d = self.doc
         limits = d.get("limits", {})
         rng = limits.get("range_c", [-70.0, 180.0])
@@ -423,6 +439,7 @@ class _MapReader:
             if not isinstance(run, dict):
                 raise self.fail("run", "expected a table (register, on, off)")
             run_field = self.ref(regs, "run.register", run.get("register"))
+            self.writable(regs, (str(run["register"]),))
             on, off = run.get("on", 1), run.get("off", 0)
             if not all(isinstance(v, int) and 0 <= v <= 0xFFFF for v in (on, off)) or on == off:
                 raise self.fail("run.on", "expected two different register values 0…65535")
@@ -433,6 +450,7 @@ class _MapReader:
             if not isinstance(step, dict):
                 raise self.fail(f"setup[{i}]", "expected {register, value}")
             f = self.ref(regs, f"setup[{i}].register", step.get("register"))
+            self.writable(regs, (str(step["register"]),))
             val = self.number(f"setup[{i}].value", step.get("value"), None)
             if val is None:
                 raise self.fail(f"setup[{i}].value", "missing")
@@ -456,6 +474,8 @@ class _MapReader:
 
     def turntable(self, name: str, regs: dict[str, Field]) -> TurntableMap:
         self.require(regs, TABLE_REQUIRED, "turntable")
+        self.writable(regs, ("target_deg", "command"))
+        self.bit_word(regs, ("status", "faults"))
         d = self.doc
         axes = d.get("axes", {})
         n_axes, stride = axes.get("count", 3), axes.get("stride", 2)

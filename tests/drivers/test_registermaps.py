@@ -178,3 +178,13 @@ def test_map_checks_load_and_refer_to_registers(tmp_path: Path) -> None:
     path = _write(tmp_path, GOOD + "[[checks]]\nregister = \"units\"\nexpect = 15\n")
     with pytest.raises(MapError, match=r"checks\[0\]\.register: names no register"):
         load_map(path)
+
+
+def test_a_register_the_driver_writes_must_be_writable(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD.replace('scale = 10\naccess = "rw"\n[registers.working',
+                                         'scale = 10\naccess = "r"\n[registers.working', 1))
+    with pytest.raises(MapError, match=r"registers\.setpoint_c\.access: the driver writes"):
+        load_map(path)
+    path = _write(tmp_path, GOOD + "[registers.alarms]\naddress = 74\ntype = \"float32\"\n")
+    with pytest.raises(MapError, match=r"registers\.alarms\.type: a bit word"):
+        load_map(path)
