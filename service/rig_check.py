@@ -32,6 +32,9 @@ MOVE_TIMEOUT_S = 120.0  # rig time for one table move to report in-position
 G_BAND = (0.9, 1.1)  # |mean specific force| of a static sensor, g
 SENSOR_SAMPLES = 16
 EXPECTED_MODEL = "ADXL355"
+#: ADXL355 identification registers 0x00-0x02 (datasheet): what a bridge reporting
+#: part ids must read. Bridges whose ID reply carries no part ids are not judged on them.
+ADXL355_IDS = {"devid_ad": 0xAD, "devid_mst": 0x1D, "partid": 0xED}
 
 
 @dataclass(frozen=True)
@@ -264,6 +267,17 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any]) -> None
             return rec.add("sensor", "identity", "fail",
                            f"{detail}: model {ident.model}, expected {EXPECTED_MODEL}",
                            "another device answers on this port")
+        reported = {k: getattr(ident, k, None) for k in ADXL355_IDS}
+        wrong = [f"{k} 0x{v:02X} (expected 0x{ADXL355_IDS[k]:02X})"
+                 for k, v in reported.items() if v is not None and v != ADXL355_IDS[k]]
+        if wrong:
+            return rec.add("sensor", "identity", "fail", f"{detail}: " + ", ".join(wrong),
+                           "the part behind the bridge is not an ADXL355, or its SPI "
+                           "wiring is wrong")
+        if all(v is not None for v in reported.values()):
+            detail += ", part ids " + " ".join(f"0x{v:02X}" for v in reported.values())
+        else:
+            detail += " (the bridge reports no part ids)"
         if expected_serial and ident.serial != expected_serial:
             return rec.add("sensor", "identity", "fail",
                            f"serial {ident.serial} connected, rig config names "

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from drivers.clock import VirtualClock
+from drivers.protocols import Acquisition
 from drivers.registermaps import CHAMBER_MAPS
 from service.rig_check import Check, check_rig, format_report, passed
 from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
@@ -182,3 +183,43 @@ async def test_a_table_moving_already_is_not_moved() -> None:
         checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
     bad = _by(checks, "turntable", "table_move")
     assert bad.status == "fail" and "moving already" in bad.detail
+
+
+async def test_sensor_part_ids_are_compared_when_the_bridge_reports_them() -> None:
+    from dataclasses import dataclass
+
+    from service.rig_check import _check_sensor, _Recorder
+
+    @dataclass
+    class Ident:
+        model: str = "ADXL355"
+        serial: str = "SN-1"
+        firmware: str = "fw"
+        devid_ad: int | None = 0xAD
+        devid_mst: int | None = 0x1D
+        partid: int | None = 0xED
+
+    class Accel:
+        def __init__(self, ident: Ident) -> None:
+            self.ident = ident
+
+        async def identify(self) -> Ident:
+            return self.ident
+
+        async def acquire(self, n: int) -> Acquisition:
+            return Acquisition((0.0, 0.0, 1.0), (1e-4,) * 3, n, 23.0, 0.0, False, 0.1)
+
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(Ident(partid=0xEC)), {"sensors": [{}]})
+    bad = _by(rec.checks, "sensor", "identity")
+    assert bad.status == "fail" and "0xEC" in bad.detail and "0xED" in bad.detail
+    assert not any(c.check == "acquire" for c in rec.checks)  # a wrong part is not sampled
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(Ident()), {"sensors": [{}]})
+    good = _by(rec.checks, "sensor", "identity")
+    assert good.status == "pass" and "part ids 0xAD 0x1D 0xED" in good.detail
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(Ident(devid_ad=None, devid_mst=None, partid=None)),
+                        {"sensors": [{}]})
+    assert "reports no part ids" in _by(rec.checks, "sensor", "identity").detail
+    assert passed(rec.checks)
