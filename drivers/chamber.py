@@ -14,6 +14,7 @@ class ModbusChamber:
     def __init__(self, link: ModbusLink, regmap: ChamberMap) -> None:
         self.link = link
         self.regmap = regmap
+        self._setup_done = False
 
     @property
     def range_c(self) -> tuple[float, float]:
@@ -21,21 +22,47 @@ class ModbusChamber:
 
     async def read_status(self) -> ChamberStatus:
         m = self.regmap
-        pv, sp, wsp, ramp, run, alarm_word = await self.link.read_fields(
-            m.fields(), m.block_read_max_gap)
-        alarms = int(alarm_word)
+        values = await self.link.read_fields(m.fields(), m.block_read_max_gap)
+        pv, sp, wsp, ramp = values[:4]
+        rest = values[4:]
+        # A map without a run register describes a controller that controls whenever powered.
+        running = True
+        if m.run is not None:
+            running = int(rest.pop(0)) == m.run_on
+        alarms: tuple[str, ...] = ()
+        if m.alarms is not None:
+            word = int(rest.pop(0))
+            # Only the bits the map names as alarms count; informative bits are not faults.
+            mask = sum(1 << b for b in m.alarm_bits) if m.alarm_bits else 0xFFFF
+            alarms = bits_to_names(word & mask & ~sum(1 << b for b in m.info_bits),
+                                   m.alarm_bits)
         return ChamberStatus(
             process_c=pv,
             setpoint_c=sp,
             working_setpoint_c=wsp,
             ramp_c_per_min=ramp,
-            running=bool(run),
-            alarms=bits_to_names(alarms, m.alarm_bits),
+            running=running,
+            alarms=alarms,
         )
 
     async def read_process_c(self) -> float:
         """Only the air temperature (PV), °C: one register read."""
         return await self.link.read_field(self.regmap.process_c)
+
+    async def read_identity(self) -> float | None:
+        """The map's identity register (``None`` when the map has none)."""
+        ident = self.regmap.identity
+        if ident is None:
+            return None
+        return await self.link.read_field(ident.field)
+
+    async def read_info_bits(self) -> tuple[str, ...]:
+        """Informative status bits the map names (manual mode, ramp running, ...)."""
+        m = self.regmap
+        if m.alarms is None or not m.info_bits:
+            return ()
+        word = int(await self.link.read_field(m.alarms))
+        return tuple(n for b, n in sorted(m.info_bits.items()) if word >> b & 1)
 
     async def set_setpoint(self, setpoint_c: float) -> None:
         lo, hi = self.range_c
@@ -47,14 +74,29 @@ class ModbusChamber:
     async def set_ramp_rate(self, ramp_c_per_min: float) -> None:
         if ramp_c_per_min < 0:
             raise ValueOutOfRange(self.link.device, f"ramp rate {ramp_c_per_min} °C/min < 0")
+        limit = self.regmap.max_ramp_c_per_min
+        if limit is not None and ramp_c_per_min > limit:
+            raise ValueOutOfRange(self.link.device,
+                                  f"ramp rate {ramp_c_per_min} °C/min > the map's {limit} °C/min")
+        await self._setup()
         await self.link.write_field(self.regmap.ramp_c_per_min, ramp_c_per_min)
 
     async def run(self) -> None:
-        await self.link.write_field(self.regmap.run, 1)
+        if self.regmap.run is not None:
+            await self.link.write_field(self.regmap.run, self.regmap.run_on)
 
     async def stop(self) -> None:
-        await self.link.write_field(self.regmap.run, 0)
+        if self.regmap.run is not None:
+            await self.link.write_field(self.regmap.run, self.regmap.run_off)
 
     async def close(self) -> None:
         """Release the connection (the controller keeps running its last command)."""
         await self.link.close()
+
+    async def _setup(self) -> None:
+        """The map's one-time writes (e.g. the F4T's ramp action and scale), once per driver."""
+        if self._setup_done:
+            return
+        for f, value in self.regmap.setup:
+            await self.link.write_field(f, value)
+        self._setup_done = True

@@ -1,18 +1,63 @@
-"""Register maps as data: one table per controller model, no per-model code paths.
+"""Register maps as data: TOML files, loaded and validated here, no per-model code paths.
 
-A :class:`Field` says where a quantity lives and how it is encoded; the
-drivers (``drivers.chamber``, ``drivers.turntable``) and the simulators' Modbus
-servers read the same tables, so a map is written once. See docs/registers.md.
+A lab adds a controller by writing a map file (format: docs/registers.md),
+never Python. The shipped files live in ``drivers/maps/``; a rig config names
+one (``map = "eurotherm-3216"``) or gives a path. The drivers
+(``drivers.chamber``, ``drivers.turntable``) and the twin's Modbus servers
+(``simulators.chamber_sim``, ``simulators.turntable_sim``) read the same
+:class:`ChamberMap` / :class:`TurntableMap`, so a map is written once.
+
+TOML through the standard library's ``tomllib``: no dependency, comments for
+the citations every register carries, and its parser already refuses a key
+written twice (a duplicated register) with line and column.
 """
 
 from __future__ import annotations
 
+import math
+import struct
+import tomllib
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
+from typing import Any, Literal
 
 from drivers import codec
 
-Encoding = Literal["int16", "uint16", "float32"]
+Encoding = Literal["int16", "uint16", "int32", "float32"]
+ENCODINGS: tuple[str, ...] = ("int16", "uint16", "int32", "float32")
+ACCESS = ("r", "w", "rw")
+SCHEMA = "soakcal-register-map/1"
+MAPS_DIR = Path(__file__).with_name("maps")
+
+#: Names the drivers give meaning to; any other register name is free (identity, setup, ...).
+CHAMBER_REQUIRED = ("process_c", "setpoint_c", "working_setpoint_c", "ramp_c_per_min")
+CHAMBER_OPTIONAL = ("alarms",)
+TABLE_REQUIRED = ("position_deg", "target_deg", "command", "status")
+TABLE_OPTIONAL = ("faults",)
+
+#: Keys a map file may use; anything else is a typo and refused with its key.
+TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
+            "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
+CHECK_KEYS = {"register", "expect", "what", "fix"}
+REGISTER_KEYS = {"address", "type", "scale", "word_order", "access", "unit", "source", "note",
+                 "bits", "info_bits"}
+SECTION_KEYS = {
+    "defaults": {"word_order"},
+    "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
+    "safe": {"setpoint_c", "angles_deg"},
+    "identity": {"register", "expect"},
+    "run": {"register", "on", "off"},
+    "axes": {"count", "stride"},
+    "command": {"move", "stop"},
+}
+
+#: Older rig configs and scripts name the maps like this; they mean the shipped files.
+ALIASES = {"eurotherm3216": "eurotherm-3216", "watlow_f4t": "watlow-f4t",
+           "soakcal_table": "soakcal-table"}
+
+
+class MapError(ValueError):
+    """A map file the drivers cannot use; the message names the file and the key."""
 
 
 @dataclass(frozen=True)
@@ -21,23 +66,55 @@ class Field:
 
     address: int
     encoding: Encoding = "int16"
-    scale: float = 1.0  # counts per engineering unit (int16/uint16 only)
-    word_order: codec.WordOrder = "high_first"  # float32 only
+    scale: float = 1.0  # counts per engineering unit (integer encodings only)
+    word_order: codec.WordOrder = "high_first"  # 32-bit encodings only
+    access: str = "rw"
 
     @property
     def n_registers(self) -> int:
-        return 2 if self.encoding == "float32" else 1
+        return 2 if self.encoding in ("int32", "float32") else 1
 
     def decode(self, words: list[int] | tuple[int, ...]) -> float:
         if self.encoding == "float32":
             return codec.decode_float32(words, self.word_order)
+        if self.encoding == "int32":
+            hi, lo = (words[0], words[1]) if self.word_order == "high_first" else (
+                words[1], words[0])
+            raw = struct.unpack(">i", struct.pack(">HH", hi & 0xFFFF, lo & 0xFFFF))[0]
+            return raw / self.scale
         return codec.decode_scaled(words[0], self.scale, signed=self.encoding == "int16")
 
     def encode(self, value: float) -> list[int]:
         """Raises ValueError when the value cannot be represented (the driver maps it)."""
         if self.encoding == "float32":
             return codec.encode_float32(value, self.word_order)
+        if self.encoding == "int32":
+            raw = int(round(value * self.scale))
+            if not -(2**31) <= raw < 2**31:
+                raise ValueError(f"{value} × {self.scale} does not fit a signed 32-bit value")
+            hi, lo = struct.unpack(">HH", struct.pack(">i", raw))
+            return [hi, lo] if self.word_order == "high_first" else [lo, hi]
         return [codec.encode_scaled(value, self.scale, signed=self.encoding == "int16")]
+
+
+@dataclass(frozen=True)
+class Identity:
+    """A register whose value names the model (e.g. the F4T's Hardware ID, 124)."""
+
+    register: str
+    field: Field
+    expect: float
+
+
+@dataclass(frozen=True)
+class RegisterCheck:
+    """A register ``rig check`` reads and compares (e.g. the F4T's display units = °C)."""
+
+    register: str
+    field: Field
+    expect: float
+    what: str  # what a pass means, e.g. "temperature units are °C"
+    fix: str = ""
 
 
 @dataclass(frozen=True)
@@ -49,16 +126,30 @@ class ChamberMap:
     setpoint_c: Field
     working_setpoint_c: Field
     ramp_c_per_min: Field
-    run: Field  # 1 = run, 0 = stop
-    alarms: Field  # bit field, names in ``alarm_bits``
+    run: Field | None = None  # None: the controller controls whenever powered
+    alarms: Field | None = None  # bit field, names in ``alarm_bits``
     alarm_bits: dict[int, str] = field(default_factory=dict)
+    info_bits: dict[int, str] = field(default_factory=dict)  # reported, not alarms
+    run_on: int = 1
+    run_off: int = 0
+    identity: Identity | None = None
+    # Written once before the first ramp-rate write (e.g. the F4T's ramp action and scale).
+    setup: tuple[tuple[Field, float], ...] = ()
+    checks: tuple[RegisterCheck, ...] = ()
+    registers: dict[str, Field] = field(default_factory=dict)  # every named register
     range_c: tuple[float, float] = (-70.0, 180.0)
+    max_ramp_c_per_min: float | None = None
+    safe_setpoint_c: float = 23.0
     # Largest run of undefined registers one read may span (0: read field by field).
     block_read_max_gap: int = 0
+    title: str = ""
+    source: str = ""  # the file the map came from
+    undocumented: tuple[str, ...] = ()
 
     def fields(self) -> list[Field]:
-        return [self.process_c, self.setpoint_c, self.working_setpoint_c, self.ramp_c_per_min,
-                self.run, self.alarms]
+        """The fields one status read covers (optional ones only when mapped)."""
+        out = [self.process_c, self.setpoint_c, self.working_setpoint_c, self.ramp_c_per_min]
+        return out + [f for f in (self.run, self.alarms) if f is not None]
 
 
 @dataclass(frozen=True)
@@ -70,72 +161,387 @@ class TurntableMap:
     position_deg: Field  # axis 0 (outer); readback
     target_deg: Field  # axis 0 (outer); written by move commands
     axis_stride: int
-    command: Field  # write COMMAND_MOVE / COMMAND_STOP
-    status: Field  # bit field, see STATUS_* below
-    faults: Field  # bit field, names in ``fault_bits``
+    command: Field  # write ``move_value`` / ``stop_value``
+    status: Field  # bit field: ``in_position_bit``, ``moving_bit``
+    faults: Field | None = None  # bit field, names in ``fault_bits``
     fault_bits: dict[int, str] = field(default_factory=dict)
     block_read_max_gap: int = 8
+    move_value: int = 1
+    stop_value: int = 0
+    in_position_bit: int = 0
+    moving_bit: int = 1
+    identity: Identity | None = None
+    checks: tuple[RegisterCheck, ...] = ()
+    registers: dict[str, Field] = field(default_factory=dict)
+    range_deg: float = 720.0  # |target| the table accepts
+    safe_angles_deg: tuple[float, ...] = ()
+    title: str = ""
+    source: str = ""
+    undocumented: tuple[str, ...] = ()
 
     def axis_field(self, base: Field, axis: int) -> Field:
         return Field(base.address + axis * self.axis_stride, base.encoding, base.scale,
-                     base.word_order)
+                     base.word_order, base.access)
 
 
-# --- chamber controllers ---------------------------------------------------
+# --- loading ------------------------------------------------------------------
 
-#: Eurotherm 3216 style: one decimal place (×10) signed integers, low addresses.
-EUROTHERM_3216 = ChamberMap(
-    name="eurotherm3216",
-    process_c=Field(1, "int16", 10.0),
-    setpoint_c=Field(2, "int16", 10.0),
-    working_setpoint_c=Field(5, "int16", 10.0),
-    ramp_c_per_min=Field(35, "uint16", 10.0),  # SP rate limit, °C/min × 10
-    run=Field(57, "uint16"),
-    alarms=Field(74, "uint16"),
-    alarm_bits={0: "deviation_high", 1: "deviation_low", 2: "sensor_break"},
-    range_c=(-70.0, 180.0),
-    block_read_max_gap=40,  # parameters 1…80 are all defined on the 3216
-)
 
-#: Watlow F4T style: IEEE-754 floats, low word first, at 4-digit addresses.
-WATLOW_F4T = ChamberMap(
-    name="watlow_f4t",
-    process_c=Field(2820, "float32", word_order="low_first"),
-    setpoint_c=Field(2782, "float32", word_order="low_first"),
-    working_setpoint_c=Field(2800, "float32", word_order="low_first"),
-    ramp_c_per_min=Field(2810, "float32", word_order="low_first"),
-    run=Field(2830, "uint16"),
-    alarms=Field(2840, "uint16"),
-    alarm_bits={0: "deviation_high", 1: "deviation_low", 2: "sensor_break"},
-    range_c=(-70.0, 180.0),
-    block_read_max_gap=20,
-)
+def shipped_maps() -> dict[str, Path]:
+    """Name → file of every map shipped in ``drivers/maps/``."""
+    return {p.stem: p for p in sorted(MAPS_DIR.glob("*.toml"))}
 
-CHAMBER_MAPS: dict[str, ChamberMap] = {m.name: m for m in (EUROTHERM_3216, WATLOW_F4T)}
 
-# --- turntable --------------------------------------------------------------
+def resolve_map(ref: str) -> Path:
+    """A shipped map name (or an old alias) or a path to a ``.toml`` file → its path."""
+    name = ALIASES.get(ref, ref)
+    shipped = shipped_maps()
+    if name in shipped:
+        return shipped[name]
+    path = Path(ref).expanduser()
+    if path.suffix == ".toml" or "/" in ref:
+        if not path.is_file():
+            raise MapError(f"{ref}: no such map file")
+        return path
+    raise MapError(f"map {ref!r}: not a shipped map ({', '.join(shipped)}) nor a .toml path")
 
-COMMAND_STOP = 0
-COMMAND_MOVE = 1
-STATUS_IN_POSITION = 1 << 0
-STATUS_MOVING = 1 << 1
 
-#: soakcal positioner map (documented in docs/registers.md): float32, high word first.
-SOAKCAL_TABLE = TurntableMap(
-    name="soakcal_table",
-    n_axes=3,
-    position_deg=Field(100, "float32", word_order="high_first"),  # 100…105
-    target_deg=Field(200, "float32", word_order="high_first"),  # 200…205
-    axis_stride=2,
-    command=Field(210, "uint16"),
-    status=Field(106, "uint16"),  # right after the positions: one read per poll
-    faults=Field(107, "uint16"),
-    fault_bits={0: "following_error", 1: "encoder_error", 2: "limit_switch"},
-)
+def load_map(ref: str | Path) -> ChamberMap | TurntableMap:
+    """Load and validate a map file; every problem is a :class:`MapError` naming file and key."""
+    path = ref if isinstance(ref, Path) else resolve_map(ref)
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        # tomllib reports a key written twice (a duplicated register) with line and column.
+        raise MapError(f"{path}: {exc}") from exc
+    except OSError as exc:
+        raise MapError(f"{path}: cannot read ({exc.strerror})") from exc
+    return _MapReader(path, doc).build()
 
-TURNTABLE_MAPS: dict[str, TurntableMap] = {SOAKCAL_TABLE.name: SOAKCAL_TABLE}
+
+def load_chamber_map(ref: str | Path) -> ChamberMap:
+    m = load_map(ref)
+    if not isinstance(m, ChamberMap):
+        raise MapError(f"{ref}: kind: expected \"chamber\", the file describes a turntable")
+    return m
+
+
+def load_turntable_map(ref: str | Path) -> TurntableMap:
+    m = load_map(ref)
+    if not isinstance(m, TurntableMap):
+        raise MapError(f"{ref}: kind: expected \"turntable\", the file describes a chamber")
+    return m
+
+
+class _MapReader:
+    """Turns one parsed TOML document into a map, collecting errors with their keys."""
+
+    def __init__(self, path: Path, doc: dict[str, Any]) -> None:
+        self.path = path
+        self.doc = doc
+
+    def fail(self, key: str, problem: str) -> MapError:
+        return MapError(f"{self.path}: {key}: {problem}")
+
+    def build(self) -> ChamberMap | TurntableMap:
+        d = self.doc
+        if d.get("schema") != SCHEMA:
+            raise self.fail("schema", f"expected \"{SCHEMA}\", got {d.get('schema')!r}")
+        for key in d:
+            if key not in TOP_KEYS:
+                raise self.fail(key, f"unknown key (expected one of {', '.join(sorted(TOP_KEYS))})")
+        for section, allowed in SECTION_KEYS.items():
+            value = d.get(section, {})
+            if not isinstance(value, dict):
+                raise self.fail(section, "expected a table")
+            for key in value:
+                if key not in allowed:
+                    raise self.fail(f"{section}.{key}", "unknown key (expected one of "
+                                    f"{', '.join(sorted(allowed))})")
+        kind = d.get("kind")
+        if kind not in ("chamber", "turntable"):
+            raise self.fail("kind", f"expected \"chamber\" or \"turntable\", got {kind!r}")
+        name = d.get("name")
+        if not isinstance(name, str) or not name:
+            raise self.fail("name", "expected a non-empty string")
+        regs = self.registers()
+        if kind == "chamber":
+            return self.chamber(name, regs)
+        return self.turntable(name, regs)
+
+    # --- registers -------------------------------------------------------------
+    def registers(self) -> dict[str, Field]:
+        table = self.doc.get("registers")
+        if not isinstance(table, dict) or not table:
+            raise self.fail("registers", "expected a table of named registers")
+        default_order = self.doc.get("defaults", {}).get("word_order", "high_first")
+        fields: dict[str, Field] = {}
+        for reg, spec in table.items():
+            fields[reg] = self.register(reg, spec, default_order)
+        self.check_overlaps(fields)
+        return fields
+
+    def register(self, reg: str, spec: Any, default_order: str) -> Field:
+        key = f"registers.{reg}"
+        if not isinstance(spec, dict):
+            raise self.fail(key, "expected a table (address, type, ...)")
+        for extra in spec:
+            if extra not in REGISTER_KEYS:
+                raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
+                                f"{', '.join(sorted(REGISTER_KEYS))})")
+        address = spec.get("address")
+        if not isinstance(address, int) or isinstance(address, bool) or not 0 <= address <= 65535:
+            raise self.fail(f"{key}.address", f"expected a protocol address 0…65535, got "
+                            f"{address!r}")
+        enc = spec.get("type")
+        if enc not in ENCODINGS:
+            raise self.fail(f"{key}.type", f"unknown type {enc!r} (expected one of "
+                            f"{', '.join(ENCODINGS)})")
+        scale = spec.get("scale", 1)
+        if not isinstance(scale, int | float) or isinstance(scale, bool) or not scale > 0 \
+                or not math.isfinite(scale):
+            raise self.fail(f"{key}.scale", f"expected counts per unit > 0, got {scale!r}")
+        if enc == "float32" and scale != 1:
+            raise self.fail(f"{key}.scale", "a float32 register carries the value itself")
+        order = spec.get("word_order", default_order)
+        if order not in ("high_first", "low_first"):
+            raise self.fail(f"{key}.word_order",
+                            f"expected \"high_first\" or \"low_first\", got {order!r}")
+        access = spec.get("access", "r")
+        if access not in ACCESS:
+            raise self.fail(f"{key}.access", f"expected one of {', '.join(ACCESS)}, got "
+                            f"{access!r}")
+        if not isinstance(spec.get("source", ""), str):
+            raise self.fail(f"{key}.source", "expected the citation as a string")
+        return Field(address, enc, float(scale), order, access)  # type: ignore[arg-type]
+
+    def check_overlaps(self, fields: dict[str, Field]) -> None:
+        """Two names on one register is a duplicated register too (a copy-paste slip)."""
+        owner: dict[int, str] = {}
+        for reg, f in fields.items():
+            for a in range(f.address, f.address + f.n_registers):
+                if a in owner:
+                    raise self.fail(f"registers.{reg}.address",
+                                    f"register {a} is also registers.{owner[a]}")
+                owner[a] = reg
+
+    def require(self, regs: dict[str, Field], names: tuple[str, ...], kind: str) -> None:
+        for reg in names:
+            if reg not in regs:
+                raise self.fail(f"registers.{reg}", f"missing (required in a {kind} map)")
+
+    def writable(self, regs: dict[str, Field], names: tuple[str, ...]) -> None:
+        """Registers the driver writes must say so: a read-only one is a wrong map."""
+        for reg in names:
+            if "w" not in regs[reg].access:
+                raise self.fail(f"registers.{reg}.access",
+                                f"the driver writes this register: expected \"rw\" or \"w\", "
+                                f"got {regs[reg].access!r}")
+
+    def bit_word(self, regs: dict[str, Field], names: tuple[str, ...]) -> None:
+        for reg in names:
+            if reg in regs and regs[reg].encoding not in ("uint16", "int16"):
+                raise self.fail(f"registers.{reg}.type",
+                                f"a bit word is one 16-bit register, got {regs[reg].encoding!r}")
+
+    def ref(self, regs: dict[str, Field], key: str, reg: Any) -> Field:
+        if not isinstance(reg, str) or reg not in regs:
+            raise self.fail(key, f"names no register in [registers] ({reg!r})")
+        return regs[reg]
+
+    def bits(self, key: str, table: Any) -> dict[int, str]:
+        if table is None:
+            return {}
+        if not isinstance(table, dict):
+            raise self.fail(key, "expected a table bit number = \"name\"")
+        out: dict[int, str] = {}
+        for bit, label in table.items():
+            if not str(bit).isdigit() or not 0 <= int(bit) <= 15 or not isinstance(label, str):
+                raise self.fail(f"{key}.{bit}", "expected bit 0…15 = \"name\"")
+            out[int(bit)] = label
+        return out
+
+    def identity(self, regs: dict[str, Field]) -> Identity | None:
+        ident = self.doc.get("identity")
+        if ident is None:
+            return None
+        if not isinstance(ident, dict):
+            raise self.fail("identity", "expected a table (register, expect)")
+        f = self.ref(regs, "identity.register", ident.get("register"))
+        expect = ident.get("expect")
+        if not isinstance(expect, int | float) or isinstance(expect, bool):
+            raise self.fail("identity.expect", "expected the number the register reads")
+        return Identity(str(ident["register"]), f, float(expect))
+
+    def checks(self, regs: dict[str, Field]) -> tuple[RegisterCheck, ...]:
+        raw = self.doc.get("checks", [])
+        if not isinstance(raw, list):
+            raise self.fail("checks", "expected a list of {register, expect, what, fix}")
+        out = []
+        for i, c in enumerate(raw):
+            key = f"checks[{i}]"
+            if not isinstance(c, dict):
+                raise self.fail(key, "expected {register, expect, what, fix}")
+            for extra in c:
+                if extra not in CHECK_KEYS:
+                    raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
+                                    f"{', '.join(sorted(CHECK_KEYS))})")
+            f = self.ref(regs, f"{key}.register", c.get("register"))
+            expect = self.number(f"{key}.expect", c.get("expect"), None)
+            if expect is None:
+                raise self.fail(f"{key}.expect", "missing")
+            what = c.get("what", f"{c['register']} = {expect:g}")
+            out.append(RegisterCheck(str(c["register"]), f, expect, str(what),
+                                     str(c.get("fix", ""))))
+        return tuple(out)
+
+    def common(self, regs: dict[str, Field]) -> dict[str, Any]:
+        d = self.doc
+        notes = d.get("undocumented", [])
+        if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+            raise self.fail("undocumented", "expected a list of strings")
+        gap = d.get("limits", {}).get("block_read_max_gap", 0)
+        if not isinstance(gap, int) or gap < 0:
+            raise self.fail("limits.block_read_max_gap", "expected an integer ≥ 0")
+        return {"title": str(d.get("title", "")), "source": str(self.path),
+                "undocumented": tuple(notes), "block_read_max_gap": gap,
+                "checks": self.checks(regs), "identity": self.identity(regs), "registers": regs}
+
+    def number(self, key: str, value: Any, default: float | None) -> float | None:
+        if value is None:
+            return default
+        if not isinstance(value, int | float) or isinstance(value, bool) \
+                or not math.isfinite(value):
+            raise self.fail(key, f"expected a number, got {value!r}")
+        return float(value)
+
+    # --- kinds ---------------------------------------------------------------------
+    def chamber(self, name: str, regs: dict[str, Field]) -> ChamberMap:
+        self.require(regs, CHAMBER_REQUIRED, "chamber")
+        self.writable(regs, ("setpoint_c", "ramp_c_per_min"))
+        self.bit_word(regs, ("alarms",))
+        d = self.doc
+        limits = d.get("limits", {})
+        rng = limits.get("range_c", [-70.0, 180.0])
+        if not (isinstance(rng, list) and len(rng) == 2
+                and all(isinstance(v, int | float) for v in rng) and rng[0] < rng[1]):
+            raise self.fail("limits.range_c", "expected [lo, hi] in °C with lo < hi")
+        max_ramp = self.number("limits.max_ramp_c_per_min", limits.get("max_ramp_c_per_min"),
+                               None)
+        safe = self.number("safe.setpoint_c", d.get("safe", {}).get("setpoint_c"), 23.0)
+        assert safe is not None
+        if not rng[0] <= safe <= rng[1]:
+            raise self.fail("safe.setpoint_c", f"{safe} °C outside limits.range_c {rng}")
+        run_field, on, off = None, 1, 0
+        run = d.get("run")
+        if run is not None:
+            if not isinstance(run, dict):
+                raise self.fail("run", "expected a table (register, on, off)")
+            run_field = self.ref(regs, "run.register", run.get("register"))
+            self.writable(regs, (str(run["register"]),))
+            on, off = run.get("on", 1), run.get("off", 0)
+            if not all(isinstance(v, int) and 0 <= v <= 0xFFFF for v in (on, off)) or on == off:
+                raise self.fail("run.on", "expected two different register values 0…65535")
+        alarms = regs.get("alarms")
+        raw_alarms = d["registers"].get("alarms", {})
+        setup: list[tuple[Field, float]] = []
+        for i, step in enumerate(d.get("setup", [])):
+            if not isinstance(step, dict):
+                raise self.fail(f"setup[{i}]", "expected {register, value}")
+            f = self.ref(regs, f"setup[{i}].register", step.get("register"))
+            self.writable(regs, (str(step["register"]),))
+            val = self.number(f"setup[{i}].value", step.get("value"), None)
+            if val is None:
+                raise self.fail(f"setup[{i}].value", "missing")
+            setup.append((f, val))
+        return ChamberMap(
+            name=name,
+            process_c=regs["process_c"],
+            setpoint_c=regs["setpoint_c"],
+            working_setpoint_c=regs["working_setpoint_c"],
+            ramp_c_per_min=regs["ramp_c_per_min"],
+            run=run_field, run_on=on, run_off=off,
+            alarms=alarms,
+            alarm_bits=self.bits("registers.alarms.bits", raw_alarms.get("bits")),
+            info_bits=self.bits("registers.alarms.info_bits", raw_alarms.get("info_bits")),
+            setup=tuple(setup),
+            range_c=(float(rng[0]), float(rng[1])),
+            max_ramp_c_per_min=max_ramp,
+            safe_setpoint_c=safe,
+            **self.common(regs),
+        )
+
+    def turntable(self, name: str, regs: dict[str, Field]) -> TurntableMap:
+        self.require(regs, TABLE_REQUIRED, "turntable")
+        self.writable(regs, ("target_deg", "command"))
+        self.bit_word(regs, ("status", "faults"))
+        d = self.doc
+        axes = d.get("axes", {})
+        n_axes, stride = axes.get("count", 3), axes.get("stride", 2)
+        if n_axes not in (1, 2, 3):
+            raise self.fail("axes.count", f"expected 1, 2 or 3, got {n_axes!r}")
+        if not isinstance(stride, int) or stride < regs["position_deg"].n_registers:
+            raise self.fail("axes.stride", "expected registers per axis ≥ the field's width")
+        cmd = d.get("command", {})
+        move, stop = cmd.get("move", 1), cmd.get("stop", 0)
+        if not all(isinstance(v, int) and 0 <= v <= 0xFFFF for v in (move, stop)) \
+                or move == stop:
+            raise self.fail("command.move", "expected two different register values 0…65535")
+        status = d.get("registers", {}).get("status", {})
+        bits = self.bits("registers.status.bits", status.get("bits"))
+        by_name = {v: k for k, v in bits.items()}
+        for needed in ("in_position", "moving"):
+            if needed not in by_name:
+                raise self.fail("registers.status.bits", f"missing the \"{needed}\" bit")
+        limits = d.get("limits", {})
+        rng = self.number("limits.range_deg", limits.get("range_deg"), 720.0)
+        safe = d.get("safe", {}).get("angles_deg", [0.0] * n_axes)
+        if not isinstance(safe, list) or len(safe) != n_axes:
+            raise self.fail("safe.angles_deg", f"expected {n_axes} angles")
+        faults_raw = d["registers"].get("faults", {})
+        common = self.common(regs)
+        common["block_read_max_gap"] = d.get("limits", {}).get("block_read_max_gap", 8)
+        return TurntableMap(
+            name=name, n_axes=n_axes,
+            position_deg=regs["position_deg"], target_deg=regs["target_deg"],
+            axis_stride=stride, command=regs["command"], status=regs["status"],
+            faults=regs.get("faults"),
+            fault_bits=self.bits("registers.faults.bits", faults_raw.get("bits")),
+            move_value=move, stop_value=stop,
+            in_position_bit=by_name["in_position"], moving_bit=by_name["moving"],
+            range_deg=float(rng or 720.0),
+            safe_angles_deg=tuple(float(a) for a in safe),
+            **common,
+        )
 
 
 def bits_to_names(word: int, names: dict[int, str]) -> tuple[str, ...]:
     """Decode a bit-field register into the names of the set bits (unknown bits as ``bitN``)."""
     return tuple(names.get(b, f"bit{b}") for b in range(16) if word >> b & 1)
+
+
+def _load_shipped() -> tuple[dict[str, ChamberMap], dict[str, TurntableMap]]:
+    chambers: dict[str, ChamberMap] = {}
+    tables: dict[str, TurntableMap] = {}
+    for name, path in shipped_maps().items():
+        m = load_map(path)
+        if isinstance(m, ChamberMap):
+            chambers[name] = m
+        else:
+            tables[name] = m
+    return chambers, tables
+
+
+#: Shipped maps by file name (``drivers/maps/NAME.toml``); loading them at import checks them.
+CHAMBER_MAPS, TURNTABLE_MAPS = _load_shipped()
+EUROTHERM_3216 = CHAMBER_MAPS["eurotherm-3216"]
+WATLOW_F4T = CHAMBER_MAPS["watlow-f4t"]
+TWIN_CHAMBER = CHAMBER_MAPS["soakcal-twin-chamber"]
+SOAKCAL_TABLE = TURNTABLE_MAPS["soakcal-table"]
+
+# The soakcal table's command values, kept for callers that predate map files.
+COMMAND_STOP = SOAKCAL_TABLE.stop_value
+COMMAND_MOVE = SOAKCAL_TABLE.move_value
+STATUS_IN_POSITION = 1 << SOAKCAL_TABLE.in_position_bit
+STATUS_MOVING = 1 << SOAKCAL_TABLE.moving_bit

@@ -52,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_token(sub)
     _add_campaign(sub)
     _add_sensor(sub)
+    _add_rig(sub)
     demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
@@ -232,6 +233,11 @@ def _add_sensor(sub: Any) -> None:
     from service import cli_sensor
 
     cli_sensor.add_parser(sub)
+def _add_rig(sub: Any) -> None:
+    """``soakcal rig check NAME [--move]`` (service/rig_check.py)."""
+    from service import rig_check
+
+    rig_check.add_parser(sub)
 
 
 def _fail(message: str) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 from pymodbus.constants import ExcCodes
 
 from drivers.clock import Clock
-from drivers.registermaps import ChamberMap
+from drivers.registermaps import ChamberMap, Field
 from simulators.faults import SimFaults
 from simulators.modbus_server import read_block
 
@@ -104,48 +104,102 @@ class ChamberPhysics:
 
 
 class ChamberRegisterImage:
-    """Renders :class:`ChamberPhysics` into a :class:`ChamberMap` and applies writes."""
+    """Renders :class:`ChamberPhysics` into any :class:`ChamberMap` and applies writes.
 
-    def __init__(self, physics: ChamberPhysics, regmap: ChamberMap) -> None:
+    The registers the map gives a role (PV, SP, WSP, ramp, run, alarms) follow
+    the physics; the identity register answers the map's expected value (or
+    ``identity_value``, to play a wrong device); any other writable register
+    (e.g. the F4T's ramp action) keeps what was written. A map without a run
+    register is a controller that controls whenever powered: the physics runs.
+    """
+
+    #: Alarm and status bit names the twin can raise, by what the physics knows.
+    SIMULATED_BITS = ("deviation_high", "deviation_low", "ramp_running")
+
+    def __init__(self, physics: ChamberPhysics, regmap: ChamberMap,
+                 identity_value: float | None = None) -> None:
         self.physics = physics
         self.regmap = regmap
-        self._writable = {
-            regmap.setpoint_c.address: ("setpoint_c", regmap.setpoint_c),
-            regmap.ramp_c_per_min.address: ("ramp_c_per_min", regmap.ramp_c_per_min),
-            regmap.run.address: ("running", regmap.run),
+        m = regmap
+        self._roles = {
+            m.setpoint_c.address: "setpoint_c",
+            m.ramp_c_per_min.address: "ramp_c_per_min",
         }
+        if m.run is not None:
+            self._roles[m.run.address] = "running"
+        else:
+            physics.running = True
+        self._identity = (identity_value if identity_value is not None
+                          else m.identity.expect if m.identity is not None else None)
+        role_fields = {id(f) for f in (m.process_c, m.setpoint_c, m.working_setpoint_c,
+                                       m.ramp_c_per_min, m.run, m.alarms) if f is not None}
+        self._stored: dict[int, tuple[Field, list[int]]] = {}
+        # A well-set-up controller: registers the map checks read what the map expects.
+        checked = {id(c.field): c.expect for c in m.checks}
+        for f in m.registers.values():
+            if id(f) not in role_fields:
+                value = self._identity if m.identity is not None and f is m.identity.field \
+                    else checked.get(id(f), 0.0)
+                self._stored[f.address] = (f, f.encode(value or 0.0))
+
+    def _alarm_word(self) -> int:
+        m, p = self.regmap, self.physics
+        names = {n: b for b, n in {**m.alarm_bits, **m.info_bits}.items()}
+        bits = p.alarm_bits()
+        raised = {"deviation_high": bool(bits & 1), "deviation_low": bool(bits & 2),
+                  "ramp_running": p.running and abs(p.working_setpoint_c - p.setpoint_c) > 1e-9}
+        return sum(1 << names[n] for n, on in raised.items() if on and n in names)
 
     def read(self, address: int, count: int) -> list[int] | ExcCodes:
         p, m = self.physics, self.regmap
         p.advance_to()
         image: dict[int, int] = {}
-        for f, value in (
+        for a, (_f, words) in self._stored.items():
+            for i, w in enumerate(words):
+                image[a + i] = w
+        rendered: list[tuple[Field, float]] = [
             (m.process_c, p.process_value_c()),
             (m.setpoint_c, p.setpoint_c),
             (m.working_setpoint_c, p.working_setpoint_c),
             (m.ramp_c_per_min, p.ramp_c_per_min),
-            (m.run, 1.0 if p.running else 0.0),
-            (m.alarms, float(p.alarm_bits())),
-        ):
+        ]
+        if m.run is not None:
+            rendered.append((m.run, float(m.run_on if p.running else m.run_off)))
+        if m.alarms is not None:
+            rendered.append((m.alarms, float(self._alarm_word())))
+        for f, value in rendered:
             for i, w in enumerate(f.encode(value)):
                 image[f.address + i] = w
         return read_block(image, address, count)
 
     def write(self, address: int, values: list[int]) -> None | ExcCodes:
-        p = self.physics
+        p, m = self.physics, self.regmap
         p.advance_to()
-        entry = self._writable.get(address)
-        if entry is None:
-            return ExcCodes.ILLEGAL_ADDRESS
-        name, f = entry
+        name = self._roles.get(address)
+        if name is None:
+            stored = self._stored.get(address)
+            if stored is None or "w" not in stored[0].access:
+                return ExcCodes.ILLEGAL_ADDRESS
+            if len(values) != len(stored[1]):
+                return ExcCodes.ILLEGAL_VALUE
+            self._stored[address] = (stored[0], list(values))
+            return None
+        f = {"setpoint_c": m.setpoint_c, "ramp_c_per_min": m.ramp_c_per_min,
+             "running": m.run}[name]
+        assert f is not None
         if len(values) != f.n_registers:
             return ExcCodes.ILLEGAL_VALUE
         value = f.decode(values)
         if name == "setpoint_c":
-            lo, hi = self.regmap.range_c
+            lo, hi = m.range_c
             if not lo <= value <= hi:
                 return ExcCodes.ILLEGAL_VALUE
         if name == "ramp_c_per_min" and value < 0:
             return ExcCodes.ILLEGAL_VALUE
-        setattr(p, name, bool(value) if name == "running" else value)
+        if name == "running":
+            if int(value) not in (m.run_on, m.run_off):
+                return ExcCodes.ILLEGAL_VALUE
+            p.running = int(value) == m.run_on
+            return None
+        setattr(p, name, value)
         return None

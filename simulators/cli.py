@@ -8,9 +8,10 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import sys
 
 from drivers.clock import RealClock, ScaledClock
-from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
+from drivers.registermaps import MapError, load_chamber_map, load_turntable_map, shipped_maps
 from simulators.faults import SimFaults
 from simulators.rig import RigFaults, SimRig, start_sim_rig
 
@@ -23,7 +24,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default loopback)")
     p.add_argument("--port", type=int, default=0,
                    help="base port: chamber, +1 table, +2 sensor (default 0 = ephemeral)")
-    p.add_argument("--chamber-map", choices=sorted(CHAMBER_MAPS), default="eurotherm3216")
+    p.add_argument("--chamber-map", default="eurotherm3216", metavar="NAME|FILE",
+                   help="chamber register map: a shipped name (" + ", ".join(shipped_maps())
+                   + ") or a map file (docs/registers.md); default eurotherm3216")
+    p.add_argument("--table-map", default="soakcal-table", metavar="NAME|FILE",
+                   help="turntable register map (default soakcal-table)")
     p.add_argument("--seed", type=int, default=1, help="sensor truth and noise seed")
     p.add_argument("--speed", type=float, default=1.0,
                    help="simulated seconds per wall second (1 = real time)")
@@ -46,6 +51,12 @@ def build_parser() -> argparse.ArgumentParser:
 def run_sim(argv: list[str] | None = None) -> int:
     """Entry point; returns a process exit code."""
     args = build_parser().parse_args(argv)
+    try:  # a bad map is bad input: one line naming the file and key, exit 2
+        load_chamber_map(args.chamber_map)
+        load_turntable_map(args.table_map)
+    except MapError as exc:
+        print(f"soakcal sim: {exc}", file=sys.stderr)
+        return 2
     with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(_serve(args))
     return 0
@@ -54,12 +65,12 @@ def run_sim(argv: list[str] | None = None) -> int:
 def describe(rig: SimRig) -> str:
     """How to reach each device (printed at start)."""
     c_host, c_port = rig.chamber_server.host, rig.chamber_server.port
-    m = CHAMBER_MAPS[rig.chamber_map]
+    m = load_chamber_map(rig.chamber_map)
     return "\n".join([
         "soakcal simulated rig",
         f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id=1 "
         f"(PV holding reg {m.process_c.address}, SP {m.setpoint_c.address})",
-        f"  table    modbus {rig.table_url}  map={SOAKCAL_TABLE.name}  axes={rig.table.n_axes}",
+        f"  table    modbus {rig.table_url}  map={rig.table_map}  axes={rig.table.n_axes}",
         f"  sensor   serial {rig.sensor_url}  (pyserial serial_for_url; docs/sensor-bridge.md)",
         "  example:",
         "    python -c \"import asyncio; from pymodbus.client import AsyncModbusTcpClient as C\n"
@@ -82,7 +93,7 @@ async def _serve(args: argparse.Namespace) -> None:
     clock = RealClock() if args.speed == 1.0 else ScaledClock(args.speed)
     async with start_sim_rig(clock, seed=args.seed, chamber_map=args.chamber_map,
                              faults=faults, ports=args.port, host=args.host,
-                             die_tau_s=args.die_tau_s) as rig:
+                             die_tau_s=args.die_tau_s, table_map=args.table_map) as rig:
         print(describe(rig), flush=True)
         stop = asyncio.Event()
         if args.duration_s is not None:

@@ -20,7 +20,7 @@ import numpy as np
 from drivers.chamber import ModbusChamber
 from drivers.clock import Clock
 from drivers.modbus_link import ModbusLink, RetryPolicy
-from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
+from drivers.registermaps import load_chamber_map, load_turntable_map
 from drivers.sensor_bridge import SerialAccelerometer
 from drivers.turntable import ModbusTurntable
 from simulators.bridge_sim import BridgeDevice, BridgeServer, start_bridge_server
@@ -46,7 +46,7 @@ class RigFaults:
 class SimRig:
     """A running simulated rig: physics objects, servers and their addresses."""
 
-    chamber_map: str
+    chamber_map: str  # a shipped map name or a map file path (drivers/registermaps.py)
     chamber: ChamberPhysics
     table: TurntablePhysics
     bridge: BridgeDevice
@@ -54,6 +54,7 @@ class SimRig:
     chamber_server: ModbusSimServer
     table_server: ModbusSimServer
     bridge_server: BridgeServer
+    table_map: str = "soakcal-table"
 
     @property
     def chamber_url(self) -> str:  # tcp://127.0.0.1:PORT
@@ -87,6 +88,7 @@ async def start_sim_rig(
     die_tau_s: float = 900.0,
     start_c: float = 23.0,
     modbus_in_memory: bool = False,
+    table_map: str = "soakcal-table",
 ) -> AsyncIterator[SimRig]:
     """Start chamber, table and bridge servers; ``ports=0`` means ephemeral ports.
 
@@ -97,7 +99,8 @@ async def start_sim_rig(
     """
     rig = await _start(clock, seed=seed, truth=truth, chamber_map=chamber_map,
                        faults=faults, ports=ports, host=host, n_axes=n_axes,
-                       die_tau_s=die_tau_s, start_c=start_c, modbus_in_memory=modbus_in_memory)
+                       die_tau_s=die_tau_s, start_c=start_c, modbus_in_memory=modbus_in_memory,
+                       table_map=table_map)
     try:
         yield rig
     finally:
@@ -111,11 +114,11 @@ async def connect_rig(
     """Driver instances talking to ``sim_rig`` over its real loopback sockets."""
     chamber = ModbusChamber(
         ModbusLink(sim_rig.chamber_url, clock, device="chamber", policy=policy),
-        CHAMBER_MAPS[sim_rig.chamber_map],
+        load_chamber_map(sim_rig.chamber_map),
     )
     table = ModbusTurntable(
         ModbusLink(sim_rig.table_url, clock, device="turntable", policy=policy),
-        SOAKCAL_TABLE, n_axes=sim_rig.table.n_axes,
+        load_turntable_map(sim_rig.table_map), n_axes=sim_rig.table.n_axes,
     )
     sensor = SerialAccelerometer(sim_rig.sensor_url, clock, mode=sensor_mode)  # type: ignore[arg-type]
     return chamber, table, sensor
@@ -124,9 +127,10 @@ async def connect_rig(
 async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                  faults: RigFaults | None, ports: int | tuple[int, int, int], host: str,
                  n_axes: int, die_tau_s: float, start_c: float,
-                 modbus_in_memory: bool = False) -> SimRig:
-    if chamber_map not in CHAMBER_MAPS:
-        raise ValueError(f"unknown chamber map {chamber_map!r}; known: {sorted(CHAMBER_MAPS)}")
+                 modbus_in_memory: bool = False, table_map: str = "soakcal-table") -> SimRig:
+    # Any map file: the twin renders whatever layout the map describes (MapError if unusable).
+    chamber_regmap = load_chamber_map(chamber_map)
+    table_regmap = load_turntable_map(table_map)
     if truth is None:
         from simulators.truth import SensorTruth  # the physics dependency, loaded late
 
@@ -154,9 +158,9 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
         modbus_host = IN_MEMORY_HOST
         port_c = next(_in_memory_ports)
         port_t = port_c + 1
-    cs = await start_modbus_server(ChamberRegisterImage(chamber, CHAMBER_MAPS[chamber_map]),
+    cs = await start_modbus_server(ChamberRegisterImage(chamber, chamber_regmap),
                                    faults.chamber, rng_c, host=modbus_host, port=port_c)
-    ts = await start_modbus_server(TurntableRegisterImage(table, SOAKCAL_TABLE),
+    ts = await start_modbus_server(TurntableRegisterImage(table, table_regmap),
                                    faults.table, rng_t, host=modbus_host, port=port_t)
     bs = await start_bridge_server(bridge, host=host, port=port_s)
-    return SimRig(chamber_map, chamber, table, bridge, faults, cs, ts, bs)
+    return SimRig(chamber_map, chamber, table, bridge, faults, cs, ts, bs, table_map)

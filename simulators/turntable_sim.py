@@ -12,13 +12,7 @@ from dataclasses import dataclass, field
 from pymodbus.constants import ExcCodes
 
 from drivers.clock import Clock
-from drivers.registermaps import (
-    COMMAND_MOVE,
-    COMMAND_STOP,
-    STATUS_IN_POSITION,
-    STATUS_MOVING,
-    TurntableMap,
-)
+from drivers.registermaps import TurntableMap
 from simulators.faults import SimFaults
 from simulators.modbus_server import read_block
 
@@ -111,9 +105,19 @@ class TurntablePhysics:
 class TurntableRegisterImage:
     """Renders :class:`TurntablePhysics` into a :class:`TurntableMap` and applies writes."""
 
-    def __init__(self, physics: TurntablePhysics, regmap: TurntableMap) -> None:
+    def __init__(self, physics: TurntablePhysics, regmap: TurntableMap,
+                 identity_value: float | None = None) -> None:
         self.physics = physics
         self.regmap = regmap
+        ident = regmap.identity
+        self._identity_words: dict[int, int] = {}
+        if ident is not None:
+            value = ident.expect if identity_value is None else identity_value
+            self._identity_words = {ident.field.address + k: w
+                                    for k, w in enumerate(ident.field.encode(value))}
+        for check in regmap.checks:  # registers the map checks read what it expects
+            self._identity_words.update({check.field.address + k: w for k, w in
+                                         enumerate(check.field.encode(check.expect))})
         m = regmap
         self._targets: list[float] = [0.0] * physics.n_axes
         self._target_addrs = {
@@ -129,11 +133,13 @@ class TurntableRegisterImage:
             f = m.axis_field(m.position_deg, i)
             for k, w in enumerate(f.encode(angle)):
                 image[f.address + k] = w
-        status = (STATUS_IN_POSITION if p.in_position() else 0) | (
-            STATUS_MOVING if p.moving() else 0)
+        status = (1 << m.in_position_bit if p.in_position() else 0) | (
+            1 << m.moving_bit if p.moving() else 0)
         image[m.status.address] = status
-        image[m.faults.address] = 0
+        if m.faults is not None:
+            image[m.faults.address] = 0
         image[m.command.address] = 0
+        image.update(self._identity_words)
         return read_block(image, address, count)
 
     def write(self, address: int, values: list[int]) -> None | ExcCodes:
@@ -144,17 +150,17 @@ class TurntableRegisterImage:
                 self._target_words[a] = w
             return None
         if address == m.command.address and len(values) == 1:
-            if values[0] == COMMAND_MOVE:
+            if values[0] == m.move_value:
                 targets = []
                 for i in range(self.physics.n_axes):
                     f = m.axis_field(m.target_deg, i)
                     targets.append(f.decode([self._target_words[f.address + k]
                                              for k in range(f.n_registers)]))
-                if any(not math.isfinite(t) or abs(t) > 720.0 for t in targets):
+                if any(not math.isfinite(t) or abs(t) > m.range_deg for t in targets):
                     return ExcCodes.ILLEGAL_VALUE
                 self.physics.move_to(tuple(targets))
                 return None
-            if values[0] == COMMAND_STOP:
+            if values[0] == m.stop_value:
                 self.physics.stop()
                 return None
             return ExcCodes.ILLEGAL_VALUE

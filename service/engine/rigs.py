@@ -9,15 +9,18 @@
 * ``modbus``: a real (or remote simulated) rig, reached by URL::
 
     {"chamber":   {"driver": "modbus", "url": "tcp://10.0.0.5:502",
-                   "map": "eurotherm3216", "device_id": 1, "range_c": [-40, 85]},
-     "turntable": {"url": "tcp://10.0.0.6:502", "device_id": 1, "axes": 3},
+                   "map": "eurotherm-3216", "device_id": 1, "range_c": [-40, 85]},
+     "turntable": {"url": "tcp://10.0.0.6:502", "device_id": 1, "axes": 3,
+                   "map": "soakcal-table"},
      "sensors":   [{"url": "/dev/ttyUSB0", "baudrate": 115200}],
      "time_scale": 1}
 
   ``url`` is ``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200``
   (drivers/modbus_link.py); a sensor ``url`` is anything pyserial's
   ``serial_for_url`` opens (a device, ``socket://host:port``, ``rfc2217://``).
-  ``time_scale`` (on the chamber config) is how fast the rig's time runs
+  ``map`` is a shipped register map (``drivers/maps/``) or the path of a map
+  file on the service's machine (docs/registers.md). ``time_scale`` (on the
+  chamber config) is how fast the rig's time runs
   against the wall clock: 1 for hardware, the ``--speed`` of a remote
   ``soakcal sim``.
 
@@ -94,7 +97,7 @@ def rig_config_errors(
     chamber: dict[str, Any], turntable: dict[str, Any], sensors: list[Any]
 ) -> list[tuple[str, str]]:
     """``(field path, problem)`` for every problem of a rig config; empty when usable."""
-    from drivers.registermaps import CHAMBER_MAPS
+    from drivers.registermaps import MapError, load_chamber_map, load_turntable_map
 
     errors: list[tuple[str, str]] = []
     driver = chamber.get("driver", "sim")
@@ -115,8 +118,17 @@ def rig_config_errors(
         dev_id = cfg.get("device_id", 1)
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
-    if chamber.get("map", "eurotherm3216") not in CHAMBER_MAPS:
-        errors.append(("chamber.map", f"expected one of {', '.join(sorted(CHAMBER_MAPS))}"))
+    for path, cfg, load, default in (("chamber.map", chamber, load_chamber_map, "eurotherm3216"),
+                                     ("turntable.map", turntable, load_turntable_map,
+                                      "soakcal-table")):
+        ref = cfg.get("map", default)
+        if not isinstance(ref, str):
+            errors.append((path, "expected a shipped map name or a map file path"))
+            continue
+        try:
+            load(ref)
+        except MapError as exc:
+            errors.append((path, str(exc)))
     axes = turntable.get("axes", 3)
     if axes not in (2, 3):
         errors.append(("turntable.axes", "expected 2 or 3"))
@@ -143,7 +155,7 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
     from drivers.chamber import ModbusChamber
     from drivers.geometry import angles_for_reference
     from drivers.modbus_link import ModbusLink
-    from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
+    from drivers.registermaps import load_chamber_map, load_turntable_map
     from drivers.sensor_bridge import SerialAccelerometer
     from drivers.turntable import ModbusTurntable
 
@@ -157,13 +169,13 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
     chamber = ModbusChamber(
         ModbusLink(chamber_cfg["url"], clock, device="chamber",
                    device_id=int(chamber_cfg.get("device_id", 1))),
-        CHAMBER_MAPS[chamber_cfg.get("map", "eurotherm3216")],
+        load_chamber_map(chamber_cfg.get("map", "eurotherm3216")),
     )
     n_axes = int(table_cfg.get("axes", 3))
     table = ModbusTurntable(
         ModbusLink(table_cfg["url"], clock, device="turntable",
                    device_id=int(table_cfg.get("device_id", 1))),
-        SOAKCAL_TABLE, n_axes=n_axes,
+        load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
     )
     sensor_cfg = sensors[0]
     accel = SerialAccelerometer(sensor_cfg["url"], clock,

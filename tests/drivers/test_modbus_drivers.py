@@ -79,7 +79,8 @@ async def test_chamber_status_roundtrip(chamber_rig: ChamberRig) -> None:
     st = await ch.read_status()
     assert st.setpoint_c == -40.0
     assert st.ramp_c_per_min == 1.5
-    assert not st.running
+    # A controller without a run register controls whenever powered (eurotherm-3216).
+    assert st.running is (chamber_rig.driver.regmap.run is None)
     assert st.process_c == pytest.approx(23.0, abs=0.2)
 
 
@@ -118,12 +119,14 @@ async def test_device_rejects_value_with_exception_reply(chamber_rig: ChamberRig
 
 async def test_illegal_address_is_exception_reply(chamber_rig: ChamberRig) -> None:
     with pytest.raises(ExceptionReply) as err:
-        await chamber_rig.driver.link.read_registers(9000, 2)
+        await chamber_rig.driver.link.read_registers(40000, 2)  # past every map
     assert err.value.code == 2
 
 
 async def test_deviation_alarm(chamber_rig: ChamberRig) -> None:
     ch = chamber_rig.driver
+    if "deviation_low" not in ch.regmap.alarm_bits.values():
+        pytest.skip("this map has no deviation alarm bit (its alarm types are configured)")
     await ch.set_ramp_rate(0.0)  # step change: WSP jumps, the air cannot follow
     await ch.set_setpoint(60.0)
     await ch.run()
@@ -144,8 +147,8 @@ async def test_stuck_process_value(chamber_rig: ChamberRig) -> None:
 
 async def test_exception_replies_are_retried(chamber_rig: ChamberRig) -> None:
     chamber_rig.faults.p_exception = 0.3
-    for _ in range(10):
-        await chamber_rig.driver.read_status()
+    for _ in range(10):  # one request each (a status read is several on gap-0 maps)
+        await chamber_rig.driver.read_process_c()
     assert chamber_rig.driver.link.stats["retries"] > 0
 
 

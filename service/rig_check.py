@@ -1,0 +1,374 @@
+"""``soakcal rig check``: is every device of a rig there, the right one, and answering sanely?
+
+Connects to the chamber, the turntable and the sensor of one rig (through the
+same drivers a campaign uses, ``service.engine.rigs.open_rig``), reads
+identity, process values and status, and moves nothing unless ``move`` is
+asked: then a small setpoint nudge and one table move, each put back. Every
+check is ``pass``, ``fail`` (with what to fix) or ``skip`` (with why: e.g. the
+map has no identity register because the manual documents none). The rig
+passes when no check fails. docs/rig-check.md describes every check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import sys
+from collections.abc import Awaitable, Callable
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+from drivers.clock import Clock, RealClock, ScaledClock
+from drivers.faults import DeviceFault
+
+Status = Literal["pass", "fail", "skip"]
+
+NUDGE_C = 0.5  # setpoint nudge, °C: visible at 0.1 °C resolution, harmless to any soak
+TABLE_STEP_DEG = 5.0  # one table move on the outer axis, deg
+ANGLE_TOLERANCE_DEG = 0.1
+MOVE_TIMEOUT_S = 120.0  # rig time for one table move to report in-position
+G_BAND = (0.9, 1.1)  # |mean specific force| of a static sensor, g
+SENSOR_SAMPLES = 16
+EXPECTED_MODEL = "ADXL355"
+#: ADXL355 identification registers 0x00-0x02 (datasheet): what a bridge reporting
+#: part ids must read. Bridges whose ID reply carries no part ids are not judged on them.
+ADXL355_IDS = {"devid_ad": 0xAD, "devid_mst": 0x1D, "partid": 0xED}
+
+
+@dataclass(frozen=True)
+class Check:
+    device: str  # chamber, turntable, sensor
+    check: str  # connect, identity, status, alarms, setpoint_nudge, table_move, acquire
+    status: Status
+    detail: str
+    fix: str = ""
+
+
+class _Recorder:
+    def __init__(self) -> None:
+        self.checks: list[Check] = []
+
+    def add(self, device: str, check: str, status: Status, detail: str, fix: str = "") -> bool:
+        self.checks.append(Check(device, check, status, detail, fix))
+        return status != "fail"
+
+    async def guard(self, device: str, check: str, fix: str,
+                    body: Callable[[], Awaitable[bool]]) -> bool:
+        """Run one check; a device fault is that check's failure, not a crash of the rest."""
+        try:
+            return await body()
+        except DeviceFault as fault:
+            return self.add(device, check, "fail", f"no usable answer: {fault}", fix)
+
+
+_CONNECT_FIX = ("check the URL, cabling, Modbus unit id (device_id) and the controller's "
+                "comms settings (baud, parity, protocol)")
+
+
+def passed(checks: list[Check]) -> bool:
+    return all(c.status != "fail" for c in checks)
+
+
+async def check_rig(rig: dict[str, Any], *, move: bool = False,
+                    clock: Clock | None = None) -> list[Check]:
+    """All checks of one rig config (a ``rigs`` row as a dict)."""
+    from service.engine.rigs import RigConfigError, open_rig, rig_time_scale
+
+    if clock is None:
+        scale = rig_time_scale(rig)
+        # A sim rig runs in this process: fast simulated time keeps a table move short.
+        clock = ScaledClock(600.0) if scale is None else (
+            RealClock() if scale == 1.0 else ScaledClock(scale))
+    rec = _Recorder()
+    try:
+        async with open_rig(rig, clock) as devices:
+            await _check_chamber(rec, devices.chamber, move, rig)
+            await _check_table(rec, devices.turntable, move, clock)
+            await _check_sensor(rec, devices.accelerometer, rig)
+    except RigConfigError as exc:
+        rec.add("rig", "config", "fail", str(exc), "fix the rig config (PUT /api/v1/rigs/NAME)")
+    return rec.checks
+
+
+# --- chamber ---------------------------------------------------------------------------
+
+
+async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
+    regmap = driver.regmap
+    ident = regmap.identity
+    if ident is None:
+        value = await driver.read_status()  # still proves the device answers
+        del value
+        rec.add(device, "connect", "pass", f"answers at {driver.link.url}")
+        rec.add(device, "identity", "skip",
+                f"map {regmap.name} has no identity register (none documented)")
+        return await _map_checks(rec, device, driver)
+    got = await driver.read_identity()
+    rec.add(device, "connect", "pass", f"answers at {driver.link.url}")
+    if got != ident.expect:
+        return rec.add(
+            device, "identity", "fail",
+            f"register {ident.register} reads {got:g}, map {regmap.name} expects "
+            f"{ident.expect:g}",
+            "another device answers at this URL/unit id, or the rig names the wrong map")
+    rec.add(device, "identity", "pass",
+            f"register {ident.register} = {got:g} as map {regmap.name} expects")
+    return await _map_checks(rec, device, driver)
+
+
+async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
+    """The map's own ``[[checks]]``: registers that must read a given value.
+
+    A wrong setting (say °F display units) is reported, and the device's
+    remaining checks still run: it is the right device, set up wrongly.
+    """
+    for c in driver.regmap.checks:
+        got = await driver.link.read_field(c.field)
+        if got != c.expect:
+            rec.add(device, f"register:{c.register}", "fail",
+                    f"{c.register} reads {got:g}, map {driver.regmap.name} expects "
+                    f"{c.expect:g} ({c.what})", c.fix or "set it on the controller")
+        else:
+            rec.add(device, f"register:{c.register}", "pass", c.what)
+    return True
+
+
+async def _check_chamber(rec: _Recorder, chamber: Any, move: bool,
+                         rig: dict[str, Any]) -> None:
+    if not hasattr(chamber, "regmap"):  # not a map-driven driver: nothing to compare against
+        rec.add("chamber", "identity", "skip", "driver has no register map")
+    elif not await rec.guard("chamber", "connect", _CONNECT_FIX,
+                             lambda: _identity(rec, "chamber", chamber)):
+        return
+    lo, hi = chamber.range_c
+    cfg_range = (rig.get("chamber") or {}).get("range_c")
+    if cfg_range:
+        lo, hi = max(lo, float(cfg_range[0])), min(hi, float(cfg_range[1]))
+
+    async def status() -> bool:
+        st = await chamber.read_status()
+        detail = (f"PV {st.process_c:.1f} °C, SP {st.setpoint_c:.1f} °C, "
+                  f"WSP {st.working_setpoint_c:.1f} °C, ramp {st.ramp_c_per_min:g} °C/min, "
+                  f"{'running' if st.running else 'stopped'}")
+        ok = math.isfinite(st.process_c) and lo - 30.0 <= st.process_c <= hi + 30.0
+        rec.add("chamber", "status", "pass" if ok else "fail", detail,
+                "" if ok else "the PV is implausible: check the map's scale and the "
+                "controller's units (°C, decimal places)")
+        if st.alarms:
+            return rec.add("chamber", "alarms", "fail", "active: " + ", ".join(st.alarms),
+                           "clear the alarm at the controller before a campaign")
+        return rec.add("chamber", "alarms", "pass", "none active")
+
+    if not await rec.guard("chamber", "status", _CONNECT_FIX, status):
+        return
+    if not move:
+        rec.add("chamber", "setpoint_nudge", "skip", "not asked (--move)")
+        return
+
+    async def nudge() -> bool:
+        sp0 = (await chamber.read_status()).setpoint_c
+        target = sp0 + NUDGE_C if sp0 + NUDGE_C <= hi else sp0 - NUDGE_C
+        await chamber.set_setpoint(target)
+        got = (await chamber.read_status()).setpoint_c
+        await chamber.set_setpoint(sp0)
+        back = (await chamber.read_status()).setpoint_c
+        tol = 0.051
+        if abs(got - target) > tol or abs(back - sp0) > tol:
+            return rec.add("chamber", "setpoint_nudge", "fail",
+                           f"wrote {target:.2f} °C, read {got:.2f} °C; restored {sp0:.2f} °C, "
+                           f"read {back:.2f} °C",
+                           "the setpoint register is read-only, remote setpoint is disabled, "
+                           "or the map's scale/word order is wrong")
+        return rec.add("chamber", "setpoint_nudge", "pass",
+                       f"SP {sp0:.1f} → {target:.1f} → {back:.1f} °C")
+
+    await rec.guard("chamber", "setpoint_nudge", _CONNECT_FIX, nudge)
+
+
+# --- turntable -------------------------------------------------------------------------
+
+
+async def _check_table(rec: _Recorder, table: Any, move: bool, clock: Clock) -> None:
+    has_map = hasattr(table, "regmap")
+    if has_map and not await rec.guard("turntable", "connect", _CONNECT_FIX,
+                                       lambda: _identity(rec, "turntable", table)):
+        return
+
+    async def status() -> bool:
+        st = await table.read_status()
+        angles = ", ".join(f"{a:.2f}" for a in st.angles_deg)
+        detail = (f"angles ({angles})°, {'in position' if st.in_position else 'not in position'}"
+                  f"{', moving' if st.moving else ''}")
+        if st.faults:
+            return rec.add("turntable", "status", "fail",
+                           detail + "; faults: " + ", ".join(st.faults),
+                           "clear the table's fault (limit switch, encoder, following error)")
+        return rec.add("turntable", "status", "pass", detail)
+
+    if not await rec.guard("turntable", "status", _CONNECT_FIX, status):
+        return
+    if not move:
+        rec.add("turntable", "table_move", "skip", "not asked (--move)")
+        return
+
+    async def one_move() -> bool:
+        st0 = await table.read_status()
+        if st0.moving:  # someone else commands the table: moving it now would fight them
+            return rec.add("turntable", "table_move", "fail", "the table is moving already",
+                           "wait until nothing else commands the table, then check again")
+        start = tuple(st0.angles_deg)
+        limit = getattr(getattr(table, "regmap", None), "range_deg", 720.0)
+        step = TABLE_STEP_DEG if start[0] + TABLE_STEP_DEG <= limit else -TABLE_STEP_DEG
+        target = (start[0] + step, *start[1:])
+        for goal in (target, start):
+            await table.move_to(goal)
+            reached = await _wait_in_position(table, goal, clock)
+            if reached is not None:
+                return rec.add("turntable", "table_move", "fail", reached,
+                               "check the drives are enabled and nothing blocks the table")
+        return rec.add("turntable", "table_move", "pass",
+                       f"axis 0 {start[0]:.2f}° → {target[0]:.2f}° → {start[0]:.2f}°")
+
+    await rec.guard("turntable", "table_move", _CONNECT_FIX, one_move)
+
+
+async def _wait_in_position(table: Any, goal: tuple[float, ...], clock: Clock) -> str | None:
+    """``None`` once in position at ``goal``; else what went wrong."""
+    t0 = clock.now()
+    await clock.sleep(0.2)  # let the table latch the command before the first poll
+    while clock.now() - t0 < MOVE_TIMEOUT_S:
+        st = await table.read_status()
+        if st.faults:
+            return "faults during the move: " + ", ".join(st.faults)
+        if st.in_position and not st.moving:
+            err = max(abs(a - g) for a, g in zip(st.angles_deg, goal, strict=False))
+            if err > ANGLE_TOLERANCE_DEG:
+                return (f"in position at ({', '.join(f'{a:.3f}' for a in st.angles_deg)})°, "
+                        f"asked ({', '.join(f'{g:.3f}' for g in goal)})°: {err:.3f}° off")
+            return None
+        await clock.sleep(0.5)
+    return f"not in position within {MOVE_TIMEOUT_S:g} s of rig time"
+
+
+# --- sensor ----------------------------------------------------------------------------
+
+
+async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any]) -> None:
+    sensors = rig.get("sensors") or [{}]
+    expected_serial = sensors[0].get("serial") if isinstance(sensors[0], dict) else None
+    fix = "check the sensor bridge's port (URL), baud rate and that its firmware answers ID"
+
+    async def identity() -> bool:
+        ident = await accel.identify()
+        detail = f"model {ident.model}, serial {ident.serial}, firmware {ident.firmware}"
+        if not str(ident.model).upper().startswith(EXPECTED_MODEL):
+            return rec.add("sensor", "identity", "fail",
+                           f"{detail}: model {ident.model}, expected {EXPECTED_MODEL}",
+                           "another device answers on this port")
+        reported = {k: getattr(ident, k, None) for k in ADXL355_IDS}
+        wrong = [f"{k} 0x{v:02X} (expected 0x{ADXL355_IDS[k]:02X})"
+                 for k, v in reported.items() if v is not None and v != ADXL355_IDS[k]]
+        if wrong:
+            return rec.add("sensor", "identity", "fail", f"{detail}: " + ", ".join(wrong),
+                           "the part behind the bridge is not an ADXL355, or its SPI "
+                           "wiring is wrong")
+        if all(v is not None for v in reported.values()):
+            detail += ", part ids " + " ".join(f"0x{v:02X}" for v in reported.values())
+        else:
+            detail += " (the bridge reports no part ids)"
+        if expected_serial and ident.serial != expected_serial:
+            return rec.add("sensor", "identity", "fail",
+                           f"serial {ident.serial} connected, rig config names "
+                           f"{expected_serial}", "mount the named sensor or fix the rig config")
+        return rec.add("sensor", "identity", "pass", detail)
+
+    if not await rec.guard("sensor", "identity", fix, identity):
+        return
+
+    async def acquire() -> bool:
+        acq = await accel.acquire(SENSOR_SAMPLES)
+        g = math.sqrt(sum(v * v for v in acq.mean_g))
+        detail = (f"{acq.n} samples: |g| {g:.4f} g, die {acq.sensor_c:.1f} °C, "
+                  f"sd {max(acq.sd_g) * 1e6:.0f} µg")
+        if acq.saturated:
+            return rec.add("sensor", "acquire", "fail", detail + ", saturated",
+                           "the sensor is being shaken or its range is too small")
+        if not G_BAND[0] <= g <= G_BAND[1]:
+            return rec.add("sensor", "acquire", "fail",
+                           f"{detail}: outside {G_BAND[0]}…{G_BAND[1]} g",
+                           "the sensor must rest static; check its mounting and range setting")
+        return rec.add("sensor", "acquire", "pass", detail)
+
+    await rec.guard("sensor", "acquire", fix, acquire)
+
+
+# --- CLI -------------------------------------------------------------------------------
+
+
+def add_parser(sub: Any) -> None:
+    """``soakcal rig check NAME [--move] [--json]`` (registered by service/cli.py)."""
+    rig = sub.add_parser("rig", help="rig tools (connection check)")
+    rig_sub = rig.add_subparsers(dest="rig_command", metavar="ACTION", required=True)
+    check = rig_sub.add_parser(
+        "check", help="connect to every device of a rig and report each check")
+    check.add_argument("name", metavar="NAME", help="rig name (GET /api/v1/rigs)")
+    check.add_argument("--move", action="store_true",
+                       help="also nudge the setpoint by 0.5 °C and move the table 5°, then back")
+    check.add_argument("--json", action="store_true", help="print the checks as JSON")
+    check.set_defaults(handler=run_check_cli)
+
+
+def run_check_cli(args: argparse.Namespace) -> int:
+    from sqlalchemy import make_url, select
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from service.config import resolve_database_url
+    from service.db.models import Rig
+    from service.db.session import make_session_factory, session_scope, upgrade_database
+
+    url = resolve_database_url()
+    try:
+        upgrade_database(url)
+        factory = make_session_factory(url)
+        try:
+            with session_scope(factory) as session:
+                row = session.scalar(select(Rig).where(Rig.name == args.name))
+                known = session.scalars(select(Rig.name).order_by(Rig.name)).all()
+                rig = None if row is None else {
+                    "name": row.name, "chamber": row.chamber or {},
+                    "turntable": row.turntable or {}, "sensors": row.sensors or []}
+        finally:
+            factory.kw["bind"].dispose()
+    except SQLAlchemyError as exc:
+        where = make_url(url).render_as_string(hide_password=True)
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"soakcal rig check: cannot read rigs from {where}: {first}", file=sys.stderr)
+        return 1
+    if rig is None:
+        print(f"soakcal rig check: no rig named {args.name!r} (known: "
+              f"{', '.join(known) or 'none'})", file=sys.stderr)
+        return 2
+    checks = asyncio.run(check_rig(rig, move=args.move))
+    if args.json:
+        print(json.dumps(report(args.name, checks), indent=2))
+    else:
+        print(format_report(args.name, checks))
+    return 0 if passed(checks) else 1
+
+
+def report(name: str, checks: list[Check]) -> dict[str, Any]:
+    """The JSON shape shared by ``--json`` and ``POST /api/v1/rigs/{name}/check``."""
+    return {"rig": name, "passed": passed(checks), "checks": [asdict(c) for c in checks]}
+
+
+def format_report(name: str, checks: list[Check]) -> str:
+    lines = [f"rig {name}:"]
+    for c in checks:
+        lines.append(f"  {c.status.upper():4}  {c.device:9} {c.check:15} {c.detail}")
+        if c.fix:
+            lines.append(f"        fix: {c.fix}")
+    n_fail = sum(c.status == "fail" for c in checks)
+    lines.append(f"{'PASS' if not n_fail else 'FAIL'}: {len(checks)} checks, {n_fail} failed")
+    return "\n".join(lines)

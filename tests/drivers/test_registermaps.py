@@ -1,0 +1,190 @@
+"""Map files: shipped ones load and cite sources; bad files are refused naming file and key."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from drivers.registermaps import (
+    CHAMBER_MAPS,
+    Field,
+    MapError,
+    load_chamber_map,
+    load_map,
+    load_turntable_map,
+    shipped_maps,
+)
+
+GOOD = """
+schema = "soakcal-register-map/1"
+kind = "chamber"
+name = "test-chamber"
+[registers.process_c]
+address = 1
+type = "int16"
+scale = 10
+[registers.setpoint_c]
+address = 2
+type = "int16"
+scale = 10
+access = "rw"
+[registers.working_setpoint_c]
+address = 5
+type = "int16"
+scale = 10
+[registers.ramp_c_per_min]
+address = 35
+type = "uint16"
+scale = 10
+access = "rw"
+"""
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "lab.toml"
+    path.write_text(text)
+    return path
+
+
+def test_every_shipped_map_loads_and_names_itself() -> None:
+    for name, path in shipped_maps().items():
+        assert load_map(path).name == name
+
+
+@pytest.mark.parametrize("name", ["eurotherm-3216", "watlow-f4t"])
+def test_manufacturer_maps_cite_a_document_for_every_register(name: str) -> None:
+    doc = tomllib.loads(shipped_maps()[name].read_text())
+    assert doc["source"]["document"] and doc["source"]["table"]
+    for reg, spec in doc["registers"].items():
+        assert spec.get("source"), f"{name}: registers.{reg} has no citation"
+    assert doc["undocumented"], "what the documents do not say must be listed"
+
+
+def test_eurotherm_addresses_are_the_handbooks() -> None:
+    m = CHAMBER_MAPS["eurotherm-3216"]
+    assert (m.process_c.address, m.setpoint_c.address, m.working_setpoint_c.address,
+            m.ramp_c_per_min.address) == (1, 2, 5, 35)
+    assert m.alarms is not None and m.alarms.address == 75
+    assert m.alarm_bits[5] == "sensor_break" and m.info_bits[4] == "manual_mode"
+    assert m.run is None and m.identity is None  # not in the cited table: not invented
+
+
+def test_f4t_identity_run_and_ramp_setup() -> None:
+    m = CHAMBER_MAPS["watlow-f4t"]
+    assert m.identity is not None and m.identity.expect == 124.0
+    assert m.identity.field.encoding == "int32"
+    assert m.run is not None and (m.run_on, m.run_off) == (63, 62)
+    assert [(f.address, v) for f, v in m.setup] == [(2794, 85.0), (2796, 57.0)]
+    assert m.process_c.word_order == "low_first"
+
+
+def test_old_names_and_paths_resolve(tmp_path: Path) -> None:
+    assert load_chamber_map("eurotherm3216").name == "eurotherm-3216"
+    assert load_chamber_map("watlow_f4t").name == "watlow-f4t"
+    assert load_turntable_map("soakcal_table").name == "soakcal-table"
+    assert load_chamber_map(str(_write(tmp_path, GOOD))).name == "test-chamber"
+    with pytest.raises(MapError, match="not a shipped map"):
+        load_chamber_map("eurotherm-9999")
+    with pytest.raises(MapError, match="describes a chamber"):
+        load_turntable_map("eurotherm-3216")
+
+
+def test_duplicated_register_key_is_refused_with_file_line_and_column(tmp_path: Path) -> None:
+    text = GOOD + "[registers.process_c]\naddress = 9\ntype = \"int16\"\n"
+    path = _write(tmp_path, text)
+    with pytest.raises(MapError) as err:
+        load_map(path)
+    assert str(path) in str(err.value) and "line" in str(err.value)
+
+
+def test_two_names_on_one_register_are_refused(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD + "[registers.alarms]\naddress = 5\ntype = \"uint16\"\n")
+    with pytest.raises(MapError) as err:
+        load_map(path)
+    msg = str(err.value)
+    assert msg.startswith(str(path)) and "registers.alarms.address" in msg
+    assert "working_setpoint_c" in msg
+
+
+def test_unknown_type_is_refused_with_the_key(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD.replace('type = "uint16"', 'type = "uint24"'))
+    with pytest.raises(MapError) as err:
+        load_map(path)
+    assert str(path) in str(err.value)
+    assert "registers.ramp_c_per_min.type" in str(err.value) and "uint24" in str(err.value)
+
+
+def test_missing_required_register_is_refused(tmp_path: Path) -> None:
+    text = GOOD.replace("[registers.working_setpoint_c]\naddress = 5",
+                        "[registers.wsp]\naddress = 5")
+    path = _write(tmp_path, text)
+    with pytest.raises(MapError) as err:
+        load_map(path)
+    assert f"{path}: registers.working_setpoint_c: missing" in str(err.value)
+
+
+def test_reference_to_an_unknown_register_is_refused(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD + "[run]\nregister = \"power\"\non = 1\noff = 0\n")
+    with pytest.raises(MapError, match=r"run\.register: names no register"):
+        load_map(path)
+
+
+def test_int32_both_word_orders_round_trip() -> None:
+    for order in ("high_first", "low_first"):
+        f = Field(0, "int32", 1.0, order)  # type: ignore[arg-type]
+        for value in (124.0, -2.0, 2.0**31 - 1):
+            assert f.decode(f.encode(value)) == value
+    assert Field(0, "int32", 1.0, "low_first").encode(124.0) == [124, 0]
+    with pytest.raises(ValueError):
+        Field(0, "int32").encode(2.0**31)
+
+
+def test_sim_refuses_a_bad_map_file_with_exit_2(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    from simulators.cli import run_sim
+
+    path = _write(tmp_path, GOOD.replace('type = "uint16"', 'type = "word"'))
+    assert run_sim(["--chamber-map", str(path), "--duration-s", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "registers.ramp_c_per_min.type" in err
+
+
+def test_a_misspelt_key_is_refused_not_ignored(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD.replace("scale = 10\naccess = \"rw\"",
+                                         "scale = 10\nacess = \"rw\"", 1))
+    with pytest.raises(MapError, match=r"registers\.setpoint_c\.acess: unknown key"):
+        load_map(path)
+    path = _write(tmp_path, GOOD + "[limit]\nrange_c = [-40, 85]\n")
+    with pytest.raises(MapError, match=r": limit: unknown key"):
+        load_map(path)
+    path = _write(tmp_path, GOOD + "[limits]\nrange = [-40, 85]\n")
+    with pytest.raises(MapError, match=r"limits\.range: unknown key"):
+        load_map(path)
+
+
+def test_the_documented_example_map_loads(tmp_path: Path) -> None:
+    doc = (Path(__file__).parents[2] / "docs" / "registers.md").read_text()
+    example = doc.split("```toml\n", 1)[1].split("```", 1)[0]
+    m = load_chamber_map(str(_write(tmp_path, example)))
+    assert m.name == "our-chamber" and m.identity is not None and m.run is not None
+    assert m.max_ramp_c_per_min == 3.0 and m.process_c.word_order == "low_first"
+
+
+def test_map_checks_load_and_refer_to_registers(tmp_path: Path) -> None:
+    checks = {c.register: c.expect for c in CHAMBER_MAPS["watlow-f4t"].checks}
+    assert checks == {"device_status": 138.0, "display_units": 15.0}
+    path = _write(tmp_path, GOOD + "[[checks]]\nregister = \"units\"\nexpect = 15\n")
+    with pytest.raises(MapError, match=r"checks\[0\]\.register: names no register"):
+        load_map(path)
+
+
+def test_a_register_the_driver_writes_must_be_writable(tmp_path: Path) -> None:
+    path = _write(tmp_path, GOOD.replace('scale = 10\naccess = "rw"\n[registers.working',
+                                         'scale = 10\naccess = "r"\n[registers.working', 1))
+    with pytest.raises(MapError, match=r"registers\.setpoint_c\.access: the driver writes"):
+        load_map(path)
+    path = _write(tmp_path, GOOD + "[registers.alarms]\naddress = 74\ntype = \"float32\"\n")
+    with pytest.raises(MapError, match=r"registers\.alarms\.type: a bit word"):
+        load_map(path)

@@ -1,0 +1,225 @@
+"""``rig check`` against the twin over Modbus TCP on loopback: shipped maps, a map file
+written from the documentation alone, a wrong device and a dead link."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from drivers.clock import VirtualClock
+from drivers.protocols import Acquisition
+from drivers.registermaps import CHAMBER_MAPS
+from service.rig_check import Check, check_rig, format_report, passed
+from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
+from simulators.faults import SimFaults
+from simulators.modbus_server import start_modbus_server
+from simulators.rig import start_sim_rig
+
+# Written from "TestEquity F4T Controller, Chapter 3 Communications, Common Modbus Registers,
+# F4T Mode (Data Map 1)", p. 15 (the cascade-control F4T), and the F4T user's guide p. 225 for
+# the Hardware ID: nothing copied from the shipped files.
+F4T_CASCADE = """
+schema = "soakcal-register-map/1"
+kind = "chamber"
+name = "testequity-f4t-cascade"
+undocumented = ["alarms: none in the table"]
+[defaults]
+word_order = "low_first"
+[identity]
+register = "hardware_id"
+expect = 124
+[run]
+register = "event_1"
+on = 63
+off = 62
+[[setup]]
+register = "ramp_action"
+value = 85
+[registers.hardware_id]
+address = 0
+type = "int32"
+source = "F4T guide p. 225"
+[registers.setpoint_c]
+address = 4042
+type = "float32"
+access = "rw"
+source = "p. 15 Temperature Set Point"
+[registers.working_setpoint_c]
+address = 4190
+type = "float32"
+source = "p. 15 Closed Loop Set Point"
+[registers.process_c]
+address = 4182
+type = "float32"
+source = "p. 15 Actual Air Temperature (PV)"
+[registers.ramp_action]
+address = 4054
+type = "uint16"
+access = "rw"
+source = "p. 15 Ramp Action, Set Point = 85"
+[registers.ramp_c_per_min]
+address = 4058
+type = "uint16"
+access = "rw"
+source = "p. 15 Ramp Rate (manual ramp parameters are all 16-bit RW)"
+[registers.event_1]
+address = 16594
+type = "uint16"
+access = "rw"
+source = "p. 15 Event 1, Off = 62, On = 63"
+"""
+
+
+def _config(sim: Any, chamber_map: str, chamber_url: str | None = None) -> dict[str, Any]:
+    return {"name": "bench",
+            "chamber": {"driver": "modbus", "url": chamber_url or sim.chamber_url,
+                        "map": chamber_map},
+            "turntable": {"url": sim.table_url, "map": sim.table_map},
+            "sensors": [{"url": sim.sensor_url}]}
+
+
+def _by(checks: list[Check], device: str, name: str) -> Check:
+    return next(c for c in checks if c.device == device and c.check == name)
+
+
+@pytest.mark.parametrize("chamber_map", sorted(CHAMBER_MAPS))
+async def test_every_shipped_map_passes_against_the_twin(chamber_map: str) -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=chamber_map) as sim:
+        checks = await check_rig(_config(sim, chamber_map), move=True, clock=clock)
+        # The nudge and the move were put back.
+        assert sim.chamber.setpoint_c == pytest.approx(23.0)
+        assert sim.table.true_angles_deg() == pytest.approx((0.0, 0.0, 0.0))
+    assert passed(checks), format_report(chamber_map, checks)
+    assert _by(checks, "chamber", "setpoint_nudge").status == "pass"
+    assert _by(checks, "turntable", "table_move").status == "pass"
+    ident = _by(checks, "chamber", "identity")
+    assert ident.status == ("skip" if CHAMBER_MAPS[chamber_map].identity is None else "pass")
+
+
+async def test_without_move_nothing_is_written() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t") as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t"), clock=clock)
+        assert not sim.table.moving() and sim.chamber.setpoint_c == 23.0
+    assert passed(checks)
+    assert _by(checks, "turntable", "table_move").status == "skip"
+    assert _by(checks, "chamber", "setpoint_nudge").status == "skip"
+
+
+async def test_a_map_written_from_the_documentation_alone(tmp_path: Path) -> None:
+    path = tmp_path / "testequity-f4t-cascade.toml"
+    path.write_text(F4T_CASCADE)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path)) as sim:
+        checks = await check_rig(_config(sim, str(path)), move=True, clock=clock)
+    assert passed(checks), format_report("doc-only", checks)
+    assert "hardware_id = 124" in _by(checks, "chamber", "identity").detail
+
+
+async def test_wrong_identity_fails_naming_both_values() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        rng = np.random.default_rng(1)
+        faults = SimFaults()
+        # Another device at the chamber's address: an F4T layout whose Hardware ID reads 77.
+        image = ChamberRegisterImage(ChamberPhysics(clock, rng), CHAMBER_MAPS["watlow-f4t"],
+                                     identity_value=77)
+        other = await start_modbus_server(image, faults, rng)
+        try:
+            checks = await check_rig(_config(sim, "watlow-f4t", other.url), clock=clock)
+        finally:
+            await other.stop()
+    assert not passed(checks)
+    bad = _by(checks, "chamber", "identity")
+    assert bad.status == "fail" and "77" in bad.detail and "124" in bad.detail and bad.fix
+    assert _by(checks, "sensor", "acquire").status == "pass"  # the rest is still checked
+
+
+async def test_nobody_listening_fails_connect_with_a_fix() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-3216", "tcp://127.0.0.1:9"),
+                                 clock=clock)
+    bad = _by(checks, "chamber", "connect")
+    assert bad.status == "fail" and "device_id" in bad.fix
+    assert _by(checks, "turntable", "status").status == "pass"
+
+
+async def test_sensor_serial_named_in_the_rig_must_be_connected() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        cfg = _config(sim, "eurotherm-3216")
+        cfg["sensors"][0]["serial"] = "SN-K9"
+        checks = await check_rig(cfg, clock=clock)
+    bad = _by(checks, "sensor", "identity")
+    assert bad.status == "fail" and "SN-K9" in bad.detail and "SN-0001" in bad.detail
+
+
+async def test_a_map_check_register_set_wrongly_fails_naming_both_values() -> None:
+    from drivers.modbus_link import ModbusLink
+
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t") as sim:
+        link = ModbusLink(sim.chamber_url, clock)
+        # The F4T left at its factory default display units, °F (30).
+        await link.write_field(CHAMBER_MAPS["watlow-f4t"].registers["display_units"], 30)
+        await link.close()
+        checks = await check_rig(_config(sim, "watlow-f4t"), clock=clock)
+    bad = _by(checks, "chamber", "register:display_units")
+    assert bad.status == "fail" and "reads 30" in bad.detail and "expects 15" in bad.detail
+    assert "C (15)" in bad.fix
+    assert _by(checks, "chamber", "register:device_status").status == "pass"
+    assert _by(checks, "chamber", "status").status == "pass"  # the rest still ran
+
+
+async def test_a_table_moving_already_is_not_moved() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        sim.table.move_to((90.0, 0.0, 0.0))  # someone else's move, 4.5 s long
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    bad = _by(checks, "turntable", "table_move")
+    assert bad.status == "fail" and "moving already" in bad.detail
+
+
+async def test_sensor_part_ids_are_compared_when_the_bridge_reports_them() -> None:
+    from dataclasses import dataclass
+
+    from service.rig_check import _check_sensor, _Recorder
+
+    @dataclass
+    class Ident:
+        model: str = "ADXL355"
+        serial: str = "SN-1"
+        firmware: str = "fw"
+        devid_ad: int | None = 0xAD
+        devid_mst: int | None = 0x1D
+        partid: int | None = 0xED
+
+    class Accel:
+        def __init__(self, ident: Ident) -> None:
+            self.ident = ident
+
+        async def identify(self) -> Ident:
+            return self.ident
+
+        async def acquire(self, n: int) -> Acquisition:
+            return Acquisition((0.0, 0.0, 1.0), (1e-4,) * 3, n, 23.0, 0.0, False, 0.1)
+
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(Ident(partid=0xEC)), {"sensors": [{}]})
+    bad = _by(rec.checks, "sensor", "identity")
+    assert bad.status == "fail" and "0xEC" in bad.detail and "0xED" in bad.detail
+    assert not any(c.check == "acquire" for c in rec.checks)  # a wrong part is not sampled
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(Ident()), {"sensors": [{}]})
+    good = _by(rec.checks, "sensor", "identity")
+    assert good.status == "pass" and "part ids 0xAD 0x1D 0xED" in good.detail
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(Ident(devid_ad=None, devid_mst=None, partid=None)),
+                        {"sensors": [{}]})
+    assert "reports no part ids" in _by(rec.checks, "sensor", "identity").detail
+    assert passed(rec.checks)
