@@ -138,6 +138,11 @@ def rig_config_errors(
     if not sensors or not isinstance(sensors[0], dict) or not isinstance(
             sensors[0].get("url"), str):
         errors.append(("sensors[0].url", "expected the sensor bridge's serial port or URL"))
+    else:
+        # protocol (bridge / plain stream), framing, serial binding: one validator, the driver's
+        from drivers.sensor_config import sensor_config_errors
+
+        errors.extend(sensor_config_errors(sensors[0]))
     return errors
 
 
@@ -156,7 +161,7 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
     from drivers.geometry import angles_for_reference
     from drivers.modbus_link import ModbusLink
     from drivers.registermaps import load_chamber_map, load_turntable_map
-    from drivers.sensor_bridge import SerialAccelerometer
+    from drivers.sensor_config import make_accelerometer, parse_sensor_config
     from drivers.turntable import ModbusTurntable
 
     chamber_cfg = rig.get("chamber") or {}
@@ -177,9 +182,7 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
                    device_id=int(table_cfg.get("device_id", 1))),
         load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
     )
-    sensor_cfg = sensors[0]
-    accel = SerialAccelerometer(sensor_cfg["url"], clock,
-                                baudrate=int(sensor_cfg.get("baudrate", 115200)))
+    accel = make_accelerometer(parse_sensor_config(sensors[0]), clock)
     try:
         yield RigDevices(chamber, table, accel,
                          lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)))
