@@ -34,6 +34,7 @@ from calibration import extensions as _ext
 from calibration import metrics, sfem, sfem_batch
 from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.fit import FitResult, fit_norm, fit_reference, rmse_norm_ug
+from calibration.placement import reference_tolerance_rad
 from calibration.recording import Recording
 from calibration.temperature_conditioning import condition_temperature
 from calibration.thermal_joint import fit_joint
@@ -214,6 +215,13 @@ def fit_campaign(
     g_local = 1.0
     if ref is not None:
         g_local = float(np.median(np.linalg.norm(ref, axis=1)))
+    ref_tol = reference_tolerance_rad(recording) if ref is not None else None
+    if ref_tol is not None:  # hand-placed: calibration/placement.py, docs/fit-honesty.md
+        notes.append("hand-placed references (ref_tol_deg): |g| fitted at full weight, "
+                     "label directions as a prior of that angle")
+        if method == "joint":  # the joint fit treats references as exact
+            notes.append("joint fit not used: hand-placed references are fitted per step")
+            method = "per_step"
 
     has_temp = recording.has_temperature
     if has_temp:
@@ -241,7 +249,8 @@ def fit_campaign(
         idx = np.flatnonzero(steps == s)
         try:
             if mode == "reference":
-                fr = fit_reference(raw[idx], ref[idx], sigma[idx], g_local=g_local)
+                fr = fit_reference(raw[idx], ref[idx], sigma[idx], g_local=g_local,
+                                   ref_tol_rad=None if ref_tol is None else ref_tol[idx])
             else:
                 fr = fit_norm(raw[idx], sigma[idx], g_local=g_local)
         except NotIdentifiable as exc:
