@@ -9,7 +9,9 @@ did not see is off by more than 1 mg. So next to it ``calibrate`` reports
   without it, predict it, and take the |g| error (Eq. 9) of the prediction; RMS over
   every position of every step. Reference mode also gives ``loo_rmse_vector_ug``.
 * ``dof`` -- observations, fitted parameters and the spare degrees of freedom of the
-  worst step (norm mode: one |g| per position; reference mode: three components).
+  worst step (norm mode: one |g| per position; reference mode: three components;
+  hand-placed references: one |g| per position against the 9 parameters |g| sees,
+  since the labels there are a prior, not a measurement).
 
 With fewer than :data:`MIN_SPARE_DOF` spare degrees of freedom in a step the held-out
 figure would come from an (almost) exactly determined fit: ``loo_rmse_ug`` is null
@@ -90,6 +92,10 @@ def leave_one_out(rec: Recording, fit: ThermalFit) -> dict[str, Any]:
         names = np.unique(groups)
         n_params = int(np.sum(st.fit.identifiable))
         per_position = 1 if mode == "norm" else 3
+        if tol is not None:
+            # Hand-placed: the labels are priors, not data; only |g| (one per position)
+            # tests the 9 parameters it sees (b, S, C).
+            per_position, n_params = 1, min(n_params, 9)
         dof = {"observations": per_position * names.size, "parameters": n_params}
         dof["spare"] = dof["observations"] - n_params
         if worst is None or dof["spare"] < worst["spare"]:
