@@ -41,7 +41,7 @@ from calibration.importers import (
 )
 
 THRESHOLD_GRID = (3.0, 4.0, 6.0, 8.0, 10.0, 15.0, 20.0)  # × initial-rest variance
-TRIM_GRID_S = (0.0, 0.25, 0.5, 1.0)
+TRIM_GRID_S = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5)
 MIN_COVERAGE = 0.9
 MIN_INTERVALS = 13  # 9 parameters + 3 spare + the one left out
 
