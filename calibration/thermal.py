@@ -215,6 +215,7 @@ def fit_campaign(
     g_local = 1.0
     if ref is not None:
         g_local = float(np.median(np.linalg.norm(ref, axis=1)))
+    method_requested = method
     ref_tol = reference_tolerance_rad(recording) if ref is not None else None
     if ref_tol is not None:  # hand-placed: calibration/placement.py, docs/fit-honesty.md
         notes.append("hand-placed references (ref_tol_deg): |g| fitted at full weight, "
@@ -335,7 +336,7 @@ def fit_campaign(
             "rows": len(recording),
             "mode": mode,
             "method": method_used,
-            "method_requested": method,
+            "method_requested": method_requested,
             "degree_requested": degree,
             "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
         },
