@@ -301,8 +301,14 @@ def fit_campaign(
             f"{used.size * 3}x{coeffs.size} Jacobian; the per-step polynomials are used"
         )
     elif method == "joint" and used_degree > 0:
+        # Each step's model-error floor (fit.model_floor_g; 0 when its residuals are
+        # noise) carries over to its rows, so the joint fit weighs as the steps did.
+        floor = np.zeros(len(recording))
+        for _, idx, fr in fits:
+            floor[idx] = fr.model_floor_g if np.isfinite(fr.model_floor_g) else 0.0
         jr = fit_joint(
-            raw[used], None if ref is None else ref[used], sigma[used],
+            raw[used], None if ref is None else ref[used],
+            np.sqrt(sigma[used] ** 2 + floor[used, None] ** 2),
             (row_c[used] - centre) / scale, coeffs, identifiable, g_local=g_local,
         )
         coeffs, coeff_se, method_used = jr.coeffs, jr.coeff_stderr, "joint"

@@ -113,3 +113,23 @@ def test_hand_placed_tolerance_is_validated() -> None:
         fit.fit_reference(labels, labels, ref_tol_rad=0.0)
     with pytest.raises(ValueError, match="ref_tol_rad"):
         fit.fit_reference(labels, labels, ref_tol_rad=np.array([0.1] * 5 + [np.nan]))
+
+
+def test_campaign_steps_find_a_floor_only_when_the_model_leaves_structure() -> None:
+    import thermal_sim
+
+    from calibration.thermal import fit_campaign
+
+    _, rec = thermal_sim.campaign(seed=5)
+    clean = fit_campaign(rec)
+    assert all(st.fit.model_floor_g == 0.0 for st in clean.steps)
+    # A fixed 500 µg error per position (what a mounting defect would leave) that
+    # averaging cannot remove: every step must see it and widen its weights.
+    rng = np.random.default_rng(0)
+    pos = rec.positions()
+    bump = rng.normal(0.0, 500e-6, (pos.max() + 1, 3))[pos]
+    for j, c in enumerate(("ax", "ay", "az")):
+        rec.columns[c] = rec.columns[c] + bump[:, j]
+    dirty = fit_campaign(rec)
+    assert all(st.fit.model_floor_g > 100e-6 for st in dirty.steps)
+    assert dirty.model.method == "joint"
