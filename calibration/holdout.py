@@ -36,6 +36,9 @@ MIN_SPARE_DOF = 3
 # Raw sample-per-row steps are averaged per position before the leave-one-out
 # refits (one refit per position of 10⁵ rows would take minutes).
 MAX_LOO_ROWS = 5000
+# More folds than this in one step (e.g. a raw recording without a position column,
+# where every row is its own position): no leave-one-out, and a warning says why.
+MAX_LOO_FOLDS = 2000
 
 
 def holdout_fields(rec: Recording, fit: ThermalFit, *, warn: TextIO | None = None
@@ -110,6 +113,13 @@ def leave_one_out(rec: Recording, fit: ThermalFit) -> dict[str, Any]:
             loo_possible = False
             continue
         if not loo_possible:
+            continue
+        if names.size > MAX_LOO_FOLDS:
+            warnings.append(
+                f"step {st.step}: {names.size} positions would need {names.size} refits; "
+                "leave-one-out not computed (loo_rmse_ug null): give the rows a position "
+                "column or average them per position")
+            loo_possible = False
             continue
         X, R, S, T = raw[idx], None if ref is None else ref[idx], sigma[idx], \
             None if tol is None else tol[idx]

@@ -146,3 +146,11 @@ def test_real_ferraris_hand_placed_beats_imucal_on_the_held_out_rests() -> None:
     other_mg = np.sqrt(np.mean((np.linalg.norm(params.apply(other), axis=1) - 1) ** 2)) * 1e3
     assert six_mg < 0.04 and other_mg < 0.5, (six_mg, other_mg)
     assert fit.model.provenance["method_requested"] == "joint"
+
+
+def test_too_many_folds_give_no_figure_and_say_why(monkeypatch: pytest.MonkeyPatch) -> None:
+    rec = _static_recording(schedules.sphere(24), seed=9)
+    monkeypatch.setattr(holdout, "MAX_LOO_FOLDS", 20)
+    held = holdout.holdout_fields(rec, fit_campaign(rec), warn=io.StringIO())
+    assert held["loo_rmse_ug"] is None
+    assert "24 refits" in held["warnings"][0]
