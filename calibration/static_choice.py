@@ -58,7 +58,7 @@ class Candidate:
 class DetectorChoice:
     settings: DetectorSettings
     intervals: list[tuple[int, int]]
-    chosen_by: str  # "leave-one-out" | "flags" | "defaults"
+    chosen_by: str  # "leave-one-out" | "flags" | "defaults" | "sections"
     loo_ug: float | None  # exact refit leave-one-out of the chosen setting
     default_loo_ug: float | None  # the same for the format's defaults
     reason: str
@@ -66,6 +66,9 @@ class DetectorChoice:
 
     def summary(self) -> str:
         st = self.settings
+        if self.chosen_by == "sections":
+            return f"static intervals: the labelled sections, trimmed {st.trim_s:g} s; " \
+                f"{self.reason}"
         head = (f"static detection: threshold {st.threshold:g}x, trim {st.trim_s:g} s "
                 f"({self.chosen_by})")
         if self.loo_ug is not None:
@@ -80,8 +83,8 @@ def choose_detector(raw: RawImport, base: DetectorSettings, *, fixed: frozenset[
     """Best (threshold, trim) on the grid; ``fixed`` names the ones given by flags."""
     if raw.sections is not None:
         iv = find_intervals(raw, base)
-        return DetectorChoice(base, iv, "defaults", None, None,
-                              "sections come from the labels, not the detector")
+        return DetectorChoice(base, iv, "sections", None, None,
+                              "no detector, so no threshold to choose")
     if {"threshold", "trim_s"} <= fixed:
         iv = find_intervals(raw, base)
         return DetectorChoice(base, iv, "flags", exact_loo_ug(raw, iv), None, "")
