@@ -45,7 +45,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except OSError as exc:
         return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
 
-    from calibration import report  # matplotlib is only needed from here on
+    from calibration import holdout, report  # matplotlib is only needed from here on
 
     figures: list[Path] = []
     report_dir = getattr(args, "report_dir", None)
@@ -55,9 +55,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
         doc = report.report_dict(fit)
         doc["model_file"] = str(args.output)
         doc["figures"] = [str(p) for p in figures]
+        holdout.add_holdout(doc, rec, fit)  # loo_rmse_ug, dof, warnings (calibration/holdout.py)
         print(json.dumps(doc, indent=2, allow_nan=False))
     else:
         print(report.format_table6(fit))
+        print(holdout.format_holdout(holdout.holdout_fields(rec, fit)))
         print(f"\nmodel written to {args.output}")
         for p in figures:
             print(f"figure: {p}")

@@ -18,10 +18,12 @@ diagonal scaling), weights W = 1/σ² from ``sd_*``/√n when available.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import brentq, least_squares
+from scipy.stats import chi2 as _chi2
 
 from calibration import sfem
 from calibration.errors import NotIdentifiable
@@ -54,6 +56,11 @@ class FitResult:
     message: str
     g_local: float = 1.0
     not_identifiable_why: dict[str, str] = field(default_factory=dict)
+    # σ_model (g) added in quadrature to every reading's sd/√n (see :func:`model_floor_g`);
+    # 0.0 when the residuals are consistent with the recorded noise, NaN with equal weights.
+    model_floor_g: float = float("nan")
+    # Hand-placed references: the orientation uncertainty (rad) per position, else None.
+    ref_tol_rad: np.ndarray | None = None
 
     @property
     def stderr(self) -> np.ndarray:
@@ -66,8 +73,17 @@ def fit_reference(
     sigma_g: np.ndarray | None = None,
     *,
     g_local: float = 1.0,
+    model_floor: float | str | None = "auto",
+    ref_tol_rad: np.ndarray | float | None = None,
 ) -> FitResult:
-    """Fit all 12 SFEM parameters from readings with known references (Eq. 4–7)."""
+    """Fit all 12 SFEM parameters from readings with known references (Eq. 4–7).
+
+    ``model_floor`` (with ``sigma_g``): "auto" adds σ_model, chosen from the fit's own
+    residual excess (:func:`model_floor_g`), in quadrature to sd/√n; a number (g) fixes
+    it; None or 0 uses sd/√n alone. ``ref_tol_rad`` (scalar or per position, > 0):
+    the references are hand-placed, known only to that angle -- see
+    :func:`_fit_hand_placed`.
+    """
     raw, ref = _as_n3(raw_g, "raw_g"), _as_n3(ref_g, "ref_g")
     if raw.shape != ref.shape:
         raise ValueError(f"raw_g {raw.shape} and ref_g {ref.shape} differ in shape")
@@ -75,6 +91,24 @@ def fit_reference(
     if n < 4:
         raise NotIdentifiable(f"reference fit needs at least 4 positions, got {n}")
     sig = _sigma(sigma_g, n)
+    tol = None
+    if ref_tol_rad is not None:
+        tol = np.broadcast_to(np.asarray(ref_tol_rad, dtype=float), (n,)).copy()
+        if not np.all(np.isfinite(tol) & (tol > 0)):
+            raise ValueError("ref_tol_rad must be positive and finite for every position")
+
+    def once(s: np.ndarray) -> FitResult:
+        if tol is not None:
+            return _fit_hand_placed(raw, ref, s, tol, g_local)
+        return _fit_reference_once(raw, ref, s, g_local)
+
+    return _with_floor(once, raw, sig, sigma_g is not None, model_floor)
+
+
+def _fit_reference_once(
+    raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, g_local: float
+) -> FitResult:
+    n = raw.shape[0]
     p0 = linear_reference_start(raw, ref, sig)
 
     def residual(p: np.ndarray) -> np.ndarray:
@@ -121,8 +155,12 @@ def fit_norm(
     sigma_g: np.ndarray | None = None,
     *,
     g_local: float = 1.0,
+    model_floor: float | str | None = "auto",
 ) -> FitResult:
-    """Fit b, S, C from |g| alone (Eq. 3 as the residual); M is not identifiable."""
+    """Fit b, S, C from |g| alone (Eq. 3 as the residual); M is not identifiable.
+
+    ``model_floor`` as in :func:`fit_reference`.
+    """
     raw = _as_n3(raw_g, "raw_g")
     n = raw.shape[0]
     if n < 10:
@@ -130,6 +168,12 @@ def fit_norm(
             f"norm-mode fit of 9 parameters needs at least 10 positions, got {n}"
         )
     sig = _sigma(sigma_g, n)
+    return _with_floor(lambda s: _fit_norm_once(raw, s, g_local), raw, sig,
+                       sigma_g is not None, model_floor)
+
+
+def _fit_norm_once(raw: np.ndarray, sig: np.ndarray, g_local: float) -> FitResult:
+    n = raw.shape[0]
     undetermined = _structurally_undetermined(raw, "norm")
     # Parameters the directions cannot see stay at their nominal value: letting
     # LM wander along a (near-)null direction would corrupt the others.
@@ -189,6 +233,168 @@ def fit_norm(
 def rmse_norm_ug(cal_g: np.ndarray, g_local: float = 1.0) -> float:
     """Eq. 9: RMS of (|a| − g) over positions, in µg."""
     return float(np.sqrt(np.mean((np.linalg.norm(cal_g, axis=1) - g_local) ** 2)) * 1e6)
+
+
+# --- weights with a model-error floor ----------------------------------------
+# A floor is only added when the residuals exceed the recorded noise beyond what
+# chance gives this often (χ² upper tail): on data the model describes within noise
+# (every simulation of the seed's model) the weights stay sd/√n exactly.
+FLOOR_SIGNIFICANCE = 0.01
+FLOOR_ITERATIONS = 6
+
+
+def model_floor_g(residual_g: np.ndarray, sigma_g: np.ndarray, n_params: int) -> float:
+    """σ_model (g) with Σ r_i² / (σ_i² + σ_model²) = N − p (the Paule–Mandel equation).
+
+    The weighted residual sum χ² = Σ r²/σ² of a fit whose model is right is χ²(N − p)
+    distributed. When it exceeds the (1 − :data:`FLOOR_SIGNIFICANCE`) quantile, the
+    excess is model error -- structure the linear SFEM (Eq. 1) leaves, placement
+    transients -- that does not shrink with averaging, so it enters every reading's
+    variance equally: σ_i² = sd_i²/n_i + σ_model². Without it, a 40 s rest with a
+    sd/√n five times smaller than a 3 s interval's gets 25× its weight although its
+    model error is the same (docs/realdata.md). Returns 0.0 when χ² is within noise
+    or there are no spare degrees of freedom.
+    """
+    r = np.asarray(residual_g, float).ravel()
+    s = np.asarray(sigma_g, float).ravel()
+    dof = r.size - int(n_params)
+    if dof < 1:
+        return 0.0
+    chi2 = float(np.sum((r / s) ** 2))
+    if chi2 <= float(_chi2.ppf(1.0 - FLOOR_SIGNIFICANCE, dof)):
+        return 0.0
+    upper = float(np.sum(r**2)) / dof  # there Σ r²/(σ² + t) < Σ r²/t = dof
+
+    def excess(t2: float) -> float:
+        return float(np.sum(r**2 / (s**2 + t2))) - dof
+
+    if excess(upper) > 0:  # only when σ is negligible against the residuals
+        return float(np.sqrt(upper))
+    return float(np.sqrt(brentq(excess, 0.0, upper, xtol=1e-30, rtol=1e-10)))
+
+
+def _floor_residuals(res: FitResult, raw: np.ndarray, sig: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, int]:
+    """(residual, its σ from sd/√n, parameters behind it) as the floor sees the fit."""
+    if res.mode == "reference" and res.ref_tol_rad is None:
+        return res.residuals_g, sig, sfem.N_PARAMS
+    # Norm residuals (norm mode; the |g| part of a hand-placed fit): b, S, C set them.
+    cal = res.params.apply(raw)
+    norm = np.linalg.norm(cal, axis=1)
+    u = cal / norm[:, None]
+    return norm - res.g_local, np.sqrt(np.sum((u * sig) ** 2, axis=1)), 9
+
+
+def _with_floor(
+    once: Callable[[np.ndarray], FitResult],
+    raw: np.ndarray,
+    sig: np.ndarray,
+    weighted: bool,
+    model_floor: float | str | None,
+) -> FitResult:
+    """Run ``once(σ)`` with σ² = sd²/n + σ_model² (σ_model per ``model_floor``)."""
+    if not weighted or model_floor is None or (
+            not isinstance(model_floor, str) and float(model_floor) == 0.0):
+        res = once(sig)
+        res.model_floor_g = 0.0 if weighted else float("nan")
+        return res
+    if not isinstance(model_floor, str):
+        tau = float(model_floor)
+        if not (np.isfinite(tau) and tau > 0):
+            raise ValueError(f"model_floor must be 'auto', None or a positive number (g), "
+                             f"got {model_floor!r}")
+        res = once(np.sqrt(sig**2 + tau**2))
+        res.model_floor_g = tau
+        return res
+    if model_floor != "auto":
+        raise ValueError(f"model_floor must be 'auto', None or a number, got {model_floor!r}")
+    res, tau = once(sig), 0.0
+    for _ in range(FLOOR_ITERATIONS):  # residuals move with the weights: a fixed point
+        new_tau = model_floor_g(*_floor_residuals(res, raw, sig))
+        if new_tau == 0.0 and tau == 0.0:
+            break
+        converged = abs(new_tau - tau) <= 1e-3 * max(new_tau, tau)
+        tau = new_tau
+        res = once(np.sqrt(sig**2 + tau**2))
+        if converged:
+            break
+    res.model_floor_g = tau
+    return res
+
+
+# --- hand-placed references ---------------------------------------------------
+def _fit_hand_placed(
+    raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, tol_rad: np.ndarray, g_local: float
+) -> FitResult:
+    """Reference-mode fit whose reference directions are known only to ``tol_rad``.
+
+    A sensor put on a cube face by hand sits a degree or so off the labelled axis.
+    Fitting ``A(U − b) = ref`` (Eq. 4) as if exact turns that tilt into
+    misalignment and non-orthogonality and, through them, into |g| errors at every
+    other orientation. Here each position contributes two kinds of residual:
+
+    * its |g| error, ``(|A(U − b)| − g)/σ_i`` (Eq. 3): gravity's magnitude does not
+      depend on how the sensor was placed, so it keeps its full weight;
+    * its direction error, ``(f/|f| − r̂)/θ_i`` with θ_i the placement uncertainty:
+      a Gaussian prior on a small per-position rotation, linearised.
+
+    With θ ≫ σ/g (1° against 10⁻⁴ g) the |g| residuals decide b, S and the
+    |g|-visible part of C exactly as a norm-mode fit would, and the labels only
+    decide what |g| cannot see (the rotation M, and C where the positions are too few
+    for norm mode -- six faces): the equivalent, in one LM, of "norm mode with the
+    reference used for the axis assignment". Uses the analytic Jacobian of
+    :func:`sfem.forward_jacobian`.
+    """
+    n = raw.shape[0]
+    r_hat = ref / np.linalg.norm(ref, axis=1, keepdims=True)
+    p0 = linear_reference_start(raw, ref, sig)
+
+    def parts(p: np.ndarray) -> tuple[np.ndarray, ...]:
+        f, jac = sfem.forward_jacobian(p, raw)
+        norm = np.linalg.norm(f, axis=1)
+        u = f / norm[:, None]
+        s_norm = np.sqrt(np.sum((u * sig) ** 2, axis=1))
+        return f, jac, norm, u, s_norm
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        _, _, norm, u, s_norm = parts(p)
+        return np.concatenate([(norm - g_local) / s_norm,
+                               ((u - r_hat) / tol_rad[:, None]).ravel()])
+
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        _, jac, norm, u, s_norm = parts(p)
+        dnorm = np.einsum("ni,nik->nk", u, jac)
+        proj = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
+        du = np.einsum("nij,njk->nik", proj, jac) / norm[:, None, None]
+        return np.vstack([dnorm / s_norm[:, None],
+                          (du / tol_rad[:, None, None]).reshape(3 * n, sfem.N_PARAMS)])
+
+    sol = least_squares(residual, p0, jac=jacobian, method="lm", x_scale="jac")
+    params = sfem.SfemParams.from_vector(sol.x)
+    cal = params.apply(raw)
+    # n |g| residuals + 2n direction components (the third is second order) − 12.
+    dof = max(3 * n - sfem.N_PARAMS, 1)
+    chi2_red = float(np.sum(sol.fun**2) / dof)
+    cov, ident = _covariance(sol.jac, chi2_red, np.ones(sfem.N_PARAMS, bool))
+    res = cal - ref
+    return FitResult(
+        mode="reference",
+        params=params,
+        covariance=cov,
+        identifiable=ident,
+        residuals_g=res,
+        rmse_norm_ug=rmse_norm_ug(cal, g_local),
+        rmse_norm_before_ug=rmse_norm_ug(raw, g_local),
+        rmse_vector_ug=float(np.sqrt(np.mean(res**2)) * 1e6),
+        chi2_red=chi2_red,
+        n_positions=n,
+        nfev=int(sol.nfev),
+        success=bool(sol.success),
+        message=str(sol.message),
+        g_local=g_local,
+        not_identifiable_why=_why(ident),
+        ref_tol_rad=tol_rad.copy(),
+    )
 
 
 def linear_reference_start(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray) -> np.ndarray:

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import RecordingError
+from calibration.placement import HAND_HELD_TOL_DEG, REF_TOL_COLUMN
 from calibration.recording import Recording
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # m/s² per g (CGPM 1901), converts m/s² files to g
@@ -202,6 +203,9 @@ def intervals_to_recording(
     if raw.section_refs is not None and len(raw.section_refs) == len(intervals):
         for j, c in enumerate(("ref_x", "ref_y", "ref_z")):
             cols[c] = [r[j] for r in raw.section_refs]
+        # Labelled sections are a box turned by hand: the labels are approximate
+        # (calibration/placement.py; docs/fit-honesty.md).
+        cols[REF_TOL_COLUMN] = [HAND_HELD_TOL_DEG] * len(intervals)
     rec = Recording.from_columns(cols, path=path)
     rec.notes.extend(raw.notes)
     return rec

@@ -11,8 +11,10 @@ so the wiring may add them later): ``sensor`` (openaxes: adxl355|bmi160),
 ``counts_per_g`` and ``offset`` (imu_tk: one number or ``x,y,z``),
 ``session_list`` (ferraris JSON), ``window_s``, ``trim_s``.
 
-Exit 0 and a summary on stdout; exit 2 with one line on stderr for bad input,
-and then no file is written (the write is the last step and atomic).
+Unless ``--threshold`` and ``--trim-s`` are both given, the missing ones are chosen by
+leave-one-interval-out error over a grid (:mod:`calibration.static_choice`) and the
+summary says what was chosen. Exit 0 and a summary on stdout; exit 2 with one line on
+stderr for bad input, and then no file is written (the write is the last step and atomic).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from typing import TextIO
 
 import numpy as np
 
-from calibration import importers
+from calibration import importers, static_choice
 from calibration.errors import CalibrationError
 from calibration.recording import Recording, write_recording
 
@@ -40,7 +42,15 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
         settings = _settings(args, fmt)
         src, raw_rows = _source_and_mode(args)
         raw = importers.read_source(fmt, src, **_reader_options(args, fmt))
-        intervals = importers.find_intervals(raw, settings)
+        choice = None
+        if raw_rows:  # every sample is written: the intervals only feed the summary
+            intervals = importers.find_intervals(raw, settings)
+        else:
+            # Threshold and trim by leave-one-interval-out error unless the flags fix them.
+            fixed = frozenset(f for a, f in (("threshold", "threshold"), ("trim_s", "trim_s"))
+                              if getattr(args, a, None) is not None)
+            choice = static_choice.choose_detector(raw, settings, fixed=fixed)
+            intervals = choice.intervals
         if raw_rows:
             rec = importers.samples_to_recording(raw, path=str(args.output))
         else:
@@ -50,6 +60,8 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
         print(f"soakcal import: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     print(summary(raw, intervals, rec, str(args.output), raw_rows=raw_rows), file=out)
+    if choice is not None:
+        print(choice.summary(), file=out)
     return 0
 
 

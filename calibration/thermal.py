@@ -34,6 +34,7 @@ from calibration import extensions as _ext
 from calibration import metrics, sfem, sfem_batch
 from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.fit import FitResult, fit_norm, fit_reference, rmse_norm_ug
+from calibration.placement import reference_tolerance_rad
 from calibration.recording import Recording
 from calibration.temperature_conditioning import condition_temperature
 from calibration.thermal_joint import fit_joint
@@ -214,6 +215,14 @@ def fit_campaign(
     g_local = 1.0
     if ref is not None:
         g_local = float(np.median(np.linalg.norm(ref, axis=1)))
+    method_requested = method
+    ref_tol = reference_tolerance_rad(recording) if ref is not None else None
+    if ref_tol is not None:  # hand-placed: calibration/placement.py, docs/fit-honesty.md
+        notes.append("hand-placed references (ref_tol_deg): |g| fitted at full weight, "
+                     "label directions as a prior of that angle")
+        if method == "joint":  # the joint fit treats references as exact
+            notes.append("joint fit not used: hand-placed references are fitted per step")
+            method = "per_step"
 
     has_temp = recording.has_temperature
     if has_temp:
@@ -241,7 +250,8 @@ def fit_campaign(
         idx = np.flatnonzero(steps == s)
         try:
             if mode == "reference":
-                fr = fit_reference(raw[idx], ref[idx], sigma[idx], g_local=g_local)
+                fr = fit_reference(raw[idx], ref[idx], sigma[idx], g_local=g_local,
+                                   ref_tol_rad=None if ref_tol is None else ref_tol[idx])
             else:
                 fr = fit_norm(raw[idx], sigma[idx], g_local=g_local)
         except NotIdentifiable as exc:
@@ -291,8 +301,14 @@ def fit_campaign(
             f"{used.size * 3}x{coeffs.size} Jacobian; the per-step polynomials are used"
         )
     elif method == "joint" and used_degree > 0:
+        # Each step's model-error floor (fit.model_floor_g; 0 when its residuals are
+        # noise) carries over to its rows, so the joint fit weighs as the steps did.
+        floor = np.zeros(len(recording))
+        for _, idx, fr in fits:
+            floor[idx] = fr.model_floor_g if np.isfinite(fr.model_floor_g) else 0.0
         jr = fit_joint(
-            raw[used], None if ref is None else ref[used], sigma[used],
+            raw[used], None if ref is None else ref[used],
+            np.sqrt(sigma[used] ** 2 + floor[used, None] ** 2),
             (row_c[used] - centre) / scale, coeffs, identifiable, g_local=g_local,
         )
         coeffs, coeff_se, method_used = jr.coeffs, jr.coeff_stderr, "joint"
@@ -326,7 +342,7 @@ def fit_campaign(
             "rows": len(recording),
             "mode": mode,
             "method": method_used,
-            "method_requested": method,
+            "method_requested": method_requested,
             "degree_requested": degree,
             "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
         },

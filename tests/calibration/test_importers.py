@@ -206,6 +206,8 @@ def test_ferraris_session_and_list(tmp_path: Path) -> None:
     assert len(rec) == 6
     np.testing.assert_allclose(rec.raw_g, rec.ref_g, atol=1e-12)
     assert list(rec.columns["n"]) == [80] * 6
+    # The sections are hand-placed: the import says so (calibration/placement.py).
+    assert list(rec.columns["ref_tol_deg"]) == [2.0] * 6
     del spec["z_a"]
     (tmp_path / "sess_list.json").write_text(json.dumps(spec))
     with pytest.raises(RecordingError) as info:
