@@ -51,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_serve(sub)
     _add_token(sub)
     _add_campaign(sub)
+    _add_ops(sub)
     demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
@@ -184,6 +185,7 @@ def _add_token(sub: Any) -> None:
     create.add_argument("--role", required=True, choices=ROLES)
     create.add_argument("--name", help="who or what the token is for")
     create.set_defaults(handler=_run_token_create)
+    _add_token_actions(token_sub, create)
 
 
 def _run_token_create(args: argparse.Namespace) -> int:
@@ -225,6 +227,19 @@ def _add_campaign(sub: Any) -> None:
     from service import cli_campaign
 
     cli_campaign.add_parser(sub)
+
+
+def _add_token_actions(token_sub: Any, create: Any) -> None:
+    from service import cli_ops
+
+    cli_ops.add_token_actions(token_sub, create)  # --expires-days, token list, token revoke
+
+
+def _add_ops(sub: Any) -> None:
+    from service import cli_ops
+
+    cli_ops.add_schedule(sub)
+    cli_ops.add_coefficients(sub)
 
 
 def _fail(message: str) -> None:
