@@ -19,14 +19,15 @@ from typing import Any
 
 logger = logging.getLogger("soakcal.events")
 
-# The events the engine and scheduler are expected to log (docs/engine-events.md).
+# The events the engine and scheduler are expected to log (docs/web.md, "Service log").
 ENGINE_EVENTS = (
     "schedule fired",
     "campaign started",
     "soak ended",
     "campaign suspended",
-    "campaign resumed",
+    "campaign unsuspended",
     "campaign paused",
+    "campaign resumed",
     "campaign ended",
 )
 
@@ -40,8 +41,30 @@ def format_event(event: str, **fields: Any) -> str:
 
 def log_event(event: str, **fields: Any) -> None:
     """Log ``event`` at INFO as one logfmt line (see the module docstring)."""
+    _ensure_handler()
     if logger.isEnabledFor(logging.INFO):
         logger.info("%s", format_event(event, **fields))
+
+
+_handler_checked = False
+
+
+def _ensure_handler() -> None:
+    """Under ``soakcal serve`` nobody configures the root logger (uvicorn configures only
+    its own), so INFO lines would be dropped: then give this logger a stderr handler in
+    uvicorn's style. A process that configured logging (pytest, a deployment) is left alone.
+    """
+    global _handler_checked
+    if _handler_checked:
+        return
+    _handler_checked = True
+    if logger.handlers or logging.getLogger().handlers:
+        return
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(levelname)s:     %(name)s %(message)s"))
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
 
 
 def _value(value: Any) -> str:
