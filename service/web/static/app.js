@@ -177,9 +177,33 @@ async function campaignView(id) {
   const buttons = h("p", { id: "controls" });
   const links = h("p", { id: "links" });
   let events = 0;
+  const journal = h("ul", { id: "journal" });
+  let prev = null;
+  // what changed between two snapshots, as lines for the page's event list
+  function changes(a, b) {
+    if (!a) return [`${b.state}, step ${b.progress.step} (${b.progress.phase})`];
+    const out = [];
+    if (a.state !== b.state) out.push(`state ${a.state} → ${b.state}`);
+    if (a.progress.step !== b.progress.step || a.progress.phase !== b.progress.phase) {
+      if (a.progress.phase === "soak" && b.progress.phase !== "soak") out.push(`soak ended at step ${a.progress.step}`);
+      out.push(`step ${b.progress.step} ${b.progress.phase}, setpoint ${fmt(b.progress.setpoint_c, 1, "°C")}`);
+    }
+    if (a.suspended_reason !== b.suspended_reason) {
+      out.push(b.suspended_reason ? `suspended: ${b.suspended_reason}` : "device answers again: unsuspended");
+    }
+    if (a.requested_action !== b.requested_action && b.requested_action) out.push(`${b.requested_action} requested`);
+    if (b.error && a.error !== b.error) out.push(`error: ${b.error}`);
+    return out;
+  }
+  function note(next) {
+    for (const line of changes(prev, next)) {
+      journal.prepend(h("li", {}, `${new Date().toLocaleTimeString()}  ${line}`));
+    }
+    prev = next;
+  }
 
   const control = (action) => h("button", { id: `${action}-btn`, onclick: () => guarded(async () => {
-    c = await api("POST", `/api/v1/campaigns/${id}/${action}`); render();
+    c = await api("POST", `/api/v1/campaigns/${id}/${action}`); note(c); render();
   }) }, action);
 
   function render() {
@@ -206,17 +230,19 @@ async function campaignView(id) {
     links.replaceChildren(h("a", { href: `/api/v1/campaigns/${id}/recording.csv`, id: "recording" }, "recording (CSV, format v1)"));
     if (c.calibration_id) links.append(" · ", h("a", { href: `#/calibrations/${c.calibration_id}`, id: "calibration-link" }, `calibration ${c.calibration_id} and its figures`));
   }
-  show(h("h2", {}, `Campaign ${id}`), facts, chartBox, buttons, links);
+  show(h("h2", {}, `Campaign ${id}`), facts, chartBox, buttons, links,
+    h("h3", {}, "Seen on this page"), journal);
+  note(c);
   render();
   if (!TERMINAL.includes(c.state)) {
     stream = new EventSource(`/api/v1/campaigns/${id}/events`);
     stream.addEventListener("progress", (ev) => {
-      c = JSON.parse(ev.data); events += 1;
+      c = JSON.parse(ev.data); events += 1; note(c);
       points.push({ t: (performance.now() - t0) / 1000, c: c.progress.chamber_c, set: c.progress.setpoint_c });
       render();
     });
     stream.addEventListener("end", () => { stream.close(); stream = null;
-      guarded(async () => { c = await api("GET", `/api/v1/campaigns/${id}`); render(); }); });
+      guarded(async () => { c = await api("GET", `/api/v1/campaigns/${id}`); note(c); render(); }); });
     stream.onerror = () => { if (stream && stream.readyState === EventSource.CLOSED) error("progress stream closed"); };
   }
 }
