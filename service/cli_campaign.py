@@ -165,7 +165,7 @@ def _list(args: argparse.Namespace) -> int:
         p = c["progress"]
         print(
             f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
-            f"{p['step'] + 1:>3}/{p['steps']:<3}  {p['fraction']:>5.0%}"
+            f"{_step(p):>7}  {p['fraction']:>5.0%}"
         )
     return EXIT_OK
 
@@ -191,6 +191,11 @@ def _watch(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     if last.get("error"):
         print(f"error: {last['error']}")
+    if last["state"] == "completed" and last.get("calibration_id") is not None:
+        print(
+            f"calibration {last['calibration_id']} of sensor {last['sensor']}: "
+            f"soakcal coefficients {last['sensor']} --temperature-c T"
+        )
     return EXIT_OK if last["state"] == "completed" else EXIT_FAILED
 
 
@@ -222,17 +227,26 @@ def _draw(campaign: dict[str, Any]) -> None:
 
 
 def progress_line(campaign: dict[str, Any], width: int = 24) -> str:
-    """``[#####.....]  42% step 5/11 soak 12.3 °C → 10 °C  ETA 1h02m  running``."""
+    """``[#####.....]  42% step 4 of 0..10 soak 12.3 °C → 10 °C  ETA 1h02m  running``.
+
+    Steps are 0-based, as the API's ``progress.step`` and the recording's ``step`` column.
+    """
     p = campaign["progress"]
     filled = int(round(p["fraction"] * width))
     bar = "#" * filled + "." * (width - filled)
     chamber = "–" if p.get("chamber_c") is None else f"{p['chamber_c']:.1f}"
     setpoint = "–" if p.get("setpoint_c") is None else f"{p['setpoint_c']:g}"
     return (
-        f"[{bar}] {p['fraction']:4.0%} step {min(p['step'] + 1, p['steps'])}/{p['steps']} "
+        f"[{bar}] {p['fraction']:4.0%} step {_step(p)} "
         f"{p['phase']:<9} {chamber} °C → {setpoint} °C  ETA {_eta(p.get('eta_s'))}  "
         f"{campaign['state']}"
     )
+
+
+def _step(p: dict[str, Any]) -> str:
+    """``4 of 0..10``: the 0-based step (clamped to the last) and the range."""
+    last = max(p["steps"] - 1, 0)
+    return f"{min(p['step'], last)} of 0..{last}"
 
 
 def _eta(eta_s: float | None) -> str:
