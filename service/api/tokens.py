@@ -24,6 +24,7 @@ TokenId = Annotated[int, Path(ge=1, le=2**31 - 1, description="the token's id")]
 class TokenCreateBody(TokenCreate):
     expires_days: float | None = Field(
         default=None,
+        strict=True,  # a JSON number: true or "30" is a 422, not 1 or 30 days
         gt=0,
         le=auth.MAX_EXPIRES_DAYS,
         description="refused (401) after this many days; omitted: never expires",

@@ -118,8 +118,10 @@ def test_an_expired_token_gets_401(client: TestClient, auth, sf) -> None:  # typ
         session.commit()
     response = client.get("/api/v1/rigs", headers=_bearer(created["token"]))
     assert response.status_code == 401 and response.json()["detail"] == "token expired"
-    bad = {"role": "viewer", "expires_days": 0}
-    assert client.post("/api/v1/tokens", json=bad, headers=auth["admin"]).status_code == 422
+    for bad_days in (0, -1, 3651, True, "30"):
+        bad = {"role": "viewer", "expires_days": bad_days}
+        response = client.post("/api/v1/tokens", json=bad, headers=auth["admin"])
+        assert response.status_code == 422, bad_days
 
 
 def test_last_used_at_is_written(client: TestClient, auth, sf) -> None:  # type: ignore[no-untyped-def]

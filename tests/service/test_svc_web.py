@@ -118,3 +118,21 @@ def test_a_malformed_cors_origin_is_one_clear_error() -> None:
     with pytest.raises(ValueError, match="SOAKCAL_CORS_ORIGINS: 'dash.lab' is not an origin"):
         cors_origins("dash.lab")
     assert cors_origins("") == []
+
+
+def test_a_signed_in_viewer_reads_but_cannot_control(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    body = {"rig": "sim", "sensor": "SN-WEB-2", "setpoints_c": [20.0]}
+    campaign = client.post("/api/v1/campaigns", json=body, headers=auth["operator"]).json()
+    client.post("/web/session", json={"token": _token(auth, "viewer")}, headers=CSRF)
+    assert client.get(f"/api/v1/campaigns/{campaign['id']}").status_code == 200
+    pause = client.post(f"/api/v1/campaigns/{campaign['id']}/pause", headers=CSRF)
+    assert pause.status_code == 403 and "operator" in pause.json()["detail"]
+
+
+def test_figures_of_an_unknown_calibration_are_404(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    assert client.get("/web/calibrations/5/figures").status_code == 401
+    response = client.get("/web/calibrations/5/figures", headers=auth["viewer"])
+    assert response.status_code == 404 and "not found" in response.json()["detail"]
+    viewer = auth["viewer"]
+    assert client.get("/web/calibrations/5/figures/x.png", headers=viewer).status_code == 404
+    assert client.get(f"/web/calibrations/{2**40}/figures", headers=viewer).status_code == 422
