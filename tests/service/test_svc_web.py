@@ -23,6 +23,7 @@ def _token(auth, role: str) -> str:  # type: ignore[no-untyped-def]
 def test_api_docs_reference_only_assets_the_service_serves(client: TestClient, page: str) -> None:
     html = client.get(page)
     assert html.status_code == 200
+    assert "default-src 'self'" in html.headers["content-security-policy"]
     urls = re.findall(r'(?:src|href)="([^"]+)"|url: *[\'"]([^\'"]+)[\'"]', html.text)
     urls = [a or b for a, b in urls]
     assert urls, html.text[:300]

@@ -94,3 +94,36 @@ def test_sign_in_start_watch_pause_resume_and_open_figures(
     assert not page_errors, page_errors
     foreign = [u for u in requested if not u.startswith((base + "/", "data:"))]
     assert not foreign, f"the dashboard asked other hosts: {foreign}"
+
+
+def test_api_docs_render_with_no_internet(live_engine_service: LiveService) -> None:
+    """Swagger UI and ReDoc render while every request to another host is refused."""
+    executable = chromium_or_skip()
+    from playwright.sync_api import sync_playwright
+
+    base = live_engine_service.url
+    refused: list[str] = []
+
+    def offline(route) -> None:  # type: ignore[no-untyped-def]
+        if route.request.url.startswith((base + "/", "data:", "blob:")):
+            route.continue_()
+        else:
+            refused.append(route.request.url)
+            route.abort()
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=executable, args=["--no-sandbox"])
+        try:
+            page = browser.new_page()
+            page.set_default_timeout(TIMEOUT_MS)
+            page.route("**/*", offline)
+            page.goto(base + "/docs")
+            page.wait_for_selector(".opblock-tag")
+            tags = set(page.locator(".opblock-tag").all_inner_texts())
+            assert {"campaigns", "tokens"} <= {t.split("\n")[0].strip() for t in tags}
+            page.goto(base + "/redoc")
+            page.wait_for_selector(".api-content h2")
+            assert page.locator(".api-content h2").count() > 10  # one per operation
+        finally:
+            browser.close()
+    assert not refused, f"the docs asked other hosts: {refused}"
