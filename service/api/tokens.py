@@ -16,7 +16,13 @@ from service.db.models import ApiToken
 from service.db.timestamps import as_utc, utcnow
 from service.event_log import log_event
 
-router = APIRouter(prefix="/api/v1/tokens", tags=["tokens"], dependencies=[Depends(auth.admin)])
+_AUTH = {
+    401: {"description": "missing, unknown, revoked or expired token"},
+    403: {"description": "the token's role is below admin"},
+}
+router = APIRouter(
+    prefix="/api/v1/tokens", tags=["tokens"], dependencies=[Depends(auth.admin)], responses=_AUTH
+)
 
 TokenId = Annotated[int, Path(ge=1, le=2**31 - 1, description="the token's id")]
 

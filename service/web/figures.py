@@ -32,7 +32,13 @@ CACHE_CALIBRATIONS = 8
 _NAME = re.compile(r"^[a-z_]{1,64}$")
 
 router = APIRouter(
-    prefix="/web/calibrations", tags=["dashboard"], dependencies=[Depends(auth.viewer)]
+    prefix="/web/calibrations",
+    tags=["dashboard"],
+    dependencies=[Depends(auth.viewer)],
+    responses={
+        401: {"description": "missing, unknown, revoked or expired token"},
+        404: {"description": "no such calibration, or no stored measurements to draw from"},
+    },
 )
 
 CalibrationId = Annotated[int, PathParam(ge=1, le=2**31 - 1)]

@@ -37,7 +37,14 @@ class WhoAmI(BaseModel):
     token_id: int
 
 
-@router.post("/session", response_model=WhoAmI, responses={401: {"description": "bad token"}})
+@router.post(
+    "/session",
+    response_model=WhoAmI,
+    responses={
+        401: {"description": "unknown, revoked or expired token"},
+        403: {"description": "without the X-Soakcal-CSRF header"},
+    },
+)
 async def sign_in(body: SignIn, request: Request, response: Response) -> WhoAmI:
     """Check the token and keep it in the session cookie."""
     if not request.headers.get(auth.CSRF_HEADER):
@@ -65,13 +72,17 @@ async def sign_in(body: SignIn, request: Request, response: Response) -> WhoAmI:
     return WhoAmI(role=row.role, name=row.name, token_id=row.id)
 
 
-@router.get("/session", response_model=WhoAmI)
+@router.get(
+    "/session", response_model=WhoAmI, responses={401: {"description": "not signed in"}}
+)
 async def who_am_i(row: Annotated[ApiToken, Depends(auth.viewer)]) -> WhoAmI:
     """The signed-in token's role (401 when the cookie is missing, revoked or expired)."""
     return WhoAmI(role=row.role, name=row.name, token_id=row.id)
 
 
-@router.delete("/session", status_code=204)
+@router.delete(
+    "/session", status_code=204, responses={403: {"description": "without X-Soakcal-CSRF"}}
+)
 async def sign_out(request: Request) -> Response:
     if not request.headers.get(auth.CSRF_HEADER):
         raise HTTPException(status_code=403, detail=f"sign-out needs the {auth.CSRF_HEADER} header")
