@@ -7,6 +7,8 @@ const ROLES = ["viewer", "operator", "admin"];
 const TERMINAL = ["completed", "failed", "aborted"];
 const me = { role: null, name: null };
 let stream = null; // the open EventSource, closed on every navigation
+let refresh = null; // the list view's re-read timer, cleared on every navigation
+const LIST_REFRESH_MS = 5000;
 
 // --- small helpers -------------------------------------------------------------------
 function h(tag, attrs, ...children) {
@@ -95,8 +97,20 @@ function signedIn(who) {
 
 // --- campaigns -------------------------------------------------------------------------
 async function campaignsView() {
-  const list = await api("GET", "/api/v1/campaigns");
-  const rows = list.map((c) => h("tr", {},
+  const table = h("table", { id: "campaigns" });
+  async function fill() {
+    const list = await api("GET", "/api/v1/campaigns");
+    table.replaceChildren(h("tr", {}, ...["id", "state", "rig", "sensor", "step", "done",
+      "suspended", "created"].map((t) => h("th", {}, t))), campaignRows(list));
+  }
+  await fill();
+  show(h("h2", {}, "Campaigns"), atLeast("operator") ? startForm() : "", table,
+    h("p", { class: "muted" }, `re-read every ${LIST_REFRESH_MS / 1000} s; open a campaign for live progress`));
+  refresh = setInterval(() => guarded(fill), LIST_REFRESH_MS);
+}
+
+function campaignRows(list) {
+  return list.map((c) => h("tr", {},
     h("td", { class: "num" }, h("a", { href: `#/campaigns/${c.id}` }, c.id)),
     h("td", {}, h("span", { class: `state ${c.state}` }, c.state)),
     h("td", {}, c.rig), h("td", {}, c.sensor),
@@ -104,9 +118,6 @@ async function campaignsView() {
     h("td", { class: "num" }, `${Math.round(c.progress.fraction * 100)} %`),
     h("td", {}, c.suspended_reason ? h("span", { class: "warn" }, c.suspended_reason) : ""),
     h("td", {}, when(c.created_at))));
-  show(h("h2", {}, "Campaigns"), atLeast("operator") ? startForm() : "",
-    h("table", { id: "campaigns" }, h("tr", {}, ...["id", "state", "rig", "sensor", "step", "done",
-      "suspended", "created"].map((t) => h("th", {}, t))), rows));
 }
 
 function startForm() {
@@ -302,9 +313,34 @@ async function calibrationView(id) {
 }
 
 // --- schedules, rigs, tokens ----------------------------------------------------------
+function scheduleForm() {
+  const field = (name, label, value, attrs) => h("label", {}, label,
+    h("input", Object.assign({ name, value }, attrs || {})));
+  const form = h("form", { class: "inline", id: "schedule-form" },
+    field("cron", "Cron (min hour dom mon dow)", "0 20 * * 1-5"),
+    field("timezone", "Time zone (IANA)", "UTC"),
+    field("at", "or once at (ISO-8601, UTC)", "", { placeholder: "2026-12-01T20:00:00Z" }),
+    field("rig", "Rig", "sim", { required: true }),
+    field("sensor", "Sensor serial", "", { required: true, placeholder: "SN-0001" }),
+    field("setpoints_c", "Setpoints (°C)", "-40,-20,0,20,40,60"),
+    field("soak_min", "Soak (min)", "60", { type: "number", step: "any", min: "0" }),
+    h("button", { class: "primary", type: "submit" }, "Add schedule"));
+  form.addEventListener("submit", (ev) => { ev.preventDefault(); guarded(async () => {
+    const f = new FormData(form);
+    const at = String(f.get("at")).trim();
+    const body = { campaign: { rig: f.get("rig"), sensor: f.get("sensor"), soak_min: Number(f.get("soak_min")),
+      setpoints_c: String(f.get("setpoints_c")).split(",").filter((x) => x.trim()).map(Number) } };
+    if (at) body.at = at;
+    else { body.cron = String(f.get("cron")).trim(); body.timezone = String(f.get("timezone")).trim() || null; }
+    await api("POST", "/api/v1/schedules", body);
+    route();
+  }); });
+  return h("details", {}, h("summary", {}, "Add a schedule (the at field, when filled, wins over cron)"), form);
+}
+
 async function schedulesView() {
   const list = await api("GET", "/api/v1/schedules");
-  show(h("h2", {}, "Schedules"), h("table", { id: "schedules" },
+  show(h("h2", {}, "Schedules"), atLeast("operator") ? scheduleForm() : "", h("table", { id: "schedules" },
     h("tr", {}, ...["id", "when", "next run", "last run", "last campaign", "campaign", ""].map((t) => h("th", {}, t))),
     list.map((s) => h("tr", {}, h("td", {}, s.id), h("td", {}, s.cron ? `cron ${s.cron} (${s.timezone || "UTC"})` : when(s.at)),
       h("td", {}, when(s.next_run_at)), h("td", {}, when(s.last_run_at)),
@@ -336,6 +372,7 @@ async function tokensView() {
 // --- routing -----------------------------------------------------------------------------
 function route() {
   if (stream) { stream.close(); stream = null; }
+  if (refresh) { clearInterval(refresh); refresh = null; }
   if (!me.role) return;
   const parts = location.hash.replace(/^#\/?/, "").split("/").map(decodeURIComponent);
   const views = {
