@@ -198,7 +198,7 @@ def _run_token_create(args: argparse.Namespace) -> int:
     factory = make_session_factory(url)
     try:
         with session_scope(factory) as session:
-            token = create_token(session, args.role, args.name)
+            token = create_token(session, args.role, args.name, args.expires_days)
     finally:
         factory.kw["bind"].dispose()
     label = f" '{args.name}'" if args.name else ""

@@ -32,7 +32,6 @@ def add_token_actions(token_sub: Any, create: argparse.ArgumentParser) -> None:
         metavar="DAYS",
         help="the token is refused after DAYS days (default: never expires)",
     )
-    create.set_defaults(handler=run_token_create)
     listing = token_sub.add_parser("list", help="list tokens (never their secrets)")
     listing.add_argument("--json", action="store_true", help="print JSON")
     listing.set_defaults(handler=run_token_list)
@@ -70,26 +69,6 @@ def _redacted(url: str) -> str:
     from sqlalchemy import make_url
 
     return make_url(url).render_as_string(hide_password=True)
-
-
-def run_token_create(args: argparse.Namespace) -> int:
-    from service.api.auth import create_token
-    from service.db.session import session_scope
-
-    factory, url = _session_factory()
-    try:
-        with session_scope(factory) as session:
-            token = create_token(session, args.role, args.name, args.expires_days)
-    finally:
-        factory.kw["bind"].dispose()
-    label = f" '{args.name}'" if args.name else ""
-    until = ""
-    if args.expires_days is not None:
-        expires = dt.datetime.now(dt.UTC) + dt.timedelta(days=args.expires_days)
-        until = f", valid until {expires:%Y-%m-%d %H:%M} UTC"
-    print(f"created {args.role} token{label}{until} in {_redacted(url)}; it is shown only once:")
-    print(token)
-    return EXIT_OK
 
 
 def run_token_list(args: argparse.Namespace) -> int:
