@@ -75,7 +75,9 @@ def test_sign_in_start_watch_pause_resume_and_open_figures(
             _wait_state(page, "running", "completed")
             _wait_state(page, "completed")
             journal = page.inner_text("#journal")
-            assert "→ paused" in journal and "paused → running" in journal
+            assert "→ paused" in journal
+            # a campaign paused before the engine took it goes back to queued, then runs
+            assert "paused → running" in journal or "paused → queued" in journal
             assert "soak ended" in journal and "→ completed" in journal
             assert _events(page) > events_paused
             assert page.inner_text("#step") + page.inner_text("#position") != paused_at
