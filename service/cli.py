@@ -53,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_campaign(sub)
     _add_sensor(sub)
     _add_rig(sub)
+    _add_ops(sub)
     demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
@@ -186,6 +187,7 @@ def _add_token(sub: Any) -> None:
     create.add_argument("--role", required=True, choices=ROLES)
     create.add_argument("--name", help="who or what the token is for")
     create.set_defaults(handler=_run_token_create)
+    _add_token_actions(token_sub, create)
 
 
 def _run_token_create(args: argparse.Namespace) -> int:
@@ -198,7 +200,7 @@ def _run_token_create(args: argparse.Namespace) -> int:
     factory = make_session_factory(url)
     try:
         with session_scope(factory) as session:
-            token = create_token(session, args.role, args.name)
+            token = create_token(session, args.role, args.name, args.expires_days)
     finally:
         factory.kw["bind"].dispose()
     label = f" '{args.name}'" if args.name else ""
@@ -233,11 +235,26 @@ def _add_sensor(sub: Any) -> None:
     from service import cli_sensor
 
     cli_sensor.add_parser(sub)
+
+
 def _add_rig(sub: Any) -> None:
     """``soakcal rig check NAME [--move]`` (service/rig_check.py)."""
     from service import rig_check
 
     rig_check.add_parser(sub)
+
+
+def _add_token_actions(token_sub: Any, create: Any) -> None:
+    from service import cli_ops
+
+    cli_ops.add_token_actions(token_sub, create)  # --expires-days, token list, token revoke
+
+
+def _add_ops(sub: Any) -> None:
+    from service import cli_ops
+
+    cli_ops.add_schedule(sub)
+    cli_ops.add_coefficients(sub)
 
 
 def _fail(message: str) -> None:

@@ -14,8 +14,8 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 TERMINAL = ("completed", "failed", "aborted")
 
 
-def add_parser(sub: Any) -> None:
-    campaign = sub.add_parser("campaign", help="start, watch and control campaigns (REST client)")
+def client_options() -> argparse.ArgumentParser:
+    """``--url`` and ``--token``, shared by every REST-client subcommand."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--url",
@@ -23,6 +23,12 @@ def add_parser(sub: Any) -> None:
         help=f"service URL (default {DEFAULT_URL})",
     )
     common.add_argument("--token", default=None, help="API token (default: $SOAKCAL_TOKEN)")
+    return common
+
+
+def add_parser(sub: Any) -> None:
+    campaign = sub.add_parser("campaign", help="start, watch and control campaigns (REST client)")
+    common = client_options()
     actions = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
 
     start = actions.add_parser("start", parents=[common], help="queue a campaign")
@@ -30,7 +36,7 @@ def add_parser(sub: Any) -> None:
     start.add_argument("--sensor", required=True, help="sensor serial, e.g. SN-0001")
     start.add_argument(
         "--setpoints",
-        type=_setpoints,
+        type=parse_setpoints,
         metavar="C,C,...",
         help="setpoints in °C, e.g. --setpoints=-40,-20,0 (default -40..60 step 10)",
     )
@@ -55,7 +61,7 @@ def add_parser(sub: Any) -> None:
     listing.set_defaults(handler=_list)
 
 
-def _setpoints(text: str) -> list[float]:
+def parse_setpoints(text: str) -> list[float]:
     try:
         return [float(part) for part in text.split(",") if part.strip()]
     except ValueError as exc:
@@ -76,7 +82,7 @@ def _client(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return httpx.Client(base_url=args.url.rstrip("/"), headers=headers, timeout=30.0)
 
 
-def _call(args: argparse.Namespace, method: str, path: str, **kwargs: Any) -> Any:
+def call(args: argparse.Namespace, method: str, path: str, **kwargs: Any) -> Any:
     import httpx
 
     try:
@@ -101,15 +107,23 @@ def _detail(response: Any) -> str:
     return str(detail)
 
 
-def _guarded(handler):  # type: ignore[no-untyped-def]
-    def run(args: argparse.Namespace) -> int:
-        try:
-            return handler(args)
-        except ApiError as exc:
-            print(f"soakcal campaign: {exc}", file=sys.stderr)
-            return EXIT_BAD_INPUT if 400 <= exc.status < 500 else EXIT_FAILED
+def guarded(command: str):  # type: ignore[no-untyped-def]
+    """Decorator: an ``ApiError`` becomes one line ``soakcal COMMAND: ...`` and exit 2 / 1."""
 
-    return run
+    def wrap(handler):  # type: ignore[no-untyped-def]
+        def run(args: argparse.Namespace) -> int:
+            try:
+                return handler(args)
+            except ApiError as exc:
+                print(f"soakcal {command}: {exc}", file=sys.stderr)
+                return EXIT_BAD_INPUT if 400 <= exc.status < 500 else EXIT_FAILED
+
+        return run
+
+    return wrap
+
+
+_guarded = guarded("campaign")
 
 
 @_guarded
@@ -122,7 +136,7 @@ def _start(args: argparse.Namespace) -> int:
         "samples_per_position": args.samples_per_position,
     }
     body.update({k: v for k, v in optional.items() if v is not None})
-    campaign = _call(args, "POST", "/api/v1/campaigns", json=body)
+    campaign = call(args, "POST", "/api/v1/campaigns", json=body)
     print(f"campaign {campaign['id']} {campaign['state']} on rig {campaign['rig']}")
     if args.watch:
         args.id = campaign["id"]
@@ -132,7 +146,7 @@ def _start(args: argparse.Namespace) -> int:
 
 @_guarded
 def _control(args: argparse.Namespace) -> int:
-    campaign = _call(args, "POST", f"/api/v1/campaigns/{args.id}/{args.action}")
+    campaign = call(args, "POST", f"/api/v1/campaigns/{args.id}/{args.action}")
     pending = campaign.get("requested_action")
     note = f" ({pending} requested: at the next safe point)" if pending else ""
     print(f"campaign {campaign['id']} {campaign['state']}{note}")
@@ -142,7 +156,7 @@ def _control(args: argparse.Namespace) -> int:
 @_guarded
 def _list(args: argparse.Namespace) -> int:
     params = {"state": args.state} if args.state else None
-    campaigns = _call(args, "GET", "/api/v1/campaigns", params=params)
+    campaigns = call(args, "GET", "/api/v1/campaigns", params=params)
     if args.json:
         print(json.dumps(campaigns, indent=2))
         return EXIT_OK
@@ -151,7 +165,7 @@ def _list(args: argparse.Namespace) -> int:
         p = c["progress"]
         print(
             f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
-            f"{p['step'] + 1:>3}/{p['steps']:<3}  {p['fraction']:>5.0%}"
+            f"{_step(p):>7}  {p['fraction']:>5.0%}"
         )
     return EXIT_OK
 
@@ -168,7 +182,7 @@ def _watch(args: argparse.Namespace) -> int:
         raise
     except Exception:  # stream cut (proxy, restart): poll instead
         while last is None or last["state"] not in TERMINAL:
-            last = _call(args, "GET", f"/api/v1/campaigns/{args.id}")
+            last = call(args, "GET", f"/api/v1/campaigns/{args.id}")
             _draw(last)
             if last["state"] not in TERMINAL:
                 time.sleep(1.0)
@@ -177,6 +191,11 @@ def _watch(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     if last.get("error"):
         print(f"error: {last['error']}")
+    if last["state"] == "completed" and last.get("calibration_id") is not None:
+        print(
+            f"calibration {last['calibration_id']} of sensor {last['sensor']}: "
+            f"soakcal coefficients {last['sensor']} --temperature-c T"
+        )
     return EXIT_OK if last["state"] == "completed" else EXIT_FAILED
 
 
@@ -208,17 +227,26 @@ def _draw(campaign: dict[str, Any]) -> None:
 
 
 def progress_line(campaign: dict[str, Any], width: int = 24) -> str:
-    """``[#####.....]  42% step 5/11 soak 12.3 °C → 10 °C  ETA 1h02m  running``."""
+    """``[#####.....]  42% step 4 of 0..10 soak 12.3 °C → 10 °C  ETA 1h02m  running``.
+
+    Steps are 0-based, as the API's ``progress.step`` and the recording's ``step`` column.
+    """
     p = campaign["progress"]
     filled = int(round(p["fraction"] * width))
     bar = "#" * filled + "." * (width - filled)
     chamber = "–" if p.get("chamber_c") is None else f"{p['chamber_c']:.1f}"
     setpoint = "–" if p.get("setpoint_c") is None else f"{p['setpoint_c']:g}"
     return (
-        f"[{bar}] {p['fraction']:4.0%} step {min(p['step'] + 1, p['steps'])}/{p['steps']} "
+        f"[{bar}] {p['fraction']:4.0%} step {_step(p)} "
         f"{p['phase']:<9} {chamber} °C → {setpoint} °C  ETA {_eta(p.get('eta_s'))}  "
         f"{campaign['state']}"
     )
+
+
+def _step(p: dict[str, Any]) -> str:
+    """``4 of 0..10``: the 0-based step (clamped to the last) and the range."""
+    last = max(p["steps"] - 1, 0)
+    return f"{min(p['step'], last)} of 0..{last}"
 
 
 def _eta(eta_s: float | None) -> str:

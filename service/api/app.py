@@ -11,6 +11,7 @@ from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
+from service import web
 from service.api import calibrations, campaigns, health, rigs, schedules, tokens
 from service.campaigns import load_rigs_file, seed_sim_rig, upsert_rigs
 from service.config import Settings, service_version
@@ -35,12 +36,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=service_version(),
         description=DESCRIPTION,
         lifespan=_lifespan,
+        docs_url=None,  # service.web serves /docs and /redoc with packaged assets (no CDN)
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.engine = engine
     app.state.session_factory = make_session_factory(engine)
     for module in (health, rigs, campaigns, calibrations, schedules, tokens):
         app.include_router(module.router)
+    app.include_router(web.router)
+    web.mount_static(app)
+    web.add_cors(app)
     app.add_exception_handler(IllegalTransition, _conflict)
     return app
 

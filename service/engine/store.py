@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from service.db.models import Calibration, Campaign, Measurement, utcnow
 from service.engine.states import TRANSITIONS
+from service.event_log import log_event
 
 SessionFactory = sessionmaker[Session]
 
@@ -94,7 +95,23 @@ def transition(
             .values(**values)
         )
         s.commit()
-        return res.rowcount == 1
+        moved = res.rowcount == 1
+    if moved:
+        _log_transition(campaign_id, current, to_state, fields.get("error"))
+    return moved
+
+
+def _log_transition(campaign_id: int, from_state: str, to_state: str, error: Any) -> None:
+    """One structured log line per state change the runner writes (service/event_log.py)."""
+    if to_state == "running":
+        event = "campaign started" if from_state == "queued" else "campaign resumed"
+    elif to_state == "paused":
+        event = "campaign paused"
+    elif to_state in ("completed", "failed", "aborted"):
+        event = "campaign ended"
+    else:
+        event = "campaign state"
+    log_event(event, campaign=campaign_id, state=to_state, was=from_state, error=error)
 
 
 def clear_action(sf: SessionFactory, campaign_id: int, action: str) -> None:
@@ -111,6 +128,12 @@ def update_campaign(sf: SessionFactory, campaign_id: int, **fields: Any) -> None
     with sf() as s:
         s.execute(update(Campaign).where(Campaign.id == campaign_id).values(**fields))
         s.commit()
+    if "suspended_reason" in fields:  # the guard's suspend / recover (engine/guard.py)
+        reason = fields["suspended_reason"]
+        if reason is None:
+            log_event("campaign unsuspended", campaign=campaign_id)
+        else:
+            log_event("campaign suspended", campaign=campaign_id, reason=reason)
 
 
 def set_cursor(sf: SessionFactory, campaign_id: int, step: int, phase: str, position: int,
@@ -159,6 +182,11 @@ def put_step_log(sf: SessionFactory, campaign_id: int, entry: dict[str, Any]) ->
         log.sort(key=lambda e: e.get("step", 0))
         c.steps_log = log
         s.commit()
+    log_event(
+        "soak ended", campaign=campaign_id, step=entry.get("step"),
+        setpoint_c=entry.get("setpoint_c"), soak_s=entry.get("soak_s"),
+        reason=entry.get("reason"),
+    )
 
 
 def measurement_columns(sf: SessionFactory, campaign_id: int) -> dict[str, list[float]]:

@@ -169,11 +169,13 @@ def test_campaign_start_list_pause_and_watch(live_service, capsys, monkeypatch) 
             campaign = session.get(Campaign, 1)
             campaign.state = "completed"
             campaign.progress = {"phase": "fitting", "fraction": 1.0, "eta_s": 0.0}
+            campaign.calibration_id = 5
 
     threading.Thread(target=finish).start()
     assert main(["campaign", "watch", "--url", url, "1"]) == 0
     out = capsys.readouterr().out
-    assert "step 1/2" in out and "100%" in out and "completed" in out
+    assert "step 0 of 0..1" in out and "100%" in out and "completed" in out  # 0-based, as the API
+    assert "calibration 5 of sensor SN-7" in out
 
 
 def test_campaign_commands_without_a_token_exit_2(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]
