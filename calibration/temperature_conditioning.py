@@ -16,6 +16,7 @@ A step with fewer than 3 rows or zero time span gets the median instead.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,3 +124,122 @@ def smooth_over_time(
                 coef = np.polyfit(tt[keep] - ts[j], yy[keep], 1)
             out[idx[j]] = float(coef[1])
     return out
+
+
+# --- conditioning at compensation time (issue 11: "right by default") ----------
+# Why a line and not a plain exponential average: a first-order average lags a
+# ramp by its time constant (0.5 °C/min x 600 s = 5 °C); a line weighted by
+# exp(-age / tau) follows a ramp with no lag, and its value at the current time
+# has variance 1.25 sigma^2 / (rate * tau) (a centred boxcar of 0.8 tau).
+CAUSAL_TAU_S = 600.0
+CAUSAL_JUMP_C = 1.0
+CAUSAL_KIND = "causal_exponential_line"
+PER_STEP_KIND = "per_step_line"
+
+
+def default_streaming_filter(tau_s: float = CAUSAL_TAU_S,
+                             jump_c: float = CAUSAL_JUMP_C) -> dict[str, object]:
+    """The causal filter a streaming consumer applies (``temperature.streaming_filter``)."""
+    return {
+        "kind": CAUSAL_KIND,
+        "tau_s": float(tau_s),
+        "jump_c": float(jump_c),
+        "description": (
+            f"causal straight line of temperature vs time weighted by exp(-age/{tau_s:g} s), "
+            f"evaluated at the current sample; the weighted mean while the samples since the "
+            f"last restart span less than {tau_s:g} s; restarted when two consecutive "
+            f"samples differ from the estimate by more than {jump_c:g} °C (one such sample "
+            f"alone is ignored as a spike)"
+        ),
+    }
+
+
+def causal_filter(
+    t_s: np.ndarray,
+    temperature_c: np.ndarray,
+    tau_s: float = CAUSAL_TAU_S,
+    jump_c: float = CAUSAL_JUMP_C,
+) -> np.ndarray:
+    """Each row's temperature from the rows before it and itself only (streaming filter).
+
+    Exponentially weighted least-squares line (weights exp(-age/tau)) kept as
+    five decaying running sums, so firmware can run it in O(1) memory. NaN
+    temperatures are passed through and do not update the filter.
+    """
+    t = np.asarray(t_s, float)
+    y = np.asarray(temperature_c, float)
+    out = y.copy()
+    if tau_s <= 0 or y.size == 0:
+        return out
+    s0 = s1 = s2 = sy = sty = 0.0  # sums of w, w·dt, w·dt², w·y, w·dt·y (dt = t − t_ref)
+    t_ref = t_start = t_last = 0.0
+    started = False
+    pending: tuple[float, float] | None = None  # an out-of-band sample awaiting confirmation
+    estimate = math.nan
+    for i in range(y.size):
+        yi, ti = y[i], t[i]
+        if not math.isfinite(yi):
+            continue
+        if started and abs(yi - estimate) > jump_c:
+            if pending is None or abs(yi - pending[1]) > jump_c:
+                pending = (ti, yi)  # maybe a spike: ignore it for now
+                out[i] = estimate
+                continue
+            started = False  # two in a row: a real jump, restart from the pending sample
+            t0, y0 = pending
+            s0, s1, s2, sy, sty = 1.0, 0.0, 0.0, y0, 0.0
+            t_ref = t_start = t_last = t0
+            started = True
+        pending = None
+        if not started:
+            s0, s1, s2, sy, sty = 0.0, 0.0, 0.0, 0.0, 0.0
+            t_ref = t_start = t_last = ti
+            started = True
+        # decay the sums to the new time, then re-reference dt to ti
+        decay = math.exp(-(ti - t_last) / tau_s) if ti > t_last else 1.0
+        s0, s1, s2, sy, sty = (v * decay for v in (s0, s1, s2, sy, sty))
+        shift = ti - t_ref  # dt' = dt − shift
+        s2 = s2 - 2.0 * shift * s1 + shift * shift * s0
+        sty = sty - shift * sy
+        s1 = s1 - shift * s0
+        t_ref = t_last = ti
+        s0 += 1.0
+        sy += yi
+        mean = sy / s0
+        det = s0 * s2 - s1 * s1
+        if ti - t_start >= tau_s and det > 1e-12 * max(s0 * s2, 1e-300):
+            estimate = (s2 * sy - s1 * sty) / det  # line's value at dt = 0 (now)
+        else:
+            estimate = mean
+        out[i] = estimate
+    return out
+
+
+def segments_for_conditioning(
+    steps: np.ndarray | None,
+    setpoint_c: np.ndarray | None,
+    temperature_c: np.ndarray,
+    jump_c: float = CAUSAL_JUMP_C,
+) -> np.ndarray | None:
+    """Soak-step segments of a recording to compensate, or None if it has no steps.
+
+    A new segment starts where the ``step`` column changes, where ``setpoint_c``
+    changes, or where the (3-point median filtered) temperature jumps by more
+    than ``jump_c`` -- a verification run may write one step index for several
+    soak temperatures, and a line through two plateaus would be wrong.
+    """
+    if steps is None and setpoint_c is None:
+        return None
+    y = np.asarray(temperature_c, float)
+    n = y.size
+    change = np.zeros(n, bool)
+    for col in (steps, setpoint_c):
+        if col is not None:
+            c = np.nan_to_num(np.asarray(col, float), nan=-1e300)
+            change[1:] |= c[1:] != c[:-1]
+    if n >= 2:
+        yy = np.where(np.isfinite(y), y, np.nanmedian(y) if np.isfinite(y).any() else 0.0)
+        med = np.median(np.column_stack([np.r_[yy[0], yy[:-1]], yy, np.r_[yy[1:], yy[-1]]]),
+                        axis=1)
+        change[1:] |= np.abs(np.diff(med)) > jump_c
+    return np.cumsum(change)

@@ -48,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_calibration_commands(sub)
+    _add_export(sub)
     _add_serve(sub)
     _add_token(sub)
     _add_campaign(sub)
@@ -123,6 +124,15 @@ def _add_calibration_commands(sub: Any) -> None:
     imp.add_argument("--window-s", type=float, metavar="S", help="static-detection window")
     imp.add_argument("--trim-s", type=float, metavar="S", help="trimmed from each interval end")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
+
+
+def _add_export(sub: Any) -> None:
+    exp = sub.add_parser("export", help="export a model for firmware (C99 header) or other code")
+    exp.add_argument("model", metavar="MODEL", help="model JSON from calibrate")
+    exp.add_argument("--format", choices=("c", "json-flat"), default="c",
+                     help="c: one C99 header (default); json-flat: plain arrays and a recipe")
+    exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
+    exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
 
 
 def _delegate(module: str, function: str, command: str) -> Callable[[Any], int]:
