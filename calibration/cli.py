@@ -18,9 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import CalibrationError, RecordingError
-from calibration.model_file import load_model, save_model
+from calibration.model_file import load_model_file, save_model
 from calibration.recording import Recording, atomic_write_text, read_recording
-from calibration.temperature_conditioning import smooth_over_time
+from calibration.temperature_conditioning import (
+    CompensationConditioning,
+    compensation_temperature,
+    smooth_over_time,
+)
 from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalModel, fit_campaign
 
 OUTPUT_COLUMNS = ("cx", "cy", "cz")
@@ -67,7 +71,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 def run_compensate(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.recording``; write every input column plus cx, cy, cz."""
     try:
-        model = load_model(args.model)
+        model, conditioning = load_model_file(args.model)
         rec = read_recording(args.recording)
     except CalibrationError as exc:  # ModelFileError, RecordingError
         return _fail(str(exc))
@@ -78,7 +82,7 @@ def run_compensate(args: argparse.Namespace) -> int:
             "compensate would overwrite it")))
     extrapolate = bool(getattr(args, "extrapolate", False))
     try:
-        temp_c = _temperatures(model, rec, extrapolate, args)
+        temp_c, how = _temperatures(model, rec, extrapolate, args, conditioning)
         cal = model.compensate(rec.raw_g, temp_c, extrapolate=True)
     except CalibrationError as exc:
         return _fail(str(exc))
@@ -88,19 +92,27 @@ def run_compensate(args: argparse.Namespace) -> int:
         return _fail(f"{args.output}: cannot write ({exc.strerror or exc})")
     print(f"compensated {len(rec)} rows with {model.model_version} ({model.mode} mode) "
           f"-> {args.output}")
+    print(how)
     return EXIT_OK
 
 
 def _temperatures(
-    model: ThermalModel, rec: Recording, extrapolate: bool, args_smooth: object = None
-) -> np.ndarray:
-    """The model's temperature for each row; RecordingError for missing/out-of-range ones.
+    model: ThermalModel,
+    rec: Recording,
+    extrapolate: bool,
+    args_smooth: object = None,
+    conditioning: CompensationConditioning | None = None,
+) -> tuple[np.ndarray, str]:
+    """The model's temperature for each row and how it was obtained (one line).
 
-    With ``--smooth-temperature-s S`` (optional attribute of the Namespace) the
-    temperature is first smoothed over S seconds (:func:`smooth_over_time`).
+    By default the temperature is conditioned as the model file says
+    (:func:`compensation_temperature`: per step where the recording has steps,
+    the causal filter otherwise). ``--raw-temperature`` uses each row's own
+    reading; ``--smooth-temperature-s S`` a centred local line over S seconds
+    (:func:`smooth_over_time`). RecordingError for missing/out-of-range ones.
     """
     if not model.temperature_dependent:
-        return np.full(len(rec), np.nan)
+        return np.full(len(rec), np.nan), "temperature: not used (temperature-independent model)"
     if not rec.has_temperature:
         raise RecordingError(
             rec.path, None, "sensor_c",
@@ -108,8 +120,18 @@ def _temperatures(
         )
     temp_c = rec.temperature_c()
     smooth_s = getattr(args_smooth, "smooth_temperature_s", None) or 0.0
-    if smooth_s > 0:
+    if getattr(args_smooth, "raw_temperature", False):
+        how = "temperature: each row's own reading, not conditioned (--raw-temperature)"
+    elif smooth_s > 0:
         temp_c = smooth_over_time(rec.t_s, temp_c, float(smooth_s))
+        how = f"temperature smoothed by a centred local line over {float(smooth_s):g} s"
+    else:
+        temp_c, how = compensation_temperature(
+            rec.t_s, temp_c,
+            rec.columns["step"] if rec.has("step") else None,
+            rec.columns["setpoint_c"] if rec.has("setpoint_c") else None,
+            conditioning or CompensationConditioning())
+        how += " (--raw-temperature: use each row's own reading)"
     if model.temperature_source in ("sensor_c", "chamber_c") and \
             rec.temperature_source != model.temperature_source:
         print(f"warning: the model was fitted on {model.temperature_source} but "
@@ -124,7 +146,7 @@ def _temperatures(
                 f"temperature {temp_c[i]:.2f} °C is outside the model's valid range "
                 f"[{lo:.2f}, {hi:.2f}] °C (use --extrapolate to compensate anyway)",
             )
-    return temp_c
+    return temp_c, how
 
 
 def _output_csv(rec: Recording, cal_g: np.ndarray) -> str:

@@ -146,10 +146,10 @@ def default_streaming_filter(tau_s: float = CAUSAL_TAU_S,
         "jump_c": float(jump_c),
         "description": (
             f"causal straight line of temperature vs time weighted by exp(-age/{tau_s:g} s), "
-            f"evaluated at the current sample; the weighted mean while the samples since the "
-            f"last restart span less than {tau_s:g} s; restarted when two consecutive "
+            f"evaluated at the current sample (the first two samples after a restart: their "
+            f"mean); restarted when two consecutive "
             f"samples differ from the estimate by more than {jump_c:g} °C (one such sample "
-            f"alone is ignored as a spike)"
+            f"alone is kept out of the filter as a possible spike and passed through as read)"
         ),
     }
 
@@ -174,6 +174,7 @@ def causal_filter(
     s0 = s1 = s2 = sy = sty = 0.0  # sums of w, w·dt, w·dt², w·y, w·dt·y (dt = t − t_ref)
     t_ref = t_start = t_last = 0.0
     started = False
+    n_seen = 0
     pending: tuple[float, float] | None = None  # an out-of-band sample awaiting confirmation
     estimate = math.nan
     for i in range(y.size):
@@ -182,18 +183,22 @@ def causal_filter(
             continue
         if started and abs(yi - estimate) > jump_c:
             if pending is None or abs(yi - pending[1]) > jump_c:
-                pending = (ti, yi)  # maybe a spike: ignore it for now
-                out[i] = estimate
+                # maybe a spike, maybe the first row at a new soak temperature: keep it
+                # out of the filter, and give the row its own reading (never a stale one)
+                pending = (ti, yi)
+                out[i] = yi
                 continue
             started = False  # two in a row: a real jump, restart from the pending sample
             t0, y0 = pending
             s0, s1, s2, sy, sty = 1.0, 0.0, 0.0, y0, 0.0
             t_ref = t_start = t_last = t0
+            n_seen = 1
             started = True
         pending = None
         if not started:
             s0, s1, s2, sy, sty = 0.0, 0.0, 0.0, 0.0, 0.0
             t_ref = t_start = t_last = ti
+            n_seen = 0
             started = True
         # decay the sums to the new time, then re-reference dt to ti
         decay = math.exp(-(ti - t_last) / tau_s) if ti > t_last else 1.0
@@ -207,7 +212,8 @@ def causal_filter(
         sy += yi
         mean = sy / s0
         det = s0 * s2 - s1 * s1
-        if ti - t_start >= tau_s and det > 1e-12 * max(s0 * s2, 1e-300):
+        n_seen += 1
+        if n_seen >= 3 and ti > t_start and det > 1e-12 * max(s0 * s2, 1e-300):
             estimate = (s2 * sy - s1 * sty) / det  # line's value at dt = 0 (now)
         else:
             estimate = mean
@@ -243,3 +249,55 @@ def segments_for_conditioning(
                         axis=1)
         change[1:] |= np.abs(np.diff(med)) > jump_c
     return np.cumsum(change)
+
+
+# Below this many rows per segment (median), a recording's "steps" are not soak
+# plateaus (e.g. a cooling run with a new setpoint per row): the causal filter is used.
+MIN_ROWS_PER_STEP = 3
+
+
+@dataclass(frozen=True)
+class CompensationConditioning:
+    """How ``compensate`` conditions temperature (the model file's ``temperature.compensation``).
+
+    ``per_step``: where the recording to compensate has steps, the same robust
+    line per step that calibrate used (:func:`condition_temperature`);
+    otherwise (or with ``per_step`` false) the causal filter, which is also the
+    filter a streaming consumer applies.
+    """
+
+    per_step: bool = True
+    tau_s: float = CAUSAL_TAU_S
+    jump_c: float = CAUSAL_JUMP_C
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "per_step": {"kind": PER_STEP_KIND, "enabled": self.per_step,
+                         "description": "where the recording has steps (step or setpoint_c "
+                         "columns; also split at temperature jumps): " + DESCRIPTION},
+            "otherwise": default_streaming_filter(self.tau_s, self.jump_c),
+        }
+
+
+def compensation_temperature(
+    t_s: np.ndarray,
+    temperature_c: np.ndarray,
+    steps: np.ndarray | None,
+    setpoint_c: np.ndarray | None,
+    conditioning: CompensationConditioning = CompensationConditioning(),  # noqa: B008
+) -> tuple[np.ndarray, str]:
+    """Conditioned temperature per row for ``compensate``, and a one-line account of it."""
+    temp = np.asarray(temperature_c, float)
+    segs = (segments_for_conditioning(steps, setpoint_c, temp, conditioning.jump_c)
+            if conditioning.per_step else None)
+    if segs is not None and temp.size:
+        sizes = np.bincount(segs)
+        if float(np.median(sizes[sizes > 0])) >= MIN_ROWS_PER_STEP:
+            cond = condition_temperature(t_s, temp, segs)
+            return cond.row_c, (
+                f"temperature conditioned per step as calibrate did ({len(cond.step_c)} "
+                f"step(s), robust straight line per step)")
+    out = causal_filter(t_s, temp, conditioning.tau_s, conditioning.jump_c)
+    return out, (
+        f"temperature conditioned by the causal filter (exponentially weighted line, "
+        f"time constant {conditioning.tau_s:g} s, restart on jumps > {conditioning.jump_c:g} °C)")

@@ -94,6 +94,9 @@ def _add_calibration_commands(sub: Any) -> None:
         metavar="S",
         help="smooth the noisy temperature channel over S seconds before compensating",
     )
+    comp.add_argument("--raw-temperature", action="store_true",
+                      help="use each row's own temperature reading (default: condition it as "
+                      "the model file says, per step or by the causal filter)")
     comp.set_defaults(handler=_delegate("calibration.cli", "run_compensate", "compensate"))
 
     diag = sub.add_parser("diagnose", help="what physics the base model left out")

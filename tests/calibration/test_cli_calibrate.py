@@ -28,9 +28,10 @@ def _calibrate(recording: Path, output: Path, **kw: object) -> int:
     return run_calibrate(ns)
 
 
-def _compensate(model: Path, recording: Path, output: Path, extrapolate: bool = False) -> int:
+def _compensate(model: Path, recording: Path, output: Path, extrapolate: bool = False,
+                **kw: object) -> int:
     return run_compensate(argparse.Namespace(model=str(model), recording=str(recording),
-                                             output=str(output), extrapolate=extrapolate))
+                                             output=str(output), extrapolate=extrapolate, **kw))
 
 
 @pytest.fixture(scope="module")
@@ -114,11 +115,14 @@ def test_compensate_out_of_range_exits_2_unless_extrapolate(
     hot.write_text("t_s,sensor_c,ax,ay,az,extra\n0,25.0,0.01,0.02,1.0,a\n"
                    "10,85.0,0.01,0.02,1.0,b\n")
     out = tmp_path / "out.csv"
-    assert _compensate(files["model"], hot, out) == 2
+    assert _compensate(files["model"], hot, out, raw_temperature=True) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "hot.csv:3" in err and "sensor_c" in err
     assert "--extrapolate" in err and not out.exists()
-    assert _compensate(files["model"], hot, out, extrapolate=True) == 0
+    # by default (the causal filter) the unconfirmed jump keeps its own reading
+    assert _compensate(files["model"], hot, out) == 2
+    assert "hot.csv:3" in capsys.readouterr().err and not out.exists()
+    assert _compensate(files["model"], hot, out, extrapolate=True, raw_temperature=True) == 0
     assert out.read_text().splitlines()[2].startswith("10,85.0,0.01,0.02,1.0,b,")
 
 
