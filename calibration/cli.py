@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import CalibrationError, RecordingError
+from calibration.gravity import NOT_IDENTIFIABLE_NOTE, GravityError, LocalGravity, from_arguments
 from calibration.model_file import load_model_file, save_model
 from calibration.recording import Recording, atomic_write_text, read_recording
 from calibration.temperature_conditioning import (
@@ -25,7 +26,7 @@ from calibration.temperature_conditioning import (
     compensation_temperature,
     smooth_over_time,
 )
-from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalModel, fit_campaign
+from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalFit, ThermalModel, fit_campaign
 
 OUTPUT_COLUMNS = ("cx", "cy", "cz")
 EXIT_OK = 0
@@ -38,12 +39,17 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if method not in METHODS:
         return _fail(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
     try:
+        gravity = _local_gravity(args)
+    except GravityError as exc:
+        return _fail(str(exc))
+    try:
         rec = read_recording(args.recording)
-        fit = fit_campaign(rec, method=method)
+        fit = fit_campaign(rec, method=method, g_local=None if gravity is None else gravity.g)
     except RecordingError as exc:
         return _fail(str(exc))
     except CalibrationError as exc:
         return _fail(f"{args.recording}: {exc}")
+    _record_gravity(fit, gravity)
     try:
         save_model(args.output, fit.model)
     except OSError as exc:
@@ -66,6 +72,26 @@ def run_calibrate(args: argparse.Namespace) -> int:
         for p in figures:
             print(f"figure: {p}")
     return EXIT_OK
+
+
+def _local_gravity(args: argparse.Namespace) -> LocalGravity | None:
+    """``--gravity-g`` or ``--latitude-deg``/``--height-m`` (GravityError when implausible)."""
+    return from_arguments(getattr(args, "gravity_g", None), getattr(args, "latitude_deg", None),
+                          getattr(args, "height_m", None))
+
+
+def _record_gravity(fit: ThermalFit, gravity: LocalGravity | None) -> None:
+    """Say in the model file and the report which local gravity was used and why it is input."""
+    g = gravity or LocalGravity(
+        fit.model.g_local,
+        "magnitude of the reference vectors (median)" if fit.model.mode == "reference"
+        else "1 g (default; --gravity-g or --latitude-deg/--height-m to set it)")
+    fit.model.provenance["gravity"] = g.to_dict()
+    fit.report["gravity"] = {**g.to_dict(), "identifiable": False, "why": NOT_IDENTIFIABLE_NOTE}
+    note = f"local gravity {g.g:.6f} g ({g.source}); {NOT_IDENTIFIABLE_NOTE}"
+    fit.model.notes.append(note)
+    fit.notes.append(note)
+    fit.report.setdefault("notes", []).append(note)
 
 
 def run_compensate(args: argparse.Namespace) -> int:

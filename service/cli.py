@@ -79,6 +79,13 @@ def _add_calibration_commands(sub: Any) -> None:
         help="thermal fit: one joint fit over all steps (default) or per step then per "
         "parameter; docs/calibration.md compares them",
     )
+    cal.add_argument("--gravity-g", type=float, metavar="G",
+                     help="local gravity in units of standard gravity (9.80665 m/s^2); "
+                     "the reference directions are scaled to it (default 1.0)")
+    cal.add_argument("--latitude-deg", type=float, metavar="L",
+                     help="local gravity from WGS84 normal gravity at this latitude (deg)")
+    cal.add_argument("--height-m", type=float, metavar="H",
+                     help="with --latitude-deg: ellipsoidal height (m), free-air corrected")
     cal.set_defaults(handler=_delegate("calibration.cli", "run_calibrate", "calibrate"))
 
     comp = sub.add_parser("compensate", help="apply a model to a recording")
