@@ -57,6 +57,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     from calibration import report  # matplotlib is only needed from here on
 
+    report.add_sections(fit, rec)  # coefficients, and Table 5 for reference recordings
+
     figures: list[Path] = []
     report_dir = getattr(args, "report_dir", None)
     if report_dir:

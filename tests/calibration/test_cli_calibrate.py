@@ -52,6 +52,8 @@ def test_calibrate_writes_a_model_and_prints_table6(files: dict, capsys: pytest.
     assert rc == 0
     text = capsys.readouterr().out
     assert "Before calibration" in text and "method: per_step" in text
+    assert "fitted SFEM parameters per step" in text and "tilt angles (Table 5" in text
+    assert "local gravity cannot be identified in a static tumble" in text
     assert json.loads(out.read_text())["method"] == "per_step"
     assert (tmp_path / "r" / "parameters_vs_temperature.png").exists()
 
@@ -61,6 +63,8 @@ def test_calibrate_json_prints_only_json(files: dict, capsys: pytest.CaptureFixt
     assert _calibrate(files["campaign"], tmp_path / "m.json", json=True) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["mode"] == "reference" and len(doc["steps"]) == 11
+    assert len(doc["coefficients"]["steps"]) == 11 and doc["tilt_table"]["rows"]
+    assert doc["gravity"]["g_local"] == 1.0 and doc["gravity"]["identifiable"] is False
 
 
 def _bad_csv(d: Path) -> Path:
@@ -124,6 +128,18 @@ def test_compensate_out_of_range_exits_2_unless_extrapolate(
     assert "hot.csv:3" in capsys.readouterr().err and not out.exists()
     assert _compensate(files["model"], hot, out, extrapolate=True, raw_temperature=True) == 0
     assert out.read_text().splitlines()[2].startswith("10,85.0,0.01,0.02,1.0,b,")
+
+
+def test_compensate_conditions_temperature_by_default_and_says_so(
+    files: dict, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out, raw_out = tmp_path / "d.csv", tmp_path / "r.csv"
+    assert _compensate(files["model"], files["campaign"], out) == 0
+    said = capsys.readouterr().out
+    assert "conditioned per step as calibrate did (11 step(s)" in said
+    assert _compensate(files["model"], files["campaign"], raw_out, raw_temperature=True) == 0
+    assert "not conditioned (--raw-temperature)" in capsys.readouterr().out
+    assert out.read_text() != raw_out.read_text()
 
 
 def test_compensate_bad_model_or_recording_exits_2(
