@@ -144,3 +144,27 @@ def test_model_with_extension_terms_is_refused(model_file: Path, tmp_path: Path,
     assert _export(ext, "c", tmp_path / "x.h") == 2
     assert "extensions" in capsys.readouterr().err
     assert not (tmp_path / "x.h").exists()
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler (cc/gcc/clang) on PATH")
+def test_temperature_independent_model_ignores_temperature(tmp_path: Path) -> None:
+    from calibration.recording import Recording
+
+    _, rec = thermal_sim.campaign(seed=6, setpoints=(25.0,))
+    cols = {k: v for k, v in rec.columns.items() if k not in ("sensor_c", "setpoint_c")}
+    cols["chamber_c"] = np.full(len(rec), np.nan)
+    model = fit_campaign(Recording.from_columns(cols)).model
+    assert not model.temperature_dependent
+    save_model(tmp_path / "m.json", model)
+    assert _export(tmp_path / "m.json", "c", tmp_path / "soakcal_cal.h") == 0
+    exe = _compile(tmp_path)
+    raw = np.array([[0.02, -0.01, 0.98], [0.7, 0.7, 0.1]])
+    stdin = "0.02 -0.01 0.98 nan\n0.7 0.7 0.1 200\n"
+    proc = subprocess.run([str(exe)], input=stdin, capture_output=True, text=True, check=True)
+    got = np.array([[float(x) for x in line.split()] for line in proc.stdout.splitlines()])
+    np.testing.assert_array_equal(got[:, 0], [0, 0])  # no range to leave, NaN is fine
+    np.testing.assert_allclose(got[:, 1:4], model.compensate(raw, np.nan), atol=1e-12)
+    flat = tmp_path / "flat.json"
+    assert _export(tmp_path / "m.json", "json-flat", flat) == 0
+    doc = json.loads(flat.read_text())
+    assert doc["temperature_dependent"] is False and doc["valid_low_c"] is None
