@@ -170,10 +170,21 @@ def test_through_the_command_line(files: dict, tmp_path: Path) -> None:
         return subprocess.run([sys.executable, "-c", code, *argv], cwd=ROOT, env=env,
                               capture_output=True, text=True, timeout=120)
 
-    r = run("calibrate", str(files["campaign"]), "-o", str(model), "--json")
+    r = run("calibrate", str(files["campaign"]), "-o", str(model), "--json",
+            "--latitude-deg", "45", "--height-m", "0")
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["method"] == "joint"
+    doc = json.loads(r.stdout)
+    assert doc["method"] == "joint"
+    assert doc["gravity"]["m_per_s2"] == pytest.approx(9.8061977, abs=1e-6)
+    r = run("calibrate", str(files["campaign"]), "-o", str(tmp_path / "x.json"),
+            "--gravity-g", "9.81")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and not (tmp_path / "x.json").exists()
+    r = run("export", str(model), "--format", "json-flat", "-o", str(tmp_path / "flat.json"))
+    assert r.returncode == 0, r.stderr
+    r = run("export", str(files["campaign"]), "-o", str(tmp_path / "bad.h"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and not (tmp_path / "bad.h").exists()
     out = tmp_path / "out.csv"
     r = run("compensate", str(model), str(files["campaign"]), "-o", str(out))
     assert r.returncode == 0, r.stderr
+    assert "conditioned per step" in r.stdout
     assert out.read_text().splitlines()[0].endswith(",cx,cy,cz")
