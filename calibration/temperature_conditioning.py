@@ -177,8 +177,7 @@ def causal_filter(
     n_seen = 0
     pending: tuple[float, float] | None = None  # an out-of-band sample awaiting confirmation
     estimate = math.nan
-    for i in range(y.size):
-        yi, ti = y[i], t[i]
+    for i, (ti, yi) in enumerate(zip(t.tolist(), y.tolist(), strict=True)):
         if not math.isfinite(yi):
             continue
         if started and abs(yi - estimate) > jump_c:
@@ -202,7 +201,11 @@ def causal_filter(
             started = True
         # decay the sums to the new time, then re-reference dt to ti
         decay = math.exp(-(ti - t_last) / tau_s) if ti > t_last else 1.0
-        s0, s1, s2, sy, sty = (v * decay for v in (s0, s1, s2, sy, sty))
+        s0 *= decay
+        s1 *= decay
+        s2 *= decay
+        sy *= decay
+        sty *= decay
         shift = ti - t_ref  # dt' = dt − shift
         s2 = s2 - 2.0 * shift * s1 + shift * shift * s0
         sty = sty - shift * sy
