@@ -12,7 +12,7 @@ import csv
 import io
 import math
 import os
-import secrets
+import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -264,10 +264,7 @@ def recording_text(rec: Recording) -> str:
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    # os.open with 0o666 (not mkstemp's 0o600): the file gets the user's umask like
-    # any other output, and O_EXCL on a random name keeps the temp file private to us
-    tmp = str(p.parent / f".{p.name}.{secrets.token_hex(8)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
