@@ -108,6 +108,8 @@ def run_compensate(args: argparse.Namespace) -> int:
         return _fail(str(RecordingError(
             rec.path, 1, clash[0], "the input already has this output column; "
             "compensate would overwrite it")))
+    if getattr(args, "raw_temperature", False) and getattr(args, "smooth_temperature_s", None):
+        return _fail("--raw-temperature and --smooth-temperature-s are alternatives; give one")
     extrapolate = bool(getattr(args, "extrapolate", False))
     try:
         temp_c, how = _temperatures(model, rec, extrapolate, args, conditioning)

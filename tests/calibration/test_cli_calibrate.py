@@ -140,6 +140,10 @@ def test_compensate_conditions_temperature_by_default_and_says_so(
     assert _compensate(files["model"], files["campaign"], raw_out, raw_temperature=True) == 0
     assert "not conditioned (--raw-temperature)" in capsys.readouterr().out
     assert out.read_text() != raw_out.read_text()
+    both = tmp_path / "both.csv"
+    assert _compensate(files["model"], files["campaign"], both, raw_temperature=True,
+                       smooth_temperature_s=600.0) == 2
+    assert "alternatives" in capsys.readouterr().err and not both.exists()
 
 
 def test_compensate_bad_model_or_recording_exits_2(
