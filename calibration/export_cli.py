@@ -13,7 +13,7 @@ from pathlib import Path
 
 from calibration.errors import CalibrationError
 from calibration.export import FORMATS, export_text
-from calibration.model_file import load_model
+from calibration.model_file import load_model_file
 from calibration.recording import atomic_write_text
 
 EXIT_OK = 0
@@ -29,8 +29,8 @@ def run_export(args: argparse.Namespace) -> int:
     if out_path.exists() and model_path.exists() and os.path.samefile(model_path, out_path):
         return _fail(f"{out_path}: the output would overwrite the model file; choose another -o")
     try:
-        model = load_model(model_path)
-        text = export_text(model, fmt, source_name=model_path.name)
+        model, conditioning = load_model_file(model_path)
+        text = export_text(model, fmt, source_name=model_path.name, conditioning=conditioning)
     except CalibrationError as exc:  # ModelFileError included
         return _fail(str(exc))
     try:

@@ -168,3 +168,44 @@ def test_temperature_independent_model_ignores_temperature(tmp_path: Path) -> No
     assert _export(tmp_path / "m.json", "json-flat", flat) == 0
     doc = json.loads(flat.read_text())
     assert doc["temperature_dependent"] is False and doc["valid_low_c"] is None
+
+
+FILTER_DRIVER = r"""
+#include <stdio.h>
+#include "soakcal_cal.h"
+int main(void) {
+    soakcal_tfilter f;
+    double t, y;
+    soakcal_tfilter_init(&f);
+    while (scanf("%lf %lf", &t, &y) == 2) {
+        printf("%.17g\n", soakcal_tfilter_update(&f, t, y));
+    }
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler (cc/gcc/clang) on PATH")
+def test_header_streaming_filter_matches_the_python_causal_filter(
+    model_file: Path, tmp_path: Path
+) -> None:
+    from calibration.temperature_conditioning import causal_filter
+
+    assert _export(model_file, "c", tmp_path / "soakcal_cal.h") == 0
+    (tmp_path / "filt.c").write_text(FILTER_DRIVER)
+    exe = tmp_path / "filt"
+    subprocess.run([CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-I",
+                    str(tmp_path), str(tmp_path / "filt.c"), "-o", str(exe), "-lm"],
+                   check=True, capture_output=True)
+    rng = np.random.default_rng(9)
+    t = np.cumsum(rng.uniform(0.5, 30.0, 3000))
+    y = np.where(t < 20_000, 25.0, 60.0 - (t - 20_000) / 120.0)  # plateau, then a ramp
+    y = y + rng.normal(0, 0.1, t.size)
+    y[500] += 30.0  # a spike
+    y[1500:] += 10.0  # a jump
+    y[2000] = np.nan
+    stdin = "\n".join(f"{a:.17g} {b:.17g}" for a, b in zip(t, y, strict=True))
+    proc = subprocess.run([str(exe)], input=stdin, capture_output=True, text=True, check=True)
+    got = np.array([float(v) for v in proc.stdout.split()])
+    want = causal_filter(t, y)
+    np.testing.assert_allclose(got, want, atol=1e-9, equal_nan=True)
