@@ -86,8 +86,8 @@ def _record_gravity(fit: ThermalFit, gravity: LocalGravity | None) -> None:
     """Say in the model file and the report which local gravity was used and why it is input."""
     g = gravity or LocalGravity(
         fit.model.g_local,
-        "magnitude of the reference vectors (median)" if fit.model.mode == "reference"
-        else "1 g (default; --gravity-g or --latitude-deg/--height-m to set it)")
+        "default: magnitude of the reference vectors (median)" if fit.model.mode == "reference"
+        else "default; set it with --gravity-g or --latitude-deg/--height-m")
     fit.model.provenance["gravity"] = g.to_dict()
     fit.report["gravity"] = {**g.to_dict(), "identifiable": False, "why": NOT_IDENTIFIABLE_NOTE}
     note = f"local gravity {g.g:.6f} g ({g.source}); {NOT_IDENTIFIABLE_NOTE}"

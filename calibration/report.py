@@ -168,8 +168,9 @@ def format_tilt_table(fit: ThermalFit) -> str | None:
         return None
     if not sec["rows"]:
         return f"tilt (Table 5): {sec['note']}"
+    temp = "temperature n/a" if sec["temperature_c"] is None else f"{sec['temperature_c']:.2f} °C"
     lines = [
-        f"tilt angles (Table 5, Eq. 10) at step {sec['step']} ({sec['temperature_c']:.2f} °C), "
+        f"tilt angles (Table 5, Eq. 10) at step {sec['step']} ({temp}), "
         f"positions within {sec['max_tilt_deg']:g}° of level; SEOQ = |before − after| / "
         f"{sec['seoq_max_angle_deg']:g}° · 100 %",
         f"{'reference φ; θ (deg)':>22} {'without calibration':>22} {'after calibration':>22} "

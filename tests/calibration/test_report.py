@@ -122,6 +122,8 @@ def test_no_temperature_no_parameters_figure_and_it_says_so(tmp_path: Path) -> N
     assert [p.name for p in paths] == ["norm_error.png"]
     assert any("no parameters-vs-temperature figure" in n for n in fit.report["notes"])
     assert "no parameters-vs-temperature figure" in report.format_table6(fit)
+    report.add_sections(fit, rec)  # references but no temperature: Table 5 still prints
+    assert "(temperature n/a)" in report.format_table6(fit)
 
 
 def test_figures_follow_the_umask(tmp_path: Path, fit_and_rec: tuple) -> None:
