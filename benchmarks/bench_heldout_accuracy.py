@@ -16,7 +16,8 @@ magnitudes, sensor-channel offset ±2 °C):
    (``--conditioning raw``, the default here so earlier figures reproduce), or
    conditioned as ``soakcal compensate`` does by default (``default``: per
    step, the run having setpoints), or by the causal filter alone
-   (``causal``: the run's step/setpoint columns withheld);
+   (``causal``: the run's step/setpoint columns withheld), or the channel's
+   noise-free value (``truth``: what remains is the calibration's share);
 4. compare the RMS vector error (calibrated − true specific force, µg) with the
    oracle: the sensor's *true* parameters at the true die temperature applied to
    the same readings -- the error left by the readings' noise alone.
@@ -105,6 +106,8 @@ def heldout_case(
             vr.t_s, temp_c,
             vr.columns["step"] if with_steps and vr.has("step") else None,
             vr.columns["setpoint_c"] if with_steps and vr.has("setpoint_c") else None)
+    elif conditioning == "truth":  # the channel without noise: what is left is calibration
+        temp_c = die + truth.temp_offset_c
     if smooth_temperature_s > 0:
         temp_c = smooth_over_time(run.recording.t_s, temp_c, smooth_temperature_s)
     cal = fit.model.compensate(raw, temp_c, extrapolate=extrapolate)
@@ -164,9 +167,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="smooth the verification run's temperature over this window (s)")
     ap.add_argument("--row-temp-noise-c", type=float, default=0.0,
                     help="extra white noise on every row's sensor_c, °C rms")
-    ap.add_argument("--conditioning", choices=("raw", "default", "causal"), default="raw",
+    ap.add_argument("--conditioning", choices=("raw", "default", "causal", "truth"),
+                    default="raw",
                     help="verification temperature: each row's own reading (raw), as "
-                    "`soakcal compensate` does by default, or the causal filter alone")
+                    "`soakcal compensate` does by default, the causal filter alone, or the "
+                    "noise-free channel (truth: isolates the calibration's share)")
     a = ap.parse_args(argv)
     methods = ("per_step", "joint") if a.method == "both" else (a.method,)
     ok = True

@@ -8,6 +8,8 @@ temperature but must say so). What we do, per temperature step:
    drops rows more than 4 robust σ from the first line), because the die may
    still creep by a few hundredths of a degree over the ~6 min a step's
    positions take, and a line keeps that creep while averaging the noise;
+   the slope is kept only where it exceeds 3 standard errors, else the rows
+   get the mean (on a settled step a line's value is twice as noisy);
 2. each row gets the line's value at its time (``row_c``), the step gets the
    mean of those (``step_c``, a robust mean of the step's temperature).
 
@@ -23,7 +25,8 @@ import numpy as np
 
 DESCRIPTION = (
     "per step: robust straight line of temperature vs time (rows > 4 robust sigma "
-    "from the first line dropped), rows take the line's value, the step its mean"
+    "from the first line dropped; slope kept only if > 3 standard errors, else the "
+    "mean), rows take the line's value, the step its mean"
 )
 
 
@@ -66,11 +69,34 @@ def condition_temperature(
         rejected += int(ok.sum() - keep.sum())
         if keep.sum() >= 3:
             coef = np.polyfit(tt[keep] - t0, yy[keep], 1)
+        if not _slope_significant(tt[keep], yy[keep], coef, t0):
+            coef = np.array([0.0, float(np.mean(yy[keep]))])  # settled: the mean is less noisy
         line = np.polyval(coef, tt - t0)
         row_c[idx] = line
         step_c[int(s)] = float(np.mean(line))
         step_noise[int(s)] = _robust_sd((yy - line)[keep])
     return ConditionedTemperature(row_c, step_c, step_noise, rejected)
+
+
+# A step's temperature slope is kept when it exceeds this many standard errors.
+# Why: on a settled step the line's value at a row has twice the variance of the
+# mean (averaged over the rows), so a slope that is only noise costs accuracy;
+# a real creep (a die still settling) is many standard errors and is kept.
+SLOPE_SIGMAS = 3.0
+
+
+def _slope_significant(tt: np.ndarray, yy: np.ndarray, coef: np.ndarray, t0: float) -> bool:
+    """|slope| > SLOPE_SIGMAS standard errors (ordinary LS standard error of the slope)."""
+    n = tt.size
+    if n < 4:
+        return True  # too few rows to tell: keep the line (the old behaviour)
+    sxx = float(np.sum((tt - tt.mean()) ** 2))
+    if sxx <= 0:
+        return False
+    sd = float(np.sqrt(np.sum((yy - np.polyval(coef, tt - t0)) ** 2) / (n - 2)))
+    if sd <= 0:
+        return True
+    return abs(float(coef[0])) > SLOPE_SIGMAS * sd / np.sqrt(sxx)
 
 
 def _robust_sd(x: np.ndarray) -> float:

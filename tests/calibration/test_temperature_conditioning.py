@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from calibration.temperature_conditioning import (
     causal_filter,
@@ -78,3 +79,18 @@ def test_compensation_temperature_per_step_when_there_are_steps() -> None:
     # a setpoint per row (a ramp) is no step structure: the causal filter is used
     _, how3 = compensation_temperature(t, noisy, None, np.arange(120.0))
     assert "causal filter" in how3
+
+
+def test_settled_step_gets_its_mean_and_a_creeping_step_its_line() -> None:
+    from calibration.temperature_conditioning import condition_temperature
+
+    rng = np.random.default_rng(4)
+    t = np.arange(48) * 15.0
+    steps = np.repeat([0, 1], 24)
+    settled = 25.0 + rng.normal(0, 0.1, 24)
+    creeping = 35.0 + 0.002 * (t[24:] - t[24]) + rng.normal(0, 0.1, 24)  # 0.7 °C over the step
+    cond = condition_temperature(t, np.r_[settled, creeping], steps)
+    assert np.ptp(cond.row_c[:24]) == 0.0  # a slope that is only noise is dropped
+    assert cond.row_c[:24][0] == pytest.approx(np.mean(settled))
+    slope = np.polyfit(t[24:], cond.row_c[24:], 1)[0]
+    assert slope == pytest.approx(0.002, rel=0.2)  # a real creep is kept
