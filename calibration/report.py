@@ -137,8 +137,12 @@ def format_coefficients(fit: ThermalFit) -> str:
     for st in sec["steps"]:
         T = st["temperature_c"]
         vals, sds = [], []
-        for n, (f, _, off) in zip(names, shown, strict=True):
+        for k, (n, (f, _, off)) in enumerate(zip(names, shown, strict=True)):
             v, e = st["params"][n], st["stderr"][n]
+            if not fit.model.identifiable[k]:  # held at its nominal value, not fitted
+                vals.append("not fitted")
+                sds.append("")
+                continue
             vals.append("n/a" if v is None else _f((v - off) * f, ".4f"))
             sds.append("" if e is None else f"±{e * f:.4f}")
         lines.append(f"{st['step']:>4} {'n/a' if T is None else f'{T:.2f}':>8} "
