@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from typing import Any
 
 from calibration import sfem
@@ -105,9 +106,9 @@ def export_c_header(
  * raw_g: the sensor's raw specific force in g (x, y, z).
  * temp_c: the CONDITIONED temperature in degC of the channel the model was
  *   fitted on ({model.temperature_source}).  The calibration conditioned it as:
- *   {_comment(cond)}.
+ *   {_comment(cond + ".", "  ")}
  *   A streaming consumer should condition its live channel with:
- *   {_comment(filt['description'])}.
+ *   {_comment(filt['description'] + ".", "  ")}
  *   soakcal_tfilter_update() is that filter: feed it every raw temperature
  *   sample with its time in seconds, pass what it returns as temp_c.
  *   (ignored when SOAKCAL_TEMPERATURE_DEPENDENT is 0.)
@@ -371,6 +372,15 @@ def export_text(
     raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
 
 
-def _comment(text: str) -> str:
-    """Text safe inside a C block comment."""
-    return " ".join(str(text).split()).replace("*/", "* /")
+_ASCII = {"°": "deg", "σ": "sigma", "µ": "u", "−": "-", "±": "+/-", "·": "*", "→": "->"}
+
+
+def _comment(text: str, indent: str = "") -> str:
+    """Text safe inside a C block comment: ASCII only (some embedded toolchains
+    reject other bytes), no ``*/``, wrapped at 78 columns with `` * `` + indent."""
+    flat = " ".join(str(text).split()).replace("*/", "* /")
+    flat = "".join(_ASCII.get(c, c if c.isascii() else "?") for c in flat)
+    if not indent:
+        return flat
+    return textwrap.fill(flat, width=78, initial_indent="", subsequent_indent=" * " + indent,
+                         break_on_hyphens=False)

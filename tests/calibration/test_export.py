@@ -69,6 +69,7 @@ def _compile(header_dir: Path) -> Path:
 def test_c_header_matches_python_compensation(model_file: Path, tmp_path: Path) -> None:
     header = tmp_path / "soakcal_cal.h"
     assert _export(model_file, "c", header) == 0
+    assert header.read_text(encoding="utf-8").isascii()  # embedded toolchains: ASCII only
     exe = _compile(tmp_path)
     model = load_model(model_file)
     lo, hi = model.valid_c
