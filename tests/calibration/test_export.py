@@ -134,6 +134,11 @@ def test_bad_model_file_exits_2_with_one_line_and_writes_nothing(
     assert not out.exists()
     assert _export(model_file, "fortran", out) == 2
     assert not out.exists()
+    before = model_file.read_text()
+    assert _export(model_file, "c", model_file) == 2  # -o equal to the model: refused
+    assert model_file.read_text() == before
+    assert _export(tmp_path, "c", out) == 2  # a directory: one line, no traceback
+    assert not out.exists()
 
 
 def test_model_with_extension_terms_is_refused(model_file: Path, tmp_path: Path,
