@@ -18,10 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import CalibrationError, RecordingError
-from calibration.model_file import load_model, save_model
+from calibration.gravity import NOT_IDENTIFIABLE_NOTE, GravityError, LocalGravity, from_arguments
+from calibration.model_file import load_model_file, save_model
 from calibration.recording import Recording, atomic_write_text, read_recording
-from calibration.temperature_conditioning import smooth_over_time
-from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalModel, fit_campaign
+from calibration.temperature_conditioning import (
+    CompensationConditioning,
+    compensation_temperature,
+    smooth_over_time,
+)
+from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalFit, ThermalModel, fit_campaign
 
 OUTPUT_COLUMNS = ("cx", "cy", "cz")
 EXIT_OK = 0
@@ -34,18 +39,25 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if method not in METHODS:
         return _fail(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
     try:
+        gravity = _local_gravity(args)
+    except GravityError as exc:
+        return _fail(str(exc))
+    try:
         rec = read_recording(args.recording)
-        fit = fit_campaign(rec, method=method)
+        fit = fit_campaign(rec, method=method, g_local=None if gravity is None else gravity.g)
     except RecordingError as exc:
         return _fail(str(exc))
     except CalibrationError as exc:
         return _fail(f"{args.recording}: {exc}")
+    _record_gravity(fit, gravity)
     try:
         save_model(args.output, fit.model)
     except OSError as exc:
         return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
 
     from calibration import holdout, report  # matplotlib is only needed from here on
+
+    report.add_sections(fit, rec)  # coefficients, and Table 5 for reference recordings
 
     figures: list[Path] = []
     report_dir = getattr(args, "report_dir", None)
@@ -66,10 +78,30 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _local_gravity(args: argparse.Namespace) -> LocalGravity | None:
+    """``--gravity-g`` or ``--latitude-deg``/``--height-m`` (GravityError when implausible)."""
+    return from_arguments(getattr(args, "gravity_g", None), getattr(args, "latitude_deg", None),
+                          getattr(args, "height_m", None))
+
+
+def _record_gravity(fit: ThermalFit, gravity: LocalGravity | None) -> None:
+    """Say in the model file and the report which local gravity was used and why it is input."""
+    g = gravity or LocalGravity(
+        fit.model.g_local,
+        "default: magnitude of the reference vectors (median)" if fit.model.mode == "reference"
+        else "default; set it with --gravity-g or --latitude-deg/--height-m")
+    fit.model.provenance["gravity"] = g.to_dict()
+    fit.report["gravity"] = {**g.to_dict(), "identifiable": False, "why": NOT_IDENTIFIABLE_NOTE}
+    note = f"local gravity {g.g:.6f} g ({g.source}); {NOT_IDENTIFIABLE_NOTE}"
+    fit.model.notes.append(note)
+    fit.notes.append(note)
+    fit.report.setdefault("notes", []).append(note)
+
+
 def run_compensate(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.recording``; write every input column plus cx, cy, cz."""
     try:
-        model = load_model(args.model)
+        model, conditioning = load_model_file(args.model)
         rec = read_recording(args.recording)
     except CalibrationError as exc:  # ModelFileError, RecordingError
         return _fail(str(exc))
@@ -78,9 +110,11 @@ def run_compensate(args: argparse.Namespace) -> int:
         return _fail(str(RecordingError(
             rec.path, 1, clash[0], "the input already has this output column; "
             "compensate would overwrite it")))
+    if getattr(args, "raw_temperature", False) and getattr(args, "smooth_temperature_s", None):
+        return _fail("--raw-temperature and --smooth-temperature-s are alternatives; give one")
     extrapolate = bool(getattr(args, "extrapolate", False))
     try:
-        temp_c = _temperatures(model, rec, extrapolate, args)
+        temp_c, how = _temperatures(model, rec, extrapolate, args, conditioning)
         cal = model.compensate(rec.raw_g, temp_c, extrapolate=True)
     except CalibrationError as exc:
         return _fail(str(exc))
@@ -90,19 +124,27 @@ def run_compensate(args: argparse.Namespace) -> int:
         return _fail(f"{args.output}: cannot write ({exc.strerror or exc})")
     print(f"compensated {len(rec)} rows with {model.model_version} ({model.mode} mode) "
           f"-> {args.output}")
+    print(how)
     return EXIT_OK
 
 
 def _temperatures(
-    model: ThermalModel, rec: Recording, extrapolate: bool, args_smooth: object = None
-) -> np.ndarray:
-    """The model's temperature for each row; RecordingError for missing/out-of-range ones.
+    model: ThermalModel,
+    rec: Recording,
+    extrapolate: bool,
+    args_smooth: object = None,
+    conditioning: CompensationConditioning | None = None,
+) -> tuple[np.ndarray, str]:
+    """The model's temperature for each row and how it was obtained (one line).
 
-    With ``--smooth-temperature-s S`` (optional attribute of the Namespace) the
-    temperature is first smoothed over S seconds (:func:`smooth_over_time`).
+    By default the temperature is conditioned as the model file says
+    (:func:`compensation_temperature`: per step where the recording has steps,
+    the causal filter otherwise). ``--raw-temperature`` uses each row's own
+    reading; ``--smooth-temperature-s S`` a centred local line over S seconds
+    (:func:`smooth_over_time`). RecordingError for missing/out-of-range ones.
     """
     if not model.temperature_dependent:
-        return np.full(len(rec), np.nan)
+        return np.full(len(rec), np.nan), "temperature: not used (temperature-independent model)"
     if not rec.has_temperature:
         raise RecordingError(
             rec.path, None, "sensor_c",
@@ -110,8 +152,18 @@ def _temperatures(
         )
     temp_c = rec.temperature_c()
     smooth_s = getattr(args_smooth, "smooth_temperature_s", None) or 0.0
-    if smooth_s > 0:
+    if getattr(args_smooth, "raw_temperature", False):
+        how = "temperature: each row's own reading, not conditioned (--raw-temperature)"
+    elif smooth_s > 0:
         temp_c = smooth_over_time(rec.t_s, temp_c, float(smooth_s))
+        how = f"temperature smoothed by a centred local line over {float(smooth_s):g} s"
+    else:
+        temp_c, how = compensation_temperature(
+            rec.t_s, temp_c,
+            rec.columns["step"] if rec.has("step") else None,
+            rec.columns["setpoint_c"] if rec.has("setpoint_c") else None,
+            conditioning or CompensationConditioning())
+        how += " (--raw-temperature: use each row's own reading)"
     if model.temperature_source in ("sensor_c", "chamber_c") and \
             rec.temperature_source != model.temperature_source:
         print(f"warning: the model was fitted on {model.temperature_source} but "
@@ -126,7 +178,7 @@ def _temperatures(
                 f"temperature {temp_c[i]:.2f} °C is outside the model's valid range "
                 f"[{lo:.2f}, {hi:.2f}] °C (use --extrapolate to compensate anyway)",
             )
-    return temp_c
+    return temp_c, how
 
 
 def _output_csv(rec: Recording, cal_g: np.ndarray) -> str:

@@ -1,6 +1,11 @@
 """The versioned JSON model document (schema: ``docs/model-file.md``).
 
-``{"format": "soakcal-model", "version": 1, "model_version": "sfem-cubic-1", ...}``
+``{"format": "soakcal-model", "version": 2, "model_version": "sfem-cubic-1", ...}``
+
+Version 2 adds ``temperature.compensation`` (how ``compensate`` conditions the
+temperature by default) and ``temperature.streaming_filter`` (the causal filter
+a streaming consumer applies); version 1 files are still read, and get the
+same defaults (their calibrate conditioned temperature the same way).
 
 :func:`dump_model_dict` / :func:`load_model_dict` convert a :class:`ThermalModel`
 to and from the JSON-able dict the service stores and returns;
@@ -22,16 +27,18 @@ import numpy as np
 from calibration import sfem
 from calibration.errors import ModelFileError
 from calibration.recording import atomic_write_text
+from calibration.temperature_conditioning import CompensationConditioning
 from calibration.thermal import MODEL_VERSION, StepParams, ThermalModel
 
 FORMAT = "soakcal-model"
-VERSION = 1
+VERSION = 2
+READABLE_VERSIONS = (1, 2)
 MODES = ("reference", "norm")
 
 
 # --- writing ------------------------------------------------------------------
 def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
-    """The model as a JSON-able dict (format ``soakcal-model`` version 1)."""
+    """The model as a JSON-able dict (format ``soakcal-model`` version 2)."""
     names = sfem.PARAM_NAMES
     d = model.degree
     phys = model.physical_coeffs()
@@ -54,6 +61,8 @@ def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
             "centre_c": model.t_centre_c,
             "scale_c": model.t_scale_c,
             "variable": "x = (T - centre_c) / scale_c",
+            "compensation": _conditioning.to_dict(),
+            "streaming_filter": _conditioning.to_dict()["otherwise"],
         },
         "polynomial": {
             "degree": d,
@@ -84,6 +93,10 @@ def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
     }
 
 
+# calibrate always conditions per step (calibration.thermal); compensate mirrors it.
+_conditioning = CompensationConditioning()
+
+
 def save_model(path: str | os.PathLike, model: ThermalModel) -> None:
     """Write the model JSON atomically (temp file + rename)."""
     text = json.dumps(dump_model_dict(model), indent=2, allow_nan=False) + "\n"
@@ -100,6 +113,8 @@ def load_model(path: str | os.PathLike) -> ThermalModel:
         raise ModelFileError(f"{p}: model file not found") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{p}: not a JSON model file ({exc})") from None
+    except OSError as exc:  # a directory, a permission problem
+        raise ModelFileError(f"{p}: cannot read the model file ({exc.strerror or exc})") from None
     try:
         return load_model_dict(doc)
     except ModelFileError as exc:
@@ -112,8 +127,9 @@ def load_model_dict(doc: Any) -> ThermalModel:
         raise ModelFileError("model document must be a JSON object")
     if doc.get("format") != FORMAT:
         raise _bad("format", f"expected {FORMAT!r}, got {doc.get('format')!r}")
-    if doc.get("version") != VERSION:
-        raise _bad("version", f"this soakcal reads version {VERSION}, got {doc.get('version')!r}")
+    if doc.get("version") not in READABLE_VERSIONS or isinstance(doc.get("version"), bool):
+        raise _bad("version", f"this soakcal reads versions {READABLE_VERSIONS}, "
+                   f"got {doc.get('version')!r}")
     mv = doc.get("model_version")
     if mv != MODEL_VERSION:
         raise _bad("model_version", f"expected {MODEL_VERSION!r}, got {mv!r}")
@@ -167,6 +183,7 @@ def load_model_dict(doc: Any) -> ThermalModel:
     notes = doc.get("notes", [])
     if not isinstance(notes, list):
         raise _bad("notes", "expected a list of strings")
+    load_conditioning_dict(doc)  # validated here so a bad document is refused at load
     method = doc.get("method", "per_step")
     if not isinstance(method, str):
         raise _bad("method", "expected a string")
@@ -188,6 +205,43 @@ def load_model_dict(doc: Any) -> ThermalModel:
         provenance=dict(prov),
         model_version=mv,
     )
+
+
+def load_conditioning_dict(doc: dict[str, Any]) -> CompensationConditioning:
+    """``temperature.compensation`` of a (validated) model document; defaults for version 1."""
+    temp = doc.get("temperature") if isinstance(doc.get("temperature"), dict) else {}
+    comp = temp.get("compensation")
+    if comp is None:
+        return CompensationConditioning()
+    if not isinstance(comp, dict):
+        raise _bad("temperature.compensation", "expected an object")
+    per = comp.get("per_step", {})
+    other = comp.get("otherwise", {})
+    if not isinstance(per, dict) or not isinstance(other, dict):
+        raise _bad("temperature.compensation", "expected objects 'per_step' and 'otherwise'")
+    enabled = per.get("enabled", True)
+    if not isinstance(enabled, bool):
+        raise _bad("temperature.compensation.per_step.enabled", "expected a boolean")
+    kind = other.get("kind", "causal_exponential_line")
+    if kind != "causal_exponential_line":
+        raise _bad("temperature.compensation.otherwise.kind",
+                   f"expected 'causal_exponential_line', got {kind!r}")
+    tau = _num(other.get("tau_s", 600.0), "temperature.compensation.otherwise.tau_s")
+    jump = _num(other.get("jump_c", 1.0), "temperature.compensation.otherwise.jump_c")
+    if tau <= 0 or jump <= 0:
+        raise _bad("temperature.compensation.otherwise", "tau_s and jump_c must be positive")
+    return CompensationConditioning(per_step=enabled, tau_s=tau, jump_c=jump)
+
+
+def load_model_file(path: str | os.PathLike) -> tuple[ThermalModel, CompensationConditioning]:
+    """:func:`load_model` plus the file's compensation conditioning."""
+    p = Path(path)
+    model = load_model(p)
+    doc = json.loads(p.read_text(encoding="utf-8"))
+    try:
+        return model, load_conditioning_dict(doc)
+    except ModelFileError as exc:
+        raise ModelFileError(f"{p}: {exc}") from None
 
 
 # --- helpers ------------------------------------------------------------------

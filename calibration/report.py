@@ -4,6 +4,10 @@
   measurement RMSE (Eq. 9, mg), as the seed's Table 6, under a header with the
   mode, method, positions and the temperature source and its conditioning.
 * :func:`report_dict` -- the same as a JSON-able dict (``soakcal calibrate --json``).
+* :func:`add_sections` -- adds the fitted coefficients (per step with σ, and
+  the polynomial coefficients with σ) and, for reference recordings, the
+  seed's Table 5 (tilt before/after, Eq. 10, SEOQ) to the report, so the text
+  and the JSON show them.
 * :func:`write_figures` -- |g| error before/after per reading, each parameter
   against temperature with its polynomial (Fig. 10), drift before/after (Fig. 11).
 * :func:`plot_rmse_vs_positions` -- the seed's Fig. 8 (RMSE vs number of positions).
@@ -24,7 +28,7 @@ matplotlib.use("Agg")  # files only: the service and CI have no display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from calibration import schedules, sfem  # noqa: E402
+from calibration import metrics, schedules, sfem  # noqa: E402
 from calibration.fit import fit_norm, fit_reference, rmse_norm_ug  # noqa: E402
 from calibration.recording import Recording  # noqa: E402
 from calibration.thermal import ThermalFit  # noqa: E402
@@ -35,6 +39,168 @@ _DISPLAY = {
     "1": (1e6, "ppm", 1.0),  # scale factor: deviation from 1
     "rad": (1e3, "mrad", 0.0),
 }
+
+
+# Table 5 rows: positions whose reference z axis is within this of vertical (the
+# seed's tilts are 0..30 deg; Eq. 10's roll atan(X/−Z) is meaningless near Z = 0).
+TILT_MAX_DEG = 45.0
+
+
+def add_sections(fit: ThermalFit, recording: Recording | None = None) -> None:
+    """Put ``coefficients`` and (reference recordings) ``tilt_table`` into ``fit.report``."""
+    fit.report["coefficients"] = coefficients_dict(fit)
+    if recording is not None and recording.has_reference:
+        fit.report["tilt_table"] = tilt_section(fit, recording)
+
+
+def coefficients_dict(fit: ThermalFit) -> dict[str, Any]:
+    """Per-step SFEM parameters with σ (Eq. 1) and the polynomial coefficients with σ (Eq. 8).
+
+    Units as in the model file: bias g, scale 1, angles rad; physical
+    coefficients in powers of (T − centre_c) (unit/°C^j).
+    """
+    m = fit.model
+    names = sfem.PARAM_NAMES
+    d = m.degree
+    se = m.coeff_stderr if m.coeff_stderr is not None else np.full_like(m.coeffs, np.nan)
+    powers = m.t_scale_c ** np.arange(d + 1)[None, :]
+    return {
+        "parameter_units": dict(zip(names, sfem.PARAM_UNITS, strict=True)),
+        "steps": [
+            {"step": st.step, "temperature_c": _num(st.temperature_c),
+             "params": {n: _num(v) for n, v in zip(names, st.params, strict=True)},
+             "stderr": {n: _num(v) for n, v in zip(names, st.stderr, strict=True)}}
+            for st in m.steps
+        ],
+        "polynomial": {
+            "degree": d,
+            "centre_c": m.t_centre_c,
+            "scale_c": m.t_scale_c,
+            "physical_basis": "p(T) = sum_j physical[j] * (T - centre_c)**j",
+            "physical": {n: [_num(v) for v in m.physical_coeffs()[k]]
+                         for k, n in enumerate(names)},
+            "physical_stderr": {n: [_num(v) for v in (se / powers)[k]]
+                                for k, n in enumerate(names)},
+        },
+    }
+
+
+def tilt_section(fit: ThermalFit, rec: Recording) -> dict[str, Any]:
+    """The seed's Table 5 at the step nearest 25 °C, and tilt error RMS over every step.
+
+    Angles by Eq. 10 from the reference (reference angle), the raw reading
+    (without calibration) and the compensated reading (after calibration);
+    SEOQ = |angle before − angle after| / 30° · 100 % (``metrics.seoq_percent``).
+    """
+    used = np.flatnonzero(fit.row_step >= 0)
+    ref = rec.ref_g[used]  # type: ignore[index]
+    raw = rec.raw_g[used]
+    cal = fit.model.compensate(raw, fit.row_temperature_c[used], extrapolate=True)
+    zfrac = np.abs(ref[:, 2]) / np.linalg.norm(ref, axis=1)
+    level = zfrac >= np.cos(np.radians(TILT_MAX_DEG))
+    out: dict[str, Any] = {"max_tilt_deg": TILT_MAX_DEG, "seoq_max_angle_deg":
+                           metrics.SEOQ_MAX_ANGLE_DEG}
+    if not level.any():
+        out.update(step=None, rows=[], note=f"no position within {TILT_MAX_DEG:g}° of level "
+                   "(z vertical): Eq. 10 tilt angles are not meaningful for these positions")
+        return out
+    rows_all = metrics.tilt_table(raw[level], cal[level], ref[level])
+    err_b = np.array([r["err_raw_deg"] for r in rows_all])
+    err_a = np.array([r["err_cal_deg"] for r in rows_all])
+    steps = fit.row_step[used][level]
+    temps = {st.step: st.temperature_c for st in fit.steps}
+    finite = [s for s in np.unique(steps) if math.isfinite(temps.get(int(s), math.nan))]
+    pick = min(finite, key=lambda s: abs(temps[int(s)] - 25.0)) if finite else int(steps[0])
+    sel = steps == pick
+    rows = [r for r, k in zip(rows_all, sel, strict=True) if k]
+    out.update(
+        step=int(pick), temperature_c=_num(temps.get(int(pick), math.nan)),
+        rows=[{k: round(v, 4) for k, v in r.items()} for r in rows],
+        rms_err_raw_deg=round(float(np.sqrt(np.mean(err_b**2))), 5),
+        rms_err_cal_deg=round(float(np.sqrt(np.mean(err_a**2))), 5),
+        positions_all_steps=int(level.sum()),
+    )
+    return out
+
+
+def format_coefficients(fit: ThermalFit) -> str:
+    """Text: per-step parameters ± σ, then the polynomial (physical) coefficients ± σ."""
+    sec = fit.report.get("coefficients") or coefficients_dict(fit)
+    names = sfem.PARAM_NAMES
+    shown = [_DISPLAY[u] for u in sfem.PARAM_UNITS]
+    heads = [f"{n}{' −1' if off else ''} ({unit})" for n, (_, unit, off) in zip(names, shown,
+                                                                              strict=True)]
+    w = 13
+    lines = ["fitted SFEM parameters per step (Eq. 1), value and ±1σ "
+             "(bias mg, scale factor − 1 in ppm, angles mrad):",
+             f"{'step':>4} {'T (°C)':>8} " + " ".join(h.rjust(w) for h in heads)]
+    for st in sec["steps"]:
+        T = st["temperature_c"]
+        vals, sds = [], []
+        for k, (n, (f, _, off)) in enumerate(zip(names, shown, strict=True)):
+            v, e = st["params"][n], st["stderr"][n]
+            if not fit.model.identifiable[k]:  # held at its nominal value, not fitted
+                vals.append("not fitted")
+                sds.append("")
+                continue
+            vals.append("n/a" if v is None else _f((v - off) * f, ".4f"))
+            sds.append("" if e is None else f"±{e * f:.4f}")
+        lines.append(f"{st['step']:>4} {'n/a' if T is None else f'{T:.2f}':>8} "
+                     + " ".join(v.rjust(w) for v in vals))
+        lines.append(" " * 14 + " ".join(v.rjust(w) for v in sds))
+    poly = sec["polynomial"]
+    d = poly["degree"]
+    lines.append("")
+    lines.append(f"polynomial coefficients (Eq. 8), p(T) = Σ c_j (T − {poly['centre_c']:.3f} °C)^j,"
+                 " value ± 1σ, in the parameter's unit (g, 1, rad) per °C^j:")
+    lines.append(f"{'param':>6} " + " ".join(f"c{j}".rjust(24) for j in range(d + 1)))
+    for k, n in enumerate(names):
+        if not fit.model.identifiable[k]:
+            lines.append(f"{n:>6}   not identifiable (held at {poly['physical'][n][0]:g})")
+            continue
+        cells = []
+        for v, e in zip(poly["physical"][n], poly["physical_stderr"][n], strict=True):
+            cells.append(f"{v:+.5e}" + ("" if e is None else f" ±{e:.1e}"))
+        lines.append(f"{n:>6} " + " ".join(c.rjust(24) for c in cells))
+    return "\n".join(lines)
+
+
+def format_tilt_table(fit: ThermalFit) -> str | None:
+    """The seed's Table 5 as text (None when the report has no tilt section)."""
+    sec = fit.report.get("tilt_table")
+    if not sec:
+        return None
+    if not sec["rows"]:
+        return f"tilt (Table 5): {sec['note']}"
+    temp = "temperature n/a" if sec["temperature_c"] is None else f"{sec['temperature_c']:.2f} °C"
+    lines = [
+        f"tilt angles (Table 5, Eq. 10) at step {sec['step']} ({temp}), "
+        f"positions within {sec['max_tilt_deg']:g}° of level; SEOQ = |before − after| / "
+        f"{sec['seoq_max_angle_deg']:g}° · 100 %",
+        f"{'reference φ; θ (deg)':>22} {'without calibration':>22} {'after calibration':>22} "
+        f"{'SEOQ φ; θ (%)':>16}",
+    ]
+    for r in sec["rows"]:
+        lines.append(
+            f"{_f(r['ref_pitch_deg'], '>10.3f')}; {_f(r['ref_roll_deg'], '<10.3f')}"
+            f"{_f(r['raw_pitch_deg'], '>11.3f')}; {_f(r['raw_roll_deg'], '<10.3f')}"
+            f"{_f(r['cal_pitch_deg'], '>11.3f')}; {_f(r['cal_roll_deg'], '<10.3f')}"
+            f"{r['seoq_pitch_pct']:>8.2f}; {r['seoq_roll_pct']:<6.2f}")
+    lines.append(f"tilt error RMS over {sec['positions_all_steps']} near-level readings of every "
+                 f"step: {sec['rms_err_raw_deg']:.4f}° without calibration, "
+                 f"{sec['rms_err_cal_deg']:.5f}° after")
+    return "\n".join(lines)
+
+
+def _f(v: float, spec: str) -> str:
+    """``format(v, spec)`` without a minus sign on a value that rounds to zero ("-0.000")."""
+    text = format(v, spec)
+    return format(0.0, spec) if "-" in text and not any(c in "123456789" for c in text) \
+        else text
+
+
+def _num(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)
 
 
 def report_dict(fit: ThermalFit) -> dict[str, Any]:
@@ -77,11 +243,16 @@ def format_table6(fit: ThermalFit) -> str:
         lines.append("")
         lines.append(
             "drift at fixed orientation (in-sample), x/y/z: before "
-            + " / ".join(f"{v:.1f}" for v in b["slope_ug_per_k"]) + " µg/K ("
-            + " / ".join(f"{v:.2f}" for v in b["drift_mg"]) + " mg over range), after "
-            + " / ".join(f"{v:.2f}" for v in a["slope_ug_per_k"]) + " µg/K ("
-            + " / ".join(f"{v:.3f}" for v in a["drift_mg"]) + " mg)"
+            + " / ".join(_f(v, ".1f") for v in b["slope_ug_per_k"]) + " µg/K ("
+            + " / ".join(_f(v, ".2f") for v in b["drift_mg"]) + " mg over range), after "
+            + " / ".join(_f(v, ".2f") for v in a["slope_ug_per_k"]) + " µg/K ("
+            + " / ".join(_f(v, ".3f") for v in a["drift_mg"]) + " mg)"
         )
+    if "coefficients" in r:
+        lines += ["", format_coefficients(fit)]
+    tilt = format_tilt_table(fit)
+    if tilt:
+        lines += ["", tilt]
     return "\n".join(lines)
 
 
@@ -92,8 +263,15 @@ def write_figures(
     """Write the report's PNG figures into ``out_dir``; returns their paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [_norm_error_figure(fit, recording, out / "norm_error.png"),
-             _parameters_figure(fit, out / "parameters_vs_temperature.png")]
+    paths = [_norm_error_figure(fit, recording, out / "norm_error.png")]
+    temps = np.array([st.temperature_c for st in fit.model.steps])
+    if fit.model.temperature_dependent and temps.size and np.all(np.isfinite(temps)):
+        paths.append(_parameters_figure(fit, out / "parameters_vs_temperature.png"))
+    else:  # one dot on a "temperature (none)" axis says nothing: say so instead
+        note = ("no parameters-vs-temperature figure: the recording has no temperature "
+                "(the model is temperature-independent)")
+        fit.notes.append(note)
+        fit.report.setdefault("notes", []).append(note)
     if fit.model.temperature_dependent and len(fit.steps) >= 2:
         paths.append(_drift_figure(fit, recording, out / "drift.png"))
     return paths
@@ -108,7 +286,7 @@ def _norm_error_figure(fit: ThermalFit, rec: Recording, path: Path) -> Path:
     after_ug = (np.linalg.norm(cal, axis=1) - g) * 1e6
     steps = fit.row_step[used]
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
-    cmap = plt.get_cmap("coolwarm")
+    cmap = step_colormap()
     temps = np.array([st.temperature_c for st in fit.steps])
     finite = np.isfinite(temps)
     tlo, thi = (temps[finite].min(), temps[finite].max()) if finite.any() else (0.0, 1.0)
@@ -116,7 +294,7 @@ def _norm_error_figure(fit: ThermalFit, rec: Recording, path: Path) -> Path:
         m = steps == st.step
         frac = 0.5 if not math.isfinite(st.temperature_c) or thi == tlo else \
             (st.temperature_c - tlo) / (thi - tlo)
-        label = f"{st.temperature_c:.0f} °C" if math.isfinite(st.temperature_c) else None
+        label = f"{_f(st.temperature_c, '.0f')} °C" if math.isfinite(st.temperature_c) else None
         ax1.plot(np.flatnonzero(m), before_mg[m], ".", color=cmap(frac), label=label)
         ax2.plot(np.flatnonzero(m), after_ug[m], ".", color=cmap(frac))
     ax1.set_ylabel("raw |g| − g (mg)")
@@ -133,6 +311,17 @@ def _norm_error_figure(fit: ThermalFit, rec: Recording, path: Path) -> Path:
     if any(np.isfinite(temps)):
         ax1.legend(fontsize=7, ncol=6, loc="lower right")
     return _save(fig, path)
+
+
+def step_colormap() -> matplotlib.colors.Colormap:
+    """Cold-to-hot colours that all stay visible on white.
+
+    Why not ``coolwarm``: its middle (the 0–10 °C steps of a −40…60 °C
+    campaign) is nearly white. ``plasma`` cut at 0.8 runs dark blue (cold) →
+    magenta → orange (hot) and never reaches its pale yellow end.
+    """
+    base = plt.get_cmap("plasma")
+    return matplotlib.colors.ListedColormap(base(np.linspace(0.0, 0.8, 256)), "soakcal_steps")
 
 
 def _parameters_figure(fit: ThermalFit, path: Path) -> Path:
@@ -195,7 +384,7 @@ def _drift_figure(fit: ThermalFit, rec: Recording, path: Path) -> Path:
         slopes = drift.get(key, {}).get("slope_ug_per_k", [math.nan] * 3)
         for j, axis in enumerate("xyz"):
             means = np.array([data[steps == s, j].mean() for s in st_ids]) * scale
-            a.plot(st_T, means, "o-", ms=3, label=f"{axis}: {slopes[j]:.2f} µg/K")
+            a.plot(st_T, means, "o-", ms=3, label=f"{axis}: {_f(slopes[j], '.2f')} µg/K")
         a.set_xlabel(f"temperature ({fit.model.temperature_source}, °C)")
         a.set_ylabel(f"output change at fixed orientation ({unit})")
         a.grid(alpha=0.3)

@@ -8,6 +8,8 @@ temperature but must say so). What we do, per temperature step:
    drops rows more than 4 robust σ from the first line), because the die may
    still creep by a few hundredths of a degree over the ~6 min a step's
    positions take, and a line keeps that creep while averaging the noise;
+   the slope is kept only where it exceeds 3 standard errors, else the rows
+   get the mean (on a settled step a line's value is twice as noisy);
 2. each row gets the line's value at its time (``row_c``), the step gets the
    mean of those (``step_c``, a robust mean of the step's temperature).
 
@@ -16,13 +18,15 @@ A step with fewer than 3 rows or zero time span gets the median instead.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 DESCRIPTION = (
     "per step: robust straight line of temperature vs time (rows > 4 robust sigma "
-    "from the first line dropped), rows take the line's value, the step its mean"
+    "from the first line dropped; slope kept only if > 3 standard errors, else the "
+    "mean), rows take the line's value, the step its mean"
 )
 
 
@@ -65,11 +69,34 @@ def condition_temperature(
         rejected += int(ok.sum() - keep.sum())
         if keep.sum() >= 3:
             coef = np.polyfit(tt[keep] - t0, yy[keep], 1)
+        if not _slope_significant(tt[keep], yy[keep], coef, t0):
+            coef = np.array([0.0, float(np.mean(yy[keep]))])  # settled: the mean is less noisy
         line = np.polyval(coef, tt - t0)
         row_c[idx] = line
         step_c[int(s)] = float(np.mean(line))
         step_noise[int(s)] = _robust_sd((yy - line)[keep])
     return ConditionedTemperature(row_c, step_c, step_noise, rejected)
+
+
+# A step's temperature slope is kept when it exceeds this many standard errors.
+# Why: on a settled step the line's value at a row has twice the variance of the
+# mean (averaged over the rows), so a slope that is only noise costs accuracy;
+# a real creep (a die still settling) is many standard errors and is kept.
+SLOPE_SIGMAS = 3.0
+
+
+def _slope_significant(tt: np.ndarray, yy: np.ndarray, coef: np.ndarray, t0: float) -> bool:
+    """|slope| > SLOPE_SIGMAS standard errors (ordinary LS standard error of the slope)."""
+    n = tt.size
+    if n < 4:
+        return True  # too few rows to tell: keep the line (the old behaviour)
+    sxx = float(np.sum((tt - tt.mean()) ** 2))
+    if sxx <= 0:
+        return False
+    sd = float(np.sqrt(np.sum((yy - np.polyval(coef, tt - t0)) ** 2) / (n - 2)))
+    if sd <= 0:
+        return True
+    return abs(float(coef[0])) > SLOPE_SIGMAS * sd / np.sqrt(sxx)
 
 
 def _robust_sd(x: np.ndarray) -> float:
@@ -123,3 +150,183 @@ def smooth_over_time(
                 coef = np.polyfit(tt[keep] - ts[j], yy[keep], 1)
             out[idx[j]] = float(coef[1])
     return out
+
+
+# --- conditioning at compensation time (issue 11: "right by default") ----------
+# Why a line and not a plain exponential average: a first-order average lags a
+# ramp by its time constant (0.5 °C/min x 600 s = 5 °C); a line weighted by
+# exp(-age / tau) follows a ramp with no lag, and its value at the current time
+# has variance 1.25 sigma^2 / (rate * tau) (a centred boxcar of 0.8 tau).
+CAUSAL_TAU_S = 600.0
+CAUSAL_JUMP_C = 1.0
+CAUSAL_KIND = "causal_exponential_line"
+PER_STEP_KIND = "per_step_line"
+
+
+def default_streaming_filter(tau_s: float = CAUSAL_TAU_S,
+                             jump_c: float = CAUSAL_JUMP_C) -> dict[str, object]:
+    """The causal filter a streaming consumer applies (``temperature.streaming_filter``)."""
+    return {
+        "kind": CAUSAL_KIND,
+        "tau_s": float(tau_s),
+        "jump_c": float(jump_c),
+        "description": (
+            f"causal straight line of temperature vs time weighted by exp(-age/{tau_s:g} s), "
+            f"evaluated at the current sample (the first two samples after a restart: their "
+            f"mean); restarted when two consecutive "
+            f"samples differ from the estimate by more than {jump_c:g} °C (one such sample "
+            f"alone is kept out of the filter as a possible spike and passed through as read)"
+        ),
+    }
+
+
+def causal_filter(
+    t_s: np.ndarray,
+    temperature_c: np.ndarray,
+    tau_s: float = CAUSAL_TAU_S,
+    jump_c: float = CAUSAL_JUMP_C,
+) -> np.ndarray:
+    """Each row's temperature from the rows before it and itself only (streaming filter).
+
+    Exponentially weighted least-squares line (weights exp(-age/tau)) kept as
+    five decaying running sums, so firmware can run it in O(1) memory. NaN
+    temperatures are passed through and do not update the filter.
+    """
+    t = np.asarray(t_s, float)
+    y = np.asarray(temperature_c, float)
+    out = y.copy()
+    if tau_s <= 0 or y.size == 0:
+        return out
+    s0 = s1 = s2 = sy = sty = 0.0  # sums of w, w·dt, w·dt², w·y, w·dt·y (dt = t − t_ref)
+    t_ref = t_start = t_last = 0.0
+    started = False
+    n_seen = 0
+    pending: tuple[float, float] | None = None  # an out-of-band sample awaiting confirmation
+    estimate = math.nan
+    for i, (ti, yi) in enumerate(zip(t.tolist(), y.tolist(), strict=True)):
+        if not math.isfinite(yi):
+            continue
+        if started and abs(yi - estimate) > jump_c:
+            if pending is None or abs(yi - pending[1]) > jump_c:
+                # maybe a spike, maybe the first row at a new soak temperature: keep it
+                # out of the filter, and give the row its own reading (never a stale one)
+                pending = (ti, yi)
+                out[i] = yi
+                continue
+            started = False  # two in a row: a real jump, restart from the pending sample
+            t0, y0 = pending
+            s0, s1, s2, sy, sty = 1.0, 0.0, 0.0, y0, 0.0
+            t_ref = t_start = t_last = t0
+            n_seen = 1
+            started = True
+        pending = None
+        if not started:
+            s0, s1, s2, sy, sty = 0.0, 0.0, 0.0, 0.0, 0.0
+            t_ref = t_start = t_last = ti
+            n_seen = 0
+            started = True
+        # decay the sums to the new time, then re-reference dt to ti
+        decay = math.exp(-(ti - t_last) / tau_s) if ti > t_last else 1.0
+        s0 *= decay
+        s1 *= decay
+        s2 *= decay
+        sy *= decay
+        sty *= decay
+        shift = ti - t_ref  # dt' = dt − shift
+        s2 = s2 - 2.0 * shift * s1 + shift * shift * s0
+        sty = sty - shift * sy
+        s1 = s1 - shift * s0
+        t_ref = t_last = ti
+        s0 += 1.0
+        sy += yi
+        mean = sy / s0
+        det = s0 * s2 - s1 * s1
+        n_seen += 1
+        if n_seen >= 3 and ti > t_start and det > 1e-12 * max(s0 * s2, 1e-300):
+            estimate = (s2 * sy - s1 * sty) / det  # line's value at dt = 0 (now)
+        else:
+            estimate = mean
+        out[i] = estimate
+    return out
+
+
+def segments_for_conditioning(
+    steps: np.ndarray | None,
+    setpoint_c: np.ndarray | None,
+    temperature_c: np.ndarray,
+    jump_c: float = CAUSAL_JUMP_C,
+) -> np.ndarray | None:
+    """Soak-step segments of a recording to compensate, or None if it has no steps.
+
+    A new segment starts where the ``step`` column changes, where ``setpoint_c``
+    changes, or where the (3-point median filtered) temperature jumps by more
+    than ``jump_c`` -- a verification run may write one step index for several
+    soak temperatures, and a line through two plateaus would be wrong.
+    """
+    if steps is None and setpoint_c is None:
+        return None
+    y = np.asarray(temperature_c, float)
+    n = y.size
+    change = np.zeros(n, bool)
+    for col in (steps, setpoint_c):
+        if col is not None:
+            c = np.nan_to_num(np.asarray(col, float), nan=-1e300)
+            change[1:] |= c[1:] != c[:-1]
+    if n >= 2:
+        yy = np.where(np.isfinite(y), y, np.nanmedian(y) if np.isfinite(y).any() else 0.0)
+        med = np.median(np.column_stack([np.r_[yy[0], yy[:-1]], yy, np.r_[yy[1:], yy[-1]]]),
+                        axis=1)
+        change[1:] |= np.abs(np.diff(med)) > jump_c
+    return np.cumsum(change)
+
+
+# Below this many rows per segment (median), a recording's "steps" are not soak
+# plateaus (e.g. a cooling run with a new setpoint per row): the causal filter is used.
+MIN_ROWS_PER_STEP = 3
+
+
+@dataclass(frozen=True)
+class CompensationConditioning:
+    """How ``compensate`` conditions temperature (the model file's ``temperature.compensation``).
+
+    ``per_step``: where the recording to compensate has steps, the same robust
+    line per step that calibrate used (:func:`condition_temperature`);
+    otherwise (or with ``per_step`` false) the causal filter, which is also the
+    filter a streaming consumer applies.
+    """
+
+    per_step: bool = True
+    tau_s: float = CAUSAL_TAU_S
+    jump_c: float = CAUSAL_JUMP_C
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "per_step": {"kind": PER_STEP_KIND, "enabled": self.per_step,
+                         "description": "where the recording has steps (step or setpoint_c "
+                         "columns; also split at temperature jumps): " + DESCRIPTION},
+            "otherwise": default_streaming_filter(self.tau_s, self.jump_c),
+        }
+
+
+def compensation_temperature(
+    t_s: np.ndarray,
+    temperature_c: np.ndarray,
+    steps: np.ndarray | None,
+    setpoint_c: np.ndarray | None,
+    conditioning: CompensationConditioning = CompensationConditioning(),  # noqa: B008
+) -> tuple[np.ndarray, str]:
+    """Conditioned temperature per row for ``compensate``, and a one-line account of it."""
+    temp = np.asarray(temperature_c, float)
+    segs = (segments_for_conditioning(steps, setpoint_c, temp, conditioning.jump_c)
+            if conditioning.per_step else None)
+    if segs is not None and temp.size:
+        sizes = np.bincount(segs)
+        if float(np.median(sizes[sizes > 0])) >= MIN_ROWS_PER_STEP:
+            cond = condition_temperature(t_s, temp, segs)
+            return cond.row_c, (
+                f"temperature conditioned per step as calibrate did ({len(cond.step_c)} "
+                f"step(s), robust straight line per step)")
+    out = causal_filter(t_s, temp, conditioning.tau_s, conditioning.jump_c)
+    return out, (
+        f"temperature conditioned by the causal filter (exponentially weighted line, "
+        f"time constant {conditioning.tau_s:g} s, restart on jumps > {conditioning.jump_c:g} °C)")

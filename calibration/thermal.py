@@ -201,8 +201,14 @@ def fit_campaign(
     *,
     method: str = DEFAULT_METHOD,
     degree: int = 3,
+    g_local: float | None = None,
 ) -> ThermalFit:
-    """Fit SFEM at each step and the cubic thermal model (Eq. 1, 4–8) to a recording."""
+    """Fit SFEM at each step and the cubic thermal model (Eq. 1, 4–8) to a recording.
+
+    ``g_local`` (units of standard gravity; :mod:`calibration.gravity`): the
+    reference directions are scaled to it (reference mode) or |g| is fitted to
+    it (norm mode). None: the references' median magnitude, or 1.0.
+    """
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     if degree < 0:
@@ -212,9 +218,13 @@ def fit_campaign(
     raw = recording.raw_g
     ref = recording.ref_g
     sigma = _row_sigma(recording, notes)
-    g_local = 1.0
     if ref is not None:
+        if g_local is not None:  # directions from the recording, magnitude the local gravity
+            norm = np.linalg.norm(ref, axis=1, keepdims=True)
+            ref = ref / np.where(norm > 0, norm, 1.0) * g_local
         g_local = float(np.median(np.linalg.norm(ref, axis=1)))
+    elif g_local is None:
+        g_local = 1.0
     method_requested = method
     ref_tol = reference_tolerance_rad(recording) if ref is not None else None
     if ref_tol is not None:  # hand-placed: calibration/placement.py, docs/fit-honesty.md

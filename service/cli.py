@@ -48,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_calibration_commands(sub)
+    _add_export(sub)
     _add_serve(sub)
     _add_token(sub)
     _add_campaign(sub)
@@ -81,6 +82,13 @@ def _add_calibration_commands(sub: Any) -> None:
         help="thermal fit: one joint fit over all steps (default) or per step then per "
         "parameter; docs/calibration.md compares them",
     )
+    cal.add_argument("--gravity-g", type=float, metavar="G",
+                     help="local gravity in units of standard gravity (9.80665 m/s^2); "
+                     "the reference directions are scaled to it (default 1.0)")
+    cal.add_argument("--latitude-deg", type=float, metavar="L",
+                     help="local gravity from WGS84 normal gravity at this latitude (deg)")
+    cal.add_argument("--height-m", type=float, metavar="H",
+                     help="with --latitude-deg: ellipsoidal height (m), free-air corrected")
     cal.set_defaults(handler=_delegate("calibration.cli", "run_calibrate", "calibrate"))
 
     comp = sub.add_parser("compensate", help="apply a model to a recording")
@@ -96,6 +104,9 @@ def _add_calibration_commands(sub: Any) -> None:
         metavar="S",
         help="smooth the noisy temperature channel over S seconds before compensating",
     )
+    comp.add_argument("--raw-temperature", action="store_true",
+                      help="use each row's own temperature reading (default: condition it as "
+                      "the model file says, per step or by the causal filter)")
     comp.set_defaults(handler=_delegate("calibration.cli", "run_compensate", "compensate"))
 
     diag = sub.add_parser("diagnose", help="what physics the base model left out")
@@ -126,6 +137,15 @@ def _add_calibration_commands(sub: Any) -> None:
     imp.add_argument("--window-s", type=float, metavar="S", help="static-detection window")
     imp.add_argument("--trim-s", type=float, metavar="S", help="trimmed from each interval end")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
+
+
+def _add_export(sub: Any) -> None:
+    exp = sub.add_parser("export", help="export a model for firmware (C99 header) or other code")
+    exp.add_argument("model", metavar="MODEL", help="model JSON from calibrate")
+    exp.add_argument("--format", choices=("c", "json-flat"), default="c",
+                     help="c: one C99 header (default); json-flat: plain arrays and a recipe")
+    exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
+    exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
 
 
 def _delegate(module: str, function: str, command: str) -> Callable[[Any], int]:

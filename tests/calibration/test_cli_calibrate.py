@@ -28,9 +28,10 @@ def _calibrate(recording: Path, output: Path, **kw: object) -> int:
     return run_calibrate(ns)
 
 
-def _compensate(model: Path, recording: Path, output: Path, extrapolate: bool = False) -> int:
+def _compensate(model: Path, recording: Path, output: Path, extrapolate: bool = False,
+                **kw: object) -> int:
     return run_compensate(argparse.Namespace(model=str(model), recording=str(recording),
-                                             output=str(output), extrapolate=extrapolate))
+                                             output=str(output), extrapolate=extrapolate, **kw))
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +52,8 @@ def test_calibrate_writes_a_model_and_prints_table6(files: dict, capsys: pytest.
     assert rc == 0
     text = capsys.readouterr().out
     assert "Before calibration" in text and "method: per_step" in text
+    assert "fitted SFEM parameters per step" in text and "tilt angles (Table 5" in text
+    assert "local gravity cannot be identified in a static tumble" in text
     assert json.loads(out.read_text())["method"] == "per_step"
     assert (tmp_path / "r" / "parameters_vs_temperature.png").exists()
 
@@ -60,6 +63,8 @@ def test_calibrate_json_prints_only_json(files: dict, capsys: pytest.CaptureFixt
     assert _calibrate(files["campaign"], tmp_path / "m.json", json=True) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["mode"] == "reference" and len(doc["steps"]) == 11
+    assert len(doc["coefficients"]["steps"]) == 11 and doc["tilt_table"]["rows"]
+    assert doc["gravity"]["g_local"] == 1.0 and doc["gravity"]["identifiable"] is False
 
 
 def _bad_csv(d: Path) -> Path:
@@ -114,12 +119,31 @@ def test_compensate_out_of_range_exits_2_unless_extrapolate(
     hot.write_text("t_s,sensor_c,ax,ay,az,extra\n0,25.0,0.01,0.02,1.0,a\n"
                    "10,85.0,0.01,0.02,1.0,b\n")
     out = tmp_path / "out.csv"
-    assert _compensate(files["model"], hot, out) == 2
+    assert _compensate(files["model"], hot, out, raw_temperature=True) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "hot.csv:3" in err and "sensor_c" in err
     assert "--extrapolate" in err and not out.exists()
-    assert _compensate(files["model"], hot, out, extrapolate=True) == 0
+    # by default (the causal filter) the unconfirmed jump keeps its own reading
+    assert _compensate(files["model"], hot, out) == 2
+    assert "hot.csv:3" in capsys.readouterr().err and not out.exists()
+    assert _compensate(files["model"], hot, out, extrapolate=True, raw_temperature=True) == 0
     assert out.read_text().splitlines()[2].startswith("10,85.0,0.01,0.02,1.0,b,")
+
+
+def test_compensate_conditions_temperature_by_default_and_says_so(
+    files: dict, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out, raw_out = tmp_path / "d.csv", tmp_path / "r.csv"
+    assert _compensate(files["model"], files["campaign"], out) == 0
+    said = capsys.readouterr().out
+    assert "conditioned per step as calibrate did (11 step(s)" in said
+    assert _compensate(files["model"], files["campaign"], raw_out, raw_temperature=True) == 0
+    assert "not conditioned (--raw-temperature)" in capsys.readouterr().out
+    assert out.read_text() != raw_out.read_text()
+    both = tmp_path / "both.csv"
+    assert _compensate(files["model"], files["campaign"], both, raw_temperature=True,
+                       smooth_temperature_s=600.0) == 2
+    assert "alternatives" in capsys.readouterr().err and not both.exists()
 
 
 def test_compensate_bad_model_or_recording_exits_2(
@@ -150,10 +174,21 @@ def test_through_the_command_line(files: dict, tmp_path: Path) -> None:
         return subprocess.run([sys.executable, "-c", code, *argv], cwd=ROOT, env=env,
                               capture_output=True, text=True, timeout=120)
 
-    r = run("calibrate", str(files["campaign"]), "-o", str(model), "--json")
+    r = run("calibrate", str(files["campaign"]), "-o", str(model), "--json",
+            "--latitude-deg", "45", "--height-m", "0")
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["method"] == "joint"
+    doc = json.loads(r.stdout)
+    assert doc["method"] == "joint"
+    assert doc["gravity"]["m_per_s2"] == pytest.approx(9.8061977, abs=1e-6)
+    r = run("calibrate", str(files["campaign"]), "-o", str(tmp_path / "x.json"),
+            "--gravity-g", "9.81")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and not (tmp_path / "x.json").exists()
+    r = run("export", str(model), "--format", "json-flat", "-o", str(tmp_path / "flat.json"))
+    assert r.returncode == 0, r.stderr
+    r = run("export", str(files["campaign"]), "-o", str(tmp_path / "bad.h"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and not (tmp_path / "bad.h").exists()
     out = tmp_path / "out.csv"
     r = run("compensate", str(model), str(files["campaign"]), "-o", str(out))
     assert r.returncode == 0, r.stderr
+    assert "conditioned per step" in r.stdout
     assert out.read_text().splitlines()[0].endswith(",cx,cy,cz")

@@ -37,7 +37,11 @@ def test_document_has_the_documented_header_units_and_provenance(model_and_rec: 
     model, _ = model_and_rec
     doc = dump_model_dict(model)
     assert (doc["format"], doc["version"], doc["model_version"]) == (
-        "soakcal-model", 1, "sfem-cubic-1")
+        "soakcal-model", 2, "sfem-cubic-1")
+    comp = doc["temperature"]["compensation"]
+    assert comp["per_step"]["enabled"] is True
+    assert comp["otherwise"] == doc["temperature"]["streaming_filter"]
+    assert doc["temperature"]["streaming_filter"]["tau_s"] == 600.0
     assert doc["polynomial"]["physical_units"]["bx"] == ["g", "g/degC", "g/degC^2", "g/degC^3"]
     assert doc["provenance"]["rows"] == 264 and doc["provenance"]["mode"] == "reference"
     assert doc["extensions"] == []
@@ -74,7 +78,11 @@ def _broken(doc: dict, path: str, value: object) -> dict:
     ("path", "value", "field"),
     [
         ("format", "something-else", "format"),
-        ("version", 2, "version"),
+        ("version", 3, "version"),
+        ("temperature.compensation.otherwise.tau_s", -1.0,
+         "temperature.compensation.otherwise"),
+        ("temperature.compensation.per_step.enabled", "yes",
+         "temperature.compensation.per_step.enabled"),
         ("model_version", "sfem-quintic-9", "model_version"),
         ("mode", "magic", "mode"),
         ("temperature", KeyError, "temperature"),
@@ -94,6 +102,22 @@ def test_bad_documents_are_rejected_naming_the_field(
     with pytest.raises(ModelFileError) as info:
         load_model_dict(_broken(doc, path, value))
     assert f"'{field}'" in str(info.value)
+
+
+def test_version_1_documents_still_load_with_the_default_conditioning(
+    model_and_rec: tuple,
+) -> None:
+    from calibration.model_file import load_conditioning_dict
+
+    model, rec = model_and_rec
+    doc = dump_model_dict(model)
+    doc["version"] = 1
+    del doc["temperature"]["compensation"], doc["temperature"]["streaming_filter"]
+    back = load_model_dict(doc)
+    T = rec.temperature_c()
+    np.testing.assert_array_equal(back.compensate(rec.raw_g, T), model.compensate(rec.raw_g, T))
+    cond = load_conditioning_dict(doc)
+    assert cond.per_step and cond.tau_s == 600.0
 
 
 def test_bad_files_name_the_file(tmp_path: Path) -> None:

@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import thermal_sim
 
 from calibration import report
+from calibration.recording import Recording
 from calibration.thermal import fit_campaign
 
 
@@ -67,3 +69,71 @@ def test_rmse_vs_positions_reproduces_the_trend_of_fig8(tmp_path: Path) -> None:
     held = {r["positions"]: r["rmse_heldout_ug"] for r in rows}
     assert held[12] > held[324]  # fewer positions: worse on unseen orientations
     assert all(r["rmse_before_ug"] > 100 * r["rmse_heldout_ug"] for r in rows)
+
+
+def test_text_report_and_json_carry_the_coefficients_and_table5(fit_and_rec: tuple) -> None:
+    fit, rec = fit_and_rec
+    report.add_sections(fit, rec)
+    doc = json.loads(json.dumps(report.report_dict(fit), allow_nan=False))
+    coef = doc["coefficients"]
+    assert len(coef["steps"]) == 11 and set(coef["steps"][0]["stderr"]) == set(
+        ["bx", "by", "bz", "sx", "sy", "sz", "ayx", "azx", "azy", "mx", "my", "mz"])
+    # the physical cubic reproduces the model at a temperature
+    T = 17.0
+    sz = np.polyval(coef["polynomial"]["physical"]["sz"][::-1], T - coef["polynomial"]["centre_c"])
+    assert sz == pytest.approx(fit.model.params_at(T).scale[2], abs=1e-12)
+    assert all(s is not None and s > 0 for s in coef["polynomial"]["physical_stderr"]["bx"])
+    tilt = doc["tilt_table"]
+    assert tilt["rows"] and abs(tilt["temperature_c"] - 25.0) < 6.0
+    for r in tilt["rows"]:
+        assert r["err_cal_deg"] < 0.01 < r["err_raw_deg"]  # calibration fixes the tilt
+        assert r["seoq_pitch_pct"] == pytest.approx(
+            abs(r["raw_pitch_deg"] - r["cal_pitch_deg"]) / 30 * 100, abs=2e-3)
+    assert tilt["rms_err_cal_deg"] < tilt["rms_err_raw_deg"] / 50
+    text = report.format_table6(fit)
+    assert "fitted SFEM parameters per step" in text and "polynomial coefficients" in text
+    assert "tilt angles (Table 5, Eq. 10)" in text and "SEOQ" in text
+    assert "-0.000" not in text
+
+
+def test_no_negative_zero_in_labels() -> None:
+    assert report._f(-0.0004, ".3f") == "0.000" and report._f(-0.2, ".0f") == "0"
+    assert report._f(-0.0012, ".3f") == "-0.001" and report._f(-1.0, ".0f") == "-1"
+
+
+def test_step_colours_stay_visible_on_white() -> None:
+    def max_luma(cmap: object) -> float:
+        c = cmap(np.linspace(0, 1, 101))[:, :3]  # type: ignore[operator]
+        return float(np.max(0.2126 * c[:, 0] + 0.7152 * c[:, 1] + 0.0722 * c[:, 2]))
+
+    import matplotlib.pyplot as plt
+
+    assert max_luma(plt.get_cmap("coolwarm")) > 0.8  # the old one: near-white middle
+    assert max_luma(report.step_colormap()) < 0.75
+
+
+def test_no_temperature_no_parameters_figure_and_it_says_so(tmp_path: Path) -> None:
+    _, rec = thermal_sim.campaign(seed=22, setpoints=(25.0,))
+    cols = {k: v for k, v in rec.columns.items() if k not in ("sensor_c", "setpoint_c")}
+    cols["chamber_c"] = np.full(len(rec), np.nan)  # the column is there, every cell empty
+    fit = fit_campaign(Recording.from_columns(cols))
+    assert not fit.model.temperature_dependent
+    paths = report.write_figures(fit, rec, tmp_path / "f")
+    assert [p.name for p in paths] == ["norm_error.png"]
+    assert any("no parameters-vs-temperature figure" in n for n in fit.report["notes"])
+    assert "no parameters-vs-temperature figure" in report.format_table6(fit)
+    report.add_sections(fit, rec)  # references but no temperature: Table 5 still prints
+    assert "(temperature n/a)" in report.format_table6(fit)
+
+
+def test_figures_follow_the_umask(tmp_path: Path, fit_and_rec: tuple) -> None:
+    # (the model file and CSVs go through recording.atomic_write_text, whose umask
+    # handling is tested in test_recording_robustness.py)
+    import os
+
+    old = os.umask(0o022)
+    try:
+        paths = report.write_figures(fit_and_rec[0], fit_and_rec[1], tmp_path / "figs")
+    finally:
+        os.umask(old)
+    assert all(p.stat().st_mode & 0o777 == 0o644 for p in paths)

@@ -1,0 +1,96 @@
+"""Temperature conditioning at compensation time: per step, or the causal filter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.temperature_conditioning import (
+    causal_filter,
+    compensation_temperature,
+    segments_for_conditioning,
+)
+
+
+def test_causal_filter_averages_noise_on_a_plateau() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 5.0  # 5 s per row, 10 000 s
+    noisy = 25.0 + rng.normal(0, 0.1, t.size)
+    out = causal_filter(t, noisy, tau_s=600.0)
+    settled = t > 1200.0
+    # effective averaging ~ tau / 1.25 = 480 s = 96 rows: sd 0.1 / sqrt(96) ~ 0.010 °C
+    assert np.std(out[settled] - 25.0) < 0.02
+    assert abs(np.mean(out[settled]) - 25.0) < 0.005
+
+
+def test_causal_filter_follows_a_ramp_without_lag() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(3000) * 2.0
+    truth = 60.0 - t / 60.0  # cooling at 1 °C/min: a first-order average of 600 s lags 10 °C
+    out = causal_filter(t, truth + rng.normal(0, 0.1, t.size), tau_s=600.0)
+    late = t > 1800.0
+    assert abs(np.mean(out[late] - truth[late])) < 0.02
+    assert np.max(np.abs(out[late] - truth[late])) < 0.1
+
+
+def test_causal_filter_uses_no_future_rows() -> None:
+    rng = np.random.default_rng(2)
+    t = np.arange(500) * 10.0
+    y = 20.0 + rng.normal(0, 0.1, t.size)
+    a = causal_filter(t, y)
+    y2 = y.copy()
+    y2[300:] += 5.0
+    b = causal_filter(t, y2)
+    np.testing.assert_array_equal(a[:300], b[:300])
+    assert not np.allclose(a[300:], b[300:])
+
+
+def test_causal_filter_ignores_one_spike_and_restarts_on_a_jump() -> None:
+    t = np.arange(100) * 10.0
+    y = np.full(100, 20.0)
+    y[30] = 40.0  # one spike
+    y[60:] = 35.0  # a real jump to another soak temperature
+    out = causal_filter(t, y)
+    # the spike row keeps its own reading, but does not enter the filter
+    assert out[30] == 40.0 and abs(out[31] - 20.0) < 1e-9
+    assert out[60] == 35.0  # first row at the new temperature: its own reading
+    np.testing.assert_allclose(out[61:], 35.0, atol=1e-9)
+
+
+def test_segments_split_on_step_setpoint_and_temperature_jumps() -> None:
+    temp = np.r_[np.full(5, -35.0), np.full(5, -5.0), np.full(5, 25.0)]
+    step = np.zeros(15)  # a verification run writing one step index for every soak
+    seg = segments_for_conditioning(step, None, temp)
+    assert seg is not None and len(np.unique(seg)) == 3
+    assert segments_for_conditioning(None, None, temp) is None
+
+
+def test_compensation_temperature_per_step_when_there_are_steps() -> None:
+    rng = np.random.default_rng(3)
+    t = np.arange(120) * 30.0
+    die = np.repeat([-35.0, -5.0, 25.0, 55.0], 30)
+    noisy = die + rng.normal(0, 0.1, die.size)
+    sp = np.round(die)
+    per_step, how = compensation_temperature(t, noisy, None, sp)
+    assert "per step" in how
+    assert np.sqrt(np.mean((per_step - die) ** 2)) < 0.04  # ~0.1/sqrt(30) plus line slope
+    causal, how2 = compensation_temperature(t, noisy, None, None)
+    assert "causal filter" in how2 and "600 s" in how2
+    # a setpoint per row (a ramp) is no step structure: the causal filter is used
+    _, how3 = compensation_temperature(t, noisy, None, np.arange(120.0))
+    assert "causal filter" in how3
+
+
+def test_settled_step_gets_its_mean_and_a_creeping_step_its_line() -> None:
+    from calibration.temperature_conditioning import condition_temperature
+
+    rng = np.random.default_rng(4)
+    t = np.arange(48) * 15.0
+    steps = np.repeat([0, 1], 24)
+    settled = 25.0 + rng.normal(0, 0.1, 24)
+    creeping = 35.0 + 0.002 * (t[24:] - t[24]) + rng.normal(0, 0.1, 24)  # 0.7 °C over the step
+    cond = condition_temperature(t, np.r_[settled, creeping], steps)
+    assert np.ptp(cond.row_c[:24]) == 0.0  # a slope that is only noise is dropped
+    assert cond.row_c[:24][0] == pytest.approx(np.mean(settled))
+    slope = np.polyfit(t[24:], cond.row_c[24:], 1)[0]
+    assert slope == pytest.approx(0.002, rel=0.2)  # a real creep is kept
