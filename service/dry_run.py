@@ -88,17 +88,17 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
         if not lo_c <= setpoint_c <= hi_c:
             issues.append(PlanIssue(
                 ("setpoints_c", i),
-                f"setpoint {setpoint_c:g} °C is outside rig {name!r}'s chamber range "
+                f"setpoint {setpoint_c:g} °C is outside the chamber range of rig {name!r}, "
                 f"[{lo_c:g}, {hi_c:g}] °C", setpoint_c))
     if not lo_c <= spec.safe_c <= hi_c:
         issues.append(PlanIssue(
-            ("safe_c",), f"safe temperature {spec.safe_c:g} °C is outside rig {name!r}'s "
-            f"chamber range [{lo_c:g}, {hi_c:g}] °C", spec.safe_c))
+            ("safe_c",), f"safe temperature {spec.safe_c:g} °C is outside the chamber range "
+            f"of rig {name!r}, [{lo_c:g}, {hi_c:g}] °C", spec.safe_c))
     max_rate = chamber_max_rate_c_per_min(rig)
     if max_rate is not None and spec.ramp_c_per_min > max_rate:
         issues.append(PlanIssue(
-            ("ramp_c_per_min",), f"ramp {spec.ramp_c_per_min:g} °C/min is faster than rig "
-            f"{name!r}'s chamber can follow ({max_rate:g} °C/min)", spec.ramp_c_per_min))
+            ("ramp_c_per_min",), f"ramp {spec.ramp_c_per_min:g} °C/min is faster than the "
+            f"chamber of rig {name!r} can follow ({max_rate:g} °C/min)", spec.ramp_c_per_min))
     n_positions, why = schedule_verdict(spec.positions, RIG_FIT_MODE)
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
@@ -150,8 +150,8 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
     if not ident.ok:
         return len(refs), (
             f"position schedule {name!r} ({len(refs)} position(s)) cannot identify the "
-            f"12-parameter model in {mode} mode (the rig's): rank {ident.rank} of "
-            f"{ident.n_params}, undetermined {', '.join(ident.undetermined)}")
+            f"12-parameter model in {mode} mode (the mode of a rig with a turntable): "
+            f"rank {ident.rank} of {ident.n_params}, undetermined {', '.join(ident.undetermined)}")
     return len(refs), None
 
 
