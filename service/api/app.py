@@ -48,6 +48,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RequestValidationError, door.validation_error_handler)
     app.add_middleware(door.BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes,
                        authenticated=door.bearer_check(app))
+    app.add_middleware(door.AllowHeaderMiddleware, openapi=lambda: app.openapi())
     door.document_auth_responses(app)
     return app
 

@@ -11,6 +11,7 @@
   decodes the body before it runs the route's auth dependency; with valid JSON
   the dependency runs first anyway). Every 422 echoes at most
   ``ECHO_CHARS`` characters of any input, so a 50 MB field is not sent back.
+* :class:`AllowHeaderMiddleware` makes a 405's ``Allow`` list every method of the path.
 * :func:`document_auth_responses` adds 401 and 403 to every operation that
   declares a security requirement in ``/openapi.json``.
 """
@@ -18,6 +19,7 @@
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -86,6 +88,49 @@ class BodyLimitMiddleware:
         await _send_json(send, 413, {"detail": (
             f"request body over the limit of {self.max_body_bytes} bytes "
             "(SOAKCAL_MAX_BODY_BYTES)")})
+
+
+class AllowHeaderMiddleware:
+    """A 405's ``Allow`` lists every documented method of the path, not just one route's.
+
+    FastAPI registers one route per method; Starlette answers a wrong method with
+    the ``Allow`` of the first route whose path matched (``GET`` for a path that
+    also has ``POST``), which contradicts the OpenAPI document. The methods are
+    read from that document (``openapi()``), so the two cannot disagree.
+    """
+
+    def __init__(self, app: ASGIApp, openapi: Callable[[], dict[str, Any]]) -> None:
+        self.app = app
+        self.openapi = openapi
+        self._paths: list[tuple[re.Pattern[str], list[str]]] | None = None
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_with_allow(message: Message) -> None:
+            if message["type"] == "http.response.start" and message["status"] == 405:
+                allow = self.methods(scope["path"])
+                if allow:
+                    headers = [(k, v) for k, v in message.get("headers", [])
+                               if k.lower() != b"allow"]
+                    headers.append((b"allow", ", ".join(allow).encode()))
+                    message = {**message, "headers": headers}
+            await send(message)
+
+        await self.app(scope, receive, send_with_allow)
+
+    def methods(self, path: str) -> list[str]:
+        if self._paths is None:
+            self._paths = [
+                (re.compile("^" + re.sub(r"\\{[^}]+\\}", "[^/]+", re.escape(template)) + "$"),
+                 sorted(m.upper() for m in item if m.upper() in HTTP_METHODS))
+                for template, item in self.openapi().get("paths", {}).items()]
+        return next((methods for pattern, methods in self._paths if pattern.match(path)), [])
+
+
+HTTP_METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
 
 
 UNAUTHORIZED_BODY = {"detail": "missing or unknown bearer token (Authorization: Bearer <token>)"}

@@ -159,3 +159,9 @@ def test_every_protected_operation_documents_401_and_403(client: TestClient) -> 
     for path, method, op in secured:
         assert {"401", "403"} <= set(op["responses"]), (method, path)
     assert "security" not in paths["/api/v1/health"]["get"]
+
+
+def test_a_wrong_method_lists_every_method_of_the_path(client: TestClient) -> None:
+    response = client.request("OPTIONS", "/api/v1/rigs")
+    assert response.status_code == 405 and response.headers["allow"] == "GET, POST"
+    assert client.put(f"{CAMPAIGNS}/3/pause").headers["allow"] == "POST"

@@ -3,7 +3,8 @@
 Bounded so the suite stays fast: examples, coverage and fuzzing phases with at most
 ``MAX_EXAMPLES`` generated cases per operation, then a short stateful run over the links
 Schemathesis infers (create a campaign, then read, pause, abort it). An admin token is
-sent on every case; the auth paths themselves are tested in test_svc_door.py.
+sent on every case (the coverage phase also drops it to check 401s); the auth paths
+themselves are tested in test_svc_door.py.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from hypothesis import HealthCheck, settings  # noqa: E402
 from schemathesis.checks import not_a_server_error  # noqa: E402
 from schemathesis.specs.openapi.checks import (  # noqa: E402
     content_type_conformance,
+    positive_data_acceptance,
     response_headers_conformance,
     response_schema_conformance,
     status_code_conformance,
@@ -31,8 +33,14 @@ from service.campaigns import seed_sim_rig  # noqa: E402
 from service.config import Settings  # noqa: E402
 from service.db.session import session_scope, upgrade_database  # noqa: E402
 
-MAX_EXAMPLES = 15
-# What "0 server errors, 0 responses outside the schema" means, check by check.
+MAX_EXAMPLES = 10
+# Every built-in check runs (no 5xx, status codes, content types, bodies and headers as
+# documented, Allow on 405, negative data rejected, auth not ignored, …) except one:
+# positive_data_acceptance expects every schema-valid body to be accepted, and the dry run
+# refuses schema-valid campaigns by design ("positions": "sphere1", a setpoint outside the
+# rig's chamber, an unknown cron or time zone).
+EXCLUDED = [positive_data_acceptance]
+# The stateful phase validates with the same set: the base checks plus these.
 CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance,
           response_schema_conformance, response_headers_conformance]
 
@@ -68,7 +76,7 @@ def admin_headers() -> Iterator[dict[str, str]]:
 @schema.parametrize()
 @settings(deadline=None, suppress_health_check=list(HealthCheck))
 def test_the_api_honours_its_schema(case, admin_headers: dict[str, str]) -> None:  # type: ignore[no-untyped-def]
-    case.call_and_validate(headers=admin_headers, checks=CHECKS)
+    case.call_and_validate(headers=admin_headers, excluded_checks=EXCLUDED)
 
 
 def test_stateful_sequences_over_the_inferred_links(admin_headers: dict[str, str]) -> None:
@@ -82,5 +90,5 @@ def test_stateful_sequences_over_the_inferred_links(admin_headers: dict[str, str
         def validate_response(self, response, case, additional_checks=None, **kwargs):  # type: ignore[no-untyped-def]
             case.validate_response(response, checks=CHECKS)
 
-    Machine.run(settings=settings(max_examples=10, stateful_step_count=6, deadline=None,
+    Machine.run(settings=settings(max_examples=8, stateful_step_count=6, deadline=None,
                                   suppress_health_check=list(HealthCheck)))
