@@ -15,7 +15,6 @@ Phase = Literal["ramp", "soak", "positions", "fitting"]
 Role = Literal["viewer", "operator", "admin"]
 
 
-
 class RigOut(BaseModel):
     name: str
     chamber: dict[str, Any]
