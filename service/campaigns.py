@@ -19,6 +19,8 @@ from sqlalchemy.orm import Session
 from service.api.schemas import CampaignCreate, CampaignOut, Progress
 from service.db.models import Campaign, Rig, RigLease, Sensor
 from service.db.timestamps import as_utc, utcnow
+from service.dry_run import PlanCheck, check_campaign, predicted_duration_s
+from service.engine.spec import CampaignSpec
 from service.engine.states import PHASES, TERMINAL, check_action
 
 SIM_RIG_NAME = "sim"
@@ -96,43 +98,21 @@ def upsert_rigs(session: Session, rigs: list[dict[str, Any]]) -> list[str]:
     return changed
 
 
+def plan_check(session: Session, spec: CampaignCreate) -> PlanCheck:
+    """The dry run of ``spec`` on its rig (``service.dry_run``): issues and predicted duration."""
+    rig = session.scalar(select(Rig).where(Rig.name == spec.rig))
+    rig_cfg = None if rig is None else {
+        "name": rig.name, "chamber": rig.chamber, "turntable": rig.turntable,
+        "sensors": rig.sensors}
+    return check_campaign(spec, rig_cfg, spec.rig)
+
+
 def spec_errors(
     session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
 ) -> list[dict[str, Any]]:
-    """Checks that need the database, in FastAPI's 422 ``detail`` format (empty when fine)."""
-    rig = session.scalar(select(Rig).where(Rig.name == spec.rig))
-    if rig is None:
-        return [field_error(loc + ("rig",), f"unknown rig {spec.rig!r}", spec.rig)]
-    errors: list[dict[str, Any]] = []
-    lo_c, hi_c = chamber_range_c(rig)
-    for i, setpoint_c in enumerate(spec.setpoints_c):
-        if not lo_c <= setpoint_c <= hi_c:
-            errors.append(
-                field_error(
-                    loc + ("setpoints_c", i),
-                    f"setpoint {setpoint_c} °C is outside rig {rig.name!r}'s chamber range "
-                    f"[{lo_c}, {hi_c}] °C",
-                    setpoint_c,
-                )
-            )
-    if positions_count(spec.positions) is None:
-        errors.append(
-            field_error(
-                loc + ("positions",),
-                f"unknown position schedule {spec.positions!r}; "
-                "expected table1, six, cube14, sphere<N> or table1+cube14",
-                spec.positions,
-            )
-        )
-    return errors
-
-
-def chamber_range_c(rig: Rig) -> tuple[float, float]:
-    """The rig's chamber range (``chamber.range_c``); unbounded when not configured."""
-    bounds = (rig.chamber or {}).get("range_c")
-    if not bounds or len(bounds) != 2:
-        return (float("-inf"), float("inf"))
-    return (float(bounds[0]), float(bounds[1]))
+    """The dry run's refusals in FastAPI's 422 ``detail`` format (empty when fine)."""
+    return [field_error(loc + issue.loc, issue.msg, issue.value)
+            for issue in plan_check(session, spec).issues]
 
 
 @functools.lru_cache(maxsize=64)
@@ -150,12 +130,11 @@ def create_campaign(
     session: Session, spec: CampaignCreate, schedule_id: int | None = None
 ) -> Campaign:
     """A new ``queued`` campaign (caller checked ``spec_errors``); flushed, not committed."""
-    if session.scalar(select(Sensor.id).where(Sensor.serial == spec.sensor)) is None:
-        session.add(Sensor(serial=spec.sensor))
+    ensure_sensor(session, spec.sensor)
     campaign = Campaign(
         rig=spec.rig,
         sensor=spec.sensor,
-        spec=spec.model_dump(),
+        spec=spec.model_dump(exclude_none=True),
         state="queued",
         schedule_id=schedule_id,
         progress={},
@@ -164,6 +143,25 @@ def create_campaign(
     session.add(campaign)
     session.flush()
     return campaign
+
+
+def ensure_sensor(session: Session, serial: str) -> None:
+    """Get-or-create the sensor row, safe when concurrent first requests race for a serial.
+
+    ``INSERT ... ON CONFLICT (serial) DO NOTHING`` on both PostgreSQL and SQLite: the
+    loser of the race inserts nothing instead of failing on the unique constraint.
+    """
+    dialect = session.get_bind().dialect.name
+    if dialect == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert
+    elif dialect == "sqlite":
+        from sqlalchemy.dialects.sqlite import insert
+    else:  # another backend: the plain check (not race-safe)
+        if session.scalar(select(Sensor.id).where(Sensor.serial == serial)) is None:
+            session.add(Sensor(serial=serial))
+        return
+    session.execute(insert(Sensor).values(serial=serial, model="ADXL355", created_at=utcnow())
+                    .on_conflict_do_nothing(index_elements=["serial"]))
 
 
 def apply_action(session: Session, campaign_id: int, action: str) -> Campaign:
@@ -235,7 +233,21 @@ def campaign_out(campaign: Campaign) -> CampaignOut:
         suspended_reason=campaign.suspended_reason,
         spec=campaign.spec or {},
         schedule_id=campaign.schedule_id,
+        predicted_duration_s=stored_prediction_s(campaign.spec or {}),
     )
+
+
+def stored_prediction_s(stored: dict[str, Any]) -> float | None:
+    """The dry run's duration estimate for a stored spec (None if it is not valid any more)."""
+    from pydantic import ValidationError
+
+    known = {k: v for k, v in stored.items() if k in CampaignSpec.model_fields}
+    try:
+        spec = CampaignSpec.model_validate(known)
+    except ValidationError:
+        return None
+    n_positions = positions_count(spec.positions)
+    return None if n_positions is None else predicted_duration_s(spec, n_positions)
 
 
 def progress_of(campaign: Campaign) -> Progress:
@@ -276,4 +288,7 @@ def _first(*values: Any) -> Any:
 
 
 def field_error(loc: tuple[str | int, ...], msg: str, value: Any) -> dict[str, Any]:
-    return {"type": "value_error", "loc": list(loc), "msg": msg, "input": value}
+    """One 422 ``detail`` entry; the input echoed at most as a short prefix."""
+    from service.api.door import short
+
+    return {"type": "value_error", "loc": list(loc), "msg": msg, "input": short(value)}

@@ -190,12 +190,18 @@ def _run_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from service.api.app import create_app
-    from service.config import Settings
-    from service.db.session import upgrade_database
+    from service.config import ConfigError, Settings
+    from service.db.session import DatabaseUnavailable, upgrade_database
 
-    settings = Settings(sim_speed=args.sim_speed, migrate=False)
-    print(f"soakcal: database {_redacted(settings.database_url)}", file=sys.stderr)
-    upgrade_database(settings.database_url)
+    url = _database_or_fail("serve")
+    if url is None:
+        return EXIT_BAD_INPUT
+    try:
+        settings = Settings(database_url=url, sim_speed=args.sim_speed, migrate=False)
+        upgrade_database(settings.database_url)
+    except (ConfigError, DatabaseUnavailable) as exc:
+        _fail(f"soakcal serve: {exc}")
+        return EXIT_BAD_INPUT
     uvicorn.run(create_app(settings), host=args.host, port=args.port)
     return EXIT_OK
 
@@ -212,11 +218,21 @@ def _add_token(sub: Any) -> None:
 
 def _run_token_create(args: argparse.Namespace) -> int:
     from service.api.auth import create_token
-    from service.config import resolve_database_url
-    from service.db.session import make_session_factory, session_scope, upgrade_database
+    from service.db.session import (
+        DatabaseUnavailable,
+        make_session_factory,
+        session_scope,
+        upgrade_database,
+    )
 
-    url = resolve_database_url()
-    upgrade_database(url)  # so a token can be made before the first `serve`
+    url = _database_or_fail("token create")
+    if url is None:
+        return EXIT_BAD_INPUT
+    try:
+        upgrade_database(url)  # so a token can be made before the first `serve`
+    except DatabaseUnavailable as exc:
+        _fail(f"soakcal token create: {exc}")
+        return EXIT_BAD_INPUT
     factory = make_session_factory(url)
     try:
         with session_scope(factory) as session:
@@ -227,6 +243,20 @@ def _run_token_create(args: argparse.Namespace) -> int:
     print(f"created {args.role} token{label} in {_redacted(url)}; it is shown only once:")
     print(token)
     return EXIT_OK
+
+
+def _database_or_fail(command: str) -> str | None:
+    """The database every subcommand uses (service.config), announced on stderr; None if bad."""
+    from service.config import ConfigError, check_database_url, database_choice
+
+    url, why = database_choice()
+    try:
+        check_database_url(url)
+    except ConfigError as exc:
+        _fail(f"soakcal {command}: {exc}")
+        return None
+    print(f"soakcal {command}: database {_redacted(url)} ({why})", file=sys.stderr)
+    return url
 
 
 def _redacted(url: str) -> str:

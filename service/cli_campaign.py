@@ -60,6 +60,10 @@ def add_parser(sub: Any) -> None:
     listing.add_argument("--json", action="store_true", help="print JSON")
     listing.set_defaults(handler=_list)
 
+    from service.cli_plan import add_plan_parser  # the dry run needs no running service
+
+    add_plan_parser(actions)
+
 
 def parse_setpoints(text: str) -> list[float]:
     try:

@@ -9,7 +9,10 @@ the schema is dropped afterwards. The URL returned is empty of tables: call
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 import uuid
 import warnings
 from collections.abc import Iterator
@@ -22,6 +25,13 @@ warnings.filterwarnings("ignore", message=".*httpx.*starlette.testclient.*")
 warnings.filterwarnings("ignore", message=".*starlette.testclient.*httpx.*")
 
 POSTGRES_ENV = "SOAKCAL_TEST_DATABASE_URL"
+
+# The suite never touches the real configuration home or a developer's database: every
+# process it starts (and every subcommand it runs in-process) sees a throw-away home.
+os.environ["SOAKCAL_HOME"] = tempfile.mkdtemp(prefix="soakcal-test-home-")
+atexit.register(shutil.rmtree, os.environ["SOAKCAL_HOME"], True)
+for _name in ("SOAKCAL_DATABASE_URL", "SOAKCAL_DATA_DIR"):
+    os.environ.pop(_name, None)
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])

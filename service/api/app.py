@@ -8,11 +8,12 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from service import web
-from service.api import calibrations, campaigns, health, rigs, schedules, tokens
+from service.api import calibrations, campaigns, door, health, rigs, schedules, tokens
 from service.campaigns import load_rigs_file, seed_sim_rig, upsert_rigs
 from service.config import Settings, service_version
 from service.db.session import make_engine, make_session_factory, session_scope, upgrade_database
@@ -48,6 +49,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     web.mount_static(app)
     web.add_cors(app)
     app.add_exception_handler(IllegalTransition, _conflict)
+    # The door (service/api/door.py): body limit before parsing, 401 before 422, short 422s,
+    # 401/403/413 in the OpenAPI document.
+    app.add_exception_handler(RequestValidationError, door.validation_error_handler)
+    app.add_middleware(door.BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes,
+                       authenticated=door.bearer_check(app))
+    app.add_middleware(door.AllowHeaderMiddleware, openapi=lambda: app.openapi())
+    door.document_auth_responses(app)
     return app
 
 

@@ -11,7 +11,7 @@ from starlette.concurrency import run_in_threadpool
 
 from calibration.errors import CalibrationError, OutOfRange
 from service.api import auth, coefficients
-from service.api.deps import SessionDep
+from service.api.deps import DbIdPath, SerialPath, SessionDep
 from service.api.schemas import CalibrationSummary, CoefficientsOut
 from service.db.models import Calibration
 from service.db.timestamps import as_utc
@@ -22,7 +22,7 @@ _NEWEST_FIRST = (Calibration.created_at.desc(), Calibration.id.desc())
 
 
 @router.get("/sensors/{serial}/calibrations", response_model=list[CalibrationSummary])
-def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
+def sensor_calibrations(serial: SerialPath, session: SessionDep) -> list[Any]:
     """Every calibration of the sensor, newest first (empty for an unknown serial)."""
     rows = session.scalars(
         select(Calibration).where(Calibration.sensor == serial).order_by(*_NEWEST_FIRST)
@@ -35,7 +35,7 @@ def sensor_calibrations(serial: str, session: SessionDep) -> list[Any]:
     response_model=dict[str, Any],
     responses={404: {"description": "no such calibration"}},
 )
-def calibration_document(calibration_id: int, session: SessionDep) -> dict[str, Any]:
+def calibration_document(calibration_id: DbIdPath, session: SessionDep) -> dict[str, Any]:
     """The full model document, as ``soakcal calibrate -o`` writes it."""
     row = session.get(Calibration, calibration_id)
     if row is None:
@@ -52,7 +52,7 @@ def calibration_document(calibration_id: int, session: SessionDep) -> dict[str, 
     },
 )
 async def sensor_coefficients(
-    serial: str,
+    serial: SerialPath,
     request: Request,
     temperature_c: Annotated[float, Query(description="°C", allow_inf_nan=False)],
     extrapolate: bool = False,

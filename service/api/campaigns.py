@@ -14,7 +14,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from service.api import auth
-from service.api.deps import SessionDep
+from service.api.deps import DbIdPath, SessionDep
 from service.api.recording_csv import render_recording_csv
 from service.api.schemas import CampaignCreate, CampaignOut, CampaignState
 from service.campaigns import (
@@ -22,7 +22,8 @@ from service.campaigns import (
     apply_action,
     campaign_out,
     create_campaign,
-    spec_errors,
+    field_error,
+    plan_check,
 )
 from service.db.models import Campaign, Measurement
 from service.engine.states import TERMINAL
@@ -35,10 +36,17 @@ _CONFLICT = {409: {"description": "the action is illegal in the campaign's state
 
 @router.post("", response_model=CampaignOut, status_code=201, dependencies=[Depends(auth.operator)])
 def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
-    """Queue a campaign; it waits in ``queued`` while its rig is busy."""
-    errors = spec_errors(session, body)
-    if errors:
-        raise HTTPException(status_code=422, detail=errors)
+    """Queue a campaign; it waits in ``queued`` while its rig is busy.
+
+    The dry run (``service.dry_run``) refuses with 422 naming the field a campaign
+    that could never produce a calibration (positions that cannot identify the model
+    in the rig's mode, a setpoint outside the chamber's range, a ramp the chamber
+    cannot follow); the 201 carries ``predicted_duration_s``.
+    """
+    check = plan_check(session, body)
+    if not check.ok:
+        raise HTTPException(status_code=422, detail=[
+            field_error(("body", *issue.loc), issue.msg, issue.value) for issue in check.issues])
     campaign = create_campaign(session, body)
     session.commit()
     return campaign_out(campaign)
@@ -61,12 +69,12 @@ def list_campaigns(
     responses=_NOT_FOUND,
     dependencies=[Depends(auth.viewer)],
 )
-def get_campaign(campaign_id: int, session: SessionDep) -> CampaignOut:
+def get_campaign(campaign_id: DbIdPath, session: SessionDep) -> CampaignOut:
     return campaign_out(_get_or_404(session, campaign_id))
 
 
 def _control(action: str):  # type: ignore[no-untyped-def]
-    def handler(campaign_id: int, session: SessionDep) -> CampaignOut:
+    def handler(campaign_id: DbIdPath, session: SessionDep) -> CampaignOut:
         try:
             return campaign_out(apply_action(session, campaign_id, action))
         except CampaignNotFound as exc:
@@ -98,7 +106,7 @@ for _action in ("pause", "resume", "abort"):
     responses={**_NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "recording v1"}},
     dependencies=[Depends(auth.viewer)],
 )
-def recording_csv(campaign_id: int, session: SessionDep) -> PlainTextResponse:
+def recording_csv(campaign_id: DbIdPath, session: SessionDep) -> PlainTextResponse:
     """The measurements so far, in recording format v1, time order."""
     _get_or_404(session, campaign_id)
     rows = session.scalars(
@@ -126,7 +134,7 @@ def recording_csv(campaign_id: int, session: SessionDep) -> PlainTextResponse:
     },
     dependencies=[Depends(auth.viewer)],
 )
-async def campaign_events(campaign_id: int, request: Request) -> StreamingResponse:
+async def campaign_events(campaign_id: DbIdPath, request: Request) -> StreamingResponse:
     """Server-sent progress events, read from the database (the runner may be elsewhere)."""
     factory = request.app.state.session_factory
     first = await run_in_threadpool(_load_view, factory, campaign_id)

@@ -18,7 +18,7 @@ import contextlib
 from collections.abc import AsyncIterator
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Path, Request
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
@@ -51,3 +51,13 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
 
 
 SessionDep = Annotated[Session, Depends(get_session)]
+
+
+# Database ids are 32-bit signed on PostgreSQL (and 64-bit on SQLite): bounded here, an
+# out-of-range id is a 422 naming the path parameter, never a driver overflow (500).
+MAX_DB_ID = 2**31 - 1
+DbIdPath = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="a database id, 1..2^31-1")]
+# Sensor serials travel in URL paths: the creation pattern (service/api/schemas.py) again.
+SERIAL_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,63}$"
+SerialPath = Annotated[str, Path(pattern=SERIAL_PATTERN, max_length=64,
+                                 description="sensor serial: letters, digits and _ . : -")]

@@ -9,9 +9,9 @@ from fastapi import APIRouter, Depends, HTTPException, Response
 from sqlalchemy import select
 
 from service.api import auth
-from service.api.deps import SessionDep
+from service.api.deps import DbIdPath, SessionDep
 from service.api.schemas import ScheduleCreate, ScheduleOut
-from service.campaigns import field_error, spec_errors
+from service.campaigns import field_error, spec_errors, stored_prediction_s
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
 from service.scheduler import cron_is_valid, next_cron_run, timezone_is_valid
@@ -22,6 +22,14 @@ router = APIRouter(prefix="/api/v1/schedules", tags=["schedules"])
 @router.post("", response_model=ScheduleOut, status_code=201, dependencies=[Depends(auth.operator)])
 def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
     errors: list[dict[str, Any]] = spec_errors(session, body.campaign, loc=("body", "campaign"))
+    now = utcnow()
+    if body.at is not None and as_utc(body.at) <= now:  # type: ignore[operator]
+        errors.append(field_error(
+            ("body", "at"),
+            f"'at' {body.at.isoformat()} is in the past (now {now.isoformat(timespec='seconds')}"
+            "); a one-shot schedule must fire in the future",
+            body.at.isoformat(),
+        ))
     if body.cron is not None and not cron_is_valid(body.cron):
         errors.append(field_error(
             ("body", "cron"),
@@ -38,11 +46,11 @@ def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
         raise HTTPException(status_code=422, detail=errors)
     at = as_utc(body.at)
     schedule = Schedule(
-        campaign=body.campaign.model_dump(),
+        campaign=body.campaign.model_dump(exclude_none=True),
         at=at,
         cron=body.cron,
         timezone=body.timezone,
-        next_run_at=at if at is not None else next_cron_run(body.cron or "", utcnow(),
+        next_run_at=at if at is not None else next_cron_run(body.cron or "", now,
                                                             body.timezone),
     )
     session.add(schedule)
@@ -62,7 +70,7 @@ def list_schedules(session: SessionDep) -> list[ScheduleOut]:
     responses={404: {"description": "no such schedule"}},
     dependencies=[Depends(auth.operator)],
 )
-def delete_schedule(schedule_id: int, session: SessionDep) -> Response:
+def delete_schedule(schedule_id: DbIdPath, session: SessionDep) -> Response:
     """Remove a schedule; campaigns it already created are not touched."""
     schedule = session.get(Schedule, schedule_id)
     if schedule is None:
@@ -83,4 +91,5 @@ def _out(s: Schedule) -> ScheduleOut:
         last_run_at=as_utc(s.last_run_at),
         last_campaign_id=s.last_campaign_id,
         created_at=as_utc(s.created_at) or dt.datetime.now(dt.UTC),
+        predicted_duration_s=stored_prediction_s(s.campaign or {}),
     )

@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from pydantic_core import PydanticCustomError
 
-from service.engine.spec import TUNING_KEYS
+from service.api.deps import SERIAL_PATTERN
+from service.engine.spec import TUNING_KEYS, CampaignSpec
 
 CampaignState = Literal["queued", "running", "paused", "completed", "failed", "aborted"]
 Phase = Literal["ramp", "soak", "positions", "fitting"]
 Role = Literal["viewer", "operator", "admin"]
-
-DEFAULT_SETPOINTS_C: list[float] = [float(t) for t in range(-40, 61, 10)]
 
 
 class RigOut(BaseModel):
@@ -35,40 +33,26 @@ class RigCreate(BaseModel):
     sensors: list[Any] = Field(default_factory=list)
 
 
-# Optional keys the engine reads to tune a run (service/engine/spec.py); others are typos.
+# Sensor serials travel in URL paths (/api/v1/sensors/{serial}/...): no "/", no spaces.
+Serial = Annotated[str, Field(
+    min_length=1, max_length=64, pattern=SERIAL_PATTERN, examples=["SN-0001"],
+    description="sensor serial: letters, digits and _ . : - (first a letter or digit), "
+    "at most 64",
+)]
+# Optional keys the engine reads to tune a run (service/engine/spec.py).
 ENGINE_TUNING_KEYS = TUNING_KEYS
 
 
-class CampaignCreate(BaseModel):
-    """A campaign request; everything but ``rig`` and ``sensor`` has the lab's default.
+class CampaignCreate(CampaignSpec):
+    """A campaign request: the engine's :class:`CampaignSpec` plus where and what to calibrate.
 
-    Engine tuning keys (``ENGINE_TUNING_KEYS``, e.g. ``ramp_c_per_min``) pass through
-    to the stored spec; any other extra key is rejected (422 naming it).
+    Everything but ``rig`` and ``sensor`` has the lab's default; every key is typed
+    and bounded, and an unknown key is refused (422 naming it).
     """
 
-    model_config = ConfigDict(extra="allow")
+    model_config = ConfigDict(extra="forbid")
     rig: str = Field(min_length=1, max_length=64, examples=["sim"])
-    sensor: str = Field(min_length=1, max_length=64, examples=["SN-0001"])
-    setpoints_c: list[float] = Field(
-        default_factory=lambda: list(DEFAULT_SETPOINTS_C), min_length=1, max_length=200
-    )
-    soak_min: float = Field(default=60.0, gt=0, le=24 * 60)
-    positions: str = Field(default="table1", description="position schedule name")
-    samples_per_position: int = Field(default=200, ge=1, le=1_000_000)
-
-    @model_validator(mode="before")
-    @classmethod
-    def _only_known_extras(cls, data: Any) -> Any:
-        if isinstance(data, dict):
-            unknown = set(data) - set(cls.model_fields) - ENGINE_TUNING_KEYS
-            if unknown:
-                raise PydanticCustomError(
-                    "extra_forbidden",
-                    "unknown field(s) {fields}; contract fields: rig, sensor, setpoints_c, "
-                    "soak_min, positions, samples_per_position (plus engine tuning keys)",
-                    {"fields": ", ".join(sorted(unknown))},
-                )
-        return data
+    sensor: Serial
 
 
 class Progress(BaseModel):
@@ -100,6 +84,11 @@ class CampaignOut(BaseModel):
     suspended_reason: str | None
     spec: dict[str, Any]
     schedule_id: int | None
+    predicted_duration_s: float | None = Field(
+        default=None,
+        description="the dry run's estimate of the whole campaign in rig time, s "
+        "(ramps, soaks, moves, settles, acquisitions; a sped-up sim rig: divide by its speed)",
+    )
 
 
 class CalibrationSummary(BaseModel):
@@ -122,18 +111,49 @@ class CoefficientsOut(BaseModel):
     extrapolated: bool
 
 
+def _one_trigger_schema(schema: dict[str, Any]) -> None:
+    """OpenAPI: exactly one of ``at`` / ``cron`` (each a non-null value when given)."""
+    props = schema.get("properties", {})
+    props["at"] = {"type": "string", "format": "date-time", "title": "At",
+                   "description": "ISO-8601, in the future; naive means UTC"}
+    props["cron"] = {"type": "string", "title": "Cron", "minLength": 1, "maxLength": 128,
+                     "examples": ["0 20 * * 1-5"],
+                     "description": "five fields, read in `timezone` (default UTC)"}
+    props["timezone"] = {"type": "string", "title": "Timezone", "maxLength": 64,
+                         "examples": ["Europe/Berlin"],
+                         "description": "IANA time zone of the lab's wall clock for `cron`; "
+                         "default UTC"}
+    schema["oneOf"] = [
+        {"required": ["at"],
+         "not": {"anyOf": [{"required": ["cron"]}, {"required": ["timezone"]}]}},
+        {"required": ["cron"], "not": {"required": ["at"]}},
+    ]
+
+
 class ScheduleCreate(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """A one-shot (``at``) or repeating (``cron``) campaign: exactly one of the two."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_one_trigger_schema)
     campaign: CampaignCreate
     at: dt.datetime | None = Field(default=None, description="ISO-8601; naive means UTC")
-    cron: str | None = Field(
-        default=None, examples=["0 20 * * 1-5"], description="read in `timezone` (default UTC)"
-    )
+    cron: str | None = Field(default=None, min_length=1, max_length=128,
+                             description="read in `timezone` (default UTC)")
     timezone: str | None = Field(
         default=None,
+        max_length=64,
         examples=["Europe/Berlin"],
         description="IANA time zone of the lab's wall clock for `cron`; default UTC",
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_explicit_nulls(cls, data: Any) -> Any:
+        # The schema says "a value when given": null is not a way to leave a trigger out.
+        if isinstance(data, dict):
+            for key in ("at", "cron", "timezone"):
+                if key in data and data[key] is None:
+                    raise ValueError(f"'{key}' is null; give a value or leave the key out")
+        return data
 
     @model_validator(mode="after")
     def _exactly_one_trigger(self) -> ScheduleCreate:
@@ -154,6 +174,9 @@ class ScheduleOut(BaseModel):
     last_run_at: dt.datetime | None
     last_campaign_id: int | None
     created_at: dt.datetime
+    predicted_duration_s: float | None = Field(
+        default=None, description="the dry run's estimate of each campaign in rig time, s"
+    )
 
 
 class HealthOut(BaseModel):

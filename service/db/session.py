@@ -96,6 +96,8 @@ def upgrade_database(url: str | None = None, revision: str = "head") -> None:
     as the service; concurrent starts are safe on PostgreSQL (transactional DDL)
     and serialised by the file lock on SQLite.
     """
+    from sqlalchemy.exc import InterfaceError, OperationalError
+
     from alembic import command
 
     engine = make_engine(url)
@@ -104,5 +106,18 @@ def upgrade_database(url: str | None = None, revision: str = "head") -> None:
             cfg = alembic_config()
             cfg.attributes["connection"] = connection
             command.upgrade(cfg, revision)
+    except (OperationalError, InterfaceError) as exc:
+        raise DatabaseUnavailable(engine.url, exc) from exc
     finally:
         engine.dispose()
+
+
+class DatabaseUnavailable(RuntimeError):
+    """The database cannot be opened: one line with the URL (no password) and the reason."""
+
+    def __init__(self, url: object, exc: BaseException) -> None:
+        from sqlalchemy import URL
+
+        shown = url.render_as_string(hide_password=True) if isinstance(url, URL) else str(url)
+        reason = str(getattr(exc, "orig", None) or exc).strip().splitlines() or ["unknown"]
+        super().__init__(f"cannot open the database {shown}: {reason[0][:200]}")

@@ -1,17 +1,27 @@
-"""The campaign spec (the validated POST body) as the engine reads it, with defaults.
+"""The campaign spec: one pydantic model that the API validates and the engine reads.
 
-The API validates the contract fields (rig, sensor, setpoints_c, soak_min,
-positions, samples_per_position); the engine tolerates extra keys that tune
-its behaviour (stability policy, tolerances, fault limits). Unknown keys are
-ignored so the API may add fields freely.
+:class:`CampaignSpec` is the whole spec (the POST body of ``/api/v1/campaigns``
+less ``rig``/``sensor``, which :class:`service.api.schemas.CampaignCreate`
+adds). Every key the engine reads is a typed, bounded field here, so a value a
+rig's devices would refuse (``samples_per_position`` 200000 against the
+bridge's 1..100000, ``range_g`` 3 against the ADXL355's ±2/4/8 g) is a 422 at
+the door instead of a failure at 2 a.m. Numbers are strict: a JSON boolean is
+not a number (``[false, true]`` is not ``[0, 1]``) and an integer field takes
+no fractions. :class:`RunSpec` is a frozen, derived *view* of a validated spec
+(seconds instead of minutes, the stability and quality configs assembled), and
+:func:`parse_spec` builds it from a stored spec through the same model.
+
+The defaults are the seed paper's protocol (section 3: −40…60 °C in 10 °C steps,
+~1 h soak per step, the 24 positions of Table 1, 200 samples per position).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
@@ -24,26 +34,121 @@ from service.engine.stability import (
     temperature_budget_c,
 )
 
-# RunSpec fields a campaign may set directly (typed like their defaults).
-RUN_TUNING_KEYS = (
-    "ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c", "range_g",
-    "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
-    "move_timeout_s",
-)
-# Every optional key parse_spec reads besides the API contract's fields: the API lets
-# exactly these through and rejects other extras as typos (service/api/schemas.py).
-TUNING_KEYS = frozenset({
-    "stability", "min_soak_min", "max_soak_min", "tol_c", "dwell_min", "die_tol_c",
-    "expected_sd_g", "max_span_c", "temp_noise_c", "on_max_soak", "temp_budget_c",
-    "tempco_ug_per_c", "drift_budget", "gradient_lag_s", "step_tol_c", "edge_tol_c",
-    *RUN_TUNING_KEYS,
-})
-
 DEFAULT_SETPOINTS_C = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
+
+# The sensor bridge's ACQ accepts 1..100000 samples ("ERR 3 n must be 1..100000").
+BRIDGE_MAX_SAMPLES = 100_000
+# ADXL355 measurement ranges (datasheet, RANGE register): ±2, ±4, ±8 g.
+ADXL355_RANGES_G = (2.0, 4.0, 8.0)
+# ADXL355 output data rates: 4000 Hz / 2^k, k = 0..10 (datasheet, FILTER register).
+ADXL355_MAX_ODR_HZ = 4000.0
+# The Eurotherm 3216 SP rate limit is a uint16 in tenths of °C/min: 6553.5 °C/min at most.
+# A rig's real capability (``chamber.max_rate_c_per_min``) is checked by the dry run.
+REGISTER_MAX_RAMP_C_PER_MIN = 6553.5
+# Longest waits a campaign may configure: long enough for any real rig, short enough
+# that an abort never waits behind a 1e9 s settle (the audit's stuck rig).
+MAX_SETTLE_S = 600.0
+MAX_SOAK_MIN = 24 * 60.0
+MAX_POLL_S = 3600.0
+MAX_SUSPEND_LIMIT_S = 7 * 24 * 3600.0
+# Plausible air temperatures for any climatic chamber; the rig's own range is the dry run's.
+PLAUSIBLE_C = (-200.0, 500.0)
+
+# Strict numbers: a JSON boolean is refused; ints are accepted where floats are expected.
+Float = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+Int = Annotated[int, Field(strict=True)]
+TempC = Annotated[Float, Field(ge=PLAUSIBLE_C[0], le=PLAUSIBLE_C[1])]
+
+
+def _f(default: float | None, lo: float | None = None, hi: float | None = None, *,
+       open_lo: bool = True, doc: str) -> Any:
+    """A bounded float field: ``lo < x`` (``lo <= x`` when ``open_lo`` is False), ``x <= hi``."""
+    bounds: dict[str, float] = {}
+    if lo is not None:
+        bounds["gt" if open_lo else "ge"] = lo
+    if hi is not None:
+        bounds["le"] = hi
+    return Field(default=default, description=doc, **bounds)
+
+
+class CampaignSpec(BaseModel):
+    """Every campaign key the engine reads, typed and bounded (units in the names)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    # --- the contract fields (docs/api.md) --------------------------------------------
+    setpoints_c: list[TempC] = Field(
+        default_factory=lambda: list(DEFAULT_SETPOINTS_C), min_length=1, max_length=200,
+        description="chamber setpoints in °C, in run order (within the rig's range)")
+    soak_min: Float = _f(60.0, 0, MAX_SOAK_MIN, doc="nominal soak per step, minutes")
+    positions: str = Field(
+        default="table1", min_length=1, max_length=32, pattern=r"^[A-Za-z0-9_+]+$",
+        description="position schedule: table1, six, cube14, sphere<N>, a+b")
+    samples_per_position: Int = Field(
+        default=200, ge=1, le=BRIDGE_MAX_SAMPLES,
+        description="samples averaged per position (sensor bridge: 1..100000)")
+
+    # --- stability decision (service/engine/stability.py) ------------------------------
+    stability: Literal["predictive", "dwell", "fixed"] = Field(
+        default="predictive", description="soak end rule; fixed = exactly soak_min (the seed)")
+    min_soak_min: Float | None = _f(None, 0, MAX_SOAK_MIN, open_lo=False,
+                                    doc="earliest soak end, min (default min(10, soak_min))")
+    max_soak_min: Float | None = _f(None, 0, 2 * MAX_SOAK_MIN,
+                                    doc="soak cap, min (default 2 × soak_min)")
+    on_max_soak: Literal["continue", "fail"] = Field(
+        default="continue", description="at the soak cap: measure anyway (flagged) or fail")
+    tol_c: Float = _f(0.3, 0, 10, doc="chamber air band around the setpoint, °C")
+    dwell_min: Float | None = _f(None, 0, MAX_SOAK_MIN, open_lo=False,
+                                 doc="time in band for policy dwell, min (default min(5, soak))")
+    die_tol_c: Float | None = _f(None, 0, 10, doc="optional |T − T∞| rule on the die, °C")
+    temp_budget_c: Float | None = _f(None, 0, 10,
+                                     doc="rms die-temperature error allowed, °C (derived)")
+    tempco_ug_per_c: Float = _f(DEFAULT_TEMPCO_UG_PER_C, 0, 1e5,
+                                doc="sensor output change per °C, µg/°C")
+    drift_budget: Float = _f(DEFAULT_DRIFT_BUDGET, 0, 10,
+                             doc="soak error allowed as a fraction of one reading's noise")
+    gradient_lag_s: Float = _f(DEFAULT_GRADIENT_LAG_S, 0, 3600, open_lo=False,
+                               doc="package lag behind the die reading, s")
+    step_tol_c: Float = _f(DEFAULT_STEP_TOL_C, 0, 50, doc="every step: |T − T∞|, °C")
+    edge_tol_c: Float = _f(DEFAULT_EDGE_TOL_C, 0, 50, doc="extreme steps: sweep offset, °C")
+
+    # --- per-position quality checks (service/engine/quality.py) -----------------------
+    expected_sd_g: Float = _f(QualityLimits.expected_sd_g, 0, 1.0,
+                              doc="rms noise of one raw sample, g")
+    max_span_c: Float = _f(QualityLimits.max_span_c, 0, 50,
+                           doc="die temperature movement allowed in one capture, °C")
+    temp_noise_c: Float = _f(QualityLimits.temp_noise_c, 0, 10, open_lo=False,
+                             doc="rms noise of the raw temperature channel, °C")
+
+    # --- devices and timing --------------------------------------------------------------
+    ramp_c_per_min: Float = _f(1.0, 0, REGISTER_MAX_RAMP_C_PER_MIN,
+                               doc="chamber setpoint ramp, °C/min (≤ the rig's max rate)")
+    soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
+    soak_probe_samples: Int = Field(default=8, ge=1, le=BRIDGE_MAX_SAMPLES,
+                                    description="samples per die-temperature probe")
+    settle_s: Float = _f(5.0, 0, MAX_SETTLE_S, open_lo=False,
+                         doc="wait after in-position before acquiring, s")
+    move_timeout_s: Float = _f(120.0, 0, MAX_POLL_S, doc="table move timeout, s")
+    safe_c: TempC = Field(default=23.0, description="chamber temperature at the end, °C")
+    range_g: Literal[2, 4, 8] = Field(default=2, description="ADXL355 range, ±g")
+    odr_hz: Float = _f(62.5, 0, ADXL355_MAX_ODR_HZ, doc="ADXL355 output data rate, Hz")
+    retry_attempts: Int = Field(default=4, ge=1, le=20,
+                                description="tries of one device call before suspending")
+    retry_backoff_s: Float = _f(1.0, 0, 600, open_lo=False, doc="first retry back-off, s")
+    suspend_poll_s: Float = _f(30.0, 0, MAX_POLL_S, doc="device poll while suspended, s")
+    suspend_limit_s: Float = _f(1800.0, 0, MAX_SUSPEND_LIMIT_S,
+                                doc="suspended longer than this fails the campaign, s")
+
+
+# The contract fields; every other field of CampaignSpec is an engine tuning key.
+CONTRACT_FIELDS = ("setpoints_c", "soak_min", "positions", "samples_per_position")
+TUNING_KEYS = frozenset(CampaignSpec.model_fields) - set(CONTRACT_FIELDS)
 
 
 @dataclass(frozen=True)
 class RunSpec:
+    """A validated :class:`CampaignSpec` as the runner uses it (times in seconds)."""
+
     setpoints_c: list[float]
     positions: str
     samples_per_position: int
@@ -69,50 +174,61 @@ class RunSpec:
         return len(self.setpoints_c)
 
 
-def parse_spec(spec: dict[str, Any]) -> RunSpec:
-    """A :class:`RunSpec` from a campaign's JSON spec (defaults = the seed's protocol)."""
-    soak_s = float(spec.get("soak_min", 60.0)) * 60.0
-    policy = str(spec.get("stability", "predictive"))
-    quality = QualityLimits(
-        expected_sd_g=float(spec.get("expected_sd_g", QualityLimits.expected_sd_g)),
-        max_span_c=float(spec.get("max_span_c", QualityLimits.max_span_c)),
-        temp_noise_c=float(spec.get("temp_noise_c", QualityLimits.temp_noise_c)),
-    )
-    samples = int(spec.get("samples_per_position", 200))
-    die_tol = spec.get("die_tol_c")
+# RunSpec fields copied as they are from the validated spec.
+_DIRECT = ("ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c",
+           "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
+           "move_timeout_s", "on_max_soak", "positions", "samples_per_position")
+
+
+def run_spec(spec: CampaignSpec) -> RunSpec:
+    """The runner's view of a validated spec (the seed's protocol where keys are absent)."""
+    soak_min = spec.soak_min
+    quality = QualityLimits(expected_sd_g=spec.expected_sd_g, max_span_c=spec.max_span_c,
+                            temp_noise_c=spec.temp_noise_c)
+    # What the thermal model can absorb: a fraction of one reading's noise over the
+    # sensor's tempco (docs/engine.md, "Stability decision").
+    budget_c = spec.temp_budget_c
+    if budget_c is None:
+        budget_c = temperature_budget_c(
+            quality.expected_sd_g / spec.samples_per_position ** 0.5,
+            spec.tempco_ug_per_c, spec.drift_budget)
     stab = StabilityConfig(
-        policy=policy,
-        soak_s=soak_s,
-        min_soak_s=float(spec.get("min_soak_min", min(10.0, soak_s / 60.0))) * 60.0,
-        max_soak_s=float(spec.get("max_soak_min", 2.0 * soak_s / 60.0)) * 60.0,
-        tol_c=float(spec.get("tol_c", 0.3)),
-        dwell_s=float(spec.get("dwell_min", min(5.0, soak_s / 60.0))) * 60.0,
-        # What the thermal model can absorb: a fraction of one reading's noise over the
-        # sensor's tempco (docs/engine.md, "Stability decision").
-        temp_budget_c=float(spec.get("temp_budget_c", temperature_budget_c(
-            quality.expected_sd_g / max(samples, 1) ** 0.5,
-            float(spec.get("tempco_ug_per_c", DEFAULT_TEMPCO_UG_PER_C)),
-            float(spec.get("drift_budget", DEFAULT_DRIFT_BUDGET))))),
-        gradient_lag_s=float(spec.get("gradient_lag_s", DEFAULT_GRADIENT_LAG_S)),
-        step_tol_c=float(spec.get("step_tol_c", DEFAULT_STEP_TOL_C)),
-        edge_tol_c=float(spec.get("edge_tol_c", DEFAULT_EDGE_TOL_C)),
-        die_tol_c=None if die_tol is None else float(die_tol),
+        policy=spec.stability,
+        soak_s=soak_min * 60.0,
+        min_soak_s=_or(spec.min_soak_min, min(10.0, soak_min)) * 60.0,
+        max_soak_s=_or(spec.max_soak_min, 2.0 * soak_min) * 60.0,
+        tol_c=spec.tol_c,
+        dwell_s=_or(spec.dwell_min, min(5.0, soak_min)) * 60.0,
+        temp_budget_c=budget_c,
+        gradient_lag_s=spec.gradient_lag_s,
+        step_tol_c=spec.step_tol_c,
+        edge_tol_c=spec.edge_tol_c,
+        die_tol_c=spec.die_tol_c,
     )
-    on_max = str(spec.get("on_max_soak", "continue"))
-    if on_max not in ("continue", "fail"):
-        raise ValueError(f"on_max_soak must be 'continue' or 'fail', got {on_max!r}")
-    keys = RUN_TUNING_KEYS
-    tuned = {k: type(getattr(RunSpec, k, 0.0))(spec[k]) for k in keys if k in spec}
     return RunSpec(
-        setpoints_c=[float(v) for v in spec.get("setpoints_c", DEFAULT_SETPOINTS_C)],
-        positions=str(spec.get("positions", "table1")),
-        samples_per_position=samples,
+        setpoints_c=[float(v) for v in spec.setpoints_c],
         stability=stab,
         quality=quality,
-        on_max_soak=on_max,
-        extra={k: v for k, v in spec.items() if k not in keys},
-        **tuned,
+        range_g=float(spec.range_g),
+        **{k: getattr(spec, k) for k in _DIRECT},
     )
+
+
+def parse_spec(stored: dict[str, Any]) -> RunSpec:
+    """A :class:`RunSpec` from a stored campaign spec, validated by :class:`CampaignSpec`.
+
+    Keys that are not part of the spec (``rig``, ``sensor``, and anything a
+    future contract adds) are kept in ``extra`` and not validated here; a bad
+    value of a known key raises ``pydantic.ValidationError`` (a ``ValueError``).
+    """
+    known = {k: v for k, v in stored.items() if k in CampaignSpec.model_fields}
+    run = run_spec(CampaignSpec.model_validate(known))
+    extra = {k: v for k, v in stored.items() if k not in CampaignSpec.model_fields}
+    return RunSpec(**{**run.__dict__, "extra": extra})
+
+
+def _or(value: float | None, default: float) -> float:
+    return default if value is None else value
 
 
 def schedule_refs(name: str) -> np.ndarray:

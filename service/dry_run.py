@@ -1,0 +1,173 @@
+"""Dry run at the door: can this campaign, on this rig, ever produce a calibration?
+
+One function, :func:`check_campaign`, decides it without hardware, for
+``POST /api/v1/campaigns``, ``POST /api/v1/schedules``, the scheduler and
+``soakcal campaign plan``. It refuses, naming the field:
+
+* a position schedule that cannot identify the 12-parameter SFEM (seed paper,
+  Eq. 1–3) in the mode the rig gives. A rig with a turntable knows the gravity
+  direction of every position, so its recordings are fitted in *reference* mode
+  (``calibration.thermal``: ``mode = "reference" if recording.has_reference``);
+  the check is the Jacobian rank of ``calibration.schedules.identifiability``
+  (e.g. ``sphere1``: 3 equations for 12 unknowns);
+* a setpoint (or the end-of-campaign ``safe_c``) outside the chamber's range
+  (``chamber.range_c``, else the controller's register map range);
+* a ramp faster than the chamber can follow (``chamber.max_rate_c_per_min``;
+  the built-in ``sim`` chamber's physics limit is 5 °C/min).
+
+and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`).
+
+When the engine's plan (``service.engine.plan.dry_run``) lands, the prediction
+should come from interpreting it; the checks stay here, in one place.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from service.engine.spec import CampaignSpec
+
+# A rig with a turntable commands every gravity direction: reference-mode fits.
+RIG_FIT_MODE = "reference"
+# Where the chamber starts a campaign: the lab's ambient (the runner's safe_c default).
+AMBIENT_C = 23.0
+# Table move to the next position, s: the engine's first-position ETA (15 s) less its
+# default settle (5 s) and 200 samples at 62.5 Hz (3.2 s) (service/engine/progress.py).
+MOVE_ESTIMATE_S = 6.8
+# The predictive stability policy ends a soak at ~3/4 of the nominal soak on average
+# (service/engine/progress.py uses the same factor for its ETA).
+PREDICTIVE_SOAK_FRACTION = 0.75
+# sphere<N> beyond this is refused before it is built (sphere10**9 would exhaust memory).
+MAX_POSITIONS = 5000
+# The built-in simulated chamber's physics limit (simulators/chamber_sim.py).
+SIM_MAX_RATE_C_PER_MIN = 5.0
+
+
+@dataclass(frozen=True)
+class PlanIssue:
+    """One refused field: where (a 422 ``loc`` tail), why, and the value given."""
+
+    loc: tuple[str | int, ...]
+    msg: str
+    value: Any
+
+
+@dataclass(frozen=True)
+class PlanCheck:
+    """The dry run's verdict: no issues means the campaign can produce a calibration."""
+
+    issues: list[PlanIssue] = field(default_factory=list)
+    predicted_duration_s: float | None = None
+    n_steps: int = 0
+    n_positions: int | None = None
+    mode: str = RIG_FIT_MODE
+
+    @property
+    def ok(self) -> bool:
+        return not self.issues
+
+    def summary(self) -> str:
+        """One line for people: steps × positions, mode, predicted duration."""
+        dur = self.predicted_duration_s
+        return (f"{self.n_steps} steps × {self.n_positions} positions, {self.mode} mode, "
+                f"predicted duration {dur:.0f} s ({dur / 3600.0:.1f} h of rig time)")
+
+
+def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
+                   rig_name: str | None = None) -> PlanCheck:
+    """Every door check of ``spec`` on ``rig`` (a rig row as a dict; None: unknown rig)."""
+    if rig is None:
+        return PlanCheck([PlanIssue(("rig",), f"unknown rig {rig_name!r}", rig_name)])
+    issues: list[PlanIssue] = []
+    lo_c, hi_c = chamber_range_c(rig)
+    name = rig.get("name")
+    for i, setpoint_c in enumerate(spec.setpoints_c):
+        if not lo_c <= setpoint_c <= hi_c:
+            issues.append(PlanIssue(
+                ("setpoints_c", i),
+                f"setpoint {setpoint_c:g} °C is outside the chamber range of rig {name!r}, "
+                f"[{lo_c:g}, {hi_c:g}] °C", setpoint_c))
+    if not lo_c <= spec.safe_c <= hi_c:
+        issues.append(PlanIssue(
+            ("safe_c",), f"safe temperature {spec.safe_c:g} °C is outside the chamber range "
+            f"of rig {name!r}, [{lo_c:g}, {hi_c:g}] °C", spec.safe_c))
+    max_rate = chamber_max_rate_c_per_min(rig)
+    if max_rate is not None and spec.ramp_c_per_min > max_rate:
+        issues.append(PlanIssue(
+            ("ramp_c_per_min",), f"ramp {spec.ramp_c_per_min:g} °C/min is faster than the "
+            f"chamber of rig {name!r} can follow ({max_rate:g} °C/min)", spec.ramp_c_per_min))
+    n_positions, why = schedule_verdict(spec.positions, RIG_FIT_MODE)
+    if why is not None:
+        issues.append(PlanIssue(("positions",), why, spec.positions))
+    duration = None if n_positions is None else predicted_duration_s(spec, n_positions)
+    return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions)
+
+
+def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:
+    """``chamber.range_c``, else the range of the controller's register map, else unbounded."""
+    chamber = rig.get("chamber") or {}
+    bounds = chamber.get("range_c")
+    if isinstance(bounds, list | tuple) and len(bounds) == 2:
+        return (float(bounds[0]), float(bounds[1]))
+    if chamber.get("driver", "sim") == "modbus":
+        from drivers.registermaps import CHAMBER_MAPS
+
+        regmap = CHAMBER_MAPS.get(str(chamber.get("map", "eurotherm3216")))
+        if regmap is not None:
+            return regmap.range_c
+    return (-math.inf, math.inf)
+
+
+def chamber_max_rate_c_per_min(rig: dict[str, Any]) -> float | None:
+    """The fastest ramp the chamber follows: configured, or the sim's physics; None: unknown."""
+    chamber = rig.get("chamber") or {}
+    rate = chamber.get("max_rate_c_per_min")
+    if isinstance(rate, int | float) and not isinstance(rate, bool) and rate > 0:
+        return float(rate)
+    if chamber.get("driver", "sim") == "sim":
+        return SIM_MAX_RATE_C_PER_MIN
+    return None
+
+
+@functools.lru_cache(maxsize=128)
+def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
+    """(number of positions, None) when ``name`` identifies the SFEM in ``mode``, else why not."""
+    from calibration.schedules import get_schedule, identifiability
+
+    for part in name.strip().lower().split("+"):
+        if part.startswith("sphere") and part[6:].isdigit() and int(part[6:]) > MAX_POSITIONS:
+            return None, (f"position schedule {name!r}: {part} has more than {MAX_POSITIONS} "
+                          "positions (a night has room for far fewer)")
+    try:
+        refs = get_schedule(name)
+    except (ValueError, KeyError):
+        return None, (f"unknown position schedule {name!r}; expected table1, six, cube14, "
+                      "sphere<N> or a sum such as table1+cube14")
+    ident = identifiability(refs, mode)
+    if not ident.ok:
+        return len(refs), (
+            f"position schedule {name!r} ({len(refs)} position(s)) cannot identify the "
+            f"12-parameter model in {mode} mode (the mode of a rig with a turntable): "
+            f"rank {ident.rank} of {ident.n_params}, undetermined {', '.join(ident.undetermined)}")
+    return len(refs), None
+
+
+def predicted_duration_s(spec: CampaignSpec, n_positions: int) -> float:
+    """Rig-time estimate of the whole campaign, s (a sped-up sim rig: divide by its speed).
+
+    ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per
+    step (the nominal soak; ~3/4 of it under the predictive policy), and per
+    position a move, the settle and the acquisition (``samples / odr_hz``).
+    """
+    path_c = [AMBIENT_C, *spec.setpoints_c]
+    ramp_s = sum(abs(b - a) for a, b in zip(path_c, path_c[1:], strict=False))
+    ramp_s *= 60.0 / spec.ramp_c_per_min
+    soak_s = spec.soak_min * 60.0
+    if spec.stability == "predictive":
+        soak_s *= PREDICTIVE_SOAK_FRACTION
+    position_s = MOVE_ESTIMATE_S + spec.settle_s + spec.samples_per_position / spec.odr_hz
+    n_steps = len(spec.setpoints_c)
+    return ramp_s + n_steps * (soak_s + n_positions * position_s)
