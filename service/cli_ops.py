@@ -166,7 +166,9 @@ def _schedule_add(args: argparse.Namespace) -> int:
         "samples_per_position": args.samples_per_position,
     }
     campaign.update({k: v for k, v in optional.items() if v is not None})
-    body: dict[str, Any] = {"campaign": campaign, "at": args.at, "cron": args.cron}
+    body: dict[str, Any] = {"campaign": campaign}
+    # exactly one of at/cron: the API refuses an explicit null for the other
+    body.update({k: v for k, v in (("at", args.at), ("cron", args.cron)) if v is not None})
     if args.timezone:
         body["timezone"] = args.timezone
     s = call(args, "POST", "/api/v1/schedules", json=body)
