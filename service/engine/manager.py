@@ -3,8 +3,10 @@
 One loop per service process. For every rig it looks for work:
 
 1. a ``running`` campaign whose lease expired (its process died): crash recovery;
-2. else, when the rig holds no ``paused`` campaign (that one keeps the rig until
-   resumed or aborted, like the API's ``rig_busy``), the oldest ``queued`` one.
+2. else, when the rig holds no campaign paused *after it started* (that one keeps
+   the rig until resumed or aborted, like the API's ``rig_busy``), the oldest
+   ``queued`` one, a resumed campaign that had started first. A campaign paused
+   while still queued never touched the rig and holds nothing.
 
 It claims the rig lease in the database (INSERT, or a conditional UPDATE
 where the lease expired or is already ours), so two service processes on one
@@ -34,6 +36,7 @@ from service.db.models import Campaign, Rig, RigLease
 from service.db.timestamps import as_utc, utcnow
 from service.engine.rigs import open_rig, rig_time_scale
 from service.engine.runner import CampaignRunner
+from service.engine.store import cas_transition
 
 log = logging.getLogger(__name__)
 POLL_WALL_S = 1.0
@@ -123,13 +126,15 @@ class CampaignManager:
             if orphan is not None:
                 return int(orphan)
             paused = s.execute(
-                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "paused").limit(1)
+                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "paused",
+                                          Campaign.started_at.is_not(None)).limit(1)
             ).scalar()
             if paused is not None:
                 return None
             queued = s.execute(
                 select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "queued")
-                .order_by(Campaign.created_at, Campaign.id).limit(1)
+                .order_by(Campaign.started_at.is_(None), Campaign.created_at, Campaign.id)
+                .limit(1)
             ).scalar()
             return None if queued is None else int(queued)
 
@@ -181,14 +186,18 @@ class CampaignManager:
                 await CampaignRunner(self.sf, campaign_id, devices, clock).run()
         except asyncio.CancelledError:
             raise
-        except Exception as exc:  # an engine bug fails the campaign, not the service
-            log.exception("campaign %s crashed", campaign_id)
-            with self.sf() as s:
-                s.execute(update(Campaign).where(Campaign.id == campaign_id,
-                                                 Campaign.state.in_(("running", "queued")))
-                          .values(state="failed", error=f"engine error: {exc}",
-                                  finished_at=utcnow()))
-                s.commit()
+        except Exception as exc:  # the rig could not be opened: fail the campaign, not the service
+            # (the engine itself handles everything raised while it runs, safe state included)
+            log.exception("campaign %s could not run", campaign_id)
+            with contextlib.suppress(Exception):
+                for from_state in ("queued", "running"):
+                    with self.sf() as s:
+                        ok = cas_transition(s, campaign_id, from_state, "failed",
+                                            error=f"engine error: {type(exc).__name__}: {exc}",
+                                            requested_action=None)
+                        s.commit()
+                    if ok:
+                        break
         finally:
             renewer.cancel()
             with contextlib.suppress(asyncio.CancelledError):

@@ -19,8 +19,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import logging
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import numpy as np
@@ -39,6 +40,10 @@ from service.engine.states import TERMINAL
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
 TURNTABLE_POLL_S = 1.0
+DEFAULT_SAFE_C = 23.0  # before the spec is parsed (RunSpec.safe_c otherwise)
+ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
+SAFE_ATTEMPTS = 3  # tries per safe-state command
+log = logging.getLogger(__name__)
 
 
 class CampaignRunner:
@@ -65,19 +70,59 @@ class CampaignRunner:
 
     # --- the plan ---------------------------------------------------------
     async def run(self) -> str:
-        """Execute (or resume) the campaign; returns its final state."""
+        """Execute (or resume) the campaign; returns its final state.
+
+        Every exit goes through one ``finally`` that drives the rig to its safe
+        state (:meth:`_drive_safe`) once the rig was touched: completion, abort,
+        failure, an exception no one expected (a device layer's ``UnicodeError``),
+        and a cancellation (service shutdown, or the manager cancelling us after
+        losing the rig lease). Only then is the terminal state written, so
+        "aborted"/"failed"/"completed" in the database means "the rig is safe".
+        A cancelled campaign stays ``running`` for the next lease holder.
+        """
         camp = store.load_campaign(self.sf, self.id)
         if camp.state in TERMINAL:
             return camp.state
-        self.spec = spec = parse_spec(camp.spec)
+        self._touched = False
+        outcome: tuple[str, dict[str, Any]] | None = None
+        cancelled: asyncio.CancelledError | None = None
+        try:
+            if not self._start(camp):
+                return store.read_control(self.sf, self.id).state
+            await self._execute(camp)
+            outcome = ("completed", {"progress": {**self._progress, "phase": "fitting",
+                                                  "fraction": 1.0, "eta_s": 0.0}})
+        except AbortRequested:
+            outcome = ("aborted", {})
+        except CampaignFailed as exc:
+            outcome = ("failed", {"error": str(exc)})
+        except asyncio.CancelledError as exc:
+            cancelled = exc
+            task = asyncio.current_task()
+            if task is not None:  # let the safe-state calls run (and their socket I/O)
+                task.uncancel()
+        except Exception as exc:  # an engine or device-layer bug: fail, never leave it running
+            log.exception("campaign %s: unexpected error", self.id)
+            outcome = ("failed", {"error": f"engine error: {type(exc).__name__}: {exc}"})
+        finally:
+            if self._touched:
+                await self._drive_safe()
+        if cancelled is not None:
+            raise cancelled
+        assert outcome is not None
+        state, fields = outcome
+        if not store.transition(self.sf, self.id, state, clear_action=True, **fields):
+            return store.read_control(self.sf, self.id).state  # someone else decided first
+        return state
+
+    def _start(self, camp: Any) -> bool:
+        """Parse the spec, build the guard, move ``queued → running``; False: not ours to run."""
+        try:
+            self.spec = spec = parse_spec(camp.spec)
+        except (ValueError, TypeError, KeyError) as exc:
+            raise CampaignFailed(f"spec: {exc}") from exc
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
-        done = store.measured_positions(self.sf, self.id)
-        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
-        # t_s continues where the stored campaign stopped (a new process has a new clock).
-        self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
-                                                                      if camp.progress else 0.0))
-        self._clock0_s = self.clock.now()
         self.guard = DeviceGuard(
             self.clock,
             FaultPolicy(spec.retry_attempts, spec.retry_backoff_s, spec.suspend_poll_s,
@@ -85,34 +130,33 @@ class CampaignRunner:
             on_suspend=self._suspend, on_resume=self._unsuspend, check_abort=self._abort_asked,
         )
         if camp.state == "queued":
-            store.transition(self.sf, self.id, "running", started_at=camp.started_at
-                             or store.now_utc(), t0_s=camp.t0_s if camp.t0_s is not None else 0.0)
-        try:
-            await self.guard.call("accelerometer.configure",
-                                  lambda: self.dev.accelerometer.configure(spec.range_g,
-                                                                           spec.odr_hz))
-            await self._checkpoint()
-            for step in range(spec.n_steps):
-                missing = [p for p in range(self.n_pos) if (step, p) not in done]
-                if not missing:
-                    continue
-                resumed = len(missing) < self.n_pos
-                await self._ramp(step)
-                await self._soak(step, resumed=resumed, n_positions=len(missing))
-                await self._positions(step, missing)
-            await self._fitting()
-            await self._safe_state()
-            store.transition(self.sf, self.id, "completed", clear_action=True,
-                             progress={**self._progress, "phase": "fitting", "fraction": 1.0,
-                                       "eta_s": 0.0})
-            return "completed"
-        except AbortRequested:
-            await self._abort()
-            return "aborted"
-        except CampaignFailed as exc:
-            store.transition(self.sf, self.id, "failed", error=str(exc), clear_action=True)
-            await self._safe_state_best_effort()
-            return "failed"
+            return store.transition(self.sf, self.id, "running", started_at=camp.started_at
+                                    or store.now_utc(),
+                                    t0_s=camp.t0_s if camp.t0_s is not None else 0.0)
+        return camp.state == "running"
+
+    async def _execute(self, camp: Any) -> None:
+        spec = self.spec
+        done = store.measured_positions(self.sf, self.id)
+        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
+        # t_s continues where the stored campaign stopped (a new process has a new clock).
+        self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
+                                                                      if camp.progress else 0.0))
+        self._clock0_s = self.clock.now()
+        self._touched = True
+        await self.guard.call("accelerometer.configure",
+                              lambda: self.dev.accelerometer.configure(spec.range_g,
+                                                                       spec.odr_hz))
+        await self._checkpoint()
+        for step in range(spec.n_steps):
+            missing = [p for p in range(self.n_pos) if (step, p) not in done]
+            if not missing:
+                continue
+            resumed = len(missing) < self.n_pos
+            await self._ramp(step)
+            await self._soak(step, resumed=resumed, n_positions=len(missing))
+            await self._positions(step, missing)
+        await self._fitting()
 
     # --- phases -------------------------------------------------------------
     async def _ramp(self, step: int) -> None:
@@ -136,7 +180,7 @@ class CampaignRunner:
                     f"(PV {status.process_c:.2f} °C)")
             self._publish(step, "ramp", 0, status, target_c)
             await self._checkpoint()
-            await self.clock.sleep(spec.soak_poll_s)
+            await self._wait(spec.soak_poll_s)
             status = await self._chamber()
         self.eta.ramp_done(self.clock.now() - start_s)
 
@@ -181,7 +225,7 @@ class CampaignRunner:
             if decision.stable:
                 break
             await self._checkpoint()
-            await self.clock.sleep(spec.soak_poll_s)
+            await self._wait(spec.soak_poll_s)
         soak_s = self.clock.now() - start_s
         if not resumed:
             self.eta.soak_done(soak_s)
@@ -211,7 +255,7 @@ class CampaignRunner:
             t_start = self.clock.now()
             ref = self.refs[pos]
             await self._move_to(self.dev.angles_for(ref))
-            await self.clock.sleep(spec.settle_s)
+            await self._wait(spec.settle_s)
             acq, flags, attempts = await self._measure()
             status = await self._chamber()
             t_mid = self.clock.now() - acq.duration_s / 2.0
@@ -280,20 +324,42 @@ class CampaignRunner:
                     f"turntable not in position {angles_deg} after {self.spec.move_timeout_s:.0f} s"
                     f" (at {st.angles_deg}, faults {st.faults})")
 
-    async def _safe_state(self) -> None:
-        """Chamber to a safe temperature, table home: the end of every campaign."""
-        await self.guard.call("chamber.set_setpoint",
-                              lambda: self.dev.chamber.set_setpoint(self.spec.safe_c))
-        home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
-        await self.guard.call("turntable.move_to", lambda: self.dev.turntable.move_to(home))
+    async def _drive_safe(self) -> None:
+        """The rig's safe state: chamber at the safe temperature, table stopped and home.
 
-    async def _safe_state_best_effort(self) -> None:
-        """After a failure: one unguarded try per device (it may be why we failed)."""
+        The one place every exit of :meth:`run` ends. Not through the guard (a
+        pending abort or a suspension must not stop it): each command gets a few
+        tries with back-off on the clock, then the next command is tried anyway;
+        whatever failed is logged and kept in ``self.safe_report``.
+        """
+        spec = getattr(self, "spec", None)
+        safe_c = spec.safe_c if spec is not None else DEFAULT_SAFE_C
+        with contextlib.suppress(Exception):  # keep the target inside the chamber's range
+            lo_c, hi_c = self.dev.chamber.range_c
+            safe_c = min(max(safe_c, lo_c), hi_c)
         home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
-        with contextlib.suppress(Exception):
-            await self.dev.chamber.set_setpoint(self.spec.safe_c)
-        with contextlib.suppress(Exception):
-            await self.dev.turntable.move_to(home)
+        ch, tt = self.dev.chamber, self.dev.turntable
+        self.safe_report = {
+            "chamber.set_setpoint": await self._try_safe(lambda: ch.set_setpoint(safe_c)),
+            "turntable.stop": await self._try_safe(tt.stop),
+            "turntable.move_to": await self._try_safe(lambda: tt.move_to(home)),
+        }
+
+    async def _try_safe(self, fn: Callable[[], Awaitable[Any]]) -> str:
+        delay_s = 1.0
+        last = ""
+        for _ in range(SAFE_ATTEMPTS):
+            try:
+                await fn()
+                return "ok"
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - any failure: log, retry, move on
+                last = f"{type(exc).__name__}: {exc}"
+                await self.clock.sleep(delay_s)
+                delay_s *= 2.0
+        log.error("campaign %s: safe state not reached: %s", self.id, last)
+        return last
 
     # --- control: pause / resume / abort --------------------------------------------
     async def _checkpoint(self) -> None:
@@ -308,8 +374,10 @@ class CampaignRunner:
 
     async def _paused(self) -> None:
         """Hold: chamber keeps its setpoint, table at rest; wait for resume or abort."""
-        store.transition(self.sf, self.id, "paused", clear_action=True,
-                         progress={**self._progress, "paused": True})
+        if not store.transition(self.sf, self.id, "paused", clear_action=True,
+                                progress={**self._progress, "paused": True}):
+            await self._lost_control()
+            return
         await self.guard.call("turntable.stop", self.dev.turntable.stop)
         while True:
             await self.clock.sleep(self.spec.soak_poll_s)
@@ -317,15 +385,30 @@ class CampaignRunner:
             if ctl.state == "aborted" or ctl.requested_action == "abort":
                 raise AbortRequested("operator")
             if ctl.requested_action == "resume" or ctl.state in ("running", "queued"):
-                store.transition(self.sf, self.id, "running", clear_action=True,
-                                 progress={**self._progress, "paused": False})
+                if not store.transition(self.sf, self.id, "running", clear_action=True,
+                                        progress={**self._progress, "paused": False}):
+                    await self._lost_control()
                 return
 
-    async def _abort(self) -> None:
-        try:
-            await self._safe_state()
-        finally:
-            store.transition(self.sf, self.id, "aborted", clear_action=True)
+    async def _lost_control(self) -> None:
+        """A state write lost its race: obey what the database now says."""
+        ctl = store.read_control(self.sf, self.id)
+        if ctl.state == "aborted" or ctl.requested_action == "abort":
+            raise AbortRequested("operator")
+        if ctl.state in TERMINAL:
+            raise CampaignFailed(f"campaign became {ctl.state} under the engine")
+
+    async def _wait(self, dt_s: float) -> None:
+        """Sleep ``dt_s`` on the clock, checking for an abort every poll (≤ 60 s).
+
+        A long settle or soak wait is interruptible: a pending abort waits at most
+        one poll period, not the whole wait.
+        """
+        end_s = self.clock.now() + dt_s
+        while (left_s := end_s - self.clock.now()) > 0:
+            await self.clock.sleep(min(left_s, self.spec.soak_poll_s, ABORT_CHECK_S))
+            if self._abort_asked():
+                raise AbortRequested("operator")
 
     def _abort_asked(self) -> bool:
         ctl = store.read_control(self.sf, self.id)

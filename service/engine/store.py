@@ -17,7 +17,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.db.models import Calibration, Campaign, Measurement, utcnow
-from service.engine.states import TRANSITIONS
+from service.engine.states import TERMINAL, TRANSITIONS
 
 SessionFactory = sessionmaker[Session]
 
@@ -74,27 +74,43 @@ def transition(
 ) -> bool:
     """Move the campaign to ``to_state`` if the table allows it from its current state.
 
-    Conditional UPDATE (WHERE state = current) so a concurrent API write is
-    not overwritten; returns False when the state changed under us.
+    Reads the current state, then a conditional UPDATE on it (:func:`cas_transition`),
+    so a concurrent writer (the API, another process) is never overwritten:
+    returns False when the table forbids the move or the state changed under us.
+    Already in ``to_state`` counts as done (True).
     """
     with sf() as s:
         current = s.execute(select(Campaign.state).where(Campaign.id == campaign_id)).scalar_one()
         if current == to_state:
             return True
-        if (current, to_state) not in TRANSITIONS:
-            return False
-        values: dict[str, Any] = {"state": to_state, **fields}
+        values: dict[str, Any] = dict(fields)
         if clear_action:
             values["requested_action"] = None
-        if to_state in ("completed", "failed", "aborted"):
-            values.setdefault("finished_at", utcnow())
-        res = s.execute(
-            update(Campaign)
-            .where(Campaign.id == campaign_id, Campaign.state == current)
-            .values(**values)
-        )
+        ok = cas_transition(s, campaign_id, current, to_state, **values)
         s.commit()
-        return res.rowcount == 1
+        return ok
+
+
+def cas_transition(s: Session, campaign_id: int, from_state: str, to_state: str,
+                   **values: Any) -> bool:
+    """``UPDATE campaign SET state = to_state WHERE id = ? AND state = from_state``.
+
+    The one way any writer (engine, API, manager) changes a campaign's state:
+    the move must be in :data:`service.engine.states.TRANSITIONS`, and the
+    WHERE on the expected from-state makes two concurrent writers unable to
+    both win (the loser's rowcount is 0). Does not commit.
+    """
+    if (from_state, to_state) not in TRANSITIONS:
+        return False
+    values = {"state": to_state, **values}
+    if to_state in TERMINAL:
+        values.setdefault("finished_at", utcnow())
+    res = s.execute(
+        update(Campaign)
+        .where(Campaign.id == campaign_id, Campaign.state == from_state)
+        .values(**values)
+    )
+    return bool(res.rowcount == 1)
 
 
 def clear_action(sf: SessionFactory, campaign_id: int, action: str) -> None:

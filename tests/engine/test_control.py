@@ -88,3 +88,18 @@ def test_runner_refuses_transitions_outside_the_table(sf) -> None:
     cid = add_campaign(sf, state="completed")
     assert store.transition(sf, cid, "running") is False
     assert campaign(sf, cid).state == "completed"
+
+
+async def test_abort_is_honoured_during_a_very_long_settle(sf) -> None:
+    """settle_s = 1e9: the abort must not wait for the settle (nor hold the rig)."""
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf, {**SMALL_SPEC, "settle_s": 1e9})
+    task = asyncio.create_task(
+        CampaignRunner(sf, cid, rig.devices, clock, calibrate=fake_calibrate).run())
+    await wait_for(lambda: campaign(sf, cid).cursor_phase == "positions")
+    t_asked = clock.now()
+    store.update_campaign(sf, cid, requested_action="abort")
+    assert await asyncio.wait_for(task, 10) == "aborted"
+    assert clock.now() - t_asked <= 60.0 + 1e-6  # one abort check period of the clock
+    assert rig.physics.setpoint_c == 23.0

@@ -32,9 +32,41 @@ def test_pick_prefers_orphaned_running_then_oldest_queued(sf) -> None:
     assert m._pick("sim") == q1
     orphan = add_campaign(sf, SMALL_SPEC, state="running")
     assert m._pick("sim") == orphan
-    store.update_campaign(sf, orphan, state="paused")
-    assert m._pick("sim") is None  # a paused campaign keeps the rig until resumed or aborted
+    store.update_campaign(sf, orphan, state="paused", started_at=store.now_utc())
+    assert m._pick("sim") is None  # a started, paused campaign keeps the rig until resumed
     other = CampaignManager(sf, owner="proc-b", lease_s=30)
     store.update_campaign(sf, orphan, state="completed")
     assert other._claim("sim", q1)
     assert m._pick("sim") is None  # someone else's live lease
+
+
+def test_a_campaign_paused_while_queued_does_not_hold_the_rig(sf) -> None:
+    """Pausing a queued campaign must not jam the queue behind it (it never touched the rig)."""
+    from service.campaigns import apply_action, rig_busy
+
+    m = CampaignManager(sf, owner="proc-a")
+    first = add_campaign(sf, SMALL_SPEC)
+    second = add_campaign(sf, SMALL_SPEC)
+    with sf() as s:
+        assert apply_action(s, first, "pause").state == "paused"
+    assert m._pick("sim") == second
+    with sf() as s:
+        assert not rig_busy(s, "sim")
+        assert apply_action(s, first, "resume").state == "queued"  # through the table
+    assert m._pick("sim") == first
+
+
+def test_transition_is_conditional_on_the_from_state(sf) -> None:
+    """Two writers racing from the same read: exactly one wins."""
+    from service.engine.store import cas_transition
+
+    cid = add_campaign(sf, SMALL_SPEC, state="running")
+    with sf() as a, sf() as b:
+        won_a = cas_transition(a, cid, "running", "aborted")
+        a.commit()
+        won_b = cas_transition(b, cid, "running", "completed")
+        b.commit()
+    assert (won_a, won_b) == (True, False)
+    assert store.load_campaign(sf, cid).state == "aborted"
+    with sf() as s:  # and only moves the table allows
+        assert not cas_transition(s, cid, "aborted", "running")
