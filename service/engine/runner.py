@@ -31,7 +31,20 @@ from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import stability, store
 from service.engine.calibrate import calibrate_columns
 from service.engine.guard import AbortRequested, CampaignFailed, DeviceGuard, FaultPolicy
-from service.engine.progress import EtaModel
+from service.engine.plan import (
+    Acquire,
+    Checkpoint,
+    Configure,
+    Fit,
+    Move,
+    Msg,
+    Save,
+    SetChamber,
+    Settle,
+    WaitStable,
+    campaign_plan,
+)
+from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
 from service.engine.rigs import RigDevices
 from service.engine.spec import parse_spec, schedule_refs
@@ -67,6 +80,12 @@ class CampaignRunner:
         self.on_step = on_step
         self.fit_result: Any = None  # the core's fit object, for the demo's report
         self._progress: dict[str, Any] = {}
+        # Called with (message, started_s, ended_s) for every plan message executed.
+        self._subscribers: list[Subscriber] = []
+
+    def subscribe(self, fn: Subscriber) -> None:
+        """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""
+        self._subscribers.append(fn)
 
     # --- the plan ---------------------------------------------------------
     async def run(self) -> str:
@@ -139,33 +158,100 @@ class CampaignRunner:
         spec = self.spec
         done = store.measured_positions(self.sf, self.id)
         self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
+        self._cursor: tuple[int, str] | None = None
         # t_s continues where the stored campaign stopped (a new process has a new clock).
         self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
                                                                       if camp.progress else 0.0))
         self._clock0_s = self.clock.now()
         self._touched = True
+        self._subscribers.append(EtaSubscriber(self.eta))
+        plan = campaign_plan(spec, self.refs, done)
+        reply: Any = None
+        while True:
+            try:
+                msg = plan.send(reply)
+            except StopIteration:
+                return
+            reply = await self._interpret(msg)
+
+    async def _interpret(self, msg: Msg) -> Any:
+        """Execute one plan message; subscribers hear of it once it is done.
+
+        A ``Save`` is announced *before* its commit (the reading is complete), so
+        the progress committed with it already counts it.
+        """
+        started_s = self.clock.now()
+        if isinstance(msg, Save):
+            self._notify(msg, started_s)
+            await self._save(msg)
+            return None
+        handler = self._handlers[type(msg)]
+        result = await handler(msg)
+        self._notify(msg, started_s)
+        return result
+
+    def _notify(self, msg: Msg, started_s: float) -> None:
+        for sub in self._subscribers:
+            sub(msg, started_s, self.clock.now())
+
+    @property
+    def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
+        return {
+            Configure: self._configure, Checkpoint: self._at_checkpoint,
+            SetChamber: self._ramp, WaitStable: self._soak, Move: self._move,
+            Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
+        }
+
+    async def _configure(self, msg: Configure) -> None:
+        acc = self.dev.accelerometer
         await self.guard.call("accelerometer.configure",
-                              lambda: self.dev.accelerometer.configure(spec.range_g,
-                                                                       spec.odr_hz))
+                              lambda: acc.configure(msg.range_g, msg.odr_hz))
+
+    async def _at_checkpoint(self, _msg: Checkpoint) -> None:
         await self._checkpoint()
-        for step in range(spec.n_steps):
-            missing = [p for p in range(self.n_pos) if (step, p) not in done]
-            if not missing:
-                continue
-            resumed = len(missing) < self.n_pos
-            await self._ramp(step)
-            await self._soak(step, resumed=resumed, n_positions=len(missing))
-            await self._positions(step, missing)
+
+    async def _move(self, msg: Move) -> None:
+        if self._cursor != (msg.step, "positions"):  # first position of this step's sweep
+            store.set_cursor(self.sf, self.id, msg.step, "positions", msg.position)
+            self._cursor = (msg.step, "positions")
+        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+
+    async def _settle(self, msg: Settle) -> None:
+        await self._wait(msg.settle_s)
+
+    async def _acquire_msg(self, msg: Acquire) -> tuple[Acquisition, list[str], int]:
+        return await self._measure(msg.n_samples)
+
+    async def _fit(self, _msg: Fit) -> None:
         await self._fitting()
 
+    async def _save(self, msg: Save) -> None:
+        """Commit the reading and the cursor past it in one transaction (the crash rule)."""
+        acq, flags, attempts = msg.acquisition
+        status = await self._chamber()
+        t_mid = self.clock.now() - acq.duration_s / 2.0
+        ref = msg.ref_g
+        row = {
+            "step": msg.step, "position": msg.position, "t_s": self._t(t_mid),
+            "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
+            "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
+            "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
+            "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
+            "attempts": attempts, "flags": ",".join(flags) or None,
+        }
+        progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
+                                 write=False)
+        store.commit_measurement(self.sf, self.id, row, msg.next_position, progress)
+
     # --- phases -------------------------------------------------------------
-    async def _ramp(self, step: int) -> None:
+    async def _ramp(self, msg: SetChamber) -> None:
         """Command the setpoint and wait until the working setpoint and PV reach it."""
-        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         store.set_cursor(self.sf, self.id, step, "ramp", 0)
+        self._cursor = (step, "ramp")
         ch = self.dev.chamber
         await self.guard.call("chamber.set_ramp_rate",
-                              lambda: ch.set_ramp_rate(spec.ramp_c_per_min))
+                              lambda: ch.set_ramp_rate(msg.ramp_c_per_min))
         await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(target_c))
         await self.guard.call("chamber.run", ch.run)
         start_s = self.clock.now()
@@ -182,19 +268,18 @@ class CampaignRunner:
             await self._checkpoint()
             await self._wait(spec.soak_poll_s)
             status = await self._chamber()
-        self.eta.ramp_done(self.clock.now() - start_s)
 
-    async def _soak(self, step: int, *, resumed: bool, n_positions: int) -> None:
+    async def _soak(self, msg: WaitStable) -> None:
         """Wait for stability (policy of the spec); log the decision in steps_log.
 
         The predictive policy judges the die against the sweep that follows: its
         duration (positions left × the measured time per position) and whether
         this step is the coldest or hottest (it then sets the model's valid range).
         """
-        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
+        resumed, edge = msg.resumed, msg.edge
         cfg = spec.stability
-        sweep_s = n_positions * self.eta.position_s
-        edge = target_c in (min(spec.setpoints_c), max(spec.setpoints_c))
+        sweep_s = msg.n_positions * self.eta.position_s
         if resumed:
             # The step was soaked before the interruption: re-check, don't re-soak in full.
             cfg = dataclasses.replace(
@@ -202,6 +287,7 @@ class CampaignRunner:
                 min_soak_s=0.0, soak_s=min(cfg.soak_s, cfg.dwell_s),
             )
         store.set_cursor(self.sf, self.id, step, "soak", 0)
+        self._cursor = (step, "soak")
         start_s = self.clock.now()
         ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
         decision = stability.Decision(False, "started")
@@ -227,8 +313,6 @@ class CampaignRunner:
             await self._checkpoint()
             await self._wait(spec.soak_poll_s)
         soak_s = self.clock.now() - start_s
-        if not resumed:
-            self.eta.soak_done(soak_s)
         entry = {
             "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
             "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
@@ -245,32 +329,6 @@ class CampaignRunner:
         if decision.max_soak_reached and spec.on_max_soak == "fail":
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
-
-    async def _positions(self, step: int, missing: list[int]) -> None:
-        """Measure every missing position; each row is committed before the next move."""
-        spec, target_c = self.spec, self.spec.setpoints_c[step]
-        store.set_cursor(self.sf, self.id, step, "positions", missing[0])
-        for k, pos in enumerate(missing):
-            await self._checkpoint()
-            t_start = self.clock.now()
-            ref = self.refs[pos]
-            await self._move_to(self.dev.angles_for(ref))
-            await self._wait(spec.settle_s)
-            acq, flags, attempts = await self._measure()
-            status = await self._chamber()
-            t_mid = self.clock.now() - acq.duration_s / 2.0
-            row = {
-                "step": step, "position": pos, "t_s": self._t(t_mid), "setpoint_c": target_c,
-                "chamber_c": status.process_c, "sensor_c": acq.sensor_c,
-                "ref_x": float(ref[0]), "ref_y": float(ref[1]), "ref_z": float(ref[2]),
-                "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
-                "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
-                "attempts": attempts, "flags": ",".join(flags) or None,
-            }
-            self.eta.position_done(self.clock.now() - t_start)
-            next_pos = missing[k + 1] if k + 1 < len(missing) else self.n_pos
-            progress = self._publish(step, "positions", pos, status, target_c, write=False)
-            store.commit_measurement(self.sf, self.id, row, next_pos, progress)
 
     async def _fitting(self) -> None:
         camp = store.load_campaign(self.sf, self.id)
@@ -300,9 +358,8 @@ class CampaignRunner:
         return await self.guard.call("accelerometer.acquire",
                                      lambda: self.dev.accelerometer.acquire(n))
 
-    async def _measure(self) -> tuple[Acquisition, list[str], int]:
+    async def _measure(self, n: int) -> tuple[Acquisition, list[str], int]:
         """Acquire; on a failed quality check measure once more and keep the second capture."""
-        n = self.spec.samples_per_position
         acq = await self._acquire(n)
         flags = check_acquisition(acq, n, self.spec.quality)
         if not flags:
