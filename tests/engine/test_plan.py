@@ -89,3 +89,26 @@ async def test_engine_executes_exactly_the_plan(sf) -> None:  # type: ignore[no-
     assert len(runner.eta.position_times_s) == 18
     assert len(runner.eta.soak_times_s) == 3 and len(runner.eta.ramp_times_s) == 3
     assert np.all(np.asarray(runner.eta.position_times_s) > 0)
+
+
+def test_offline_simulator_interprets_the_same_plan(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """simulate_campaign has no loop of its own: it executes campaign_plan's messages."""
+    from simulators import campaign_sim
+    from simulators.truth import SensorTruth
+
+    seen: list[pl.Msg] = []
+    real = pl.campaign_plan
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        for m in real(*args, **kwargs):
+            seen.append(m)
+            yield m
+
+    monkeypatch.setattr(campaign_sim.plan, "campaign_plan", spy)
+    rec = campaign_sim.simulate_campaign(SensorTruth.adxl355_typical(0), setpoints_c=[-10.0, 30.0],
+                                         schedule=schedule_refs("six"), soak_min=5.0,
+                                         samples_per_position=50)
+    saves = [(m.step, m.position) for m in seen if isinstance(m, pl.Save)]
+    assert saves == [(s, p) for s in range(2) for p in range(6)]
+    assert list(rec.columns["step"]) == [s for s, _ in saves]
+    assert list(rec.columns["position"]) == [p for _, p in saves]
