@@ -30,7 +30,13 @@ from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import stability, store
 from service.engine.calibrate import calibrate_columns
-from service.engine.guard import AbortRequested, CampaignFailed, DeviceGuard, FaultPolicy
+from service.engine.guard import (
+    AbortRequested,
+    CampaignFailed,
+    DeviceGuard,
+    FaultPolicy,
+    clock_speed,
+)
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -49,11 +55,13 @@ from service.engine.quality import check_acquisition
 from service.engine.rigs import RigDevices
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
+from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
 
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
 TURNTABLE_POLL_S = 1.0
 DEFAULT_SAFE_C = 23.0  # before the spec is parsed (RunSpec.safe_c otherwise)
+HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 SAFE_ATTEMPTS = 3  # tries per safe-state command
 log = logging.getLogger(__name__)
@@ -82,6 +90,8 @@ class CampaignRunner:
         self._progress: dict[str, Any] = {}
         # Called with (message, started_s, ended_s) for every plan message executed.
         self._subscribers: list[Subscriber] = []
+        self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
+        self._last_soak: WaitStable | None = None
 
     def subscribe(self, fn: Subscriber) -> None:
         """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""
@@ -148,6 +158,7 @@ class CampaignRunner:
                         spec.suspend_limit_s),
             on_suspend=self._suspend, on_resume=self._unsuspend, check_abort=self._abort_asked,
         )
+        self.suspenders = Suspenders(limit_s=spec.suspend_limit_s)
         if camp.state == "queued":
             return store.transition(self.sf, self.id, "running", started_at=camp.started_at
                                     or store.now_utc(),
@@ -228,7 +239,19 @@ class CampaignRunner:
     async def _save(self, msg: Save) -> None:
         """Commit the reading and the cursor past it in one transaction (the crash rule)."""
         acq, flags, attempts = msg.acquisition
-        status = await self._chamber()
+        while True:
+            status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
+            if tripped is None:
+                break
+            # The reading was taken while the chamber misbehaved: discard it, hold, re-soak
+            # where the physics needs it, and measure this position again.
+            await self._hold(*tripped, setpoint_c=msg.setpoint_c)
+            if tripped[0].restart_soak and self._last_soak is not None:
+                await self._soak(dataclasses.replace(self._last_soak, resumed=True))
+            await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+            await self._wait(self.spec.settle_s)
+            acq, flags, attempts = await self._measure(self.spec.samples_per_position)
         t_mid = self.clock.now() - acq.duration_s / 2.0
         ref = msg.ref_g
         row = {
@@ -267,7 +290,7 @@ class CampaignRunner:
             self._publish(step, "ramp", 0, status, target_c)
             await self._checkpoint()
             await self._wait(spec.soak_poll_s)
-            status = await self._chamber()
+            status = await self._chamber_watched(None)
 
     async def _soak(self, msg: WaitStable) -> None:
         """Wait for stability (policy of the spec); log the decision in steps_log.
@@ -278,6 +301,8 @@ class CampaignRunner:
         """
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         resumed, edge = msg.resumed, msg.edge
+        if not resumed or self._last_soak is None or self._last_soak.step != step:
+            self._last_soak = msg
         cfg = spec.stability
         sweep_s = msg.n_positions * self.eta.position_s
         if resumed:
@@ -293,6 +318,13 @@ class CampaignRunner:
         decision = stability.Decision(False, "started")
         while True:
             status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, target_c)
+            if tripped is not None:
+                # The die was disturbed: hold until the chamber is back, then soak afresh.
+                await self._hold(*tripped, setpoint_c=target_c)
+                start_s = self.clock.now()
+                ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
+                continue
             now_s = self.clock.now()
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
@@ -368,18 +400,75 @@ class CampaignRunner:
         return acq, check_acquisition(acq, n, self.spec.quality), 2
 
     async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
+        """Command the table and wait for in-position; a table that misses it suspends.
+
+        The table suspender stops the table and commands the move again after each
+        ``move_timeout_s``; it fails the campaign once it lasted ``suspend_limit_s``
+        of real time (no soak restart: the table does not disturb the temperature).
+        """
         tt = self.dev.turntable
-        await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
-        start_s = self.clock.now()
+        susp = self.suspenders.table
+        since_s: float | None = None
         while True:
-            await self.clock.sleep(TURNTABLE_POLL_S)
-            st = await self.guard.call("turntable.read_status", tt.read_status)
-            if st.in_position and not st.moving:
+            await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
+            start_s = self.clock.now()
+            while True:
+                await self.clock.sleep(TURNTABLE_POLL_S)
+                st = await self.guard.call("turntable.read_status", tt.read_status)
+                if st.in_position and not st.moving:
+                    if since_s is not None:
+                        self._resumed(susp, since_s)
+                    return
+                if self.clock.now() - start_s > self.spec.move_timeout_s:
+                    break
+            why = table_not_in_position(st, angles_deg, self.clock.now() - start_s)
+            if since_s is None:
+                since_s = self.clock.now()
+                self._suspend(f"{susp.name}: {why}")
+            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
+                raise CampaignFailed(f"{why}; suspended {susp.limit_s:.0f} s of real time")
+            await self.guard.call("turntable.stop", tt.stop)
+            await self._checkpoint()
+
+    async def _chamber_watched(self, setpoint_c: float | None) -> ChamberStatus:
+        """Read the chamber; hold while a chamber suspender is tripped (band armed if given)."""
+        while True:
+            status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, setpoint_c)
+            if tripped is None:
+                return status
+            await self._hold(*tripped, setpoint_c=setpoint_c)
+
+    async def _hold(self, susp: Suspender, why: str, *, setpoint_c: float | None) -> None:
+        """Suspended: no readings, chamber keeps its setpoint, until clear for ``clear_s``.
+
+        Pause and abort still apply. Fails the campaign when the condition lasted
+        ``limit_s`` of real time (clock time over the clock's speed-up).
+        """
+        since_s = self.clock.now()
+        clear_since_s: float | None = None
+        self._suspend(f"{susp.name}: {why}")
+        while True:
+            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
+                raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
+                                     "real time")
+            await self._checkpoint()
+            await self._wait(min(self.spec.soak_poll_s, HOLD_POLL_S))
+            status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, setpoint_c)
+            if tripped is not None:
+                why, clear_since_s = tripped[1], None
+                continue
+            if clear_since_s is None:
+                clear_since_s = self.clock.now()
+            if self.clock.now() - clear_since_s >= susp.clear_s:
+                self._resumed(susp, since_s)
                 return
-            if self.clock.now() - start_s > self.spec.move_timeout_s:
-                raise CampaignFailed(
-                    f"turntable not in position {angles_deg} after {self.spec.move_timeout_s:.0f} s"
-                    f" (at {st.angles_deg}, faults {st.faults})")
+
+    def _resumed(self, susp: Suspender, since_s: float) -> None:
+        self.suspension_log.append({"suspender": susp.name, "t_s": round(self._t(since_s), 3),
+                                    "held_s": round(self.clock.now() - since_s, 3)})
+        self._unsuspend()
 
     async def _drive_safe(self) -> None:
         """The rig's safe state: chamber at the safe temperature, table stopped and home.
