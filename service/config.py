@@ -58,3 +58,12 @@ class Settings:
     # A comment line keeps proxies from closing an idle SSE stream.
     events_heartbeat_s: float = 15.0
     engine_owner: str | None = None
+    # The rigs this process's campaign engine drives (``serve --rigs``, SOAKCAL_ENGINE_RIGS):
+    # None every rig, an empty set none (API only). service/engine/worker.py parses it.
+    engine_rigs: frozenset[str] | None = field(default_factory=lambda: _engine_rigs())
+
+
+def _engine_rigs() -> frozenset[str] | None:
+    from service.engine.worker import engine_rigs_from_env
+
+    return engine_rigs_from_env()

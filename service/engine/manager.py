@@ -24,7 +24,7 @@ import logging
 import os
 import socket
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 from sqlalchemy import delete, insert, select, update
@@ -34,6 +34,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from drivers.clock import Clock, RealClock, ScaledClock
 from service.db.models import Campaign, Rig, RigLease
 from service.db.timestamps import as_utc, utcnow
+from service.engine import store
 from service.engine.rigs import open_rig, rig_time_scale
 from service.engine.runner import CampaignRunner
 from service.engine.store import cas_transition
@@ -59,6 +60,7 @@ class CampaignManager:
         lease_s: float = 30.0,
         poll_wall_s: float = POLL_WALL_S,
         rig_options: dict[str, Any] | None = None,
+        rigs: Collection[str] | None = None,
     ) -> None:
         self.sf = session_factory
         self.sim_speed = sim_speed
@@ -70,6 +72,8 @@ class CampaignManager:
         self.lease_s = lease_s
         self.poll_wall_s = poll_wall_s
         self.rig_options = rig_options or {}
+        # The rigs this process drives (``--rigs``); None: every rig in the database.
+        self.rigs = None if rigs is None else frozenset(rigs)
         self._loop_task: asyncio.Task | None = None
         self._runs: dict[str, asyncio.Task] = {}  # rig name -> running campaign task
 
@@ -93,6 +97,8 @@ class CampaignManager:
         with self.sf() as s:
             rigs = s.execute(select(Rig.name)).scalars().all()
         for rig in rigs:
+            if self.rigs is not None and rig not in self.rigs:
+                continue  # another host drives it
             task = self._runs.get(rig)
             if task is not None and not task.done():
                 continue
@@ -183,7 +189,8 @@ class CampaignManager:
                            "sensors": row.sensors}
             clock = self._clock_for(rig_cfg)
             async with open_rig(rig_cfg, clock, seed=campaign_id, **self.rig_options) as devices:
-                await CampaignRunner(self.sf, campaign_id, devices, clock).run()
+                fence = store.Fence(rig, self.owner)
+                await CampaignRunner(self.sf, campaign_id, devices, clock, fence=fence).run()
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # the rig could not be opened: fail the campaign, not the service

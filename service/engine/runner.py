@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import functools
 import logging
 import math
 from collections.abc import Awaitable, Callable
@@ -79,6 +80,7 @@ class CampaignRunner:
         *,
         calibrate: Calibrate = calibrate_columns,
         on_step: StepReporter | None = None,
+        fence: store.Fence | None = None,
     ) -> None:
         self.sf = session_factory
         self.id = campaign_id
@@ -86,6 +88,7 @@ class CampaignRunner:
         self.clock = clock
         self.calibrate = calibrate
         self.on_step = on_step
+        self.fence = fence  # every measurement commit checks this lease (manager-run campaigns)
         self.fit_result: Any = None  # the core's fit object, for the demo's report
         self._progress: dict[str, Any] = {}
         # Called with (message, started_s, ended_s) for every plan message executed.
@@ -115,6 +118,7 @@ class CampaignRunner:
         self._touched = False
         outcome: tuple[str, dict[str, Any]] | None = None
         cancelled: asyncio.CancelledError | None = None
+        lost: store.LeaseLost | None = None
         try:
             if not self._start(camp):
                 return store.read_control(self.sf, self.id).state
@@ -125,6 +129,10 @@ class CampaignRunner:
             outcome = ("aborted", {})
         except CampaignFailed as exc:
             outcome = ("failed", {"error": str(exc)})
+        except store.LeaseLost as exc:
+            # Another process holds the rig now: write nothing more, park, leave the state.
+            log.error("campaign %s: %s; stopping", self.id, exc)
+            lost = exc
         except asyncio.CancelledError as exc:
             cancelled = exc
             task = asyncio.current_task()
@@ -138,6 +146,8 @@ class CampaignRunner:
                 await self._drive_safe()
         if cancelled is not None:
             raise cancelled
+        if lost is not None:
+            return store.read_control(self.sf, self.id).state
         assert outcome is not None
         state, fields = outcome
         if not store.transition(self.sf, self.id, state, clear_action=True, **fields):
@@ -264,7 +274,8 @@ class CampaignRunner:
         }
         progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
                                  write=False)
-        store.commit_measurement(self.sf, self.id, row, msg.next_position, progress)
+        store.commit_measurement(self.sf, self.id, row, msg.next_position, progress,
+                                 fence=self.fence)
 
     # --- phases -------------------------------------------------------------
     async def _ramp(self, msg: SetChamber) -> None:
@@ -455,6 +466,11 @@ class CampaignRunner:
             await self._checkpoint()
             await self._wait(min(self.spec.soak_poll_s, HOLD_POLL_S))
             status = await self._chamber()
+            if setpoint_c is not None and abs(status.setpoint_c - setpoint_c) > 1e-3:
+                # Someone changed the controller behind the engine (a front panel, a
+                # process that lost the rig parking it): command our setpoint again.
+                await self.guard.call("chamber.set_setpoint",
+                                      functools.partial(self.dev.chamber.set_setpoint, setpoint_c))
             tripped = self.suspenders.check_chamber(status, setpoint_c)
             if tripped is not None:
                 why, clear_since_s = tripped[1], None

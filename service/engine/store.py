@@ -16,7 +16,7 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from service.db.models import Calibration, Campaign, Measurement, utcnow
+from service.db.models import Calibration, Campaign, Measurement, RigLease, utcnow
 from service.engine.states import TERMINAL, TRANSITIONS
 
 SessionFactory = sessionmaker[Session]
@@ -139,17 +139,50 @@ def set_cursor(sf: SessionFactory, campaign_id: int, step: int, phase: str, posi
     update_campaign(sf, campaign_id, **fields)
 
 
+@dataclass(frozen=True)
+class Fence:
+    """The rig lease this process must still hold for its writes to count (a fencing token)."""
+
+    rig: str
+    owner: str
+
+
+class LeaseLost(Exception):
+    """A fenced write found the rig lease expired or held by another process."""
+
+
+def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
+    """Inside the caller's transaction: this process still holds a live lease on the rig.
+
+    A no-op UPDATE rather than a SELECT so PostgreSQL locks the lease row until
+    the commit: a takeover (a conditional UPDATE on the same row) waits for this
+    transaction and then sees the lease as it is after it.
+    """
+    res = s.execute(
+        update(RigLease)
+        .where(RigLease.rig == fence.rig, RigLease.owner == fence.owner,
+               RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
+        .values(owner=fence.owner)
+    )
+    if res.rowcount != 1:
+        raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
+
+
 def commit_measurement(
     sf: SessionFactory, campaign_id: int, row: dict[str, Any], next_position: int,
-    progress: dict[str, Any],
+    progress: dict[str, Any], fence: Fence | None = None,
 ) -> bool:
     """Store one measurement and move the cursor past it, atomically.
 
     Returns False when (step, position) was already stored (a previous process
-    committed it just before dying): that is "done", not an error.
+    committed it just before dying): that is "done", not an error. With a
+    ``fence``, the same transaction verifies that this process still holds the
+    rig's lease; if not, nothing is written and :class:`LeaseLost` is raised.
     """
     with sf() as s:
         try:
+            if fence is not None:
+                _check_fence(s, fence, campaign_id)
             s.add(Measurement(campaign_id=campaign_id, **row))
             s.execute(
                 update(Campaign).where(Campaign.id == campaign_id).values(
@@ -161,6 +194,9 @@ def commit_measurement(
             return True
         except IntegrityError:
             s.rollback()
+        except LeaseLost:
+            s.rollback()
+            raise
     set_cursor(sf, campaign_id, row["step"], "positions", next_position, progress)
     return False
 

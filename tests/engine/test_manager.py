@@ -70,3 +70,40 @@ def test_transition_is_conditional_on_the_from_state(sf) -> None:
     assert store.load_campaign(sf, cid).state == "aborted"
     with sf() as s:  # and only moves the table allows
         assert not cas_transition(s, cid, "aborted", "running")
+
+
+async def test_a_measurement_commit_is_fenced_by_the_rig_lease(sf) -> None:  # type: ignore[no-untyped-def]
+    """A process that lost the lease (stalled past it) writes nothing more, even before
+    its renewal notices: the commit itself checks the lease in its transaction."""
+    import asyncio
+
+    from engine_fakes import make_fake_rig
+    from engine_helpers import fake_calibrate
+    from sqlalchemy import select, update
+
+    from drivers.clock import VirtualClock
+    from service.db.models import Measurement, RigLease
+    from service.engine.runner import CampaignRunner
+
+    def n_rows() -> int:
+        with sf() as s:
+            return len(s.execute(select(Measurement.id)
+                                 .where(Measurement.campaign_id == cid)).all())
+
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf)
+    a = CampaignManager(sf, owner="proc-a", lease_s=3600)  # its renewal would come far too late
+    assert a._claim("sim", cid)
+    runner = CampaignRunner(sf, cid, rig.devices, clock, calibrate=fake_calibrate,
+                            fence=store.Fence("sim", "proc-a"))
+    task = asyncio.create_task(runner.run())
+    while n_rows() < 3:
+        await asyncio.sleep(0.001)
+    with sf() as s:  # proc-b took the rig over while proc-a was stalled
+        s.execute(update(RigLease).where(RigLease.rig == "sim").values(owner="proc-b"))
+        s.commit()
+    n_at_takeover = n_rows()
+    assert await asyncio.wait_for(task, 30) == "running"  # left for proc-b, not failed
+    assert n_rows() == n_at_takeover
+    assert rig.physics.setpoint_c == 23.0  # parked: the lost lease is an exit like any other
