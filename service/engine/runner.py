@@ -64,6 +64,7 @@ TURNTABLE_POLL_S = 1.0
 DEFAULT_SAFE_C = 23.0  # before the spec is parsed (RunSpec.safe_c otherwise)
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
+ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
 SAFE_ATTEMPTS = 3  # tries per safe-state command
 log = logging.getLogger(__name__)
 
@@ -95,6 +96,7 @@ class CampaignRunner:
         self._subscribers: list[Subscriber] = []
         self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
         self._last_soak: WaitStable | None = None
+        self._abort_checked_s = -math.inf
 
     def subscribe(self, fn: Subscriber) -> None:
         """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""
@@ -166,7 +168,8 @@ class CampaignRunner:
             self.clock,
             FaultPolicy(spec.retry_attempts, spec.retry_backoff_s, spec.suspend_poll_s,
                         spec.suspend_limit_s),
-            on_suspend=self._suspend, on_resume=self._unsuspend, check_abort=self._abort_asked,
+            on_suspend=self._suspend, on_resume=self._unsuspend,
+            check_abort=self._abort_asked_recently,
         )
         self.suspenders = Suspenders(limit_s=spec.suspend_limit_s)
         if camp.state == "queued":
@@ -568,9 +571,25 @@ class CampaignRunner:
         """
         end_s = self.clock.now() + dt_s
         while (left_s := end_s - self.clock.now()) > 0:
-            await self.clock.sleep(min(left_s, self.spec.soak_poll_s, ABORT_CHECK_S))
-            if self._abort_asked():
+            chunk_s = min(left_s, self.spec.soak_poll_s, ABORT_CHECK_S)
+            await self.clock.sleep(chunk_s)
+            # More to wait: look for an abort now (the next device call checks after the last).
+            if chunk_s < left_s and self._abort_asked():
                 raise AbortRequested("operator")
+
+    def _abort_asked_recently(self) -> bool:
+        """The guard's check before every device call, read at most every 50 ms of loop time.
+
+        On a real rig a device call takes longer than that, so this is every call;
+        on a VirtualClock (tests, demo) thousands of calls pass per wall second and
+        the database read (~1 ms) would dominate the run. Waits and checkpoints
+        read unthrottled (:meth:`_abort_asked`).
+        """
+        now_s = asyncio.get_running_loop().time()  # the event loop's monotonic time: no waiting
+        if now_s - self._abort_checked_s < ABORT_READ_EVERY_S:
+            return False
+        self._abort_checked_s = now_s
+        return self._abort_asked()
 
     def _abort_asked(self) -> bool:
         ctl = store.read_control(self.sf, self.id)

@@ -40,8 +40,10 @@ def load_campaign(sf: SessionFactory, campaign_id: int) -> Campaign:
 
 
 def read_control(sf: SessionFactory, campaign_id: int) -> Control:
-    with sf() as s:
-        row = s.execute(
+    """State and requested action; read before every device call, so a bare connection
+    (no ORM session: ~0.4 ms instead of ~1 ms on SQLite)."""
+    with sf.kw["bind"].connect() as conn:
+        row = conn.execute(
             select(Campaign.state, Campaign.requested_action).where(Campaign.id == campaign_id)
         ).one()
         return Control(state=row[0], requested_action=row[1])

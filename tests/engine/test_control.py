@@ -11,7 +11,7 @@ from test_runner import assert_complete_once, campaign, measurements
 
 from drivers.clock import VirtualClock
 from service.engine import store
-from service.engine.runner import CampaignRunner
+from service.engine.runner import ABORT_CHECK_S, CampaignRunner
 from service.engine.states import IllegalTransition, check_action
 
 
@@ -101,5 +101,7 @@ async def test_abort_is_honoured_during_a_very_long_settle(sf) -> None:
     t_asked = clock.now()
     store.update_campaign(sf, cid, requested_action="abort")
     assert await asyncio.wait_for(task, 10) == "aborted"
-    assert clock.now() - t_asked <= 60.0 + 1e-6  # one abort check period of the clock
+    # Honoured within the move in progress plus one abort-check period of the settle (60 s),
+    # not after 10⁹ s.
+    assert clock.now() - t_asked <= 2 * ABORT_CHECK_S
     assert rig.physics.setpoint_c == 23.0
