@@ -27,8 +27,8 @@ import uuid
 from collections.abc import Callable, Collection
 from typing import Any
 
-from sqlalchemy import delete, insert, select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy import delete, insert, select, text, update
+from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
 from drivers.clock import Clock, RealClock, ScaledClock
@@ -156,13 +156,21 @@ class CampaignManager:
                 return True
             except IntegrityError:
                 s.rollback()
-            res = s.execute(
-                update(RigLease)
-                .where(RigLease.rig == rig,
-                       (RigLease.lease_until < now) | (RigLease.owner == self.owner))
-                .values(campaign_id=campaign_id, owner=self.owner, lease_until=until)
-            )
-            s.commit()
+            if s.get_bind().dialect.name == "postgresql":
+                # A stalled holder may sit inside a fenced commit holding the lease row's
+                # lock (store._check_fence): give up after 2 s rather than hang the scan.
+                s.execute(text("SET LOCAL lock_timeout = '2s'"))
+            try:
+                res = s.execute(
+                    update(RigLease)
+                    .where(RigLease.rig == rig,
+                           (RigLease.lease_until < now) | (RigLease.owner == self.owner))
+                    .values(campaign_id=campaign_id, owner=self.owner, lease_until=until)
+                )
+                s.commit()
+            except OperationalError:
+                s.rollback()
+                return False
             return res.rowcount == 1
 
     def _renew(self, rig: str) -> bool:
