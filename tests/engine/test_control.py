@@ -105,3 +105,14 @@ async def test_abort_is_honoured_during_a_very_long_settle(sf) -> None:
     # not after 10⁹ s.
     assert clock.now() - t_asked <= 2 * ABORT_CHECK_S
     assert rig.physics.setpoint_c == 23.0
+
+
+async def test_an_unusable_spec_fails_through_the_table_without_touching_the_rig(sf) -> None:
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf, {**SMALL_SPEC, "on_max_soak": "explode"})
+    assert await CampaignRunner(sf, cid, rig.devices, clock).run() == "failed"
+    c = campaign(sf, cid)
+    assert c.state == "failed" and "on_max_soak" in c.error and c.finished_at is not None
+    assert rig.accelerometer.acquisitions == 0 and rig.physics.setpoint_c == 23.0
+    assert rig.turntable.stops == 0  # never touched: no safe-state commands either
