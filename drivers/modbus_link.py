@@ -4,12 +4,16 @@ Every register access of the chamber and turntable drivers goes through
 :class:`ModbusLink`. It owns what pymodbus leaves to the caller:
 
 * one request in flight per client (an ``asyncio.Lock`` around each request),
-* retries with exponential backoff (the backoff waits on the injected clock),
-* reconnect on the next attempt after the transport dropped,
-* translation of every failure into :mod:`drivers.faults`.
+* reconnect on the next request after the transport dropped,
+* translation of every failure into :mod:`drivers.faults`, with the register
+  and the Modbus exception's name in the message.
 
-pymodbus' own retries and auto-reconnect are switched off so the policy is in
-one place. The reply timeout is wall time on purpose: it guards a socket, not
+Retrying is *not* the link's job by default (``RetryPolicy.attempts = 1``):
+the campaign engine's guard (service/engine/guard.py) is the one retry owner,
+so a fault is decided once instead of 3 link tries × 4 guard tries. Tools that
+talk to a device without the engine may still ask for link retries.
+pymodbus' own retries and auto-reconnect are switched off. The reply timeout is wall
+time on purpose: it guards a socket, not
 physics, and with a :class:`~drivers.clock.VirtualClock` a clock-based timeout
 would fire whenever the loop is briefly idle while a reply is still in flight.
 """
@@ -29,10 +33,11 @@ from pymodbus.pdu import ModbusPDU
 
 from drivers.clock import Clock
 from drivers.faults import (
+    MODBUS_EXCEPTION_NAMES,
     ConnectionLost,
     DeviceFault,
     DeviceTimeout,
-    ExceptionReply,
+    ModbusExceptionReply,
     ProtocolError,
     ValueOutOfRange,
 )
@@ -48,7 +53,7 @@ class RetryPolicy:
     """How hard to try before a fault reaches the caller."""
 
     timeout_s: float = 1.0  # wall time per attempt
-    attempts: int = 3  # total tries per request (1 = no retry)
+    attempts: int = 1  # total tries per request (1 = no retry: the engine's guard retries)
     backoff_s: float = 0.2  # first backoff, clock time; doubles each retry
     backoff_max_s: float = 5.0
 
@@ -135,7 +140,7 @@ class ModbusLink:
 
     async def read_registers(self, address: int, count: int) -> list[int]:
         rr = await self._request(
-            "read", lambda c: c.read_holding_registers(
+            "read", address, lambda c: c.read_holding_registers(
                 address, count=count, device_id=self.device_id)
         )
         if len(rr.registers) != count:  # a short reply is a broken device, not noise
@@ -146,7 +151,7 @@ class ModbusLink:
 
     async def write_registers(self, address: int, words: list[int]) -> None:
         await self._request(
-            "write", lambda c: c.write_registers(address, words, device_id=self.device_id)
+            "write", address, lambda c: c.write_registers(address, words, device_id=self.device_id)
         )
 
     async def close(self) -> None:
@@ -155,7 +160,7 @@ class ModbusLink:
 
     # --- internals ----------------------------------------------------------
     async def _request(
-        self, what: str, call: Callable[[ModbusBaseClient], Awaitable[ModbusPDU]]
+        self, what: str, address: int, call: Callable[[ModbusBaseClient], Awaitable[ModbusPDU]]
     ) -> ModbusPDU:
         async with self._lock:
             last: DeviceFault | None = None
@@ -194,9 +199,12 @@ class ModbusLink:
                     raise ProtocolError(self.device, f"{what}: {exc}") from exc
                 if rr.isError():
                     code = getattr(rr, "exception_code", None)
-                    last = ExceptionReply(self.device, f"{what}: exception code {code}", code)
-                    # Illegal address/value will not heal by retrying: report at once.
-                    if code in (1, 2, 3):
+                    name = MODBUS_EXCEPTION_NAMES.get(code or 0, "unknown exception")
+                    last = ModbusExceptionReply(
+                        self.device, f"{what} register {address}: exception code {code} "
+                                     f"({name})", code, address)
+                    # Illegal function/address/value will not heal by retrying: report at once.
+                    if not last.retryable:
                         raise last
                     continue
                 return rr

@@ -21,7 +21,8 @@ from service.db.models import Campaign, Rig, RigLease, Sensor
 from service.db.timestamps import as_utc, utcnow
 from service.dry_run import PlanCheck, check_campaign, predicted_duration_s
 from service.engine.spec import CampaignSpec
-from service.engine.states import PHASES, TERMINAL, check_action
+from service.engine.states import PHASES, TERMINAL, UNHELD_TARGETS, check_action
+from service.engine.store import cas_transition
 
 SIM_RIG_NAME = "sim"
 SIM_CHAMBER_RANGE_C = (-70.0, 180.0)
@@ -31,7 +32,7 @@ SIM_RIG: dict[str, Any] = {
     "turntable": {"driver": "sim"},
     "sensors": [{"driver": "sim", "model": "ADXL355"}],
 }
-ACTIVE_STATES = ("running", "paused")
+ACTIVE_STATES = ("running", "paused")  # paused holds the rig only once started
 
 
 class CampaignNotFound(LookupError):
@@ -165,21 +166,30 @@ def ensure_sensor(session: Session, serial: str) -> None:
 
 
 def apply_action(session: Session, campaign_id: int, action: str) -> Campaign:
-    """Pause, resume or abort; raises ``IllegalTransition`` (409) or ``CampaignNotFound``."""
-    for _ in range(5):  # a runner may change the state between our read and our write
+    """Pause, resume or abort; raises ``IllegalTransition`` (409) or ``CampaignNotFound``.
+
+    A campaign no engine holds moves at once to the state the table gives
+    (``states.UNHELD_TARGETS``); a held one gets ``requested_action``, which its
+    engine applies within one device call. Both writes are conditional on the
+    state read, so a racing engine or API request cannot be overwritten.
+    """
+    for _ in range(5):  # an engine may change the state between our read and our write
         campaign = session.get(Campaign, campaign_id, populate_existing=True)
         if campaign is None:
             raise CampaignNotFound(campaign_id)
         check_action(action, campaign.state)
-        values = _direct_transition(session, campaign, action)
-        if values is None:
-            values = {"requested_action": action}
-        result = session.execute(
-            update(Campaign)
-            .where(Campaign.id == campaign_id, Campaign.state == campaign.state)
-            .values(**values)
-        )
-        if result.rowcount == 1:
+        held = campaign.state == "running" or _held_by_runner(session, campaign.id)
+        target = None if held else UNHELD_TARGETS[action].get(campaign.state)
+        if target is not None:
+            ok = cas_transition(session, campaign_id, campaign.state, target,
+                                requested_action=None)
+        else:
+            ok = session.execute(
+                update(Campaign)
+                .where(Campaign.id == campaign_id, Campaign.state == campaign.state)
+                .values(requested_action=action)
+            ).rowcount == 1
+        if ok:
             session.commit()
             refreshed = session.get(Campaign, campaign_id, populate_existing=True)
             assert refreshed is not None
@@ -188,27 +198,22 @@ def apply_action(session: Session, campaign_id: int, action: str) -> Campaign:
     raise RuntimeError(f"campaign {campaign_id} kept changing state; try again")
 
 
-def _direct_transition(session: Session, campaign: Campaign, action: str) -> dict | None:
-    """Column values when no runner holds the campaign, else None (ask the runner)."""
-    if campaign.state == "running" or _held_by_runner(session, campaign.id):
-        return None
-    now = utcnow()
-    if action == "pause":  # queued -> paused: the manager skips it until resumed
-        return {"state": "paused", "requested_action": None}
-    if action == "resume":  # paused -> queued: the manager picks it up from its cursor
-        return {"state": "queued", "requested_action": None}
-    return {"state": "aborted", "requested_action": None, "finished_at": now}
-
-
 def _held_by_runner(session: Session, campaign_id: int) -> bool:
     lease = session.scalar(select(RigLease).where(RigLease.campaign_id == campaign_id))
     return lease is not None and (as_utc(lease.lease_until) or utcnow()) > utcnow()
 
 
 def rig_busy(session: Session, rig_name: str) -> bool:
-    """A campaign is running or paused on the rig, or a live lease holds it."""
+    """A campaign holds the rig: running, paused after it started, or a live lease.
+
+    A campaign paused while still queued has not touched the rig and does not
+    hold it: the other queued campaigns run (a paused queue cannot jam).
+    """
     active = session.scalar(
-        select(Campaign.id).where(Campaign.rig == rig_name, Campaign.state.in_(ACTIVE_STATES))
+        select(Campaign.id).where(
+            Campaign.rig == rig_name,
+            (Campaign.state == "running")
+            | ((Campaign.state == "paused") & Campaign.started_at.is_not(None)))
     )
     if active is not None:
         return True

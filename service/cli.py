@@ -50,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_calibration_commands(sub)
     _add_export(sub)
     _add_serve(sub)
+    _add_engine_hosts(sub)
     _add_token(sub)
     _add_campaign(sub)
     _add_sensor(sub)
@@ -270,6 +271,37 @@ def _positive_float(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
     return value
+
+
+# --- rigs on several hosts: serve --rigs, worker (service/engine/worker.py) ---------------
+
+
+def _add_engine_hosts(sub: Any) -> None:
+    """``serve --rigs NAME,…|none`` and ``worker --rigs NAME,…`` (after ``_add_serve``)."""
+    from service.engine.worker import rigs_argument
+
+    rigs_help = ("drive only these rigs' campaigns ('none': API only; default: every rig)")
+    serve = sub.choices["serve"]
+    serve.add_argument("--rigs", type=rigs_argument, default=None, metavar="NAME,…|none",
+                       help=rigs_help)
+    run_serve = serve.get_default("handler")
+
+    def serve_with_rigs(args: argparse.Namespace) -> int:
+        if args.rigs is not None:  # Settings reads it (service/config.py engine_rigs)
+            import os
+
+            from service.engine.worker import ENGINE_RIGS_ENV
+
+            os.environ[ENGINE_RIGS_ENV] = args.rigs
+        return int(run_serve(args))
+
+    serve.set_defaults(handler=serve_with_rigs)
+    worker = sub.add_parser("worker", help="run the campaign engine for some rigs, no HTTP")
+    worker.add_argument("--rigs", type=rigs_argument, required=True, metavar="NAME,…",
+                        help="the rigs this process drives (their devices are on this host)")
+    worker.add_argument("--sim-speed", type=_positive_float, default=600.0, metavar="FACTOR",
+                        help="simulated rigs run FACTOR times faster than the wall clock")
+    worker.set_defaults(handler=_delegate("service.engine.worker", "run_worker", "worker"))
 
 
 # --- campaign (REST client) ------------------------------------------------------------

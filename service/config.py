@@ -154,3 +154,12 @@ class Settings:
     engine_owner: str | None = None
     # Request bodies over this are refused with 413 before they are parsed.
     max_body_bytes: int = field(default_factory=max_body_bytes)
+    # The rigs this process's campaign engine drives (``serve --rigs``, SOAKCAL_ENGINE_RIGS):
+    # None every rig, an empty set none (API only). service/engine/worker.py parses it.
+    engine_rigs: frozenset[str] | None = field(default_factory=lambda: _engine_rigs())
+
+
+def _engine_rigs() -> frozenset[str] | None:
+    from service.engine.worker import engine_rigs_from_env
+
+    return engine_rigs_from_env()

@@ -1,7 +1,8 @@
 """Offline soak-campaign simulator: the twin's physics without the wire, for tests and benchmarks.
 
-It walks the same timeline a real campaign has -- ramp the chamber at its rate
-limit, soak, visit each scheduled position (move, settle, capture N samples) --
+It interprets the campaign's one plan (service/engine/plan.py) -- ramp the
+chamber at its rate limit, soak, visit each scheduled position (move, settle,
+capture N samples) --
 integrating the air temperature and the die temperature (first-order lag
 ``tau_s`` behind the air), and writes recording format v1 rows. The wire-level
 twin (``simulators/rig.py``) produces the same physics through Modbus and the
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration.recording import Recording
+from service.engine import plan
 from simulators.truth import Context, SensorTruth
 
 DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 10))
@@ -83,13 +85,13 @@ def simulate_campaign(
     refs = table1() if schedule is None else np.asarray(schedule, float)
     rng = np.random.default_rng(seed)
     n = int(samples_per_position)
-    capture_s = n / truth.odr_hz
 
     t, air, die, wsp = 0.0, ph.start_c, ph.start_c, ph.start_c
     rows: dict[str, list[float]] = {k: [] for k in (
         "t_s", "step", "setpoint_c", "position", "air", "die", "rate", "dir", "session")}
     direction = 0
     last_sp = ph.start_c
+    die_before = die
 
     def advance(dt: float, target: float) -> None:
         nonlocal t, air, die, wsp
@@ -99,31 +101,47 @@ def simulate_campaign(
         die = air + (die - air) * np.exp(-dt / ph.die_tau_s) if ph.die_tau_s > 0 else air
         t += dt
 
-    for k, sp in enumerate(setpoints_c):
-        if sp != last_sp:
-            direction = 1 if sp > last_sp else -1
-        last_sp = sp
-        while abs(wsp - sp) > 1e-9:  # ramp
-            advance(ph.dt_s, sp)
-        soak_left = soak_min * 60.0
-        while soak_left > 1e-9:
-            dt = min(ph.dt_s, soak_left)
-            advance(dt, sp)
-            soak_left -= dt
-        for j in range(refs.shape[0]):
-            advance(ph.move_s, sp)
+    # The campaign's one plan (service/engine/plan.py), interpreted with this module's physics:
+    # the chamber ramps at the rig's rate limit, the soak is a fixed soak_min, a move costs
+    # move_s (slew and settle), an acquisition n / odr_hz with its reading at mid-capture.
+    def handle(msg: plan.Msg) -> None:
+        nonlocal direction, last_sp, die_before
+        if isinstance(msg, plan.SetChamber):
+            sp = msg.setpoint_c
+            if sp != last_sp:
+                direction = 1 if sp > last_sp else -1
+            last_sp = sp
+            while abs(wsp - sp) > 1e-9:  # ramp
+                advance(ph.dt_s, sp)
+        elif isinstance(msg, plan.WaitStable):
+            soak_left = soak_min * 60.0
+            while soak_left > 1e-9:
+                dt = min(ph.dt_s, soak_left)
+                advance(dt, msg.setpoint_c)
+                soak_left -= dt
+        elif isinstance(msg, plan.Move):
+            advance(ph.move_s, last_sp)
+        elif isinstance(msg, plan.Settle) and msg.settle_s > 0:
+            advance(msg.settle_s, last_sp)
+        elif isinstance(msg, plan.Acquire):
+            capture_s = msg.n_samples / truth.odr_hz
             die_before = die
-            advance(capture_s / 2, sp)
+            advance(capture_s / 2, last_sp)
             rows["t_s"].append(t)
             rows["air"].append(air)
             rows["die"].append(die)
-            advance(capture_s / 2, sp)
+            advance(capture_s / 2, last_sp)
             rows["rate"].append((die - die_before) / capture_s)
-            rows["step"].append(k)
-            rows["setpoint_c"].append(sp)
-            rows["position"].append(j)
+        elif isinstance(msg, plan.Save):
+            rows["step"].append(msg.step)
+            rows["setpoint_c"].append(msg.setpoint_c)
+            rows["position"].append(msg.position)
             rows["dir"].append(direction)
-            rows["session"].append(sessions[k] if sessions is not None else 0)
+            rows["session"].append(sessions[msg.step] if sessions is not None else 0)
+
+    spec = plan.PlanSpec(setpoints_c=list(setpoints_c), samples_per_position=n, settle_s=0.0,
+                         ramp_c_per_min=ph.ramp_c_per_min, odr_hz=truth.odr_hz)
+    plan.interpret(plan.campaign_plan(spec, refs), handle)
 
     N = len(rows["t_s"])
     ref = np.tile(refs, (len(setpoints_c), 1))

@@ -113,4 +113,8 @@ def _campaign_manager(settings: Settings, factory: Any) -> Any | None:
     except ImportError as exc:
         log.error("campaign engine unavailable (%s): campaigns will stay queued", exc)
         return None
-    return CampaignManager(factory, sim_speed=settings.sim_speed, owner=settings.engine_owner)
+    if settings.engine_rigs == frozenset():  # serve --rigs none: the API alone
+        return None
+    only = {} if settings.engine_rigs is None else {"rigs": settings.engine_rigs}
+    return CampaignManager(factory, sim_speed=settings.sim_speed, owner=settings.engine_owner,
+                           **only)

@@ -3,8 +3,10 @@
 One loop per service process. For every rig it looks for work:
 
 1. a ``running`` campaign whose lease expired (its process died): crash recovery;
-2. else, when the rig holds no ``paused`` campaign (that one keeps the rig until
-   resumed or aborted, like the API's ``rig_busy``), the oldest ``queued`` one.
+2. else, when the rig holds no campaign paused *after it started* (that one keeps
+   the rig until resumed or aborted, like the API's ``rig_busy``), the oldest
+   ``queued`` one, a resumed campaign that had started first. A campaign paused
+   while still queued never touched the rig and holds nothing.
 
 It claims the rig lease in the database (INSERT, or a conditional UPDATE
 where the lease expired or is already ours), so two service processes on one
@@ -22,18 +24,20 @@ import logging
 import os
 import socket
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
-from sqlalchemy import delete, insert, select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy import delete, insert, select, text, update
+from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
 from drivers.clock import Clock, RealClock, ScaledClock
 from service.db.models import Campaign, Rig, RigLease
 from service.db.timestamps import as_utc, utcnow
+from service.engine import store
 from service.engine.rigs import open_rig, rig_time_scale
 from service.engine.runner import CampaignRunner
+from service.engine.store import cas_transition
 
 log = logging.getLogger(__name__)
 POLL_WALL_S = 1.0
@@ -56,6 +60,7 @@ class CampaignManager:
         lease_s: float = 30.0,
         poll_wall_s: float = POLL_WALL_S,
         rig_options: dict[str, Any] | None = None,
+        rigs: Collection[str] | None = None,
     ) -> None:
         self.sf = session_factory
         self.sim_speed = sim_speed
@@ -67,6 +72,8 @@ class CampaignManager:
         self.lease_s = lease_s
         self.poll_wall_s = poll_wall_s
         self.rig_options = rig_options or {}
+        # The rigs this process drives (``--rigs``); None: every rig in the database.
+        self.rigs = None if rigs is None else frozenset(rigs)
         self._loop_task: asyncio.Task | None = None
         self._runs: dict[str, asyncio.Task] = {}  # rig name -> running campaign task
 
@@ -90,6 +97,8 @@ class CampaignManager:
         with self.sf() as s:
             rigs = s.execute(select(Rig.name)).scalars().all()
         for rig in rigs:
+            if self.rigs is not None and rig not in self.rigs:
+                continue  # another host drives it
             task = self._runs.get(rig)
             if task is not None and not task.done():
                 continue
@@ -123,13 +132,15 @@ class CampaignManager:
             if orphan is not None:
                 return int(orphan)
             paused = s.execute(
-                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "paused").limit(1)
+                select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "paused",
+                                          Campaign.started_at.is_not(None)).limit(1)
             ).scalar()
             if paused is not None:
                 return None
             queued = s.execute(
                 select(Campaign.id).where(Campaign.rig == rig, Campaign.state == "queued")
-                .order_by(Campaign.created_at, Campaign.id).limit(1)
+                .order_by(Campaign.started_at.is_(None), Campaign.created_at, Campaign.id)
+                .limit(1)
             ).scalar()
             return None if queued is None else int(queued)
 
@@ -145,13 +156,21 @@ class CampaignManager:
                 return True
             except IntegrityError:
                 s.rollback()
-            res = s.execute(
-                update(RigLease)
-                .where(RigLease.rig == rig,
-                       (RigLease.lease_until < now) | (RigLease.owner == self.owner))
-                .values(campaign_id=campaign_id, owner=self.owner, lease_until=until)
-            )
-            s.commit()
+            if s.get_bind().dialect.name == "postgresql":
+                # A stalled holder may sit inside a fenced commit holding the lease row's
+                # lock (store._check_fence): give up after 2 s rather than hang the scan.
+                s.execute(text("SET LOCAL lock_timeout = '2s'"))
+            try:
+                res = s.execute(
+                    update(RigLease)
+                    .where(RigLease.rig == rig,
+                           (RigLease.lease_until < now) | (RigLease.owner == self.owner))
+                    .values(campaign_id=campaign_id, owner=self.owner, lease_until=until)
+                )
+                s.commit()
+            except OperationalError:
+                s.rollback()
+                return False
             return res.rowcount == 1
 
     def _renew(self, rig: str) -> bool:
@@ -178,17 +197,22 @@ class CampaignManager:
                            "sensors": row.sensors}
             clock = self._clock_for(rig_cfg)
             async with open_rig(rig_cfg, clock, seed=campaign_id, **self.rig_options) as devices:
-                await CampaignRunner(self.sf, campaign_id, devices, clock).run()
+                fence = store.Fence(rig, self.owner)
+                await CampaignRunner(self.sf, campaign_id, devices, clock, fence=fence).run()
         except asyncio.CancelledError:
             raise
-        except Exception as exc:  # an engine bug fails the campaign, not the service
-            log.exception("campaign %s crashed", campaign_id)
-            with self.sf() as s:
-                s.execute(update(Campaign).where(Campaign.id == campaign_id,
-                                                 Campaign.state.in_(("running", "queued")))
-                          .values(state="failed", error=f"engine error: {exc}",
-                                  finished_at=utcnow()))
-                s.commit()
+        except Exception as exc:  # the rig could not be opened: fail the campaign, not the service
+            # (the engine itself handles everything raised while it runs, safe state included)
+            log.exception("campaign %s could not run", campaign_id)
+            with contextlib.suppress(Exception):
+                for from_state in ("queued", "running"):
+                    with self.sf() as s:
+                        ok = cas_transition(s, campaign_id, from_state, "failed",
+                                            error=f"engine error: {type(exc).__name__}: {exc}",
+                                            requested_action=None)
+                        s.commit()
+                    if ok:
+                        break
         finally:
             renewer.cancel()
             with contextlib.suppress(asyncio.CancelledError):

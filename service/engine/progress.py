@@ -10,7 +10,9 @@ campaign measures them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from service.engine.spec import RunSpec
 
@@ -63,3 +65,33 @@ class EtaModel:
         elif phase == "soak" and soak_remaining_s is not None:
             eta += soak_remaining_s
         return max(0.0, eta)
+
+
+Subscriber = Callable[[Any, float, float], None]
+
+
+class EtaSubscriber:
+    """Keeps an :class:`EtaModel` current from the plan's message stream.
+
+    Called with (message, started_s, ended_s) for each message the engine has
+    executed: a ramp's and a soak's durations come from ``SetChamber`` and
+    ``WaitStable`` (a resumed step's short re-check is not a soak), a
+    position's from its ``Move`` to its ``Save``.
+    """
+
+    def __init__(self, eta: EtaModel) -> None:
+        self.eta = eta
+        self._position_start_s: float | None = None
+
+    def __call__(self, msg: Any, started_s: float, ended_s: float) -> None:
+        from service.engine import plan
+
+        if isinstance(msg, plan.SetChamber):
+            self.eta.ramp_done(ended_s - started_s)
+        elif isinstance(msg, plan.WaitStable) and not msg.resumed:
+            self.eta.soak_done(ended_s - started_s)
+        elif isinstance(msg, plan.Move):
+            self._position_start_s = started_s
+        elif isinstance(msg, plan.Save) and self._position_start_s is not None:
+            self.eta.position_done(ended_s - self._position_start_s)
+            self._position_start_s = None

@@ -19,8 +19,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import functools
+import logging
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import numpy as np
@@ -29,16 +31,42 @@ from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import stability, store
 from service.engine.calibrate import calibrate_columns
-from service.engine.guard import AbortRequested, CampaignFailed, DeviceGuard, FaultPolicy
-from service.engine.progress import EtaModel
+from service.engine.guard import (
+    AbortRequested,
+    CampaignFailed,
+    DeviceGuard,
+    FaultPolicy,
+    clock_speed,
+)
+from service.engine.plan import (
+    Acquire,
+    Checkpoint,
+    Configure,
+    Fit,
+    Move,
+    Msg,
+    Save,
+    SetChamber,
+    Settle,
+    WaitStable,
+    campaign_plan,
+)
+from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
 from service.engine.rigs import RigDevices
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
+from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
 
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
 TURNTABLE_POLL_S = 1.0
+DEFAULT_SAFE_C = 23.0  # before the spec is parsed (RunSpec.safe_c otherwise)
+HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
+ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
+ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
+SAFE_ATTEMPTS = 3  # tries per safe-state command
+log = logging.getLogger(__name__)
 
 
 class CampaignRunner:
@@ -53,6 +81,7 @@ class CampaignRunner:
         *,
         calibrate: Calibrate = calibrate_columns,
         on_step: StepReporter | None = None,
+        fence: store.Fence | None = None,
     ) -> None:
         self.sf = session_factory
         self.id = campaign_id
@@ -60,68 +89,207 @@ class CampaignRunner:
         self.clock = clock
         self.calibrate = calibrate
         self.on_step = on_step
+        self.fence = fence  # every measurement commit checks this lease (manager-run campaigns)
         self.fit_result: Any = None  # the core's fit object, for the demo's report
         self._progress: dict[str, Any] = {}
+        # Called with (message, started_s, ended_s) for every plan message executed.
+        self._subscribers: list[Subscriber] = []
+        self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
+        self._last_soak: WaitStable | None = None
+        self._abort_checked_s = -math.inf
+
+    def subscribe(self, fn: Subscriber) -> None:
+        """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""
+        self._subscribers.append(fn)
 
     # --- the plan ---------------------------------------------------------
     async def run(self) -> str:
-        """Execute (or resume) the campaign; returns its final state."""
+        """Execute (or resume) the campaign; returns its final state.
+
+        Every exit goes through one ``finally`` that drives the rig to its safe
+        state (:meth:`_drive_safe`) once the rig was touched: completion, abort,
+        failure, an exception no one expected (a device layer's ``UnicodeError``),
+        and a cancellation (service shutdown, or the manager cancelling us after
+        losing the rig lease). Only then is the terminal state written, so
+        "aborted"/"failed"/"completed" in the database means "the rig is safe".
+        A cancelled campaign stays ``running`` for the next lease holder.
+        """
         camp = store.load_campaign(self.sf, self.id)
         if camp.state in TERMINAL:
             return camp.state
-        self.spec = spec = parse_spec(camp.spec)
+        self._touched = False
+        outcome: tuple[str, dict[str, Any]] | None = None
+        cancelled: asyncio.CancelledError | None = None
+        lost: store.LeaseLost | None = None
+        try:
+            if not self._start(camp):
+                return store.read_control(self.sf, self.id).state
+            await self._execute(camp)
+            outcome = ("completed", {"progress": {**self._progress, "phase": "fitting",
+                                                  "fraction": 1.0, "eta_s": 0.0,
+                                                  "eta_wall_s": 0.0}})
+        except AbortRequested:
+            outcome = ("aborted", {})
+        except CampaignFailed as exc:
+            outcome = ("failed", {"error": str(exc)})
+        except store.LeaseLost as exc:
+            # Another process holds the rig now: write nothing more, park, leave the state.
+            log.error("campaign %s: %s; stopping", self.id, exc)
+            lost = exc
+        except asyncio.CancelledError as exc:
+            cancelled = exc
+            task = asyncio.current_task()
+            if task is not None:  # let the safe-state calls run (and their socket I/O)
+                task.uncancel()
+        except Exception as exc:  # an engine or device-layer bug: fail, never leave it running
+            log.exception("campaign %s: unexpected error", self.id)
+            outcome = ("failed", {"error": f"engine error: {type(exc).__name__}: {exc}"})
+        finally:
+            if self._touched:
+                await self._drive_safe()
+        if cancelled is not None:
+            raise cancelled
+        if lost is not None:
+            return store.read_control(self.sf, self.id).state
+        assert outcome is not None
+        state, fields = outcome
+        if not store.transition(self.sf, self.id, state, clear_action=True, **fields):
+            return store.read_control(self.sf, self.id).state  # someone else decided first
+        return state
+
+    def _start(self, camp: Any) -> bool:
+        """Parse the spec, build the guard, move ``queued → running``; False: not ours to run."""
+        try:
+            self.spec = spec = parse_spec(camp.spec)
+        except (ValueError, TypeError, KeyError) as exc:
+            raise CampaignFailed(f"spec: {exc}") from exc
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
-        done = store.measured_positions(self.sf, self.id)
-        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
-        # t_s continues where the stored campaign stopped (a new process has a new clock).
-        self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
-                                                                      if camp.progress else 0.0))
-        self._clock0_s = self.clock.now()
         self.guard = DeviceGuard(
             self.clock,
             FaultPolicy(spec.retry_attempts, spec.retry_backoff_s, spec.suspend_poll_s,
                         spec.suspend_limit_s),
-            on_suspend=self._suspend, on_resume=self._unsuspend, check_abort=self._abort_asked,
+            on_suspend=self._suspend, on_resume=self._unsuspend,
+            check_abort=self._abort_asked_recently,
         )
+        self.suspenders = Suspenders(limit_s=spec.suspend_limit_s)
         if camp.state == "queued":
-            store.transition(self.sf, self.id, "running", started_at=camp.started_at
-                             or store.now_utc(), t0_s=camp.t0_s if camp.t0_s is not None else 0.0)
-        try:
-            await self.guard.call("accelerometer.configure",
-                                  lambda: self.dev.accelerometer.configure(spec.range_g,
-                                                                           spec.odr_hz))
-            await self._checkpoint()
-            for step in range(spec.n_steps):
-                missing = [p for p in range(self.n_pos) if (step, p) not in done]
-                if not missing:
-                    continue
-                resumed = len(missing) < self.n_pos
-                await self._ramp(step)
-                await self._soak(step, resumed=resumed, n_positions=len(missing))
-                await self._positions(step, missing)
-            await self._fitting()
-            await self._safe_state()
-            store.transition(self.sf, self.id, "completed", clear_action=True,
-                             progress={**self._progress, "phase": "fitting", "fraction": 1.0,
-                                       "eta_s": 0.0})
-            return "completed"
-        except AbortRequested:
-            await self._abort()
-            return "aborted"
-        except CampaignFailed as exc:
-            store.transition(self.sf, self.id, "failed", error=str(exc), clear_action=True)
-            await self._safe_state_best_effort()
-            return "failed"
+            return store.transition(self.sf, self.id, "running", started_at=camp.started_at
+                                    or store.now_utc(),
+                                    t0_s=camp.t0_s if camp.t0_s is not None else 0.0)
+        return camp.state == "running"
+
+    async def _execute(self, camp: Any) -> None:
+        spec = self.spec
+        done = store.measured_positions(self.sf, self.id)
+        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
+        self._cursor: tuple[int, str] | None = None
+        # t_s continues where the stored campaign stopped (a new process has a new clock).
+        self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
+                                                                      if camp.progress else 0.0))
+        self._clock0_s = self.clock.now()
+        self._touched = True
+        self._subscribers.append(EtaSubscriber(self.eta))
+        plan = campaign_plan(spec, self.refs, done)
+        reply: Any = None
+        while True:
+            try:
+                msg = plan.send(reply)
+            except StopIteration:
+                return
+            reply = await self._interpret(msg)
+
+    async def _interpret(self, msg: Msg) -> Any:
+        """Execute one plan message; subscribers hear of it once it is done.
+
+        A ``Save`` is announced *before* its commit (the reading is complete), so
+        the progress committed with it already counts it.
+        """
+        started_s = self.clock.now()
+        if isinstance(msg, Save):
+            self._notify(msg, started_s)
+            await self._save(msg)
+            return None
+        handler = self._handlers[type(msg)]
+        result = await handler(msg)
+        self._notify(msg, started_s)
+        return result
+
+    def _notify(self, msg: Msg, started_s: float) -> None:
+        for sub in self._subscribers:
+            sub(msg, started_s, self.clock.now())
+
+    @property
+    def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
+        return {
+            Configure: self._configure, Checkpoint: self._at_checkpoint,
+            SetChamber: self._ramp, WaitStable: self._soak, Move: self._move,
+            Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
+        }
+
+    async def _configure(self, msg: Configure) -> None:
+        acc = self.dev.accelerometer
+        await self.guard.call("accelerometer.configure",
+                              lambda: acc.configure(msg.range_g, msg.odr_hz))
+
+    async def _at_checkpoint(self, _msg: Checkpoint) -> None:
+        await self._checkpoint()
+
+    async def _move(self, msg: Move) -> None:
+        if self._cursor != (msg.step, "positions"):  # first position of this step's sweep
+            store.set_cursor(self.sf, self.id, msg.step, "positions", msg.position)
+            self._cursor = (msg.step, "positions")
+        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+
+    async def _settle(self, msg: Settle) -> None:
+        await self._wait(msg.settle_s)
+
+    async def _acquire_msg(self, msg: Acquire) -> tuple[Acquisition, list[str], int]:
+        return await self._measure(msg.n_samples)
+
+    async def _fit(self, _msg: Fit) -> None:
+        await self._fitting()
+
+    async def _save(self, msg: Save) -> None:
+        """Commit the reading and the cursor past it in one transaction (the crash rule)."""
+        acq, flags, attempts = msg.acquisition
+        while True:
+            status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
+            if tripped is None:
+                break
+            # The reading was taken while the chamber misbehaved: discard it, hold, re-soak
+            # where the physics needs it, and measure this position again.
+            await self._hold(*tripped, setpoint_c=msg.setpoint_c)
+            if tripped[0].restart_soak and self._last_soak is not None:
+                await self._soak(dataclasses.replace(self._last_soak, resumed=True))
+            await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+            await self._wait(self.spec.settle_s)
+            acq, flags, attempts = await self._measure(self.spec.samples_per_position)
+        t_mid = self.clock.now() - acq.duration_s / 2.0
+        ref = msg.ref_g
+        row = {
+            "step": msg.step, "position": msg.position, "t_s": self._t(t_mid),
+            "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
+            "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
+            "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
+            "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
+            "attempts": attempts, "flags": ",".join(flags) or None,
+        }
+        progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
+                                 write=False)
+        store.commit_measurement(self.sf, self.id, row, msg.next_position, progress,
+                                 fence=self.fence)
 
     # --- phases -------------------------------------------------------------
-    async def _ramp(self, step: int) -> None:
+    async def _ramp(self, msg: SetChamber) -> None:
         """Command the setpoint and wait until the working setpoint and PV reach it."""
-        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         store.set_cursor(self.sf, self.id, step, "ramp", 0)
+        self._cursor = (step, "ramp")
         ch = self.dev.chamber
         await self.guard.call("chamber.set_ramp_rate",
-                              lambda: ch.set_ramp_rate(spec.ramp_c_per_min))
+                              lambda: ch.set_ramp_rate(msg.ramp_c_per_min))
         await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(target_c))
         await self.guard.call("chamber.run", ch.run)
         start_s = self.clock.now()
@@ -136,21 +304,22 @@ class CampaignRunner:
                     f"(PV {status.process_c:.2f} °C)")
             self._publish(step, "ramp", 0, status, target_c)
             await self._checkpoint()
-            await self.clock.sleep(spec.soak_poll_s)
-            status = await self._chamber()
-        self.eta.ramp_done(self.clock.now() - start_s)
+            await self._wait(spec.soak_poll_s)
+            status = await self._chamber_watched(None)
 
-    async def _soak(self, step: int, *, resumed: bool, n_positions: int) -> None:
+    async def _soak(self, msg: WaitStable) -> None:
         """Wait for stability (policy of the spec); log the decision in steps_log.
 
         The predictive policy judges the die against the sweep that follows: its
         duration (positions left × the measured time per position) and whether
         this step is the coldest or hottest (it then sets the model's valid range).
         """
-        spec, target_c = self.spec, self.spec.setpoints_c[step]
+        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
+        resumed, edge = msg.resumed, msg.edge
+        if not resumed or self._last_soak is None or self._last_soak.step != step:
+            self._last_soak = msg
         cfg = spec.stability
-        sweep_s = n_positions * self.eta.position_s
-        edge = target_c in (min(spec.setpoints_c), max(spec.setpoints_c))
+        sweep_s = msg.n_positions * self.eta.position_s
         if resumed:
             # The step was soaked before the interruption: re-check, don't re-soak in full.
             cfg = dataclasses.replace(
@@ -158,11 +327,19 @@ class CampaignRunner:
                 min_soak_s=0.0, soak_s=min(cfg.soak_s, cfg.dwell_s),
             )
         store.set_cursor(self.sf, self.id, step, "soak", 0)
+        self._cursor = (step, "soak")
         start_s = self.clock.now()
         ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
         decision = stability.Decision(False, "started")
         while True:
             status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, target_c)
+            if tripped is not None:
+                # The die was disturbed: hold until the chamber is back, then soak afresh.
+                await self._hold(*tripped, setpoint_c=target_c)
+                start_s = self.clock.now()
+                ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
+                continue
             now_s = self.clock.now()
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
@@ -181,10 +358,8 @@ class CampaignRunner:
             if decision.stable:
                 break
             await self._checkpoint()
-            await self.clock.sleep(spec.soak_poll_s)
+            await self._wait(spec.soak_poll_s)
         soak_s = self.clock.now() - start_s
-        if not resumed:
-            self.eta.soak_done(soak_s)
         entry = {
             "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
             "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
@@ -201,32 +376,6 @@ class CampaignRunner:
         if decision.max_soak_reached and spec.on_max_soak == "fail":
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
-
-    async def _positions(self, step: int, missing: list[int]) -> None:
-        """Measure every missing position; each row is committed before the next move."""
-        spec, target_c = self.spec, self.spec.setpoints_c[step]
-        store.set_cursor(self.sf, self.id, step, "positions", missing[0])
-        for k, pos in enumerate(missing):
-            await self._checkpoint()
-            t_start = self.clock.now()
-            ref = self.refs[pos]
-            await self._move_to(self.dev.angles_for(ref))
-            await self.clock.sleep(spec.settle_s)
-            acq, flags, attempts = await self._measure()
-            status = await self._chamber()
-            t_mid = self.clock.now() - acq.duration_s / 2.0
-            row = {
-                "step": step, "position": pos, "t_s": self._t(t_mid), "setpoint_c": target_c,
-                "chamber_c": status.process_c, "sensor_c": acq.sensor_c,
-                "ref_x": float(ref[0]), "ref_y": float(ref[1]), "ref_z": float(ref[2]),
-                "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
-                "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
-                "attempts": attempts, "flags": ",".join(flags) or None,
-            }
-            self.eta.position_done(self.clock.now() - t_start)
-            next_pos = missing[k + 1] if k + 1 < len(missing) else self.n_pos
-            progress = self._publish(step, "positions", pos, status, target_c, write=False)
-            store.commit_measurement(self.sf, self.id, row, next_pos, progress)
 
     async def _fitting(self) -> None:
         camp = store.load_campaign(self.sf, self.id)
@@ -256,9 +405,8 @@ class CampaignRunner:
         return await self.guard.call("accelerometer.acquire",
                                      lambda: self.dev.accelerometer.acquire(n))
 
-    async def _measure(self) -> tuple[Acquisition, list[str], int]:
+    async def _measure(self, n: int) -> tuple[Acquisition, list[str], int]:
         """Acquire; on a failed quality check measure once more and keep the second capture."""
-        n = self.spec.samples_per_position
         acq = await self._acquire(n)
         flags = check_acquisition(acq, n, self.spec.quality)
         if not flags:
@@ -267,33 +415,117 @@ class CampaignRunner:
         return acq, check_acquisition(acq, n, self.spec.quality), 2
 
     async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
+        """Command the table and wait for in-position; a table that misses it suspends.
+
+        The table suspender stops the table and commands the move again after each
+        ``move_timeout_s``; it fails the campaign once it lasted ``suspend_limit_s``
+        of real time (no soak restart: the table does not disturb the temperature).
+        """
         tt = self.dev.turntable
-        await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
-        start_s = self.clock.now()
+        susp = self.suspenders.table
+        since_s: float | None = None
         while True:
-            await self.clock.sleep(TURNTABLE_POLL_S)
-            st = await self.guard.call("turntable.read_status", tt.read_status)
-            if st.in_position and not st.moving:
+            await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
+            start_s = self.clock.now()
+            while True:
+                await self.clock.sleep(TURNTABLE_POLL_S)
+                st = await self.guard.call("turntable.read_status", tt.read_status)
+                if st.in_position and not st.moving:
+                    if since_s is not None:
+                        self._resumed(susp, since_s)
+                    return
+                if self.clock.now() - start_s > self.spec.move_timeout_s:
+                    break
+            why = table_not_in_position(st, angles_deg, self.clock.now() - start_s)
+            if since_s is None:
+                since_s = self.clock.now()
+                self._suspend(f"{susp.name}: {why}")
+            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
+                raise CampaignFailed(f"{why}; suspended {susp.limit_s:.0f} s of real time")
+            await self.guard.call("turntable.stop", tt.stop)
+            await self._checkpoint()
+
+    async def _chamber_watched(self, setpoint_c: float | None) -> ChamberStatus:
+        """Read the chamber; hold while a chamber suspender is tripped (band armed if given)."""
+        while True:
+            status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, setpoint_c)
+            if tripped is None:
+                return status
+            await self._hold(*tripped, setpoint_c=setpoint_c)
+
+    async def _hold(self, susp: Suspender, why: str, *, setpoint_c: float | None) -> None:
+        """Suspended: no readings, chamber keeps its setpoint, until clear for ``clear_s``.
+
+        Pause and abort still apply. Fails the campaign when the condition lasted
+        ``limit_s`` of real time (clock time over the clock's speed-up).
+        """
+        since_s = self.clock.now()
+        clear_since_s: float | None = None
+        self._suspend(f"{susp.name}: {why}")
+        while True:
+            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
+                raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
+                                     "real time")
+            await self._checkpoint()
+            await self._wait(min(self.spec.soak_poll_s, HOLD_POLL_S))
+            status = await self._chamber()
+            if setpoint_c is not None and abs(status.setpoint_c - setpoint_c) > 1e-3:
+                # Someone changed the controller behind the engine (a front panel, a
+                # process that lost the rig parking it): command our setpoint again.
+                await self.guard.call("chamber.set_setpoint",
+                                      functools.partial(self.dev.chamber.set_setpoint, setpoint_c))
+            tripped = self.suspenders.check_chamber(status, setpoint_c)
+            if tripped is not None:
+                why, clear_since_s = tripped[1], None
+                continue
+            if clear_since_s is None:
+                clear_since_s = self.clock.now()
+            if self.clock.now() - clear_since_s >= susp.clear_s:
+                self._resumed(susp, since_s)
                 return
-            if self.clock.now() - start_s > self.spec.move_timeout_s:
-                raise CampaignFailed(
-                    f"turntable not in position {angles_deg} after {self.spec.move_timeout_s:.0f} s"
-                    f" (at {st.angles_deg}, faults {st.faults})")
 
-    async def _safe_state(self) -> None:
-        """Chamber to a safe temperature, table home: the end of every campaign."""
-        await self.guard.call("chamber.set_setpoint",
-                              lambda: self.dev.chamber.set_setpoint(self.spec.safe_c))
-        home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
-        await self.guard.call("turntable.move_to", lambda: self.dev.turntable.move_to(home))
+    def _resumed(self, susp: Suspender, since_s: float) -> None:
+        self.suspension_log.append({"suspender": susp.name, "t_s": round(self._t(since_s), 3),
+                                    "held_s": round(self.clock.now() - since_s, 3)})
+        self._unsuspend()
 
-    async def _safe_state_best_effort(self) -> None:
-        """After a failure: one unguarded try per device (it may be why we failed)."""
+    async def _drive_safe(self) -> None:
+        """The rig's safe state: chamber at the safe temperature, table stopped and home.
+
+        The one place every exit of :meth:`run` ends. Not through the guard (a
+        pending abort or a suspension must not stop it): each command gets a few
+        tries with back-off on the clock, then the next command is tried anyway;
+        whatever failed is logged and kept in ``self.safe_report``.
+        """
+        spec = getattr(self, "spec", None)
+        safe_c = spec.safe_c if spec is not None else DEFAULT_SAFE_C
+        with contextlib.suppress(Exception):  # keep the target inside the chamber's range
+            lo_c, hi_c = self.dev.chamber.range_c
+            safe_c = min(max(safe_c, lo_c), hi_c)
         home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
-        with contextlib.suppress(Exception):
-            await self.dev.chamber.set_setpoint(self.spec.safe_c)
-        with contextlib.suppress(Exception):
-            await self.dev.turntable.move_to(home)
+        ch, tt = self.dev.chamber, self.dev.turntable
+        self.safe_report = {
+            "chamber.set_setpoint": await self._try_safe(lambda: ch.set_setpoint(safe_c)),
+            "turntable.stop": await self._try_safe(tt.stop),
+            "turntable.move_to": await self._try_safe(lambda: tt.move_to(home)),
+        }
+
+    async def _try_safe(self, fn: Callable[[], Awaitable[Any]]) -> str:
+        delay_s = 1.0
+        last = ""
+        for _ in range(SAFE_ATTEMPTS):
+            try:
+                await fn()
+                return "ok"
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - any failure: log, retry, move on
+                last = f"{type(exc).__name__}: {exc}"
+                await self.clock.sleep(delay_s)
+                delay_s *= 2.0
+        log.error("campaign %s: safe state not reached: %s", self.id, last)
+        return last
 
     # --- control: pause / resume / abort --------------------------------------------
     async def _checkpoint(self) -> None:
@@ -308,8 +540,10 @@ class CampaignRunner:
 
     async def _paused(self) -> None:
         """Hold: chamber keeps its setpoint, table at rest; wait for resume or abort."""
-        store.transition(self.sf, self.id, "paused", clear_action=True,
-                         progress={**self._progress, "paused": True})
+        if not store.transition(self.sf, self.id, "paused", clear_action=True,
+                                progress={**self._progress, "paused": True}):
+            await self._lost_control()
+            return
         await self.guard.call("turntable.stop", self.dev.turntable.stop)
         while True:
             await self.clock.sleep(self.spec.soak_poll_s)
@@ -317,15 +551,46 @@ class CampaignRunner:
             if ctl.state == "aborted" or ctl.requested_action == "abort":
                 raise AbortRequested("operator")
             if ctl.requested_action == "resume" or ctl.state in ("running", "queued"):
-                store.transition(self.sf, self.id, "running", clear_action=True,
-                                 progress={**self._progress, "paused": False})
+                if not store.transition(self.sf, self.id, "running", clear_action=True,
+                                        progress={**self._progress, "paused": False}):
+                    await self._lost_control()
                 return
 
-    async def _abort(self) -> None:
-        try:
-            await self._safe_state()
-        finally:
-            store.transition(self.sf, self.id, "aborted", clear_action=True)
+    async def _lost_control(self) -> None:
+        """A state write lost its race: obey what the database now says."""
+        ctl = store.read_control(self.sf, self.id)
+        if ctl.state == "aborted" or ctl.requested_action == "abort":
+            raise AbortRequested("operator")
+        if ctl.state in TERMINAL:
+            raise CampaignFailed(f"campaign became {ctl.state} under the engine")
+
+    async def _wait(self, dt_s: float) -> None:
+        """Sleep ``dt_s`` on the clock, checking for an abort every poll (≤ 60 s).
+
+        A long settle or soak wait is interruptible: a pending abort waits at most
+        one poll period, not the whole wait.
+        """
+        end_s = self.clock.now() + dt_s
+        while (left_s := end_s - self.clock.now()) > 0:
+            chunk_s = min(left_s, self.spec.soak_poll_s, ABORT_CHECK_S)
+            await self.clock.sleep(chunk_s)
+            # More to wait: look for an abort now (the next device call checks after the last).
+            if chunk_s < left_s and self._abort_asked():
+                raise AbortRequested("operator")
+
+    def _abort_asked_recently(self) -> bool:
+        """The guard's check before every device call, read at most every 50 ms of loop time.
+
+        On a real rig a device call takes longer than that, so this is every call;
+        on a VirtualClock (tests, demo) thousands of calls pass per wall second and
+        the database read (~1 ms) would dominate the run. Waits and checkpoints
+        read unthrottled (:meth:`_abort_asked`).
+        """
+        now_s = asyncio.get_running_loop().time()  # the event loop's monotonic time: no waiting
+        if now_s - self._abort_checked_s < ABORT_READ_EVERY_S:
+            return False
+        self._abort_checked_s = now_s
+        return self._abort_asked()
 
     def _abort_asked(self) -> bool:
         ctl = store.read_control(self.sf, self.id)
@@ -353,7 +618,9 @@ class CampaignRunner:
             "positions": self.n_pos,
             "fraction": round(n_done / (self.spec.n_steps * self.n_pos), 4),
             "chamber_c": round(status.process_c, 3), "setpoint_c": target_c,
-            "eta_s": round(self.eta.eta_s(step, phase, soak_remaining_s), 1),
+            "eta_s": round(eta_s := self.eta.eta_s(step, phase, soak_remaining_s), 1),
+            # The same remaining time on the wall: a sped-up rig's clock runs faster.
+            "eta_wall_s": round(eta_s / clock_speed(self.clock), 1),
             "t_s": round(self._t(self.clock.now()), 3),
         }
         self._progress = progress

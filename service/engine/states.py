@@ -19,6 +19,7 @@ TRANSITIONS: frozenset[tuple[str, str]] = frozenset(
         ("queued", "running"),
         ("queued", "paused"),
         ("queued", "aborted"),
+        ("queued", "failed"),  # cannot start: the rig cannot be opened, the spec is unusable
         ("running", "paused"),
         ("running", "completed"),
         ("running", "failed"),
@@ -28,6 +29,15 @@ TRANSITIONS: frozenset[tuple[str, str]] = frozenset(
         ("paused", "aborted"),
     }
 )
+
+# action -> {from state: to state} when no engine holds the campaign (the API writes it
+# directly); a held campaign gets ``requested_action`` and its engine moves it.
+UNHELD_TARGETS: dict[str, dict[str, str]] = {
+    "pause": {"queued": "paused"},  # the manager skips it; it does not hold the rig
+    "resume": {"paused": "queued"},  # picked up again from its measurements
+    "abort": {"queued": "aborted", "paused": "aborted"},
+}
+assert all((a, b) in TRANSITIONS for m in UNHELD_TARGETS.values() for a, b in m.items())
 
 
 class IllegalTransition(Exception):

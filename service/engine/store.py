@@ -16,8 +16,8 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from service.db.models import Calibration, Campaign, Measurement, utcnow
-from service.engine.states import TRANSITIONS
+from service.db.models import Calibration, Campaign, Measurement, RigLease, utcnow
+from service.engine.states import TERMINAL, TRANSITIONS
 from service.event_log import log_event
 
 SessionFactory = sessionmaker[Session]
@@ -41,8 +41,10 @@ def load_campaign(sf: SessionFactory, campaign_id: int) -> Campaign:
 
 
 def read_control(sf: SessionFactory, campaign_id: int) -> Control:
-    with sf() as s:
-        row = s.execute(
+    """State and requested action; read before every device call, so a bare connection
+    (no ORM session: ~0.4 ms instead of ~1 ms on SQLite)."""
+    with sf.kw["bind"].connect() as conn:
+        row = conn.execute(
             select(Campaign.state, Campaign.requested_action).where(Campaign.id == campaign_id)
         ).one()
         return Control(state=row[0], requested_action=row[1])
@@ -75,30 +77,23 @@ def transition(
 ) -> bool:
     """Move the campaign to ``to_state`` if the table allows it from its current state.
 
-    Conditional UPDATE (WHERE state = current) so a concurrent API write is
-    not overwritten; returns False when the state changed under us.
+    Reads the current state, then a conditional UPDATE on it (:func:`cas_transition`),
+    so a concurrent writer (the API, another process) is never overwritten:
+    returns False when the table forbids the move or the state changed under us.
+    Already in ``to_state`` counts as done (True).
     """
     with sf() as s:
         current = s.execute(select(Campaign.state).where(Campaign.id == campaign_id)).scalar_one()
         if current == to_state:
             return True
-        if (current, to_state) not in TRANSITIONS:
-            return False
-        values: dict[str, Any] = {"state": to_state, **fields}
+        values: dict[str, Any] = dict(fields)
         if clear_action:
             values["requested_action"] = None
-        if to_state in ("completed", "failed", "aborted"):
-            values.setdefault("finished_at", utcnow())
-        res = s.execute(
-            update(Campaign)
-            .where(Campaign.id == campaign_id, Campaign.state == current)
-            .values(**values)
-        )
+        ok = cas_transition(s, campaign_id, current, to_state, **values)
         s.commit()
-        moved = res.rowcount == 1
-    if moved:
+    if ok:
         _log_transition(campaign_id, current, to_state, fields.get("error"))
-    return moved
+    return ok
 
 
 def _log_transition(campaign_id: int, from_state: str, to_state: str, error: Any) -> None:
@@ -112,6 +107,27 @@ def _log_transition(campaign_id: int, from_state: str, to_state: str, error: Any
     else:
         event = "campaign state"
     log_event(event, campaign=campaign_id, state=to_state, was=from_state, error=error)
+
+def cas_transition(s: Session, campaign_id: int, from_state: str, to_state: str,
+                   **values: Any) -> bool:
+    """``UPDATE campaign SET state = to_state WHERE id = ? AND state = from_state``.
+
+    The one way any writer (engine, API, manager) changes a campaign's state:
+    the move must be in :data:`service.engine.states.TRANSITIONS`, and the
+    WHERE on the expected from-state makes two concurrent writers unable to
+    both win (the loser's rowcount is 0). Does not commit.
+    """
+    if (from_state, to_state) not in TRANSITIONS:
+        return False
+    values = {"state": to_state, **values}
+    if to_state in TERMINAL:
+        values.setdefault("finished_at", utcnow())
+    res = s.execute(
+        update(Campaign)
+        .where(Campaign.id == campaign_id, Campaign.state == from_state)
+        .values(**values)
+    )
+    return bool(res.rowcount == 1)
 
 
 def clear_action(sf: SessionFactory, campaign_id: int, action: str) -> None:
@@ -146,17 +162,50 @@ def set_cursor(sf: SessionFactory, campaign_id: int, step: int, phase: str, posi
     update_campaign(sf, campaign_id, **fields)
 
 
+@dataclass(frozen=True)
+class Fence:
+    """The rig lease this process must still hold for its writes to count (a fencing token)."""
+
+    rig: str
+    owner: str
+
+
+class LeaseLost(Exception):
+    """A fenced write found the rig lease expired or held by another process."""
+
+
+def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
+    """Inside the caller's transaction: this process still holds a live lease on the rig.
+
+    A no-op UPDATE rather than a SELECT so PostgreSQL locks the lease row until
+    the commit: a takeover (a conditional UPDATE on the same row) waits for this
+    transaction and then sees the lease as it is after it.
+    """
+    res = s.execute(
+        update(RigLease)
+        .where(RigLease.rig == fence.rig, RigLease.owner == fence.owner,
+               RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
+        .values(owner=fence.owner)
+    )
+    if res.rowcount != 1:
+        raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
+
+
 def commit_measurement(
     sf: SessionFactory, campaign_id: int, row: dict[str, Any], next_position: int,
-    progress: dict[str, Any],
+    progress: dict[str, Any], fence: Fence | None = None,
 ) -> bool:
     """Store one measurement and move the cursor past it, atomically.
 
     Returns False when (step, position) was already stored (a previous process
-    committed it just before dying): that is "done", not an error.
+    committed it just before dying): that is "done", not an error. With a
+    ``fence``, the same transaction verifies that this process still holds the
+    rig's lease; if not, nothing is written and :class:`LeaseLost` is raised.
     """
     with sf() as s:
         try:
+            if fence is not None:
+                _check_fence(s, fence, campaign_id)
             s.add(Measurement(campaign_id=campaign_id, **row))
             s.execute(
                 update(Campaign).where(Campaign.id == campaign_id).values(
@@ -168,6 +217,9 @@ def commit_measurement(
             return True
         except IntegrityError:
             s.rollback()
+        except LeaseLost:
+            s.rollback()
+            raise
     set_cursor(sf, campaign_id, row["step"], "positions", next_position, progress)
     return False
 

@@ -2,6 +2,8 @@
 
 Usage: python crash_worker.py DB_URL CAMPAIGN_ID LEASE_S
 Runs until the campaign reaches a terminal state (or is SIGKILLed by the test).
+Prints ``commit STEP POSITION`` (flushed) after each measurement this process
+committed, so a test can tell which process wrote what.
 """
 
 from __future__ import annotations
@@ -12,12 +14,26 @@ import sys
 from drivers.clock import VirtualClock
 from service.db.models import Campaign
 from service.db.session import make_session_factory
+from service.engine import store
 from service.engine.manager import CampaignManager
 from service.engine.states import TERMINAL
 from service.engine.store import fast_sqlite_commits
 
 
+def _report_commits() -> None:
+    commit = store.commit_measurement
+
+    def reporting(sf, campaign_id, row, *args, **kwargs):  # type: ignore[no-untyped-def]
+        stored = commit(sf, campaign_id, row, *args, **kwargs)
+        if stored:
+            print("commit", row["step"], row["position"], flush=True)
+        return stored
+
+    store.commit_measurement = reporting  # type: ignore[assignment]
+
+
 async def main(url: str, campaign_id: int, lease_s: float) -> int:
+    _report_commits()
     sf = make_session_factory(url)
     fast_sqlite_commits(sf)
     mgr = CampaignManager(sf, clock_factory=lambda: VirtualClock(idle_wall_s=0.0005),

@@ -11,7 +11,7 @@ from test_runner import assert_complete_once, campaign, measurements
 
 from drivers.clock import VirtualClock
 from service.engine import store
-from service.engine.runner import CampaignRunner
+from service.engine.runner import ABORT_CHECK_S, CampaignRunner
 from service.engine.states import IllegalTransition, check_action
 
 
@@ -88,3 +88,31 @@ def test_runner_refuses_transitions_outside_the_table(sf) -> None:
     cid = add_campaign(sf, state="completed")
     assert store.transition(sf, cid, "running") is False
     assert campaign(sf, cid).state == "completed"
+
+
+async def test_abort_is_honoured_during_a_very_long_settle(sf) -> None:
+    """settle_s = 1e9: the abort must not wait for the settle (nor hold the rig)."""
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf, {**SMALL_SPEC, "settle_s": 1e9})
+    task = asyncio.create_task(
+        CampaignRunner(sf, cid, rig.devices, clock, calibrate=fake_calibrate).run())
+    await wait_for(lambda: campaign(sf, cid).cursor_phase == "positions")
+    t_asked = clock.now()
+    store.update_campaign(sf, cid, requested_action="abort")
+    assert await asyncio.wait_for(task, 10) == "aborted"
+    # Honoured within the move in progress plus one abort-check period of the settle (60 s),
+    # not after 10⁹ s.
+    assert clock.now() - t_asked <= 2 * ABORT_CHECK_S
+    assert rig.physics.setpoint_c == 23.0
+
+
+async def test_an_unusable_spec_fails_through_the_table_without_touching_the_rig(sf) -> None:
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf, {**SMALL_SPEC, "on_max_soak": "explode"})
+    assert await CampaignRunner(sf, cid, rig.devices, clock).run() == "failed"
+    c = campaign(sf, cid)
+    assert c.state == "failed" and "on_max_soak" in c.error and c.finished_at is not None
+    assert rig.accelerometer.acquisitions == 0 and rig.physics.setpoint_c == 23.0
+    assert rig.turntable.stops == 0  # never touched: no safe-state commands either

@@ -1,0 +1,176 @@
+"""Every exit of the engine leaves the twin's rig safe: chamber at 23 °C, table home and at rest.
+
+Each test runs a campaign through the wire-level twin (Modbus chamber and
+table servers, serial sensor bridge), ends it one way, then reads the
+chamber's setpoint register and the table's status through a fresh
+connection, as an operator's tool would.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from sqlalchemy import select, update
+
+from drivers.clock import VirtualClock
+from service.db.models import Campaign, Measurement, RigLease
+from service.engine import manager as manager_mod
+from service.engine import store
+from service.engine.manager import CampaignManager
+from service.engine.rigs import RigDevices, open_rig
+from service.engine.runner import CampaignRunner
+from simulators.rig import connect_rig, start_sim_rig
+
+SAFE_C = 23.0
+SPEC: dict[str, Any] = {**SMALL_SPEC, "setpoints_c": [-40.0, 60.0, -40.0], "positions": "six",
+                        "samples_per_position": 20}
+
+
+def _cfg(sim: Any) -> dict[str, Any]:
+    return {"name": "lab",
+            "chamber": {"driver": "modbus", "url": sim.chamber_url, "map": sim.chamber_map},
+            "turntable": {"url": sim.table_url}, "sensors": [{"url": sim.sensor_url}]}
+
+
+@contextlib.asynccontextmanager
+async def twin(clock: VirtualClock) -> AsyncIterator[tuple[Any, RigDevices]]:
+    async with start_sim_rig(clock, seed=5) as sim, open_rig(_cfg(sim), clock) as devices:
+        yield sim, devices
+
+
+async def rig_state(sim: Any, clock: VirtualClock) -> tuple[float, Any]:
+    """(chamber setpoint register °C, table status) once the table had time to get home."""
+    await clock.sleep(120.0)
+    chamber, table, sensor = await connect_rig(sim, clock)
+    try:
+        return (await chamber.read_status()).setpoint_c, await table.read_status()
+    finally:
+        await chamber.close()
+        await table.close()
+        with contextlib.suppress(Exception):
+            await sensor.close()
+
+
+def assert_safe(setpoint_c: float, table: Any) -> None:
+    assert setpoint_c == pytest.approx(SAFE_C, abs=0.05)
+    assert not table.moving and table.in_position
+    assert max(abs(a) for a in table.angles_deg) < 0.05
+
+
+def state_of(sf: Any, cid: int) -> Campaign:
+    return store.load_campaign(sf, cid)
+
+
+def n_measured(sf: Any, cid: int) -> int:
+    with sf() as s:
+        return len(s.execute(select(Measurement.id).where(Measurement.campaign_id == cid)).all())
+
+
+async def until(pred: Any, timeout_s: float = 60.0) -> None:
+    async def loop() -> None:
+        while not pred():
+            await asyncio.sleep(0.002)
+
+    await asyncio.wait_for(loop(), timeout_s)
+
+
+async def test_completed_campaign_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SPEC, "setpoints_c": [-40.0]}, rig="lab")
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        assert await asyncio.wait_for(runner.run(), 60) == "completed"
+        assert_safe(*await rig_state(sim, clock))
+
+
+async def test_abort_during_soak_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with twin(clock) as (sim, devices):
+        task = asyncio.create_task(
+            CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run())
+        await until(lambda: state_of(sf, cid).cursor_phase == "soak")
+        store.update_campaign(sf, cid, requested_action="abort")
+        assert await asyncio.wait_for(task, 60) == "aborted"
+        assert_safe(*await rig_state(sim, clock))
+
+
+async def test_configuration_fault_fails_at_once_and_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
+    """The second step's setpoint is beyond the controller's range: fail on the first try."""
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SPEC, "setpoints_c": [-40.0, 400.0]}, rig="lab")
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        assert await asyncio.wait_for(runner.run(), 60) == "failed"
+        c = state_of(sf, cid)
+        assert "chamber.set_setpoint" in c.error and "400" in c.error and "fix:" in c.error
+        assert runner.guard.faults_retried == 0  # decided once, not retried
+        assert_safe(*await rig_state(sim, clock))
+
+
+async def test_unexpected_exception_from_a_device_layer_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
+    """A non-DeviceFault (a decoder's UnicodeEncodeError) fails the campaign; rig still safe."""
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with twin(clock) as (sim, devices):
+        acquire = devices.accelerometer.acquire
+        calls = {"n": 0}
+
+        async def flaky(n: int) -> Any:
+            calls["n"] += 1
+            if calls["n"] > 40:
+                raise UnicodeEncodeError("ascii", "\xe9", 0, 1, "ordinal not in range(128)")
+            return await acquire(n)
+
+        devices.accelerometer.acquire = flaky  # type: ignore[method-assign]
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        assert await asyncio.wait_for(runner.run(), 60) == "failed"
+        assert "UnicodeEncodeError" in state_of(sf, cid).error
+        assert_safe(*await rig_state(sim, clock))
+
+
+async def test_cancellation_ends_safe_and_leaves_the_campaign_to_recover(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with twin(clock) as (sim, devices):
+        task = asyncio.create_task(
+            CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run())
+        await until(lambda: n_measured(sf, cid) >= 2)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await asyncio.wait_for(task, 60)
+        assert state_of(sf, cid).state == "running"  # the next lease holder resumes it
+        assert_safe(*await rig_state(sim, clock))
+
+
+async def test_lost_lease_ends_safe(sf, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Another process takes the rig lease: the manager cancels the run, the engine parks."""
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with start_sim_rig(clock, seed=5) as sim:
+
+        @contextlib.asynccontextmanager
+        async def the_twin(_cfg_row: Any, _clock: Any, **_kw: Any) -> AsyncIterator[RigDevices]:
+            async with open_rig(_cfg(sim), clock) as devices:
+                yield devices
+
+        monkeypatch.setattr(manager_mod, "open_rig", the_twin)
+        mgr = CampaignManager(sf, clock_factory=lambda: clock, owner="me", lease_s=0.3)
+        await mgr.run_once()
+        await until(lambda: n_measured(sf, cid) >= 2)
+        with sf() as s:  # the lease expired and another process took it
+            s.execute(update(RigLease).where(RigLease.rig == "lab").values(owner="other"))
+            s.commit()
+        run = mgr._runs["lab"]
+        with contextlib.suppress(asyncio.CancelledError):
+            await asyncio.wait_for(run, 60)
+        assert state_of(sf, cid).state == "running"
+        n = n_measured(sf, cid)
+        assert_safe(*await rig_state(sim, clock))
+        assert n_measured(sf, cid) == n  # nothing written after the lease was lost
+        await mgr.stop()

@@ -1,0 +1,95 @@
+"""Suspenders on the engine, through the twin: chamber alarm, chamber out of band, table.
+
+Each condition is caused in the twin's physics (a door opened: the air jumps;
+the table's in-position bit never comes), and the campaign must say why it
+holds, take no reading meanwhile, and resume or fail by its policy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import Counter
+from typing import Any
+
+from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from sqlalchemy import select
+from test_safe_state import assert_safe, n_measured, rig_state, twin, until
+
+from drivers.clock import VirtualClock
+from service.db.models import Measurement
+from service.engine import store
+from service.engine.runner import CampaignRunner
+
+SPEC: dict[str, Any] = {**SMALL_SPEC, "setpoints_c": [-10.0, 30.0], "positions": "six",
+                        "samples_per_position": 20}
+
+
+def keys(sf: Any, cid: int) -> Counter:
+    with sf() as s:
+        rows = s.execute(select(Measurement.step, Measurement.position)
+                         .where(Measurement.campaign_id == cid)).all()
+    return Counter((int(a), int(b)) for a, b in rows)
+
+
+async def test_chamber_alarm_twice_suspends_resoaks_and_completes(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    reasons: list[str] = []
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        task = asyncio.create_task(runner.run())
+        for n in (2, 8):  # open the door twice: the air jumps 12 °C above the setpoint
+            await until(lambda n=n: n_measured(sf, cid) >= n)
+            sim.chamber.advance_to()
+            sim.chamber.air_c += 12.0
+            await until(lambda: store.load_campaign(sf, cid).suspended_reason is not None
+                        or task.done())
+            reasons.append(store.load_campaign(sf, cid).suspended_reason or "")
+        assert await asyncio.wait_for(task, 60) == "completed"
+        assert_safe(*await rig_state(sim, clock))
+    assert all(r.startswith("chamber_alarm: chamber alarm: deviation_high")
+               for r in reasons), reasons
+    holds = [e["suspender"] for e in runner.suspension_log]
+    assert holds.count("chamber_alarm") == 2, runner.suspension_log
+    counts = keys(sf, cid)
+    assert set(counts) == {(s, p) for s in range(2) for p in range(6)}
+    assert max(counts.values()) == 1
+    c = store.load_campaign(sf, cid)
+    assert c.suspended_reason is None
+    # No stored reading was taken while the air was off: the die stayed near its setpoint.
+    with sf() as s:
+        for m in s.execute(select(Measurement).where(Measurement.campaign_id == cid)).scalars():
+            assert abs(m.chamber_c - SPEC["setpoints_c"][m.step]) < 2.0
+
+
+async def test_chamber_out_of_band_without_alarm_suspends(sf) -> None:  # type: ignore[no-untyped-def]
+    """3 °C off (below the controller's 5 °C alarm) is still too far for a reading."""
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        task = asyncio.create_task(runner.run())
+        await until(lambda: n_measured(sf, cid) >= 3)
+        sim.chamber.advance_to()
+        sim.chamber.air_c += 3.5
+        assert await asyncio.wait_for(task, 60) == "completed"
+    assert [e["suspender"] for e in runner.suspension_log] == ["chamber_band"]
+    assert max(keys(sf, cid).values()) == 1 and len(keys(sf, cid)) == 12
+
+
+async def test_table_never_in_position_suspends_then_fails_safe(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SPEC, "suspend_limit_s": 600.0, "move_timeout_s": 60.0}, rig="lab")
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        task = asyncio.create_task(runner.run())
+        await until(lambda: n_measured(sf, cid) >= 2)
+        sim.faults.table.never_in_position = True
+        await until(lambda: (store.load_campaign(sf, cid).suspended_reason or "").startswith(
+            "turntable_position") or task.done())
+        assert not task.done()
+        assert "not in position" in store.load_campaign(sf, cid).suspended_reason
+        assert await asyncio.wait_for(task, 60) == "failed"
+        assert "600 s of real time" in store.load_campaign(sf, cid).error
+        sim.faults.table.never_in_position = False
+        assert_safe(*await rig_state(sim, clock))
