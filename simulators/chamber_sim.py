@@ -18,6 +18,12 @@ from drivers.registermaps import ChamberMap, Field
 from simulators.faults import SimFaults
 from simulators.modbus_server import read_block
 
+# Simulated condition -> the names a map may give its bit, first match wins.
+ALARM_ALIASES: dict[str, tuple[str, ...]] = {
+    "deviation_high": ("deviation_high", "alarm_1"),
+    "deviation_low": ("deviation_low", "alarm_2"),
+}
+
 
 @dataclass
 class ChamberPhysics:
@@ -148,7 +154,14 @@ class ChamberRegisterImage:
         bits = p.alarm_bits()
         raised = {"deviation_high": bool(bits & 1), "deviation_low": bool(bits & 2),
                   "ramp_running": p.running and abs(p.working_setpoint_c - p.setpoint_c) > 1e-9}
-        return sum(1 << names[n] for n, on in raised.items() if on and n in names)
+        word = 0
+        for name, on in raised.items():
+            # A controller whose map names user-configured alarms (Eurotherm 3216: alarm_1..4)
+            # is simulated configured as a soak chamber would be: AL1 deviation high, AL2 low.
+            bit = next((names[n] for n in ALARM_ALIASES.get(name, (name,)) if n in names), None)
+            if on and bit is not None:
+                word |= 1 << bit
+        return word
 
     def read(self, address: int, count: int) -> list[int] | ExcCodes:
         p, m = self.physics, self.regmap

@@ -166,8 +166,9 @@ def _get(session: Session, name: str) -> Rig:
 
 
 def _refuse_in_use(session: Session, name: str) -> None:
+    # A campaign paused while still queued does not hold the rig (rig_busy) but will use it.
     queued = session.scalar(select(Campaign.id).where(
-        Campaign.rig == name, Campaign.state == "queued"))
+        Campaign.rig == name, Campaign.state.in_(("queued", "paused"))))
     if rig_busy(session, name) or queued is not None:
         raise HTTPException(status_code=409,
                             detail=f"rig {name!r} is used by a queued, running or paused campaign")

@@ -74,6 +74,8 @@ def classify(fault: DeviceFault) -> tuple[FaultClass, str]:
             return "configuration", (
                 "the sensor bridge refused the command: check the campaign's "
                 "samples_per_position, range_g and odr_hz against docs/sensor-bridge.md")
+        if not fault.retryable:  # ConfigurationFault, SensorMismatch: refused for good
+            return "configuration", "the device refuses this for good: fix what the message names"
         return "transient", ""
     if isinstance(fault, ValueOutOfRange) or not fault.retryable:
         return "configuration", "a value is outside what the device accepts: check the campaign"
