@@ -76,7 +76,9 @@ async def run_campaign(sf: Any, spec: dict[str, Any], truth: SensorTruth, *, fau
     async with start_sim_rig(clock, seed=seed, truth=truth, faults=faults) as sim:
         cfg = {"name": "lab",
                "chamber": {"driver": "modbus", "url": sim.chamber_url, "map": sim.chamber_map},
-               "turntable": {"url": sim.table_url}, "sensors": [{"url": sim.sensor_url}]}
+               "turntable": {"url": sim.table_url},
+               # the twin reached by URL reports its own serial: bind any (as the sim rig does)
+               "sensors": [{"url": sim.sensor_url, "serial_binding": "any"}]}
         async with open_rig(cfg, clock) as dev:
             for link in (dev.chamber.link, dev.turntable.link):  # loopback: short wall timeout
                 link.policy = RetryPolicy(timeout_s=0.25)

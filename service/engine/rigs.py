@@ -31,13 +31,14 @@ from __future__ import annotations
 
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from drivers.clock import Clock
 from drivers.protocols import Accelerometer, Chamber, Turntable
+from service.engine.identity import SerialBinding, binding_for_rig
 
 AnglesFor = Callable[[np.ndarray], tuple[float, ...]]
 
@@ -49,6 +50,9 @@ class RigDevices:
     accelerometer: Accelerometer
     # Maps a scheduled gravity direction (sensor frame, unit) to table angles: rig geometry.
     angles_for: AnglesFor
+    # How the campaign's serial is checked against the connected sensor (identity.py):
+    # "any" for the twin, which mounts whatever sensor a campaign names.
+    serial_binding: SerialBinding = field(default_factory=lambda: SerialBinding("any"))
 
 
 @asynccontextmanager
@@ -185,7 +189,8 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
     accel = make_accelerometer(parse_sensor_config(sensors[0]), clock)
     try:
         yield RigDevices(chamber, table, accel,
-                         lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)))
+                         lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
+                         binding_for_rig(rig))
     finally:
         await chamber.link.close()
         await table.link.close()

@@ -38,6 +38,7 @@ from service.engine.guard import (
     FaultPolicy,
     clock_speed,
 )
+from service.engine.identity import verify_sensor
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -163,6 +164,8 @@ class CampaignRunner:
             self.spec = spec = parse_spec(camp.spec)
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
+        self.sensor_serial = str(camp.sensor)
+        self.sensor_identity: dict[str, Any] | None = None
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
         self.guard = DeviceGuard(
@@ -229,6 +232,14 @@ class CampaignRunner:
 
     async def _configure(self, msg: Configure) -> None:
         acc = self.dev.accelerometer
+        if self.sensor_identity is None:
+            # Before any reading: the sensor connected must be the one the campaign names
+            # (a typo must not store a calibration under the wrong part). A mismatch is a
+            # configuration fault: the campaign fails at once with both serials named.
+            verified = await self.guard.call(
+                "sensor.identify",
+                lambda: verify_sensor(acc, self.sensor_serial, self.dev.serial_binding))
+            self.sensor_identity = verified.as_dict()
         await self.guard.call("accelerometer.configure",
                               lambda: acc.configure(msg.range_g, msg.odr_hz))
 
@@ -388,6 +399,7 @@ class CampaignRunner:
             "campaign_id": self.id, "rig": camp.rig, "sensor": camp.sensor,
             "spec": camp.spec, "positions": self.spec.positions,
             "steps_log": camp.steps_log, "recording": f"campaign-{self.id}.csv",
+            "sensor_identity": self.sensor_identity,
         }
         try:
             # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.

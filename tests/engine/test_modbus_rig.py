@@ -16,7 +16,7 @@ import pytest
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
-from service.db.models import Measurement
+from service.db.models import Campaign, Measurement
 from service.engine.rigs import RigConfigError, open_rig, rig_config_errors, rig_time_scale
 from service.engine.runner import CampaignRunner
 from simulators.rig import start_sim_rig
@@ -24,14 +24,52 @@ from simulators.rig import start_sim_rig
 from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate  # isort: skip
 
 
-def _modbus_config(sim: Any, chamber_map: str) -> dict[str, Any]:
+def _modbus_config(sim: Any, chamber_map: str, binding: str = "any") -> dict[str, Any]:
     return {
         "name": "lab",
         "chamber": {"driver": "modbus", "url": sim.chamber_url, "map": chamber_map,
                     "device_id": 1, "range_c": [-70, 180]},
         "turntable": {"url": sim.table_url, "axes": 3},
-        "sensors": [{"url": sim.sensor_url}],
+        "sensors": [{"url": sim.sensor_url, "serial_binding": binding}],
     }
+
+
+async def test_the_wrong_sensor_fails_the_campaign_at_start_with_both_serials(sf) -> None:  # type: ignore[no-untyped-def]
+    """A rig that binds serials by fixture EEPROM: the campaign names SN-T, SN-OTHER is there."""
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SMALL_SPEC, "positions": "six"}, rig="lab")
+    async with start_sim_rig(clock, seed=3) as sim:
+        sim.bridge.eeprom_serial = "SN-OTHER"
+        async with open_rig(_modbus_config(sim, "eurotherm3216", "eeprom"), clock) as devices:
+            fake = fake_calibrate
+            state = await asyncio.wait_for(
+                CampaignRunner(sf, cid, devices, clock, calibrate=fake).run(), 60.0)
+    assert state == "failed"
+    with sf() as s:
+        c = s.get(Campaign, cid)
+        assert "SN-T" in c.error and "SN-OTHER" in c.error, c.error
+        assert s.execute(select(Measurement).where(Measurement.campaign_id == cid)).first() \
+            is None
+
+
+async def test_the_right_sensor_is_stored_with_its_identity(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SMALL_SPEC, "positions": "six", "samples_per_position": 20},
+                       rig="lab")
+    provenance: dict[str, Any] = {}
+
+    def calibrate(cols: Any, prov: dict[str, Any]) -> Any:
+        provenance.update(prov)
+        return fake_calibrate(cols, prov)
+
+    async with start_sim_rig(clock, seed=3) as sim:
+        sim.bridge.eeprom_serial = "sn-t"  # case is not part of a serial
+        async with open_rig(_modbus_config(sim, "eurotherm3216", "eeprom"), clock) as devices:
+            state = await asyncio.wait_for(
+                CampaignRunner(sf, cid, devices, clock, calibrate=calibrate).run(), 60.0)
+    assert state == "completed"
+    ident = provenance["sensor_identity"]
+    assert ident["serial"] == "SN-T" and ident["bound_by"] == "eeprom"
 
 
 @pytest.mark.parametrize("chamber_map", ["eurotherm3216", "watlow_f4t"])

@@ -34,7 +34,9 @@ SPEC: dict[str, Any] = {**SMALL_SPEC, "setpoints_c": [-40.0, 60.0, -40.0], "posi
 def _cfg(sim: Any) -> dict[str, Any]:
     return {"name": "lab",
             "chamber": {"driver": "modbus", "url": sim.chamber_url, "map": sim.chamber_map},
-            "turntable": {"url": sim.table_url}, "sensors": [{"url": sim.sensor_url}]}
+            "turntable": {"url": sim.table_url},
+            # the twin reached by URL reports its own serial: bind any (as the sim rig does)
+            "sensors": [{"url": sim.sensor_url, "serial_binding": "any"}]}
 
 
 @contextlib.asynccontextmanager

@@ -36,7 +36,9 @@ async def _run(sf: Any, faults: RigFaults | None) -> tuple[str, dict[tuple[int, 
     async with start_sim_rig(clock, seed=11, faults=faults) as sim:
         cfg = {"name": "lab",
                "chamber": {"driver": "modbus", "url": sim.chamber_url, "map": sim.chamber_map},
-               "turntable": {"url": sim.table_url}, "sensors": [{"url": sim.sensor_url}]}
+               "turntable": {"url": sim.table_url},
+               # the twin reached by URL reports its own serial: bind any (as the sim rig does)
+               "sensors": [{"url": sim.sensor_url, "serial_binding": "any"}]}
         async with open_rig(cfg, clock) as devices:
             runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
             state = await asyncio.wait_for(runner.run(), 90.0)
