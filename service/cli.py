@@ -102,6 +102,8 @@ def _add_calibration_commands(sub: Any) -> None:
     diag.add_argument("--report-dir", metavar="DIR", help="write the report here")
     diag.add_argument("--seed", type=int, metavar="N", help="random seed")
     diag.add_argument("--n-null", type=int, metavar="N", help="null-distribution draws")
+    diag.add_argument("--against", metavar="FILE", help="model or twin JSON held fixed (no refit)")
+    diag.add_argument("--write-twin", metavar="OUT", help="with --against: corrected twin JSON")
     diag.set_defaults(handler=_delegate("calibration.discrepancy.cli", "run_diagnose", "diagnose"))
 
     imp = sub.add_parser("import", help="convert a raw recording to recording format v1")

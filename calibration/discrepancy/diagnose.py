@@ -94,10 +94,14 @@ class Diagnosis:
     stage_log: list[dict[str, Any]] = field(default_factory=list)
     unexplained: dict[str, Any] = field(default_factory=dict)
     problem: LinearProblem | None = field(default=None, repr=False)  # for model extensions
+    cannot_judge: str = ""  # why the recording is too small to test (then mismatch is None)
 
     @property
-    def mismatch(self) -> bool:
-        """A named finding, or residuals well above the recorded noise that nothing names."""
+    def mismatch(self) -> bool | None:
+        """A named finding, or residuals well above the recorded noise that nothing names;
+        None when the recording is too small to judge."""
+        if self.cannot_judge:
+            return None
         return bool(self.findings) or bool(self.unexplained.get("significant", False))
 
     def to_dict(self) -> dict[str, Any]:
@@ -107,6 +111,9 @@ class Diagnosis:
                          "noise_ug": _r(self.noise_ug), "mode": self.mode,
                          "noise_source": self.noise_source},
             "mismatch": self.mismatch,
+            "verdict": ("cannot judge" if self.cannot_judge else
+                        "mismatch" if self.mismatch else "consistent"),
+            **({"reason": self.cannot_judge} if self.cannot_judge else {}),
             "findings": [f.to_json() for f in self.findings],
             "not_identifiable": self.not_identifiable,
             "final_rmse_ug": _r(self.final_rmse_ug),
@@ -126,8 +133,8 @@ class Diagnosis:
         return text_report(self)
 
 
-def _r(v: float) -> float:
-    return float(round(float(v), 2))
+def _r(v: float) -> float | None:
+    return float(round(float(v), 2)) if np.isfinite(v) else None
 
 
 def heldout_improved(before_ug: float, after_ug: float) -> bool:
@@ -153,7 +160,15 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     """
     notes: list[str] = []
     given_rmse = _given_model_rmse_ug(model, recording, notes)
+    why_not = _too_few(recording)
+    if why_not:
+        return _cannot_judge(recording, why_not, n_null, alpha, notes)
     pb = build_problem(recording)
+    dof = pb.m - np.linalg.matrix_rank(pb.X0 * pb.w[:, None])
+    if dof < MIN_RESIDUAL_DOF:
+        return _cannot_judge(recording, f"{len(recording)} reading(s) leave {dof} residual "
+                             f"degree(s) of freedom after the base model (need at least "
+                             f"{MIN_RESIDUAL_DOF})", n_null, alpha, notes)
     ctx = pb.ctx
     rng = np.random.default_rng(seed)
     fold_masks, scheme = folds(ctx)
@@ -261,6 +276,33 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         residuals_after_ug=(final_res * 1e6).reshape(shape),
         t_s=ctx.t_s, steps=ctx.steps, positions=ctx.positions, stage_log=stage_log, problem=pb,
     )
+
+
+MIN_RESIDUAL_DOF = 10
+MIN_ROWS = 6  # below this even one temperature's 12 SFEM parameters leave < 6 dof
+
+
+def _too_few(rec: Recording) -> str:
+    if len(rec) < MIN_ROWS:
+        return (f"{len(rec)} reading(s): too few to judge a mismatch (need at least "
+                f"{MIN_ROWS} readings, and {MIN_RESIDUAL_DOF} residual degrees of freedom "
+                "after the base model)")
+    return ""
+
+
+def _cannot_judge(rec: Recording, why: str, n_null: int, alpha: float,
+                  notes: list[str]) -> Diagnosis:
+    """A recording too small to test: say so instead of ``mismatch: false`` (issue 10)."""
+    n = len(rec)
+    empty = np.zeros((n, 3))
+    steps = rec.steps() if n else np.zeros(0, int)
+    return Diagnosis(
+        recording=str(rec.path), mode="reference" if rec.has_reference else "norm",
+        rmse_ug=float("nan"), noise_ug=float("nan"), noise_source="not estimated",
+        findings=[], not_identifiable=[], located={}, heldout_scheme="none",
+        n_null=n_null, alpha=alpha, notes=notes, final_rmse_ug=float("nan"),
+        residuals_before_ug=empty, residuals_after_ug=empty, t_s=rec.t_s, steps=steps,
+        positions=np.zeros(n, int), cannot_judge=why)
 
 
 def _given_model_rmse_ug(model: object | None, rec: Recording, notes: list[str]) -> float | None:

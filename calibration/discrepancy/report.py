@@ -15,6 +15,8 @@ def text_report(diag: Any) -> str:
              f"  null: parametric bootstrap, {diag.n_null} replicates, "
              f"family-wise α = {diag.alpha}",
              f"  held out: {diag.heldout_scheme}"]
+    if getattr(diag, "cannot_judge", ""):
+        return "\n".join(lines[:1] + [f"  Cannot judge: {diag.cannot_judge}."])
     un = diag.unexplained
     if not diag.findings and not un.get("significant"):
         lines.append("  No mismatch: the residuals are consistent with noise.")
