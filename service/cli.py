@@ -51,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_serve(sub)
     _add_token(sub)
     _add_campaign(sub)
+    _add_twin(sub)
     demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
@@ -125,6 +126,17 @@ def _add_calibration_commands(sub: Any) -> None:
     imp.add_argument("--window-s", type=float, metavar="S", help="static-detection window")
     imp.add_argument("--trim-s", type=float, metavar="S", help="trimmed from each interval end")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
+
+
+def _add_twin(sub: Any) -> None:
+    twin = sub.add_parser("twin", help="digital twins fitted to real recordings")
+    tsub = twin.add_subparsers(dest="twin_command", metavar="ACTION", required=True)
+    fit = tsub.add_parser("fit", help="fit a twin (sensor model, die lag, noise) to a recording")
+    fit.add_argument("recording", metavar="RECORDING", help="recording v1 CSV")
+    fit.add_argument("-o", "--output", required=True, metavar="TWIN", help="twin JSON to write")
+    fit.add_argument("--json", action="store_true", help="print the report as JSON")
+    fit.set_defaults(handler=_delegate("calibration.discrepancy.twin_cli", "run_twin_fit",
+                                       "twin fit"))
 
 
 def _delegate(module: str, function: str, command: str) -> Callable[[Any], int]:

@@ -114,6 +114,10 @@ class AgainstDiagnosis:
         return "\n".join(lines)
 
 
+def _sd_words(sd: float | None) -> str:
+    return "" if sd is None else f" (σ {sd:.0f} s)"
+
+
 def _r(v: float) -> float | None:
     return float(round(float(v), 2)) if np.isfinite(v) else None
 
@@ -128,9 +132,12 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
     mode = "reference" if recording.has_reference else "norm"
     n = len(recording)
     steps = recording.steps()
-    temp_c = _temperature(recording, model, notes)
+    air_c = _temperature(recording, model, notes)
     raw = recording.raw_g
     ref = recording.ref_g if mode == "reference" else None
+    die_minus_air = _lag_of(recording, given, notes)
+    tau_given = given.die_tau_s if die_minus_air is not None else None
+    temp_c = air_c if tau_given is None else air_c + die_minus_air(tau_given)
     fitted = _fitted_mask(model, mode, temp_c, steps)
     n_coef = int(fitted.sum())
     n_entries = n * (3 if mode == "reference" else 1)
@@ -148,9 +155,35 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
         notes.append("no sd_* columns: noise scale taken from the residual after the shift")
         sigma = np.ones_like(r0)
     fit = fit_shift(model, raw, ref, temp_c, sigma, fitted)
-    shift = _shift_table(model, fit, alpha, temp_c)
     findings: list[dict[str, Any]] = []
-    heldout = _heldout(model, raw, ref, temp_c, sigma, fitted, steps, recording.t_s)
+    tau = tau_given
+    rig: dict[str, Any] = {}
+    if tau_given is not None and die_minus_air is not None:
+        rig = rig_check(model, raw, ref, air_c, die_minus_air, tau_given, sigma, fitted, alpha,
+                        given.die_tau_sd_s or 0.0)
+        if rig["significant"]:
+            tau = rig["tau_s"]
+            temp_c = air_c + die_minus_air(tau)
+            fit = fit_shift(model, raw, ref, temp_c, sigma, fitted)
+    shift = _shift_table(model, fit, alpha, temp_c)
+    heldout = _heldout(model, raw, ref, air_c, sigma, fitted, steps, recording.t_s,
+                       None if tau is None else (die_minus_air, tau_given, tau))
+    if rig.get("significant"):
+        findings.append({
+            "effect": "thermal_lag", "axes": list(AXES), "where": {"steps": "all (lag after "
+                                                                  "each step)"},
+            "explanation": (f"Rig physics differs from the twin: the die lags the chamber air "
+                            f"with τ = {rig['tau_s']:.0f} s{_sd_words(rig['tau_sd_s'])}, not "
+                            f"the twin's {tau_given:.0f} s"),
+            "parameters": {"tau_s": rig["tau_s"], "twin_tau_s": tau_given},
+            "parameter_sd": {"tau_s": rig["tau_sd_s"]},
+            "heldout_rmse_before_ug": heldout.get("rmse_given_ug"),
+            "heldout_rmse_after_ug": heldout.get("rmse_corrected_ug"),
+            "evidence": {"test": rig["test"], "p_value": rig["p_value"]},
+            "confusers": [{"effect": "parameter_shift", "how_told_apart": "the shift is "
+                           "refitted at every τ of the profile: τ is what the shift cannot "
+                           "absorb"}],
+        })
     if shift["significant"]:
         findings.append({
             "effect": "parameter_shift", "axes": shift["axes"],
@@ -183,20 +216,26 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
                              "explanation": "structure beyond noise after the refitted base "
                                             "that no catalogue term explains",
                              "evidence": d.unexplained})
-    mismatch = bool(shift["significant"]) or refit_mismatch
+    mismatch = bool(shift["significant"]) or refit_mismatch or bool(rig.get("significant"))
     if mismatch:
         parts = []
         if shift["significant"]:
             parts.append(f"base parameters moved (family p = {shift['p_family']:.3g})")
         if refit_mismatch:
             parts.append("the recording has structure the base model leaves out")
+        if rig.get("significant"):
+            parts.append(f"the die lag is {rig['tau_s']:.0f} s, not {tau_given:.0f} s")
         reason = "; ".join(parts)
     else:
         reason = (f"no coefficient moved beyond its σ (family p = {shift['p_family']:.3g}) and "
                   "the refitted base leaves nothing the tests can name"
                   if refit else f"no coefficient moved (family p = {shift['p_family']:.3g})")
     corrected = replace(given, model=_corrected_model(model, fit, against, recording),
+                        die_tau_s=tau if tau is not None else given.die_tau_s,
                         provenance={**given.provenance, "corrected_against": str(recording.path)})
+    if rig:
+        notes.append(f"rig check: die lag profiled over τ, best {rig['tau_s']:.0f} s against "
+                     f"the twin's {tau_given:.0f} s (p = {rig['p_value']:.3g})")
     located = _locate(r0, sigma, steps, recording)
     return AgainstDiagnosis(
         str(recording.path), against, mode, "mismatch" if mismatch else "consistent", reason,
@@ -415,12 +454,18 @@ def _folds(steps: np.ndarray, t_s: np.ndarray) -> tuple[list[np.ndarray], str]:
     return out, "leave-one-interval-out (5 contiguous time intervals)"
 
 
-def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s) -> dict[str, Any]:
+def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s, lag=None) -> dict[str, Any]:
     """RMS on held-out plateaus: the given model vs the shift fitted on the other plateaus.
 
     The end steps are never held out (a cubic does not extrapolate: that would test the
-    polynomial, not the shift), and the same rows enter both figures.
+    polynomial, not the shift), and the same rows enter both figures. ``lag``:
+    (die − air of τ, the twin's τ, the corrected τ): the given twin predicts at its τ, the
+    corrected one at the corrected τ (τ itself is fitted on all rows: one scalar).
     """
+    given_c = temp_c
+    if lag is not None:
+        dma, tau_g, tau_c = lag
+        given_c, temp_c = temp_c + dma(tau_g), temp_c + dma(tau_c)
     masks, scheme = _folds(steps, t_s)
     sq_g = sq_c = 0.0
     cnt = 0
@@ -431,7 +476,8 @@ def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s) -> dict[str, An
                           steps[~m]) & fitted
         f = fit_shift(model, raw, ref, temp_c, sigma, fm, rows=~m)
         shifted = replace(model, coeffs=model.coeffs + f.delta)
-        r_g = _residual(model.coeffs, model, raw[m], None if ref is None else ref[m], temp_c[m])
+        r_g = _residual(model.coeffs, model, raw[m], None if ref is None else ref[m],
+                        given_c[m])
         r_c = _residual(shifted.coeffs, model, raw[m], None if ref is None else ref[m],
                         temp_c[m])
         sq_g += float(np.sum(r_g**2))
@@ -442,6 +488,87 @@ def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s) -> dict[str, An
     rg, rc = np.sqrt(sq_g / cnt) * UG, np.sqrt(sq_c / cnt) * UG
     return {"scheme": scheme, "rmse_given_ug": _r(rg), "rmse_corrected_ug": _r(rc),
             "improvement_percent": _r(100.0 * (1.0 - rc / rg)) if rg > 0 else None}
+
+
+# --- rig physics: the die's lag ------------------------------------------------
+def _lag_of(rec: Recording, twin: Twin, notes: list[str]):
+    """T_die − T_air(τ) for this recording, or None when the twin's lag does not apply.
+
+    The twin's model is in the die temperature on the air's scale (``twin fit`` on a
+    chamber-only recording); a recording with ``sensor_c`` already follows the die.
+    """
+    if twin.die_tau_s is None:
+        return None
+    if rec.has("sensor_c") or not rec.has("chamber_c"):
+        notes.append("the twin's die lag is not applied: the recording's temperature is the "
+                     "sensor's own channel, which follows the die")
+        return None
+    from calibration.discrepancy.context import base_context
+    from calibration.discrepancy.rig import die_minus_air_c
+
+    ctx = base_context(rec, "reference", np.zeros((len(rec), 3)))
+    cache: dict[float, np.ndarray] = {}
+
+    def dma(tau_s: float) -> np.ndarray:
+        key = round(float(tau_s), 6)
+        if key not in cache:
+            cache[key] = die_minus_air_c(ctx.t_s, ctx.steps, ctx.step_temp_c, tau_s,
+                                         twin.air_tau_s, twin.ramp_c_per_min)
+        return cache[key]
+
+    return dma
+
+
+# The reconstructed history (rig.py) recovers a simulated rig's τ within ~2 % (300 s: −2.1 %,
+# 900 s: −0.5 %, 1800 s: −0.4 %, 20-min soaks); a twin's τ is not held to better than this.
+TAU_RESOLUTION_REL = 0.03
+
+
+def rig_check(model: ThermalModel, raw, ref, air_c, dma, tau_given: float, sigma, fitted,
+              alpha: float, tau_given_sd: float = 0.0) -> dict[str, Any]:
+    """Profile the die lag τ (the shift refitted at each τ) against the twin's τ.
+
+    Two conditions, both at α: the likelihood ratio of the best τ over the twin's (scaled by
+    the residual variance at the best τ, χ²₁ tail, Bonferroni over the grid: the profile's
+    search is paid for), and the difference of the two τ beyond their joint uncertainty
+    (profile σ here, the twin's own σ, and :data:`TAU_RESOLUTION_REL` of the twin's τ).
+    """
+    from scipy.optimize import minimize_scalar
+
+    from calibration.discrepancy.effects.thermal_lag import TAU_GRID_S
+
+    def rss(tau_s: float) -> float:
+        f = fit_shift(model, raw, ref, air_c + dma(tau_s), sigma, fitted)
+        return float(np.sum((f.residual / sigma) ** 2))
+
+    grid = sorted({0.0, *TAU_GRID_S, float(tau_given)})
+    prof = np.array([rss(t) for t in grid])
+    i = int(np.argmin(prof))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    best_t, best = grid[i], float(prof[i])
+    if hi > lo:
+        r = minimize_scalar(rss, bounds=(lo, hi), method="bounded", options={"xatol": 1.0})
+        if r.fun < best:
+            best_t, best = float(r.x), float(r.fun)
+    n_res = raw.shape[0] * (3 if ref is not None else 1)
+    dof = max(n_res - int(fitted.sum()) - 1, 1)
+    s2 = max(best / dof, 1e-300)
+    lr = max(rss(tau_given) - best, 0.0) / s2
+    logp = float(sps.chi2.logsf(lr, 1)) + np.log(len(grid))
+    h = max(0.02 * best_t, 1.0)
+    curv = (rss(best_t + h) + rss(max(best_t - h, 0.0)) - 2 * best) / h**2
+    tau_sd = float(np.sqrt(2.0 * s2 / curv)) if curv > 0 else float("nan")
+    sd_diff = float(np.sqrt(np.nan_to_num(tau_sd, nan=0.0) ** 2 + tau_given_sd**2
+                            + (TAU_RESOLUTION_REL * tau_given) ** 2))
+    z = abs(best_t - tau_given) / sd_diff if sd_diff > 0 else np.inf
+    logp_z = float(np.log(2.0) + sps.norm.logsf(z)) + np.log(len(grid))
+    logp = max(logp, logp_z)
+    return {"significant": bool(logp < np.log(alpha)), "tau_s": round(best_t, 1),
+            "tau_sd_s": round(tau_sd, 1) if np.isfinite(tau_sd) else None,
+            "p_value": float(f"{min(np.exp(logp), 1.0):.3g}"),
+            "test": "likelihood ratio of the profiled die lag against the twin's (shift "
+                    "refitted at each τ), χ²₁, and the τ difference over its joint σ; "
+                    "Bonferroni over the τ grid"}
 
 
 # --- where -------------------------------------------------------------------

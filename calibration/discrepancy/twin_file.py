@@ -1,8 +1,10 @@
 """The twin document (``docs/diagnosis.md`` §9): a calibration model plus the rig and noise.
 
 ``{"format": "soakcal-twin", "version": 1, "model": <soakcal-model document>,
-"rig": {"die_tau_s": float | null}, "noise": {"sd_g": [3] | null, "temperature_c": float |
-null}, "effects": [...], "provenance": {...}}``
+"rig": {"die_tau_s": float | null, "die_tau_sd_s": float | null, "air_tau_s": float,
+"ramp_c_per_min": float},
+"noise": {"sd_g": [3] | null, "temperature_c": float | null, "sample_sd_g": [3] | null,
+"samples_per_reading": float | null}, "effects": [...], "provenance": {...}}``
 
 The ``model`` member is an ordinary model file (``docs/model-file.md``), so a twin holds the
 same sensor physics (SFEM, seed Eq. 1, with cubic parameters, Eq. 8) that ``calibrate``
@@ -20,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy.rig import DEFAULT_AIR_TAU_S, DEFAULT_RAMP_C_PER_MIN
 from calibration.errors import ModelFileError
 from calibration.model_file import FORMAT as MODEL_FORMAT
 from calibration.model_file import dump_model_dict, load_model_dict
@@ -40,13 +43,24 @@ class Twin:
     temperature_noise_c: float | None = None  # rms of the temperature channel per reading, °C
     effects: list[dict[str, Any]] = field(default_factory=list)
     provenance: dict[str, Any] = field(default_factory=dict)
+    sample_sd_g: list[float] | None = None  # per-axis sd of one raw sample (sd_* columns), g
+    samples_per_reading: float | None = None  # median n of the recording
+    # The chamber's response (calibration/discrepancy/rig.py): not identifiable from plateau
+    # readings alone, so a fitted twin keeps the rig's nominal values and says so.
+    air_tau_s: float = DEFAULT_AIR_TAU_S
+    ramp_c_per_min: float = DEFAULT_RAMP_C_PER_MIN
+    die_tau_sd_s: float | None = None  # σ of die_tau_s (profile), None: not estimated
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": TWIN_FORMAT, "version": TWIN_VERSION,
             "model": dump_model_dict(self.model),
-            "rig": {"die_tau_s": self.die_tau_s},
-            "noise": {"sd_g": self.noise_sd_g, "temperature_c": self.temperature_noise_c},
+            "rig": {"die_tau_s": self.die_tau_s, "die_tau_sd_s": self.die_tau_sd_s,
+                    "air_tau_s": self.air_tau_s,
+                    "ramp_c_per_min": self.ramp_c_per_min},
+            "noise": {"sd_g": self.noise_sd_g, "temperature_c": self.temperature_noise_c,
+                      "sample_sd_g": self.sample_sd_g,
+                      "samples_per_reading": self.samples_per_reading},
             "effects": list(self.effects),
             "provenance": dict(self.provenance),
         }
@@ -98,12 +112,33 @@ def twin_from_dict(doc: Any) -> Twin:
     tn = noise.get("temperature_c")
     if tn is not None and not (_is_num(tn) and tn >= 0):
         raise ModelFileError(f"noise.temperature_c: expected null or a number >= 0, got {tn!r}")
+    ssd = noise.get("sample_sd_g")
+    if ssd is not None and not (isinstance(ssd, list) and len(ssd) == 3
+                                and all(_is_num(v) and v >= 0 for v in ssd)):
+        raise ModelFileError(f"noise.sample_sd_g: expected null or three numbers >= 0, "
+                             f"got {ssd!r}")
+    spr = noise.get("samples_per_reading")
+    if spr is not None and not (_is_num(spr) and spr >= 1):
+        raise ModelFileError(f"noise.samples_per_reading: expected null or a number >= 1, "
+                             f"got {spr!r}")
+    air_tau = rig.get("air_tau_s", DEFAULT_AIR_TAU_S)
+    if not (_is_num(air_tau) and air_tau >= 0):
+        raise ModelFileError(f"rig.air_tau_s: expected a number >= 0, got {air_tau!r}")
+    ramp = rig.get("ramp_c_per_min", DEFAULT_RAMP_C_PER_MIN)
+    if not (_is_num(ramp) and ramp > 0):
+        raise ModelFileError(f"rig.ramp_c_per_min: expected a number > 0, got {ramp!r}")
+    tau_sd = rig.get("die_tau_sd_s")
+    if tau_sd is not None and not (_is_num(tau_sd) and tau_sd >= 0):
+        raise ModelFileError(f"rig.die_tau_sd_s: expected null or a number >= 0, got {tau_sd!r}")
     effects = doc.get("effects") or []
     if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
         raise ModelFileError("effects: expected a list of objects")
     return Twin(model, None if tau is None else float(tau),
                 None if sd is None else [float(v) for v in sd],
-                None if tn is None else float(tn), effects, dict(doc.get("provenance") or {}))
+                None if tn is None else float(tn), effects, dict(doc.get("provenance") or {}),
+                None if ssd is None else [float(v) for v in ssd],
+                None if spr is None else float(spr), float(air_tau), float(ramp),
+                None if tau_sd is None else float(tau_sd))
 
 
 def _is_num(v: Any) -> bool:
