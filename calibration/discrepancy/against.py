@@ -207,7 +207,17 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
     if refit:
         from calibration.discrepancy.diagnose import diagnose
 
-        d = diagnose(recording, None, seed=seed, n_null=n_null, alpha=alpha)
+        rec_frame = recording
+        if tau is not None and die_minus_air is not None and tau > 0:
+            # Why: the twin already holds the die lag; what the refitted base leaves must be
+            # judged on the twin's die temperature, or the lag the twin carries is "found".
+            cols = dict(recording.columns)
+            cols["chamber_c"] = cols["chamber_c"] + die_minus_air(tau)
+            rec_frame = Recording.from_columns(cols)
+            rec_frame.path = recording.path
+            notes.append(f"the refit diagnosis uses the twin's die temperature (air + lag of "
+                         f"τ = {tau:.0f} s)")
+        d = diagnose(rec_frame, None, seed=seed, n_null=n_null, alpha=alpha)
         refit_dict = d.to_dict()
         refit_mismatch = bool(d.mismatch)
         findings.extend(refit_dict["findings"])

@@ -58,7 +58,10 @@ def fit_twin(rec: Recording) -> tuple[Twin, dict[str, Any]]:
         notes.append("no die lag fitted: the recording's temperature follows the die "
                      "(sensor_c) or there is one plateau")
     fit = ag.fit_shift(start, raw, ref, temp_c, sigma, fitted)
+    se = start.coeff_stderr if start.coeff_stderr is not None else np.full(start.coeffs.shape,
+                                                                             np.nan)
     model = replace(start, coeffs=start.coeffs + fit.delta,
+                    coeff_stderr=np.where(fitted, fit.sd_recording, se),
                     provenance={**start.provenance, "twin_fit": str(rec.path)},
                     notes=list(start.notes) + (
                         [f"temperature is the die's, lagging the air by τ = {tau:.0f} s"]
