@@ -165,6 +165,9 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
             tau = rig["tau_s"]
             temp_c = air_c + die_minus_air(tau)
             fit = fit_shift(model, raw, ref, temp_c, sigma, fitted)
+    if tau is not None and die_minus_air is not None and tau > 0:
+        fit = fit_shift(model, raw, ref, temp_c, sigma, fitted,
+                        dtemp_dtau=dtemp_dtau(die_minus_air, tau))
     shift = _shift_table(model, fit, alpha, temp_c)
     heldout = _heldout(model, raw, ref, air_c, sigma, fitted, steps, recording.t_s,
                        None if tau is None else (die_minus_air, tau_given, tau))
@@ -315,8 +318,14 @@ def _sigma_g(rec: Recording, steps: np.ndarray, model: ThermalModel, raw: np.nda
 
 # --- the shift ---------------------------------------------------------------
 def fit_shift(model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None, temp_c: np.ndarray,
-              sigma: np.ndarray, fitted: np.ndarray, rows: np.ndarray | None = None) -> ShiftFit:
-    """Gauss–Newton for the coefficient shift δ (weighted by 1/σ), on ``rows`` if given."""
+              sigma: np.ndarray, fitted: np.ndarray, rows: np.ndarray | None = None,
+              dtemp_dtau: np.ndarray | None = None) -> ShiftFit:
+    """Gauss–Newton for the coefficient shift δ (weighted by 1/σ), on ``rows`` if given.
+
+    ``dtemp_dtau`` (∂T/∂τ per row, °C/s): the temperature came from a profiled die lag τ;
+    its column joins the covariance, so σ of δ is marginal over τ (a lag slightly off is
+    partly absorbed by the tempcos; conditional σ would be too small).
+    """
     sel = np.ones(raw.shape[0], bool) if rows is None else rows
     w = 1.0 / sigma[sel]
     coeffs = model.coeffs.copy()
@@ -337,12 +346,20 @@ def fit_shift(model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None, temp
     J, r = _jacobian(coeffs, model, raw[sel], None if ref is None else ref[sel], temp_c[sel],
                      V, cols)
     Jw = J * w.reshape(-1)[:, None]
+    if dtemp_dtau is not None:
+        h = 0.01  # °C: the residual's slope in T, times ∂T/∂τ
+        refs = None if ref is None else ref[sel]
+        dr = (_residual(coeffs, model, raw[sel], refs, temp_c[sel] + h)
+              - _residual(coeffs, model, raw[sel], refs, temp_c[sel] - h)) / (2 * h)
+        dt = dtemp_dtau[sel] if dr.ndim == 1 else dtemp_dtau[sel][:, None]
+        Jw = np.hstack([Jw, ((dr * dt) * w).reshape(-1, 1)])
     rw = (r * w).reshape(-1)
-    dof = max(rw.size - cols.shape[0], 1)
+    dof = max(rw.size - Jw.shape[1], 1)
     chi2_red = float(rw @ rw) / dof
     scale = np.where(np.linalg.norm(Jw, axis=0) > 0, np.linalg.norm(Jw, axis=0), 1.0)
     G = (Jw / scale).T @ (Jw / scale)
     cov = np.linalg.pinv(G, rcond=1e-12, hermitian=True) / np.outer(scale, scale)
+    cov = cov[: cols.shape[0], : cols.shape[0]]
     sd_rec = np.zeros(model.coeffs.shape)
     sd_rec[cols[:, 0], cols[:, 1]] = np.sqrt(np.clip(np.diag(cov), 0, None) * chi2_red)
     se = model.coeff_stderr
@@ -532,6 +549,12 @@ def _lag_of(rec: Recording, twin: Twin, notes: list[str]):
 # The reconstructed history (rig.py) recovers a simulated rig's τ within ~2 % (300 s: −2.1 %,
 # 900 s: −0.5 %, 1800 s: −0.4 %, 20-min soaks); a twin's τ is not held to better than this.
 TAU_RESOLUTION_REL = 0.03
+
+
+def dtemp_dtau(dma, tau_s: float) -> np.ndarray:
+    """∂T_die/∂τ per row (°C/s), central difference of the reconstructed history."""
+    h = max(0.01 * tau_s, 1.0)
+    return (dma(tau_s + h) - dma(max(tau_s - h, 0.0))) / (tau_s + h - max(tau_s - h, 0.0))
 
 
 def rig_check(model: ThermalModel, raw, ref, air_c, dma, tau_given: float, sigma, fitted,

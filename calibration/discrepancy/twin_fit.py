@@ -57,7 +57,8 @@ def fit_twin(rec: Recording) -> tuple[Twin, dict[str, Any]]:
     else:
         notes.append("no die lag fitted: the recording's temperature follows the die "
                      "(sensor_c) or there is one plateau")
-    fit = ag.fit_shift(start, raw, ref, temp_c, sigma, fitted)
+    fit = ag.fit_shift(start, raw, ref, temp_c, sigma, fitted,
+                       dtemp_dtau=ag.dtemp_dtau(dma, tau) if dma is not None and tau else None)
     se = start.coeff_stderr if start.coeff_stderr is not None else np.full(start.coeffs.shape,
                                                                              np.nan)
     model = replace(start, coeffs=start.coeffs + fit.delta,
