@@ -223,12 +223,7 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
         d = diagnose(rec_frame, None, seed=seed, n_null=n_null, alpha=alpha)
         refit_dict = d.to_dict()
         refit_mismatch = bool(d.mismatch)
-        findings.extend(refit_dict["findings"])
-        if d.unexplained.get("significant"):
-            findings.append({"effect": "unexplained", "axes": [], "where": d.located,
-                             "explanation": "structure beyond noise after the refitted base "
-                                            "that no catalogue term explains",
-                             "evidence": d.unexplained})
+        findings.extend(refit_dict["findings"])  # an ``unexplained`` finding included
     mismatch = bool(shift["significant"]) or refit_mismatch or bool(rig.get("significant"))
     if mismatch:
         parts = []
