@@ -47,31 +47,50 @@ class ScanResult:
 
 
 def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> ScanResult:
-    """Scan the residual ``e`` (whitened, model projected out; ``E`` its null replicates)."""
-    blocks = list(_blocks(pb))
-    if not blocks or e.size == 0:
-        return ScanResult(1.0, False, 0)
-    lps: list[float] = []
-    null_min = np.zeros(E.shape[1])
+    """Scan the residual ``e`` (whitened, model projected out; ``E`` its null replicates).
+
+    Blocks with the same (k, dof) share one F law, so the minimum p over them is the p of
+    their largest F: the null needs one tail evaluation per group, not per block.
+    """
+    m = e.size
+    ee, EE = float(e @ e), np.sum(E**2, axis=0)
+    F: list[float] = []
+    kd: list[tuple[int, int]] = []
     kept: list[tuple[str, int, int]] = []
-    for label, key, axis, X in blocks:
+    null_max: dict[tuple[int, int], np.ndarray] = {}
+    for label, key, axis, X in _blocks(pb):
         Xw = pb.whiten(pb.lift(X))
-        if not np.any(Xw):
+        tot = float(np.sum(Xw**2))
+        if tot <= 0:
             continue
-        lp, lpn, k, absorbed, _ = stats.linear_stats(U, Xw, e, E)
-        if k == 0 or absorbed > stats.ABSORBED_MAX:
+        Z = stats.project_out(U, Xw)
+        if 1.0 - float(np.sum(Z**2)) / tot > stats.ABSORBED_MAX:
             continue
-        lps.append(lp)
-        null_min = np.minimum(null_min, lpn)
+        B = stats.orthonormal_basis(Z, 1e-6)
+        k = B.shape[1]
+        if k == 0:
+            continue
+        dof = max(m - U.shape[1] - k, 1)
+        q = float(np.sum((B.T @ e) ** 2))
+        qn = np.sum((B.T @ E) ** 2, axis=0)
+        F.append(q / k / max((ee - q) / dof, 1e-300))
+        fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
+        null_max[(k, dof)] = np.maximum(null_max.get((k, dof), 0.0), fn)
+        kd.append((k, dof))
         kept.append((label, key, axis))
-    if not lps:
+    if not F:
         return ScanResult(1.0, False, 0)
-    lp_arr = np.asarray(lps)
+    lp_arr = np.empty(len(F))
+    for g in set(kd):
+        idx = [i for i, x in enumerate(kd) if x == g]
+        lp_arr[idx] = stats.f_logsf(np.asarray([F[i] for i in idx]), g[0], g[1])
+    null_min = np.min(np.vstack([stats.f_logsf(v, g[0], g[1]) for g, v in null_max.items()]),
+                      axis=0)
     best = float(lp_arr.min())
     count = int(np.sum(null_min <= best))
     p_family = (1 + count) / (E.shape[1] + 1)
     if count == 0:  # beyond the bootstrap's resolution: Bonferroni over the blocks
-        p_family = min(p_family, float(np.exp(best)) * len(lps))
+        p_family = min(p_family, float(np.exp(best)) * len(F))
     places = []
     for i in np.argsort(lp_arr)[:MAX_WHERE]:
         # Each listed place must be significant on its own against the scan's null.
@@ -81,7 +100,7 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
         label, key, axis = kept[i]
         places.append({label: int(key), "axis": AXES[axis] if axis >= 0 else "norm",
                        "log10_p": round(float(lp_arr[i] / np.log(10)), 1)})
-    return ScanResult(float(p_family), bool(p_family <= alpha), len(lps), places)
+    return ScanResult(float(p_family), bool(p_family <= alpha), len(F), places)
 
 
 def _blocks(pb: Any):
