@@ -49,3 +49,29 @@ def test_scan_is_quiet_on_a_null():
     d = diagnose(rec, n_null=100, seed=3)
     assert d.findings == [] and d.unexplained["significant"] is False
     assert d.unexplained["blocks"] == 11 * 3 + 24 * 3
+
+
+@dataclass
+class WarmUpAfterPowerOn:
+    """Outside the catalogue: all axes drift back from an offset after power-on (τ 20 min)."""
+
+    amplitude_g: float
+    effect_id: str = "warmup"
+
+    def raw_delta_g(self, ctx, truth, rng):
+        decay = np.exp(-(ctx.t_s - ctx.t_s.min() + 3600.0) / 1200.0)
+        return self.amplitude_g * np.repeat(decay[:, None], 3, axis=1)
+
+    def temperature_delta_c(self, ctx, rng):
+        return np.zeros(ctx.t_s.size)
+
+
+def test_warm_up_on_the_first_plateau_gets_no_catalogue_name():
+    """Its evidence is the first plateau alone: a rate slope or a session jump from step 1
+    would explain it as well as "that plateau differs", so neither is named."""
+    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=4, effects=[
+        WarmUpAfterPowerOn(1.2e-3)]), ONE_WAY, seed=54, soak_min=30)
+    d = diagnose(rec, n_null=100, seed=4)
+    assert [f.effect for f in d.findings] == ["unexplained"]
+    assert d.findings[0].where["steps"][0] == 0
+    assert any("evidence is step" in n for n in d.notes)
