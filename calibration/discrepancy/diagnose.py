@@ -293,6 +293,19 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             notes.append(f"reading(s) {sorted(withdrawn)} not named outlier: they lie where "
                          "the local scan finds structure beyond them (not isolated)")
             scanned = _scan_final(pb, terms, rng, n_null, alpha)
+    if scanned.significant:
+        # "A named finding must explain most of the located structure" (issue 10): when
+        # structure remains exactly where a named term acts (its own steps or positions,
+        # not all of them), the term took a share of something it does not describe
+        # (orientation history named a nonlinearity under the fixed Table 1 order).
+        demoted = _leaves_its_own_places(pb, findings, scanned.places)
+        if demoted:
+            terms = [t for t in terms if t.effect_id not in demoted]
+            findings = [f for f in findings if f.effect not in demoted]
+            notes.append(f"{', '.join(sorted(demoted))} not named: after it, structure "
+                         "remains at the steps/positions where it acts, so it does not "
+                         "explain the located structure")
+            scanned = _scan_final(pb, terms, rng, n_null, alpha)
     findings = _merge_outliers(findings)
     final_res = _residual(pb, terms)
     flagged = _flagged(pb, terms)
@@ -416,6 +429,22 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     E = rng.standard_normal((pb.m, n_null))
     E -= U @ (U.T @ E)
     return scan_mod.scan(pb, U, e, E, alpha)
+
+
+def _leaves_its_own_places(pb: LinearProblem, findings: list[Finding],
+                           places: list[dict[str, Any]]) -> set[str]:
+    ctx = pb.ctx
+    n_steps, n_pos = len(ctx.step_ids), len(np.unique(ctx.positions))
+    out: set[str] = set()
+    for f in findings:
+        if f.rows or f.effect == "unexplained":
+            continue
+        steps, pos = set(f.where.get("steps") or []), set(f.where.get("positions") or [])
+        for p in places:
+            if ("step" in p and p["step"] in steps and len(steps) < n_steps) or (
+                    "position" in p and p["position"] in pos and len(pos) < n_pos):
+                out.add(f.effect)
+    return out
 
 
 def _rows_in_places(pb: LinearProblem, places: list[dict[str, Any]]) -> np.ndarray:
