@@ -23,6 +23,7 @@ from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, EffectModule
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.problem import LinearProblem, build_problem
+from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.recording import Recording
 
 MAX_STAGES = 8
@@ -187,6 +188,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         notes.append("no sd_* columns: noise estimated from the residuals (MAD)")
     if ctx.temperature_source == "none":
         notes.append("no temperature recorded: one plateau, base model has no temperature terms")
+    if time_and_position_confounded(ctx.steps, ctx.positions, ctx.t_s):
+        notes.append("the positions are visited in the same order on every plateau: time within "
+                     "a plateau and orientation are one regressor here, so a warm-up or settling "
+                     "and an orientation effect cannot be told apart (a seeded or balanced "
+                     "order per plateau separates them: calibration/discrepancy/"
+                     "protocol_order.py)")
 
     # Protocol-level identifiability first; the absorbed fraction is checked per stage.
     live: list[EffectModule] = []
