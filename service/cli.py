@@ -56,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sensor(sub)
     _add_rig(sub)
     _add_ops(sub)
+    _add_twin(sub)
     demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
@@ -117,6 +118,8 @@ def _add_calibration_commands(sub: Any) -> None:
     diag.add_argument("--report-dir", metavar="DIR", help="write the report here")
     diag.add_argument("--seed", type=int, metavar="N", help="random seed")
     diag.add_argument("--n-null", type=int, metavar="N", help="null-distribution draws")
+    diag.add_argument("--against", metavar="FILE", help="model or twin JSON held fixed (no refit)")
+    diag.add_argument("--write-twin", metavar="OUT", help="with --against: corrected twin JSON")
     diag.set_defaults(handler=_delegate("calibration.discrepancy.cli", "run_diagnose", "diagnose"))
 
     imp = sub.add_parser("import", help="convert a raw recording to recording format v1")
@@ -147,6 +150,17 @@ def _add_export(sub: Any) -> None:
                      help="c: one C99 header (default); json-flat: plain arrays and a recipe")
     exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
     exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
+
+
+def _add_twin(sub: Any) -> None:
+    twin = sub.add_parser("twin", help="digital twins fitted to real recordings")
+    tsub = twin.add_subparsers(dest="twin_command", metavar="ACTION", required=True)
+    fit = tsub.add_parser("fit", help="fit a twin (sensor model, die lag, noise) to a recording")
+    fit.add_argument("recording", metavar="RECORDING", help="recording v1 CSV")
+    fit.add_argument("-o", "--output", required=True, metavar="TWIN", help="twin JSON to write")
+    fit.add_argument("--json", action="store_true", help="print the report as JSON")
+    fit.set_defaults(handler=_delegate("calibration.discrepancy.twin_cli", "run_twin_fit",
+                                       "twin fit"))
 
 
 def _delegate(module: str, function: str, command: str) -> Callable[[Any], int]:

@@ -32,8 +32,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1, help="sensor truth and noise seed")
     p.add_argument("--speed", type=float, default=1.0,
                    help="simulated seconds per wall second (1 = real time)")
-    p.add_argument("--die-tau-s", type=float, default=900.0,
-                   help="die lag behind chamber air, s")
+    p.add_argument("--die-tau-s", type=float, default=None,
+                   help="die lag behind chamber air, s (default: the twin's, else 900)")
+    p.add_argument("--twin", metavar="FILE", default=None,
+                   help="twin or model JSON (soakcal twin fit / diagnose --write-twin): the "
+                        "simulated sensor, its noise and die lag")
     p.add_argument("--p-exception", type=float, default=0.0,
                    help="probability of an exception reply per request (all devices)")
     p.add_argument("--p-no-reply", type=float, default=0.0,
@@ -57,6 +60,22 @@ def run_sim(argv: list[str] | None = None) -> int:
     except MapError as exc:
         print(f"soakcal sim: {exc}", file=sys.stderr)
         return 2
+    args.truth = None
+    if args.twin:
+        from calibration.discrepancy.twin_file import load_model_or_twin
+        from calibration.errors import CalibrationError
+        from simulators.truth import SensorTruth
+
+        try:
+            twin = load_model_or_twin(args.twin)
+            args.truth = SensorTruth.from_twin(twin)
+        except (CalibrationError, ValueError) as exc:
+            print(f"soakcal sim: {exc}", file=sys.stderr)
+            return 2
+        if args.die_tau_s is None and twin.die_tau_s is not None:
+            args.die_tau_s = twin.die_tau_s
+    if args.die_tau_s is None:
+        args.die_tau_s = 900.0
     with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(_serve(args))
     return 0
@@ -91,7 +110,8 @@ async def _serve(args: argparse.Namespace) -> None:
     faults.chamber.stuck_process_value = args.stuck_pv
     faults.table.never_in_position = args.never_in_position
     clock = RealClock() if args.speed == 1.0 else ScaledClock(args.speed)
-    async with start_sim_rig(clock, seed=args.seed, chamber_map=args.chamber_map,
+    async with start_sim_rig(clock, seed=args.seed, truth=args.truth,
+                             chamber_map=args.chamber_map,
                              faults=faults, ports=args.port, host=args.host,
                              die_tau_s=args.die_tau_s, table_map=args.table_map) as rig:
         print(describe(rig), flush=True)

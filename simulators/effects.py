@@ -40,6 +40,14 @@ def ideal_raw_batch(truth: SensorTruth, ref_g: np.ndarray, die_c: np.ndarray) ->
     return np.linalg.solve(A, f[:, :, None])[:, :, 0] + P[:, 0:3]
 
 
+def _axes(p: dict, pattern: str, default: float | None = None) -> np.ndarray:
+    """(3,) from a finding's per-axis parameters ``pattern.format(axis)``."""
+    keys = [pattern.format(a) for a in ("x", "y", "z")]
+    if default is None:
+        return np.array([float(p[k]) for k in keys])
+    return np.array([float(p.get(k, default) or default) for k in keys])
+
+
 def _vec3(v: float | Sequence[float] | np.ndarray) -> np.ndarray:
     return np.broadcast_to(np.asarray(v, float), (3,)).copy()
 
@@ -66,6 +74,11 @@ class ThermalLag:
 
     tau_s: float
     effect_id: str = "thermal_lag"
+
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> ThermalLag:
+        """The twin counterpart of a ``thermal_lag`` finding (rig physics: τ)."""
+        return cls(tau_s=float(p["tau_s"]))
     COLUMNS: ClassVar[tuple[str, ...]] = ("chamber_c",)
 
     def physics(self, base: object) -> object:
@@ -82,6 +95,10 @@ class ThermalHysteresis(_RawOnly):
     h_g: np.ndarray
     effect_id: str = "thermal_hysteresis"
 
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> ThermalHysteresis:
+        return cls(h_g=_axes(p, "h_{}_ug") * 1e-6)
+
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         return ctx.direction.astype(float)[:, None] * _vec3(self.h_g)[None, :]
 
@@ -92,6 +109,11 @@ class TemperatureRate(_RawOnly):
 
     k_g_per_c_per_s: np.ndarray
     effect_id: str = "temperature_rate"
+
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> TemperatureRate:
+        # the finding is per °C/min of the recorded slope; this is per °C/s of the die rate
+        return cls(k_g_per_c_per_s=_axes(p, "k_rate_{}_ug_per_c_per_min") * 1e-6 * 60.0)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         return ctx.die_rate_c_per_s[:, None] * _vec3(self.k_g_per_c_per_s)[None, :]
@@ -173,6 +195,10 @@ class VibrationRectification(_RawOnly):
     c_per_g: np.ndarray
     effect_id: str = "vibration_rectification"
 
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> VibrationRectification:
+        return cls(c_per_g=_axes(p, "c_{}_per_g"))
+
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         return (ctx.vib_sd_g**2)[:, None] * _vec3(self.c_per_g)[None, :]
 
@@ -185,6 +211,11 @@ class ScaleNonlinearity(_RawOnly):
     k2_per_g: np.ndarray = field(default_factory=lambda: np.zeros(3))
     k3_per_g2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     effect_id: str = "scale_nonlinearity"
+
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> ScaleNonlinearity:
+        return cls(k2_per_g=_axes(p, "k2_{}_ug_per_g2") * 1e-6,
+                   k3_per_g2=_axes(p, "k3_{}_ug_per_g3") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         a = ctx.ref_g
@@ -203,6 +234,11 @@ class CrossCoupling(_RawOnly):
     k_xz_per_g: float = 0.0
     k_yz_per_g: float = 0.0
     effect_id: str = "cross_coupling"
+
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> CrossCoupling:
+        return cls(**{f"k_{q}_per_g": float(p[f"k_{q}_ug_per_g2"]) * 1e-6
+                      for q in ("xy", "xz", "yz")})
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         ax, ay, az = ctx.ref_g.T
@@ -324,6 +360,10 @@ class BiasDrift(_RawOnly):
     relax_tau_h: float = 10.0
     effect_id: str = "bias_drift"
 
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> BiasDrift:
+        return cls(rate_g_per_h=_axes(p, "rate_{}_ug_per_h") * 1e-6)
+
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         t_h = ctx.t_s[:, None] / 3600.0
         relax = _vec3(self.relax_g) * (1.0 - np.exp(-t_h / self.relax_tau_h))
@@ -336,6 +376,10 @@ class SessionOffset(_RawOnly):
 
     offsets_g: np.ndarray
     effect_id: str = "session_offset"
+
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> SessionOffset:
+        return cls(offsets_g=np.vstack([np.zeros(3), _axes(p, "offset_{}_ug") * 1e-6]))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         off = np.atleast_2d(np.asarray(self.offsets_g, float))
@@ -362,6 +406,10 @@ class Outlier(_RawOnly):
     spike_samples: int | None = None
     effect_id: str = "outlier"
 
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> Outlier:
+        return cls(size_g=_axes(p, "size_{}_ug", 0.0) * 1e-6, rows=tuple(int(r) for r in rows))
+
     def hit_rows(self, n_rows: int, rng: np.random.Generator) -> np.ndarray:
         hit = np.zeros(n_rows, bool)
         hit[list(self.rows)] = True
@@ -384,3 +432,23 @@ EFFECT_CLASSES: dict[str, type] = {
               VibrationRectification, ScaleNonlinearity, CrossCoupling, LocalGravity,
               TurntableGeometry, LeverArm, FilterDelay, BiasDrift, SessionOffset, Outlier)
 }
+
+
+def to_truth_effects(findings: Sequence[object]) -> list[object]:
+    """Twin counterparts of diagnosis findings (``Finding`` objects or their JSON dicts).
+
+    Each effect class owns its mapping (``from_finding``); findings without a counterpart
+    (``parameter_shift``, ``unexplained``, effects not built here) are skipped. A diagnosis
+    object may be passed too (its ``findings`` are used).
+    """
+    items = getattr(findings, "findings", findings)
+    out: list[object] = []
+    for f in items:  # type: ignore[union-attr]
+        eid = f["effect"] if isinstance(f, dict) else f.effect  # type: ignore[attr-defined]
+        params = f["parameters"] if isinstance(f, dict) else f.parameters  # type: ignore
+        rows = (f.get("rows") or f.get("where", {}).get("rows") or ()) if isinstance(f, dict) \
+            else f.rows  # type: ignore[attr-defined]
+        cls = EFFECT_CLASSES.get(eid)
+        if cls is not None and hasattr(cls, "from_finding"):
+            out.append(cls.from_finding(params, rows))
+    return out

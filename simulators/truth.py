@@ -93,6 +93,34 @@ class SensorTruth:
         c[9:12, 1] = rng.normal(0, 2e-6, 3)
         return cls(coeffs=c, temp_offset_c=float(rng.uniform(-2.0, 2.0)), **kw)  # type: ignore[arg-type]
 
+    @classmethod
+    def from_twin(cls, twin: object, **kw: object) -> SensorTruth:
+        """The sensor of a twin document (``calibration.discrepancy.twin_file.Twin``).
+
+        The twin's model polynomials (Eq. 8, in x = (T − centre)/scale up to degree 3)
+        are re-expanded exactly in (T − 25 °C); its temperature is the die's, so the
+        channel offset is 0. Noise: the twin's per-sample sd (mean over axes) as a density
+        at this ODR, and its temperature-channel noise per reading scaled to one sample.
+        """
+        model = twin.model  # type: ignore[attr-defined]
+        if model.degree > 3:
+            raise ValueError(f"twin model degree {model.degree} > 3: the truth model is cubic")
+        c = np.zeros((sfem.N_PARAMS, 4))
+        x_of_u = np.polynomial.Polynomial([(T_REF_C - model.t_centre_c) / model.t_scale_c,
+                                           1.0 / model.t_scale_c])
+        for k in range(sfem.N_PARAMS):
+            p = np.polynomial.Polynomial(model.coeffs[k])(x_of_u).coef
+            c[k, : p.size] = p[:4]
+        out = cls(coeffs=c, temp_offset_c=0.0, **kw)  # type: ignore[arg-type]
+        ssd = getattr(twin, "sample_sd_g", None)
+        if ssd:
+            out.noise_density_ug_rthz = float(np.mean(ssd)) * 1e6 / np.sqrt(out.odr_hz / 2.0)
+        tn = getattr(twin, "temperature_noise_c", None)
+        n = getattr(twin, "samples_per_reading", None) or 1.0
+        if tn is not None:
+            out.temp_noise_c = float(tn) * float(np.sqrt(n))
+        return out
+
     # --- physics --------------------------------------------------------
     def params_vector_at(self, die_c: np.ndarray | float) -> np.ndarray:
         """SFEM parameter vectors at die temperature(s): (12,) or (N,12)."""

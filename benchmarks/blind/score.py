@@ -145,9 +145,10 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
     with_finding = [c for c in ok if ok[c].get("findings")]
 
     def improved(c: str) -> bool:
+        # ``unexplained`` models nothing, so it has no held-out figures (None) to compare.
         return all(f.get("heldout_rmse_after_ug", math.inf) < f.get("heldout_rmse_before_ug",
                                                                        -math.inf)
-                   for f in ok[c]["findings"])
+                   for f in ok[c]["findings"] if f.get("effect") != "unexplained")
     res["heldout_improved"] = rate(with_finding, improved)
 
     def hidden_ok(c: str) -> bool:

@@ -37,6 +37,12 @@ def run_diagnose(args: Any) -> int:
     if n_null < 10:
         print(f"--n-null must be at least 10, got {n_null}", file=sys.stderr)
         return 2
+    against = getattr(args, "against", None)
+    if getattr(args, "write_twin", None) and not against:
+        print("--write-twin needs --against FILE (the twin to correct)", file=sys.stderr)
+        return 2
+    if against:
+        return _run_against(args, rec, against, n_null)
     try:
         diag = diagnose(rec, model, seed=int(getattr(args, "seed", 0) or 0), n_null=n_null)
     except (CalibrationError, ValueError, np_linalg_error()) as exc:
@@ -58,6 +64,35 @@ def run_diagnose(args: Any) -> int:
             from calibration.discrepancy.extensions import write_extended_model
 
             write_extended_model(diag, model_path, str(out / "model_extended.json"))
+    return 0
+
+
+def _run_against(args: Any, rec: Any, against: str, n_null: int) -> int:
+    """``diagnose --against FILE``: the given model or twin held fixed (docs/diagnosis.md §9)."""
+    from calibration.discrepancy.against import diagnose_against
+    from calibration.discrepancy.twin_file import load_model_or_twin, save_twin
+
+    try:
+        twin = load_model_or_twin(against)
+    except (CalibrationError, OSError) as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    try:
+        diag = diagnose_against(rec, twin, against=str(against), n_null=n_null,
+                                seed=int(getattr(args, "seed", 0) or 0))
+    except (CalibrationError, ValueError, np_linalg_error()) as exc:
+        print(f"{args.recording}: cannot diagnose against {against}: {exc}", file=sys.stderr)
+        return 2
+    print(diag.to_json() if getattr(args, "json", False) else diag.report())
+    out = getattr(args, "write_twin", None)
+    if out and diag.corrected is not None:
+        save_twin(out, diag.corrected)
+    report_dir = getattr(args, "report_dir", None)
+    if report_dir:
+        d = Path(report_dir)
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "diagnosis.json").write_text(diag.to_json(), encoding="utf-8")
+        (d / "diagnosis.txt").write_text(diag.report() + "\n", encoding="utf-8")
     return 0
 
 

@@ -305,6 +305,13 @@ def _norm_problem(rec: Recording) -> LinearProblem:
         raw_h = np.linalg.solve(sfem_batch.matrices(Pm_h), f[:, :, None])[:, :, 0] + Pm_h[:, 0:3]
         raw_0 = np.linalg.solve(A, f[:, :, None])[:, :, 0] + Pm[:, 0:3]
         ctx.draw_dtemp_g_per_c = (raw_h - raw_0) / h
+        sig_T = temperature_noise_c(ctx)
+        if from_sd and np.any(sig_T > 0):
+            # As in reference mode: the recorded temperature's noise moves |f| along
+            # ∂|f|/∂T (at fixed raw). Without it a 0.1 °C channel on a sensor with a
+            # typical tempco reads as structure (issue 10: ~¼ of nulls flagged).
+            dnorm_dT = (np.linalg.norm(sfem_batch.forward(Pm_h, raw), axis=1) - nf) / h
+            s_norm = np.sqrt(s_norm**2 + (dnorm_dT * sig_T) ** 2)
 
     def lift(x: np.ndarray) -> np.ndarray:
         return np.einsum("na,nak->nk", gvec, x.reshape(n, 3, -1))

@@ -15,14 +15,10 @@ def text_report(diag: Any) -> str:
              f"  null: parametric bootstrap, {diag.n_null} replicates, "
              f"family-wise α = {diag.alpha}",
              f"  held out: {diag.heldout_scheme}"]
-    un = diag.unexplained
-    if not diag.findings and not un.get("significant"):
+    if getattr(diag, "cannot_judge", ""):
+        return "\n".join(lines[:1] + [f"  Cannot judge: {diag.cannot_judge}."])
+    if not diag.findings:
         lines.append("  No mismatch: the residuals are consistent with noise.")
-    if un.get("significant"):
-        lines.append(f"  Unexplained excess: residuals are {un['rms_over_noise']:.1f}× "
-                     "the recorded "
-                     f"noise (χ²/dof {un['chi2_per_dof']:.2f}, p = {un['p_value']:.2g}) and no "
-                     "catalogue effect is significant at α")
     for k, f in enumerate(diag.findings, 1):
         w = f.where
         lines += [
@@ -30,9 +26,10 @@ def text_report(diag: Any) -> str:
             f"   {f.explanation}",
             f"   where: steps {w.get('steps')}, positions {w.get('positions')}, "
             f"t = {w['time_s'][0]:.0f}–{w['time_s'][1]:.0f} s",
-            f"   RMS {f.rmse_before_ug:.1f} → {f.rmse_after_ug:.1f} µg; held out "
-            f"{f.heldout_rmse_before_ug:.1f} → {f.heldout_rmse_after_ug:.1f} µg",
         ]
+        if f.effect != "unexplained":  # nothing is modelled for it: no before/after
+            lines.append(f"   RMS {f.rmse_before_ug:.1f} → {f.rmse_after_ug:.1f} µg; held out "
+                         f"{f.heldout_rmse_before_ug:.1f} → {f.heldout_rmse_after_ug:.1f} µg")
         for c in f.confusers:
             after = c.get("p_after")
             lines.append(f"   told apart from {c['effect']} (p {c['p_before']:.2g}"

@@ -183,12 +183,24 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
 
 
 def test_twin_reproduces_finding():
-    from calibration.discrepancy.twin import to_truth_effects
+    from simulators.effects import to_truth_effects
 
     d = run([E.ScaleNonlinearity(k2_per_g=np.array([0.0, 90e-6, 0.0]))], seed=14)
     effs = to_truth_effects(d)
     assert [e.effect_id for e in effs] == ["scale_nonlinearity"]
     assert effs[0].k2_per_g[1] == pytest.approx(90e-6, abs=10e-6)
+    # The same from the JSON findings (what a twin file carries).
+    again = to_truth_effects(d.to_dict()["findings"])
+    assert again[0].k2_per_g[1] == effs[0].k2_per_g[1]
+
+
+def test_calibration_never_imports_simulators():
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parents[2] / "calibration"
+    offenders = [str(p) for p in root.rglob("*.py")
+                 if "from simulators" in p.read_text() or "import simulators" in p.read_text()]
+    assert offenders == []
 
 
 def test_extended_model_compensates_better():

@@ -1,0 +1,72 @@
+"""Position orders per plateau that separate time within a plateau from orientation (issue 10).
+
+With the seed's fixed Table 1 order every position sits at the same time since the step
+on every plateau, so "time within the plateau" (a warm-up, a settling die) and
+"orientation" (a nonlinearity, orientation history) are the same regressor. Visiting the
+positions in a different order on each plateau separates them:
+
+* ``"random"``: an independent seeded permutation per plateau;
+* ``"balanced"``: a Williams design (a balanced Latin square): over ``n`` plateaus
+  (``2n`` for odd ``n``) every position takes every slot once and follows every other
+  position once (first-order carry-over balanced), with the labels permuted by the seed.
+
+The engine (owned by the campaign engine's maintainers) must plumb this: call
+:func:`position_order` when a campaign is planned, visit ``order[step]`` on each step and
+record the position index (``position`` column, already in recording v1) and
+``order_seed`` / ``order_scheme`` in the recording's header so a diagnosis can rebuild it.
+:func:`time_and_position_confounded` is what the diagnosis checks today.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+SCHEMES = ("fixed", "random", "balanced")
+
+
+def position_order(n_positions: int, n_steps: int, scheme: str = "balanced",
+                   seed: int = 0) -> np.ndarray:
+    """(n_steps, n_positions) position indices in visiting order for each plateau."""
+    if scheme not in SCHEMES:
+        raise ValueError(f"scheme must be one of {', '.join(SCHEMES)}, got {scheme!r}")
+    if n_positions < 1 or n_steps < 1:
+        raise ValueError(f"need at least one position and one step, got {n_positions}, "
+                         f"{n_steps}")
+    if scheme == "fixed":
+        return np.tile(np.arange(n_positions), (n_steps, 1))
+    rng = np.random.default_rng(seed)
+    if scheme == "random":
+        return np.vstack([rng.permutation(n_positions) for _ in range(n_steps)])
+    square = williams_square(n_positions)
+    labels = rng.permutation(n_positions)
+    rows = labels[square]  # relabel: the balance properties are label-free
+    return np.vstack([rows[k % rows.shape[0]] for k in range(n_steps)])
+
+
+def williams_square(n: int) -> np.ndarray:
+    """Williams design: rows are sequences; ``n`` rows (even n) or ``2n`` (odd n).
+
+    First row 0, 1, n−1, 2, n−2, …; row r adds r (mod n). For odd n the mirrored rows
+    are appended, which restores carry-over balance.
+    """
+    first = [0]
+    lo, hi = 1, n - 1
+    while len(first) < n:
+        first.append(lo)
+        lo += 1
+        if len(first) < n:
+            first.append(hi)
+            hi -= 1
+    base = np.array(first)
+    rows = np.vstack([(base + r) % n for r in range(n)])
+    return rows if n % 2 == 0 else np.vstack([rows, rows[:, ::-1]])
+
+
+def time_and_position_confounded(steps: np.ndarray, positions: np.ndarray,
+                                 t_s: np.ndarray) -> bool:
+    """True when every plateau visits the positions in the same order (Table 1 fixed)."""
+    orders = []
+    for s in np.unique(steps):
+        m = steps == s
+        orders.append(tuple(positions[m][np.argsort(t_s[m], kind="stable")].tolist()))
+    return len(orders) > 1 and len(set(orders)) == 1

@@ -1,0 +1,138 @@
+"""Localised scan for structure no catalogue term explains (issue 10; docs/diagnosis.md §7).
+
+Replaces "χ²/dof > 2": after the accepted terms, every *local* departure of the base
+model is tested, each a small block of free columns confined to one place:
+
+* a **step** and an axis: the SFEM at that plateau differs (columns 1, a_x, a_y, a_z on
+  that step's readings — bias and the axis's matrix row; a scale factor that steps at one
+  temperature, a cross-axis product at one plateau, a warm-up confined to a step);
+* a **position** and an axis: that orientation differs over the campaign (columns 1 and
+  the scaled temperature on that position's readings — orientation-history effects, a
+  product of two axes at a few positions).
+
+Norm mode has no axes: a block holds the same columns for all three axes, mapped to |g|.
+Each block is an F-type score test after projecting out the current model
+(:func:`calibration.discrepancy.stats.linear_stats`); the scan's statistic is the smallest
+p over all blocks, and its null is the same minimum on each parametric-bootstrap replicate
+(the multiple-comparison cost is paid by the null, not by a Bonferroni guess). Scale-free
+(noise from the residual): an optimistic sd/√n cannot raise it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibration.discrepancy import stats
+from calibration.discrepancy.context import AXES
+
+MAX_WHERE = 3  # places listed in ``where`` (the strongest, each significant on its own)
+
+
+@dataclass
+class ScanResult:
+    p_family: float
+    significant: bool
+    n_blocks: int
+    places: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"test": "localised scan: F score test of every step×axis and position×axis "
+                        "block after the model, min-p over blocks against its parametric-"
+                        "bootstrap null", "p_value": float(f"{self.p_family:.3g}"),
+                "significant": self.significant, "blocks": self.n_blocks,
+                "where": self.places}
+
+
+def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> ScanResult:
+    """Scan the residual ``e`` (whitened, model projected out; ``E`` its null replicates).
+
+    Blocks with the same (k, dof) share one F law, so the minimum p over them is the p of
+    their largest F: the null needs one tail evaluation per group, not per block.
+    """
+    m = e.size
+    ee, EE = float(e @ e), np.sum(E**2, axis=0)
+    F: list[float] = []
+    kd: list[tuple[int, int]] = []
+    kept: list[tuple[str, int, int]] = []
+    null_max: dict[tuple[int, int], np.ndarray] = {}
+    for label, key, axis, X in _blocks(pb):
+        Xw = pb.whiten(pb.lift(X))
+        S = np.flatnonzero(np.any(Xw != 0, axis=1))  # a block lives on its own readings
+        if S.size == 0:
+            continue
+        Xs = Xw[S]
+        # Gram of the projected block from its support alone: Z = (I − UUᵀ)X, so
+        # ZᵀZ = XᵀX − (UᵀX)ᵀ(UᵀX), and Zᵀe = Xᵀe, ZᵀE = XᵀE because e and E are already
+        # orthogonal to U. Exact, and O(|S|) instead of O(m) per block (long recordings
+        # have thousands of blocks).
+        UX = U[S].T @ Xs
+        G = Xs.T @ Xs - UX.T @ UX
+        tot = float(np.trace(Xs.T @ Xs))
+        if tot <= 0 or 1.0 - float(np.trace(G)) / tot > stats.ABSORBED_MAX:
+            continue
+        lam, V = np.linalg.eigh(G)
+        keep = lam > 1e-12 * max(float(lam.max()), 1e-300)
+        k = int(keep.sum())
+        if k == 0:
+            continue
+        W = V[:, keep] / np.sqrt(lam[keep])  # Bᵀ = Wᵀ Zᵀ has orthonormal rows
+        dof = max(m - U.shape[1] - k, 1)
+        q = float(np.sum((W.T @ (Xs.T @ e[S])) ** 2))
+        qn = np.sum((W.T @ (Xs.T @ E[S])) ** 2, axis=0)
+        F.append(q / k / max((ee - q) / dof, 1e-300))
+        fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
+        null_max[(k, dof)] = np.maximum(null_max.get((k, dof), 0.0), fn)
+        kd.append((k, dof))
+        kept.append((label, key, axis))
+    if not F:
+        return ScanResult(1.0, False, 0)
+    lp_arr = np.empty(len(F))
+    for g in set(kd):
+        idx = [i for i, x in enumerate(kd) if x == g]
+        lp_arr[idx] = stats.f_logsf(np.asarray([F[i] for i in idx]), g[0], g[1])
+    null_min = np.min(np.vstack([stats.f_logsf(v, g[0], g[1]) for g, v in null_max.items()]),
+                      axis=0)
+    best = float(lp_arr.min())
+    count = int(np.sum(null_min <= best))
+    p_family = (1 + count) / (E.shape[1] + 1)
+    if count == 0:  # beyond the bootstrap's resolution: Bonferroni over the blocks
+        p_family = min(p_family, float(np.exp(best)) * len(F))
+    places = []
+    for i in np.argsort(lp_arr)[:MAX_WHERE]:
+        # Each listed place must be significant on its own against the scan's null.
+        p_i = (1 + int(np.sum(null_min <= lp_arr[i]))) / (E.shape[1] + 1)
+        if p_i > alpha and not (i == int(np.argmin(lp_arr)) and p_family <= alpha):
+            continue
+        label, key, axis = kept[i]
+        places.append({label: int(key), "axis": AXES[axis] if axis >= 0 else "norm",
+                       "log10_p": round(float(lp_arr[i] / np.log(10)), 1)})
+    return ScanResult(float(p_family), bool(p_family <= alpha), len(F), places)
+
+
+def _blocks(pb: Any):
+    """(label, key, axis, raw-space (N,3,k) columns) of every block."""
+    ctx = pb.ctx
+    n = ctx.n
+    u = np.column_stack([np.ones(n), ctx.input_g])  # (N,4)
+    t = (ctx.temp_c - pb.t_mid_c) / pb.t_half_c
+    pos_cols = np.column_stack([np.ones(n), t]) if np.ptp(t) > 0 else np.ones((n, 1))
+    per_axis = pb.mode == "reference"
+    for label, keys, cols in (("step", ctx.steps, u), ("position", ctx.positions, pos_cols)):
+        ids = np.unique(keys)
+        if len(ids) < 2 or len(ids) > n // 2:  # one reading per place: an outlier's business
+            continue
+        for key in ids:
+            m = (keys == key).astype(float)[:, None] * cols  # (N,k)
+            if per_axis:
+                for a in range(3):
+                    X = np.zeros((n, 3, cols.shape[1]))
+                    X[:, a, :] = m
+                    yield label, int(key), a, X
+            else:
+                X = np.zeros((n, 3, 3 * cols.shape[1]))
+                for a in range(3):
+                    X[:, a, a * cols.shape[1]:(a + 1) * cols.shape[1]] = m
+                yield label, int(key), -1, X
