@@ -67,8 +67,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # gradient_lag_s = 60 s/min · k / tempco = 60 · 100 / 150 = 40 s.
     "predictive, lag 40 s": {"stability": "predictive", "gradient_lag_s": 40.0},
     # The rate gain measured from the campaign's own soak probes (service.engine.soak_rate),
-    # fed to the decision before each soak; 200-sample probes so the estimate is useful.
-    "predictive, measured k": {"stability": "predictive", "soak_probe_samples": 200,
+    # fed to the decision before each soak; 250-sample probes so the estimate is useful
+    # (not 200: a capture of the position size would be taken for a position's, see BenchTruth).
+    "predictive, measured k": {"stability": "predictive", "soak_probe_samples": 250,
                                "_measured_rate_gain": True},
 }
 RATE_PATTERN = np.array([1.0, -0.6, 0.4])  # per-axis signs/sizes of the rate effect

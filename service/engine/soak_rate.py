@@ -126,16 +126,17 @@ def rate_gain_for_decision(estimate: RateGain | None, z: float = 2.0,
                            ) -> float:
     """The k (µg per °C/min) a soak decision should use.
 
-    The measured upper bound |k̂| + z·σ, capped at the prior while the data are
-    too few to rule the prior out; a point estimate |k̂| above the prior (a
-    sensor worse than typical) lifts the cap: the prior is a starting point,
-    not a limit.
+    Once the estimate is informative (z·σ ≤ half the prior) its upper bound
+    |k̂| + z·σ, whether below the prior (the data rule the typical gain out) or
+    above it (this sensor is worse than typical); before that the prior, or
+    the point estimate |k̂| if that is already larger.
     """
     if estimate is None:
         return prior_ug_per_c_per_min
     hi = estimate.upper_ug_per_c_per_min(z)
     point = float(np.max(np.abs(estimate.gain_ug_per_c_per_min)))
-    if not math.isfinite(hi):
-        return max(prior_ug_per_c_per_min, point) if math.isfinite(point) else \
-            prior_ug_per_c_per_min
-    return min(hi, max(prior_ug_per_c_per_min, point))
+    if math.isfinite(hi) and z * float(np.max(estimate.sd_ug_per_c_per_min)) \
+            <= 0.5 * prior_ug_per_c_per_min:
+        return hi
+    return max(prior_ug_per_c_per_min, point) if math.isfinite(point) \
+        else prior_ug_per_c_per_min

@@ -372,7 +372,9 @@ def test_rate_gain_for_the_decision_prior_cap_and_lift() -> None:
     sharp = RateGain(np.array([2.0, -1.0, 0.0]), np.array([3.0, 3.0, 3.0]), 400, 10)
     assert rate_gain_for_decision(sharp) == pytest.approx(8.0)
     worse = RateGain(np.array([180.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 400, 10)
-    assert rate_gain_for_decision(worse) == pytest.approx(180.0)
+    assert rate_gain_for_decision(worse) == pytest.approx(180.0)  # not informative yet
+    typical = RateGain(np.array([95.0, 0.0, 0.0]), np.array([6.0, 3.0, 3.0]), 400, 10)
+    assert rate_gain_for_decision(typical) == pytest.approx(107.0)  # the bound, not the prior
 
 
 def test_a_measured_rate_gain_sets_the_lag() -> None:
