@@ -82,6 +82,7 @@ class BenchTruth(SensorTruth):
     crn_seed: int = 0
     probe_n: int = 8  # captures of this size are soak probes (rig's own noise stream)
     rate_g_per_c_per_s: np.ndarray | None = None
+    chamber: Any = None  # the rig's ChamberPhysics, set by run_campaign (exact die rate)
     _captures: int = field(default=0, init=False)
     _temp_rng: np.random.Generator | None = field(default=None, init=False)
     _last: tuple[float, float] | None = field(default=None, init=False)
@@ -89,7 +90,10 @@ class BenchTruth(SensorTruth):
     def sample_g(self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator,
                  t_s: float = 0.0) -> np.ndarray:
         rate = 0.0
-        if self._last is not None and 0.0 < t_s - self._last[0] <= 300.0:
+        if self.chamber is not None:
+            # The die's instantaneous rate: it follows the air first-order (ChamberPhysics).
+            rate = (self.chamber.air_c - self.chamber.die_c) / self.chamber.die_tau_s
+        elif self._last is not None and 0.0 < t_s - self._last[0] <= 300.0:
             rate = (die_c - self._last[1]) / (t_s - self._last[0])
         self._last = (t_s, die_c)
         self._temp_rng = None
@@ -171,10 +175,26 @@ async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
     measured = bool(spec.pop("_measured_rate_gain", False))
     cid = _create_campaign(sf, spec)
     clock = VirtualClock(idle_wall_s=0.0003)
-    async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
-                        sim_options={"truth": truth}) as dev:
-        runner = (MeasuredRateRunner if measured else CampaignRunner)(sf, cid, dev, clock)
-        state = await runner.run()
+    # The rig simulator keeps its physics to itself; catch its chamber so the rate effect uses
+    # the die's true instantaneous rate (consecutive captures can be a ramp apart).
+    import simulators.rig as sim_rig
+
+    physics = sim_rig.ChamberPhysics
+
+    def _caught(*a: Any, **kw: Any) -> Any:
+        chamber = physics(*a, **kw)
+        if isinstance(truth, BenchTruth):
+            truth.chamber = chamber
+        return chamber
+
+    sim_rig.ChamberPhysics = _caught  # type: ignore[misc, assignment]
+    try:
+        async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
+                            sim_options={"truth": truth}) as dev:
+            runner = (MeasuredRateRunner if measured else CampaignRunner)(sf, cid, dev, clock)
+            state = await runner.run()
+    finally:
+        sim_rig.ChamberPhysics = physics  # type: ignore[misc]
     camp = store.load_campaign(sf, cid)
     if state != "completed":
         raise RuntimeError(f"campaign {state}: {camp.error}")
