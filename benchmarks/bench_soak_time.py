@@ -25,10 +25,17 @@ comparison meaningful rather than a coin toss:
 then the soak-induced (systematic) part only. ``--rate-ug-per-c-per-min K``
 adds the ``temperature_rate`` effect of shared/spec/effects.md (output ∝ dT/dt
 of the die, gains up to K µg per °C/min per axis), which the rig simulator
-does not model on its own; the die rate is taken from consecutive captures.
+does not model on its own; the die rate is the simulated die's instantaneous
+rate at the capture.
+
+"predictive, measured k" feeds the decision the rate gain measured from the
+campaign's own soak probes (``service.engine.soak_rate``) through
+:class:`MeasuredRateRunner`, before each soak. ``--variants 1,4`` runs a subset
+(the fixed hour always runs: it is the reference).
 
 Usage: .venv/bin/python benchmarks/bench_soak_time.py [--seeds 1-8] [--fast] [--jobs N]
                                                       [--noise-free] [--rate-ug-per-c-per-min K]
+                                                      [--variants 1,2,3,4]
 """
 
 from __future__ import annotations
