@@ -78,6 +78,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # (not 200: a capture of the position size would be taken for a position's, see BenchTruth).
     "predictive, measured k": {"stability": "predictive", "soak_probe_samples": 250,
                                "_measured_rate_gain": True},
+    # The same, every soak at one table pose (home): k separates from the second soak on.
+    "measured k, one pose": {"stability": "predictive", "soak_probe_samples": 250,
+                             "_measured_rate_gain": True, "_soak_pose_home": True},
 }
 RATE_PATTERN = np.array([1.0, -0.6, 0.4])  # per-axis signs/sizes of the rate effect
 
@@ -139,8 +142,9 @@ class MeasuredRateRunner(CampaignRunner):
     passing ``rate_gain_ug_per_c_per_min`` to ``stability.decide``.
     """
 
-    def __init__(self, *a: Any, **kw: Any) -> None:
+    def __init__(self, *a: Any, soak_pose_home: bool = False, **kw: Any) -> None:
         super().__init__(*a, **kw)
+        self.soak_pose_home = soak_pose_home
         self.soaks: list[SoakProbes] = []
         self.k_used: list[float] = []
         self._orientation = "home"
@@ -155,6 +159,11 @@ class MeasuredRateRunner(CampaignRunner):
         if self._probes is not None:
             self._probes.append((self.clock.now(), acq.sensor_c, acq.mean_g))
         return acq
+
+    async def _ramp(self, step: int) -> None:
+        if self.soak_pose_home:  # one pose for every soak: their probes compare directly
+            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
+        await super()._ramp(step)
 
     async def _soak(self, step: int, *, resumed: bool, n_positions: int) -> None:
         k = rate_gain_for_decision(estimate_rate_gain(self.soaks))
@@ -180,6 +189,7 @@ async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
     sf = make_session_factory(url)
     store.fast_sqlite_commits(sf)
     measured = bool(spec.pop("_measured_rate_gain", False))
+    one_pose = bool(spec.pop("_soak_pose_home", False))
     cid = _create_campaign(sf, spec)
     clock = VirtualClock(idle_wall_s=0.0003)
     # The rig simulator keeps its physics to itself; catch its chamber so the rate effect uses
@@ -198,7 +208,8 @@ async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
     try:
         async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
                             sim_options={"truth": truth}) as dev:
-            runner = (MeasuredRateRunner if measured else CampaignRunner)(sf, cid, dev, clock)
+            runner = (MeasuredRateRunner(sf, cid, dev, clock, soak_pose_home=one_pose)
+                      if measured else CampaignRunner(sf, cid, dev, clock))
             state = await runner.run()
     finally:
         sim_rig.ChamberPhysics = physics  # type: ignore[misc]
