@@ -25,16 +25,24 @@ comparison meaningful rather than a coin toss:
 then the soak-induced (systematic) part only. ``--rate-ug-per-c-per-min K``
 adds the ``temperature_rate`` effect of shared/spec/effects.md (output ∝ dT/dt
 of the die, gains up to K µg per °C/min per axis), which the rig simulator
-does not model on its own; the die rate is taken from consecutive captures.
+does not model on its own; the die rate is the simulated die's instantaneous
+rate at the capture.
+
+"predictive, measured k" feeds the decision the rate gain measured from the
+campaign's own soak probes (``service.engine.soak_rate``) through
+:class:`MeasuredRateRunner`, before each soak. ``--variants 1,4`` runs a subset
+(the fixed hour always runs: it is the reference).
 
 Usage: .venv/bin/python benchmarks/bench_soak_time.py [--seeds 1-8] [--fast] [--jobs N]
                                                       [--noise-free] [--rate-ug-per-c-per-min K]
+                                                      [--variants 1,2,3,4]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import os
 import tempfile
 import time
@@ -52,6 +60,8 @@ from service.demo import SETPOINTS_C, _create_campaign, demo_spec
 from service.engine import store
 from service.engine.rigs import open_rig
 from service.engine.runner import CampaignRunner
+from service.engine.soak_rate import SoakProbes, estimate_rate_gain, rate_gain_for_decision
+from service.engine.stability import lag_from_rate_gain_s
 from simulators.truth import SensorTruth
 
 EQUAL_ACCURACY = 1.05  # pooled held-out error ≤ this × the fixed hour's counts as equal
@@ -63,6 +73,14 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # A sensor with the catalogue's temperature_rate gain k = 100 µg per °C/min:
     # gradient_lag_s = 60 s/min · k / tempco = 60 · 100 / 150 = 40 s.
     "predictive, lag 40 s": {"stability": "predictive", "gradient_lag_s": 40.0},
+    # The rate gain measured from the campaign's own soak probes (service.engine.soak_rate),
+    # fed to the decision before each soak; 250-sample probes so the estimate is useful
+    # (not 200: a capture of the position size would be taken for a position's, see BenchTruth).
+    "predictive, measured k": {"stability": "predictive", "soak_probe_samples": 250,
+                               "_measured_rate_gain": True},
+    # The same, every soak at one table pose (home): k separates from the second soak on.
+    "measured k, one pose": {"stability": "predictive", "soak_probe_samples": 250,
+                             "_measured_rate_gain": True, "_soak_pose_home": True},
 }
 RATE_PATTERN = np.array([1.0, -0.6, 0.4])  # per-axis signs/sizes of the rate effect
 
@@ -74,6 +92,7 @@ class BenchTruth(SensorTruth):
     crn_seed: int = 0
     probe_n: int = 8  # captures of this size are soak probes (rig's own noise stream)
     rate_g_per_c_per_s: np.ndarray | None = None
+    chamber: Any = None  # the rig's ChamberPhysics, set by run_campaign (exact die rate)
     _captures: int = field(default=0, init=False)
     _temp_rng: np.random.Generator | None = field(default=None, init=False)
     _last: tuple[float, float] | None = field(default=None, init=False)
@@ -81,7 +100,10 @@ class BenchTruth(SensorTruth):
     def sample_g(self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator,
                  t_s: float = 0.0) -> np.ndarray:
         rate = 0.0
-        if self._last is not None and 0.0 < t_s - self._last[0] <= 300.0:
+        if self.chamber is not None:
+            # The die's instantaneous rate: it follows the air first-order (ChamberPhysics).
+            rate = (self.chamber.air_c - self.chamber.die_c) / self.chamber.die_tau_s
+        elif self._last is not None and 0.0 < t_s - self._last[0] <= 300.0:
             rate = (die_c - self._last[1]) / (t_s - self._last[0])
         self._last = (t_s, die_c)
         self._temp_rng = None
@@ -99,14 +121,65 @@ class BenchTruth(SensorTruth):
         return super().temperature_samples_c(die_c, n, self._temp_rng or rng)
 
 
-def make_truth(seed: int, noise_free: bool, rate_ug_per_c_per_min: float) -> BenchTruth:
+def make_truth(seed: int, noise_free: bool, rate_ug_per_c_per_min: float,
+               probe_n: int = 8) -> BenchTruth:
     base = SensorTruth.adxl355_typical(seed)
     rate = None
     if rate_ug_per_c_per_min:
         rate = RATE_PATTERN * rate_ug_per_c_per_min * 1e-6 * 60.0  # g per °C/s
     return BenchTruth(coeffs=base.coeffs, temp_offset_c=base.temp_offset_c,
                       noise_density_ug_rthz=0.0 if noise_free else base.noise_density_ug_rthz,
-                      crn_seed=seed, rate_g_per_c_per_s=rate)
+                      crn_seed=seed, rate_g_per_c_per_s=rate, probe_n=probe_n)
+
+
+class MeasuredRateRunner(CampaignRunner):
+    """The engine with the soak decision fed the measured rate gain (how runner.py should do it).
+
+    Records every soak probe (time, die channel, output) with the table's
+    orientation; before each soak, estimates k from the soaks so far and sets
+    the decision's lag from its upper bound (``rate_gain_for_decision``).
+    Between soaks only: the engine proper should re-estimate at every poll,
+    passing ``rate_gain_ug_per_c_per_min`` to ``stability.decide``.
+    """
+
+    def __init__(self, *a: Any, soak_pose_home: bool = False, **kw: Any) -> None:
+        super().__init__(*a, **kw)
+        self.soak_pose_home = soak_pose_home
+        self.soaks: list[SoakProbes] = []
+        self.k_used: list[float] = []
+        self._orientation = "home"
+        self._probes: list[tuple[float, float, tuple[float, float, float]]] | None = None
+
+    async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
+        await super()._move_to(angles_deg)
+        self._orientation = ",".join(f"{a:.1f}" for a in angles_deg)
+
+    async def _acquire(self, n: int) -> Any:
+        acq = await super()._acquire(n)
+        if self._probes is not None:
+            self._probes.append((self.clock.now(), acq.sensor_c, acq.mean_g))
+        return acq
+
+    async def _ramp(self, step: int) -> None:
+        if self.soak_pose_home:  # one pose for every soak: their probes compare directly
+            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
+        await super()._ramp(step)
+
+    async def _soak(self, step: int, *, resumed: bool, n_positions: int) -> None:
+        k = rate_gain_for_decision(estimate_rate_gain(self.soaks))
+        self.k_used.append(k)
+        stab = dataclasses.replace(self.spec.stability, gradient_lag_s=lag_from_rate_gain_s(
+            k, self.spec.stability.tempco_ug_per_c))
+        self.spec = dataclasses.replace(self.spec, stability=stab)
+        self._probes = []
+        try:
+            await super()._soak(step, resumed=resumed, n_positions=n_positions)
+        finally:
+            pr, self._probes = self._probes, None
+        if pr:
+            self.soaks.append(SoakProbes(self._orientation, np.array([p[0] for p in pr]),
+                                         np.array([p[1] for p in pr]),
+                                         np.array([p[2] for p in pr])))
 
 
 async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
@@ -115,16 +188,37 @@ async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
     upgrade_database(url)
     sf = make_session_factory(url)
     store.fast_sqlite_commits(sf)
+    measured = bool(spec.pop("_measured_rate_gain", False))
+    one_pose = bool(spec.pop("_soak_pose_home", False))
     cid = _create_campaign(sf, spec)
     clock = VirtualClock(idle_wall_s=0.0003)
-    async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
-                        sim_options={"truth": truth}) as dev:
-        runner = CampaignRunner(sf, cid, dev, clock)
-        state = await runner.run()
+    # The rig simulator keeps its physics to itself; catch its chamber so the rate effect uses
+    # the die's true instantaneous rate (consecutive captures can be a ramp apart).
+    import simulators.rig as sim_rig
+
+    physics = sim_rig.ChamberPhysics
+
+    def _caught(*a: Any, **kw: Any) -> Any:
+        chamber = physics(*a, **kw)
+        if isinstance(truth, BenchTruth):
+            truth.chamber = chamber
+        return chamber
+
+    sim_rig.ChamberPhysics = _caught  # type: ignore[misc, assignment]
+    try:
+        async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
+                            sim_options={"truth": truth}) as dev:
+            runner = (MeasuredRateRunner(sf, cid, dev, clock, soak_pose_home=one_pose)
+                      if measured else CampaignRunner(sf, cid, dev, clock))
+            state = await runner.run()
+    finally:
+        sim_rig.ChamberPhysics = physics  # type: ignore[misc]
     camp = store.load_campaign(sf, cid)
     if state != "completed":
         raise RuntimeError(f"campaign {state}: {camp.error}")
-    return runner.fit_result, clock.now(), camp.steps_log
+    log = [{**e, "k_used": k} for e, k in zip(camp.steps_log, getattr(runner, "k_used", []),
+                                               strict=False)] or camp.steps_log
+    return runner.fit_result, clock.now(), log
 
 
 def heldout_errors_g(model: Any, truth: SensorTruth, temps_die_c: np.ndarray) -> np.ndarray:
@@ -145,7 +239,9 @@ def heldout_rmse_ug(model: Any, truth: SensorTruth, temps_die_c: np.ndarray) -> 
 def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
     """One campaign (variant × sensor); runs in a worker process."""
     name, seed, fast, noise_free, rate = args
-    truth = make_truth(seed, noise_free, rate)
+    # Probes keep the rig's noise stream, so every variant measures positions with the same noise.
+    truth = make_truth(seed, noise_free, rate,
+                       int(VARIANTS[name].get("soak_probe_samples", 8)))
     sp = demo_spec(fast)["setpoints_c"] if fast else SETPOINTS_C
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
@@ -159,6 +255,7 @@ def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
         "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6,
         "max_soak": sum(bool(e.get("max_soak_reached")) for e in log),
         "valid_c": list(fit.model.valid_c or ()), "wall_s": time.monotonic() - w0,
+        "k_used": [e["k_used"] for e in log if "k_used" in e],
     }
 
 
@@ -179,10 +276,16 @@ def main() -> int:
                     help="no accelerometer noise: held-out error = soak-induced part only")
     ap.add_argument("--rate-ug-per-c-per-min", type=float, default=0.0,
                     help="add the temperature_rate effect with this largest per-axis gain")
+    ap.add_argument("--variants", default="",
+                    help="comma-separated numbers of the policies to run besides the fixed "
+                         f"hour (1-{len(VARIANTS) - 1}, in the order {list(VARIANTS)[1:]})")
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
+    names = list(VARIANTS)
+    if args.variants:
+        names = [names[0]] + [names[int(i)] for i in args.variants.split(",")]
     cases = [(name, s, args.fast, args.noise_free, args.rate_ug_per_c_per_min)
-             for name in VARIANTS for s in seeds]
+             for name in names for s in seeds]
     w0 = time.monotonic()
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         results = list(pool.map(one_case, cases))
@@ -192,7 +295,7 @@ def main() -> int:
              if args.rate_ug_per_c_per_min else "")
           + f"; {time.monotonic() - w0:.0f} s wall\n")
     summary = {}
-    for name in VARIANTS:
+    for name in names:
         rs = [r for r in results if r["name"] == name]
         summary[name] = {
             "sim_s": np.mean([r["sim_s"] for r in rs]),
@@ -201,11 +304,15 @@ def main() -> int:
                                           / sum(r["n_err"] for r in rs))),
             "per_seed": {r["seed"]: r for r in rs}, "max_soak": sum(r["max_soak"] for r in rs),
         }
+        if rs and rs[0]["k_used"]:
+            ks = np.array([r["k_used"] for r in rs])
+            print(f"{name}: k fed per step (µg per °C/min, mean over sensors): "
+                  + " ".join(f"{v:.0f}" for v in ks.mean(axis=0)))
     print(f"{'policy':<24} {'campaign':>9} {'soak':>8} {'held-out':>9}  max-soak steps")
     for name, s in summary.items():
         print(f"{name:<24} {s['sim_s'] / 3600:7.2f} h {s['soak_s'] / 3600:6.2f} h "
               f"{s['rmse_ug']:7.2f} µg  {s['max_soak']}")
-    base = summary[next(iter(VARIANTS))]
+    base = summary[names[0]]
     if args.noise_free:
         print("\nsoak-induced held-out error only (diagnostic, no verdict): compare it with "
               "the total held-out error of a run with noise")

@@ -43,6 +43,7 @@ never its absolute value against the setpoint.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -77,6 +78,18 @@ def temperature_budget_c(reading_noise_g: float, tempco_ug_per_c: float = DEFAUL
     return fraction * reading_noise_g * 1e6 / tempco_ug_per_c
 
 
+def lag_from_rate_gain_s(rate_gain_ug_per_c_per_min: float, tempco_ug_per_c: float) -> float:
+    """The package lag (s) whose rate error equals a ``temperature_rate`` gain k.
+
+    k × dT/dt (µg, rate in °C/min) = tempco × lag × dT/dt (rate in °C/s):
+    lag = 60 · k / tempco. k = 100 µg per °C/min at 150 µg/°C → 40 s.
+    """
+    if not (rate_gain_ug_per_c_per_min >= 0 and tempco_ug_per_c > 0):
+        raise ValueError(f"rate gain must be >= 0 and tempco > 0, got "
+                         f"{rate_gain_ug_per_c_per_min} and {tempco_ug_per_c}")
+    return 60.0 * rate_gain_ug_per_c_per_min / tempco_ug_per_c
+
+
 @dataclass(frozen=True)
 class StabilityConfig:
     """How a soak is judged. Times in s, temperatures in °C."""
@@ -90,6 +103,8 @@ class StabilityConfig:
     # rms temperature error the thermal model may see during the sweep (spec.py derives it)
     temp_budget_c: float = temperature_budget_c(2.5e-4 / math.sqrt(200))
     gradient_lag_s: float = DEFAULT_GRADIENT_LAG_S  # package/board lag behind the die reading
+    # output change per °C of die temperature: converts a measured rate gain into a lag
+    tempco_ug_per_c: float = DEFAULT_TEMPCO_UG_PER_C
     sweep_s: float = 360.0  # expected duration of the step's position sweep (runner passes it)
     n_positions: int = 24  # positions per step (runner passes it): a step mean's noise is σ/√n
     step_tol_c: float = DEFAULT_STEP_TOL_C  # every step: |T − T∞| at the sweep start
@@ -288,6 +303,7 @@ def decide(
     sweep_s: float | None = None,
     n_positions: int | None = None,
     edge: bool = False,
+    rate_gain_ug_per_c_per_min: float | None = None,
 ) -> Decision:
     """Is the step soaked, ``elapsed_s`` after the soak started?
 
@@ -295,8 +311,16 @@ def decide(
     ``sensor_t_s``/``sensor_c`` the die temperature history since the soak start;
     ``sweep_s`` how long the step's positions will take (default ``cfg.sweep_s``);
     ``n_positions`` how many positions a step has (default ``cfg.n_positions``);
-    ``edge`` whether this is the coldest or hottest step of the campaign.
+    ``edge`` whether this is the coldest or hottest step of the campaign;
+    ``rate_gain_ug_per_c_per_min`` the sensor's measured sensitivity to the rate
+    of die-temperature change k (upper bound, µg per °C/min, e.g. from
+    :func:`service.engine.soak_rate.rate_gain_for_decision`): the rate lag is then
+    60·k / ``tempco_ug_per_c`` s instead of the assumed ``gradient_lag_s``
+    (None, the default, keeps the assumption).
     """
+    if rate_gain_ug_per_c_per_min is not None:
+        cfg = dataclasses.replace(cfg, gradient_lag_s=lag_from_rate_gain_s(
+            rate_gain_ug_per_c_per_min, cfg.tempco_ug_per_c))
     if cfg.policy == "fixed":
         if elapsed_s >= cfg.soak_s:
             return Decision(True, "fixed_soak_elapsed")

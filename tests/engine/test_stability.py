@@ -7,16 +7,25 @@ budget (and within the step / edge tolerances), up to the probe noise.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from service.engine.soak_rate import (
+    PRIOR_RATE_GAIN_UG_PER_C_PER_MIN,
+    RateGain,
+    SoakProbes,
+    estimate_rate_gain,
+    rate_gain_for_decision,
+)
 from service.engine.stability import (
     StabilityConfig,
     chamber_settled,
     decide,
     fit_approach,
+    lag_from_rate_gain_s,
     sweep_error_c,
     temperature_budget_c,
 )
@@ -317,3 +326,67 @@ def test_chamber_settled_needs_continuous_dwell_at_target() -> None:
 def test_unknown_policy_is_rejected() -> None:
     with pytest.raises(ValueError, match="policy"):
         StabilityConfig(policy="magic")
+
+
+# --- the measured rate sensitivity (service.engine.soak_rate) -----------------------------
+def synthetic_soaks(k_ug_per_c_per_min: np.ndarray, seed: int = 0, n_steps: int = 10,
+                    out_noise_ug: float = 17.7,
+                    orientation: str = "pos23") -> list[SoakProbes]:
+    """Soak probes of a staircase: die approaches (τ 900 s) from 7 °C short of each setpoint,
+    output = a cubic f(T) per axis + k·dT/dt + noise (200-sample probes)."""
+    rng = np.random.default_rng(seed)
+    tempco = np.array([[80.0, -60.0, 40.0], [0.4, 0.2, -0.3], [0.003, -0.002, 0.001]])
+    soaks = []
+    for j in range(n_steps):
+        t_inf = -30.0 + 10.0 * j
+        t = np.arange(0.0, 2400.0, 60.0)
+        die = t_inf - 7.0 * np.exp(-t / 900.0)
+        rate = 60.0 * 7.0 / 900.0 * np.exp(-t / 900.0)  # °C/min
+        f = sum(np.outer(die**(d + 1), tempco[d]) for d in range(3))
+        out_ug = f + np.outer(rate, k_ug_per_c_per_min) + rng.normal(0, out_noise_ug, (t.size, 3))
+        soaks.append(SoakProbes(orientation, t + 5000.0 * j,
+                                die + 1.3 + rng.normal(0, 0.007, t.size), out_ug * 1e-6))
+    return soaks
+
+
+@pytest.mark.parametrize("k", [0.0, 100.0])
+def test_rate_gain_is_recovered_from_the_soaks(k: float) -> None:
+    true_k = k * np.array([1.0, -0.6, 0.4])
+    est = estimate_rate_gain(synthetic_soaks(true_k, seed=int(k)))
+    assert est is not None and est.soaks == 10
+    assert np.all(np.abs(est.gain_ug_per_c_per_min - true_k) <= 3 * est.sd_ug_per_c_per_min)
+    assert np.all(est.sd_ug_per_c_per_min < 10.0)  # informative enough to shorten a soak
+
+
+def test_one_soak_per_orientation_says_nothing_about_the_rate_gain() -> None:
+    soaks = synthetic_soaks(np.zeros(3), n_steps=3)
+    lone = [dataclasses.replace(s, orientation=f"o{i}") for i, s in enumerate(soaks)]
+    assert estimate_rate_gain(lone) is None
+    assert estimate_rate_gain(soaks[:1]) is None
+
+
+def test_rate_gain_for_the_decision_prior_cap_and_lift() -> None:
+    assert rate_gain_for_decision(None) == PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    weak = RateGain(np.array([5.0, 0.0, 0.0]), np.array([80.0, 80.0, 80.0]), 100, 2)
+    assert rate_gain_for_decision(weak) == PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    sharp = RateGain(np.array([2.0, -1.0, 0.0]), np.array([3.0, 3.0, 3.0]), 400, 10)
+    assert rate_gain_for_decision(sharp) == pytest.approx(8.0)
+    worse = RateGain(np.array([180.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 400, 10)
+    assert rate_gain_for_decision(worse) == pytest.approx(180.0)  # not informative yet
+    typical = RateGain(np.array([95.0, 0.0, 0.0]), np.array([6.0, 3.0, 3.0]), 400, 10)
+    assert rate_gain_for_decision(typical) == pytest.approx(107.0)  # the bound, not the prior
+
+
+def test_a_measured_rate_gain_sets_the_lag() -> None:
+    assert lag_from_rate_gain_s(100.0, 150.0) == pytest.approx(40.0)
+    with pytest.raises(ValueError):
+        lag_from_rate_gain_s(-1.0, 150.0)
+    t = np.arange(0.0, 7200.0, 60.0)
+    temp = approach(t, 30.0, 25.0, 900.0, PROBE_NOISE_C, seed=3)
+    via_gain = first_stable(CFG, t, temp, sweep_s=SWEEP_S, rate_gain_ug_per_c_per_min=100.0)
+    via_lag = first_stable(StabilityConfig(soak_s=3600.0, gradient_lag_s=40.0), t, temp,
+                           sweep_s=SWEEP_S)
+    none = first_stable(CFG, t, temp, sweep_s=SWEEP_S, rate_gain_ug_per_c_per_min=0.0)
+    assert via_gain is not None and via_lag is not None and none is not None
+    assert via_gain[0] == via_lag[0]
+    assert none[0] < via_gain[0]  # no rate sensitivity measured: a shorter soak

@@ -1,0 +1,142 @@
+"""The sensor's sensitivity to the rate of die-temperature change, from the campaign's own probes.
+
+While the die moves, package and board lag it and the output carries a term
+k × dT/dt (the ``temperature_rate`` effect of shared/spec/effects.md, k in
+µg per °C/min). The soak must wait until k × rate is below the noise
+(:mod:`service.engine.stability`), so k sets the soak; today it is assumed
+(``gradient_lag_s``). Here it is measured from the soak probes the engine
+takes anyway: at one table orientation the probe output is
+
+    out(t) = f(T(t)) + k · dT/dt(t) + noise,
+
+f a smooth polynomial of the die temperature T (the thermal model of the
+seed paper's Eq. 12–14, cubic at most). Within one soak the die follows a
+first-order approach, so dT/dt = (T∞ − T)/τ is a straight line in T and k
+cannot be told from f; across soaks it can: the rate is a sawtooth in T (high
+at each soak start, near zero at each end, 10 °C further on), which no cubic
+follows. T and dT/dt come from :func:`stability.fit_approach` per soak (the
+fitted curve, not differenced readings: differencing noisy readings would
+bias k towards 0, the unsafe direction).
+
+Precision: with 8-sample probes (the default) a whole −40…60 °C campaign
+gives σ(k) ≈ 25–30 µg per °C/min, too weak to shorten a soak; with
+200-sample probes ≈ 5 (docs/engine.md, "Measured rate sensitivity").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.engine.stability import fit_approach
+
+# What a sensor is assumed to have until the campaign has measured it: the catalogue's
+# typical temperature_rate gain (shared/spec/effects.md), the safe side for a new die.
+PRIOR_RATE_GAIN_UG_PER_C_PER_MIN = 100.0
+MIN_PROBES_PER_SOAK = 6  # fewer and the soak's approach cannot be fitted
+
+
+@dataclass(frozen=True)
+class SoakProbes:
+    """The probes of one soak, all at one table orientation (``orientation`` names it)."""
+
+    orientation: str
+    t_s: np.ndarray  # (n,) probe times
+    die_c: np.ndarray  # (n,) die temperature channel, °C
+    out_g: np.ndarray  # (n, 3) mean output per axis, g
+
+
+@dataclass(frozen=True)
+class RateGain:
+    """k per axis (µg per °C/min) with its 1-σ uncertainty; ``n`` probes, ``soaks`` used."""
+
+    gain_ug_per_c_per_min: np.ndarray
+    sd_ug_per_c_per_min: np.ndarray
+    n: int
+    soaks: int
+
+    def upper_ug_per_c_per_min(self, z: float = 2.0) -> float:
+        """Largest |k| + z·σ over the axes: what the soak decision may rely on."""
+        return float(np.max(np.abs(self.gain_ug_per_c_per_min) + z * self.sd_ug_per_c_per_min))
+
+
+def soak_rate_c_per_min(t_s: np.ndarray, die_c: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(T, dT/dt in °C/min) of the fitted first-order approach at the probe times, or None."""
+    t = np.asarray(t_s, float)
+    if t.size < MIN_PROBES_PER_SOAK:
+        return None
+    fit = fit_approach(t, np.asarray(die_c, float))
+    if not fit.ok or not math.isfinite(fit.tau_s):
+        return None
+    e = np.exp(-(t - t[0]) / fit.tau_s)
+    temp_c = fit.t_inf_c - fit.amplitude_c * e
+    return temp_c, 60.0 * fit.amplitude_c / fit.tau_s * e
+
+
+def estimate_rate_gain(soaks: list[SoakProbes]) -> RateGain | None:
+    """Least-squares k shared by all soaks, with a polynomial f(T) per orientation.
+
+    An orientation with one soak only is left out: within one approach the rate
+    is a straight line in T, so that soak says nothing about k, and whatever
+    of f a low-degree polynomial misses would be taken for k. The degree per
+    orientation is min(3, its soaks). Returns None when no orientation has two
+    soaks or there are fewer probes than unknowns + 5.
+    """
+    fitted = [(s, soak_rate_c_per_min(s.t_s, s.die_c)) for s in soaks]
+    fitted = [(s, tr) for s, tr in fitted if tr is not None]
+    count: dict[str, int] = {}
+    for s, _ in fitted:
+        count[s.orientation] = count.get(s.orientation, 0) + 1
+    rows_t, rows_r, rows_y, rows_o = [], [], [], []
+    for s, tr in fitted:
+        if count[s.orientation] < 2:
+            continue
+        rows_t.append(np.asarray(s.die_c, float))  # measured: precise, and f(T) needs the truth
+        rows_r.append(tr[1])
+        rows_y.append(np.asarray(s.out_g, float).reshape(-1, 3) * 1e6)
+        rows_o.extend([s.orientation] * tr[0].size)
+    if not rows_t:
+        return None
+    temp_c, rate, out_ug = np.concatenate(rows_t), np.concatenate(rows_r), np.vstack(rows_y)
+    orient = np.array(rows_o)
+    # Scaled temperature keeps the cubic columns well conditioned over −40…60 °C.
+    x = (temp_c - temp_c.mean()) / max(float(np.ptp(temp_c)) / 2.0, 1.0)
+    cols = []
+    for o in dict.fromkeys(orient):
+        mask = (orient == o).astype(float)
+        cols.extend(mask * x**d for d in range(min(3, count[o]) + 1))
+    cols.append(rate)
+    design = np.column_stack(cols)
+    n, p = design.shape
+    if n < p + 5:
+        return None
+    coef, *_ = np.linalg.lstsq(design, out_ug, rcond=None)
+    resid = out_ug - design @ coef
+    s2 = np.sum(resid**2, axis=0) / (n - p)
+    xtx_inv = np.linalg.pinv(design.T @ design)
+    var_k = float(xtx_inv[-1, -1])
+    sd = np.sqrt(s2 * var_k) if var_k > 0 else np.full(3, math.inf)
+    return RateGain(coef[-1].copy(), sd, n, sum(count[o] for o in dict.fromkeys(orient)))
+
+
+def rate_gain_for_decision(estimate: RateGain | None, z: float = 2.0,
+                           prior_ug_per_c_per_min: float = PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+                           ) -> float:
+    """The k (µg per °C/min) a soak decision should use.
+
+    Once the estimate is informative (z·σ ≤ half the prior) its upper bound
+    |k̂| + z·σ, whether below the prior (the data rule the typical gain out) or
+    above it (this sensor is worse than typical); before that the prior, or
+    the point estimate |k̂| if that is already larger.
+    """
+    if estimate is None:
+        return prior_ug_per_c_per_min
+    hi = estimate.upper_ug_per_c_per_min(z)
+    point = float(np.max(np.abs(estimate.gain_ug_per_c_per_min)))
+    if math.isfinite(hi) and z * float(np.max(estimate.sd_ug_per_c_per_min)) \
+            <= 0.5 * prior_ug_per_c_per_min:
+        return hi
+    return max(prior_ug_per_c_per_min, point) if math.isfinite(point) \
+        else prior_ug_per_c_per_min
