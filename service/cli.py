@@ -27,11 +27,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
+    overwrite = _overwrites_an_input(args)
+    if overwrite:
+        _fail(f"soakcal {args.command}: {overwrite}")
+        return EXIT_BAD_INPUT
     try:
         result = args.handler(args)
     except KeyboardInterrupt:
         return 130
     return EXIT_OK if result is None else int(result)
+
+
+def _overwrites_an_input(args: argparse.Namespace) -> str | None:
+    """Why ``-o`` (or ``--write-twin``) may not be written: it names one of the inputs."""
+    from calibration.errors import RecordingError
+    from calibration.recording import check_output_path
+
+    inputs = [getattr(args, n, None) for n in ("recording", "model", "raw", "against")]
+    for out in (getattr(args, "output", None), getattr(args, "write_twin", None)):
+        if not isinstance(out, str):
+            continue
+        for src in inputs:
+            if isinstance(src, str):
+                try:
+                    check_output_path(src, out)
+                except RecordingError as exc:
+                    return f"{exc} ({src})" if "overwrite" in str(exc) else str(exc)
+    return None
 
 
 class _OneLineParser(argparse.ArgumentParser):

@@ -56,12 +56,20 @@ def _token_id(text: str) -> int:
     return int(text)
 
 
-def _session_factory() -> tuple[Any, str]:
-    from service.config import resolve_database_url
-    from service.db.session import make_session_factory, upgrade_database
+def _session_factory(command: str = "token") -> tuple[Any, str]:
+    """The database every subcommand uses, migrated; a bad URL or an unreachable database
+    is one line on stderr and exit 2 (the same rules as ``token create``)."""
+    from service.cli import EXIT_BAD_INPUT, _database_or_fail
+    from service.db.session import DatabaseUnavailable, make_session_factory, upgrade_database
 
-    url = resolve_database_url()
-    upgrade_database(url)  # so these work before the first `serve`, like `token create`
+    url = _database_or_fail(command)
+    if url is None:
+        raise SystemExit(EXIT_BAD_INPUT)
+    try:
+        upgrade_database(url)  # so these work before the first `serve`, like `token create`
+    except DatabaseUnavailable as exc:
+        print(f"soakcal {command}: {exc}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from None
     return make_session_factory(url), url
 
 
@@ -77,7 +85,7 @@ def run_token_list(args: argparse.Namespace) -> int:
     from service.api.tokens import token_out
     from service.db.models import ApiToken
 
-    factory, url = _session_factory()
+    factory, url = _session_factory("token list")
     try:
         with factory() as session:
             rows = [token_out(r) for r in session.scalars(select(ApiToken).order_by(ApiToken.id))]
@@ -104,7 +112,7 @@ def run_token_revoke(args: argparse.Namespace) -> int:
     from service.db.timestamps import utcnow
     from service.event_log import log_event
 
-    factory, url = _session_factory()
+    factory, url = _session_factory("token revoke")
     try:
         with factory() as session:
             row = session.get(ApiToken, args.id)

@@ -97,3 +97,23 @@ def test_a_megabyte_cell_is_one_line_error() -> None:
         parse_recording(text, "r.csv")
     assert err.value.line == 3
     assert len(str(err.value)) < 300
+
+
+@pytest.mark.parametrize("command", ["calibrate", "compensate", "import"])
+def test_cli_refuses_an_output_that_is_its_input(
+    tmp_path: Path, command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from service.cli import main
+
+    src = tmp_path / "r.csv"
+    src.write_text(f"{HEADER}\n{GOOD}\n")
+    before = src.read_bytes()
+    argv = {
+        "calibrate": ["calibrate", str(src), "-o", str(src)],
+        "compensate": ["compensate", str(tmp_path / "m.json"), str(src), "-o", str(src)],
+        "import": ["import", "--format", "imu_tk", str(src), "-o", str(tmp_path / "." / "r.csv")],
+    }[command]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "overwrite the input" in err and err.count("\n") == 1
+    assert src.read_bytes() == before
