@@ -72,7 +72,7 @@ def main() -> int:
         model = CampaignSpec.model_validate(spec)
         n_positions, why = schedule_verdict(model.positions, "reference")
         assert why is None and n_positions is not None
-        predicted_s = predicted_duration_s(model, n_positions)
+        predicted_s = predicted_duration_s(model)
         wall0 = time.monotonic()
         with tempfile.TemporaryDirectory() as tmp:
             simulated_s = asyncio.run(_run(spec, Path(tmp)))

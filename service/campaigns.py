@@ -252,7 +252,7 @@ def stored_prediction_s(stored: dict[str, Any]) -> float | None:
     except ValidationError:
         return None
     n_positions = positions_count(spec.positions)
-    return None if n_positions is None else predicted_duration_s(spec, n_positions)
+    return None if n_positions is None else predicted_duration_s(spec)
 
 
 def progress_of(campaign: Campaign) -> Progress:

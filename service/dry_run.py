@@ -17,8 +17,8 @@ One function, :func:`check_campaign`, decides it without hardware, for
 
 and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`).
 
-When the engine's plan (``service.engine.plan.dry_run``) lands, the prediction
-should come from interpreting it; the checks stay here, in one place.
+The prediction interprets the engine's own plan (``service.engine.plan.dry_run``);
+the checks stay here, in one place.
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
     n_positions, why = schedule_verdict(spec.positions, RIG_FIT_MODE)
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
-    duration = None if n_positions is None else predicted_duration_s(spec, n_positions)
+    duration = None if n_positions is None else predicted_duration_s(spec)
     return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions)
 
 
@@ -155,19 +155,19 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
     return len(refs), None
 
 
-def predicted_duration_s(spec: CampaignSpec, n_positions: int) -> float:
+def predicted_duration_s(spec: CampaignSpec) -> float:
     """Rig-time estimate of the whole campaign, s (a sped-up sim rig: divide by its speed).
 
-    ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per
-    step (the nominal soak; ~3/4 of it under the predictive policy), and per
-    position a move, the settle and the acquisition (``samples / odr_hz``).
+    The campaign's own plan interpreted without hardware (``service.engine.plan.dry_run``):
+    ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per step
+    (the nominal soak; ~3/4 of it under the predictive policy), and per position a move,
+    the settle and the acquisition (``samples / odr_hz``).
     """
-    path_c = [AMBIENT_C, *spec.setpoints_c]
-    ramp_s = sum(abs(b - a) for a, b in zip(path_c, path_c[1:], strict=False))
-    ramp_s *= 60.0 / spec.ramp_c_per_min
+    from service.engine.plan import dry_run
+
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
-    position_s = MOVE_ESTIMATE_S + spec.settle_s + spec.samples_per_position / spec.odr_hz
-    n_steps = len(spec.setpoints_c)
-    return ramp_s + n_steps * (soak_s + n_positions * position_s)
+    plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s,
+                   move_s=MOVE_ESTIMATE_S, start_c=AMBIENT_C)
+    return plan.duration_s

@@ -27,6 +27,7 @@ from service.api.schemas import CampaignCreate
 from service.campaigns import create_campaign, spec_errors
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
+from service.event_log import log_event
 
 log = logging.getLogger(__name__)
 
@@ -144,17 +145,19 @@ class Scheduler:
                 .execution_options(synchronize_session=False)
             )
             session.commit()
-            log.info("schedule %s fired: campaign %s", schedule_id, campaign_id)
+            log_event("schedule fired", schedule=schedule_id, campaign=campaign_id)
             return campaign_id
 
     def _create(self, session: Session, schedule: Schedule) -> int | None:
         try:
             spec = CampaignCreate.model_validate(schedule.campaign)
         except ValidationError as exc:  # stored before a contract change: skip, don't loop
-            log.error("schedule %s: stored campaign no longer valid: %s", schedule.id, exc)
+            log_event("schedule skipped", schedule=schedule.id,
+                      error=f"stored campaign no longer valid: {exc.errors()[:1]}")
             return None
         errors = spec_errors(session, spec, loc=("campaign",))
         if errors:  # e.g. the rig was removed since: skip this firing, keep the schedule
-            log.error("schedule %s: campaign not valid any more: %s", schedule.id, errors)
+            log_event("schedule skipped", schedule=schedule.id,
+                      error=f"campaign not valid any more: {errors[:1]}")
             return None
         return create_campaign(session, spec, schedule_id=schedule.id).id
