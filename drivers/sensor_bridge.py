@@ -53,7 +53,7 @@ class SerialAccelerometer:
         mode: AcquireMode = "average",
         baudrate: int = 115200,
         timeout_s: float = 2.0,
-        attempts: int = 2,
+        attempts: int = 1,  # 1: no retry here; the engine's guard is the one retry owner
         device: str = "sensor",
         framing: Framing = "v2",
     ) -> None:

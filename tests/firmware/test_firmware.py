@@ -24,7 +24,7 @@ from pty_device import PtyDevice
 from drivers import adxl355
 from drivers.bridge_protocol import encode_frame, parse_frame
 from drivers.clock import VirtualClock
-from drivers.faults import ConfigurationFault, ExceptionReply, ValueOutOfRange
+from drivers.faults import ConfigurationFault, ExceptionReply, ProtocolError, ValueOutOfRange
 from drivers.sensor_bridge import SerialAccelerometer
 from drivers.sensor_config import StreamFormat
 from drivers.stream_sensor import StreamingAccelerometer
@@ -230,7 +230,8 @@ async def test_refusal_and_line_faults_over_a_pty(pty_board: tuple[Board, PtyDev
         assert sum(b"CFG" in line for line in dev.received) == 1  # refused once, not retried
         reply = board.bridge.handle_line(encode_frame("SN", "SN 1"))
         assert parse_frame(reply[0]).fields[:2] == ["ERR", "3"]
-        # A high-bit byte in one reply: a framing fault, retried on a fresh port.
+        # A high-bit byte in one reply: a framing fault (never a UnicodeError), raised to the
+        # engine's guard (the one retry owner); the next call works on a fresh port.
         hits = []
 
         def corrupt_once(reply: bytes) -> bytes:
@@ -240,6 +241,8 @@ async def test_refusal_and_line_faults_over_a_pty(pty_board: tuple[Board, PtyDev
             return reply[:5] + b"\xc3" + reply[6:]
 
         dev.inject = corrupt_once
+        with pytest.raises(ProtocolError):
+            await accel.identify()
         assert (await accel.identify()).partid == 0xED
         assert len(hits) == 1
         dev.inject = None
