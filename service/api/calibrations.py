@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from fastapi.responses import PlainTextResponse
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
@@ -41,6 +42,39 @@ def calibration_document(calibration_id: DbIdPath, session: SessionDep) -> dict[
     if row is None:
         raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
     return row.model
+
+
+@router.get(
+    "/calibrations/{calibration_id}/export",
+    response_class=PlainTextResponse,
+    responses={
+        200: {"description": "the firmware export: a C99 header (format=c) or flat JSON",
+              "content": {"text/x-c": {}, "application/json": {}}},
+        404: {"description": "no such calibration"},
+        422: {"description": "the model cannot be exported (e.g. it carries extension terms)"},
+    },
+)
+def calibration_export(
+    calibration_id: DbIdPath,
+    session: SessionDep,
+    format: Annotated[Literal["c", "json-flat"], Query(description="c or json-flat")] = "c",
+) -> Response:
+    """``soakcal export`` of this calibration, as a download (docs/model-file.md)."""
+    from calibration.export import export_text
+    from calibration.model_file import load_conditioning_dict, load_model_dict
+
+    row = session.get(Calibration, calibration_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
+    name = f"calibration-{calibration_id}"
+    try:
+        text = export_text(load_model_dict(row.model), format, source_name=f"{name}.json",
+                           conditioning=load_conditioning_dict(row.model))
+    except CalibrationError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
+    media, ext = ("text/x-c", "h") if format == "c" else ("application/json", "json")
+    return Response(text, media_type=media, headers={
+        "Content-Disposition": f'attachment; filename="soakcal-{name}.{ext}"'})
 
 
 @router.get(

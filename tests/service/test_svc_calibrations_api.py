@@ -124,3 +124,24 @@ def test_coefficients_errors(client: TestClient, auth, calibrations) -> None:  #
     )
     assert missing.status_code == 404
     assert client.get(base + "?temperature_c=20").status_code == 401
+
+
+def test_firmware_export_download_is_what_soakcal_export_writes(  # type: ignore[no-untyped-def]
+        client: TestClient, auth, calibrations) -> None:
+    from calibration.export import export_text
+    from calibration.model_file import load_conditioning_dict, load_model_dict
+
+    url = f"/api/v1/calibrations/{calibrations[1]}/export"
+    r = client.get(url, headers=auth["viewer"])
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/x-c")
+    assert "attachment" in r.headers["content-disposition"]
+    doc = _model_doc()
+    expected = export_text(load_model_dict(doc), "c", conditioning=load_conditioning_dict(doc),
+                           source_name=f"calibration-{calibrations[1]}.json")
+    assert r.text == expected and "soakcal_compensate_f" in r.text
+    flat = client.get(url, params={"format": "json-flat"}, headers=auth["viewer"])
+    assert flat.status_code == 200 and "coefficients" in flat.text.lower()
+    assert client.get(url, params={"format": "pdf"}, headers=auth["viewer"]).status_code == 422
+    assert client.get("/api/v1/calibrations/999/export", headers=auth["viewer"]).status_code \
+        == 404
+    assert client.get(url).status_code == 401

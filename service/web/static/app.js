@@ -297,7 +297,9 @@ async function calibrationView(id) {
   const prov = doc.provenance || {};
   const figs = h("div", { id: "figures" }, h("p", { class: "muted" }, "drawing the figures (the fit is redone from the stored measurements)…"));
   show(h("h2", {}, `Calibration ${id}`),
-    h("p", {}, h("a", { href: `/api/v1/calibrations/${id}`, download: `calibration-${id}.json` }, "model document (JSON)")),
+    h("p", {}, h("a", { href: `/api/v1/calibrations/${id}`, download: `calibration-${id}.json` }, "model document (JSON)"),
+      " · ", h("a", { href: `/api/v1/calibrations/${id}/export?format=c`, id: "export-c" }, "firmware header (C99)"),
+      " · ", h("a", { href: `/api/v1/calibrations/${id}/export?format=json-flat` }, "flat JSON for other languages")),
     h("dl", { class: "facts" },
       h("dt", {}, "model"), h("dd", {}, `${doc.model_version} (${doc.mode} mode, ${doc.method} fit)`),
       h("dt", {}, "sensor / campaign"), h("dd", {}, `${prov.sensor || "–"} / ${prov.campaign_id || "–"}`),
