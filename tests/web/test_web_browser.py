@@ -91,6 +91,14 @@ def test_sign_in_start_watch_pause_resume_and_open_figures(
             )
             names = page.locator("#figures figcaption").all_inner_texts()
             assert {"norm_error", "parameters_vs_temperature"} <= set(names)
+            assert page.get_attribute("#export-c", "href").endswith("/export?format=c")
+
+            # The rig's connection check (soakcal rig check) from the rigs page.
+            page.click("a[href='#/rigs']")
+            page.click("#rigs button")
+            page.wait_for_selector("#rig-check h3", timeout=60_000)
+            assert "every check passed" in page.inner_text("#rig-check h3")
+            assert "pass" in page.inner_text("#rig-check table")
         finally:
             browser.close()
     assert not page_errors, page_errors

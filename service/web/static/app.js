@@ -355,10 +355,22 @@ async function schedulesView() {
 
 async function rigsView() {
   const list = await api("GET", "/api/v1/rigs");
+  const out = h("div", { id: "rig-check" });
+  // The connection check of `soakcal rig check` (POST /rigs/{name}/check): reads only, moves nothing.
+  const check = (name) => guarded(async () => {
+    out.replaceChildren(h("p", { class: "muted" }, `checking rig ${name}…`));
+    const r = await api("POST", `/api/v1/rigs/${encodeURIComponent(name)}/check`, { move: false });
+    out.replaceChildren(h("h3", {}, `Rig ${r.rig}: ${r.passed ? "every check passed" : "NOT READY"}`),
+      h("table", {}, h("tr", {}, ...["device", "check", "status", "detail", "what to fix"].map((t) => h("th", {}, t))),
+        r.checks.map((c) => h("tr", { class: c.status }, h("td", {}, c.device), h("td", {}, c.check),
+          h("td", {}, c.status), h("td", {}, c.detail), h("td", {}, c.fix || "")))));
+  });
   show(h("h2", {}, "Rigs"), h("table", { id: "rigs" },
-    h("tr", {}, ...["name", "busy", "chamber", "turntable"].map((t) => h("th", {}, t))),
+    h("tr", {}, ...["name", "busy", "chamber", "turntable", ""].map((t) => h("th", {}, t))),
     list.map((r) => h("tr", {}, h("td", {}, r.name), h("td", {}, r.busy ? "busy" : "idle"),
-      h("td", {}, h("code", {}, JSON.stringify(r.chamber))), h("td", {}, h("code", {}, JSON.stringify(r.turntable)))))));
+      h("td", {}, h("code", {}, JSON.stringify(r.chamber))), h("td", {}, h("code", {}, JSON.stringify(r.turntable))),
+      h("td", {}, atLeast("operator") && !r.busy ? h("button", { onclick: () => check(r.name) }, "check") : "")))),
+    out);
 }
 
 async function tokensView() {
