@@ -257,3 +257,29 @@ def manual_devices(rig: dict[str, Any], devices: Any, sf: sessionmaker[Session] 
                             noise_g=float(cfg.get("noise_g", 0.2e-3)))
     return replace(devices, turntable=table,
                    angles_for=lambda ref: tuple(angles_for_reference(np.asarray(ref), 3)))
+
+
+def hand_placed_calibrate(calibrate: Callable[[dict[str, list[float]], dict[str, Any]],
+                                              dict[str, Any]] | None = None,
+                          tol_deg: float | None = None
+                          ) -> Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]:
+    """The engine's calibrate step for a manual rig: every row gets ``ref_tol_deg``.
+
+    A hand placement is good to a degree or two, not to the table's arc-seconds;
+    docs/fit-honesty.md ("Hand-placed references") fits such rows with the
+    labels as a prior instead of exact data. ``tol_deg`` defaults to
+    :data:`calibration.placement.HAND_HELD_TOL_DEG` (2°). The runner takes it
+    as its ``calibrate=`` argument (docs/manual-fixtures.md, "Wiring").
+    """
+    from calibration.placement import HAND_HELD_TOL_DEG, REF_TOL_COLUMN
+    from service.engine.calibrate import calibrate_columns
+
+    inner = calibrate or calibrate_columns
+    tol = HAND_HELD_TOL_DEG if tol_deg is None else float(tol_deg)
+
+    def run(columns: dict[str, list[float]], provenance: dict[str, Any]) -> dict[str, Any]:
+        n = len(columns["t_s"])
+        with_tol = {**columns, REF_TOL_COLUMN: [tol] * n}
+        return inner(with_tol, {**provenance, REF_TOL_COLUMN: tol, "placement": "manual"})
+
+    return run

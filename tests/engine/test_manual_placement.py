@@ -18,10 +18,11 @@ from drivers.manual_table import ManualTurntable
 from service.api.app import create_app
 from service.api.auth import create_token
 from service.config import Settings
-from service.db.models import Campaign, Measurement
+from service.db.models import Calibration, Campaign, Measurement
 from service.engine.placement import (
     PlacementBoard,
     check_placement,
+    hand_placed_calibrate,
     instruction_for,
     manual_devices,
     sketch_for,
@@ -71,7 +72,7 @@ def test_check_rejects_a_tilt_beyond_the_limit() -> None:
 
 # --- the twin, operator played over REST ----------------------------------------------
 MANUAL_SPEC: dict[str, Any] = {
-    "setpoints_c": [25.0], "soak_min": 10, "positions": "six",
+    "setpoints_c": [5.0, 20.0, 35.0, 50.0], "soak_min": 10, "positions": "six",
     "samples_per_position": 50, "move_timeout_s": 3600.0,
 }
 
@@ -119,7 +120,9 @@ async def test_manual_campaign_on_the_twin_completes_with_the_operator_over_rest
         sim_table = twin.turntable  # the twin's table: the operator's hands
         devices = manual_devices(rig, twin, sf)
         assert isinstance(devices.turntable, ManualTurntable)
-        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        # The real fit once (hand-placed: ref_tol_deg on every row), the fake one otherwise.
+        calibrate = fake_calibrate if wrong_first else hand_placed_calibrate()
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=calibrate)
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(transport=transport, base_url="http://t") as client:
             op = asyncio.create_task(_operator(client, headers, clock, sim_table, cid,
@@ -130,16 +133,22 @@ async def test_manual_campaign_on_the_twin_completes_with_the_operator_over_rest
     with sf() as s:
         rows = s.execute(select(Measurement).where(Measurement.campaign_id == cid)).scalars().all()
         assert s.get(Campaign, cid).state == "completed"
-    assert sorted(m.position for m in rows) == list(range(6))
+    assert sorted(m.position for m in rows) == sorted(list(range(6)) * 4)
     for m in rows:  # each averaged reading is where the schedule asked: the operator placed it
         assert np.dot([m.ax, m.ay, m.az], [m.ref_x, m.ref_y, m.ref_z]) > 0.95
     rejections = devices.turntable.rejections
     if wrong_first:
         assert len(rejections) == 1 and "looks down, not up" in rejections[0]
         assert confirmed[0]["position"] == confirmed[1]["position"]  # the same one, re-asked
+        assert confirmed[1]["reason"] == rejections[0]
     else:
         assert rejections == []
     assert len({c["position"] for c in confirmed}) == 6
+    if not wrong_first:
+        with sf() as s:
+            cal = s.get(Calibration, s.get(Campaign, cid).calibration_id)
+            assert cal.provenance["ref_tol_deg"] == 2.0 and cal.rmse_ug > 0
+            assert "hand-placed references (ref_tol_deg)" in str(cal.report)  # the fit saw it
 
 
 async def test_board_keeps_an_open_request_and_reissues_with_the_reason(sf) -> None:
