@@ -160,3 +160,30 @@ async def test_board_keeps_an_open_request_and_reissues_with_the_reason(sf) -> N
     again = board.publish(np.array([0, -1.0, 0]), reason="y looks up, not down")
     assert again["seq"] == 2 and again["reason"] == "y looks up, not down"
     assert again["state"] == "pending" and again["campaign_id"] == cid
+
+
+class _StillSensor:
+    """A sensor lying still with +z up (what a placed cube reads)."""
+
+    async def acquire(self, n_samples: int) -> Any:
+        from drivers.protocols import Acquisition
+
+        return Acquisition((0.0, 0.0, 1.0), (NOISE_G,) * 3, n_samples, 25.0, 0.0, False, 0.1)
+
+
+async def test_a_confirmation_survives_a_restart_of_the_driver(sf) -> None:
+    """The request lives in the database: a new driver (new process) sees the confirmation."""
+    cid = add_campaign(sf, spec=MANUAL_SPEC, rig="bench", state="running")
+    home = angles_for_reference(np.array([0.0, 0.0, 1.0]))
+    before = ManualTurntable(PlacementBoard(sf, "bench"), _StillSensor())
+    await before.move_to(home)
+    assert not (await before.read_status()).in_position  # nobody confirmed yet
+    with sf() as s:
+        from service.engine.placement import confirm_request
+
+        confirm_request(s, cid, 4)  # six: +z is position 4
+        s.commit()
+    after = ManualTurntable(PlacementBoard(sf, "bench"), _StillSensor())  # restarted
+    await after.move_to(home)  # the engine re-commands the pending position
+    assert (await after.read_status()).in_position
+    assert PlacementBoard(sf, "bench").state() == "accepted"
