@@ -3,6 +3,7 @@
 * :func:`table1` -- the seed's Table 1: three great circles of 8 positions at
   45° steps (rotation about z with y vertical first, about y with z vertical
   first, about x with z vertical first): 24 positions.
+* :func:`tilt_fixture` -- six faces plus a hand-placed wedge ring (manual rigs).
 * :func:`sphere` -- n points spread uniformly over the sphere (Fibonacci
   lattice); ``sphere(1296)`` is the seed's §4.2 reference set.
 * :data:`TABLE4_NOP` -- the numbers of positions of the seed's Table 4 (Fig. 8).
@@ -43,6 +44,27 @@ def cube14() -> np.ndarray:
     return np.vstack([six_position(), diag / np.sqrt(3.0)])
 
 
+def tilt_fixture(tilt_deg: float = 45.0, n_azimuth: int = 8) -> np.ndarray:
+    """Six faces plus a hand-placed wedge: 6 + 2·``n_azimuth`` positions.
+
+    For labs without a turntable (docs/manual-fixtures.md): the sensor first lies
+    on each face of its cube, then sits on a wedge of ``tilt_deg`` with +z away
+    from the wedge and is turned in its plane by 360°/``n_azimuth`` steps, then
+    the same with -z away. On the wedge the specific force in the sensor frame is
+    (sin θ cos ψ, sin θ sin ψ, ±cos θ) (seed paper eq. (1), |f| = 1 g). The six
+    faces alone leave the cross-axis terms undetermined in norm mode; with the
+    ring of 8 at 45° all nine |g|-visible parameters are determined (tested).
+    """
+    if not 0.0 < tilt_deg < 90.0 or n_azimuth < 3:
+        raise ValueError(f"tilt fixture needs 0 < tilt_deg < 90 and n_azimuth >= 3, "
+                         f"got {tilt_deg}, {n_azimuth}")
+    th = np.deg2rad(tilt_deg)
+    psi = np.deg2rad(np.arange(n_azimuth) * 360.0 / n_azimuth)
+    ring = np.column_stack([np.sin(th) * np.cos(psi), np.sin(th) * np.sin(psi),
+                            np.full(n_azimuth, np.cos(th))])
+    return _clean(np.vstack([six_position(), ring, ring * np.array([1.0, 1.0, -1.0])]))
+
+
 def sphere(n: int) -> np.ndarray:
     """n unit vectors spread uniformly over the sphere (Fibonacci lattice)."""
     if n < 1:
@@ -55,7 +77,8 @@ def sphere(n: int) -> np.ndarray:
 
 
 def get_schedule(name: str) -> np.ndarray:
-    """Schedule by name: table1, six, cube14, sphere<N> (e.g. sphere1296), table1+cube14."""
+    """Schedule by name: table1, six, cube14, tilt / tilt<DEG> (hand wedge, default 45°),
+    sphere<N> (e.g. sphere1296), table1+cube14."""
     key = name.strip().lower()
     if "+" in key:
         return np.vstack([get_schedule(k) for k in key.split("+")])
@@ -65,10 +88,15 @@ def get_schedule(name: str) -> np.ndarray:
         return six_position()
     if key == "cube14":
         return cube14()
+    if key == "tilt":
+        return tilt_fixture()
+    if key.startswith("tilt") and key[4:].isdigit() and 0 < int(key[4:]) < 90:
+        return tilt_fixture(float(key[4:]))
     if key.startswith("sphere") and key[6:].isdigit():
         return sphere(int(key[6:]))
     raise ValueError(
-        f"unknown position schedule {name!r}; expected table1, six, cube14 or sphere<N>"
+        f"unknown position schedule {name!r}; expected table1, six, cube14, tilt, tilt<DEG> "
+        "or sphere<N>"
     )
 
 

@@ -63,6 +63,9 @@ def add_parser(sub: Any) -> None:
     from service.cli_plan import add_plan_parser  # the dry run needs no running service
 
     add_plan_parser(actions)
+    from service.cli_placement import add_placement_parser  # hand-placed fixtures
+
+    add_placement_parser(actions)
 
 
 def parse_setpoints(text: str) -> list[float]:

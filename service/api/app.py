@@ -14,6 +14,7 @@ from starlette.concurrency import run_in_threadpool
 
 from service import web
 from service.api import calibrations, campaigns, door, health, rigs, schedules, tokens
+from service.api import placement as placement_api  # manual fixtures (issue 9)
 from service.campaigns import load_rigs_file, seed_sim_rig, upsert_rigs
 from service.config import Settings, service_version
 from service.db.session import make_engine, make_session_factory, session_scope, upgrade_database
@@ -45,6 +46,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = make_session_factory(engine)
     for module in (health, rigs, campaigns, calibrations, schedules, tokens):
         app.include_router(module.router)
+    app.include_router(placement_api.router)
     app.include_router(web.router)
     web.mount_static(app)
     web.add_cors(app)

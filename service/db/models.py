@@ -178,3 +178,26 @@ class ApiToken(Base):
     # NULL = never expires / not revoked; a revoked or expired token is refused (401) at once.
     expires_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
     revoked_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+
+
+class PlacementRequest(Base):
+    """The hand-placement a manual turntable asks for now (docs/manual-fixtures.md).
+
+    One row per campaign, overwritten by each new request: ``state`` is
+    ``pending`` (waiting for the operator), ``confirmed`` (the operator says it
+    is placed; the driver checks it) or ``accepted`` (the check passed).
+    """
+
+    __tablename__ = "placement_requests"
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaigns.id"), primary_key=True)
+    seq: Mapped[int] = mapped_column(Integer, default=1)  # requests issued so far (re-issues count)
+    position: Mapped[int] = mapped_column(Integer)  # index in the campaign's schedule
+    ref_x: Mapped[float] = mapped_column(Float)  # asked gravity direction, sensor frame (unit)
+    ref_y: Mapped[float] = mapped_column(Float)
+    ref_z: Mapped[float] = mapped_column(Float)
+    instruction: Mapped[str] = mapped_column(Text)
+    sketch: Mapped[str] = mapped_column(Text)
+    reason: Mapped[str | None] = mapped_column(Text)  # why it was re-issued (None: first ask)
+    state: Mapped[str] = mapped_column(String(16), default="pending")
+    requested_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    confirmed_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))

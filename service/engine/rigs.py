@@ -61,6 +61,13 @@ async def open_rig(
     sim_options: dict[str, Any] | None = None,
 ) -> AsyncIterator[RigDevices]:
     """Devices for a rig config ``{"name", "chamber", "turntable", "sensors"}``."""
+    if (rig.get("turntable") or {}).get("driver") == "manual":  # hand-placed fixture
+        from service.engine.placement import manual_devices  # docs/manual-fixtures.md
+
+        async with open_rig({**rig, "turntable": {}}, clock, seed=seed, faults=faults,
+                            sim_options=sim_options) as devices:
+            yield manual_devices(rig, devices)
+        return
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
     if driver == "modbus":
         async with _open_modbus_rig(rig, clock) as devices:

@@ -78,3 +78,18 @@ def test_one_great_circle_is_not_enough_for_reference_mode() -> None:
 def test_identifiability_rejects_unknown_mode() -> None:
     with pytest.raises(ValueError, match="mode"):
         schedules.identifiability(schedules.table1(), "magic")
+
+
+def test_tilt_fixture_adds_a_wedge_ring_that_determines_norm_mode() -> None:
+    from calibration.schedules import get_schedule, identifiability, tilt_fixture
+
+    ref = tilt_fixture()
+    assert ref.shape == (22, 3) and np.allclose(np.linalg.norm(ref, axis=1), 1.0)
+    ring = ref[6:]
+    assert np.allclose(np.abs(ring[:, 2]), np.cos(np.radians(45.0)))
+    assert identifiability(ref, "norm").undetermined == ("mx", "my", "mz")
+    assert identifiability(ref, "reference").ok
+    assert np.allclose(get_schedule("tilt30")[6, 2], np.cos(np.radians(30.0)))
+    assert np.allclose(get_schedule("tilt"), ref)
+    with pytest.raises(ValueError, match="tilt<DEG>"):
+        get_schedule("tilt95")
