@@ -35,6 +35,7 @@ from drivers.clock import Clock, RealClock, ScaledClock
 from service.db.models import Campaign, Rig, RigLease
 from service.db.timestamps import as_utc, utcnow
 from service.engine import store
+from service.engine.placement import hand_placed_calibrate
 from service.engine.rigs import open_rig, rig_time_scale
 from service.engine.runner import CampaignRunner
 from service.engine.store import cas_transition
@@ -198,7 +199,12 @@ class CampaignManager:
             clock = self._clock_for(rig_cfg)
             async with open_rig(rig_cfg, clock, seed=campaign_id, **self.rig_options) as devices:
                 fence = store.Fence(rig, self.owner)
-                await CampaignRunner(self.sf, campaign_id, devices, clock, fence=fence).run()
+                options: dict[str, Any] = {}
+                if (rig_cfg.get("turntable") or {}).get("driver") == "manual":
+                    # hand-placed references: fitted as approximate (docs/manual-fixtures.md)
+                    options["calibrate"] = hand_placed_calibrate()
+                await CampaignRunner(self.sf, campaign_id, devices, clock, fence=fence,
+                                     **options).run()
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # the rig could not be opened: fail the campaign, not the service
