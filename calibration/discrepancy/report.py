@@ -63,12 +63,17 @@ def write_diagnosis_figures(diag: Any, out_dir: str | Path) -> list[Path]:
         ax.plot(diag.t_s / 3600, before[:, a], ".", ms=3, label="base model")
         ax.plot(diag.t_s / 3600, after[:, a], ".", ms=3, label="with findings")
         for f in diag.findings:
+            if not f.where.get("time_s"):
+                continue
             lo, hi = f.where["time_s"]
             ax.axvspan(lo / 3600, hi / 3600, alpha=0.08, color="C3")
         ax.set_ylabel(f"{lab} residual, µg")
     axs[0, 0].legend(loc="upper right", fontsize=8)
     axs[-1, 0].set_xlabel("elapsed time, h")
-    fig.suptitle("Residuals over time (shaded: where findings act)")
+    # Say "shaded" only when something is: a recording with no finding has no region.
+    shaded = any(f.where.get("time_s") for f in diag.findings)
+    fig.suptitle("Residuals over time" + (" (shaded: where findings act)" if shaded
+                                          else " (no finding: nothing shaded)"))
     fig.tight_layout()
     p = out / "residuals_time.png"
     fig.savefig(p, dpi=110)
