@@ -23,6 +23,7 @@ from service.campaigns import (
     campaign_out,
     create_campaign,
     field_error,
+    mount_errors,
     plan_check,
 )
 from service.db.models import Campaign, Measurement
@@ -44,9 +45,10 @@ def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
     cannot follow); the 201 carries ``predicted_duration_s``.
     """
     check = plan_check(session, body)
-    if not check.ok:
-        raise HTTPException(status_code=422, detail=[
-            field_error(("body", *issue.loc), issue.msg, issue.value) for issue in check.issues])
+    errors = [field_error(("body", *issue.loc), issue.msg, issue.value)
+              for issue in check.issues] + mount_errors(session, body)
+    if errors:
+        raise HTTPException(status_code=422, detail=errors)
     campaign = create_campaign(session, body)
     session.commit()
     return campaign_out(campaign)

@@ -165,6 +165,12 @@ class CampaignRunner:
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
         self.sensor_serial = str(camp.sensor)
+        several = spec.extra.get("sensors")
+        if isinstance(several, list) and len(several) > 1:
+            # Accepted at the door (docs/api.md) but this engine reads one sensor only:
+            # fail at start, before any device I/O, rather than calibrate one silently.
+            raise CampaignFailed(f"spec: {len(several)} sensors named; this engine runs "
+                                 f"one sensor per campaign (several-sensor reading not built)")
         self.sensor_identity: dict[str, Any] | None = None
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
