@@ -285,8 +285,10 @@ def campaign_out(campaign: Campaign) -> CampaignOut:
         finished_at=as_utc(campaign.finished_at),
         progress=progress_of(campaign),
         calibration_id=campaign.calibration_id,
-        calibration_ids=({} if campaign.calibration_id is None
-                         else {campaign.sensor: campaign.calibration_id}),
+        calibration_ids=dict(campaign.calibration_ids or {}) or (
+            {} if campaign.calibration_id is None
+            else {campaign.sensor: campaign.calibration_id}),
+        sensors_dropped=dict(campaign.sensors_dropped or {}),
         error=campaign.error,
         requested_action=campaign.requested_action,
         suspended_reason=campaign.suspended_reason,

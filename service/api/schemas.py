@@ -106,6 +106,8 @@ class CampaignOut(BaseModel):
     sensor: str = Field(description="the campaign's (first) sensor")
     sensors: list[str] = Field(default_factory=list,
                                description="every sensor of the campaign, in order")
+    sensors_dropped: dict[str, str] = Field(
+        default_factory=dict, description="sensor → why it was dropped during the run")
     state: CampaignState
     created_at: dt.datetime
     started_at: dt.datetime | None

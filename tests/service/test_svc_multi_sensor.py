@@ -65,3 +65,31 @@ def test_a_sensor_not_mounted_on_a_real_rig_is_422_naming_it(
     assert "'SN-7' is not mounted on rig 'lab-8'" in err["msg"] and "SN-1, SN-2" in err["msg"]
     # the sim twin mounts whatever a campaign names
     assert _post(client, auth["operator"], {"rig": "sim", "sensors": ["SN-7"]}).status_code == 201
+
+
+def test_recording_csv_is_per_sensor(client: TestClient, auth, sf) -> None:  # type: ignore[no-untyped-def]
+    from service.db.models import Measurement
+    from service.db.session import session_scope
+
+    created = _post(client, auth["operator"], {"rig": "sim", "sensors": ["SN-1", "SN-2"]})
+    cid = created.json()["id"]
+    with session_scope(sf) as session:
+        for serial, ax in (("SN-1", 0.011), ("SN-2", 0.022)):
+            session.add(Measurement(
+                campaign_id=cid, sensor=serial, step=0, position=0, t_s=10.0, setpoint_c=20.0,
+                chamber_c=20.0, sensor_c=21.0, ref_x=0.0, ref_y=0.0, ref_z=1.0, ax=ax, ay=0.0,
+                az=1.0, n=200))
+    url = f"/api/v1/campaigns/{cid}/recording.csv"
+    bare = client.get(url, headers=auth["viewer"])
+    assert bare.status_code == 422
+    (err,) = bare.json()["detail"]
+    assert err["loc"] == ["query", "sensor"] and "choose one of SN-1, SN-2" in err["msg"]
+    wrong = client.get(url, params={"sensor": "SN-3"}, headers=auth["viewer"])
+    assert wrong.status_code == 422 and "no sensor 'SN-3'" in wrong.json()["detail"][0]["msg"]
+    two = client.get(url, params={"sensor": "SN-2"}, headers=auth["viewer"])
+    assert two.status_code == 200
+    lines = two.text.strip().splitlines()
+    assert len(lines) == 2 and ",0.022," in lines[1]
+    assert f"campaign-{cid}-SN-2.csv" in two.headers["content-disposition"]
+    got = client.get(f"/api/v1/campaigns/{cid}", headers=auth["viewer"]).json()
+    assert got["sensors_dropped"] == {} and got["sensors"] == ["SN-1", "SN-2"]
