@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import asyncio
+
 import numpy as np
+import pytest
 from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
 from sqlalchemy import select
 
@@ -25,7 +28,8 @@ def _set_sensor(sf, cid: int, serial: str) -> None:  # type: ignore[no-untyped-d
         s.commit()
 
 
-async def _run(sf, cid: int, *, break_sensor=None, binding: str = "any"):  # type: ignore[no-untyped-def]
+async def _run(sf, cid: int, *, break_sensor=None, binding: str = "any",  # type: ignore[no-untyped-def]
+               stop_at: int | None = None):
     clock = VirtualClock()
     async with start_sim_rig(clock, seed=5, serials=SERIALS, modbus_in_memory=True) as sim:
         chamber, table, first = await connect_rig(sim, clock)
@@ -37,8 +41,27 @@ async def _run(sf, cid: int, *, break_sensor=None, binding: str = "any"):  # typ
                              lambda ref: tuple(angles_for_reference(np.asarray(ref), 3)),
                              SerialBinding(binding), accelerometers=accels)  # type: ignore[arg-type]
         try:
-            state = await CampaignRunner(sf, cid, devices, clock,
-                                         calibrate=fake_calibrate).run()
+            task = asyncio.create_task(CampaignRunner(sf, cid, devices, clock,
+                                                      calibrate=fake_calibrate).run())
+            while stop_at is not None and not task.done():
+                with sf() as s:
+                    c = s.get(Campaign, cid)
+                    # anywhere in the sweep of that step (a poll can miss a narrower window)
+                    if (c.cursor_step, c.cursor_phase) == (stop_at, "positions"):
+                        break
+                await asyncio.sleep(0.0005)
+            if stop_at is not None:
+                assert not task.done(), "campaign ended before the interruption point"
+                # The in-process stand-in for SIGKILL. Repeated: a cancel that races a
+                # driver's own timeout can be absorbed by asyncio.wait_for (Python < 3.12).
+                while not task.done():
+                    task.cancel()
+                    await asyncio.sleep(0.001)
+                with pytest.raises(asyncio.CancelledError):
+                    task.result()
+                state = "interrupted"
+            else:
+                state = await task
         finally:
             for dev in (chamber.link, table.link, *accels.values()):
                 await dev.close()
@@ -100,3 +123,22 @@ async def test_a_wrong_identity_is_dropped_naming_both_serials(sf) -> None:  # t
     reason = camp.sensors_dropped["SN-M3"]
     assert "SN-M3" in reason and "SN-OTHER" in reason
     assert set(camp.calibration_ids) == {"SN-M1", "SN-M2"}
+
+
+async def test_resume_mid_sweep_stores_every_sensor_once(sf) -> None:  # type: ignore[no-untyped-def]
+    cid = add_campaign(sf, SPEC)
+    _set_sensor(sf, cid, SERIALS[0])
+    assert await _run(sf, cid, stop_at=1) == "interrupted"
+    with sf() as s:
+        partial = s.execute(select(Measurement.step, Measurement.position, Measurement.sensor)
+                            .where(Measurement.campaign_id == cid)).all()
+    # a position is stored for all three sensors or for none (one transaction)
+    per_position: dict[tuple[int, int], int] = {}
+    for st, p, _se in partial:
+        per_position[(st, p)] = per_position.get((st, p), 0) + 1
+    assert set(per_position.values()) == {3} and len(per_position) < 12
+    assert await _run(sf, cid) == "completed"  # a new process: new clock, new rig
+    with sf() as s:
+        rows = s.execute(select(Measurement.step, Measurement.position, Measurement.sensor)
+                         .where(Measurement.campaign_id == cid)).all()
+    assert len(rows) == len(set(rows)) == 3 * 2 * 6
