@@ -75,7 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_demo_sensors(sub: Any) -> None:
     """``soakcal demo --sensors N``: a fixture of N simulated sensors (service/demo.py)."""
-    from service.demo import sensors_count
+
+    def sensors_count(text: str) -> int:  # service.demo is loaded only when the flag is used
+        from service.demo import sensors_count as parse
+
+        return parse(text)
 
     sub.choices["demo"].add_argument(
         "--sensors", type=sensors_count, default=1, metavar="N",
