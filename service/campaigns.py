@@ -111,9 +111,59 @@ def plan_check(session: Session, spec: CampaignCreate) -> PlanCheck:
 def spec_errors(
     session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
 ) -> list[dict[str, Any]]:
-    """The dry run's refusals in FastAPI's 422 ``detail`` format (empty when fine)."""
+    """The dry run's and the mounting check's refusals in FastAPI's 422 ``detail`` format."""
     return [field_error(loc + issue.loc, issue.msg, issue.value)
-            for issue in plan_check(session, spec).issues]
+            for issue in plan_check(session, spec).issues] + mount_errors(session, spec, loc)
+
+
+def campaign_serials(stored: dict[str, Any], first: str) -> list[str]:
+    """The sensors a stored campaign spec names, in order (``[first]`` for a one-sensor one)."""
+    several = stored.get("sensors")
+    if isinstance(several, list) and several:
+        return [str(s) for s in several]
+    return [first]
+
+
+def rig_mounted_serials(rig_cfg: dict[str, Any]) -> set[str] | None:
+    """Serials a rig declares mounted; ``None`` when any serial mounts (the ``sim`` twin).
+
+    A real rig's sensor entry declares its sensor by ``serial`` or by the values of its
+    ``serials`` table (board uid → serial, docs/api.md "Rigs").
+    """
+    if (rig_cfg.get("chamber") or {}).get("driver", "sim") != "modbus":
+        return None
+    mounted: set[str] = set()
+    for entry in rig_cfg.get("sensors") or []:
+        if not isinstance(entry, dict):
+            continue
+        if isinstance(entry.get("serial"), str):
+            mounted.add(entry["serial"].strip())
+        table = entry.get("serials")
+        if isinstance(table, dict):
+            mounted.update(str(v).strip() for v in table.values())
+    return mounted
+
+
+def mount_errors(
+    session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
+) -> list[dict[str, Any]]:
+    """A ``sensors`` entry a real rig does not mount: 422 naming it (the twin mounts any).
+
+    Only ``sensors`` is checked: a one-sensor campaign (``sensor``) on a rig whose fixture
+    binds by EEPROM is verified at start by the identity check, as before.
+    """
+    if spec.sensors is None:
+        return []
+    rig = session.scalar(select(Rig).where(Rig.name == spec.rig))
+    if rig is None:
+        return []  # the dry run already names the unknown rig
+    mounted = rig_mounted_serials({"chamber": rig.chamber, "sensors": rig.sensors})
+    if mounted is None:
+        return []
+    return [field_error(loc + ("sensors", i),
+                        f"sensor {serial!r} is not mounted on rig {rig.name!r} "
+                        f"(mounted: {', '.join(sorted(mounted)) or 'none declared'})", serial)
+            for i, serial in enumerate(spec.sensors) if serial not in mounted]
 
 
 @functools.lru_cache(maxsize=64)
@@ -131,10 +181,11 @@ def create_campaign(
     session: Session, spec: CampaignCreate, schedule_id: int | None = None
 ) -> Campaign:
     """A new ``queued`` campaign (caller checked ``spec_errors``); flushed, not committed."""
-    ensure_sensor(session, spec.sensor)
+    for serial in spec.serials:
+        ensure_sensor(session, serial)
     campaign = Campaign(
         rig=spec.rig,
-        sensor=spec.sensor,
+        sensor=spec.serials[0],  # the first sensor: one-sensor readers keep working
         spec=spec.model_dump(exclude_none=True),
         state="queued",
         schedule_id=schedule_id,
@@ -227,12 +278,17 @@ def campaign_out(campaign: Campaign) -> CampaignOut:
         id=campaign.id,
         rig=campaign.rig,
         sensor=campaign.sensor,
+        sensors=campaign_serials(campaign.spec or {}, campaign.sensor),
         state=campaign.state,  # type: ignore[arg-type]
         created_at=as_utc(campaign.created_at),  # type: ignore[arg-type]
         started_at=as_utc(campaign.started_at),
         finished_at=as_utc(campaign.finished_at),
         progress=progress_of(campaign),
         calibration_id=campaign.calibration_id,
+        calibration_ids=dict(campaign.calibration_ids or {}) or (
+            {} if campaign.calibration_id is None
+            else {campaign.sensor: campaign.calibration_id}),
+        sensors_dropped=dict(campaign.sensors_dropped or {}),
         error=campaign.error,
         requested_action=campaign.requested_action,
         suspended_reason=campaign.suspended_reason,

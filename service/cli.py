@@ -83,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
     demo.set_defaults(handler=_delegate("service.demo", "run_demo", "demo"))
+    _add_demo_sensors(sub)
     sub.add_parser(
         "sim",
         help="simulated devices (arguments are passed to the simulators' CLI)",
@@ -92,6 +93,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # --- subcommands implemented elsewhere ------------------------------------------------
+
+
+def _add_demo_sensors(sub: Any) -> None:
+    """``soakcal demo --sensors N``: a fixture of N simulated sensors (service/demo.py)."""
+
+    def sensors_count(text: str) -> int:  # service.demo is loaded only when the flag is used
+        from service.demo import sensors_count as parse
+
+        return parse(text)
+
+    sub.choices["demo"].add_argument(
+        "--sensors", type=sensors_count, default=1, metavar="N",
+        help="sensors calibrated together in one campaign (1…64, default 1)")
 
 
 def _add_calibration_commands(sub: Any) -> None:

@@ -33,11 +33,34 @@ SENSOR_SERIAL = "SN-DEMO-0001"
 IDLE_WALL_S = 0.0003
 
 
+MAX_DEMO_SENSORS = 64  # the campaign contract's limit (service/api/schemas.py)
+
+
+def sensors_count(text: str) -> int:
+    """``--sensors N``: an integer 1…64 (argparse type: a bad value is a one-line exit 2)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer 1…{MAX_DEMO_SENSORS}, "
+                                         f"got {text!r}") from None
+    if not 1 <= n <= MAX_DEMO_SENSORS:
+        raise argparse.ArgumentTypeError(f"expected 1…{MAX_DEMO_SENSORS} sensors, got {n}")
+    return n
+
+
+def demo_serials(n: int) -> list[str]:
+    """The demo fixture's serials: the one-sensor demo's serial first, then SN-DEMO-0002…"""
+    return [SENSOR_SERIAL] + [f"SN-DEMO-{i:04d}" for i in range(2, n + 1)]
+
+
 def run_demo(args: argparse.Namespace) -> int:
-    """Entry point of ``soakcal demo [--out DIR] [--fast]``; returns the exit code."""
+    """Entry point of ``soakcal demo [--out DIR] [--fast] [--sensors N]``; the exit code."""
     out = Path(getattr(args, "out", None) or "soakcal-demo")
     fast = bool(getattr(args, "fast", False))
     spec = demo_spec(fast)
+    n_sensors = int(getattr(args, "sensors", 1) or 1)
+    if n_sensors > 1:
+        spec["sensors"] = demo_serials(n_sensors)
     return asyncio.run(_demo(out, spec))
 
 
@@ -78,7 +101,9 @@ async def _demo(out: Path, spec: dict[str, Any]) -> int:
               flush=True)
 
     clock = VirtualClock(idle_wall_s=IDLE_WALL_S)
-    async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=1) as devices:
+    serials = list(spec.get("sensors") or [])
+    async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=1,
+                        serials=serials) as devices:
         runner = CampaignRunner(sf, cid, devices, clock, on_step=on_step)
         state = await runner.run()
     camp = store.load_campaign(sf, cid)
@@ -86,6 +111,8 @@ async def _demo(out: Path, spec: dict[str, Any]) -> int:
         print(f"demo campaign ended {state}: {camp.error}")
         return 1
     sim_h = clock.now() / 3600.0
+    if serials:
+        return _report_several(sf, cid, camp, serials, sim_h, time.monotonic() - wall0)
     paths = _write_outputs(sf, cid, out, runner.fit_result)
     print()
     print(_table6(runner.fit_result))
@@ -101,6 +128,31 @@ async def _demo(out: Path, spec: dict[str, Any]) -> int:
     for label, path in paths.items():
         print(f"  {label:<10} {path}")
     return 0
+
+
+def _report_several(sf: Any, cid: int, camp: Any, serials: list[str], sim_h: float,
+                    wall_s: float) -> int:
+    """One line per sensor: its calibration's rmse and valid range, or why it was dropped."""
+    from service.db.models import Calibration
+
+    ids = dict(camp.calibration_ids or {})
+    dropped = dict(camp.sensors_dropped or {})
+    with sf() as s:
+        cals = {c.id: c for c in s.query(Calibration).filter(Calibration.campaign_id == cid)}
+    print()
+    for serial in serials:
+        if serial in ids:
+            cal = cals[ids[serial]]
+            print(f"  {serial:<14} calibration {cal.id}: rmse {cal.rmse_ug:8.1f} µg, valid "
+                  f"{cal.valid_lo_c:.1f}…{cal.valid_hi_c:.1f} °C")
+        else:
+            print(f"  {serial:<14} dropped: {dropped.get(serial, 'no calibration')}")
+    soak_min = sum(e["soak_s"] for e in camp.steps_log) / 60.0
+    print(f"campaign {cid}: {len(serials)} sensors, {len(ids)} calibrated, "
+          f"{len(camp.steps_log)} steps, "
+          f"{sum(1 for _ in store.measured_positions(sf, cid))} positions stored, "
+          f"simulated {sim_h:.1f} h (soak total {soak_min:.0f} min) in {wall_s:.1f} s wall")
+    return 0 if ids else 1
 
 
 def _create_campaign(sf: Any, spec: dict[str, Any]) -> int:

@@ -1,17 +1,24 @@
-"""One call to start a whole simulated rig (chamber, table, sensor bridge) on loopback.
+"""One call to start a whole simulated rig (chamber, table, sensor bridges) on loopback.
 
 The campaign engine's tests and ``soakcal demo`` use::
 
     async with start_sim_rig(clock, seed=1) as rig:
         chamber, table, sensor = await connect_rig(rig, clock)
         ...
+
+A fixture of several sensors (issue 12): ``start_sim_rig(clock, seed=1,
+serials=["SN-1", "SN-2"])`` mounts one simulated bridge per serial, all in the
+same chamber and on the same table, each with its own truth drawn from
+:func:`sensor_seed` of its serial (so a serial is the same part in every run)
+and its own noise stream; :func:`connect_sensors` opens a driver per bridge.
 """
 
 from __future__ import annotations
 
 import contextlib
 import itertools
-from collections.abc import AsyncIterator
+import zlib
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +49,28 @@ class RigFaults:
     sensor: SimFaults = field(default_factory=SimFaults)
 
 
+def sensor_seed(serial: str) -> int:
+    """The truth seed of a simulated sensor: a stable function of its serial (CRC-32).
+
+    ``hash()`` is salted per process; CRC-32 gives the same part in every run.
+    """
+    return zlib.crc32(serial.encode("utf-8"))
+
+
+@dataclass
+class SimSensor:
+    """One mounted simulated sensor: its serial, bridge physics, server and faults."""
+
+    serial: str
+    bridge: BridgeDevice
+    server: BridgeServer
+    faults: SimFaults
+
+    @property
+    def url(self) -> str:  # socket://127.0.0.1:PORT
+        return self.server.url
+
+
 @dataclass
 class SimRig:
     """A running simulated rig: physics objects, servers and their addresses."""
@@ -55,6 +84,8 @@ class SimRig:
     table_server: ModbusSimServer
     bridge_server: BridgeServer
     table_map: str = "soakcal-table"
+    # Every mounted sensor when started with ``serials`` (the first is ``bridge``); else empty.
+    sensors: list[SimSensor] = field(default_factory=list)
 
     @property
     def chamber_url(self) -> str:  # tcp://127.0.0.1:PORT
@@ -69,6 +100,8 @@ class SimRig:
         return self.bridge_server.url
 
     async def stop(self) -> None:
+        for extra in self.sensors[1:]:
+            await extra.server.stop()
         await self.bridge_server.stop()
         await self.table_server.stop()
         await self.chamber_server.stop()
@@ -89,8 +122,13 @@ async def start_sim_rig(
     start_c: float = 23.0,
     modbus_in_memory: bool = False,
     table_map: str = "soakcal-table",
+    serials: Sequence[str] = (),
 ) -> AsyncIterator[SimRig]:
     """Start chamber, table and bridge servers; ``ports=0`` means ephemeral ports.
+
+    ``serials`` of two or more mounts one bridge per serial (module docstring; the
+    extra bridges listen on ephemeral ports); ``truth`` and ``seed`` then only set
+    the chamber's and table's streams. One serial or none: the one-sensor rig as before.
 
     ``ports`` may be one base port (chamber, base+1 table, base+2 sensor) or a
     triple. ``truth`` defaults to ``SensorTruth.adxl355_typical(seed)``.
@@ -100,7 +138,7 @@ async def start_sim_rig(
     rig = await _start(clock, seed=seed, truth=truth, chamber_map=chamber_map,
                        faults=faults, ports=ports, host=host, n_axes=n_axes,
                        die_tau_s=die_tau_s, start_c=start_c, modbus_in_memory=modbus_in_memory,
-                       table_map=table_map)
+                       table_map=table_map, serials=serials)
     try:
         yield rig
     finally:
@@ -124,14 +162,27 @@ async def connect_rig(
     return chamber, table, sensor
 
 
+def connect_sensors(sim_rig: SimRig, clock: Clock, *,
+                    sensor_mode: str = "average") -> dict[str, SerialAccelerometer]:
+    """A bridge driver per mounted sensor, by serial (rigs started with ``serials``)."""
+    return {s.serial: SerialAccelerometer(s.url, clock, mode=sensor_mode)  # type: ignore[arg-type]
+            for s in sim_rig.sensors}
+
+
 async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                  faults: RigFaults | None, ports: int | tuple[int, int, int], host: str,
                  n_axes: int, die_tau_s: float, start_c: float,
-                 modbus_in_memory: bool = False, table_map: str = "soakcal-table") -> SimRig:
+                 modbus_in_memory: bool = False, table_map: str = "soakcal-table",
+                 serials: Sequence[str] = ()) -> SimRig:
     # Any map file: the twin renders whatever layout the map describes (MapError if unusable).
     chamber_regmap = load_chamber_map(chamber_map)
     table_regmap = load_turntable_map(table_map)
-    if truth is None:
+    several = len(serials) > 1
+    if several:
+        from simulators.truth import SensorTruth  # the physics dependency, loaded late
+
+        truth = SensorTruth.adxl355_typical(sensor_seed(serials[0]), serial=serials[0])
+    elif truth is None:
         from simulators.truth import SensorTruth  # the physics dependency, loaded late
 
         truth = SensorTruth.adxl355_typical(seed)
@@ -163,4 +214,29 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
     ts = await start_modbus_server(TurntableRegisterImage(table, table_regmap),
                                    faults.table, rng_t, host=modbus_host, port=port_t)
     bs = await start_bridge_server(bridge, host=host, port=port_s)
-    return SimRig(chamber_map, chamber, table, bridge, faults, cs, ts, bs, table_map)
+    rig = SimRig(chamber_map, chamber, table, bridge, faults, cs, ts, bs, table_map)
+    if several:
+        rig.sensors.append(SimSensor(serials[0], bridge, bs, faults.sensor))
+        try:
+            for i, serial in enumerate(serials[1:], start=2):
+                rig.sensors.append(await _start_sensor(clock, serial, i, seed, die_now,
+                                                       table, host))
+        except BaseException:
+            await rig.stop()
+            raise
+    return rig
+
+
+async def _start_sensor(clock: Clock, serial: str, index: int, seed: int, die_now: Any,
+                        table: TurntablePhysics, host: str) -> SimSensor:
+    """The ``index``-th bridge of a fixture: its own truth, noise stream, faults and port."""
+    from simulators.truth import SensorTruth
+
+    sensor_faults = SimFaults()
+    # Noise differs per sensor and per campaign seed; the part itself is its serial's.
+    rng = np.random.default_rng(np.random.SeedSequence([seed, sensor_seed(serial)]))
+    bridge = BridgeDevice(SensorTruth.adxl355_typical(sensor_seed(serial), serial=serial),
+                          clock, rng, die_now, table.true_angles_deg, faults=sensor_faults,
+                          board_uid=f"SIM-BRIDGE-{index:04d}")
+    server = await start_bridge_server(bridge, host=host, port=0)
+    return SimSensor(serial, bridge, server, sensor_faults)

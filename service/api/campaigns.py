@@ -21,8 +21,10 @@ from service.campaigns import (
     CampaignNotFound,
     apply_action,
     campaign_out,
+    campaign_serials,
     create_campaign,
     field_error,
+    mount_errors,
     plan_check,
 )
 from service.db.models import Campaign, Measurement
@@ -44,9 +46,10 @@ def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
     cannot follow); the 201 carries ``predicted_duration_s``.
     """
     check = plan_check(session, body)
-    if not check.ok:
-        raise HTTPException(status_code=422, detail=[
-            field_error(("body", *issue.loc), issue.msg, issue.value) for issue in check.issues])
+    errors = [field_error(("body", *issue.loc), issue.msg, issue.value)
+              for issue in check.issues] + mount_errors(session, body)
+    if errors:
+        raise HTTPException(status_code=422, detail=errors)
     campaign = create_campaign(session, body)
     session.commit()
     return campaign_out(campaign)
@@ -106,18 +109,36 @@ for _action in ("pause", "resume", "abort"):
     responses={**_NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "recording v1"}},
     dependencies=[Depends(auth.viewer)],
 )
-def recording_csv(campaign_id: DbIdPath, session: SessionDep) -> PlainTextResponse:
-    """The measurements so far, in recording format v1, time order."""
-    _get_or_404(session, campaign_id)
+def recording_csv(
+    campaign_id: DbIdPath, session: SessionDep,
+    sensor: Annotated[str | None, Query(
+        max_length=64, description="which sensor of a several-sensor campaign")] = None,
+) -> PlainTextResponse:
+    """The measurements so far, in recording format v1, time order (one sensor's).
+
+    A several-sensor campaign needs ``sensor`` (422 naming the choices without it);
+    a one-sensor campaign takes its own serial or nothing.
+    """
+    campaign = _get_or_404(session, campaign_id)
+    serials = campaign_serials(campaign.spec or {}, campaign.sensor)
+    if sensor is None and len(serials) > 1:
+        raise HTTPException(status_code=422, detail=[field_error(
+            ("query", "sensor"), f"campaign {campaign_id} has {len(serials)} sensors: "
+            f"choose one of {', '.join(serials)}", None)])
+    if sensor is not None and sensor not in serials:
+        raise HTTPException(status_code=422, detail=[field_error(
+            ("query", "sensor"), f"campaign {campaign_id} has no sensor {sensor!r}: "
+            f"choose one of {', '.join(serials)}", sensor)])
+    query = select(Measurement).where(Measurement.campaign_id == campaign_id)
+    if len(serials) > 1:
+        query = query.where(Measurement.sensor == sensor)
     rows = session.scalars(
-        select(Measurement)
-        .where(Measurement.campaign_id == campaign_id)
-        .order_by(Measurement.t_s, Measurement.step, Measurement.position)
-    )
+        query.order_by(Measurement.t_s, Measurement.step, Measurement.position))
+    name = f"campaign-{campaign_id}" + (f"-{sensor}" if len(serials) > 1 else "")
     return PlainTextResponse(
         render_recording_csv(rows),
         media_type="text/csv; charset=utf-8",
-        headers={"Content-Disposition": f'attachment; filename="campaign-{campaign_id}.csv"'},
+        headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
     )
 
 

@@ -107,15 +107,22 @@ class Campaign(Base):
     t0_s: Mapped[float | None] = mapped_column(Float)
     # Per-step facts (soak start/end, stability decision, flags) as a JSON list.
     steps_log: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    # Several-sensor campaigns: serial → why it was dropped; serial → its calibration id.
+    sensors_dropped: Mapped[dict[str, str] | None] = mapped_column(JSON)
+    calibration_ids: Mapped[dict[str, int] | None] = mapped_column(JSON)
 
 
 class Measurement(Base):
     """One averaged static position: a row of recording format v1."""
 
     __tablename__ = "measurements"
-    __table_args__ = (UniqueConstraint("campaign_id", "step", "position", name="uq_meas_cursor"),)
+    __table_args__ = (UniqueConstraint("campaign_id", "sensor", "step", "position",
+                                       name="uq_meas_sensor_cursor"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     campaign_id: Mapped[int] = mapped_column(ForeignKey("campaigns.id"), index=True)
+    # The sensor read (several per campaign since migration 0005_multi_sensor); the engine
+    # always writes it, NULL only in rows inserted by hand (read as the campaign's sensor).
+    sensor: Mapped[str | None] = mapped_column(String(64), index=True)
     step: Mapped[int] = mapped_column(Integer)
     position: Mapped[int] = mapped_column(Integer)
     t_s: Mapped[float] = mapped_column(Float)

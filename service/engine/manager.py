@@ -196,8 +196,11 @@ class CampaignManager:
                 row = s.execute(select(Rig).where(Rig.name == rig)).scalar_one()
                 rig_cfg = {"name": row.name, "chamber": row.chamber, "turntable": row.turntable,
                            "sensors": row.sensors}
+                # The sim twin mounts the sensors the campaign names (issue 12).
+                serials = list((s.get(Campaign, campaign_id).spec or {}).get("sensors") or [])
             clock = self._clock_for(rig_cfg)
-            async with open_rig(rig_cfg, clock, seed=campaign_id, **self.rig_options) as devices:
+            async with open_rig(rig_cfg, clock, seed=campaign_id, serials=serials,
+                                **self.rig_options) as devices:
                 fence = store.Fence(rig, self.owner)
                 options: dict[str, Any] = {}
                 if (rig_cfg.get("turntable") or {}).get("driver") == "manual":

@@ -85,11 +85,16 @@ class Settle:
 
 @dataclass(frozen=True)
 class Acquire:
-    """Average ``n_samples`` raw samples; the interpreter returns the acquisition."""
+    """Average ``n_samples`` raw samples; the interpreter returns the acquisition.
+
+    ``sensor``: which sensor of a several-sensor campaign (``None``: the one sensor);
+    the interpreter returns ``None`` for a sensor it has dropped.
+    """
 
     step: int
     position: int
     n_samples: int
+    sensor: str | None = None
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,8 @@ class Save:
     ref_g: tuple[float, float, float]
     acquisition: Any
     next_position: int
+    # Several sensors: ``acquisition`` is {serial: acquisition or None}, these serials, in order.
+    sensors: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -126,13 +133,17 @@ class PlanSpec:
 
 
 def campaign_plan(spec: Any, refs: np.ndarray,
-                  done: Iterable[tuple[int, int]] = ()) -> Plan:
+                  done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] = ()) -> Plan:
     """The campaign, once: ramp, soak, then move/settle/acquire/save per position, then fit.
 
     ``spec`` needs ``setpoints_c``, ``samples_per_position``, ``settle_s``,
     ``ramp_c_per_min``, ``range_g`` and ``odr_hz`` (a :class:`PlanSpec` or the
     engine's RunSpec); ``refs`` is the (n, 3) schedule of unit gravity vectors.
+    ``sensors`` (two or more serials, issue 12): every position is acquired once per
+    sensor (one ``Acquire`` each, in order) and saved by one ``Save`` carrying them all,
+    so the interpreter stores a position for every sensor in one transaction.
     """
+    several = tuple(str(s) for s in sensors) if len(sensors) > 1 else ()
     stored = set(done)
     refs = np.asarray(refs, float)
     n_pos = refs.shape[0]
@@ -152,8 +163,15 @@ def campaign_plan(spec: Any, refs: np.ndarray,
             yield Checkpoint()
             yield Move(step, pos, ref)
             yield Settle(float(spec.settle_s))
-            acquisition = yield Acquire(step, pos, int(spec.samples_per_position))
             next_pos = missing[k + 1] if k + 1 < len(missing) else n_pos
+            if several:
+                by_sensor = {}
+                for serial in several:
+                    by_sensor[serial] = yield Acquire(step, pos, int(spec.samples_per_position),
+                                                      serial)
+                yield Save(step, pos, setpoint_c, ref, by_sensor, next_pos, several)
+                continue
+            acquisition = yield Acquire(step, pos, int(spec.samples_per_position))
             yield Save(step, pos, setpoint_c, ref, acquisition, next_pos)
     yield Fit()
 

@@ -29,7 +29,7 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -53,19 +53,26 @@ class RigDevices:
     # How the campaign's serial is checked against the connected sensor (identity.py):
     # "any" for the twin, which mounts whatever sensor a campaign names.
     serial_binding: SerialBinding = field(default_factory=lambda: SerialBinding("any"))
+    # Every mounted sensor by serial when the rig was opened for several (``serials``);
+    # ``accelerometer`` is then the first of them. Empty for a one-sensor rig.
+    accelerometers: dict[str, Accelerometer] = field(default_factory=dict)
 
 
 @asynccontextmanager
 async def open_rig(
     rig: dict[str, Any], clock: Clock, *, seed: int = 0, faults: Any = None,
-    sim_options: dict[str, Any] | None = None,
+    sim_options: dict[str, Any] | None = None, serials: Sequence[str] = (),
 ) -> AsyncIterator[RigDevices]:
-    """Devices for a rig config ``{"name", "chamber", "turntable", "sensors"}``."""
+    """Devices for a rig config ``{"name", "chamber", "turntable", "sensors"}``.
+
+    ``serials``: the sensors a campaign names; the ``sim`` twin mounts one simulated
+    sensor per serial when there are two or more (``simulators.rig``).
+    """
     if (rig.get("turntable") or {}).get("driver") == "manual":  # hand-placed fixture
         from service.engine.placement import manual_devices  # docs/manual-fixtures.md
 
         async with open_rig({**rig, "turntable": {}}, clock, seed=seed, faults=faults,
-                            sim_options=sim_options) as devices:
+                            sim_options=sim_options, serials=serials) as devices:
             yield manual_devices(rig, devices)
         return
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
@@ -78,19 +85,27 @@ async def open_rig(
             f"rig {rig.get('name')!r}: unknown chamber driver {driver!r} "
             f"(expected one of {', '.join(DRIVERS)})")
     from drivers.geometry import angles_for_reference
-    from simulators.rig import connect_rig, start_sim_rig
+    from simulators.rig import connect_rig, connect_sensors, start_sim_rig
 
     kwargs: dict[str, Any] = {"seed": seed, **(sim_options or {})}
     if faults is not None:
         kwargs["faults"] = faults
+    if len(serials) > 1:
+        kwargs["serials"] = list(serials)
     async with start_sim_rig(clock, **kwargs) as sim:
         chamber, turntable, accel = await _maybe_await(connect_rig(sim, clock))
+        accels: dict[str, Any] = {}
+        if sim.sensors:
+            await accel.close()  # the first sensor's driver comes with the others
+            accels = connect_sensors(sim, clock)
+            accel = accels[sim.sensors[0].serial]
         n_axes = turntable.n_axes
         try:
             yield RigDevices(chamber, turntable, accel,
-                             lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)))
+                             lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
+                             accelerometers=accels)
         finally:
-            for dev in (chamber, turntable, accel):
+            for dev in (chamber, turntable, *(accels.values() or [accel])):
                 # Modbus drivers close through their link; the serial bridge directly.
                 owner = dev if hasattr(dev, "close") else getattr(dev, "link", None)
                 if owner is not None and hasattr(owner, "close"):

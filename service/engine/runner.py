@@ -39,6 +39,7 @@ from service.engine.guard import (
     clock_speed,
 )
 from service.engine.identity import verify_sensor
+from service.engine.multi import SensorDropped, reading_problem, sensor_call, slowest_decision
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -165,6 +166,12 @@ class CampaignRunner:
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
         self.sensor_serial = str(camp.sensor)
+        several = spec.extra.get("sensors")
+        # Several sensors (issue 12): each read at every position, dropped alone on a fault.
+        self.serials: list[str] = ([str(s) for s in several]
+                                   if isinstance(several, list) and len(several) > 1 else [])
+        self.dropped: dict[str, str] = dict(camp.sensors_dropped or {})
+        self.identities: dict[str, dict[str, Any]] = {}
         self.sensor_identity: dict[str, Any] | None = None
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
@@ -193,7 +200,12 @@ class CampaignRunner:
         self._clock0_s = self.clock.now()
         self._touched = True
         self._subscribers.append(EtaSubscriber(self.eta))
-        plan = campaign_plan(spec, self.refs, done)
+        if self.serials:
+            missing = [s for s in self.serials if s not in self.dev.accelerometers]
+            if missing:
+                raise CampaignFailed(f"rig has no sensor {', '.join(missing)} mounted "
+                                     f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
+        plan = campaign_plan(spec, self.refs, done, sensors=self.serials)
         reply: Any = None
         while True:
             try:
@@ -230,7 +242,73 @@ class CampaignRunner:
             Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
         }
 
+    # --- several sensors (service/engine/multi.py) ------------------------------------
+    @property
+    def _live(self) -> list[str]:
+        return [s for s in self.serials if s not in self.dropped]
+
+    def _drop(self, exc: SensorDropped) -> None:
+        """Flag and drop one sensor with its reason; the campaign fails only with none left."""
+        self.dropped[exc.serial] = exc.reason
+        store.drop_sensor(self.sf, self.id, exc.serial, exc.reason)
+        if not self._live:
+            reasons = "; ".join(f"{s}: {r}" for s, r in self.dropped.items())
+            raise CampaignFailed(f"every sensor dropped: {reasons}")
+
+    async def _sensor_call(self, serial: str, label: str,
+                           fn: Callable[[], Awaitable[Any]]) -> Any:
+        return await sensor_call(self.clock, self.guard.policy, self._abort_asked_recently,
+                                 serial, f"{label} [{serial}]", fn)
+
+    async def _configure_each(self, msg: Configure) -> None:
+        """Identity and configuration of every sensor; a failing one is dropped."""
+        for serial in self._live:
+            acc = self.dev.accelerometers[serial]
+            try:
+                if serial not in self.identities:
+                    verified = await self._sensor_call(
+                        serial, "sensor.identify",
+                        lambda acc=acc, serial=serial: verify_sensor(  # type: ignore[misc]
+                            acc, serial, self.dev.serial_binding))
+                    self.identities[serial] = verified.as_dict()
+                await self._sensor_call(serial, "accelerometer.configure",
+                                        lambda acc=acc: acc.configure(  # type: ignore[misc]
+                                            msg.range_g, msg.odr_hz))
+            except SensorDropped as exc:
+                self._drop(exc)
+        self.sensor_identity = self.identities.get(self.sensor_serial)
+
+    async def _measure_one(self, serial: str, n: int) -> tuple[Acquisition, list[str], int]:
+        """:meth:`_measure` for one sensor of several; out of range: :class:`SensorDropped`."""
+        acc = self.dev.accelerometers[serial]
+        attempts = 1
+        acq = await self._sensor_call(serial, "accelerometer.acquire", lambda: acc.acquire(n))
+        flags = check_acquisition(acq, n, self.spec.quality)
+        if flags:
+            attempts = 2
+            acq = await self._sensor_call(serial, "accelerometer.acquire",
+                                          lambda: acc.acquire(n))
+            flags = check_acquisition(acq, n, self.spec.quality)
+        problem = reading_problem(acq, self.spec.range_g)
+        if problem is not None:
+            raise SensorDropped(serial, problem)
+        return acq, flags, attempts
+
+    async def _measure_live(self, n: int, serials: list[str]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for serial in serials:
+            if serial in self.dropped:
+                continue
+            try:
+                out[serial] = await self._measure_one(serial, n)
+            except SensorDropped as exc:
+                self._drop(exc)
+        return out
+
     async def _configure(self, msg: Configure) -> None:
+        if self.serials:
+            await self._configure_each(msg)
+            return
         acc = self.dev.accelerometer
         if self.sensor_identity is None:
             # Before any reading: the sensor connected must be the one the campaign names
@@ -255,14 +333,58 @@ class CampaignRunner:
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
 
-    async def _acquire_msg(self, msg: Acquire) -> tuple[Acquisition, list[str], int]:
-        return await self._measure(msg.n_samples)
+    async def _acquire_msg(self, msg: Acquire) -> tuple[Acquisition, list[str], int] | None:
+        if msg.sensor is None:
+            return await self._measure(msg.n_samples)
+        return (await self._measure_live(msg.n_samples, [msg.sensor])).get(msg.sensor)
 
     async def _fit(self, _msg: Fit) -> None:
         await self._fitting()
 
+    async def _save_each(self, msg: Save) -> None:
+        """Commit every live sensor's reading of a position and the cursor in one transaction."""
+        readings = {s: r for s, r in dict(msg.acquisition).items()
+                    if r is not None and s not in self.dropped}
+        while True:
+            status = await self._chamber()
+            tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
+            if tripped is None:
+                break
+            # As for one sensor: discard the readings, hold, re-soak if needed, measure again.
+            await self._hold(*tripped, setpoint_c=msg.setpoint_c)
+            if tripped[0].restart_soak and self._last_soak is not None:
+                await self._soak(dataclasses.replace(self._last_soak, resumed=True))
+            await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+            await self._wait(self.spec.settle_s)
+            readings = await self._measure_live(self.spec.samples_per_position, self._live)
+        readings = {s: r for s, r in readings.items() if s not in self.dropped}
+        if not readings:
+            raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
+        ref = msg.ref_g
+        rows = []
+        for serial in msg.sensors:
+            if serial not in readings:
+                continue
+            acq, flags, attempts = readings[serial]
+            rows.append({
+                "sensor": serial, "step": msg.step, "position": msg.position,
+                "t_s": self._t(self.clock.now() - acq.duration_s / 2.0),
+                "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
+                "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
+                "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
+                "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
+                "attempts": attempts, "flags": ",".join(flags) or None,
+            })
+        progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
+                                 write=False)
+        store.commit_measurements(self.sf, self.id, rows, msg.step, msg.next_position,
+                                  progress, fence=self.fence)
+
     async def _save(self, msg: Save) -> None:
         """Commit the reading and the cursor past it in one transaction (the crash rule)."""
+        if msg.sensors:
+            await self._save_each(msg)
+            return
         acq, flags, attempts = msg.acquisition
         while True:
             status = await self._chamber()
@@ -286,6 +408,7 @@ class CampaignRunner:
             "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
             "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
             "attempts": attempts, "flags": ",".join(flags) or None,
+            "sensor": self.sensor_serial,
         }
         progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
                                  write=False)
@@ -340,7 +463,11 @@ class CampaignRunner:
         store.set_cursor(self.sf, self.id, step, "soak", 0)
         self._cursor = (step, "soak")
         start_s = self.clock.now()
-        ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
+        ch_t: list[float] = []
+        ch_pv: list[float] = []
+        ch_wsp: list[float] = []
+        # Die probes per sensor (the key None: the one sensor of a one-sensor campaign).
+        dies: dict[str | None, tuple[list[float], list[float]]] = self._no_dies()
         decision = stability.Decision(False, "started")
         while True:
             status = await self._chamber()
@@ -349,21 +476,23 @@ class CampaignRunner:
                 # The die was disturbed: hold until the chamber is back, then soak afresh.
                 await self._hold(*tripped, setpoint_c=target_c)
                 start_s = self.clock.now()
-                ch_t, ch_pv, ch_wsp, die_t, die_c = [], [], [], [], []
+                ch_t, ch_pv, ch_wsp, dies = [], [], [], self._no_dies()
                 continue
             now_s = self.clock.now()
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
             ch_wsp.append(status.working_setpoint_c)
             if cfg.policy == "predictive":
-                probe = await self._acquire(spec.soak_probe_samples)
-                die_t.append(now_s)
-                die_c.append(probe.sensor_c)
+                await self._probe_dies(dies, now_s)
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
-            decision = stability.decide(cfg, now_s - start_s, settled, np.array(die_t),
-                                        np.array(die_c), sweep_s=sweep_s,
-                                        n_positions=self.n_pos, edge=edge)
+            # Every die decides; the slowest one ends the soak (one die: its own decision).
+            decision = slowest_decision([
+                stability.decide(cfg, now_s - start_s, settled, np.array(die_t),
+                                 np.array(die_c), sweep_s=sweep_s, n_positions=self.n_pos,
+                                 edge=edge)
+                for key, (die_t, die_c) in dies.items()
+                if key is None or key not in self.dropped])
             self._publish(step, "soak", 0, status, target_c,
                           soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
             if decision.stable:
@@ -388,10 +517,61 @@ class CampaignRunner:
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
+    def _no_dies(self) -> dict[str | None, tuple[list[float], list[float]]]:
+        keys: list[str | None] = list(self._live) if self.serials else [None]
+        return {k: ([], []) for k in keys}
+
+    async def _probe_dies(self, dies: dict[str | None, tuple[list[float], list[float]]],
+                          now_s: float) -> None:
+        """One cheap die-temperature probe of every live sensor (of the one sensor)."""
+        n = self.spec.soak_probe_samples
+        for key, (die_t, die_c) in dies.items():
+            if key is None:
+                probe = await self._acquire(n)
+            elif key in self.dropped:
+                continue
+            else:
+                acc = self.dev.accelerometers[key]
+                try:
+                    probe = await self._sensor_call(key, "accelerometer.acquire",
+                                                    lambda acc=acc: acc.acquire(n))  # type: ignore[misc]
+                except SensorDropped as exc:
+                    self._drop(exc)
+                    continue
+            die_t.append(now_s)
+            die_c.append(probe.sensor_c)
+
+    async def _fitting_each(self, camp: Any) -> None:
+        """One calibration per live sensor (a fit that fails drops that sensor)."""
+        done = dict(camp.calibration_ids or {})
+        for serial in self._live:
+            if serial in done:
+                continue
+            cols = store.measurement_columns(self.sf, self.id, serial)
+            provenance = {
+                "campaign_id": self.id, "rig": camp.rig, "sensor": serial,
+                "sensors": self.serials, "spec": camp.spec, "positions": self.spec.positions,
+                "steps_log": camp.steps_log,
+                "recording": f"campaign-{self.id}-{serial}.csv",
+                "sensor_identity": self.identities.get(serial),
+            }
+            try:
+                values = await asyncio.to_thread(self.calibrate, cols, provenance)
+            except Exception as exc:  # one sensor's fit failing drops it, not the others
+                self._drop(SensorDropped(serial, f"calibration fit failed: {exc}"))
+                continue
+            fit = values.pop("_fit", None)
+            if self.fit_result is None:
+                self.fit_result = fit
+            store.store_calibration(self.sf, self.id, values, sensor=serial)
+
     async def _fitting(self) -> None:
         camp = store.load_campaign(self.sf, self.id)
         store.set_cursor(self.sf, self.id, self.spec.n_steps - 1, "fitting", self.n_pos,
                          {**self._progress, "phase": "fitting", "fraction": 1.0, "eta_s": 0.0})
+        if self.serials:
+            await self._fitting_each(camp)
+            return
         if camp.calibration_id is not None:
             return
         cols = store.measurement_columns(self.sf, self.id)

@@ -224,6 +224,49 @@ def commit_measurement(
     return False
 
 
+def commit_measurements(
+    sf: SessionFactory, campaign_id: int, rows: list[dict[str, Any]], step: int,
+    next_position: int, progress: dict[str, Any], fence: Fence | None = None,
+) -> bool:
+    """Store every sensor's measurement of one position and move the cursor, atomically.
+
+    The several-sensor form of :func:`commit_measurement`: all rows of a position and
+    the cursor past it are one transaction, so a position is stored for every live
+    sensor or for none and :func:`measured_positions` stays exact on resume. False
+    when the position was already stored (a previous process committed it).
+    """
+    with sf() as s:
+        try:
+            if fence is not None:
+                _check_fence(s, fence, campaign_id)
+            s.add_all([Measurement(campaign_id=campaign_id, **row) for row in rows])
+            s.execute(
+                update(Campaign).where(Campaign.id == campaign_id).values(
+                    cursor_step=step, cursor_phase="positions",
+                    cursor_position=next_position, progress=progress,
+                )
+            )
+            s.commit()
+            return True
+        except IntegrityError:
+            s.rollback()
+        except LeaseLost:
+            s.rollback()
+            raise
+    set_cursor(sf, campaign_id, step, "positions", next_position, progress)
+    return False
+
+
+def drop_sensor(sf: SessionFactory, campaign_id: int, serial: str, reason: str) -> None:
+    """Record that ``serial`` was dropped from the campaign (``sensors_dropped``) and log it."""
+    with sf() as s:
+        c = s.get(Campaign, campaign_id)
+        assert c is not None
+        c.sensors_dropped = {**(c.sensors_dropped or {}), serial: reason}
+        s.commit()
+    log_event("sensor dropped", campaign=campaign_id, sensor=serial, reason=reason)
+
+
 def put_step_log(sf: SessionFactory, campaign_id: int, entry: dict[str, Any]) -> None:
     """Replace (or append) the steps_log entry of ``entry['step']``; a resumed step updates it."""
     with sf() as s:
@@ -241,14 +284,16 @@ def put_step_log(sf: SessionFactory, campaign_id: int, entry: dict[str, Any]) ->
     )
 
 
-def measurement_columns(sf: SessionFactory, campaign_id: int) -> dict[str, list[float]]:
-    """The stored measurements as recording-v1 columns, in time order."""
+def measurement_columns(sf: SessionFactory, campaign_id: int,
+                        sensor: str | None = None) -> dict[str, list[float]]:
+    """The stored measurements (of ``sensor`` when given) as recording-v1 columns, time order."""
     names = ("t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "ref_x", "ref_y",
              "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")
     with sf() as s:
         rows = s.execute(
             select(*(getattr(Measurement, n) for n in names))
-            .where(Measurement.campaign_id == campaign_id)
+            .where(Measurement.campaign_id == campaign_id,
+                   *(() if sensor is None else (Measurement.sensor == sensor,)))
             .order_by(Measurement.t_s, Measurement.step, Measurement.position)
         ).all()
     cols: dict[str, list[float]] = {n: [] for n in names}
@@ -258,17 +303,29 @@ def measurement_columns(sf: SessionFactory, campaign_id: int) -> dict[str, list[
     return cols
 
 
-def store_calibration(sf: SessionFactory, campaign_id: int, values: dict[str, Any]) -> int:
-    """Insert the Calibration row and link it from the campaign in one transaction."""
+def store_calibration(sf: SessionFactory, campaign_id: int, values: dict[str, Any],
+                      sensor: str | None = None) -> int:
+    """Insert the Calibration row and link it from the campaign in one transaction.
+
+    ``sensor`` (several-sensor campaigns): the row is that sensor's and is linked in
+    ``calibration_ids``; ``calibration_id`` is set for the campaign's first sensor.
+    """
     with sf() as s:
         c = s.get(Campaign, campaign_id)
         assert c is not None
-        if c.calibration_id is not None:  # a previous process got this far before dying
-            return c.calibration_id
-        cal = Calibration(campaign_id=campaign_id, sensor=c.sensor, **values)
+        if sensor is None:
+            if c.calibration_id is not None:  # a previous process got this far before dying
+                return c.calibration_id
+        elif sensor in (c.calibration_ids or {}):
+            return int((c.calibration_ids or {})[sensor])
+        serial = c.sensor if sensor is None else sensor
+        cal = Calibration(campaign_id=campaign_id, sensor=serial, **values)
         s.add(cal)
         s.flush()
-        c.calibration_id = cal.id
+        if sensor is None or sensor == c.sensor:
+            c.calibration_id = cal.id
+        if sensor is not None:
+            c.calibration_ids = {**(c.calibration_ids or {}), sensor: cal.id}
         s.commit()
         return cal.id
 

@@ -1,0 +1,96 @@
+"""Several sensors in one campaign (issue 12): one sensor's fault drops it, not the campaign.
+
+A one-sensor campaign sends every device call through the guard
+(:mod:`service.engine.guard`): a transient fault is retried, then the campaign
+*suspends* until the device answers. With several sensors on a fixture that
+would stop every good sensor for one bad one, so a sensor's calls go through
+:func:`sensor_call` instead: the same retries and back-off on the injected
+clock and the same fault classes, but a sensor that still fails after them (a
+bridge timeout), refuses for good (a wrong identity, a bridge ``ERR``), or reads
+out of range (:func:`reading_problem`) raises :class:`SensorDropped`; the engine
+records the reason and goes on with the others.
+
+The stability decision covers every sensor: each die gets its own decision
+(seed Sec. 3's soak rule, :func:`service.engine.stability.decide`) and the
+soak ends when all are stable (:func:`slowest_decision`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Awaitable, Callable, Sequence
+from typing import TypeVar
+
+from drivers.clock import Clock
+from drivers.faults import DeviceFault
+from drivers.protocols import Acquisition
+from service.engine.guard import AbortRequested, FaultPolicy, classify
+from service.engine.stability import Decision
+
+T = TypeVar("T")
+# A static accelerometer reads gravity: |a| ≈ 1 g. Beyond this band the reading is not a
+# plausible gravity vector (a loose part, a dead axis, a sensor shorted to a rail).
+GRAVITY_BAND_G = (0.5, 1.5)
+SATURATION_FRACTION = 0.98  # |mean| this close to the range limit: the axis is clipped
+
+
+class SensorDropped(Exception):
+    """A sensor of a several-sensor campaign is given up; ``reason`` goes to the campaign."""
+
+    def __init__(self, serial: str, reason: str) -> None:
+        super().__init__(f"sensor {serial}: {reason}")
+        self.serial = serial
+        self.reason = reason
+
+
+async def sensor_call(clock: Clock, policy: FaultPolicy, check_abort: Callable[[], bool],
+                      serial: str, label: str, fn: Callable[[], Awaitable[T]]) -> T:
+    """``await fn()`` with the guard's retries; :class:`SensorDropped` instead of suspending."""
+    delay_s = policy.retry_backoff_s
+    last: DeviceFault | None = None
+    for _ in range(max(1, policy.retry_attempts)):
+        if check_abort():
+            raise AbortRequested(label)
+        try:
+            return await fn()
+        except DeviceFault as exc:
+            kind, _fix = classify(exc)
+            if kind == "configuration":
+                raise SensorDropped(serial, f"{label}: {exc}") from exc
+            last = exc
+            await clock.sleep(delay_s)
+            delay_s *= 2.0
+    raise SensorDropped(serial, f"{label}: no answer after {policy.retry_attempts} tries "
+                                f"(last fault: {last})")
+
+
+def reading_problem(acq: Acquisition, range_g: float) -> str | None:
+    """Why an averaged reading is out of range for a static sensor; ``None`` when plausible."""
+    mean = [float(v) for v in acq.mean_g]
+    if not all(math.isfinite(v) for v in (*mean, float(acq.sensor_c))):
+        return f"reading out of range: non-finite value {mean} g, {acq.sensor_c} °C"
+    if max(abs(v) for v in mean) >= SATURATION_FRACTION * range_g:
+        return f"reading out of range: an axis at the ±{range_g:g} g limit ({mean} g)"
+    norm_g = math.sqrt(sum(v * v for v in mean))
+    lo, hi = GRAVITY_BAND_G
+    if not lo <= norm_g <= hi:
+        return (f"reading out of range: |a| = {norm_g:.3f} g outside {lo:g}…{hi:g} g "
+                f"for a static sensor")
+    return None
+
+
+def slowest_decision(decisions: Sequence[Decision]) -> Decision:
+    """The soak decision over every die: not stable while any is not; the slowest reports.
+
+    While some die is not stable its decision is returned (why we wait); once all are,
+    the one with the longest time constant (the slowest die, which decided the end).
+    """
+    if not decisions:
+        raise ValueError("no sensor left to decide the soak")
+    waiting = [d for d in decisions if not d.stable]
+    if waiting:
+        return waiting[0]
+    capped = [d for d in decisions if d.max_soak_reached]
+    if capped:
+        return capped[0]
+    return max(decisions, key=lambda d: -math.inf if d.tau_s is None else d.tau_s)
