@@ -71,8 +71,11 @@ async def open_rig(
     if (rig.get("turntable") or {}).get("driver") == "manual":  # hand-placed fixture
         from service.engine.placement import manual_devices  # docs/manual-fixtures.md
 
-        async with open_rig({**rig, "turntable": {}}, clock, seed=seed, faults=faults,
-                            sim_options=sim_options, serials=serials) as devices:
+        # The sim twin keeps its table (a test turns it to play the operator); a real
+        # chamber over Modbus gets no table driver at all: the operator is the table.
+        async with open_rig({**rig, "turntable": {"driver": _NO_TABLE}}, clock, seed=seed,
+                            faults=faults, sim_options=sim_options,
+                            serials=serials) as devices:
             yield manual_devices(rig, devices)
         return
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
@@ -113,6 +116,12 @@ async def open_rig(
 
 
 DRIVERS = ("sim", "modbus")
+_NO_TABLE = "none"  # internal: the manual fixture's devices, opened without a table driver
+
+
+def is_manual_table(turntable: dict[str, Any]) -> bool:
+    """A hand-placed fixture: no table to command (docs/manual-fixtures.md)."""
+    return turntable.get("driver") in ("manual", _NO_TABLE)
 
 
 class RigConfigError(ValueError):
@@ -137,16 +146,19 @@ def rig_config_errors(
         errors.append(("chamber.range_c", "expected [lo, hi] in °C with lo < hi"))
     if driver != "modbus":
         return errors
-    for path, cfg in (("chamber", chamber), ("turntable", turntable)):
+    manual = is_manual_table(turntable)
+    devices = [("chamber", chamber)] + ([] if manual else [("turntable", turntable)])
+    for path, cfg in devices:
         url = cfg.get("url")
         if not isinstance(url, str) or not url.startswith(("tcp://", "rtu://")):
             errors.append((f"{path}.url", "expected tcp://host:port or rtu:///dev/...?baudrate="))
         dev_id = cfg.get("device_id", 1)
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
-    for path, cfg, load, default in (("chamber.map", chamber, load_chamber_map, "eurotherm3216"),
-                                     ("turntable.map", turntable, load_turntable_map,
-                                      "soakcal-table")):
+    maps = [("chamber.map", chamber, load_chamber_map, "eurotherm3216")]
+    if not manual:
+        maps.append(("turntable.map", turntable, load_turntable_map, "soakcal-table"))
+    for path, cfg, load, default in maps:
         ref = cfg.get("map", default)
         if not isinstance(ref, str):
             errors.append((path, "expected a shipped map name or a map file path"))
@@ -203,11 +215,13 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
         load_chamber_map(chamber_cfg.get("map", "eurotherm3216")),
     )
     n_axes = int(table_cfg.get("axes", 3))
-    table = ModbusTurntable(
-        ModbusLink(table_cfg["url"], clock, device="turntable",
-                   device_id=int(table_cfg.get("device_id", 1))),
-        load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
-    )
+    table: Any = None  # a hand-placed fixture: open_rig puts the operator's table in
+    if not is_manual_table(table_cfg):
+        table = ModbusTurntable(
+            ModbusLink(table_cfg["url"], clock, device="turntable",
+                       device_id=int(table_cfg.get("device_id", 1))),
+            load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
+        )
     accel = make_accelerometer(parse_sensor_config(sensors[0]), clock)
     try:
         yield RigDevices(chamber, table, accel,
@@ -215,7 +229,8 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
                          binding_for_rig(rig))
     finally:
         await chamber.link.close()
-        await table.link.close()
+        if table is not None:
+            await table.link.close()
         await accel.close()
 
 

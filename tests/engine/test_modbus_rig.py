@@ -120,3 +120,24 @@ async def test_a_bad_config_is_refused_before_touching_a_device() -> None:
                              "turntable": {"url": "tcp://127.0.0.1:1"},
                              "sensors": [{"url": "socket://127.0.0.1:1"}]}, VirtualClock()):
             pass
+
+
+def test_a_real_chamber_with_a_hand_placed_fixture_is_a_valid_rig() -> None:
+    """The small lab: a Eurotherm over Modbus, no turntable (the operator places the cube)."""
+    chamber = {"driver": "modbus", "url": "tcp://10.0.0.5:502", "map": "eurotherm-3216"}
+    sensors = [{"url": "/dev/ttyACM0"}]
+    assert rig_config_errors(chamber, {"driver": "manual"}, sensors) == []
+    # without the manual marker the same rig lacks its table
+    assert ("turntable.url" in {p for p, _ in rig_config_errors(chamber, {}, sensors)})
+
+
+async def test_a_modbus_chamber_with_a_manual_table_opens_with_the_operator_as_table(sf) -> None:  # type: ignore[no-untyped-def]
+    from drivers.manual_table import ManualTurntable
+
+    clock = VirtualClock(idle_wall_s=0.0003)
+    async with start_sim_rig(clock, seed=3) as sim:
+        cfg = {**_modbus_config(sim, "eurotherm3216"), "turntable": {"driver": "manual"}}
+        async with open_rig(cfg, clock) as devices:
+            assert isinstance(devices.turntable, ManualTurntable)
+            status = await devices.chamber.read_status()
+            assert -70.0 < status.process_c < 180.0
