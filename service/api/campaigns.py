@@ -13,6 +13,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
+from calibration.placement import HAND_HELD_TOL_DEG
 from service.api import auth
 from service.api.deps import DbIdPath, SessionDep
 from service.api.recording_csv import render_recording_csv
@@ -27,7 +28,7 @@ from service.campaigns import (
     mount_errors,
     plan_check,
 )
-from service.db.models import Campaign, Measurement
+from service.db.models import Campaign, Measurement, Rig
 from service.engine.states import TERMINAL
 
 router = APIRouter(prefix="/api/v1/campaigns", tags=["campaigns"])
@@ -135,8 +136,10 @@ def recording_csv(
     rows = session.scalars(
         query.order_by(Measurement.t_s, Measurement.step, Measurement.position))
     name = f"campaign-{campaign_id}" + (f"-{sensor}" if len(serials) > 1 else "")
+    rig = session.scalar(select(Rig).where(Rig.name == campaign.rig))
+    hand_placed = rig is not None and (rig.turntable or {}).get("driver") == "manual"
     return PlainTextResponse(
-        render_recording_csv(rows),
+        render_recording_csv(rows, HAND_HELD_TOL_DEG if hand_placed else None),
         media_type="text/csv; charset=utf-8",
         headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
     )

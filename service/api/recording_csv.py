@@ -14,13 +14,21 @@ RECORDING_COLUMNS: tuple[str, ...] = (
 )  # fmt: skip
 
 
-def render_recording_csv(measurements: Iterable[Measurement]) -> str:
-    """Header plus one row per measurement; ``None`` becomes an empty cell ("not recorded")."""
+def render_recording_csv(measurements: Iterable[Measurement],
+                         ref_tol_deg: float | None = None) -> str:
+    """Header plus one row per measurement; ``None`` becomes an empty cell ("not recorded").
+
+    ``ref_tol_deg``: the references were hand-placed (a manual fixture) with about this
+    orientation uncertainty; written on every row so a refit treats them as approximate
+    (docs/recording.md, ``ref_tol_deg``), as the campaign's own calibration did.
+    """
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(RECORDING_COLUMNS)
+    extra = () if ref_tol_deg is None else ("ref_tol_deg",)
+    writer.writerow(RECORDING_COLUMNS + extra)
+    tail = [] if ref_tol_deg is None else [_cell(float(ref_tol_deg))]
     for m in measurements:
-        writer.writerow([_cell(getattr(m, column)) for column in RECORDING_COLUMNS])
+        writer.writerow([_cell(getattr(m, column)) for column in RECORDING_COLUMNS] + tail)
     return out.getvalue()
 
 

@@ -10,7 +10,7 @@ import httpx
 import numpy as np
 import pytest
 from engine_helpers import add_campaign, fake_calibrate
-from sqlalchemy import select
+from sqlalchemy import select, update
 
 from drivers.clock import VirtualClock
 from drivers.geometry import angles_for_reference
@@ -18,7 +18,7 @@ from drivers.manual_table import ManualTurntable
 from service.api.app import create_app
 from service.api.auth import create_token
 from service.config import Settings
-from service.db.models import Calibration, Campaign, Measurement
+from service.db.models import Calibration, Campaign, Measurement, Rig
 from service.engine.placement import (
     PlacementBoard,
     check_placement,
@@ -149,6 +149,15 @@ async def test_manual_campaign_on_the_twin_completes_with_the_operator_over_rest
             cal = s.get(Calibration, s.get(Campaign, cid).calibration_id)
             assert cal.provenance["ref_tol_deg"] == 2.0 and cal.rmse_ug > 0
             assert "hand-placed references (ref_tol_deg)" in str(cal.report)  # the fit saw it
+    # The exported recording says the references were hand-placed, so a refit agrees.
+    with sf() as s:
+        s.execute(update(Rig).where(Rig.name == "bench").values(turntable={"driver": "manual"}))
+        s.commit()
+    async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app),
+                                 base_url="http://t") as client:
+        r = await client.get(f"/api/v1/campaigns/{cid}/recording.csv", headers=headers)
+    lines = r.text.splitlines()
+    assert lines[0].endswith(",ref_tol_deg") and all(x.endswith(",2.0") for x in lines[1:])
 
 
 async def test_board_keeps_an_open_request_and_reissues_with_the_reason(sf) -> None:
