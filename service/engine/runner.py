@@ -341,22 +341,36 @@ class CampaignRunner:
     async def _fit(self, _msg: Fit) -> None:
         await self._fitting()
 
-    async def _save_each(self, msg: Save) -> None:
-        """Commit every live sensor's reading of a position and the cursor in one transaction."""
-        readings = {s: r for s, r in dict(msg.acquisition).items()
-                    if r is not None and s not in self.dropped}
+    async def _chamber_in_band(
+        self, msg: Save, remeasure: Callable[[], Awaitable[Any]]
+    ) -> tuple[ChamberStatus, Any]:
+        """The chamber's status once it is in band for this save, and the readings taken
+        again if it was not (None when the readings in hand stand).
+
+        A reading taken while the chamber misbehaved is discarded: hold, re-soak where the
+        physics needs it, return to the position and measure it again (``remeasure``).
+        """
+        remeasured: Any = None
         while True:
             status = await self._chamber()
             tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
             if tripped is None:
-                break
-            # As for one sensor: discard the readings, hold, re-soak if needed, measure again.
+                return status, remeasured
             await self._hold(*tripped, setpoint_c=msg.setpoint_c)
             if tripped[0].restart_soak and self._last_soak is not None:
                 await self._soak(dataclasses.replace(self._last_soak, resumed=True))
             await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
             await self._wait(self.spec.settle_s)
-            readings = await self._measure_live(self.spec.samples_per_position, self._live)
+            remeasured = await remeasure()
+
+    async def _save_each(self, msg: Save) -> None:
+        """Commit every live sensor's reading of a position and the cursor in one transaction."""
+        readings = {s: r for s, r in dict(msg.acquisition).items()
+                    if r is not None and s not in self.dropped}
+        status, again = await self._chamber_in_band(
+            msg, lambda: self._measure_live(self.spec.samples_per_position, self._live))
+        if again is not None:
+            readings = again
         readings = {s: r for s, r in readings.items() if s not in self.dropped}
         if not readings:
             raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
@@ -386,19 +400,10 @@ class CampaignRunner:
             await self._save_each(msg)
             return
         acq, flags, attempts = msg.acquisition
-        while True:
-            status = await self._chamber()
-            tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
-            if tripped is None:
-                break
-            # The reading was taken while the chamber misbehaved: discard it, hold, re-soak
-            # where the physics needs it, and measure this position again.
-            await self._hold(*tripped, setpoint_c=msg.setpoint_c)
-            if tripped[0].restart_soak and self._last_soak is not None:
-                await self._soak(dataclasses.replace(self._last_soak, resumed=True))
-            await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
-            await self._wait(self.spec.settle_s)
-            acq, flags, attempts = await self._measure(self.spec.samples_per_position)
+        status, again = await self._chamber_in_band(
+            msg, lambda: self._measure(self.spec.samples_per_position))
+        if again is not None:
+            acq, flags, attempts = again
         t_mid = self.clock.now() - acq.duration_s / 2.0
         ref = msg.ref_g
         row = {
