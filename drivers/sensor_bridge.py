@@ -267,11 +267,7 @@ class SerialAccelerometer:
 
     def _open_port(self) -> serial.SerialBase:
         if self._port is None or not self._port.is_open:
-            try:
-                self._port = serial.serial_for_url(self.url, baudrate=self.baudrate,
-                                                   timeout=self.timeout_s)
-            except (serial.SerialException, OSError, ValueError) as exc:
-                raise ConnectionLost(self.device, f"cannot open {self.url}: {exc}") from exc
+            self._port = open_serial_port(self.url, self.baudrate, self.timeout_s, self.device)
         return self._port
 
     def _close_port(self) -> None:
@@ -280,3 +276,14 @@ class SerialAccelerometer:
                 self._port.close()
             finally:
                 self._port = None
+
+
+def open_serial_port(url: str, baudrate: int, timeout_s: float,
+                     device: str) -> serial.SerialBase:
+    """A pyserial port for ``url`` (a device path or any ``serial_for_url`` URL); a port
+    that cannot be opened is :class:`ConnectionLost` naming the URL (the guard retries it).
+    Shared by the framed bridge and the plain stream driver."""
+    try:
+        return serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise ConnectionLost(device, f"cannot open {url}: {exc}") from exc

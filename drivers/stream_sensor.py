@@ -28,6 +28,7 @@ from drivers.faults import (
     ValueOutOfRange,
 )
 from drivers.protocols import Acquisition, SensorIdentity
+from drivers.sensor_bridge import open_serial_port
 from drivers.sensor_config import StreamFormat
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # converts m/s² lines to g (the fit's unit)
@@ -162,11 +163,7 @@ class StreamingAccelerometer:
 
     def _open_port(self) -> serial.SerialBase:
         if self._port is None or not self._port.is_open:
-            try:
-                self._port = serial.serial_for_url(self.url, baudrate=self.baudrate,
-                                                   timeout=self.timeout_s)
-            except (serial.SerialException, OSError, ValueError) as exc:
-                raise ConnectionLost(self.device, f"cannot open {self.url}: {exc}") from exc
+            self._port = open_serial_port(self.url, self.baudrate, self.timeout_s, self.device)
         return self._port
 
     def _close_port(self) -> None:
