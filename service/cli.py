@@ -127,6 +127,10 @@ def _add_calibration_commands(sub: Any) -> None:
                      help="local gravity from WGS84 normal gravity at this latitude (deg)")
     cal.add_argument("--height-m", type=float, metavar="H",
                      help="with --latitude-deg: ellipsoidal height (m), free-air corrected")
+    cal.add_argument("--rate-gain-ug-per-c-per-min", metavar="X,Y,Z",
+                     help="the sensor's measured temperature_rate gain per axis (µg per "
+                     "°C/min, e.g. a campaign's provenance): k·dT/dt is subtracted from every "
+                     "row before the fit")
     cal.set_defaults(handler=_delegate("calibration.cli", "run_calibrate", "calibrate"))
 
     comp = sub.add_parser("compensate", help="apply a model to a recording")

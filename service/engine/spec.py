@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
@@ -51,6 +51,9 @@ MAX_SETTLE_S = 600.0
 MAX_SOAK_MIN = 24 * 60.0
 MAX_POLL_S = 3600.0
 MAX_SUSPEND_LIMIT_S = 7 * 24 * 3600.0
+# Fewest samples per soak probe when the rate gain is measured from the probes: 8-sample
+# probes give σ(k) ≈ 25–30 µg per °C/min over a campaign, 200 ≈ 5 (docs/engine.md).
+MIN_MEASURED_PROBE_SAMPLES = 200
 # Plausible air temperatures for any climatic chamber; the rig's own range is the dry run's.
 PLAUSIBLE_C = (-200.0, 500.0)
 
@@ -109,6 +112,11 @@ class CampaignSpec(BaseModel):
                              doc="soak error allowed as a fraction of one reading's noise")
     gradient_lag_s: Float = _f(DEFAULT_GRADIENT_LAG_S, 0, 3600, open_lo=False,
                                doc="package lag behind the die reading, s")
+    rate_gain: Literal["assumed", "measured"] = Field(
+        default="assumed",
+        description="sensitivity to the die's rate of change: assumed (gradient_lag_s) or "
+                    "measured from the soak probes (then the calibration corrects k̂·rate "
+                    "and the soak waits for the correction's uncertainty only)")
     step_tol_c: Float = _f(DEFAULT_STEP_TOL_C, 0, 50, doc="every step: |T − T∞|, °C")
     edge_tol_c: Float = _f(DEFAULT_EDGE_TOL_C, 0, 50, doc="extreme steps: sweep offset, °C")
 
@@ -139,6 +147,15 @@ class CampaignSpec(BaseModel):
     suspend_limit_s: Float = _f(1800.0, 0, MAX_SUSPEND_LIMIT_S,
                                 doc="suspended longer than this fails the campaign, s")
 
+    @model_validator(mode="after")
+    def _measured_rate_needs_precise_probes(self) -> CampaignSpec:
+        if self.rate_gain == "measured" and self.soak_probe_samples < MIN_MEASURED_PROBE_SAMPLES:
+            raise ValueError(
+                f"rate_gain 'measured' needs soak_probe_samples >= "
+                f"{MIN_MEASURED_PROBE_SAMPLES} (got {self.soak_probe_samples}): the gain is "
+                "measured from the probes")
+        return self
+
 
 # The contract fields; every other field of CampaignSpec is an engine tuning key.
 CONTRACT_FIELDS = ("setpoints_c", "soak_min", "positions", "samples_per_position")
@@ -158,6 +175,7 @@ class RunSpec:
     ramp_c_per_min: float = 1.0
     soak_poll_s: float = 60.0  # cheap sensor/chamber poll period during a soak
     soak_probe_samples: int = 8  # samples per cheap die-temperature probe
+    rate_gain: str = "assumed"  # assumed (gradient_lag_s) | measured (soak_rate.py, corrected)
     settle_s: float = 5.0  # wait after in-position before acquiring (table ringing)
     move_timeout_s: float = 120.0
     safe_c: float = 23.0  # abort leaves the chamber here
@@ -177,7 +195,7 @@ class RunSpec:
 # RunSpec fields copied as they are from the validated spec.
 _DIRECT = ("ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c",
            "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
-           "move_timeout_s", "on_max_soak", "positions", "samples_per_position")
+           "move_timeout_s", "on_max_soak", "positions", "samples_per_position", "rate_gain")
 
 
 def run_spec(spec: CampaignSpec) -> RunSpec:
@@ -201,6 +219,7 @@ def run_spec(spec: CampaignSpec) -> RunSpec:
         dwell_s=_or(spec.dwell_min, min(5.0, soak_min)) * 60.0,
         temp_budget_c=budget_c,
         gradient_lag_s=spec.gradient_lag_s,
+        tempco_ug_per_c=spec.tempco_ug_per_c,
         step_tol_c=spec.step_tol_c,
         edge_tol_c=spec.edge_tol_c,
         die_tol_c=spec.die_tol_c,
