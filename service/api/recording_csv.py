@@ -6,7 +6,7 @@ import csv
 import io
 from collections.abc import Iterable
 
-from service.db.models import Measurement
+from service.db.models import Measurement, SoakProbe
 
 RECORDING_COLUMNS: tuple[str, ...] = (
     "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position",
@@ -29,6 +29,25 @@ def render_recording_csv(measurements: Iterable[Measurement],
     tail = [] if ref_tol_deg is None else [_cell(float(ref_tol_deg))]
     for m in measurements:
         writer.writerow([_cell(getattr(m, column)) for column in RECORDING_COLUMNS] + tail)
+    return out.getvalue()
+
+
+# The soak probes (docs/recording.md, "Project additions"): recording-v1 columns, no
+# position (a probe is taken wherever the table stands during the soak, at home when the
+# rate gain is measured) and no per-axis sd.
+PROBE_COLUMNS: tuple[str, ...] = (
+    "t_s", "step", "setpoint_c", "chamber_c", "sensor_c",
+    "ref_x", "ref_y", "ref_z", "ax", "ay", "az", "n",
+)  # fmt: skip
+
+
+def render_probes_csv(probes: Iterable[SoakProbe]) -> str:
+    """Header plus one row per soak probe; ``None`` becomes an empty cell."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(PROBE_COLUMNS)
+    for p in probes:
+        writer.writerow([_cell(getattr(p, column)) for column in PROBE_COLUMNS])
     return out.getvalue()
 
 
