@@ -269,7 +269,7 @@ def main() -> int:
             verdict = ""
         print(f"  {name:<24} campaign ×{s['sim_s'] / base['sim_s']:.2f}  "
               f"soak ×{s['soak_s'] / base['soak_s']:.2f}  held-out ×{ratio:.3f} "
-              f"(per sensor {np.mean(paired):.3f} ± {spread:.3f})"
+              f"(per sensor {np.mean(paired):.3f} ± {spread:.3f}, worst {max(paired):.3f})"
               f"  {verdict}")
     return 0
 

@@ -40,11 +40,10 @@ MIN_PROBES_PER_SOAK = 6  # fewer and the soak's approach cannot be fitted
 # The estimate is used once z·σ is at most this fraction of the prior (2σ ≤ 50 µg per °C/min).
 INFORMATIVE_FRACTION = 0.5
 # What the calibration's correction k̂·rate may still get wrong besides σ_k (docs/engine.md,
-# "Measured rate sensitivity"): the row's rate is the per-step line's slope, i.e. the sweep's
-# mean rate, not the capture's, and the first-order package model is itself approximate:
-# a tenth of |k̂|, and a floor for a k̂ near 0 (the model may be wrong there too).
+# "Measured rate sensitivity"), as a fraction of the largest gain the data allow, |k̂| + z·σ:
+# the row's rate is the per-step line's slope (the sweep's mean rate, not the capture's) and
+# the first-order package model is itself approximate; both errors scale with the true gain.
 RATE_ALLOWANCE_FRACTION = 0.1
-RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN = 5.0
 
 
 @dataclass(frozen=True)
@@ -165,27 +164,23 @@ def is_informative(estimate: RateGain | None, z: float = 2.0,
     return math.isfinite(sd) and z * sd <= INFORMATIVE_FRACTION * prior_ug_per_c_per_min
 
 
-def rate_allowance_ug_per_c_per_min(estimate: RateGain) -> float:
-    """Model-error allowance of the correction k̂·rate (see ``RATE_ALLOWANCE_FRACTION``)."""
-    point = float(np.max(np.abs(estimate.gain_ug_per_c_per_min)))
-    return max(RATE_ALLOWANCE_FRACTION * point, RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN)
-
-
 def residual_rate_gain_for_decision(
         estimate: RateGain | None, z: float = 2.0,
         prior_ug_per_c_per_min: float = PRIOR_RATE_GAIN_UG_PER_C_PER_MIN) -> float:
     """The k a soak decision should use when the calibration subtracts k̂·rate from the rows.
 
     What is left of the rate error after the correction is (k − k̂)·rate plus what the
-    correction's model gets wrong: z·σ_k + the allowance (:func:`rate_allowance_ug_per_c_per_min`),
-    not |k̂| + z·σ. Until the estimate is informative the calibration does not correct
+    correction's model gets wrong: z·σ_k + ``RATE_ALLOWANCE_FRACTION`` × (|k̂| + z·σ_k) per
+    axis, the largest over the axes, instead of |k̂| + z·σ_k. Until the estimate is
+    informative the calibration does not correct
     (:func:`correction_gain_ug_per_c_per_min`), so the uncorrected rule applies
     (:func:`rate_gain_for_decision`).
     """
     if estimate is None or not is_informative(estimate, z, prior_ug_per_c_per_min):
         return rate_gain_for_decision(estimate, z, prior_ug_per_c_per_min)
-    return z * float(np.max(estimate.sd_ug_per_c_per_min)) \
-        + rate_allowance_ug_per_c_per_min(estimate)
+    sd = np.asarray(estimate.sd_ug_per_c_per_min, float)
+    upper = np.abs(estimate.gain_ug_per_c_per_min) + z * sd  # the largest |k| per axis
+    return float(np.max(z * sd + RATE_ALLOWANCE_FRACTION * upper))
 
 
 def correction_gain_ug_per_c_per_min(estimate: RateGain | None, z: float = 2.0

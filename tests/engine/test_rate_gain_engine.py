@@ -130,3 +130,21 @@ def test_probe_rows_round_trip_through_the_store(sf) -> None:
     got = store.soak_probe_rows(sf, cid)
     assert [r["t_s"] for r in got] == [11.0, 70.0]
     assert store.soak_probe_rows(sf, cid, "SN-T") == [row]
+
+
+def test_corrected_decision_waits_for_the_uncertainty_not_the_gain() -> None:
+    typical = soak_rate.RateGain(np.array([95.0, -60.0, 40.0]), np.array([6.0, 3.0, 3.0]),
+                                 400, 10)
+    # 2σ (12) + 0.1 × (|k̂| + 2σ) (10.7) instead of |k̂| + 2σ (107)
+    assert soak_rate.residual_rate_gain_for_decision(typical) == pytest.approx(12.0 + 10.7)
+    assert soak_rate.rate_gain_for_decision(typical) == pytest.approx(107.0)
+    none = soak_rate.RateGain(np.array([1.0, 0.0, -1.0]), np.array([4.0, 4.0, 4.0]), 400, 10)
+    assert soak_rate.residual_rate_gain_for_decision(none) == pytest.approx(8.0 + 0.9)
+    assert soak_rate.correction_gain_ug_per_c_per_min(typical) == pytest.approx([95, -60, 40])
+    # Not informative yet: no correction, so the uncorrected rule (the prior) applies.
+    weak = soak_rate.RateGain(np.array([5.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 100, 2)
+    assert soak_rate.correction_gain_ug_per_c_per_min(weak) is None
+    assert soak_rate.residual_rate_gain_for_decision(weak) == \
+        soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    assert soak_rate.residual_rate_gain_for_decision(None) == \
+        soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
