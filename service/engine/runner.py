@@ -552,6 +552,7 @@ class CampaignRunner:
         """One die-temperature probe of every live sensor (of the one sensor), each stored
         as it is taken (``soak_probes``: the measured rate gain and a resume need them)."""
         n = self.spec.soak_probe_samples
+        rows: list[dict[str, Any]] = []
         for key, probes in dies.items():
             if key is None:
                 probe = await self._acquire(n)
@@ -569,7 +570,7 @@ class CampaignRunner:
             probes.append(_Probe(now_s, t_s, float(probe.sensor_c),
                                  tuple(float(v) for v in probe.mean_g)))
             ref = self._pose_ref or (math.nan, math.nan, math.nan)
-            store.add_soak_probe(self.sf, self.id, {
+            rows.append({
                 "sensor": key if key is not None else self.sensor_serial, "step": step,
                 "soak_start_t_s": soak_start_t_s, "pose": self._pose, "t_s": t_s,
                 "setpoint_c": setpoint_c, "chamber_c": status.process_c,
@@ -578,6 +579,7 @@ class CampaignRunner:
                 "ax": probe.mean_g[0], "ay": probe.mean_g[1], "az": probe.mean_g[2],
                 "n": probe.n,
             })
+        store.add_soak_probes(self.sf, self.id, rows)
 
     # --- the sensor's rate gain (soak_rate.py) ---------------------------------------
     def _set_pose(self, angles_deg: tuple[float, ...]) -> None:

@@ -44,6 +44,10 @@ INFORMATIVE_FRACTION = 0.5
 # the row's rate is the per-step line's slope (the sweep's mean rate, not the capture's) and
 # the first-order package model is itself approximate; both errors scale with the true gain.
 RATE_ALLOWANCE_FRACTION = 0.1
+# ... and at least this: a k̂ near 0 does not make a short soak free. On the twin a sensor
+# without rate sensitivity still loses accuracy when the soak ends with the die moving (held-out
+# ×1.09 at lag 0, ×1.07 at a fed gain of 9, ×1.01 at lag 10 s; docs/benchmarks.md, issue 12).
+RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN = 10.0
 
 
 @dataclass(frozen=True)
@@ -170,8 +174,9 @@ def residual_rate_gain_for_decision(
     """The k a soak decision should use when the calibration subtracts k̂·rate from the rows.
 
     What is left of the rate error after the correction is (k − k̂)·rate plus what the
-    correction's model gets wrong: z·σ_k + ``RATE_ALLOWANCE_FRACTION`` × (|k̂| + z·σ_k) per
-    axis, the largest over the axes, instead of |k̂| + z·σ_k. Until the estimate is
+    correction's model gets wrong: z·σ_k + max(``RATE_ALLOWANCE_FRACTION`` × (|k̂| + z·σ_k),
+    ``RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN``) per axis, the largest over the axes, instead
+    of |k̂| + z·σ_k. Until the estimate is
     informative the calibration does not correct
     (:func:`correction_gain_ug_per_c_per_min`), so the uncorrected rule applies
     (:func:`rate_gain_for_decision`).
@@ -180,7 +185,8 @@ def residual_rate_gain_for_decision(
         return rate_gain_for_decision(estimate, z, prior_ug_per_c_per_min)
     sd = np.asarray(estimate.sd_ug_per_c_per_min, float)
     upper = np.abs(estimate.gain_ug_per_c_per_min) + z * sd  # the largest |k| per axis
-    return float(np.max(z * sd + RATE_ALLOWANCE_FRACTION * upper))
+    allowance = np.maximum(RATE_ALLOWANCE_FRACTION * upper, RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN)
+    return float(np.max(z * sd + allowance))
 
 
 def correction_gain_ug_per_c_per_min(estimate: RateGain | None, z: float = 2.0

@@ -271,10 +271,13 @@ PROBE_COLUMNS = ("t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "ref_x", 
                  "ref_z", "ax", "ay", "az", "n")
 
 
-def add_soak_probe(sf: SessionFactory, campaign_id: int, row: dict[str, Any]) -> None:
-    """Store one soak probe as it is taken (its own short commit; keys: SoakProbe's columns)."""
+def add_soak_probes(sf: SessionFactory, campaign_id: int, rows: list[dict[str, Any]]) -> None:
+    """Store one poll's soak probes (every sensor's) as they are taken, in one short commit;
+    keys: SoakProbe's columns."""
+    if not rows:
+        return
     with sf() as s:
-        s.add(SoakProbe(campaign_id=campaign_id, **row))
+        s.add_all([SoakProbe(campaign_id=campaign_id, **row) for row in rows])
         s.commit()
 
 

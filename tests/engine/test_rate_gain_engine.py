@@ -125,8 +125,8 @@ def test_probe_rows_round_trip_through_the_store(sf) -> None:
            "t_s": 70.0, "setpoint_c": 10.0, "chamber_c": 10.1, "sensor_c": 12.3,
            "ref_x": 0.0, "ref_y": None, "ref_z": 1.0, "ax": 0.1, "ay": -0.2, "az": 1.0,
            "n": 200}
-    store.add_soak_probe(sf, cid, row)
-    store.add_soak_probe(sf, cid, {**row, "t_s": 10.0 + 1.0, "sensor": "SN-U"})
+    store.add_soak_probes(sf, cid, [row, {**row, "t_s": 10.0 + 1.0, "sensor": "SN-U"}])
+    store.add_soak_probes(sf, cid, [])
     got = store.soak_probe_rows(sf, cid)
     assert [r["t_s"] for r in got] == [11.0, 70.0]
     assert store.soak_probe_rows(sf, cid, "SN-T") == [row]
@@ -135,11 +135,13 @@ def test_probe_rows_round_trip_through_the_store(sf) -> None:
 def test_corrected_decision_waits_for_the_uncertainty_not_the_gain() -> None:
     typical = soak_rate.RateGain(np.array([95.0, -60.0, 40.0]), np.array([6.0, 3.0, 3.0]),
                                  400, 10)
-    # 2σ (12) + 0.1 × (|k̂| + 2σ) (10.7) instead of |k̂| + 2σ (107)
+    # 2σ (12) + max(0.1 × (|k̂| + 2σ), floor) (10.7) instead of |k̂| + 2σ (107)
     assert soak_rate.residual_rate_gain_for_decision(typical) == pytest.approx(12.0 + 10.7)
     assert soak_rate.rate_gain_for_decision(typical) == pytest.approx(107.0)
+    # k̂ ≈ 0: 2σ + the floor (a gain near 0 does not make a short soak free)
     none = soak_rate.RateGain(np.array([1.0, 0.0, -1.0]), np.array([4.0, 4.0, 4.0]), 400, 10)
-    assert soak_rate.residual_rate_gain_for_decision(none) == pytest.approx(8.0 + 0.9)
+    assert soak_rate.residual_rate_gain_for_decision(none) == pytest.approx(
+        8.0 + soak_rate.RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN)
     assert soak_rate.correction_gain_ug_per_c_per_min(typical) == pytest.approx([95, -60, 40])
     # Not informative yet: no correction, so the uncorrected rule (the prior) applies.
     weak = soak_rate.RateGain(np.array([5.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 100, 2)
@@ -148,3 +150,22 @@ def test_corrected_decision_waits_for_the_uncertainty_not_the_gain() -> None:
         soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
     assert soak_rate.residual_rate_gain_for_decision(None) == \
         soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+
+
+async def test_several_sensors_each_get_their_own_probes_and_gain(sf) -> None:  # type: ignore[no-untyped-def]
+    from test_multi_sensor_runner import SERIALS, SPEC, _run, _set_sensor
+
+    spec = {**SPEC, "setpoints_c": [0.0, 10.0, 20.0], "rate_gain": "measured",
+            "soak_probe_samples": 200}
+    cid = add_campaign(sf, spec)
+    _set_sensor(sf, cid, SERIALS[0])
+    assert await _run(sf, cid) == "completed"
+    rows = probes(sf, cid)
+    per_sensor = {s: [r for r in rows if r.sensor == s] for s in SERIALS}
+    # every sensor probed at every poll: the same count and times, each its own readings
+    assert len({len(v) for v in per_sensor.values()}) == 1 and per_sensor[SERIALS[0]]
+    assert len({tuple(round(r.ax, 5) for r in v[:3]) for v in per_sensor.values()}) == 3
+    assert {r.pose for r in rows} == {"0.0,0.0,0.0"}
+    log = steps_log(sf, cid)
+    assert log[0]["rate_gain_ug_per_c_per_min"] == soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    assert log[-1]["rate_gain_ug_per_c_per_min"] < soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
