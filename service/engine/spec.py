@@ -54,6 +54,10 @@ MAX_SUSPEND_LIMIT_S = 7 * 24 * 3600.0
 # Fewest samples per soak probe when the rate gain is measured from the probes: 8-sample
 # probes give σ(k) ≈ 25–30 µg per °C/min over a campaign, 200 ≈ 5 (docs/engine.md).
 MIN_MEASURED_PROBE_SAMPLES = 200
+# Probe size when not given: 8 samples (a die-temperature probe, 0.13 s), or 250 (4 s of
+# every 60-s poll) when the rate gain is measured from the probes.
+DEFAULT_PROBE_SAMPLES = 8
+DEFAULT_MEASURED_PROBE_SAMPLES = 250
 # Plausible air temperatures for any climatic chamber; the rig's own range is the dry run's.
 PLAUSIBLE_C = (-200.0, 500.0)
 
@@ -132,8 +136,10 @@ class CampaignSpec(BaseModel):
     ramp_c_per_min: Float = _f(1.0, 0, REGISTER_MAX_RAMP_C_PER_MIN,
                                doc="chamber setpoint ramp, °C/min (≤ the rig's max rate)")
     soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
-    soak_probe_samples: Int = Field(default=8, ge=1, le=BRIDGE_MAX_SAMPLES,
-                                    description="samples per die-temperature probe")
+    soak_probe_samples: Int | None = Field(
+        default=None, ge=1, le=BRIDGE_MAX_SAMPLES,
+        description="samples per die-temperature probe (default 8; 250 with rate_gain "
+                    "measured, which needs at least 200)")
     settle_s: Float = _f(5.0, 0, MAX_SETTLE_S, open_lo=False,
                          doc="wait after in-position before acquiring, s")
     move_timeout_s: Float = _f(120.0, 0, MAX_POLL_S, doc="table move timeout, s")
@@ -149,7 +155,8 @@ class CampaignSpec(BaseModel):
 
     @model_validator(mode="after")
     def _measured_rate_needs_precise_probes(self) -> CampaignSpec:
-        if self.rate_gain == "measured" and self.soak_probe_samples < MIN_MEASURED_PROBE_SAMPLES:
+        if (self.rate_gain == "measured" and self.soak_probe_samples is not None
+                and self.soak_probe_samples < MIN_MEASURED_PROBE_SAMPLES):
             raise ValueError(
                 f"rate_gain 'measured' needs soak_probe_samples >= "
                 f"{MIN_MEASURED_PROBE_SAMPLES} (got {self.soak_probe_samples}): the gain is "
@@ -193,7 +200,7 @@ class RunSpec:
 
 
 # RunSpec fields copied as they are from the validated spec.
-_DIRECT = ("ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c",
+_DIRECT = ("ramp_c_per_min", "soak_poll_s", "settle_s", "safe_c",
            "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
            "move_timeout_s", "on_max_soak", "positions", "samples_per_position", "rate_gain")
 
@@ -224,8 +231,13 @@ def run_spec(spec: CampaignSpec) -> RunSpec:
         edge_tol_c=spec.edge_tol_c,
         die_tol_c=spec.die_tol_c,
     )
+    probe_n = spec.soak_probe_samples
+    if probe_n is None:
+        probe_n = (DEFAULT_MEASURED_PROBE_SAMPLES if spec.rate_gain == "measured"
+                   else DEFAULT_PROBE_SAMPLES)
     return RunSpec(
         setpoints_c=[float(v) for v in spec.setpoints_c],
+        soak_probe_samples=probe_n,
         stability=stab,
         quality=quality,
         range_g=float(spec.range_g),

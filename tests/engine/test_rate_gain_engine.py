@@ -50,7 +50,8 @@ def test_measured_rate_gain_needs_precise_probes() -> None:
                       "tempco_ug_per_c": 90.0})
     assert run.rate_gain == "measured"
     assert run.stability.tempco_ug_per_c == 90.0  # the spec's tempco reaches the decision
-    assert parse_spec({}).rate_gain == "assumed"
+    assert parse_spec({}).rate_gain == "assumed" and parse_spec({}).soak_probe_samples == 8
+    assert parse_spec({"rate_gain": "measured"}).soak_probe_samples == 250
 
 
 async def test_probes_are_stored_at_home_and_k_reaches_decision_and_fit(sf) -> None:
