@@ -501,7 +501,7 @@ class CampaignRunner:
             ch_pv.append(status.process_c)
             ch_wsp.append(status.working_setpoint_c)
             if cfg.policy == "predictive":
-                await self._probe_dies(dies, now_s, step, target_c, status, self._t(start_s))
+                await self._probe_dies(dies, step, target_c, status, self._t(start_s))
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
             live = {k: v for k, v in dies.items() if k is None or k not in self.dropped}
@@ -546,7 +546,7 @@ class CampaignRunner:
         keys: list[str | None] = list(self._live) if self.serials else [None]
         return {k: [] for k in keys}
 
-    async def _probe_dies(self, dies: dict[str | None, list[_Probe]], now_s: float, step: int,
+    async def _probe_dies(self, dies: dict[str | None, list[_Probe]], step: int,
                           setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
                           ) -> None:
         """One die-temperature probe of every live sensor (of the one sensor), each stored
@@ -566,8 +566,10 @@ class CampaignRunner:
                 except SensorDropped as exc:
                     self._drop(exc)
                     continue
-            t_s = self._t(now_s)
-            probes.append(_Probe(now_s, t_s, float(probe.sensor_c),
+            # mid-capture: with several sensors probed one after another, each its own time
+            mid_s = self.clock.now() - probe.duration_s / 2.0
+            t_s = self._t(mid_s)
+            probes.append(_Probe(mid_s, t_s, float(probe.sensor_c),
                                  tuple(float(v) for v in probe.mean_g)))
             ref = self._pose_ref or (math.nan, math.nan, math.nan)
             rows.append({
