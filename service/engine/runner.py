@@ -277,7 +277,7 @@ class CampaignRunner:
                     verified = await self._sensor_call(
                         serial, "sensor.identify",
                         lambda acc=acc, serial=serial: verify_sensor(  # type: ignore[misc]
-                            acc, serial, self.dev.serial_binding))
+                            acc, serial, self.dev.bindings.get(serial, self.dev.serial_binding)))
                     self.identities[serial] = verified.as_dict()
                 await self._sensor_call(serial, "accelerometer.configure",
                                         lambda acc=acc: acc.configure(  # type: ignore[misc]
