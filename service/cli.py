@@ -106,6 +106,9 @@ def _add_demo_sensors(sub: Any) -> None:
     sub.choices["demo"].add_argument(
         "--sensors", type=sensors_count, default=1, metavar="N",
         help="sensors calibrated together in one campaign (1…64, default 1)")
+    sub.choices["demo"].add_argument(
+        "--position-order", choices=("travel", "table", "balanced"), default=None,
+        help="order of each step's positions (default: the engine's, travel; docs/engine.md)")
 
 
 def _add_calibration_commands(sub: Any) -> None:

@@ -39,7 +39,13 @@ from service.engine.guard import (
     clock_speed,
 )
 from service.engine.identity import verify_sensor
-from service.engine.multi import SensorDropped, reading_problem, sensor_call, slowest_decision
+from service.engine.multi import (
+    SensorDropped,
+    read_all,
+    reading_problem,
+    sensor_call,
+    slowest_decision,
+)
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -211,7 +217,9 @@ class CampaignRunner:
             if missing:
                 raise CampaignFailed(f"rig has no sensor {', '.join(missing)} mounted "
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
-        plan = campaign_plan(spec, self.refs, done, sensors=self.serials)
+        # The table's pose of each position, by this rig's geometry: the travel order's costs.
+        angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
+        plan = campaign_plan(spec, self.refs, done, sensors=self.serials, angles_deg=angles_deg)
         reply: Any = None
         while True:
             try:
@@ -275,7 +283,7 @@ class CampaignRunner:
                     verified = await self._sensor_call(
                         serial, "sensor.identify",
                         lambda acc=acc, serial=serial: verify_sensor(  # type: ignore[misc]
-                            acc, serial, self.dev.serial_binding))
+                            acc, serial, self.dev.bindings.get(serial, self.dev.serial_binding)))
                     self.identities[serial] = verified.as_dict()
                 await self._sensor_call(serial, "accelerometer.configure",
                                         lambda acc=acc: acc.configure(  # type: ignore[misc]
@@ -301,14 +309,16 @@ class CampaignRunner:
         return acq, flags, attempts
 
     async def _measure_live(self, n: int, serials: list[str]) -> dict[str, Any]:
+        """Every live sensor of ``serials`` read at once (:func:`multi.read_all`); the ones
+        that fail are dropped after all have answered (a drop may fail the campaign)."""
+        live = [s for s in serials if s not in self.dropped]
+        got = await read_all(live, lambda serial: self._measure_one(serial, n))
         out: dict[str, Any] = {}
-        for serial in serials:
-            if serial in self.dropped:
-                continue
-            try:
-                out[serial] = await self._measure_one(serial, n)
-            except SensorDropped as exc:
-                self._drop(exc)
+        for serial, result in got.items():
+            if isinstance(result, SensorDropped):
+                self._drop(result)
+            else:
+                out[serial] = result
         return out
 
     async def _configure(self, msg: Configure) -> None:
@@ -339,10 +349,11 @@ class CampaignRunner:
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
 
-    async def _acquire_msg(self, msg: Acquire) -> tuple[Acquisition, list[str], int] | None:
-        if msg.sensor is None:
+    async def _acquire_msg(self, msg: Acquire) -> Any:
+        if not msg.sensors:
             return await self._measure(msg.n_samples)
-        return (await self._measure_live(msg.n_samples, [msg.sensor])).get(msg.sensor)
+        got = await self._measure_live(msg.n_samples, list(msg.sensors))
+        return {serial: got.get(serial) for serial in msg.sensors}
 
     async def _fit(self, _msg: Fit) -> None:
         await self._fitting()

@@ -21,7 +21,14 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
@@ -94,6 +101,23 @@ class CampaignSpec(BaseModel):
     samples_per_position: Int = Field(
         default=200, ge=1, le=BRIDGE_MAX_SAMPLES,
         description="samples averaged per position (sensor bridge: 1..100000)")
+
+    # --- position order (service/engine/soak_order.py, docs/engine.md) --------------------
+    position_order: Literal["travel", "random", "balanced", "table"] = Field(
+        default="travel",
+        description="order of a step's positions: least table travel, seeded random or "
+        "counter-balanced per plateau, or the schedule's")
+    position_order_seed: Int | None = Field(
+        default=None, ge=0, le=2**32 - 1, validate_default=True,
+        description="seed of a random (required) or balanced (default 0) order")
+
+    @field_validator("position_order_seed")
+    @classmethod
+    def _random_needs_a_seed(cls, seed: int | None, info: ValidationInfo) -> int | None:
+        if seed is None and info.data.get("position_order") == "random":
+            raise ValueError("a random position order needs a seed, so the order can be "
+                             "reproduced (and a resumed step visits the same order)")
+        return seed
 
     # --- stability decision (service/engine/stability.py) ------------------------------
     stability: Literal["predictive", "dwell", "fixed"] = Field(
@@ -192,6 +216,8 @@ class RunSpec:
     retry_backoff_s: float = 1.0  # first back-off, doubled each try
     suspend_poll_s: float = 30.0
     suspend_limit_s: float = 1800.0  # suspended longer than this: fail the campaign
+    position_order: str = "travel"  # travel | random | balanced | table (soak_order.py)
+    position_order_seed: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -202,7 +228,8 @@ class RunSpec:
 # RunSpec fields copied as they are from the validated spec.
 _DIRECT = ("ramp_c_per_min", "soak_poll_s", "settle_s", "safe_c",
            "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
-           "move_timeout_s", "on_max_soak", "positions", "samples_per_position", "rate_gain")
+           "move_timeout_s", "on_max_soak", "positions", "samples_per_position", "rate_gain",
+           "position_order", "position_order_seed")
 
 
 def run_spec(spec: CampaignSpec) -> RunSpec:

@@ -22,6 +22,7 @@ NON_DEFAULT = {
     "move_timeout_s": 60.0, "safe_c": 25.0, "range_g": 4, "odr_hz": 125.0,
     "retry_attempts": 2, "retry_backoff_s": 0.5, "suspend_poll_s": 10.0,
     "suspend_limit_s": 600.0, "rate_gain": "measured",
+    "position_order": "balanced", "position_order_seed": 9,
 }
 
 
