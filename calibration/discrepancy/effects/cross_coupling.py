@@ -23,6 +23,8 @@ class CrossCoupling(EffectModule):
     confusers: tuple[str, ...] = ("scale_nonlinearity", "turntable_geometry")
     experiment: str = ("add oblique positions where two axes see gravity at once "
                        "(45° between axes, e.g. table1 or cube14)")
+    writes_extension: bool = True
+    extension_absorbed: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         a = ctx.input_g
@@ -46,6 +48,17 @@ class CrossCoupling(EffectModule):
         s = {f"k_{name}_ug_per_g2": float(se[k] * UG) for k, (name, _, _) in enumerate(PAIRS)}
         return p, s
 
+    def extension_fields(self, params):
+        return {f"k_{name}_per_g": params[f"k_{name}_ug_per_g2"] * 1e-6 for name, _, _ in PAIRS}
+
+    def extension_term_g(self, spec, a):
+        out = np.zeros_like(a, dtype=float)
+        for name, i, j in PAIRS:  # each pair couples into both of its axes (regressors)
+            prod = float(spec.get(f"k_{name}_per_g", 0.0)) * a[:, i] * a[:, j]
+            out[:, i] += prod
+            out[:, j] += prod
+        return out
+
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf))
         hit: set[str] = set()
@@ -54,7 +67,7 @@ class CrossCoupling(EffectModule):
                 hit.update(name)
         return sorted(hit) or list(PAIRS[int(np.argmax(z))][0])
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         names = sorted(params, key=lambda k: -abs(params[k]) / max(sd[k], 1e-12))
         top = names[0]
         pair = top.split("_")[1]
