@@ -50,3 +50,21 @@ def test_extension_terms_remove_what_the_module_describes():
         np.tile([10e-6, 0.0, -4e-6], (2, 1)))
     drift = {"kind": "discrepancy.bias_drift", "rate_g_per_h": [1e-6, 0, 0]}
     assert np.array_equal(apply_extensions([drift], raw, temp, a.copy()), a)  # needs time
+
+
+@pytest.mark.parametrize("eid, params", [
+    ("scale_nonlinearity", {"k2_x_ug_per_g2": 30.0, "k2_y_ug_per_g2": -5.0,
+                            "k2_z_ug_per_g2": 0.0, "k3_x_ug_per_g3": 0.0,
+                            "k3_y_ug_per_g3": 12.0, "k3_z_ug_per_g3": -7.0}),
+    ("cross_coupling", {"k_xy_ug_per_g2": 40.0, "k_xz_ug_per_g2": 0.0, "k_yz_ug_per_g2": -9.0}),
+])
+def test_model_file_term_is_the_tested_regressors(eid, params):
+    """One place for the physics: the file's term is the diagnosis' columns × parameters."""
+    from types import SimpleNamespace
+
+    eff = BY_ID[eid]
+    a = np.random.default_rng(0).normal(size=(20, 3))
+    X = eff.regressors(SimpleNamespace(input_g=a, n=a.shape[0]), float("nan"))
+    coef = np.array(list(params.values())) * 1e-6  # parameter order = column order
+    spec = eff.extension_fields(params)
+    assert eff.extension_term_g(spec, a) == pytest.approx(X @ coef, abs=1e-15)

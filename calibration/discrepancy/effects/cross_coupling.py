@@ -17,6 +17,16 @@ from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm
 PAIRS = (("xy", 0, 1), ("xz", 0, 2), ("yz", 1, 2))
 
 
+def pair_products(a: np.ndarray) -> np.ndarray:
+    """(N,3) inputs → (N,3,3): column k is pair k's product ``a_i a_j`` on both its axes."""
+    out = np.zeros((a.shape[0], 3, 3))
+    for k, (_, i, j) in enumerate(PAIRS):
+        prod = a[:, i] * a[:, j]
+        out[:, i, k] = prod
+        out[:, j, k] = prod
+    return out
+
+
 @dataclass(frozen=True)
 class CrossCoupling(EffectModule):
     effect_id: str = "cross_coupling"
@@ -27,13 +37,7 @@ class CrossCoupling(EffectModule):
     extension_absorbed: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        a = ctx.input_g
-        out = np.zeros((ctx.n, 3, 3))
-        for k, (_, i, j) in enumerate(PAIRS):
-            prod = a[:, i] * a[:, j]
-            out[:, i, k] = prod
-            out[:, j, k] = prod
-        return out
+        return pair_products(ctx.input_g)
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         a = ctx.input_g
@@ -52,12 +56,8 @@ class CrossCoupling(EffectModule):
         return {f"k_{name}_per_g": params[f"k_{name}_ug_per_g2"] * 1e-6 for name, _, _ in PAIRS}
 
     def extension_term_g(self, spec, a):
-        out = np.zeros_like(a, dtype=float)
-        for name, i, j in PAIRS:  # each pair couples into both of its axes (regressors)
-            prod = float(spec.get(f"k_{name}_per_g", 0.0)) * a[:, i] * a[:, j]
-            out[:, i] += prod
-            out[:, j] += prod
-        return out
+        k = np.array([float(spec.get(f"k_{name}_per_g", 0.0)) for name, _, _ in PAIRS])
+        return pair_products(a) @ k
 
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf))

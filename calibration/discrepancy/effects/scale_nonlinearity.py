@@ -15,6 +15,15 @@ from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm, vec3
 
 
+def own_powers(a: np.ndarray) -> np.ndarray:
+    """(N,3) inputs → (N,3,6): ``a_i²`` (columns 0–2) and ``a_i³`` (3–5) on axis i."""
+    out = np.zeros((a.shape[0], 3, 6))
+    for i in range(3):
+        out[:, i, i] = a[:, i] ** 2
+        out[:, i, 3 + i] = a[:, i] ** 3
+    return out
+
+
 @dataclass(frozen=True)
 class ScaleNonlinearity(EffectModule):
     effect_id: str = "scale_nonlinearity"
@@ -27,12 +36,7 @@ class ScaleNonlinearity(EffectModule):
     extension_absorbed: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        a = ctx.input_g
-        out = np.zeros((ctx.n, 3, 6))
-        for i in range(3):
-            out[:, i, i] = a[:, i] ** 2
-            out[:, i, 3 + i] = a[:, i] ** 3
-        return out
+        return own_powers(ctx.input_g)
 
     def parameters(self, coef, se, theta, ctx):
         p, s = {}, {}
@@ -46,7 +50,7 @@ class ScaleNonlinearity(EffectModule):
                 "k3_per_g2": [params[f"k3_{a}_ug_per_g3"] * 1e-6 for a in AXES]}
 
     def extension_term_g(self, spec, a):
-        return vec3(spec, "k2_per_g") * a**2 + vec3(spec, "k3_per_g2") * a**3
+        return own_powers(a) @ np.concatenate([vec3(spec, "k2_per_g"), vec3(spec, "k3_per_g2")])
 
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf)).reshape(2, 3)
