@@ -154,7 +154,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
             "no temperature is recorded: nothing thermal can be seen, and a drift with elapsed "
             "time cannot be told from a slow change of an unrecorded temperature",
             versus=("bias_drift",)))
-    if order in ("fixed", "one plateau"):
+    read_once = np.unique(ctx.positions).size == ctx.n  # one plateau, no position repeated
+    if order == "fixed" or (order == "one plateau" and read_once):
         how = ("the positions are visited in the same order on every plateau" if order == "fixed"
                else "one plateau: each position is read once, at one time")
         conf.append(Confusion(

@@ -94,6 +94,18 @@ def test_one_way_staircase_withholds_rate_against_session_jump_when_both_testabl
         is None
 
 
+def test_one_plateau_confuses_time_and_orientation_only_when_each_position_is_read_once():
+    def time_vs_orientation(pr) -> bool:
+        return any({"self_heating", "scale_nonlinearity"} <= set(c.effects)
+                   for c in pr.not_separable)
+
+    assert time_vs_orientation(assess(ctx_of([0.0], source="none")))
+    twice = assess(ctx_of([0.0], np.array([[0, 1, 2, 3, 4, 5, 5, 4, 3, 2, 1, 0]]), n_pos=12,
+                          source="none"))
+    assert twice.position_order == "one plateau"
+    assert not time_vs_orientation(twice)
+
+
 def test_no_temperature_column_separates_nothing_thermal():
     pr = assess(ctx_of([0.0], source="none"))
     assert pr.temperature == "none" and pr.position_order == "one plateau"
