@@ -68,3 +68,13 @@ def test_model_file_term_is_the_tested_regressors(eid, params):
     coef = np.array(list(params.values())) * 1e-6  # parameter order = column order
     spec = eff.extension_fields(params)
     assert eff.extension_term_g(spec, a) == pytest.approx(X @ coef, abs=1e-15)
+
+
+def test_every_testable_effect_has_a_twin_counterpart():
+    """The twin side (simulators, which import calibration, never the reverse) maps each
+    finding by its id: an effect that can be named must have ``from_finding`` there."""
+    from simulators.effects import EFFECT_CLASSES
+
+    for eff in ALL_EFFECTS:
+        has_twin = hasattr(EFFECT_CLASSES.get(eff.effect_id), "from_finding")
+        assert has_twin == eff.observable, eff.effect_id
