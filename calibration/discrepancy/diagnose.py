@@ -692,15 +692,15 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
                          "p_after": None, "how_told_apart": how_told_apart(eff, BY_ID[c])})
     return Finding(
         effect=eff.effect_id, axes=axes, where=where_of(pb, contrib, term.rows),
-        explanation=_sentence(eff, params, sd, axes), parameters=_round(params),
+        explanation=_sentence(eff, params, sd, axes, pb.ctx), parameters=_round(params),
         parameter_sd=_round(sd), rmse_before_ug=rms_b, rmse_after_ug=rms_a,
         heldout_rmse_before_ug=ho_b, heldout_rmse_after_ug=ho_a, p_value=p_family,
         test=eff.test_name(), confusers=conf, theta=term.theta, rows=list(term.rows),
     )
 
 
-def _sentence(eff: EffectModule, params, sd, axes) -> str:
-    text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES))
+def _sentence(eff: EffectModule, params, sd, axes, ctx) -> str:
+    text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES), ctx)
     return text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")
 
 

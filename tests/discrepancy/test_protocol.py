@@ -170,3 +170,23 @@ def test_lag_sentence_says_the_ramp_is_assumed():
     text = BY_ID["thermal_lag"].sentence({"tau_s": 900.0, "amplitude": 1.0}, {"tau_s": 30.0},
                                          ["x", "y", "z"])
     assert "assumed 2 °C/min ramp" in text
+
+
+def test_diagnosed_drift_without_a_temperature_does_not_claim_one():
+    """Four plateaus, no temperature column: the drift is named, the sentence makes no
+    temperature comparison, and the protocol says nothing thermal is separable."""
+    from simulators import effects as E  # noqa: N812
+
+    truth = SensorTruth.adxl355_typical(
+        seed=5, effects=[E.BiasDrift(rate_g_per_h=np.array([0.0, 0.0, 20e-6]))])
+    rec = simulate_campaign(truth, [25.0] * 4, seed=6, temperature_columns=("chamber_c",))
+    cols = dict(rec.columns)
+    cols["chamber_c"] = np.full(len(rec), np.nan)
+    d = diagnose(Recording.from_columns(cols), n_null=30, seed=0)
+    f = d.findings[0]
+    assert f.effect == "bias_drift" and f.axes == ["z"]
+    assert "not with temperature" not in f.explanation
+    assert "no temperature is recorded" in f.explanation
+    block = d.to_dict()["protocol"]
+    assert block["temperature"] == "none"
+    assert not {"thermal_lag", "thermal_hysteresis"} & set(block["separable"])
