@@ -1,4 +1,4 @@
-"""What a recording's protocol can and cannot separate (issue 10, docs/diagnosis.md §7).
+"""What a recording's protocol can and cannot separate (issue 10, docs/diagnosis.md §11).
 
 The facts come from the recording alone: how many plateaus and whether they are
 reached one way or both ways (``DesignContext.one_way``), the position order on
@@ -105,8 +105,10 @@ def position_order_kind(steps: np.ndarray, positions: np.ndarray, t_s: np.ndarra
     """``fixed`` (same order on every plateau), ``balanced`` or ``random``; ``one plateau``.
 
     ``balanced``: over the plateaus every position takes every visiting slot equally
-    often (a Latin/Williams square, protocol_order.py); ``random``: orders differ
-    without that balance. The order is ``visit`` when recorded, else ``t_s``.
+    often, ±1 (a Latin/Williams square, protocol_order.py); ``random``: orders differ
+    without that balance. The order is ``visit`` when recorded, else ``t_s``. Only
+    ``fixed`` changes what is separable; the other two are descriptive (with fewer
+    plateaus than positions a lucky random order can read as balanced).
     """
     key = t_s if visit is None else visit
     ids = np.unique(steps)
@@ -128,7 +130,7 @@ def position_order_kind(steps: np.ndarray, positions: np.ndarray, t_s: np.ndarra
 
 def assess(ctx: DesignContext, visit: np.ndarray | None = None,
            identifiable: dict[str, bool] | None = None) -> Protocol:
-    """The protocol facts and the confusions they imply (docs/diagnosis.md §7).
+    """The protocol facts and the confusions they imply (docs/diagnosis.md §11).
 
     ``identifiable``: effect id → whether the effect module alone can be tested here
     (``EffectModule.identifiable``); it decides which confusions withhold a name, and
