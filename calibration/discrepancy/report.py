@@ -52,7 +52,7 @@ def text_report(diag: Any) -> str:
 
 
 def protocol_lines(pr: dict[str, Any]) -> list[str]:
-    """The short "what this protocol separates" section (docs/diagnosis.md §7)."""
+    """The short "what this protocol separates" section (docs/diagnosis.md §11)."""
     if not pr:
         return []
     temp = ("no temperature recorded" if pr["temperature"] == "none" else
