@@ -7,6 +7,7 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 DEFAULT_URL = "http://127.0.0.1:8000"
@@ -174,18 +175,29 @@ def _control(args: argparse.Namespace) -> int:
 
 @_guarded
 def _list(args: argparse.Namespace) -> int:
-    params = {"state": args.state} if args.state else None
-    campaigns = call(args, "GET", "/api/v1/campaigns", params=params)
-    if args.json:
-        print(json.dumps(campaigns, indent=2))
-        return EXIT_OK
-    print(f"{'id':>5}  {'state':<10} {'rig':<10} {'sensor':<12} {'step':>7}  {'done':>5}")
-    for c in campaigns:
+    def row(c: dict[str, Any]) -> str:
         p = c["progress"]
-        print(
-            f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
-            f"{_step(p):>7}  {p['fraction']:>5.0%}"
-        )
+        return (f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
+                f"{_step(p):>7}  {p['fraction']:>5.0%}")
+
+    return print_listing(
+        args, "/api/v1/campaigns",
+        f"{'id':>5}  {'state':<10} {'rig':<10} {'sensor':<12} {'step':>7}  {'done':>5}", row,
+        params={"state": args.state} if args.state else None)
+
+
+def print_listing(args: argparse.Namespace, path: str, header: str,
+                  row: Callable[[dict[str, Any]], str], *,
+                  params: dict[str, Any] | None = None) -> int:
+    """``GET path``: with ``--json`` the list as the API returned it, else ``header`` and
+    one ``row(item)`` a line (``campaign list``, ``schedule list``)."""
+    items = call(args, "GET", path, params=params)
+    if args.json:
+        print(json.dumps(items, indent=2))
+        return EXIT_OK
+    print(header)
+    for item in items:
+        print(row(item))
     return EXIT_OK
 
 

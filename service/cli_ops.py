@@ -21,6 +21,7 @@ from service.cli_campaign import (
     campaign_body,
     client_options,
     guarded,
+    print_listing,
 )
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -179,18 +180,14 @@ def _schedule_add(args: argparse.Namespace) -> int:
 
 @guarded("schedule")
 def _schedule_list(args: argparse.Namespace) -> int:
-    schedules = call(args, "GET", "/api/v1/schedules")
-    if args.json:
-        print(json.dumps(schedules, indent=2))
-        return EXIT_OK
-    print(f"{'id':>4}  {'next run (UTC)':<16}  {'rig':<8} {'sensor':<12} trigger")
-    for s in schedules:
+    def row(s: dict[str, Any]) -> str:
         c = s["campaign"]
-        print(
-            f"{s['id']:>4}  {_utc_text(s.get('next_run_at')):<16}  {c['rig']:<8} "
-            f"{c['sensor']:<12} {_trigger(s)}"
-        )
-    return EXIT_OK
+        return (f"{s['id']:>4}  {_utc_text(s.get('next_run_at')):<16}  {c['rig']:<8} "
+                f"{c['sensor']:<12} {_trigger(s)}")
+
+    return print_listing(
+        args, "/api/v1/schedules",
+        f"{'id':>4}  {'next run (UTC)':<16}  {'rig':<8} {'sensor':<12} trigger", row)
 
 
 @guarded("schedule")
