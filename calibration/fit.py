@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq, least_squares
+from scipy.optimize import OptimizeResult, brentq, least_squares
 from scipy.stats import chi2 as _chi2
 
 from calibration import sfem
@@ -119,9 +119,6 @@ def _fit_reference_once(
         return (jac / sig[:, :, None]).reshape(3 * n, sfem.N_PARAMS)
 
     sol = least_squares(residual, p0, jac=jacobian, method="lm", x_scale="jac")
-    params = sfem.SfemParams.from_vector(sol.x)
-    cal = params.apply(raw)
-    res = cal - ref
     dof = max(3 * n - sfem.N_PARAMS, 1)
     chi2_red = float(np.sum(sol.fun**2) / dof)
     cov, ident = _covariance(sol.jac, chi2_red, np.ones(sfem.N_PARAMS, bool))
@@ -131,6 +128,28 @@ def _fit_reference_once(
         ident &= ~mask
         cov[mask, :] = np.nan
         cov[:, mask] = np.nan
+    return _reference_result(sol, raw, ref, cov, ident, chi2_red, g_local)
+
+
+def _reference_result(
+    sol: OptimizeResult,
+    raw: np.ndarray,
+    ref: np.ndarray,
+    cov: np.ndarray,
+    ident: np.ndarray,
+    chi2_red: float,
+    g_local: float,
+    ref_tol_rad: np.ndarray | None = None,
+) -> FitResult:
+    """The one :class:`FitResult` of a reference-mode fit (exact or hand-placed labels).
+
+    Residuals are the Eq. 4 vector residuals ``A(U − b) − ref``; the |g| figures are
+    Eq. 9 before and after. ``ref_tol_rad`` is kept for a hand-placed fit so a refit
+    with a model floor treats the labels as approximate again.
+    """
+    params = sfem.SfemParams.from_vector(sol.x)
+    cal = params.apply(raw)
+    res = cal - ref
     return FitResult(
         mode="reference",
         params=params,
@@ -141,12 +160,13 @@ def _fit_reference_once(
         rmse_norm_before_ug=rmse_norm_ug(raw, g_local),
         rmse_vector_ug=float(np.sqrt(np.mean(res**2)) * 1e6),
         chi2_red=chi2_red,
-        n_positions=n,
+        n_positions=raw.shape[0],
         nfev=int(sol.nfev),
         success=bool(sol.success),
         message=str(sol.message),
         g_local=g_local,
         not_identifiable_why=_why(ident),
+        ref_tol_rad=None if ref_tol_rad is None else ref_tol_rad.copy(),
     )
 
 
@@ -370,31 +390,11 @@ def _fit_hand_placed(
                           (du / tol_rad[:, None, None]).reshape(3 * n, sfem.N_PARAMS)])
 
     sol = least_squares(residual, p0, jac=jacobian, method="lm", x_scale="jac")
-    params = sfem.SfemParams.from_vector(sol.x)
-    cal = params.apply(raw)
     # n |g| residuals + 2n direction components (the third is second order) − 12.
     dof = max(3 * n - sfem.N_PARAMS, 1)
     chi2_red = float(np.sum(sol.fun**2) / dof)
     cov, ident = _covariance(sol.jac, chi2_red, np.ones(sfem.N_PARAMS, bool))
-    res = cal - ref
-    return FitResult(
-        mode="reference",
-        params=params,
-        covariance=cov,
-        identifiable=ident,
-        residuals_g=res,
-        rmse_norm_ug=rmse_norm_ug(cal, g_local),
-        rmse_norm_before_ug=rmse_norm_ug(raw, g_local),
-        rmse_vector_ug=float(np.sqrt(np.mean(res**2)) * 1e6),
-        chi2_red=chi2_red,
-        n_positions=n,
-        nfev=int(sol.nfev),
-        success=bool(sol.success),
-        message=str(sol.message),
-        g_local=g_local,
-        not_identifiable_why=_why(ident),
-        ref_tol_rad=tol_rad.copy(),
-    )
+    return _reference_result(sol, raw, ref, cov, ident, chi2_red, g_local, tol_rad)
 
 
 def linear_reference_start(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray) -> np.ndarray:

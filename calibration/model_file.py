@@ -19,8 +19,9 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -34,6 +35,8 @@ FORMAT = "soakcal-model"
 VERSION = 2
 READABLE_VERSIONS = (1, 2)
 MODES = ("reference", "norm")
+
+_Doc = TypeVar("_Doc")
 
 
 # --- writing ------------------------------------------------------------------
@@ -106,17 +109,30 @@ def save_model(path: str | os.PathLike, model: ThermalModel) -> None:
 # --- reading ------------------------------------------------------------------
 def load_model(path: str | os.PathLike) -> ThermalModel:
     """Read a model file; :class:`ModelFileError` names the file and the bad field."""
+    return load_json_document(path, load_model_dict, "model")
+
+
+def load_json_document(
+    path: str | os.PathLike, from_dict: Callable[[Any], _Doc], what: str
+) -> _Doc:
+    """Read the JSON file at ``path`` and convert it with ``from_dict``.
+
+    The one reader of soakcal's JSON documents (the model file here, the twin file in
+    ``calibration/discrepancy/twin_file.py``): every failure -- missing, unreadable, not
+    JSON, or refused by ``from_dict`` -- is a :class:`ModelFileError` that starts with the
+    path; ``what`` names the document in the messages ("model", "model or twin").
+    """
     p = Path(path)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise ModelFileError(f"{p}: model file not found") from None
+        raise ModelFileError(f"{p}: {what} file not found") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ModelFileError(f"{p}: not a JSON model file ({exc})") from None
+        raise ModelFileError(f"{p}: not a JSON {what} file ({exc})") from None
     except OSError as exc:  # a directory, a permission problem
-        raise ModelFileError(f"{p}: cannot read the model file ({exc.strerror or exc})") from None
+        raise ModelFileError(f"{p}: cannot read the {what} file ({exc.strerror or exc})") from None
     try:
-        return load_model_dict(doc)
+        return from_dict(doc)
     except ModelFileError as exc:
         raise ModelFileError(f"{p}: {exc}") from None
 

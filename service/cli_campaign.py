@@ -7,6 +7,7 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 DEFAULT_URL = "http://127.0.0.1:8000"
@@ -32,17 +33,7 @@ def add_parser(sub: Any) -> None:
     actions = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
 
     start = actions.add_parser("start", parents=[common], help="queue a campaign")
-    start.add_argument("--rig", default="sim")
-    start.add_argument("--sensor", required=True, help="sensor serial, e.g. SN-0001")
-    start.add_argument(
-        "--setpoints",
-        type=parse_setpoints,
-        metavar="C,C,...",
-        help="setpoints in °C, e.g. --setpoints=-40,-20,0 (default -40..60 step 10)",
-    )
-    start.add_argument("--soak-min", type=float, help="soak per step in minutes (default 60)")
-    start.add_argument("--positions", help="position schedule (default table1)")
-    start.add_argument("--samples-per-position", type=int, help="default 200")
+    add_campaign_options(start)
     start.add_argument("--watch", action="store_true", help="follow it until it ends")
     start.set_defaults(handler=_start)
 
@@ -66,6 +57,36 @@ def add_parser(sub: Any) -> None:
     from service.cli_placement import add_placement_parser  # hand-placed fixtures
 
     add_placement_parser(actions)
+
+
+def add_campaign_options(parser: argparse.ArgumentParser) -> None:
+    """The campaign a request asks for (``campaign start``, ``schedule add``);
+    :func:`campaign_body` turns them into the API's campaign object."""
+    parser.add_argument("--rig", default="sim")
+    parser.add_argument("--sensor", required=True, help="sensor serial, e.g. SN-0001")
+    parser.add_argument(
+        "--setpoints",
+        type=parse_setpoints,
+        metavar="C,C,...",
+        help="setpoints in °C, e.g. --setpoints=-40,-20,0 (default -40..60 step 10)",
+    )
+    parser.add_argument("--soak-min", type=float, help="soak per step in minutes (default 60)")
+    parser.add_argument("--positions", help="position schedule (default table1)")
+    parser.add_argument("--samples-per-position", type=int, help="default 200")
+
+
+def campaign_body(args: argparse.Namespace) -> dict[str, Any]:
+    """The API's campaign object from :func:`add_campaign_options`' arguments; an option
+    not given is left out so the service applies its default."""
+    body: dict[str, Any] = {"rig": args.rig, "sensor": args.sensor}
+    optional = {
+        "setpoints_c": args.setpoints,
+        "soak_min": args.soak_min,
+        "positions": args.positions,
+        "samples_per_position": args.samples_per_position,
+    }
+    body.update({k: v for k, v in optional.items() if v is not None})
+    return body
 
 
 def parse_setpoints(text: str) -> list[float]:
@@ -135,15 +156,7 @@ _guarded = guarded("campaign")
 
 @_guarded
 def _start(args: argparse.Namespace) -> int:
-    body: dict[str, Any] = {"rig": args.rig, "sensor": args.sensor}
-    optional = {
-        "setpoints_c": args.setpoints,
-        "soak_min": args.soak_min,
-        "positions": args.positions,
-        "samples_per_position": args.samples_per_position,
-    }
-    body.update({k: v for k, v in optional.items() if v is not None})
-    campaign = call(args, "POST", "/api/v1/campaigns", json=body)
+    campaign = call(args, "POST", "/api/v1/campaigns", json=campaign_body(args))
     print(f"campaign {campaign['id']} {campaign['state']} on rig {campaign['rig']}")
     if args.watch:
         args.id = campaign["id"]
@@ -162,18 +175,29 @@ def _control(args: argparse.Namespace) -> int:
 
 @_guarded
 def _list(args: argparse.Namespace) -> int:
-    params = {"state": args.state} if args.state else None
-    campaigns = call(args, "GET", "/api/v1/campaigns", params=params)
-    if args.json:
-        print(json.dumps(campaigns, indent=2))
-        return EXIT_OK
-    print(f"{'id':>5}  {'state':<10} {'rig':<10} {'sensor':<12} {'step':>7}  {'done':>5}")
-    for c in campaigns:
+    def row(c: dict[str, Any]) -> str:
         p = c["progress"]
-        print(
-            f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
-            f"{_step(p):>7}  {p['fraction']:>5.0%}"
-        )
+        return (f"{c['id']:>5}  {c['state']:<10} {c['rig']:<10} {c['sensor']:<12} "
+                f"{_step(p):>7}  {p['fraction']:>5.0%}")
+
+    return print_listing(
+        args, "/api/v1/campaigns",
+        f"{'id':>5}  {'state':<10} {'rig':<10} {'sensor':<12} {'step':>7}  {'done':>5}", row,
+        params={"state": args.state} if args.state else None)
+
+
+def print_listing(args: argparse.Namespace, path: str, header: str,
+                  row: Callable[[dict[str, Any]], str], *,
+                  params: dict[str, Any] | None = None) -> int:
+    """``GET path``: with ``--json`` the list as the API returned it, else ``header`` and
+    one ``row(item)`` a line (``campaign list``, ``schedule list``)."""
+    items = call(args, "GET", path, params=params)
+    if args.json:
+        print(json.dumps(items, indent=2))
+        return EXIT_OK
+    print(header)
+    for item in items:
+        print(row(item))
     return EXIT_OK
 
 

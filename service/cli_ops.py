@@ -15,7 +15,14 @@ import sys
 from typing import Any
 from urllib.parse import quote
 
-from service.cli_campaign import call, client_options, guarded, parse_setpoints
+from service.cli_campaign import (
+    add_campaign_options,
+    call,
+    campaign_body,
+    client_options,
+    guarded,
+    print_listing,
+)
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 MAX_EXPIRES_DAYS = 3650
@@ -147,12 +154,7 @@ def add_schedule(sub: Any) -> None:
     when.add_argument("--at", metavar="ISO", help="once, at this ISO-8601 time (naive: UTC)")
     when.add_argument("--cron", metavar="EXPR", help="repeatedly, e.g. '0 20 * * 1-5'")
     add.add_argument("--timezone", metavar="IANA", help="the cron's wall clock (default UTC)")
-    add.add_argument("--rig", default="sim")
-    add.add_argument("--sensor", required=True, help="sensor serial, e.g. SN-0001")
-    add.add_argument("--setpoints", type=parse_setpoints, metavar="C,C,...", help="°C")
-    add.add_argument("--soak-min", type=float, help="soak per step in minutes (default 60)")
-    add.add_argument("--positions", help="position schedule (default table1)")
-    add.add_argument("--samples-per-position", type=int, help="default 200")
+    add_campaign_options(add)
     add.set_defaults(handler=_schedule_add)
 
     listing = actions.add_parser("list", parents=[common], help="list schedules")
@@ -166,15 +168,7 @@ def add_schedule(sub: Any) -> None:
 
 @guarded("schedule")
 def _schedule_add(args: argparse.Namespace) -> int:
-    campaign: dict[str, Any] = {"rig": args.rig, "sensor": args.sensor}
-    optional = {
-        "setpoints_c": args.setpoints,
-        "soak_min": args.soak_min,
-        "positions": args.positions,
-        "samples_per_position": args.samples_per_position,
-    }
-    campaign.update({k: v for k, v in optional.items() if v is not None})
-    body: dict[str, Any] = {"campaign": campaign}
+    body: dict[str, Any] = {"campaign": campaign_body(args)}
     # exactly one of at/cron: the API refuses an explicit null for the other
     body.update({k: v for k, v in (("at", args.at), ("cron", args.cron)) if v is not None})
     if args.timezone:
@@ -186,18 +180,14 @@ def _schedule_add(args: argparse.Namespace) -> int:
 
 @guarded("schedule")
 def _schedule_list(args: argparse.Namespace) -> int:
-    schedules = call(args, "GET", "/api/v1/schedules")
-    if args.json:
-        print(json.dumps(schedules, indent=2))
-        return EXIT_OK
-    print(f"{'id':>4}  {'next run (UTC)':<16}  {'rig':<8} {'sensor':<12} trigger")
-    for s in schedules:
+    def row(s: dict[str, Any]) -> str:
         c = s["campaign"]
-        print(
-            f"{s['id']:>4}  {_utc_text(s.get('next_run_at')):<16}  {c['rig']:<8} "
-            f"{c['sensor']:<12} {_trigger(s)}"
-        )
-    return EXIT_OK
+        return (f"{s['id']:>4}  {_utc_text(s.get('next_run_at')):<16}  {c['rig']:<8} "
+                f"{c['sensor']:<12} {_trigger(s)}")
+
+    return print_listing(
+        args, "/api/v1/schedules",
+        f"{'id':>4}  {'next run (UTC)':<16}  {'rig':<8} {'sensor':<12} trigger", row)
 
 
 @guarded("schedule")

@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,7 +24,7 @@ import numpy as np
 from calibration.discrepancy.rig import DEFAULT_AIR_TAU_S, DEFAULT_RAMP_C_PER_MIN
 from calibration.errors import ModelFileError
 from calibration.model_file import FORMAT as MODEL_FORMAT
-from calibration.model_file import dump_model_dict, load_model_dict
+from calibration.model_file import dump_model_dict, load_json_document, load_model_dict
 from calibration.recording import atomic_write_text
 from calibration.thermal import ThermalModel
 
@@ -72,17 +71,7 @@ def save_twin(path: str | os.PathLike, twin: Twin) -> None:
 
 def load_model_or_twin(path: str | os.PathLike) -> Twin:
     """Read a model file or a twin file; a model file becomes a twin with an unknown rig."""
-    p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ModelFileError(f"{p}: file not found") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ModelFileError(f"{p}: not a JSON model or twin file ({exc})") from None
-    try:
-        return twin_from_dict(doc)
-    except ModelFileError as exc:
-        raise ModelFileError(f"{p}: {exc}") from None
+    return load_json_document(path, twin_from_dict, "model or twin")
 
 
 def twin_from_dict(doc: Any) -> Twin:
@@ -102,43 +91,51 @@ def twin_from_dict(doc: Any) -> Twin:
         raise ModelFileError(f"model.{exc}") from None
     rig = doc.get("rig") or {}
     noise = doc.get("noise") or {}
-    tau = rig.get("die_tau_s")
-    if tau is not None and not (_is_num(tau) and tau >= 0):
-        raise ModelFileError(f"rig.die_tau_s: expected null or a number >= 0, got {tau!r}")
-    sd = noise.get("sd_g")
-    if sd is not None and not (isinstance(sd, list) and len(sd) == 3
-                               and all(_is_num(v) and v >= 0 for v in sd)):
-        raise ModelFileError(f"noise.sd_g: expected null or three numbers >= 0, got {sd!r}")
-    tn = noise.get("temperature_c")
-    if tn is not None and not (_is_num(tn) and tn >= 0):
-        raise ModelFileError(f"noise.temperature_c: expected null or a number >= 0, got {tn!r}")
-    ssd = noise.get("sample_sd_g")
-    if ssd is not None and not (isinstance(ssd, list) and len(ssd) == 3
-                                and all(_is_num(v) and v >= 0 for v in ssd)):
-        raise ModelFileError(f"noise.sample_sd_g: expected null or three numbers >= 0, "
-                             f"got {ssd!r}")
-    spr = noise.get("samples_per_reading")
-    if spr is not None and not (_is_num(spr) and spr >= 1):
-        raise ModelFileError(f"noise.samples_per_reading: expected null or a number >= 1, "
-                             f"got {spr!r}")
-    air_tau = rig.get("air_tau_s", DEFAULT_AIR_TAU_S)
-    if not (_is_num(air_tau) and air_tau >= 0):
-        raise ModelFileError(f"rig.air_tau_s: expected a number >= 0, got {air_tau!r}")
-    ramp = rig.get("ramp_c_per_min", DEFAULT_RAMP_C_PER_MIN)
-    if not (_is_num(ramp) and ramp > 0):
-        raise ModelFileError(f"rig.ramp_c_per_min: expected a number > 0, got {ramp!r}")
-    tau_sd = rig.get("die_tau_sd_s")
-    if tau_sd is not None and not (_is_num(tau_sd) and tau_sd >= 0):
-        raise ModelFileError(f"rig.die_tau_sd_s: expected null or a number >= 0, got {tau_sd!r}")
+    # Each field is checked the same way: null (unknown) where allowed, else a finite
+    # number above its floor; the message names the field as "<section>.<key>".
+    tau = _opt_number(rig, "rig", "die_tau_s", 0.0)
+    sd = _opt_triple(noise, "noise", "sd_g")
+    tn = _opt_number(noise, "noise", "temperature_c", 0.0)
+    ssd = _opt_triple(noise, "noise", "sample_sd_g")
+    spr = _opt_number(noise, "noise", "samples_per_reading", 1.0)
+    air_tau = _number(rig, "rig", "air_tau_s", DEFAULT_AIR_TAU_S, 0.0)
+    ramp = _number(rig, "rig", "ramp_c_per_min", DEFAULT_RAMP_C_PER_MIN, 0.0, strict=True)
+    tau_sd = _opt_number(rig, "rig", "die_tau_sd_s", 0.0)
     effects = doc.get("effects") or []
     if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
         raise ModelFileError("effects: expected a list of objects")
-    return Twin(model, None if tau is None else float(tau),
-                None if sd is None else [float(v) for v in sd],
-                None if tn is None else float(tn), effects, dict(doc.get("provenance") or {}),
-                None if ssd is None else [float(v) for v in ssd],
-                None if spr is None else float(spr), float(air_tau), float(ramp),
-                None if tau_sd is None else float(tau_sd))
+    return Twin(model, die_tau_s=tau, noise_sd_g=sd, temperature_noise_c=tn, effects=effects,
+                provenance=dict(doc.get("provenance") or {}), sample_sd_g=ssd,
+                samples_per_reading=spr, air_tau_s=air_tau, ramp_c_per_min=ramp,
+                die_tau_sd_s=tau_sd)
+
+
+def _number(section: dict[str, Any], where: str, key: str, default: float, floor: float,
+            *, strict: bool = False) -> float:
+    """``section[key]`` (``default`` when absent) as a float >= floor (> floor if strict)."""
+    v = section.get(key, default)
+    if not (_is_num(v) and (v > floor if strict else v >= floor)):
+        raise ModelFileError(f"{where}.{key}: expected a number {'>' if strict else '>='} "
+                             f"{floor:g}, got {v!r}")
+    return float(v)
+
+
+def _opt_number(section: dict[str, Any], where: str, key: str, floor: float) -> float | None:
+    """``section[key]`` as None (unknown) or a float >= floor."""
+    v = section.get(key)
+    if v is not None and not (_is_num(v) and v >= floor):
+        raise ModelFileError(f"{where}.{key}: expected null or a number >= {floor:g}, "
+                             f"got {v!r}")
+    return None if v is None else float(v)
+
+
+def _opt_triple(section: dict[str, Any], where: str, key: str) -> list[float] | None:
+    """``section[key]`` as None (unknown) or three numbers >= 0 (one per axis)."""
+    v = section.get(key)
+    if v is not None and not (isinstance(v, list) and len(v) == 3
+                              and all(_is_num(x) and x >= 0 for x in v)):
+        raise ModelFileError(f"{where}.{key}: expected null or three numbers >= 0, got {v!r}")
+    return None if v is None else [float(x) for x in v]
 
 
 def _is_num(v: Any) -> bool:

@@ -130,3 +130,36 @@ def test_bad_files_name_the_file(tmp_path: Path) -> None:
     p.write_text("[1, 2]")
     with pytest.raises(ModelFileError, match="JSON object"):
         load_model(p)
+
+
+def test_twin_round_trips_and_bad_rig_or_noise_fields_are_named(
+    tmp_path: Path, model_and_rec: tuple
+) -> None:
+    from calibration.discrepancy.twin_file import (
+        Twin,
+        load_model_or_twin,
+        save_twin,
+        twin_from_dict,
+    )
+
+    model, _ = model_and_rec
+    twin = Twin(model, die_tau_s=120.0, noise_sd_g=[1e-5, 2e-5, 3e-5], temperature_noise_c=0.02,
+                sample_sd_g=[1e-4, 1e-4, 2e-4], samples_per_reading=40.0, air_tau_s=90.0,
+                ramp_c_per_min=2.0, die_tau_sd_s=15.0)
+    save_twin(tmp_path / "twin.json", twin)
+    back = load_model_or_twin(tmp_path / "twin.json")
+    assert back.to_dict() == twin.to_dict()
+    # a model file read as a twin: the same physics, the rig unknown
+    save_model(tmp_path / "m.json", model)
+    assert load_model_or_twin(tmp_path / "m.json").die_tau_s is None
+    for section, key, value in [("rig", "die_tau_s", -1.0), ("rig", "air_tau_s", None),
+                                ("rig", "ramp_c_per_min", 0), ("rig", "die_tau_sd_s", "x"),
+                                ("noise", "sd_g", [1.0, 2.0]), ("noise", "sample_sd_g", [-1, 0, 0]),
+                                ("noise", "temperature_c", float("inf")),
+                                ("noise", "samples_per_reading", 0.5)]:
+        doc = twin.to_dict()
+        doc[section][key] = value
+        with pytest.raises(ModelFileError, match=rf"^{section}\.{key}: expected"):
+            twin_from_dict(doc)
+    with pytest.raises(ModelFileError, match="nope.json: model or twin file not found"):
+        load_model_or_twin(tmp_path / "nope.json")

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 from service.db.models import Campaign, Rig
+
+# For tests of device and engine logic (Modbus faults, safe states, suspenders, register maps):
+# their store calls are the ones test_runner, test_control and test_crash run on both backends,
+# so a second, PostgreSQL run of the same campaign adds time and no check. Tests of the store,
+# the lease or the control channel keep tests/conftest.py's two backends.
+SQLITE_ONLY = pytest.mark.parametrize("db_url", ["sqlite"], indirect=True)
 
 SMALL_SPEC: dict[str, Any] = {
     "setpoints_c": [-10.0, 10.0, 30.0],

@@ -21,7 +21,7 @@ from service.engine.rigs import RigConfigError, open_rig, rig_config_errors, rig
 from service.engine.runner import CampaignRunner
 from simulators.rig import start_sim_rig
 
-from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate  # isort: skip
+from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate  # isort: skip
 
 
 def _modbus_config(sim: Any, chamber_map: str, binding: str = "any") -> dict[str, Any]:
@@ -34,6 +34,7 @@ def _modbus_config(sim: Any, chamber_map: str, binding: str = "any") -> dict[str
     }
 
 
+@SQLITE_ONLY
 async def test_the_wrong_sensor_fails_the_campaign_at_start_with_both_serials(sf) -> None:  # type: ignore[no-untyped-def]
     """A rig that binds serials by fixture EEPROM: the campaign names SN-T, SN-OTHER is there."""
     clock = VirtualClock(idle_wall_s=0.0003)
@@ -52,6 +53,7 @@ async def test_the_wrong_sensor_fails_the_campaign_at_start_with_both_serials(sf
             is None
 
 
+@SQLITE_ONLY
 async def test_the_right_sensor_is_stored_with_its_identity(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, {**SMALL_SPEC, "positions": "six", "samples_per_position": 20},
@@ -73,6 +75,7 @@ async def test_the_right_sensor_is_stored_with_its_identity(sf) -> None:  # type
 
 
 @pytest.mark.parametrize("chamber_map", ["eurotherm3216", "watlow_f4t"])
+@SQLITE_ONLY
 async def test_campaign_on_a_rig_reached_by_url(sf, chamber_map: str) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     spec = {**SMALL_SPEC, "positions": "six", "samples_per_position": 20}

@@ -7,7 +7,7 @@ from collections import Counter
 
 import pytest
 from engine_fakes import Faults, make_fake_rig
-from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
@@ -65,6 +65,7 @@ async def test_small_campaign_completes_with_every_position_once(sf) -> None:
     assert all(m.attempts == 1 and m.flags is None for m in rows)
 
 
+@SQLITE_ONLY
 async def test_predictive_soak_is_shorter_than_fixed_at_equal_die_error(sf) -> None:
     soaks = {}
     for policy in ("predictive", "fixed"):
@@ -166,6 +167,7 @@ async def test_quality_failure_remeasures_once_then_flags(sf) -> None:
     assert all(rows[p].attempts == 1 and rows[p].flags is None for p in range(1, N_POS))
 
 
+@SQLITE_ONLY
 async def test_retryable_faults_on_five_percent_of_calls_do_not_hurt(sf) -> None:
     clock = VirtualClock(idle_wall_s=0.0)
     faults = Faults(p_fail=0.05)

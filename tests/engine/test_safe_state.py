@@ -14,7 +14,7 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
-from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select, update
 
 from drivers.clock import VirtualClock
@@ -81,6 +81,7 @@ async def until(pred: Any, timeout_s: float = 60.0) -> None:
     await asyncio.wait_for(loop(), timeout_s)
 
 
+@SQLITE_ONLY
 async def test_completed_campaign_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, {**SPEC, "setpoints_c": [-40.0]}, rig="lab")
@@ -90,6 +91,7 @@ async def test_completed_campaign_ends_safe(sf) -> None:  # type: ignore[no-unty
         assert_safe(*await rig_state(sim, clock))
 
 
+@SQLITE_ONLY
 async def test_abort_during_soak_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, SPEC, rig="lab")
@@ -102,6 +104,7 @@ async def test_abort_during_soak_ends_safe(sf) -> None:  # type: ignore[no-untyp
         assert_safe(*await rig_state(sim, clock))
 
 
+@SQLITE_ONLY
 async def test_configuration_fault_fails_at_once_and_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
     """The second step's setpoint is beyond the controller's range: fail on the first try."""
     clock = VirtualClock(idle_wall_s=0.0003)
@@ -115,6 +118,7 @@ async def test_configuration_fault_fails_at_once_and_ends_safe(sf) -> None:  # t
         assert_safe(*await rig_state(sim, clock))
 
 
+@SQLITE_ONLY
 async def test_unexpected_exception_from_a_device_layer_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
     """A non-DeviceFault (a decoder's UnicodeEncodeError) fails the campaign; rig still safe."""
     clock = VirtualClock(idle_wall_s=0.0003)
@@ -136,6 +140,7 @@ async def test_unexpected_exception_from_a_device_layer_ends_safe(sf) -> None:  
         assert_safe(*await rig_state(sim, clock))
 
 
+@SQLITE_ONLY
 async def test_cancellation_ends_safe_and_leaves_the_campaign_to_recover(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, SPEC, rig="lab")

@@ -12,7 +12,7 @@ import asyncio
 from typing import Any
 
 import numpy as np
-from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
@@ -54,6 +54,7 @@ async def _run(sf: Any, faults: RigFaults | None) -> tuple[str, dict[tuple[int, 
     return state, by_key, stats
 
 
+@SQLITE_ONLY  # the Modbus link and the engine's guard are under test, not the store
 async def test_five_percent_modbus_faults_neither_fail_nor_corrupt(sf) -> None:  # type: ignore[no-untyped-def]
     clean_state, clean, _ = await _run(sf, None)
     state, faulty, stats = await _run(

@@ -11,7 +11,7 @@ import asyncio
 from collections import Counter
 from typing import Any
 
-from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select
 from test_safe_state import assert_safe, n_measured, rig_state, twin, until
 
@@ -31,6 +31,7 @@ def keys(sf: Any, cid: int) -> Counter:
     return Counter((int(a), int(b)) for a, b in rows)
 
 
+@SQLITE_ONLY
 async def test_chamber_alarm_twice_suspends_resoaks_and_completes(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, SPEC, rig="lab")
@@ -62,6 +63,7 @@ async def test_chamber_alarm_twice_suspends_resoaks_and_completes(sf) -> None:  
             assert abs(m.chamber_c - SPEC["setpoints_c"][m.step]) < 2.0
 
 
+@SQLITE_ONLY
 async def test_chamber_out_of_band_without_alarm_suspends(sf) -> None:  # type: ignore[no-untyped-def]
     """3 °C off (below the controller's 5 °C alarm) is still too far for a reading."""
     clock = VirtualClock(idle_wall_s=0.0003)
@@ -77,6 +79,7 @@ async def test_chamber_out_of_band_without_alarm_suspends(sf) -> None:  # type: 
     assert max(keys(sf, cid).values()) == 1 and len(keys(sf, cid)) == 12
 
 
+@SQLITE_ONLY
 async def test_table_never_in_position_suspends_then_fails_safe(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, {**SPEC, "suspend_limit_s": 600.0, "move_timeout_s": 60.0}, rig="lab")

@@ -28,6 +28,7 @@ from service.cli import build_parser
 from simulators.cli import build_parser as build_sim_parser
 
 ROOT = Path(__file__).resolve().parents[2]
+POSTGRES_ENV = "SOAKCAL_TEST_DATABASE_URL"  # as tests/conftest.py
 
 
 def _compose() -> dict[str, Any]:
@@ -118,6 +119,10 @@ def _wait_http(url: str, deadline_s: float) -> None:
     raise TimeoutError(url)
 
 
+# One backend: the one compose runs (PostgreSQL) where the tests have it, else SQLite. The
+# processes' work on each backend is covered in-process by the engine and service tests.
+@pytest.mark.parametrize(
+    "shared_db_url", ["postgresql" if os.environ.get(POSTGRES_ENV) else "sqlite"], indirect=True)
 def test_the_compose_processes_run_a_campaign_without_docker(
     tmp_path: Path, clean_db_url: str
 ) -> None:

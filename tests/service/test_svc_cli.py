@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import socket
 import threading
 import time
@@ -156,6 +157,8 @@ def test_campaign_start_list_pause_and_watch(live_service, capsys, monkeypatch) 
     assert "campaign 1 queued" in capsys.readouterr().out
     assert main(["campaign", "list", "--url", url, "--state", "queued"]) == 0
     assert "SN-7" in capsys.readouterr().out
+    assert main(["campaign", "list", "--url", url, "--state", "queued", "--json"]) == 0
+    assert [c["sensor"] for c in json.loads(capsys.readouterr().out)] == ["SN-7"]
     assert main(["campaign", "pause", "--url", url, "1"]) == 0
     assert "campaign 1 paused" in capsys.readouterr().out
     assert main(["campaign", "pause", "--url", url, "1"]) == 2  # 409: already paused

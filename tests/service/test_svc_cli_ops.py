@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
 import socket
 import threading
 import time
@@ -102,6 +103,9 @@ def test_schedule_add_list_rm(live_service, capsys, monkeypatch) -> None:  # typ
     assert main(["schedule", "list", "--url", url]) == 0
     listing = capsys.readouterr().out
     assert "SN-9" in listing and "2031-05-01 22:00" in listing
+    assert main(["schedule", "list", "--url", url, "--json"]) == 0
+    assert [(s["id"], s["campaign"]["sensor"]) for s in json.loads(capsys.readouterr().out)] \
+        == [(1, "SN-9"), (2, "SN-9")]
     assert main(["schedule", "rm", "--url", url, "1"]) == 0
     assert "schedule 1 removed" in capsys.readouterr().out
     assert main(["schedule", "rm", "--url", url, "1"]) == 2
