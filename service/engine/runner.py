@@ -496,6 +496,7 @@ class CampaignRunner:
         dies: dict[str | None, list[_Probe]] = self._no_dies()
         decision = stability.Decision(False, "started")
         gains: dict[str | None, float | None] = {}
+        waiting_on: str | None = None  # the die that said "not yet" last
         while True:
             status = await self._chamber()
             tripped = self.suspenders.check_chamber(status, target_c)
@@ -517,14 +518,23 @@ class CampaignRunner:
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
             live = {k: v for k, v in dies.items() if k is None or k not in self.dropped}
             gains = {k: self._rate_gain_for_decision(k, v) for k, v in live.items()}
-            # Every die decides, with its own rate gain; the slowest one ends the soak.
-            decision = slowest_decision([
-                stability.decide(cfg, now_s - start_s, settled,
-                                 np.array([p.clock_s for p in probes]),
-                                 np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
-                                 n_positions=self.n_pos, edge=edge,
-                                 rate_gain_ug_per_c_per_min=gains[key])
-                for key, probes in live.items()])
+            # Every die decides, with its own rate gain; the slowest one ends the soak. The
+            # die that kept the soak going last poll is asked first and the first "not yet"
+            # ends the round: the soak goes on whatever the others say, and on the poll
+            # that ends it every die has been asked (slowest_decision then picks the
+            # slowest), so the outcome is that of asking all, at a fraction of the fits.
+            decisions: list[stability.Decision] = []
+            for key in sorted(live, key=lambda k: k != waiting_on):
+                probes = live[key]
+                decisions.append(stability.decide(
+                    cfg, now_s - start_s, settled, np.array([p.clock_s for p in probes]),
+                    np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
+                    n_positions=self.n_pos, edge=edge,
+                    rate_gain_ug_per_c_per_min=gains[key]))
+                if not decisions[-1].stable:
+                    waiting_on = key
+                    break
+            decision = slowest_decision(decisions)
             self._publish(step, "soak", 0, status, target_c,
                           soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
             if decision.stable:
@@ -564,20 +574,23 @@ class CampaignRunner:
         as it is taken (``soak_probes``: the measured rate gain and a resume need them)."""
         n = self.spec.soak_probe_samples
         rows: list[dict[str, Any]] = []
-        for key, probes in dies.items():
-            if key is None:
-                probe = await self._acquire(n)
-            elif key in self.dropped:
+        if None in dies:
+            taken: dict[str | None, Any] = {None: await self._acquire(n)}
+        else:
+            # Every live die at once, as a position's captures (multi.read_all): a poll of
+            # eight sensors takes one capture's time, not eight.
+            def read(serial: str) -> Awaitable[Any]:
+                acc = self.dev.accelerometers[serial]
+                return self._sensor_call(serial, "accelerometer.acquire",
+                                         lambda: acc.acquire(n))
+            live = [k for k in dies if k is not None and k not in self.dropped]
+            taken = dict(await read_all(live, read))
+        for key, probe in taken.items():
+            if isinstance(probe, SensorDropped):
+                self._drop(probe)
                 continue
-            else:
-                acc = self.dev.accelerometers[key]
-                try:
-                    probe = await self._sensor_call(key, "accelerometer.acquire",
-                                                    lambda acc=acc: acc.acquire(n))  # type: ignore[misc]
-                except SensorDropped as exc:
-                    self._drop(exc)
-                    continue
-            # mid-capture: with several sensors probed one after another, each its own time
+            probes = dies[key]
+            # mid-capture (captures end together; each keeps its own duration)
             mid_s = self.clock.now() - probe.duration_s / 2.0
             t_s = self._t(mid_s)
             probes.append(_Probe(mid_s, t_s, float(probe.sensor_c),
