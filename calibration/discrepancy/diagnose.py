@@ -220,13 +220,17 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     base_res = _residual(pb, [])
     prev_tests: dict[str, stats.CandidateTest] = {}
     for _stage in range(MAX_STAGES):
+        # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
+        # built: two generations alive at once doubled the peak (issue 10, memory).
+        Xw = U = E = None
         Xw, yw = _design(pb, terms)
         U = stats.orthonormal_basis(Xw)
+        del Xw
         e = yw - U @ (U.T @ yw)
         dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
         s = float(stats.robust_scale(e[:, None], dof)[0])
         E = rng.standard_normal((pb.m, n_null))
-        E -= U @ (U.T @ E)
+        stats.project_out_inplace(U, E)
         s_null = stats.robust_scale(E, dof)
         tests = _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident)
         if not tests:
@@ -263,13 +267,15 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         excl_before = _flagged(pb, terms)
         excl_after = _flagged(pb, terms + [term])
         X_before, y_before = _design(pb, terms, whiten=False)
-        X_after, y_after = _design(pb, terms + [term], whiten=False)
         # Both sides are scored on the same rows (issue 10): a newly flagged reading leaves
         # the "before" figure too, else dropping it alone counts as the term's gain (the
         # circular 44.02 → 40.03 µg of the issue). Its gain is then only its influence on
         # the predictions of the other plateaus.
         ho_before = heldout_rms_ug(y_before, X_before, pb.w, pb.row, fold_masks, excl_after)
+        del X_before  # one (m × p) design at a time
+        X_after, y_after = _design(pb, terms + [term], whiten=False)
         ho_after = heldout_rms_ug(y_after, X_after, pb.w, pb.row, fold_masks, excl_after)
+        del X_after
         # A flagged reading is evidenced by its own test; scored on the same rows its held-out
         # gain is only its pull on the other plateaus' fit, often below the 0.01 µg
         # resolution: it must not make the prediction worse. Every other term must improve.
@@ -286,6 +292,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                  _rms(res_before, excl_before), _rms(res_after, excl_after),
                                  ho_before, ho_after))
         prev_tests = tests
+    U = E = None  # the last stage's basis and replicates: the scan builds its own
     scanned = _scan_final(pb, terms, rng, n_null, alpha)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -432,9 +439,10 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     """The localised scan (scan.py) on the residual of the final model."""
     Xw, yw = _design(pb, terms)
     U = stats.orthonormal_basis(Xw)
+    del Xw  # the basis replaces it; the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
     E = rng.standard_normal((pb.m, n_null))
-    E -= U @ (U.T @ E)
+    stats.project_out_inplace(U, E)
     return scan_mod.scan(pb, U, e, E, alpha)
 
 
@@ -505,8 +513,8 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
     from scipy.stats import chi2
 
     z = (res_g * pb.w)[~flagged[pb.row]]
-    Xw, _ = _design(pb, terms)
-    dof = max(z.size - Xw.shape[1], 1)
+    n_cols = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)  # not an (m × p) copy for it
+    dof = max(z.size - n_cols, 1)
     c2 = float(z @ z)
     p = float(chi2.sf(c2, dof))
     red = c2 / dof
@@ -519,6 +527,7 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
 def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident):
     tests: dict[str, stats.CandidateTest] = {}
     chosen = {t.effect_id for t in terms if t.effect_id != "outlier"}
+    EE = stats.sum_sq_columns(E)  # once per stage, not once per candidate and grid value
     for eff in live:
         if eff.effect_id in chosen or eff.effect_id in rejected:
             continue
@@ -541,7 +550,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident):
             Xw = pb.whiten(lifted(eff, theta))
             if Xw.shape[1] == 0 or not np.any(Xw):
                 continue
-            lp, lpn, k, absorbed, q = stats.linear_stats(U, Xw, e, E, eff.one_sided)
+            lp, lpn, k, absorbed, q = stats.linear_stats(U, Xw, e, E, eff.one_sided, EE)
             absorbed_min = min(absorbed_min, absorbed)
             if k == 0 or absorbed > stats.ABSORBED_MAX:
                 continue
@@ -623,7 +632,8 @@ def _make_term(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, 
 def _design(pb: LinearProblem, terms: list[Term], whiten: bool = True):
     X = np.hstack([pb.X0] + [t.X for t in terms])
     if whiten:
-        return X * pb.w[:, None], pb.y * pb.w
+        X *= pb.w[:, None]  # in place: the hstack is already a fresh copy
+        return X, pb.y * pb.w
     return X, pb.y
 
 
@@ -631,7 +641,8 @@ def _fit(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray, 
     """WLS of the current model: coefficients, covariance (× reduced χ²), residual (g)."""
     Xw, yw = _design(pb, terms)
     scale = column_scale(Xw)  # why: effect columns may be 10⁷ smaller than the base's
-    Xs = Xw / scale
+    Xs = Xw
+    Xs /= scale  # in place: _design's copy is ours
     G = Xs.T @ Xs
     Ginv = np.linalg.pinv(G, rcond=1e-12, hermitian=True)
     beta_s = Ginv @ (Xs.T @ yw)

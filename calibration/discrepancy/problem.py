@@ -33,6 +33,8 @@ from calibration.discrepancy.context import DesignContext, base_context
 from calibration.recording import Recording
 
 Lift = Callable[[np.ndarray], np.ndarray]
+# (rows (r,), raw-space values on those rows (r,3,k)) → (residual entries, (entries, k) values)
+LiftRows = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
@@ -51,6 +53,10 @@ class LinearProblem:
     degree: int
     t_mid_c: float
     t_half_c: float
+    # The lift of columns that live on a few readings only (the scan's local blocks): the
+    # same values as ``lift`` on those readings' entries, without an (m × k) dense copy
+    # that is zero almost everywhere (issue 10: O(rows) per block made the scan O(rows²)).
+    lift_rows: LiftRows | None = None
 
     @property
     def m(self) -> int:
@@ -194,9 +200,12 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     def lift(x: np.ndarray) -> np.ndarray:
         return x.reshape(3 * n, -1)
 
+    def lift_rows(rows: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (3 * rows[:, None] + np.arange(3)).ravel(), x.reshape(3 * rows.size, -1)
+
     return LinearProblem(
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
-        from_sd, degree, mid, half,
+        from_sd, degree, mid, half, lift_rows,
     )
 
 
@@ -316,7 +325,10 @@ def _norm_problem(rec: Recording) -> LinearProblem:
     def lift(x: np.ndarray) -> np.ndarray:
         return np.einsum("na,nak->nk", gvec, x.reshape(n, 3, -1))
 
+    def lift_rows(rows: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return rows, np.einsum("na,nak->nk", gvec[rows], x.reshape(rows.size, 3, -1))
+
     return LinearProblem(
         "norm", y, X0, 1.0 / s_norm, np.arange(n), np.full(n, -1), lift, ctx, from_sd,
-        degree, mid, half,
+        degree, mid, half, lift_rows,
     )

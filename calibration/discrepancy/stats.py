@@ -38,9 +38,35 @@ def project_out(U: np.ndarray, X: np.ndarray) -> np.ndarray:
     return X - U @ (U.T @ X)
 
 
+CHUNK_BYTES = 16 * 2**20  # working block of the null replicates' row/column loops
+
+
+def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """``E ← (I − UUᵀ)E`` by blocks of rows: no second (m × B) array (issue 10, memory).
+
+    ``UᵀE`` is (p × B), small; the product ``U·(UᵀE)`` is formed one row block at a time.
+    """
+    UtE = U.T @ E
+    step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
+    for i in range(0, E.shape[0], step):
+        E[i:i + step] -= U[i:i + step] @ UtE
+    return E
+
+
+def sum_sq_columns(E: np.ndarray) -> np.ndarray:
+    """Σ E² of each column without the (m × B) temporary of ``np.sum(E**2, axis=0)``."""
+    return np.einsum("ij,ij->j", E, E)
+
+
 def robust_scale(E: np.ndarray, dof_corr: float) -> np.ndarray:
-    """MAD scale of residual columns (one per replicate), corrected for the fitted dof."""
-    return 1.4826 * np.median(np.abs(E), axis=0) * dof_corr
+    """MAD scale of residual columns (one per replicate), corrected for the fitted dof.
+
+    By blocks of columns: the median of |E| needs a copy, of one block at a time only.
+    """
+    step = max(1, CHUNK_BYTES // (8 * max(E.shape[0], 1)))
+    med = np.concatenate([np.median(np.abs(E[:, j:j + step]), axis=0)
+                          for j in range(0, E.shape[1], step)]) if E.shape[1] else np.zeros(0)
+    return 1.4826 * med * dof_corr
 
 
 def absorbed_fraction(U: np.ndarray, X: np.ndarray) -> float:
@@ -106,7 +132,8 @@ def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
 
 
 def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
-                 one_sided: bool = False) -> tuple[float, np.ndarray, int, float, float]:
+                 one_sided: bool = False, EE: np.ndarray | None = None,
+                 ) -> tuple[float, np.ndarray, int, float, float]:
     """F-type score test of free-gain columns after projecting out U.
 
     ``one_sided``: the first column's coefficient is physically > 0 (a lag's amplitude)
@@ -118,11 +145,13 @@ def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
     absorbed fraction and the explained sum of squares. The noise scale is taken from
     the residual *after* the candidate, so the effect itself does not inflate it (short
     recordings, e.g. 33 rows; and strong effects, whose own signal would otherwise hide
-    them): χ²_k tails become F(k, dof) tails.
+    them): χ²_k tails become F(k, dof) tails. ``EE``: Σ E² per replicate, when the caller
+    has it (it is the same for every candidate of a stage).
     """
     absorbed = absorbed_fraction(U, Xw)
     m = e.size
-    ee, EE = float(e @ e), np.sum(E**2, axis=0)
+    ee = float(e @ e)
+    EE = sum_sq_columns(E) if EE is None else EE
     if one_sided:
         Nb = orthonormal_basis(project_out(U, Xw[:, 1:]), 1e-6)
         z1 = project_out(np.hstack([U, Nb]), Xw[:, :1])[:, 0]
@@ -178,13 +207,23 @@ def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_ro
     """
     g = int(np.bincount(row).max())
     idx = np.argsort(row, kind="stable").reshape(n_rows, g)
-    Ug = U[idx]  # (N, g, p)
+    if np.array_equal(idx.ravel(), np.arange(idx.size)):
+        # Entries already grouped by reading (both modes): views, not (m × p), (m × B) copies.
+        Ug = U.reshape(n_rows, g, -1)
+        Eg = E.reshape(n_rows, g, -1)
+    else:
+        Ug, Eg = U[idx], E[idx]  # (N, g, p), (N, g, B)
     M = np.eye(g)[None] - np.einsum("ngp,nhp->ngh", Ug, Ug)
     ok = np.array([i not in skip for i in range(n_rows)]) & (np.linalg.det(M) > 1e-6)
     Minv = np.zeros_like(M)
     Minv[ok] = np.linalg.inv(M[ok])
     eg = e[idx]
     t = np.einsum("ng,ngh,nh->n", eg, Minv, eg) / s**2
-    Eg = E[idx]  # (N, g, B)
-    tn = np.einsum("ngb,ngh,nhb->nb", Eg, Minv, Eg) / s_null[None, :] ** 2
-    return t, tn.max(axis=0), g
+    # The max over readings by blocks of readings: no (N × B) array. s_null is one scale per
+    # replicate, so max(q / s²) = max(q) / s².
+    tn_max = np.full(E.shape[1], -np.inf)
+    step = max(1, CHUNK_BYTES // (8 * g * max(E.shape[1], 1)))
+    for i in range(0, n_rows, step):
+        q = np.einsum("ngb,ngh,nhb->nb", Eg[i:i + step], Minv[i:i + step], Eg[i:i + step])
+        tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
+    return t, tn_max, g
