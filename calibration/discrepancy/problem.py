@@ -57,6 +57,12 @@ class LinearProblem:
     # same values as ``lift`` on those readings' entries, without an (m × k) dense copy
     # that is zero almost everywhere (issue 10: O(rows) per block made the scan O(rows²)).
     lift_rows: LiftRows | None = None
+    # (m,) whitened loading of each entry on its reading's one temperature error, 0 when
+    # none: the recorded T's noise moves the three axes of a reading together (ε_a =
+    # ∂raw_a/∂T · δT), so whitened entries of one reading are correlated. The parametric
+    # bootstrap draws that shared term (stats.null_replicates); without it the null of any
+    # statistic that sums a reading's axes (outliers, cross-axis terms) was too light.
+    shared_t_loading: np.ndarray | None = None
 
     @property
     def m(self) -> int:
@@ -144,6 +150,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     w = 1.0 / np.asarray(sig, float).ravel()
     beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
     sig_T = temperature_noise_c(ctx)
+    loading = None
     if np.any(sig_T > 0):
         # Errors in the temperature regressor: a reading's T noise moves the model along
         # ∂raw/∂T. Without it, a sensor with a large tempco read on a noisy chamber PV
@@ -157,6 +164,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
         sig = np.sqrt(np.asarray(sig, float) ** 2 + (d0 * sig_T[:, None]) ** 2)
         w = 1.0 / sig.ravel()
         beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+        loading = (d0 * sig_T[:, None]).ravel() * w  # |loading| ≤ 1: its share of σ
     t_scaled = P[:, 1] if degree > 0 else np.zeros(n)
     remainder = _sfem_remainder(raw, ref, np.asarray(sig, float).reshape(n, 3), t_scaled,
                                 degree, ctx, beta, X0, w)
@@ -206,6 +214,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     return LinearProblem(
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
         from_sd, degree, mid, half, lift_rows,
+        loading if loading is not None and np.any(loading != 0) else None,
     )
 
 

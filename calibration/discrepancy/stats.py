@@ -53,6 +53,29 @@ def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
     return E
 
 
+def null_replicates(rng: np.random.Generator, m: int, n_null: int, row: np.ndarray,
+                    shared: np.ndarray | None = None) -> np.ndarray:
+    """(m × B) whitened noise of the parametric bootstrap (docs/diagnosis.md §2).
+
+    Entries are unit-variance. ``shared`` (m,): each entry's loading c on one N(0,1) draw
+    per reading (``row``), the recorded temperature's error that moves a reading's three
+    axes together: entry = √(1 − c²)·z + c·ξ_row, so the null has the data's within-reading
+    correlation. Without ``shared`` it is white noise, drawn exactly as before.
+    """
+    E = rng.standard_normal((m, n_null))
+    if shared is None:
+        return E
+    xi = rng.standard_normal((int(row.max()) + 1, n_null))
+    c = np.clip(shared, -1.0, 1.0)
+    own = np.sqrt(1.0 - c**2)
+    step = max(1, CHUNK_BYTES // (8 * max(n_null, 1)))
+    for i in range(0, m, step):  # by row blocks: no second (m × B) array
+        sl = slice(i, i + step)
+        E[sl] *= own[sl, None]
+        E[sl] += c[sl, None] * xi[row[sl]]
+    return E
+
+
 def sum_sq_columns(E: np.ndarray) -> np.ndarray:
     """Σ E² of each column without the (m × B) temporary of ``np.sum(E**2, axis=0)``."""
     return np.einsum("ij,ij->j", E, E)
@@ -199,8 +222,16 @@ def explained_ss(U: np.ndarray, Xw: np.ndarray, e: np.ndarray,
 
 
 def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_rows: int,
-              s: float, s_null: np.ndarray, skip: set[int]) -> tuple[np.ndarray, np.ndarray, int]:
-    """Leave-one-reading-out statistic per reading: e_gᵀ(I − U_g U_gᵀ)⁻¹ e_g / s².
+              s: float, s_null: np.ndarray, skip: set[int],
+              shared: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
+
+    C_g is the whitened noise covariance of the reading's entries: I, or with ``shared``
+    (the loading c of each entry on the reading's one temperature error, as in
+    :func:`null_replicates`) diag(1 − c²) + c cᵀ. Why: a recorded-temperature error moves
+    the three axes together; the sum of squares of correlated entries has a far heavier
+    tail than χ²_g, and one such reading was named an outlier (issue 10 nulls). With C_g
+    the statistic is the Mahalanobis distance, χ²_g under the null.
 
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
@@ -214,6 +245,9 @@ def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_ro
     else:
         Ug, Eg = U[idx], E[idx]  # (N, g, p), (N, g, B)
     M = np.eye(g)[None] - np.einsum("ngp,nhp->ngh", Ug, Ug)
+    if shared is not None:
+        c = np.clip(shared, -1.0, 1.0)[idx]  # (N, g)
+        M = M - c[:, :, None] ** 2 * np.eye(g)[None] + c[:, :, None] * c[:, None, :]
     ok = np.array([i not in skip for i in range(n_rows)]) & (np.linalg.det(M) > 1e-6)
     Minv = np.zeros_like(M)
     Minv[ok] = np.linalg.inv(M[ok])
