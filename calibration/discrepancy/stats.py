@@ -76,6 +76,34 @@ def null_replicates(rng: np.random.Generator, m: int, n_null: int, row: np.ndarr
     return E
 
 
+def _residual_cov_blocks(U: np.ndarray, Ug: np.ndarray, c: np.ndarray,
+                         idx: np.ndarray) -> np.ndarray:
+    """(N, g, g) blocks of Cov(e) = (I − P) C (I − P), C block-diagonal per reading.
+
+    C = diag(1 − c²) + per-reading c cᵀ (unit diagonal). With P = UUᵀ and C block-diagonal,
+    the g-block is C_g − U_gU_gᵀC_g − C_gU_gU_gᵀ + U_g (UᵀCU) U_gᵀ, where
+    UᵀCU = I − Uᵀdiag(c²)U + Σ_readings v vᵀ, v = U_gᵀc_g (p × p, accumulated by blocks).
+    """
+    n, g, p = Ug.shape
+    cg = c[idx]  # (N, g)
+    Cg = np.eye(g)[None] * (1.0 - cg[:, :, None] ** 2) + cg[:, :, None] * cg[:, None, :]
+    V = np.einsum("ng,ngp->np", cg, Ug)
+    W = np.eye(p) + V.T @ V
+    c2 = c**2
+    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
+    for i in range(0, U.shape[0], step):
+        Ub = U[i:i + step]
+        W -= (Ub * c2[i:i + step, None]).T @ Ub
+    out = np.empty_like(Cg)
+    step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
+    for i in range(0, n, step):  # by blocks of readings: U_g W is an (m × p) array at once
+        Ub, Cb = Ug[i:i + step], Cg[i:i + step]
+        UUtC = np.einsum("ngp,nhp->ngh", Ub, Ub) @ Cb
+        UWU = np.einsum("ngq,nhq->ngh", Ub @ W, Ub)
+        out[i:i + step] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
+    return out
+
+
 def sum_sq_columns(E: np.ndarray) -> np.ndarray:
     """Σ E² of each column without the (m × B) temporary of ``np.sum(E**2, axis=0)``."""
     return np.einsum("ij,ij->j", E, E)
@@ -226,12 +254,16 @@ def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_ro
               shared: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
 
-    C_g is the whitened noise covariance of the reading's entries: I, or with ``shared``
-    (the loading c of each entry on the reading's one temperature error, as in
-    :func:`null_replicates`) diag(1 − c²) + c cᵀ. Why: a recorded-temperature error moves
-    the three axes together; the sum of squares of correlated entries has a far heavier
-    tail than χ²_g, and one such reading was named an outlier (issue 10 nulls). With C_g
-    the statistic is the Mahalanobis distance, χ²_g under the null.
+    With white noise the residual's covariance on a reading is I − U_gU_gᵀ. With
+    ``shared`` (the loading c of each entry on the reading's one temperature error, as in
+    :func:`null_replicates`) the noise covariance is block-diagonal, C_g = diag(1 − c²) +
+    c cᵀ, and the residual's is the g-block of (I − P)C(I − P) (:func:`_residual_cov_blocks`):
+    the statistic is then the Mahalanobis distance, χ²_g under the null. Why: a
+    recorded-temperature error moves the three axes together; the sum of squares of
+    correlated entries has a far heavier tail than χ²_g, and such readings were named
+    outliers (issue 10 nulls). C_g − U_gU_gᵀ is not that covariance: where the shared term
+    dominates (c ≈ ±0.95 on all axes at the cold end) it is nearly singular and a null
+    reading scored p ≈ 0.
 
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
@@ -244,10 +276,10 @@ def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_ro
         Eg = E.reshape(n_rows, g, -1)
     else:
         Ug, Eg = U[idx], E[idx]  # (N, g, p), (N, g, B)
-    M = np.eye(g)[None] - np.einsum("ngp,nhp->ngh", Ug, Ug)
-    if shared is not None:
-        c = np.clip(shared, -1.0, 1.0)[idx]  # (N, g)
-        M = M - c[:, :, None] ** 2 * np.eye(g)[None] + c[:, :, None] * c[:, None, :]
+    if shared is None:
+        M = np.eye(g)[None] - np.einsum("ngp,nhp->ngh", Ug, Ug)
+    else:
+        M = _residual_cov_blocks(U, Ug, np.clip(shared, -1.0, 1.0), idx)
     ok = np.array([i not in skip for i in range(n_rows)]) & (np.linalg.det(M) > 1e-6)
     Minv = np.zeros_like(M)
     Minv[ok] = np.linalg.inv(M[ok])
