@@ -142,13 +142,13 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     sig = pooled_sigma_g(rec, ctx.steps)
     from_sd = sig is not None and bool(np.all(np.isfinite(sig) & (sig > 0)))
     if not from_sd:
-        beta = np.linalg.lstsq(X0, y, rcond=None)[0]
+        beta = _wls(X0, np.ones(3 * n), y)
         e = (y - X0 @ beta).reshape(n, 3)
         dof_corr = np.sqrt(3 * n / max(3 * n - X0.shape[1], 1))
         s = 1.4826 * np.median(np.abs(e - np.median(e, axis=0)), axis=0) * dof_corr
         sig = np.broadcast_to(np.maximum(s, 1e-9), (n, 3))
     w = 1.0 / np.asarray(sig, float).ravel()
-    beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+    beta = _wls(X0, w, y)
     sig_T = temperature_noise_c(ctx)
     loading = None
     if np.any(sig_T > 0):
@@ -163,7 +163,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
             d0 = np.column_stack([db0 @ beta[a * k:(a + 1) * k] for a in range(3)])
         sig = np.sqrt(np.asarray(sig, float) ** 2 + (d0 * sig_T[:, None]) ** 2)
         w = 1.0 / sig.ravel()
-        beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+        beta = _wls(X0, w, y)
         loading = (d0 * sig_T[:, None]).ravel() * w  # |loading| ≤ 1: its share of σ
     t_scaled = P[:, 1] if degree > 0 else np.zeros(n)
     remainder = _sfem_remainder(raw, ref, np.asarray(sig, float).reshape(n, 3), t_scaled,
@@ -171,7 +171,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     if remainder is not None:  # the data minus what the SFEM-cubic has beyond the design
 
         y = (raw - remainder).ravel()
-        beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+        beta = _wls(X0, w, y)
     ydata = y.reshape(n, 3)
 
     def blocks(temp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -218,6 +218,32 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     )
 
 
+def _wls(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Weighted least squares ``min ‖w(y − Xβ)‖``: lstsq, or normal equations by row blocks
+    for a design above ``stats.TALL_BYTES``.
+
+    Why: lstsq on ``X·w`` holds the weighted copy plus LAPACK's copy and workspace (~4 × the
+    design at its peak); on a long recording that, not the data, set diagnose's peak. The
+    normal equations on unit-norm columns lose precision only as cond² (the base design's
+    condition is modest after scaling); recordings below the size keep lstsq exactly.
+    """
+    from calibration.discrepancy import stats
+
+    if X.nbytes <= stats.TALL_BYTES or X.shape[0] <= 20 * X.shape[1]:
+        return np.linalg.lstsq(X * w[:, None], y * w, rcond=None)[0]
+    p = X.shape[1]
+    G, h = np.zeros((p, p)), np.zeros(p)
+    step = max(1, stats.CHUNK_BYTES // (8 * p))
+    for i in range(0, X.shape[0], step):
+        Xc = X[i:i + step] * w[i:i + step, None]
+        G += Xc.T @ Xc
+        h += Xc.T @ (y[i:i + step] * w[i:i + step])
+    d = np.sqrt(np.diag(G))
+    d = np.where(d > 0, d, 1.0)
+    beta = np.linalg.lstsq(G / np.outer(d, d), h / d, rcond=1e-12)[0]
+    return beta / d
+
+
 def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.ndarray,
                     degree: int, ctx: DesignContext, beta: np.ndarray, X0: np.ndarray,
                     w: np.ndarray) -> np.ndarray | None:
@@ -262,8 +288,7 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
         return None
     if not np.all(np.isfinite(pred)):
         return None
-    Xw = X0 * w[:, None]
-    lin = np.linalg.lstsq(Xw, pred.ravel() * w, rcond=None)[0]
+    lin = _wls(X0, w, pred.ravel())
     rem = pred - (X0 @ lin).reshape(n, 3)
     return rem
 
