@@ -244,6 +244,23 @@ def _wls(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
     return beta / d
 
 
+JOINT_FIT_MAX_ROWS = 50_000  # readings the joint SFEM-cubic fit of the remainder uses
+
+
+def _joint_fit_rows(n: int) -> slice | np.ndarray:
+    """Readings for the joint fit behind the SFEM remainder: all, or a fixed random subset.
+
+    Why: ``fit_joint``'s Jacobian and rotations are ~6 kB per reading at their peak, which set
+    diagnose's peak on a long recording (300 k readings: 2.3 GB of 3.0). The fit has 12×(d+1)
+    coefficients, and the remainder it predicts is a few µg; 50 000 readings fix them far
+    below the noise. Random, not every k-th reading: a stride can alias with the schedule's
+    period (every 24th reading of a tiled Table 1 is one position). Seeded: reproducible.
+    """
+    if n <= JOINT_FIT_MAX_ROWS:
+        return slice(None)
+    return np.sort(np.random.default_rng(0).choice(n, JOINT_FIT_MAX_ROWS, replace=False))
+
+
 def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.ndarray,
                     degree: int, ctx: DesignContext, beta: np.ndarray, X0: np.ndarray,
                     w: np.ndarray) -> np.ndarray | None:
@@ -280,7 +297,8 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
         cnt = np.array([np.sum(ctx.steps == s_) for s_ in ids], float)
         coeffs0 = np.linalg.lstsq(Pt * np.sqrt(cnt)[:, None], Ps * np.sqrt(cnt)[:, None],
                                   rcond=None)[0].T  # (12, d+1)
-        res = fit_joint(raw, ref, sig, t, coeffs0, np.ones(12, bool))
+        fit = _joint_fit_rows(n)
+        res = fit_joint(raw[fit], ref[fit], sig[fit], t[fit], coeffs0, np.ones(12, bool))
         V = np.vander(t, degree + 1, increasing=True)
         Pn = V @ res.coeffs.T
         pred = np.linalg.solve(sfem_batch.matrices(Pn), ref[:, :, None])[:, :, 0] + Pn[:, 0:3]

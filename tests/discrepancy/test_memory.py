@@ -147,3 +147,17 @@ def test_long_recording_path_gives_the_same_diagnosis(monkeypatch):
     assert [f["effect"] for f in tall["findings"]] == [f["effect"] for f in ref["findings"]]
     assert abs(tall["baseline"]["rmse_ug"] - ref["baseline"]["rmse_ug"]) < 0.02
     assert abs(tall["unexplained"]["p_value"] - ref["unexplained"]["p_value"]) < 0.05
+
+
+def test_joint_fit_subset_is_all_readings_below_the_cap_and_covers_a_tiled_schedule():
+    from calibration.discrepancy import problem
+
+    assert problem._joint_fit_rows(problem.JOINT_FIT_MAX_ROWS) == slice(None)
+    n = 3 * problem.JOINT_FIT_MAX_ROWS
+    rows = problem._joint_fit_rows(n)
+    assert rows.size == problem.JOINT_FIT_MAX_ROWS
+    assert np.all(np.diff(rows) > 0) and rows[0] >= 0 and rows[-1] < n
+    np.testing.assert_array_equal(rows, problem._joint_fit_rows(n))  # reproducible
+    # Every position of a 24-position schedule repeated along the recording is represented.
+    counts = np.bincount(rows % 24, minlength=24)
+    assert counts.min() > 0.8 * rows.size / 24
