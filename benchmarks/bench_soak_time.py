@@ -28,10 +28,12 @@ of the die, gains up to K µg per °C/min per axis), which the rig simulator
 does not model on its own; the die rate is the simulated die's instantaneous
 rate at the capture.
 
-"predictive, measured k" feeds the decision the rate gain measured from the
-campaign's own soak probes (``service.engine.soak_rate``) through
-:class:`MeasuredRateRunner`, before each soak. ``--variants 1,4`` runs a subset
-(the fixed hour always runs: it is the reference).
+"measured k, corrected" is the engine's ``rate_gain: "measured"``: every soak at
+home, the rate gain k measured from the campaign's own soak probes
+(``service.engine.soak_rate``) at every poll, the calibration subtracting
+k̂·dT/dt from the rows, and the soak waiting only for what that correction may
+get wrong. ``--variants 1,4`` runs a subset (the fixed hour always runs: it is
+the reference).
 
 Usage: .venv/bin/python benchmarks/bench_soak_time.py [--seeds 1-8] [--fast] [--jobs N]
                                                       [--noise-free] [--rate-ug-per-c-per-min K]
@@ -42,7 +44,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import dataclasses
 import os
 import tempfile
 import time
@@ -60,8 +61,6 @@ from service.demo import SETPOINTS_C, _create_campaign, demo_spec
 from service.engine import store
 from service.engine.rigs import open_rig
 from service.engine.runner import CampaignRunner
-from service.engine.soak_rate import SoakProbes, estimate_rate_gain, rate_gain_for_decision
-from service.engine.stability import lag_from_rate_gain_s
 from simulators.truth import SensorTruth
 
 EQUAL_ACCURACY = 1.05  # pooled held-out error ≤ this × the fixed hour's counts as equal
@@ -73,14 +72,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # A sensor with the catalogue's temperature_rate gain k = 100 µg per °C/min:
     # gradient_lag_s = 60 s/min · k / tempco = 60 · 100 / 150 = 40 s.
     "predictive, lag 40 s": {"stability": "predictive", "gradient_lag_s": 40.0},
-    # The rate gain measured from the campaign's own soak probes (service.engine.soak_rate),
-    # fed to the decision before each soak; 250-sample probes so the estimate is useful
+    # The engine measures k from its soak probes (every soak at home) and the calibration
+    # corrects k̂·rate (rate_gain "measured"); 250-sample probes so the estimate is useful
     # (not 200: a capture of the position size would be taken for a position's, see BenchTruth).
-    "predictive, measured k": {"stability": "predictive", "soak_probe_samples": 250,
-                               "_measured_rate_gain": True},
-    # The same, every soak at one table pose (home): k separates from the second soak on.
-    "measured k, one pose": {"stability": "predictive", "soak_probe_samples": 250,
-                             "_measured_rate_gain": True, "_soak_pose_home": True},
+    "measured k, corrected": {"stability": "predictive", "rate_gain": "measured",
+                              "soak_probe_samples": 250},
 }
 RATE_PATTERN = np.array([1.0, -0.6, 0.4])  # per-axis signs/sizes of the rate effect
 
@@ -132,64 +128,12 @@ def make_truth(seed: int, noise_free: bool, rate_ug_per_c_per_min: float,
                       crn_seed=seed, rate_g_per_c_per_s=rate, probe_n=probe_n)
 
 
-class MeasuredRateRunner(CampaignRunner):
-    """The engine with the soak decision fed the measured rate gain (how runner.py should do it).
-
-    Records every soak probe (time, die channel, output) with the table's
-    orientation; before each soak, estimates k from the soaks so far and sets
-    the decision's lag from its upper bound (``rate_gain_for_decision``).
-    Between soaks only: the engine proper should re-estimate at every poll,
-    passing ``rate_gain_ug_per_c_per_min`` to ``stability.decide``.
-    """
-
-    def __init__(self, *a: Any, soak_pose_home: bool = False, **kw: Any) -> None:
-        super().__init__(*a, **kw)
-        self.soak_pose_home = soak_pose_home
-        self.soaks: list[SoakProbes] = []
-        self.k_used: list[float] = []
-        self._orientation = "home"
-        self._probes: list[tuple[float, float, tuple[float, float, float]]] | None = None
-
-    async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
-        await super()._move_to(angles_deg)
-        self._orientation = ",".join(f"{a:.1f}" for a in angles_deg)
-
-    async def _acquire(self, n: int) -> Any:
-        acq = await super()._acquire(n)
-        if self._probes is not None:
-            self._probes.append((self.clock.now(), acq.sensor_c, acq.mean_g))
-        return acq
-
-    async def _ramp(self, step: int) -> None:
-        if self.soak_pose_home:  # one pose for every soak: their probes compare directly
-            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
-        await super()._ramp(step)
-
-    async def _soak(self, step: int, *, resumed: bool, n_positions: int) -> None:
-        k = rate_gain_for_decision(estimate_rate_gain(self.soaks))
-        self.k_used.append(k)
-        stab = dataclasses.replace(self.spec.stability, gradient_lag_s=lag_from_rate_gain_s(
-            k, self.spec.stability.tempco_ug_per_c))
-        self.spec = dataclasses.replace(self.spec, stability=stab)
-        self._probes = []
-        try:
-            await super()._soak(step, resumed=resumed, n_positions=n_positions)
-        finally:
-            pr, self._probes = self._probes, None
-        if pr:
-            self.soaks.append(SoakProbes(self._orientation, np.array([p[0] for p in pr]),
-                                         np.array([p[1] for p in pr]),
-                                         np.array([p[2] for p in pr])))
-
-
 async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
                        truth: SensorTruth) -> tuple[Any, float, list[dict]]:
     url = f"sqlite:///{db_dir / 'bench.db'}"
     upgrade_database(url)
     sf = make_session_factory(url)
     store.fast_sqlite_commits(sf)
-    measured = bool(spec.pop("_measured_rate_gain", False))
-    one_pose = bool(spec.pop("_soak_pose_home", False))
     cid = _create_campaign(sf, spec)
     clock = VirtualClock(idle_wall_s=0.0003)
     # The rig simulator keeps its physics to itself; catch its chamber so the rate effect uses
@@ -208,17 +152,14 @@ async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
     try:
         async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
                             sim_options={"truth": truth}) as dev:
-            runner = (MeasuredRateRunner(sf, cid, dev, clock, soak_pose_home=one_pose)
-                      if measured else CampaignRunner(sf, cid, dev, clock))
+            runner = CampaignRunner(sf, cid, dev, clock)
             state = await runner.run()
     finally:
         sim_rig.ChamberPhysics = physics  # type: ignore[misc]
     camp = store.load_campaign(sf, cid)
     if state != "completed":
         raise RuntimeError(f"campaign {state}: {camp.error}")
-    log = [{**e, "k_used": k} for e, k in zip(camp.steps_log, getattr(runner, "k_used", []),
-                                               strict=False)] or camp.steps_log
-    return runner.fit_result, clock.now(), log
+    return runner.fit_result, clock.now(), camp.steps_log
 
 
 def heldout_errors_g(model: Any, truth: SensorTruth, temps_die_c: np.ndarray) -> np.ndarray:
@@ -255,7 +196,8 @@ def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
         "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6,
         "max_soak": sum(bool(e.get("max_soak_reached")) for e in log),
         "valid_c": list(fit.model.valid_c or ()), "wall_s": time.monotonic() - w0,
-        "k_used": [e["k_used"] for e in log if "k_used" in e],
+        "k_used": [e.get("rate_gain_ug_per_c_per_min") for e in log
+                   if e.get("rate_gain_ug_per_c_per_min") is not None],
     }
 
 
@@ -327,7 +269,7 @@ def main() -> int:
             verdict = ""
         print(f"  {name:<24} campaign ×{s['sim_s'] / base['sim_s']:.2f}  "
               f"soak ×{s['soak_s'] / base['soak_s']:.2f}  held-out ×{ratio:.3f} "
-              f"(per sensor {np.mean(paired):.3f} ± {spread:.3f})"
+              f"(per sensor {np.mean(paired):.3f} ± {spread:.3f}, worst {max(paired):.3f})"
               f"  {verdict}")
     return 0
 

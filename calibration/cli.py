@@ -43,8 +43,13 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except GravityError as exc:
         return _fail(str(exc))
     try:
+        rate_gain = _rate_gain(getattr(args, "rate_gain_ug_per_c_per_min", None))
+    except ValueError as exc:
+        return _fail(f"--rate-gain-ug-per-c-per-min: {exc}")
+    try:
         rec = read_recording(args.recording)
-        fit = fit_campaign(rec, method=method, g_local=None if gravity is None else gravity.g)
+        fit = fit_campaign(rec, method=method, g_local=None if gravity is None else gravity.g,
+                           rate_gain_ug_per_c_per_min=rate_gain)
     except RecordingError as exc:
         return _fail(str(exc))
     except CalibrationError as exc:
@@ -76,6 +81,19 @@ def run_calibrate(args: argparse.Namespace) -> int:
         for p in figures:
             print(f"figure: {p}")
     return EXIT_OK
+
+
+def _rate_gain(text: str | None) -> np.ndarray | None:
+    """``X,Y,Z`` (µg per °C/min, finite) → array, or None when not given."""
+    if text is None:
+        return None
+    try:
+        k = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise ValueError(f"expected three numbers X,Y,Z, got {text!r}") from None
+    if k.shape != (3,) or not np.all(np.isfinite(k)):
+        raise ValueError(f"expected three finite numbers X,Y,Z, got {text!r}")
+    return k
 
 
 def _local_gravity(args: argparse.Namespace) -> LocalGravity | None:

@@ -28,10 +28,11 @@ TEMPERATURE = ("sensor_c", "chamber_c")
 NUMERIC = (
     "t_s", "ax", "ay", "az", "chamber_c", "sensor_c", "ref_x", "ref_y", "ref_z",
     "step", "setpoint_c", "position", "n", "sd_x", "sd_y", "sd_z",
+    "visit",  # project addition: the row's visit index within its step (docs/recording.md)
 )
 # Order used when soakcal writes a recording (readers accept any order).
 CANONICAL_ORDER = (
-    "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position",
+    "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "visit",
     "ref_x", "ref_y", "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z",
 )
 DEFAULT_RANGE_G = 8.0  # ADXL355's widest range; a reading beyond it cannot be real
@@ -421,7 +422,7 @@ def _current_umask() -> int:
 def format_value(v: float, name: str = "") -> str:
     if not math.isfinite(v):
         return ""
-    if name in ("step", "position", "n") and float(v).is_integer():
+    if name in ("step", "position", "visit", "n") and float(v).is_integer():
         return str(int(v))
     return repr(float(v))
 

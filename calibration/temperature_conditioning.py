@@ -37,6 +37,9 @@ class ConditionedTemperature:
     step_noise_c: dict[int, float]  # step index -> robust rms scatter about the line
     rejected_rows: int
     description: str = DESCRIPTION
+    # (N,) the die's rate of change at each row, °C/min: the slope of its step's line (0 where
+    # the slope is not significant, or the step has too few rows to draw a line)
+    row_rate_c_per_min: np.ndarray | None = None
 
 
 def condition_temperature(
@@ -46,6 +49,7 @@ def condition_temperature(
     t_s = np.asarray(t_s, float)
     temp = np.asarray(temperature_c, float)
     row_c = temp.copy()
+    row_rate = np.zeros_like(temp)
     step_c: dict[int, float] = {}
     step_noise: dict[int, float] = {}
     rejected = 0
@@ -73,9 +77,29 @@ def condition_temperature(
             coef = np.array([0.0, float(np.mean(yy[keep]))])  # settled: the mean is less noisy
         line = np.polyval(coef, tt - t0)
         row_c[idx] = line
+        row_rate[idx] = 60.0 * float(coef[0])
         step_c[int(s)] = float(np.mean(line))
         step_noise[int(s)] = _robust_sd((yy - line)[keep])
-    return ConditionedTemperature(row_c, step_c, step_noise, rejected)
+    return ConditionedTemperature(row_c, step_c, step_noise, rejected,
+                                  row_rate_c_per_min=row_rate)
+
+
+def rate_corrected_raw_g(raw_g: np.ndarray, row_rate_c_per_min: np.ndarray,
+                         rate_gain_ug_per_c_per_min: np.ndarray) -> np.ndarray:
+    """The raw rows less the ``temperature_rate`` effect k·dT/dt (shared/spec/effects.md).
+
+    While the die moves, package and board lag it and each axis reads an extra
+    k·dT/dt (k in µg per °C/min, per axis, measured by the campaign from its soak
+    probes: service/engine/soak_rate.py). The SFEM and thermal model (seed paper
+    Eq. 1, 4–8, 12–14) describe the sensor at rest, so that term is removed from
+    every row before they are fitted: otherwise a step measured while the die still
+    moved carries a bias common to all its positions that the model would take for a
+    temperature dependence. The rate is the conditioned line's slope of the row's step
+    (``row_rate_c_per_min``): the line the thermal fit already draws through the die
+    readings in time, so the two agree on how the die moved.
+    """
+    k_g = np.asarray(rate_gain_ug_per_c_per_min, float).reshape(1, 3) * 1e-6
+    return np.asarray(raw_g, float) - np.asarray(row_rate_c_per_min, float)[:, None] * k_g
 
 
 # A step's temperature slope is kept when it exceeds this many standard errors.

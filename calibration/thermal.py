@@ -36,7 +36,7 @@ from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.fit import FitResult, fit_norm, fit_reference, rmse_norm_ug
 from calibration.placement import reference_tolerance_rad
 from calibration.recording import Recording
-from calibration.temperature_conditioning import condition_temperature
+from calibration.temperature_conditioning import condition_temperature, rate_corrected_raw_g
 from calibration.thermal_joint import fit_joint
 
 METHODS = ("per_step", "joint")
@@ -202,12 +202,19 @@ def fit_campaign(
     method: str = DEFAULT_METHOD,
     degree: int = 3,
     g_local: float | None = None,
+    rate_gain_ug_per_c_per_min: np.ndarray | None = None,
 ) -> ThermalFit:
     """Fit SFEM at each step and the cubic thermal model (Eq. 1, 4–8) to a recording.
 
     ``g_local`` (units of standard gravity; :mod:`calibration.gravity`): the
     reference directions are scaled to it (reference mode) or |g| is fitted to
     it (norm mode). None: the references' median magnitude, or 1.0.
+
+    ``rate_gain_ug_per_c_per_min`` (3,): the sensor's measured ``temperature_rate``
+    gain k per axis; each row's k·dT/dt (dT/dt from the temperature conditioning's
+    per-step line) is subtracted before the fits
+    (:func:`calibration.temperature_conditioning.rate_corrected_raw_g`), so the model
+    is the sensor's at rest. Needs a temperature in the recording.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -243,7 +250,15 @@ def fit_campaign(
         conditioning = f"{temp_src}: {cond.description}"
         if cond.rejected_rows:
             conditioning += f"; {cond.rejected_rows} outlying temperature reading(s) ignored"
+        if rate_gain_ug_per_c_per_min is not None:
+            k = np.asarray(rate_gain_ug_per_c_per_min, float).reshape(3)
+            raw = rate_corrected_raw_g(raw, cond.row_rate_c_per_min, k)
+            notes.append("temperature_rate corrected: k·dT/dt subtracted from every row, k = "
+                         + ", ".join(f"{v:.1f}" for v in k) + " µg per °C/min (x, y, z)")
     else:
+        if rate_gain_ug_per_c_per_min is not None:
+            raise CalibrationError("a rate-gain correction needs the die temperature in the "
+                                   "recording")
         steps = np.zeros(len(recording), int)
         temp_src = "none"
         row_c = np.full(len(recording), np.nan)
@@ -354,6 +369,8 @@ def fit_campaign(
             "method": method_used,
             "method_requested": method_requested,
             "degree_requested": degree,
+            "rate_gain_ug_per_c_per_min": None if rate_gain_ug_per_c_per_min is None
+            else [float(v) for v in np.asarray(rate_gain_ug_per_c_per_min, float).reshape(3)],
             "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
         },
     )

@@ -170,10 +170,18 @@ class ModbusLink:
                     delay = min(self.policy.backoff_s * 2 ** (attempt - 1),
                                 self.policy.backoff_max_s)
                     await self.clock.sleep(delay)
+                task = asyncio.current_task()
+                cancels = task.cancelling() if task is not None else 0
                 try:
                     client = await self._connected()
                     self.stats["requests"] += 1
                     rr = await call(client)
+                    if task is not None and task.cancelling() > cancels:
+                        # pymodbus awaits the reply with asyncio.wait_for, which (Python
+                        # < 3.12) returns a reply that arrived with our cancellation and
+                        # drops the cancellation: give it back, or a service shutdown
+                        # (or a lost rig lease) is ignored and the campaign goes on.
+                        raise asyncio.CancelledError
                 except DeviceFault as fault:
                     last = fault
                     continue

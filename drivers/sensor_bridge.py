@@ -10,8 +10,10 @@ measured on the injected clock.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
-from typing import Literal
+import functools
+from collections.abc import AsyncIterator, Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Literal, TypeVar
 
 import numpy as np
 import serial
@@ -40,6 +42,33 @@ ERR_BAD_FRAME = 2
 ERR_BAD_ARGUMENT = 3
 ERR_NO_EEPROM = 4
 _PERMANENT_ERRS = (ERR_UNKNOWN_COMMAND, ERR_BAD_ARGUMENT, ERR_NO_EEPROM)
+
+
+# Each port gets its own I/O threads. The event loop's default executor has only
+# min(32, cpus + 4) workers: on a 2-core host the seventh sensor's capture of a position
+# waited for another's to end, so eight sensors "read at once" took two capture times.
+PORT_THREADS = 2  # the command's, and one for a cancelled read running out its timeout
+T = TypeVar("T")
+
+
+class PortThreads:
+    """The blocking serial calls of one port, on that port's own threads."""
+
+    def __init__(self, name: str) -> None:
+        self._name = name
+        self._pool: ThreadPoolExecutor | None = None
+
+    async def run(self, fn: Callable[..., T], *args: object) -> T:
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(PORT_THREADS, thread_name_prefix=self._name)
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._pool, functools.partial(fn, *args))
+
+    def shutdown(self) -> None:
+        """Free the threads once idle (a read still running ends at its own timeout)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False)
+            self._pool = None
 
 
 class SerialAccelerometer:
@@ -72,6 +101,7 @@ class SerialAccelerometer:
         self.odr_hz = 62.5
         self._port: serial.SerialBase | None = None
         self._lock = asyncio.Lock()
+        self._threads = PortThreads(f"bridge {url}")
 
     # --- protocol -------------------------------------------------------------
     async def identify(self) -> SensorIdentity:
@@ -158,7 +188,8 @@ class SerialAccelerometer:
 
     async def close(self) -> None:
         async with self._lock:
-            await asyncio.to_thread(self._close_port)
+            await self._threads.run(self._close_port)
+            self._threads.shutdown()
 
     # --- raw path ---------------------------------------------------------------
     async def _acquire_raw(self, n_samples: int) -> Acquisition:
@@ -213,8 +244,8 @@ class SerialAccelerometer:
                 if attempt:
                     await self.clock.sleep(0.1 * attempt)
                 try:
-                    port = self._port or await asyncio.to_thread(self._open_port)
-                    io = asyncio.ensure_future(asyncio.to_thread(
+                    port = self._port or await self._threads.run(self._open_port)
+                    io = asyncio.ensure_future(self._threads.run(
                         self._exchange_blocking, port, fields, n_lines, extra_wait_s))
                     try:
                         return await asyncio.shield(io)

@@ -28,7 +28,7 @@ from drivers.faults import (
     ValueOutOfRange,
 )
 from drivers.protocols import Acquisition, SensorIdentity
-from drivers.sensor_bridge import open_serial_port
+from drivers.sensor_bridge import PortThreads, open_serial_port
 from drivers.sensor_config import StreamFormat
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # converts m/s² lines to g (the fit's unit)
@@ -74,6 +74,7 @@ class StreamingAccelerometer:
         self.device = device
         self._port: serial.SerialBase | None = None
         self._lock = asyncio.Lock()
+        self._threads = PortThreads(f"stream {url}")
 
     async def identify(self) -> SensorIdentity:
         """A plain stream reports nothing: the serial is the operator's word (binding ``any``)."""
@@ -103,7 +104,8 @@ class StreamingAccelerometer:
 
     async def close(self) -> None:
         async with self._lock:
-            await asyncio.to_thread(self._close_port)
+            await self._threads.run(self._close_port)
+            self._threads.shutdown()
 
     async def _capture(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         async with self._lock:
@@ -112,9 +114,8 @@ class StreamingAccelerometer:
                 if attempt:
                     await self.clock.sleep(0.1 * attempt)
                 try:
-                    port = self._port or await asyncio.to_thread(self._open_port)
-                    io = asyncio.ensure_future(
-                        asyncio.to_thread(self._capture_blocking, port, n))
+                    port = self._port or await self._threads.run(self._open_port)
+                    io = asyncio.ensure_future(self._threads.run(self._capture_blocking, port, n))
                     try:
                         return await asyncio.shield(io)
                     except asyncio.CancelledError:

@@ -106,6 +106,9 @@ def _add_demo_sensors(sub: Any) -> None:
     sub.choices["demo"].add_argument(
         "--sensors", type=sensors_count, default=1, metavar="N",
         help="sensors calibrated together in one campaign (1…64, default 1)")
+    sub.choices["demo"].add_argument(
+        "--position-order", choices=("travel", "table", "balanced"), default=None,
+        help="order of each step's positions (default: the engine's, travel; docs/engine.md)")
 
 
 def _add_calibration_commands(sub: Any) -> None:
@@ -127,6 +130,10 @@ def _add_calibration_commands(sub: Any) -> None:
                      help="local gravity from WGS84 normal gravity at this latitude (deg)")
     cal.add_argument("--height-m", type=float, metavar="H",
                      help="with --latitude-deg: ellipsoidal height (m), free-air corrected")
+    cal.add_argument("--rate-gain-ug-per-c-per-min", metavar="X,Y,Z",
+                     help="the sensor's measured temperature_rate gain per axis (µg per "
+                     "°C/min, e.g. a campaign's provenance): k·dT/dt is subtracted from every "
+                     "row before the fit")
     cal.set_defaults(handler=_delegate("calibration.cli", "run_calibrate", "calibrate"))
 
     comp = sub.add_parser("compensate", help="apply a model to a recording")

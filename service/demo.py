@@ -61,6 +61,9 @@ def run_demo(args: argparse.Namespace) -> int:
     n_sensors = int(getattr(args, "sensors", 1) or 1)
     if n_sensors > 1:
         spec["sensors"] = demo_serials(n_sensors)
+    order = getattr(args, "position_order", None)
+    if order:  # absent: the engine's default (travel)
+        spec["position_order"] = str(order)
     return asyncio.run(_demo(out, spec))
 
 

@@ -34,9 +34,9 @@ from service.engine.spec import CampaignSpec
 RIG_FIT_MODE = "reference"
 # Where the chamber starts a campaign: the lab's ambient (the runner's safe_c default).
 AMBIENT_C = 23.0
-# Table move to the next position, s: the engine's first-position ETA (15 s) less its
-# default settle (5 s) and 200 samples at 62.5 Hz (3.2 s) (service/engine/progress.py).
-MOVE_ESTIMATE_S = 6.8
+# Table moves are predicted from the table's own travel in the campaign's position order
+# (``service.engine.plan.dry_run(move_s=None)``: slowest axis on the trapezoidal profile,
+# plus the in-position poll), so a travel order's saving shows in the prediction.
 # The predictive stability policy ends a soak at ~3/4 of the nominal soak on average
 # (service/engine/progress.py uses the same factor for its ETA).
 PREDICTIVE_SOAK_FRACTION = 0.75
@@ -160,14 +160,16 @@ def predicted_duration_s(spec: CampaignSpec) -> float:
 
     The campaign's own plan interpreted without hardware (``service.engine.plan.dry_run``):
     ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per step
-    (the nominal soak; ~3/4 of it under the predictive policy), and per position a move,
-    the settle and the acquisition (``samples / odr_hz``).
+    (the nominal soak; ~3/4 of it under the predictive policy), and per position a move
+    (the table's travel from the pose before, in the spec's ``position_order``), the
+    settle and one acquisition (``samples / odr_hz``) for all its sensors: a campaign's
+    sensors are read at once, so eight take the time of one.
     """
     from service.engine.plan import dry_run
 
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
-    plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s,
-                   move_s=MOVE_ESTIMATE_S, start_c=AMBIENT_C)
+    plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s, move_s=None,
+                   start_c=AMBIENT_C)
     return plan.duration_s

@@ -72,12 +72,17 @@ def simulate_campaign(
     temperature_columns: Sequence[str] = ("chamber_c", "sensor_c"),
     sessions: Sequence[int] | None = None,
     return_truth: bool = False,
+    position_order: str = "table",
+    position_order_seed: int | None = None,
 ) -> Recording | SimCampaign:
     """Simulate a soak campaign and return its v1 recording (or a :class:`SimCampaign`).
 
     ``schedule`` is (n,3) unit gravity vectors in the sensor frame (default the
     seed's Table 1); the same schedule is used at each step. ``sessions`` gives
-    a power-session index per step (default: one session).
+    a power-session index per step (default: one session). ``position_order`` /
+    ``position_order_seed`` are the campaign spec's keys (docs/engine.md, "Position
+    order"; default the schedule's order here); the recording's ``visit`` column is
+    each row's index within its step in time order.
     """
     from calibration.schedules import table1
 
@@ -88,8 +93,10 @@ def simulate_campaign(
 
     t, air, die, wsp = 0.0, ph.start_c, ph.start_c, ph.start_c
     rows: dict[str, list[float]] = {k: [] for k in (
-        "t_s", "step", "setpoint_c", "position", "air", "die", "rate", "dir", "session")}
+        "t_s", "step", "setpoint_c", "position", "air", "die", "rate", "dir", "session",
+        "ref", "visit")}
     direction = 0
+    visits: dict[int, int] = {}  # rows saved so far per step
     last_sp = ph.start_c
     die_before = die
 
@@ -105,7 +112,7 @@ def simulate_campaign(
     # the chamber ramps at the rig's rate limit, the soak is a fixed soak_min, a move costs
     # move_s (slew and settle), an acquisition n / odr_hz with its reading at mid-capture.
     def handle(msg: plan.Msg) -> None:
-        nonlocal direction, last_sp, die_before
+        nonlocal direction, last_sp, die_before, visits
         if isinstance(msg, plan.SetChamber):
             sp = msg.setpoint_c
             if sp != last_sp:
@@ -136,15 +143,20 @@ def simulate_campaign(
             rows["step"].append(msg.step)
             rows["setpoint_c"].append(msg.setpoint_c)
             rows["position"].append(msg.position)
+            rows["ref"].append(msg.ref_g)
+            rows["visit"].append(visits.get(msg.step, 0))
+            visits[msg.step] = visits.get(msg.step, 0) + 1
             rows["dir"].append(direction)
             rows["session"].append(sessions[msg.step] if sessions is not None else 0)
 
     spec = plan.PlanSpec(setpoints_c=list(setpoints_c), samples_per_position=n, settle_s=0.0,
-                         ramp_c_per_min=ph.ramp_c_per_min, odr_hz=truth.odr_hz)
+                         ramp_c_per_min=ph.ramp_c_per_min, odr_hz=truth.odr_hz,
+                         position_order=position_order,
+                         position_order_seed=position_order_seed)
     plan.interpret(plan.campaign_plan(spec, refs), handle)
 
     N = len(rows["t_s"])
-    ref = np.tile(refs, (len(setpoints_c), 1))
+    ref = np.asarray(rows["ref"], float).reshape(N, 3)  # each row's own, in visiting order
     die_c = np.asarray(rows["die"])
     air_c = np.asarray(rows["air"])
     ctx = Context(
@@ -162,6 +174,9 @@ def simulate_campaign(
     rec = readings_to_recording(truth, ctx, rng, temperature_columns, pv_noise_c=ph.pv_noise_c,
                                 setpoint_c=np.asarray(rows["setpoint_c"]),
                                 position=np.asarray(rows["position"], float))
+    if position_order != "table":  # the table order's recordings stay exactly as they were
+        rec = Recording.from_columns({**rec.columns,
+                                      "visit": np.asarray(rows["visit"], float)})
     if return_truth:
         return SimCampaign(rec, die_c, air_c, truth, {"context": ctx})
     return rec

@@ -20,9 +20,11 @@ from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, EffectModule
+from calibration.discrepancy.effects.base import how_told_apart
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.problem import LinearProblem, build_problem
+from calibration.discrepancy.protocol import Protocol, assess, visit_column
 from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.recording import Recording
 
@@ -97,6 +99,7 @@ class Diagnosis:
     unexplained: dict[str, Any] = field(default_factory=dict)
     problem: LinearProblem | None = field(default=None, repr=False)  # for model extensions
     cannot_judge: str = ""  # why the recording is too small to test (then mismatch is None)
+    protocol: dict[str, Any] = field(default_factory=dict)  # what it separates (protocol.py)
 
     @property
     def mismatch(self) -> bool | None:
@@ -118,6 +121,7 @@ class Diagnosis:
             **({"reason": self.cannot_judge} if self.cannot_judge else {}),
             "findings": [f.to_json() for f in self.findings],
             "not_identifiable": self.not_identifiable,
+            **({"protocol": self.protocol} if self.protocol else {}),
             "final_rmse_ug": _r(self.final_rmse_ug),
             "heldout": self.heldout_scheme,
             "null": {"method": "parametric bootstrap of the fitted model", "n_null": self.n_null,
@@ -209,6 +213,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             live.append(eff)
         else:
             not_ident[eff.effect_id] = {"effect": eff.effect_id, "why": why, "experiment": exp}
+    protocol = assess(ctx, visit_column(recording.columns),
+                      {e.effect_id: e in live for e in effects})
 
     raw_cache: dict[tuple[str, float], np.ndarray] = {}
 
@@ -312,8 +318,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         withdrawn = {r for t in terms if t.rows and inside[list(t.rows)].any() for r in t.rows}
         if withdrawn:
             terms = [t for t in terms if not set(t.rows) & withdrawn]
-            findings = [f for f in findings
-                        if not (f.effect == "outlier" and set(f.rows) & withdrawn)]
+            findings = [f for f in findings if not set(f.rows) & withdrawn]
             notes.append(f"reading(s) {sorted(withdrawn)} not named outlier: they lie where "
                          "the local scan finds structure beyond them (not isolated)")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
@@ -330,6 +335,10 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                          "remains at the steps/positions where it acts, so it does not "
                          "explain the located structure")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
+    # What the protocol separates: the effects still testable after the absorbed fractions.
+    protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
+                                       for e in effects})
+    findings = [_as_protocol_allows(f, protocol, not_ident, alpha) for f in findings]
     findings = _merge_outliers(findings)
     final_res = _residual(pb, terms)
     flagged = _flagged(pb, terms)
@@ -355,6 +364,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         residuals_before_ug=(base_res * 1e6).reshape(shape),
         residuals_after_ug=(final_res * 1e6).reshape(shape),
         t_s=ctx.t_s, steps=ctx.steps, positions=ctx.positions, stage_log=stage_log, problem=pb,
+        protocol=protocol.to_json(),
     )
 
 
@@ -537,20 +547,21 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
 
 def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident):
     tests: dict[str, stats.CandidateTest] = {}
-    chosen = {t.effect_id for t in terms if t.effect_id != "outlier"}
+    # A per-reading effect may be accepted again at another reading; any other once.
+    chosen = {t.effect_id for t in terms if not BY_ID[t.effect_id].per_reading}
     EE = stats.sum_sq_columns(E)  # once per stage, not once per candidate and grid value
     for eff in live:
         if eff.effect_id in chosen or eff.effect_id in rejected:
             continue
-        if eff.effect_id == "outlier":
+        if eff.per_reading:
             skip = {r for t in terms for r in t.rows}
             t_row, tn, g = stats.row_stats(U, e, E, pb.row, pb.ctx.n, s, s_null, skip,
                                            pb.shared_t_loading)
             i = int(np.argmax(t_row))
             mult = pb.ctx.n - len(skip)
             lp = float(stats.chi2_logsf(t_row[i], g))
-            tests["outlier"] = stats.CandidateTest(
-                "outlier", lp, mult, float(stats.sidak_log(lp, mult)),
+            tests[eff.effect_id] = stats.CandidateTest(
+                eff.effect_id, lp, mult, float(stats.sidak_log(lp, mult)),
                 stats.sidak_log(stats.chi2_logsf(tn, g), mult), float(i), 0.0, float(t_row[i]))
             continue
         grid = eff.grid(pb.ctx)
@@ -633,10 +644,10 @@ def _refine(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, U: 
 
 def _make_term(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, lifted,
                X: np.ndarray | None = None) -> Term:
-    if eff.effect_id == "outlier":
+    if eff.per_reading:
         i = int(test.theta)
         X = pb.lift(eff.regressors(pb.ctx, float(i)))
-        return Term("outlier", float(i), X, (i,))
+        return Term(eff.effect_id, float(i), X, (i,))
     X = lifted(eff, test.theta) if X is None else X
     return Term(eff.effect_id, test.theta, X, (), test.theta_sd)
 
@@ -695,31 +706,24 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
     if eff.continuous and eff.theta_name:
         sd[eff.theta_name] = term.theta_sd
     axes = eff.axes(coef, se)
-    if pb.mode == "norm" and eff.effect_id == "outlier":
+    if pb.mode == "norm" and eff.per_reading:
         axes = ["norm"]  # a |g| residual has no axis
     conf = []
     for c in eff.confusers:
         if c in tests:
             conf.append({"effect": c, "p_before": float(f"{tests[c].p_adj:.3g}"),
-                         "p_after": None, "how_told_apart": _told_apart(eff.effect_id, c)})
-    test_name = "score test after projecting out the model, min-p over candidates " \
-        "(parametric bootstrap)"
-    if eff.effect_id == "outlier":
-        test_name = "leave-one-reading-out statistic, max over readings, min-p over candidates"
-    elif eff.continuous:
-        test_name = (f"score test profiled over {eff.theta_name} (grid, then refined), "
-                     "min-p over candidates (parametric bootstrap)")
+                         "p_after": None, "how_told_apart": how_told_apart(eff, BY_ID[c])})
     return Finding(
         effect=eff.effect_id, axes=axes, where=where_of(pb, contrib, term.rows),
-        explanation=_sentence(eff, params, sd, axes), parameters=_round(params),
+        explanation=_sentence(eff, params, sd, axes, pb.ctx), parameters=_round(params),
         parameter_sd=_round(sd), rmse_before_ug=rms_b, rmse_after_ug=rms_a,
         heldout_rmse_before_ug=ho_b, heldout_rmse_after_ug=ho_a, p_value=p_family,
-        test=test_name, confusers=conf, theta=term.theta, rows=list(term.rows),
+        test=eff.test_name(), confusers=conf, theta=term.theta, rows=list(term.rows),
     )
 
 
-def _sentence(eff: EffectModule, params, sd, axes) -> str:
-    text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES))
+def _sentence(eff: EffectModule, params, sd, axes, ctx) -> str:
+    text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES), ctx)
     return text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")
 
 
@@ -727,33 +731,58 @@ def _round(d: dict[str, float]) -> dict[str, float]:
     return {k: float(f"{v:.4g}") if np.isfinite(v) else None for k, v in d.items()}
 
 
-TOLD_APART = {
-    frozenset({"thermal_lag", "thermal_hysteresis"}):
-        "a lag decays with time since the step, hysteresis persists through the plateau",
-    frozenset({"thermal_lag", "bias_drift"}):
-        "a lag follows each step and decays; drift grows with elapsed time",
-    frozenset({"thermal_hysteresis", "bias_drift"}):
-        ("hysteresis flips with heating/cooling at revisited temperatures; "
-         "drift is monotonic in time"),
-    frozenset({"thermal_lag", "temperature_rate"}):
-        "a lag's shape is locked to the model's ∂output/∂T (one amplitude for all axes); "
-        "a rate effect has free per-axis gains",
-    frozenset({"scale_nonlinearity", "cross_coupling"}):
-        "own-axis a², a³ versus products of two axes' inputs",
-    frozenset({"session_offset", "thermal_hysteresis"}):
-        "a session jump happens once; hysteresis flips with each change of direction",
-    frozenset({"session_offset", "bias_drift"}):
-        "a session offset is a step in time; drift is a ramp",
-}
+def _as_protocol_allows(f: Finding, protocol: Protocol, not_ident: dict[str, dict[str, str]],
+                        alpha: float) -> Finding:
+    """A finding as this recording's protocol lets it be stated (issue 10).
 
-
-def _told_apart(a: str, b: str) -> str:
-    return TOLD_APART.get(frozenset({a, b}), "compared by their p-values after projection")
+    A named member of a withholding confusion (members each testable here, not from each
+    other under this protocol) whose confuser in that confusion was significant too before
+    the term was added (p ≤ α: it explained the same structure) becomes ``not_identifiable``
+    with every candidate in ``where`` and the text. The term stays in the model, since
+    either candidate removes that structure, but no parameters or model-file term are given
+    for a name the data cannot support. Other confusions that hold the effect add their
+    untestable alternatives to ``confusers``.
+    """
+    if f.effect not in BY_ID:
+        return f
+    conf = protocol.withheld_with(f.effect)
+    rivals = {c["effect"] for c in f.confusers
+              if c.get("p_before") is not None and c["p_before"] <= alpha}
+    if conf is not None and not rivals & set(conf.alternatives(f.effect)):
+        conf = None  # the data told them apart here: the rival did not explain it
+    if conf is None:
+        # Only alternatives with no regressor: one that has one was tested (its p is in
+        # ``confusers``) or cannot be in this recording's data (absorbed, dT/dt ≈ 0).
+        extra = [{"effect": alt, "p_before": None, "p_after": None,
+                  "how_told_apart": f"not separable in this protocol: {c.why}"}
+                 for c in protocol.not_separable for alt in c.alternatives(f.effect)
+                 if alt in BY_ID and not BY_ID[alt].observable
+                 and alt not in {x["effect"] for x in f.confusers}]
+        return replace(f, confusers=f.confusers + extra) if extra else f
+    candidates = [f.effect] + [e for e in conf.alternatives(f.effect)
+                               if e in rivals or (e in BY_ID and not BY_ID[e].observable)]
+    for c in candidates:
+        others = ", ".join(e for e in candidates if e != c)
+        not_ident.setdefault(c, {"effect": c, "why": f"not separable from {others} in this "
+                                 f"protocol: {conf.why}", "experiment": BY_ID[c].experiment})
+    return replace(
+        f, effect="not_identifiable", where={**f.where, "candidates": candidates},
+        explanation=(f"Structure beyond noise that {' or '.join(candidates)} explain alike "
+                     f"(each significant here): {conf.why}. It is modelled (with the "
+                     f"{f.effect} term) but not named."),
+        parameters={}, parameter_sd={}, confusers=[])
 
 
 def _merge_outliers(findings: list[Finding]) -> list[Finding]:
-    """All flagged readings become one ``outlier`` finding, at the place of the first."""
-    outs = [f for f in findings if f.effect == "outlier"]
+    """All readings a per-reading effect flagged become one finding, at the place of the first."""
+    ids = [f.effect for f in findings if f.effect in BY_ID and BY_ID[f.effect].per_reading]
+    for eid in dict.fromkeys(ids):
+        findings = _merge_rows(findings, eid)
+    return findings
+
+
+def _merge_rows(findings: list[Finding], eid: str) -> list[Finding]:
+    outs = [f for f in findings if f.effect == eid]
     if len(outs) <= 1:
         return findings
     first = outs[0]
@@ -763,7 +792,7 @@ def _merge_outliers(findings: list[Finding]) -> list[Finding]:
     t_lo = min(f.where["time_s"][0] for f in outs)
     t_hi = max(f.where["time_s"][1] for f in outs)
     merged = Finding(
-        effect="outlier", axes=sorted({a for f in outs for a in f.axes}),
+        effect=eid, axes=sorted({a for f in outs for a in f.axes}),
         where={"steps": steps, "positions": pos, "time_s": [t_lo, t_hi], "rows": rows},
         explanation=first.explanation.replace("1 reading(s)", f"{len(rows)} reading(s)", 1),
         parameters={**first.parameters, "n_rows": float(len(rows))},
@@ -774,7 +803,7 @@ def _merge_outliers(findings: list[Finding]) -> list[Finding]:
         p_value=first.p_value, test=first.test, confusers=first.confusers, rows=rows)
     out, placed = [], False
     for f in findings:
-        if f.effect == "outlier":
+        if f.effect == eid:
             if not placed:
                 out.append(merged)
                 placed = True

@@ -16,6 +16,9 @@ Kinds (JSON object ``{"kind": ..., ...}``, parameters in g-based SI units):
   temperature; the term documents the lag)
 
 Terms that need context compensate does not have are identity there and say so.
+Each effect module owns its term (``extension_fields``, ``extension_term_g``,
+:mod:`calibration.discrepancy.effects.base`); this module only writes and registers
+them, so no effect id is named here.
 """
 
 from __future__ import annotations
@@ -25,13 +28,11 @@ from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy.effects import ALL_EFFECTS
+from calibration.discrepancy.effects.base import EffectModule
 from calibration.extensions import register_extension
 
 PREFIX = "discrepancy."
-
-
-def _vec(spec: Mapping[str, Any], key: str) -> np.ndarray:
-    return np.broadcast_to(np.asarray(spec.get(key, 0.0), float), (3,))
 
 
 def _input(calibrated: np.ndarray) -> np.ndarray:
@@ -56,46 +57,24 @@ def _absorbed(spec: Mapping[str, Any], a: np.ndarray, temperature_c: np.ndarray)
     return np.einsum("nj,ajp,np->na", u, coef, P)
 
 
-def term_scale_nonlinearity(spec: Mapping[str, Any], a: np.ndarray) -> np.ndarray:
-    return _vec(spec, "k2_per_g") * a**2 + _vec(spec, "k3_per_g2") * a**3
+def applier(eff: EffectModule):
+    """The ``compensate`` function of an effect's term: remove what the base did not absorb.
+
+    Effects without an input-only term (``extension_term_g`` None: they need time or the die
+    temperature) are identity there and say so in the module docstring.
+    """
+    def apply(spec, raw_g, temperature_c, calibrated):
+        a = _input(calibrated)
+        term = eff.extension_term_g(spec, a)
+        if term is None:
+            return calibrated.copy()
+        return calibrated - (term - _absorbed(spec, a, temperature_c))
+    return apply
 
 
-def term_cross_coupling(spec: Mapping[str, Any], a: np.ndarray) -> np.ndarray:
-    xy = float(spec.get("k_xy_per_g", 0.0)) * a[:, 0] * a[:, 1]
-    xz = float(spec.get("k_xz_per_g", 0.0)) * a[:, 0] * a[:, 2]
-    yz = float(spec.get("k_yz_per_g", 0.0)) * a[:, 1] * a[:, 2]
-    return np.column_stack([xy + xz, xy + yz, xz + yz])
-
-
-def apply_scale_nonlinearity(spec, raw_g, temperature_c, calibrated):
-    a = _input(calibrated)
-    return calibrated - (term_scale_nonlinearity(spec, a) - _absorbed(spec, a, temperature_c))
-
-
-def apply_cross_coupling(spec, raw_g, temperature_c, calibrated):
-    a = _input(calibrated)
-    return calibrated - (term_cross_coupling(spec, a) - _absorbed(spec, a, temperature_c))
-
-
-def apply_hysteresis(spec, raw_g, temperature_c, calibrated):
-    d = float(spec.get("direction", 0.0))
-    return calibrated - d * _vec(spec, "h_g")[None, :]
-
-
-def apply_identity(spec, raw_g, temperature_c, calibrated):
-    return calibrated.copy()
-
-
-KINDS = {
-    PREFIX + "scale_nonlinearity": apply_scale_nonlinearity,
-    PREFIX + "cross_coupling": apply_cross_coupling,
-    PREFIX + "thermal_hysteresis": apply_hysteresis,
-    PREFIX + "bias_drift": apply_identity,
-    PREFIX + "thermal_lag": apply_identity,
-    PREFIX + "session_offset": apply_identity,
-    PREFIX + "temperature_rate": apply_identity,
-    PREFIX + "vibration_rectification": apply_identity,
-}
+EXTENDING: dict[str, EffectModule] = {
+    PREFIX + e.effect_id: e for e in ALL_EFFECTS if e.writes_extension}
+KINDS = {kind: applier(eff) for kind, eff in EXTENDING.items()}
 for _kind, _fn in KINDS.items():
     register_extension(_kind, _fn)
 
@@ -104,41 +83,25 @@ def extension_specs(diag: Any) -> list[dict[str, Any]]:
     """JSON extension objects for a :class:`~calibration.discrepancy.Diagnosis`'s findings."""
     out: list[dict[str, Any]] = []
     for f in diag.findings:
-        kind = PREFIX + f.effect
-        if kind not in KINDS:
+        eff = EXTENDING.get(PREFIX + f.effect)
+        if eff is None:
             continue
-        p = f.parameters
-        spec: dict[str, Any] = {"kind": kind, "source": "soakcal diagnose",
+        spec: dict[str, Any] = {"kind": PREFIX + f.effect, "source": "soakcal diagnose",
                                 "explanation": f.explanation}
-        ax = ("x", "y", "z")
-        if f.effect == "scale_nonlinearity":
-            spec["k2_per_g"] = [p[f"k2_{a}_ug_per_g2"] * 1e-6 for a in ax]
-            spec["k3_per_g2"] = [p[f"k3_{a}_ug_per_g3"] * 1e-6 for a in ax]
-            _add_absorbed(spec, diag, term_scale_nonlinearity)
-        elif f.effect == "cross_coupling":
-            for pair in ("xy", "xz", "yz"):
-                spec[f"k_{pair}_per_g"] = p[f"k_{pair}_ug_per_g2"] * 1e-6
-            _add_absorbed(spec, diag, term_cross_coupling)
-        elif f.effect == "thermal_hysteresis":
-            spec["h_g"] = [p[f"h_{a}_ug"] * 1e-6 for a in ax]
-            spec["direction"] = 0.0  # set +1/−1 for the leg being compensated
-        elif f.effect == "bias_drift":
-            spec["rate_g_per_h"] = [p[f"rate_{a}_ug_per_h"] * 1e-6 for a in ax]
-        elif f.effect == "thermal_lag":
-            spec["tau_s"] = p["tau_s"]
-        else:
-            spec["parameters"] = dict(p)
+        spec.update(eff.extension_fields(f.parameters))
+        if eff.extension_absorbed:
+            _add_absorbed(spec, diag, eff)
         out.append(spec)
     return out
 
 
-def _add_absorbed(spec: dict[str, Any], diag: Any, term) -> None:
+def _add_absorbed(spec: dict[str, Any], diag: Any, eff: EffectModule) -> None:
     """Weighted projection of the term on the base design (reference mode), stored per axis."""
     pb = getattr(diag, "problem", None)
     if pb is None or pb.mode != "reference":
         return
     n = pb.ctx.n
-    contrib = term(spec, pb.ctx.input_g).ravel()
+    contrib = eff.extension_term_g(spec, pb.ctx.input_g).ravel()
     k = pb.X0.shape[1] // 3
     Xw = pb.X0 * pb.w[:, None]
     beta = np.linalg.lstsq(Xw, contrib * pb.w, rcond=None)[0]

@@ -10,10 +10,11 @@ positions in a different order on each plateau separates them:
   (``2n`` for odd ``n``) every position takes every slot once and follows every other
   position once (first-order carry-over balanced), with the labels permuted by the seed.
 
-The engine (owned by the campaign engine's maintainers) must plumb this: call
-:func:`position_order` when a campaign is planned, visit ``order[step]`` on each step and
-record the position index (``position`` column, already in recording v1) and
-``order_seed`` / ``order_scheme`` in the recording's header so a diagnosis can rebuild it.
+This module is the one place those orders are drawn: the engine's
+``position_order`` (``service/engine/soak_order.py``, which also has the least-travel
+order) calls :func:`position_order` and visits ``order[step]`` on each step; the
+recording carries ``position`` and ``visit`` (the row's index within its step), and the
+campaign's spec the scheme and seed, so a diagnosis can rebuild the order.
 :func:`time_and_position_confounded` is what the diagnosis checks today.
 """
 

@@ -30,11 +30,18 @@ def text_report(diag: Any) -> str:
         if f.effect != "unexplained":  # nothing is modelled for it: no before/after
             lines.append(f"   RMS {f.rmse_before_ug:.1f} → {f.rmse_after_ug:.1f} µg; held out "
                          f"{f.heldout_rmse_before_ug:.1f} → {f.heldout_rmse_after_ug:.1f} µg")
+        alike: dict[str, list[str]] = {}  # alternatives the protocol cannot rule out, by why
         for c in f.confusers:
+            if c.get("p_before") is None:
+                alike.setdefault(c["how_told_apart"], []).append(c["effect"])
+                continue
             after = c.get("p_after")
             lines.append(f"   told apart from {c['effect']} (p {c['p_before']:.2g}"
                          + (f" → {after:.2g} after this term" if after is not None else "")
                          + f"): {c['how_told_apart']}")
+        for why, effs in alike.items():
+            lines.append(f"   not told apart from {', '.join(effs)}: {why}")
+    lines += protocol_lines(getattr(diag, "protocol", None) or {})
     if diag.not_identifiable:
         lines.append("Not identifiable in this recording:")
         for n in diag.not_identifiable:
@@ -42,6 +49,27 @@ def text_report(diag: Any) -> str:
     for note in diag.notes:
         lines.append(f"Note: {note}")
     return "\n".join(lines)
+
+
+def protocol_lines(pr: dict[str, Any]) -> list[str]:
+    """The short "what this protocol separates" section (docs/diagnosis.md §11)."""
+    if not pr:
+        return []
+    temp = ("no temperature recorded" if pr["temperature"] == "none" else
+            f"{pr['temperature']} over {pr['n_plateaus']} plateau(s) ({pr['temperature_source']})")
+    sessions = ("no session column" if pr["sessions"] is None
+                else f"{pr['sessions']} session(s) recorded")
+    lines = ["Protocol: " + "; ".join([
+        temp, f"position order {pr['position_order']} (from {pr['order_from']})",
+        "references" if pr["references"] else "no references (norm mode)", sessions,
+        "oblique positions" if pr["oblique_positions"] else "axis-aligned positions only"])]
+    if pr["separable"]:
+        lines.append(f"  separates: {', '.join(pr['separable'])}")
+    for c in pr["not_separable"]:
+        tail = " (a finding naming one is reported as not identifiable)" \
+            if c["finding_withheld"] else ""
+        lines.append(f"  cannot separate {' / '.join(c['effects'])}: {c['why']}{tail}")
+    return lines
 
 
 def write_diagnosis_figures(diag: Any, out_dir: str | Path) -> list[Path]:

@@ -16,7 +16,7 @@ from starlette.concurrency import run_in_threadpool
 from calibration.placement import HAND_HELD_TOL_DEG
 from service.api import auth
 from service.api.deps import DbIdPath, SessionDep
-from service.api.recording_csv import render_recording_csv
+from service.api.recording_csv import render_probes_csv, render_recording_csv
 from service.api.schemas import CampaignCreate, CampaignOut, CampaignState
 from service.campaigns import (
     CampaignNotFound,
@@ -28,7 +28,7 @@ from service.campaigns import (
     mount_errors,
     plan_check,
 )
-from service.db.models import Campaign, Measurement, Rig
+from service.db.models import Campaign, Measurement, Rig, SoakProbe
 from service.engine.states import TERMINAL
 
 router = APIRouter(prefix="/api/v1/campaigns", tags=["campaigns"])
@@ -121,15 +121,7 @@ def recording_csv(
     a one-sensor campaign takes its own serial or nothing.
     """
     campaign = _get_or_404(session, campaign_id)
-    serials = campaign_serials(campaign.spec or {}, campaign.sensor)
-    if sensor is None and len(serials) > 1:
-        raise HTTPException(status_code=422, detail=[field_error(
-            ("query", "sensor"), f"campaign {campaign_id} has {len(serials)} sensors: "
-            f"choose one of {', '.join(serials)}", None)])
-    if sensor is not None and sensor not in serials:
-        raise HTTPException(status_code=422, detail=[field_error(
-            ("query", "sensor"), f"campaign {campaign_id} has no sensor {sensor!r}: "
-            f"choose one of {', '.join(serials)}", sensor)])
+    serials = _sensor_choice(campaign_id, campaign, sensor)
     query = select(Measurement).where(Measurement.campaign_id == campaign_id)
     if len(serials) > 1:
         query = query.where(Measurement.sensor == sensor)
@@ -141,6 +133,52 @@ def recording_csv(
     return PlainTextResponse(
         render_recording_csv(rows, HAND_HELD_TOL_DEG if hand_placed else None),
         media_type="text/csv; charset=utf-8",
+        headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
+    )
+
+
+def _sensor_choice(campaign_id: int, campaign: Any, sensor: str | None) -> list[str]:
+    """The campaign's serials; 422 naming the choices when ``sensor`` is missing (several
+    sensors) or not one of them."""
+    serials = campaign_serials(campaign.spec or {}, campaign.sensor)
+    if sensor is None and len(serials) > 1:
+        raise HTTPException(status_code=422, detail=[field_error(
+            ("query", "sensor"), f"campaign {campaign_id} has {len(serials)} sensors: "
+            f"choose one of {', '.join(serials)}", None)])
+    if sensor is not None and sensor not in serials:
+        raise HTTPException(status_code=422, detail=[field_error(
+            ("query", "sensor"), f"campaign {campaign_id} has no sensor {sensor!r}: "
+            f"choose one of {', '.join(serials)}", sensor)])
+    return serials
+
+
+@router.get(
+    "/{campaign_id}/probes.csv",
+    response_class=PlainTextResponse,
+    responses={**_NOT_FOUND, 200: {"content": {"text/csv": {}},
+                                   "description": "soak probes, recording-format rows"}},
+    dependencies=[Depends(auth.viewer)],
+)
+def probes_csv(
+    campaign_id: DbIdPath, session: SessionDep,
+    sensor: Annotated[str | None, Query(
+        max_length=64, description="which sensor of a several-sensor campaign")] = None,
+) -> PlainTextResponse:
+    """The soak probes so far (die-temperature probes taken while soaking), one sensor's,
+    time order: t_s, step, setpoint_c, chamber_c, sensor_c, ref_x/y/z, ax/ay/az, n.
+
+    The measurements the campaign's rate gain (``rate_gain: measured``) comes from.
+    Sensor choice as for ``recording.csv``.
+    """
+    campaign = _get_or_404(session, campaign_id)
+    serials = _sensor_choice(campaign_id, campaign, sensor)
+    query = select(SoakProbe).where(SoakProbe.campaign_id == campaign_id)
+    if len(serials) > 1:
+        query = query.where(SoakProbe.sensor == sensor)
+    rows = session.scalars(query.order_by(SoakProbe.t_s, SoakProbe.id))
+    name = f"campaign-{campaign_id}-probes" + (f"-{sensor}" if len(serials) > 1 else "")
+    return PlainTextResponse(
+        render_probes_csv(rows), media_type="text/csv; charset=utf-8",
         headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
     )
 

@@ -144,6 +144,37 @@ class Measurement(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+class SoakProbe(Base):
+    """One die-temperature probe taken during a soak (migration 0006_soak_probes).
+
+    The soak decision's own measurements: the campaign measures the sensor's
+    ``temperature_rate`` gain from them (service/engine/soak_rate.py) and a resumed
+    campaign reloads them. ``pose`` is the table's commanded angles (deg, "a,b[,c]"),
+    the key under which probes of different soaks compare (``ref_*`` its gravity
+    reference, NULL when the table's geometry gives none); ``soak_start_t_s`` tells one
+    soak of a step from a later re-soak of the same step.
+    """
+
+    __tablename__ = "soak_probes"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaigns.id"), index=True)
+    sensor: Mapped[str | None] = mapped_column(String(64))
+    step: Mapped[int] = mapped_column(Integer)
+    soak_start_t_s: Mapped[float] = mapped_column(Float)
+    pose: Mapped[str] = mapped_column(String(64))
+    t_s: Mapped[float] = mapped_column(Float)
+    setpoint_c: Mapped[float] = mapped_column(Float)
+    chamber_c: Mapped[float | None] = mapped_column(Float)
+    sensor_c: Mapped[float | None] = mapped_column(Float)
+    ref_x: Mapped[float | None] = mapped_column(Float)
+    ref_y: Mapped[float | None] = mapped_column(Float)
+    ref_z: Mapped[float | None] = mapped_column(Float)
+    ax: Mapped[float] = mapped_column(Float)
+    ay: Mapped[float] = mapped_column(Float)
+    az: Mapped[float] = mapped_column(Float)
+    n: Mapped[int] = mapped_column(Integer)
+
+
 class Calibration(Base):
     __tablename__ = "calibrations"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)

@@ -19,13 +19,19 @@ def calibrate_columns(
     """Fit the thermal SFEM model; return the Calibration row fields (not yet stored).
 
     Keys: valid_lo_c, valid_hi_c, rmse_ug, model_version, model, report, provenance.
+    ``provenance["rate_gain_ug_per_c_per_min"]`` (x, y, z), when present, is the
+    sensor's measured rate gain: the fit subtracts k·dT/dt from the rows first
+    (``calibration.thermal.fit_campaign``); it stays in the model's provenance.
     """
     from calibration.recording import Recording
     from calibration.thermal import fit_campaign
 
     rec = Recording.from_columns({k: np.asarray(v, float) for k, v in columns.items()},
                                  path=provenance.get("recording", "<campaign>"))
-    fit = fit_campaign(rec)
+    # The campaign's measured temperature_rate gain (runner: soak_rate.py), when it has one.
+    k = provenance.get("rate_gain_ug_per_c_per_min")
+    fit = fit_campaign(rec, rate_gain_ug_per_c_per_min=None if k is None
+                       else np.asarray(k, float))
     model = fit.model
     valid = model.valid_c or (math.nan, math.nan)
     model_doc = model_document(model)

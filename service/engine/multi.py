@@ -10,6 +10,11 @@ bridge timeout), refuses for good (a wrong identity, a bridge ``ERR``), or reads
 out of range (:func:`reading_problem`) raises :class:`SensorDropped`; the engine
 records the reason and goes on with the others.
 
+The sensors of a position are read at once (:func:`read_all`): each bridge
+captures on its own, so a position of eight sensors takes about one capture
+time, not eight, on the one injectable clock (the simulated bridges overlap in
+virtual time as real ones do on the wall).
+
 The stability decision covers every sensor: each die gets its own decision
 (seed Sec. 3's soak rule, :func:`service.engine.stability.decide`) and the
 soak ends when all are stable (:func:`slowest_decision`).
@@ -17,6 +22,7 @@ soak ends when all are stable (:func:`slowest_decision`).
 
 from __future__ import annotations
 
+import asyncio
 import math
 from collections.abc import Awaitable, Callable, Sequence
 from typing import TypeVar
@@ -62,6 +68,32 @@ async def sensor_call(clock: Clock, policy: FaultPolicy, check_abort: Callable[[
             delay_s *= 2.0
     raise SensorDropped(serial, f"{label}: no answer after {policy.retry_attempts} tries "
                                 f"(last fault: {last})")
+
+
+async def read_all(serials: Sequence[str], read: Callable[[str], Awaitable[T]]
+                   ) -> dict[str, T | SensorDropped]:
+    """``read(serial)`` for every serial concurrently: the result, or the
+    :class:`SensorDropped` it raised (the caller drops it; the others' readings stand).
+
+    Any other exception (an abort, a cancellation, an engine bug) cancels the reads
+    still running and is raised once they have all ended, so no capture outlives it.
+    """
+
+    async def one(serial: str) -> T | SensorDropped:
+        try:
+            return await read(serial)
+        except SensorDropped as exc:
+            return exc
+
+    tasks = [asyncio.ensure_future(one(s)) for s in serials]
+    try:
+        results = await asyncio.gather(*tasks)
+    except BaseException:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        raise
+    return dict(zip(serials, results, strict=True))
 
 
 def reading_problem(acq: Acquisition, range_g: float) -> str | None:

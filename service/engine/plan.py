@@ -18,6 +18,12 @@ acquisition the following ``Save`` stores). Resuming is a replay of the same
 plan that skips what is already stored: pass the stored (step, position)
 pairs as ``done``; a step with every position stored is skipped entirely, a
 step with some stored is re-ramped (idempotent) and re-soaked as ``resumed``.
+
+A step's positions are visited in the spec's ``position_order``
+(:func:`service.engine.soak_order.step_orders`: least table travel, a seeded
+random or balanced order per plateau, or the schedule's). The order of every
+step is computed from the whole campaign, never from what is stored, so a
+resumed step visits its missing positions in the order it had.
 """
 
 from __future__ import annotations
@@ -87,14 +93,15 @@ class Settle:
 class Acquire:
     """Average ``n_samples`` raw samples; the interpreter returns the acquisition.
 
-    ``sensor``: which sensor of a several-sensor campaign (``None``: the one sensor);
-    the interpreter returns ``None`` for a sensor it has dropped.
+    ``sensors``: a several-sensor campaign reads these sensors *at once* (one capture
+    time for all, issue 12); the interpreter returns ``{serial: acquisition}`` with
+    ``None`` for a sensor it has dropped. Empty: the one sensor, one acquisition.
     """
 
     step: int
     position: int
     n_samples: int
-    sensor: str | None = None
+    sensors: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -130,18 +137,46 @@ class PlanSpec:
     ramp_c_per_min: float = 1.0
     range_g: float = 2.0
     odr_hz: float = 62.5
+    # The offline simulator's default is the schedule's order (its recordings feed
+    # benchmarks whose figures were taken in that order); the engine's is "travel".
+    position_order: str = "table"
+    position_order_seed: int | None = None
+
+
+def visit_orders(spec: Any, refs: np.ndarray,
+                 angles_deg: np.ndarray | None = None) -> list[list[int]]:
+    """The order each step visits its positions (``spec.position_order``, default table).
+
+    ``angles_deg`` (n, axes): the rig's table pose of each reference (default the
+    3-axis geometry of ``drivers.geometry``); only the ``travel`` order reads it.
+    """
+    from service.engine.soak_order import angles_of, step_orders
+
+    method = str(getattr(spec, "position_order", "table"))
+    refs = np.asarray(refs, float)
+    n_steps = len(spec.setpoints_c)
+    if method != "travel":
+        angles_deg = np.zeros((refs.shape[0], 1))
+    elif angles_deg is None:
+        angles_deg = angles_of(refs)
+    return step_orders(np.asarray(angles_deg, float), n_steps, method,
+                       getattr(spec, "position_order_seed", None))
 
 
 def campaign_plan(spec: Any, refs: np.ndarray,
-                  done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] = ()) -> Plan:
+                  done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] = (),
+                  angles_deg: np.ndarray | None = None) -> Plan:
     """The campaign, once: ramp, soak, then move/settle/acquire/save per position, then fit.
 
     ``spec`` needs ``setpoints_c``, ``samples_per_position``, ``settle_s``,
     ``ramp_c_per_min``, ``range_g`` and ``odr_hz`` (a :class:`PlanSpec` or the
-    engine's RunSpec); ``refs`` is the (n, 3) schedule of unit gravity vectors.
-    ``sensors`` (two or more serials, issue 12): every position is acquired once per
-    sensor (one ``Acquire`` each, in order) and saved by one ``Save`` carrying them all,
-    so the interpreter stores a position for every sensor in one transaction.
+    engine's RunSpec), and may give ``position_order`` / ``position_order_seed``;
+    ``refs`` is the (n, 3) schedule of unit gravity vectors; ``angles_deg`` the
+    rig's table pose of each (for the ``travel`` order; :func:`visit_orders`).
+    ``sensors`` (two or more serials, issue 12): every position is acquired by one
+    ``Acquire`` naming them all (read concurrently) and saved by one ``Save``
+    carrying them all, so the interpreter stores a position for every sensor in one
+    transaction.
     """
     several = tuple(str(s) for s in sensors) if len(sensors) > 1 else ()
     stored = set(done)
@@ -149,10 +184,11 @@ def campaign_plan(spec: Any, refs: np.ndarray,
     n_pos = refs.shape[0]
     setpoints_c = [float(v) for v in spec.setpoints_c]
     lo_c, hi_c = min(setpoints_c), max(setpoints_c)
+    orders = visit_orders(spec, refs, angles_deg)
     yield Configure(float(spec.range_g), float(spec.odr_hz))
     yield Checkpoint()
     for step, setpoint_c in enumerate(setpoints_c):
-        missing = [p for p in range(n_pos) if (step, p) not in stored]
+        missing = [p for p in orders[step] if (step, p) not in stored]
         if not missing:
             continue
         yield SetChamber(step, setpoint_c, float(spec.ramp_c_per_min))
@@ -165,10 +201,7 @@ def campaign_plan(spec: Any, refs: np.ndarray,
             yield Settle(float(spec.settle_s))
             next_pos = missing[k + 1] if k + 1 < len(missing) else n_pos
             if several:
-                by_sensor = {}
-                for serial in several:
-                    by_sensor[serial] = yield Acquire(step, pos, int(spec.samples_per_position),
-                                                      serial)
+                by_sensor = yield Acquire(step, pos, int(spec.samples_per_position), several)
                 yield Save(step, pos, setpoint_c, ref, by_sensor, next_pos, several)
                 continue
             acquisition = yield Acquire(step, pos, int(spec.samples_per_position))
@@ -189,6 +222,9 @@ def interpret(plan: Plan, handle: Any) -> None:
 # --- the dry-run interpreter ------------------------------------------------------------
 DEFAULT_MOVE_S = 12.0  # table slew + in-position between orientations (seed Table 3 rigs)
 DEFAULT_START_C = 23.0
+# Beyond the slew itself a move waits for in-position: the engine polls the table every
+# second (runner.TURNTABLE_POLL_S), so on average ~1 s more than the trapezoid.
+IN_POSITION_S = 1.0
 
 
 @dataclass
@@ -206,8 +242,9 @@ class DryRun:
 
 
 def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None = None,
-            move_s: float = DEFAULT_MOVE_S, start_c: float = DEFAULT_START_C,
-            done: Iterable[tuple[int, int]] = ()) -> DryRun:
+            move_s: float | None = DEFAULT_MOVE_S, start_c: float = DEFAULT_START_C,
+            done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] | None = None,
+            angles_deg: np.ndarray | None = None) -> DryRun:
     """Interpret the campaign plan without hardware: predicted duration and counts.
 
     ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict)
@@ -215,11 +252,16 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
     ``refs`` defaults to the spec's named schedule; ``soak_s`` to the nominal
     soak (``soak_min`` × 60: the predictive policy usually ends earlier, so
     the prediction is an upper estimate); ``move_s`` is the time per table
-    move; ``start_c`` the chamber's temperature at the start. Ramps are
-    predicted at the commanded rate, acquisitions at ``n_samples / odr_hz``.
-    Pass ``done`` (stored (step, position) pairs) to predict the rest of a
-    resumed campaign.
+    move, or ``None`` for the table's own travel: each move's slowest axis on
+    the trapezoidal profile of :mod:`service.engine.soak_order` from the pose
+    before (home at the start), plus :data:`IN_POSITION_S`, so the position
+    order's saving is in the figure; ``start_c`` the chamber's temperature at
+    the start. Ramps are predicted at the commanded rate, acquisitions at
+    ``n_samples / odr_hz`` once per position however many sensors (they are read
+    concurrently; ``sensors`` default the spec's). Pass ``done`` (stored (step,
+    position) pairs) to predict the rest of a resumed campaign.
     """
+    from service.engine.soak_order import angles_of, axis_move_s
     from service.engine.spec import parse_spec, schedule_refs
 
     if isinstance(spec, dict):
@@ -228,6 +270,20 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
         refs = schedule_refs(spec.positions)
     if soak_s is None:
         soak_s = float(spec.stability.soak_s)
+    if sensors is None:
+        named = getattr(spec, "extra", {}).get("sensors")
+        sensors = [str(v) for v in named] if isinstance(named, list) else []
+    refs = np.asarray(refs, float)
+    poses = angles_of(refs) if angles_deg is None else np.asarray(angles_deg, float)
+    pose_of = {tuple(np.round(r, 12)): poses[i] for i, r in enumerate(refs)}
+    here = {"deg": np.zeros(poses.shape[1])}
+
+    def travel_move_s(ref_g: tuple[float, float, float]) -> float:
+        to = pose_of[tuple(np.round(np.asarray(ref_g, float), 12))]
+        dt_s = float(axis_move_s(to - here["deg"], *_table_limits()).max())
+        here["deg"] = to
+        return dt_s + IN_POSITION_S
+
     state = {"c": float(start_c)}
     odr_hz = float(spec.odr_hz)
     out = DryRun(0.0, 0, int(np.asarray(refs).shape[0]), 0, 0.0, 0.0, 0.0)
@@ -244,14 +300,22 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
             out.soak_s += soak_s
             out.steps[-1]["soak_s"] = soak_s
         elif isinstance(msg, Move | Settle | Acquire):
-            dt_s = (move_s if isinstance(msg, Move) else msg.settle_s if isinstance(msg, Settle)
-                    else msg.n_samples / odr_hz)
+            if isinstance(msg, Move):
+                dt_s = travel_move_s(msg.ref_g) if move_s is None else move_s
+            else:
+                dt_s = msg.settle_s if isinstance(msg, Settle) else msg.n_samples / odr_hz
             out.positions_s += dt_s
             out.steps[-1]["positions_s"] += dt_s
         elif isinstance(msg, Save):
             out.n_saves += 1
         return None
 
-    interpret(campaign_plan(spec, refs, done), handle)
+    interpret(campaign_plan(spec, refs, done, sensors, poses), handle)
     out.duration_s = out.ramp_s + out.soak_s + out.positions_s
     return out
+
+
+def _table_limits() -> tuple[float, float]:
+    from service.engine.soak_order import DEFAULT_ACCEL_DEG_PER_S2, DEFAULT_SLEW_DEG_PER_S
+
+    return DEFAULT_SLEW_DEG_PER_S, DEFAULT_ACCEL_DEG_PER_S2

@@ -15,6 +15,18 @@
      "sensors":   [{"url": "/dev/ttyUSB0", "baudrate": 115200}],
      "time_scale": 1}
 
+  Several sensors (issue 12): one bridge per sensor, each sensor entry its own
+  serial port, declaring the sensor it carries by ``serial`` (or by the values
+  of its ``serials`` table, board uid → serial)::
+
+    "sensors": [{"url": "/dev/ttyUSB0", "serial": "SN-1", "serial_binding": "eeprom"},
+                {"url": "/dev/ttyUSB1", "serial": "SN-2", "serial_binding": "eeprom"}]
+
+  A campaign naming several sensors opens the entry of each (and only those),
+  each checked against its own entry's binding. One bridge multiplexing N
+  sensors is not built: the bridge protocol (docs/sensor-bridge.md) has no
+  channel address, so two serials declared by one entry are refused.
+
   ``url`` is ``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200``
   (drivers/modbus_link.py); a sensor ``url`` is anything pyserial's
   ``serial_for_url`` opens (a device, ``socket://host:port``, ``rfc2217://``).
@@ -56,6 +68,9 @@ class RigDevices:
     # Every mounted sensor by serial when the rig was opened for several (``serials``);
     # ``accelerometer`` is then the first of them. Empty for a one-sensor rig.
     accelerometers: dict[str, Accelerometer] = field(default_factory=dict)
+    # A real rig's several sensors: each sensor entry's own binding, by serial (else
+    # ``serial_binding`` applies).
+    bindings: dict[str, SerialBinding] = field(default_factory=dict)
 
 
 @asynccontextmanager
@@ -80,7 +95,7 @@ async def open_rig(
         return
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
     if driver == "modbus":
-        async with _open_modbus_rig(rig, clock) as devices:
+        async with _open_modbus_rig(rig, clock, serials) as devices:
             yield devices
         return
     if driver != "sim":
@@ -176,12 +191,64 @@ def rig_config_errors(
     if not sensors or not isinstance(sensors[0], dict) or not isinstance(
             sensors[0].get("url"), str):
         errors.append(("sensors[0].url", "expected the sensor bridge's serial port or URL"))
-    else:
-        # protocol (bridge / plain stream), framing, serial binding: one validator, the driver's
-        from drivers.sensor_config import sensor_config_errors
+        return errors
+    # protocol (bridge / plain stream), framing, serial binding: one validator, the driver's
+    from drivers.sensor_config import sensor_config_errors
 
-        errors.extend(sensor_config_errors(sensors[0]))
+    declared: dict[str, int] = {}
+    for i, entry in enumerate(sensors):
+        path = f"sensors[{i}]"
+        errors.extend(sensor_config_errors(entry, path))
+        if not isinstance(entry, dict):
+            continue
+        serial = entry.get("serial")
+        if serial is not None and (not isinstance(serial, str) or not serial.strip()):
+            errors.append((f"{path}.serial", "expected the serial of the sensor on this port"))
+            continue
+        for name in _entry_serials(entry):
+            if name in declared:
+                errors.append((f"{path}.serial", f"sensor {name!r} is already declared by "
+                                                 f"sensors[{declared[name]}]"))
+            declared[name] = i
     return errors
+
+
+def _entry_serials(entry: dict[str, Any]) -> list[str]:
+    """The serials one sensor entry declares: ``serial`` and its ``serials`` table's values."""
+    out = [entry["serial"].strip()] if isinstance(entry.get("serial"), str) else []
+    table = entry.get("serials")
+    if isinstance(table, dict):
+        out += [str(v).strip() for v in table.values() if str(v).strip() not in out]
+    return out
+
+
+def sensor_entries(rig: dict[str, Any], serials: Sequence[str]) -> dict[str, int]:
+    """Index of the sensor entry mounting each serial (one bridge per sensor).
+
+    :class:`RigConfigError` naming a serial no entry declares, or two serials behind one
+    entry (a multiplexing bridge is not built: the protocol has no channel address).
+    """
+    entries = rig.get("sensors") or []
+    where: dict[str, int] = {}
+    for i, entry in enumerate(entries):
+        if isinstance(entry, dict):
+            for name in _entry_serials(entry):
+                where.setdefault(name, i)
+    out: dict[str, int] = {}
+    for serial in serials:
+        key = str(serial).strip()
+        if key not in where:
+            raise RigConfigError(
+                f"rig {rig.get('name')!r}: sensor {key!r} is not mounted (declared: "
+                f"{', '.join(sorted(where)) or 'none'})")
+        out[str(serial)] = where[key]
+    shared = [s for s in out if list(out.values()).count(out[s]) > 1]
+    if shared:
+        raise RigConfigError(
+            f"rig {rig.get('name')!r}: sensors {', '.join(shared)} are behind one bridge "
+            f"(sensors[{out[shared[0]]}]); one bridge per sensor is needed (a multiplexing "
+            "bridge is not built)")
+    return out
 
 
 def rig_time_scale(rig: dict[str, Any]) -> float | None:
@@ -193,8 +260,10 @@ def rig_time_scale(rig: dict[str, Any]) -> float | None:
 
 
 @asynccontextmanager
-async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[RigDevices]:
-    """Real drivers on the URLs of the config (see the module docstring)."""
+async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
+                          serials: Sequence[str] = ()) -> AsyncIterator[RigDevices]:
+    """Real drivers on the URLs of the config (see the module docstring); with two or more
+    ``serials``, one driver per serial on the port of the entry that declares it."""
     from drivers.chamber import ModbusChamber
     from drivers.geometry import angles_for_reference
     from drivers.modbus_link import ModbusLink
@@ -222,16 +291,26 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock) -> AsyncIterator[R
                        device_id=int(table_cfg.get("device_id", 1))),
             load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
         )
-    accel = make_accelerometer(parse_sensor_config(sensors[0]), clock)
+    accels: dict[str, Any] = {}
+    bindings: dict[str, SerialBinding] = {}
+    if len(serials) > 1:
+        for serial, i in sensor_entries(rig, serials).items():
+            link = parse_sensor_config(sensors[i], f"sensors[{i}]")
+            accels[serial] = make_accelerometer(link, clock)
+            bindings[serial] = SerialBinding(link.serial_binding, dict(link.serials))
+        accel = accels[str(serials[0])]
+    else:
+        accel = make_accelerometer(parse_sensor_config(sensors[0]), clock)
     try:
         yield RigDevices(chamber, table, accel,
                          lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
-                         binding_for_rig(rig))
+                         binding_for_rig(rig), accelerometers=accels, bindings=bindings)
     finally:
         await chamber.link.close()
         if table is not None:
             await table.link.close()
-        await accel.close()
+        for dev in accels.values() or [accel]:
+            await dev.close()
 
 
 async def _maybe_await(v: Any) -> Any:

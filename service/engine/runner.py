@@ -29,7 +29,7 @@ import numpy as np
 
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
-from service.engine import stability, store
+from service.engine import soak_rate, stability, store
 from service.engine.calibrate import calibrate_columns
 from service.engine.guard import (
     AbortRequested,
@@ -39,7 +39,13 @@ from service.engine.guard import (
     clock_speed,
 )
 from service.engine.identity import verify_sensor
-from service.engine.multi import SensorDropped, reading_problem, sensor_call, slowest_decision
+from service.engine.multi import (
+    SensorDropped,
+    read_all,
+    reading_problem,
+    sensor_call,
+    slowest_decision,
+)
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -98,6 +104,11 @@ class CampaignRunner:
         self._subscribers: list[Subscriber] = []
         self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
         self._last_soak: WaitStable | None = None
+        # Finished (or interrupted) soaks' probes per sensor (None: the one sensor), for the
+        # measured rate gain (soak_rate.py); reloaded from the soak_probes table on resume.
+        self._soaks: dict[str | None, list[soak_rate.SoakProbes]] = {}
+        self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
+        self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
 
     def subscribe(self, fn: Subscriber) -> None:
@@ -200,12 +211,15 @@ class CampaignRunner:
         self._clock0_s = self.clock.now()
         self._touched = True
         self._subscribers.append(EtaSubscriber(self.eta))
+        self._soaks = self._stored_soaks()
         if self.serials:
             missing = [s for s in self.serials if s not in self.dev.accelerometers]
             if missing:
                 raise CampaignFailed(f"rig has no sensor {', '.join(missing)} mounted "
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
-        plan = campaign_plan(spec, self.refs, done, sensors=self.serials)
+        # The table's pose of each position, by this rig's geometry: the travel order's costs.
+        angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
+        plan = campaign_plan(spec, self.refs, done, sensors=self.serials, angles_deg=angles_deg)
         reply: Any = None
         while True:
             try:
@@ -269,7 +283,7 @@ class CampaignRunner:
                     verified = await self._sensor_call(
                         serial, "sensor.identify",
                         lambda acc=acc, serial=serial: verify_sensor(  # type: ignore[misc]
-                            acc, serial, self.dev.serial_binding))
+                            acc, serial, self.dev.bindings.get(serial, self.dev.serial_binding)))
                     self.identities[serial] = verified.as_dict()
                 await self._sensor_call(serial, "accelerometer.configure",
                                         lambda acc=acc: acc.configure(  # type: ignore[misc]
@@ -295,14 +309,16 @@ class CampaignRunner:
         return acq, flags, attempts
 
     async def _measure_live(self, n: int, serials: list[str]) -> dict[str, Any]:
+        """Every live sensor of ``serials`` read at once (:func:`multi.read_all`); the ones
+        that fail are dropped after all have answered (a drop may fail the campaign)."""
+        live = [s for s in serials if s not in self.dropped]
+        got = await read_all(live, lambda serial: self._measure_one(serial, n))
         out: dict[str, Any] = {}
-        for serial in serials:
-            if serial in self.dropped:
-                continue
-            try:
-                out[serial] = await self._measure_one(serial, n)
-            except SensorDropped as exc:
-                self._drop(exc)
+        for serial, result in got.items():
+            if isinstance(result, SensorDropped):
+                self._drop(result)
+            else:
+                out[serial] = result
         return out
 
     async def _configure(self, msg: Configure) -> None:
@@ -333,10 +349,11 @@ class CampaignRunner:
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
 
-    async def _acquire_msg(self, msg: Acquire) -> tuple[Acquisition, list[str], int] | None:
-        if msg.sensor is None:
+    async def _acquire_msg(self, msg: Acquire) -> Any:
+        if not msg.sensors:
             return await self._measure(msg.n_samples)
-        return (await self._measure_live(msg.n_samples, [msg.sensor])).get(msg.sensor)
+        got = await self._measure_live(msg.n_samples, list(msg.sensors))
+        return {serial: got.get(serial) for serial in msg.sensors}
 
     async def _fit(self, _msg: Fit) -> None:
         await self._fitting()
@@ -426,6 +443,10 @@ class CampaignRunner:
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         store.set_cursor(self.sf, self.id, step, "ramp", 0)
         self._cursor = (step, "ramp")
+        if spec.rate_gain == "measured":
+            # Every soak at one pose (home), so every soak's probes compare directly and k
+            # is known from the second soak on (soak_rate.estimate_rate_gain).
+            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
         ch = self.dev.chamber
         await self.guard.call("chamber.set_ramp_rate",
                               lambda: ch.set_ramp_rate(msg.ramp_c_per_min))
@@ -472,13 +493,16 @@ class CampaignRunner:
         ch_pv: list[float] = []
         ch_wsp: list[float] = []
         # Die probes per sensor (the key None: the one sensor of a one-sensor campaign).
-        dies: dict[str | None, tuple[list[float], list[float]]] = self._no_dies()
+        dies: dict[str | None, list[_Probe]] = self._no_dies()
         decision = stability.Decision(False, "started")
+        gains: dict[str | None, float | None] = {}
         while True:
             status = await self._chamber()
             tripped = self.suspenders.check_chamber(status, target_c)
             if tripped is not None:
-                # The die was disturbed: hold until the chamber is back, then soak afresh.
+                # The die was disturbed: hold until the chamber is back, then soak afresh
+                # (the probes so far are still an approach: they stay for the rate gain).
+                self._keep_soak(dies)
                 await self._hold(*tripped, setpoint_c=target_c)
                 start_s = self.clock.now()
                 ch_t, ch_pv, ch_wsp, dies = [], [], [], self._no_dies()
@@ -488,23 +512,28 @@ class CampaignRunner:
             ch_pv.append(status.process_c)
             ch_wsp.append(status.working_setpoint_c)
             if cfg.policy == "predictive":
-                await self._probe_dies(dies, now_s)
+                await self._probe_dies(dies, step, target_c, status, self._t(start_s))
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
-            # Every die decides; the slowest one ends the soak (one die: its own decision).
+            live = {k: v for k, v in dies.items() if k is None or k not in self.dropped}
+            gains = {k: self._rate_gain_for_decision(k, v) for k, v in live.items()}
+            # Every die decides, with its own rate gain; the slowest one ends the soak.
             decision = slowest_decision([
-                stability.decide(cfg, now_s - start_s, settled, np.array(die_t),
-                                 np.array(die_c), sweep_s=sweep_s, n_positions=self.n_pos,
-                                 edge=edge)
-                for key, (die_t, die_c) in dies.items()
-                if key is None or key not in self.dropped])
+                stability.decide(cfg, now_s - start_s, settled,
+                                 np.array([p.clock_s for p in probes]),
+                                 np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
+                                 n_positions=self.n_pos, edge=edge,
+                                 rate_gain_ug_per_c_per_min=gains[key])
+                for key, probes in live.items()])
             self._publish(step, "soak", 0, status, target_c,
                           soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
             if decision.stable:
                 break
             await self._checkpoint()
             await self._wait(spec.soak_poll_s)
+        self._keep_soak(dies)
         soak_s = self.clock.now() - start_s
+        used = [g for g in gains.values() if g is not None]
         entry = {
             "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
             "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
@@ -514,6 +543,8 @@ class CampaignRunner:
             "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": sweep_s,
             "edge": edge, "policy": cfg.policy,
             "resumed": resumed, "max_soak_reached": decision.max_soak_reached,
+            # the k (µg per °C/min) the last decision used, largest over the sensors
+            "rate_gain_ug_per_c_per_min": max(used) if used else None,
         }
         store.put_step_log(self.sf, self.id, _clean_json(entry))
         if self.on_step:
@@ -522,15 +553,18 @@ class CampaignRunner:
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
-    def _no_dies(self) -> dict[str | None, tuple[list[float], list[float]]]:
+    def _no_dies(self) -> dict[str | None, list[_Probe]]:
         keys: list[str | None] = list(self._live) if self.serials else [None]
-        return {k: ([], []) for k in keys}
+        return {k: [] for k in keys}
 
-    async def _probe_dies(self, dies: dict[str | None, tuple[list[float], list[float]]],
-                          now_s: float) -> None:
-        """One cheap die-temperature probe of every live sensor (of the one sensor)."""
+    async def _probe_dies(self, dies: dict[str | None, list[_Probe]], step: int,
+                          setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
+                          ) -> None:
+        """One die-temperature probe of every live sensor (of the one sensor), each stored
+        as it is taken (``soak_probes``: the measured rate gain and a resume need them)."""
         n = self.spec.soak_probe_samples
-        for key, (die_t, die_c) in dies.items():
+        rows: list[dict[str, Any]] = []
+        for key, probes in dies.items():
             if key is None:
                 probe = await self._acquire(n)
             elif key in self.dropped:
@@ -543,8 +577,86 @@ class CampaignRunner:
                 except SensorDropped as exc:
                     self._drop(exc)
                     continue
-            die_t.append(now_s)
-            die_c.append(probe.sensor_c)
+            # mid-capture: with several sensors probed one after another, each its own time
+            mid_s = self.clock.now() - probe.duration_s / 2.0
+            t_s = self._t(mid_s)
+            probes.append(_Probe(mid_s, t_s, float(probe.sensor_c),
+                                 tuple(float(v) for v in probe.mean_g)))
+            ref = self._pose_ref or (math.nan, math.nan, math.nan)
+            rows.append({
+                "sensor": key if key is not None else self.sensor_serial, "step": step,
+                "soak_start_t_s": soak_start_t_s, "pose": self._pose, "t_s": t_s,
+                "setpoint_c": setpoint_c, "chamber_c": status.process_c,
+                "sensor_c": probe.sensor_c,
+                **_finite({"ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2]}),
+                "ax": probe.mean_g[0], "ay": probe.mean_g[1], "az": probe.mean_g[2],
+                "n": probe.n,
+            })
+        store.add_soak_probes(self.sf, self.id, rows)
+
+    # --- the sensor's rate gain (soak_rate.py) ---------------------------------------
+    def _set_pose(self, angles_deg: tuple[float, ...]) -> None:
+        """The table stands at ``angles_deg``: the probes' orientation key and reference."""
+        from drivers.geometry import reference_for_angles
+
+        self._pose = ",".join(f"{float(a):.1f}" for a in angles_deg)
+        try:
+            ref = reference_for_angles(angles_deg)
+            self._pose_ref = (float(ref[0]), float(ref[1]), float(ref[2]))
+        except ValueError:  # a table geometry the reference formula does not cover
+            self._pose_ref = None
+
+    def _keep_soak(self, dies: dict[str | None, list[_Probe]]) -> None:
+        """Add this soak's probes to the finished soaks of each sensor."""
+        for key, probes in dies.items():
+            if len(probes) >= soak_rate.MIN_PROBES_PER_SOAK:
+                self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes))
+
+    def _stored_soaks(self) -> dict[str | None, list[soak_rate.SoakProbes]]:
+        """The soaks of an interrupted run, from the soak_probes table, per sensor."""
+        groups: dict[tuple[str | None, int, float, str], list[dict[str, Any]]] = {}
+        for r in store.soak_probe_rows(self.sf, self.id):
+            key = r["sensor"] if self.serials else None
+            groups.setdefault((key, r["step"], r["soak_start_t_s"], r["pose"]), []).append(r)
+        out: dict[str | None, list[soak_rate.SoakProbes]] = {}
+        for (key, _, _, pose), rows in groups.items():
+            if len(rows) >= soak_rate.MIN_PROBES_PER_SOAK:
+                out.setdefault(key, []).append(soak_rate.SoakProbes(
+                    pose, np.array([r["t_s"] for r in rows], float),
+                    np.array([r["sensor_c"] for r in rows], float),
+                    np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float)))
+        return out
+
+    def _rate_estimate(self, key: str | None,
+                       current: list[_Probe] | None = None) -> soak_rate.RateGain | None:
+        soaks = list(self._soaks.get(key, []))
+        if current is not None and len(current) >= soak_rate.MIN_PROBES_PER_SOAK:
+            soaks.append(_soak_probes(self._pose, current))
+        return soak_rate.estimate_rate_gain(soaks)
+
+    def _rate_gain_for_decision(self, key: str | None, current: list[_Probe]) -> float | None:
+        """k (µg per °C/min) for ``stability.decide``; None: the spec's ``gradient_lag_s``.
+
+        Measured: the calibration subtracts k̂·rate, so only what the correction may get
+        wrong counts (``soak_rate.residual_rate_gain_for_decision``).
+        """
+        if self.spec.rate_gain != "measured":
+            return None
+        return soak_rate.residual_rate_gain_for_decision(self._rate_estimate(key, current))
+
+    def _rate_provenance(self, key: str | None) -> dict[str, Any] | None:
+        """The campaign's measured rate gain of one sensor, for the fit and its provenance."""
+        if self.spec.rate_gain != "measured":
+            return None
+        est = self._rate_estimate(key)
+        k_hat = soak_rate.correction_gain_ug_per_c_per_min(est)
+        return {
+            "rate_gain_ug_per_c_per_min": None if k_hat is None else k_hat.tolist(),
+            "rate_gain_estimate": None if est is None else {
+                "gain_ug_per_c_per_min": est.gain_ug_per_c_per_min.tolist(),
+                "sd_ug_per_c_per_min": est.sd_ug_per_c_per_min.tolist(),
+                "probes": est.n, "soaks": est.soaks},
+        }
 
     async def _fitting_each(self, camp: Any) -> None:
         """One calibration per live sensor (a fit that fails drops that sensor)."""
@@ -559,6 +671,7 @@ class CampaignRunner:
                 "steps_log": camp.steps_log,
                 "recording": f"campaign-{self.id}-{serial}.csv",
                 "sensor_identity": self.identities.get(serial),
+                **(self._rate_provenance(serial) or {}),
             }
             try:
                 values = await asyncio.to_thread(self.calibrate, cols, provenance)
@@ -585,6 +698,7 @@ class CampaignRunner:
             "spec": camp.spec, "positions": self.spec.positions,
             "steps_log": camp.steps_log, "recording": f"campaign-{self.id}.csv",
             "sensor_identity": self.sensor_identity,
+            **(self._rate_provenance(None) or {}),
         }
         try:
             # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
@@ -630,6 +744,7 @@ class CampaignRunner:
                 if st.in_position and not st.moving:
                     if since_s is not None:
                         self._resumed(susp, since_s)
+                    self._set_pose(angles_deg)
                     return
                 if self.clock.now() - start_s > self.spec.move_timeout_s:
                     break
@@ -833,3 +948,23 @@ def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
 
 def _clean_json(d: dict[str, Any]) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Probe:
+    """One soak probe: clock time (the decision's), campaign time, die channel, mean output."""
+
+    clock_s: float
+    t_s: float
+    sensor_c: float
+    mean_g: tuple[float, ...]
+
+
+def _soak_probes(pose: str, probes: list[_Probe]) -> soak_rate.SoakProbes:
+    return soak_rate.SoakProbes(pose, np.array([p.t_s for p in probes]),
+                                np.array([p.sensor_c for p in probes]),
+                                np.array([p.mean_g for p in probes], float))
+
+
+def _finite(d: dict[str, float]) -> dict[str, float | None]:
+    return {k: (v if math.isfinite(v) else None) for k, v in d.items()}

@@ -1,4 +1,4 @@
-"""The order of a step's positions: least table travel, or a seeded random order.
+"""The order of a step's positions: least table travel, a seeded random or a balanced order.
 
 The seed paper measures its Table 1 positions in table order. Nothing in the
 fit depends on the order (every row carries its own reference direction and
@@ -8,20 +8,28 @@ the order is free to save time: the axes of a rate table move at once, each
 with a trapezoidal speed profile, so a move takes as long as its slowest axis
 (:func:`move_s`). :func:`order_positions` returns the order with the least
 total move time it finds (nearest neighbour from where the table stands, then
-2-opt on the open path), or, with ``method="random"``, a permutation drawn
-from ``seed`` (for a diagnosis that wants the order decorrelated from time).
+2-opt on the open path), or, with ``method="random"`` / ``"balanced"``, the
+seeded per-plateau orders of :mod:`calibration.discrepancy.protocol_order`
+(the one place those orders are drawn; for a diagnosis that wants the order
+decorrelated from time). :func:`step_orders` gives the order of every step of
+a campaign, which the plan (``service/engine/plan.py``) visits.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
 
+from calibration.discrepancy.protocol_order import position_order
+
 # The simulated table's limits (simulators/turntable_sim.py); a rig passes its own.
 DEFAULT_SLEW_DEG_PER_S = 20.0
 DEFAULT_ACCEL_DEG_PER_S2 = 40.0
-METHODS = ("travel", "random", "table")
+METHODS = ("travel", "random", "balanced", "table")
+# soak_order's method name → protocol_order's scheme name (the seeded orders live there).
+_SCHEME = {"random": "random", "balanced": "balanced", "table": "fixed"}
 
 
 def axis_move_s(distance_deg: np.ndarray, slew_deg_per_s: float,
@@ -55,25 +63,31 @@ def travel_s(angles_deg: np.ndarray, order: Sequence[int], start_deg: Sequence[f
 
 def order_positions(angles_deg: np.ndarray, *, method: str = "travel",
                     start_deg: Sequence[float] | None = None, seed: int | None = None,
+                    step: int = 0,
                     slew_deg_per_s: float = DEFAULT_SLEW_DEG_PER_S,
                     accel_deg_per_s2: float = DEFAULT_ACCEL_DEG_PER_S2) -> list[int]:
     """An order of the positions (indices into ``angles_deg``, shape (n, axes)).
 
     ``travel``: least total move time found from ``start_deg`` (default: the
-    first position); ``random``: ``np.random.default_rng(seed)`` permutation
-    (seed required, so the order is reproducible and recorded); ``table``: as
-    given.
+    first position); ``random``: the seeded permutation of plateau ``step``
+    (seed required, so the order is reproducible and recorded); ``balanced``:
+    row ``step`` of the seeded Williams design (seed default 0); ``table``: as
+    given. ``random`` and ``balanced`` are
+    :func:`calibration.discrepancy.protocol_order.position_order`'s.
     """
     a = np.asarray(angles_deg, float)
     n = a.shape[0]
     if method not in METHODS:
         raise ValueError(f"position order must be one of {METHODS}, got {method!r}")
-    if method == "table" or n <= 2:
+    if method == "random" and seed is None:
+        raise ValueError("a random position order needs a seed (so it can be reproduced)")
+    if method != "travel":
+        if n < 1:
+            return []
+        rows = position_order(n, step + 1, _SCHEME[method], 0 if seed is None else int(seed))
+        return [int(i) for i in rows[step]]
+    if n <= 2:
         return list(range(n))
-    if method == "random":
-        if seed is None:
-            raise ValueError("a random position order needs a seed (so it can be reproduced)")
-        return [int(i) for i in np.random.default_rng(seed).permutation(n)]
     cost = move_s(a, slew_deg_per_s, accel_deg_per_s2)
     if start_deg is None:
         first = 0
@@ -99,23 +113,35 @@ def _nearest_neighbour(cost: np.ndarray, first: int) -> list[int]:
 
 def _two_opt(cost: np.ndarray, order: list[int], from_start: np.ndarray | None) -> list[int]:
     """Reverse segments of the open path while that shortens it (the start is a fixed
-    extra node when ``from_start`` gives the move times from where the table stands)."""
+    extra node when ``from_start`` gives the move times from where the table stands).
 
-    def length(o: list[int]) -> float:
-        total = float(sum(cost[o[i], o[i + 1]] for i in range(len(o) - 1)))
-        return total + (float(from_start[o[0]]) if from_start is not None else 0.0)
-
-    best, best_len = list(order), length(order)
+    A reversal of ``best[i..j]`` changes only the two edges at its ends (the move
+    times are symmetric), so each candidate costs O(1): the first improving reversal
+    in (i, j) order is taken, as a full re-sum would take it.
+    """
+    best = list(order)
+    n = len(best)
     improved = True
     while improved:
         improved = False
         lo = 0 if from_start is not None else 1
-        for i in range(lo, len(best) - 1):
-            for j in range(i + 1, len(best)):
-                cand = best[:i] + best[i:j + 1][::-1] + best[j + 1:]
-                cand_len = length(cand)
-                if cand_len < best_len - 1e-9:
-                    best, best_len, improved = cand, cand_len, True
+        for i in range(lo, n - 1):
+            for j in range(i + 1, n):
+                a, b = best[i], best[j]
+                if i == 0:
+                    before = after = 0.0
+                    if from_start is not None:
+                        before, after = float(from_start[a]), float(from_start[b])
+                else:
+                    p = best[i - 1]
+                    before, after = float(cost[p, a]), float(cost[p, b])
+                if j + 1 < n:
+                    q = best[j + 1]
+                    before += float(cost[b, q])
+                    after += float(cost[a, q])
+                if after - before < -1e-9:
+                    best[i:j + 1] = best[i:j + 1][::-1]
+                    improved = True
     return best
 
 
@@ -127,4 +153,42 @@ def angles_of(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
     return np.array([angles_for_reference(r, n_axes) for r in np.asarray(refs_g, float)])
 
 
-__all__ = ["METHODS", "angles_of", "axis_move_s", "move_s", "order_positions", "travel_s"]
+def step_orders(angles_deg: np.ndarray, n_steps: int, method: str = "travel",
+                seed: int | None = None, start_deg: Sequence[float] | None = None,
+                slew_deg_per_s: float = DEFAULT_SLEW_DEG_PER_S,
+                accel_deg_per_s2: float = DEFAULT_ACCEL_DEG_PER_S2) -> list[list[int]]:
+    """The visiting order of every step of a campaign: ``n_steps`` lists of indices.
+
+    ``travel``: step 0 from ``start_deg`` (default home, every axis at 0°), each
+    later step from the last pose of the step before, so a whole sweep and the
+    step after it are chained. Deterministic: the same arguments give the same
+    orders, so a resumed campaign visits what is missing in the order it had
+    (independent of which positions are stored). Cached: the plan is replayed by
+    every dry run.
+    """
+    a = np.asarray(angles_deg, float)
+    home = tuple(0.0 for _ in range(a.shape[1])) if start_deg is None else tuple(start_deg)
+    return [list(o) for o in _step_orders(a.tobytes(), a.shape, int(n_steps), method,
+                                          None if seed is None else int(seed),
+                                          tuple(float(v) for v in home),
+                                          float(slew_deg_per_s), float(accel_deg_per_s2))]
+
+
+@functools.lru_cache(maxsize=64)
+def _step_orders(raw: bytes, shape: tuple[int, ...], n_steps: int, method: str,
+                 seed: int | None, start: tuple[float, ...], slew: float,
+                 accel: float) -> tuple[tuple[int, ...], ...]:
+    a = np.frombuffer(raw, float).reshape(shape)
+    out: list[tuple[int, ...]] = []
+    here: Sequence[float] = start
+    for step in range(n_steps):
+        order = order_positions(a, method=method, start_deg=here, seed=seed, step=step,
+                                slew_deg_per_s=slew, accel_deg_per_s2=accel)
+        out.append(tuple(order))
+        if order:
+            here = tuple(a[order[-1]])
+    return tuple(out)
+
+
+__all__ = ["METHODS", "angles_of", "axis_move_s", "move_s", "order_positions", "step_orders",
+           "travel_s"]

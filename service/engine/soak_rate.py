@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -36,6 +37,17 @@ from service.engine.stability import fit_approach
 # typical temperature_rate gain (shared/spec/effects.md), the safe side for a new die.
 PRIOR_RATE_GAIN_UG_PER_C_PER_MIN = 100.0
 MIN_PROBES_PER_SOAK = 6  # fewer and the soak's approach cannot be fitted
+# The estimate is used once z·σ is at most this fraction of the prior (2σ ≤ 50 µg per °C/min).
+INFORMATIVE_FRACTION = 0.5
+# What the calibration's correction k̂·rate may still get wrong besides σ_k (docs/engine.md,
+# "Measured rate sensitivity"), as a fraction of the largest gain the data allow, |k̂| + z·σ:
+# the row's rate is the per-step line's slope (the sweep's mean rate, not the capture's) and
+# the first-order package model is itself approximate; both errors scale with the true gain.
+RATE_ALLOWANCE_FRACTION = 0.1
+# ... and at least this: a k̂ near 0 does not make a short soak free. On the twin a sensor
+# without rate sensitivity still loses accuracy when the soak ends with the die moving (held-out
+# ×1.09 at lag 0, ×1.07 at a fed gain of 9, ×1.01 at lag 10 s; docs/benchmarks.md, issue 12).
+RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN = 10.0
 
 
 @dataclass(frozen=True)
@@ -46,6 +58,12 @@ class SoakProbes:
     t_s: np.ndarray  # (n,) probe times
     die_c: np.ndarray  # (n,) die temperature channel, °C
     out_g: np.ndarray  # (n, 3) mean output per axis, g
+
+    @cached_property
+    def rate(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """:func:`soak_rate_c_per_min` of this soak, computed once (the engine re-estimates
+        k at every poll from every finished soak)."""
+        return soak_rate_c_per_min(self.t_s, self.die_c)
 
 
 @dataclass(frozen=True)
@@ -84,7 +102,7 @@ def estimate_rate_gain(soaks: list[SoakProbes]) -> RateGain | None:
     orientation is min(3, its soaks). Returns None when no orientation has two
     soaks or there are fewer probes than unknowns + 5.
     """
-    fitted = [(s, soak_rate_c_per_min(s.t_s, s.die_c)) for s in soaks]
+    fitted = [(s, s.rate) for s in soaks]
     fitted = [(s, tr) for s, tr in fitted if tr is not None]
     count: dict[str, int] = {}
     for s, _ in fitted:
@@ -135,8 +153,50 @@ def rate_gain_for_decision(estimate: RateGain | None, z: float = 2.0,
         return prior_ug_per_c_per_min
     hi = estimate.upper_ug_per_c_per_min(z)
     point = float(np.max(np.abs(estimate.gain_ug_per_c_per_min)))
-    if math.isfinite(hi) and z * float(np.max(estimate.sd_ug_per_c_per_min)) \
-            <= 0.5 * prior_ug_per_c_per_min:
+    if is_informative(estimate, z, prior_ug_per_c_per_min):
         return hi
     return max(prior_ug_per_c_per_min, point) if math.isfinite(point) \
         else prior_ug_per_c_per_min
+
+
+def is_informative(estimate: RateGain | None, z: float = 2.0,
+                   prior_ug_per_c_per_min: float = PRIOR_RATE_GAIN_UG_PER_C_PER_MIN) -> bool:
+    """z·σ of every axis at most half the prior: the estimate may replace the prior."""
+    if estimate is None:
+        return False
+    sd = float(np.max(estimate.sd_ug_per_c_per_min))
+    return math.isfinite(sd) and z * sd <= INFORMATIVE_FRACTION * prior_ug_per_c_per_min
+
+
+def residual_rate_gain_for_decision(
+        estimate: RateGain | None, z: float = 2.0,
+        prior_ug_per_c_per_min: float = PRIOR_RATE_GAIN_UG_PER_C_PER_MIN) -> float:
+    """The k a soak decision should use when the calibration subtracts k̂·rate from the rows.
+
+    What is left of the rate error after the correction is (k − k̂)·rate plus what the
+    correction's model gets wrong: z·σ_k + max(``RATE_ALLOWANCE_FRACTION`` × (|k̂| + z·σ_k),
+    ``RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN``) per axis, the largest over the axes, instead
+    of |k̂| + z·σ_k. Until the estimate is
+    informative the calibration does not correct
+    (:func:`correction_gain_ug_per_c_per_min`), so the uncorrected rule applies
+    (:func:`rate_gain_for_decision`).
+    """
+    if estimate is None or not is_informative(estimate, z, prior_ug_per_c_per_min):
+        return rate_gain_for_decision(estimate, z, prior_ug_per_c_per_min)
+    sd = np.asarray(estimate.sd_ug_per_c_per_min, float)
+    upper = np.abs(estimate.gain_ug_per_c_per_min) + z * sd  # the largest |k| per axis
+    allowance = np.maximum(RATE_ALLOWANCE_FRACTION * upper, RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN)
+    return float(np.max(z * sd + allowance))
+
+
+def correction_gain_ug_per_c_per_min(estimate: RateGain | None, z: float = 2.0
+                                     ) -> np.ndarray | None:
+    """k̂ per axis the calibration should subtract (times each row's die rate), or None.
+
+    Only an informative estimate corrects: a noisy k̂ would add σ_k·rate where the
+    decision, not knowing k, already waited for the rate to fall below the noise.
+    """
+    if not is_informative(estimate, z):
+        return None
+    assert estimate is not None
+    return np.asarray(estimate.gain_ug_per_c_per_min, float).copy()

@@ -21,7 +21,14 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
@@ -51,6 +58,13 @@ MAX_SETTLE_S = 600.0
 MAX_SOAK_MIN = 24 * 60.0
 MAX_POLL_S = 3600.0
 MAX_SUSPEND_LIMIT_S = 7 * 24 * 3600.0
+# Fewest samples per soak probe when the rate gain is measured from the probes: 8-sample
+# probes give σ(k) ≈ 25–30 µg per °C/min over a campaign, 200 ≈ 5 (docs/engine.md).
+MIN_MEASURED_PROBE_SAMPLES = 200
+# Probe size when not given: 8 samples (a die-temperature probe, 0.13 s), or 250 (4 s of
+# every 60-s poll) when the rate gain is measured from the probes.
+DEFAULT_PROBE_SAMPLES = 8
+DEFAULT_MEASURED_PROBE_SAMPLES = 250
 # Plausible air temperatures for any climatic chamber; the rig's own range is the dry run's.
 PLAUSIBLE_C = (-200.0, 500.0)
 
@@ -88,6 +102,23 @@ class CampaignSpec(BaseModel):
         default=200, ge=1, le=BRIDGE_MAX_SAMPLES,
         description="samples averaged per position (sensor bridge: 1..100000)")
 
+    # --- position order (service/engine/soak_order.py, docs/engine.md) --------------------
+    position_order: Literal["travel", "random", "balanced", "table"] = Field(
+        default="travel",
+        description="order of a step's positions: least table travel, seeded random or "
+        "counter-balanced per plateau, or the schedule's")
+    position_order_seed: Int | None = Field(
+        default=None, ge=0, le=2**32 - 1, validate_default=True,
+        description="seed of a random (required) or balanced (default 0) order")
+
+    @field_validator("position_order_seed")
+    @classmethod
+    def _random_needs_a_seed(cls, seed: int | None, info: ValidationInfo) -> int | None:
+        if seed is None and info.data.get("position_order") == "random":
+            raise ValueError("a random position order needs a seed, so the order can be "
+                             "reproduced (and a resumed step visits the same order)")
+        return seed
+
     # --- stability decision (service/engine/stability.py) ------------------------------
     stability: Literal["predictive", "dwell", "fixed"] = Field(
         default="predictive", description="soak end rule; fixed = exactly soak_min (the seed)")
@@ -109,6 +140,11 @@ class CampaignSpec(BaseModel):
                              doc="soak error allowed as a fraction of one reading's noise")
     gradient_lag_s: Float = _f(DEFAULT_GRADIENT_LAG_S, 0, 3600, open_lo=False,
                                doc="package lag behind the die reading, s")
+    rate_gain: Literal["assumed", "measured"] = Field(
+        default="assumed",
+        description="sensitivity to the die's rate of change: assumed (gradient_lag_s) or "
+                    "measured from the soak probes (then the calibration corrects k̂·rate "
+                    "and the soak waits for the correction's uncertainty only)")
     step_tol_c: Float = _f(DEFAULT_STEP_TOL_C, 0, 50, doc="every step: |T − T∞|, °C")
     edge_tol_c: Float = _f(DEFAULT_EDGE_TOL_C, 0, 50, doc="extreme steps: sweep offset, °C")
 
@@ -124,8 +160,10 @@ class CampaignSpec(BaseModel):
     ramp_c_per_min: Float = _f(1.0, 0, REGISTER_MAX_RAMP_C_PER_MIN,
                                doc="chamber setpoint ramp, °C/min (≤ the rig's max rate)")
     soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
-    soak_probe_samples: Int = Field(default=8, ge=1, le=BRIDGE_MAX_SAMPLES,
-                                    description="samples per die-temperature probe")
+    soak_probe_samples: Int | None = Field(
+        default=None, ge=1, le=BRIDGE_MAX_SAMPLES,
+        description="samples per die-temperature probe (default 8; 250 with rate_gain "
+                    "measured, which needs at least 200)")
     settle_s: Float = _f(5.0, 0, MAX_SETTLE_S, open_lo=False,
                          doc="wait after in-position before acquiring, s")
     move_timeout_s: Float = _f(120.0, 0, MAX_POLL_S, doc="table move timeout, s")
@@ -138,6 +176,16 @@ class CampaignSpec(BaseModel):
     suspend_poll_s: Float = _f(30.0, 0, MAX_POLL_S, doc="device poll while suspended, s")
     suspend_limit_s: Float = _f(1800.0, 0, MAX_SUSPEND_LIMIT_S,
                                 doc="suspended longer than this fails the campaign, s")
+
+    @model_validator(mode="after")
+    def _measured_rate_needs_precise_probes(self) -> CampaignSpec:
+        if (self.rate_gain == "measured" and self.soak_probe_samples is not None
+                and self.soak_probe_samples < MIN_MEASURED_PROBE_SAMPLES):
+            raise ValueError(
+                f"rate_gain 'measured' needs soak_probe_samples >= "
+                f"{MIN_MEASURED_PROBE_SAMPLES} (got {self.soak_probe_samples}): the gain is "
+                "measured from the probes")
+        return self
 
 
 # The contract fields; every other field of CampaignSpec is an engine tuning key.
@@ -158,6 +206,7 @@ class RunSpec:
     ramp_c_per_min: float = 1.0
     soak_poll_s: float = 60.0  # cheap sensor/chamber poll period during a soak
     soak_probe_samples: int = 8  # samples per cheap die-temperature probe
+    rate_gain: str = "assumed"  # assumed (gradient_lag_s) | measured (soak_rate.py, corrected)
     settle_s: float = 5.0  # wait after in-position before acquiring (table ringing)
     move_timeout_s: float = 120.0
     safe_c: float = 23.0  # abort leaves the chamber here
@@ -167,6 +216,8 @@ class RunSpec:
     retry_backoff_s: float = 1.0  # first back-off, doubled each try
     suspend_poll_s: float = 30.0
     suspend_limit_s: float = 1800.0  # suspended longer than this: fail the campaign
+    position_order: str = "travel"  # travel | random | balanced | table (soak_order.py)
+    position_order_seed: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -175,9 +226,10 @@ class RunSpec:
 
 
 # RunSpec fields copied as they are from the validated spec.
-_DIRECT = ("ramp_c_per_min", "soak_poll_s", "soak_probe_samples", "settle_s", "safe_c",
+_DIRECT = ("ramp_c_per_min", "soak_poll_s", "settle_s", "safe_c",
            "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
-           "move_timeout_s", "on_max_soak", "positions", "samples_per_position")
+           "move_timeout_s", "on_max_soak", "positions", "samples_per_position", "rate_gain",
+           "position_order", "position_order_seed")
 
 
 def run_spec(spec: CampaignSpec) -> RunSpec:
@@ -201,12 +253,18 @@ def run_spec(spec: CampaignSpec) -> RunSpec:
         dwell_s=_or(spec.dwell_min, min(5.0, soak_min)) * 60.0,
         temp_budget_c=budget_c,
         gradient_lag_s=spec.gradient_lag_s,
+        tempco_ug_per_c=spec.tempco_ug_per_c,
         step_tol_c=spec.step_tol_c,
         edge_tol_c=spec.edge_tol_c,
         die_tol_c=spec.die_tol_c,
     )
+    probe_n = spec.soak_probe_samples
+    if probe_n is None:
+        probe_n = (DEFAULT_MEASURED_PROBE_SAMPLES if spec.rate_gain == "measured"
+                   else DEFAULT_PROBE_SAMPLES)
     return RunSpec(
         setpoints_c=[float(v) for v in spec.setpoints_c],
+        soak_probe_samples=probe_n,
         stability=stab,
         quality=quality,
         range_g=float(spec.range_g),

@@ -16,7 +16,7 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from service.db.models import Calibration, Campaign, Measurement, RigLease, utcnow
+from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe, utcnow
 from service.engine.states import TERMINAL, TRANSITIONS
 from service.event_log import log_event
 
@@ -201,27 +201,10 @@ def commit_measurement(
     committed it just before dying): that is "done", not an error. With a
     ``fence``, the same transaction verifies that this process still holds the
     rig's lease; if not, nothing is written and :class:`LeaseLost` is raised.
+    :func:`commit_measurements` with one row: one fence, cursor and retry tail.
     """
-    with sf() as s:
-        try:
-            if fence is not None:
-                _check_fence(s, fence, campaign_id)
-            s.add(Measurement(campaign_id=campaign_id, **row))
-            s.execute(
-                update(Campaign).where(Campaign.id == campaign_id).values(
-                    cursor_step=row["step"], cursor_phase="positions",
-                    cursor_position=next_position, progress=progress,
-                )
-            )
-            s.commit()
-            return True
-        except IntegrityError:
-            s.rollback()
-        except LeaseLost:
-            s.rollback()
-            raise
-    set_cursor(sf, campaign_id, row["step"], "positions", next_position, progress)
-    return False
+    return commit_measurements(sf, campaign_id, [row], int(row["step"]), next_position,
+                               progress, fence=fence)
 
 
 def commit_measurements(
@@ -282,6 +265,37 @@ def put_step_log(sf: SessionFactory, campaign_id: int, entry: dict[str, Any]) ->
         setpoint_c=entry.get("setpoint_c"), soak_s=entry.get("soak_s"),
         reason=entry.get("reason"),
     )
+
+
+PROBE_COLUMNS = ("t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "ref_x", "ref_y",
+                 "ref_z", "ax", "ay", "az", "n")
+
+
+def add_soak_probes(sf: SessionFactory, campaign_id: int, rows: list[dict[str, Any]]) -> None:
+    """Store one poll's soak probes (every sensor's) as they are taken, in one short commit;
+    keys: SoakProbe's columns."""
+    if not rows:
+        return
+    with sf() as s:
+        s.add_all([SoakProbe(campaign_id=campaign_id, **row) for row in rows])
+        s.commit()
+
+
+def soak_probe_rows(sf: SessionFactory, campaign_id: int,
+                    sensor: str | None = None) -> list[dict[str, Any]]:
+    """The stored probes (of ``sensor`` when given) as dicts, in time order.
+
+    Keys: ``sensor``, ``soak_start_t_s``, ``pose`` and :data:`PROBE_COLUMNS`.
+    """
+    names = ("sensor", "soak_start_t_s", "pose") + PROBE_COLUMNS
+    with sf() as s:
+        rows = s.execute(
+            select(*(getattr(SoakProbe, n) for n in names))
+            .where(SoakProbe.campaign_id == campaign_id,
+                   *(() if sensor is None else (SoakProbe.sensor == sensor,)))
+            .order_by(SoakProbe.t_s, SoakProbe.id)
+        ).all()
+    return [dict(zip(names, r, strict=True)) for r in rows]
 
 
 def measurement_columns(sf: SessionFactory, campaign_id: int,

@@ -141,3 +141,65 @@ async def test_a_modbus_chamber_with_a_manual_table_opens_with_the_operator_as_t
             assert isinstance(devices.turntable, ManualTurntable)
             status = await devices.chamber.read_status()
             assert -70.0 < status.process_c < 180.0
+
+
+SEVERAL = ["SN-R1", "SN-R2", "SN-R3"]
+
+
+def _several_config(sim: Any) -> dict[str, Any]:
+    """One bridge per sensor: each entry its own port, declaring the sensor it carries."""
+    cfg = _modbus_config(sim, "eurotherm3216")
+    cfg["sensors"] = [{"url": s.url, "serial": s.serial, "serial_binding": "eeprom"}
+                      for s in reversed(sim.sensors)]  # entry order is not campaign order
+    return cfg
+
+
+async def test_a_several_sensor_campaign_runs_on_a_rig_reached_by_url(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0003)
+    spec = {**SMALL_SPEC, "setpoints_c": [20.0], "positions": "six", "samples_per_position": 20,
+            "sensors": SEVERAL}
+    cid = add_campaign(sf, spec, rig="lab")
+    with sf() as s:
+        s.get(Campaign, cid).sensor = SEVERAL[0]
+        s.commit()
+    async with start_sim_rig(clock, seed=3, serials=SEVERAL) as sim:
+        sim.sensors[1].bridge.eeprom_serial = "SN-OTHER"  # the wrong part on SN-R2's port
+        async with open_rig(_several_config(sim), clock, serials=SEVERAL) as devices:
+            assert list(devices.accelerometers) == SEVERAL
+            runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+            state = await asyncio.wait_for(runner.run(), 60.0)
+    assert state == "completed"
+    with sf() as s:
+        camp = s.get(Campaign, cid)
+        rows = s.execute(select(Measurement).where(Measurement.campaign_id == cid)).scalars().all()
+    # each port's identity checked by its own entry: the wrong part is dropped, naming both
+    assert set(camp.sensors_dropped) == {"SN-R2"}
+    assert "SN-OTHER" in camp.sensors_dropped["SN-R2"]
+    assert Counter(m.sensor for m in rows) == {"SN-R1": 6, "SN-R3": 6}
+    by_sensor = {(m.sensor, m.position): m.ax for m in rows}
+    assert by_sensor[("SN-R1", 0)] != by_sensor[("SN-R3", 0)]  # two parts, two ports
+
+
+async def test_a_sensor_no_entry_declares_or_two_behind_one_bridge_is_refused() -> None:
+    clock = VirtualClock(idle_wall_s=0.0003)
+    async with start_sim_rig(clock, seed=3, serials=SEVERAL) as sim:
+        cfg = _several_config(sim)
+        with pytest.raises(RigConfigError, match="'SN-NONE' is not mounted"):
+            async with open_rig(cfg, clock, serials=["SN-R1", "SN-NONE"]):
+                pass
+        cfg["sensors"][0]["serials"] = {"UID-A": "SN-R1"}  # SN-R3's port claims SN-R1 too
+        del cfg["sensors"][2]
+        with pytest.raises(RigConfigError, match="one bridge per sensor"):
+            async with open_rig(cfg, clock, serials=["SN-R3", "SN-R1"]):
+                pass
+
+
+def test_every_sensor_entry_is_validated_and_a_serial_is_declared_once() -> None:
+    chamber = {"driver": "modbus", "url": "tcp://h:502"}
+    table = {"url": "tcp://h:503"}
+    errors = dict(rig_config_errors(chamber, table, [
+        {"url": "/dev/ttyUSB0", "serial": "SN-1"},
+        {"url": "/dev/ttyUSB1", "serial": "SN-1", "framing": "v9"},
+        {"url": "/dev/ttyUSB2", "serial": 7}]))
+    assert set(errors) == {"sensors[1].serial", "sensors[1].framing", "sensors[2].serial"}
+    assert "sensors[0]" in errors["sensors[1].serial"]

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 import pytest
 
+from drivers.clock import VirtualClock
 from drivers.protocols import Acquisition
-from service.engine.multi import reading_problem, slowest_decision
+from service.engine.guard import AbortRequested
+from service.engine.multi import SensorDropped, read_all, reading_problem, slowest_decision
 from service.engine.stability import Decision
 
 
@@ -33,3 +36,38 @@ def test_the_slowest_die_decides() -> None:
     assert slowest_decision([slow, capped]) is capped
     with pytest.raises(ValueError):
         slowest_decision([])
+
+
+async def test_read_all_overlaps_the_reads_and_returns_a_drop_in_place_of_its_reading() -> None:
+    clock = VirtualClock(idle_wall_s=0.0)
+
+    async def read(serial: str) -> str:
+        await clock.sleep(10.0)
+        if serial == "B":
+            raise SensorDropped(serial, "no answer")
+        return f"reading {serial}"
+
+    got = await read_all(["A", "B", "C"], read)
+    assert clock.now() == pytest.approx(10.0)  # at once: one read's time, not three
+    assert got["A"] == "reading A" and got["C"] == "reading C"
+    assert isinstance(got["B"], SensorDropped) and got["B"].reason == "no answer"
+
+
+async def test_an_abort_in_one_read_cancels_the_others_before_it_is_raised() -> None:
+    clock = VirtualClock(idle_wall_s=0.01)  # the abort reaches read_all before time jumps
+    cancelled: list[str] = []
+
+    async def read(serial: str) -> str:
+        if serial == "A":
+            await clock.sleep(1.0)
+            raise AbortRequested("operator")
+        try:
+            await clock.sleep(100.0)
+        except asyncio.CancelledError:
+            cancelled.append(serial)
+            raise
+        return serial
+
+    with pytest.raises(AbortRequested):
+        await read_all(["A", "B", "C"], read)
+    assert sorted(cancelled) == ["B", "C"]  # no capture outlives the abort

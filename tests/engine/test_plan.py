@@ -14,8 +14,11 @@ from service.engine import plan as pl
 from service.engine.runner import CampaignRunner
 from service.engine.spec import parse_spec, schedule_refs
 
+TABLE_ORDER = {**SMALL_SPEC, "position_order": "table"}
 
-def messages(spec: dict, done: set[tuple[int, int]] = frozenset()) -> list[pl.Msg]:  # type: ignore[assignment]
+
+def messages(spec: dict, done: set[tuple[int, int]] = frozenset(),  # type: ignore[assignment]
+             sensors: tuple[str, ...] = ()) -> list[pl.Msg]:
     rs = parse_spec(spec)
     out: list[pl.Msg] = []
 
@@ -23,12 +26,16 @@ def messages(spec: dict, done: set[tuple[int, int]] = frozenset()) -> list[pl.Ms
         out.append(msg)
         return ("reading", getattr(msg, "step", None), getattr(msg, "position", None))
 
-    pl.interpret(pl.campaign_plan(rs, schedule_refs(rs.positions), done), handle)
+    pl.interpret(pl.campaign_plan(rs, schedule_refs(rs.positions), done, sensors), handle)
     return out
 
 
+def saves_of(msgs: list[pl.Msg]) -> list[tuple[int, int]]:
+    return [(m.step, m.position) for m in msgs if isinstance(m, pl.Save)]
+
+
 def test_plan_visits_every_step_and_position_once_then_fits() -> None:
-    msgs = messages(SMALL_SPEC)
+    msgs = messages(TABLE_ORDER)
     saves = [(m.step, m.position) for m in msgs if isinstance(m, pl.Save)]
     assert saves == [(s, p) for s in range(3) for p in range(6)]
     assert [m.setpoint_c for m in msgs if isinstance(m, pl.SetChamber)] == [-10.0, 10.0, 30.0]
@@ -44,7 +51,7 @@ def test_plan_visits_every_step_and_position_once_then_fits() -> None:
 
 def test_resume_is_a_replay_that_skips_what_is_stored() -> None:
     done = {(0, p) for p in range(6)} | {(1, 0), (1, 1)}
-    msgs = messages(SMALL_SPEC, done)
+    msgs = messages(TABLE_ORDER, done)
     assert [m.step for m in msgs if isinstance(m, pl.SetChamber)] == [1, 2]  # step 0 complete
     assert [m.resumed for m in msgs if isinstance(m, pl.WaitStable)] == [True, False]
     saves = [(m.step, m.position) for m in msgs if isinstance(m, pl.Save)]
@@ -81,7 +88,12 @@ async def test_engine_executes_exactly_the_plan(sf) -> None:  # type: ignore[no-
     seen: list[pl.Msg] = []
     runner.subscribe(lambda m, t0, t1: seen.append(m))
     assert await asyncio.wait_for(runner.run(), 30) == "completed"
-    expected = messages(SMALL_SPEC)
+    rs = parse_spec(SMALL_SPEC)
+    refs = schedule_refs(rs.positions)
+    poses = np.array([rig.devices.angles_for(r) for r in refs])  # this rig's geometry
+    expected = []
+    pl.interpret(pl.campaign_plan(rs, refs, angles_deg=poses),
+                 lambda m: expected.append(m))  # type: ignore[func-returns-value]
     assert [type(m) for m in seen] == [type(m) for m in expected]
     assert [(m.step, m.position) for m in seen if isinstance(m, pl.Save)] == [
         (m.step, m.position) for m in expected if isinstance(m, pl.Save)]
@@ -112,3 +124,71 @@ def test_offline_simulator_interprets_the_same_plan(monkeypatch) -> None:  # typ
     assert saves == [(s, p) for s in range(2) for p in range(6)]
     assert list(rec.columns["step"]) == [s for s, _ in saves]
     assert list(rec.columns["position"]) == [p for _, p in saves]
+
+
+def test_the_default_travel_order_visits_each_position_once_and_moves_less() -> None:
+    from service.engine.soak_order import angles_of, travel_s
+
+    spec = {**SMALL_SPEC, "positions": "table1"}
+    saves = saves_of(messages(spec))
+    table = saves_of(messages({**spec, "position_order": "table"}))
+    assert sorted(saves) == sorted(table)
+    poses = angles_of(schedule_refs("table1"))
+    home = (0.0, 0.0, 0.0)
+    chained = [p for _, p in saves]  # the whole campaign's moves, step after step
+    assert travel_s(poses, chained, home) < 0.7 * travel_s(poses, [p for _, p in table], home)
+
+
+def test_a_resumed_step_visits_its_missing_positions_in_the_order_it_had() -> None:
+    for order in ({"position_order": "travel"},
+                  {"position_order": "random", "position_order_seed": 3},
+                  {"position_order": "balanced"}):
+        spec = {**SMALL_SPEC, "positions": "table1", **order}
+        full = saves_of(messages(spec))
+        step1 = [p for s, p in full if s == 1]
+        done = {(0, p) for p in range(24)} | {(1, p) for p in step1[:5]}
+        rest = saves_of(messages(spec, done))
+        assert rest[:19] == [(1, p) for p in step1[5:]], order
+        assert rest[19:] == [sp for sp in full if sp[0] == 2], order
+
+
+def test_random_and_balanced_orders_differ_per_plateau_and_come_from_protocol_order() -> None:
+    from calibration.discrepancy.protocol_order import position_order
+
+    for name, seed in (("random", 11), ("balanced", 4)):
+        spec = {**SMALL_SPEC, "position_order": name, "position_order_seed": seed}
+        by_step = [[p for s, p in saves_of(messages(spec)) if s == k] for k in range(3)]
+        assert by_step == position_order(6, 3, name, seed).tolist()
+        assert len({tuple(o) for o in by_step}) == 3  # time within the plateau ≠ position
+    other = {**SMALL_SPEC, "position_order": "random", "position_order_seed": 12}
+    assert saves_of(messages(other)) != saves_of(
+        messages({**other, "position_order_seed": 11}))
+
+
+def test_a_random_order_without_a_seed_is_refused_naming_the_seed() -> None:
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="position_order_seed"):
+        parse_spec({**SMALL_SPEC, "position_order": "random"})
+    with pytest.raises(ValidationError, match="position_order"):
+        parse_spec({**SMALL_SPEC, "position_order": "shortest"})
+    with pytest.raises(ValidationError, match="position_order_seed"):
+        parse_spec({**SMALL_SPEC, "position_order": "random", "position_order_seed": -1})
+
+
+def test_several_sensors_are_read_by_one_acquire_per_position() -> None:
+    serials = ("SN-1", "SN-2", "SN-3")
+    msgs = messages(SMALL_SPEC, sensors=serials)
+    acquires = [m for m in msgs if isinstance(m, pl.Acquire)]
+    assert len(acquires) == 18 and all(m.sensors == serials for m in acquires)
+    assert all(m.sensors == serials for m in msgs if isinstance(m, pl.Save))
+
+
+def test_dry_run_counts_the_order_s_table_travel_and_one_capture_for_all_sensors() -> None:
+    spec = {**SMALL_SPEC, "positions": "table1"}
+    travel = pl.dry_run(spec, move_s=None)
+    table = pl.dry_run({**spec, "position_order": "table"}, move_s=None)
+    assert travel.positions_s < table.positions_s - 3 * 20.0  # ≥ 20 s of moves saved per step
+    eight = pl.dry_run({**spec, "sensors": [f"SN-{i}" for i in range(8)]}, move_s=None)
+    assert eight.positions_s == pytest.approx(travel.positions_s)  # read concurrently
+    assert eight.n_saves == travel.n_saves

@@ -10,6 +10,8 @@ from fastapi.testclient import TestClient
 
 from service.api.app import create_app
 from service.config import Settings
+from service.engine.soak_order import angles_of, step_orders, travel_s
+from service.engine.spec import schedule_refs
 
 CAMPAIGNS = "/api/v1/campaigns"
 SCHEDULES = "/api/v1/schedules"
@@ -49,11 +51,35 @@ def test_201_carries_the_predicted_duration(client: TestClient, auth) -> None:  
     response = client.post(CAMPAIGNS, json=body, headers=auth["operator"])
     assert response.status_code == 201, response.text
     # ramps 23 → −10 → 20 °C at 2 °C/min, two fixed 30 min soaks, 12 positions of
-    # 6.8 s move + 3 s settle + 2 s acquisition
-    expected_s = 63 / 2 * 60 + 2 * 30 * 60 + 12 * (6.8 + 3.0 + 2.0)
+    # 3 s settle + 2 s acquisition, and the table's moves in the travel order (from home,
+    # step 1 from where step 0 ended), each + 1 s to see it in position
+    poses = angles_of(schedule_refs("six"))
+    orders = step_orders(poses, 2, "travel")
+    moves_s = (travel_s(poses, orders[0], (0.0, 0.0, 0.0))
+               + travel_s(poses, orders[1], tuple(poses[orders[0][-1]])) + 12 * 1.0)
+    expected_s = 63 / 2 * 60 + 2 * 30 * 60 + 12 * (3.0 + 2.0) + moves_s
     assert response.json()["predicted_duration_s"] == pytest.approx(expected_s)
     assert client.get(f"{CAMPAIGNS}/{response.json()['id']}", headers=auth["viewer"]).json()[
         "predicted_duration_s"] == pytest.approx(expected_s)
+    # Eight sensors are read at once: the same duration; the schedule's order moves more.
+    eight = client.post(CAMPAIGNS, json={**{k: v for k, v in body.items() if k != "sensor"},
+                                         "sensors": [f"SN-{i}" for i in range(8)]},
+                        headers=auth["operator"])
+    assert eight.json()["predicted_duration_s"] == pytest.approx(expected_s)
+    table = client.post(CAMPAIGNS, json={**body, "position_order": "table"},
+                        headers=auth["operator"])
+    assert table.json()["predicted_duration_s"] > expected_s + 5.0
+
+
+def test_a_random_order_without_a_seed_is_422_naming_the_seed(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    body = {"rig": "sim", "sensor": "SN-1", "position_order": "random"}
+    assert _locs(client.post(CAMPAIGNS, json=body, headers=auth["operator"])) == [
+        ["body", "position_order_seed"]]
+    ok = client.post(CAMPAIGNS, json={**body, "position_order_seed": 7},
+                     headers=auth["operator"])
+    assert ok.status_code == 201, ok.text
+    assert ok.json()["spec"]["position_order"] == "random"
+    assert ok.json()["spec"]["position_order_seed"] == 7
 
 
 def test_schedules_at_in_the_past_and_exactly_one_trigger(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]

@@ -50,11 +50,24 @@ def test_recording_csv_is_format_v1_in_time_order(client: TestClient, auth, sf) 
     assert response.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(response.text)))
     assert tuple(rows[0]) == RECORDING_COLUMNS == (
-        "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "ref_x", "ref_y",
-        "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")  # fmt: skip
+        "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "visit", "ref_x",
+        "ref_y", "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")  # fmt: skip
     assert [r["t_s"] for r in rows] == ["5570.0", "5610.0"]
+    assert [(r["position"], r["visit"]) for r in rows] == [("0", "0"), ("1", "1")]
     assert float(rows[0]["ax"]) == 0.00421993386 and rows[0]["n"] == "200"
     assert rows[1]["sd_x"] == ""  # not recorded
+
+
+def test_visit_counts_each_step_s_rows_in_time_order_whatever_their_position(  # type: ignore[no-untyped-def]
+        client: TestClient, auth, sf) -> None:
+    cid = new_campaign(client, auth["operator"])["id"]
+    with session_scope(sf) as session:  # a travel order: position 5, then 2, then 0
+        for step, position, t_s in ((0, 5, 100.0), (0, 2, 130.0), (1, 0, 900.0), (0, 0, 160.0)):
+            session.add(_measurement(cid, step, position, t_s))
+    text = client.get(f"/api/v1/campaigns/{cid}/recording.csv", headers=auth["viewer"]).text
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert [(r["step"], r["position"], r["visit"]) for r in rows] == [
+        ("0", "5", "0"), ("0", "2", "1"), ("0", "0", "2"), ("1", "0", "0")]
 
 
 def test_recording_of_a_fresh_campaign_is_just_the_header(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]

@@ -4,15 +4,24 @@ An effect module says how the physics would show in the raw output of each
 reading (``regressors``: (N,3,k) g per unit parameter), over a grid of its
 nonlinear parameter if it has one (``grid``: profile), whether a protocol can
 reveal it at all (``identifiable``), and how to say what was found
-(``parameters`` with uncertainties, ``sentence``). Whether the *base model*
-absorbs it is measured, not declared: ``absorbed_fraction`` in
-:mod:`calibration.discrepancy.stats`.
+(``parameters`` with uncertainties, ``sentence``), how it is told apart from
+each confuser (``told_apart``), and what it adds to a model file
+(``extension_fields``, ``extension_term_g``, ``apply_extension``: written and
+registered by :mod:`calibration.discrepancy.extensions`). Its twin counterpart
+is the class with the same ``effect_id`` in ``simulators/effects.py``
+(``from_finding``): the simulators import the calibration side, never the
+reverse (shared/DESIGN.md). Whether the *base model* absorbs it is measured,
+not declared: ``absorbed_fraction`` in :mod:`calibration.discrepancy.stats`.
+
+Adding an effect is one module here plus its entry in ``ALL_EFFECTS``; nothing
+in ``diagnose``, ``extensions`` or ``report`` names effect ids.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +45,21 @@ class EffectModule:
     # ``one_sided``: the first regressor's coefficient is physically ≥ 0 (a lag's
     # amplitude); the test is the likelihood ratio under that constraint (stats.py).
     one_sided: bool = False
+    # ``per_reading``: tested reading by reading (leave-one-reading-out, the max over readings
+    # calibrated by the null), may be accepted at several readings, and flagged readings are
+    # excluded from the scores (the ``outlier`` of effects.md). ``theta`` is then the row.
+    per_reading: bool = False
+    # How this effect is told apart from each of its confusers: (confuser id, text). A pair is
+    # written once, in either module; :func:`how_told_apart` looks in both.
+    told_apart: tuple[tuple[str, str], ...] = ()
+    # Model-file term ``discrepancy.<effect_id>`` (extensions.py): written for a finding when
+    # True. ``extension_absorbed``: the term depends on the input only, so the base model fitted
+    # with it present absorbed its affine-in-input part; the file stores that part.
+    writes_extension: bool = False
+    extension_absorbed: bool = False
+    # False: no regressor exists for it in a static soak recording (not_identifiable.py); it
+    # can be in the data without being testable, so the report names it as an alternative.
+    observable: bool = True
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:
@@ -77,8 +101,44 @@ class EffectModule:
             return hit or [AXES[int(np.argmax(np.max(z, axis=0)))]]
         return list(AXES)
 
-    def sentence(self, params: dict[str, float], sd: dict[str, float], axes: list[str]) -> str:
+    def sentence(self, params: dict[str, float], sd: dict[str, float], axes: list[str],
+                 ctx: DesignContext | None = None) -> str:
+        """One plain sentence; ``ctx`` lets it say only what this recording can show."""
         return f"{self.effect_id}: " + ", ".join(_pm(k, params, sd) for k in params)
+
+    def test_name(self) -> str:
+        """The statistic named in a finding's ``evidence``."""
+        if self.per_reading:
+            return "leave-one-reading-out statistic, max over readings, min-p over candidates"
+        if self.continuous:
+            return (f"score test profiled over {self.theta_name} (grid, then refined), "
+                    "min-p over candidates (parametric bootstrap)")
+        return ("score test after projecting out the model, min-p over candidates "
+                "(parametric bootstrap)")
+
+    # --- model-file extension ----------------------------------------------
+    def extension_fields(self, params: Mapping[str, float]) -> dict[str, Any]:
+        """The term's fields in g-based SI units (default: the finding's parameters as is)."""
+        return {"parameters": dict(params)}
+
+    def extension_term_g(self, spec: Mapping[str, Any], a: np.ndarray) -> np.ndarray | None:
+        """(N,3) extra raw output (g) at input ``a``; None: ``compensate`` has not the context
+        it needs (time, the die temperature) and the term is identity there."""
+        return None
+
+
+def how_told_apart(a: EffectModule, b: EffectModule) -> str:
+    """The text of either module for the pair, or the generic statement."""
+    for one, other in ((a, b), (b, a)):
+        for cid, text in one.told_apart:
+            if cid == other.effect_id:
+                return text
+    return "compared by their p-values after projection"
+
+
+def vec3(spec: Mapping[str, Any], key: str) -> np.ndarray:
+    """A model-file field given as one value or one per axis, as (3,)."""
+    return np.broadcast_to(np.asarray(spec.get(key, 0.0), float), (3,))
 
 
 def per_axis(ctx: DesignContext, col: np.ndarray) -> np.ndarray:

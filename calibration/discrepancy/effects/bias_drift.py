@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.discrepancy.context import DesignContext
+from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
 
 
@@ -20,6 +20,8 @@ class BiasDrift(EffectModule):
     confusers: tuple[str, ...] = ("thermal_hysteresis", "thermal_lag", "session_offset")
     experiment: str = ("revisit a temperature hours later (e.g. a return step to the first "
                        "setpoint at the end) or hold one plateau for several hours")
+    # Needs t_s, which compensate does not have: identity there, recorded for the twin.
+    writes_extension: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return per_axis(ctx, (ctx.t_s - ctx.t_s.min()) / 3600.0)
@@ -27,8 +29,16 @@ class BiasDrift(EffectModule):
     def parameters(self, coef, se, theta, ctx):
         return axis_params("rate", "ug_per_h", coef, se, UG)
 
-    def sentence(self, params, sd, axes):
+    def extension_fields(self, params):
+        return {"rate_g_per_h": [params[f"rate_{a}_ug_per_h"] * 1e-6 for a in AXES]}
+
+    def sentence(self, params, sd, axes, ctx=None):
         parts = [fmt_pm(params[f"rate_{a}_ug_per_h"], sd[f"rate_{a}_ug_per_h"], "µg/h")
                  for a in axes]
+        if ctx is not None and ctx.temperature_source == "none":
+            # Why: "not with temperature" needs a temperature to compare with.
+            return (f"{'/'.join(axes)} bias drifts with elapsed time: {', '.join(parts)} (no "
+                    "temperature is recorded, so a slow change of temperature would look the "
+                    "same)")
         return (f"{'/'.join(axes)} bias drifts with elapsed time, not with temperature: "
                 f"{', '.join(parts)}")

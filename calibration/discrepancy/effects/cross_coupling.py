@@ -17,21 +17,27 @@ from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm
 PAIRS = (("xy", 0, 1), ("xz", 0, 2), ("yz", 1, 2))
 
 
+def pair_products(a: np.ndarray) -> np.ndarray:
+    """(N,3) inputs → (N,3,3): column k is pair k's product ``a_i a_j`` on both its axes."""
+    out = np.zeros((a.shape[0], 3, 3))
+    for k, (_, i, j) in enumerate(PAIRS):
+        prod = a[:, i] * a[:, j]
+        out[:, i, k] = prod
+        out[:, j, k] = prod
+    return out
+
+
 @dataclass(frozen=True)
 class CrossCoupling(EffectModule):
     effect_id: str = "cross_coupling"
     confusers: tuple[str, ...] = ("scale_nonlinearity", "turntable_geometry")
     experiment: str = ("add oblique positions where two axes see gravity at once "
                        "(45° between axes, e.g. table1 or cube14)")
+    writes_extension: bool = True
+    extension_absorbed: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        a = ctx.input_g
-        out = np.zeros((ctx.n, 3, 3))
-        for k, (_, i, j) in enumerate(PAIRS):
-            prod = a[:, i] * a[:, j]
-            out[:, i, k] = prod
-            out[:, j, k] = prod
-        return out
+        return pair_products(ctx.input_g)
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         a = ctx.input_g
@@ -46,6 +52,13 @@ class CrossCoupling(EffectModule):
         s = {f"k_{name}_ug_per_g2": float(se[k] * UG) for k, (name, _, _) in enumerate(PAIRS)}
         return p, s
 
+    def extension_fields(self, params):
+        return {f"k_{name}_per_g": params[f"k_{name}_ug_per_g2"] * 1e-6 for name, _, _ in PAIRS}
+
+    def extension_term_g(self, spec, a):
+        k = np.array([float(spec.get(f"k_{name}_per_g", 0.0)) for name, _, _ in PAIRS])
+        return pair_products(a) @ k
+
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf))
         hit: set[str] = set()
@@ -54,7 +67,7 @@ class CrossCoupling(EffectModule):
                 hit.update(name)
         return sorted(hit) or list(PAIRS[int(np.argmax(z))][0])
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         names = sorted(params, key=lambda k: -abs(params[k]) / max(sd[k], 1e-12))
         top = names[0]
         pair = top.split("_")[1]

@@ -15,6 +15,7 @@ class Unobservable(EffectModule):
     """An effect declared not identifiable under this recording's protocol, with the reason."""
 
     why: str = ""
+    observable: bool = False
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return np.zeros((ctx.n, 3, 0))

@@ -19,6 +19,7 @@ class Outlier(EffectModule):
     effect_id: str = "outlier"
     confusers: tuple[str, ...] = ("thermal_lag",)
     experiment: str = "repeat the flagged positions"
+    per_reading: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         return [float(i) for i in range(ctx.n)]
@@ -37,7 +38,7 @@ class Outlier(EffectModule):
             p[f"size_{ax}_ug"], s[f"size_{ax}_ug"] = float(coef[a] * UG), float(se[a] * UG)
         return p, s
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         rows = params.get("rows") or [params["row"]]
         sizes = ", ".join(f"{ax} {params[f'size_{ax}_ug']:.0f} µg" for ax in axes)
         return (f"{len(rows)} reading(s) stand far off the rest and are isolated in time "

@@ -12,7 +12,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import AXES, DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm
+from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm, vec3
+
+
+def own_powers(a: np.ndarray) -> np.ndarray:
+    """(N,3) inputs → (N,3,6): ``a_i²`` (columns 0–2) and ``a_i³`` (3–5) on axis i."""
+    out = np.zeros((a.shape[0], 3, 6))
+    for i in range(3):
+        out[:, i, i] = a[:, i] ** 2
+        out[:, i, 3 + i] = a[:, i] ** 3
+    return out
 
 
 @dataclass(frozen=True)
@@ -21,14 +30,13 @@ class ScaleNonlinearity(EffectModule):
     confusers: tuple[str, ...] = ("cross_coupling", "bias_drift")
     experiment: str = ("add oblique positions (e.g. the cube14 diagonals) so a³ and a² differ "
                        "from scale and bias")
+    told_apart: tuple[tuple[str, str], ...] = (
+        ("cross_coupling", "own-axis a², a³ versus products of two axes' inputs"),)
+    writes_extension: bool = True
+    extension_absorbed: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        a = ctx.input_g
-        out = np.zeros((ctx.n, 3, 6))
-        for i in range(3):
-            out[:, i, i] = a[:, i] ** 2
-            out[:, i, 3 + i] = a[:, i] ** 3
-        return out
+        return own_powers(ctx.input_g)
 
     def parameters(self, coef, se, theta, ctx):
         p, s = {}, {}
@@ -37,12 +45,19 @@ class ScaleNonlinearity(EffectModule):
             p[f"k3_{ax}_ug_per_g3"], s[f"k3_{ax}_ug_per_g3"] = coef[3 + i] * UG, se[3 + i] * UG
         return ({k: float(v) for k, v in p.items()}, {k: float(v) for k, v in s.items()})
 
+    def extension_fields(self, params):
+        return {"k2_per_g": [params[f"k2_{a}_ug_per_g2"] * 1e-6 for a in AXES],
+                "k3_per_g2": [params[f"k3_{a}_ug_per_g3"] * 1e-6 for a in AXES]}
+
+    def extension_term_g(self, spec, a):
+        return own_powers(a) @ np.concatenate([vec3(spec, "k2_per_g"), vec3(spec, "k3_per_g2")])
+
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf)).reshape(2, 3)
         hit = [AXES[a] for a in range(3) if np.max(z[:, a]) >= 3.0]
         return hit or list(AXES)  # jointly significant, no axis resolved
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         z = {k: abs(v) / max(sd.get(k, 0.0), 1e-12) for k, v in params.items()}
         if max(z.values()) < 3.0:  # jointly significant, no single coefficient resolved
             top = max(z, key=z.__getitem__)

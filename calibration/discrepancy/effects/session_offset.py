@@ -17,9 +17,17 @@ from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, 
 @dataclass(frozen=True)
 class SessionOffset(EffectModule):
     effect_id: str = "session_offset"
-    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift")
+    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate")
     experiment: str = ("power-cycle the sensor at one plateau and take the same positions "
                        "before and after the cycle")
+    told_apart: tuple[tuple[str, str], ...] = (
+        ("thermal_hysteresis",
+         "a session jump happens once; hysteresis flips with each change of direction"),
+        ("bias_drift", "a session offset is a step in time; drift is a ramp"),
+        ("temperature_rate", "a rate term flips sign with the direction of the temperature "
+                             "change; a session jump does not"),
+    )
+    writes_extension: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         if ctx.session is not None:
@@ -48,8 +56,12 @@ class SessionOffset(EffectModule):
             p["from_step"], s["from_step"] = float(theta), 0.0
         return p, s
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         parts = [fmt_pm(params[f"offset_{a}_ug"], sd[f"offset_{a}_ug"], "µg") for a in axes]
-        where = f" from step {int(params['from_step'])} on" if "from_step" in params else ""
-        return (f"{'/'.join(axes)} bias jumps by {', '.join(parts)}{where} and stays there, as "
-                "after a power cycle")
+        if "from_step" in params:
+            # Why: without a session column the jump is seen, its cause is not recorded.
+            return (f"{'/'.join(axes)} bias jumps by {', '.join(parts)} from step "
+                    f"{int(params['from_step'])} on and stays there, as after a power cycle (the "
+                    "recording has no session column, so its cause is not recorded)")
+        return (f"{'/'.join(axes)} bias jumps by {', '.join(parts)} in the later power "
+                "session(s) of the session column and stays there")

@@ -19,9 +19,12 @@ MIN_RATE_C_PER_MIN = 0.02
 @dataclass(frozen=True)
 class TemperatureRate(EffectModule):
     effect_id: str = "temperature_rate"
-    confusers: tuple[str, ...] = ("thermal_lag",)
+    # session_offset: in a one-way staircase the rate is largest on the first plateau and of
+    # one sign, i.e. a jump after it (issue 10; protocol.py withholds the name then).
+    confusers: tuple[str, ...] = ("thermal_lag", "session_offset")
     experiment: str = ("record positions during slow ramps in both directions (e.g. ±0.5 °C/min) "
                        "with sensor_c as the temperature")
+    writes_extension: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return per_axis(ctx, ctx.rate_c_per_min)
@@ -36,7 +39,7 @@ class TemperatureRate(EffectModule):
     def parameters(self, coef, se, theta, ctx):
         return axis_params("k_rate", "ug_per_c_per_min", coef, se, UG)
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         parts = [fmt_pm(params[f"k_rate_{a}_ug_per_c_per_min"],
                         sd[f"k_rate_{a}_ug_per_c_per_min"], "µg per °C/min") for a in axes]
         return f"{'/'.join(axes)} output follows the rate of temperature change: {', '.join(parts)}"

@@ -12,8 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
+from calibration.discrepancy.context import AXES, DesignContext
+from calibration.discrepancy.effects.base import (
+    UG,
+    EffectModule,
+    axis_params,
+    fmt_pm,
+    per_axis,
+    vec3,
+)
 
 
 @dataclass(frozen=True)
@@ -22,6 +29,10 @@ class ThermalHysteresis(EffectModule):
     confusers: tuple[str, ...] = ("thermal_lag", "bias_drift", "session_offset")
     experiment: str = ("revisit the same setpoints on a heating and a cooling leg "
                        "(e.g. −40 → 60 → −40 °C) so each temperature is seen from both sides")
+    told_apart: tuple[tuple[str, str], ...] = (
+        ("bias_drift", "hysteresis flips with heating/cooling at revisited temperatures; "
+                       "drift is monotonic in time"),)
+    writes_extension: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return per_axis(ctx, ctx.direction)
@@ -38,8 +49,19 @@ class ThermalHysteresis(EffectModule):
     def parameters(self, coef, se, theta, ctx):
         return axis_params("h", "ug", coef, se, UG)
 
-    def sentence(self, params, sd, axes):
+    def extension_fields(self, params):
+        # ``direction``: set +1/−1 for the leg being compensated (0: no correction).
+        return {"h_g": [params[f"h_{a}_ug"] * 1e-6 for a in AXES], "direction": 0.0}
+
+    def extension_term_g(self, spec, a):
+        d = float(spec.get("direction", 0.0))
+        return np.broadcast_to(d * vec3(spec, "h_g")[None, :], a.shape)
+
+    def sentence(self, params, sd, axes, ctx=None):
         parts = [fmt_pm(params[f"h_{a}_ug"], sd[f"h_{a}_ug"], "µg") for a in axes]
-        return (f"{'/'.join(axes)} output reads higher after heating than after cooling at the "
+        # Why the sign: h is the coefficient of +1 after heating; a negative h reads lower.
+        signs = {np.sign(params[f"h_{a}_ug"]) for a in axes}
+        how = "higher" if signs == {1.0} else "lower" if signs == {-1.0} else "differently"
+        return (f"{'/'.join(axes)} output reads {how} after heating than after cooling at the "
                 f"same temperature (half the difference h = {', '.join(parts)}), and it persists "
                 "through each plateau")

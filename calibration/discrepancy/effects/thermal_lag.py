@@ -45,6 +45,16 @@ class ThermalLag(EffectModule):
     continuous: bool = True
     theta_name: str = "tau_s"
     one_sided: bool = True
+    told_apart: tuple[tuple[str, str], ...] = (
+        ("thermal_hysteresis",
+         "a lag decays with time since the step, hysteresis persists through the plateau"),
+        ("bias_drift", "a lag follows each step and decays; drift grows with elapsed time"),
+        ("temperature_rate",
+         "a lag's shape is locked to the model's ∂output/∂T (one amplitude for all axes); "
+         "a rate effect has free per-axis gains"),
+    )
+    # Informational: compensate should use the die temperature; the term documents the lag.
+    writes_extension: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         return list(TAU_GRID_S)
@@ -100,17 +110,21 @@ class ThermalLag(EffectModule):
              "first_plateau_offset_c": float(se[1])}
         return p, s
 
+    def extension_fields(self, params):
+        return {"tau_s": params["tau_s"]}
+
     def axes(self, coef, se):
         return ["x", "y", "z"]
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         tau, s = params["tau_s"], sd.get("tau_s", float("nan"))
         unc = f" (± {s:.0f} s)" if s is not None and np.isfinite(s) else ""
         amp = params.get("amplitude", 1.0)
         return (f"the sensor die lags the chamber air with a time constant τ = {tau:.0f} s{unc}: "
                 "readings early in each plateau still carry part of the last step, scaled by the "
-                f"model's own temperature sensitivity ({amp:.2f} × the die–air difference of a "
-                f"{RAMP_C_PER_MIN:g} °C/min ramp)")
+                f"model's own temperature sensitivity ({amp:.2f} × the die–air difference of an "
+                f"assumed {RAMP_C_PER_MIN:g} °C/min ramp: the recording holds the plateaus, not "
+                "the ramps)")
 
 
 def die_minus_air_c(ctx: DesignContext, tau_s: float) -> np.ndarray:

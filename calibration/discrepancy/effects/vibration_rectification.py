@@ -20,6 +20,7 @@ class VibrationRectification(EffectModule):
     confusers: tuple[str, ...] = ("bias_drift",)
     experiment: str = ("record sd_* and take positions with the chamber compressor on and off "
                        "at the same temperature")
+    writes_extension: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         assert ctx.sd_g is not None
@@ -37,7 +38,7 @@ class VibrationRectification(EffectModule):
     def parameters(self, coef, se, theta, ctx):
         return axis_params("c", "per_g", coef, se, 1.0)
 
-    def sentence(self, params, sd, axes):
+    def sentence(self, params, sd, axes, ctx=None):
         parts = [fmt_pm(params[f"c_{a}_per_g"], sd[f"c_{a}_per_g"], "per g") for a in axes]
         return (f"{'/'.join(axes)} output shifts with the vibration power seen in sd_*: "
                 f"c = {', '.join(parts)}")
