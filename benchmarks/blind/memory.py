@@ -11,6 +11,7 @@ diagnose figure per row.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import subprocess
 import sys
@@ -53,7 +54,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "long.csv"
         write_recording(path, rec)
-        out = {"rows": len(rec), "n_null": a.n_null}
+        n_rows = len(rec)
+        del rec  # the children read the CSV; the parent must not hold a copy while they run
+        gc.collect()
+        out = {"rows": n_rows, "n_null": a.n_null}
         for what in ("calibrate", "diagnose"):
             r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), str(a.n_null)],
                                capture_output=True, text=True, check=False)
@@ -63,7 +67,10 @@ def main(argv: list[str] | None = None) -> int:
             out[what] = json.loads(r.stdout.strip().splitlines()[-1])
         if "peak_rss_mb" in out.get("diagnose", {}):
             d = out["diagnose"]
-            d["kb_per_row"] = round((d["peak_rss_mb"] - d["after_read_mb"]) * 1024 / len(rec), 2)
+            d["kb_per_row"] = round((d["peak_rss_mb"] - d["after_read_mb"]) * 1024 / n_rows, 2)
+        if "peak_rss_mb" in out.get("diagnose", {}) and "peak_rss_mb" in out.get("calibrate", {}):
+            out["diagnose_over_calibrate_peak"] = round(
+                out["diagnose"]["peak_rss_mb"] / out["calibrate"]["peak_rss_mb"], 2)
     print(json.dumps(out, indent=1))
     return 0
 

@@ -33,6 +33,8 @@ from calibration.discrepancy.context import DesignContext, base_context
 from calibration.recording import Recording
 
 Lift = Callable[[np.ndarray], np.ndarray]
+# (rows (r,), raw-space values on those rows (r,3,k)) → (residual entries, (entries, k) values)
+LiftRows = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
@@ -51,6 +53,16 @@ class LinearProblem:
     degree: int
     t_mid_c: float
     t_half_c: float
+    # The lift of columns that live on a few readings only (the scan's local blocks): the
+    # same values as ``lift`` on those readings' entries, without an (m × k) dense copy
+    # that is zero almost everywhere (issue 10: O(rows) per block made the scan O(rows²)).
+    lift_rows: LiftRows | None = None
+    # (m,) whitened loading of each entry on its reading's one temperature error, 0 when
+    # none: the recorded T's noise moves the three axes of a reading together (ε_a =
+    # ∂raw_a/∂T · δT), so whitened entries of one reading are correlated. The parametric
+    # bootstrap draws that shared term (stats.null_replicates); without it the null of any
+    # statistic that sums a reading's axes (outliers, cross-axis terms) was too light.
+    shared_t_loading: np.ndarray | None = None
 
     @property
     def m(self) -> int:
@@ -130,14 +142,15 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     sig = pooled_sigma_g(rec, ctx.steps)
     from_sd = sig is not None and bool(np.all(np.isfinite(sig) & (sig > 0)))
     if not from_sd:
-        beta = np.linalg.lstsq(X0, y, rcond=None)[0]
+        beta = _wls(X0, np.ones(3 * n), y)
         e = (y - X0 @ beta).reshape(n, 3)
         dof_corr = np.sqrt(3 * n / max(3 * n - X0.shape[1], 1))
         s = 1.4826 * np.median(np.abs(e - np.median(e, axis=0)), axis=0) * dof_corr
         sig = np.broadcast_to(np.maximum(s, 1e-9), (n, 3))
     w = 1.0 / np.asarray(sig, float).ravel()
-    beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+    beta = _wls(X0, w, y)
     sig_T = temperature_noise_c(ctx)
+    loading = None
     if np.any(sig_T > 0):
         # Errors in the temperature regressor: a reading's T noise moves the model along
         # ∂raw/∂T. Without it, a sensor with a large tempco read on a noisy chamber PV
@@ -150,14 +163,15 @@ def _reference_problem(rec: Recording) -> LinearProblem:
             d0 = np.column_stack([db0 @ beta[a * k:(a + 1) * k] for a in range(3)])
         sig = np.sqrt(np.asarray(sig, float) ** 2 + (d0 * sig_T[:, None]) ** 2)
         w = 1.0 / sig.ravel()
-        beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+        beta = _wls(X0, w, y)
+        loading = (d0 * sig_T[:, None]).ravel() * w  # |loading| ≤ 1: its share of σ
     t_scaled = P[:, 1] if degree > 0 else np.zeros(n)
     remainder = _sfem_remainder(raw, ref, np.asarray(sig, float).reshape(n, 3), t_scaled,
                                 degree, ctx, beta, X0, w)
     if remainder is not None:  # the data minus what the SFEM-cubic has beyond the design
 
         y = (raw - remainder).ravel()
-        beta = np.linalg.lstsq(X0 * w[:, None], y * w, rcond=None)[0]
+        beta = _wls(X0, w, y)
     ydata = y.reshape(n, 3)
 
     def blocks(temp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -194,10 +208,57 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     def lift(x: np.ndarray) -> np.ndarray:
         return x.reshape(3 * n, -1)
 
+    def lift_rows(rows: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (3 * rows[:, None] + np.arange(3)).ravel(), x.reshape(3 * rows.size, -1)
+
     return LinearProblem(
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
-        from_sd, degree, mid, half,
+        from_sd, degree, mid, half, lift_rows,
+        loading if loading is not None and np.any(loading != 0) else None,
     )
+
+
+def _wls(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Weighted least squares ``min ‖w(y − Xβ)‖``: lstsq, or normal equations by row blocks
+    for a design above ``stats.TALL_BYTES``.
+
+    Why: lstsq on ``X·w`` holds the weighted copy plus LAPACK's copy and workspace (~4 × the
+    design at its peak); on a long recording that, not the data, set diagnose's peak. The
+    normal equations on unit-norm columns lose precision only as cond² (the base design's
+    condition is modest after scaling); recordings below the size keep lstsq exactly.
+    """
+    from calibration.discrepancy import stats
+
+    if X.nbytes <= stats.TALL_BYTES or X.shape[0] <= 20 * X.shape[1]:
+        return np.linalg.lstsq(X * w[:, None], y * w, rcond=None)[0]
+    p = X.shape[1]
+    G, h = np.zeros((p, p)), np.zeros(p)
+    step = max(1, stats.CHUNK_BYTES // (8 * p))
+    for i in range(0, X.shape[0], step):
+        Xc = X[i:i + step] * w[i:i + step, None]
+        G += Xc.T @ Xc
+        h += Xc.T @ (y[i:i + step] * w[i:i + step])
+    d = np.sqrt(np.diag(G))
+    d = np.where(d > 0, d, 1.0)
+    beta = np.linalg.lstsq(G / np.outer(d, d), h / d, rcond=1e-12)[0]
+    return beta / d
+
+
+JOINT_FIT_MAX_ROWS = 50_000  # readings the joint SFEM-cubic fit of the remainder uses
+
+
+def _joint_fit_rows(n: int) -> slice | np.ndarray:
+    """Readings for the joint fit behind the SFEM remainder: all, or a fixed random subset.
+
+    Why: ``fit_joint``'s Jacobian and rotations are ~6 kB per reading at their peak, which set
+    diagnose's peak on a long recording (300 k readings: 2.3 GB of 3.0). The fit has 12×(d+1)
+    coefficients, and the remainder it predicts is a few µg; 50 000 readings fix them far
+    below the noise. Random, not every k-th reading: a stride can alias with the schedule's
+    period (every 24th reading of a tiled Table 1 is one position). Seeded: reproducible.
+    """
+    if n <= JOINT_FIT_MAX_ROWS:
+        return slice(None)
+    return np.sort(np.random.default_rng(0).choice(n, JOINT_FIT_MAX_ROWS, replace=False))
 
 
 def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.ndarray,
@@ -236,7 +297,8 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
         cnt = np.array([np.sum(ctx.steps == s_) for s_ in ids], float)
         coeffs0 = np.linalg.lstsq(Pt * np.sqrt(cnt)[:, None], Ps * np.sqrt(cnt)[:, None],
                                   rcond=None)[0].T  # (12, d+1)
-        res = fit_joint(raw, ref, sig, t, coeffs0, np.ones(12, bool))
+        fit = _joint_fit_rows(n)
+        res = fit_joint(raw[fit], ref[fit], sig[fit], t[fit], coeffs0, np.ones(12, bool))
         V = np.vander(t, degree + 1, increasing=True)
         Pn = V @ res.coeffs.T
         pred = np.linalg.solve(sfem_batch.matrices(Pn), ref[:, :, None])[:, :, 0] + Pn[:, 0:3]
@@ -244,8 +306,7 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
         return None
     if not np.all(np.isfinite(pred)):
         return None
-    Xw = X0 * w[:, None]
-    lin = np.linalg.lstsq(Xw, pred.ravel() * w, rcond=None)[0]
+    lin = _wls(X0, w, pred.ravel())
     rem = pred - (X0 @ lin).reshape(n, 3)
     return rem
 
@@ -316,7 +377,10 @@ def _norm_problem(rec: Recording) -> LinearProblem:
     def lift(x: np.ndarray) -> np.ndarray:
         return np.einsum("na,nak->nk", gvec, x.reshape(n, 3, -1))
 
+    def lift_rows(rows: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return rows, np.einsum("na,nak->nk", gvec[rows], x.reshape(rows.size, 3, -1))
+
     return LinearProblem(
         "norm", y, X0, 1.0 / s_norm, np.arange(n), np.full(n, -1), lift, ctx, from_sd,
-        degree, mid, half,
+        degree, mid, half, lift_rows,
     )

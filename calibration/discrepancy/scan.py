@@ -53,17 +53,18 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
     their largest F: the null needs one tail evaluation per group, not per block.
     """
     m = e.size
-    ee, EE = float(e @ e), np.sum(E**2, axis=0)
+    # Σ E² per replicate without an (m × B) temporary (E is the largest array here).
+    ee, EE = float(e @ e), stats.sum_sq_columns(E)
     F: list[float] = []
     kd: list[tuple[int, int]] = []
     kept: list[tuple[str, int, int]] = []
     null_max: dict[tuple[int, int], np.ndarray] = {}
-    for label, key, axis, X in _blocks(pb):
-        Xw = pb.whiten(pb.lift(X))
-        S = np.flatnonzero(np.any(Xw != 0, axis=1))  # a block lives on its own readings
+    for label, key, axis, S, Xs in _blocks(pb):
+        keep_rows = np.any(Xs != 0, axis=1)  # a block lives on its own (nonzero) entries
+        if not keep_rows.all():
+            S, Xs = S[keep_rows], Xs[keep_rows]
         if S.size == 0:
             continue
-        Xs = Xw[S]
         # Gram of the projected block from its support alone: Z = (I − UUᵀ)X, so
         # ZᵀZ = XᵀX − (UᵀX)ᵀ(UᵀX), and Zᵀe = Xᵀe, ZᵀE = XᵀE because e and E are already
         # orthogonal to U. Exact, and O(|S|) instead of O(m) per block (long recordings
@@ -113,7 +114,12 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
 
 
 def _blocks(pb: Any):
-    """(label, key, axis, raw-space (N,3,k) columns) of every block."""
+    """(label, key, axis, residual entries S, whitened columns on S) of every block.
+
+    Each block is built on its own readings only (``pb.lift_rows``): a dense (m × k) block
+    per place made the scan O(rows × places) = O(rows²) in time on long recordings, where
+    the places (positions) grow with the rows.
+    """
     ctx = pb.ctx
     n = ctx.n
     u = np.column_stack([np.ones(n), ctx.input_g])  # (N,4)
@@ -121,18 +127,24 @@ def _blocks(pb: Any):
     pos_cols = np.column_stack([np.ones(n), t]) if np.ptp(t) > 0 else np.ones((n, 1))
     per_axis = pb.mode == "reference"
     for label, keys, cols in (("step", ctx.steps, u), ("position", ctx.positions, pos_cols)):
-        ids = np.unique(keys)
+        ids, inverse = np.unique(keys, return_inverse=True)
         if len(ids) < 2 or len(ids) > n // 2:  # one reading per place: an outlier's business
             continue
-        for key in ids:
-            m = (keys == key).astype(float)[:, None] * cols  # (N,k)
+        members = np.split(np.argsort(inverse, kind="stable"),
+                           np.cumsum(np.bincount(inverse, minlength=len(ids)))[:-1])
+        kc = cols.shape[1]
+        for key, rows in zip(ids, members, strict=True):
+            c = cols[rows]
             if per_axis:
                 for a in range(3):
-                    X = np.zeros((n, 3, cols.shape[1]))
-                    X[:, a, :] = m
-                    yield label, int(key), a, X
+                    X = np.zeros((rows.size, 3, kc))
+                    X[:, a, :] = c
+                    S, Xl = pb.lift_rows(rows, X)
+                    on_axis = slice(a, None, 3)  # entries of the other axes are zero
+                    yield label, int(key), a, S[on_axis], Xl[on_axis] * pb.w[S[on_axis], None]
             else:
-                X = np.zeros((n, 3, 3 * cols.shape[1]))
+                X = np.zeros((rows.size, 3, 3 * kc))
                 for a in range(3):
-                    X[:, a, a * cols.shape[1]:(a + 1) * cols.shape[1]] = m
-                yield label, int(key), -1, X
+                    X[:, a, a * kc:(a + 1) * kc] = c
+                S, Xl = pb.lift_rows(rows, X)
+                yield label, int(key), -1, S, Xl * pb.w[S, None]

@@ -25,22 +25,139 @@ from scipy.special import betaln, gammaln
 ABSORBED_MAX = 0.99  # beyond this the base model swallows the effect: not identifiable here
 
 
+TALL_BYTES = 64 * 2**20  # above this a tall design's basis comes from its Gram matrix
+
+
 def orthonormal_basis(X: np.ndarray, rel_tol: float = 1e-9) -> np.ndarray:
-    """Orthonormal basis of the column space of X (SVD; rank-deficient columns dropped)."""
+    """Orthonormal basis of the column space of X (SVD; rank-deficient columns dropped).
+
+    A tall X larger than :data:`TALL_BYTES` takes :func:`orthonormal_basis_tall`: the SVD
+    holds ~3.6 copies of X at its peak (measured, m = 300 000 × 48), the Gram route one.
+    """
     if X.shape[1] == 0:
         return np.zeros((X.shape[0], 0))
+    if X.nbytes > TALL_BYTES and X.shape[0] > 20 * X.shape[1]:
+        return orthonormal_basis_tall(X)
     U, s, _ = np.linalg.svd(X, full_matrices=False)
     keep = s > rel_tol * max(float(s[0]), 1e-300)
     return U[:, keep]
+
+
+GRAM_REL_TOL = 1e-12  # eigenvalue cut of the scaled Gram (singular-value ratio 1e-6)
+
+
+def orthonormal_basis_tall(X: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of a tall X from its Gram matrix, then one re-orthonormalisation.
+
+    Columns scaled to unit norm, G = XᵀX eigendecomposed (p × p), directions with
+    λ ≤ 1e-12·λmax dropped (the Gram resolves singular-value ratios to ~1e-8 only, so the
+    cut is coarser than the SVD's 1e-9; such near-collinear directions carry no
+    testable signal), U₁ = X V Λ^-½ by row blocks, then U = U₁ R⁻¹ with RᵀR = U₁ᵀU₁
+    (Cholesky-QR2: orthonormal to rounding when the scaled design's condition is far
+    below 1e8, as the base design's is). One (m × r) array besides X.
+    """
+    m, p = X.shape
+    G = X.T @ X
+    d = np.sqrt(np.diag(G))
+    inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
+    lam, V = np.linalg.eigh(G * inv[:, None] * inv[None, :])
+    keep = lam > GRAM_REL_TOL * max(float(lam.max()), 1e-300)
+    T = (inv[:, None] * V[:, keep]) / np.sqrt(lam[keep])
+    U = np.empty((m, int(keep.sum())))
+    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
+    for i in range(0, m, step):
+        U[i:i + step] = X[i:i + step] @ T
+    R = np.linalg.cholesky(U.T @ U).T  # upper: U₁ = U R
+    Rinv = np.linalg.inv(R)
+    for i in range(0, m, step):
+        U[i:i + step] = U[i:i + step] @ Rinv
+    return U
 
 
 def project_out(U: np.ndarray, X: np.ndarray) -> np.ndarray:
     return X - U @ (U.T @ X)
 
 
+CHUNK_BYTES = 16 * 2**20  # working block of the null replicates' row/column loops
+
+
+def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """``E ← (I − UUᵀ)E`` by blocks of rows: no second (m × B) array (issue 10, memory).
+
+    ``UᵀE`` is (p × B), small; the product ``U·(UᵀE)`` is formed one row block at a time.
+    """
+    UtE = U.T @ E
+    step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
+    for i in range(0, E.shape[0], step):
+        E[i:i + step] -= U[i:i + step] @ UtE
+    return E
+
+
+def null_replicates(rng: np.random.Generator, m: int, n_null: int, row: np.ndarray,
+                    shared: np.ndarray | None = None) -> np.ndarray:
+    """(m × B) whitened noise of the parametric bootstrap (docs/diagnosis.md §2).
+
+    Entries are unit-variance. ``shared`` (m,): each entry's loading c on one N(0,1) draw
+    per reading (``row``), the recorded temperature's error that moves a reading's three
+    axes together: entry = √(1 − c²)·z + c·ξ_row, so the null has the data's within-reading
+    correlation. Without ``shared`` it is white noise, drawn exactly as before.
+    """
+    E = rng.standard_normal((m, n_null))
+    if shared is None:
+        return E
+    xi = rng.standard_normal((int(row.max()) + 1, n_null))
+    c = np.clip(shared, -1.0, 1.0)
+    own = np.sqrt(1.0 - c**2)
+    step = max(1, CHUNK_BYTES // (8 * max(n_null, 1)))
+    for i in range(0, m, step):  # by row blocks: no second (m × B) array
+        sl = slice(i, i + step)
+        E[sl] *= own[sl, None]
+        E[sl] += c[sl, None] * xi[row[sl]]
+    return E
+
+
+def _residual_cov_blocks(U: np.ndarray, Ug: np.ndarray, c: np.ndarray,
+                         idx: np.ndarray) -> np.ndarray:
+    """(N, g, g) blocks of Cov(e) = (I − P) C (I − P), C block-diagonal per reading.
+
+    C = diag(1 − c²) + per-reading c cᵀ (unit diagonal). With P = UUᵀ and C block-diagonal,
+    the g-block is C_g − U_gU_gᵀC_g − C_gU_gU_gᵀ + U_g (UᵀCU) U_gᵀ, where
+    UᵀCU = I − Uᵀdiag(c²)U + Σ_readings v vᵀ, v = U_gᵀc_g (p × p, accumulated by blocks).
+    """
+    n, g, p = Ug.shape
+    cg = c[idx]  # (N, g)
+    Cg = np.eye(g)[None] * (1.0 - cg[:, :, None] ** 2) + cg[:, :, None] * cg[:, None, :]
+    V = np.einsum("ng,ngp->np", cg, Ug)
+    W = np.eye(p) + V.T @ V
+    c2 = c**2
+    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
+    for i in range(0, U.shape[0], step):
+        Ub = U[i:i + step]
+        W -= (Ub * c2[i:i + step, None]).T @ Ub
+    out = np.empty_like(Cg)
+    step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
+    for i in range(0, n, step):  # by blocks of readings: U_g W is an (m × p) array at once
+        Ub, Cb = Ug[i:i + step], Cg[i:i + step]
+        UUtC = np.einsum("ngp,nhp->ngh", Ub, Ub) @ Cb
+        UWU = np.einsum("ngq,nhq->ngh", Ub @ W, Ub)
+        out[i:i + step] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
+    return out
+
+
+def sum_sq_columns(E: np.ndarray) -> np.ndarray:
+    """Σ E² of each column without the (m × B) temporary of ``np.sum(E**2, axis=0)``."""
+    return np.einsum("ij,ij->j", E, E)
+
+
 def robust_scale(E: np.ndarray, dof_corr: float) -> np.ndarray:
-    """MAD scale of residual columns (one per replicate), corrected for the fitted dof."""
-    return 1.4826 * np.median(np.abs(E), axis=0) * dof_corr
+    """MAD scale of residual columns (one per replicate), corrected for the fitted dof.
+
+    By blocks of columns: the median of |E| needs a copy, of one block at a time only.
+    """
+    step = max(1, CHUNK_BYTES // (8 * max(E.shape[0], 1)))
+    med = np.concatenate([np.median(np.abs(E[:, j:j + step]), axis=0)
+                          for j in range(0, E.shape[1], step)]) if E.shape[1] else np.zeros(0)
+    return 1.4826 * med * dof_corr
 
 
 def absorbed_fraction(U: np.ndarray, X: np.ndarray) -> float:
@@ -106,7 +223,8 @@ def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
 
 
 def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
-                 one_sided: bool = False) -> tuple[float, np.ndarray, int, float, float]:
+                 one_sided: bool = False, EE: np.ndarray | None = None,
+                 ) -> tuple[float, np.ndarray, int, float, float]:
     """F-type score test of free-gain columns after projecting out U.
 
     ``one_sided``: the first column's coefficient is physically > 0 (a lag's amplitude)
@@ -118,11 +236,13 @@ def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
     absorbed fraction and the explained sum of squares. The noise scale is taken from
     the residual *after* the candidate, so the effect itself does not inflate it (short
     recordings, e.g. 33 rows; and strong effects, whose own signal would otherwise hide
-    them): χ²_k tails become F(k, dof) tails.
+    them): χ²_k tails become F(k, dof) tails. ``EE``: Σ E² per replicate, when the caller
+    has it (it is the same for every candidate of a stage).
     """
     absorbed = absorbed_fraction(U, Xw)
     m = e.size
-    ee, EE = float(e @ e), np.sum(E**2, axis=0)
+    ee = float(e @ e)
+    EE = sum_sq_columns(E) if EE is None else EE
     if one_sided:
         Nb = orthonormal_basis(project_out(U, Xw[:, 1:]), 1e-6)
         z1 = project_out(np.hstack([U, Nb]), Xw[:, :1])[:, 0]
@@ -170,21 +290,46 @@ def explained_ss(U: np.ndarray, Xw: np.ndarray, e: np.ndarray,
 
 
 def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_rows: int,
-              s: float, s_null: np.ndarray, skip: set[int]) -> tuple[np.ndarray, np.ndarray, int]:
-    """Leave-one-reading-out statistic per reading: e_gᵀ(I − U_g U_gᵀ)⁻¹ e_g / s².
+              s: float, s_null: np.ndarray, skip: set[int],
+              shared: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
+
+    With white noise the residual's covariance on a reading is I − U_gU_gᵀ. With
+    ``shared`` (the loading c of each entry on the reading's one temperature error, as in
+    :func:`null_replicates`) the noise covariance is block-diagonal, C_g = diag(1 − c²) +
+    c cᵀ, and the residual's is the g-block of (I − P)C(I − P) (:func:`_residual_cov_blocks`):
+    the statistic is then the Mahalanobis distance, χ²_g under the null. Why: a
+    recorded-temperature error moves the three axes together; the sum of squares of
+    correlated entries has a far heavier tail than χ²_g, and such readings were named
+    outliers (issue 10 nulls). C_g − U_gU_gᵀ is not that covariance: where the shared term
+    dominates (c ≈ ±0.95 on all axes at the cold end) it is nearly singular and a null
+    reading scored p ≈ 0.
 
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
     """
     g = int(np.bincount(row).max())
     idx = np.argsort(row, kind="stable").reshape(n_rows, g)
-    Ug = U[idx]  # (N, g, p)
-    M = np.eye(g)[None] - np.einsum("ngp,nhp->ngh", Ug, Ug)
+    if np.array_equal(idx.ravel(), np.arange(idx.size)):
+        # Entries already grouped by reading (both modes): views, not (m × p), (m × B) copies.
+        Ug = U.reshape(n_rows, g, -1)
+        Eg = E.reshape(n_rows, g, -1)
+    else:
+        Ug, Eg = U[idx], E[idx]  # (N, g, p), (N, g, B)
+    if shared is None:
+        M = np.eye(g)[None] - np.einsum("ngp,nhp->ngh", Ug, Ug)
+    else:
+        M = _residual_cov_blocks(U, Ug, np.clip(shared, -1.0, 1.0), idx)
     ok = np.array([i not in skip for i in range(n_rows)]) & (np.linalg.det(M) > 1e-6)
     Minv = np.zeros_like(M)
     Minv[ok] = np.linalg.inv(M[ok])
     eg = e[idx]
     t = np.einsum("ng,ngh,nh->n", eg, Minv, eg) / s**2
-    Eg = E[idx]  # (N, g, B)
-    tn = np.einsum("ngb,ngh,nhb->nb", Eg, Minv, Eg) / s_null[None, :] ** 2
-    return t, tn.max(axis=0), g
+    # The max over readings by blocks of readings: no (N × B) array. s_null is one scale per
+    # replicate, so max(q / s²) = max(q) / s².
+    tn_max = np.full(E.shape[1], -np.inf)
+    step = max(1, CHUNK_BYTES // (8 * g * max(E.shape[1], 1)))
+    for i in range(0, n_rows, step):
+        q = np.einsum("ngb,ngh,nhb->nb", Eg[i:i + step], Minv[i:i + step], Eg[i:i + step])
+        tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
+    return t, tn_max, g
