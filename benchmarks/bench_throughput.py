@@ -139,6 +139,9 @@ def one_campaign(args: tuple[str, int, bool, list[float]]) -> dict[str, Any]:
         "name": name, "sim_s": sim_s, "soak_s": sum(e["soak_s"] for e in log),
         "max_soak": sum(bool(e.get("max_soak_reached")) for e in log),
         "per_sensor": per_sensor, "dropped": dropped, "wall_s": wall_s,
+        # the k (µg per °C/min) each step's soak decision used, largest over the sensors
+        "k_used": [e.get("rate_gain_ug_per_c_per_min") for e in log
+                   if e.get("rate_gain_ug_per_c_per_min") is not None],
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     }
 
@@ -167,7 +170,7 @@ def report(results: list[dict[str, Any]], n_sensors: int, rates: list[float]) ->
                 cells.append(f"{got['rmse_ug']:>12.2f} (×{got['rmse_ug'] / ref['rmse_ug']:.3f})")
         print(f"{serial:<10} {rate_of(i, rates):>5g} " + " ".join(cells))
     seed_h = SEED_HOURS_PER_SENSOR
-    print(f"\n{'policy':<24} {'campaign':>9} {'×seed 1-sensor':>14} {'×fixed N':>9} "
+    print(f"\n{'policy':<24} {'campaign':>9} {'soak':>7} {'×seed 1-sensor':>14} {'×fixed N':>9} "
           f"{'sensors/ch-h':>12} {'×seed':>6} {'pooled':>8} {'worst':>7}  {'wall s':>6} "
           f"{'RSS MiB':>7}  verdict")
     for r in results:
@@ -183,12 +186,16 @@ def report(results: list[dict[str, Any]], n_sensors: int, rates: list[float]) ->
         verdict = ("reference" if r is base else
                    f"time {'met' if ok_time else 'NOT met'}, every sensor "
                    f"{'equal' if ok_acc else 'NOT equal'} (≤ ×{EQUAL_ACCURACY:.2f})")
-        print(f"{r['name']:<24} {hours:7.2f} h {hours / seed_h:14.3f} "
+        print(f"{r['name']:<24} {hours:7.2f} h {r['soak_s'] / 3600:5.2f} h {hours / seed_h:14.3f} "
               f"{r['sim_s'] / base['sim_s']:9.3f} {per_h:12.3f} {per_h * seed_h:6.1f} "
               f"{pooled:8.3f} {worst:7.3f}  {r['wall_s']:6.1f} {r['peak_rss_mib']:7.0f}  "
               f"{verdict}")
         if r["dropped"]:
             print(f"  dropped: {r['dropped']}")
+    for r in results:
+        if r["k_used"]:
+            print(f"{r['name']}: k fed per step (µg per °C/min, largest over the sensors): "
+                  + " ".join(f"{float(np.max(k)):.0f}" for k in r["k_used"]))
 
 
 def main() -> int:
