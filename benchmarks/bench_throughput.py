@@ -78,10 +78,11 @@ def rate_of(index: int, rates: list[float]) -> float:
     return rates[index % len(rates)]
 
 
-def make_truths(n_sensors: int, rates: list[float], probe_n: int) -> dict[str, Any]:
+def make_truths(n_sensors: int, rates: list[float], probe_n: int,
+                noise_free: bool = False) -> dict[str, Any]:
     """Every serial's BenchTruth, reporting its serial (the twin's identity check)."""
-    return {serial: dataclasses.replace(make_truth(i + 1, False, rate_of(i, rates), probe_n),
-                                        serial=serial)
+    return {serial: dataclasses.replace(
+                make_truth(i + 1, noise_free, rate_of(i, rates), probe_n), serial=serial)
             for i, serial in enumerate(serials_for(n_sensors))}
 
 
@@ -114,12 +115,12 @@ async def run_several(spec: dict[str, Any], db_dir: Path,
     return fits, clock.now(), camp.steps_log, dict(camp.sensors_dropped or {})
 
 
-def one_campaign(args: tuple[str, int, bool, list[float]]) -> dict[str, Any]:
+def one_campaign(args: tuple[str, int, bool, list[float], bool]) -> dict[str, Any]:
     """One N-sensor campaign under one policy; runs in its own worker process."""
-    name, n_sensors, fast, rates = args
+    name, n_sensors, fast, rates, noise_free = args
     logging.getLogger("soakcal").setLevel(logging.WARNING)  # no per-soak event lines
     probe_n = int(VARIANTS[name].get("soak_probe_samples", 8))
-    truths = make_truths(n_sensors, rates, probe_n)
+    truths = make_truths(n_sensors, rates, probe_n, noise_free)
     sp = demo_spec(fast)["setpoints_c"] if fast else SETPOINTS_C
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
@@ -202,6 +203,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sensors", type=int, default=8, help="sensors in the one campaign (≥ 2)")
     ap.add_argument("--fast", action="store_true", help="3 steps instead of 11")
+    ap.add_argument("--noise-free", action="store_true",
+                    help="no accelerometer noise: held-out error = soak-induced part only")
     ap.add_argument("--jobs", type=int, default=1, help="campaigns run at once (processes)")
     ap.add_argument("--rate-ug-per-c-per-min", default="0",
                     help="temperature_rate gain(s), µg per °C/min; a list cycles over sensors")
@@ -216,13 +219,14 @@ def main() -> int:
     if args.variants:
         names = [POLICIES[0]] + [POLICIES[int(i)] for i in args.variants.split(",")]
     w0 = time.monotonic()
-    cases = [(name, args.sensors, args.fast, rates) for name in names]
+    cases = [(name, args.sensors, args.fast, rates, args.noise_free) for name in names]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
         results = list(pool.map(one_campaign, cases))
     print(f"{args.sensors} sensors in one campaign, temperature_rate "
           f"{','.join(f'{v:g}' for v in rates)} µg per °C/min"
           f"{' (cycled over the sensors)' if len(rates) > 1 else ''}, "
-          f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}; "
+          f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}"
+          f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}; "
           f"{time.monotonic() - w0:.0f} s wall, {args.jobs} job(s)\n")
     report(results, args.sensors, rates)
     return 0
