@@ -79,15 +79,21 @@ def rate_of(index: int, rates: list[float]) -> float:
 
 
 def make_truths(n_sensors: int, rates: list[float], probe_n: int,
-                noise_free: bool = False) -> dict[str, Any]:
-    """Every serial's BenchTruth, reporting its serial (the twin's identity check)."""
-    return {serial: dataclasses.replace(
-                make_truth(i + 1, noise_free, rate_of(i, rates), probe_n), serial=serial)
-            for i, serial in enumerate(serials_for(n_sensors))}
+                noise_free: bool = False, crn_offset: int = 0) -> dict[str, Any]:
+    """Every serial's BenchTruth, reporting its serial (the twin's identity check).
+
+    ``crn_offset`` > 0: the same parts with other noise streams (another draw per part).
+    """
+    out = {}
+    for i, serial in enumerate(serials_for(n_sensors)):
+        truth = make_truth(i + 1, noise_free, rate_of(i, rates), probe_n)
+        out[serial] = dataclasses.replace(truth, serial=serial,
+                                          crn_seed=truth.crn_seed + 1000 * crn_offset)
+    return out
 
 
-async def run_several(spec: dict[str, Any], db_dir: Path,
-                      truths: dict[str, Any]) -> tuple[dict[str, Any], float, list[dict], dict]:
+async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any],
+                      rig_seed: int = RIG_SEED) -> tuple[dict[str, Any], float, list[dict], dict]:
     """One campaign of every serial in ``truths``; each sensor's fit, simulated s, log."""
     url = f"sqlite:///{db_dir / 'bench.db'}"
     upgrade_database(url)
@@ -105,7 +111,7 @@ async def run_several(spec: dict[str, Any], db_dir: Path,
 
     with catching_chamber(truths.values()):
         async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock,
-                            seed=RIG_SEED, serials=serials,
+                            seed=rig_seed, serials=serials,
                             sim_options={"truths": truths, "modbus_in_memory": True}) as dev:
             runner = CampaignRunner(sf, cid, dev, clock, calibrate=calibrate)
             state = await runner.run()
@@ -115,18 +121,19 @@ async def run_several(spec: dict[str, Any], db_dir: Path,
     return fits, clock.now(), camp.steps_log, dict(camp.sensors_dropped or {})
 
 
-def one_campaign(args: tuple[str, int, bool, list[float], bool]) -> dict[str, Any]:
+def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[str, Any]:
     """One N-sensor campaign under one policy; runs in its own worker process."""
-    name, n_sensors, fast, rates, noise_free = args
+    name, n_sensors, fast, rates, noise_free, crn_offset = args
     logging.getLogger("soakcal").setLevel(logging.WARNING)  # no per-soak event lines
     probe_n = int(VARIANTS[name].get("soak_probe_samples", 8))
-    truths = make_truths(n_sensors, rates, probe_n, noise_free)
+    truths = make_truths(n_sensors, rates, probe_n, noise_free, crn_offset)
     sp = demo_spec(fast)["setpoints_c"] if fast else SETPOINTS_C
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
     with tempfile.TemporaryDirectory() as d:
         fits, sim_s, log, dropped = asyncio.run(
-            run_several({**demo_spec(fast), **VARIANTS[name]}, Path(d), truths))
+            run_several({**demo_spec(fast), **VARIANTS[name]}, Path(d), truths,
+                        RIG_SEED + crn_offset))
     wall_s = time.monotonic() - w0
     per_sensor: dict[str, dict[str, float]] = {}
     for i, serial in enumerate(truths):
@@ -205,6 +212,8 @@ def main() -> int:
     ap.add_argument("--fast", action="store_true", help="3 steps instead of 11")
     ap.add_argument("--noise-free", action="store_true",
                     help="no accelerometer noise: held-out error = soak-induced part only")
+    ap.add_argument("--crn-offset", type=int, default=0,
+                    help="other noise streams for the same parts (positions and probes)")
     ap.add_argument("--jobs", type=int, default=1, help="campaigns run at once (processes)")
     ap.add_argument("--rate-ug-per-c-per-min", default="0",
                     help="temperature_rate gain(s), µg per °C/min; a list cycles over sensors")
@@ -219,14 +228,16 @@ def main() -> int:
     if args.variants:
         names = [POLICIES[0]] + [POLICIES[int(i)] for i in args.variants.split(",")]
     w0 = time.monotonic()
-    cases = [(name, args.sensors, args.fast, rates, args.noise_free) for name in names]
+    cases = [(name, args.sensors, args.fast, rates, args.noise_free, args.crn_offset)
+             for name in names]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
         results = list(pool.map(one_campaign, cases))
     print(f"{args.sensors} sensors in one campaign, temperature_rate "
           f"{','.join(f'{v:g}' for v in rates)} µg per °C/min"
           f"{' (cycled over the sensors)' if len(rates) > 1 else ''}, "
           f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}"
-          f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}; "
+          f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}"
+          f"{f', noise streams offset {args.crn_offset}' if args.crn_offset else ''}; "
           f"{time.monotonic() - w0:.0f} s wall, {args.jobs} job(s)\n")
     report(results, args.sensors, rates)
     return 0

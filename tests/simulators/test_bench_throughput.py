@@ -38,3 +38,14 @@ async def test_a_two_step_campaign_calibrates_each_sensor_against_its_own_truth(
         other = np.sqrt(np.mean(heldout_errors_g(fits[serial].model, own[1 - i], temps) ** 2))
         # A fit of its own part is far closer to it than to the other part (mg offsets).
         assert mine < 0.1 * other
+
+
+def test_a_crn_offset_keeps_the_parts_and_changes_only_the_noise_streams() -> None:
+    base = make_truths(2, [0.0], probe_n=8)
+    other = make_truths(2, [0.0], probe_n=8, crn_offset=1)
+    assert [t.crn_seed for t in other.values()] == [1001, 1002]
+    for serial in base:
+        assert base[serial].temp_offset_c == other[serial].temp_offset_c
+        ref = np.array([[0.0, 0.0, 1.0]])
+        assert np.allclose(base[serial].ideal_raw_g(ref, 20.0),
+                           other[serial].ideal_raw_g(ref, 20.0))
