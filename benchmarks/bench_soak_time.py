@@ -44,9 +44,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
 import tempfile
 import time
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -128,6 +130,32 @@ def make_truth(seed: int, noise_free: bool, rate_ug_per_c_per_min: float,
                       crn_seed=seed, rate_g_per_c_per_s=rate, probe_n=probe_n)
 
 
+@contextlib.contextmanager
+def catching_chamber(truths: Iterable[SensorTruth]) -> Iterator[None]:
+    """Hand the next simulated rig's chamber to every BenchTruth among ``truths``.
+
+    The rig simulator keeps its physics to itself; catch its chamber so the rate effect uses
+    the die's true instantaneous rate (consecutive captures can be a ramp apart). The sensors
+    of one rig share its chamber, so one chamber serves N truths.
+    """
+    import simulators.rig as sim_rig
+
+    physics = sim_rig.ChamberPhysics
+    bench = [t for t in truths if isinstance(t, BenchTruth)]
+
+    def _caught(*a: Any, **kw: Any) -> Any:
+        chamber = physics(*a, **kw)
+        for t in bench:
+            t.chamber = chamber
+        return chamber
+
+    sim_rig.ChamberPhysics = _caught  # type: ignore[misc, assignment]
+    try:
+        yield
+    finally:
+        sim_rig.ChamberPhysics = physics  # type: ignore[misc]
+
+
 async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
                        truth: SensorTruth) -> tuple[Any, float, list[dict]]:
     url = f"sqlite:///{db_dir / 'bench.db'}"
@@ -136,26 +164,11 @@ async def run_campaign(spec: dict[str, Any], db_dir: Path, seed: int,
     store.fast_sqlite_commits(sf)
     cid = _create_campaign(sf, spec)
     clock = VirtualClock(idle_wall_s=0.0003)
-    # The rig simulator keeps its physics to itself; catch its chamber so the rate effect uses
-    # the die's true instantaneous rate (consecutive captures can be a ramp apart).
-    import simulators.rig as sim_rig
-
-    physics = sim_rig.ChamberPhysics
-
-    def _caught(*a: Any, **kw: Any) -> Any:
-        chamber = physics(*a, **kw)
-        if isinstance(truth, BenchTruth):
-            truth.chamber = chamber
-        return chamber
-
-    sim_rig.ChamberPhysics = _caught  # type: ignore[misc, assignment]
-    try:
+    with catching_chamber([truth]):
         async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=seed,
                             sim_options={"truth": truth}) as dev:
             runner = CampaignRunner(sf, cid, dev, clock)
             state = await runner.run()
-    finally:
-        sim_rig.ChamberPhysics = physics  # type: ignore[misc]
     camp = store.load_campaign(sf, cid)
     if state != "completed":
         raise RuntimeError(f"campaign {state}: {camp.error}")

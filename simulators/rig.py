@@ -11,6 +11,8 @@ serials=["SN-1", "SN-2"])`` mounts one simulated bridge per serial, all in the
 same chamber and on the same table, each with its own truth drawn from
 :func:`sensor_seed` of its serial (so a serial is the same part in every run)
 and its own noise stream; :func:`connect_sensors` opens a driver per bridge.
+``truths={serial: truth}`` replaces the part of the serials it names (a benchmark's
+truth with keyed noise or an extra effect); the others keep their serial's part.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import zlib
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -123,12 +125,15 @@ async def start_sim_rig(
     modbus_in_memory: bool = False,
     table_map: str = "soakcal-table",
     serials: Sequence[str] = (),
+    truths: Mapping[str, Any] | None = None,
 ) -> AsyncIterator[SimRig]:
     """Start chamber, table and bridge servers; ``ports=0`` means ephemeral ports.
 
     ``serials`` of two or more mounts one bridge per serial (module docstring; the
     extra bridges listen on ephemeral ports); ``truth`` and ``seed`` then only set
     the chamber's and table's streams. One serial or none: the one-sensor rig as before.
+    ``truths`` (several serials only): the truth of each serial it names, instead of
+    the serial's own part; a serial it names that is not mounted is a ``ValueError``.
 
     ``ports`` may be one base port (chamber, base+1 table, base+2 sensor) or a
     triple. ``truth`` defaults to ``SensorTruth.adxl355_typical(seed)``.
@@ -138,7 +143,7 @@ async def start_sim_rig(
     rig = await _start(clock, seed=seed, truth=truth, chamber_map=chamber_map,
                        faults=faults, ports=ports, host=host, n_axes=n_axes,
                        die_tau_s=die_tau_s, start_c=start_c, modbus_in_memory=modbus_in_memory,
-                       table_map=table_map, serials=serials)
+                       table_map=table_map, serials=serials, truths=truths)
     try:
         yield rig
     finally:
@@ -173,15 +178,21 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                  faults: RigFaults | None, ports: int | tuple[int, int, int], host: str,
                  n_axes: int, die_tau_s: float, start_c: float,
                  modbus_in_memory: bool = False, table_map: str = "soakcal-table",
-                 serials: Sequence[str] = ()) -> SimRig:
+                 serials: Sequence[str] = (),
+                 truths: Mapping[str, Any] | None = None) -> SimRig:
     # Any map file: the twin renders whatever layout the map describes (MapError if unusable).
     chamber_regmap = load_chamber_map(chamber_map)
     table_regmap = load_turntable_map(table_map)
     several = len(serials) > 1
+    truths = dict(truths or {})
+    if truths and not several:
+        raise ValueError("truths: only a rig of several serials takes a truth per serial")
+    unknown = sorted(set(truths) - set(serials))
+    if unknown:
+        raise ValueError(f"truths name serials not mounted: {', '.join(unknown)}")
     if several:
-        from simulators.truth import SensorTruth  # the physics dependency, loaded late
-
-        truth = SensorTruth.adxl355_typical(sensor_seed(serials[0]), serial=serials[0])
+        truth = truths.get(serials[0])
+        truth = _serial_truth(serials[0]) if truth is None else truth
     elif truth is None:
         from simulators.truth import SensorTruth  # the physics dependency, loaded late
 
@@ -220,23 +231,31 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
         try:
             for i, serial in enumerate(serials[1:], start=2):
                 rig.sensors.append(await _start_sensor(clock, serial, i, seed, die_now,
-                                                       table, host))
+                                                       table, host, truths.get(serial)))
         except BaseException:
             await rig.stop()
             raise
     return rig
 
 
-async def _start_sensor(clock: Clock, serial: str, index: int, seed: int, die_now: Any,
-                        table: TurntablePhysics, host: str) -> SimSensor:
-    """The ``index``-th bridge of a fixture: its own truth, noise stream, faults and port."""
-    from simulators.truth import SensorTruth
+def _serial_truth(serial: str) -> Any:
+    """The simulated part a serial stands for (the same in every run: :func:`sensor_seed`)."""
+    from simulators.truth import SensorTruth  # the physics dependency, loaded late
 
+    return SensorTruth.adxl355_typical(sensor_seed(serial), serial=serial)
+
+
+async def _start_sensor(clock: Clock, serial: str, index: int, seed: int, die_now: Any,
+                        table: TurntablePhysics, host: str, truth: Any = None) -> SimSensor:
+    """The ``index``-th bridge of a fixture: its own truth, noise stream, faults and port.
+
+    ``truth``: an injected truth for this serial; default the serial's own part.
+    """
     sensor_faults = SimFaults()
-    # Noise differs per sensor and per campaign seed; the part itself is its serial's.
+    # Noise differs per sensor and per campaign seed; the part is its serial's unless injected.
     rng = np.random.default_rng(np.random.SeedSequence([seed, sensor_seed(serial)]))
-    bridge = BridgeDevice(SensorTruth.adxl355_typical(sensor_seed(serial), serial=serial),
-                          clock, rng, die_now, table.true_angles_deg, faults=sensor_faults,
+    bridge = BridgeDevice(_serial_truth(serial) if truth is None else truth, clock, rng,
+                          die_now, table.true_angles_deg, faults=sensor_faults,
                           board_uid=f"SIM-BRIDGE-{index:04d}")
     server = await start_bridge_server(bridge, host=host, port=0)
     return SimSensor(serial, bridge, server, sensor_faults)

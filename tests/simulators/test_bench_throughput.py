@@ -1,0 +1,51 @@
+"""The throughput bench mounts its own parts, one per serial, in one chamber (issue 12)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.bench_soak_time import BenchTruth, heldout_errors_g, make_truth
+from benchmarks.bench_throughput import make_truths, rate_of, run_several, serials_for
+
+
+def test_every_serial_gets_its_own_bench_truth_and_rate() -> None:
+    truths = make_truths(4, [0.0, 100.0], probe_n=8)
+    assert list(truths) == serials_for(4)
+    assert [t.serial for t in truths.values()] == serials_for(4)  # the twin's identity
+    assert [t.crn_seed for t in truths.values()] == [1, 2, 3, 4]  # own noise streams
+    assert [rate_of(i, [0.0, 100.0]) for i in range(4)] == [0.0, 100.0, 0.0, 100.0]
+    assert truths["SN-T0001"].rate_g_per_c_per_s is None
+    assert truths["SN-T0002"].rate_g_per_c_per_s is not None
+
+
+async def test_a_two_step_campaign_calibrates_each_sensor_against_its_own_truth(
+        tmp_path: Path) -> None:
+    truths = make_truths(2, [0.0], probe_n=8)
+    spec = {"setpoints_c": [20.0, 30.0], "soak_min": 1, "stability": "fixed",
+            "positions": "table1", "samples_per_position": 50, "ramp_c_per_min": 5.0}
+    fits, sim_s, log, dropped = await run_several(spec, tmp_path, truths)
+    assert dropped == {} and sorted(fits) == serials_for(2) and len(log) == 2
+    # One shared chamber reached every truth (the rate effect's die rate).
+    chambers = {id(t.chamber) for t in truths.values()}
+    assert len(chambers) == 1 and all(t.chamber is not None for t in truths.values())
+    assert all(isinstance(t, BenchTruth) and t._captures > 0 for t in truths.values())
+    temps = np.array([25.0])
+    own = [make_truth(1, False, 0.0), make_truth(2, False, 0.0)]
+    for i, serial in enumerate(serials_for(2)):
+        mine = np.sqrt(np.mean(heldout_errors_g(fits[serial].model, own[i], temps) ** 2))
+        other = np.sqrt(np.mean(heldout_errors_g(fits[serial].model, own[1 - i], temps) ** 2))
+        # A fit of its own part is far closer to it than to the other part (mg offsets).
+        assert mine < 0.1 * other
+
+
+def test_a_crn_offset_keeps_the_parts_and_changes_only_the_noise_streams() -> None:
+    base = make_truths(2, [0.0], probe_n=8)
+    other = make_truths(2, [0.0], probe_n=8, crn_offset=1)
+    assert [t.crn_seed for t in other.values()] == [1001, 1002]
+    for serial in base:
+        assert base[serial].temp_offset_c == other[serial].temp_offset_c
+        ref = np.array([[0.0, 0.0, 1.0]])
+        assert np.allclose(base[serial].ideal_raw_g(ref, 20.0),
+                           other[serial].ideal_raw_g(ref, 20.0))
