@@ -159,8 +159,11 @@ def visit_orders(spec: Any, refs: np.ndarray,
         angles_deg = np.zeros((refs.shape[0], 1))
     elif angles_deg is None:
         angles_deg = angles_of(refs)
+    # A campaign measuring the rate gain parks the table at home before each ramp
+    # (runner._ramp): every step then starts there.
     return step_orders(np.asarray(angles_deg, float), n_steps, method,
-                       getattr(spec, "position_order_seed", None))
+                       getattr(spec, "position_order_seed", None),
+                       home_each_step=getattr(spec, "rate_gain", "assumed") == "measured")
 
 
 def campaign_plan(spec: Any, refs: np.ndarray,

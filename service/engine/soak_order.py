@@ -156,28 +156,32 @@ def angles_of(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
 def step_orders(angles_deg: np.ndarray, n_steps: int, method: str = "travel",
                 seed: int | None = None, start_deg: Sequence[float] | None = None,
                 slew_deg_per_s: float = DEFAULT_SLEW_DEG_PER_S,
-                accel_deg_per_s2: float = DEFAULT_ACCEL_DEG_PER_S2) -> list[list[int]]:
+                accel_deg_per_s2: float = DEFAULT_ACCEL_DEG_PER_S2,
+                home_each_step: bool = False) -> list[list[int]]:
     """The visiting order of every step of a campaign: ``n_steps`` lists of indices.
 
     ``travel``: step 0 from ``start_deg`` (default home, every axis at 0°), each
     later step from the last pose of the step before, so a whole sweep and the
-    step after it are chained. Deterministic: the same arguments give the same
-    orders, so a resumed campaign visits what is missing in the order it had
-    (independent of which positions are stored). Cached: the plan is replayed by
-    every dry run.
+    step after it are chained; with ``home_each_step`` every step from
+    ``start_deg`` (the engine parks the table at home before each ramp when it
+    measures the rate gain: its soak probes must share one pose). Deterministic:
+    the same arguments give the same orders, so a resumed campaign visits what is
+    missing in the order it had (independent of which positions are stored).
+    Cached: the plan is replayed by every dry run.
     """
     a = np.asarray(angles_deg, float)
     home = tuple(0.0 for _ in range(a.shape[1])) if start_deg is None else tuple(start_deg)
     return [list(o) for o in _step_orders(a.tobytes(), a.shape, int(n_steps), method,
                                           None if seed is None else int(seed),
                                           tuple(float(v) for v in home),
-                                          float(slew_deg_per_s), float(accel_deg_per_s2))]
+                                          float(slew_deg_per_s), float(accel_deg_per_s2),
+                                          bool(home_each_step))]
 
 
 @functools.lru_cache(maxsize=64)
 def _step_orders(raw: bytes, shape: tuple[int, ...], n_steps: int, method: str,
                  seed: int | None, start: tuple[float, ...], slew: float,
-                 accel: float) -> tuple[tuple[int, ...], ...]:
+                 accel: float, home_each_step: bool) -> tuple[tuple[int, ...], ...]:
     a = np.frombuffer(raw, float).reshape(shape)
     out: list[tuple[int, ...]] = []
     here: Sequence[float] = start
@@ -185,7 +189,7 @@ def _step_orders(raw: bytes, shape: tuple[int, ...], n_steps: int, method: str,
         order = order_positions(a, method=method, start_deg=here, seed=seed, step=step,
                                 slew_deg_per_s=slew, accel_deg_per_s2=accel)
         out.append(tuple(order))
-        if order:
+        if order and not home_each_step:
             here = tuple(a[order[-1]])
     return tuple(out)
 

@@ -48,3 +48,20 @@ def test_random_order_is_seeded_and_reproducible() -> None:
     with pytest.raises(ValueError, match="one of"):
         order_positions(a, method="shortest")
     assert order_positions(a, method="table") == list(range(len(a)))
+
+
+def test_a_campaign_measuring_the_rate_gain_plans_every_step_from_home() -> None:
+    # rate_gain "measured" parks the table at home before each ramp (runner._ramp): the
+    # travel order must then start every step there, not where the last sweep ended.
+    from types import SimpleNamespace
+
+    from service.engine.plan import visit_orders
+
+    refs = schedule_refs("table1")
+    spec = SimpleNamespace(setpoints_c=[-40.0, -30.0, -20.0], position_order="travel",
+                           position_order_seed=None, rate_gain="assumed")
+    chained = visit_orders(spec, refs)
+    homed = visit_orders(SimpleNamespace(**{**vars(spec), "rate_gain": "measured"}), refs)
+    from_home = order_positions(angles_of(refs), start_deg=(0.0, 0.0, 0.0))
+    assert homed == [from_home] * 3
+    assert chained[0] == from_home and chained[1] != from_home
