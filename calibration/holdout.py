@@ -75,7 +75,10 @@ def leave_one_out(rec: Recording, fit: ThermalFit) -> dict[str, Any]:
     """The held-out figures of :mod:`calibration.holdout` for one ``fit_campaign`` result."""
     mode = fit.model.mode
     g_local = fit.model.g_local
-    raw, ref = rec.raw_g, rec.ref_g
+    # the rows the fit used (rate-corrected where it corrected them), so the refits
+    # leave out exactly what the judged fit saw
+    raw = rec.raw_g if fit.raw_used_g is None else fit.raw_used_g
+    ref = rec.ref_g
     sigma = _row_sigma(rec, [])
     weighted = rec.sigma_g is not None
     tol = reference_tolerance_rad(rec) if ref is not None else None

@@ -194,6 +194,10 @@ class ThermalFit:
     row_temperature_c: np.ndarray  # conditioned temperature per used row (NaN if none)
     row_step: np.ndarray  # step index per row (−1: row not used)
     notes: list[str] = field(default_factory=list)
+    # The raw rows the fits used when they differ from the recording's (the
+    # temperature_rate correction); None: the recording's own. Held-out refits
+    # (calibration/holdout.py) must see the same rows as the fit they judge.
+    raw_used_g: np.ndarray | None = None
 
 
 def fit_campaign(
@@ -404,7 +408,8 @@ def fit_campaign(
         row_step[idx] = s
     report = _report(model, step_results, notes, poly_chi2, joint_info, recording)
     report["drift"] = _drift(model, recording, fits, row_c)
-    return ThermalFit(model, step_results, report, row_c, row_step, notes)
+    return ThermalFit(model, step_results, report, row_c, row_step, notes,
+                      raw if rate_gain_ug_per_c_per_min is not None else None)
 
 
 # --- helpers ----------------------------------------------------------------
