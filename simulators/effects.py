@@ -26,6 +26,13 @@ from typing import ClassVar
 import numpy as np
 
 from calibration import sfem_batch
+from calibration.discrepancy.effects.bias_drift import drift_offset_g
+from calibration.discrepancy.effects.cross_coupling import cross_coupling_g
+from calibration.discrepancy.effects.scale_nonlinearity import scale_nonlinearity_g
+from calibration.discrepancy.effects.session_offset import session_offset_g
+from calibration.discrepancy.effects.temperature_rate import rate_offset_g
+from calibration.discrepancy.effects.thermal_hysteresis import hysteresis_offset_g
+from calibration.discrepancy.effects.vibration_rectification import rectified_offset_g
 from simulators.truth import Context, SensorTruth
 
 G0_M_S2 = 9.80665
@@ -100,7 +107,7 @@ class ThermalHysteresis(_RawOnly):
         return cls(h_g=_axes(p, "h_{}_ug") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return ctx.direction.astype(float)[:, None] * _vec3(self.h_g)[None, :]
+        return hysteresis_offset_g(ctx.direction, self.h_g)
 
 
 @dataclass
@@ -116,7 +123,8 @@ class TemperatureRate(_RawOnly):
         return cls(k_g_per_c_per_s=_axes(p, "k_rate_{}_ug_per_c_per_min") * 1e-6 * 60.0)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return ctx.die_rate_c_per_s[:, None] * _vec3(self.k_g_per_c_per_s)[None, :]
+        # the twin acts on the die's rate (°C/s); the diagnosis sees the recorded slope
+        return rate_offset_g(ctx.die_rate_c_per_s, self.k_g_per_c_per_s)
 
 
 @dataclass
@@ -200,7 +208,7 @@ class VibrationRectification(_RawOnly):
         return cls(c_per_g=_axes(p, "c_{}_per_g"))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return (ctx.vib_sd_g**2)[:, None] * _vec3(self.c_per_g)[None, :]
+        return rectified_offset_g(ctx.vib_sd_g, self.c_per_g)
 
 
 # --- input-dependent -------------------------------------------------------
@@ -218,8 +226,7 @@ class ScaleNonlinearity(_RawOnly):
                    k3_per_g2=_axes(p, "k3_{}_ug_per_g3") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        a = ctx.ref_g
-        return _vec3(self.k2_per_g) * a**2 + _vec3(self.k3_per_g2) * a**3
+        return scale_nonlinearity_g(ctx.ref_g, self.k2_per_g, self.k3_per_g2)
 
 
 @dataclass
@@ -241,9 +248,8 @@ class CrossCoupling(_RawOnly):
                       for q in ("xy", "xz", "yz")})
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        ax, ay, az = ctx.ref_g.T
-        xy, xz, yz = self.k_xy_per_g * ax * ay, self.k_xz_per_g * ax * az, self.k_yz_per_g * ay * az
-        return np.column_stack([xy + xz, xy + yz, xz + yz])
+        k = np.array([self.k_xy_per_g, self.k_xz_per_g, self.k_yz_per_g], float)
+        return cross_coupling_g(ctx.ref_g, k)
 
 
 @dataclass
@@ -365,9 +371,7 @@ class BiasDrift(_RawOnly):
         return cls(rate_g_per_h=_axes(p, "rate_{}_ug_per_h") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        t_h = ctx.t_s[:, None] / 3600.0
-        relax = _vec3(self.relax_g) * (1.0 - np.exp(-t_h / self.relax_tau_h))
-        return _vec3(self.rate_g_per_h) * t_h + relax
+        return drift_offset_g(ctx.t_s / 3600.0, self.rate_g_per_h, self.relax_g, self.relax_tau_h)
 
 
 @dataclass
@@ -382,11 +386,7 @@ class SessionOffset(_RawOnly):
         return cls(offsets_g=np.vstack([np.zeros(3), _axes(p, "offset_{}_ug") * 1e-6]))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        off = np.atleast_2d(np.asarray(self.offsets_g, float))
-        if ctx.session.max(initial=0) >= off.shape[0]:
-            raise ValueError(f"offsets_g has {off.shape[0]} sessions, readings reach "
-                             f"session {int(ctx.session.max())}")
-        return off[ctx.session]
+        return session_offset_g(ctx.session, self.offsets_g)
 
 
 @dataclass
