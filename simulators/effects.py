@@ -28,14 +28,22 @@ import numpy as np
 from calibration import sfem_batch
 from calibration.discrepancy.effects.bias_drift import drift_offset_g
 from calibration.discrepancy.effects.cross_coupling import cross_coupling_g
+from calibration.discrepancy.effects.filter_delay import delayed_input_shift_g
+from calibration.discrepancy.effects.lever_arm import centripetal_g
+from calibration.discrepancy.effects.outlier import spike_mean_fraction
 from calibration.discrepancy.effects.scale_nonlinearity import scale_nonlinearity_g
+from calibration.discrepancy.effects.self_heating import warmup_delta_c
 from calibration.discrepancy.effects.session_offset import session_offset_g
 from calibration.discrepancy.effects.temperature_rate import rate_offset_g
+from calibration.discrepancy.effects.temperature_sensor import channel_error_c
 from calibration.discrepancy.effects.thermal_hysteresis import hysteresis_offset_g
+from calibration.discrepancy.effects.turntable_geometry import lab_to_sensor as lab_to_sensor
+from calibration.discrepancy.effects.turntable_geometry import tilted_ref_g
 from calibration.discrepancy.effects.vibration_rectification import rectified_offset_g
+from calibration.gravity import STANDARD_GRAVITY_M_S2
 from simulators.truth import Context, SensorTruth
 
-G0_M_S2 = 9.80665
+G0_M_S2 = STANDARD_GRAVITY_M_S2
 
 
 def ideal_raw_batch(truth: SensorTruth, ref_g: np.ndarray, die_c: np.ndarray) -> np.ndarray:
@@ -151,10 +159,8 @@ class SelfHeating:
                 t_on[m] = self.session_on_s[int(s)]
             elif s != ctx.session[0]:
                 t_on[m] = ctx.t_s[m].min()
-        if self.warmup_tau_s <= 0:
-            return np.full(ctx.t_s.size, float(self.delta_c))
-        age = np.clip(ctx.t_s - t_on, 0.0, None)
-        return self.delta_c * (1.0 - np.exp(-age / self.warmup_tau_s))
+        # the twin knows each session's power-on time; the warm-up curve is shared
+        return warmup_delta_c(ctx.t_s - t_on, self.delta_c, self.warmup_tau_s)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         dT = self._delta_c(ctx)
@@ -184,7 +190,7 @@ class TemperatureSensor:
         return np.zeros((ctx.t_s.size, 3))
 
     def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
-        d = self.offset_c + self.k2_per_c * (ctx.die_c - 25.0) ** 2
+        d = channel_error_c(ctx.die_c, self.offset_c, self.k2_per_c)
         g = np.zeros(ctx.t_s.size)
         g[list(self.glitch_rows)] = self.glitch_c
         if self.glitch_probability > 0:
@@ -268,26 +274,6 @@ class LocalGravity(_RawOnly):
             truth, ctx.ref_g, ctx.die_c)
 
 
-def lab_to_sensor(ref_g: np.ndarray) -> np.ndarray:
-    """Orientation of each position: the minimal rotation taking lab up (0,0,1) onto ``ref``.
-
-    The fixture's commanded orientation is only known through ``ref``; this
-    convention fixes the free rotation about gravity (antipode: π about x).
-    """
-    u = np.asarray(ref_g, float) / np.linalg.norm(ref_g, axis=1, keepdims=True)
-    z = np.array([0.0, 0.0, 1.0])
-    R = np.empty((u.shape[0], 3, 3))
-    for i, v in enumerate(u):
-        c = float(z @ v)
-        if c < -1 + 1e-12:
-            R[i] = np.diag([1.0, -1.0, -1.0])
-            continue
-        k = np.cross(z, v)
-        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-        R[i] = np.eye(3) + K + K @ K / (1.0 + c)
-    return R
-
-
 @dataclass
 class TurntableGeometry(_RawOnly):
     """``turntable_geometry``: the rig's base is tilted by ``base_tilt_rad`` (about lab x, y).
@@ -302,12 +288,7 @@ class TurntableGeometry(_RawOnly):
     effect_id: str = "turntable_geometry"
 
     def true_ref_g(self, ref_g: np.ndarray) -> np.ndarray:
-        tx, ty = np.asarray(self.base_tilt_rad, float)
-        Rx = np.array([[1, 0, 0], [0, np.cos(tx), -np.sin(tx)], [0, np.sin(tx), np.cos(tx)]])
-        Ry = np.array([[np.cos(ty), 0, np.sin(ty)], [0, 1, 0], [-np.sin(ty), 0, np.cos(ty)]])
-        up = Rx @ Ry @ np.array([0.0, 0.0, 1.0])
-        mag = np.linalg.norm(ref_g, axis=1)
-        return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
+        return tilted_ref_g(ref_g, self.base_tilt_rad)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         return ideal_raw_batch(truth, self.true_ref_g(ctx.ref_g), ctx.die_c) - ideal_raw_batch(
@@ -330,7 +311,7 @@ class LeverArm(_RawOnly):
         if ctx.omega_rad_s is None:
             return np.zeros((N, 3))
         w = np.asarray(ctx.omega_rad_s, float)
-        a = np.cross(w, np.cross(w, _vec3(self.r_m)[None, :])) / G0_M_S2
+        a = centripetal_g(w, self.r_m)
         return ideal_raw_batch(truth, ctx.ref_g + a, ctx.die_c) - ideal_raw_batch(
             truth, ctx.ref_g, ctx.die_c)
 
@@ -351,7 +332,7 @@ class FilterDelay(_RawOnly):
         N = ctx.t_s.size
         if ctx.omega_rad_s is None:
             return np.zeros((N, 3))
-        d = self.delay_s * np.cross(np.asarray(ctx.omega_rad_s, float), ctx.ref_g)
+        d = delayed_input_shift_g(ctx.omega_rad_s, ctx.ref_g, self.delay_s)
         return ideal_raw_batch(truth, ctx.ref_g + d, ctx.die_c) - ideal_raw_batch(
             truth, ctx.ref_g, ctx.die_c)
 
@@ -421,7 +402,7 @@ class Outlier(_RawOnly):
         N = ctx.t_s.size
         out = np.zeros((N, 3))
         hit = self.hit_rows(N, rng)
-        frac = np.ones(N) if self.spike_samples is None else self.spike_samples / ctx.n_samples
+        frac = spike_mean_fraction(self.spike_samples, ctx.n_samples)
         out[hit] = _vec3(self.size_g)[None, :] * frac[hit, None]
         return out
 

@@ -13,16 +13,22 @@ import pytest
 
 from calibration.discrepancy.effects.bias_drift import drift_offset_g
 from calibration.discrepancy.effects.cross_coupling import CrossCoupling, cross_coupling_g
+from calibration.discrepancy.effects.filter_delay import delayed_input_shift_g
+from calibration.discrepancy.effects.lever_arm import centripetal_g
+from calibration.discrepancy.effects.outlier import spike_mean_fraction
 from calibration.discrepancy.effects.scale_nonlinearity import (
     ScaleNonlinearity,
     scale_nonlinearity_g,
 )
+from calibration.discrepancy.effects.self_heating import warmup_delta_c
 from calibration.discrepancy.effects.session_offset import session_offset_g
 from calibration.discrepancy.effects.temperature_rate import rate_offset_g
+from calibration.discrepancy.effects.temperature_sensor import channel_error_c
 from calibration.discrepancy.effects.thermal_hysteresis import (
     ThermalHysteresis,
     hysteresis_offset_g,
 )
+from calibration.discrepancy.effects.turntable_geometry import tilted_ref_g
 from calibration.discrepancy.effects.vibration_rectification import rectified_offset_g
 from calibration.schedules import cube14
 from simulators import effects as fx
@@ -127,3 +133,50 @@ def test_session_offset_indexes_sessions_and_rejects_missing_ones() -> None:
     np.testing.assert_array_equal(out[4], off[0])
     with pytest.raises(ValueError, match="sessions"):
         session_offset_g(np.array([0, 2]), off)
+
+
+def test_self_heating_warmup_curve_is_the_twins_die_offset(truth: SensorTruth) -> None:
+    age_s = np.array([-10.0, 0.0, 60.0, 600.0])
+    dT = warmup_delta_c(age_s, 2.0, 60.0)
+    np.testing.assert_allclose(dT, [0.0, 0.0, 2.0 * (1 - np.exp(-1.0)), 2.0 * (1 - np.exp(-10))],
+                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(warmup_delta_c(age_s, 2.0, 0.0), np.full(4, 2.0))
+    ctx = ctx_for(A_G)  # one session powered on at t = 0
+    twin = fx.SelfHeating(delta_c=2.0, warmup_tau_s=900.0).temperature_delta_c(ctx, RNG)
+    np.testing.assert_array_equal(twin, warmup_delta_c(ctx.t_s, 2.0, 900.0))
+
+
+def test_temperature_channel_error_is_offset_plus_curvature_about_25c() -> None:
+    die_c = np.array([25.0, 35.0, -15.0])
+    np.testing.assert_allclose(channel_error_c(die_c, 0.5, 1e-3), [0.5, 0.6, 2.1], rtol=1e-12)
+
+
+def test_spike_reaches_the_mean_in_proportion_to_its_samples() -> None:
+    n = np.array([200.0, 100.0])
+    np.testing.assert_allclose(spike_mean_fraction(5, n), [0.025, 0.05], rtol=1e-15)
+    np.testing.assert_array_equal(spike_mean_fraction(None, n), [1.0, 1.0])
+
+
+def test_centripetal_is_omega_squared_r_toward_the_axis() -> None:
+    w = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, -2.0]])
+    a = centripetal_g(w, [0.05, 0.0, 0.0])
+    np.testing.assert_allclose(a[:, 0], -4.0 * 0.05 / 9.80665, rtol=1e-12)
+    np.testing.assert_array_equal(a[0], a[1])  # ∝ ω², blind to the direction
+    assert np.all(a[:, 1:] == 0.0)
+
+
+def test_filter_delay_is_tangential_and_flips_with_direction() -> None:
+    ref = np.array([[1.0, 0.0, 0.0]])
+    d_plus = delayed_input_shift_g(np.array([[0.0, 0.0, 1.0]]), ref, 0.01)
+    d_minus = delayed_input_shift_g(np.array([[0.0, 0.0, -1.0]]), ref, 0.01)
+    np.testing.assert_allclose(d_plus, [[0.0, 0.01, 0.0]], atol=1e-18)
+    np.testing.assert_array_equal(d_minus, -d_plus)
+    assert float(d_plus[0] @ ref[0]) == 0.0
+
+
+def test_tilted_reference_keeps_magnitude_and_vanishes_without_tilt() -> None:
+    np.testing.assert_allclose(tilted_ref_g(A_G, [0.0, 0.0]), A_G, atol=1e-15)
+    tilted = tilted_ref_g(A_G, [2e-3, -1e-3])
+    np.testing.assert_allclose(np.linalg.norm(tilted, axis=1), np.linalg.norm(A_G, axis=1),
+                               rtol=1e-12)
+    assert np.max(np.abs(tilted - A_G)) > 1e-3
