@@ -13,6 +13,12 @@ through the rig's first-order lag ``RigPhysics.die_tau_s``; it shows in a
 recording when only ``chamber_c`` is recorded (the model then regresses on
 the air, not the die). :class:`ThermalLag` sets both.
 
+Each physical term is computed by the pure function in the effect's diagnosis
+module (``calibration/discrepancy/effects/<id>.py``, docs/diagnosis.md §4): one
+place per effect's physics. What stays here is the twin's own part: random
+draws, session power-on times, the base-model response ``ideal_raw_batch`` and
+the mapping from findings.
+
 How large each effect must be to be seen under a protocol ("minimum
 detectable size") is computed by ``benchmarks/blind/detectability.py``.
 """
