@@ -13,6 +13,12 @@ through the rig's first-order lag ``RigPhysics.die_tau_s``; it shows in a
 recording when only ``chamber_c`` is recorded (the model then regresses on
 the air, not the die). :class:`ThermalLag` sets both.
 
+Each physical term is computed by the pure function in the effect's diagnosis
+module (``calibration/discrepancy/effects/<id>.py``, docs/diagnosis.md §4): one
+place per effect's physics. What stays here is the twin's own part: random
+draws, session power-on times, the base-model response ``ideal_raw_batch`` and
+the mapping from findings.
+
 How large each effect must be to be seen under a protocol ("minimum
 detectable size") is computed by ``benchmarks/blind/detectability.py``.
 """
@@ -26,9 +32,24 @@ from typing import ClassVar
 import numpy as np
 
 from calibration import sfem_batch
+from calibration.discrepancy.effects.bias_drift import drift_offset_g
+from calibration.discrepancy.effects.cross_coupling import cross_coupling_g
+from calibration.discrepancy.effects.filter_delay import delayed_input_shift_g
+from calibration.discrepancy.effects.lever_arm import centripetal_g
+from calibration.discrepancy.effects.outlier import spike_mean_fraction
+from calibration.discrepancy.effects.scale_nonlinearity import scale_nonlinearity_g
+from calibration.discrepancy.effects.self_heating import warmup_delta_c
+from calibration.discrepancy.effects.session_offset import session_offset_g
+from calibration.discrepancy.effects.temperature_rate import rate_offset_g
+from calibration.discrepancy.effects.temperature_sensor import channel_error_c
+from calibration.discrepancy.effects.thermal_hysteresis import hysteresis_offset_g
+from calibration.discrepancy.effects.turntable_geometry import lab_to_sensor as lab_to_sensor
+from calibration.discrepancy.effects.turntable_geometry import tilted_ref_g
+from calibration.discrepancy.effects.vibration_rectification import rectified_offset_g
+from calibration.gravity import STANDARD_GRAVITY_M_S2
 from simulators.truth import Context, SensorTruth
 
-G0_M_S2 = 9.80665
+G0_M_S2 = STANDARD_GRAVITY_M_S2
 
 
 def ideal_raw_batch(truth: SensorTruth, ref_g: np.ndarray, die_c: np.ndarray) -> np.ndarray:
@@ -100,7 +121,7 @@ class ThermalHysteresis(_RawOnly):
         return cls(h_g=_axes(p, "h_{}_ug") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return ctx.direction.astype(float)[:, None] * _vec3(self.h_g)[None, :]
+        return hysteresis_offset_g(ctx.direction, self.h_g)
 
 
 @dataclass
@@ -116,7 +137,8 @@ class TemperatureRate(_RawOnly):
         return cls(k_g_per_c_per_s=_axes(p, "k_rate_{}_ug_per_c_per_min") * 1e-6 * 60.0)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return ctx.die_rate_c_per_s[:, None] * _vec3(self.k_g_per_c_per_s)[None, :]
+        # the twin acts on the die's rate (°C/s); the diagnosis sees the recorded slope
+        return rate_offset_g(ctx.die_rate_c_per_s, self.k_g_per_c_per_s)
 
 
 @dataclass
@@ -143,10 +165,8 @@ class SelfHeating:
                 t_on[m] = self.session_on_s[int(s)]
             elif s != ctx.session[0]:
                 t_on[m] = ctx.t_s[m].min()
-        if self.warmup_tau_s <= 0:
-            return np.full(ctx.t_s.size, float(self.delta_c))
-        age = np.clip(ctx.t_s - t_on, 0.0, None)
-        return self.delta_c * (1.0 - np.exp(-age / self.warmup_tau_s))
+        # the twin knows each session's power-on time; the warm-up curve is shared
+        return warmup_delta_c(ctx.t_s - t_on, self.delta_c, self.warmup_tau_s)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         dT = self._delta_c(ctx)
@@ -176,7 +196,7 @@ class TemperatureSensor:
         return np.zeros((ctx.t_s.size, 3))
 
     def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
-        d = self.offset_c + self.k2_per_c * (ctx.die_c - 25.0) ** 2
+        d = channel_error_c(ctx.die_c, self.offset_c, self.k2_per_c)
         g = np.zeros(ctx.t_s.size)
         g[list(self.glitch_rows)] = self.glitch_c
         if self.glitch_probability > 0:
@@ -200,7 +220,7 @@ class VibrationRectification(_RawOnly):
         return cls(c_per_g=_axes(p, "c_{}_per_g"))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return (ctx.vib_sd_g**2)[:, None] * _vec3(self.c_per_g)[None, :]
+        return rectified_offset_g(ctx.vib_sd_g, self.c_per_g)
 
 
 # --- input-dependent -------------------------------------------------------
@@ -218,8 +238,7 @@ class ScaleNonlinearity(_RawOnly):
                    k3_per_g2=_axes(p, "k3_{}_ug_per_g3") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        a = ctx.ref_g
-        return _vec3(self.k2_per_g) * a**2 + _vec3(self.k3_per_g2) * a**3
+        return scale_nonlinearity_g(ctx.ref_g, self.k2_per_g, self.k3_per_g2)
 
 
 @dataclass
@@ -241,9 +260,8 @@ class CrossCoupling(_RawOnly):
                       for q in ("xy", "xz", "yz")})
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        ax, ay, az = ctx.ref_g.T
-        xy, xz, yz = self.k_xy_per_g * ax * ay, self.k_xz_per_g * ax * az, self.k_yz_per_g * ay * az
-        return np.column_stack([xy + xz, xy + yz, xz + yz])
+        k = np.array([self.k_xy_per_g, self.k_xz_per_g, self.k_yz_per_g], float)
+        return cross_coupling_g(ctx.ref_g, k)
 
 
 @dataclass
@@ -262,26 +280,6 @@ class LocalGravity(_RawOnly):
             truth, ctx.ref_g, ctx.die_c)
 
 
-def lab_to_sensor(ref_g: np.ndarray) -> np.ndarray:
-    """Orientation of each position: the minimal rotation taking lab up (0,0,1) onto ``ref``.
-
-    The fixture's commanded orientation is only known through ``ref``; this
-    convention fixes the free rotation about gravity (antipode: π about x).
-    """
-    u = np.asarray(ref_g, float) / np.linalg.norm(ref_g, axis=1, keepdims=True)
-    z = np.array([0.0, 0.0, 1.0])
-    R = np.empty((u.shape[0], 3, 3))
-    for i, v in enumerate(u):
-        c = float(z @ v)
-        if c < -1 + 1e-12:
-            R[i] = np.diag([1.0, -1.0, -1.0])
-            continue
-        k = np.cross(z, v)
-        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-        R[i] = np.eye(3) + K + K @ K / (1.0 + c)
-    return R
-
-
 @dataclass
 class TurntableGeometry(_RawOnly):
     """``turntable_geometry``: the rig's base is tilted by ``base_tilt_rad`` (about lab x, y).
@@ -296,12 +294,7 @@ class TurntableGeometry(_RawOnly):
     effect_id: str = "turntable_geometry"
 
     def true_ref_g(self, ref_g: np.ndarray) -> np.ndarray:
-        tx, ty = np.asarray(self.base_tilt_rad, float)
-        Rx = np.array([[1, 0, 0], [0, np.cos(tx), -np.sin(tx)], [0, np.sin(tx), np.cos(tx)]])
-        Ry = np.array([[np.cos(ty), 0, np.sin(ty)], [0, 1, 0], [-np.sin(ty), 0, np.cos(ty)]])
-        up = Rx @ Ry @ np.array([0.0, 0.0, 1.0])
-        mag = np.linalg.norm(ref_g, axis=1)
-        return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
+        return tilted_ref_g(ref_g, self.base_tilt_rad)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         return ideal_raw_batch(truth, self.true_ref_g(ctx.ref_g), ctx.die_c) - ideal_raw_batch(
@@ -324,7 +317,7 @@ class LeverArm(_RawOnly):
         if ctx.omega_rad_s is None:
             return np.zeros((N, 3))
         w = np.asarray(ctx.omega_rad_s, float)
-        a = np.cross(w, np.cross(w, _vec3(self.r_m)[None, :])) / G0_M_S2
+        a = centripetal_g(w, self.r_m)
         return ideal_raw_batch(truth, ctx.ref_g + a, ctx.die_c) - ideal_raw_batch(
             truth, ctx.ref_g, ctx.die_c)
 
@@ -345,7 +338,7 @@ class FilterDelay(_RawOnly):
         N = ctx.t_s.size
         if ctx.omega_rad_s is None:
             return np.zeros((N, 3))
-        d = self.delay_s * np.cross(np.asarray(ctx.omega_rad_s, float), ctx.ref_g)
+        d = delayed_input_shift_g(ctx.omega_rad_s, ctx.ref_g, self.delay_s)
         return ideal_raw_batch(truth, ctx.ref_g + d, ctx.die_c) - ideal_raw_batch(
             truth, ctx.ref_g, ctx.die_c)
 
@@ -365,9 +358,7 @@ class BiasDrift(_RawOnly):
         return cls(rate_g_per_h=_axes(p, "rate_{}_ug_per_h") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        t_h = ctx.t_s[:, None] / 3600.0
-        relax = _vec3(self.relax_g) * (1.0 - np.exp(-t_h / self.relax_tau_h))
-        return _vec3(self.rate_g_per_h) * t_h + relax
+        return drift_offset_g(ctx.t_s / 3600.0, self.rate_g_per_h, self.relax_g, self.relax_tau_h)
 
 
 @dataclass
@@ -382,11 +373,7 @@ class SessionOffset(_RawOnly):
         return cls(offsets_g=np.vstack([np.zeros(3), _axes(p, "offset_{}_ug") * 1e-6]))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        off = np.atleast_2d(np.asarray(self.offsets_g, float))
-        if ctx.session.max(initial=0) >= off.shape[0]:
-            raise ValueError(f"offsets_g has {off.shape[0]} sessions, readings reach "
-                             f"session {int(ctx.session.max())}")
-        return off[ctx.session]
+        return session_offset_g(ctx.session, self.offsets_g)
 
 
 @dataclass
@@ -421,7 +408,7 @@ class Outlier(_RawOnly):
         N = ctx.t_s.size
         out = np.zeros((N, 3))
         hit = self.hit_rows(N, rng)
-        frac = np.ones(N) if self.spike_samples is None else self.spike_samples / ctx.n_samples
+        frac = spike_mean_fraction(self.spike_samples, ctx.n_samples)
         out[hit] = _vec3(self.size_g)[None, :] * frac[hit, None]
         return out
 

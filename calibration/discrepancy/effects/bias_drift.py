@@ -14,6 +14,21 @@ from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
 
 
+def drift_offset_g(t_h: np.ndarray, rate_g_per_h: np.ndarray, relax_g: np.ndarray | float = 0.0,
+                   relax_tau_h: float = 10.0) -> np.ndarray:
+    """Bias drift (N,3) g at elapsed time ``t_h`` (N,) h (effects.md).
+
+    ``rate_g_per_h · t_h + relax_g · (1 − exp(−t_h/relax_tau_h))``: the linear
+    ramp is what this module regresses (its rate is ``rate_*_ug_per_h``); the
+    relaxation is the twin's ageing term, which the ramp plus the cubic
+    partly absorb. ``rate_g_per_h`` and ``relax_g`` one value or (3,).
+    """
+    t = np.asarray(t_h, float)[:, None]
+    rate = np.broadcast_to(np.asarray(rate_g_per_h, float), (3,))
+    relax = np.broadcast_to(np.asarray(relax_g, float), (3,))
+    return rate * t + relax * (1.0 - np.exp(-t / relax_tau_h))
+
+
 @dataclass(frozen=True)
 class BiasDrift(EffectModule):
     effect_id: str = "bias_drift"

@@ -27,6 +27,16 @@ def pair_products(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def cross_coupling_g(a: np.ndarray, k_per_g: np.ndarray) -> np.ndarray:
+    """Cross-coupling output change (N,3) g of inputs ``a`` (N,3) g; ``k_per_g`` (k_xy, k_xz, k_yz).
+
+    effects.md: ``raw_x += k_xy a_x a_y + k_xz a_x a_z`` and likewise for y, z.
+    The one place of this physics: the twin's truth effect and the model-file
+    term (:meth:`CrossCoupling.extension_term_g`) both call it.
+    """
+    return pair_products(a) @ np.asarray(k_per_g, float)
+
+
 @dataclass(frozen=True)
 class CrossCoupling(EffectModule):
     effect_id: str = "cross_coupling"
@@ -57,7 +67,7 @@ class CrossCoupling(EffectModule):
 
     def extension_term_g(self, spec, a):
         k = np.array([float(spec.get(f"k_{name}_per_g", 0.0)) for name, _, _ in PAIRS])
-        return pair_products(a) @ k
+        return cross_coupling_g(a, k)
 
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf))

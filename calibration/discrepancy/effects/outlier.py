@@ -14,6 +14,17 @@ from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, EffectModule
 
 
+def spike_mean_fraction(spike_samples: int | None, n_samples: np.ndarray) -> np.ndarray:
+    """Fraction (N,) of a spike's size that reaches each recorded mean (effects.md).
+
+    A recorded row averages ``n_samples``; a spike of ``size_g`` on
+    ``spike_samples`` of them moves the mean by ``size_g · spike_samples / n``.
+    ``spike_samples=None`` is a whole-reading disturbance (shock, door opened): 1.
+    """
+    n = np.asarray(n_samples, float)
+    return np.ones(n.shape) if spike_samples is None else spike_samples / n
+
+
 @dataclass(frozen=True)
 class Outlier(EffectModule):
     effect_id: str = "outlier"

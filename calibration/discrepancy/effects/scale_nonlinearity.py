@@ -24,6 +24,18 @@ def own_powers(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def scale_nonlinearity_g(a: np.ndarray, k2_per_g: np.ndarray, k3_per_g2: np.ndarray) -> np.ndarray:
+    """Own-axis nonlinearity output change (N,3) g: ``K2_i a_i² + K3_i a_i³`` (effects.md).
+
+    ``a`` (N,3) g, ``k2_per_g`` and ``k3_per_g2`` one value or (3,). The one place
+    of this physics: the twin's truth effect and the model-file term
+    (:meth:`ScaleNonlinearity.extension_term_g`) both call it.
+    """
+    k2 = np.broadcast_to(np.asarray(k2_per_g, float), (3,))
+    k3 = np.broadcast_to(np.asarray(k3_per_g2, float), (3,))
+    return own_powers(a) @ np.concatenate([k2, k3])
+
+
 @dataclass(frozen=True)
 class ScaleNonlinearity(EffectModule):
     effect_id: str = "scale_nonlinearity"
@@ -50,7 +62,7 @@ class ScaleNonlinearity(EffectModule):
                 "k3_per_g2": [params[f"k3_{a}_ug_per_g3"] * 1e-6 for a in AXES]}
 
     def extension_term_g(self, spec, a):
-        return own_powers(a) @ np.concatenate([vec3(spec, "k2_per_g"), vec3(spec, "k3_per_g2")])
+        return scale_nonlinearity_g(a, vec3(spec, "k2_per_g"), vec3(spec, "k3_per_g2"))
 
     def axes(self, coef, se):
         z = np.abs(coef / np.where(se > 0, se, np.inf)).reshape(2, 3)

@@ -14,6 +14,21 @@ from calibration.discrepancy.context import DesignContext
 from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
 
 
+def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
+    """Session-offset output change (N,3) g: ``offsets_g[session]`` (effects.md).
+
+    ``session`` (N,) integer power-session index per reading, ``offsets_g`` (S,3)
+    one bias per session (this module reports the later sessions' offsets
+    relative to the first, i.e. ``offsets_g[0] = 0``).
+    """
+    off = np.atleast_2d(np.asarray(offsets_g, float))
+    s = np.asarray(session)
+    if s.max(initial=0) >= off.shape[0]:
+        raise ValueError(f"offsets_g has {off.shape[0]} sessions, readings reach "
+                         f"session {int(s.max())}")
+    return off[s]
+
+
 @dataclass(frozen=True)
 class SessionOffset(EffectModule):
     effect_id: str = "session_offset"

@@ -16,6 +16,17 @@ from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, 
 MIN_RATE_C_PER_MIN = 0.02
 
 
+def rate_offset_g(rate_c_per_time: np.ndarray, k_g_per_c_per_time: np.ndarray) -> np.ndarray:
+    """Temperature-rate output change (N,3) g: ``k_i × dT/dt`` per axis (effects.md).
+
+    The units of time cancel: a rate in °C/s takes gains in g per °C/s (the twin,
+    on the die rate) and °C/min takes g per °C/min (this module's regressor, on
+    the recorded slope). ``k`` one value or (3,).
+    """
+    k = np.broadcast_to(np.asarray(k_g_per_c_per_time, float), (3,))
+    return np.asarray(rate_c_per_time, float)[:, None] * k[None, :]
+
+
 @dataclass(frozen=True)
 class TemperatureRate(EffectModule):
     effect_id: str = "temperature_rate"

@@ -23,6 +23,17 @@ from calibration.discrepancy.effects.base import (
 )
 
 
+def hysteresis_offset_g(direction: np.ndarray | float, h_g: np.ndarray) -> np.ndarray:
+    """Hysteresis output change g: ``direction × h_g`` per axis (effects.md).
+
+    ``direction`` is +1 after heating, −1 after cooling, 0 before any excursion,
+    per reading (N,) → (N,3) or one value → (3,). ``h_g`` one value or (3,).
+    The one place of this physics: the twin and the model-file term both call it.
+    """
+    h = np.broadcast_to(np.asarray(h_g, float), (3,))
+    return np.asarray(direction, float)[..., None] * h
+
+
 @dataclass(frozen=True)
 class ThermalHysteresis(EffectModule):
     effect_id: str = "thermal_hysteresis"
@@ -55,7 +66,7 @@ class ThermalHysteresis(EffectModule):
 
     def extension_term_g(self, spec, a):
         d = float(spec.get("direction", 0.0))
-        return np.broadcast_to(d * vec3(spec, "h_g")[None, :], a.shape)
+        return np.broadcast_to(hysteresis_offset_g(d, vec3(spec, "h_g"))[None, :], a.shape)
 
     def sentence(self, params, sd, axes, ctx=None):
         parts = [fmt_pm(params[f"h_{a}_ug"], sd[f"h_{a}_ug"], "µg") for a in axes]

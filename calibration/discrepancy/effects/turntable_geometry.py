@@ -1,6 +1,44 @@
 """``turntable_geometry``: rig tilt / axis errors constant in the lab frame (effects.md)."""
 
+from __future__ import annotations
+
+import numpy as np
+
 from calibration.discrepancy.effects.not_identifiable import Unobservable
+
+
+def lab_to_sensor(ref_g: np.ndarray) -> np.ndarray:
+    """Orientation of each position: the minimal rotation taking lab up (0,0,1) onto ``ref``.
+
+    The fixture's commanded orientation is only known through ``ref``; this
+    convention fixes the free rotation about gravity (antipode: π about x).
+    """
+    u = np.asarray(ref_g, float) / np.linalg.norm(ref_g, axis=1, keepdims=True)
+    z = np.array([0.0, 0.0, 1.0])
+    R = np.empty((u.shape[0], 3, 3))
+    for i, v in enumerate(u):
+        c = float(z @ v)
+        if c < -1 + 1e-12:
+            R[i] = np.diag([1.0, -1.0, -1.0])
+            continue
+        k = np.cross(z, v)
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        R[i] = np.eye(3) + K + K @ K / (1.0 + c)
+    return R
+
+
+def tilted_ref_g(ref_g: np.ndarray, base_tilt_rad: np.ndarray) -> np.ndarray:
+    """True specific force (N,3) g on a rig whose base is tilted about lab x, y (effects.md).
+
+    Gravity is constant in the lab frame but tilted: ``C_pos · R_tilt · up``
+    instead of ``C_pos · up`` (C_pos: :func:`lab_to_sensor`), same magnitude.
+    """
+    tx, ty = np.asarray(base_tilt_rad, float)
+    Rx = np.array([[1, 0, 0], [0, np.cos(tx), -np.sin(tx)], [0, np.sin(tx), np.cos(tx)]])
+    Ry = np.array([[np.cos(ty), 0, np.sin(ty)], [0, 1, 0], [-np.sin(ty), 0, np.cos(ty)]])
+    up = Rx @ Ry @ np.array([0.0, 0.0, 1.0])
+    mag = np.linalg.norm(ref_g, axis=1)
+    return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
 
 TURNTABLE_GEOMETRY = Unobservable(
     effect_id="turntable_geometry", confusers=("cross_coupling",),

@@ -14,6 +14,18 @@ from calibration.discrepancy.context import DesignContext
 from calibration.discrepancy.effects.base import EffectModule, axis_params, fmt_pm
 
 
+def rectified_offset_g(sd_vib_g: np.ndarray, c_per_g: np.ndarray) -> np.ndarray:
+    """Vibration-rectification output change (N,3) g: ``c_i × σ²`` (effects.md).
+
+    ``sd_vib_g`` is the vibration in g rms, one per reading (N,) acting on every
+    axis (the twin's rig vibration) or per axis (N,3) (the recorded ``sd_*``);
+    ``c_per_g`` one value or (3,).
+    """
+    sd = np.asarray(sd_vib_g, float)
+    c = np.broadcast_to(np.asarray(c_per_g, float), (3,))
+    return (sd**2 if sd.ndim == 2 else (sd**2)[:, None]) * c[None, :]
+
+
 @dataclass(frozen=True)
 class VibrationRectification(EffectModule):
     effect_id: str = "vibration_rectification"
