@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from effect_context import ctx_for as _ctx_for
 
 from calibration.discrepancy.effects.bias_drift import drift_offset_g
 from calibration.discrepancy.effects.cross_coupling import CrossCoupling, cross_coupling_g
@@ -39,13 +40,7 @@ A_G = cube14()
 
 
 def ctx_for(ref: np.ndarray, **kw: object) -> Context:
-    N = ref.shape[0]
-    base = dict(t_s=np.arange(N) * 600.0, die_c=np.linspace(-40, 60, N),
-                air_c=np.linspace(-40, 60, N), die_rate_c_per_s=np.zeros(N), ref_g=ref,
-                step=np.zeros(N, int), direction=np.zeros(N, int), session=np.zeros(N, int),
-                n_samples=np.full(N, 200.0), vib_sd_g=np.zeros(N), omega_rad_s=None)
-    base.update(kw)
-    return Context(**base)  # type: ignore[arg-type]
+    return _ctx_for(ref, step_s=600.0, **kw)
 
 
 @pytest.fixture

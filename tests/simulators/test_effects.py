@@ -8,27 +8,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from effect_context import ctx_for
 
 from calibration.schedules import cube14, six_position, table1
 from simulators import effects as fx
 from simulators.campaign_sim import RigPhysics, compressor_vibration, simulate_campaign
-from simulators.truth import Context, SensorTruth
+from simulators.truth import SensorTruth
 
 # benchmarks/ is a repo directory, not an installed package (pyproject packages.find).
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from benchmarks.blind import detectability  # noqa: E402
 
 RNG = np.random.default_rng(0)
-
-
-def ctx_for(ref: np.ndarray, **kw: object) -> Context:
-    N = ref.shape[0]
-    base = dict(t_s=np.arange(N) * 60.0, die_c=np.linspace(-40, 60, N),
-                air_c=np.linspace(-40, 60, N), die_rate_c_per_s=np.zeros(N), ref_g=ref,
-                step=np.zeros(N, int), direction=np.zeros(N, int), session=np.zeros(N, int),
-                n_samples=np.full(N, 200.0), vib_sd_g=np.zeros(N), omega_rad_s=None)
-    base.update(kw)
-    return Context(**base)  # type: ignore[arg-type]
 
 
 @pytest.fixture
