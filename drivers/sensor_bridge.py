@@ -71,6 +71,65 @@ class PortThreads:
             self._pool = None
 
 
+class SerialLine:
+    """One driver's serial port: the open/retry/close discipline both sensor drivers share.
+
+    The port opens on first use, on the port's own threads (:class:`PortThreads`); one
+    blocking call runs at a time. A fault that may heal (connection lost, a timeout, a
+    garbled line) leaves the stream position unknown: the port is closed and the call
+    tried again on a fresh one, up to ``attempts`` times (1 by default: the engine's guard
+    is the one retry owner). A cancelled call keeps its worker thread reading until its
+    timeout: that thread is handed the port to close, and the next call opens a fresh one.
+    """
+
+    def __init__(self, url: str, clock: Clock, *, baudrate: int, timeout_s: float,
+                 attempts: int, device: str, name: str) -> None:
+        self.url, self.clock, self.device = url, clock, device
+        self.baudrate, self.timeout_s, self.attempts = baudrate, timeout_s, attempts
+        self._port: serial.SerialBase | None = None
+        self._lock = asyncio.Lock()
+        self._threads = PortThreads(name)
+
+    async def call(self, fn: Callable[..., T], *args: object) -> T:
+        """``fn(port, *args)`` on the port's thread, with the retries above."""
+        async with self._lock:
+            last: DeviceFault | None = None
+            for attempt in range(self.attempts):
+                if attempt:
+                    await self.clock.sleep(0.1 * attempt)
+                try:
+                    port = self._port or await self._threads.run(self._open)
+                    io = asyncio.ensure_future(self._threads.run(fn, port, *args))
+                    try:
+                        return await asyncio.shield(io)
+                    except asyncio.CancelledError:
+                        self._port = None
+                        io.add_done_callback(lambda _f, p=port: p.close())
+                        raise
+                except (ConnectionLost, DeviceTimeout, ProtocolError) as fault:
+                    self._close()
+                    last = fault
+            assert last is not None
+            raise last
+
+    async def close(self) -> None:
+        async with self._lock:
+            await self._threads.run(self._close)
+            self._threads.shutdown()
+
+    def _open(self) -> serial.SerialBase:
+        if self._port is None or not self._port.is_open:
+            self._port = open_serial_port(self.url, self.baudrate, self.timeout_s, self.device)
+        return self._port
+
+    def _close(self) -> None:
+        if self._port is not None:
+            try:
+                self._port.close()
+            finally:
+                self._port = None
+
+
 class SerialAccelerometer:
     """:class:`drivers.protocols.Accelerometer` for an ADXL355 behind the bridge."""
 
@@ -99,9 +158,8 @@ class SerialAccelerometer:
         self.device = device
         self.range_g = 2.0
         self.odr_hz = 62.5
-        self._port: serial.SerialBase | None = None
-        self._lock = asyncio.Lock()
-        self._threads = PortThreads(f"bridge {url}")
+        self._line = SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
+                                attempts=attempts, device=device, name=f"bridge {url}")
 
     # --- protocol -------------------------------------------------------------
     async def identify(self) -> SensorIdentity:
@@ -187,9 +245,7 @@ class SerialAccelerometer:
             yield c / scale, float(adxl355.temp_raw_to_c(t))
 
     async def close(self) -> None:
-        async with self._lock:
-            await self._threads.run(self._close_port)
-            self._threads.shutdown()
+        await self._line.close()
 
     # --- raw path ---------------------------------------------------------------
     async def _acquire_raw(self, n_samples: int) -> Acquisition:
@@ -237,31 +293,8 @@ class SerialAccelerometer:
 
     async def _exchange(self, fields: list[object], n_lines: int,
                         extra_wait_s: float) -> list[list[str]]:
-        """Send one command, read ``n_lines`` replies; retry faults that may heal."""
-        async with self._lock:
-            last: DeviceFault | None = None
-            for attempt in range(self.attempts):
-                if attempt:
-                    await self.clock.sleep(0.1 * attempt)
-                try:
-                    port = self._port or await self._threads.run(self._open_port)
-                    io = asyncio.ensure_future(self._threads.run(
-                        self._exchange_blocking, port, fields, n_lines, extra_wait_s))
-                    try:
-                        return await asyncio.shield(io)
-                    except asyncio.CancelledError:
-                        # The worker thread keeps reading until its timeout; hand it the
-                        # port to close and start the next command on a fresh one.
-                        self._port = None
-                        io.add_done_callback(lambda _f, p=port: p.close())
-                        raise
-                except (ConnectionLost, DeviceTimeout, ProtocolError) as fault:
-                    # After a timeout or a garbled line the stream position is unknown:
-                    # reopen so the next command starts clean.
-                    self._close_port()
-                    last = fault
-            assert last is not None
-            raise last
+        """Send one command, read ``n_lines`` replies (:meth:`SerialLine.call`)."""
+        return await self._line.call(self._exchange_blocking, fields, n_lines, extra_wait_s)
 
     def _exchange_blocking(self, port: serial.SerialBase, fields: list[object], n_lines: int,
                            extra_wait_s: float) -> list[list[str]]:
@@ -295,18 +328,6 @@ class SerialAccelerometer:
             return ConfigurationFault(self.device, f"bridge refuses {command!r}: ERR {code} "
                                                    f"{text}", code)
         return ExceptionReply(self.device, f"ERR {code} {text}", code)
-
-    def _open_port(self) -> serial.SerialBase:
-        if self._port is None or not self._port.is_open:
-            self._port = open_serial_port(self.url, self.baudrate, self.timeout_s, self.device)
-        return self._port
-
-    def _close_port(self) -> None:
-        if self._port is not None:
-            try:
-                self._port.close()
-            finally:
-                self._port = None
 
 
 def open_serial_port(url: str, baudrate: int, timeout_s: float,

@@ -13,7 +13,6 @@ streaming mode").
 
 from __future__ import annotations
 
-import asyncio
 import re
 
 import numpy as np
@@ -22,13 +21,12 @@ import serial
 from drivers.clock import Clock
 from drivers.faults import (
     ConnectionLost,
-    DeviceFault,
     DeviceTimeout,
     ProtocolError,
     ValueOutOfRange,
 )
 from drivers.protocols import Acquisition, SensorIdentity
-from drivers.sensor_bridge import PortThreads, open_serial_port
+from drivers.sensor_bridge import SerialLine
 from drivers.sensor_config import StreamFormat
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # converts m/s² lines to g (the fit's unit)
@@ -72,9 +70,8 @@ class StreamingAccelerometer:
         self.timeout_s = timeout_s  # wall time per line
         self.attempts = attempts
         self.device = device
-        self._port: serial.SerialBase | None = None
-        self._lock = asyncio.Lock()
-        self._threads = PortThreads(f"stream {url}")
+        self._line = SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
+                                attempts=attempts, device=device, name=f"stream {url}")
 
     async def identify(self) -> SensorIdentity:
         """A plain stream reports nothing: the serial is the operator's word (binding ``any``)."""
@@ -103,32 +100,10 @@ class StreamingAccelerometer:
         )
 
     async def close(self) -> None:
-        async with self._lock:
-            await self._threads.run(self._close_port)
-            self._threads.shutdown()
+        await self._line.close()
 
     async def _capture(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        async with self._lock:
-            last: DeviceFault | None = None
-            for attempt in range(self.attempts):
-                if attempt:
-                    await self.clock.sleep(0.1 * attempt)
-                try:
-                    port = self._port or await self._threads.run(self._open_port)
-                    io = asyncio.ensure_future(self._threads.run(self._capture_blocking, port, n))
-                    try:
-                        return await asyncio.shield(io)
-                    except asyncio.CancelledError:
-                        # The worker keeps reading until its timeout: let it close that
-                        # port, and start the next capture on a fresh one.
-                        self._port = None
-                        io.add_done_callback(lambda _f, p=port: p.close())
-                        raise
-                except (ConnectionLost, DeviceTimeout, ProtocolError) as fault:
-                    self._close_port()
-                    last = fault
-            assert last is not None
-            raise last
+        return await self._line.call(self._capture_blocking, n)
 
     def _capture_blocking(self, port: serial.SerialBase, n: int) -> tuple[np.ndarray, np.ndarray]:
         # Lines buffered before this call belong to an earlier orientation: drop them,
@@ -161,15 +136,3 @@ class StreamingAccelerometer:
             raise DeviceTimeout(self.device, f"no line from the stream within "
                                              f"{self.timeout_s:.1f} s")
         return line
-
-    def _open_port(self) -> serial.SerialBase:
-        if self._port is None or not self._port.is_open:
-            self._port = open_serial_port(self.url, self.baudrate, self.timeout_s, self.device)
-        return self._port
-
-    def _close_port(self) -> None:
-        if self._port is not None:
-            try:
-                self._port.close()
-            finally:
-                self._port = None
