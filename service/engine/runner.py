@@ -159,7 +159,7 @@ class CampaignRunner:
             outcome = ("failed", {"error": f"engine error: {type(exc).__name__}: {exc}"})
         finally:
             if self._touched:
-                await self._drive_safe()
+                cancelled = await self._park_through_cancel() or cancelled
         if cancelled is not None:
             raise cancelled
         if lost is not None:
@@ -814,6 +814,32 @@ class CampaignRunner:
         self.suspension_log.append({"suspender": susp.name, "t_s": round(self._t(since_s), 3),
                                     "held_s": round(self.clock.now() - since_s, 3)})
         self._unsuspend()
+
+    async def _park_through_cancel(self) -> asyncio.CancelledError | None:
+        """Run :meth:`_drive_safe` to its end even if we are cancelled meanwhile.
+
+        A cancel can arrive while the rig is being parked: the manager cancels
+        the run when it finds the lease lost, which races the runner's own
+        ``LeaseLost`` exit, and a shutdown can cancel twice. Cancelling the park
+        itself would leave the table where it stood (seen: 90° off home). So the
+        park runs as its own task behind :func:`asyncio.shield`; a cancel that
+        arrives meanwhile is absorbed and returned, to be raised once the rig is
+        safe. Every safe-state command is bounded (its tries and back-off), so
+        this cannot wait for ever.
+        """
+        park = asyncio.ensure_future(self._drive_safe())
+        late: asyncio.CancelledError | None = None
+        while True:
+            try:
+                await asyncio.shield(park)
+                return late
+            except asyncio.CancelledError as exc:
+                if park.done():  # the park itself was cancelled (loop shutting down)
+                    raise
+                late = late or exc
+                task = asyncio.current_task()
+                if task is not None:
+                    task.uncancel()
 
     async def _drive_safe(self) -> None:
         """The rig's safe state: chamber at the safe temperature, table stopped and home.

@@ -181,3 +181,33 @@ async def test_lost_lease_ends_safe(sf, monkeypatch) -> None:  # type: ignore[no
         assert_safe(*await rig_state(sim, clock))
         assert n_measured(sf, cid) == n  # nothing written after the lease was lost
         await mgr.stop()
+
+
+@SQLITE_ONLY
+async def test_a_cancel_during_the_park_does_not_stop_it(sf) -> None:  # type: ignore[no-untyped-def]
+    """The manager's cancel (lease lost) can land while the runner already parks: park anyway.
+
+    Seen under load: the runner's own ``LeaseLost`` exit started the park, the
+    manager's renewer cancelled the task mid-park, and the table stayed at 90°.
+    """
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with twin(clock) as (sim, devices):
+        stop = devices.turntable.stop
+        parking = asyncio.Event()
+
+        async def slow_stop() -> Any:
+            parking.set()
+            await clock.sleep(5.0)  # the cancel arrives here, before the table is sent home
+            return await stop()
+
+        task = asyncio.create_task(
+            CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run())
+        await until(lambda: n_measured(sf, cid) >= 2)
+        devices.turntable.stop = slow_stop  # type: ignore[method-assign]
+        store.update_campaign(sf, cid, requested_action="abort")
+        await asyncio.wait_for(parking.wait(), 60)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):  # the cancel is kept, raised once parked
+            await asyncio.wait_for(task, 60)
+        assert_safe(*await rig_state(sim, clock))
