@@ -193,7 +193,8 @@ class CampaignRunner:
             on_suspend=self._suspend, on_resume=self._unsuspend,
             check_abort=self._abort_asked_recently,
         )
-        self.suspenders = Suspenders(limit_s=spec.suspend_limit_s)
+        self.suspenders = Suspenders(band_c=spec.chamber_band_c, limit_s=spec.suspend_limit_s,
+                                     clear_s=spec.suspend_clear_s)
         if camp.state == "queued":
             return store.transition(self.sf, self.id, "running", started_at=camp.started_at
                                     or store.now_utc(),

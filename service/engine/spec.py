@@ -40,6 +40,7 @@ from service.engine.stability import (
     StabilityConfig,
     temperature_budget_c,
 )
+from service.engine.suspenders import DEFAULT_BAND_C, DEFAULT_CLEAR_S
 
 DEFAULT_SETPOINTS_C = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
 
@@ -176,6 +177,12 @@ class CampaignSpec(BaseModel):
     suspend_poll_s: Float = _f(30.0, 0, MAX_POLL_S, doc="device poll while suspended, s")
     suspend_limit_s: Float = _f(1800.0, 0, MAX_SUSPEND_LIMIT_S,
                                 doc="suspended longer than this fails the campaign, s")
+    chamber_band_c: Float = _f(DEFAULT_BAND_C, 0, 50,
+                               doc="air farther than this from the setpoint while measuring "
+                                   "suspends the campaign (and restarts the soak), °C")
+    suspend_clear_s: Float = _f(DEFAULT_CLEAR_S, 0, MAX_POLL_S, open_lo=False,
+                                doc="a chamber alarm or band excursion must stay clear this "
+                                    "long before the campaign resumes, s")
 
     @model_validator(mode="after")
     def _measured_rate_needs_precise_probes(self) -> CampaignSpec:
@@ -216,6 +223,8 @@ class RunSpec:
     retry_backoff_s: float = 1.0  # first back-off, doubled each try
     suspend_poll_s: float = 30.0
     suspend_limit_s: float = 1800.0  # suspended longer than this: fail the campaign
+    chamber_band_c: float = DEFAULT_BAND_C  # air this far off the setpoint while measuring
+    suspend_clear_s: float = DEFAULT_CLEAR_S  # a chamber condition clear this long: resume
     position_order: str = "travel"  # travel | random | balanced | table (soak_order.py)
     position_order_seed: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
@@ -228,8 +237,8 @@ class RunSpec:
 # RunSpec fields copied as they are from the validated spec.
 _DIRECT = ("ramp_c_per_min", "soak_poll_s", "settle_s", "safe_c",
            "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
-           "move_timeout_s", "on_max_soak", "positions", "samples_per_position", "rate_gain",
-           "position_order", "position_order_seed")
+           "chamber_band_c", "suspend_clear_s", "move_timeout_s", "on_max_soak", "positions",
+           "samples_per_position", "rate_gain", "position_order", "position_order_seed")
 
 
 def run_spec(spec: CampaignSpec) -> RunSpec:

@@ -80,6 +80,21 @@ async def test_chamber_out_of_band_without_alarm_suspends(sf) -> None:  # type: 
 
 
 @SQLITE_ONLY
+async def test_the_band_is_the_campaigns_own(sf) -> None:  # type: ignore[no-untyped-def]
+    """A chamber that swings wider at −40 °C: ``chamber_band_c`` 5 lets 3.5 °C pass."""
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SPEC, "chamber_band_c": 5.0}, rig="lab")
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        task = asyncio.create_task(runner.run())
+        await until(lambda: n_measured(sf, cid) >= 3)
+        sim.chamber.advance_to()
+        sim.chamber.air_c += 3.5
+        assert await asyncio.wait_for(task, 60) == "completed"
+    assert runner.suspension_log == []
+
+
+@SQLITE_ONLY
 async def test_table_never_in_position_suspends_then_fails_safe(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, {**SPEC, "suspend_limit_s": 600.0, "move_timeout_s": 60.0}, rig="lab")

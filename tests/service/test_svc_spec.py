@@ -21,7 +21,8 @@ NON_DEFAULT = {
     "ramp_c_per_min": 3.0, "soak_poll_s": 20.0, "soak_probe_samples": 16, "settle_s": 2.0,
     "move_timeout_s": 60.0, "safe_c": 25.0, "range_g": 4, "odr_hz": 125.0,
     "retry_attempts": 2, "retry_backoff_s": 0.5, "suspend_poll_s": 10.0,
-    "suspend_limit_s": 600.0, "rate_gain": "measured",
+    "suspend_limit_s": 600.0, "rate_gain": "measured", "chamber_band_c": 3.0,
+    "suspend_clear_s": 20.0,
     "position_order": "balanced", "position_order_seed": 9,
 }
 
