@@ -160,7 +160,7 @@ class MultiplexedBridgeDevice:
         return Route(address, device, command)
 
     async def answer(self, route: Route, framing: Framing) -> list[list[object]]:
-        if route.refusal is not None or route.target is None:
+        if route.target is None:  # the bridge answers for itself (CHANNELS, ERR 3 / 7)
             return [route.refusal or ["ERR", 1, "unknown command"]]
         return await route.target.replies(route.command, framing)
 
