@@ -92,6 +92,20 @@ async def test_the_sensors_of_one_bridge_are_read_one_after_the_other(mux: MuxRi
     assert mux.clock.now() - t0 == pytest.approx(40.0, abs=0.5)
 
 
+async def test_a_sensor_on_another_bridge_reads_alongside_them(mux: MuxRig) -> None:
+    """Queueing is per port: a third sensor on a bridge of its own overlaps the two."""
+    other = await start_bridge_server(_device(mux.clock, 2))
+    alone = SerialAccelerometer(other.url, mux.clock, timeout_s=0.3)
+    try:
+        a, b = mux.bridge.channel(0), mux.bridge.channel(1)
+        t0 = mux.clock.now()
+        await asyncio.gather(a.acquire(2000), b.acquire(2000), alone.acquire(2000))
+        assert mux.clock.now() - t0 == pytest.approx(40.0, abs=0.5)  # not 60 s
+    finally:
+        await alone.close()
+        await other.stop()
+
+
 async def test_unaddressed_lines_are_channel_0_byte_for_byte(mux: MuxRig) -> None:
     """An old host's ID to a multiplexing bridge: the very bytes a one-sensor bridge sends."""
     single = await start_bridge_server(_device(mux.clock, 0))
