@@ -35,12 +35,14 @@ def run_one(n_sensors: int, multiplexed: bool, fast: bool) -> tuple[float, str]:
     with tempfile.TemporaryDirectory() as out:
         code = RUN.format(fast=fast, n=n_sensors, mux=multiplexed)
         t0 = time.monotonic()
-        proc = subprocess.run([sys.executable, "-c", code, out], capture_output=True,
-                              text=True, check=False)
+        proc = subprocess.run(
+            [sys.executable, "-c", code, out], capture_output=True, text=True, check=False
+        )
         wall_s = time.monotonic() - t0
     if proc.returncode != 0:
-        raise SystemExit(f"campaign failed (multiplexed={multiplexed}):\n{proc.stdout}"
-                         f"\n{proc.stderr}")
+        raise SystemExit(
+            f"campaign failed (multiplexed={multiplexed}):\n{proc.stdout}\n{proc.stderr}"
+        )
     return wall_s, next(ln for ln in proc.stdout.splitlines() if ln.startswith("campaign "))
 
 
@@ -49,15 +51,17 @@ def main() -> int:
     ap.add_argument("--sensors", type=int, default=8)
     ap.add_argument("--fast", action="store_true", help="the demo's 3-step campaign")
     args = ap.parse_args()
-    print(f"{'bridges':>22} {'sensors':>7} {'calibrated':>10} {'simulated h':>11} "
-          f"{'wall s':>7}")
+    print(f"{'bridges':>22} {'sensors':>7} {'calibrated':>10} {'simulated h':>11} {'wall s':>7}")
     for multiplexed in (False, True):
         wall_s, summary = run_one(args.sensors, multiplexed, args.fast)
         sim = re.search(r"simulated ([0-9.]+) h", summary)
         cal = re.search(r"(\d+) calibrated", summary)
         label = "one multiplexing" if multiplexed else "one per sensor"
-        print(f"{label:>22} {args.sensors:7d} {cal.group(1) if cal else '?':>10} "
-              f"{sim.group(1) if sim else '?':>11} {wall_s:7.1f}", flush=True)
+        print(
+            f"{label:>22} {args.sensors:7d} {cal.group(1) if cal else '?':>10} "
+            f"{sim.group(1) if sim else '?':>11} {wall_s:7.1f}",
+            flush=True,
+        )
     return 0
 
 

@@ -30,9 +30,15 @@ BIASES_G = [(0.01, -0.02, 0.0), (-0.03, 0.005, 0.02), (0.0, 0.04, -0.01)]
 
 
 def _device(clock: VirtualClock, i: int) -> BridgeDevice:
-    return BridgeDevice(FakeTruth(bias_g=BIASES_G[i], serial=f"SN-CH{i}"), clock,
-                        np.random.default_rng(i), lambda: 25.0, lambda: (0.0, 0.0, 0.0),
-                        faults=SimFaults(), board_uid="SIM-MUX-0001")
+    return BridgeDevice(
+        FakeTruth(bias_g=BIASES_G[i], serial=f"SN-CH{i}"),
+        clock,
+        np.random.default_rng(i),
+        lambda: 25.0,
+        lambda: (0.0, 0.0, 0.0),
+        faults=SimFaults(),
+        board_uid="SIM-MUX-0001",
+    )
 
 
 @dataclass
@@ -72,7 +78,8 @@ async def test_each_channel_is_its_own_sensor(mux: MuxRig) -> None:
     handles = [mux.bridge.channel(i) for i in range(3)]
     idents = [await h.identify() for h in handles]
     assert [(i.serial, i.channel, i.board_uid) for i in idents] == [
-        (f"SN-CH{i}", i, "SIM-MUX-0001") for i in range(3)]
+        (f"SN-CH{i}", i, "SIM-MUX-0001") for i in range(3)
+    ]
     assert idents[1].as_dict()["channel"] == 1
     await handles[2].configure(4.0, 250.0)  # one channel's range, not the others'
     assert mux.mux.channels[2].truth.range_g == 4.0 and mux.mux.channels[0].truth.range_g == 2.0
@@ -112,12 +119,17 @@ async def test_unaddressed_lines_are_channel_0_byte_for_byte(mux: MuxRig) -> Non
     try:
         replies = []
         for url in (single.url, mux.server.url):
-            reader, writer = await asyncio.open_connection(*url[len("socket://"):].split(":"))
+            reader, writer = await asyncio.open_connection(*url[len("socket://") :].split(":"))
             writer.write(b"$ID*A21B\r\n")
             replies.append(await reader.readline())
             writer.close()
-        assert replies[0] == replies[1] == encode_frame(
-            "ID", "ADXL355", "SN-CH0", "soakcal-sim-2.0", "SIM-MUX-0001", "AD", "1D", "ED", "01")
+        assert (
+            replies[0]
+            == replies[1]
+            == encode_frame(
+                "ID", "ADXL355", "SN-CH0", "soakcal-sim-2.0", "SIM-MUX-0001", "AD", "1D", "ED", "01"
+            )
+        )
         old_host = SerialAccelerometer(mux.server.url, mux.clock, timeout_s=0.3)
         assert (await old_host.identify()).serial == "SN-CH0"
         await old_host.close()
@@ -138,14 +150,19 @@ async def _lying_bridge(answer: Callable[[list[str]], bytes]) -> asyncio.Server:
 ID_FIELDS = ["ID", "ADXL355", "SN-X", "fw", "UID", "AD", "1D", "ED", "01"]
 
 
-@pytest.mark.parametrize("reply_channel,why", [
-    ("@2", "carries channel 2, expected channel 1"),
-    (None, "carries no channel address, expected channel 1"),
-])
-async def test_a_reply_from_another_channel_is_never_taken(reply_channel: str | None,
-                                                           why: str) -> None:
+@pytest.mark.parametrize(
+    "reply_channel,why",
+    [
+        ("@2", "carries channel 2, expected channel 1"),
+        (None, "carries no channel address, expected channel 1"),
+    ],
+)
+async def test_a_reply_from_another_channel_is_never_taken(
+    reply_channel: str | None, why: str
+) -> None:
     server = await _lying_bridge(
-        lambda f: encode_frame(*([reply_channel] if reply_channel else []), *ID_FIELDS))
+        lambda f: encode_frame(*([reply_channel] if reply_channel else []), *ID_FIELDS)
+    )
     port = server.sockets[0].getsockname()[1]
     bridge = MultiplexedBridge(f"socket://127.0.0.1:{port}", VirtualClock(), timeout_s=0.3)
     try:
@@ -202,8 +219,11 @@ async def test_a_silent_channel_fails_alone_and_the_others_read_on(mux: MuxRig) 
     assert isinstance(results[1], DeviceTimeout)
     assert "@1" in results[1].device
     for i in (0, 2):
-        np.testing.assert_allclose(results[i].mean_g,  # type: ignore[union-attr]
-                                   np.add(BIASES_G[i], (0.0, 0.0, 1.0)), atol=2e-5)
+        np.testing.assert_allclose(
+            results[i].mean_g,  # type: ignore[union-attr]
+            np.add(BIASES_G[i], (0.0, 0.0, 1.0)),
+            atol=2e-5,
+        )
     # the port reopened after the timeout; the silent channel's late nothing harms no one
     assert (await handles[2].identify()).serial == "SN-CH2"
 

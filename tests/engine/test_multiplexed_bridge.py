@@ -27,8 +27,14 @@ from simulators.truth import SensorTruth
 
 SERIALS = ["SN-X0", "SN-X1", "SN-X2"]
 # one short step: six positions of 20 samples each, after a 2-minute fixed soak
-SPEC = {**SMALL_SPEC, "setpoints_c": [20.0], "soak_min": 2, "stability": "fixed",
-        "samples_per_position": 20, "sensors": SERIALS}
+SPEC = {
+    **SMALL_SPEC,
+    "setpoints_c": [20.0],
+    "soak_min": 2,
+    "stability": "fixed",
+    "samples_per_position": 20,
+    "sensors": SERIALS,
+}
 SIM = {"name": "sim", "chamber": {"driver": "sim"}, "turntable": {}, "sensors": []}
 
 
@@ -65,22 +71,32 @@ class DeadAxisTruth:
         else:
             setattr(self._part, name, value)
 
-    def sample_g(self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator,
-                 t_s: float = 0.0) -> np.ndarray:
+    def sample_g(
+        self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator, t_s: float = 0.0
+    ) -> np.ndarray:
         g = self._part.sample_g(ref_g, die_c, n, rng, t_s=t_s)
         return g * 0.1
 
 
-async def _run_twin(sf, cid: int, sim_options: dict[str, Any],  # type: ignore[no-untyped-def]
-                    break_channel=None) -> str:
+async def _run_twin(
+    sf,
+    cid: int,
+    sim_options: dict[str, Any],  # type: ignore[no-untyped-def]
+    break_channel=None,
+) -> str:
     clock = VirtualClock()
-    async with open_rig(SIM, clock, seed=4, serials=SERIALS,
-                        sim_options={"multiplexed": True, "modbus_in_memory": True,
-                                     **sim_options}) as devices:
+    async with open_rig(
+        SIM,
+        clock,
+        seed=4,
+        serials=SERIALS,
+        sim_options={"multiplexed": True, "modbus_in_memory": True, **sim_options},
+    ) as devices:
         if break_channel is not None:
             break_channel(devices)
         return await asyncio.wait_for(
-            CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run(), 120.0)
+            CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run(), 120.0
+        )
 
 
 async def test_three_sensors_on_one_multiplexed_twin_bridge_give_three_recordings(sf) -> None:  # type: ignore[no-untyped-def]
@@ -131,26 +147,41 @@ async def test_an_out_of_range_channel_is_dropped_with_its_reason(sf) -> None:  
 
 
 def _mux_config(url: str, chamber_url: str, table_url: str, **entry: Any) -> dict[str, Any]:
-    return {"name": "lab", "chamber": {"driver": "modbus", "url": chamber_url,
-                                       "map": "eurotherm3216", "range_c": [-70, 180]},
-            "turntable": {"url": table_url, "axes": 3},
-            "sensors": [{"url": url, "serial_binding": "eeprom",
-                         "channels": {str(i): s for i, s in enumerate(SERIALS)}, **entry}]}
+    return {
+        "name": "lab",
+        "chamber": {
+            "driver": "modbus",
+            "url": chamber_url,
+            "map": "eurotherm3216",
+            "range_c": [-70, 180],
+        },
+        "turntable": {"url": table_url, "axes": 3},
+        "sensors": [
+            {
+                "url": url,
+                "serial_binding": "eeprom",
+                "channels": {str(i): s for i, s in enumerate(SERIALS)},
+                **entry,
+            }
+        ],
+    }
 
 
 async def test_a_modbus_rig_declares_its_multiplexing_bridge_by_channels(sf) -> None:  # type: ignore[no-untyped-def]
     """Reached by URL like a real lab's rig; each channel's EEPROM serial is checked."""
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = _campaign(sf, SPEC, rig="lab")
-    async with start_sim_rig(clock, seed=3, serials=SERIALS, multiplexed=True,
-                             modbus_in_memory=False) as sim:
+    async with start_sim_rig(
+        clock, seed=3, serials=SERIALS, multiplexed=True, modbus_in_memory=False
+    ) as sim:
         sim.sensors[1].bridge.eeprom_serial = "SN-OTHER"  # the wrong part on channel 1
         cfg = _mux_config(sim.sensor_url, sim.chamber_url, sim.table_url)
         assert rig_config_errors(cfg["chamber"], cfg["turntable"], cfg["sensors"]) == []
         async with open_rig(cfg, clock, serials=SERIALS) as devices:
             assert [a.channel for a in devices.accelerometers.values()] == [0, 1, 2]
             state = await asyncio.wait_for(
-                CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run(), 120.0)
+                CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate).run(), 120.0
+            )
     assert state == "completed"
     camp, rows, _cals = _rows(sf, cid)
     assert set(camp.sensors_dropped) == {"SN-X1"}
@@ -174,7 +205,10 @@ def test_sensor_entries_resolve_channels_and_refuse_sharing_without_them() -> No
     cfg = _mux_config("/dev/ttyACM0", "tcp://h:502", "tcp://h:503")
     cfg["sensors"].append({"url": "/dev/ttyACM1", "serial": "SN-Y"})
     assert sensor_entries(cfg, ["SN-X2", "SN-Y", "SN-X0"]) == {
-        "SN-X2": (0, 2), "SN-Y": (1, None), "SN-X0": (0, 0)}
+        "SN-X2": (0, 2),
+        "SN-Y": (1, None),
+        "SN-X0": (0, 0),
+    }
     cfg["sensors"][1]["serials"] = {"UID-1": "SN-Z"}
     with pytest.raises(RigConfigError, match="one bridge per sensor is needed, or declare"):
         sensor_entries(cfg, ["SN-Y", "SN-Z"])
@@ -188,22 +222,34 @@ def test_channel_config_problems_name_the_key() -> None:
 
     ok = {"url": "/dev/ttyACM0", "channels": {"0": "SN-1", "1": "SN-2"}}
     assert errors(ok) == {}
-    got = errors({"url": "/dev/ttyACM0", "channels": {"0": "SN-1", "x": "SN-2", "2": "SN-1",
-                                                      "3": ""}})
-    assert set(got) == {"sensors[0].channels.x", "sensors[0].channels.2",
-                        "sensors[0].channels.3"}
+    got = errors(
+        {"url": "/dev/ttyACM0", "channels": {"0": "SN-1", "x": "SN-2", "2": "SN-1", "3": ""}}
+    )
+    assert set(got) == {"sensors[0].channels.x", "sensors[0].channels.2", "sensors[0].channels.3"}
     assert "already on channel 0" in got["sensors[0].channels.2"]
     assert set(errors({"url": "u", "channels": {}})) == {"sensors[0].channels"}
     assert set(errors({"url": "u", "channels": {"0": "SN-1"}, "framing": "v1"})) == {
-        "sensors[0].channels"}
-    assert set(errors({"url": "u", "channels": {"0": "SN-1"}, "protocol": "stream",
-                       "serial_binding": "any"})) == {"sensors[0].channels"}
+        "sensors[0].channels"
+    }
+    assert set(
+        errors(
+            {"url": "u", "channels": {"0": "SN-1"}, "protocol": "stream", "serial_binding": "any"}
+        )
+    ) == {"sensors[0].channels"}
     assert set(errors({"url": "u", "channels": {"0": "SN-1"}, "serial": "SN-1"})) == {
-        "sensors[0].serial"}
-    assert "on no channel" in errors({"url": "u", "channels": {"0": "SN-1"},
-                                      "serials": {"UID@1": "SN-9"}})["sensors[0].serials"]
+        "sensors[0].serial"
+    }
+    assert (
+        "on no channel"
+        in errors({"url": "u", "channels": {"0": "SN-1"}, "serials": {"UID@1": "SN-9"}})[
+            "sensors[0].serials"
+        ]
+    )
     # one port is one entry; a serial is declared once across entries
-    twice = errors(ok, {"url": "/dev/ttyACM0", "serial": "SN-3"},
-                   {"url": "/dev/ttyACM2", "channels": {"4": "SN-2"}})
+    twice = errors(
+        ok,
+        {"url": "/dev/ttyACM0", "serial": "SN-3"},
+        {"url": "/dev/ttyACM2", "channels": {"4": "SN-2"}},
+    )
     assert "sensors[0]" in twice["sensors[1].url"] and "'channels'" in twice["sensors[1].url"]
     assert "'SN-2' is already declared by sensors[0]" in twice["sensors[2].channels.4"]

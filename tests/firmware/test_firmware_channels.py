@@ -47,8 +47,14 @@ def board() -> Iterator[tuple[list[ADXL355Registers], bridge_app.MuxBridge, PtyD
 def test_unaddressed_lines_get_the_one_sensor_bridge_s_bytes() -> None:
     _chip, single = _channel(0)
     mux = bridge_app.MuxBridge({0: _channel(0)[1], 1: _channel(1)[1]})
-    for line in (b"$ID*A21B\r\n", encode_frame("ID", framing="v1"), encode_frame("AVG", 5),
-                 encode_frame("CFG", 4, 250), encode_frame("AVG", 0), b"$ID*0000\r\n"):
+    for line in (
+        b"$ID*A21B\r\n",
+        encode_frame("ID", framing="v1"),
+        encode_frame("AVG", 5),
+        encode_frame("CFG", 4, 250),
+        encode_frame("AVG", 0),
+        b"$ID*0000\r\n",
+    ):
         assert mux.handle_line(line) == single.handle_line(line)
 
 
@@ -59,11 +65,14 @@ def test_addressed_replies_carry_their_channel_on_every_line() -> None:
     assert all(bridge_proto.unframe(x)[0][0] == "@2" for x in lines)
     assert bridge_proto.unframe(lines[-1])[0] == ["@2", "END", "3"]
     assert mux.handle_line(encode_frame("@1", "ID")) == [
-        encode_frame("@1", "ERR", 7, "no sensor on channel 1")]
+        encode_frame("@1", "ERR", 7, "no sensor on channel 1")
+    ]
     assert mux.handle_line(encode_frame("@01", "ID")) == [
-        encode_frame("ERR", 3, "bad channel address @01")]
+        encode_frame("ERR", 3, "bad channel address @01")
+    ]
     assert mux.handle_line(encode_frame("CHANNELS")) == [
-        encode_frame("CHANNELS", 2, 0, "SN-F0", 2, "SN-F2")]
+        encode_frame("CHANNELS", 2, 0, "SN-F0", 2, "SN-F2")
+    ]
 
 
 async def test_three_sensors_on_one_firmware_bridge_over_a_pty(board) -> None:  # type: ignore[no-untyped-def]
@@ -74,7 +83,8 @@ async def test_three_sensors_on_one_firmware_bridge_over_a_pty(board) -> None:  
         handles = [bridge.channel(i) for i in range(3)]
         idents = [await h.identify() for h in handles]
         assert [(x.serial, x.channel, x.board_uid, x.partid) for x in idents] == [
-            (f"SN-F{i}", i, UID, 0xED) for i in range(3)]
+            (f"SN-F{i}", i, UID, 0xED) for i in range(3)
+        ]
         await handles[1].configure(4.0, 250.0)  # that chip only
         assert chips[1].range_g == 4.0 and chips[0].range_g == 2.0 and chips[2].range_g == 2.0
         acqs = await asyncio.gather(*(h.acquire(30) for h in handles))
