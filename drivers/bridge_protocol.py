@@ -128,3 +128,38 @@ def decode_frame(line: bytes, device: str = "sensor", framing: Framing = "v2") -
 def _show(raw: bytes) -> str:
     """A line for an error message: printable ASCII kept, anything else as \\xNN, 60 bytes max."""
     return repr(raw[:60].decode("ascii", errors="backslashreplace"))
+
+
+# --- channel address (a bridge multiplexing N sensors; docs/sensor-bridge.md, "Channels") ---
+#: A channel-addressed line starts with the field ``@<ch>``: ``$@1,AVG,200*CCCC``, and every
+#: reply line to it carries the same field first. A line without it is the pre-channel form
+#: (what single-sensor bridges and hosts always sent), which a multiplexing bridge answers
+#: for channel 0, unaddressed: old hosts keep their bytes.
+CHANNEL_MARK = "@"
+MAX_CHANNEL = 99  # two decimal digits on the wire; a board hosts as many as its chip selects
+
+
+def channel_field(channel: int) -> str:
+    """The address field of ``channel``; ``ValueError`` outside 0…:data:`MAX_CHANNEL`."""
+    if isinstance(channel, bool) or not isinstance(channel, int) or \
+            not 0 <= channel <= MAX_CHANNEL:
+        raise ValueError(f"bridge channel must be an integer 0..{MAX_CHANNEL}, got {channel!r}")
+    return f"{CHANNEL_MARK}{channel}"
+
+
+def split_channel(fields: list[str], device: str = "sensor") -> tuple[int | None, list[str]]:
+    """``["@2", "AVG", …]`` → ``(2, ["AVG", …])``; unaddressed fields → ``(None, fields)``.
+
+    A malformed address (``@``, ``@x``, ``@100``, ``@01``) is a :class:`ProtocolError`:
+    it can only come from a line fault or a bridge that does not speak this protocol.
+    """
+    head = fields[0] if fields else ""
+    if not head.startswith(CHANNEL_MARK):
+        return None, fields
+    digits = head[len(CHANNEL_MARK):]
+    if not digits.isdigit() or not digits.isascii() or str(int(digits)) != digits or \
+            int(digits) > MAX_CHANNEL:
+        raise ProtocolError(device, f"bad channel address {head!r} (expected @0..@{MAX_CHANNEL})")
+    if len(fields) < 2:
+        raise ProtocolError(device, f"channel address {head!r} with no command or reply after it")
+    return int(digits), fields[1:]

@@ -82,8 +82,9 @@ class SensorIdentity:
     partid: int | None = None  # register 0x02, 0xED for the ADXL355
     revid: int | None = None  # register 0x03, silicon revision
     protocol: str = ""  # link that reported it: "v2", "v1", "stream", ... ("" unknown)
+    channel: int | None = None  # the sensor's channel on a multiplexing bridge; None: one sensor
 
-    def as_dict(self) -> dict[str, str | None]:
+    def as_dict(self) -> dict[str, str | int | None]:
         """JSON-ready form for the recording and calibration metadata; ids as ``0xNN``."""
 
         def hex_id(v: int | None) -> str | None:
@@ -94,7 +95,7 @@ class SensorIdentity:
             "board_uid": self.board_uid or None,
             "devid_ad": hex_id(self.devid_ad), "devid_mst": hex_id(self.devid_mst),
             "partid": hex_id(self.partid), "revid": hex_id(self.revid),
-            "protocol": self.protocol or None,
+            "protocol": self.protocol or None, "channel": self.channel,
         }
 
 

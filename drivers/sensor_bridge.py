@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Literal, TypeVar
 
@@ -19,7 +19,15 @@ import numpy as np
 import serial
 
 from drivers import adxl355
-from drivers.bridge_protocol import FRAMINGS, Framing, decode_frame, encode_frame
+from drivers.bridge_protocol import (
+    CHANNEL_MARK,
+    FRAMINGS,
+    Framing,
+    channel_field,
+    decode_frame,
+    encode_frame,
+    split_channel,
+)
 from drivers.clock import Clock
 from drivers.faults import (
     ConfigurationFault,
@@ -34,14 +42,15 @@ from drivers.protocols import Acquisition, SensorIdentity
 
 AcquireMode = Literal["average", "raw"]
 
-#: ``ERR`` codes (docs/sensor-bridge.md): 1, 3 and 4 are permanent refusals, 2 means the
+#: ``ERR`` codes (docs/sensor-bridge.md): 1, 3, 4 and 7 are permanent refusals, 2 means the
 #: bridge received our command garbled (a line fault: retried), anything else (5 sensor
 #: not ready, 6 busy) is an ordinary retryable exception reply.
 ERR_UNKNOWN_COMMAND = 1
 ERR_BAD_FRAME = 2
 ERR_BAD_ARGUMENT = 3
 ERR_NO_EEPROM = 4
-_PERMANENT_ERRS = (ERR_UNKNOWN_COMMAND, ERR_BAD_ARGUMENT, ERR_NO_EEPROM)
+ERR_NO_CHANNEL = 7  # a multiplexing bridge has no sensor on the addressed channel
+_PERMANENT_ERRS = (ERR_UNKNOWN_COMMAND, ERR_BAD_ARGUMENT, ERR_NO_EEPROM, ERR_NO_CHANNEL)
 
 
 # Each port gets its own I/O threads. The event loop's default executor has only
@@ -131,7 +140,14 @@ class SerialLine:
 
 
 class SerialAccelerometer:
-    """:class:`drivers.protocols.Accelerometer` for an ADXL355 behind the bridge."""
+    """:class:`drivers.protocols.Accelerometer` for an ADXL355 behind the bridge.
+
+    ``channel=None`` speaks the unaddressed commands of a one-sensor bridge (the bytes every
+    bridge has always understood). A sensor behind a multiplexing bridge is a handle from
+    :meth:`MultiplexedBridge.channel`: every command it sends carries ``@<channel>``, every
+    reply line must carry the same address, and it shares the bridge's one
+    :class:`SerialLine` with the other channels (one command in flight per port).
+    """
 
     def __init__(
         self,
@@ -144,10 +160,15 @@ class SerialAccelerometer:
         attempts: int = 1,  # 1: no retry here; the engine's guard is the one retry owner
         device: str = "sensor",
         framing: Framing = "v2",
+        channel: int | None = None,
+        line: SerialLine | None = None,
+        on_close: Callable[[], Awaitable[None]] | None = None,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"sensor framing must be one of {', '.join(FRAMINGS)}, "
                              f"got {framing!r}")
+        self.channel = channel
+        self._address = [] if channel is None else [channel_field(channel)]
         self.url = url
         self.framing: Framing = framing
         self.clock = clock
@@ -158,8 +179,10 @@ class SerialAccelerometer:
         self.device = device
         self.range_g = 2.0
         self.odr_hz = 62.5
-        self._line = SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
-                                attempts=attempts, device=device, name=f"bridge {url}")
+        # A channel handle borrows its bridge's line; ``on_close`` hands it back.
+        self._line = line or SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
+                                        attempts=attempts, device=device, name=f"bridge {url}")
+        self._on_close = on_close
 
     # --- protocol -------------------------------------------------------------
     async def identify(self) -> SensorIdentity:
@@ -177,7 +200,7 @@ class SerialAccelerometer:
             raise ProtocolError(self.device, f"ID reply has a non-hex part id: {f!r}") from None
         return SensorIdentity(model=f[1], serial=f[2], firmware=f[3], board_uid=f[4],
                               devid_ad=devid_ad, devid_mst=devid_mst, partid=partid,
-                              revid=revid, protocol=self.framing)
+                              revid=revid, protocol=self.framing, channel=self.channel)
 
     async def bind_serial(self, serial_text: str) -> str:
         """Write the sensor's serial into the fixture EEPROM (``SN``); returns what was stored.
@@ -245,6 +268,10 @@ class SerialAccelerometer:
             yield c / scale, float(adxl355.temp_raw_to_c(t))
 
     async def close(self) -> None:
+        if self._on_close is not None:  # a channel: the bridge closes the line after the last
+            on_close, self._on_close = self._on_close, None
+            await on_close()
+            return
         await self._line.close()
 
     # --- raw path ---------------------------------------------------------------
@@ -300,7 +327,7 @@ class SerialAccelerometer:
                            extra_wait_s: float) -> list[list[str]]:
         try:
             port.reset_input_buffer()
-            port.write(encode_frame(*fields, framing=self.framing))
+            port.write(encode_frame(*self._address, *fields, framing=self.framing))
             out: list[list[str]] = []
             for i in range(n_lines):
                 # First line of a capture waits for the capture itself (device time).
@@ -309,7 +336,7 @@ class SerialAccelerometer:
                 if not line.endswith(b"\n"):
                     raise DeviceTimeout(self.device, f"no reply to {fields[0]} within "
                                                      f"{port.timeout:.1f} s")
-                f = decode_frame(line, self.device, self.framing)
+                f = self._reply_fields(decode_frame(line, self.device, self.framing), fields)
                 if f[0] == "ERR":
                     raise self._err_fault(f, fields)
                 out.append(f)
@@ -317,17 +344,100 @@ class SerialAccelerometer:
         except (serial.SerialException, OSError) as exc:
             raise ConnectionLost(self.device, f"{self.url}: {exc}") from exc
 
+    def _reply_fields(self, f: list[str], fields: list[object]) -> list[str]:
+        """A reply line's fields without its channel address, which must be ours.
+
+        Data from another channel (a late reply on a shared port, a bridge bug) must never
+        pass as this sensor's, so any other address, or none on an addressed command, is a
+        :class:`ProtocolError`. One exception: an unaddressed ``ERR`` answering an addressed
+        command is the bridge refusing it (no data to mistake; a bridge without channel
+        addressing says ``ERR 1 unknown command @1``), so it keeps its ``ERR`` meaning.
+        """
+        channel, rest = split_channel(f, self.device)
+        if channel == self.channel:
+            return rest
+        if channel is None and rest[0] == "ERR":
+            return rest
+        said = "no channel address" if channel is None else f"channel {channel}"
+        want = "no channel (an unaddressed command)" if self.channel is None else \
+            f"channel {self.channel}"
+        raise ProtocolError(self.device, f"reply to {fields[0]} carries {said}, expected "
+                                         f"{want}: {','.join(f)[:60]!r}")
+
     def _err_fault(self, f: list[str], fields: list[object]) -> DeviceFault:
         """An ``ERR,<code>,<text>`` reply → the fault class its code means."""
         code = int(f[1]) if len(f) > 1 and f[1].isdigit() else None
         text = ",".join(f[2:]) or "error"
-        command = ",".join(str(x) for x in fields)
+        command = ",".join(str(x) for x in (*self._address, *fields))
         if code == ERR_BAD_FRAME:
             return ProtocolError(self.device, f"bridge received {command!r} garbled: {text}")
         if code in _PERMANENT_ERRS:
+            hint = ""
+            if code == ERR_UNKNOWN_COMMAND and self._address and CHANNEL_MARK in text:
+                hint = (" (this bridge has no channel addressing: a one-sensor bridge is "
+                        "declared without 'channels')")
             return ConfigurationFault(self.device, f"bridge refuses {command!r}: ERR {code} "
-                                                   f"{text}", code)
+                                                   f"{text}{hint}", code)
         return ExceptionReply(self.device, f"ERR {code} {text}", code)
+
+
+class MultiplexedBridge:
+    """One bridge port hosting several sensors, one per channel (docs/sensor-bridge.md).
+
+    The channels share one :class:`SerialLine`, so one command is in flight on the port:
+    reads of the sensors behind one bridge queue on its lock (sensors on other bridges
+    still read at once). Each :meth:`channel` handle is a full
+    :class:`SerialAccelerometer` with its own range, ODR, timeout and faults: a channel
+    that times out or is refused fails that handle's call only. The port closes once
+    every handle taken has been closed (or on :meth:`close`).
+    """
+
+    def __init__(self, url: str, clock: Clock, *, baudrate: int = 115200,
+                 timeout_s: float = 2.0, attempts: int = 1, device: str = "sensor",
+                 framing: Framing = "v2") -> None:
+        self.url, self.clock, self.framing = url, clock, framing
+        self.baudrate, self.timeout_s, self.device = baudrate, timeout_s, device
+        self.line = SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
+                               attempts=attempts, device=device, name=f"bridge {url}")
+        self._open: set[int] = set()
+
+    def channel(self, channel: int, *, device: str | None = None,
+                mode: AcquireMode = "average") -> SerialAccelerometer:
+        """The sensor on ``channel`` (``ValueError`` outside 0…99, or taken twice)."""
+        channel_field(channel)
+        if channel in self._open:
+            raise ValueError(f"{self.url}: channel {channel} is already in use")
+        self._open.add(channel)
+
+        async def release() -> None:
+            self._open.discard(channel)
+            if not self._open:
+                await self.line.close()
+
+        return SerialAccelerometer(self.url, self.clock, mode=mode, baudrate=self.baudrate,
+                                   timeout_s=self.timeout_s, attempts=self.line.attempts,
+                                   device=device or f"{self.device} @{channel}",
+                                   framing=self.framing, channel=channel, line=self.line,
+                                   on_close=release)
+
+    async def channels(self) -> dict[int, str]:
+        """``CHANNELS`` → ``{channel: serial in its fixture EEPROM ("" when blank)}``."""
+        bridge = SerialAccelerometer(self.url, self.clock, timeout_s=self.timeout_s,
+                                     device=self.device, framing=self.framing, line=self.line)
+        f = await bridge._command(["CHANNELS"], expect="CHANNELS")
+        try:
+            n = int(f[1])
+        except (IndexError, ValueError):
+            raise ProtocolError(self.device, f"CHANNELS reply malformed: {f!r}") from None
+        pairs = f[2:]
+        if len(pairs) != 2 * n or not all(ch.isdigit() for ch in pairs[::2]):
+            raise ProtocolError(self.device, f"CHANNELS reply lists {len(pairs)} fields for "
+                                             f"{n} channels, expected {2 * n}: {f!r}")
+        return {int(ch): serial for ch, serial in zip(pairs[::2], pairs[1::2], strict=True)}
+
+    async def close(self) -> None:
+        self._open.clear()
+        await self.line.close()
 
 
 def open_serial_port(url: str, baudrate: int, timeout_s: float,

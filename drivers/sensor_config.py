@@ -9,6 +9,10 @@ A rig config's ``sensors[0]`` (docs/sensor-bridge.md, "Rig config keys")::
      "serial_binding": "auto",        # "auto", "eeprom", "table" or "any"
      "serials": {"E6614104035F2B2F": "SN-0001"}}   # board uid → sensor serial
 
+A multiplexing bridge (docs/sensor-bridge.md, "Channels") declares the sensor on each
+of its channels: ``"channels": {"0": "SN-1", "1": "SN-2"}`` (its ``serials`` table is then
+keyed ``"<board uid>@<channel>"``).
+
 Only parsing lives here (the rig config loader calls it); the drivers take the
 result. :func:`make_accelerometer` builds the matching driver.
 """
@@ -18,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from drivers.bridge_protocol import FRAMINGS, Framing
+from drivers.bridge_protocol import FRAMINGS, MAX_CHANNEL, Framing
 from drivers.clock import Clock
 from drivers.protocols import Accelerometer
 
@@ -50,6 +54,8 @@ class SensorLinkConfig:
     stream: StreamFormat = field(default_factory=StreamFormat)
     serial_binding: BindingMode = "auto"
     serials: dict[str, str] = field(default_factory=dict)  # board uid → serial
+    # A multiplexing bridge: channel → the serial of the sensor on it; empty: one sensor.
+    channels: dict[int, str] = field(default_factory=dict)
 
 
 class SensorConfigError(ValueError):
@@ -90,6 +96,46 @@ def sensor_config_errors(cfg: Any, path: str = "sensors[0]") -> list[tuple[str, 
     if protocol == "stream" and mode in ("eeprom", "table"):
         errors.append((f"{path}.serial_binding", "a plain stream reports no identity: "
                                                  "use 'any' (the operator's word)"))
+    if "channels" in cfg:
+        errors += _channel_errors(cfg, path)
+    return errors
+
+
+def _channel_errors(cfg: dict[str, Any], path: str) -> list[tuple[str, str]]:
+    """A multiplexing bridge's ``channels``: ``{"<ch>": serial}``, each serial once."""
+    channels = cfg["channels"]
+    if not isinstance(channels, dict) or not channels:
+        return [(f"{path}.channels", "expected an object {channel: sensor serial} with at "
+                                     "least one channel, e.g. {\"0\": \"SN-1\", \"1\": \"SN-2\"}")]
+    errors: list[tuple[str, str]] = []
+    seen: dict[str, str] = {}
+    for key, serial in channels.items():
+        where = f"{path}.channels.{key}"
+        if not (isinstance(key, str) and key.isdigit() and key.isascii()
+                and str(int(key)) == key and int(key) <= MAX_CHANNEL):
+            errors.append((where, f"expected a channel number 0..{MAX_CHANNEL} as the key"))
+        elif not isinstance(serial, str) or not serial.strip():
+            errors.append((where, "expected the serial of the sensor on this channel"))
+        elif serial.strip() in seen:
+            errors.append((where, f"sensor {serial.strip()!r} is already on channel "
+                                  f"{seen[serial.strip()]}"))
+        else:
+            seen[serial.strip()] = key
+    if cfg.get("protocol", "bridge") != "bridge":
+        errors.append((f"{path}.channels", "only a framed bridge has channels (a plain stream "
+                                           "carries no address)"))
+    if cfg.get("framing", "v2") != "v2":
+        errors.append((f"{path}.channels", "a multiplexing bridge speaks v2 framing (v1 is "
+                                           "for bridges flashed before channels existed)"))
+    if "serial" in cfg:
+        errors.append((f"{path}.serial", "a multiplexing bridge names its sensors in "
+                                         "'channels', not 'serial'"))
+    table = cfg.get("serials")
+    if isinstance(table, dict):
+        off = sorted({str(v).strip() for v in table.values()} - set(seen))
+        if off:
+            errors.append((f"{path}.serials", f"{', '.join(off)} is on no channel of this "
+                                              f"bridge (keys are '<board uid>@<channel>')"))
     return errors
 
 
@@ -125,11 +171,13 @@ def parse_sensor_config(cfg: Any, path: str = "sensors[0]") -> SensorLinkConfig:
                             range_g=float(stream.get("range_g", 2.0))),
         serial_binding=cfg.get("serial_binding", "auto"),
         serials={k: v.strip() for k, v in cfg.get("serials", {}).items()},
+        channels={int(k): v.strip() for k, v in cfg.get("channels", {}).items()},
     )
 
 
 def make_accelerometer(link: SensorLinkConfig, clock: Clock) -> Accelerometer:
-    """The driver a link config means: framed bridge or plain stream."""
+    """The driver a link config means: framed bridge or plain stream (unaddressed: a
+    multiplexing bridge's channels come from :func:`make_multiplexed_bridge`)."""
     if link.protocol == "stream":
         from drivers.stream_sensor import StreamingAccelerometer
 
@@ -137,3 +185,10 @@ def make_accelerometer(link: SensorLinkConfig, clock: Clock) -> Accelerometer:
     from drivers.sensor_bridge import SerialAccelerometer
 
     return SerialAccelerometer(link.url, clock, baudrate=link.baudrate, framing=link.framing)
+
+
+def make_multiplexed_bridge(link: SensorLinkConfig, clock: Clock) -> Any:
+    """The :class:`drivers.sensor_bridge.MultiplexedBridge` of a link with ``channels``."""
+    from drivers.sensor_bridge import MultiplexedBridge
+
+    return MultiplexedBridge(link.url, clock, baudrate=link.baudrate, framing=link.framing)

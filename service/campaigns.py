@@ -127,20 +127,18 @@ def campaign_serials(stored: dict[str, Any], first: str) -> list[str]:
 def rig_mounted_serials(rig_cfg: dict[str, Any]) -> set[str] | None:
     """Serials a rig declares mounted; ``None`` when any serial mounts (the ``sim`` twin).
 
-    A real rig's sensor entry declares its sensor by ``serial`` or by the values of its
-    ``serials`` table (board uid → serial, docs/api.md "Rigs").
+    A real rig's sensor entry declares its sensor by ``serial``, a multiplexing bridge's
+    by its ``channels``, or by the values of its ``serials`` table (board uid → serial,
+    docs/api.md "Rigs"): :func:`service.engine.rigs.entry_serials`.
     """
+    from service.engine.rigs import entry_serials
+
     if (rig_cfg.get("chamber") or {}).get("driver", "sim") != "modbus":
         return None
     mounted: set[str] = set()
     for entry in rig_cfg.get("sensors") or []:
-        if not isinstance(entry, dict):
-            continue
-        if isinstance(entry.get("serial"), str):
-            mounted.add(entry["serial"].strip())
-        table = entry.get("serials")
-        if isinstance(table, dict):
-            mounted.update(str(v).strip() for v in table.values())
+        if isinstance(entry, dict):
+            mounted.update(entry_serials(entry))
     return mounted
 
 

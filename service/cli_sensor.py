@@ -33,6 +33,10 @@ def add_parser(sub: Any) -> None:
                         help="stream only: acceleration unit of the lines (default g)")
     common.add_argument("--columns", default="x,y,z,t", metavar="ORDER",
                         help="stream only: order of the four values (default x,y,z,t)")
+    common.add_argument("--channel", type=int, default=None, metavar="CH",
+                        help="the sensor on channel CH (0..99) of a multiplexing bridge; "
+                             "omitted: the unaddressed commands (a one-sensor bridge, or "
+                             "channel 0)")
     actions = sensor.add_subparsers(dest="sensor_command", metavar="ACTION", required=True)
     ident = actions.add_parser("id", parents=[common], help="print the bridge's identity")
     ident.add_argument("--json", action="store_true", help="one JSON object")
@@ -72,7 +76,8 @@ def _accel(args: argparse.Namespace) -> Any:
     from drivers.sensor_bridge import SerialAccelerometer
 
     return SerialAccelerometer(link.url, RealClock(), framing=link.framing,
-                               baudrate=link.baudrate, timeout_s=args.timeout)
+                               baudrate=link.baudrate, timeout_s=args.timeout,
+                               channel=args.channel)
 
 
 def _run(args: argparse.Namespace, body: Any) -> int:
@@ -85,6 +90,13 @@ def _run(args: argparse.Namespace, body: Any) -> int:
         key, _, why = str(exc).partition(": ")
         print(f"soakcal sensor: {_OPTION_FOR_KEY.get(key, key)}: {why}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.channel is not None:
+        from drivers.bridge_protocol import MAX_CHANNEL
+
+        if args.protocol == "stream" or not 0 <= args.channel <= MAX_CHANNEL:
+            print(f"soakcal sensor: --channel: expected 0..{MAX_CHANNEL} on a framed bridge "
+                  f"(a plain stream has no channels)", file=sys.stderr)
+            return EXIT_BAD_INPUT
     if args.sensor_command == "bind" and args.protocol == "stream":
         print("soakcal sensor bind: a plain stream has no fixture EEPROM to write",
               file=sys.stderr)
@@ -119,6 +131,8 @@ def _run_id(args: argparse.Namespace) -> int:
         else:
             d = ident.as_dict()
             ids = " ".join((d[k] or "--") for k in ("devid_ad", "devid_mst", "partid"))
+            if ident.channel is not None:
+                print(f"channel    {ident.channel}")
             print(f"model      {ident.model}\nfirmware   {ident.firmware}\n"
                   f"serial     {ident.serial or '(none: fixture EEPROM blank or absent)'}\n"
                   f"board uid  {ident.board_uid or '(not reported)'}\n"

@@ -79,7 +79,10 @@ def demo_spec(fast: bool = False) -> dict[str, Any]:
     }
 
 
-async def _demo(out: Path, spec: dict[str, Any]) -> int:
+async def _demo(out: Path, spec: dict[str, Any],
+                sim_options: dict[str, Any] | None = None) -> int:
+    """``sim_options``: passed to the twin (``open_rig``), e.g. ``{"multiplexed": True}`` to
+    mount the sensors on one multiplexing bridge (benchmarks/bench_mux_bridge.py)."""
     wall0 = time.monotonic()
     out.mkdir(parents=True, exist_ok=True)
     db_path = out / "demo.db"
@@ -106,7 +109,7 @@ async def _demo(out: Path, spec: dict[str, Any]) -> int:
     clock = VirtualClock(idle_wall_s=IDLE_WALL_S)
     serials = list(spec.get("sensors") or [])
     async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=1,
-                        serials=serials) as devices:
+                        serials=serials, sim_options=sim_options) as devices:
         runner = CampaignRunner(sf, cid, devices, clock, on_step=on_step)
         state = await runner.run()
     camp = store.load_campaign(sf, cid)

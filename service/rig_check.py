@@ -82,11 +82,20 @@ async def check_rig(rig: dict[str, Any], *, move: bool = False,
         clock = ScaledClock(600.0) if scale is None else (
             RealClock() if scale == 1.0 else ScaledClock(scale))
     rec = _Recorder()
+    channels = _first_entry_channels(rig)
     try:
-        async with open_rig(rig, clock) as devices:
+        async with open_rig(rig, clock, serials=list(channels.values())) as devices:
             await _check_chamber(rec, devices.chamber, move, rig)
             await _check_table(rec, devices.turntable, move, clock)
-            await _check_sensor(rec, devices.accelerometer, rig)
+            if not channels:
+                await _check_sensor(rec, devices.accelerometer, rig)
+            # A multiplexing bridge: every channel is a sensor, checked as "sensor @<ch>"
+            # against the serial its channel declares.
+            accels = devices.accelerometers or {s: devices.accelerometer
+                                                for s in channels.values()}
+            for ch, serial in channels.items():
+                await _check_sensor(rec, accels[serial], rig, device=f"sensor @{ch}",
+                                    expected_serial=serial, blank_ok=True)
     except RigConfigError as exc:
         rec.add("rig", "config", "fail", str(exc), "fix the rig config (PUT /api/v1/rigs/NAME)")
     return rec.checks
@@ -255,36 +264,55 @@ async def _wait_in_position(table: Any, goal: tuple[float, ...], clock: Clock) -
 # --- sensor ----------------------------------------------------------------------------
 
 
-async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any]) -> None:
+def _first_entry_channels(rig: dict[str, Any]) -> dict[int, str]:
+    """``sensors[0].channels`` as ``{channel: serial}`` in channel order (``{}``: one sensor)."""
     sensors = rig.get("sensors") or [{}]
-    expected_serial = sensors[0].get("serial") if isinstance(sensors[0], dict) else None
+    table = sensors[0].get("channels") if isinstance(sensors[0], dict) else None
+    if not isinstance(table, dict) or not table:
+        return {}
+    try:
+        return {int(k): str(v).strip() for k, v in sorted(table.items(), key=lambda kv: int(kv[0]))}
+    except ValueError:
+        return {}  # open_rig names the bad key (RigConfigError)
+
+
+async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
+                        device: str = "sensor", expected_serial: str | None = None,
+                        blank_ok: bool = False) -> None:
+    """Identity and one static reading of one sensor; ``blank_ok``: a blank fixture EEPROM
+    is not a mismatch (a channel bound by the rig's table, checked at campaign start)."""
+    sensors = rig.get("sensors") or [{}]
+    if expected_serial is None and isinstance(sensors[0], dict):
+        expected_serial = sensors[0].get("serial")
     fix = "check the sensor bridge's port (URL), baud rate and that its firmware answers ID"
 
     async def identity() -> bool:
         ident = await accel.identify()
         detail = f"model {ident.model}, serial {ident.serial}, firmware {ident.firmware}"
         if not str(ident.model).upper().startswith(EXPECTED_MODEL):
-            return rec.add("sensor", "identity", "fail",
+            return rec.add(device, "identity", "fail",
                            f"{detail}: model {ident.model}, expected {EXPECTED_MODEL}",
                            "another device answers on this port")
         reported = {k: getattr(ident, k, None) for k in ADXL355_IDS}
         wrong = [f"{k} 0x{v:02X} (expected 0x{ADXL355_IDS[k]:02X})"
                  for k, v in reported.items() if v is not None and v != ADXL355_IDS[k]]
         if wrong:
-            return rec.add("sensor", "identity", "fail", f"{detail}: " + ", ".join(wrong),
+            return rec.add(device, "identity", "fail", f"{detail}: " + ", ".join(wrong),
                            "the part behind the bridge is not an ADXL355, or its SPI "
                            "wiring is wrong")
         if all(v is not None for v in reported.values()):
             detail += ", part ids " + " ".join(f"0x{v:02X}" for v in reported.values())
         else:
             detail += " (the bridge reports no part ids)"
-        if expected_serial and ident.serial != expected_serial:
-            return rec.add("sensor", "identity", "fail",
+        if blank_ok and expected_serial and not ident.serial:
+            detail += f" (fixture EEPROM blank: {expected_serial} not checked here)"
+        elif expected_serial and ident.serial != expected_serial:
+            return rec.add(device, "identity", "fail",
                            f"serial {ident.serial} connected, rig config names "
                            f"{expected_serial}", "mount the named sensor or fix the rig config")
-        return rec.add("sensor", "identity", "pass", detail)
+        return rec.add(device, "identity", "pass", detail)
 
-    if not await rec.guard("sensor", "identity", fix, identity):
+    if not await rec.guard(device, "identity", fix, identity):
         return
 
     async def acquire() -> bool:
@@ -293,15 +321,15 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any]) -> None
         detail = (f"{acq.n} samples: |g| {g:.4f} g, die {acq.sensor_c:.1f} °C, "
                   f"sd {max(acq.sd_g) * 1e6:.0f} µg")
         if acq.saturated:
-            return rec.add("sensor", "acquire", "fail", detail + ", saturated",
+            return rec.add(device, "acquire", "fail", detail + ", saturated",
                            "the sensor is being shaken or its range is too small")
         if not G_BAND[0] <= g <= G_BAND[1]:
-            return rec.add("sensor", "acquire", "fail",
+            return rec.add(device, "acquire", "fail",
                            f"{detail}: outside {G_BAND[0]}…{G_BAND[1]} g",
                            "the sensor must rest static; check its mounting and range setting")
-        return rec.add("sensor", "acquire", "pass", detail)
+        return rec.add(device, "acquire", "pass", detail)
 
-    await rec.guard("sensor", "acquire", fix, acquire)
+    await rec.guard(device, "acquire", fix, acquire)
 
 
 # --- CLI -------------------------------------------------------------------------------

@@ -4,6 +4,11 @@ Reachable as ``socket://127.0.0.1:PORT`` through ``serial.serial_for_url``.
 Samples come from the sensor truth model at the die temperature of the
 simulated chamber (the die lags the air, see :class:`ChamberPhysics`) and the
 orientation of the simulated table (:mod:`drivers.geometry`).
+
+:class:`BridgeDevice` is a one-sensor bridge as flashed before channel addressing
+(``@1,ID`` is an unknown command to it). :class:`MultiplexedBridgeDevice` hosts several
+of them, one per channel, behind one port (docs/sensor-bridge.md, "Channels"): each
+keeps its own part, noise stream, identity and faults.
 """
 
 from __future__ import annotations
@@ -17,15 +22,27 @@ from typing import Any
 import numpy as np
 
 from drivers import adxl355
-from drivers.bridge_protocol import Framing, encode_frame, parse_frame
+from drivers.bridge_protocol import Framing, channel_field, encode_frame, parse_frame, split_channel
 from drivers.clock import Clock
 from drivers.faults import ProtocolError
 from drivers.geometry import reference_for_angles
 from simulators.faults import SimFaults
 
 FIRMWARE = "soakcal-sim-2.0"
+_NO_FAULTS = SimFaults()
 #: The simulated ADXL355's id registers (datasheet: DEVID_AD, DEVID_MST, PARTID, REVID).
 PART_IDS = (adxl355.DEVID_AD, adxl355.DEVID_MST, adxl355.PARTID, adxl355.REVID_SIM)
+
+
+@dataclass(frozen=True)
+class Route:
+    """Where one received command goes: the address its replies carry, the channel's device
+    (whose faults apply; ``None`` for a bridge-level reply) and the command's own fields."""
+
+    address: list[str]
+    target: BridgeDevice | None
+    command: list[str]
+    refusal: list[object] | None = None  # the bridge's own answer instead of the device's
 
 
 @dataclass
@@ -61,6 +78,13 @@ class BridgeDevice:
         counts = adxl355.g_to_counts(g, self.truth.range_g)
         temps_c = _temperature_samples(self.truth, die_c, n, self.rng)
         return counts, adxl355.temp_c_to_raw(temps_c)
+
+    def route(self, fields: list[str]) -> Route:
+        """Every command is this sensor's: "@1,ID" is an unknown command (a pre-channel bridge)."""
+        return Route([], self, fields)
+
+    async def answer(self, route: Route, framing: Framing) -> list[list[object]]:
+        return await self.replies(route.command, framing)
 
     async def handle(self, fields: list[str], framing: Framing = "v2") -> list[bytes]:
         """One command → reply frames, in the framing the command arrived in.
@@ -105,6 +129,50 @@ class BridgeDevice:
         return [["ERR", 1, f"unknown command {cmd}"]]
 
 
+@dataclass
+class MultiplexedBridgeDevice:
+    """One bridge board, one port, a sensor per channel (its chip select on one SPI bus).
+
+    Addressed commands (``@<ch>,…``) go to that channel's :class:`BridgeDevice` and every
+    reply line carries the address back; an unaddressed command is channel 0's, answered
+    unaddressed (what an old host sends and expects); ``CHANNELS`` lists the channels
+    with their fixture serials. A channel with no sensor answers ``ERR 7``.
+    """
+
+    channels: dict[int, BridgeDevice]
+
+    def route(self, fields: list[str]) -> Route:
+        try:
+            channel, command = split_channel(fields, "bridge")
+        except ProtocolError as exc:
+            return Route([], None, fields, ["ERR", 3, exc.message])
+        if channel is None:
+            if fields == ["CHANNELS"]:
+                return Route([], None, fields, self._channels_reply())
+            channel = 0
+            address: list[str] = []
+        else:
+            address = [channel_field(channel)]
+        device = self.channels.get(channel)
+        if device is None:
+            return Route(address, None, command,
+                         ["ERR", 7, f"no sensor on channel {channel}"])
+        return Route(address, device, command)
+
+    async def answer(self, route: Route, framing: Framing) -> list[list[object]]:
+        if route.target is None:  # the bridge answers for itself (CHANNELS, ERR 3 / 7)
+            return [route.refusal or ["ERR", 1, "unknown command"]]
+        return await route.target.replies(route.command, framing)
+
+    def _channels_reply(self) -> list[object]:
+        out: list[object] = ["CHANNELS", len(self.channels)]
+        for ch in sorted(self.channels):
+            dev = self.channels[ch]
+            out += [ch, dev.eeprom_serial if dev.eeprom_serial is not None else
+                    getattr(dev.truth, "serial", "")]
+        return out
+
+
 def _temperature_samples(truth: Any, die_c: float, n: int,
                          rng: np.random.Generator) -> np.ndarray:
     if hasattr(truth, "temperature_samples_c"):
@@ -134,7 +202,7 @@ def _raw_reply(counts: np.ndarray, traw: np.ndarray) -> list[list[object]]:
 
 @dataclass
 class BridgeServer:
-    device: BridgeDevice
+    device: BridgeDevice | MultiplexedBridgeDevice
     server: asyncio.base_events.Server
     host: str
     port: int
@@ -152,7 +220,8 @@ class BridgeServer:
             await self.server.wait_closed()
 
 
-async def start_bridge_server(device: BridgeDevice, *, host: str = "127.0.0.1",
+async def start_bridge_server(device: BridgeDevice | MultiplexedBridgeDevice, *,
+                              host: str = "127.0.0.1",
                               port: int = 0) -> BridgeServer:
     """Listen for bridge clients; each connection is served line by line."""
     holder: dict[str, BridgeServer] = {}
@@ -174,9 +243,8 @@ async def start_bridge_server(device: BridgeDevice, *, host: str = "127.0.0.1",
     return holder["srv"]
 
 
-async def _serve_client(device: BridgeDevice, reader: asyncio.StreamReader,
-                        writer: asyncio.StreamWriter) -> None:
-    faults = device.faults
+async def _serve_client(device: BridgeDevice | MultiplexedBridgeDevice,
+                        reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
     while True:
         try:
             line = await reader.readline()
@@ -194,15 +262,21 @@ async def _serve_client(device: BridgeDevice, reader: asyncio.StreamReader,
             writer.write(encode_frame("ERR", 2, "bad frame or checksum"))
             await writer.drain()
             continue
-        if faults.p_drop > 0 and device.rng.random() < faults.p_drop:
+        route = device.route(frame.fields)
+        # The addressed sensor's faults (a multiplexing bridge's other channels are fine).
+        target = route.target
+        faults = target.faults if target is not None else _NO_FAULTS
+        rng = target.rng if target is not None else None
+        if faults.p_drop > 0 and rng is not None and rng.random() < faults.p_drop:
             return  # caller closes the socket
-        if faults.p_no_reply > 0 and device.rng.random() < faults.p_no_reply:
+        if faults.p_no_reply > 0 and rng is not None and rng.random() < faults.p_no_reply:
             continue
-        if faults.p_exception > 0 and device.rng.random() < faults.p_exception:
-            writer.write(encode_frame("ERR", 6, "busy", framing=frame.framing))
+        if faults.p_exception > 0 and rng is not None and rng.random() < faults.p_exception:
+            rows: list[list[object]] = [["ERR", 6, "busy"]]
         else:
-            for reply in await device.handle(frame.fields, frame.framing):
-                writer.write(reply)
+            rows = await device.answer(route, frame.framing)
+        for row in rows:
+            writer.write(encode_frame(*route.address, *row, framing=frame.framing))
         try:
             await writer.drain()
         except ConnectionError:

@@ -13,6 +13,10 @@ same chamber and on the same table, each with its own truth drawn from
 and its own noise stream; :func:`connect_sensors` opens a driver per bridge.
 ``truths={serial: truth}`` replaces the part of the serials it names (a benchmark's
 truth with keyed noise or an extra effect); the others keep their serial's part.
+``multiplexed=True`` mounts those sensors behind one multiplexing bridge instead, channel
+``i`` for the ``i``-th serial, on one port (docs/sensor-bridge.md, "Channels"); each keeps
+its own part, noise stream, identity and faults, and :func:`connect_sensors` opens one
+channel handle per sensor over that port's one line.
 """
 
 from __future__ import annotations
@@ -30,9 +34,14 @@ from drivers.chamber import ModbusChamber
 from drivers.clock import Clock
 from drivers.modbus_link import ModbusLink, RetryPolicy
 from drivers.registermaps import load_chamber_map, load_turntable_map
-from drivers.sensor_bridge import SerialAccelerometer
+from drivers.sensor_bridge import MultiplexedBridge, SerialAccelerometer
 from drivers.turntable import ModbusTurntable
-from simulators.bridge_sim import BridgeDevice, BridgeServer, start_bridge_server
+from simulators.bridge_sim import (
+    BridgeDevice,
+    BridgeServer,
+    MultiplexedBridgeDevice,
+    start_bridge_server,
+)
 from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
 from simulators.faults import SimFaults
 from simulators.modbus_server import IN_MEMORY_HOST, ModbusSimServer, start_modbus_server
@@ -61,12 +70,17 @@ def sensor_seed(serial: str) -> int:
 
 @dataclass
 class SimSensor:
-    """One mounted simulated sensor: its serial, bridge physics, server and faults."""
+    """One mounted simulated sensor: its serial, bridge physics, server and faults.
+
+    ``channel``: its channel on the rig's multiplexing bridge (``server`` is then shared by
+    every sensor of the rig); ``None`` on a bridge of its own.
+    """
 
     serial: str
     bridge: BridgeDevice
     server: BridgeServer
     faults: SimFaults
+    channel: int | None = None
 
     @property
     def url(self) -> str:  # socket://127.0.0.1:PORT
@@ -101,9 +115,15 @@ class SimRig:
     def sensor_url(self) -> str:  # socket://127.0.0.1:PORT
         return self.bridge_server.url
 
+    @property
+    def multiplexed(self) -> bool:
+        """The sensors share one multiplexing bridge (``start_sim_rig(multiplexed=True)``)."""
+        return any(s.channel is not None for s in self.sensors)
+
     async def stop(self) -> None:
         for extra in self.sensors[1:]:
-            await extra.server.stop()
+            if extra.server is not self.bridge_server:
+                await extra.server.stop()
         await self.bridge_server.stop()
         await self.table_server.stop()
         await self.chamber_server.stop()
@@ -126,6 +146,7 @@ async def start_sim_rig(
     table_map: str = "soakcal-table",
     serials: Sequence[str] = (),
     truths: Mapping[str, Any] | None = None,
+    multiplexed: bool = False,
 ) -> AsyncIterator[SimRig]:
     """Start chamber, table and bridge servers; ``ports=0`` means ephemeral ports.
 
@@ -134,6 +155,8 @@ async def start_sim_rig(
     the chamber's and table's streams. One serial or none: the one-sensor rig as before.
     ``truths`` (several serials only): the truth of each serial it names, instead of
     the serial's own part; a serial it names that is not mounted is a ``ValueError``.
+    ``multiplexed`` (several serials): all of them on one multiplexing bridge, serial ``i``
+    on channel ``i`` (module docstring); ignored for one sensor or none.
 
     ``ports`` may be one base port (chamber, base+1 table, base+2 sensor) or a
     triple. ``truth`` defaults to ``SensorTruth.adxl355_typical(seed)``.
@@ -143,7 +166,8 @@ async def start_sim_rig(
     rig = await _start(clock, seed=seed, truth=truth, chamber_map=chamber_map,
                        faults=faults, ports=ports, host=host, n_axes=n_axes,
                        die_tau_s=die_tau_s, start_c=start_c, modbus_in_memory=modbus_in_memory,
-                       table_map=table_map, serials=serials, truths=truths)
+                       table_map=table_map, serials=serials, truths=truths,
+                       multiplexed=multiplexed)
     try:
         yield rig
     finally:
@@ -169,7 +193,12 @@ async def connect_rig(
 
 def connect_sensors(sim_rig: SimRig, clock: Clock, *,
                     sensor_mode: str = "average") -> dict[str, SerialAccelerometer]:
-    """A bridge driver per mounted sensor, by serial (rigs started with ``serials``)."""
+    """A bridge driver per mounted sensor, by serial (rigs started with ``serials``);
+    on a multiplexed rig, a channel handle each over the one bridge's shared line."""
+    if sim_rig.multiplexed:
+        bridge = MultiplexedBridge(sim_rig.sensor_url, clock)
+        return {s.serial: bridge.channel(s.channel or 0, mode=sensor_mode)  # type: ignore[arg-type]
+                for s in sim_rig.sensors}
     return {s.serial: SerialAccelerometer(s.url, clock, mode=sensor_mode)  # type: ignore[arg-type]
             for s in sim_rig.sensors}
 
@@ -179,7 +208,8 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                  n_axes: int, die_tau_s: float, start_c: float,
                  modbus_in_memory: bool = False, table_map: str = "soakcal-table",
                  serials: Sequence[str] = (),
-                 truths: Mapping[str, Any] | None = None) -> SimRig:
+                 truths: Mapping[str, Any] | None = None,
+                 multiplexed: bool = False) -> SimRig:
     # Any map file: the twin renders whatever layout the map describes (MapError if unusable).
     chamber_regmap = load_chamber_map(chamber_map)
     table_regmap = load_turntable_map(table_map)
@@ -224,6 +254,11 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                                    faults.chamber, rng_c, host=modbus_host, port=port_c)
     ts = await start_modbus_server(TurntableRegisterImage(table, table_regmap),
                                    faults.table, rng_t, host=modbus_host, port=port_t)
+    if several and multiplexed:
+        return await _start_multiplexed(clock, serials, seed, truths, bridge, die_now, table,
+                                        host, port_s,
+                                        SimRig(chamber_map, chamber, table, bridge, faults, cs,
+                                               ts, None, table_map))  # type: ignore[arg-type]
     bs = await start_bridge_server(bridge, host=host, port=port_s)
     rig = SimRig(chamber_map, chamber, table, bridge, faults, cs, ts, bs, table_map)
     if several:
@@ -235,6 +270,33 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
         except BaseException:
             await rig.stop()
             raise
+    return rig
+
+
+async def _start_multiplexed(clock: Clock, serials: Sequence[str], seed: int,
+                             truths: Mapping[str, Any], first: BridgeDevice, die_now: Any,
+                             table: TurntablePhysics, host: str, port: int,
+                             rig: SimRig) -> SimRig:
+    """Every serial on one multiplexing bridge: serial ``i`` on channel ``i``, one port.
+
+    Channel 0 is the first serial's device (the rig's ``bridge``, with the rig's sensor
+    faults); the others are built as the bridges of :func:`_start_sensor` would be (their
+    own part, noise stream and faults), without a server each. They share one board uid.
+    """
+    devices = [first]
+    for serial in serials[1:]:
+        devices.append(_sensor_device(clock, serial, seed, die_now, table,
+                                      truths.get(serial), first.board_uid))
+    mux = MultiplexedBridgeDevice(dict(enumerate(devices)))
+    try:
+        server = await start_bridge_server(mux, host=host, port=port)
+    except BaseException:
+        await rig.table_server.stop()
+        await rig.chamber_server.stop()
+        raise
+    rig.bridge_server = server
+    rig.sensors = [SimSensor(serial, dev, server, dev.faults, channel=ch)
+                   for ch, (serial, dev) in enumerate(zip(serials, devices, strict=True))]
     return rig
 
 
@@ -251,11 +313,17 @@ async def _start_sensor(clock: Clock, serial: str, index: int, seed: int, die_no
 
     ``truth``: an injected truth for this serial; default the serial's own part.
     """
-    sensor_faults = SimFaults()
+    bridge = _sensor_device(clock, serial, seed, die_now, table, truth,
+                            f"SIM-BRIDGE-{index:04d}")
+    server = await start_bridge_server(bridge, host=host, port=0)
+    return SimSensor(serial, bridge, server, bridge.faults)
+
+
+def _sensor_device(clock: Clock, serial: str, seed: int, die_now: Any,
+                   table: TurntablePhysics, truth: Any, board_uid: str) -> BridgeDevice:
+    """One extra sensor's simulated device: its part, its noise stream, its own faults."""
     # Noise differs per sensor and per campaign seed; the part is its serial's unless injected.
     rng = np.random.default_rng(np.random.SeedSequence([seed, sensor_seed(serial)]))
-    bridge = BridgeDevice(_serial_truth(serial) if truth is None else truth, clock, rng,
-                          die_now, table.true_angles_deg, faults=sensor_faults,
-                          board_uid=f"SIM-BRIDGE-{index:04d}")
-    server = await start_bridge_server(bridge, host=host, port=0)
-    return SimSensor(serial, bridge, server, sensor_faults)
+    return BridgeDevice(_serial_truth(serial) if truth is None else truth, clock, rng,
+                        die_now, table.true_angles_deg, faults=SimFaults(),
+                        board_uid=board_uid)

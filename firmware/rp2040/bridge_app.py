@@ -2,6 +2,9 @@
 #
 # Protocol v2 (docs/sensor-bridge.md): ID, CFG, AVG, RAW, SN; replies in the
 # framing the command came in (v2 CRC-16, or v1 XOR for hosts not yet updated).
+# MuxBridge serves several ADXL355 on one SPI bus (one chip select each) behind the
+# channel address "@<ch>" (docs/sensor-bridge.md, "Channels"); unaddressed commands are
+# channel 0's, answered exactly as a one-sensor bridge does.
 # Averages are computed in exact integer arithmetic: the RP2040 port of
 # MicroPython has single-precision floats only, which would round a mean of
 # 256000 counts to 1/64 count; integers are exact and identical under CPython.
@@ -10,12 +13,13 @@
 import adxl355_spi as adx
 import bridge_proto as proto
 
-FIRMWARE = "soakcal-fw-2.0"
+FIRMWARE = "soakcal-fw-2.1"  # 2.1: channel addressing (MuxBridge)
 MODEL = "ADXL355"
 MAX_SAMPLES = 100000
 LSB_PER_G = {2: 256000, 4: 128000, 8: 64000}
 COUNT_MAX = (1 << 19) - 1
 POLL_US = 100  # DATA_RDY polling period
+MAX_CHANNEL = 99  # "@0".."@99": two decimal digits on the wire
 
 
 class SensorStalled(Exception):
@@ -83,17 +87,22 @@ class Bridge:
         if parsed is None:
             return [proto.frame(["ERR", 2, "bad frame or checksum"])]
         fields, v1 = parsed
+        return [proto.frame(r, v1) for r in self.answer(fields, v1)]
+
+    def answer(self, fields, v1=False):
+        """Reply field lists for one command, a stalled sensor answered with ERR 5."""
         try:
-            replies = self.replies(fields, v1)
+            return self.replies(fields, v1)
         except SensorStalled:
-            replies = [["ERR", 5, "sensor not ready (no DATA_RDY)"]]
-        return [proto.frame(r, v1) for r in replies]
+            return [["ERR", 5, "sensor not ready (no DATA_RDY)"]]
+
+    def eeprom_serial(self):
+        return self.eeprom.read_serial() if self.eeprom is not None else ""
 
     def replies(self, fields, v1=False):
         cmd = fields[0]
         if cmd == "ID" and len(fields) == 1:
-            serial = self.eeprom.read_serial() if self.eeprom is not None else ""
-            reply = ["ID", MODEL, serial, FIRMWARE]
+            reply = ["ID", MODEL, self.eeprom_serial(), FIRMWARE]
             if not v1:
                 ids = self.sensor.ids()
                 reply.append(self.board_uid)
@@ -175,3 +184,50 @@ class Bridge:
         lsb = LSB_PER_G[self.range_g]
         return (",".join([fixed(c, lsb, 6) for c in xyz]) + "," + temp_c_text(t)
                 + "\r\n").encode()
+
+
+class MuxBridge:
+    """Several sensors behind one port: ``bridges`` maps a channel to its :class:`Bridge`.
+
+    ``@<ch>,<command>`` goes to that channel's Bridge (its own sensor, chip select,
+    range, ODR and fixture EEPROM) and every reply line carries ``@<ch>`` back, so the
+    host can never take one channel's data for another's. An unaddressed command is
+    channel 0's and is answered unaddressed, byte for byte as a one-sensor bridge;
+    ``CHANNELS`` lists the channels and their fixture serials. One command at a time:
+    the channels share the SPI bus and the serial line.
+    """
+
+    def __init__(self, bridges):
+        self.bridges = bridges
+
+    def handle_line(self, line):
+        parsed = proto.unframe(line)
+        if parsed is None:
+            return [proto.frame(["ERR", 2, "bad frame or checksum"])]
+        fields, v1 = parsed
+        head = fields[0]
+        address = []
+        channel = 0
+        if head.startswith("@"):
+            digits = head[1:]
+            if not digits.isdigit() or str(int(digits)) != digits or \
+                    int(digits) > MAX_CHANNEL or len(fields) < 2:
+                return [proto.frame(["ERR", 3, "bad channel address " + head], v1)]
+            channel = int(digits)
+            address = [head]
+            fields = fields[1:]
+        elif fields == ["CHANNELS"]:
+            return [proto.frame(self.channels_reply(), v1)]
+        bridge = self.bridges.get(channel)
+        if bridge is None:
+            replies = [["ERR", 7, "no sensor on channel " + str(channel)]]
+        else:
+            replies = bridge.answer(fields, v1)
+        return [proto.frame(address + r, v1) for r in replies]
+
+    def channels_reply(self):
+        out = ["CHANNELS", len(self.bridges)]
+        for ch in sorted(self.bridges):
+            out.append(ch)
+            out.append(self.bridges[ch].eeprom_serial())
+        return out

@@ -6,7 +6,11 @@
 # fixture EEPROM (optional) on I2C0 SDA GP4, SCL GP5. The host talks over the
 # Pico's native USB CDC serial port (/dev/ttyACM0); the baud rate is ignored.
 # Pull GP15 to ground at boot for the plain streaming mode (x_g,y_g,z_g,temp_c
-# lines) instead of framed commands.
+# lines, channel 0 only) instead of framed commands.
+#
+# Several sensors on one bridge (docs/sensor-bridge.md, "Channels"): one chip select
+# per sensor, channel i on CS_PINS[i], all on SPI0; channel i's fixture EEPROM at I2C
+# address 0x50 + i (a 24xx02 with its A2..A0 pins strapped to the channel).
 
 import select
 import sys
@@ -41,27 +45,38 @@ def board_uid():
     return "".join(f"{b:02X}" for b in machine.unique_id())
 
 
-def open_eeprom():
-    i2c = I2C(0, sda=Pin(4), scl=Pin(5), freq=100000)
-    if 0x50 not in i2c.scan():
+CS_PINS = (17,)  # one chip select per channel: e.g. (17, 20, 21, 22) for four sensors
+
+
+def open_eeprom(i2c, present, channel):
+    addr = 0x50 + channel
+    if addr not in present:
         return None
-    return fixture_eeprom.FixtureEeprom(i2c, 0x50, time.sleep_ms)
+    return fixture_eeprom.FixtureEeprom(i2c, addr, time.sleep_ms)
 
 
 def main():
-    cs = Pin(17, Pin.OUT, value=1)
     # ADXL355: SPI mode 0 (CPOL = 0, CPHA = 0), up to 10 MHz; 5 MHz leaves margin on a cable.
     spi = SPI(0, baudrate=5000000, polarity=0, phase=0, sck=Pin(18), mosi=Pin(19),
               miso=Pin(16))
-    sensor = adxl355_spi.ADXL355(PinSPI(spi, cs))
-    sensor.write(adxl355_spi.RESET, 0x52)
-    time.sleep_ms(10)
-    bridge = bridge_app.Bridge(sensor, board_uid(), open_eeprom(), time.sleep_us)
+    # every chip select high before any transfer: one sensor on the bus at a time
+    selects = [Pin(p, Pin.OUT, value=1) for p in CS_PINS]
+    i2c = I2C(0, sda=Pin(4), scl=Pin(5), freq=100000)
+    present = i2c.scan()
+    uid = board_uid()
+    bridges = {}
+    for channel in range(len(selects)):
+        sensor = adxl355_spi.ADXL355(PinSPI(spi, selects[channel]))
+        sensor.write(adxl355_spi.RESET, 0x52)
+        time.sleep_ms(10)
+        bridges[channel] = bridge_app.Bridge(sensor, uid, open_eeprom(i2c, present, channel),
+                                             time.sleep_us)
+    bridge = bridge_app.MuxBridge(bridges)
     out = sys.stdout.buffer if hasattr(sys.stdout, "buffer") else sys.stdout
     stream_mode = Pin(15, Pin.IN, Pin.PULL_UP).value() == 0
     if stream_mode:
         while True:
-            out.write(bridge.stream_line())
+            out.write(bridges[0].stream_line())
     micropython.kbd_intr(-1)  # 0x03 on the line is data, not Ctrl-C
     inp = sys.stdin.buffer if hasattr(sys.stdin, "buffer") else sys.stdin
     poll = select.poll()

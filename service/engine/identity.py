@@ -14,7 +14,8 @@ sensor config, :mod:`drivers.sensor_config`):
   (written once with the bridge's ``SN`` command when the sensor is glued to
   the fixture); the bridge reports it in ``ID``.
 * ``table``: the rig config maps each bridge board's unique id to the serial of
-  the sensor wired to it (``serials``), for fixtures without an EEPROM.
+  the sensor wired to it (``serials``), for fixtures without an EEPROM. A sensor on
+  a multiplexing bridge's channel is looked up as ``"<board uid>@<channel>"``.
 * ``auto`` (default): the EEPROM serial when the bridge reports one, else the table.
 * ``any``: the operator's word. The ``sim`` rig uses it (its twin mounts the
   sensor the campaign names) and so must plain streams, which report no ids.
@@ -96,6 +97,8 @@ def check_identity(identity: SensorIdentity, expected_serial: str, binding: Seri
     if binding.mode == "any":
         return VerifiedSensor(expected, "any", identity)
     uid = identity.board_uid.strip()
+    # One board, several sensors: each channel is its own row of the table.
+    key = uid if identity.channel is None or not uid else f"{uid}@{identity.channel}"
     eeprom_serial = identity.serial.strip()
     mode = binding.mode
     if mode == "auto":
@@ -103,20 +106,20 @@ def check_identity(identity: SensorIdentity, expected_serial: str, binding: Seri
     if mode == "eeprom":
         if not eeprom_serial:
             raise SensorMismatch(device, f"campaign names {expected} but bridge "
-                                         f"{uid or '(no uid)'} reports no serial (fixture "
+                                         f"{key or '(no uid)'} reports no serial (fixture "
                                          f"EEPROM blank or absent): program it with the "
                                          f"bridge's SN command or bind it in 'serials'")
-        connected, where = eeprom_serial, f"fixture EEPROM on bridge {uid or '(no uid)'}"
+        connected, where = eeprom_serial, f"fixture EEPROM on bridge {key or '(no uid)'}"
     else:
         if not uid:
             raise SensorMismatch(device, f"campaign names {expected} but the bridge reports "
                                          f"no board uid to look up in 'serials' "
                                          f"(a v1 bridge? bind by its serial: 'eeprom')")
-        if uid not in binding.table:
-            raise SensorMismatch(device, f"campaign names {expected} but bridge {uid} is not "
+        if key not in binding.table:
+            raise SensorMismatch(device, f"campaign names {expected} but bridge {key} is not "
                                          f"in the rig's 'serials' table "
                                          f"({', '.join(sorted(binding.table)) or 'empty'})")
-        connected, where = binding.table[uid].strip(), f"rig table entry for bridge {uid}"
+        connected, where = binding.table[key].strip(), f"rig table entry for bridge {key}"
     # Case and surrounding blanks are not part of a serial: a scanned "sn-0001" is SN-0001.
     if connected.casefold() != expected.casefold():
         raise SensorMismatch(device, f"campaign names sensor {expected} but {connected} is "

@@ -22,10 +22,17 @@
     "sensors": [{"url": "/dev/ttyUSB0", "serial": "SN-1", "serial_binding": "eeprom"},
                 {"url": "/dev/ttyUSB1", "serial": "SN-2", "serial_binding": "eeprom"}]
 
+  Or one bridge multiplexing several sensors on one port, one sensor per channel
+  (docs/sensor-bridge.md, "Channels"); the entry declares them in ``channels``::
+
+    "sensors": [{"url": "/dev/ttyACM0", "serial_binding": "eeprom",
+                 "channels": {"0": "SN-1", "1": "SN-2", "2": "SN-3"}}]
+
   A campaign naming several sensors opens the entry of each (and only those),
-  each checked against its own entry's binding. One bridge multiplexing N
-  sensors is not built: the bridge protocol (docs/sensor-bridge.md) has no
-  channel address, so two serials declared by one entry are refused.
+  each checked against its own entry's binding (a channel's identity is that
+  channel's ``ID``). The sensors of one multiplexing entry share its port: one
+  :class:`drivers.sensor_bridge.MultiplexedBridge`, a channel handle per sensor.
+  Two serials behind one entry without ``channels`` are refused.
 
   ``url`` is ``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200``
   (drivers/modbus_link.py); a sensor ``url`` is anything pyserial's
@@ -196,58 +203,84 @@ def rig_config_errors(
     from drivers.sensor_config import sensor_config_errors
 
     declared: dict[str, int] = {}
+    ports: dict[str, int] = {}
     for i, entry in enumerate(sensors):
         path = f"sensors[{i}]"
         errors.extend(sensor_config_errors(entry, path))
         if not isinstance(entry, dict):
             continue
+        url = entry.get("url")
+        if isinstance(url, str) and url:
+            # Two drivers on one port would interleave their commands and read each other's
+            # replies: several sensors on one port are one multiplexing entry.
+            if url in ports:
+                errors.append((f"{path}.url", f"port {url} is already sensors[{ports[url]}]'s; "
+                                              "several sensors on one bridge are that entry's "
+                                              "'channels'"))
+            ports.setdefault(url, i)
         serial = entry.get("serial")
         if serial is not None and (not isinstance(serial, str) or not serial.strip()):
             errors.append((f"{path}.serial", "expected the serial of the sensor on this port"))
             continue
-        for name in _entry_serials(entry):
-            if name in declared:
-                errors.append((f"{path}.serial", f"sensor {name!r} is already declared by "
-                                                 f"sensors[{declared[name]}]"))
-            declared[name] = i
+        channel_of = _channel_serials(entry)
+        for name in entry_serials(entry):
+            if name in declared and declared[name] != i:
+                key = f"channels.{channel_of[name]}" if name in channel_of else "serial"
+                errors.append((f"{path}.{key}", f"sensor {name!r} is already declared by "
+                                                f"sensors[{declared[name]}]"))
+            declared.setdefault(name, i)
     return errors
 
 
-def _entry_serials(entry: dict[str, Any]) -> list[str]:
-    """The serials one sensor entry declares: ``serial`` and its ``serials`` table's values."""
+def entry_serials(entry: dict[str, Any]) -> list[str]:
+    """The serials one sensor entry declares mounted: ``serial``, its ``channels``' serials
+    and its ``serials`` table's values (the one definition: the door's 422 uses it too)."""
     out = [entry["serial"].strip()] if isinstance(entry.get("serial"), str) else []
-    table = entry.get("serials")
-    if isinstance(table, dict):
-        out += [str(v).strip() for v in table.values() if str(v).strip() not in out]
+    for table in (entry.get("channels"), entry.get("serials")):
+        if isinstance(table, dict):
+            out += [str(v).strip() for v in table.values() if str(v).strip() not in out]
     return out
 
 
-def sensor_entries(rig: dict[str, Any], serials: Sequence[str]) -> dict[str, int]:
-    """Index of the sensor entry mounting each serial (one bridge per sensor).
+def _channel_serials(entry: dict[str, Any]) -> dict[str, int]:
+    """serial → channel of a multiplexing entry (``{}`` for a one-sensor entry)."""
+    channels = entry.get("channels")
+    if not isinstance(channels, dict):
+        return {}
+    return {str(v).strip(): int(k) for k, v in channels.items()
+            if isinstance(k, str) and k.isdigit()}
+
+
+def sensor_entries(rig: dict[str, Any], serials: Sequence[str]
+                   ) -> dict[str, tuple[int, int | None]]:
+    """``(entry index, channel)`` of the sensor entry mounting each serial; the channel is
+    ``None`` on a one-sensor bridge.
 
     :class:`RigConfigError` naming a serial no entry declares, or two serials behind one
-    entry (a multiplexing bridge is not built: the protocol has no channel address).
+    entry that has no ``channels`` (one bridge per sensor, unless it multiplexes).
     """
     entries = rig.get("sensors") or []
     where: dict[str, int] = {}
     for i, entry in enumerate(entries):
         if isinstance(entry, dict):
-            for name in _entry_serials(entry):
+            for name in entry_serials(entry):
                 where.setdefault(name, i)
-    out: dict[str, int] = {}
+    out: dict[str, tuple[int, int | None]] = {}
     for serial in serials:
         key = str(serial).strip()
         if key not in where:
             raise RigConfigError(
                 f"rig {rig.get('name')!r}: sensor {key!r} is not mounted (declared: "
                 f"{', '.join(sorted(where)) or 'none'})")
-        out[str(serial)] = where[key]
-    shared = [s for s in out if list(out.values()).count(out[s]) > 1]
+        i = where[key]
+        out[str(serial)] = (i, _channel_serials(entries[i]).get(key))
+    shared = [s for s, (i, ch) in out.items()
+              if ch is None and sum(j == i for j, _ in out.values()) > 1]
     if shared:
         raise RigConfigError(
             f"rig {rig.get('name')!r}: sensors {', '.join(shared)} are behind one bridge "
-            f"(sensors[{out[shared[0]]}]); one bridge per sensor is needed (a multiplexing "
-            "bridge is not built)")
+            f"(sensors[{out[shared[0]][0]}]) that has no 'channels'; one bridge per sensor "
+            "is needed, or declare the multiplexing bridge's sensors in its 'channels'")
     return out
 
 
@@ -268,7 +301,11 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
     from drivers.geometry import angles_for_reference
     from drivers.modbus_link import ModbusLink
     from drivers.registermaps import load_chamber_map, load_turntable_map
-    from drivers.sensor_config import make_accelerometer, parse_sensor_config
+    from drivers.sensor_config import (
+        make_accelerometer,
+        make_multiplexed_bridge,
+        parse_sensor_config,
+    )
     from drivers.turntable import ModbusTurntable
 
     chamber_cfg = rig.get("chamber") or {}
@@ -293,18 +330,30 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
         )
     accels: dict[str, Any] = {}
     bindings: dict[str, SerialBinding] = {}
-    if len(serials) > 1:
-        for serial, i in sensor_entries(rig, serials).items():
+    binding = binding_for_rig(rig)
+    # One campaign serial on a multiplexing bridge: that channel, not the unaddressed form.
+    one_on_channel = len(serials) == 1 and any(
+        str(serials[0]).strip() in _channel_serials(e) for e in sensors if isinstance(e, dict))
+    if len(serials) > 1 or one_on_channel:
+        muxes: dict[int, Any] = {}  # entry index → its MultiplexedBridge: one line per port
+        for serial, (i, channel) in sensor_entries(rig, serials).items():
             link = parse_sensor_config(sensors[i], f"sensors[{i}]")
-            accels[serial] = make_accelerometer(link, clock)
+            if channel is None:
+                accels[serial] = make_accelerometer(link, clock)
+            else:
+                if i not in muxes:
+                    muxes[i] = make_multiplexed_bridge(link, clock)
+                accels[serial] = muxes[i].channel(channel, device=f"sensor {serial}")
             bindings[serial] = SerialBinding(link.serial_binding, dict(link.serials))
         accel = accels[str(serials[0])]
+        if one_on_channel:  # the one-sensor path of the runner: its binding, no dict
+            binding, accels, bindings = bindings[str(serials[0])], {}, {}
     else:
         accel = make_accelerometer(parse_sensor_config(sensors[0]), clock)
     try:
         yield RigDevices(chamber, table, accel,
                          lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
-                         binding_for_rig(rig), accelerometers=accels, bindings=bindings)
+                         binding, accelerometers=accels, bindings=bindings)
     finally:
         await chamber.link.close()
         if table is not None:

@@ -223,3 +223,23 @@ async def test_sensor_part_ids_are_compared_when_the_bridge_reports_them() -> No
                         {"sensors": [{}]})
     assert "reports no part ids" in _by(rec.checks, "sensor", "identity").detail
     assert passed(rec.checks)
+
+
+async def test_every_channel_of_a_multiplexing_bridge_is_checked() -> None:
+    clock = VirtualClock()
+    serials = ["SN-C0", "SN-C1", "SN-C2"]
+    async with start_sim_rig(clock, seed=4, serials=serials, multiplexed=True) as sim:
+        sim.sensors[1].bridge.eeprom_serial = "SN-WRONG"  # another part on channel 1
+        sim.sensors[2].bridge.part_ids = (0, 0, 0, 0)  # nothing answering on channel 2's CS
+        cfg = _config(sim, "eurotherm-3216")
+        cfg["sensors"][0]["channels"] = {str(i): s for i, s in enumerate(serials)}
+        checks = await check_rig(cfg, clock=clock)
+    assert not any(c.device == "sensor" for c in checks)  # no unaddressed check
+    assert _by(checks, "sensor @0", "identity").status == "pass"
+    assert _by(checks, "sensor @0", "acquire").status == "pass"
+    bad = _by(checks, "sensor @1", "identity")
+    assert bad.status == "fail" and "SN-WRONG" in bad.detail and "SN-C1" in bad.detail
+    # a wrong part is not read further; the channels after it are still checked
+    assert not any(c.device == "sensor @1" and c.check == "acquire" for c in checks)
+    dead = _by(checks, "sensor @2", "identity")
+    assert dead.status == "fail" and "0x00" in dead.detail

@@ -69,3 +69,27 @@ def test_read_a_plain_stream(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert "(+0.000000, -1.000000, +0.000000) g over 10 samples" in out
     assert "sensor_c   30.00 °C" in out
+
+
+def test_a_channel_of_a_multiplexing_bridge(capsys: pytest.CaptureFixture[str]) -> None:
+    chips = [ADXL355Registers(lambda: (0.0, 0.5, -0.5), lambda: 40.0),
+             ADXL355Registers(lambda: (0.6, 0.0, 0.8), lambda: 10.0)]
+    eeproms = [fixture_eeprom.FixtureEeprom(MemI2C()) for _ in chips]
+    mux = bridge_app.MuxBridge({i: bridge_app.Bridge(adxl355_spi.ADXL355(c), UID, e)
+                                for i, (c, e) in enumerate(zip(chips, eeproms, strict=True))})
+    dev = PtyDevice(on_line=mux.handle_line)
+    try:
+        assert main(["sensor", "bind", dev.path, "SN-CH1", "--channel", "1"]) == 0
+        assert (eeproms[0].read_serial(), eeproms[1].read_serial()) == ("", "SN-CH1")
+        capsys.readouterr()
+        assert main(["sensor", "id", dev.path, "--channel", "1", "--json"]) == 0
+        d = json.loads(capsys.readouterr().out)
+        assert (d["serial"], d["channel"], d["ok"]) == ("SN-CH1", 1, True)
+        assert main(["sensor", "read", dev.path, "--channel", "1", "-n", "10"]) == 0
+        assert "(+0.600000, +0.000000, +0.800000) g" in capsys.readouterr().out
+        assert main(["sensor", "id", dev.path, "--channel", "2"]) == 1
+        assert "ERR 7 no sensor on channel 2" in capsys.readouterr().err
+        assert main(["sensor", "id", dev.path, "--channel", "100"]) == 2
+        assert "--channel: expected 0..99" in capsys.readouterr().err
+    finally:
+        dev.close()

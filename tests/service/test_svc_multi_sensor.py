@@ -93,3 +93,37 @@ def test_recording_csv_is_per_sensor(client: TestClient, auth, sf) -> None:  # t
     assert f"campaign-{cid}-SN-2.csv" in two.headers["content-disposition"]
     got = client.get(f"/api/v1/campaigns/{cid}", headers=auth["viewer"]).json()
     assert got["sensors_dropped"] == {} and got["sensors"] == ["SN-1", "SN-2"]
+
+
+MUX_LAB = {**LAB, "name": "lab-mux",
+           "sensors": [{"url": "/dev/ttyACM0", "serial_binding": "eeprom",
+                        "channels": {"0": "SN-1", "1": "SN-2", "2": "SN-3"}}]}
+
+
+def test_a_multiplexing_bridge_mounts_its_channels_serials(
+        client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    assert client.post("/api/v1/rigs", json=MUX_LAB, headers=auth["admin"]).status_code == 201
+    ok = _post(client, auth["operator"], {"rig": "lab-mux", "sensors": ["SN-3", "SN-1"]})
+    assert ok.status_code == 201, ok.text
+    bad = _post(client, auth["operator"], {"rig": "lab-mux", "sensors": ["SN-1", "SN-4"]})
+    assert bad.status_code == 422
+    (err,) = bad.json()["detail"]
+    assert err["loc"] == ["body", "sensors", 1]
+    assert "'SN-4' is not mounted on rig 'lab-mux'" in err["msg"]
+    assert "SN-1, SN-2, SN-3" in err["msg"]
+
+
+def test_a_bad_channels_entry_is_422_naming_the_key(
+        client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    bad = {**MUX_LAB, "name": "lab-bad", "sensors": [
+        {"url": "/dev/ttyACM0", "channels": {"0": "SN-1", "one": "SN-2", "2": "SN-1"}},
+        {"url": "/dev/ttyACM0", "serial": "SN-9"}]}
+    r = client.post("/api/v1/rigs", json=bad, headers=auth["admin"])
+    assert r.status_code == 422
+    errors = {tuple(d["loc"]): d["msg"] for d in r.json()["detail"]}
+    assert set(errors) == {("body", "sensors", 0, "channels", "one"),
+                           ("body", "sensors", 0, "channels", 2),
+                           ("body", "sensors", 1, "url")}
+    assert "channel number 0..99" in errors[("body", "sensors", 0, "channels", "one")]
+    assert "already on channel 0" in errors[("body", "sensors", 0, "channels", 2)]
+    assert "'channels'" in errors[("body", "sensors", 1, "url")]
