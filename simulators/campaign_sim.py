@@ -4,7 +4,8 @@ It interprets the campaign's one plan (service/engine/plan.py) -- ramp the
 chamber at its rate limit, soak, visit each scheduled position (move, settle,
 capture N samples) --
 integrating the air temperature and the die temperature (first-order lag
-``tau_s`` behind the air), and writes recording format v1 rows. The wire-level
+``tau_s`` behind the air; the plant's steps are ``calibration.thermal_plant``'s), and
+writes recording format v1 rows. The wire-level
 twin (``simulators/rig.py``) produces the same physics through Modbus and the
 serial bridge; this one is for the thousands of campaigns a benchmark needs.
 
@@ -21,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration.recording import Recording
+from calibration.thermal_plant import lag_step, rate_limited
 from service.engine import plan
 from simulators.truth import Context, SensorTruth
 
@@ -102,10 +104,9 @@ def simulate_campaign(
 
     def advance(dt: float, target: float) -> None:
         nonlocal t, air, die, wsp
-        ramp = ph.ramp_c_per_min / 60.0 * dt
-        wsp = target if abs(target - wsp) <= ramp else wsp + np.sign(target - wsp) * ramp
-        air = wsp + (air - wsp) * np.exp(-dt / ph.air_tau_s)
-        die = air + (die - air) * np.exp(-dt / ph.die_tau_s) if ph.die_tau_s > 0 else air
+        wsp = rate_limited(wsp, target, ph.ramp_c_per_min / 60.0 * dt)
+        air = lag_step(air, wsp, dt, ph.air_tau_s)
+        die = lag_step(die, air, dt, ph.die_tau_s)  # driven by the air at the step's end
         t += dt
 
     # The campaign's one plan (service/engine/plan.py), interpreted with this module's physics:

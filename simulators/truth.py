@@ -190,10 +190,3 @@ def static_context(
         n_samples=np.broadcast_to(np.asarray(n), (N,)).astype(float),
         vib_sd_g=zeros,
     )
-
-
-def lag_step(die_c: float, air_c: float, dt_s: float, tau_s: float) -> float:
-    """First-order lag of the die behind the air over ``dt_s`` (exact for constant air)."""
-    if tau_s <= 0:
-        return air_c
-    return air_c + (die_c - air_c) * float(np.exp(-dt_s / tau_s))
