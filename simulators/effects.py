@@ -31,7 +31,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from calibration import sfem_batch
+from calibration import sfem
 from calibration.discrepancy.effects.bias_drift import drift_offset_g
 from calibration.discrepancy.effects.cross_coupling import cross_coupling_g
 from calibration.discrepancy.effects.filter_delay import delayed_input_shift_g
@@ -57,7 +57,7 @@ def ideal_raw_batch(truth: SensorTruth, ref_g: np.ndarray, die_c: np.ndarray) ->
     f = np.atleast_2d(np.asarray(ref_g, float))
     T = np.broadcast_to(np.asarray(die_c, float), (f.shape[0],))
     P = truth.params_vector_at(T)
-    A = sfem_batch.matrices(P)
+    A = sfem.matrix_from_vector(P)
     return np.linalg.solve(A, f[:, :, None])[:, :, 0] + P[:, 0:3]
 
 

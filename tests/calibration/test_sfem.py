@@ -67,3 +67,50 @@ def test_decomposition_refuses_a_reflection() -> None:
 def test_vector_length_is_checked() -> None:
     with pytest.raises(ValueError, match="12 entries"):
         sfem.SfemParams.from_vector(np.zeros(9))
+
+
+def _textbook_rotation(phi: float, theta: float, psi: float) -> np.ndarray:
+    """Rz(ψ)·Ry(θ)·Rx(φ) multiplied out by hand (ZYX Euler angles), independent of sfem."""
+    cf, sf, ct, st, cp, sp = (np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta),
+                              np.cos(psi), np.sin(psi))
+    return np.array([
+        [cp * ct, cp * st * sf - sp * cf, cp * st * cf + sp * sf],
+        [sp * ct, sp * st * sf + cp * cf, sp * st * cf - cp * sf],
+        [-st, ct * sf, ct * cf],
+    ])
+
+
+def test_rotation_of_one_or_many_angle_triples_is_the_zyx_product() -> None:
+    ang = np.random.default_rng(4).uniform(-1.2, 1.2, (7, 3))  # large: every term shows
+    many = sfem.rotation(ang)
+    assert many.shape == (7, 3, 3)
+    for i, a in enumerate(ang):
+        want = _textbook_rotation(*a)
+        np.testing.assert_allclose(sfem.rotation(a), want, atol=1e-15)
+        np.testing.assert_allclose(many[i], want, atol=1e-15)
+        np.testing.assert_allclose(sfem.angles_from_rotation(many[i]), a, atol=1e-12)
+
+
+def test_per_reading_parameters_give_each_reading_its_own_model_and_jacobian() -> None:
+    """Rows of p (the thermal model's p(T_i)): f_i and ∂f_i/∂p_i against an independent
+    per-reading evaluation and central differences, at large angles."""
+    rng = np.random.default_rng(5)
+    P = np.stack([_random_params(20 + i) for i in range(5)])
+    P[:, sfem.MISALIGN] = rng.uniform(-0.8, 0.8, (5, 3))
+    P[:, sfem.ALPHA] = rng.uniform(-0.2, 0.2, (5, 3))
+    raw = rng.normal(size=(5, 3))
+    f, jac = sfem.forward_jacobian(P, raw)
+    for i in range(5):
+        C = np.eye(3)
+        C[1, 0], C[2, 0], C[2, 1] = P[i, sfem.ALPHA]
+        A = _textbook_rotation(*P[i, sfem.MISALIGN]) @ C @ np.diag(P[i, sfem.SCALE])
+        np.testing.assert_allclose(sfem.matrix_from_vector(P)[i], A, atol=1e-15)
+        np.testing.assert_allclose(f[i], A @ (raw[i] - P[i, sfem.BIAS]), atol=1e-14)
+    np.testing.assert_allclose(sfem.forward(P, raw), f, atol=0)
+    h = 1e-6
+    for k in range(sfem.N_PARAMS):
+        up, down = P.copy(), P.copy()
+        up[:, k] += h
+        down[:, k] -= h
+        fd = (sfem.forward(up, raw) - sfem.forward(down, raw)) / (2 * h)
+        np.testing.assert_allclose(jac[:, :, k], fd, atol=1e-9, err_msg=sfem.PARAM_NAMES[k])
