@@ -168,6 +168,28 @@ def forward_jacobian(p: np.ndarray, raw_g: np.ndarray) -> tuple[np.ndarray, np.n
     return f, jac
 
 
+def norm_jacobian(f: np.ndarray, jac: np.ndarray) -> np.ndarray:
+    """∂|f_i|/∂q of norm mode (Eq. 3): (f_i/|f_i|)·∂f_i/∂q for f (N,3), ∂f/∂q (N,3,K): (N,K)."""
+    unit = f / np.linalg.norm(f, axis=1)[:, None]
+    return np.einsum("ni,nik->nk", unit, jac)
+
+
+def coefficient_jacobian(
+    jac: np.ndarray, powers: np.ndarray, cols: np.ndarray | None = None
+) -> np.ndarray:
+    """Chain rule through Eq. 8, ``p_k(T_i) = Σ_j c_kj x_i^j``: ∂/∂c_kj = ∂/∂p_k · x_i^j.
+
+    ``jac`` (N,…,K): a derivative in each reading's parameters (from :func:`forward_jacobian`,
+    :func:`norm_jacobian`, or a weighted form); ``powers`` (N,d+1): ``x_i^j``. With
+    ``cols`` (m,2) of (k, j) pairs the result is (N,…,m); without, every k × every j,
+    k-major: (N,…,K·(d+1)).
+    """
+    x = powers.reshape(powers.shape[:1] + (1,) * (jac.ndim - 2) + powers.shape[1:])
+    if cols is not None:
+        return jac[..., cols[:, 0]] * x[..., cols[:, 1]]
+    return (jac[..., :, None] * x[..., None, :]).reshape(jac.shape[:-1] + (-1,))
+
+
 def _apply(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     """A x for every row of x (N,3): one matrix (3,3) for all rows, or one per row (N,3,3)."""
     if A.ndim == 2:

@@ -64,7 +64,7 @@ def fit_joint(
         def jacobian(q: np.ndarray) -> np.ndarray:
             _, jac = sfem.forward_jacobian(params(q), raw)
             jac = jac[:, :, free_idx] / sig[:, :, None]  # (N,3,F)
-            return (jac[:, :, :, None] * V[:, None, None, :]).reshape(3 * n_rows, -1)
+            return sfem.coefficient_jacobian(jac, V).reshape(3 * n_rows, -1)
 
     else:
 
@@ -78,10 +78,8 @@ def fit_joint(
 
         def jacobian(q: np.ndarray) -> np.ndarray:
             f, jac = sfem.forward_jacobian(params(q), raw)
-            norm = np.linalg.norm(f, axis=1)
-            dn = np.einsum("ni,nik->nk", f / norm[:, None], jac[:, :, free_idx])
-            dn = dn / norm_sigma(f)[:, None]
-            return (dn[:, :, None] * V[:, None, :]).reshape(n_rows, -1)
+            dn = sfem.norm_jacobian(f, jac[:, :, free_idx]) / norm_sigma(f)[:, None]
+            return sfem.coefficient_jacobian(dn, V)
 
     q0 = coeffs0[free_idx].ravel()
     sol = least_squares(residual, q0, jac=jacobian, method="lm", x_scale="jac")

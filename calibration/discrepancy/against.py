@@ -372,12 +372,10 @@ def _jacobian(coeffs: np.ndarray, model: ThermalModel, raw: np.ndarray, ref: np.
         from calibration import extensions as ext
 
         f = ext.apply_extensions(model.extensions, raw, temp_c, f)
-    Jp = jac[:, :, cols[:, 0]] * V[:, None, cols[:, 1]]  # (N,3,p)
+    Jp = sfem.coefficient_jacobian(jac, V, cols)  # (N,3,p)
     if ref is not None:
         return Jp.reshape(-1, cols.shape[0]), f - ref
-    nf = np.linalg.norm(f, axis=1)
-    u = f / nf[:, None]
-    return np.einsum("na,nap->np", u, Jp), nf - 1.0
+    return sfem.norm_jacobian(f, Jp), np.linalg.norm(f, axis=1) - 1.0
 
 
 def _shift_table(model: ThermalModel, fit: ShiftFit, alpha: float,

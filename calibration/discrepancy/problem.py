@@ -330,10 +330,8 @@ def _norm_problem(rec: Recording) -> LinearProblem:
     for _ in range(8):  # Gauss–Newton on the 9×(d+1) coefficients; starts at the pooled fit
         Pm = params(q)
         f, jac = sfem.forward_jacobian(Pm, raw)
-        nf = np.linalg.norm(f, axis=1)
-        r = nf - 1.0
-        ju = np.einsum("ni,nij->nj", f / nf[:, None], jac[:, :, free])  # (N,9)
-        J = (ju[:, :, None] * P[:, None, :]).reshape(n, -1)
+        r = np.linalg.norm(f, axis=1) - 1.0
+        J = sfem.coefficient_jacobian(sfem.norm_jacobian(f, jac[:, :, free]), P)  # (N,9·(d+1))
         step = np.linalg.lstsq(J, -r, rcond=None)[0].reshape(q.shape)
         q = q + step
         if np.max(np.abs(step)) < 1e-12:
@@ -344,8 +342,7 @@ def _norm_problem(rec: Recording) -> LinearProblem:
     uvec = f / nf[:, None]
     A = sfem.matrix_from_vector(Pm)
     gvec = np.einsum("ni,nij->nj", uvec, A)  # ∂|f|/∂raw
-    ju = np.einsum("ni,nij->nj", uvec, jac[:, :, free])
-    X0 = (ju[:, :, None] * P[:, None, :]).reshape(n, -1)
+    X0 = sfem.coefficient_jacobian(sfem.norm_jacobian(f, jac[:, :, free]), P)
     y = nf - 1.0
     ctx = base_context(rec, "norm", f)
     sig = pooled_sigma_g(rec, ctx.steps)

@@ -114,3 +114,40 @@ def test_per_reading_parameters_give_each_reading_its_own_model_and_jacobian() -
         down[:, k] -= h
         fd = (sfem.forward(up, raw) - sfem.forward(down, raw)) / (2 * h)
         np.testing.assert_allclose(jac[:, :, k], fd, atol=1e-9, err_msg=sfem.PARAM_NAMES[k])
+
+
+def test_coefficient_and_norm_jacobians_match_finite_differences_of_the_thermal_model() -> None:
+    """Eq. 1 with Eq. 8's p_k(T) = Σ_j c_kj x^j: the chained Jacobian in the coefficients
+    (all of them, and a chosen (k, j) subset), and norm mode's ∂|f|/∂c (Eq. 3)."""
+    rng = np.random.default_rng(6)
+    n, deg = 9, 3
+    coeffs = np.zeros((sfem.N_PARAMS, deg + 1))
+    coeffs[:, 0] = _random_params(30)
+    coeffs[:, 1:] = rng.normal(0.0, 0.01, (sfem.N_PARAMS, deg))
+    x = rng.uniform(-1.0, 1.0, n)
+    V = np.vander(x, deg + 1, increasing=True)
+    raw = rng.normal(size=(n, 3))
+
+    def f_of(c: np.ndarray) -> np.ndarray:
+        return sfem.forward(V @ c.T, raw)
+
+    f, jac = sfem.forward_jacobian(V @ coeffs.T, raw)
+    full = sfem.coefficient_jacobian(jac, V)  # (n, 3, 12·(d+1)), k-major
+    cols = np.array([[0, 0], [4, 2], [10, 3], [7, 1]])
+    some = sfem.coefficient_jacobian(jac, V, cols)
+    dnorm = sfem.norm_jacobian(f, full)
+    h = 1e-6
+    for k in range(sfem.N_PARAMS):
+        for j in range(deg + 1):
+            up, down = coeffs.copy(), coeffs.copy()
+            up[k, j] += h
+            down[k, j] -= h
+            fd = (f_of(up) - f_of(down)) / (2 * h)
+            col = k * (deg + 1) + j
+            np.testing.assert_allclose(full[:, :, col], fd, atol=1e-9, err_msg=f"c[{k},{j}]")
+            fd_norm = (np.linalg.norm(f_of(up), axis=1) - np.linalg.norm(f_of(down), axis=1)) / (
+                2 * h
+            )
+            np.testing.assert_allclose(dnorm[:, col], fd_norm, atol=1e-9, err_msg=f"|f| c[{k},{j}]")
+    for m, (k, j) in enumerate(cols):
+        np.testing.assert_array_equal(some[:, :, m], full[:, :, k * (deg + 1) + j])
