@@ -81,7 +81,22 @@ def identity_vector() -> np.ndarray:
 def rotation(angles_rad: np.ndarray) -> np.ndarray:
     """M = Rz(ψ) · Ry(θ) · Rx(φ) of Eq. 1 for angles (φ, θ, ψ): (3,) → (3,3), (N,3) → (N,3,3)."""
     ang = np.asarray(angles_rad, dtype=float)
-    return _rz(ang[..., 2]) @ _ry(ang[..., 1]) @ _rx(ang[..., 0])
+    return rotation_z(ang[..., 2]) @ rotation_y(ang[..., 1]) @ rotation_x(ang[..., 0])
+
+
+def rotation_x(a: np.ndarray | float, d: bool = False) -> np.ndarray:
+    """Rx(a), a right-handed rotation about x by angles ``a`` (…): (…,3,3); ∂Rx/∂a if ``d``."""
+    return _rot(a, 1, 2, 0, d, 1.0)
+
+
+def rotation_y(a: np.ndarray | float, d: bool = False) -> np.ndarray:
+    """Ry(a) about y (…,3,3); ∂Ry/∂a if ``d``."""
+    return _rot(a, 0, 2, 1, d, -1.0)
+
+
+def rotation_z(a: np.ndarray | float, d: bool = False) -> np.ndarray:
+    """Rz(a) about z (…,3,3); ∂Rz/∂a if ``d``."""
+    return _rot(a, 0, 1, 2, d, 1.0)
 
 
 def nonorthogonality(alpha_rad: np.ndarray) -> np.ndarray:
@@ -200,8 +215,12 @@ def _apply(A: np.ndarray, x: np.ndarray) -> np.ndarray:
 def _rotation_derivatives(ang: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """∂M/∂φ, ∂M/∂θ, ∂M/∂ψ for angles (…,3)."""
     phi, theta, psi = ang[..., 0], ang[..., 1], ang[..., 2]
-    rx, ry, rz = _rx(phi), _ry(theta), _rz(psi)
-    return (rz @ ry @ _rx(phi, d=True), rz @ _ry(theta, d=True) @ rx, _rz(psi, d=True) @ ry @ rx)
+    rx, ry, rz = rotation_x(phi), rotation_y(theta), rotation_z(psi)
+    return (
+        rz @ ry @ rotation_x(phi, d=True),
+        rz @ rotation_y(theta, d=True) @ rx,
+        rotation_z(psi, d=True) @ ry @ rx,
+    )
 
 
 def _rot(a: np.ndarray, i: int, j: int, k: int, d: bool, sign: float) -> np.ndarray:
@@ -217,15 +236,3 @@ def _rot(a: np.ndarray, i: int, j: int, k: int, d: bool, sign: float) -> np.ndar
         R[..., i, i], R[..., j, j] = c, c
         R[..., i, j], R[..., j, i] = -sign * s, sign * s
     return R
-
-
-def _rx(a: np.ndarray, d: bool = False) -> np.ndarray:
-    return _rot(a, 1, 2, 0, d, 1.0)
-
-
-def _ry(a: np.ndarray, d: bool = False) -> np.ndarray:
-    return _rot(a, 0, 2, 1, d, -1.0)
-
-
-def _rz(a: np.ndarray, d: bool = False) -> np.ndarray:
-    return _rot(a, 0, 1, 2, d, 1.0)

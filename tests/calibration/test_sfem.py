@@ -151,3 +151,15 @@ def test_coefficient_and_norm_jacobians_match_finite_differences_of_the_thermal_
             np.testing.assert_allclose(dnorm[:, col], fd_norm, atol=1e-9, err_msg=f"|f| c[{k},{j}]")
     for m, (k, j) in enumerate(cols):
         np.testing.assert_array_equal(some[:, :, m], full[:, :, k * (deg + 1) + j])
+
+
+def test_elementary_rotations_and_their_derivatives() -> None:
+    a = np.array([-1.1, 0.0, 0.4, 2.5])
+    for i, r in enumerate((sfem.rotation_x, sfem.rotation_y, sfem.rotation_z)):
+        R = r(a)
+        for m, ang in enumerate(a):
+            want = _textbook_rotation(*(ang if q == i else 0.0 for q in range(3)))
+            np.testing.assert_allclose(R[m], want, atol=1e-15)
+            np.testing.assert_allclose(r(float(ang)), want, atol=1e-15)
+        h = 1e-6
+        np.testing.assert_allclose(r(a, d=True), (r(a + h) - r(a - h)) / (2 * h), atol=1e-9)
