@@ -68,8 +68,7 @@ class SfemParams:
 
     def invert(self, true_g: np.ndarray) -> np.ndarray:
         """Raw output that a sensor with these errors gives for specific force ``true_g``."""
-        f = np.asarray(true_g, dtype=float)
-        return np.linalg.solve(self.matrix(), f.T).T + self.bias_g
+        return inverse(self.to_vector(), true_g)
 
 
 def identity_vector() -> np.ndarray:
@@ -150,6 +149,20 @@ def forward(p: np.ndarray, raw_g: np.ndarray) -> np.ndarray:
     """
     p = np.asarray(p, dtype=float)
     return _apply(matrix_from_vector(p), np.asarray(raw_g, dtype=float) - p[..., BIAS])
+
+
+def inverse(p: np.ndarray, calibrated_g: np.ndarray) -> np.ndarray:
+    """Raw output U = A⁻¹ f + b that Eq. 1 maps onto ``calibrated_g`` f (…,3): what a sensor
+    with these errors reads for the specific force f (the twin's sensor, synthetic data).
+
+    ``p`` as in :func:`forward`: one vector (12,) for all rows, or one per row (N,12).
+    """
+    p = np.asarray(p, dtype=float)
+    f = np.asarray(calibrated_g, dtype=float)
+    A = matrix_from_vector(p)
+    if A.ndim == 2:
+        return np.linalg.solve(A, f.T).T + p[BIAS]  # one factorisation for all rows
+    return np.linalg.solve(A, f[..., None])[..., 0] + p[..., BIAS]
 
 
 def forward_jacobian(p: np.ndarray, raw_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

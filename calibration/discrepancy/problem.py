@@ -300,7 +300,7 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
         res = fit_joint(raw[fit], ref[fit], sig[fit], t[fit], coeffs0, np.ones(12, bool))
         V = np.vander(t, degree + 1, increasing=True)
         Pn = V @ res.coeffs.T
-        pred = np.linalg.solve(sfem.matrix_from_vector(Pn), ref[:, :, None])[:, :, 0] + Pn[:, 0:3]
+        pred = sfem.inverse(Pn, ref)
     except (np.linalg.LinAlgError, ValueError):
         return None
     if not np.all(np.isfinite(pred)):
@@ -359,9 +359,8 @@ def _norm_problem(rec: Recording) -> LinearProblem:
         Pm_h = np.tile(fixed, (n, 1))
         th = (ctx0.temp_c + h - mid) / half
         Pm_h[:, free] = np.column_stack([th**p for p in range(npow)]) @ q.T
-        A_h = sfem.matrix_from_vector(Pm_h)
-        raw_h = np.linalg.solve(A_h, f[:, :, None])[:, :, 0] + Pm_h[:, 0:3]
-        raw_0 = np.linalg.solve(A, f[:, :, None])[:, :, 0] + Pm[:, 0:3]
+        raw_h = sfem.inverse(Pm_h, f)
+        raw_0 = sfem.inverse(Pm, f)
         ctx.draw_dtemp_g_per_c = (raw_h - raw_0) / h
         sig_T = temperature_noise_c(ctx)
         if from_sd and np.any(sig_T > 0):
