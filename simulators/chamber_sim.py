@@ -101,11 +101,11 @@ class ChamberPhysics:
             # Stopped: WSP tracks PV like a real controller in standby.
             self.working_setpoint_c = self.air_c
             target, tau = self.ambient_c, self.off_tau_s
-        new_air = lag_step(self.air_c, target, dt, tau)
+        new_air = float(lag_step(self.air_c, target, dt, tau))
         new_air = rate_limited(self.air_c, new_air, self.max_rate_c_per_min / 60.0 * dt)
         # Die: exact first-order step for the mean air over the substep.
         mean_air = 0.5 * (self.air_c + new_air)
-        self.die_c = lag_step(self.die_c, mean_air, dt, self.die_tau_s)
+        self.die_c = float(lag_step(self.die_c, mean_air, dt, self.die_tau_s))
         self.air_c = new_air
 
 
