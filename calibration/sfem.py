@@ -155,7 +155,8 @@ def inverse(p: np.ndarray, calibrated_g: np.ndarray) -> np.ndarray:
     """Raw output U = A⁻¹ f + b that Eq. 1 maps onto ``calibrated_g`` f (…,3): what a sensor
     with these errors reads for the specific force f (the twin's sensor, synthetic data).
 
-    ``p`` as in :func:`forward`: one vector (12,) for all rows, or one per row (N,12).
+    ``p`` as in :func:`forward`: one vector (12,) for all rows, or one per row (N,12)
+    (more leading axes broadcast against f's, e.g. (K,1,12) with (K,N,3)).
     """
     p = np.asarray(p, dtype=float)
     f = np.asarray(calibrated_g, dtype=float)

@@ -28,6 +28,12 @@ import math
 import numpy as np
 from scipy.signal import lfilter
 
+# The offline rig's defaults (simulators.campaign_sim.RigPhysics), which are also what the
+# diagnosis assumes where a recording does not say (it holds the plateaus, not the ramps).
+AMBIENT_C = 25.0  # the rig (air and die) at lab ambient before the first ramp
+DEFAULT_RAMP_C_PER_MIN = 2.0  # working-setpoint ramp between steps (seed Table 3: 0.1–5 °C/min)
+DEFAULT_AIR_TAU_S = 120.0  # the air's settling behind the working setpoint
+
 
 def lag_step(y: float, u: float, dt_s: float, tau_s: float) -> float:
     """One exact step of ``y' = (u − y)/τ``, ``u`` held over ``dt_s``: ``u + (y − u)·e^{−dt/τ}``.

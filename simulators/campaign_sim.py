@@ -22,7 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration.recording import Recording
-from calibration.thermal_plant import lag_step, rate_limited
+from calibration.thermal_plant import (
+    AMBIENT_C,
+    DEFAULT_AIR_TAU_S,
+    DEFAULT_RAMP_C_PER_MIN,
+    lag_step,
+    rate_limited,
+)
 from service.engine import plan
 from simulators.truth import Context, SensorTruth
 
@@ -33,12 +39,12 @@ DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 
 class RigPhysics:
     """Chamber and fixture dynamics of the offline campaign."""
 
-    ramp_c_per_min: float = 2.0  # chamber ramp-rate limit (seed Table 3: 0.1–5 °C/min)
-    air_tau_s: float = 120.0  # air settling behind the working setpoint
+    ramp_c_per_min: float = DEFAULT_RAMP_C_PER_MIN  # chamber ramp-rate limit
+    air_tau_s: float = DEFAULT_AIR_TAU_S  # air settling behind the working setpoint
     die_tau_s: float = 600.0  # sensor die behind the air (fixture mass, airflow)
     move_s: float = 12.0  # table slew + settle between positions
     pv_noise_c: float = 0.02  # chamber PV noise (rms)
-    start_c: float = 25.0
+    start_c: float = AMBIENT_C
     dt_s: float = 10.0  # integration step during ramp and soak
     vib_sd_g: float = 0.0  # chamber vibration at the sensor (rms g), see vibration_rectification
     # Per-step vibration (rms g), e.g. the compressor running at cold setpoints; overrides

@@ -17,12 +17,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from calibration.thermal_plant import lag_series, ramp_breakpoints
+from calibration.thermal_plant import (
+    AMBIENT_C,
+    DEFAULT_AIR_TAU_S,
+    DEFAULT_RAMP_C_PER_MIN,
+    lag_series,
+    ramp_breakpoints,
+)
 
-AMBIENT_C = 25.0
 DT_S = 2.0
-DEFAULT_AIR_TAU_S = 120.0  # the offline rig's air settling (simulators.campaign_sim.RigPhysics)
-DEFAULT_RAMP_C_PER_MIN = 2.0
 
 
 def die_minus_air_c(t_s: np.ndarray, steps: np.ndarray, step_temp_c: dict[int, float],

@@ -101,7 +101,7 @@ def test_rig_cascade_tends_to_the_closed_form_when_the_air_is_fast():
         [np.linspace(3000.0 + 4000.0 * k, 4200.0 + 4000.0 * k, 6) for k in range(3)]
     )
     steps = np.repeat([0, 1, 2], 6)
-    bt, bv = tp.ramp_breakpoints(t_s, steps, temps, 2.0, rig.AMBIENT_C)
+    bt, bv = tp.ramp_breakpoints(t_s, steps, temps, 2.0, tp.AMBIENT_C)
     closed = tp.lag_behind_piecewise_linear(bt, bv, t_s, 600.0)
     grid = rig.die_minus_air_c(t_s, steps, temps, 600.0, air_tau_s=1e-6, ramp_c_per_min=2.0)
     # a held end value over each 2 s grid step leads the ramp by ~1 s: r·1 s ≈ 0.03 °C

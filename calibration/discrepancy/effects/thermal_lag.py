@@ -29,10 +29,13 @@ import numpy as np
 
 from calibration.discrepancy.context import DesignContext
 from calibration.discrepancy.effects.base import EffectModule
-from calibration.thermal_plant import lag_behind_piecewise_linear, ramp_breakpoints
+from calibration.thermal_plant import (
+    AMBIENT_C,
+    DEFAULT_RAMP_C_PER_MIN,
+    lag_behind_piecewise_linear,
+    ramp_breakpoints,
+)
 
-RAMP_C_PER_MIN = 2.0  # assumed chamber ramp between steps (seed Table 3: 0.1–5 °C/min)
-AMBIENT_C = 25.0  # assumed start of the campaign: the die at lab ambient before the first ramp
 MAX_AMPLITUDE_ITER = 4
 TAU_GRID_S = tuple(float(v) for v in np.geomspace(120.0, 14400.0, 18))
 
@@ -124,21 +127,23 @@ class ThermalLag(EffectModule):
         return (f"the sensor die lags the chamber air with a time constant τ = {tau:.0f} s{unc}: "
                 "readings early in each plateau still carry part of the last step, scaled by the "
                 f"model's own temperature sensitivity ({amp:.2f} × the die–air difference of an "
-                f"assumed {RAMP_C_PER_MIN:g} °C/min ramp: the recording holds the plateaus, not "
-                "the ramps)")
+                f"assumed {DEFAULT_RAMP_C_PER_MIN:g} °C/min ramp: the recording holds the "
+                "plateaus, not the ramps)")
 
 
 def die_minus_air_c(ctx: DesignContext, tau_s: float) -> np.ndarray:
     """T_die − T_air at each reading for a first-order lag τ of a reconstructed air history.
 
     The air history is piecewise linear (:func:`calibration.thermal_plant.ramp_breakpoints`):
-    each plateau at its median temperature; between plateaus a ramp at
-    :data:`RAMP_C_PER_MIN` starting at the previous plateau's last reading (why: the
+    each plateau at its median temperature; between plateaus a ramp at the rig's default
+    ``DEFAULT_RAMP_C_PER_MIN`` starting at the previous plateau's last reading (why: the
     recording does not hold the ramp). Before the first plateau the campaign is assumed to
-    start at :data:`AMBIENT_C` and to ramp, then soak as long as the other plateaus do. The
+    start at ``AMBIENT_C`` and to ramp, then soak as long as the other plateaus do. The
     lag of each linear segment is solved exactly
     (:func:`calibration.thermal_plant.lag_behind_piecewise_linear`), so the last reading of
     a plateau is not smeared into the next ramp.
     """
-    bt, bv = ramp_breakpoints(ctx.t_s, ctx.steps, ctx.step_temp_c, RAMP_C_PER_MIN, AMBIENT_C)
+    bt, bv = ramp_breakpoints(
+        ctx.t_s, ctx.steps, ctx.step_temp_c, DEFAULT_RAMP_C_PER_MIN, AMBIENT_C
+    )
     return lag_behind_piecewise_linear(bt, bv, ctx.t_s, tau_s)
