@@ -2,8 +2,7 @@
 
 The seed paper's thermal model (Eq. 8) gives the SFEM parameters as polynomials of the
 temperature the sensor *is at*; the chamber only controls its air (ramped at 0.1–5 °C/min,
-seed Table 3).
-What stands between them is this plant, used by the offline twin
+seed Table 3). What stands between them is this plant, used by the offline twin
 (``simulators.campaign_sim``), the Modbus twin (``simulators.chamber_sim``), the twin's
 rig reconstruction (``calibration.discrepancy.rig``) and the ``thermal_lag`` effect
 (``calibration.discrepancy.effects.thermal_lag``):
@@ -19,6 +18,9 @@ rig reconstruction (``calibration.discrepancy.rig``) and the ``thermal_lag`` eff
   form per segment (:func:`lag_behind_piecewise_linear`).
 
 Pure numerics: no clock, no state. ``τ ≤ 0`` means no lag (the output is the input).
+What each twin drives the die with is its own choice and stays so: the offline twin the
+air at the end of each step, the Modbus twin the mean air of each substep (it also caps
+the air's rate and relaxes to ambient when stopped).
 """
 
 from __future__ import annotations
