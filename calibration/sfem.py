@@ -16,6 +16,14 @@ back into (M, C, S) uniquely (a QL decomposition).
 Parameter vector order (used by fits, covariances, thermal models and JSON)::
 
     bx by bz | sx sy sz | ayx azx azy | mx my mz
+
+Eq. 1 is written once, here: :func:`rotation` (and its factors :func:`rotation_x`,
+:func:`rotation_y`, :func:`rotation_z`), :func:`nonorthogonality`,
+:func:`matrix_from_vector`, :func:`forward`, :func:`inverse` and the analytic
+:func:`forward_jacobian` take one parameter vector (12,) or one per reading (N,12) — the
+thermal model's p(T_i) of Eq. 8, which the joint fits and compensation evaluate for
+thousands of readings at once. :func:`coefficient_jacobian` chains the Jacobian through
+Eq. 8, :func:`norm_jacobian` projects it for norm mode (Eq. 3).
 """
 
 from __future__ import annotations
@@ -222,7 +230,9 @@ def coefficient_jacobian(
 def _apply(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     """A x for every row of x (N,3): one matrix (3,3) for all rows, or one per row (N,3,3)."""
     if A.ndim == 2:
-        return x @ A.T  # one matrix product for all rows
+        # One BLAS product for all rows: fastest, and the bits the per-temperature fits
+        # have always had (einsum's sum order differs in the last bit).
+        return x @ A.T
     return np.einsum("nij,nj->ni", A, x)
 
 
