@@ -39,7 +39,7 @@ if str(ROOT) not in sys.path:
 
 from sqlalchemy import select  # noqa: E402
 
-from calibration import sfem_batch  # noqa: E402
+from calibration import sfem  # noqa: E402
 from drivers.clock import VirtualClock  # noqa: E402
 from drivers.modbus_link import RetryPolicy  # noqa: E402
 from service.db.models import Campaign, Measurement, Rig  # noqa: E402
@@ -127,7 +127,7 @@ def oracle_rmse_ug(truth: SensorTruth, seed: int) -> float:
     refs = np.vstack([_unit(rng.normal(size=(60, 3))) for _ in HELDOUT_C])
     die = np.repeat(HELDOUT_C, 60)
     run = simulate_static_run(truth, refs, die, seed=seed + 30_000)
-    oracle = sfem_batch.forward(truth.params_vector_at(die), run.recording.raw_g)
+    oracle = sfem.forward(truth.params_vector_at(die), run.recording.raw_g)
     return float(np.sqrt(np.mean(np.sum((oracle - refs) ** 2, axis=1)) / 3) * 1e6)
 
 

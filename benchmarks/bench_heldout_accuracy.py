@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from calibration import sfem_batch  # noqa: E402
+from calibration import sfem  # noqa: E402
 from calibration.metrics import thermal_drift  # noqa: E402
 from calibration.temperature_conditioning import (  # noqa: E402
     compensation_temperature,
@@ -111,7 +111,7 @@ def heldout_case(
     if smooth_temperature_s > 0:
         temp_c = smooth_over_time(run.recording.t_s, temp_c, smooth_temperature_s)
     cal = fit.model.compensate(raw, temp_c, extrapolate=extrapolate)
-    oracle = sfem_batch.forward(truth.params_vector_at(die), raw)
+    oracle = sfem.forward(truth.params_vector_at(die), raw)
     err_m = np.sum((cal - refs) ** 2, axis=1)
     err_o = np.sum((oracle - refs) ** 2, axis=1)
     out = {"seed": seed, "sse_model": float(err_m.sum()), "sse_oracle": float(err_o.sum()),

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from calibration import fit, schedules, sfem, sfem_batch  # noqa: E402
+from calibration import fit, schedules, sfem  # noqa: E402
 from simulators.campaign_sim import simulate_campaign, simulate_static_run  # noqa: E402
 from simulators.truth import SensorTruth  # noqa: E402
 
@@ -55,10 +55,9 @@ def make_problems(k: int, seed: int, refs: np.ndarray | None = None) -> tuple[np
     P[:, sfem.SCALE] += rng.normal(0, 0.01, (k, 3))
     P[:, sfem.ALPHA] = rng.normal(0, 4e-3, (k, 3))
     P[:, sfem.MISALIGN] = rng.normal(0, 5e-3, (k, 3))
-    A = sfem_batch.matrices(P)
     ref = np.broadcast_to(ref1, (k, n, 3)).copy()
     sd_mean = 25e-6 * np.sqrt(62.5 / 2) / np.sqrt(200)  # ADXL355, 200 samples per mean
-    raw = np.linalg.solve(A[:, None], ref[..., None])[..., 0] + P[:, None, sfem.BIAS]
+    raw = sfem.inverse(P[:, None, :], ref)  # each problem's p for all its n rows
     raw += rng.normal(0, sd_mean, raw.shape)
     sigma = np.full_like(raw, sd_mean)
     return raw, ref, sigma

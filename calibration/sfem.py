@@ -16,6 +16,14 @@ back into (M, C, S) uniquely (a QL decomposition).
 Parameter vector order (used by fits, covariances, thermal models and JSON)::
 
     bx by bz | sx sy sz | ayx azx azy | mx my mz
+
+Eq. 1 is written once, here: :func:`rotation` (and its factors :func:`rotation_x`,
+:func:`rotation_y`, :func:`rotation_z`), :func:`nonorthogonality`,
+:func:`matrix_from_vector`, :func:`forward`, :func:`inverse` and the analytic
+:func:`forward_jacobian` take one parameter vector (12,) or one per reading (N,12) — the
+thermal model's p(T_i) of Eq. 8, which the joint fits and compensation evaluate for
+thousands of readings at once. :func:`coefficient_jacobian` chains the Jacobian through
+Eq. 8, :func:`norm_jacobian` projects it for norm mode (Eq. 3).
 """
 
 from __future__ import annotations
@@ -64,13 +72,11 @@ class SfemParams:
 
     def apply(self, raw_g: np.ndarray) -> np.ndarray:
         """Calibrate raw readings (N,3) or (3,): Eq. 1 forward."""
-        raw = np.asarray(raw_g, dtype=float)
-        return (raw - self.bias_g) @ self.matrix().T
+        return forward(self.to_vector(), raw_g)
 
     def invert(self, true_g: np.ndarray) -> np.ndarray:
         """Raw output that a sensor with these errors gives for specific force ``true_g``."""
-        f = np.asarray(true_g, dtype=float)
-        return np.linalg.solve(self.matrix(), f.T).T + self.bias_g
+        return inverse(self.to_vector(), true_g)
 
 
 def identity_vector() -> np.ndarray:
@@ -80,18 +86,39 @@ def identity_vector() -> np.ndarray:
 
 
 def rotation(angles_rad: np.ndarray) -> np.ndarray:
-    """M = Rz(ψ) · Ry(θ) · Rx(φ) for angles (φ, θ, ψ)."""
-    return _rz(angles_rad[2]) @ _ry(angles_rad[1]) @ _rx(angles_rad[0])
+    """M = Rz(ψ) · Ry(θ) · Rx(φ) of Eq. 1 for angles (φ, θ, ψ): (3,) → (3,3), (N,3) → (N,3,3)."""
+    ang = np.asarray(angles_rad, dtype=float)
+    return rotation_z(ang[..., 2]) @ rotation_y(ang[..., 1]) @ rotation_x(ang[..., 0])
+
+
+def rotation_x(a: np.ndarray | float, d: bool = False) -> np.ndarray:
+    """Rx(a), a right-handed rotation about x by angles ``a`` (…): (…,3,3); ∂Rx/∂a if ``d``."""
+    return _rot(a, 1, 2, 0, d, 1.0)
+
+
+def rotation_y(a: np.ndarray | float, d: bool = False) -> np.ndarray:
+    """Ry(a) about y (…,3,3); ∂Ry/∂a if ``d``."""
+    return _rot(a, 0, 2, 1, d, -1.0)
+
+
+def rotation_z(a: np.ndarray | float, d: bool = False) -> np.ndarray:
+    """Rz(a) about z (…,3,3); ∂Rz/∂a if ``d``."""
+    return _rot(a, 0, 1, 2, d, 1.0)
 
 
 def nonorthogonality(alpha_rad: np.ndarray) -> np.ndarray:
-    """C of Eq. 1: lower unitriangular with αyx, αzx, αzy."""
-    ayx, azx, azy = alpha_rad
-    return np.array([[1.0, 0.0, 0.0], [ayx, 1.0, 0.0], [azx, azy, 1.0]])
+    """C of Eq. 1: lower unitriangular with αyx, αzx, αzy. (3,) → (3,3), (N,3) → (N,3,3)."""
+    alpha = np.asarray(alpha_rad, dtype=float)
+    C = np.zeros(alpha.shape[:-1] + (3, 3))
+    C[..., 0, 0] = C[..., 1, 1] = C[..., 2, 2] = 1.0
+    C[..., 1, 0], C[..., 2, 0], C[..., 2, 1] = alpha[..., 0], alpha[..., 1], alpha[..., 2]
+    return C
 
 
 def matrix_from_vector(p: np.ndarray) -> np.ndarray:
-    return rotation(p[MISALIGN]) @ nonorthogonality(p[ALPHA]) @ np.diag(p[SCALE])
+    """A = M · C · S of Eq. 1 for one parameter vector (12,) → (3,3), or rows (N,12) → (N,3,3)."""
+    p = np.asarray(p, dtype=float)
+    return rotation(p[..., MISALIGN]) @ nonorthogonality(p[..., ALPHA]) * p[..., None, SCALE]
 
 
 def from_matrix(matrix: np.ndarray, bias_g: np.ndarray) -> SfemParams:
@@ -122,62 +149,114 @@ def angles_from_rotation(R: np.ndarray) -> np.ndarray:
     return np.array([phi, theta, psi])
 
 
+def forward(p: np.ndarray, raw_g: np.ndarray) -> np.ndarray:
+    """Calibrated output f = A (U − b) of Eq. 1, (N,3), for raw readings U (N,3).
+
+    ``p`` is one parameter vector (12,) for every reading, or one per reading (N,12),
+    e.g. the thermal model's p(T_i) of Eq. 8.
+    """
+    p = np.asarray(p, dtype=float)
+    return _apply(matrix_from_vector(p), np.asarray(raw_g, dtype=float) - p[..., BIAS])
+
+
+def inverse(p: np.ndarray, calibrated_g: np.ndarray) -> np.ndarray:
+    """Raw output U = A⁻¹ f + b that Eq. 1 maps onto ``calibrated_g`` f (…,3): what a sensor
+    with these errors reads for the specific force f (the twin's sensor, synthetic data).
+
+    ``p`` as in :func:`forward`: one vector (12,) for all rows, or one per row (N,12)
+    (more leading axes broadcast against f's, e.g. (K,1,12) with (K,N,3)).
+    """
+    p = np.asarray(p, dtype=float)
+    f = np.asarray(calibrated_g, dtype=float)
+    A = matrix_from_vector(p)
+    if A.ndim == 2:
+        return np.linalg.solve(A, f.T).T + p[BIAS]  # one factorisation for all rows
+    return np.linalg.solve(A, f[..., None])[..., 0] + p[..., BIAS]
+
+
 def forward_jacobian(p: np.ndarray, raw_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Calibrated output f = A(U − b) (N,3) and its Jacobian ∂f/∂p (N,3,12), analytic."""
+    """f = A (U − b) of Eq. 1 (N,3) and its analytic Jacobian ∂f_i/∂p (N,3,12).
+
+    The Jacobian is what Levenberg–Marquardt (Eq. 7) and every linearised test use.
+    ``p`` is one vector (12,) for all N readings, or one per reading (N,12): then row i
+    of the Jacobian is the derivative in reading i's own parameters (the joint thermal
+    fit chains it with the powers of Eq. 8).
+    """
+    p = np.asarray(p, dtype=float)
     raw = np.asarray(raw_g, dtype=float)
-    M = rotation(p[MISALIGN])
-    C = nonorthogonality(p[ALPHA])
-    S = np.diag(p[SCALE])
-    v = raw - p[BIAS]  # (N,3)
-    w = v * p[SCALE]  # S v
-    u = w @ C.T  # C S v
-    f = u @ M.T
-    N = raw.shape[0]
-    jac = np.empty((N, 3, N_PARAMS))
-    A = M @ C @ S
-    jac[:, :, BIAS] = -A[None, :, :]
+    ang = p[..., MISALIGN]
+    M = rotation(ang)
+    C = nonorthogonality(p[..., ALPHA])
+    s = p[..., SCALE]
+    v = raw - p[..., BIAS]  # (N,3)
+    w = v * s  # S v
+    u = _apply(C, w)  # C S v
+    f = _apply(M, u)
+    jac = np.empty((raw.shape[0], 3, N_PARAMS))
     MC = M @ C
+    jac[:, :, BIAS] = -MC * s[..., None, :]  # −A
     for k in range(3):
-        jac[:, :, 3 + k] = MC[None, :, k] * v[:, k : k + 1]
-    jac[:, :, 6] = M[None, :, 1] * w[:, 0:1]  # αyx = C[1,0]
-    jac[:, :, 7] = M[None, :, 2] * w[:, 0:1]  # αzx = C[2,0]
-    jac[:, :, 8] = M[None, :, 2] * w[:, 1:2]  # αzy = C[2,1]
-    for k, dM in enumerate(_rotation_derivatives(p[MISALIGN])):
-        jac[:, :, 9 + k] = u @ dM.T
+        jac[:, :, 3 + k] = MC[..., :, k] * v[:, k : k + 1]
+    jac[:, :, 6] = M[..., :, 1] * w[:, 0:1]  # αyx = C[1,0]
+    jac[:, :, 7] = M[..., :, 2] * w[:, 0:1]  # αzx = C[2,0]
+    jac[:, :, 8] = M[..., :, 2] * w[:, 1:2]  # αzy = C[2,1]
+    for k, dM in enumerate(_rotation_derivatives(ang)):
+        jac[:, :, 9 + k] = _apply(dM, u)
     return f, jac
 
 
-def _rotation_derivatives(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    phi, theta, psi = angles
-    rx, ry, rz = _rx(phi), _ry(theta), _rz(psi)
-    return (rz @ ry @ _drx(phi), rz @ _dry(theta) @ rx, _drz(psi) @ ry @ rx)
+def norm_jacobian(f: np.ndarray, jac: np.ndarray) -> np.ndarray:
+    """∂|f_i|/∂q of norm mode (Eq. 3): (f_i/|f_i|)·∂f_i/∂q for f (N,3), ∂f/∂q (N,3,K): (N,K)."""
+    unit = f / np.linalg.norm(f, axis=1)[:, None]
+    return np.einsum("ni,nik->nk", unit, jac)
 
 
-def _rx(a: float) -> np.ndarray:
+def coefficient_jacobian(
+    jac: np.ndarray, powers: np.ndarray, cols: np.ndarray | None = None
+) -> np.ndarray:
+    """Chain rule through Eq. 8, ``p_k(T_i) = Σ_j c_kj x_i^j``: ∂/∂c_kj = ∂/∂p_k · x_i^j.
+
+    ``jac`` (N,…,K): a derivative in each reading's parameters (from :func:`forward_jacobian`,
+    :func:`norm_jacobian`, or a weighted form); ``powers`` (N,d+1): ``x_i^j``. With
+    ``cols`` (m,2) of (k, j) pairs the result is (N,…,m); without, every k × every j,
+    k-major: (N,…,K·(d+1)).
+    """
+    x = powers.reshape(powers.shape[:1] + (1,) * (jac.ndim - 2) + powers.shape[1:])
+    if cols is not None:
+        return jac[..., cols[:, 0]] * x[..., cols[:, 1]]
+    return (jac[..., :, None] * x[..., None, :]).reshape(jac.shape[:-1] + (-1,))
+
+
+def _apply(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x for every row of x (N,3): one matrix (3,3) for all rows, or one per row (N,3,3)."""
+    if A.ndim == 2:
+        # One BLAS product for all rows: fastest, and the bits the per-temperature fits
+        # have always had (einsum's sum order differs in the last bit).
+        return x @ A.T
+    return np.einsum("nij,nj->ni", A, x)
+
+
+def _rotation_derivatives(ang: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """∂M/∂φ, ∂M/∂θ, ∂M/∂ψ for angles (…,3)."""
+    phi, theta, psi = ang[..., 0], ang[..., 1], ang[..., 2]
+    rx, ry, rz = rotation_x(phi), rotation_y(theta), rotation_z(psi)
+    return (
+        rz @ ry @ rotation_x(phi, d=True),
+        rz @ rotation_y(theta, d=True) @ rx,
+        rotation_z(psi, d=True) @ ry @ rx,
+    )
+
+
+def _rot(a: np.ndarray, i: int, j: int, k: int, d: bool, sign: float) -> np.ndarray:
+    """Rotation by angles ``a`` (…) about axis k (i, j the other two), or its derivative
+    in ``a`` when ``d``: (…,3,3). ``sign`` = −1 gives Ry's layout (sin above the diagonal)."""
     c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _ry(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def _rz(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _drx(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[0.0, 0.0, 0.0], [0.0, -s, -c], [0.0, c, -s]])
-
-
-def _dry(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[-s, 0.0, c], [0.0, 0.0, 0.0], [-c, 0.0, -s]])
-
-
-def _drz(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[-s, -c, 0.0], [c, -s, 0.0], [0.0, 0.0, 0.0]])
+    R = np.zeros(np.shape(a) + (3, 3))
+    if d:
+        R[..., i, i], R[..., j, j] = -s, -s
+        R[..., i, j], R[..., j, i] = -sign * c, sign * c
+    else:
+        R[..., k, k] = 1.0
+        R[..., i, i], R[..., j, j] = c, c
+        R[..., i, j], R[..., j, i] = -sign * s, sign * s
+    return R

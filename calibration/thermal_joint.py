@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from calibration import sfem_batch
+from calibration import sfem
 
 
 @dataclass
@@ -59,12 +59,12 @@ def fit_joint(
         ref = np.asarray(ref_g, float)
 
         def residual(q: np.ndarray) -> np.ndarray:
-            return ((sfem_batch.forward(params(q), raw) - ref) / sig).ravel()
+            return ((sfem.forward(params(q), raw) - ref) / sig).ravel()
 
         def jacobian(q: np.ndarray) -> np.ndarray:
-            _, jac = sfem_batch.forward_jacobian(params(q), raw)
+            _, jac = sfem.forward_jacobian(params(q), raw)
             jac = jac[:, :, free_idx] / sig[:, :, None]  # (N,3,F)
-            return (jac[:, :, :, None] * V[:, None, None, :]).reshape(3 * n_rows, -1)
+            return sfem.coefficient_jacobian(jac, V).reshape(3 * n_rows, -1)
 
     else:
 
@@ -73,15 +73,13 @@ def fit_joint(
             return np.sqrt(np.sum((u * sig) ** 2, axis=1))
 
         def residual(q: np.ndarray) -> np.ndarray:
-            f = sfem_batch.forward(params(q), raw)
+            f = sfem.forward(params(q), raw)
             return (np.linalg.norm(f, axis=1) - g_local) / norm_sigma(f)
 
         def jacobian(q: np.ndarray) -> np.ndarray:
-            f, jac = sfem_batch.forward_jacobian(params(q), raw)
-            norm = np.linalg.norm(f, axis=1)
-            dn = np.einsum("ni,nik->nk", f / norm[:, None], jac[:, :, free_idx])
-            dn = dn / norm_sigma(f)[:, None]
-            return (dn[:, :, None] * V[:, None, :]).reshape(n_rows, -1)
+            f, jac = sfem.forward_jacobian(params(q), raw)
+            dn = sfem.norm_jacobian(f, jac[:, :, free_idx]) / norm_sigma(f)[:, None]
+            return sfem.coefficient_jacobian(dn, V)
 
     q0 = coeffs0[free_idx].ravel()
     sol = least_squares(residual, q0, jac=jacobian, method="lm", x_scale="jac")

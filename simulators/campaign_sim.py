@@ -4,7 +4,8 @@ It interprets the campaign's one plan (service/engine/plan.py) -- ramp the
 chamber at its rate limit, soak, visit each scheduled position (move, settle,
 capture N samples) --
 integrating the air temperature and the die temperature (first-order lag
-``tau_s`` behind the air), and writes recording format v1 rows. The wire-level
+``tau_s`` behind the air; the plant's steps are ``calibration.thermal_plant``'s), and
+writes recording format v1 rows. The wire-level
 twin (``simulators/rig.py``) produces the same physics through Modbus and the
 serial bridge; this one is for the thousands of campaigns a benchmark needs.
 
@@ -21,6 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration.recording import Recording
+from calibration.thermal_plant import (
+    AMBIENT_C,
+    DEFAULT_AIR_TAU_S,
+    DEFAULT_RAMP_C_PER_MIN,
+    lag_step,
+    rate_limited,
+)
 from service.engine import plan
 from simulators.truth import Context, SensorTruth
 
@@ -31,12 +39,12 @@ DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 
 class RigPhysics:
     """Chamber and fixture dynamics of the offline campaign."""
 
-    ramp_c_per_min: float = 2.0  # chamber ramp-rate limit (seed Table 3: 0.1–5 °C/min)
-    air_tau_s: float = 120.0  # air settling behind the working setpoint
+    ramp_c_per_min: float = DEFAULT_RAMP_C_PER_MIN  # chamber ramp-rate limit
+    air_tau_s: float = DEFAULT_AIR_TAU_S  # air settling behind the working setpoint
     die_tau_s: float = 600.0  # sensor die behind the air (fixture mass, airflow)
     move_s: float = 12.0  # table slew + settle between positions
     pv_noise_c: float = 0.02  # chamber PV noise (rms)
-    start_c: float = 25.0
+    start_c: float = AMBIENT_C
     dt_s: float = 10.0  # integration step during ramp and soak
     vib_sd_g: float = 0.0  # chamber vibration at the sensor (rms g), see vibration_rectification
     # Per-step vibration (rms g), e.g. the compressor running at cold setpoints; overrides
@@ -102,10 +110,9 @@ def simulate_campaign(
 
     def advance(dt: float, target: float) -> None:
         nonlocal t, air, die, wsp
-        ramp = ph.ramp_c_per_min / 60.0 * dt
-        wsp = target if abs(target - wsp) <= ramp else wsp + np.sign(target - wsp) * ramp
-        air = wsp + (air - wsp) * np.exp(-dt / ph.air_tau_s)
-        die = air + (die - air) * np.exp(-dt / ph.die_tau_s) if ph.die_tau_s > 0 else air
+        wsp = rate_limited(wsp, target, ph.ramp_c_per_min / 60.0 * dt)
+        air = lag_step(air, wsp, dt, ph.air_tau_s)
+        die = lag_step(die, air, dt, ph.die_tau_s)  # driven by the air at the step's end
         t += dt
 
     # The campaign's one plan (service/engine/plan.py), interpreted with this module's physics:

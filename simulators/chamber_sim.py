@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymodbus.constants import ExcCodes
 
+from calibration.thermal_plant import lag_step, rate_limited
 from drivers.clock import Clock
 from drivers.registermaps import ChamberMap, Field
 from simulators.faults import SimFaults
@@ -34,6 +35,9 @@ class ChamberPhysics:
       chamber's own capability ``max_rate_c_per_min``; no overshoot.
     * Stopped, the air relaxes to ``ambient_c`` with ``off_tau_s``.
     * The die follows the air first-order with ``die_tau_s`` (mounting + package).
+
+    The steps are ``calibration.thermal_plant``'s, shared with the offline twin and the
+    diagnosis.
     """
 
     clock: Clock
@@ -89,23 +93,19 @@ class ChamberPhysics:
     # --- internals -----------------------------------------------------------
     def _step(self, dt: float) -> None:
         if self.running:
-            if self.ramp_c_per_min <= 0:
-                self.working_setpoint_c = self.setpoint_c
-            else:
-                max_dw = self.ramp_c_per_min / 60.0 * dt
-                diff = self.setpoint_c - self.working_setpoint_c
-                self.working_setpoint_c += max(-max_dw, min(max_dw, diff))
+            max_dw = self.ramp_c_per_min / 60.0 * dt if self.ramp_c_per_min > 0 else math.inf
+            self.working_setpoint_c = rate_limited(self.working_setpoint_c, self.setpoint_c,
+                                                   max_dw)
             target, tau = self.working_setpoint_c, self.air_tau_s
         else:
             # Stopped: WSP tracks PV like a real controller in standby.
             self.working_setpoint_c = self.air_c
             target, tau = self.ambient_c, self.off_tau_s
-        new_air = target + (self.air_c - target) * math.exp(-dt / tau)
-        max_da = self.max_rate_c_per_min / 60.0 * dt
-        new_air = self.air_c + max(-max_da, min(max_da, new_air - self.air_c))
+        new_air = float(lag_step(self.air_c, target, dt, tau))
+        new_air = rate_limited(self.air_c, new_air, self.max_rate_c_per_min / 60.0 * dt)
         # Die: exact first-order step for the mean air over the substep.
         mean_air = 0.5 * (self.air_c + new_air)
-        self.die_c = mean_air + (self.die_c - mean_air) * math.exp(-dt / self.die_tau_s)
+        self.die_c = float(lag_step(self.die_c, mean_air, dt, self.die_tau_s))
         self.air_c = new_air
 
 

@@ -16,8 +16,8 @@ the air, not the die). :class:`ThermalLag` sets both.
 Each physical term is computed by the pure function in the effect's diagnosis
 module (``calibration/discrepancy/effects/<id>.py``, docs/diagnosis.md §4): one
 place per effect's physics. What stays here is the twin's own part: random
-draws, session power-on times, the base-model response ``ideal_raw_batch`` and
-the mapping from findings.
+draws, session power-on times and the mapping from findings; the base-model response
+is :meth:`SensorTruth.ideal_raw_g` (``calibration.sfem.inverse``).
 
 How large each effect must be to be seen under a protocol ("minimum
 detectable size") is computed by ``benchmarks/blind/detectability.py``.
@@ -31,7 +31,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from calibration import sfem_batch
 from calibration.discrepancy.effects.bias_drift import drift_offset_g
 from calibration.discrepancy.effects.cross_coupling import cross_coupling_g
 from calibration.discrepancy.effects.filter_delay import delayed_input_shift_g
@@ -50,15 +49,6 @@ from calibration.gravity import STANDARD_GRAVITY_M_S2
 from simulators.truth import Context, SensorTruth
 
 G0_M_S2 = STANDARD_GRAVITY_M_S2
-
-
-def ideal_raw_batch(truth: SensorTruth, ref_g: np.ndarray, die_c: np.ndarray) -> np.ndarray:
-    """Vectorised base-model raw output ``A(T)⁻¹ f + b(T)``: (N,3) forces at (N,) temperatures."""
-    f = np.atleast_2d(np.asarray(ref_g, float))
-    T = np.broadcast_to(np.asarray(die_c, float), (f.shape[0],))
-    P = truth.params_vector_at(T)
-    A = sfem_batch.matrices(P)
-    return np.linalg.solve(A, f[:, :, None])[:, :, 0] + P[:, 0:3]
 
 
 def _axes(p: dict, pattern: str, default: float | None = None) -> np.ndarray:
@@ -170,8 +160,8 @@ class SelfHeating:
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         dT = self._delta_c(ctx)
-        return ideal_raw_batch(truth, ctx.ref_g, ctx.die_c + dT) - ideal_raw_batch(
-            truth, ctx.ref_g, ctx.die_c)
+        return truth.ideal_raw_g(ctx.ref_g, ctx.die_c + dT) - truth.ideal_raw_g(
+            ctx.ref_g, ctx.die_c)
 
     def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
         return self._delta_c(ctx)
@@ -276,8 +266,8 @@ class LocalGravity(_RawOnly):
     effect_id: str = "local_gravity"
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return ideal_raw_batch(truth, ctx.ref_g * self.g_local, ctx.die_c) - ideal_raw_batch(
-            truth, ctx.ref_g, ctx.die_c)
+        return truth.ideal_raw_g(ctx.ref_g * self.g_local, ctx.die_c) - truth.ideal_raw_g(
+            ctx.ref_g, ctx.die_c)
 
 
 @dataclass
@@ -297,8 +287,8 @@ class TurntableGeometry(_RawOnly):
         return tilted_ref_g(ref_g, self.base_tilt_rad)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return ideal_raw_batch(truth, self.true_ref_g(ctx.ref_g), ctx.die_c) - ideal_raw_batch(
-            truth, ctx.ref_g, ctx.die_c)
+        return truth.ideal_raw_g(self.true_ref_g(ctx.ref_g), ctx.die_c) - truth.ideal_raw_g(
+            ctx.ref_g, ctx.die_c)
 
 
 @dataclass
@@ -318,8 +308,8 @@ class LeverArm(_RawOnly):
             return np.zeros((N, 3))
         w = np.asarray(ctx.omega_rad_s, float)
         a = centripetal_g(w, self.r_m)
-        return ideal_raw_batch(truth, ctx.ref_g + a, ctx.die_c) - ideal_raw_batch(
-            truth, ctx.ref_g, ctx.die_c)
+        return truth.ideal_raw_g(ctx.ref_g + a, ctx.die_c) - truth.ideal_raw_g(
+            ctx.ref_g, ctx.die_c)
 
 
 @dataclass
@@ -339,8 +329,8 @@ class FilterDelay(_RawOnly):
         if ctx.omega_rad_s is None:
             return np.zeros((N, 3))
         d = delayed_input_shift_g(ctx.omega_rad_s, ctx.ref_g, self.delay_s)
-        return ideal_raw_batch(truth, ctx.ref_g + d, ctx.die_c) - ideal_raw_batch(
-            truth, ctx.ref_g, ctx.die_c)
+        return truth.ideal_raw_g(ctx.ref_g + d, ctx.die_c) - truth.ideal_raw_g(
+            ctx.ref_g, ctx.die_c)
 
 
 # --- time / session --------------------------------------------------------

@@ -139,12 +139,7 @@ class SensorTruth:
         """Noise-free raw output, base model only: raw = A(T)⁻¹ f + b(T). Shapes (N,3)."""
         f = np.atleast_2d(np.asarray(ref_g, dtype=float))
         T = np.broadcast_to(np.asarray(die_c, dtype=float), (f.shape[0],))
-        P = self.params_vector_at(T)
-        out = np.empty_like(f)
-        for i in range(f.shape[0]):
-            A = sfem.matrix_from_vector(P[i])
-            out[i] = np.linalg.solve(A, f[i]) + P[i, sfem.BIAS]
-        return out
+        return sfem.inverse(self.params_vector_at(T), f)
 
     def sample_g(
         self,
@@ -190,10 +185,3 @@ def static_context(
         n_samples=np.broadcast_to(np.asarray(n), (N,)).astype(float),
         vib_sd_g=zeros,
     )
-
-
-def lag_step(die_c: float, air_c: float, dt_s: float, tau_s: float) -> float:
-    """First-order lag of the die behind the air over ``dt_s`` (exact for constant air)."""
-    if tau_s <= 0:
-        return air_c
-    return air_c + (die_c - air_c) * float(np.exp(-dt_s / tau_s))

@@ -34,6 +34,7 @@ import numpy as np
 from benchmarks.blind.score import clopper_pearson
 from calibration.discrepancy import diagnose
 from calibration.recording import Recording
+from calibration.thermal_plant import lag_step
 from simulators.campaign_sim import simulate_campaign
 from simulators.truth import SensorTruth
 
@@ -83,8 +84,7 @@ def _lag_channel(rec: Recording, tau_s: float) -> Recording:
     out = np.empty_like(T)
     out[0] = T[0]
     for i in range(1, T.size):
-        a = np.exp(-(t[i] - t[i - 1]) / tau_s)
-        out[i] = T[i] + (out[i - 1] - T[i]) * a
+        out[i] = lag_step(float(out[i - 1]), float(T[i]), float(t[i] - t[i - 1]), tau_s)
     cols["sensor_c"] = out
     return Recording.from_columns(cols)
 

@@ -12,7 +12,7 @@ from benchmarks.blind.catalogue import DF, NONLINEAR, ROWWISE, Concealed, make
 from benchmarks.blind.protocols import Protocol
 from calibration.recording import Recording
 from simulators.campaign_sim import SimCampaign, simulate_campaign
-from simulators.effects import ThermalLag, ideal_raw_batch
+from simulators.effects import ThermalLag
 from simulators.truth import Context, SensorTruth
 
 SAMPLES = 200
@@ -53,15 +53,15 @@ def signature(protocol: Protocol, truth: SensorTruth, concealed: Concealed,
         if uses_sensor_c:  # regressed on the die temperature: lag is gone
             return np.zeros_like(ctx0.ref_g)
         ctx1 = _context(protocol, truth, concealed.effect.tau_s)
-        return ideal_raw_batch(truth, ctx0.ref_g, ctx1.die_c) - ideal_raw_batch(
-            truth, ctx0.ref_g, ctx0.die_c)
+        return truth.ideal_raw_g(ctx0.ref_g, ctx1.die_c) - truth.ideal_raw_g(
+            ctx0.ref_g, ctx0.die_c)
     rng = np.random.default_rng(0)
     x = concealed.effect.raw_delta_g(ctx0, truth, rng)
     if uses_sensor_c:
         td = concealed.effect.temperature_delta_c(ctx0, rng)
         if np.any(td):
-            x = x - (ideal_raw_batch(truth, ctx0.ref_g, ctx0.die_c + td)
-                     - ideal_raw_batch(truth, ctx0.ref_g, ctx0.die_c))
+            x = x - (truth.ideal_raw_g(ctx0.ref_g, ctx0.die_c + td)
+                     - truth.ideal_raw_g(ctx0.ref_g, ctx0.die_c))
     return x
 
 

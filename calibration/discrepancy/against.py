@@ -6,7 +6,7 @@ docs/diagnosis.md §9. The given model's prediction is *not* refitted: its resid
 
 * ``parameter_shift``: the base parameters that moved. The shift δ of the model's
   polynomial coefficients is fitted to ``r`` by Gauss–Newton (the SFEM Jacobian of
-  ``calibration.sfem_batch`` times powers of T), and each coefficient is tested with
+  ``calibration.sfem`` times powers of T), and each coefficient is tested with
   ``z = δ / √(σ²_δ,recording + σ²_given)``: the given model's own stderr enters, because a
   model fitted on a recording of the same size carries about as much estimation noise as
   the shift fitted here (without it a perfect calibration would fail its own sensor). The
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as sps
 
-from calibration import sfem, sfem_batch
+from calibration import sfem
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.problem import pooled_sigma_g
 from calibration.discrepancy.twin_file import Twin
@@ -276,7 +276,7 @@ def _params(coeffs: np.ndarray, model: ThermalModel, temp_c: np.ndarray) -> np.n
 
 def _residual(coeffs: np.ndarray, model: ThermalModel, raw: np.ndarray,
               ref: np.ndarray | None, temp_c: np.ndarray) -> np.ndarray:
-    f = sfem_batch.forward(_params(coeffs, model, temp_c), raw)
+    f = sfem.forward(_params(coeffs, model, temp_c), raw)
     if model.extensions:
         from calibration import extensions as ext
 
@@ -305,7 +305,7 @@ def _sigma_g(rec: Recording, steps: np.ndarray, model: ThermalModel, raw: np.nda
     if sig is None or not np.all(np.isfinite(sig) & (sig > 0)):
         return None
     if mode == "norm":
-        f = sfem_batch.forward(_params(model.coeffs, model, temp_c), raw)
+        f = sfem.forward(_params(model.coeffs, model, temp_c), raw)
         u = f / np.linalg.norm(f, axis=1)[:, None]
         return np.sqrt(np.sum((u * sig) ** 2, axis=1))
     return sig
@@ -367,17 +367,15 @@ def _jacobian(coeffs: np.ndarray, model: ThermalModel, raw: np.ndarray, ref: np.
               ) -> tuple[np.ndarray, np.ndarray]:
     """Residual and its Jacobian in the fitted coefficients: ∂f/∂p (seed Eq. 1) × x^j."""
     P = V @ coeffs.T
-    f, jac = sfem_batch.forward_jacobian(P, raw)
+    f, jac = sfem.forward_jacobian(P, raw)
     if model.extensions:
         from calibration import extensions as ext
 
         f = ext.apply_extensions(model.extensions, raw, temp_c, f)
-    Jp = jac[:, :, cols[:, 0]] * V[:, None, cols[:, 1]]  # (N,3,p)
+    Jp = sfem.coefficient_jacobian(jac, V, cols)  # (N,3,p)
     if ref is not None:
         return Jp.reshape(-1, cols.shape[0]), f - ref
-    nf = np.linalg.norm(f, axis=1)
-    u = f / nf[:, None]
-    return np.einsum("na,nap->np", u, Jp), nf - 1.0
+    return sfem.norm_jacobian(f, Jp), np.linalg.norm(f, axis=1) - 1.0
 
 
 def _shift_table(model: ThermalModel, fit: ShiftFit, alpha: float,

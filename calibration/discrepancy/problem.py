@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration import fit as sfem_fit
-from calibration import sfem_batch
+from calibration import sfem
 from calibration.discrepancy.context import DesignContext, base_context
 from calibration.recording import Recording
 
@@ -277,7 +277,6 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
     """
     if degree == 0:
         return None
-    from calibration import sfem_batch
     from calibration.fit import _decompose_batch
     from calibration.thermal_joint import fit_joint
 
@@ -301,7 +300,7 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
         res = fit_joint(raw[fit], ref[fit], sig[fit], t[fit], coeffs0, np.ones(12, bool))
         V = np.vander(t, degree + 1, increasing=True)
         Pn = V @ res.coeffs.T
-        pred = np.linalg.solve(sfem_batch.matrices(Pn), ref[:, :, None])[:, :, 0] + Pn[:, 0:3]
+        pred = sfem.inverse(Pn, ref)
     except (np.linalg.LinAlgError, ValueError):
         return None
     if not np.all(np.isfinite(pred)):
@@ -330,23 +329,20 @@ def _norm_problem(rec: Recording) -> LinearProblem:
 
     for _ in range(8):  # Gauss–Newton on the 9×(d+1) coefficients; starts at the pooled fit
         Pm = params(q)
-        f, jac = sfem_batch.forward_jacobian(Pm, raw)
-        nf = np.linalg.norm(f, axis=1)
-        r = nf - 1.0
-        ju = np.einsum("ni,nij->nj", f / nf[:, None], jac[:, :, free])  # (N,9)
-        J = (ju[:, :, None] * P[:, None, :]).reshape(n, -1)
+        f, jac = sfem.forward_jacobian(Pm, raw)
+        r = np.linalg.norm(f, axis=1) - 1.0
+        J = sfem.coefficient_jacobian(sfem.norm_jacobian(f, jac[:, :, free]), P)  # (N,9·(d+1))
         step = np.linalg.lstsq(J, -r, rcond=None)[0].reshape(q.shape)
         q = q + step
         if np.max(np.abs(step)) < 1e-12:
             break
     Pm = params(q)
-    f, jac = sfem_batch.forward_jacobian(Pm, raw)
+    f, jac = sfem.forward_jacobian(Pm, raw)
     nf = np.linalg.norm(f, axis=1)
     uvec = f / nf[:, None]
-    A = sfem_batch.matrices(Pm)
+    A = sfem.matrix_from_vector(Pm)
     gvec = np.einsum("ni,nij->nj", uvec, A)  # ∂|f|/∂raw
-    ju = np.einsum("ni,nij->nj", uvec, jac[:, :, free])
-    X0 = (ju[:, :, None] * P[:, None, :]).reshape(n, -1)
+    X0 = sfem.coefficient_jacobian(sfem.norm_jacobian(f, jac[:, :, free]), P)
     y = nf - 1.0
     ctx = base_context(rec, "norm", f)
     sig = pooled_sigma_g(rec, ctx.steps)
@@ -363,15 +359,15 @@ def _norm_problem(rec: Recording) -> LinearProblem:
         Pm_h = np.tile(fixed, (n, 1))
         th = (ctx0.temp_c + h - mid) / half
         Pm_h[:, free] = np.column_stack([th**p for p in range(npow)]) @ q.T
-        raw_h = np.linalg.solve(sfem_batch.matrices(Pm_h), f[:, :, None])[:, :, 0] + Pm_h[:, 0:3]
-        raw_0 = np.linalg.solve(A, f[:, :, None])[:, :, 0] + Pm[:, 0:3]
+        raw_h = sfem.inverse(Pm_h, f)
+        raw_0 = sfem.inverse(Pm, f)
         ctx.draw_dtemp_g_per_c = (raw_h - raw_0) / h
         sig_T = temperature_noise_c(ctx)
         if from_sd and np.any(sig_T > 0):
             # As in reference mode: the recorded temperature's noise moves |f| along
             # ∂|f|/∂T (at fixed raw). Without it a 0.1 °C channel on a sensor with a
             # typical tempco reads as structure (issue 10: ~¼ of nulls flagged).
-            dnorm_dT = (np.linalg.norm(sfem_batch.forward(Pm_h, raw), axis=1) - nf) / h
+            dnorm_dT = (np.linalg.norm(sfem.forward(Pm_h, raw), axis=1) - nf) / h
             s_norm = np.sqrt(s_norm**2 + (dnorm_dT * sig_T) ** 2)
 
     def lift(x: np.ndarray) -> np.ndarray:

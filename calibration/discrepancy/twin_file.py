@@ -21,12 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy.rig import DEFAULT_AIR_TAU_S, DEFAULT_RAMP_C_PER_MIN
 from calibration.errors import ModelFileError
 from calibration.model_file import FORMAT as MODEL_FORMAT
 from calibration.model_file import dump_model_dict, load_json_document, load_model_dict
 from calibration.recording import atomic_write_text
 from calibration.thermal import ThermalModel
+from calibration.thermal_plant import DEFAULT_AIR_TAU_S, DEFAULT_RAMP_C_PER_MIN
 
 TWIN_FORMAT = "soakcal-twin"
 TWIN_VERSION = 1

@@ -67,3 +67,99 @@ def test_decomposition_refuses_a_reflection() -> None:
 def test_vector_length_is_checked() -> None:
     with pytest.raises(ValueError, match="12 entries"):
         sfem.SfemParams.from_vector(np.zeros(9))
+
+
+def _textbook_rotation(phi: float, theta: float, psi: float) -> np.ndarray:
+    """Rz(ψ)·Ry(θ)·Rx(φ) multiplied out by hand (ZYX Euler angles), independent of sfem."""
+    cf, sf, ct, st, cp, sp = (np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta),
+                              np.cos(psi), np.sin(psi))
+    return np.array([
+        [cp * ct, cp * st * sf - sp * cf, cp * st * cf + sp * sf],
+        [sp * ct, sp * st * sf + cp * cf, sp * st * cf - cp * sf],
+        [-st, ct * sf, ct * cf],
+    ])
+
+
+def test_rotation_of_one_or_many_angle_triples_is_the_zyx_product() -> None:
+    ang = np.random.default_rng(4).uniform(-1.2, 1.2, (7, 3))  # large: every term shows
+    many = sfem.rotation(ang)
+    assert many.shape == (7, 3, 3)
+    for i, a in enumerate(ang):
+        want = _textbook_rotation(*a)
+        np.testing.assert_allclose(sfem.rotation(a), want, atol=1e-15)
+        np.testing.assert_allclose(many[i], want, atol=1e-15)
+        np.testing.assert_allclose(sfem.angles_from_rotation(many[i]), a, atol=1e-12)
+
+
+def test_per_reading_parameters_give_each_reading_its_own_model_and_jacobian() -> None:
+    """Rows of p (the thermal model's p(T_i)): f_i and ∂f_i/∂p_i against an independent
+    per-reading evaluation and central differences, at large angles."""
+    rng = np.random.default_rng(5)
+    P = np.stack([_random_params(20 + i) for i in range(5)])
+    P[:, sfem.MISALIGN] = rng.uniform(-0.8, 0.8, (5, 3))
+    P[:, sfem.ALPHA] = rng.uniform(-0.2, 0.2, (5, 3))
+    raw = rng.normal(size=(5, 3))
+    f, jac = sfem.forward_jacobian(P, raw)
+    for i in range(5):
+        C = np.eye(3)
+        C[1, 0], C[2, 0], C[2, 1] = P[i, sfem.ALPHA]
+        A = _textbook_rotation(*P[i, sfem.MISALIGN]) @ C @ np.diag(P[i, sfem.SCALE])
+        np.testing.assert_allclose(sfem.matrix_from_vector(P)[i], A, atol=1e-15)
+        np.testing.assert_allclose(f[i], A @ (raw[i] - P[i, sfem.BIAS]), atol=1e-14)
+    np.testing.assert_allclose(sfem.forward(P, raw), f, atol=0)
+    h = 1e-6
+    for k in range(sfem.N_PARAMS):
+        up, down = P.copy(), P.copy()
+        up[:, k] += h
+        down[:, k] -= h
+        fd = (sfem.forward(up, raw) - sfem.forward(down, raw)) / (2 * h)
+        np.testing.assert_allclose(jac[:, :, k], fd, atol=1e-9, err_msg=sfem.PARAM_NAMES[k])
+
+
+def test_coefficient_and_norm_jacobians_match_finite_differences_of_the_thermal_model() -> None:
+    """Eq. 1 with Eq. 8's p_k(T) = Σ_j c_kj x^j: the chained Jacobian in the coefficients
+    (all of them, and a chosen (k, j) subset), and norm mode's ∂|f|/∂c (Eq. 3)."""
+    rng = np.random.default_rng(6)
+    n, deg = 9, 3
+    coeffs = np.zeros((sfem.N_PARAMS, deg + 1))
+    coeffs[:, 0] = _random_params(30)
+    coeffs[:, 1:] = rng.normal(0.0, 0.01, (sfem.N_PARAMS, deg))
+    x = rng.uniform(-1.0, 1.0, n)
+    V = np.vander(x, deg + 1, increasing=True)
+    raw = rng.normal(size=(n, 3))
+
+    def f_of(c: np.ndarray) -> np.ndarray:
+        return sfem.forward(V @ c.T, raw)
+
+    f, jac = sfem.forward_jacobian(V @ coeffs.T, raw)
+    full = sfem.coefficient_jacobian(jac, V)  # (n, 3, 12·(d+1)), k-major
+    cols = np.array([[0, 0], [4, 2], [10, 3], [7, 1]])
+    some = sfem.coefficient_jacobian(jac, V, cols)
+    dnorm = sfem.norm_jacobian(f, full)
+    h = 1e-6
+    for k in range(sfem.N_PARAMS):
+        for j in range(deg + 1):
+            up, down = coeffs.copy(), coeffs.copy()
+            up[k, j] += h
+            down[k, j] -= h
+            fd = (f_of(up) - f_of(down)) / (2 * h)
+            col = k * (deg + 1) + j
+            np.testing.assert_allclose(full[:, :, col], fd, atol=1e-9, err_msg=f"c[{k},{j}]")
+            fd_norm = (np.linalg.norm(f_of(up), axis=1) - np.linalg.norm(f_of(down), axis=1)) / (
+                2 * h
+            )
+            np.testing.assert_allclose(dnorm[:, col], fd_norm, atol=1e-9, err_msg=f"|f| c[{k},{j}]")
+    for m, (k, j) in enumerate(cols):
+        np.testing.assert_array_equal(some[:, :, m], full[:, :, k * (deg + 1) + j])
+
+
+def test_elementary_rotations_and_their_derivatives() -> None:
+    a = np.array([-1.1, 0.0, 0.4, 2.5])
+    for i, r in enumerate((sfem.rotation_x, sfem.rotation_y, sfem.rotation_z)):
+        R = r(a)
+        for m, ang in enumerate(a):
+            want = _textbook_rotation(*(ang if q == i else 0.0 for q in range(3)))
+            np.testing.assert_allclose(R[m], want, atol=1e-15)
+            np.testing.assert_allclose(r(float(ang)), want, atol=1e-15)
+        h = 1e-6
+        np.testing.assert_allclose(r(a, d=True), (r(a + h) - r(a - h)) / (2 * h), atol=1e-9)

@@ -13,7 +13,6 @@ from calibration.discrepancy import diagnose, stats
 from calibration.discrepancy.diagnose import heldout_improved
 from calibration.discrepancy.problem import build_problem
 from calibration.recording import Recording
-from simulators import effects as E  # noqa: N812
 from simulators.campaign_sim import RigPhysics, simulate_campaign
 from simulators.truth import SensorTruth
 
@@ -39,7 +38,7 @@ def test_base_is_the_sfem_cubic_not_its_linear_surrogate():
     sim = simulate_campaign(truth, ONE_WAY, seed=34, temperature_columns=("chamber_c",),
                             return_truth=True)
     cols = dict(sim.recording.columns)
-    ideal = E.ideal_raw_batch(truth, sim.recording.ref_g, sim.die_c)
+    ideal = truth.ideal_raw_g(sim.recording.ref_g, sim.die_c)
     cols.update(ax=ideal[:, 0], ay=ideal[:, 1], az=ideal[:, 2], chamber_c=sim.die_c)
     pb = build_problem(Recording.from_columns(cols))
     Xw, yw = pb.X0 * pb.w[:, None], pb.y * pb.w

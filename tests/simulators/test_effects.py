@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from effect_context import ctx_for
 
+from calibration import sfem
 from calibration.schedules import cube14, six_position, table1
 from simulators import effects as fx
 from simulators.campaign_sim import RigPhysics, compressor_vibration, simulate_campaign
@@ -27,10 +28,14 @@ def truth() -> SensorTruth:
     return SensorTruth.adxl355_typical(3)
 
 
-def test_ideal_raw_batch_matches_truth(truth: SensorTruth) -> None:
+def test_ideal_raw_is_what_eq1_maps_back_onto_the_reference(truth: SensorTruth) -> None:
+    """The twin's sensor reads raw = A(T)⁻¹ f + b(T): Eq. 1 forward at T gives f again."""
     ref, T = cube14(), np.linspace(-40, 60, 14)
-    np.testing.assert_allclose(fx.ideal_raw_batch(truth, ref, T), truth.ideal_raw_g(ref, T),
-                               atol=1e-14)
+    raw = truth.ideal_raw_g(ref, T)
+    np.testing.assert_allclose(sfem.forward(truth.params_vector_at(T), raw), ref, atol=1e-14)
+    one = np.array([truth.ideal_raw_g(ref[i], T[i])[0] for i in range(14)])
+    np.testing.assert_allclose(raw, one, atol=0)
+    assert np.max(np.abs(raw - ref)) > 1e-3  # the sensor's errors are visible
 
 
 def test_hysteresis_follows_direction(truth: SensorTruth) -> None:
@@ -131,8 +136,8 @@ def test_self_heating_shifts_die_and_sensor_channel(truth: SensorTruth) -> None:
     ctx = ctx_for(six_position())
     eff = fx.SelfHeating(delta_c=2.0)
     np.testing.assert_allclose(eff.temperature_delta_c(ctx, RNG), 2.0)
-    expect = fx.ideal_raw_batch(truth, ctx.ref_g, ctx.die_c + 2) - fx.ideal_raw_batch(
-        truth, ctx.ref_g, ctx.die_c)
+    expect = truth.ideal_raw_g(ctx.ref_g, ctx.die_c + 2) - truth.ideal_raw_g(
+        ctx.ref_g, ctx.die_c)
     np.testing.assert_allclose(eff.raw_delta_g(ctx, truth, RNG), expect)
     warm = fx.SelfHeating(delta_c=2.0, warmup_tau_s=60.0).temperature_delta_c(ctx, RNG)
     assert warm[0] == 0.0 and warm[-1] == pytest.approx(2 * (1 - np.exp(-5)))
@@ -150,7 +155,7 @@ def test_temperature_sensor_touches_only_the_channel(truth: SensorTruth) -> None
 def test_local_gravity_is_a_common_scale(truth: SensorTruth) -> None:
     ctx = ctx_for(cube14())
     out = fx.LocalGravity(g_local=1.0005).raw_delta_g(ctx, truth, RNG)
-    lin = fx.ideal_raw_batch(truth, ctx.ref_g, ctx.die_c) - truth.params_vector_at(ctx.die_c)[:,
+    lin = truth.ideal_raw_g(ctx.ref_g, ctx.die_c) - truth.params_vector_at(ctx.die_c)[:,
                                                                                               :3]
     np.testing.assert_allclose(out, 5e-4 * lin, atol=1e-15)
 

@@ -29,9 +29,13 @@ import numpy as np
 
 from calibration.discrepancy.context import DesignContext
 from calibration.discrepancy.effects.base import EffectModule
+from calibration.thermal_plant import (
+    AMBIENT_C,
+    DEFAULT_RAMP_C_PER_MIN,
+    lag_behind_piecewise_linear,
+    ramp_breakpoints,
+)
 
-RAMP_C_PER_MIN = 2.0  # assumed chamber ramp between steps (seed Table 3: 0.1–5 °C/min)
-AMBIENT_C = 25.0  # assumed start of the campaign: the die at lab ambient before the first ramp
 MAX_AMPLITUDE_ITER = 4
 TAU_GRID_S = tuple(float(v) for v in np.geomspace(120.0, 14400.0, 18))
 
@@ -123,46 +127,23 @@ class ThermalLag(EffectModule):
         return (f"the sensor die lags the chamber air with a time constant τ = {tau:.0f} s{unc}: "
                 "readings early in each plateau still carry part of the last step, scaled by the "
                 f"model's own temperature sensitivity ({amp:.2f} × the die–air difference of an "
-                f"assumed {RAMP_C_PER_MIN:g} °C/min ramp: the recording holds the plateaus, not "
-                "the ramps)")
+                f"assumed {DEFAULT_RAMP_C_PER_MIN:g} °C/min ramp: the recording holds the "
+                "plateaus, not the ramps)")
 
 
 def die_minus_air_c(ctx: DesignContext, tau_s: float) -> np.ndarray:
     """T_die − T_air at each reading for a first-order lag τ of a reconstructed air history.
 
-    The air history is piecewise linear: each plateau at its median temperature;
-    between plateaus a ramp at :data:`RAMP_C_PER_MIN` starting at the previous
-    plateau's last reading (why: the recording does not hold the ramp). Before
-    the first plateau the campaign is assumed to start at :data:`AMBIENT_C` and
-    to ramp, then soak as long as the other plateaus do. The lag of a linear
-    segment is solved exactly (δ = die − air: δ' = −δ/τ − r, r the air slope),
-    so the last reading of a plateau is not smeared into the next ramp.
+    The air history is piecewise linear (:func:`calibration.thermal_plant.ramp_breakpoints`):
+    each plateau at its median temperature; between plateaus a ramp at the rig's default
+    ``DEFAULT_RAMP_C_PER_MIN`` starting at the previous plateau's last reading (why: the
+    recording does not hold the ramp). Before the first plateau the campaign is assumed to
+    start at ``AMBIENT_C`` and to ramp, then soak as long as the other plateaus do. The
+    lag of each linear segment is solved exactly
+    (:func:`calibration.thermal_plant.lag_behind_piecewise_linear`), so the last reading of
+    a plateau is not smeared into the next ramp.
     """
-    ids = ctx.step_ids
-    t = ctx.t_s
-    first = {s: float(t[ctx.steps == s].min()) for s in ids}
-    last = {s: float(t[ctx.steps == s].max()) for s in ids}
-    rate = RAMP_C_PER_MIN / 60.0
-    temp = [ctx.step_temp_c[s] for s in ids]
-    soaks = [first[ids[k]] - last[ids[k - 1]] - abs(temp[k] - temp[k - 1]) / rate
-             for k in range(1, len(ids))]
-    soak = max(float(np.median(soaks)), 0.0) if soaks else 0.0
-    a0 = AMBIENT_C
-    t0 = first[ids[0]] - soak - abs(temp[0] - a0) / rate
-    # Breakpoints (time, air) of the piecewise-linear air history.
-    bt, bv = [t0, t0 + abs(temp[0] - a0) / rate], [a0, temp[0]]
-    for k in range(1, len(ids)):
-        start = max(last[ids[k - 1]], bt[-1])
-        bt += [start, start + abs(temp[k] - temp[k - 1]) / rate]
-        bv += [temp[k - 1], temp[k]]
-    bt_a, bv_a = np.asarray(bt), np.asarray(bv)
-    dt_seg = np.diff(bt_a)
-    slope = np.divide(np.diff(bv_a), dt_seg, out=np.zeros_like(dt_seg), where=dt_seg > 0)
-    slope = np.append(slope, 0.0)  # constant after the last breakpoint
-    delta = np.zeros(bt_a.size)  # δ at each breakpoint; the die starts at the air (ambient)
-    for i in range(1, bt_a.size):
-        r = slope[i - 1]
-        delta[i] = -r * tau_s + (delta[i - 1] + r * tau_s) * np.exp(-dt_seg[i - 1] / tau_s)
-    i = np.clip(np.searchsorted(bt_a, t, side="right") - 1, 0, bt_a.size - 1)
-    r = slope[i]
-    return -r * tau_s + (delta[i] + r * tau_s) * np.exp(-(t - bt_a[i]) / tau_s)
+    bt, bv = ramp_breakpoints(
+        ctx.t_s, ctx.steps, ctx.step_temp_c, DEFAULT_RAMP_C_PER_MIN, AMBIENT_C
+    )
+    return lag_behind_piecewise_linear(bt, bv, ctx.t_s, tau_s)

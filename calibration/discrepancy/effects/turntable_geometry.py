@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from calibration import sfem
 from calibration.discrepancy.effects.not_identifiable import Unobservable
 
 
@@ -34,9 +35,7 @@ def tilted_ref_g(ref_g: np.ndarray, base_tilt_rad: np.ndarray) -> np.ndarray:
     instead of ``C_pos · up`` (C_pos: :func:`lab_to_sensor`), same magnitude.
     """
     tx, ty = np.asarray(base_tilt_rad, float)
-    Rx = np.array([[1, 0, 0], [0, np.cos(tx), -np.sin(tx)], [0, np.sin(tx), np.cos(tx)]])
-    Ry = np.array([[np.cos(ty), 0, np.sin(ty)], [0, 1, 0], [-np.sin(ty), 0, np.cos(ty)]])
-    up = Rx @ Ry @ np.array([0.0, 0.0, 1.0])
+    up = sfem.rotation_x(tx) @ sfem.rotation_y(ty) @ np.array([0.0, 0.0, 1.0])
     mag = np.linalg.norm(ref_g, axis=1)
     return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
 
