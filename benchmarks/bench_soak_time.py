@@ -16,10 +16,14 @@ comparison meaningful rather than a coin toss:
 
 * several sensors (``--seeds``), not one: one sensor's held-out error moves
   by ±10 % with the noise realisation alone;
-* common random numbers: the accelerometer and temperature-channel noise of
-  the k-th position capture is drawn from a stream keyed by (sensor, k), so
-  every policy measures its positions with the *same* noise and differences
-  come from the soak alone (the soak's die probes keep the rig's stream).
+* common random numbers: the accelerometer and temperature-channel noise of a
+  position capture is drawn from a stream keyed by (sensor, orientation,
+  setpoint, attempt), so every policy measures each position of each step with
+  the *same* noise whatever order it visits them in, and differences come from
+  the soak alone (the soak's die probes keep the rig's stream). Keyed by the
+  capture's index instead (before issue 12's soak12 branch), two policies whose
+  steps visit the positions in different orders (``rate_gain: measured`` starts
+  every step from home) gave each position another noise draw.
 
 ``--noise-free`` switches the accelerometer noise off: the held-out error is
 then the soak-induced (systematic) part only. ``--rate-ug-per-c-per-min K``
@@ -92,6 +96,8 @@ class BenchTruth(SensorTruth):
     rate_g_per_c_per_s: np.ndarray | None = None
     chamber: Any = None  # the rig's ChamberPhysics, set by run_campaign (exact die rate)
     _captures: int = field(default=0, init=False)
+    # attempts per (orientation, setpoint): a quality re-measure gets its own stream
+    _attempts: dict[tuple[int, ...], int] = field(default_factory=dict, init=False)
     _temp_rng: np.random.Generator | None = field(default=None, init=False)
     _last: tuple[float, float] | None = field(default=None, init=False)
 
@@ -106,13 +112,30 @@ class BenchTruth(SensorTruth):
         self._last = (t_s, die_c)
         self._temp_rng = None
         if n != self.probe_n:
-            self._captures += 1
-            rng = np.random.default_rng([self.crn_seed, self._captures])
-            self._temp_rng = np.random.default_rng([self.crn_seed, self._captures, 1])
+            key = self._capture_key(ref_g)
+            rng = np.random.default_rng(key)
+            self._temp_rng = np.random.default_rng([*key, 1])
         out = super().sample_g(ref_g, die_c, n, rng, t_s)
         if self.rate_g_per_c_per_s is not None:
             out = out + rate * self.rate_g_per_c_per_s[None, :]
         return out
+
+    def _capture_key(self, ref_g: np.ndarray) -> list[int]:
+        """The noise stream of a position capture: (sensor, orientation, setpoint, attempt).
+
+        Keyed by what is measured, not by when, so every policy draws the same noise for
+        the same position of the same step even when it visits the positions in another
+        order. Without the rig's chamber (no setpoint known): the capture's index.
+        """
+        if self.chamber is None:
+            self._captures += 1
+            return [self.crn_seed, self._captures]
+        # Table-1 references are 0, ±1, ±0.707…: two decimals tell every position apart.
+        pose = tuple(int(round(float(v) * 100.0)) + 200 for v in np.ravel(ref_g)[:3])
+        where = (*pose, int(round(float(self.chamber.setpoint_c))) + 1000)
+        attempt = self._attempts.get(where, 0)
+        self._attempts[where] = attempt + 1
+        return [self.crn_seed, *where, attempt, 7]
 
     def temperature_samples_c(self, die_c: float, n: int,
                               rng: np.random.Generator) -> np.ndarray:

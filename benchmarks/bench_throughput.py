@@ -65,7 +65,12 @@ from service.engine.runner import CampaignRunner  # noqa: E402
 SEED_HOURS_PER_SENSOR = 13.9  # the seed's protocol: one sensor per 13.9 chamber-hours
 REQUIRED_TIME_RATIO = 0.7  # 8 sensors in ≤ 0.7 × the seed's fixed-hour campaign
 RIG_SEED = 1  # the chamber's, table's and die probes' streams: the same in every policy
-POLICIES = ["fixed 60 min (seed)", "measured k, corrected", "predictive (default)"]
+POLICIES = ["fixed 60 min (seed)", "measured k, corrected", "predictive (default)",
+            "fixed 60 min, next draw"]
+# The fixed hour again with the next noise draw (crn offset + 1): how far a sensor's held-out
+# error moves between two independent noise draws of the same part and the same soak, the
+# metric's own spread against which a per-sensor ratio of one draw is judged.
+NEXT_DRAW = "fixed 60 min, next draw"
 
 
 def serials_for(n_sensors: int) -> list[str]:
@@ -118,21 +123,27 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     camp = store.load_campaign(sf, cid)
     if state != "completed":
         raise RuntimeError(f"campaign {state}: {camp.error}")
-    return fits, clock.now(), camp.steps_log, dict(camp.sensors_dropped or {})
+    cols = store.measurement_columns(sf, cid, serials[0])
+    log = [{**e, "rows_t_s": [t for t, st in zip(cols["t_s"], cols["step"], strict=True)
+                              if int(st) == e["step"]]} for e in camp.steps_log]
+    return fits, clock.now(), log, dict(camp.sensors_dropped or {})
 
 
 def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[str, Any]:
     """One N-sensor campaign under one policy; runs in its own worker process."""
     name, n_sensors, fast, rates, noise_free, crn_offset = args
     logging.getLogger("soakcal").setLevel(logging.WARNING)  # no per-soak event lines
-    probe_n = int(VARIANTS[name].get("soak_probe_samples", 8))
+    if name == NEXT_DRAW:
+        crn_offset += 1
+    variant = VARIANTS[POLICIES[0] if name == NEXT_DRAW else name]
+    probe_n = int(variant.get("soak_probe_samples", 8))
     truths = make_truths(n_sensors, rates, probe_n, noise_free, crn_offset)
     sp = demo_spec(fast)["setpoints_c"] if fast else SETPOINTS_C
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
     with tempfile.TemporaryDirectory() as d:
         fits, sim_s, log, dropped = asyncio.run(
-            run_several({**demo_spec(fast), **VARIANTS[name]}, Path(d), truths,
+            run_several({**demo_spec(fast), **variant}, Path(d), truths,
                         RIG_SEED + crn_offset))
     wall_s = time.monotonic() - w0
     per_sensor: dict[str, dict[str, float]] = {}
@@ -151,7 +162,27 @@ def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[st
         "k_used": [e.get("rate_gain_ug_per_c_per_min") for e in log
                    if e.get("rate_gain_ug_per_c_per_min") is not None],
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "steps": step_breakdown(log, sim_s),
     }
+
+
+def step_breakdown(log: list[dict[str, Any]], sim_s: float) -> list[dict[str, float]]:
+    """Where each step's time went (s): ramp (from the previous step's last capture, or the
+    campaign start, to the soak's start: table parking, setpoint ramp, the air settling
+    into the band, the poll that sees it), soak, and sweep (soak end to the step's last row:
+    moves, settles, captures, saves). The rows' times are the first sensor's (all are
+    read at once); what follows the last step's last row (the fit) is ``tail``."""
+    out: list[dict[str, float]] = []
+    prev_end_s = 0.0
+    for e in sorted(log, key=lambda e: e["step"]):
+        rows = e.get("rows_t_s") or [e["soak_end_t_s"]]
+        out.append({"step": e["step"], "ramp_s": e["soak_start_t_s"] - prev_end_s,
+                    "soak_s": e["soak_s"], "sweep_s": max(rows) - e["soak_end_t_s"],
+                    "k": e.get("rate_gain_ug_per_c_per_min") or float("nan")})
+        prev_end_s = max(rows)
+    if out:
+        out[-1]["tail_s"] = sim_s - prev_end_s
+    return out
 
 
 def pooled_rmse_ug(per_sensor: dict[str, dict[str, float]]) -> float:
@@ -200,6 +231,17 @@ def report(results: list[dict[str, Any]], n_sensors: int, rates: list[float]) ->
               f"{verdict}")
         if r["dropped"]:
             print(f"  dropped: {r['dropped']}")
+    print("\nper step, minutes: ramp (incl. parking and the poll that sees the band) / soak / "
+          "sweep (soak end → last capture)")
+    for r in results:
+        steps = r["steps"]
+        cells = " ".join(f"{s['ramp_s'] / 60:.1f}/{s['soak_s'] / 60:.1f}/{s['sweep_s'] / 60:.1f}"
+                         for s in steps)
+        ramp = sum(s["ramp_s"] for s in steps) / 3600.0
+        sweep = sum(s["sweep_s"] for s in steps) / 3600.0
+        tail = (steps[-1].get("tail_s", 0.0) if steps else 0.0) / 3600.0
+        print(f"{r['name']:<24} ramp {ramp:.2f} h, sweep {sweep:.2f} h, after the last row "
+              f"{tail * 3600:.0f} s: {cells}")
     for r in results:
         if r["k_used"]:
             print(f"{r['name']}: k fed per step (µg per °C/min, largest over the sensors): "
