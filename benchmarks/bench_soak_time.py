@@ -83,6 +83,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # (not 200: a capture of the position size would be taken for a position's, see BenchTruth).
     "measured k, corrected": {"stability": "predictive", "rate_gain": "measured",
                               "soak_probe_samples": 250},
+    # The same with a Williams design per plateau: every position in every slot of the sweep
+    # once over the steps, so what depends on the slot (the die still approaching) is averaged
+    # over the steps instead of meeting the same position at every step.
+    "measured k, balanced order": {"stability": "predictive", "rate_gain": "measured",
+                                   "soak_probe_samples": 250, "position_order": "balanced"},
 }
 RATE_PATTERN = np.array([1.0, -0.6, 0.4])  # per-axis signs/sizes of the rate effect
 

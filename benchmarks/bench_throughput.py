@@ -66,7 +66,7 @@ SEED_HOURS_PER_SENSOR = 13.9  # the seed's protocol: one sensor per 13.9 chamber
 REQUIRED_TIME_RATIO = 0.7  # 8 sensors in ≤ 0.7 × the seed's fixed-hour campaign
 RIG_SEED = 1  # the chamber's, table's and die probes' streams: the same in every policy
 POLICIES = ["fixed 60 min (seed)", "measured k, corrected", "predictive (default)",
-            "fixed 60 min, next draw"]
+            "fixed 60 min, next draw", "measured k, balanced order"]
 # The fixed hour again with the next noise draw (crn offset + 1): how far a sensor's held-out
 # error moves between two independent noise draws of the same part and the same soak, the
 # metric's own spread against which a per-sensor ratio of one draw is judged.

@@ -535,7 +535,7 @@ class CampaignRunner:
                     cfg, now_s - start_s, settled, np.array([p.clock_s for p in probes]),
                     np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
                     n_positions=self.n_pos, edge=edge,
-                    rate_gain_ug_per_c_per_min=gains[key]))
+                    rate_gain_ug_per_c_per_min=gains[key], order_repeats=msg.order_repeats))
                 if not decisions[-1].stable:
                     waiting_on = key
                     break

@@ -61,7 +61,7 @@ DEFAULT_DRIFT_BUDGET = 0.25
 DEFAULT_GRADIENT_LAG_S = 10.0
 # Every position within this of the step's final temperature: a fifth of the seed's
 # 10 °C spacing, so the steps stay where the plan put them.
-DEFAULT_STEP_TOL_C = 2.0
+DEFAULT_STEP_TOL_C = 1.0
 # The calibration core's valid range is the step temperatures ± 1 °C; keeping the
 # extreme steps within 0.7 °C of their final value leaves 3 σ of a reading's 0.1 °C.
 DEFAULT_EDGE_TOL_C = 0.7
@@ -321,6 +321,7 @@ def decide(
     n_positions: int | None = None,
     edge: bool = False,
     rate_gain_ug_per_c_per_min: float | None = None,
+    order_repeats: int = 1,
 ) -> Decision:
     """Is the step soaked, ``elapsed_s`` after the soak started?
 
@@ -333,7 +334,11 @@ def decide(
     of die-temperature change k (upper bound, µg per °C/min, e.g. from
     :func:`service.engine.soak_rate.rate_gain_for_decision`): the rate lag is then
     60·k / ``tempco_ug_per_c`` s instead of the assumed ``gradient_lag_s``
-    (None, the default, keeps the assumption).
+    (None, the default, keeps the assumption);
+    ``order_repeats`` how many steps visit the positions in this step's order: the varying
+    part of the sweep's error depends on the slot in the sweep, so it then meets the same
+    position at every such step and is not averaged over them; its budget becomes
+    ``temp_budget_c / √order_repeats``, the noise of a position's mean over those steps.
     """
     if rate_gain_ug_per_c_per_min is not None:
         cfg = dataclasses.replace(cfg, gradient_lag_s=lag_from_rate_gain_s(
@@ -354,17 +359,19 @@ def decide(
         return Decision(False, "min_soak_waiting", ready_in_s=cfg.min_soak_s - elapsed_s)
     return _predict(cfg, np.asarray(sensor_t_s, float), np.asarray(sensor_c, float),
                     cfg.sweep_s if sweep_s is None else float(sweep_s),
-                    cfg.n_positions if n_positions is None else int(n_positions), edge)
+                    cfg.n_positions if n_positions is None else int(n_positions), edge,
+                    cfg.temp_budget_c / math.sqrt(max(order_repeats, 1)))
 
 
 def _predict(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s: float,
-             n_positions: int, edge: bool) -> Decision:
-    """The die-temperature half of :func:`decide` (policy ``predictive``)."""
+             n_positions: int, edge: bool, varying_budget_c: float) -> Decision:
+    """The die-temperature half of :func:`decide` (policy ``predictive``);
+    ``varying_budget_c``: ``temp_budget_c`` over √(steps visiting in this order)."""
     recent = t_s >= t_s[-1] - cfg.window_s if t_s.size else t_s.astype(bool)
     t_s, temp_c = t_s[recent], temp_c[recent]
     if t_s.size < cfg.min_points:
         return Decision(False, "too_few_sensor_points")
-    flat = _flat(cfg, t_s, temp_c, sweep_s, n_positions)
+    flat = _flat(cfg, t_s, temp_c, sweep_s, n_positions, varying_budget_c)
     if flat is not None:
         return flat
     fit = fit_approach(t_s, temp_c)
@@ -398,7 +405,7 @@ def _predict(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s:
     varying_hi, common_hi, mean_off_hi, off_hi = (float(v) for v in upper)
     common_budget_c = cfg.temp_budget_c / math.sqrt(max(n_positions, 1))
     info["predicted_error_c"] = max(varying_hi, common_hi * math.sqrt(max(n_positions, 1)))
-    ok = (varying_hi <= cfg.temp_budget_c and common_hi <= common_budget_c
+    ok = (varying_hi <= varying_budget_c and common_hi <= common_budget_c
           and off_hi <= cfg.step_tol_c)
     if edge:
         ok = ok and mean_off_hi <= cfg.edge_tol_c
@@ -409,7 +416,7 @@ def _predict(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s:
     # Every bound above is proportional to the die's offset, which decays as e^(−Δt/τ): the
     # budget binding hardest is met after τ·ln(bound / budget). Approximate (the bounds' σ
     # part does not decay exactly so), which is why the runner still re-decides then.
-    ratios = [varying_hi / cfg.temp_budget_c, common_hi / common_budget_c,
+    ratios = [varying_hi / varying_budget_c, common_hi / common_budget_c,
               off_hi / cfg.step_tol_c]
     if edge:
         ratios.append(mean_off_hi / cfg.edge_tol_c)
@@ -456,7 +463,7 @@ def _upper_bounds(f, p: np.ndarray, cov: np.ndarray, z: float) -> np.ndarray:  #
 
 
 def _flat(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s: float,
-          n_positions: int) -> Decision | None:
+          n_positions: int, varying_budget_c: float) -> Decision | None:
     """Stable if even the upper bound of the linear trend keeps the die within the budgets
     (an exponential fit to pure noise is ill-posed); else None.
 
@@ -474,7 +481,7 @@ def _flat(cfg: StabilityConfig, t_s: np.ndarray, temp_c: np.ndarray, sweep_s: fl
     slope_hi = abs(float(slope)) + cfg.confidence_z * math.sqrt(s2 / sxx)
     drift_c = slope_hi * sweep_s
     lag_c = slope_hi * cfg.gradient_lag_s
-    if (drift_c <= cfg.temp_budget_c
+    if (drift_c <= varying_budget_c
             and lag_c <= cfg.temp_budget_c / math.sqrt(max(n_positions, 1))
             and math.sqrt(s2) <= cfg.max_resid_c):
         return Decision(True, "die_flat", predicted_offset_c=drift_c,
