@@ -35,6 +35,7 @@ import argparse
 import asyncio
 import dataclasses
 import logging
+import math
 import resource
 import sys
 import tempfile
@@ -256,6 +257,9 @@ def main() -> int:
                     help="no accelerometer noise: held-out error = soak-induced part only")
     ap.add_argument("--crn-offset", type=int, default=0,
                     help="other noise streams for the same parts (positions and probes)")
+    ap.add_argument("--draws", type=int, default=1,
+                    help="repeat with this many noise draws (crn offsets N, N+1, …) and judge "
+                         "each sensor over all of them")
     ap.add_argument("--jobs", type=int, default=1, help="campaigns run at once (processes)")
     ap.add_argument("--rate-ug-per-c-per-min", default="0",
                     help="temperature_rate gain(s), µg per °C/min; a list cycles over sensors")
@@ -269,20 +273,64 @@ def main() -> int:
     names = POLICIES
     if args.variants:
         names = [POLICIES[0]] + [POLICIES[int(i)] for i in args.variants.split(",")]
-    w0 = time.monotonic()
-    cases = [(name, args.sensors, args.fast, rates, args.noise_free, args.crn_offset)
-             for name in names]
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
-        results = list(pool.map(one_campaign, cases))
-    print(f"{args.sensors} sensors in one campaign, temperature_rate "
-          f"{','.join(f'{v:g}' for v in rates)} µg per °C/min"
-          f"{' (cycled over the sensors)' if len(rates) > 1 else ''}, "
-          f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}"
-          f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}"
-          f"{f', noise streams offset {args.crn_offset}' if args.crn_offset else ''}; "
-          f"{time.monotonic() - w0:.0f} s wall, {args.jobs} job(s)\n")
-    report(results, args.sensors, rates)
+    by_draw = []
+    for draw in range(args.crn_offset, args.crn_offset + max(1, args.draws)):
+        w0 = time.monotonic()
+        cases = [(name, args.sensors, args.fast, rates, args.noise_free, draw)
+                 for name in names]
+        with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
+            results = list(pool.map(one_campaign, cases))
+        print(f"{args.sensors} sensors in one campaign, temperature_rate "
+              f"{','.join(f'{v:g}' for v in rates)} µg per °C/min"
+              f"{' (cycled over the sensors)' if len(rates) > 1 else ''}, "
+              f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}"
+              f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}"
+              f"{f', noise streams offset {draw}' if draw else ''}; "
+              f"{time.monotonic() - w0:.0f} s wall, {args.jobs} job(s)\n")
+        report(results, args.sensors, rates)
+        print()
+        by_draw.append(results)
+    if len(by_draw) > 1:
+        report_draws(by_draw, args.sensors)
     return 0
+
+
+def report_draws(by_draw: list[list[dict[str, Any]]], n_sensors: int) -> None:
+    """Each sensor judged over every draw: its held-out rms pooled over the draws against
+    its fixed hour's pooled over the same draws; and how many single sensor-draws exceed
+    ×1.05, and the campaign times."""
+    serials = serials_for(n_sensors)
+    names = [r["name"] for r in by_draw[0]]
+    print(f"over {len(by_draw)} noise draws: each sensor's held-out rms pooled over the draws, "
+          "ratio to its fixed hour's pooled over the same draws")
+    print(f"{'sensor':<10} " + " ".join(f"{n[:26]:>26}" for n in names[1:]))
+    worst: dict[str, float] = {}
+    for serial in serials:
+        cells = []
+        for j, name in enumerate(names[1:], start=1):
+            got = [d[j]["per_sensor"].get(serial) for d in by_draw]
+            ref = [d[0]["per_sensor"].get(serial) for d in by_draw]
+            if any(g is None for g in got) or any(r is None for r in ref):
+                cells.append(f"{'dropped':>26}")
+                continue
+            ratio = math.sqrt(sum(g["sq_err"] for g in got) / sum(r["sq_err"] for r in ref))
+            each = [g["rmse_ug"] / r["rmse_ug"] for g, r in zip(got, ref, strict=True)]
+            worst[name] = max(worst.get(name, 0.0), ratio)
+            cells.append(f"×{ratio:.3f} ({min(each):.3f}–{max(each):.3f})".rjust(26))
+        print(f"{serial:<10} " + " ".join(cells))
+    for j, name in enumerate(names[1:], start=1):
+        hours = [d[j]["sim_s"] / 3600.0 for d in by_draw]
+        past = sum(d[j]["per_sensor"][s]["rmse_ug"] / d[0]["per_sensor"][s]["rmse_ug"]
+                   > EQUAL_ACCURACY for d in by_draw for s in serials
+                   if s in d[j]["per_sensor"] and s in d[0]["per_sensor"])
+        pooled = [pooled_rmse_ug(d[j]["per_sensor"]) / pooled_rmse_ug(d[0]["per_sensor"])
+                  for d in by_draw]
+        print(f"{name:<26} campaign {min(hours):.2f}–{max(hours):.2f} h "
+              f"(×{min(hours) / SEED_HOURS_PER_SENSOR:.3f}–"
+              f"×{max(hours) / SEED_HOURS_PER_SENSOR:.3f} of {SEED_HOURS_PER_SENSOR} h), "
+              f"pooled ×{min(pooled):.3f}–×{max(pooled):.3f}, worst sensor over the draws "
+              f"×{worst.get(name, math.nan):.3f}, sensor-draws past ×{EQUAL_ACCURACY:.2f}: "
+              f"{past} of {len(by_draw) * n_sensors}")
 
 
 if __name__ == "__main__":
