@@ -49,6 +49,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import json
 import os
 import tempfile
 import time
@@ -218,9 +219,9 @@ def heldout_rmse_ug(model: Any, truth: SensorTruth, temps_die_c: np.ndarray) -> 
     return float(np.sqrt(np.mean(np.square(heldout_errors_g(model, truth, temps_die_c))))) * 1e6
 
 
-def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
+def one_case(args: tuple[str, int, bool, bool, float, dict[str, Any]]) -> dict[str, Any]:
     """One campaign (variant × sensor); runs in a worker process."""
-    name, seed, fast, noise_free, rate = args
+    name, seed, fast, noise_free, rate, extra = args
     # Probes keep the rig's noise stream, so every variant measures positions with the same noise.
     truth = make_truth(seed, noise_free, rate,
                        int(VARIANTS[name].get("soak_probe_samples", 8)))
@@ -228,7 +229,7 @@ def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
     with tempfile.TemporaryDirectory() as d:
-        fit, sim_s, log = asyncio.run(run_campaign({**demo_spec(fast), **VARIANTS[name]},
+        fit, sim_s, log = asyncio.run(run_campaign({**demo_spec(fast), **VARIANTS[name], **extra},
                                                    Path(d), seed, truth))
     err = heldout_errors_g(fit.model, make_truth(seed, noise_free, rate), temps)
     return {
@@ -262,12 +263,16 @@ def main() -> int:
     ap.add_argument("--variants", default="",
                     help="comma-separated numbers of the policies to run besides the fixed "
                          f"hour (1-{len(VARIANTS) - 1}, in the order {list(VARIANTS)[1:]})")
+    ap.add_argument("--extra", default="{}",
+                    help='spec keys (JSON) added to every policy, the fixed hour\'s too, e.g. '
+                         '\'{"step_tol_c": 2.0}\' or a position_order')
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
+    extra = json.loads(args.extra)
     names = list(VARIANTS)
     if args.variants:
         names = [names[0]] + [names[int(i)] for i in args.variants.split(",")]
-    cases = [(name, s, args.fast, args.noise_free, args.rate_ug_per_c_per_min)
+    cases = [(name, s, args.fast, args.noise_free, args.rate_ug_per_c_per_min, extra)
              for name in names for s in seeds]
     w0 = time.monotonic()
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
