@@ -109,10 +109,15 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     cid = _create_campaign(sf, {**spec, "sensors": serials})
     clock = VirtualClock(idle_wall_s=0.0003)
     fits: dict[str, Any] = {}
+    k_hats: dict[str, tuple[list[float], list[float]]] = {}
 
     def calibrate(cols: Any, provenance: dict[str, Any]) -> dict[str, Any]:
         values = calibrate_columns(cols, provenance)
         fits[str(provenance["sensor"])] = values.get("_fit")  # the runner keeps the first only
+        est = provenance.get("rate_gain_estimate")  # rate_gain measured: the campaign's k̂
+        if est:
+            k_hats[str(provenance["sensor"])] = (est["gain_ug_per_c_per_min"],
+                                                 est["sd_ug_per_c_per_min"])
         return values
 
     with catching_chamber(truths.values()):
@@ -127,6 +132,9 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     cols = store.measurement_columns(sf, cid, serials[0])
     log = [{**e, "rows_t_s": [t for t, st in zip(cols["t_s"], cols["step"], strict=True)
                               if int(st) == e["step"]]} for e in camp.steps_log]
+    for serial, k in k_hats.items():
+        if serial in fits:
+            fits[serial].k_hat = k  # the estimate the fit used, read by one_campaign
     return fits, clock.now(), log, dict(camp.sensors_dropped or {})
 
 
@@ -154,7 +162,8 @@ def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[st
         err = heldout_errors_g(fits[serial].model, make_truth(i + 1, False, rate_of(i, rates)),
                                temps)
         per_sensor[serial] = {"sq_err": float(np.sum(err**2)), "n_err": int(err.size),
-                              "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6}
+                              "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6,
+                              "k_hat": getattr(fits[serial], "k_hat", None)}
     return {
         "name": name, "sim_s": sim_s, "soak_s": sum(e["soak_s"] for e in log),
         "max_soak": sum(bool(e.get("max_soak_reached")) for e in log),
@@ -243,6 +252,14 @@ def report(results: list[dict[str, Any]], n_sensors: int, rates: list[float]) ->
         tail = (steps[-1].get("tail_s", 0.0) if steps else 0.0) / 3600.0
         print(f"{r['name']:<24} ramp {ramp:.2f} h, sweep {sweep:.2f} h, after the last row "
               f"{tail * 3600:.0f} s: {cells}")
+    for r in results:
+        k_hats = {s: v["k_hat"] for s, v in r["per_sensor"].items() if v.get("k_hat")}
+        if k_hats:
+            print(f"{r['name']}: the campaign's k̂ ± σ per sensor (x, y, z; µg per °C/min; true "
+                  "gain × (1, −0.6, 0.4)): " + "; ".join(
+                      f"{s[-4:]} " + " ".join(f"{k:+.1f}±{sd:.1f}" for k, sd in zip(*v,
+                                                                                   strict=True))
+                      for s, v in k_hats.items()))
     for r in results:
         if r["k_used"]:
             print(f"{r['name']}: k fed per step (µg per °C/min, largest over the sensors): "
