@@ -59,8 +59,10 @@ DEFAULT_DRIFT_BUDGET = 0.25
 # Package/board lag behind the die reading while the die moves: ceramic LCC package
 # ≈ 0.15 J/K on ≈ 30 K/W of pads and board → R·C ≈ 5 s, doubled for margin.
 DEFAULT_GRADIENT_LAG_S = 10.0
-# Every position within this of the step's final temperature: a fifth of the seed's
-# 10 °C spacing, so the steps stay where the plan put them.
+# Every position within this of the step's final temperature, so the steps stay where the
+# plan put them. Measured (issue 12, docs/benchmarks.md): with the same position noise, soaks
+# ending ≈ 1.9 °C from the final value (the former 2 °C, a fifth of the seed's spacing) cost
+# a sensor 3–4 % of held-out error, ≈ 0.9 °C nothing measurable.
 DEFAULT_STEP_TOL_C = 1.0
 # The calibration core's valid range is the step temperatures ± 1 °C; keeping the
 # extreme steps within 0.7 °C of their final value leaves 3 σ of a reading's 0.1 °C.
