@@ -16,10 +16,14 @@ comparison meaningful rather than a coin toss:
 
 * several sensors (``--seeds``), not one: one sensor's held-out error moves
   by ±10 % with the noise realisation alone;
-* common random numbers: the accelerometer and temperature-channel noise of
-  the k-th position capture is drawn from a stream keyed by (sensor, k), so
-  every policy measures its positions with the *same* noise and differences
-  come from the soak alone (the soak's die probes keep the rig's stream).
+* common random numbers: the accelerometer and temperature-channel noise of a
+  position capture is drawn from a stream keyed by (sensor, orientation,
+  setpoint, attempt), so every policy measures each position of each step with
+  the *same* noise whatever order it visits them in, and differences come from
+  the soak alone (the soak's die probes keep the rig's stream). Keyed by the
+  capture's index instead (before issue 12's soak12 branch), two policies whose
+  steps visit the positions in different orders (``rate_gain: measured`` starts
+  every step from home) gave each position another noise draw.
 
 ``--noise-free`` switches the accelerometer noise off: the held-out error is
 then the soak-induced (systematic) part only. ``--rate-ug-per-c-per-min K``
@@ -45,6 +49,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import json
 import os
 import tempfile
 import time
@@ -79,6 +84,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # (not 200: a capture of the position size would be taken for a position's, see BenchTruth).
     "measured k, corrected": {"stability": "predictive", "rate_gain": "measured",
                               "soak_probe_samples": 250},
+    # The same with a Williams design per plateau: every position in every slot of the sweep
+    # once over the steps, so what depends on the slot (the die still approaching) is averaged
+    # over the steps instead of meeting the same position at every step.
+    "measured k, balanced order": {"stability": "predictive", "rate_gain": "measured",
+                                   "soak_probe_samples": 250, "position_order": "balanced"},
 }
 RATE_PATTERN = np.array([1.0, -0.6, 0.4])  # per-axis signs/sizes of the rate effect
 
@@ -92,6 +102,8 @@ class BenchTruth(SensorTruth):
     rate_g_per_c_per_s: np.ndarray | None = None
     chamber: Any = None  # the rig's ChamberPhysics, set by run_campaign (exact die rate)
     _captures: int = field(default=0, init=False)
+    # attempts per (orientation, setpoint): a quality re-measure gets its own stream
+    _attempts: dict[tuple[int, ...], int] = field(default_factory=dict, init=False)
     _temp_rng: np.random.Generator | None = field(default=None, init=False)
     _last: tuple[float, float] | None = field(default=None, init=False)
 
@@ -106,13 +118,30 @@ class BenchTruth(SensorTruth):
         self._last = (t_s, die_c)
         self._temp_rng = None
         if n != self.probe_n:
-            self._captures += 1
-            rng = np.random.default_rng([self.crn_seed, self._captures])
-            self._temp_rng = np.random.default_rng([self.crn_seed, self._captures, 1])
+            key = self._capture_key(ref_g)
+            rng = np.random.default_rng(key)
+            self._temp_rng = np.random.default_rng([*key, 1])
         out = super().sample_g(ref_g, die_c, n, rng, t_s)
         if self.rate_g_per_c_per_s is not None:
             out = out + rate * self.rate_g_per_c_per_s[None, :]
         return out
+
+    def _capture_key(self, ref_g: np.ndarray) -> list[int]:
+        """The noise stream of a position capture: (sensor, orientation, setpoint, attempt).
+
+        Keyed by what is measured, not by when, so every policy draws the same noise for
+        the same position of the same step even when it visits the positions in another
+        order. Without the rig's chamber (no setpoint known): the capture's index.
+        """
+        if self.chamber is None:
+            self._captures += 1
+            return [self.crn_seed, self._captures]
+        # Table-1 references are 0, ±1, ±0.707…: two decimals tell every position apart.
+        pose = tuple(int(round(float(v) * 100.0)) + 200 for v in np.ravel(ref_g)[:3])
+        where = (*pose, int(round(float(self.chamber.setpoint_c))) + 1000)
+        attempt = self._attempts.get(where, 0)
+        self._attempts[where] = attempt + 1
+        return [self.crn_seed, *where, attempt, 7]
 
     def temperature_samples_c(self, die_c: float, n: int,
                               rng: np.random.Generator) -> np.ndarray:
@@ -190,9 +219,9 @@ def heldout_rmse_ug(model: Any, truth: SensorTruth, temps_die_c: np.ndarray) -> 
     return float(np.sqrt(np.mean(np.square(heldout_errors_g(model, truth, temps_die_c))))) * 1e6
 
 
-def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
+def one_case(args: tuple[str, int, bool, bool, float, dict[str, Any]]) -> dict[str, Any]:
     """One campaign (variant × sensor); runs in a worker process."""
-    name, seed, fast, noise_free, rate = args
+    name, seed, fast, noise_free, rate, extra = args
     # Probes keep the rig's noise stream, so every variant measures positions with the same noise.
     truth = make_truth(seed, noise_free, rate,
                        int(VARIANTS[name].get("soak_probe_samples", 8)))
@@ -200,7 +229,7 @@ def one_case(args: tuple[str, int, bool, bool, float]) -> dict[str, Any]:
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
     with tempfile.TemporaryDirectory() as d:
-        fit, sim_s, log = asyncio.run(run_campaign({**demo_spec(fast), **VARIANTS[name]},
+        fit, sim_s, log = asyncio.run(run_campaign({**demo_spec(fast), **VARIANTS[name], **extra},
                                                    Path(d), seed, truth))
     err = heldout_errors_g(fit.model, make_truth(seed, noise_free, rate), temps)
     return {
@@ -234,12 +263,16 @@ def main() -> int:
     ap.add_argument("--variants", default="",
                     help="comma-separated numbers of the policies to run besides the fixed "
                          f"hour (1-{len(VARIANTS) - 1}, in the order {list(VARIANTS)[1:]})")
+    ap.add_argument("--extra", default="{}",
+                    help='spec keys (JSON) added to every policy, the fixed hour\'s too, e.g. '
+                         '\'{"step_tol_c": 2.0}\' or a position_order')
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
+    extra = json.loads(args.extra)
     names = list(VARIANTS)
     if args.variants:
         names = [names[0]] + [names[int(i)] for i in args.variants.split(",")]
-    cases = [(name, s, args.fast, args.noise_free, args.rate_ug_per_c_per_min)
+    cases = [(name, s, args.fast, args.noise_free, args.rate_ug_per_c_per_min, extra)
              for name in names for s in seeds]
     w0 = time.monotonic()
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:

@@ -35,6 +35,7 @@ import argparse
 import asyncio
 import dataclasses
 import logging
+import math
 import resource
 import sys
 import tempfile
@@ -65,7 +66,12 @@ from service.engine.runner import CampaignRunner  # noqa: E402
 SEED_HOURS_PER_SENSOR = 13.9  # the seed's protocol: one sensor per 13.9 chamber-hours
 REQUIRED_TIME_RATIO = 0.7  # 8 sensors in ≤ 0.7 × the seed's fixed-hour campaign
 RIG_SEED = 1  # the chamber's, table's and die probes' streams: the same in every policy
-POLICIES = ["fixed 60 min (seed)", "measured k, corrected", "predictive (default)"]
+POLICIES = ["fixed 60 min (seed)", "measured k, corrected", "predictive (default)",
+            "fixed 60 min, next draw", "measured k, balanced order"]
+# The fixed hour again with the next noise draw (crn offset + 1): how far a sensor's held-out
+# error moves between two independent noise draws of the same part and the same soak, the
+# metric's own spread against which a per-sensor ratio of one draw is judged.
+NEXT_DRAW = "fixed 60 min, next draw"
 
 
 def serials_for(n_sensors: int) -> list[str]:
@@ -103,10 +109,15 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     cid = _create_campaign(sf, {**spec, "sensors": serials})
     clock = VirtualClock(idle_wall_s=0.0003)
     fits: dict[str, Any] = {}
+    k_hats: dict[str, tuple[list[float], list[float]]] = {}
 
     def calibrate(cols: Any, provenance: dict[str, Any]) -> dict[str, Any]:
         values = calibrate_columns(cols, provenance)
         fits[str(provenance["sensor"])] = values.get("_fit")  # the runner keeps the first only
+        est = provenance.get("rate_gain_estimate")  # rate_gain measured: the campaign's k̂
+        if est:
+            k_hats[str(provenance["sensor"])] = (est["gain_ug_per_c_per_min"],
+                                                 est["sd_ug_per_c_per_min"])
         return values
 
     with catching_chamber(truths.values()):
@@ -118,21 +129,30 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     camp = store.load_campaign(sf, cid)
     if state != "completed":
         raise RuntimeError(f"campaign {state}: {camp.error}")
-    return fits, clock.now(), camp.steps_log, dict(camp.sensors_dropped or {})
+    cols = store.measurement_columns(sf, cid, serials[0])
+    log = [{**e, "rows_t_s": [t for t, st in zip(cols["t_s"], cols["step"], strict=True)
+                              if int(st) == e["step"]]} for e in camp.steps_log]
+    for serial, k in k_hats.items():
+        if serial in fits:
+            fits[serial].k_hat = k  # the estimate the fit used, read by one_campaign
+    return fits, clock.now(), log, dict(camp.sensors_dropped or {})
 
 
 def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[str, Any]:
     """One N-sensor campaign under one policy; runs in its own worker process."""
     name, n_sensors, fast, rates, noise_free, crn_offset = args
     logging.getLogger("soakcal").setLevel(logging.WARNING)  # no per-soak event lines
-    probe_n = int(VARIANTS[name].get("soak_probe_samples", 8))
+    if name == NEXT_DRAW:
+        crn_offset += 1
+    variant = VARIANTS[POLICIES[0] if name == NEXT_DRAW else name]
+    probe_n = int(variant.get("soak_probe_samples", 8))
     truths = make_truths(n_sensors, rates, probe_n, noise_free, crn_offset)
     sp = demo_spec(fast)["setpoints_c"] if fast else SETPOINTS_C
     temps = np.arange(sp[0] + 5.0, sp[-1], 10.0)
     w0 = time.monotonic()
     with tempfile.TemporaryDirectory() as d:
         fits, sim_s, log, dropped = asyncio.run(
-            run_several({**demo_spec(fast), **VARIANTS[name]}, Path(d), truths,
+            run_several({**demo_spec(fast), **variant}, Path(d), truths,
                         RIG_SEED + crn_offset))
     wall_s = time.monotonic() - w0
     per_sensor: dict[str, dict[str, float]] = {}
@@ -142,7 +162,8 @@ def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[st
         err = heldout_errors_g(fits[serial].model, make_truth(i + 1, False, rate_of(i, rates)),
                                temps)
         per_sensor[serial] = {"sq_err": float(np.sum(err**2)), "n_err": int(err.size),
-                              "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6}
+                              "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6,
+                              "k_hat": getattr(fits[serial], "k_hat", None)}
     return {
         "name": name, "sim_s": sim_s, "soak_s": sum(e["soak_s"] for e in log),
         "max_soak": sum(bool(e.get("max_soak_reached")) for e in log),
@@ -151,7 +172,27 @@ def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[st
         "k_used": [e.get("rate_gain_ug_per_c_per_min") for e in log
                    if e.get("rate_gain_ug_per_c_per_min") is not None],
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "steps": step_breakdown(log, sim_s),
     }
+
+
+def step_breakdown(log: list[dict[str, Any]], sim_s: float) -> list[dict[str, float]]:
+    """Where each step's time went (s): ramp (from the previous step's last capture, or the
+    campaign start, to the soak's start: table parking, setpoint ramp, the air settling
+    into the band, the poll that sees it), soak, and sweep (soak end to the step's last row:
+    moves, settles, captures, saves). The rows' times are the first sensor's (all are
+    read at once); what follows the last step's last row (the fit) is ``tail``."""
+    out: list[dict[str, float]] = []
+    prev_end_s = 0.0
+    for e in sorted(log, key=lambda e: e["step"]):
+        rows = e.get("rows_t_s") or [e["soak_end_t_s"]]
+        out.append({"step": e["step"], "ramp_s": e["soak_start_t_s"] - prev_end_s,
+                    "soak_s": e["soak_s"], "sweep_s": max(rows) - e["soak_end_t_s"],
+                    "k": e.get("rate_gain_ug_per_c_per_min") or float("nan")})
+        prev_end_s = max(rows)
+    if out:
+        out[-1]["tail_s"] = sim_s - prev_end_s
+    return out
 
 
 def pooled_rmse_ug(per_sensor: dict[str, dict[str, float]]) -> float:
@@ -200,6 +241,25 @@ def report(results: list[dict[str, Any]], n_sensors: int, rates: list[float]) ->
               f"{verdict}")
         if r["dropped"]:
             print(f"  dropped: {r['dropped']}")
+    print("\nper step, minutes: ramp (incl. parking and the poll that sees the band) / soak / "
+          "sweep (soak end → last capture)")
+    for r in results:
+        steps = r["steps"]
+        cells = " ".join(f"{s['ramp_s'] / 60:.1f}/{s['soak_s'] / 60:.1f}/{s['sweep_s'] / 60:.1f}"
+                         for s in steps)
+        ramp = sum(s["ramp_s"] for s in steps) / 3600.0
+        sweep = sum(s["sweep_s"] for s in steps) / 3600.0
+        tail = (steps[-1].get("tail_s", 0.0) if steps else 0.0) / 3600.0
+        print(f"{r['name']:<24} ramp {ramp:.2f} h, sweep {sweep:.2f} h, after the last row "
+              f"{tail * 3600:.0f} s: {cells}")
+    for r in results:
+        k_hats = {s: v["k_hat"] for s, v in r["per_sensor"].items() if v.get("k_hat")}
+        if k_hats:
+            print(f"{r['name']}: the campaign's k̂ ± σ per sensor (x, y, z; µg per °C/min; true "
+                  "gain × (1, −0.6, 0.4)): " + "; ".join(
+                      f"{s[-4:]} " + " ".join(f"{k:+.1f}±{sd:.1f}" for k, sd in zip(*v,
+                                                                                   strict=True))
+                      for s, v in k_hats.items()))
     for r in results:
         if r["k_used"]:
             print(f"{r['name']}: k fed per step (µg per °C/min, largest over the sensors): "
@@ -214,6 +274,9 @@ def main() -> int:
                     help="no accelerometer noise: held-out error = soak-induced part only")
     ap.add_argument("--crn-offset", type=int, default=0,
                     help="other noise streams for the same parts (positions and probes)")
+    ap.add_argument("--draws", type=int, default=1,
+                    help="repeat with this many noise draws (crn offsets N, N+1, …) and judge "
+                         "each sensor over all of them")
     ap.add_argument("--jobs", type=int, default=1, help="campaigns run at once (processes)")
     ap.add_argument("--rate-ug-per-c-per-min", default="0",
                     help="temperature_rate gain(s), µg per °C/min; a list cycles over sensors")
@@ -227,20 +290,64 @@ def main() -> int:
     names = POLICIES
     if args.variants:
         names = [POLICIES[0]] + [POLICIES[int(i)] for i in args.variants.split(",")]
-    w0 = time.monotonic()
-    cases = [(name, args.sensors, args.fast, rates, args.noise_free, args.crn_offset)
-             for name in names]
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
-        results = list(pool.map(one_campaign, cases))
-    print(f"{args.sensors} sensors in one campaign, temperature_rate "
-          f"{','.join(f'{v:g}' for v in rates)} µg per °C/min"
-          f"{' (cycled over the sensors)' if len(rates) > 1 else ''}, "
-          f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}"
-          f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}"
-          f"{f', noise streams offset {args.crn_offset}' if args.crn_offset else ''}; "
-          f"{time.monotonic() - w0:.0f} s wall, {args.jobs} job(s)\n")
-    report(results, args.sensors, rates)
+    by_draw = []
+    for draw in range(args.crn_offset, args.crn_offset + max(1, args.draws)):
+        w0 = time.monotonic()
+        cases = [(name, args.sensors, args.fast, rates, args.noise_free, draw)
+                 for name in names]
+        with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
+            results = list(pool.map(one_campaign, cases))
+        print(f"{args.sensors} sensors in one campaign, temperature_rate "
+              f"{','.join(f'{v:g}' for v in rates)} µg per °C/min"
+              f"{' (cycled over the sensors)' if len(rates) > 1 else ''}, "
+              f"{'3 steps (--fast)' if args.fast else 'the seed protocol (11 steps)'}"
+              f"{', noise-free accelerometer (verdicts do not apply)' if args.noise_free else ''}"
+              f"{f', noise streams offset {draw}' if draw else ''}; "
+              f"{time.monotonic() - w0:.0f} s wall, {args.jobs} job(s)\n")
+        report(results, args.sensors, rates)
+        print()
+        by_draw.append(results)
+    if len(by_draw) > 1:
+        report_draws(by_draw, args.sensors)
     return 0
+
+
+def report_draws(by_draw: list[list[dict[str, Any]]], n_sensors: int) -> None:
+    """Each sensor judged over every draw: its held-out rms pooled over the draws against
+    its fixed hour's pooled over the same draws; and how many single sensor-draws exceed
+    ×1.05, and the campaign times."""
+    serials = serials_for(n_sensors)
+    names = [r["name"] for r in by_draw[0]]
+    print(f"over {len(by_draw)} noise draws: each sensor's held-out rms pooled over the draws, "
+          "ratio to its fixed hour's pooled over the same draws")
+    print(f"{'sensor':<10} " + " ".join(f"{n[:26]:>26}" for n in names[1:]))
+    worst: dict[str, float] = {}
+    for serial in serials:
+        cells = []
+        for j, name in enumerate(names[1:], start=1):
+            got = [d[j]["per_sensor"].get(serial) for d in by_draw]
+            ref = [d[0]["per_sensor"].get(serial) for d in by_draw]
+            if any(g is None for g in got) or any(r is None for r in ref):
+                cells.append(f"{'dropped':>26}")
+                continue
+            ratio = math.sqrt(sum(g["sq_err"] for g in got) / sum(r["sq_err"] for r in ref))
+            each = [g["rmse_ug"] / r["rmse_ug"] for g, r in zip(got, ref, strict=True)]
+            worst[name] = max(worst.get(name, 0.0), ratio)
+            cells.append(f"×{ratio:.3f} ({min(each):.3f}–{max(each):.3f})".rjust(26))
+        print(f"{serial:<10} " + " ".join(cells))
+    for j, name in enumerate(names[1:], start=1):
+        hours = [d[j]["sim_s"] / 3600.0 for d in by_draw]
+        past = sum(d[j]["per_sensor"][s]["rmse_ug"] / d[0]["per_sensor"][s]["rmse_ug"]
+                   > EQUAL_ACCURACY for d in by_draw for s in serials
+                   if s in d[j]["per_sensor"] and s in d[0]["per_sensor"])
+        pooled = [pooled_rmse_ug(d[j]["per_sensor"]) / pooled_rmse_ug(d[0]["per_sensor"])
+                  for d in by_draw]
+        print(f"{name:<26} campaign {min(hours):.2f}–{max(hours):.2f} h "
+              f"(×{min(hours) / SEED_HOURS_PER_SENSOR:.3f}–"
+              f"×{max(hours) / SEED_HOURS_PER_SENSOR:.3f} of {SEED_HOURS_PER_SENSOR} h), "
+              f"pooled ×{min(pooled):.3f}–×{max(pooled):.3f}, worst sensor over the draws "
+              f"×{worst.get(name, math.nan):.3f}, sensor-draws past ×{EQUAL_ACCURACY:.2f}: "
+              f"{past} of {len(by_draw) * n_sensors}")
 
 
 if __name__ == "__main__":

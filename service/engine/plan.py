@@ -66,6 +66,11 @@ class WaitStable:
     resumed: bool
     n_positions: int
     edge: bool
+    # How many steps of the campaign (this one included) visit the positions in this step's
+    # order: an error that depends on the slot in the sweep (the die's curvature the per-step
+    # line cannot follow) then meets the same position at every such step and is not averaged
+    # over them (stability.decide's ``order_repeats``).
+    order_repeats: int = 1
 
 
 @dataclass(frozen=True)
@@ -196,7 +201,8 @@ def campaign_plan(spec: Any, refs: np.ndarray,
             continue
         yield SetChamber(step, setpoint_c, float(spec.ramp_c_per_min))
         yield WaitStable(step, setpoint_c, resumed=len(missing) < n_pos,
-                         n_positions=len(missing), edge=setpoint_c in (lo_c, hi_c))
+                         n_positions=len(missing), edge=setpoint_c in (lo_c, hi_c),
+                         order_repeats=sum(o == orders[step] for o in orders))
         for k, pos in enumerate(missing):
             ref = (float(refs[pos, 0]), float(refs[pos, 1]), float(refs[pos, 2]))
             yield Checkpoint()

@@ -71,6 +71,9 @@ StepReporter = Callable[[dict[str, Any]], None]
 TURNTABLE_POLL_S = 1.0
 DEFAULT_SAFE_C = 23.0  # before the spec is parsed (RunSpec.safe_c otherwise)
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
+# Shortest wait between two soak polls when the decision predicts stability sooner than a
+# period (stability.next_poll_s): a poll costs a die probe (≈ 4 s at 250 samples) and a fit.
+MIN_SOAK_POLL_S = 15.0
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
 SAFE_ATTEMPTS = 3  # tries per safe-state command
@@ -444,15 +447,17 @@ class CampaignRunner:
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         store.set_cursor(self.sf, self.id, step, "ramp", 0)
         self._cursor = (step, "ramp")
-        if spec.rate_gain == "measured":
-            # Every soak at one pose (home), so every soak's probes compare directly and k
-            # is known from the second soak on (soak_rate.estimate_rate_gain).
-            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
         ch = self.dev.chamber
         await self.guard.call("chamber.set_ramp_rate",
                               lambda: ch.set_ramp_rate(msg.ramp_c_per_min))
         await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(target_c))
         await self.guard.call("chamber.run", ch.run)
+        if spec.rate_gain == "measured":
+            # Every soak at one pose (home), so every soak's probes compare directly and k
+            # is known from the second soak on (soak_rate.estimate_rate_gain). Parked after
+            # the setpoint is commanded: the move (≈ 10 s) then runs during the ramp instead
+            # of delaying it, and the soak's probes start after both.
+            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
         start_s = self.clock.now()
         status = await self._chamber()
         limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
@@ -531,7 +536,7 @@ class CampaignRunner:
                     cfg, now_s - start_s, settled, np.array([p.clock_s for p in probes]),
                     np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
                     n_positions=self.n_pos, edge=edge,
-                    rate_gain_ug_per_c_per_min=gains[key]))
+                    rate_gain_ug_per_c_per_min=gains[key], order_repeats=msg.order_repeats))
                 if not decisions[-1].stable:
                     waiting_on = key
                     break
@@ -541,7 +546,10 @@ class CampaignRunner:
             if decision.stable:
                 break
             await self._checkpoint()
-            await self._wait(spec.soak_poll_s)
+            # Sooner than a whole period when the die is predicted to meet its budgets sooner
+            # (the soak ends at a poll: a fixed period overshoots by half of one on average).
+            await self._wait(stability.next_poll_s(
+                decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
         self._keep_soak(dies)
         soak_s = self.clock.now() - start_s
         used = [g for g in gains.values() if g is not None]
@@ -656,7 +664,13 @@ class CampaignRunner:
         """
         if self.spec.rate_gain != "measured":
             return None
-        return soak_rate.residual_rate_gain_for_decision(self._rate_estimate(key, current))
+        # The fit corrects every row, this soak's too, with the campaign's final k̂: a
+        # campaign with the soaks to measure it may soak for that correction's residual
+        # before its own estimate is informative (the first soak: the prior's 100 would
+        # otherwise keep it ≈ 30 min longer).
+        will_correct = self.spec.n_steps >= soak_rate.SOAKS_TO_CORRECT
+        return soak_rate.residual_rate_gain_for_decision(self._rate_estimate(key, current),
+                                                         will_correct=will_correct)
 
     def _rate_provenance(self, key: str | None) -> dict[str, Any] | None:
         """The campaign's measured rate gain of one sensor, for the fit and its provenance."""

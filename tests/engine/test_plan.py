@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 
 import numpy as np
 import pytest
@@ -192,3 +193,22 @@ def test_dry_run_counts_the_order_s_table_travel_and_one_capture_for_all_sensors
     eight = pl.dry_run({**spec, "sensors": [f"SN-{i}" for i in range(8)]}, move_s=None)
     assert eight.positions_s == pytest.approx(travel.positions_s)  # read concurrently
     assert eight.n_saves == travel.n_saves
+
+
+def test_wait_stable_says_how_many_steps_share_its_position_order() -> None:
+    """A campaign measuring the rate gain starts every step from home, so every step of the
+    travel order is the same permutation; chained from the step before, they differ."""
+    from calibration.schedules import table1
+    from service.engine.plan import PlanSpec, WaitStable, campaign_plan
+
+    @dataclasses.dataclass(frozen=True)
+    class Spec(PlanSpec):
+        rate_gain: str = "assumed"
+
+    sp = [-40.0, -30.0, -20.0, -10.0, 0.0]
+    home = Spec(sp, 200, position_order="travel", rate_gain="measured")
+    waits = [m for m in campaign_plan(home, table1()) if isinstance(m, WaitStable)]
+    assert [w.order_repeats for w in waits] == [len(sp)] * len(sp)
+    seeded = Spec(sp, 200, position_order="random", position_order_seed=1)
+    waits = [m for m in campaign_plan(seeded, table1()) if isinstance(m, WaitStable)]
+    assert [w.order_repeats for w in waits] == [1] * len(sp)

@@ -67,10 +67,12 @@ async def test_probes_are_stored_at_home_and_k_reaches_decision_and_fit(sf) -> N
     assert len({(r.step, r.soak_start_t_s) for r in rows}) == len(MEASURED["setpoints_c"])
     assert {r.pose for r in rows} == {"0.0,0.0"} and {r.n for r in rows} == {200}
     assert all(r.sensor == "SN-T" for r in rows)
-    # The first soak has no estimate: the prior; later soaks a measured, smaller bound
-    # (the fake sensor has no rate sensitivity).
+    # The first soak has no estimate: the residual the fit's correction will leave at worst
+    # (the campaign has the soaks to measure k: 50 + 0.1 × (100 + 50)), not the uncorrected
+    # prior; later soaks a measured, smaller bound (the fake sensor has no rate sensitivity).
     gains = [e["rate_gain_ug_per_c_per_min"] for e in log]
-    assert gains[0] == soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    assert len(MEASURED["setpoints_c"]) >= soak_rate.SOAKS_TO_CORRECT
+    assert gains[0] == pytest.approx(65.0)
     assert all(g < soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN for g in gains[2:])
     # The calibration was given the campaign's k̂ and the estimate it came from.
     (prov,) = core.provenances
@@ -136,13 +138,12 @@ def test_probe_rows_round_trip_through_the_store(sf) -> None:
 def test_corrected_decision_waits_for_the_uncertainty_not_the_gain() -> None:
     typical = soak_rate.RateGain(np.array([95.0, -60.0, 40.0]), np.array([6.0, 3.0, 3.0]),
                                  400, 10)
-    # 2σ (12) + max(0.1 × (|k̂| + 2σ), floor) (10.7) instead of |k̂| + 2σ (107)
+    # 2σ (12) + 0.1 × (|k̂| + 2σ) (10.7) instead of |k̂| + 2σ (107)
     assert soak_rate.residual_rate_gain_for_decision(typical) == pytest.approx(12.0 + 10.7)
     assert soak_rate.rate_gain_for_decision(typical) == pytest.approx(107.0)
-    # k̂ ≈ 0: 2σ + the floor (a gain near 0 does not make a short soak free)
+    # k̂ ≈ 0: 2σ + 0.1 × (1 + 2σ), no floor: what is left to wait for is the uncertainty
     none = soak_rate.RateGain(np.array([1.0, 0.0, -1.0]), np.array([4.0, 4.0, 4.0]), 400, 10)
-    assert soak_rate.residual_rate_gain_for_decision(none) == pytest.approx(
-        8.0 + soak_rate.RATE_ALLOWANCE_FLOOR_UG_PER_C_PER_MIN)
+    assert soak_rate.residual_rate_gain_for_decision(none) == pytest.approx(8.0 + 0.9)
     assert soak_rate.correction_gain_ug_per_c_per_min(typical) == pytest.approx([95, -60, 40])
     # Not informative yet: no correction, so the uncorrected rule (the prior) applies.
     weak = soak_rate.RateGain(np.array([5.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 100, 2)
@@ -151,6 +152,19 @@ def test_corrected_decision_waits_for_the_uncertainty_not_the_gain() -> None:
         soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
     assert soak_rate.residual_rate_gain_for_decision(None) == \
         soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    # ... unless the campaign will correct with its final k̂: then the worst residual that
+    # correction may leave, the least precise estimate it still uses (2σ = 50) plus a tenth
+    # of the larger of the prior and |k̂| (+ 2σ)
+    assert soak_rate.residual_rate_gain_for_decision(None, will_correct=True) == \
+        pytest.approx(50.0 + 0.1 * (100.0 + 50.0))
+    assert soak_rate.residual_rate_gain_for_decision(weak, will_correct=True) == \
+        pytest.approx(65.0)
+    worse = soak_rate.RateGain(np.array([180.0, 0.0, 0.0]), np.array([40.0, 3.0, 3.0]), 100, 2)
+    assert soak_rate.residual_rate_gain_for_decision(worse, will_correct=True) == \
+        pytest.approx(50.0 + 0.1 * (180.0 + 50.0))
+    # an informative estimate is used as it is, promise or not
+    assert soak_rate.residual_rate_gain_for_decision(typical, will_correct=True) == \
+        pytest.approx(12.0 + 10.7)
 
 
 async def test_several_sensors_each_get_their_own_probes_and_gain(sf) -> None:  # type: ignore[no-untyped-def]
@@ -168,5 +182,6 @@ async def test_several_sensors_each_get_their_own_probes_and_gain(sf) -> None:  
     assert len({tuple(round(r.ax, 5) for r in v[:3]) for v in per_sensor.values()}) == 3
     assert {r.pose for r in rows} == {"0.0,0.0,0.0"}
     log = steps_log(sf, cid)
-    assert log[0]["rate_gain_ug_per_c_per_min"] == soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    # three soaks: the first one counts on the fit's correction (65, not the prior's 100)
+    assert log[0]["rate_gain_ug_per_c_per_min"] == pytest.approx(65.0)
     assert log[-1]["rate_gain_ug_per_c_per_min"] < soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN

@@ -21,11 +21,13 @@ from service.engine.soak_rate import (
     rate_gain_for_decision,
 )
 from service.engine.stability import (
+    Decision,
     StabilityConfig,
     chamber_settled,
     decide,
     fit_approach,
     lag_from_rate_gain_s,
+    next_poll_s,
     sweep_error_c,
     temperature_budget_c,
 )
@@ -155,7 +157,10 @@ def test_the_die_need_not_reach_the_final_value_only_the_budget() -> None:
     t_default, _ = first_stable(CFG, t, y, sweep_s=SWEEP_S)  # type: ignore[misc]
     t_no_lag, _ = first_stable(NO_LAG, t, y, sweep_s=SWEEP_S)  # type: ignore[misc]
     assert 8.5 * np.exp(-t_default / 900.0) > 0.2
-    assert t_no_lag < t_default and 8.5 * np.exp(-t_no_lag / 900.0) > 1.0
+    # ... and then the step tolerance binds: the die is within step_tol_c (1 °C) of its final
+    # value at the sweep's start, but not nearer than it needs to be.
+    offset_no_lag = 8.5 * np.exp(-t_no_lag / 900.0)
+    assert t_no_lag < t_default and 0.5 < offset_no_lag <= NO_LAG.step_tol_c
     assert within_budgets(8.5 * np.exp(-t_no_lag / 900.0), 900.0, NO_LAG)
     strict = StabilityConfig(die_tol_c=0.1)
     t_strict, _ = first_stable(strict, t, y, sweep_s=SWEEP_S)  # type: ignore[misc]
@@ -390,3 +395,51 @@ def test_a_measured_rate_gain_sets_the_lag() -> None:
     assert via_gain is not None and via_lag is not None and none is not None
     assert via_gain[0] == via_lag[0]
     assert none[0] < via_gain[0]  # no rate sensitivity measured: a shorter soak
+
+
+def test_an_approaching_die_predicts_when_it_will_be_stable() -> None:
+    """``ready_in_s`` from a decision 10 min before the true first stable poll lands within
+    a short poll (15 s) and 15 % of it: the runner may poll then, not a period later."""
+    tau_s, step_s = 900.0, 15.0
+    t = np.arange(0.0, 7200.0, step_s)
+    temp = approach(t, -30.0, -38.5, tau_s, 0.005, seed=3)  # 250-sample probe noise
+    got = first_stable(CFG, t, temp, sweep_s=SWEEP_S)
+    assert got is not None
+    t_stable = got[0]
+    k0 = int(np.searchsorted(t, t_stable - 600.0))
+    early = decide(CFG, float(t[k0]), True, t[: k0 + 1], temp[: k0 + 1], sweep_s=SWEEP_S)
+    assert not early.stable and early.reason == "die_approaching"
+    assert early.ready_in_s is not None
+    assert early.ready_in_s == pytest.approx(t_stable - t[k0], rel=0.15, abs=step_s)
+
+
+def test_next_poll_is_sooner_only_when_predicted_and_never_below_the_minimum() -> None:
+    assert next_poll_s(Decision(False, "die_approaching", ready_in_s=25.0), 60.0, 15.0) == 25.0
+    assert next_poll_s(Decision(False, "die_approaching", ready_in_s=3.0), 60.0, 15.0) == 15.0
+    assert next_poll_s(Decision(False, "die_approaching", ready_in_s=600.0), 60.0, 15.0) == 60.0
+    assert next_poll_s(Decision(False, "fit_not_credible"), 60.0, 15.0) == 60.0
+    assert next_poll_s(Decision(False, "x", ready_in_s=math.inf), 60.0, 15.0) == 60.0
+    waiting = decide(CFG, 420.0, True, np.arange(0.0, 421.0, 60.0), np.zeros(8))
+    assert waiting.reason == "min_soak_waiting" and waiting.ready_in_s == pytest.approx(180.0)
+
+
+def test_an_order_repeated_at_every_step_budgets_the_slot_error_over_the_steps() -> None:
+    """When every step visits the positions in one order, the curvature the per-step line
+    cannot follow meets the same position at every step: its budget is a position mean's
+    noise over those steps (temp_budget_c / √steps), so the soak is longer and the true
+    varying error at its end within that smaller budget."""
+    loose = dataclasses.replace(NO_LAG, step_tol_c=5.0)  # only the curvature binds
+    tau_s = 900.0
+    t = np.arange(0.0, 7200.0, 30.0)
+    y = approach(t, 40.0, 31.5, tau_s, 0.005, seed=5)
+    once, _ = first_stable(loose, t, y, sweep_s=SWEEP_S)  # type: ignore[misc]
+    every, _ = first_stable(loose, t, y, sweep_s=SWEEP_S, order_repeats=11)  # type: ignore[misc]
+    assert every > once + 300.0
+
+    def curve(u: np.ndarray) -> np.ndarray:
+        return 40.0 - 8.5 * np.exp(-u / tau_s)
+
+    varying, _ = true_sweep_errors_c(curve, every, SWEEP_S, 0.0)
+    assert varying <= loose.temp_budget_c / math.sqrt(11)
+    varying_once, _ = true_sweep_errors_c(curve, once, SWEEP_S, 0.0)
+    assert varying_once > loose.temp_budget_c / math.sqrt(11)

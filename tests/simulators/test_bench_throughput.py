@@ -30,7 +30,7 @@ async def test_a_two_step_campaign_calibrates_each_sensor_against_its_own_truth(
     # One shared chamber reached every truth (the rate effect's die rate).
     chambers = {id(t.chamber) for t in truths.values()}
     assert len(chambers) == 1 and all(t.chamber is not None for t in truths.values())
-    assert all(isinstance(t, BenchTruth) and t._captures > 0 for t in truths.values())
+    assert all(isinstance(t, BenchTruth) and t._attempts for t in truths.values())
     temps = np.array([25.0])
     own = [make_truth(1, False, 0.0), make_truth(2, False, 0.0)]
     for i, serial in enumerate(serials_for(2)):
@@ -49,3 +49,31 @@ def test_a_crn_offset_keeps_the_parts_and_changes_only_the_noise_streams() -> No
         ref = np.array([[0.0, 0.0, 1.0]])
         assert np.allclose(base[serial].ideal_raw_g(ref, 20.0),
                            other[serial].ideal_raw_g(ref, 20.0))
+
+
+def test_a_position_gets_the_same_noise_whatever_order_the_step_visits_it_in() -> None:
+    """Common random numbers keyed by (sensor, orientation, setpoint, attempt): two policies
+    visiting a step's positions in other orders still measure each position with the same
+    noise (keyed by the capture's index, a reordered step drew other noise for every
+    position), and a quality re-measure of a position draws its own."""
+    from types import SimpleNamespace
+
+    refs = [np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, -1.0, 0.0])]
+
+    def captures(order: list[int]) -> dict[int, np.ndarray]:
+        truth = make_truth(3, False, 0.0, probe_n=8)
+        truth.chamber = SimpleNamespace(setpoint_c=10.0, air_c=10.0, die_c=10.0,
+                                        die_tau_s=900.0)
+        rng = np.random.default_rng(0)
+        return {i: truth.sample_g(refs[i], 10.0, 50, rng) for i in order}
+
+    forward, backward = captures([0, 1, 2]), captures([2, 0, 1])
+    for i in range(3):
+        assert np.array_equal(forward[i], backward[i])
+    truth = make_truth(3, False, 0.0, probe_n=8)
+    truth.chamber = SimpleNamespace(setpoint_c=10.0, air_c=10.0, die_c=10.0, die_tau_s=900.0)
+    rng = np.random.default_rng(0)
+    first, again = (truth.sample_g(refs[0], 10.0, 50, rng) for _ in range(2))
+    assert np.array_equal(first, forward[0]) and not np.array_equal(first, again)
+    truth.chamber.setpoint_c = 20.0  # the next step: other noise for the same position
+    assert not np.array_equal(truth.sample_g(refs[0], 10.0, 50, rng), first)
