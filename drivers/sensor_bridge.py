@@ -410,7 +410,7 @@ class MultiplexedBridge:
 
     Averaged captures are grouped: the ``acquire(n)`` calls of several channels that
     arrive in one event-loop turn (the engine's ``multi.read_all`` starts a position's
-    reads together) with the same ``n`` and ODR become one group command
+    reads together) with the same ``n`` become one group command
     ``AVG,<n>,@<ch>,…``, which the bridge captures at once (:meth:`avg_fields`): eight
     sensors on one bridge cost one capture time, not eight. Each channel still gets its
     own reply line, so its fault (an ``ERR`` line, a missing or duplicated line) is its
@@ -428,7 +428,7 @@ class MultiplexedBridge:
         self._open: set[int] = set()
         #: False once the firmware refused the group command: per-channel captures for good.
         self.group_capture = True
-        self._forming: dict[tuple[int, float], _Group] = {}  # (n, odr_hz) → the next group
+        self._forming: dict[int, _Group] = {}  # n → the group being formed this loop turn
         self._running: set[asyncio.Task[None]] = set()
 
     def channel(self, channel: int, *, device: str | None = None,
@@ -464,8 +464,8 @@ class MultiplexedBridge:
         return {int(ch): serial for ch, serial in zip(pairs[::2], pairs[1::2], strict=True)}
 
     async def avg_fields(self, handle: SerialAccelerometer, n_samples: int) -> list[str]:
-        """``handle``'s ``AVG`` reply fields, captured with whichever other channels ask in
-        the same event-loop turn (same ``n`` and ODR).
+        """``handle``'s ``AVG`` reply fields, captured with whichever other channels ask for
+        ``n`` samples in the same event-loop turn (at any ODR: the group paces at the slowest).
 
         The window is one turn of the loop (``call_soon``), not a wall-time wait: the reads
         ``multi.read_all`` starts together all reach here before the group is sent, and a
@@ -474,11 +474,10 @@ class MultiplexedBridge:
         if not self.group_capture:
             return await handle.avg_fields(n_samples)
         loop = asyncio.get_running_loop()
-        key = (n_samples, handle.odr_hz)
-        group = self._forming.get(key)
+        group = self._forming.get(n_samples)
         if group is None:
-            group = self._forming[key] = _Group(n_samples)
-            loop.call_soon(self._launch, key)
+            group = self._forming[n_samples] = _Group(n_samples)
+            loop.call_soon(self._launch, n_samples)
         assert handle.channel is not None and handle.channel not in group.members
         reply: asyncio.Future[list[str]] = loop.create_future()
         group.members[handle.channel] = (handle, reply)
@@ -501,8 +500,8 @@ class MultiplexedBridge:
         return SerialAccelerometer(self.url, self.clock, timeout_s=self.timeout_s,
                                    device=self.device, framing=self.framing, line=self.line)
 
-    def _launch(self, key: tuple[int, float]) -> None:
-        group = self._forming.pop(key)
+    def _launch(self, n_samples: int) -> None:
+        group = self._forming.pop(n_samples)
         if group.members:
             group.task = asyncio.ensure_future(self._capture(group))
             self._running.add(group.task)
@@ -551,8 +550,8 @@ class MultiplexedBridge:
         the timeout: the channels whose lines came deliver, the others time out, and the
         port is closed (its stream position is unknown).
         """
-        first = next(iter(members.values()))
         timeout_s = max(h.timeout_s for h in members.values())
+        capture_s = max(n / h.odr_hz for h in members.values())  # paced by the slowest ODR
         command = ["AVG", n, *(channel_field(ch) for ch in members)]
         got: dict[int, list[list[str]]] = {ch: [] for ch in members}
         unusable: list[str] = []  # why a line could not be given to a channel
@@ -561,7 +560,7 @@ class MultiplexedBridge:
             port.write(encode_frame(*command, framing=self.framing))
             for i in range(2 * len(members) + 4):  # a bridge that never says END ends here
                 # The first line waits for the capture itself (device time).
-                port.timeout = timeout_s + (n / first.odr_hz if i == 0 else 0.0)
+                port.timeout = timeout_s + (capture_s if i == 0 else 0.0)
                 line = port.read_until(b"\n")
                 if not line.endswith(b"\n"):
                     port.close()
