@@ -181,3 +181,17 @@ def test_a_one_sensor_bridge_refuses_the_group_command_as_unknown() -> None:
     assert single.handle_line(encode_frame("AVG", 5, "@0", "@1")) == [
         encode_frame("ERR", 1, "unknown command AVG")
     ]
+
+
+def test_the_group_capture_bytes_of_docs_sensor_bridge_md() -> None:
+    mux = bridge_app.MuxBridge({i: _channel(i)[1] for i in range(3)})
+    assert encode_frame("AVG", 200, "@0", "@1", "@2") == b"$AVG,200,@0,@1,@2*A91B\r\n"
+    assert mux.handle_line(b"$AVG,200,@0,@1,@2*A91B\r\n") == [
+        b"$@0,AVG,200,3149.000,-11674.000,252826.000,0.000,0.000,0.000,2224.00,2224,2224,0"
+        b"*F318\r\n",
+        b"$@1,AVG,200,-128000.000,64000.000,204800.000,0.000,0.000,0.000,2111.00,2111,2111,0"
+        b"*EF49\r\n",
+        b"$@2,AVG,200,179200.000,0.000,-179200.000,0.000,0.000,0.000,1749.00,1749,1749,0"
+        b"*B872\r\n",
+        b"$END,AVG,3*4E7A\r\n",
+    ]
