@@ -277,8 +277,19 @@ async def test_a_channel_s_err_line_fails_it_alone(mux: MuxRig) -> None:
 # --- group capture against a bridge that lies: each reply line goes to its address only ---
 def _avg_line(address: str, mean_x: float) -> bytes:
     return encode_frame(
-        address, "AVG", 10, f"{mean_x:.3f}", "0.000", "256000.000", "1.000", "1.000", "1.000",
-        "1885.00", 1885, 1885, 0,
+        address,
+        "AVG",
+        10,
+        f"{mean_x:.3f}",
+        "0.000",
+        "256000.000",
+        "1.000",
+        "1.000",
+        "1.000",
+        "1885.00",
+        1885,
+        1885,
+        0,
     )
 
 
