@@ -471,14 +471,14 @@ class MultiplexedBridge:
         ``multi.read_all`` starts together all reach here before the group is sent, and a
         lone call (a retry, a one-sensor read) goes out as its own ``@<ch>,AVG,<n>``.
         """
-        if not self.group_capture:
-            return await handle.avg_fields(n_samples)
-        loop = asyncio.get_running_loop()
         group = self._forming.get(n_samples)
+        if not self.group_capture or handle.channel is None or \
+                (group is not None and handle.channel in group.members):
+            return await handle.avg_fields(n_samples)  # (a second call of one handle: queued)
+        loop = asyncio.get_running_loop()
         if group is None:
             group = self._forming[n_samples] = _Group(n_samples)
             loop.call_soon(self._launch, n_samples)
-        assert handle.channel is not None and handle.channel not in group.members
         reply: asyncio.Future[list[str]] = loop.create_future()
         group.members[handle.channel] = (handle, reply)
         try:

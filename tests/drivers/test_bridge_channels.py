@@ -379,3 +379,41 @@ async def test_the_port_closes_after_the_last_handle(mux: MuxRig) -> None:
     assert (await b.identify()).channel == 1
     await b.close()
     assert mux.bridge.line._port is None
+
+
+async def test_cancelled_group_reads_leave_the_bridge_usable() -> None:
+    """An abort cancels a position's reads while the group waits for its reply: the group
+    is given up (its port handed to the reading thread to close), and the next reads,
+    grouped again on a fresh port, get their own answers."""
+    commands: list[list[str]] = []
+
+    def answer(f: list[str]) -> bytes:
+        commands.append(f)
+        return b"" if len(commands) == 1 else _group_reply(["@0", "@1", "@2"])(f)
+
+    server = await _lying_bridge(answer)
+    port = server.sockets[0].getsockname()[1]
+    bridge = MultiplexedBridge(f"socket://127.0.0.1:{port}", VirtualClock(), timeout_s=0.5)
+    try:
+        handles = [bridge.channel(i) for i in range(3)]
+        reads = asyncio.gather(*(h.acquire(10) for h in handles))
+        while not commands:  # the group command is out, its reply never comes
+            await asyncio.sleep(0.01)
+        groups = list(bridge._running)
+        reads.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await reads
+        await asyncio.gather(*groups, return_exceptions=True)
+        assert len(groups) == 1 and groups[0].cancelled()  # nobody waits: the group stops
+        again = await asyncio.gather(*(h.acquire(10) for h in handles))
+        assert [_x_counts(r) for r in again] == [1000.0, 2000.0, 3000.0]
+        assert commands == [["AVG", "10", "@0", "@1", "@2"]] * 2
+    finally:
+        await bridge.close()
+        server.close()
+
+
+async def test_two_reads_of_one_channel_in_one_turn_both_answer(mux: MuxRig) -> None:
+    a, b = mux.bridge.channel(0), mux.bridge.channel(1)
+    got = await asyncio.gather(a.acquire(20), a.acquire(20), b.acquire(20))
+    assert [g.n for g in got] == [20, 20, 20]
