@@ -4,13 +4,15 @@ Works with anything ``serial.serial_for_url`` opens: a real port
 (``/dev/ttyUSB0``), a pseudo-terminal, or ``socket://host:port`` (the simulated
 bridge). pyserial is blocking, so each command runs in a worker thread; one
 command is in flight at a time (``asyncio.Lock``). Acquisition duration is
-measured on the injected clock.
+measured on the injected clock. A :class:`MultiplexedBridge` gathers the ``acquire``
+calls its channels make in one event-loop turn into one group capture.
 """
 
 from __future__ import annotations
 
 import asyncio
 import functools
+import logging
 from collections.abc import AsyncIterator, Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Literal, TypeVar
@@ -41,6 +43,7 @@ from drivers.faults import (
 from drivers.protocols import Acquisition, SensorIdentity
 
 AcquireMode = Literal["average", "raw"]
+log = logging.getLogger(__name__)
 
 #: ``ERR`` codes (docs/sensor-bridge.md): 1, 3, 4 and 7 are permanent refusals, 2 means the
 #: bridge received our command garbled (a line fault: retried), anything else (5 sensor
@@ -107,7 +110,9 @@ class SerialLine:
                 if attempt:
                     await self.clock.sleep(0.1 * attempt)
                 try:
-                    port = self._port or await self._threads.run(self._open)
+                    # a group capture that lost its stream position closed the port itself
+                    port = self._port if self._port is not None and self._port.is_open \
+                        else await self._threads.run(self._open)
                     io = asyncio.ensure_future(self._threads.run(fn, port, *args))
                     try:
                         return await asyncio.shield(io)
@@ -163,6 +168,7 @@ class SerialAccelerometer:
         channel: int | None = None,
         line: SerialLine | None = None,
         on_close: Callable[[], Awaitable[None]] | None = None,
+        group: Callable[[SerialAccelerometer, int], Awaitable[list[str]]] | None = None,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"sensor framing must be one of {', '.join(FRAMINGS)}, "
@@ -183,6 +189,9 @@ class SerialAccelerometer:
         self._line = line or SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
                                         attempts=attempts, device=device, name=f"bridge {url}")
         self._on_close = on_close
+        # A channel's averaged captures go through its bridge, which may group them with
+        # its other channels' (MultiplexedBridge.avg_fields); None: this handle's own AVG.
+        self._group = group
 
     # --- protocol -------------------------------------------------------------
     async def identify(self) -> SensorIdentity:
@@ -237,8 +246,17 @@ class SerialAccelerometer:
         if self.mode == "raw":
             return await self._acquire_raw(n_samples)
         t0 = self.clock.now()
-        f = await self._command(["AVG", n_samples], expect="AVG", n_lines=1,
-                                extra_wait_s=n_samples / self.odr_hz)
+        f = await (self._group(self, n_samples) if self._group is not None
+                   else self.avg_fields(n_samples))
+        return self._avg_acquisition(f, t0)
+
+    async def avg_fields(self, n_samples: int) -> list[str]:
+        """One ``AVG,<n>`` of this sensor alone → the reply's fields (address stripped)."""
+        return await self._command(["AVG", n_samples], expect="AVG", n_lines=1,
+                                   extra_wait_s=n_samples / self.odr_hz)
+
+    def _avg_acquisition(self, f: list[str], t0: float) -> Acquisition:
+        """An ``AVG`` reply's fields (alone or from a group capture) → the Acquisition."""
         if len(f) != 12:
             raise ProtocolError(self.device, f"AVG reply has {len(f)} fields, expected 12")
         try:
@@ -384,12 +402,20 @@ class SerialAccelerometer:
 class MultiplexedBridge:
     """One bridge port hosting several sensors, one per channel (docs/sensor-bridge.md).
 
-    The channels share one :class:`SerialLine`, so one command is in flight on the port:
-    reads of the sensors behind one bridge queue on its lock (sensors on other bridges
-    still read at once). Each :meth:`channel` handle is a full
-    :class:`SerialAccelerometer` with its own range, ODR, timeout and faults: a channel
-    that times out or is refused fails that handle's call only. The port closes once
-    every handle taken has been closed (or on :meth:`close`).
+    The channels share one :class:`SerialLine`, so one command is in flight on the port.
+    Each :meth:`channel` handle is a full :class:`SerialAccelerometer` with its own range,
+    ODR, timeout and faults: a channel that times out or is refused fails that handle's
+    call only. The port closes once every handle taken has been closed (or on
+    :meth:`close`).
+
+    Averaged captures are grouped: the ``acquire(n)`` calls of several channels that
+    arrive in one event-loop turn (the engine's ``multi.read_all`` starts a position's
+    reads together) with the same ``n`` become one group command
+    ``AVG,<n>,@<ch>,…``, which the bridge captures at once (:meth:`avg_fields`): eight
+    sensors on one bridge cost one capture time, not eight. Each channel still gets its
+    own reply line, so its fault (an ``ERR`` line, a missing or duplicated line) is its
+    own. A bridge whose firmware predates the group command (2.1 answers ``ERR 1``) is
+    read one channel after the other from then on, said once in the log.
     """
 
     def __init__(self, url: str, clock: Clock, *, baudrate: int = 115200,
@@ -400,6 +426,10 @@ class MultiplexedBridge:
         self.line = SerialLine(url, clock, baudrate=baudrate, timeout_s=timeout_s,
                                attempts=attempts, device=device, name=f"bridge {url}")
         self._open: set[int] = set()
+        #: False once the firmware refused the group command: per-channel captures for good.
+        self.group_capture = True
+        self._forming: dict[int, _Group] = {}  # n → the group being formed this loop turn
+        self._running: set[asyncio.Task[None]] = set()
 
     def channel(self, channel: int, *, device: str | None = None,
                 mode: AcquireMode = "average") -> SerialAccelerometer:
@@ -418,13 +448,11 @@ class MultiplexedBridge:
                                    timeout_s=self.timeout_s, attempts=self.line.attempts,
                                    device=device or f"{self.device} @{channel}",
                                    framing=self.framing, channel=channel, line=self.line,
-                                   on_close=release)
+                                   on_close=release, group=self.avg_fields)
 
     async def channels(self) -> dict[int, str]:
         """``CHANNELS`` → ``{channel: serial in its fixture EEPROM ("" when blank)}``."""
-        bridge = SerialAccelerometer(self.url, self.clock, timeout_s=self.timeout_s,
-                                     device=self.device, framing=self.framing, line=self.line)
-        f = await bridge._command(["CHANNELS"], expect="CHANNELS")
+        f = await self._bridge_handle()._command(["CHANNELS"], expect="CHANNELS")
         try:
             n = int(f[1])
         except (IndexError, ValueError):
@@ -435,9 +463,189 @@ class MultiplexedBridge:
                                              f"{n} channels, expected {2 * n}: {f!r}")
         return {int(ch): serial for ch, serial in zip(pairs[::2], pairs[1::2], strict=True)}
 
+    async def avg_fields(self, handle: SerialAccelerometer, n_samples: int) -> list[str]:
+        """``handle``'s ``AVG`` reply fields, captured with whichever other channels ask for
+        ``n`` samples in the same event-loop turn (at any ODR: the group paces at the slowest).
+
+        The window is one turn of the loop (``call_soon``), not a wall-time wait: the reads
+        ``multi.read_all`` starts together all reach here before the group is sent, and a
+        lone call (a retry, a one-sensor read) goes out as its own ``@<ch>,AVG,<n>``.
+        """
+        group = self._forming.get(n_samples)
+        if not self.group_capture or handle.channel is None or \
+                (group is not None and handle.channel in group.members):
+            return await handle.avg_fields(n_samples)  # (a second call of one handle: queued)
+        loop = asyncio.get_running_loop()
+        if group is None:
+            group = self._forming[n_samples] = _Group(n_samples)
+            loop.call_soon(self._launch, n_samples)
+        reply: asyncio.Future[list[str]] = loop.create_future()
+        group.members[handle.channel] = (handle, reply)
+        try:
+            return await reply
+        except asyncio.CancelledError:
+            if group.task is None:  # not sent yet: it goes without this channel
+                group.members.pop(handle.channel, None)
+            elif all(f.done() for _h, f in group.members.values()):
+                group.task.cancel()  # nobody waits for it any more (its port is closed)
+            raise
+
     async def close(self) -> None:
         self._open.clear()
         await self.line.close()
+
+    # --- group capture ------------------------------------------------------------------
+    def _bridge_handle(self) -> SerialAccelerometer:
+        """An unaddressed handle on the shared line, for the bridge's own commands."""
+        return SerialAccelerometer(self.url, self.clock, timeout_s=self.timeout_s,
+                                   device=self.device, framing=self.framing, line=self.line)
+
+    def _launch(self, n_samples: int) -> None:
+        group = self._forming.pop(n_samples)
+        if group.members:
+            group.task = asyncio.ensure_future(self._capture(group))
+            self._running.add(group.task)
+            group.task.add_done_callback(self._running.discard)
+
+    async def _capture(self, group: _Group) -> None:
+        """Run one group and hand each member its reply fields or its own fault."""
+        members = {ch: h for ch, (h, _f) in group.members.items()}
+        outcomes: dict[int, list[str] | DeviceFault]
+        try:
+            if len(members) == 1:
+                outcomes = {ch: await _outcome(h.avg_fields(group.n))
+                            for ch, h in members.items()}
+            else:
+                try:
+                    outcomes = await self.line.call(self._group_blocking, members, group.n)
+                except _GroupRefused as refused:
+                    self.group_capture = False
+                    log.warning("%s: bridge %s refuses the group capture (%s): its channels "
+                                "are read one after the other from now on (firmware older "
+                                "than soakcal-fw-2.2)", self.device, self.url, refused)
+                    outcomes = {ch: await _outcome(h.avg_fields(group.n))
+                                for ch, h in members.items()}
+                except DeviceFault as fault:  # the whole command failed: each member's fault
+                    outcomes = {ch: _member_fault(fault, h.device) for ch, h in members.items()}
+        except BaseException:
+            for _h, f in group.members.values():
+                f.cancel()
+            raise
+        for ch, (_h, f) in group.members.items():
+            if f.done():
+                continue
+            outcome = outcomes[ch]
+            if isinstance(outcome, DeviceFault):
+                f.set_exception(outcome)
+            else:
+                f.set_result(outcome)
+
+    def _group_blocking(self, port: serial.SerialBase, members: dict[int, SerialAccelerometer],
+                        n: int) -> dict[int, list[str] | DeviceFault]:
+        """Send ``AVG,<n>,@<ch>,…``; read the lines up to ``END,AVG,<k>``; sort them by address.
+
+        A line that fails its CRC or has no known address is set aside (its channel then
+        finds no line: a ProtocolError for that channel alone). An unaddressed ``ERR`` first
+        line refuses the whole command (ERR 1: :class:`_GroupRefused`). No ``END`` within
+        the timeout: the channels whose lines came deliver, the others time out, and the
+        port is closed (its stream position is unknown).
+        """
+        timeout_s = max(h.timeout_s for h in members.values())
+        capture_s = max(n / h.odr_hz for h in members.values())  # paced by the slowest ODR
+        command = ["AVG", n, *(channel_field(ch) for ch in members)]
+        got: dict[int, list[list[str]]] = {ch: [] for ch in members}
+        unusable: list[str] = []  # why a line could not be given to a channel
+        try:
+            port.reset_input_buffer()
+            port.write(encode_frame(*command, framing=self.framing))
+            for i in range(2 * len(members) + 4):  # a bridge that never says END ends here
+                # The first line waits for the capture itself (device time).
+                port.timeout = timeout_s + (capture_s if i == 0 else 0.0)
+                line = port.read_until(b"\n")
+                if not line.endswith(b"\n"):
+                    port.close()
+                    return {ch: _group_line(members[ch], lines, n, unusable) if lines else
+                            DeviceTimeout(members[ch].device, f"no reply line in the group "
+                                                              f"capture AVG,{n} within "
+                                                              f"{port.timeout:.1f} s")
+                            for ch, lines in got.items()}
+                try:
+                    channel, rest = split_channel(decode_frame(line, self.device, self.framing),
+                                                  self.device)
+                except ProtocolError as exc:
+                    unusable.append(exc.message)
+                    continue
+                if channel in got:
+                    got[channel].append(rest)
+                elif channel is None and rest[0] == "END":
+                    said = ",".join(rest)
+                    if rest[:2] != ["END", "AVG"]:
+                        unusable.append(f"group ended with {said!r}")
+                    return {ch: _group_line(members[ch], lines, n, unusable)
+                            for ch, lines in got.items()}
+                elif channel is None and rest[0] == "ERR" and i == 0:
+                    raise self._command_refusal(rest, command)
+                else:
+                    whose = "no channel" if channel is None else f"channel {channel}"
+                    unusable.append(f"a line for {whose} not asked: {','.join(rest)[:40]!r}")
+        except (serial.SerialException, OSError) as exc:
+            raise ConnectionLost(self.device, f"{self.url}: {exc}") from exc
+        raise ProtocolError(self.device, f"group capture AVG,{n}: no END after "
+                                         f"{2 * len(members) + 4} lines")
+
+    def _command_refusal(self, f: list[str], command: list[object]) -> Exception:
+        fault = self._bridge_handle()._err_fault(f, command)
+        if isinstance(fault, ConfigurationFault) and fault.code == ERR_UNKNOWN_COMMAND:
+            return _GroupRefused(fault.message)
+        return fault
+
+
+class _Group:
+    """The averaged captures of one bridge's channels asked for in one loop turn."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.members: dict[int, tuple[SerialAccelerometer, asyncio.Future[list[str]]]] = {}
+        self.task: asyncio.Task[None] | None = None
+
+
+class _GroupRefused(Exception):
+    """The bridge answered the group command ERR 1 (unknown command): older firmware."""
+
+
+async def _outcome(call: Awaitable[list[str]]) -> list[str] | DeviceFault:
+    try:
+        return await call
+    except DeviceFault as fault:
+        return fault
+
+
+def _group_line(handle: SerialAccelerometer, lines: list[list[str]], n: int,
+                unusable: list[str]) -> list[str] | DeviceFault:
+    """A channel's one line of a group capture → its ``AVG`` fields, or that channel's fault."""
+    if len(lines) == 1:
+        f = lines[0]
+        if f[0] == "ERR":
+            return handle._err_fault(f, ["AVG", n])
+        if f[0] != "AVG":
+            return ProtocolError(handle.device, f"expected AVG reply, got {f!r}")
+        return f
+    if lines:  # which one is this channel's? neither can be trusted
+        return ProtocolError(handle.device, f"group capture AVG,{n}: {len(lines)} reply lines "
+                                            f"for channel {handle.channel}, expected one")
+    why = f" ({'; '.join(unusable)[:120]})" if unusable else ""
+    return ProtocolError(handle.device, f"group capture AVG,{n}: no reply line for channel "
+                                        f"{handle.channel}{why}")
+
+
+def _member_fault(fault: DeviceFault, device: str) -> DeviceFault:
+    """A fault of the whole group command, as one member channel's own (its device name)."""
+    if isinstance(fault, ExceptionReply):
+        copy: DeviceFault = type(fault)(device, fault.message, fault.code)
+    else:
+        copy = type(fault)(device, fault.message)
+    copy.__cause__ = fault
+    return copy
 
 
 def open_serial_port(url: str, baudrate: int, timeout_s: float,

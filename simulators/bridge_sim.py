@@ -8,7 +8,8 @@ orientation of the simulated table (:mod:`drivers.geometry`).
 :class:`BridgeDevice` is a one-sensor bridge as flashed before channel addressing
 (``@1,ID`` is an unknown command to it). :class:`MultiplexedBridgeDevice` hosts several
 of them, one per channel, behind one port (docs/sensor-bridge.md, "Channels"): each
-keeps its own part, noise stream, identity and faults.
+keeps its own part, noise stream, identity and faults, and its group capture
+``AVG,<n>,@<ch>,…`` reads the listed channels in one capture's time.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class Route:
     target: BridgeDevice | None
     command: list[str]
     refusal: list[object] | None = None  # the bridge's own answer instead of the device's
+    group: list[int] | None = None  # a group capture's channels (AVG,<n>,@<ch>,…)
 
 
 @dataclass
@@ -141,6 +143,10 @@ class MultiplexedBridgeDevice:
 
     channels: dict[int, BridgeDevice]
 
+    #: False: a bridge flashed with firmware 2.1 (channels, no group capture), which answers
+    #: ``AVG,<n>,@<ch>,…`` with ERR 1 as any unknown command.
+    group_capture: bool = True
+
     def route(self, fields: list[str]) -> Route:
         try:
             channel, command = split_channel(fields, "bridge")
@@ -149,6 +155,8 @@ class MultiplexedBridgeDevice:
         if channel is None:
             if fields == ["CHANNELS"]:
                 return Route([], None, fields, self._channels_reply())
+            if fields[0] == "AVG" and len(fields) > 2 and self.group_capture:
+                return self._group_route(fields)
             channel = 0
             address: list[str] = []
         else:
@@ -160,9 +168,61 @@ class MultiplexedBridgeDevice:
         return Route(address, device, command)
 
     async def answer(self, route: Route, framing: Framing) -> list[list[object]]:
+        if route.group is not None:
+            return await self.group_avg(route)
         if route.target is None:  # the bridge answers for itself (CHANNELS, ERR 3 / 7)
             return [route.refusal or ["ERR", 1, "unknown command"]]
         return await route.target.replies(route.command, framing)
+
+    def _group_route(self, fields: list[str]) -> Route:
+        """``AVG,<n>,@<ch>,…``: checked as the firmware does (one unaddressed ERR 3 for a bad
+        n or channel list), else a route whose replies carry their own addresses."""
+        n = int(fields[1]) if fields[1].isdigit() else 0
+        max_n = min(d.max_samples for d in self.channels.values())
+        if not 1 <= n <= max_n:
+            return Route([], None, fields, ["ERR", 3, f"n must be 1..{max_n}"])
+        group: list[int] = []
+        for head in fields[2:]:
+            try:
+                ch, _rest = split_channel([head, "AVG"], "bridge")
+            except ProtocolError:
+                ch = None
+            if ch is None or ch in group:
+                return Route([], None, fields,
+                             ["ERR", 3, f"bad or repeated channel address {head}"])
+            group.append(ch)
+        return Route([], None, fields, group=group)
+
+    async def group_avg(self, route: Route) -> list[list[object]]:
+        """One capture of every channel of the group, at once on the clock (the firmware
+        reads each chip in turn per sample period): one addressed line per channel in the
+        command's order, then ``END,AVG,<lines>``.
+
+        Each channel keeps its own faults: its ``p_no_reply`` / ``p_drop`` loses its line
+        only (the host then finds it missing), its ``p_exception`` answers its line ERR 6;
+        an empty channel is ERR 7. The others deliver.
+        """
+        assert route.group is not None
+        n = int(route.command[1])
+        rows: dict[int, list[object] | None] = {}
+        capturing: dict[int, BridgeDevice] = {}
+        for ch in route.group:
+            dev = self.channels.get(ch)
+            if dev is None:
+                rows[ch] = ["ERR", 7, f"no sensor on channel {ch}"]
+            elif _draw(dev, dev.faults.p_drop) or _draw(dev, dev.faults.p_no_reply):
+                rows[ch] = None
+            elif _draw(dev, dev.faults.p_exception):
+                rows[ch] = ["ERR", 6, "busy"]
+            else:
+                capturing[ch] = dev
+        captures = await asyncio.gather(*(dev.capture(n) for dev in capturing.values()))
+        for (ch, dev), (counts, traw) in zip(capturing.items(), captures, strict=True):
+            rows[ch] = _avg_reply(counts, traw, dev.truth.range_g)[0]
+        out: list[list[object]] = [[channel_field(ch), *row] for ch in route.group
+                                   if (row := rows[ch]) is not None]
+        out.append(["END", "AVG", len(out)])
+        return out
 
     def _channels_reply(self) -> list[object]:
         out: list[object] = ["CHANNELS", len(self.channels)]
@@ -171,6 +231,11 @@ class MultiplexedBridgeDevice:
             out += [ch, dev.eeprom_serial if dev.eeprom_serial is not None else
                     getattr(dev.truth, "serial", "")]
         return out
+
+
+def _draw(device: BridgeDevice, p: float) -> bool:
+    """One fault draw on the channel's own stream (no draw at p = 0: the noise is unshifted)."""
+    return p > 0 and device.rng.random() < p
 
 
 def _temperature_samples(truth: Any, die_c: float, n: int,
@@ -275,7 +340,7 @@ async def _serve_client(device: BridgeDevice | MultiplexedBridgeDevice,
             rows: list[list[object]] = [["ERR", 6, "busy"]]
         else:
             rows = await device.answer(route, frame.framing)
-        for row in rows:
+        for row in rows:  # a group capture's rows carry their own addresses (route.address [])
             writer.write(encode_frame(*route.address, *row, framing=frame.framing))
         try:
             await writer.drain()

@@ -4,7 +4,9 @@
 # framing the command came in (v2 CRC-16, or v1 XOR for hosts not yet updated).
 # MuxBridge serves several ADXL355 on one SPI bus (one chip select each) behind the
 # channel address "@<ch>" (docs/sensor-bridge.md, "Channels"); unaddressed commands are
-# channel 0's, answered exactly as a one-sensor bridge does.
+# channel 0's, answered exactly as a one-sensor bridge does. Its group capture
+# "AVG,<n>,@<ch>,@<ch>,..." averages n samples on every listed channel at once (each chip
+# read in turn within each sample period) and answers one line per channel, then END.
 # Averages are computed in exact integer arithmetic: the RP2040 port of
 # MicroPython has single-precision floats only, which would round a mean of
 # 256000 counts to 1/64 count; integers are exact and identical under CPython.
@@ -13,13 +15,14 @@
 import adxl355_spi as adx
 import bridge_proto as proto
 
-FIRMWARE = "soakcal-fw-2.1"  # 2.1: channel addressing (MuxBridge)
+FIRMWARE = "soakcal-fw-2.2"  # 2.1: channel addressing (MuxBridge); 2.2: group capture
 MODEL = "ADXL355"
 MAX_SAMPLES = 100000
 LSB_PER_G = {2: 256000, 4: 128000, 8: 64000}
 COUNT_MAX = (1 << 19) - 1
 POLL_US = 100  # DATA_RDY polling period
 MAX_CHANNEL = 99  # "@0".."@99": two decimal digits on the wire
+NOT_READY = ["ERR", 5, "sensor not ready (no DATA_RDY)"]
 
 
 class SensorStalled(Exception):
@@ -52,6 +55,49 @@ def isqrt(v):
 def temp_c_text(code):
     """12-bit temperature code -> degC text: 25 + (code - 1885) / (-9.05), 2 decimals."""
     return fixed(211125 - 100 * code, 905, 2)
+
+
+class Averager:
+    """Exact integer sums of one channel's capture -> its ``AVG`` reply fields.
+
+    One place for the AVG arithmetic, whether a channel is captured alone or in a group.
+    """
+
+    def __init__(self, saturation_limit):
+        self.limit = saturation_limit
+        self.n = 0
+        self.s = [0, 0, 0]
+        self.ss = [0, 0, 0]
+        self.t_sum = 0
+        self.t_min = 4095
+        self.t_max = 0
+        self.sat = 0
+
+    def add(self, xyz, t):
+        self.n += 1
+        for k in range(3):
+            c = xyz[k]
+            self.s[k] += c
+            self.ss[k] += c * c
+            if c >= self.limit or -c >= self.limit:
+                self.sat = 1
+        self.t_sum += t
+        self.t_min = min(self.t_min, t)
+        self.t_max = max(self.t_max, t)
+
+    def reply(self):
+        n, s, ss = self.n, self.s, self.ss
+        means = [fixed(s[k], n, 3) for k in range(3)]
+        sds = []
+        for k in range(3):
+            if n < 2:
+                sds.append("0.000")
+                continue
+            # sample variance (ddof = 1) in counts^2 x 1e6, square-rooted to milli-counts
+            var_micro = (n * ss[k] - s[k] * s[k]) * 1000000 // (n * (n - 1))
+            sds.append(fixed(isqrt(var_micro), 1000, 3))
+        return ["AVG", n] + means + sds + [fixed(self.t_sum, n, 2), self.t_min, self.t_max,
+                                           self.sat]
 
 
 class Bridge:
@@ -94,7 +140,7 @@ class Bridge:
         try:
             return self.replies(fields, v1)
         except SensorStalled:
-            return [["ERR", 5, "sensor not ready (no DATA_RDY)"]]
+            return [NOT_READY]
 
     def eeprom_serial(self):
         return self.eeprom.read_serial() if self.eeprom is not None else ""
@@ -140,34 +186,11 @@ class Bridge:
         return min(self.range_g * LSB_PER_G[self.range_g], COUNT_MAX)
 
     def _avg(self, n):
-        s = [0, 0, 0]
-        ss = [0, 0, 0]
-        t_sum = 0
-        t_min = 4095
-        t_max = 0
-        sat = 0
-        limit = self._saturation_limit()
+        acc = Averager(self._saturation_limit())
         for _ in range(n):
             xyz, t = self.next_sample()
-            for k in range(3):
-                c = xyz[k]
-                s[k] += c
-                ss[k] += c * c
-                if c >= limit or -c >= limit:
-                    sat = 1
-            t_sum += t
-            t_min = min(t_min, t)
-            t_max = max(t_max, t)
-        means = [fixed(s[k], n, 3) for k in range(3)]
-        sds = []
-        for k in range(3):
-            if n < 2:
-                sds.append("0.000")
-                continue
-            # sample variance (ddof = 1) in counts^2 x 1e6, square-rooted to milli-counts
-            var_micro = (n * ss[k] - s[k] * s[k]) * 1000000 // (n * (n - 1))
-            sds.append(fixed(isqrt(var_micro), 1000, 3))
-        return [["AVG", n] + means + sds + [fixed(t_sum, n, 2), t_min, t_max, sat]]
+            acc.add(xyz, t)
+        return [acc.reply()]
 
     def _raw(self, n):
         out = []
@@ -194,7 +217,8 @@ class MuxBridge:
     host can never take one channel's data for another's. An unaddressed command is
     channel 0's and is answered unaddressed, byte for byte as a one-sensor bridge;
     ``CHANNELS`` lists the channels and their fixture serials. One command at a time:
-    the channels share the SPI bus and the serial line.
+    the channels share the SPI bus and the serial line. The group capture
+    ``AVG,<n>,@<ch>,...`` (:meth:`group_avg`) reads the listed channels in one capture.
     """
 
     def __init__(self, bridges):
@@ -209,15 +233,15 @@ class MuxBridge:
         address = []
         channel = 0
         if head.startswith("@"):
-            digits = head[1:]
-            if not digits.isdigit() or str(int(digits)) != digits or \
-                    int(digits) > MAX_CHANNEL or len(fields) < 2:
+            channel = channel_number(head)
+            if channel is None or len(fields) < 2:
                 return [proto.frame(["ERR", 3, "bad channel address " + head], v1)]
-            channel = int(digits)
             address = [head]
             fields = fields[1:]
         elif fields == ["CHANNELS"]:
             return [proto.frame(self.channels_reply(), v1)]
+        elif head == "AVG" and len(fields) > 2:
+            return [proto.frame(r, v1) for r in self.group_avg(fields)]
         bridge = self.bridges.get(channel)
         if bridge is None:
             replies = [["ERR", 7, "no sensor on channel " + str(channel)]]
@@ -231,3 +255,54 @@ class MuxBridge:
             out.append(ch)
             out.append(self.bridges[ch].eeprom_serial())
         return out
+
+    def group_avg(self, fields):
+        """``AVG,<n>,@<ch>,...`` -> one ``@<ch>,AVG,...`` (or ``@<ch>,ERR,...``) line per
+        listed channel, in the command's order, then ``END,AVG,<lines>``.
+
+        Every sample period reads each chip in turn (its chip select, its DATA_RDY), so the
+        samples of one period are simultaneous to within the SPI transfers and the whole
+        group costs one capture's time, not one per channel. A channel that stalls gets its
+        own ERR 5 line and the others go on; a bad n or channel list is one unaddressed
+        ERR 3 for the whole command.
+        """
+        n = int(fields[1]) if fields[1].isdigit() else 0
+        if not 1 <= n <= MAX_SAMPLES:
+            return [["ERR", 3, "n must be 1.." + str(MAX_SAMPLES)]]
+        channels = []
+        for head in fields[2:]:
+            ch = channel_number(head)
+            if ch is None or ch in channels:
+                return [["ERR", 3, "bad or repeated channel address " + head]]
+            channels.append(ch)
+        replies = {}
+        active = []
+        for ch in channels:
+            bridge = self.bridges.get(ch)
+            if bridge is None:
+                replies[ch] = ["ERR", 7, "no sensor on channel " + str(ch)]
+            else:
+                active.append((ch, bridge, Averager(bridge._saturation_limit())))
+        for _ in range(n):
+            for item in list(active):
+                ch, bridge, acc = item
+                try:
+                    xyz, t = bridge.next_sample()
+                except SensorStalled:
+                    replies[ch] = NOT_READY
+                    active.remove(item)
+                    continue
+                acc.add(xyz, t)
+        for ch, _bridge, acc in active:
+            replies[ch] = acc.reply()
+        out = [["@" + str(ch)] + replies[ch] for ch in channels]
+        out.append(["END", "AVG", len(channels)])
+        return out
+
+
+def channel_number(head):
+    """``"@<ch>"`` -> ch, or None unless decimal 0..MAX_CHANNEL without leading zeros."""
+    digits = head[1:] if head.startswith("@") else ""
+    if not digits.isdigit() or str(int(digits)) != digits or int(digits) > MAX_CHANNEL:
+        return None
+    return int(digits)

@@ -18,7 +18,7 @@ from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
-from service.db.models import Calibration, Campaign, Measurement
+from service.db.models import Calibration, Campaign, Measurement, SoakProbe
 from service.engine.rigs import RigConfigError, open_rig, rig_config_errors, sensor_entries
 from service.engine.runner import CampaignRunner
 from simulators.faults import SimFaults
@@ -253,3 +253,39 @@ def test_channel_config_problems_name_the_key() -> None:
     )
     assert "sensors[0]" in twice["sensors[1].url"] and "'channels'" in twice["sensors[1].url"]
     assert "'SN-2' is already declared by sensors[0]" in twice["sensors[2].channels.4"]
+
+
+@pytest.mark.parametrize("stability", ["fixed", "predictive"])
+async def test_a_multiplexed_bridge_costs_no_more_chamber_time_than_a_bridge_each(
+    sf, stability: str
+) -> None:  # type: ignore[no-untyped-def]
+    """Issue 12: the engine reads a position's sensors (and a soak's die probes) together,
+    and on one multiplexing bridge that is one group capture: the three sensors of a
+    position are read at one campaign time, and no reading is stored later than with a
+    bridge per sensor. (Captured one after the other, the three 3.2 s captures of a
+    position would put the last sensor's row 6.4 s after the first, every position.)
+
+    "No later", not "at the same time": the twin with a bridge per sensor can only lose
+    virtual time (a capture command written late by its port thread on a loaded machine
+    lets the clock run on to the other bridges' wake-ups), never gain it."""
+    spec = {**SPEC, "samples_per_position": 200, "stability": stability}  # 3.2 s at 62.5 Hz
+    rows_t: dict[bool, dict[tuple[str | None, int, int], float]] = {}
+    probes_t: dict[bool, list[tuple[str | None, float]]] = {}
+    for multiplexed in (False, True):
+        cid = _campaign(sf, spec)
+        assert await _run_twin(sf, cid, {"multiplexed": multiplexed}) == "completed"
+        camp, rows, _cals = _rows(sf, cid)
+        assert not camp.sensors_dropped
+        rows_t[multiplexed] = {(m.sensor, m.step, m.position): m.t_s for m in rows}
+        with sf() as s:
+            probes = s.scalars(select(SoakProbe).where(SoakProbe.campaign_id == cid)).all()
+            probes_t[multiplexed] = [(p.sensor, p.t_s) for p in probes]
+    assert rows_t[True].keys() == rows_t[False].keys() and len(rows_t[True]) == 3 * 6
+    for key, t_s in rows_t[True].items():
+        assert t_s <= rows_t[False][key] + 0.01, key
+    for position in range(6):  # the three sensors of a position captured at once
+        at = [rows_t[True][(s, 0, position)] for s in SERIALS]
+        assert max(at) - min(at) < 0.01
+    if stability == "predictive":  # every poll probes the three dies at once
+        polls = Counter(round(t_s, 3) for _s, t_s in probes_t[True])
+        assert len(polls) >= 2 and set(polls.values()) == {3}
