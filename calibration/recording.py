@@ -28,14 +28,43 @@ from calibration.errors import RecordingError
 REQUIRED = ("t_s", "ax", "ay", "az")
 TEMPERATURE = ("sensor_c", "chamber_c")
 NUMERIC = (
-    "t_s", "ax", "ay", "az", "chamber_c", "sensor_c", "ref_x", "ref_y", "ref_z",
-    "step", "setpoint_c", "position", "n", "sd_x", "sd_y", "sd_z",
+    "t_s",
+    "ax",
+    "ay",
+    "az",
+    "chamber_c",
+    "sensor_c",
+    "ref_x",
+    "ref_y",
+    "ref_z",
+    "step",
+    "setpoint_c",
+    "position",
+    "n",
+    "sd_x",
+    "sd_y",
+    "sd_z",
     "visit",  # project addition: the row's visit index within its step (docs/recording.md)
 )
 # Order used when soakcal writes a recording (readers accept any order).
 CANONICAL_ORDER = (
-    "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "visit",
-    "ref_x", "ref_y", "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z",
+    "t_s",
+    "step",
+    "setpoint_c",
+    "chamber_c",
+    "sensor_c",
+    "position",
+    "visit",
+    "ref_x",
+    "ref_y",
+    "ref_z",
+    "ax",
+    "ay",
+    "az",
+    "n",
+    "sd_x",
+    "sd_y",
+    "sd_z",
 )
 DEFAULT_RANGE_G = 8.0  # ADXL355's widest range; a reading beyond it cannot be real
 # A `_c` column outside this band is not a chamber or die temperature in °C (kelvin, or
@@ -66,8 +95,10 @@ class Recording:
     def from_columns(
         cls, columns: Mapping[str, Iterable[float]], path: str = "<memory>"
     ) -> Recording:
-        cols = {k: np.asarray(list(v) if not isinstance(v, np.ndarray) else v, dtype=float)
-                for k, v in columns.items()}
+        cols = {
+            k: np.asarray(list(v) if not isinstance(v, np.ndarray) else v, dtype=float)
+            for k, v in columns.items()
+        }
         header = [c for c in CANONICAL_ORDER if c in cols] + [
             c for c in cols if c not in CANONICAL_ORDER
         ]
@@ -280,9 +311,7 @@ def _parse_plain(text: str, path: str) -> Recording | None:
     header = text[: start - 1].split(",")
     if [h.strip() for h in header] != header or len(set(header)) != len(header):
         return None
-    if any(name not in header for name in REQUIRED) or not any(
-        t in header for t in TEMPERATURE
-    ):
+    if any(name not in header for name in REQUIRED) or not any(t in header for t in TEMPERATURE):
         return None
     if text.find("\n\n", start, end) >= 0 or _SPACE.search(text, start, end):
         return None  # a blank row, or whitespace that the row reader strips
@@ -298,8 +327,10 @@ def _parse_plain(text: str, path: str) -> Recording | None:
     if rows.fullmatch(text, start, end) is None:
         return None
     numeric = [i for i, h in enumerate(header) if h in NUMERIC]
-    empty_cells = text.startswith(",", start) or text.endswith(",", start, end) or any(
-        text.find(p, start, end) >= 0 for p in (",,", "\n,", ",\n")
+    empty_cells = (
+        text.startswith(",", start)
+        or text.endswith(",", start, end)
+        or any(text.find(p, start, end) >= 0 for p in (",,", "\n,", ",\n"))
     )
 
     def lines() -> Iterator[str]:
@@ -393,7 +424,9 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
     if back.size:
         i = int(back[0]) + 1
         raise RecordingError(
-            path, first_line + i, "t_s",
+            path,
+            first_line + i,
+            "t_s",
             f"time goes backwards ({rec.columns['t_s'][i]} after {rec.columns['t_s'][i - 1]})",
         )
     for name in ("ax", "ay", "az"):
@@ -401,7 +434,9 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
         if over.size:
             i = int(over[0])
             raise RecordingError(
-                path, first_line + i, name,
+                path,
+                first_line + i,
+                name,
                 f"reading {rec.columns[name][i]} g is outside the sensor range ±{range_g} g",
             )
     _validate_plausible(rec, first_line)
@@ -414,7 +449,9 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
     # temperature-bearing recording is an error.
     if empty.size and empty.size < temp.size:
         raise RecordingError(
-            path, first_line + int(empty[0]), rec.temperature_source,
+            path,
+            first_line + int(empty[0]),
+            rec.temperature_source,
             "no temperature in this row (neither sensor_c nor chamber_c)",
         )
 
@@ -452,19 +489,24 @@ def _validate_plausible(rec: Recording, first_line: int) -> None:
     for name in [c for c in rec.columns if c.endswith("_c")]:
         col = rec.columns[name]
         first_bad(
-            name, np.isfinite(col) & ((col < lo) | (col > hi)),
+            name,
+            np.isfinite(col) & ((col < lo) | (col > hi)),
             f"{{value:g}} is not a plausible temperature in °C (expected {lo:g} .. {hi:g} °C;"
             " kelvin or °F? convert to °C)",
         )
     if "n" in rec.columns:
         n = rec.columns["n"]
-        first_bad("n", np.isfinite(n) & ((n < 1) | (n != np.round(n))),
-                  "n = {value:g}: the number of averaged samples must be a whole number ≥ 1")
+        first_bad(
+            "n",
+            np.isfinite(n) & ((n < 1) | (n != np.round(n))),
+            "n = {value:g}: the number of averaged samples must be a whole number ≥ 1",
+        )
     for name in ("sd_x", "sd_y", "sd_z"):
         if name in rec.columns:
             sd = rec.columns[name]
-            first_bad(name, np.isfinite(sd) & (sd < 0),
-                      "standard deviation {value:g} g is negative")
+            first_bad(
+                name, np.isfinite(sd) & (sd < 0), "standard deviation {value:g} g is negative"
+            )
     refs = [c for c in ("ref_x", "ref_y", "ref_z") if c in rec.columns]
     if refs:
         filled = np.column_stack([np.isfinite(rec.columns[c]) for c in refs])
@@ -474,12 +516,17 @@ def _validate_plausible(rec: Recording, first_line: int) -> None:
         if partial.any():
             i = int(np.flatnonzero(partial)[0])
             gap = next(
-                (c for c in ("ref_x", "ref_y", "ref_z")
-                 if c not in rec.columns or not np.isfinite(rec.columns[c][i])),
+                (
+                    c
+                    for c in ("ref_x", "ref_y", "ref_z")
+                    if c not in rec.columns or not np.isfinite(rec.columns[c][i])
+                ),
                 "ref_x",
             )
             raise RecordingError(
-                path, first_line + i, gap,
+                path,
+                first_line + i,
+                gap,
                 "reference vector is incomplete: fill ref_x, ref_y and ref_z, or none of them",
             )
         if len(refs) == 3:
@@ -491,7 +538,9 @@ def _validate_plausible(rec: Recording, first_line: int) -> None:
             if idx.size:
                 i = int(idx[0])
                 raise RecordingError(
-                    path, first_line + i, "ref_x",
+                    path,
+                    first_line + i,
+                    "ref_x",
                     f"reference vector magnitude {norm[i]:g} g is not local gravity "
                     f"(expected {rlo:g} .. {rhi:g} g; ref_* are in g, not m/s² or counts)",
                 )
