@@ -24,8 +24,9 @@ ONE_WAY = [float(t) for t in range(-40, 61, 20)]
 def _rec(norm: bool) -> Recording:
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=4), ONE_WAY, seed=54, soak_min=20)
     if norm:
-        rec = Recording.from_columns({c: v for c, v in rec.columns.items()
-                                      if not c.startswith("ref_")})
+        rec = Recording.from_columns(
+            {c: v for c, v in rec.columns.items() if not c.startswith("ref_")}
+        )
     return rec
 
 
@@ -47,7 +48,7 @@ def _dense_blocks(pb):
             else:
                 X = np.zeros((n, 3, 3 * cols.shape[1]))
                 for a in range(3):
-                    X[:, a, a * cols.shape[1]:(a + 1) * cols.shape[1]] = m
+                    X[:, a, a * cols.shape[1] : (a + 1) * cols.shape[1]] = m
                 yield label, int(key), -1, X
 
 
@@ -57,8 +58,7 @@ def test_scan_blocks_on_their_readings_equal_the_dense_blocks(norm):
     sparse = list(_blocks(pb))
     dense = list(_dense_blocks(pb))
     assert len(sparse) == len(dense) > 0
-    for (label, key, axis, S, Xs), (label_d, key_d, axis_d, X) in zip(sparse, dense,
-                                                                       strict=True):
+    for (label, key, axis, S, Xs), (label_d, key_d, axis_d, X) in zip(sparse, dense, strict=True):
         assert (label, key, axis) == (label_d, key_d, axis_d)
         Xw = pb.whiten(pb.lift(X))
         support = np.flatnonzero(np.any(Xw != 0, axis=1))
@@ -75,10 +75,10 @@ def test_blocked_projection_scale_and_sums_equal_the_dense_forms(monkeypatch):
     dense = E - U @ (U.T @ E)
     blocked = stats.project_out_inplace(U, E.copy())
     np.testing.assert_allclose(blocked, dense, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(stats.sum_sq_columns(dense), np.sum(dense**2, axis=0),
-                               rtol=1e-12)
-    np.testing.assert_array_equal(stats.robust_scale(dense, 1.1),
-                                  1.4826 * np.median(np.abs(dense), axis=0) * 1.1)
+    np.testing.assert_allclose(stats.sum_sq_columns(dense), np.sum(dense**2, axis=0), rtol=1e-12)
+    np.testing.assert_array_equal(
+        stats.robust_scale(dense, 1.1), 1.4826 * np.median(np.abs(dense), axis=0) * 1.1
+    )
 
 
 def test_row_stats_blocked_max_equals_the_dense_statistic(monkeypatch):
@@ -161,3 +161,22 @@ def test_joint_fit_subset_is_all_readings_below_the_cap_and_covers_a_tiled_sched
     # Every position of a 24-position schedule repeated along the recording is represented.
     counts = np.bincount(rows % 24, minlength=24)
     assert counts.min() > 0.8 * rows.size / 24
+
+
+def test_group_means_by_bincount_equal_the_per_key_masks():
+    """locate's per-step/position RMS and where_of's groups: one pass equals one mask per key."""
+    from calibration.discrepancy.locate import _group_means, _group_rms
+
+    rng = np.random.default_rng(7)
+    keys = rng.integers(0, 500, 4000).astype(float) * 3 - 20  # sparse, negative
+    keys[::7] += 0.5  # some non-integer keys ("by quartile"-style names)
+    z = rng.normal(0.0, 1.3, keys.size)
+    naive = {
+        str(int(k)) if float(k).is_integer() else str(k): float(
+            round(np.sqrt(np.mean(z[keys == k] ** 2)), 2)
+        )
+        for k in np.unique(keys)
+    }
+    assert _group_rms(z, keys) == naive
+    names, means = _group_means(z, keys)
+    np.testing.assert_allclose(means, [np.mean(z[keys == k]) for k in names], rtol=1e-12)
