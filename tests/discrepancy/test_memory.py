@@ -180,3 +180,43 @@ def test_group_means_by_bincount_equal_the_per_key_masks():
     assert _group_rms(z, keys) == naive
     names, means = _group_means(z, keys)
     np.testing.assert_allclose(means, [np.mean(z[keys == k]) for k in names], rtol=1e-12)
+
+
+@pytest.mark.parametrize("norm", [False, True])
+def test_design_by_row_blocks_equals_the_whole_design(monkeypatch, norm):
+    """Above TALL_BYTES the whitened design is only ever built by row blocks: same fit,
+    same residual, a basis of the same span (issue 10: the 1.15 GB copy at 1 M readings)."""
+    dg = importlib.import_module("calibration.discrepancy.diagnose")
+
+    from calibration.schedules import table1
+
+    rec = simulate_campaign(
+        SensorTruth.adxl355_typical(seed=4),
+        ONE_WAY,
+        np.tile(table1(), (6, 1)),
+        seed=54,
+        soak_min=20,
+    )
+    if norm:
+        rec = Recording.from_columns(
+            {c: v for c, v in rec.columns.items() if not c.startswith("ref_")}
+        )
+    pb = build_problem(rec)  # m > 20 p: tall enough for the block path
+    rng = np.random.default_rng(9)
+    extra = rng.standard_normal((pb.m, 2)) * 1e-5  # a term, as a selected effect adds one
+    terms = [dg.Term("test_term", 0.0, extra, ())]
+    beta, cov, res = dg._fit(pb, terms)
+    U_whole, yw = dg._basis(pb, terms)
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 60 * 97)  # blocks that do not divide m
+    assert dg._tall_rows(pb, terms) is not None
+    beta_b, cov_b, res_b = dg._fit(pb, terms)
+    np.testing.assert_allclose(res_b, res, rtol=0, atol=1e-9 * np.abs(res).max())
+    np.testing.assert_allclose(beta_b, beta, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(np.sqrt(np.diag(cov_b)), np.sqrt(np.diag(cov)), rtol=1e-5)
+    U_blocks, yw_b = dg._basis(pb, terms)
+    np.testing.assert_array_equal(yw_b, yw)
+    assert U_blocks.shape == U_whole.shape
+    np.testing.assert_allclose(U_blocks.T @ U_blocks, np.eye(U_blocks.shape[1]), atol=1e-10)
+    e, e_b = yw - U_whole @ (U_whole.T @ yw), yw - U_blocks @ (U_blocks.T @ yw)
+    np.testing.assert_allclose(e_b, e, atol=1e-8 * np.abs(yw).max())
