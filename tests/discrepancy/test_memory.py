@@ -220,3 +220,40 @@ def test_design_by_row_blocks_equals_the_whole_design(monkeypatch, norm):
     np.testing.assert_allclose(U_blocks.T @ U_blocks, np.eye(U_blocks.shape[1]), atol=1e-10)
     e, e_b = yw - U_whole @ (U_whole.T @ yw), yw - U_blocks @ (U_blocks.T @ yw)
     np.testing.assert_allclose(e_b, e, atol=1e-8 * np.abs(yw).max())
+
+
+def test_axis_block_design_is_the_dense_design_without_its_zeros(monkeypatch):
+    """Above TALL_BYTES the reference base design keeps its (N × k) block only: the same
+    rows, products and dense form, and the same diagnosis (issue 10: 1.15 GB at 1 M)."""
+    from calibration.discrepancy.problem import AxisBlockDesign
+    from calibration.schedules import table1
+
+    rec = simulate_campaign(
+        SensorTruth.adxl355_typical(seed=4),
+        ONE_WAY,
+        np.tile(table1(), (6, 1)),
+        seed=54,
+        soak_min=20,
+    )
+    dense = build_problem(rec)
+    assert isinstance(dense.X0, np.ndarray)
+    ref = diagnose(rec, n_null=30, seed=2).to_dict()
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 48 * 101)  # blocks that do not divide m
+    pb = build_problem(rec)
+    X0 = pb.X0
+    assert isinstance(X0, AxisBlockDesign)
+    assert X0.shape == dense.X0.shape and X0.nbytes == dense.X0.nbytes
+    np.testing.assert_array_equal(np.asarray(X0), dense.X0)
+    for i, j in ((0, 7), (5, 77), (100, 2000), (dense.X0.shape[0] - 4, dense.X0.shape[0])):
+        np.testing.assert_array_equal(X0[i:j], dense.X0[i:j])
+    rng = np.random.default_rng(3)
+    b, B = rng.standard_normal(X0.shape[1]), rng.standard_normal((X0.shape[1], 4))
+    np.testing.assert_allclose(X0 @ b, dense.X0 @ b, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(X0 @ B, dense.X0 @ B, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(pb.w, dense.w, rtol=1e-6)
+    np.testing.assert_allclose(pb.y, dense.y, rtol=0, atol=1e-9)
+    tall = diagnose(rec, n_null=30, seed=2).to_dict()
+    assert tall["verdict"] == ref["verdict"]
+    assert [f["effect"] for f in tall["findings"]] == [f["effect"] for f in ref["findings"]]
+    assert abs(tall["baseline"]["rmse_ug"] - ref["baseline"]["rmse_ug"]) < 0.02
