@@ -253,6 +253,12 @@ def _axis_block_design(block: np.ndarray) -> np.ndarray | AxisBlockDesign:
     n, k = block.shape
     if 8 * 9 * n * k > stats.TALL_BYTES and n > 20 * k:  # the tall paths only
         return AxisBlockDesign(block)
+    return _axis_blocks(block)
+
+
+def _axis_blocks(block: np.ndarray) -> np.ndarray:
+    """Dense (3N × 3k) rows of an (N × k) block: reading i, axis a → row 3i + a."""
+    n, k = block.shape
     X0 = np.zeros((n, 3, 3 * k))
     for a in range(3):
         X0[:, a, a * k:(a + 1) * k] = block
@@ -287,13 +293,10 @@ class AxisBlockDesign:
         i, j, stride = key.indices(self.shape[0])
         if stride != 1:
             return np.asarray(self)[key]
-        k = self.block.shape[1]
-        out = np.zeros((max(j - i, 0), 3 * k))
-        rows = np.arange(i, j)
-        for a in range(3):
-            sel = rows % 3 == a
-            out[sel, a * k:(a + 1) * k] = self.block[rows[sel] // 3]
-        return out
+        if j <= i:
+            return np.zeros((0, self.shape[1]))
+        r0, r1 = i // 3, -(-j // 3)  # the readings the rows belong to
+        return _axis_blocks(self.block[r0:r1])[i - 3 * r0 : j - 3 * r0]
 
     def __matmul__(self, beta: np.ndarray) -> np.ndarray:
         beta = np.asarray(beta, float)
@@ -302,7 +305,7 @@ class AxisBlockDesign:
         return np.stack(parts, axis=1).reshape((self.shape[0],) + beta.shape[1:])
 
     def __array__(self, dtype: object = None, copy: object = None) -> np.ndarray:
-        dense = self[0:self.shape[0]]
+        dense = _axis_blocks(self.block)
         return dense if dtype is None else dense.astype(dtype)
 
     def __mul__(self, other: object) -> np.ndarray:
