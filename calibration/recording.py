@@ -9,15 +9,17 @@ the 1-based line and the column.
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import math
 import os
 import re
 import stat
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 
@@ -26,14 +28,43 @@ from calibration.errors import RecordingError
 REQUIRED = ("t_s", "ax", "ay", "az")
 TEMPERATURE = ("sensor_c", "chamber_c")
 NUMERIC = (
-    "t_s", "ax", "ay", "az", "chamber_c", "sensor_c", "ref_x", "ref_y", "ref_z",
-    "step", "setpoint_c", "position", "n", "sd_x", "sd_y", "sd_z",
+    "t_s",
+    "ax",
+    "ay",
+    "az",
+    "chamber_c",
+    "sensor_c",
+    "ref_x",
+    "ref_y",
+    "ref_z",
+    "step",
+    "setpoint_c",
+    "position",
+    "n",
+    "sd_x",
+    "sd_y",
+    "sd_z",
     "visit",  # project addition: the row's visit index within its step (docs/recording.md)
 )
 # Order used when soakcal writes a recording (readers accept any order).
 CANONICAL_ORDER = (
-    "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "visit",
-    "ref_x", "ref_y", "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z",
+    "t_s",
+    "step",
+    "setpoint_c",
+    "chamber_c",
+    "sensor_c",
+    "position",
+    "visit",
+    "ref_x",
+    "ref_y",
+    "ref_z",
+    "ax",
+    "ay",
+    "az",
+    "n",
+    "sd_x",
+    "sd_y",
+    "sd_z",
 )
 DEFAULT_RANGE_G = 8.0  # ADXL355's widest range; a reading beyond it cannot be real
 # A `_c` column outside this band is not a chamber or die temperature in °C (kelvin, or
@@ -55,7 +86,8 @@ class Recording:
     columns: dict[str, np.ndarray]
     header: list[str]
     path: str = "<memory>"
-    cells: list[list[str]] | None = None  # raw text rows, for copy-through
+    # raw text rows, for copy-through: a list, or the plain reader's TextRows
+    cells: Sequence[list[str]] | None = None
     notes: list[str] = field(default_factory=list)  # conditioning applied, said in reports
 
     # --- construction -------------------------------------------------
@@ -63,8 +95,10 @@ class Recording:
     def from_columns(
         cls, columns: Mapping[str, Iterable[float]], path: str = "<memory>"
     ) -> Recording:
-        cols = {k: np.asarray(list(v) if not isinstance(v, np.ndarray) else v, dtype=float)
-                for k, v in columns.items()}
+        cols = {
+            k: np.asarray(list(v) if not isinstance(v, np.ndarray) else v, dtype=float)
+            for k, v in columns.items()
+        }
         header = [c for c in CANONICAL_ORDER if c in cols] + [
             c for c in cols if c not in CANONICAL_ORDER
         ]
@@ -185,7 +219,24 @@ def read_recording(path: str | os.PathLike, *, range_g: float = DEFAULT_RANGE_G)
 def parse_recording(
     text: str, path: str = "<memory>", *, range_g: float = DEFAULT_RANGE_G
 ) -> Recording:
-    reader = csv.reader(io.StringIO(text.lstrip("\ufeff")))
+    """Parse and validate a v1 CSV text (see :func:`read_recording`).
+
+    Plain files (no quotes, no spaces in cells, no blank lines but at the end: what
+    soakcal and most loggers write) are read in C by :func:`_parse_plain`; anything
+    else, and every file that would be rejected, goes through the row-by-row reader
+    below, which names the line and column. Both give the same columns, bit for bit.
+    """
+    text = text.lstrip("\ufeff")
+    fast = _parse_plain(text, path)
+    if fast is not None:
+        validate(fast, range_g=range_g, first_line=2)
+        return fast
+    return _parse_rows(text, path, range_g=range_g)
+
+
+def _parse_rows(text: str, path: str, *, range_g: float) -> Recording:
+    """Row-by-row reader: any CSV the contract allows, and the exact error for the rest."""
+    reader = csv.reader(io.StringIO(text))
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
@@ -229,6 +280,134 @@ def parse_recording(
     return rec
 
 
+def _parse_plain(text: str, path: str) -> Recording | None:
+    """The columns of a plain CSV, or None when the row-by-row reader must decide.
+
+    Why: the row-by-row reader keeps a Python float and a Python string per cell
+    (~3.3 kB per reading with io.StringIO's 4-byte copy of the text): 3.3 GB and a
+    minute for a 1 M-row recording (issue 10). Here one regular expression checks every
+    row at once against the rules :func:`_parse_rows` applies (cell count, plain ASCII
+    decimal numbers of at most :data:`MAX_CELL_CHARS` characters), then numpy's C
+    reader converts the numeric columns (``np.loadtxt``: the same correctly rounded
+    conversion as ``float``). The text is kept once, for the raw cells of
+    copy-through (:class:`TextRows`), instead of one string per cell.
+
+    Declines (None) on anything it does not check itself: quotes, a lone CR, NUL,
+    whitespace in a cell, a blank or all-empty row before the last data row, a header
+    the row reader would strip or refuse, a number that overflows to infinity;
+    :func:`_parse_rows` then reads the file and gives the same result or the error.
+    """
+    if '"' in text or "\x00" in text:
+        return None
+    if "\r" in text:
+        if text.count("\r") != text.count("\r\n"):
+            return None
+        text = text.replace("\r\n", "\n")
+    # The data rows are text[start:end], searched in place (pos/endpos), not copied.
+    start = text.find("\n") + 1
+    end = len(text.rstrip("\n")) if text.endswith("\n") else len(text)
+    if start == 0 or end <= start:
+        return None
+    header = text[: start - 1].split(",")
+    if [h.strip() for h in header] != header or len(set(header)) != len(header):
+        return None
+    if any(name not in header for name in REQUIRED) or not any(t in header for t in TEMPERATURE):
+        return None
+    if text.find("\n\n", start, end) >= 0 or _SPACE.search(text, start, end):
+        return None  # a blank row, or whitespace that the row reader strips
+    empty_row = "\n" + "," * (len(header) - 1)
+    if text.startswith(empty_row[1:] + "\n", start) or text[start:end] == empty_row[1:]:
+        return None  # an all-empty row: the row reader skips it, loadtxt would not
+    i = text.find(empty_row, start, end)
+    while i >= 0:
+        if i + len(empty_row) >= end or text[i + len(empty_row)] == "\n":
+            return None
+        i = text.find(empty_row, i + 1, end)
+    rows = _plain_rows(tuple(h in NUMERIC for h in header), csv.field_size_limit())
+    if rows.fullmatch(text, start, end) is None:
+        return None
+    numeric = [i for i, h in enumerate(header) if h in NUMERIC]
+    empty_cells = (
+        text.startswith(",", start)
+        or text.endswith(",", start, end)
+        or any(text.find(p, start, end) >= 0 for p in (",,", "\n,", ",\n"))
+    )
+
+    def lines() -> Iterator[str]:
+        for m in _LINE.finditer(text, start, end):
+            line = m.group()
+            if empty_cells:  # "not recorded" → NaN, which the row reader also gives
+                if line.startswith(","):
+                    line = "nan" + line
+                if line.endswith(","):
+                    line += "nan"
+                while ",," in line:
+                    line = line.replace(",,", ",nan,")
+            yield line
+
+    values = np.loadtxt(
+        lines(), delimiter=",", dtype=float, comments=None, usecols=numeric, ndmin=2
+    )
+    if np.isinf(values).any():
+        return None  # "1e999": the row reader names its line and column
+    columns_first = np.ascontiguousarray(values.T)
+    del values
+    cols = {header[i]: columns_first[j] for j, i in enumerate(numeric)}
+    return Recording(columns=cols, header=header, path=path, cells=TextRows(text, start, end))
+
+
+_SPACE = re.compile(r"[^\S\n]")  # any whitespace but the row separator (str.strip's set)
+_LINE = re.compile(r"[^\n]+")
+
+
+@functools.lru_cache(maxsize=16)
+def _plain_rows(numeric: tuple[bool, ...], text_chars: int) -> re.Pattern[str]:
+    """Rows of plain cells: numbers (or empty) in numeric columns, text elsewhere.
+
+    A number is :data:`_NUMBER` (ASCII digits) of at most :data:`MAX_CELL_CHARS`
+    characters; a text cell at most ``text_chars`` (the csv module's field limit).
+    Atomic groups: a cell or row once matched is never re-split (without them a
+    failing row made the engine retry every way of cutting the digits before it).
+    """
+    number = f"(?=[^,\\n]{{0,{MAX_CELL_CHARS}}}+(?![^,\\n]))(?>{_NUMBER.pattern})"
+    text = f"[^,\\n]{{0,{text_chars}}}+"
+    row = ",".join(f"(?:{number})?" if is_num else text for is_num in numeric)
+    return re.compile(f"(?>{row}\\n)*+{row}", re.ASCII)
+
+
+class TextRows(Sequence[list[str]]):
+    """The raw cells of a plain CSV's data rows, split on demand from its text.
+
+    What :func:`_parse_rows` keeps as a list of lists (one str per cell, ~1.3 kB per
+    row), held as the one text: only copy-through (``compensate``) and text columns
+    (``ref_tol_deg``) read it. ``text[start:end]`` are the rows, one per line.
+    """
+
+    def __init__(self, text: str, start: int, end: int) -> None:
+        self._text, self._start, self._end = text, start, end
+        self._len = text.count("\n", start, end) + 1
+        self._rows: list[list[str]] | None = None
+
+    def __len__(self) -> int:
+        return self._len
+
+    def __iter__(self) -> Iterator[list[str]]:
+        if self._rows is not None:
+            yield from self._rows
+            return
+        for m in _LINE.finditer(self._text, self._start, self._end):
+            yield m.group().split(",")
+
+    @overload
+    def __getitem__(self, i: int) -> list[str]: ...
+    @overload
+    def __getitem__(self, i: slice) -> list[list[str]]: ...
+    def __getitem__(self, i: int | slice) -> list[str] | list[list[str]]:
+        if self._rows is None:  # random access is rare: materialise once
+            self._rows = list(self)
+        return self._rows[i]
+
+
 def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: int = 2) -> None:
     """Spec rules: required values present, t_s non-decreasing, readings within range."""
     path = rec.path
@@ -245,7 +424,9 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
     if back.size:
         i = int(back[0]) + 1
         raise RecordingError(
-            path, first_line + i, "t_s",
+            path,
+            first_line + i,
+            "t_s",
             f"time goes backwards ({rec.columns['t_s'][i]} after {rec.columns['t_s'][i - 1]})",
         )
     for name in ("ax", "ay", "az"):
@@ -253,7 +434,9 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
         if over.size:
             i = int(over[0])
             raise RecordingError(
-                path, first_line + i, name,
+                path,
+                first_line + i,
+                name,
                 f"reading {rec.columns[name][i]} g is outside the sensor range ±{range_g} g",
             )
     _validate_plausible(rec, first_line)
@@ -266,7 +449,9 @@ def validate(rec: Recording, *, range_g: float = DEFAULT_RANGE_G, first_line: in
     # temperature-bearing recording is an error.
     if empty.size and empty.size < temp.size:
         raise RecordingError(
-            path, first_line + int(empty[0]), rec.temperature_source,
+            path,
+            first_line + int(empty[0]),
+            rec.temperature_source,
             "no temperature in this row (neither sensor_c nor chamber_c)",
         )
 
@@ -304,19 +489,24 @@ def _validate_plausible(rec: Recording, first_line: int) -> None:
     for name in [c for c in rec.columns if c.endswith("_c")]:
         col = rec.columns[name]
         first_bad(
-            name, np.isfinite(col) & ((col < lo) | (col > hi)),
+            name,
+            np.isfinite(col) & ((col < lo) | (col > hi)),
             f"{{value:g}} is not a plausible temperature in °C (expected {lo:g} .. {hi:g} °C;"
             " kelvin or °F? convert to °C)",
         )
     if "n" in rec.columns:
         n = rec.columns["n"]
-        first_bad("n", np.isfinite(n) & ((n < 1) | (n != np.round(n))),
-                  "n = {value:g}: the number of averaged samples must be a whole number ≥ 1")
+        first_bad(
+            "n",
+            np.isfinite(n) & ((n < 1) | (n != np.round(n))),
+            "n = {value:g}: the number of averaged samples must be a whole number ≥ 1",
+        )
     for name in ("sd_x", "sd_y", "sd_z"):
         if name in rec.columns:
             sd = rec.columns[name]
-            first_bad(name, np.isfinite(sd) & (sd < 0),
-                      "standard deviation {value:g} g is negative")
+            first_bad(
+                name, np.isfinite(sd) & (sd < 0), "standard deviation {value:g} g is negative"
+            )
     refs = [c for c in ("ref_x", "ref_y", "ref_z") if c in rec.columns]
     if refs:
         filled = np.column_stack([np.isfinite(rec.columns[c]) for c in refs])
@@ -326,12 +516,17 @@ def _validate_plausible(rec: Recording, first_line: int) -> None:
         if partial.any():
             i = int(np.flatnonzero(partial)[0])
             gap = next(
-                (c for c in ("ref_x", "ref_y", "ref_z")
-                 if c not in rec.columns or not np.isfinite(rec.columns[c][i])),
+                (
+                    c
+                    for c in ("ref_x", "ref_y", "ref_z")
+                    if c not in rec.columns or not np.isfinite(rec.columns[c][i])
+                ),
                 "ref_x",
             )
             raise RecordingError(
-                path, first_line + i, gap,
+                path,
+                first_line + i,
+                gap,
                 "reference vector is incomplete: fill ref_x, ref_y and ref_z, or none of them",
             )
         if len(refs) == 3:
@@ -343,7 +538,9 @@ def _validate_plausible(rec: Recording, first_line: int) -> None:
             if idx.size:
                 i = int(idx[0])
                 raise RecordingError(
-                    path, first_line + i, "ref_x",
+                    path,
+                    first_line + i,
+                    "ref_x",
                     f"reference vector magnitude {norm[i]:g} g is not local gravity "
                     f"(expected {rlo:g} .. {rhi:g} g; ref_* are in g, not m/s² or counts)",
                 )

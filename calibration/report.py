@@ -368,11 +368,7 @@ def _drift_figure(fit: ThermalFit, rec: Recording, path: Path) -> Path:
     steps = fit.row_step[used]
 
     def centred(v: np.ndarray) -> np.ndarray:
-        v = v.copy()
-        for gid in np.unique(groups):
-            sel = groups == gid
-            v[sel] -= v[sel].mean(axis=0)
-        return v
+        return metrics.minus_group_means(groups, v)  # one pass, not a mask per position
 
     before, after = centred(raw), centred(cal)
     st_ids = [st.step for st in fit.steps]

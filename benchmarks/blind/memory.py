@@ -1,11 +1,23 @@
 """Peak memory of ``diagnose`` against ``calibrate`` on a long recording (issue 10).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m benchmarks.blind.memory [--rows 100000]
+        [--shape positions|samples] [--cli] [--csv PATH] [--only calibrate|diagnose]
 
-Builds one twin campaign (11 steps, Table 1 repeated to reach ``--rows`` readings), writes
-it to a temporary CSV, then runs ``calibrate`` (``fit_campaign``) and ``diagnose`` each in
-its own process and reports the peak RSS (``ru_maxrss``) and wall time of each, and the
-diagnose figure per row.
+Builds one twin campaign (11 steps) of about ``--rows`` readings, writes it to a CSV
+(temporary unless ``--csv`` names one; an existing ``--csv`` is reused as it is), then runs
+``calibrate`` and ``diagnose`` each in its own process and reports the peak RSS
+(``ru_maxrss``, which includes reading the CSV) and wall time of each, and the diagnose
+figure per row. Two shapes of a long recording:
+
+* ``positions`` (default): Table 1 repeated to reach the rows, one averaged reading
+  (n = 200) per position, so the positions grow with the rows;
+* ``samples``: Table 1 once per step (24 positions), each position's capture written as
+  raw samples (one row per sample at the sensor's 62.5 Hz, ``n`` = 1, no ``sd_*``): a
+  streamed recording, many rows per position.
+
+``--cli`` runs the commands a user runs (``soakcal calibrate --json`` with its held-out
+refits and report, ``soakcal diagnose --json``) instead of the library calls
+(``fit_campaign``, ``diagnose``).
 """
 
 from __future__ import annotations
@@ -19,58 +31,139 @@ import tempfile
 from pathlib import Path
 
 CHILD = r"""
-import json, resource, sys, time
-from calibration.recording import read_recording
-rec = read_recording(sys.argv[2])
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+import contextlib, io, json, os, resource, sys, tempfile, time
+what, path, n_null, cli = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1"
 t0 = time.perf_counter()
-if sys.argv[1] == "calibrate":
-    from calibration.thermal import fit_campaign
-    fit_campaign(rec)
+if cli:
+    from service.cli import main
+    with tempfile.TemporaryDirectory() as tmp:
+        argv = ([what, path, "--json", "-o", os.path.join(tmp, "model.json")]
+                if what == "calibrate" else [what, path, "--json", "--n-null", str(n_null)])
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+            code = main(argv)
+        if code:
+            raise SystemExit(f"{what} exited with {code}")
+        doc = json.loads(out.getvalue())
+    base = float("nan")
+    extra = ({k: doc.get(k) for k in ("rmse_ug", "loo_rmse_ug", "loo_notes")}
+             if what == "calibrate" else {"verdict": doc.get("verdict")})
 else:
-    from calibration.discrepancy import diagnose
-    diagnose(rec, n_null=int(sys.argv[3]))
+    from calibration.recording import read_recording
+    rec = read_recording(path)
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    t0 = time.perf_counter()
+    if what == "calibrate":
+        from calibration.thermal import fit_campaign
+        fit_campaign(rec)
+    else:
+        from calibration.discrepancy import diagnose
+        diagnose(rec, n_null=n_null)
+    extra = {}
 print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                  "after_read_mb": base / 1024, "wall_s": time.perf_counter() - t0}))
+                  "after_read_mb": base, "wall_s": time.perf_counter() - t0, **extra}))
 """
+
+SETPOINTS_C = [float(t) for t in range(-40, 61, 10)]
+
+
+def long_recording(rows: int, shape: str):  # -> Recording
+    """About ``rows`` readings of one 11-step twin campaign in the given shape."""
+    import numpy as np
+
+    from calibration.recording import Recording
+    from calibration.schedules import table1
+    from simulators.campaign_sim import simulate_campaign
+    from simulators.truth import SensorTruth
+
+    truth = SensorTruth.adxl355_typical(seed=1)
+    per_step = len(SETPOINTS_C) * 24
+    if shape == "positions":
+        reps = max(1, rows // per_step)
+        return simulate_campaign(
+            truth, SETPOINTS_C, np.tile(table1(), (reps, 1)), soak_min=30.0, seed=2
+        )
+    k = max(1, rows // per_step)  # samples per position
+    rec = simulate_campaign(
+        truth, SETPOINTS_C, table1(), soak_min=30.0, samples_per_position=k, seed=2
+    )
+    # Each averaged row back to the k samples it was the mean of: times across its
+    # capture window, each sample the mean plus the recorded per-sample scatter.
+    rng = np.random.default_rng(3)
+    c = rec.columns
+    dt_s = 1.0 / truth.odr_hz
+    offsets = (np.arange(k) - (k - 1) / 2) * dt_s
+    cols = {
+        name: np.repeat(c[name], k)
+        for name in (
+            "step",
+            "setpoint_c",
+            "chamber_c",
+            "sensor_c",
+            "position",
+            "ref_x",
+            "ref_y",
+            "ref_z",
+        )
+    }
+    cols["t_s"] = (c["t_s"][:, None] + offsets[None, :]).ravel()
+    for axis, sd in (("ax", "sd_x"), ("ay", "sd_y"), ("az", "sd_z")):
+        cols[axis] = (
+            c[axis][:, None] + c[sd][:, None] * rng.standard_normal((len(rec), k))
+        ).ravel()
+    cols["n"] = np.ones(len(rec) * k)
+    return Recording.from_columns(cols)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=100_000)
     ap.add_argument("--n-null", type=int, default=200)
+    ap.add_argument("--shape", choices=("positions", "samples"), default="positions")
+    ap.add_argument("--cli", action="store_true", help="run the soakcal commands")
+    ap.add_argument("--csv", type=Path, help="keep (or reuse) the recording here")
+    ap.add_argument("--only", choices=("calibrate", "diagnose"))
     a = ap.parse_args(argv)
-    import numpy as np
 
-    from calibration.recording import write_recording
-    from calibration.schedules import table1
-    from simulators.campaign_sim import simulate_campaign
-    from simulators.truth import SensorTruth
-
-    setpoints = [float(t) for t in range(-40, 61, 10)]
-    reps = max(1, a.rows // (len(setpoints) * 24))
-    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=1), setpoints,
-                            np.tile(table1(), (reps, 1)), soak_min=30.0, seed=2)
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "long.csv"
-        write_recording(path, rec)
-        n_rows = len(rec)
-        del rec  # the children read the CSV; the parent must not hold a copy while they run
-        gc.collect()
-        out = {"rows": n_rows, "n_null": a.n_null}
-        for what in ("calibrate", "diagnose"):
-            r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), str(a.n_null)],
-                               capture_output=True, text=True, check=False)
+        path = a.csv or Path(tmp) / "long.csv"
+        if not path.exists():
+            from calibration.recording import write_recording
+
+            rec = long_recording(a.rows, a.shape)
+            write_recording(path, rec)
+            del rec  # the children read the CSV; the parent must not hold a copy
+            gc.collect()
+        with open(path, encoding="utf-8") as fh:
+            n_rows = sum(1 for _ in fh) - 1
+        out = {"rows": n_rows, "shape": a.shape, "n_null": a.n_null, "cli": a.cli}
+        whats = (a.only,) if a.only else ("calibrate", "diagnose")
+        for what in whats:
+            r = subprocess.run(
+                [
+                    sys.executable,
+                    "-c",
+                    CHILD,
+                    what,
+                    str(path),
+                    str(a.n_null),
+                    "1" if a.cli else "0",
+                ],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
             if r.returncode != 0:
                 out[what] = {"error": r.stderr.strip().splitlines()[-1:]}
                 continue
             out[what] = json.loads(r.stdout.strip().splitlines()[-1])
-        if "peak_rss_mb" in out.get("diagnose", {}):
-            d = out["diagnose"]
+        d = out.get("diagnose", {})
+        if "peak_rss_mb" in d and d.get("after_read_mb") == d.get("after_read_mb"):  # not NaN
             d["kb_per_row"] = round((d["peak_rss_mb"] - d["after_read_mb"]) * 1024 / n_rows, 2)
-        if "peak_rss_mb" in out.get("diagnose", {}) and "peak_rss_mb" in out.get("calibrate", {}):
+        if "peak_rss_mb" in d and "peak_rss_mb" in out.get("calibrate", {}):
             out["diagnose_over_calibrate_peak"] = round(
-                out["diagnose"]["peak_rss_mb"] / out["calibrate"]["peak_rss_mb"], 2)
+                d["peak_rss_mb"] / out["calibrate"]["peak_rss_mb"], 2
+            )
     print(json.dumps(out, indent=1))
     return 0
 

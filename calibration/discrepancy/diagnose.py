@@ -238,10 +238,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
-        Xw = U = E = None
-        Xw, yw = _design(pb, terms)
-        U = stats.orthonormal_basis(Xw)
-        del Xw
+        U = E = None
+        U, yw = _basis(pb, terms)
         e = yw - U @ (U.T @ yw)
         dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
         s = float(stats.robust_scale(e[:, None], dof)[0])
@@ -458,9 +456,7 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
 def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, n_null: int,
                 alpha: float) -> scan_mod.ScanResult:
     """The localised scan (scan.py) on the residual of the final model."""
-    Xw, yw = _design(pb, terms)
-    U = stats.orthonormal_basis(Xw)
-    del Xw  # the basis replaces it; the replicates below are the largest array
+    U, yw = _basis(pb, terms)  # the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
     E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
     stats.project_out_inplace(U, E)
@@ -660,8 +656,38 @@ def _design(pb: LinearProblem, terms: list[Term], whiten: bool = True):
     return X, pb.y
 
 
+def _tall_rows(pb: LinearProblem, terms: list[Term]):
+    """Row blocks ``rows(i, j)`` of the whitened design, or None when it is built whole.
+
+    Why (issue 10, memory): above ``stats.TALL_BYTES`` (the tall path of
+    ``stats.orthonormal_basis``) the whitened design is never materialised: at 1 M readings
+    it was a 1.15 GB copy next to the base design and the basis, the largest of diagnose's
+    peak. Shorter recordings keep the whole-array code, so their answers are unchanged.
+    """
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
+    if 8 * pb.m * p <= stats.TALL_BYTES or pb.m <= 20 * p:
+        return None
+
+    def rows(i: int, j: int) -> np.ndarray:
+        return np.hstack([pb.X0[i:j]] + [t.X[i:j] for t in terms]) * pb.w[i:j, None]
+
+    return rows
+
+
+def _basis(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal basis of the whitened design of ``terms``, and the whitened data."""
+    rows = _tall_rows(pb, terms)
+    if rows is not None:
+        p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
+        return stats.orthonormal_basis_of_blocks(rows, pb.m, p), pb.y * pb.w
+    Xw, yw = _design(pb, terms)
+    return stats.orthonormal_basis(Xw), yw
+
+
 def _fit(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """WLS of the current model: coefficients, covariance (× reduced χ²), residual (g)."""
+    if _tall_rows(pb, terms) is not None:
+        return _fit_by_blocks(pb, terms)
     Xw, yw = _design(pb, terms)
     scale = column_scale(Xw)  # why: effect columns may be 10⁷ smaller than the base's
     Xs = Xw
@@ -674,6 +700,36 @@ def _fit(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray, 
     chi2_red = float(r @ r) / dof
     cov = Ginv * chi2_red / np.outer(scale, scale)
     return beta_s / scale, cov, r / pb.w
+
+
+def _fit_by_blocks(pb: LinearProblem, terms: list[Term]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_fit` by row blocks of the whitened design (see :func:`_tall_rows`).
+
+    The same normal equations on unit-norm columns: G = XᵀX and Xᵀy summed by blocks,
+    the column norms from diag(G), the residual y − Xβ by blocks.
+    """
+    rows = _tall_rows(pb, terms)
+    yw = pb.y * pb.w
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
+    G, h = np.zeros((p, p)), np.zeros(p)
+    step = max(1, stats.CHUNK_BYTES // (8 * p))
+    for i in range(0, pb.m, step):
+        B = rows(i, i + step)
+        G += B.T @ B
+        h += B.T @ yw[i:i + step]
+    scale = np.sqrt(np.diag(G))
+    scale = np.where(scale > 0, scale, 1.0)
+    Gs = G / np.outer(scale, scale)
+    Ginv = np.linalg.pinv(Gs, rcond=1e-12, hermitian=True)
+    beta = (Ginv @ (h / scale)) / scale
+    r = yw.copy()
+    for i in range(0, pb.m, step):
+        r[i:i + step] -= rows(i, i + step) @ beta
+    dof = max(pb.m - int(round(np.trace(Ginv @ Gs))), 1)
+    chi2_red = float(r @ r) / dof
+    cov = Ginv * chi2_red / np.outer(scale, scale)
+    return beta, cov, r / pb.w
 
 
 def _residual(pb: LinearProblem, terms: list[Term]) -> np.ndarray:

@@ -13,20 +13,39 @@ ROBUST_Z_FLAG = 4.0
 
 
 def _group_rms(values: np.ndarray, keys: np.ndarray) -> dict[str, float]:
-    return {str(int(k)) if float(k).is_integer() else str(k):
-            float(round(np.sqrt(np.mean(values[keys == k] ** 2)), 2)) for k in np.unique(keys)}
+    names, mean_sq = _group_means(values**2, keys)
+    return {
+        str(int(k)) if float(k).is_integer() else str(k): float(round(np.sqrt(v), 2))
+        for k, v in zip(names, mean_sq, strict=True)
+    }
 
 
-def locate_residuals(pb: LinearProblem, base_res_g: np.ndarray, final_res_g: np.ndarray,
-                     flagged: np.ndarray) -> dict[str, Any]:
+def _group_means(values: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique keys, mean of ``values`` per key) in one pass (bincount).
+
+    One mask per key was O(rows × keys): with a position index per reading the keys grow
+    with the rows, and a 1 M-row recording never left this loop (issue 10).
+    """
+    names, inverse = np.unique(keys, return_inverse=True)
+    inverse = inverse.ravel()
+    means = np.bincount(inverse, weights=values, minlength=names.size) / np.bincount(
+        inverse, minlength=names.size
+    )
+    return names, means
+
+
+def locate_residuals(
+    pb: LinearProblem, base_res_g: np.ndarray, final_res_g: np.ndarray, flagged: np.ndarray
+) -> dict[str, Any]:
     """RMS of whitened base residuals (noise units: 1 = consistent) by every grouping."""
     ctx = pb.ctx
     z = base_res_g * pb.w  # whitened, entries
     rows = pb.row
     out: dict[str, Any] = {"units": "rms of base-model residual / noise (1 = noise level)"}
     if pb.mode == "reference":
-        out["by_axis"] = {AXES[a]: float(round(np.sqrt(np.mean(z[pb.axis == a] ** 2)), 2))
-                          for a in range(3)}
+        out["by_axis"] = {
+            AXES[a]: float(round(np.sqrt(np.mean(z[pb.axis == a] ** 2)), 2)) for a in range(3)
+        }
     out["by_step"] = _group_rms(z, ctx.steps[rows])
     out["by_position"] = _group_rms(z, ctx.positions[rows])
     out["by_direction"] = _group_rms(z, ctx.direction[rows])
@@ -55,10 +74,12 @@ def where_of(pb: LinearProblem, contrib_g: np.ndarray, rows: tuple[int, ...]) ->
     ctx = pb.ctx
     if rows:
         idx = np.array(rows, int)
-        return {"steps": sorted({int(ctx.steps[i]) for i in idx}),
-                "positions": sorted({int(ctx.positions[i]) for i in idx}),
-                "time_s": [float(ctx.t_s[idx].min()), float(ctx.t_s[idx].max())],
-                "rows": [int(i) for i in idx]}
+        return {
+            "steps": sorted({int(ctx.steps[i]) for i in idx}),
+            "positions": sorted({int(ctx.positions[i]) for i in idx}),
+            "time_s": [float(ctx.t_s[idx].min()), float(ctx.t_s[idx].max())],
+            "rows": [int(i) for i in idx],
+        }
     per_row = np.sqrt(np.bincount(pb.row, contrib_g**2, minlength=ctx.n))
     top = float(per_row.max()) if per_row.size else 0.0
     if top <= 0:
@@ -67,9 +88,11 @@ def where_of(pb: LinearProblem, contrib_g: np.ndarray, rows: tuple[int, ...]) ->
     big = per_row >= 0.5 * top
 
     def groups(keys: np.ndarray) -> list[int]:
-        means = {int(k): float(np.mean(per_row[keys == k])) for k in np.unique(keys)}
-        m = max(means.values())
-        return sorted(k for k, v in means.items() if v >= 0.5 * m)
+        names, means = _group_means(per_row, keys)
+        return sorted(int(k) for k in names[means >= 0.5 * means.max()])
 
-    return {"steps": groups(ctx.steps), "positions": groups(ctx.positions),
-            "time_s": [float(ctx.t_s[big].min()), float(ctx.t_s[big].max())]}
+    return {
+        "steps": groups(ctx.steps),
+        "positions": groups(ctx.positions),
+        "time_s": [float(ctx.t_s[big].min()), float(ctx.t_s[big].max())],
+    }

@@ -43,7 +43,7 @@ class LinearProblem:
 
     mode: str
     y: np.ndarray  # (m,) data vector (raw output, or norm residual of the base fit), g
-    X0: np.ndarray  # (m, p0) base design, unweighted
+    X0: np.ndarray | AxisBlockDesign  # (m, p0) base design, unweighted
     w: np.ndarray  # (m,) whitening weights 1/σ
     row: np.ndarray  # (m,) reading index of each entry
     axis: np.ndarray  # (m,) axis of each entry (−1 in norm mode)
@@ -134,10 +134,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     u = np.column_stack([np.ones(n), ref])  # (N,4)
     block = (u[:, :, None] * P[:, None, :]).reshape(n, -1)  # (N, 4·(d+1))
     k = block.shape[1]
-    X0 = np.zeros((n, 3, 3 * k))
-    for a in range(3):
-        X0[:, a, a * k:(a + 1) * k] = block
-    X0 = X0.reshape(3 * n, 3 * k)
+    X0 = _axis_block_design(block)
     y = raw.ravel()
     sig = pooled_sigma_g(rec, ctx.steps)
     from_sd = sig is not None and bool(np.all(np.isfinite(sig) & (sig > 0)))
@@ -242,6 +239,77 @@ def _wls(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
     d = np.where(d > 0, d, 1.0)
     beta = np.linalg.lstsq(G / np.outer(d, d), h / d, rcond=1e-12)[0]
     return beta / d
+
+
+def _axis_block_design(block: np.ndarray) -> np.ndarray | AxisBlockDesign:
+    """The reference-mode base design: entry (i, a) holds ``block[i]`` in axis a's columns.
+
+    Dense as before up to ``stats.TALL_BYTES``; above, :class:`AxisBlockDesign` keeps the
+    (N × k) block only (issue 10: two thirds of the dense (3N × 3k) array are zeros, 1.15 GB
+    at 1 M readings, alive for the whole diagnosis).
+    """
+    from calibration.discrepancy import stats
+
+    n, k = block.shape
+    if 8 * 9 * n * k > stats.TALL_BYTES and n > 20 * k:  # the tall paths only
+        return AxisBlockDesign(block)
+    return _axis_blocks(block)
+
+
+def _axis_blocks(block: np.ndarray) -> np.ndarray:
+    """Dense (3N × 3k) rows of an (N × k) block: reading i, axis a → row 3i + a."""
+    n, k = block.shape
+    X0 = np.zeros((n, 3, 3 * k))
+    for a in range(3):
+        X0[:, a, a * k:(a + 1) * k] = block
+    return X0.reshape(3 * n, 3 * k)
+
+
+class AxisBlockDesign:
+    """(3N × 3k) block-diagonal-by-axis design stored as its (N × k) block.
+
+    Rows are readings × axes (reading i, axis a at row 3i + a), as the dense form. What the
+    tall code paths use: ``shape``, ``nbytes`` (the dense size, so the same paths are
+    chosen), contiguous row slices ``[i:j]`` (dense blocks: the same values, zeros
+    included), ``@`` a coefficient vector or matrix, and ``np.asarray``/``*`` (the dense
+    array, built on demand: only the rarely taken paths need it).
+    """
+
+    ndim = 2
+    dtype = np.dtype(float)
+
+    def __init__(self, block: np.ndarray) -> None:
+        self.block = np.asarray(block, float)
+        n, k = self.block.shape
+        self.shape = (3 * n, 3 * k)
+
+    @property
+    def nbytes(self) -> int:
+        return 8 * self.shape[0] * self.shape[1]
+
+    def __getitem__(self, key: object) -> np.ndarray:
+        if not isinstance(key, slice):
+            return np.asarray(self)[key]
+        i, j, stride = key.indices(self.shape[0])
+        if stride != 1:
+            return np.asarray(self)[key]
+        if j <= i:
+            return np.zeros((0, self.shape[1]))
+        r0, r1 = i // 3, -(-j // 3)  # the readings the rows belong to
+        return _axis_blocks(self.block[r0:r1])[i - 3 * r0 : j - 3 * r0]
+
+    def __matmul__(self, beta: np.ndarray) -> np.ndarray:
+        beta = np.asarray(beta, float)
+        k = self.block.shape[1]
+        parts = [self.block @ beta[a * k:(a + 1) * k] for a in range(3)]
+        return np.stack(parts, axis=1).reshape((self.shape[0],) + beta.shape[1:])
+
+    def __array__(self, dtype: object = None, copy: object = None) -> np.ndarray:
+        dense = _axis_blocks(self.block)
+        return dense if dtype is None else dense.astype(dtype)
+
+    def __mul__(self, other: object) -> np.ndarray:
+        return np.asarray(self) * other
 
 
 JOINT_FIT_MAX_ROWS = 50_000  # readings the joint SFEM-cubic fit of the remainder uses

@@ -16,6 +16,7 @@ far below 1e-300).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,21 +57,37 @@ def orthonormal_basis_tall(X: np.ndarray) -> np.ndarray:
     (Cholesky-QR2: orthonormal to rounding when the scaled design's condition is far
     below 1e8, as the base design's is). One (m × r) array besides X.
     """
-    m, p = X.shape
-    G = X.T @ X
+    return orthonormal_basis_of_blocks(lambda i, j: X[i:j], X.shape[0], X.shape[1], X.T @ X)
+
+
+def orthonormal_basis_of_blocks(
+    rows: Callable[[int, int], np.ndarray], m: int, p: int, gram: np.ndarray | None = None
+) -> np.ndarray:
+    """:func:`orthonormal_basis_tall` of an (m × p) X given by its row blocks ``rows(i, j)``.
+
+    Why: the design of a long recording need not exist whole (issue 10: at 1 M readings the
+    whitened design is 1.15 GB next to the base design and the basis). ``gram`` (XᵀX) when
+    the caller has it; else it is summed over the blocks.
+    """
+    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
+    if gram is None:
+        gram = np.zeros((p, p))
+        for i in range(0, m, step):
+            B = rows(i, i + step)
+            gram += B.T @ B
+    G = gram
     d = np.sqrt(np.diag(G))
     inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
     lam, V = np.linalg.eigh(G * inv[:, None] * inv[None, :])
     keep = lam > GRAM_REL_TOL * max(float(lam.max()), 1e-300)
     T = (inv[:, None] * V[:, keep]) / np.sqrt(lam[keep])
     U = np.empty((m, int(keep.sum())))
-    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
     for i in range(0, m, step):
-        U[i:i + step] = X[i:i + step] @ T
+        U[i : i + step] = rows(i, i + step) @ T
     R = np.linalg.cholesky(U.T @ U).T  # upper: U₁ = U R
     Rinv = np.linalg.inv(R)
     for i in range(0, m, step):
-        U[i:i + step] = U[i:i + step] @ Rinv
+        U[i : i + step] = U[i : i + step] @ Rinv
     return U
 
 
@@ -89,12 +106,13 @@ def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
     UtE = U.T @ E
     step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
     for i in range(0, E.shape[0], step):
-        E[i:i + step] -= U[i:i + step] @ UtE
+        E[i : i + step] -= U[i : i + step] @ UtE
     return E
 
 
-def null_replicates(rng: np.random.Generator, m: int, n_null: int, row: np.ndarray,
-                    shared: np.ndarray | None = None) -> np.ndarray:
+def null_replicates(
+    rng: np.random.Generator, m: int, n_null: int, row: np.ndarray, shared: np.ndarray | None = None
+) -> np.ndarray:
     """(m × B) whitened noise of the parametric bootstrap (docs/diagnosis.md §2).
 
     Entries are unit-variance. ``shared`` (m,): each entry's loading c on one N(0,1) draw
@@ -116,8 +134,9 @@ def null_replicates(rng: np.random.Generator, m: int, n_null: int, row: np.ndarr
     return E
 
 
-def _residual_cov_blocks(U: np.ndarray, Ug: np.ndarray, c: np.ndarray,
-                         idx: np.ndarray) -> np.ndarray:
+def _residual_cov_blocks(
+    U: np.ndarray, Ug: np.ndarray, c: np.ndarray, idx: np.ndarray
+) -> np.ndarray:
     """(N, g, g) blocks of Cov(e) = (I − P) C (I − P), C block-diagonal per reading.
 
     C = diag(1 − c²) + per-reading c cᵀ (unit diagonal). With P = UUᵀ and C block-diagonal,
@@ -132,15 +151,15 @@ def _residual_cov_blocks(U: np.ndarray, Ug: np.ndarray, c: np.ndarray,
     c2 = c**2
     step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
     for i in range(0, U.shape[0], step):
-        Ub = U[i:i + step]
-        W -= (Ub * c2[i:i + step, None]).T @ Ub
+        Ub = U[i : i + step]
+        W -= (Ub * c2[i : i + step, None]).T @ Ub
     out = np.empty_like(Cg)
     step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
     for i in range(0, n, step):  # by blocks of readings: U_g W is an (m × p) array at once
-        Ub, Cb = Ug[i:i + step], Cg[i:i + step]
+        Ub, Cb = Ug[i : i + step], Cg[i : i + step]
         UUtC = np.einsum("ngp,nhp->ngh", Ub, Ub) @ Cb
         UWU = np.einsum("ngq,nhq->ngh", Ub @ W, Ub)
-        out[i:i + step] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
+        out[i : i + step] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
     return out
 
 
@@ -155,8 +174,13 @@ def robust_scale(E: np.ndarray, dof_corr: float) -> np.ndarray:
     By blocks of columns: the median of |E| needs a copy, of one block at a time only.
     """
     step = max(1, CHUNK_BYTES // (8 * max(E.shape[0], 1)))
-    med = np.concatenate([np.median(np.abs(E[:, j:j + step]), axis=0)
-                          for j in range(0, E.shape[1], step)]) if E.shape[1] else np.zeros(0)
+    med = (
+        np.concatenate(
+            [np.median(np.abs(E[:, j : j + step]), axis=0) for j in range(0, E.shape[1], step)]
+        )
+        if E.shape[1]
+        else np.zeros(0)
+    )
     return 1.4826 * med * dof_corr
 
 
@@ -222,9 +246,14 @@ def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
     return np.where(np.isfinite(v), v, asym)
 
 
-def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
-                 one_sided: bool = False, EE: np.ndarray | None = None,
-                 ) -> tuple[float, np.ndarray, int, float, float]:
+def linear_stats(
+    U: np.ndarray,
+    Xw: np.ndarray,
+    e: np.ndarray,
+    E: np.ndarray,
+    one_sided: bool = False,
+    EE: np.ndarray | None = None,
+) -> tuple[float, np.ndarray, int, float, float]:
     """F-type score test of free-gain columns after projecting out U.
 
     ``one_sided``: the first column's coefficient is physically > 0 (a lag's amplitude)
@@ -272,8 +301,9 @@ def linear_stats(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
     return float(f_logsf(f, k, dof)), f_logsf(fn, k, dof), k, absorbed, q
 
 
-def explained_ss(U: np.ndarray, Xw: np.ndarray, e: np.ndarray,
-                 one_sided: bool = False) -> tuple[float, int]:
+def explained_ss(
+    U: np.ndarray, Xw: np.ndarray, e: np.ndarray, one_sided: bool = False
+) -> tuple[float, int]:
     """‖Bᵀe‖² and k for the columns Xw after projecting out U (for profiling θ).
 
     ``one_sided`` as in :func:`linear_stats`: 0 when the first column's coefficient
@@ -289,9 +319,17 @@ def explained_ss(U: np.ndarray, Xw: np.ndarray, e: np.ndarray,
     return q, B.shape[1]
 
 
-def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_rows: int,
-              s: float, s_null: np.ndarray, skip: set[int],
-              shared: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+def row_stats(
+    U: np.ndarray,
+    e: np.ndarray,
+    E: np.ndarray,
+    row: np.ndarray,
+    n_rows: int,
+    s: float,
+    s_null: np.ndarray,
+    skip: set[int],
+    shared: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
 
     With white noise the residual's covariance on a reading is I − U_gU_gᵀ. With
@@ -330,6 +368,6 @@ def row_stats(U: np.ndarray, e: np.ndarray, E: np.ndarray, row: np.ndarray, n_ro
     tn_max = np.full(E.shape[1], -np.inf)
     step = max(1, CHUNK_BYTES // (8 * g * max(E.shape[1], 1)))
     for i in range(0, n_rows, step):
-        q = np.einsum("ngb,ngh,nhb->nb", Eg[i:i + step], Minv[i:i + step], Eg[i:i + step])
+        q = np.einsum("ngb,ngh,nhb->nb", Eg[i : i + step], Minv[i : i + step], Eg[i : i + step])
         tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
     return t, tn_max, g

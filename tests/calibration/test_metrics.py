@@ -66,3 +66,35 @@ def test_thermal_drift_slope_and_range_with_orientation_groups() -> None:
     assert d.range_c == (-40.0, 60.0)
     both = metrics.drift_before_after(v, base, T, groups)
     assert abs(both["after"]["slope_ug_per_k"][0]) < 0.01
+
+
+def test_thermal_drift_group_means_match_per_group_masks() -> None:
+    """The bincount group means give the slope the per-group masks gave (many groups)."""
+    rng = np.random.default_rng(3)
+    n = 3000
+    T = rng.uniform(-40.0, 60.0, n)
+    groups = rng.integers(0, 1200, n) * 7 - 50  # sparse, negative ids: not 0..k-1
+    v = rng.normal(0.0, 1.0, (n, 3))
+    y = np.column_stack([v, np.linalg.norm(v, axis=1) - 1.0])
+    Tc = T.copy()
+    for gid in np.unique(groups):  # the naive form: one mask per group
+        m = groups == gid
+        y[m] -= y[m].mean(axis=0)
+        Tc[m] -= Tc[m].mean()
+    naive = (Tc @ y) / float(Tc @ Tc) * 1e6
+    d = metrics.thermal_drift(v, T, groups)
+    np.testing.assert_allclose(d.slope_ug_per_k, naive[:3], rtol=1e-12)
+    assert d.norm_slope_ug_per_k == pytest.approx(naive[3], rel=1e-12)
+
+
+def test_minus_group_means_matches_per_group_masks_for_vectors_and_tables() -> None:
+    """The drift report's and drift figure's centring: one pass equals a mask per group."""
+    rng = np.random.default_rng(5)
+    groups = rng.integers(0, 40, 500)
+    v = rng.normal(0.0, 1.0, (500, 3))
+    naive = v.copy()
+    for gid in np.unique(groups):
+        m = groups == gid
+        naive[m] -= naive[m].mean(axis=0)
+    np.testing.assert_allclose(metrics.minus_group_means(groups, v), naive, atol=1e-14)
+    np.testing.assert_allclose(metrics.minus_group_means(groups, v[:, 1]), naive[:, 1], atol=1e-14)

@@ -24,8 +24,9 @@ ONE_WAY = [float(t) for t in range(-40, 61, 20)]
 def _rec(norm: bool) -> Recording:
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=4), ONE_WAY, seed=54, soak_min=20)
     if norm:
-        rec = Recording.from_columns({c: v for c, v in rec.columns.items()
-                                      if not c.startswith("ref_")})
+        rec = Recording.from_columns(
+            {c: v for c, v in rec.columns.items() if not c.startswith("ref_")}
+        )
     return rec
 
 
@@ -47,7 +48,7 @@ def _dense_blocks(pb):
             else:
                 X = np.zeros((n, 3, 3 * cols.shape[1]))
                 for a in range(3):
-                    X[:, a, a * cols.shape[1]:(a + 1) * cols.shape[1]] = m
+                    X[:, a, a * cols.shape[1] : (a + 1) * cols.shape[1]] = m
                 yield label, int(key), -1, X
 
 
@@ -57,8 +58,7 @@ def test_scan_blocks_on_their_readings_equal_the_dense_blocks(norm):
     sparse = list(_blocks(pb))
     dense = list(_dense_blocks(pb))
     assert len(sparse) == len(dense) > 0
-    for (label, key, axis, S, Xs), (label_d, key_d, axis_d, X) in zip(sparse, dense,
-                                                                       strict=True):
+    for (label, key, axis, S, Xs), (label_d, key_d, axis_d, X) in zip(sparse, dense, strict=True):
         assert (label, key, axis) == (label_d, key_d, axis_d)
         Xw = pb.whiten(pb.lift(X))
         support = np.flatnonzero(np.any(Xw != 0, axis=1))
@@ -75,10 +75,10 @@ def test_blocked_projection_scale_and_sums_equal_the_dense_forms(monkeypatch):
     dense = E - U @ (U.T @ E)
     blocked = stats.project_out_inplace(U, E.copy())
     np.testing.assert_allclose(blocked, dense, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(stats.sum_sq_columns(dense), np.sum(dense**2, axis=0),
-                               rtol=1e-12)
-    np.testing.assert_array_equal(stats.robust_scale(dense, 1.1),
-                                  1.4826 * np.median(np.abs(dense), axis=0) * 1.1)
+    np.testing.assert_allclose(stats.sum_sq_columns(dense), np.sum(dense**2, axis=0), rtol=1e-12)
+    np.testing.assert_array_equal(
+        stats.robust_scale(dense, 1.1), 1.4826 * np.median(np.abs(dense), axis=0) * 1.1
+    )
 
 
 def test_row_stats_blocked_max_equals_the_dense_statistic(monkeypatch):
@@ -161,3 +161,99 @@ def test_joint_fit_subset_is_all_readings_below_the_cap_and_covers_a_tiled_sched
     # Every position of a 24-position schedule repeated along the recording is represented.
     counts = np.bincount(rows % 24, minlength=24)
     assert counts.min() > 0.8 * rows.size / 24
+
+
+def test_group_means_by_bincount_equal_the_per_key_masks():
+    """locate's per-step/position RMS and where_of's groups: one pass equals one mask per key."""
+    from calibration.discrepancy.locate import _group_means, _group_rms
+
+    rng = np.random.default_rng(7)
+    keys = rng.integers(0, 500, 4000).astype(float) * 3 - 20  # sparse, negative
+    keys[::7] += 0.5  # some non-integer keys ("by quartile"-style names)
+    z = rng.normal(0.0, 1.3, keys.size)
+    naive = {
+        str(int(k)) if float(k).is_integer() else str(k): float(
+            round(np.sqrt(np.mean(z[keys == k] ** 2)), 2)
+        )
+        for k in np.unique(keys)
+    }
+    assert _group_rms(z, keys) == naive
+    names, means = _group_means(z, keys)
+    np.testing.assert_allclose(means, [np.mean(z[keys == k]) for k in names], rtol=1e-12)
+
+
+@pytest.mark.parametrize("norm", [False, True])
+def test_design_by_row_blocks_equals_the_whole_design(monkeypatch, norm):
+    """Above TALL_BYTES the whitened design is only ever built by row blocks: same fit,
+    same residual, a basis of the same span (issue 10: the 1.15 GB copy at 1 M readings)."""
+    dg = importlib.import_module("calibration.discrepancy.diagnose")
+
+    from calibration.schedules import table1
+
+    rec = simulate_campaign(
+        SensorTruth.adxl355_typical(seed=4),
+        ONE_WAY,
+        np.tile(table1(), (6, 1)),
+        seed=54,
+        soak_min=20,
+    )
+    if norm:
+        rec = Recording.from_columns(
+            {c: v for c, v in rec.columns.items() if not c.startswith("ref_")}
+        )
+    pb = build_problem(rec)  # m > 20 p: tall enough for the block path
+    rng = np.random.default_rng(9)
+    extra = rng.standard_normal((pb.m, 2)) * 1e-5  # a term, as a selected effect adds one
+    terms = [dg.Term("test_term", 0.0, extra, ())]
+    beta, cov, res = dg._fit(pb, terms)
+    U_whole, yw = dg._basis(pb, terms)
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 60 * 97)  # blocks that do not divide m
+    assert dg._tall_rows(pb, terms) is not None
+    beta_b, cov_b, res_b = dg._fit(pb, terms)
+    np.testing.assert_allclose(res_b, res, rtol=0, atol=1e-9 * np.abs(res).max())
+    np.testing.assert_allclose(beta_b, beta, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(np.sqrt(np.diag(cov_b)), np.sqrt(np.diag(cov)), rtol=1e-5)
+    U_blocks, yw_b = dg._basis(pb, terms)
+    np.testing.assert_array_equal(yw_b, yw)
+    assert U_blocks.shape == U_whole.shape
+    np.testing.assert_allclose(U_blocks.T @ U_blocks, np.eye(U_blocks.shape[1]), atol=1e-10)
+    e, e_b = yw - U_whole @ (U_whole.T @ yw), yw - U_blocks @ (U_blocks.T @ yw)
+    np.testing.assert_allclose(e_b, e, atol=1e-8 * np.abs(yw).max())
+
+
+def test_axis_block_design_is_the_dense_design_without_its_zeros(monkeypatch):
+    """Above TALL_BYTES the reference base design keeps its (N × k) block only: the same
+    rows, products and dense form, and the same diagnosis (issue 10: 1.15 GB at 1 M)."""
+    from calibration.discrepancy.problem import AxisBlockDesign
+    from calibration.schedules import table1
+
+    rec = simulate_campaign(
+        SensorTruth.adxl355_typical(seed=4),
+        ONE_WAY,
+        np.tile(table1(), (6, 1)),
+        seed=54,
+        soak_min=20,
+    )
+    dense = build_problem(rec)
+    assert isinstance(dense.X0, np.ndarray)
+    ref = diagnose(rec, n_null=30, seed=2).to_dict()
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 48 * 101)  # blocks that do not divide m
+    pb = build_problem(rec)
+    X0 = pb.X0
+    assert isinstance(X0, AxisBlockDesign)
+    assert X0.shape == dense.X0.shape and X0.nbytes == dense.X0.nbytes
+    np.testing.assert_array_equal(np.asarray(X0), dense.X0)
+    for i, j in ((0, 7), (5, 77), (100, 2000), (dense.X0.shape[0] - 4, dense.X0.shape[0])):
+        np.testing.assert_array_equal(X0[i:j], dense.X0[i:j])
+    rng = np.random.default_rng(3)
+    b, B = rng.standard_normal(X0.shape[1]), rng.standard_normal((X0.shape[1], 4))
+    np.testing.assert_allclose(X0 @ b, dense.X0 @ b, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(X0 @ B, dense.X0 @ B, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(pb.w, dense.w, rtol=1e-6)
+    np.testing.assert_allclose(pb.y, dense.y, rtol=0, atol=1e-9)
+    tall = diagnose(rec, n_null=30, seed=2).to_dict()
+    assert tall["verdict"] == ref["verdict"]
+    assert [f["effect"] for f in tall["findings"]] == [f["effect"] for f in ref["findings"]]
+    assert abs(tall["baseline"]["rmse_ug"] - ref["baseline"]["rmse_ug"]) < 0.02
