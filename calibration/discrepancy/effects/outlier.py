@@ -103,7 +103,7 @@ class Outlier(EffectModule):
                         "steps": sorted({int(s) for s in ctx.steps[rows]}),
                         "time_s": [float(ctx.t_s[rows].min()), float(ctx.t_s[rows].max())],
                         "axes": list(axes),
-                        "log10_p": round(float(lp_struct) / np.log(10), 1),
+                        "log10_p": round(float(lp_struct / np.log(10)), 1),
                         "why": _NOT_ISOLATED[kind]}
         return best
 

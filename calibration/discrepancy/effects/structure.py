@@ -98,4 +98,4 @@ def visits_differ(pb: Any, U: np.ndarray, e: np.ndarray, positions: list[int],
     if k == 0 or lp > np.log(alpha):
         return None
     return {"positions": sorted(p for g in groups for p in g), "axes": [AXES[a] for a in ax],
-            "log10_p": round(float(lp) / np.log(10), 1)}
+            "log10_p": round(float(lp / np.log(10)), 1)}
