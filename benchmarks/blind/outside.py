@@ -1,6 +1,6 @@
 """Effects outside the catalogue: how often does ``diagnose`` give them a catalogue name?
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python -m benchmarks.blind.outside [--reps 12]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python -m benchmarks.blind.outside [--reps 12] [--seed0 K]
 
 Five effects the catalogue (shared/spec/effects.md) does not hold, each on its own sensor
 and seed, one-way −40…60 °C, Table 1, 30-min soaks, sensor_c + chamber_c:
