@@ -49,8 +49,7 @@ def log_p(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> tuple[float, int]:
     return (float(lp), int(k)) if k > 0 else (0.0, 0)
 
 
-def per_axis_indicator(n: int, rows: np.ndarray, axes: tuple[int, ...] = (0, 1, 2)
-                       ) -> np.ndarray:
+def per_axis_indicator(n: int, rows: np.ndarray, axes: tuple[int, ...] = (0, 1, 2)) -> np.ndarray:
     """(N,3,len(axes)): 1 on ``rows`` of each listed axis (an offset there)."""
     out = np.zeros((n, 3, len(axes)))
     for j, a in enumerate(axes):
@@ -73,8 +72,9 @@ def direction_groups(positions: np.ndarray, input_g: np.ndarray) -> list[list[in
     return [g for g in groups if len(g) >= 2]
 
 
-def visits_differ(pb: Any, U: np.ndarray, e: np.ndarray, positions: list[int],
-                  axes: list[str], alpha: float) -> dict[str, Any] | None:
+def visits_differ(
+    pb: Any, U: np.ndarray, e: np.ndarray, positions: list[int], axes: list[str], alpha: float
+) -> dict[str, Any] | None:
     """Residuals that differ between visits of the same reference direction (issue 10).
 
     ``U``, ``e``: the model *with* the input-only term. Restricted to the term's own
@@ -97,5 +97,8 @@ def visits_differ(pb: Any, U: np.ndarray, e: np.ndarray, positions: list[int],
     lp, k = log_p(Uc, ec, whitened(pb, np.concatenate(visit, axis=2)))
     if k == 0 or lp > np.log(alpha):
         return None
-    return {"positions": sorted(p for g in groups for p in g), "axes": [AXES[a] for a in ax],
-            "log10_p": round(float(lp / np.log(10)), 1)}
+    return {
+        "positions": sorted(p for g in groups for p in g),
+        "axes": [AXES[a] for a in ax],
+        "log10_p": round(float(lp / np.log(10)), 1),
+    }
