@@ -307,6 +307,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                  ho_before, ho_after))
         prev_tests = tests
     U = E = None  # the last stage's basis and replicates: the scan builds its own
+    # Physics checks (issue 10, docs/diagnosis.md §7): a named term must have its physics'
+    # shape (EffectModule.misses: an outlier is isolated, a function of the specific force
+    # is the same at every visit of a direction). One that is not is withdrawn, and the
+    # structure it was fitted to is reported as ``unexplained`` where it is.
+    terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -348,8 +353,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                       * np.sqrt(np.mean((1.0 / pb.w) ** 2)) * 1e6)
     unexplained = _excess_test(pb, final_res, flagged, terms, alpha)
     unexplained = {**scanned.to_dict(), "chi_square": unexplained}
-    if scanned.significant:
-        findings.append(_unexplained_finding(pb, scanned, final_res))
+    if scanned.significant or not_named:
+        findings.append(_unexplained_finding(pb, scanned, final_res, not_named))
     base_rmse = _rms(base_res, np.zeros(n, bool)) if given_rmse is None else given_rmse
     return Diagnosis(
         unexplained=unexplained,
@@ -490,13 +495,68 @@ def _rows_in_places(pb: LinearProblem, places: list[dict[str, Any]]) -> np.ndarr
     return inside
 
 
+def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding],
+                    alpha: float, notes: list[str]
+                    ) -> tuple[list[Term], list[Finding], list[dict[str, Any]]]:
+    """Withdraw the terms whose module finds structure its physics cannot make (issue 10).
+
+    Outlier terms are judged against the model without any flagged reading's term (their
+    deviation must not be what the other readings predict); every other term against the
+    whole model. Returns the kept terms and findings and, per withdrawn term, where the
+    structure is (``EffectModule.misses``) with the term's family p.
+    """
+    not_named: list[dict[str, Any]] = []
+    for row_terms in (True, False):
+        chosen = [t for t in terms if bool(t.rows) == row_terms]
+        if not chosen:
+            continue
+        Xw, yw = _design(pb, [t for t in terms if not t.rows] if row_terms else terms)
+        U = stats.orthonormal_basis(Xw)
+        del Xw
+        e = yw - U @ (U.T @ yw)
+        for t in chosen:
+            f = next(f for f in findings if f.effect == t.effect_id and f.rows == list(t.rows))
+            miss = BY_ID[t.effect_id].misses(pb, U, e, t.theta, f.where, f.axes, alpha)
+            if miss is not None:
+                not_named.append({"effect": t.effect_id, **miss, "p_value": f.p_value,
+                                  "test": f.test})
+        U = e = None
+    if not_named:
+        gone = {(n["effect"], n.get("row")) for n in not_named}
+        terms = [t for t in terms if (t.effect_id, t.rows[0] if t.rows else None) not in gone]
+        findings = [f for f in findings if (f.effect, f.rows[0] if f.rows else None) not in gone]
+        for n in not_named:
+            at = (f"reading {n['row']}" if "row" in n else
+                  "position(s) " + ", ".join(str(p) for p in n["positions"]))
+            notes.append(f"{n['effect']} not named at {at}: {n['why']}")
+    return terms, findings, not_named
+
+
 def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
-                         final_res: np.ndarray) -> Finding:
-    """``unexplained``: where structure was found, not what it is (effects.md)."""
+                         final_res: np.ndarray, not_named: list[dict[str, Any]] | None = None
+                         ) -> Finding:
+    """``unexplained``: where structure was found, not what it is (effects.md).
+
+    ``not_named``: the places of terms withdrawn by their physics checks; their family
+    p is the evidence when the scan alone is not significant (the structure was found,
+    only the name failed).
+    """
     ctx = pb.ctx
-    steps = sorted({p["step"] for p in res.places if "step" in p})
-    pos = sorted({p["position"] for p in res.places if "position" in p})
-    axes = sorted({p["axis"] for p in res.places})
+    not_named = not_named or []
+    places = list(res.places) if res.significant else []
+    for n in not_named:  # a run in time is a place on its plateau; the others, positions
+        in_time = n.get("kind") == "time"
+        places.append({"not_named": n["effect"], "kind": n.get("kind", "visits"),
+                       **({"row": n["row"]} if "row" in n else {}),
+                       "steps": n["steps"] if in_time else [],
+                       "positions": [] if in_time else n["positions"],
+                       **({"time_s": n["time_s"]} if in_time else {}),
+                       "axis": "/".join(n["axes"]), "log10_p": n["log10_p"], "why": n["why"]})
+    steps = sorted({p["step"] for p in places if "step" in p}
+                   | {s for p in places for s in p.get("steps", [])})
+    pos = sorted({p["position"] for p in places if "position" in p}
+                 | {q for p in places for q in p.get("positions", [])})
+    axes = sorted({a for p in places for a in p["axis"].split("/")})
     rows = np.isin(ctx.steps, steps) | np.isin(ctx.positions, pos)
     span = ([float(ctx.t_s[rows].min()), float(ctx.t_s[rows].max())] if rows.any()
             else [float(ctx.t_s.min()), float(ctx.t_s.max())])
@@ -506,16 +566,21 @@ def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
                                             for s in steps))
     if pos:
         parts.append("position(s) " + ", ".join(str(p) for p in pos))
+    why = "".join(dict.fromkeys(f" Not named {n['effect']}: {n['why']}." for n in not_named))
+    p_value, test = res.p_family, res.to_dict()["test"]
+    if not res.significant:  # found by the withdrawn terms' tests; only their names failed
+        first = min(not_named, key=lambda n: n["p_value"])
+        p_value, test = first["p_value"], f"{first['test']} (found; not named: physics check)"
     rms = _rms(final_res, np.zeros(ctx.n, bool))
     return Finding(
         effect="unexplained", axes=axes,
-        where={"steps": steps, "positions": pos, "time_s": span, "places": res.places},
+        where={"steps": steps, "positions": pos, "time_s": span, "places": places},
         explanation=(f"Structure beyond noise at {' and '.join(parts)} on axis "
                      f"{'/'.join(axes)} that no catalogue term explains; the data show where, "
-                     "not what."),
+                     f"not what.{why}"),
         parameters={}, parameter_sd={}, rmse_before_ug=rms, rmse_after_ug=rms,
         heldout_rmse_before_ug=float("nan"), heldout_rmse_after_ug=float("nan"),
-        p_value=res.p_family, test=res.to_dict()["test"])
+        p_value=p_value, test=test)
 
 
 def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,

@@ -60,6 +60,10 @@ class EffectModule:
     # False: no regressor exists for it in a static soak recording (not_identifiable.py); it
     # can be in the data without being testable, so the report names it as an alternative.
     observable: bool = True
+    # True: the term is a function of the specific force alone (a nonlinearity, products of
+    # axes' inputs). It must then leave the same residual at every visit of the same
+    # reference direction: :meth:`misses` tests that after selection (issue 10).
+    input_only: bool = False
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:
@@ -86,6 +90,29 @@ class EffectModule:
             return (False, "it acts only while the table rotates; every reading here is static",
                     self.experiment)
         return True, "", self.experiment
+
+    def misses(self, pb: Any, U: np.ndarray, e: np.ndarray, theta: float,
+               where: Mapping[str, Any], axes: list[str], alpha: float) -> dict[str, Any] | None:
+        """Structure at this finding's own places that its physics cannot produce (issue 10).
+
+        Called after selection with ``U`` (orthonormal basis of the whitened model) and
+        ``e`` (its residual): for a per-reading effect the model *without* its readings'
+        terms, for any other the model with it. Returns where that structure is (a dict
+        for ``unexplained``'s ``where``) or None. Default: an input-only term must leave
+        the same residual at every visit of the same reference direction
+        (:func:`~calibration.discrepancy.effects.structure.visits_differ`); others: None.
+        """
+        if not self.input_only:
+            return None
+        from calibration.discrepancy.effects.structure import visits_differ
+
+        found = visits_differ(pb, U, e, list(where.get("positions") or []), axes, alpha)
+        if found is None:
+            return None
+        return {**found, "why": (f"{self.effect_id} is a function of the specific force, but "
+                                 "the residual differs between visits of the same reference "
+                                 "direction (it depends on something else, e.g. the previous "
+                                 "position)")}
 
     # --- words ------------------------------------------------------------
     def parameters(self, coef: np.ndarray, se: np.ndarray, theta: float,

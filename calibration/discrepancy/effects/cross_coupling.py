@@ -45,6 +45,7 @@ class CrossCoupling(EffectModule):
                        "(45° between axes, e.g. table1 or cube14)")
     writes_extension: bool = True
     extension_absorbed: bool = True
+    input_only: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return pair_products(ctx.input_g)

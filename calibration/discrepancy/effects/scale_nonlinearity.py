@@ -46,6 +46,7 @@ class ScaleNonlinearity(EffectModule):
         ("cross_coupling", "own-axis a², a³ versus products of two axes' inputs"),)
     writes_extension: bool = True
     extension_absorbed: bool = True
+    input_only: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return own_powers(ctx.input_g)

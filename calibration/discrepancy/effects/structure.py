@@ -1,0 +1,104 @@
+"""Tests an effect module uses to check that a finding has its own physics' shape (issue 10).
+
+A name is given only if the residual structure looks like the named physics. Two effects
+carry such a check (docs/diagnosis.md §7, *Physics checks after selection*):
+
+* ``outlier`` (:meth:`Outlier.misses`): a transient is *isolated*. Its deviation is not
+  predicted by the other readings: the same position at other plateaus, the same
+  orientation class (a smooth function of the reference direction), its neighbours in
+  time on the same plateau.
+* input-only terms (``scale_nonlinearity``, ``cross_coupling``: a function of the specific
+  force alone, :meth:`EffectModule.misses`): the same reference direction must leave the
+  same residual at every visit; a term that leaves the visits of one direction different
+  (a memory of the previous position) did not describe what it was fitted to.
+
+Every test here is an F-type score test after projecting out an orthonormal basis ``U``
+of the whitened model (:func:`calibration.discrepancy.stats.linear_stats`, noise from the
+residual), on columns given in raw-output space (N,3,k) and lifted by the problem.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from calibration.discrepancy import stats
+from calibration.discrepancy.context import AXES
+
+# The same reference direction at two positions: within this many g on every axis (norm mode
+# uses the calibrated output, whose noise is µg).
+SAME_DIRECTION_G = 0.05
+
+
+def whitened(pb: Any, x_raw: np.ndarray) -> np.ndarray:
+    """(N,3,k) raw-output columns → whitened residual-space columns (m,k)."""
+    return pb.whiten(pb.lift(x_raw))
+
+
+def extend(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Basis and residual after adding the whitened columns ``Xw`` to the model."""
+    B = stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6)
+    return np.hstack([U, B]), e - B @ (B.T @ e)
+
+
+def log_p(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> tuple[float, int]:
+    """log p of the F score test of ``Xw`` after ``U`` (single test), and its dof (0: none)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lp, _, k, _, _ = stats.linear_stats(U, Xw, e, np.zeros((e.size, 1)))
+    return (float(lp), int(k)) if k > 0 else (0.0, 0)
+
+
+def per_axis_indicator(n: int, rows: np.ndarray, axes: tuple[int, ...] = (0, 1, 2)) -> np.ndarray:
+    """(N,3,len(axes)): 1 on ``rows`` of each listed axis (an offset there)."""
+    out = np.zeros((n, 3, len(axes)))
+    for j, a in enumerate(axes):
+        out[rows, a, j] = 1.0
+    return out
+
+
+def direction_groups(positions: np.ndarray, input_g: np.ndarray) -> list[list[int]]:
+    """Positions that put the same reference direction on the sensor (≥ 2 positions each)."""
+    ids = [int(p) for p in np.unique(positions)]
+    d = {p: np.median(input_g[positions == p], axis=0) for p in ids}
+    groups: list[list[int]] = []
+    for p in ids:
+        for g in groups:
+            if np.all(np.abs(d[g[0]] - d[p]) < SAME_DIRECTION_G):
+                g.append(p)
+                break
+        else:
+            groups.append([p])
+    return [g for g in groups if len(g) >= 2]
+
+
+def visits_differ(
+    pb: Any, U: np.ndarray, e: np.ndarray, positions: list[int], axes: list[str], alpha: float
+) -> dict[str, Any] | None:
+    """Residuals that differ between visits of the same reference direction (issue 10).
+
+    ``U``, ``e``: the model *with* the input-only term. Restricted to the term's own
+    places (the direction groups holding its ``where`` positions) and axes: per group and
+    axis, an offset per position is tested after an offset per direction (the contrast
+    between visits). A function of the specific force predicts no contrast, so under it
+    the test rejects with probability α; an orientation history (the previous position)
+    makes it. Returns the place (positions, axes, log10 p) when significant at α.
+    """
+    ctx = pb.ctx
+    groups = [g for g in direction_groups(ctx.positions, ctx.input_g) if set(g) & set(positions)]
+    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
+    if not groups:
+        return None
+    common, visit = [], []
+    for g in groups:
+        common.append(per_axis_indicator(ctx.n, np.isin(ctx.positions, g), ax))
+        visit += [per_axis_indicator(ctx.n, ctx.positions == p, ax) for p in g]
+    Uc, ec = extend(U, e, whitened(pb, np.concatenate(common, axis=2)))
+    lp, k = log_p(Uc, ec, whitened(pb, np.concatenate(visit, axis=2)))
+    if k == 0 or lp > np.log(alpha):
+        return None
+    return {
+        "positions": sorted(p for g in groups for p in g),
+        "axes": [AXES[a] for a in ax],
+        "log10_p": round(float(lp / np.log(10)), 1),
+    }
