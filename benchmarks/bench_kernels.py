@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path.cwd()))
 
-from calibration import fit, sfem, sfem_batch  # noqa: E402
+from calibration import fit, sfem  # noqa: E402
 from calibration.schedules import table1  # noqa: E402
 from simulators.campaign_sim import simulate_campaign  # noqa: E402
 from simulators.truth import SensorTruth  # noqa: E402
@@ -33,8 +33,9 @@ def main() -> None:
     temp5k = rng.uniform(-40, 60, 5000)
     cases = [
         ("forward_jacobian, one p, 24 rows", lambda: sfem.forward_jacobian(p, raw24), 2000),
-        # sfem_batch: the per-row name both before and after branch merge10
-        ("forward_jacobian, 5000 rows of p", lambda: sfem_batch.forward_jacobian(rows, raw5k), 30),
+        # Trees before branch dup10 also had this as sfem_batch.forward_jacobian (before
+        # merge10, its own copy): time those with their own script.
+        ("forward_jacobian, 5000 rows of p", lambda: sfem.forward_jacobian(rows, raw5k), 30),
         ("fit_reference, 24 positions", lambda: fit.fit_reference(pos24, table1()), 30),
         ("SensorTruth.ideal_raw_g, 5000 rows", lambda: truth.ideal_raw_g(raw5k, temp5k), 3),
         ("simulate_campaign, 11 steps x 24", lambda: simulate_campaign(truth, seed=1), 1),

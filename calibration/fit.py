@@ -112,7 +112,7 @@ def _fit_reference_once(
     p0 = linear_reference_start(raw, ref, sig)
 
     def residual(p: np.ndarray) -> np.ndarray:
-        return ((_forward(p, raw) - ref) / sig).ravel()
+        return ((sfem.forward(p, raw) - ref) / sig).ravel()
 
     def jacobian(p: np.ndarray) -> np.ndarray:
         _, jac = sfem.forward_jacobian(p, raw)
@@ -206,20 +206,13 @@ def _fit_norm_once(raw: np.ndarray, sig: np.ndarray, g_local: float) -> FitResul
         p[free] = q
         return p
 
-    def norm_sigma(f: np.ndarray) -> np.ndarray:
-        # σ of |f| from per-axis σ, projected on the reading's direction.
-        u = f / np.linalg.norm(f, axis=1, keepdims=True)
-        return np.sqrt(np.sum((u * sig) ** 2, axis=1))
-
     def residual(q: np.ndarray) -> np.ndarray:
-        f = _forward(full(q), raw)
-        return (np.linalg.norm(f, axis=1) - g_local) / norm_sigma(f)
+        f = sfem.forward(full(q), raw)
+        return (np.linalg.norm(f, axis=1) - g_local) / sfem.norm_sigma(f, sig)
 
     def jacobian(q: np.ndarray) -> np.ndarray:
         f, jac = sfem.forward_jacobian(full(q), raw)
-        norm = np.linalg.norm(f, axis=1)
-        dn = np.einsum("ni,nik->nk", f / norm[:, None], jac[:, :, free])
-        return dn / norm_sigma(f)[:, None]
+        return sfem.norm_jacobian(f, jac[:, :, free]) / sfem.norm_sigma(f, sig)[:, None]
 
     sol = least_squares(residual, p0[free], jac=jacobian, method="lm", x_scale="jac")
     pv = full(sol.x)
@@ -300,9 +293,7 @@ def _floor_residuals(res: FitResult, raw: np.ndarray, sig: np.ndarray
         return res.residuals_g, sig, sfem.N_PARAMS
     # Norm residuals (norm mode; the |g| part of a hand-placed fit): b, S, C set them.
     cal = res.params.apply(raw)
-    norm = np.linalg.norm(cal, axis=1)
-    u = cal / norm[:, None]
-    return norm - res.g_local, np.sqrt(np.sum((u * sig) ** 2, axis=1)), 9
+    return np.linalg.norm(cal, axis=1) - res.g_local, sfem.norm_sigma(cal, sig), 9
 
 
 def _with_floor(
@@ -372,9 +363,7 @@ def _fit_hand_placed(
     def parts(p: np.ndarray) -> tuple[np.ndarray, ...]:
         f, jac = sfem.forward_jacobian(p, raw)
         norm = np.linalg.norm(f, axis=1)
-        u = f / norm[:, None]
-        s_norm = np.sqrt(np.sum((u * sig) ** 2, axis=1))
-        return f, jac, norm, u, s_norm
+        return f, jac, norm, f / norm[:, None], sfem.norm_sigma(f, sig)
 
     def residual(p: np.ndarray) -> np.ndarray:
         _, _, norm, u, s_norm = parts(p)
@@ -382,8 +371,9 @@ def _fit_hand_placed(
                                ((u - r_hat) / tol_rad[:, None]).ravel()])
 
     def jacobian(p: np.ndarray) -> np.ndarray:
-        _, jac, norm, u, s_norm = parts(p)
-        dnorm = np.einsum("ni,nik->nk", u, jac)
+        f, jac, norm, u, s_norm = parts(p)
+        dnorm = sfem.norm_jacobian(f, jac)
+        # ∂û/∂p = (I − û ûᵀ) ∂f/∂p / |f|: the direction's derivative for the label prior.
         proj = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
         du = np.einsum("nij,njk->nik", proj, jac) / norm[:, None, None]
         return np.vstack([dnorm / s_norm[:, None],
@@ -433,10 +423,6 @@ def ellipsoid_start(raw: np.ndarray, g_local: float = 1.0) -> np.ndarray:
         return p
     except (np.linalg.LinAlgError, ValueError):
         return sfem.identity_vector()
-
-
-def _forward(p: np.ndarray, raw: np.ndarray) -> np.ndarray:
-    return (raw - p[sfem.BIAS]) @ sfem.matrix_from_vector(p).T
 
 
 def _as_n3(a: np.ndarray, name: str) -> np.ndarray:
@@ -543,8 +529,6 @@ def fit_reference_batch(
     Problems whose A is not a proper rotation-times-triangular (det ≤ 0) fall back to
     the single fit, so every row matches :func:`fit_reference`.
     """
-    from calibration import sfem_batch  # local: sfem_batch is only needed for batches
-
     raw = np.asarray(raw_g, dtype=float)
     ref = np.asarray(ref_g, dtype=float)
     if raw.ndim != 3 or raw.shape[2] != 3:
@@ -576,14 +560,14 @@ def fit_reference_batch(
     def weighted(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # f = A(U − b) is linear in v = U − b, so ∂f/∂p is too: evaluate the analytic
         # Jacobian once per problem at v = e_x, e_y, e_z (3K rows, not NK) and combine.
+        # ∂f/∂b = −A does not depend on v at all.
         basis = p[:, None, sfem.BIAS] + np.eye(3)[None]  # (K,3,3): raw giving v = e_j
-        _, g = sfem_batch.forward_jacobian(np.repeat(p, 3, axis=0), basis.reshape(-1, 3))
+        _, g = sfem.forward_jacobian(np.repeat(p, 3, axis=0), basis.reshape(-1, 3))
         g = g.reshape(K, 3, 3, sfem.N_PARAMS)  # [k, j, axis, param]
         v = raw - p[:, None, sfem.BIAS]
-        A = sfem_batch.matrices(p)
-        f = v @ np.swapaxes(A, 1, 2)
+        f = sfem.forward(p, raw)
         jac = np.empty((K, n, 3, sfem.N_PARAMS))
-        jac[..., sfem.BIAS] = -A[:, None]
+        jac[..., sfem.BIAS] = g[:, :1, :, sfem.BIAS]
         jac[..., 3:] = (v @ g[..., 3:].reshape(K, 3, 27)).reshape(K, n, 3, 9)
         r = (f - ref) / sig
         J = jac / sig[..., None]
@@ -618,7 +602,7 @@ def fit_reference_batch(
         params=P, covariance=cov, rmse_norm_ug=np.empty(K), rmse_norm_before_ug=np.empty(K),
         rmse_vector_ug=np.empty(K), chi2_red=chi2, identifiable=full_rank,
     )
-    cal = (raw - P[:, None, sfem.BIAS]) @ np.swapaxes(sfem_batch.matrices(P), 1, 2)
+    cal = sfem.forward(P, raw)
     out.rmse_norm_ug[:] = np.sqrt(np.mean((np.linalg.norm(cal, axis=2) - g_local) ** 2, 1)) * 1e6
     out.rmse_norm_before_ug[:] = (
         np.sqrt(np.mean((np.linalg.norm(raw, axis=2) - g_local) ** 2, axis=1)) * 1e6)

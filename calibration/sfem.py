@@ -22,8 +22,10 @@ Eq. 1 is written once, here: :func:`rotation` (and its factors :func:`rotation_x
 :func:`matrix_from_vector`, :func:`forward`, :func:`inverse` and the analytic
 :func:`forward_jacobian` take one parameter vector (12,) or one per reading (N,12) — the
 thermal model's p(T_i) of Eq. 8, which the joint fits and compensation evaluate for
-thousands of readings at once. :func:`coefficient_jacobian` chains the Jacobian through
-Eq. 8, :func:`norm_jacobian` projects it for norm mode (Eq. 3).
+thousands of readings at once; :func:`forward` also takes one vector per problem (K,12)
+for K problems' readings (K,N,3). :func:`coefficient_jacobian` chains the Jacobian through
+Eq. 8, :func:`norm_jacobian` projects it for norm mode (Eq. 3) and :func:`norm_sigma` gives
+that residual's σ.
 """
 
 from __future__ import annotations
@@ -153,10 +155,16 @@ def forward(p: np.ndarray, raw_g: np.ndarray) -> np.ndarray:
     """Calibrated output f = A (U − b) of Eq. 1, (N,3), for raw readings U (N,3).
 
     ``p`` is one parameter vector (12,) for every reading, or one per reading (N,12),
-    e.g. the thermal model's p(T_i) of Eq. 8.
+    e.g. the thermal model's p(T_i) of Eq. 8. When ``raw_g`` has one axis more than
+    ``p``, each vector serves a whole set of readings: p (K,12) with U (K,N,3) is K
+    problems' readings (the batched fits), f (K,N,3).
     """
     p = np.asarray(p, dtype=float)
-    return _apply(matrix_from_vector(p), np.asarray(raw_g, dtype=float) - p[..., BIAS])
+    raw = np.asarray(raw_g, dtype=float)
+    bias = p[..., BIAS]
+    if p.ndim > 1 and raw.ndim == p.ndim + 1:
+        bias = bias[..., None, :]  # one vector per set of readings
+    return _apply(matrix_from_vector(p), raw - bias)
 
 
 def inverse(p: np.ndarray, calibrated_g: np.ndarray) -> np.ndarray:
@@ -211,6 +219,17 @@ def norm_jacobian(f: np.ndarray, jac: np.ndarray) -> np.ndarray:
     return np.einsum("ni,nik->nk", unit, jac)
 
 
+def norm_sigma(f: np.ndarray, sigma_g: np.ndarray) -> np.ndarray:
+    """σ of |f_i| (N,) from per-axis σ (N,3) of f (N,3): the norm-mode residual's (Eq. 3).
+
+    To first order |f| moves with the component along f's direction û, so
+    σ_|f| = √(Σ_a (û_a σ_a)²): the weight of every norm-mode fit (per step, joint,
+    hand-placed) and of the model floor's norm residuals.
+    """
+    unit = f / np.linalg.norm(f, axis=1)[:, None]
+    return np.sqrt(np.sum((unit * sigma_g) ** 2, axis=1))
+
+
 def coefficient_jacobian(
     jac: np.ndarray, powers: np.ndarray, cols: np.ndarray | None = None
 ) -> np.ndarray:
@@ -228,11 +247,12 @@ def coefficient_jacobian(
 
 
 def _apply(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """A x for every row of x (N,3): one matrix (3,3) for all rows, or one per row (N,3,3)."""
-    if A.ndim == 2:
-        # One BLAS product for all rows: fastest, and the bits the per-temperature fits
-        # have always had (einsum's sum order differs in the last bit).
-        return x @ A.T
+    """A x for every row of x (N,3): one matrix (3,3) for all rows, or one per row (N,3,3);
+    or one matrix per set of rows, A (K,3,3) for x (K,N,3)."""
+    if A.ndim == 2 or A.ndim == x.ndim:
+        # One BLAS product for all rows (of each set): fastest, and the bits the
+        # per-temperature fits have always had (einsum's sum order differs in the last bit).
+        return x @ np.swapaxes(A, -1, -2)
     return np.einsum("nij,nj->ni", A, x)
 
 

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from calibration import extensions as _ext
-from calibration import metrics, sfem, sfem_batch
+from calibration import metrics, sfem
 from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.fit import FitResult, fit_norm, fit_reference, rmse_norm_ug
 from calibration.placement import reference_tolerance_rad
@@ -136,7 +136,7 @@ class ThermalModel:
             raise ValueError(f"raw_g must have shape (N, 3), got {raw.shape}")
         T = np.broadcast_to(np.asarray(temperature_c, float), (raw.shape[0],))
         P = self.params_vector_at(T, extrapolate)
-        out = sfem_batch.forward(P, raw)
+        out = sfem.forward(P, raw)
         if self.extensions:
             out = _ext.apply_extensions(self.extensions, raw, T, out)
         return out

@@ -68,17 +68,13 @@ def fit_joint(
 
     else:
 
-        def norm_sigma(f: np.ndarray) -> np.ndarray:
-            u = f / np.linalg.norm(f, axis=1, keepdims=True)
-            return np.sqrt(np.sum((u * sig) ** 2, axis=1))
-
         def residual(q: np.ndarray) -> np.ndarray:
             f = sfem.forward(params(q), raw)
-            return (np.linalg.norm(f, axis=1) - g_local) / norm_sigma(f)
+            return (np.linalg.norm(f, axis=1) - g_local) / sfem.norm_sigma(f, sig)
 
         def jacobian(q: np.ndarray) -> np.ndarray:
             f, jac = sfem.forward_jacobian(params(q), raw)
-            dn = sfem.norm_jacobian(f, jac[:, :, free_idx]) / norm_sigma(f)[:, None]
+            dn = sfem.norm_jacobian(f, jac[:, :, free_idx]) / sfem.norm_sigma(f, sig)[:, None]
             return sfem.coefficient_jacobian(dn, V)
 
     q0 = coeffs0[free_idx].ravel()

@@ -153,6 +153,33 @@ def test_coefficient_and_norm_jacobians_match_finite_differences_of_the_thermal_
         np.testing.assert_array_equal(some[:, :, m], full[:, :, k * (deg + 1) + j])
 
 
+def test_forward_with_one_vector_per_problem_evaluates_each_problems_readings() -> None:
+    """p (K,12) with readings (K,N,3): problem k's readings through its own vector only.
+    K = N = 3, where subtracting (K,3) biases from (K,N,3) readings without the extra axis
+    would broadcast silently across the wrong axis."""
+    rng = np.random.default_rng(8)
+    P = np.stack([_random_params(40 + k) for k in range(3)])
+    raw = rng.normal(size=(3, 3, 3))
+    f = sfem.forward(P, raw)
+    assert f.shape == (3, 3, 3)
+    for k in range(3):
+        np.testing.assert_allclose(f[k], sfem.forward(P[k], raw[k]), rtol=0, atol=1e-15)
+        A = sfem.matrix_from_vector(P[k])
+        np.testing.assert_allclose(f[k], (raw[k] - P[k, sfem.BIAS]) @ A.T, atol=1e-15)
+
+
+def test_norm_sigma_projects_the_per_axis_sigma_on_the_readings_direction() -> None:
+    """σ of |f| (Eq. 3's residual): the axis's own σ along an axis, the quadrature mean
+    on a diagonal, and the spread of |f| under small per-axis noise (Monte Carlo)."""
+    sig = np.array([[1e-4, 2e-4, 4e-4]] * 4)
+    f = np.array([[0.0, 0.0, -1.0], [0.0, 2.0, 0.0], [1.0, 1.0, 0.0], [1.0, 1.0, 1.0]])
+    got = sfem.norm_sigma(f, sig)
+    np.testing.assert_allclose(got[:3], [4e-4, 2e-4, np.sqrt((1e-8 + 4e-8) / 2)], rtol=1e-12)
+    rng = np.random.default_rng(9)
+    noisy = f[3] + rng.normal(size=(200_000, 3)) * sig[3]
+    assert got[3] == pytest.approx(np.std(np.linalg.norm(noisy, axis=1)), rel=0.01)
+
+
 def test_elementary_rotations_and_their_derivatives() -> None:
     a = np.array([-1.1, 0.0, 0.4, 2.5])
     for i, r in enumerate((sfem.rotation_x, sfem.rotation_y, sfem.rotation_z)):

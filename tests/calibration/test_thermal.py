@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import thermal_sim
 
-from calibration import extensions, sfem, sfem_batch
+from calibration import extensions, sfem
 from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.recording import Recording
 from calibration.temperature_conditioning import condition_temperature
@@ -125,7 +125,7 @@ def test_batched_jacobian_matches_the_single_parameter_one() -> None:
     rng = np.random.default_rng(1)
     P = sfem.identity_vector() + rng.normal(0, 0.05, (6, 12))
     raw = rng.normal(size=(6, 3))
-    f, J = sfem_batch.forward_jacobian(P, raw)
+    f, J = sfem.forward_jacobian(P, raw)
     for i in range(6):
         f1, J1 = sfem.forward_jacobian(P[i], raw[i : i + 1])
         np.testing.assert_allclose(f[i], f1[0], atol=1e-14)
