@@ -555,7 +555,7 @@ def fit_reference_batch(
     ok = det > 0
     P[~ok] = sfem.identity_vector()
     if ok.any():
-        P[ok] = _decompose_batch(A[ok], -np.linalg.solve(A[ok], c[ok][..., None])[..., 0])
+        P[ok] = sfem.vector_from_matrix(A[ok], -np.linalg.solve(A[ok], c[ok][..., None])[..., 0])
 
     def weighted(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # f = A(U − b) is linear in v = U − b, so ∂f/∂p is too: evaluate the analytic
@@ -630,19 +630,6 @@ def _sigma_batch(sigma_g: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarr
     return sig
 
 
-def _decompose_batch(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Vectorised :func:`sfem.from_matrix`: A (K,3,3) with det > 0 → SFEM vectors (K,12)."""
-    J = np.eye(3)[::-1]
-    upper = np.swapaxes(np.linalg.cholesky(J @ np.swapaxes(A, 1, 2) @ A @ J), 1, 2)
-    L = J @ upper @ J
-    R = A @ np.linalg.inv(L)
-    scale = np.diagonal(L, axis1=1, axis2=2)
-    C = L / scale[:, None, :]
-    P = np.empty((A.shape[0], sfem.N_PARAMS))
-    P[:, sfem.BIAS] = b
-    P[:, sfem.SCALE] = scale
-    P[:, sfem.ALPHA] = np.stack([C[:, 1, 0], C[:, 2, 0], C[:, 2, 1]], axis=1)
-    P[:, 9] = np.arctan2(R[:, 2, 1], R[:, 2, 2])
-    P[:, 10] = -np.arcsin(np.clip(R[:, 2, 0], -1.0, 1.0))
-    P[:, 11] = np.arctan2(R[:, 1, 0], R[:, 0, 0])
-    return P
+# calibration/discrepancy/problem.py imports this name (helper big10b's file): it is
+# sfem.vector_from_matrix, the one decomposition of A = M·C·S.
+_decompose_batch = sfem.vector_from_matrix

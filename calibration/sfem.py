@@ -11,7 +11,8 @@
 The product ``A = M C S`` is a general 3×3 matrix with positive determinant,
 so the model is equivalently ``calibrated = A · (raw − b)``: the *matrix form*
 the service returns to ops. :func:`from_matrix` decomposes any such ``A``
-back into (M, C, S) uniquely (a QL decomposition).
+back into (M, C, S) uniquely (a QL decomposition); :func:`vector_from_matrix` does the
+same for a stack of matrices.
 
 Parameter vector order (used by fits, covariances, thermal models and JSON)::
 
@@ -132,23 +133,34 @@ def from_matrix(matrix: np.ndarray, bias_g: np.ndarray) -> SfemParams:
     A = np.asarray(matrix, dtype=float)
     if np.linalg.det(A) <= 0:
         raise ValueError("calibration matrix must have a positive determinant")
+    return SfemParams.from_vector(vector_from_matrix(A, bias_g))
+
+
+def vector_from_matrix(matrix: np.ndarray, bias_g: np.ndarray) -> np.ndarray:
+    """:func:`from_matrix` as parameter vectors: A (3,3) and b (3,) → (12,), or a stack
+    A (K,3,3) and b (K,3) → (K,12) (the batched fits). det A > 0 is the caller's to check:
+    for det A ≤ 0 the Cholesky fails or the angles are meaningless."""
+    A = np.asarray(matrix, dtype=float)
     J = np.eye(3)[::-1]
-    upper = np.linalg.cholesky(J @ A.T @ A @ J).T  # V with J AᵀA J = Vᵀ V, V upper
-    L = J @ upper @ J
+    upper = np.swapaxes(np.linalg.cholesky(J @ np.swapaxes(A, -1, -2) @ A @ J), -1, -2)
+    L = J @ upper @ J  # J AᵀA J = Vᵀ V with V upper: L = J V J is lower, AᵀA = Lᵀ L
     R = A @ np.linalg.inv(L)
-    scale = np.diag(L).copy()
-    C = L / scale[None, :]
-    alpha = np.array([C[1, 0], C[2, 0], C[2, 1]])
-    misalign = angles_from_rotation(R)
-    return SfemParams(np.asarray(bias_g, dtype=float).copy(), scale, alpha, misalign)
+    scale = np.diagonal(L, axis1=-2, axis2=-1)
+    C = L / scale[..., None, :]
+    p = np.empty(A.shape[:-2] + (N_PARAMS,))
+    p[..., BIAS] = bias_g
+    p[..., SCALE] = scale
+    p[..., ALPHA] = np.stack([C[..., 1, 0], C[..., 2, 0], C[..., 2, 1]], axis=-1)
+    p[..., MISALIGN] = angles_from_rotation(R)
+    return p
 
 
 def angles_from_rotation(R: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotation` (ZYX Euler angles)."""
-    theta = -np.arcsin(np.clip(R[2, 0], -1.0, 1.0))
-    phi = np.arctan2(R[2, 1], R[2, 2])
-    psi = np.arctan2(R[1, 0], R[0, 0])
-    return np.array([phi, theta, psi])
+    """Inverse of :func:`rotation` (ZYX Euler angles): (3,3) → (3,), (K,3,3) → (K,3)."""
+    theta = -np.arcsin(np.clip(R[..., 2, 0], -1.0, 1.0))
+    phi = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([phi, theta, psi], axis=-1)
 
 
 def forward(p: np.ndarray, raw_g: np.ndarray) -> np.ndarray:

@@ -153,6 +153,20 @@ def test_coefficient_and_norm_jacobians_match_finite_differences_of_the_thermal_
         np.testing.assert_array_equal(some[:, :, m], full[:, :, k * (deg + 1) + j])
 
 
+def test_a_stack_of_matrices_decomposes_like_each_one_alone() -> None:
+    """vector_from_matrix (the batched fits' decomposition) on K matrices: each row is
+    from_matrix's, and rebuilds its A and b."""
+    P = np.stack([_random_params(50 + k) for k in range(6)])
+    A = sfem.matrix_from_vector(P)
+    got = sfem.vector_from_matrix(A, P[:, sfem.BIAS])
+    assert got.shape == (6, 12)
+    np.testing.assert_allclose(got, P, atol=1e-12)
+    for k in range(6):
+        one = sfem.from_matrix(A[k], P[k, sfem.BIAS]).to_vector()
+        np.testing.assert_allclose(got[k], one, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(sfem.vector_from_matrix(A[k], P[k, sfem.BIAS]), one, atol=0)
+
+
 def test_forward_with_one_vector_per_problem_evaluates_each_problems_readings() -> None:
     """p (K,12) with readings (K,N,3): problem k's readings through its own vector only.
     K = N = 3, where subtracting (K,3) biases from (K,N,3) readings without the extra axis
