@@ -5,6 +5,7 @@ call (no background task), so a VirtualClock runs a many-hour campaign in a
 second. The chamber's working setpoint ramps at the commanded rate, the air
 (PV) lags it, the die lags the air; the sensor reads the die through a
 constant offset plus noise; the table reaches a commanded pose after a slew.
+The thermal steps are the rig plant's (``calibration.thermal_plant``), not a copy.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.thermal_plant import lag_step, rate_limited
 from drivers.clock import Clock
 from drivers.faults import DeviceTimeout
 from drivers.protocols import (
@@ -46,13 +48,13 @@ class Physics:
         now = self.clock.now()
         while self.t_s < now:
             dt = min(DT_S, now - self.t_s)
+            # The rig's plant (calibration/thermal_plant.py), as the twins step it.
             if self.running:
                 step = self.ramp_c_per_min / 60.0 * dt if self.ramp_c_per_min > 0 else math.inf
-                d = self.setpoint_c - self.wsp_c
-                self.wsp_c += max(-step, min(step, d))
+                self.wsp_c = rate_limited(self.wsp_c, self.setpoint_c, step)
             target = self.wsp_c + self.drift_c * math.sin(self.t_s / 400.0)
-            self.air_c += (target - self.air_c) * (1 - math.exp(-dt / self.air_tau_s))
-            self.die_c += (self.air_c - self.die_c) * (1 - math.exp(-dt / self.die_tau_s))
+            self.air_c = lag_step(self.air_c, target, dt, self.air_tau_s)
+            self.die_c = lag_step(self.die_c, self.air_c, dt, self.die_tau_s)
             self.t_s += dt
 
 
