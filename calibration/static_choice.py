@@ -155,13 +155,12 @@ def press_ug(res: FitResult, raw_g: np.ndarray, sigma_g: np.ndarray | None) -> f
         return None
     f, jac = sfem.forward_jacobian(res.params.to_vector(), raw_g)
     norm = np.linalg.norm(f, axis=1)
-    u = f / norm[:, None]
     if sigma_g is None:
         s = np.ones(norm.size)
     else:
         floor = res.model_floor_g if np.isfinite(res.model_floor_g) else 0.0
-        s = np.sqrt(np.sum((u * sigma_g) ** 2, axis=1) + floor**2)
-    J = np.einsum("ni,nik->nk", u, jac[:, :, free]) / s[:, None]
+        s = np.sqrt(sfem.norm_sigma(f, sigma_g) ** 2 + floor**2)
+    J = sfem.norm_jacobian(f, jac[:, :, free]) / s[:, None]
     q, _ = np.linalg.qr(J)
     h = np.sum(q**2, axis=1)
     if np.any(h >= 1.0 - 1e-9):
