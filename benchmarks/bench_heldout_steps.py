@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -182,6 +183,9 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
                 acc[name] += v
             acc["draws"] += 1
             acc["ratios"].append(float(np.sqrt(sq_p.sum() / sq_f.sum())))
+            noise_d = sq_f.sum() - s_f.sum()
+            acc.setdefault("expected", []).append(
+                float(np.sqrt((noise_d + s_p.sum()) / (noise_d + s_f.sum()))))
     print(f"policy {policy!r} against the fixed hour, {len(draws)} draw(s) in {dump_dir}")
     print("µg; 'soak-only': the same campaigns refitted without the accelerometer noise")
     summary = []
@@ -192,7 +196,7 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
         # less its soak-only part; a policy changes the soak-only part only.
         noise = a["sq_f"].sum() - a["s_f"].sum()
         expected = float(np.sqrt((noise + a["s_p"].sum()) / (noise + a["s_f"].sum())))
-        summary.append((serial, a["rate"], ratio, expected, a["ratios"]))
+        summary.append((serial, a["rate"], ratio, expected, a["ratios"], a["expected"]))
         print(f"\n{serial} (rate {a['rate']:g}): held-out ×{ratio:.3f} over {n} draw(s) (each "
               f"{' '.join(f'{r:.3f}' for r in a['ratios'])}); soak-only "
               f"{1e6 * np.sqrt(a['s_f'].sum() / (m * HELDOUT_C.size)):.2f} → "
@@ -210,10 +214,22 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
             r = np.sqrt(a[key] / n)
             print(f"  rows {label:<7} common " + " ".join(f"{v:6.2f}" for v in r[:, 0]))
             print(f"  rows {label:<7} varying" + " ".join(f"{v:6.2f}" for v in r[:, 1]))
-    print("\nsensor      rate  held-out ×  expected ×  per draw")
-    for serial, rate, ratio, expected, each in summary:
-        print(f"{serial:<10} {rate:5g}  {ratio:9.3f}  {expected:9.3f}   "
-              + " ".join(f"{r:.3f}" for r in each))
+    print("\nper sensor over the draws: the held-out ratio pooled over them, ± 2 sd of one draw's "
+          "ratio / √draws; draws needed for that ± to be 0.05; the expected ratio (mean ± sd "
+          "over the draws)")
+    print(f"{'sensor':<10} {'rate':>5} {'held-out ×':>10} {'± 2σ/√n':>8} {'n for ±.05':>10} "
+          f"{'expected ×':>10} {'sd':>6}  per draw")
+    for serial, rate, ratio, expected, each, exp_each in summary:
+        sd = float(np.std(each, ddof=1)) if len(each) > 1 else math.nan
+        half = 2.0 * sd / math.sqrt(len(each))
+        need = math.ceil((2.0 * sd / 0.05) ** 2) if math.isfinite(sd) else 0
+        sd_exp = float(np.std(exp_each, ddof=1)) if len(exp_each) > 1 else math.nan
+        print(f"{serial:<10} {rate:5g} {ratio:10.3f} {half:8.3f} {need:10d} {expected:10.3f} "
+              f"{sd_exp:6.3f}  " + " ".join(f"{r:.3f}" for r in each))
+    worst = max(summary, key=lambda r: r[2])
+    worst_exp = max(summary, key=lambda r: r[3])
+    print(f"worst sensor: held-out ×{worst[2]:.3f} ({worst[0]}), expected ×{worst_exp[3]:.3f} "
+          f"({worst_exp[0]})")
 
 
 def step_row_error_ug(errors: dict[tuple, np.ndarray], step: int) -> tuple[float, float]:
