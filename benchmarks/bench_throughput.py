@@ -24,9 +24,14 @@ every sensor's held-out error ≤ 1.05 × its fixed-hour figure; aim: 16 in ≤ 
 campaign: odd sensors 0, even 100). Each campaign runs in its own process (peak RSS is
 that process's ``ru_maxrss``).
 
+``--dump DIR`` writes each campaign's stored rows, k̂ and every position capture's noise-free
+mean per sensor to DIR (JSON), for ``bench_heldout_steps.py`` (per step, per held-out
+temperature, and the soak-only error and expected per-sensor ratio).
+
 Usage: .venv/bin/python benchmarks/bench_throughput.py [--sensors 8] [--fast] [--jobs N]
                                                        [--rate-ug-per-c-per-min K[,K…]]
-                                                       [--variants 1,2]
+                                                       [--variants 1,2] [--draws N]
+                                                       [--dump DIR]
 """
 
 from __future__ import annotations

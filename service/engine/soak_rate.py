@@ -16,7 +16,11 @@ cannot be told from f; across soaks it can: the rate is a sawtooth in T (high
 at each soak start, near zero at each end, 10 °C further on), which no cubic
 follows. T and dT/dt come from :func:`stability.fit_approach` per soak (the
 fitted curve, not differenced readings: differencing noisy readings would
-bias k towards 0, the unsafe direction).
+bias k towards 0, the unsafe direction). The probes taken during a ramp count
+too, with the readings' central difference as the rate (large there, so the
+bias is negligible: :func:`ramp_rate_c_per_min`): the first ramp with the first
+soak separates k (a trapezoid of rate in T), so k is measured during the first
+soak, not after it.
 
 Precision: with 8-sample probes (the default) a whole −40…60 °C campaign
 gives σ(k) ≈ 25–30 µg per °C/min, too weak to shorten a soak; with
