@@ -64,8 +64,9 @@ def correction_gain(k_hat: Any) -> np.ndarray | None:
 
 
 def refit(columns: dict[str, list[float]], k: np.ndarray | None) -> Any:
-    rec = Recording.from_columns({n: np.asarray(v, float) for n, v in columns.items()},
-                                 path="<dump>")
+    rec = Recording.from_columns(
+        {n: np.asarray(v, float) for n, v in columns.items()}, path="<dump>"
+    )
     return fit_campaign(rec, rate_gain_ug_per_c_per_min=k)
 
 
@@ -75,13 +76,13 @@ def heldout_by_temp_sq(fit: Any, truth: Any) -> np.ndarray:
     return np.sum(err**2, axis=1)
 
 
-def splice(base: dict[str, list[float]], other: dict[str, list[float]],
-           step: int) -> dict[str, list[float]]:
+def splice(
+    base: dict[str, list[float]], other: dict[str, list[float]], step: int
+) -> dict[str, list[float]]:
     """``base``'s rows with those of ``step`` taken from ``other`` (time order kept)."""
     b_step, o_step = np.asarray(base["step"]), np.asarray(other["step"])
     keep_b, keep_o = np.flatnonzero(b_step != step), np.flatnonzero(o_step == step)
-    rows = [(base["t_s"][i], "b", i) for i in keep_b] + [(other["t_s"][i], "o", i)
-                                                         for i in keep_o]
+    rows = [(base["t_s"][i], "b", i) for i in keep_b] + [(other["t_s"][i], "o", i) for i in keep_o]
     rows.sort()
     return {n: [(base if src == "b" else other)[n][i] for _, src, i in rows] for n in base}
 
@@ -93,8 +94,11 @@ def row_errors_g(fit: Any, columns: dict[str, list[float]], truth: Any) -> dict[
     Keyed as the bench keys a capture's noise (``BenchTruth._capture_key``): Table 1 has
     positions with the same reference (rotations about gravity), which share a noise stream
     taken in visit order, so the k-th visit of a reference in a step is what pairs."""
-    raw = fit.raw_used_g if fit.raw_used_g is not None else np.column_stack(
-        [columns["ax"], columns["ay"], columns["az"]])
+    raw = (
+        fit.raw_used_g
+        if fit.raw_used_g is not None
+        else np.column_stack([columns["ax"], columns["ay"], columns["az"]])
+    )
     ref = np.column_stack([columns["ref_x"], columns["ref_y"], columns["ref_z"]])
     die_c = np.asarray(fit.row_temperature_c, float) - truth.temp_offset_c
     err = np.asarray(raw, float) - truth.ideal_raw_g(ref, die_c)
@@ -107,8 +111,9 @@ def row_errors_g(fit: Any, columns: dict[str, list[float]], truth: Any) -> dict[
     return out
 
 
-def noise_free_columns(columns: dict[str, list[float]],
-                       log: list[tuple[list[int], list[float]]]) -> dict[str, list[float]] | None:
+def noise_free_columns(
+    columns: dict[str, list[float]], log: list[tuple[list[int], list[float]]]
+) -> dict[str, list[float]] | None:
     """``columns`` with each row's output replaced by its capture's noise-free mean
     (``BenchTruth.noise_free_log``): what the row would read without the accelerometer
     noise, the die temperature and rate (and the temperature channel) as they were."""
@@ -119,8 +124,10 @@ def noise_free_columns(columns: dict[str, list[float]],
     rows: dict[tuple, list[int]] = {}
     for i in order:
         ref = (columns["ref_x"][i], columns["ref_y"][i], columns["ref_z"][i])
-        where = (*(int(round(v * 100.0)) + 200 for v in ref),
-                 int(round(columns["setpoint_c"][i])) + 1000)
+        where = (
+            *(int(round(v * 100.0)) + 200 for v in ref),
+            int(round(columns["setpoint_c"][i])) + 1000,
+        )
         rows.setdefault(where, []).append(int(i))
     out = {n: list(v) for n, v in columns.items()}
     for where, idx in rows.items():
@@ -128,14 +135,16 @@ def noise_free_columns(columns: dict[str, list[float]],
         if len(caps) < len(idx):
             return None
         # a quality re-measure stores the later capture: the last len(idx) attempts
-        for i, ideal in zip(idx, caps[len(caps) - len(idx):], strict=True):
+        for i, ideal in zip(idx, caps[len(caps) - len(idx) :], strict=True):
             out["ax"][i], out["ay"][i], out["az"][i] = ideal
     return out
 
 
 def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
-    draws = sorted(int(p.stem.rsplit("draw", 1)[1]) for p in
-                   dump_dir.glob(f"{dump_name(POLICIES[0], 0).rsplit('-draw', 1)[0]}-draw*.json"))
+    draws = sorted(
+        int(p.stem.rsplit("draw", 1)[1])
+        for p in dump_dir.glob(f"{dump_name(POLICIES[0], 0).rsplit('-draw', 1)[0]}-draw*.json")
+    )
     per_sensor: dict[str, dict[str, Any]] = {}
     for d in draws:
         path = dump_dir / dump_name(policy, d)
@@ -165,27 +174,46 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
             # that step's taken from the policy, fitted with the policy's k̂ (the fixed hour's
             # rows barely move with it: their die is at rest).
             base = float(np.sum(heldout_by_temp_sq(refit(nf_f, kp), truth)))
-            subst = [float(np.sum(heldout_by_temp_sq(refit(splice(nf_f, nf_p, s), kp), truth)))
-                     - base for s in steps]
+            subst = [
+                float(np.sum(heldout_by_temp_sq(refit(splice(nf_f, nf_p, s), kp), truth))) - base
+                for s in steps
+            ]
             ef, ep = row_errors_g(fit_nf_f, nf_f, truth), row_errors_g(fit_nf_p, nf_p, truth)
             rows_f, rows_p = [], []
             for s in steps:
                 rows_f.append(step_row_error_ug(ef, s))
                 rows_p.append(step_row_error_ug(ep, s))
-            acc = per_sensor.setdefault(serial, {
-                "sq_f": np.zeros_like(sq_f), "sq_p": np.zeros_like(sq_p), "draws": 0,
-                "s_f": np.zeros_like(sq_f), "s_p": np.zeros_like(sq_f),
-                "subst": np.zeros(len(steps)), "rows_f": np.zeros((len(steps), 2)),
-                "rows_p": np.zeros((len(steps), 2)), "ratios": [], "rate": rate_of(idx, rates)})
-            for name, v in (("sq_f", sq_f), ("sq_p", sq_p), ("s_f", s_f), ("s_p", s_p),
-                            ("subst", np.array(subst)), ("rows_f", np.square(rows_f)),
-                            ("rows_p", np.square(rows_p))):
+            acc = per_sensor.setdefault(
+                serial,
+                {
+                    "sq_f": np.zeros_like(sq_f),
+                    "sq_p": np.zeros_like(sq_p),
+                    "draws": 0,
+                    "s_f": np.zeros_like(sq_f),
+                    "s_p": np.zeros_like(sq_f),
+                    "subst": np.zeros(len(steps)),
+                    "rows_f": np.zeros((len(steps), 2)),
+                    "rows_p": np.zeros((len(steps), 2)),
+                    "ratios": [],
+                    "rate": rate_of(idx, rates),
+                },
+            )
+            for name, v in (
+                ("sq_f", sq_f),
+                ("sq_p", sq_p),
+                ("s_f", s_f),
+                ("s_p", s_p),
+                ("subst", np.array(subst)),
+                ("rows_f", np.square(rows_f)),
+                ("rows_p", np.square(rows_p)),
+            ):
                 acc[name] += v
             acc["draws"] += 1
             acc["ratios"].append(float(np.sqrt(sq_p.sum() / sq_f.sum())))
             noise_d = sq_f.sum() - s_f.sum()
             acc.setdefault("expected", []).append(
-                float(np.sqrt((noise_d + s_p.sum()) / (noise_d + s_f.sum()))))
+                float(np.sqrt((noise_d + s_p.sum()) / (noise_d + s_f.sum())))
+            )
     print(f"policy {policy!r} against the fixed hour, {len(draws)} draw(s) in {dump_dir}")
     print("µg; 'soak-only': the same campaigns refitted without the accelerometer noise")
     summary = []
@@ -197,39 +225,52 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
         noise = a["sq_f"].sum() - a["s_f"].sum()
         expected = float(np.sqrt((noise + a["s_p"].sum()) / (noise + a["s_f"].sum())))
         summary.append((serial, a["rate"], ratio, expected, a["ratios"], a["expected"]))
-        print(f"\n{serial} (rate {a['rate']:g}): held-out ×{ratio:.3f} over {n} draw(s) (each "
-              f"{' '.join(f'{r:.3f}' for r in a['ratios'])}); soak-only "
-              f"{1e6 * np.sqrt(a['s_f'].sum() / (m * HELDOUT_C.size)):.2f} → "
-              f"{1e6 * np.sqrt(a['s_p'].sum() / (m * HELDOUT_C.size)):.2f} µg, expected "
-              f"ratio ×{expected:.3f}")
+        print(
+            f"\n{serial} (rate {a['rate']:g}): held-out ×{ratio:.3f} over {n} draw(s) (each "
+            f"{' '.join(f'{r:.3f}' for r in a['ratios'])}); soak-only "
+            f"{1e6 * np.sqrt(a['s_f'].sum() / (m * HELDOUT_C.size)):.2f} → "
+            f"{1e6 * np.sqrt(a['s_p'].sum() / (m * HELDOUT_C.size)):.2f} µg, expected "
+            f"ratio ×{expected:.3f}"
+        )
         print("  held-out °C         " + " ".join(f"{t:>6.0f}" for t in HELDOUT_C))
-        for label, key in (("fixed hour", "sq_f"), ("policy", "sq_p"),
-                           ("soak-only fixed", "s_f"), ("soak-only policy", "s_p")):
+        for label, key in (
+            ("fixed hour", "sq_f"),
+            ("policy", "sq_p"),
+            ("soak-only fixed", "s_f"),
+            ("soak-only policy", "s_p"),
+        ):
             print(f"  {label:<19} " + " ".join(f"{v:6.2f}" for v in 1e6 * np.sqrt(a[key] / m)))
         tot = a["sq_f"].sum() / n
         print("  step                " + " ".join(f"{s:>6d}" for s in range(len(a["subst"]))))
-        print("  subst Δ % of fixed  " + " ".join(f"{100 * v / n / tot:6.2f}"
-                                                  for v in a["subst"]))
+        print("  subst Δ % of fixed  " + " ".join(f"{100 * v / n / tot:6.2f}" for v in a["subst"]))
         for label, key in (("fixed", "rows_f"), ("policy", "rows_p")):
             r = np.sqrt(a[key] / n)
             print(f"  rows {label:<7} common " + " ".join(f"{v:6.2f}" for v in r[:, 0]))
             print(f"  rows {label:<7} varying" + " ".join(f"{v:6.2f}" for v in r[:, 1]))
-    print("\nper sensor over the draws: the held-out ratio pooled over them, ± 2 sd of one draw's "
-          "ratio / √draws; draws needed for that ± to be 0.05; the expected ratio (mean ± sd "
-          "over the draws)")
-    print(f"{'sensor':<10} {'rate':>5} {'held-out ×':>10} {'± 2σ/√n':>8} {'n for ±.05':>10} "
-          f"{'expected ×':>10} {'sd':>6}  per draw")
+    print(
+        "\nper sensor over the draws: the held-out ratio pooled over them, ± 2 sd of one draw's "
+        "ratio / √draws; draws needed for that ± to be 0.05; the expected ratio (mean ± sd "
+        "over the draws)"
+    )
+    print(
+        f"{'sensor':<10} {'rate':>5} {'held-out ×':>10} {'± 2σ/√n':>8} {'n for ±.05':>10} "
+        f"{'expected ×':>10} {'sd':>6}  per draw"
+    )
     for serial, rate, ratio, expected, each, exp_each in summary:
         sd = float(np.std(each, ddof=1)) if len(each) > 1 else math.nan
         half = 2.0 * sd / math.sqrt(len(each))
         need = math.ceil((2.0 * sd / 0.05) ** 2) if math.isfinite(sd) else 0
         sd_exp = float(np.std(exp_each, ddof=1)) if len(exp_each) > 1 else math.nan
-        print(f"{serial:<10} {rate:5g} {ratio:10.3f} {half:8.3f} {need:10d} {expected:10.3f} "
-              f"{sd_exp:6.3f}  " + " ".join(f"{r:.3f}" for r in each))
+        print(
+            f"{serial:<10} {rate:5g} {ratio:10.3f} {half:8.3f} {need:10d} {expected:10.3f} "
+            f"{sd_exp:6.3f}  " + " ".join(f"{r:.3f}" for r in each)
+        )
     worst = max(summary, key=lambda r: r[2])
     worst_exp = max(summary, key=lambda r: r[3])
-    print(f"worst sensor: held-out ×{worst[2]:.3f} ({worst[0]}), expected ×{worst_exp[3]:.3f} "
-          f"({worst_exp[0]})")
+    print(
+        f"worst sensor: held-out ×{worst[2]:.3f} ({worst[0]}), expected ×{worst_exp[3]:.3f} "
+        f"({worst_exp[0]})"
+    )
 
 
 def step_row_error_ug(errors: dict[tuple, np.ndarray], step: int) -> tuple[float, float]:
