@@ -140,7 +140,24 @@ def noise_free_columns(
     return out
 
 
-def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
+def with_noise(columns: dict[str, list[float]], sd_g: float, draw: int) -> dict[str, list[float]]:
+    """Noise-free ``columns`` plus a fresh accelerometer noise draw (sd/√n per row and axis),
+    keyed like the bench's captures (step, reference, visit): two campaigns get the same
+    noise at the same measurement, whatever their order and timing."""
+    out = {n: list(v) for n, v in columns.items()}
+    seen: dict[tuple, int] = {}
+    for i in np.argsort(np.asarray(columns["t_s"]), kind="stable"):
+        ref = (columns["ref_x"][i], columns["ref_y"][i], columns["ref_z"][i])
+        where = (int(columns["step"][i]), *(int(round(v * 100.0)) + 200 for v in ref))
+        seen[where] = seen.get(where, -1) + 1
+        rng = np.random.default_rng([draw, *where, seen[where], 11])
+        noise = rng.normal(0.0, sd_g / math.sqrt(max(columns["n"][i], 1.0)), 3)
+        for axis, v in zip(("ax", "ay", "az"), noise, strict=True):
+            out[axis][i] += float(v)
+    return out
+
+
+def analyse(dump_dir: Path, policy: str, sensors: list[str] | None, mc: int = 0) -> None:
     draws = sorted(
         int(p.stem.rsplit("draw", 1)[1])
         for p in dump_dir.glob(f"{dump_name(POLICIES[0], 0).rsplit('-draw', 1)[0]}-draw*.json")
@@ -178,6 +195,15 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
                 float(np.sum(heldout_by_temp_sq(refit(splice(nf_f, nf_p, s), kp), truth))) - base
                 for s in steps
             ]
+            # The expected held-out sum of squares of each campaign's own design (its steps'
+            # and rows' temperatures): ``mc`` fresh noise draws on its noise-free rows, the
+            # same draws for both campaigns.
+            mc_f, mc_p = [], []
+            for j in range(mc):
+                noisy_f = with_noise(nf_f, truth.sample_sd_g(), 1000 * d + j)
+                noisy_p = with_noise(nf_p, truth.sample_sd_g(), 1000 * d + j)
+                mc_f.append(float(np.sum(heldout_by_temp_sq(refit(noisy_f, None), truth))))
+                mc_p.append(float(np.sum(heldout_by_temp_sq(refit(noisy_p, kp), truth))))
             ef, ep = row_errors_g(fit_nf_f, nf_f, truth), row_errors_g(fit_nf_p, nf_p, truth)
             rows_f, rows_p = [], []
             for s in steps:
@@ -208,6 +234,8 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
                 ("rows_p", np.square(rows_p)),
             ):
                 acc[name] += v
+            acc.setdefault("mc_f", []).extend(mc_f)
+            acc.setdefault("mc_p", []).extend(mc_p)
             acc["draws"] += 1
             acc["ratios"].append(float(np.sqrt(sq_p.sum() / sq_f.sum())))
             noise_d = sq_f.sum() - s_f.sum()
@@ -224,6 +252,13 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
         # less its soak-only part; a policy changes the soak-only part only.
         noise = a["sq_f"].sum() - a["s_f"].sum()
         expected = float(np.sqrt((noise + a["s_p"].sum()) / (noise + a["s_f"].sum())))
+        mc_ratio, mc_half = math.nan, math.nan
+        if a.get("mc_f"):
+            mf, mp = np.array(a["mc_f"]), np.array(a["mc_p"])
+            mc_ratio = float(np.sqrt(mp.sum() / mf.sum()))
+            each = np.sqrt(mp / mf)
+            mc_half = 2.0 * float(np.std(each, ddof=1)) / math.sqrt(each.size)
+        a["mc"] = (mc_ratio, mc_half)
         summary.append((serial, a["rate"], ratio, expected, a["ratios"], a["expected"]))
         print(
             f"\n{serial} (rate {a['rate']:g}): held-out ×{ratio:.3f} over {n} draw(s) (each "
@@ -250,26 +285,30 @@ def analyse(dump_dir: Path, policy: str, sensors: list[str] | None) -> None:
     print(
         "\nper sensor over the draws: the held-out ratio pooled over them, ± 2 sd of one draw's "
         "ratio / √draws; draws needed for that ± to be 0.05; the expected ratio (mean ± sd "
-        "over the draws)"
+        "over the draws); with --mc, the ratio of the mean held-out sum of squares over fresh "
+        "noise draws on each campaign's own rows (± 2 sd / √(campaigns × mc))"
     )
     print(
         f"{'sensor':<10} {'rate':>5} {'held-out ×':>10} {'± 2σ/√n':>8} {'n for ±.05':>10} "
-        f"{'expected ×':>10} {'sd':>6}  per draw"
+        f"{'expected ×':>10} {'sd':>6} {'mc ×':>7} {'±':>6}  per draw"
     )
     for serial, rate, ratio, expected, each, exp_each in summary:
         sd = float(np.std(each, ddof=1)) if len(each) > 1 else math.nan
         half = 2.0 * sd / math.sqrt(len(each))
         need = math.ceil((2.0 * sd / 0.05) ** 2) if math.isfinite(sd) else 0
         sd_exp = float(np.std(exp_each, ddof=1)) if len(exp_each) > 1 else math.nan
+        mc_ratio, mc_half = per_sensor[serial]["mc"]
         print(
             f"{serial:<10} {rate:5g} {ratio:10.3f} {half:8.3f} {need:10d} {expected:10.3f} "
-            f"{sd_exp:6.3f}  " + " ".join(f"{r:.3f}" for r in each)
+            f"{sd_exp:6.3f} {mc_ratio:7.3f} {mc_half:6.3f}  " + " ".join(f"{r:.3f}" for r in each)
         )
     worst = max(summary, key=lambda r: r[2])
     worst_exp = max(summary, key=lambda r: r[3])
+    worst_mc = max(per_sensor.items(), key=lambda kv: kv[1]["mc"][0])
     print(
         f"worst sensor: held-out ×{worst[2]:.3f} ({worst[0]}), expected ×{worst_exp[3]:.3f} "
-        f"({worst_exp[0]})"
+        f"({worst_exp[0]}), mc ×{worst_mc[1]['mc'][0]:.3f} ± {worst_mc[1]['mc'][1]:.3f} "
+        f"({worst_mc[0]})"
     )
 
 
@@ -286,8 +325,11 @@ def main() -> int:
     ap.add_argument("dump", type=Path, help="the folder of bench_throughput.py --dump")
     ap.add_argument("--policy", default=POLICIES[1])
     ap.add_argument("--sensors", default="", help="serials (default: all)")
+    ap.add_argument(
+        "--mc", type=int, default=0, help="fresh noise draws per campaign for the expected ratio"
+    )
     args = ap.parse_args()
-    analyse(args.dump, args.policy, [s for s in args.sensors.split(",") if s] or None)
+    analyse(args.dump, args.policy, [s for s in args.sensors.split(",") if s] or None, args.mc)
     return 0
 
 
