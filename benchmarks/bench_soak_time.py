@@ -106,6 +106,11 @@ class BenchTruth(SensorTruth):
     _attempts: dict[tuple[int, ...], int] = field(default_factory=dict, init=False)
     _temp_rng: np.random.Generator | None = field(default=None, init=False)
     _last: tuple[float, float] | None = field(default=None, init=False)
+    # Every position capture's key and noise-free mean output (ideal + rate effect at the
+    # capture's die temperature and rate), g: the soak-induced part of each stored row
+    # (bench_heldout_steps.py refits the rows without the accelerometer noise).
+    noise_free_log: list[tuple[list[int], list[float]]] = field(default_factory=list,
+                                                                init=False)
 
     def sample_g(self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator,
                  t_s: float = 0.0) -> np.ndarray:
@@ -122,9 +127,12 @@ class BenchTruth(SensorTruth):
             rng = np.random.default_rng(key)
             self._temp_rng = np.random.default_rng([*key, 1])
         out = super().sample_g(ref_g, die_c, n, rng, t_s)
-        if self.rate_g_per_c_per_s is not None:
-            out = out + rate * self.rate_g_per_c_per_s[None, :]
-        return out
+        effect = (np.zeros(3) if self.rate_g_per_c_per_s is None
+                  else rate * self.rate_g_per_c_per_s)
+        if n != self.probe_n:
+            ideal = self.ideal_raw_g(np.asarray(ref_g, float)[None, :], die_c)[0] + effect
+            self.noise_free_log.append((key, ideal.tolist()))
+        return out + effect[None, :]
 
     def _capture_key(self, ref_g: np.ndarray) -> list[int]:
         """The noise stream of a position capture: (sensor, orientation, setpoint, attempt).

@@ -24,9 +24,14 @@ every sensor's held-out error ≤ 1.05 × its fixed-hour figure; aim: 16 in ≤ 
 campaign: odd sensors 0, even 100). Each campaign runs in its own process (peak RSS is
 that process's ``ru_maxrss``).
 
+``--dump DIR`` writes each campaign's stored rows, k̂ and every position capture's noise-free
+mean per sensor to DIR (JSON), for ``bench_heldout_steps.py`` (per step, per held-out
+temperature, and the soak-only error and expected per-sensor ratio).
+
 Usage: .venv/bin/python benchmarks/bench_throughput.py [--sensors 8] [--fast] [--jobs N]
                                                        [--rate-ug-per-c-per-min K[,K…]]
-                                                       [--variants 1,2]
+                                                       [--variants 1,2] [--draws N]
+                                                       [--dump DIR]
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
+import json
 import logging
 import math
 import resource
@@ -135,12 +141,18 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     for serial, k in k_hats.items():
         if serial in fits:
             fits[serial].k_hat = k  # the estimate the fit used, read by one_campaign
+    for serial in fits:
+        fits[serial].columns = store.measurement_columns(sf, cid, serial)  # for --dump
     return fits, clock.now(), log, dict(camp.sensors_dropped or {})
 
 
-def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[str, Any]:
-    """One N-sensor campaign under one policy; runs in its own worker process."""
-    name, n_sensors, fast, rates, noise_free, crn_offset = args
+def one_campaign(args: tuple[str, int, bool, list[float], bool, int, str]) -> dict[str, Any]:
+    """One N-sensor campaign under one policy; runs in its own worker process.
+
+    ``dump`` (a folder, or ""): each sensor's stored rows and the campaign's k̂ are written
+    there as JSON (``dump_name``), for the per-step analysis of ``bench_heldout_steps.py``.
+    """
+    name, n_sensors, fast, rates, noise_free, crn_offset, dump = args
     logging.getLogger("soakcal").setLevel(logging.WARNING)  # no per-soak event lines
     if name == NEXT_DRAW:
         crn_offset += 1
@@ -164,6 +176,13 @@ def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[st
         per_sensor[serial] = {"sq_err": float(np.sum(err**2)), "n_err": int(err.size),
                               "rmse_ug": float(np.sqrt(np.mean(err**2))) * 1e6,
                               "k_hat": getattr(fits[serial], "k_hat", None)}
+    if dump:
+        Path(dump).mkdir(parents=True, exist_ok=True)
+        (Path(dump) / dump_name(name, crn_offset)).write_text(json.dumps({
+            "name": name, "draw": crn_offset, "rates": rates, "log": log,
+            "sensors": {s: {"columns": fits[s].columns, "k_hat": getattr(fits[s], "k_hat", None),
+                            "index": serials_for(n_sensors).index(s),
+                            "noise_free": truths[s].noise_free_log} for s in fits}}))
     return {
         "name": name, "sim_s": sim_s, "soak_s": sum(e["soak_s"] for e in log),
         "max_soak": sum(bool(e.get("max_soak_reached")) for e in log),
@@ -174,6 +193,11 @@ def one_campaign(args: tuple[str, int, bool, list[float], bool, int]) -> dict[st
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "steps": step_breakdown(log, sim_s),
     }
+
+
+def dump_name(policy: str, draw: int) -> str:
+    """The --dump file of one campaign: the policy's name made a file name, and the draw."""
+    return f"{''.join(c if c.isalnum() else '_' for c in policy)}-draw{draw}.json"
 
 
 def step_breakdown(log: list[dict[str, Any]], sim_s: float) -> list[dict[str, float]]:
@@ -278,6 +302,8 @@ def main() -> int:
                     help="repeat with this many noise draws (crn offsets N, N+1, …) and judge "
                          "each sensor over all of them")
     ap.add_argument("--jobs", type=int, default=1, help="campaigns run at once (processes)")
+    ap.add_argument("--dump", default="",
+                    help="write every campaign's rows and k̂ per sensor to this folder (JSON)")
     ap.add_argument("--rate-ug-per-c-per-min", default="0",
                     help="temperature_rate gain(s), µg per °C/min; a list cycles over sensors")
     ap.add_argument("--variants", default="",
@@ -293,7 +319,7 @@ def main() -> int:
     by_draw = []
     for draw in range(args.crn_offset, args.crn_offset + max(1, args.draws)):
         w0 = time.monotonic()
-        cases = [(name, args.sensors, args.fast, rates, args.noise_free, draw)
+        cases = [(name, args.sensors, args.fast, rates, args.noise_free, draw, args.dump)
                  for name in names]
         with ProcessPoolExecutor(max_workers=max(1, args.jobs), max_tasks_per_child=1) as pool:
             results = list(pool.map(one_campaign, cases))

@@ -462,16 +462,29 @@ class CampaignRunner:
         status = await self._chamber()
         limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
         limit_s += spec.stability.max_soak_s
-        while not (_wsp_at_target(status, target_c)
-                   and abs(status.process_c - target_c) <= spec.stability.tol_c):
-            if self.clock.now() - start_s > limit_s:
-                raise CampaignFailed(
-                    f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
-                    f"(PV {status.process_c:.2f} °C)")
-            self._publish(step, "ramp", 0, status, target_c)
-            await self._checkpoint()
-            await self._wait(spec.soak_poll_s)
-            status = await self._chamber_watched(None)
+        # With the rate gain measured, the dies are probed during the ramp too (at home, like
+        # the soaks): the die's rate is large then, and the first ramp with the first soak
+        # measures k during that soak instead of after it (soak_rate.estimate_rate_gain).
+        probe_ramp = spec.rate_gain == "measured" and spec.stability.policy == "predictive"
+        dies = self._no_dies()
+        try:
+            while not (_wsp_at_target(status, target_c)
+                       and abs(status.process_c - target_c) <= spec.stability.tol_c):
+                if self.clock.now() - start_s > limit_s:
+                    raise CampaignFailed(
+                        f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
+                        f"(PV {status.process_c:.2f} °C)")
+                polled_s = self.clock.now()
+                if probe_ramp:
+                    await self._probe_dies(dies, step, target_c, status, self._t(start_s))
+                self._publish(step, "ramp", 0, status, target_c)
+                await self._checkpoint()
+                # The probe's capture (≈ 4 s) is part of the poll period, not added to it:
+                # the ramp's end is seen as soon as without probes.
+                await self._wait(spec.soak_poll_s - (self.clock.now() - polled_s))
+                status = await self._chamber_watched(None)
+        finally:
+            self._keep_soak(dies, ramp=True)
 
     async def _soak(self, msg: WaitStable) -> None:
         """Wait for stability (policy of the spec); log the decision in steps_log.
@@ -628,11 +641,12 @@ class CampaignRunner:
         except ValueError:  # a table geometry the reference formula does not cover
             self._pose_ref = None
 
-    def _keep_soak(self, dies: dict[str | None, list[_Probe]]) -> None:
-        """Add this soak's probes to the finished soaks of each sensor."""
+    def _keep_soak(self, dies: dict[str | None, list[_Probe]], ramp: bool = False) -> None:
+        """Add this soak's (``ramp``: this ramp's) probes to the finished soaks of each
+        sensor."""
         for key, probes in dies.items():
             if len(probes) >= soak_rate.MIN_PROBES_PER_SOAK:
-                self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes))
+                self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes, ramp))
 
     def _stored_soaks(self) -> dict[str | None, list[soak_rate.SoakProbes]]:
         """The soaks of an interrupted run, from the soak_probes table, per sensor."""
@@ -643,10 +657,16 @@ class CampaignRunner:
         out: dict[str | None, list[soak_rate.SoakProbes]] = {}
         for (key, _, _, pose), rows in groups.items():
             if len(rows) >= soak_rate.MIN_PROBES_PER_SOAK:
+                # A ramp's probes begin with the air outside the band (a soak starts once
+                # the air is in it): no column needed to tell them apart.
+                first = min(rows, key=lambda r: r["t_s"])
+                air_c, setpoint_c = first.get("chamber_c"), first.get("setpoint_c")
+                ramp = (air_c is not None and setpoint_c is not None
+                        and abs(air_c - setpoint_c) > self.spec.stability.tol_c)
                 out.setdefault(key, []).append(soak_rate.SoakProbes(
                     pose, np.array([r["t_s"] for r in rows], float),
                     np.array([r["sensor_c"] for r in rows], float),
-                    np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float)))
+                    np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float), ramp))
         return out
 
     def _rate_estimate(self, key: str | None,
@@ -1014,10 +1034,10 @@ class _Probe:
     mean_g: tuple[float, ...]
 
 
-def _soak_probes(pose: str, probes: list[_Probe]) -> soak_rate.SoakProbes:
+def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> soak_rate.SoakProbes:
     return soak_rate.SoakProbes(pose, np.array([p.t_s for p in probes]),
                                 np.array([p.sensor_c for p in probes]),
-                                np.array([p.mean_g for p in probes], float))
+                                np.array([p.mean_g for p in probes], float), ramp)
 
 
 def _finite(d: dict[str, float]) -> dict[str, float | None]:

@@ -16,7 +16,11 @@ cannot be told from f; across soaks it can: the rate is a sawtooth in T (high
 at each soak start, near zero at each end, 10 °C further on), which no cubic
 follows. T and dT/dt come from :func:`stability.fit_approach` per soak (the
 fitted curve, not differenced readings: differencing noisy readings would
-bias k towards 0, the unsafe direction).
+bias k towards 0, the unsafe direction). The probes taken during a ramp count
+too, with the readings' central difference as the rate (large there, so the
+bias is negligible: :func:`ramp_rate_c_per_min`): the first ramp with the first
+soak separates k (a trapezoid of rate in T), so k is measured during the first
+soak, not after it.
 
 Precision: with 8-sample probes (the default) a whole −40…60 °C campaign
 gives σ(k) ≈ 25–30 µg per °C/min, too weak to shorten a soak; with
@@ -54,17 +58,26 @@ RATE_ALLOWANCE_FRACTION = 0.1
 
 @dataclass(frozen=True)
 class SoakProbes:
-    """The probes of one soak, all at one table orientation (``orientation`` names it)."""
+    """The probes of one soak, all at one table orientation (``orientation`` names it).
+
+    ``ramp``: taken while the chamber ramped to the step (the air not yet in its band), not
+    during a soak: the die is then no first-order approach, and its rate comes from the
+    readings themselves (:func:`ramp_rate_c_per_min`).
+    """
 
     orientation: str
     t_s: np.ndarray  # (n,) probe times
     die_c: np.ndarray  # (n,) die temperature channel, °C
     out_g: np.ndarray  # (n, 3) mean output per axis, g
+    ramp: bool = False
 
     @cached_property
     def rate(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """:func:`soak_rate_c_per_min` of this soak, computed once (the engine re-estimates
-        k at every poll from every finished soak)."""
+        """:func:`soak_rate_c_per_min` (a ramp: :func:`ramp_rate_c_per_min`) of these
+        probes, computed once (the engine re-estimates k at every poll from every finished
+        soak). NaN where a probe has no rate (a ramp's first and last)."""
+        if self.ramp:
+            return ramp_rate_c_per_min(self.t_s, self.die_c)
         return soak_rate_c_per_min(self.t_s, self.die_c)
 
 
@@ -95,28 +108,57 @@ def soak_rate_c_per_min(t_s: np.ndarray, die_c: np.ndarray) -> tuple[np.ndarray,
     return temp_c, 60.0 * fit.amplitude_c / fit.tau_s * e
 
 
+def ramp_rate_c_per_min(t_s: np.ndarray, die_c: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(T, dT/dt in °C/min) during a ramp: central differences of the die readings.
+
+    While the air ramps the die is no first-order approach (it lags a moving air), so there
+    is no fitted curve to differentiate. Differencing is safe here, unlike at a soak's end:
+    the rate is large (up to the ramp's 2 °C/min) against the difference's noise (two
+    250-sample readings of ±0.006 °C a minute apart: ±0.01 °C/min), so the noise in the
+    regressor biases k towards 0 by a part in 10⁴ (errors in variables: var(noise) / var(rate)).
+    The first and last probe (one-sided differences, off by the curvature) get NaN.
+    """
+    t = np.asarray(t_s, float)
+    temp_c = np.asarray(die_c, float)
+    if t.size < MIN_PROBES_PER_SOAK or np.any(np.diff(t) <= 0):
+        return None
+    rate = 60.0 * np.gradient(temp_c, t)
+    rate[[0, -1]] = np.nan
+    return temp_c, rate
+
+
 def estimate_rate_gain(soaks: list[SoakProbes]) -> RateGain | None:
     """Least-squares k shared by all soaks, with a polynomial f(T) per orientation.
 
     An orientation with one soak only is left out: within one approach the rate
     is a straight line in T, so that soak says nothing about k, and whatever
     of f a low-degree polynomial misses would be taken for k. The degree per
-    orientation is min(3, its soaks). Returns None when no orientation has two
-    soaks or there are fewer probes than unknowns + 5.
+    orientation is min(3, its soaks), 3 once one of them is a ramp: a ramp and the soak
+    after it cover the range between them without a gap (the first ramp and soak: from the
+    ambient to the first setpoint), and over it the rate is a trapezoid in T (rising at the
+    ramp's start, about the ramp rate while the die lags the air, falling linearly in T
+    during the approach) that no cubic follows, so k separates from one ramp and one soak:
+    k is known during the first soak. Returns None when no orientation has two segments
+    or there are fewer probes than unknowns + 5.
     """
     fitted = [(s, s.rate) for s in soaks]
     fitted = [(s, tr) for s, tr in fitted if tr is not None]
     count: dict[str, int] = {}
+    degree: dict[str, int] = {}
     for s, _ in fitted:
         count[s.orientation] = count.get(s.orientation, 0) + 1
+        degree[s.orientation] = 3 if s.ramp else min(3, max(degree.get(s.orientation, 0),
+                                                               count[s.orientation]))
     rows_t, rows_r, rows_y, rows_o = [], [], [], []
     for s, tr in fitted:
         if count[s.orientation] < 2:
             continue
-        rows_t.append(np.asarray(s.die_c, float))  # measured: precise, and f(T) needs the truth
-        rows_r.append(tr[1])
-        rows_y.append(np.asarray(s.out_g, float).reshape(-1, 3) * 1e6)
-        rows_o.extend([s.orientation] * tr[0].size)
+        ok = np.isfinite(tr[1])
+        rows_t.append(np.asarray(s.die_c, float)[ok])  # measured: precise; f(T) needs the truth
+        rows_r.append(tr[1][ok])
+        rows_y.append(np.asarray(s.out_g, float).reshape(-1, 3)[ok] * 1e6)
+        rows_o.extend([s.orientation] * int(ok.sum()))
     if not rows_t:
         return None
     temp_c, rate, out_ug = np.concatenate(rows_t), np.concatenate(rows_r), np.vstack(rows_y)
@@ -126,7 +168,7 @@ def estimate_rate_gain(soaks: list[SoakProbes]) -> RateGain | None:
     cols = []
     for o in dict.fromkeys(orient):
         mask = (orient == o).astype(float)
-        cols.extend(mask * x**d for d in range(min(3, count[o]) + 1))
+        cols.extend(mask * x**d for d in range(degree[o] + 1))
     cols.append(rate)
     design = np.column_stack(cols)
     n, p = design.shape

@@ -18,6 +18,7 @@ from service.engine.soak_rate import (
     RateGain,
     SoakProbes,
     estimate_rate_gain,
+    is_informative,
     rate_gain_for_decision,
 )
 from service.engine.stability import (
@@ -361,6 +362,67 @@ def test_rate_gain_is_recovered_from_the_soaks(k: float) -> None:
     assert est is not None and est.soaks == 10
     assert np.all(np.abs(est.gain_ug_per_c_per_min - true_k) <= 3 * est.sd_ug_per_c_per_min)
     assert np.all(est.sd_ug_per_c_per_min < 10.0)  # informative enough to shorten a soak
+
+
+def synthetic_first_ramp(k_ug_per_c_per_min: np.ndarray, seed: int = 0,
+                         ambient_c: float = 23.0, first_c: float = -40.0,
+                         ramp_c_per_min: float = 2.0, tau_s: float = 900.0,
+                         soak_s: float = 3600.0) -> list[SoakProbes]:
+    """The first ramp (air ambient → first setpoint at the ramp rate) and the first soak:
+    the die lags the air first-order (τ), probed every 60 s with 250 samples; output a
+    cubic f(T) + k·dT/dt + noise. Returns [ramp, soak]."""
+    rng = np.random.default_rng(seed)
+    tempco = np.array([[80.0, -60.0, 40.0], [0.4, 0.2, -0.3], [0.003, -0.002, 0.001]])
+    ramp_s = (ambient_c - first_c) / ramp_c_per_min * 60.0
+    dt = 1.0
+    t = np.arange(0.0, ramp_s + soak_s, dt)
+    air = np.maximum(first_c, ambient_c - ramp_c_per_min / 60.0 * t)
+    die = np.empty_like(t)
+    die[0] = ambient_c
+    for i in range(1, t.size):  # exact step of the first-order lag for a piecewise-linear air
+        die[i] = air[i] + (die[i - 1] - air[i]) * np.exp(-dt / tau_s)
+    rate = 60.0 * (air - die) / tau_s  # °C/min
+    probe = np.arange(60, t.size, 60)
+    f = sum(np.outer(die[probe] ** (d + 1), tempco[d]) for d in range(3))
+    out_ug = f + np.outer(rate[probe], k_ug_per_c_per_min) \
+        + rng.normal(0, 8.9, (probe.size, 3))  # 250 samples: 140 µg / √250
+    read = die[probe] + 1.3 + rng.normal(0, 0.006, probe.size)
+    # the air reaches its band ≈ when the ramp ends: the soak starts there
+    ramp = t[probe] < ramp_s
+    return [SoakProbes("home", t[probe][m], read[m], out_ug[m] * 1e-6, is_ramp)
+            for m, is_ramp in ((ramp, True), (~ramp, False))]
+
+
+@pytest.mark.parametrize("k", [0.0, 100.0])
+def test_the_first_ramp_and_soak_measure_the_rate_gain(k: float) -> None:
+    """k from the first ramp: one ramp and the soak after it separate k (the rate is a
+    trapezoid in T there), precisely enough to replace the prior during the first soak;
+    the soak alone (a first-order approach: rate linear in T) says nothing."""
+    true_k = k * np.array([1.0, -0.6, 0.4])
+    ramp, soak = synthetic_first_ramp(true_k, seed=int(k) + 1)
+    assert estimate_rate_gain([soak]) is None
+    est = estimate_rate_gain([ramp, soak])
+    assert est is not None and est.soaks == 2
+    assert np.all(np.abs(est.gain_ug_per_c_per_min - true_k) <= 3 * est.sd_ug_per_c_per_min)
+    assert is_informative(est)  # 2σ ≤ 50: the first soak need not wait on the prior
+    # the ramp's rate comes from its readings: edges dropped, the ramp rate reached
+    t_r, r_r = ramp.rate
+    assert np.isnan(r_r[0]) and np.isnan(r_r[-1])
+    assert -2.0 < np.nanmin(r_r) < -1.5 and np.nanmax(r_r) < 0.0
+
+
+def test_a_ramp_counted_as_a_soak_would_bias_the_rate_gain() -> None:
+    """Why a ramp's rate is its readings' and not a fitted approach: the die lags a moving
+    air, which no first-order approach to a fixed value describes."""
+    true_k = 100.0 * np.array([1.0, -0.6, 0.4])
+    ramp, soak = synthetic_first_ramp(true_k, seed=5)
+    as_soak = dataclasses.replace(ramp, ramp=False)
+    wrong = estimate_rate_gain([as_soak, soak])
+    right = estimate_rate_gain([ramp, soak])
+    assert right is not None
+    assert np.all(np.abs(right.gain_ug_per_c_per_min - true_k) <= 3 * right.sd_ug_per_c_per_min)
+    assert wrong is None or np.any(np.abs(wrong.gain_ug_per_c_per_min - true_k)
+                                   > 3 * wrong.sd_ug_per_c_per_min)
 
 
 def test_one_soak_per_orientation_says_nothing_about_the_rate_gain() -> None:

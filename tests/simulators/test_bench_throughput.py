@@ -77,3 +77,30 @@ def test_a_position_gets_the_same_noise_whatever_order_the_step_visits_it_in() -
     assert np.array_equal(first, forward[0]) and not np.array_equal(first, again)
     truth.chamber.setpoint_c = 20.0  # the next step: other noise for the same position
     assert not np.array_equal(truth.sample_g(refs[0], 10.0, 50, rng), first)
+
+
+def test_the_noise_free_log_is_each_capture_without_its_noise() -> None:
+    """``BenchTruth.noise_free_log`` (the soak-only refits of bench_heldout_steps): each
+    position capture's key and mean output less the accelerometer noise, the rate effect
+    included; a soak probe (the probe size) is not logged."""
+    from types import SimpleNamespace
+
+    from benchmarks.bench_heldout_steps import noise_free_columns
+
+    truth = make_truth(3, False, 100.0, probe_n=250)
+    truth.chamber = SimpleNamespace(air_c=-38.0, die_c=-39.0, die_tau_s=900.0, setpoint_c=-40.0)
+    ref = np.array([0.0, 0.0, 1.0])
+    rng = np.random.default_rng(0)
+    out = truth.sample_g(ref, -39.0, 200, rng)
+    truth.sample_g(ref, -39.0, 250, rng)  # a probe: not logged
+    (key, ideal), = truth.noise_free_log
+    rate_g = (1.0 / 900.0) * truth.rate_g_per_c_per_s  # (air − die) / τ, °C/s
+    assert np.allclose(ideal, truth.ideal_raw_g(ref[None, :], -39.0)[0] + rate_g)
+    # what is left is the noise of a 200-sample mean (140 µg per sample): within 5 σ
+    assert np.all(np.abs(out.mean(axis=0) - ideal) < 5 * truth.sample_sd_g() / np.sqrt(200))
+    # the rows get their capture's noise-free mean back, matched by reference and setpoint
+    cols = {"t_s": [1.0], "step": [0.0], "setpoint_c": [-40.0], "ref_x": [0.0], "ref_y": [0.0],
+            "ref_z": [1.0], "ax": [9.0], "ay": [9.0], "az": [9.0], "n": [200.0]}
+    got = noise_free_columns(cols, truth.noise_free_log)
+    assert got is not None and [got["ax"][0], got["ay"][0], got["az"][0]] == list(ideal)
+    assert noise_free_columns({**cols, "setpoint_c": [-30.0]}, truth.noise_free_log) is None
