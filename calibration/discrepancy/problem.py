@@ -63,6 +63,10 @@ class LinearProblem:
     # bootstrap draws that shared term (stats.null_replicates); without it the null of any
     # statistic that sums a reading's axes (outliers, cross-axis terms) was too light.
     shared_t_loading: np.ndarray | None = None
+    # Per axis (reference) or one value (norm): the sd, g, of the error the samples of one
+    # capture share (placement, vibration, temperature state), estimated from the residual
+    # and added to sd/√n in σ; None unless the readings are capture means of raw samples.
+    between_sd_g: np.ndarray | None = None
 
     @property
     def m(self) -> int:
@@ -110,10 +114,44 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
     return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
 
 
-def build_problem(rec: Recording) -> LinearProblem:
+def between_capture_sd(e: np.ndarray, sig: np.ndarray, dof_corr: float) -> np.ndarray:
+    """Per column, the sd τ ≥ 0 of an error common to a capture's samples, in g.
+
+    ``e`` (N, a) is the base residual of the capture means, ``sig`` (N, a) their sd/√n.
+    A mean's error is its samples' scatter over √n plus what they all share (placement,
+    vibration, temperature state of the capture), which the scatter cannot show:
+    σ² = sd²/n + τ². τ is the smallest value whose whitened residual has a robust
+    (MAD) scale of 1 after the dof correction; 0 when sd/√n already explains it. The
+    MAD, not the rms, so that one bad capture does not set everyone's σ.
+    """
+    def scale(z: np.ndarray) -> float:
+        return 1.4826 * float(np.median(np.abs(z - np.median(z)))) * dof_corr
+
+    tau = np.zeros(e.shape[1])
+    for a in range(e.shape[1]):
+        ea, sa = e[:, a], sig[:, a]
+        if scale(ea / sa) <= 1.0:
+            continue
+        lo, hi = 0.0, 2.0 * scale(ea) + float(np.max(sa))
+        for _ in range(60):  # bisection: the whitened scale falls monotonically in τ
+            mid = 0.5 * (lo + hi)
+            if scale(ea / np.sqrt(sa**2 + mid**2)) > 1.0:
+                lo = mid
+            else:
+                hi = mid
+        tau[a] = hi
+    return tau
+
+
+def build_problem(rec: Recording, *, capture_means: bool = False) -> LinearProblem:
+    """The linearised base model of ``rec`` (docs/diagnosis.md §1).
+
+    ``capture_means``: the readings are means of raw-sample captures
+    (:mod:`calibration.discrepancy.samples`): σ gains the between-capture sd τ.
+    """
     if rec.has_reference:
-        return _reference_problem(rec)
-    return _norm_problem(rec)
+        return _reference_problem(rec, capture_means)
+    return _norm_problem(rec, capture_means)
 
 
 def _powers(temp: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, float, float]:
@@ -125,7 +163,7 @@ def _powers(temp: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, float
     return np.column_stack([t**p for p in range(degree + 1)]), degree, mid, half
 
 
-def _reference_problem(rec: Recording) -> LinearProblem:
+def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearProblem:
     raw, ref = rec.raw_g, rec.ref_g
     assert ref is not None
     n = raw.shape[0]
@@ -144,6 +182,13 @@ def _reference_problem(rec: Recording) -> LinearProblem:
         dof_corr = np.sqrt(3 * n / max(3 * n - X0.shape[1], 1))
         s = 1.4826 * np.median(np.abs(e - np.median(e, axis=0)), axis=0) * dof_corr
         sig = np.broadcast_to(np.maximum(s, 1e-9), (n, 3))
+    tau = None
+    if from_sd and capture_means:
+        sig = np.asarray(sig, float)
+        beta = _wls(X0, 1.0 / sig.ravel(), y)
+        e = (y - X0 @ beta).reshape(n, 3)
+        tau = between_capture_sd(e, sig, np.sqrt(3 * n / max(3 * n - X0.shape[1], 1)))
+        sig = np.sqrt(sig**2 + tau**2)
     w = 1.0 / np.asarray(sig, float).ravel()
     beta = _wls(X0, w, y)
     sig_T = temperature_noise_c(ctx)
@@ -211,7 +256,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     return LinearProblem(
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
         from_sd, degree, mid, half, lift_rows,
-        loading if loading is not None and np.any(loading != 0) else None,
+        loading if loading is not None and np.any(loading != 0) else None, tau,
     )
 
 
@@ -378,7 +423,7 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
     return rem
 
 
-def _norm_problem(rec: Recording) -> LinearProblem:
+def _norm_problem(rec: Recording, capture_means: bool = False) -> LinearProblem:
     raw = rec.raw_g
     n = raw.shape[0]
     start = sfem_fit.fit_norm(raw, rec.sigma_g)
@@ -415,8 +460,15 @@ def _norm_problem(rec: Recording) -> LinearProblem:
     ctx = base_context(rec, "norm", f)
     sig = pooled_sigma_g(rec, ctx.steps)
     from_sd = sig is not None and bool(np.all(np.isfinite(sig) & (sig > 0)))
+    tau = None
     if from_sd:
         s_norm = np.sqrt(np.sum((gvec * sig) ** 2, axis=1))
+        if capture_means:
+            beta = np.linalg.lstsq(X0 / s_norm[:, None], y / s_norm, rcond=None)[0]
+            e = y - X0 @ beta
+            corr = np.sqrt(n / max(n - X0.shape[1], 1))
+            tau = between_capture_sd(e[:, None], s_norm[:, None], corr)
+            s_norm = np.sqrt(s_norm**2 + tau[0] ** 2)
     else:
         beta = np.linalg.lstsq(X0, y, rcond=None)[0]
         e = y - X0 @ beta
@@ -446,5 +498,5 @@ def _norm_problem(rec: Recording) -> LinearProblem:
 
     return LinearProblem(
         "norm", y, X0, 1.0 / s_norm, np.arange(n), np.full(n, -1), lift, ctx, from_sd,
-        degree, mid, half, lift_rows,
+        degree, mid, half, lift_rows, None, tau,
     )
