@@ -27,8 +27,9 @@ from simulators.truth import SensorTruth
 SETPOINTS_C = [float(t) for t in range(-40, 61, 10)]
 
 
-def raw_sample_recording(truth: SensorTruth, samples: int, seed: int,
-                         soak_min: float = 20.0) -> Recording:
+def raw_sample_recording(
+    truth: SensorTruth, samples: int, seed: int, soak_min: float = 20.0
+) -> Recording:
     """Table 1 per step, each capture written back as ``samples`` raw rows.
 
     As ``benchmarks.blind.memory`` (*samples* shape): the simulator's capture mean plus
@@ -37,17 +38,30 @@ def raw_sample_recording(truth: SensorTruth, samples: int, seed: int,
     from calibration.schedules import table1
     from simulators.campaign_sim import simulate_campaign
 
-    rec = simulate_campaign(truth, SETPOINTS_C, table1(), soak_min=soak_min,
-                            samples_per_position=samples, seed=seed)
+    rec = simulate_campaign(
+        truth, SETPOINTS_C, table1(), soak_min=soak_min, samples_per_position=samples, seed=seed
+    )
     rng = np.random.default_rng(seed + 1)
     c, k = rec.columns, samples
     offsets = (np.arange(k) - (k - 1) / 2) / truth.odr_hz
-    cols = {name: np.repeat(c[name], k) for name in (
-        "step", "setpoint_c", "chamber_c", "sensor_c", "position", "ref_x", "ref_y", "ref_z")}
+    cols = {
+        name: np.repeat(c[name], k)
+        for name in (
+            "step",
+            "setpoint_c",
+            "chamber_c",
+            "sensor_c",
+            "position",
+            "ref_x",
+            "ref_y",
+            "ref_z",
+        )
+    }
     cols["t_s"] = (c["t_s"][:, None] + offsets[None, :]).ravel()
     for axis, sd in (("ax", "sd_x"), ("ay", "sd_y"), ("az", "sd_z")):
-        cols[axis] = (c[axis][:, None]
-                      + c[sd][:, None] * rng.standard_normal((len(rec), k))).ravel()
+        cols[axis] = (
+            c[axis][:, None] + c[sd][:, None] * rng.standard_normal((len(rec), k))
+        ).ravel()
     cols["n"] = np.ones(len(rec) * k)
     return Recording.from_columns(cols)
 
@@ -62,8 +76,12 @@ def case(k: int, samples: int, n_null: int, effect: str | None, size: float) -> 
         truth.effects = [make(effect, size, pat, PROTOCOLS["short_soak"]).effect]
     rec = raw_sample_recording(truth, samples, seed=17000 + k)
     d = diagnose(rec, n_null=n_null, seed=k)
-    return {"case": k, "mismatch": d.mismatch, "noise_source": d.noise_source,
-            "findings": [f.effect for f in d.findings]}
+    return {
+        "case": k,
+        "mismatch": d.mismatch,
+        "noise_source": d.noise_source,
+        "findings": [f.effect for f in d.findings],
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -83,9 +101,17 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         for f in r["findings"]:
             named[f] = named.get(f, 0) + 1
-    res = {"effect": a.effect, "size": a.size, "samples": a.samples, "mismatch": hits,
-           "n": len(rows), "rate": hits / len(rows), "ci95": [lo, hi], "named": named,
-           "wall_s": round(time.perf_counter() - t0, 1)}
+    res = {
+        "effect": a.effect,
+        "size": a.size,
+        "samples": a.samples,
+        "mismatch": hits,
+        "n": len(rows),
+        "rate": hits / len(rows),
+        "ci95": [lo, hi],
+        "named": named,
+        "wall_s": round(time.perf_counter() - t0, 1),
+    }
     if a.out:
         with open(a.out, "w") as fh:
             json.dump({**res, "cases": rows}, fh, indent=1)

@@ -61,8 +61,10 @@ def position_means(rec: Recording) -> Recording:
     count = np.bincount(inv, minlength=groups).astype(float)
     # The step and position of each capture as the samples were grouped (a derived step,
     # from setpoint runs or plateaus, is written out so the means keep it).
-    cols: dict[str, np.ndarray] = {"step": rec.steps()[first].astype(float),
-                                   "position": rec.positions()[first].astype(float)}
+    cols: dict[str, np.ndarray] = {
+        "step": rec.steps()[first].astype(float),
+        "position": rec.positions()[first].astype(float),
+    }
     for name, v in rec.columns.items():
         if name in ("n", "step", "position"):
             continue
