@@ -13,7 +13,7 @@ So diagnose works on the capture means, the readings the seed paper's Eq. 1 is
 fitted to: mean of the samples, their sample sd and count as ``sd_*`` and ``n`` (the
 averaged-reading format). The noise of such a mean is sd/√n *plus* the component the
 samples share, which their scatter cannot show; it is estimated from the data by
-:func:`calibration.discrepancy.problem.between_capture_sd`.
+:func:`calibration.discrepancy.problem.capture_noise`.
 """
 
 from __future__ import annotations
