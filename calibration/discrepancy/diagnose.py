@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
@@ -166,10 +167,21 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     """
     notes: list[str] = []
     given_rmse = _given_model_rmse_ug(model, recording, notes)
+    # Raw samples (many n = 1 rows per position): the samples of a capture share its
+    # placement, vibration and temperature error, so they are not independent readings;
+    # counted as such, a null twin was a "mismatch" (issue 10). Diagnose the capture means,
+    # with σ = sd/√n plus the shared component estimated from the data (samples.py).
+    capture_means = samples_mod.is_raw_samples(recording)
+    if capture_means:
+        n_rows = len(recording)
+        recording = samples_mod.position_means(recording)
+        notes.append(f"raw samples: {n_rows} rows diagnosed as {len(recording)} capture means "
+                     "(one per step and position); noise = sample sd/sqrt(n) plus the "
+                     "between-capture sd estimated from the residuals")
     why_not = _too_few(recording)
     if why_not:
         return _cannot_judge(recording, why_not, n_null, alpha, notes)
-    pb = build_problem(recording)
+    pb = build_problem(recording, capture_means=capture_means)
     # A long recording cannot be short of dof: skip the rank's SVD (an (m × p) copy).
     p0 = pb.X0.shape[1]
     dof = pb.m - (p0 if pb.m > 20 * p0 else np.linalg.matrix_rank(pb.X0 * pb.w[:, None]))
@@ -360,7 +372,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         unexplained=unexplained,
         recording=str(recording.path), mode=pb.mode,
         rmse_ug=base_rmse, noise_ug=noise,
-        noise_source="sd/sqrt(n)" if pb.noise_from_sd else "residual MAD",
+        noise_source=("sd/sqrt(n) + between-capture sd (residual MAD)"
+                      if pb.between_sd_g is not None else
+                      "sd/sqrt(n)" if pb.noise_from_sd else "residual MAD"),
         findings=findings, not_identifiable=list(not_ident.values()),
         located=locate_residuals(pb, base_res, final_res, flagged), heldout_scheme=scheme,
         n_null=n_null, alpha=alpha, notes=notes, final_rmse_ug=_rms(final_res, flagged),
@@ -592,6 +606,9 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
     """
     if not pb.noise_from_sd:
         return {"test": "not run: no sd_* columns, noise estimated from the residuals"}
+    if pb.between_sd_g is not None:  # σ was matched to this residual: χ² ≈ dof by design
+        return {"test": "not run: raw samples, the between-capture noise is estimated from "
+                        "the residuals"}
     from scipy.stats import chi2
 
     z = (res_g * pb.w)[~flagged[pb.row]]

@@ -63,6 +63,11 @@ class LinearProblem:
     # bootstrap draws that shared term (stats.null_replicates); without it the null of any
     # statistic that sums a reading's axes (outliers, cross-axis terms) was too light.
     shared_t_loading: np.ndarray | None = None
+    # Only when the readings are capture means of raw samples (samples.py): σ² = κ·sd²/n
+    # + τ², κ the samples' averaging shortfall and τ (g) the error a capture shares, both
+    # fitted to the residual (capture_noise).
+    between_sd_g: float | None = None
+    scatter_factor: float | None = None
 
     @property
     def m(self) -> int:
@@ -110,10 +115,50 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
     return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
 
 
-def build_problem(rec: Recording) -> LinearProblem:
+def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float
+                  ) -> tuple[np.ndarray, float, float]:
+    """σ of capture means from their base residual: ``(σ, κ, τ)``, σ² = κ·sd²/n + τ².
+
+    ``e`` (N, a) is the base residual of the capture means, ``sig`` (N, a) their sd/√n
+    (pooled per step and axis). A mean's error is not its samples' scatter over √n
+    alone: samples correlated in time (slow vibration, 1/f noise) average down more
+    slowly (κ ≥ 1, in proportion to the scatter, so it grows on vibrating steps), and
+    what a capture shares whatever its scatter — its placement on the table, the
+    temperature state — adds τ², the same at every step and axis. Neither shows in the
+    scatter. Both are fitted by Gaussian maximum likelihood to all residuals at once
+    (dof-corrected for the base's p columns): per-step moment estimates from ~24
+    residuals each were noisy enough to misweight steps and axes and raised the false
+    alarms (docs/benchmarks.md, *Raw-sample recordings*). When the steps' sd²/n are
+    nearly equal, κ and τ trade off along a ridge of the likelihood on which σ, all
+    the whitening needs, hardly changes.
+    """
+    from scipy.optimize import minimize
+
+    w = np.asarray(sig, float) ** 2
+    e2 = (np.asarray(e, float) * dof_corr) ** 2
+    ok = np.isfinite(e2) & np.isfinite(w) & (w > 0)
+    w, e2 = w[ok], e2[ok]
+    w0 = float(np.median(w))
+
+    def nll(q: np.ndarray) -> float:  # κ = 1 + q0, τ² = q1·median(sd²/n)
+        v = (1.0 + q[0]) * w + q[1] * w0
+        return float(np.sum(np.log(v) + e2 / v)) / w.size
+
+    start = np.array([0.0, max(0.0, float(np.mean(e2 - w)) / w0)])
+    q = minimize(nll, start, method="L-BFGS-B", bounds=[(0.0, 1e4), (0.0, 1e6)]).x
+    kappa, tau2 = 1.0 + float(q[0]), float(q[1]) * w0
+    return np.sqrt(kappa * np.asarray(sig, float) ** 2 + tau2), kappa, float(np.sqrt(tau2))
+
+
+def build_problem(rec: Recording, *, capture_means: bool = False) -> LinearProblem:
+    """The linearised base model of ``rec`` (docs/diagnosis.md §1).
+
+    ``capture_means``: the readings are means of raw-sample captures
+    (:mod:`calibration.discrepancy.samples`): σ gains the between-capture sd τ.
+    """
     if rec.has_reference:
-        return _reference_problem(rec)
-    return _norm_problem(rec)
+        return _reference_problem(rec, capture_means)
+    return _norm_problem(rec, capture_means)
 
 
 def _powers(temp: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, float, float]:
@@ -125,7 +170,7 @@ def _powers(temp: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, float
     return np.column_stack([t**p for p in range(degree + 1)]), degree, mid, half
 
 
-def _reference_problem(rec: Recording) -> LinearProblem:
+def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearProblem:
     raw, ref = rec.raw_g, rec.ref_g
     assert ref is not None
     n = raw.shape[0]
@@ -144,6 +189,13 @@ def _reference_problem(rec: Recording) -> LinearProblem:
         dof_corr = np.sqrt(3 * n / max(3 * n - X0.shape[1], 1))
         s = 1.4826 * np.median(np.abs(e - np.median(e, axis=0)), axis=0) * dof_corr
         sig = np.broadcast_to(np.maximum(s, 1e-9), (n, 3))
+    tau = kappa = None
+    if from_sd and capture_means:
+        sig = np.asarray(sig, float)
+        beta = _wls(X0, 1.0 / sig.ravel(), y)
+        e = (y - X0 @ beta).reshape(n, 3)
+        dof_corr = float(np.sqrt(3 * n / max(3 * n - X0.shape[1], 1)))
+        sig, kappa, tau = capture_noise(e, sig, dof_corr)
     w = 1.0 / np.asarray(sig, float).ravel()
     beta = _wls(X0, w, y)
     sig_T = temperature_noise_c(ctx)
@@ -211,7 +263,7 @@ def _reference_problem(rec: Recording) -> LinearProblem:
     return LinearProblem(
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
         from_sd, degree, mid, half, lift_rows,
-        loading if loading is not None and np.any(loading != 0) else None,
+        loading if loading is not None and np.any(loading != 0) else None, tau, kappa,
     )
 
 
@@ -378,7 +430,7 @@ def _sfem_remainder(raw: np.ndarray, ref: np.ndarray, sig: np.ndarray, t: np.nda
     return rem
 
 
-def _norm_problem(rec: Recording) -> LinearProblem:
+def _norm_problem(rec: Recording, capture_means: bool = False) -> LinearProblem:
     raw = rec.raw_g
     n = raw.shape[0]
     start = sfem_fit.fit_norm(raw, rec.sigma_g)
@@ -415,8 +467,15 @@ def _norm_problem(rec: Recording) -> LinearProblem:
     ctx = base_context(rec, "norm", f)
     sig = pooled_sigma_g(rec, ctx.steps)
     from_sd = sig is not None and bool(np.all(np.isfinite(sig) & (sig > 0)))
+    tau = kappa = None
     if from_sd:
         s_norm = np.sqrt(np.sum((gvec * sig) ** 2, axis=1))
+        if capture_means:
+            beta = np.linalg.lstsq(X0 / s_norm[:, None], y / s_norm, rcond=None)[0]
+            e = y - X0 @ beta
+            corr = float(np.sqrt(n / max(n - X0.shape[1], 1)))
+            s2, kappa, tau = capture_noise(e[:, None], s_norm[:, None], corr)
+            s_norm = s2[:, 0]
     else:
         beta = np.linalg.lstsq(X0, y, rcond=None)[0]
         e = y - X0 @ beta
@@ -446,5 +505,5 @@ def _norm_problem(rec: Recording) -> LinearProblem:
 
     return LinearProblem(
         "norm", y, X0, 1.0 / s_norm, np.arange(n), np.full(n, -1), lift, ctx, from_sd,
-        degree, mid, half, lift_rows,
+        degree, mid, half, lift_rows, None, tau, kappa,
     )
