@@ -71,7 +71,6 @@ def long_recording(rows: int, shape: str):  # -> Recording
     """About ``rows`` readings of one 11-step twin campaign in the given shape."""
     import numpy as np
 
-    from calibration.recording import Recording
     from calibration.schedules import table1
     from simulators.campaign_sim import simulate_campaign
     from simulators.truth import SensorTruth
@@ -87,32 +86,10 @@ def long_recording(rows: int, shape: str):  # -> Recording
     rec = simulate_campaign(
         truth, SETPOINTS_C, table1(), soak_min=30.0, samples_per_position=k, seed=2
     )
-    # Each averaged row back to the k samples it was the mean of: times across its
-    # capture window, each sample the mean plus the recorded per-sample scatter.
-    rng = np.random.default_rng(3)
-    c = rec.columns
-    dt_s = 1.0 / truth.odr_hz
-    offsets = (np.arange(k) - (k - 1) / 2) * dt_s
-    cols = {
-        name: np.repeat(c[name], k)
-        for name in (
-            "step",
-            "setpoint_c",
-            "chamber_c",
-            "sensor_c",
-            "position",
-            "ref_x",
-            "ref_y",
-            "ref_z",
-        )
-    }
-    cols["t_s"] = (c["t_s"][:, None] + offsets[None, :]).ravel()
-    for axis, sd in (("ax", "sd_x"), ("ay", "sd_y"), ("az", "sd_z")):
-        cols[axis] = (
-            c[axis][:, None] + c[sd][:, None] * rng.standard_normal((len(rec), k))
-        ).ravel()
-    cols["n"] = np.ones(len(rec) * k)
-    return Recording.from_columns(cols)
+    # Each averaged row back to the k samples it was the mean of.
+    from benchmarks.blind.sample_nulls import as_raw_samples
+
+    return as_raw_samples(rec, k, truth.odr_hz, np.random.default_rng(3))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -60,31 +60,34 @@ def raw_sample_recording(
     )
     rng = np.random.default_rng(seed + 1)
     placed = 1e-6 * placement_ug * rng.standard_normal((len(rec), 3))
-    c, k = rec.columns, samples
-    offsets = (np.arange(k) - (k - 1) / 2) / truth.odr_hz
-    cols = {
-        name: np.repeat(c[name], k)
-        for name in (
-            "step",
-            "setpoint_c",
-            "chamber_c",
-            "sensor_c",
-            "position",
-            "ref_x",
-            "ref_y",
-            "ref_z",
-        )
-    }
+    return as_raw_samples(rec, samples, truth.odr_hz, rng, placed)
+
+
+
+def as_raw_samples(
+    rec: Recording, k: int, odr_hz: float, rng: np.random.Generator,
+    placed_g: np.ndarray | None = None,
+) -> Recording:
+    """Each averaged row back to the ``k`` samples it was the mean of.
+
+    Times spread across the capture window at ``odr_hz``; each sample is the row's
+    mean plus ``placed_g`` (N,3, an error its samples share; none if None) plus the
+    recorded per-sample scatter drawn from ``rng``.
+    """
+    c = rec.columns
+    offsets = (np.arange(k) - (k - 1) / 2) / odr_hz
+    keep = ("step", "setpoint_c", "chamber_c", "sensor_c", "position", "ref_x", "ref_y",
+            "ref_z")
+    cols = {name: np.repeat(c[name], k) for name in keep}
     cols["t_s"] = (c["t_s"][:, None] + offsets[None, :]).ravel()
-    for axis, sd in (("ax", "sd_x"), ("ay", "sd_y"), ("az", "sd_z")):
+    shared = np.zeros((len(rec), 3)) if placed_g is None else placed_g
+    for i, (axis, sd) in enumerate((("ax", "sd_x"), ("ay", "sd_y"), ("az", "sd_z"))):
         cols[axis] = (
-            c[axis][:, None]
-            + placed[:, "xyz".index(sd[-1]), None]
+            c[axis][:, None] + shared[:, i, None]
             + c[sd][:, None] * rng.standard_normal((len(rec), k))
         ).ravel()
     cols["n"] = np.ones(len(rec) * k)
     return Recording.from_columns(cols)
-
 
 def case(
     k: int,
