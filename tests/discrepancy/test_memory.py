@@ -182,21 +182,22 @@ def test_group_means_by_bincount_equal_the_per_key_masks():
     np.testing.assert_allclose(means, [np.mean(z[keys == k]) for k in names], rtol=1e-12)
 
 
+def _six_tables_one_way() -> Recording:
+    """Table 1 six times per step on the one-way staircase: tall enough for the block paths."""
+    from calibration.schedules import table1
+
+    return simulate_campaign(
+        SensorTruth.adxl355_typical(seed=4), ONE_WAY, np.tile(table1(), (6, 1)), seed=54,
+        soak_min=20,
+    )
+
+
 @pytest.mark.parametrize("norm", [False, True])
 def test_design_by_row_blocks_equals_the_whole_design(monkeypatch, norm):
     """Above TALL_BYTES the whitened design is only ever built by row blocks: same fit,
     same residual, a basis of the same span (issue 10: the 1.15 GB copy at 1 M readings)."""
     dg = importlib.import_module("calibration.discrepancy.diagnose")
-
-    from calibration.schedules import table1
-
-    rec = simulate_campaign(
-        SensorTruth.adxl355_typical(seed=4),
-        ONE_WAY,
-        np.tile(table1(), (6, 1)),
-        seed=54,
-        soak_min=20,
-    )
+    rec = _six_tables_one_way()
     if norm:
         rec = Recording.from_columns(
             {c: v for c, v in rec.columns.items() if not c.startswith("ref_")}
@@ -226,15 +227,8 @@ def test_axis_block_design_is_the_dense_design_without_its_zeros(monkeypatch):
     """Above TALL_BYTES the reference base design keeps its (N × k) block only: the same
     rows, products and dense form, and the same diagnosis (issue 10: 1.15 GB at 1 M)."""
     from calibration.discrepancy.problem import AxisBlockDesign
-    from calibration.schedules import table1
 
-    rec = simulate_campaign(
-        SensorTruth.adxl355_typical(seed=4),
-        ONE_WAY,
-        np.tile(table1(), (6, 1)),
-        seed=54,
-        soak_min=20,
-    )
+    rec = _six_tables_one_way()
     dense = build_problem(rec)
     assert isinstance(dense.X0, np.ndarray)
     ref = diagnose(rec, n_null=30, seed=2).to_dict()
