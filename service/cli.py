@@ -178,11 +178,29 @@ def _add_calibration_commands(sub: Any) -> None:
         help="write every raw sample as a row instead of one averaged row per static interval",
     )
     imp.add_argument("--sensor", choices=("adxl355", "bmi160"), help="openaxes: which sensor")
-    imp.add_argument("--counts-per-g", metavar="K|KX,KY,KZ", help="imu_tk: counts per g")
-    imp.add_argument("--offset", metavar="O|OX,OY,OZ", help="imu_tk: offset in counts")
+    imp.add_argument("--counts-per-g", metavar="K|KX,KY,KZ", help="imu_tk/csv: counts per g")
+    imp.add_argument("--offset", metavar="O|OX,OY,OZ", help="imu_tk/csv: offset in counts")
     imp.add_argument("--session-list", metavar="JSON", help="ferraris: the session list")
     imp.add_argument("--window-s", type=float, metavar="S", help="static-detection window")
     imp.add_argument("--trim-s", type=float, metavar="S", help="trimmed from each interval end")
+    imp.add_argument("--block-s", type=float, metavar="S",
+                     help="one row per consecutive S-second block (mean, sd, n, temperature)")
+    imp.add_argument("--instance", type=int, metavar="N",
+                     help="ulog/dataflash: which accelerometer (0 = the first)")
+    imp.add_argument("--columns", metavar="ROLE=COL,...",
+                     help="csv: t=,ax=,ay=,az=,temp= source column names")
+    imp.add_argument("--delimiter", metavar="D", help="csv: ',' ';' or 'tab' (default: sniffed)")
+    imp.add_argument("--accel-unit", choices=("g", "mg", "m/s2", "counts"),
+                     help="csv: acceleration unit (required; counts needs --counts-per-g)")
+    imp.add_argument("--temp-unit", choices=("C", "F", "K", "counts"),
+                     help="csv: temperature unit (default C)")
+    imp.add_argument("--temp-c-per-count", type=float, metavar="K",
+                     help="csv/openaxes: degC per temperature count")
+    imp.add_argument("--temp-offset-c", type=float, metavar="C",
+                     help="csv/openaxes: degC at temperature count 0")
+    imp.add_argument("--time-unit", choices=("s", "ms", "us"), help="csv: time unit (default s)")
+    imp.add_argument("--rate-hz", type=float, metavar="HZ",
+                     help="csv without a time column: t = i / HZ")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
 
 
