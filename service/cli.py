@@ -207,8 +207,13 @@ def _add_calibration_commands(sub: Any) -> None:
 def _add_export(sub: Any) -> None:
     exp = sub.add_parser("export", help="export a model for firmware (C99 header) or other code")
     exp.add_argument("model", metavar="MODEL", help="model JSON from calibrate")
-    exp.add_argument("--format", choices=("c", "json-flat"), default="c",
-                     help="c: one C99 header (default); json-flat: plain arrays and a recipe")
+    exp.add_argument("--format", choices=("c", "json-flat", "px4", "ardupilot"), default="c",
+                     help="c: one C99 header (default); json-flat: plain arrays and a recipe; "
+                     "px4: TC_A* parameter file; ardupilot: INS_TCAL* parameter file")
+    exp.add_argument("--instance", type=int, metavar="N",
+                     help="px4: TC_A<N> (0-3, default 0); ardupilot: INS_TCAL<N> (1-3, default 1)")
+    exp.add_argument("--device-id", type=int, metavar="ID",
+                     help="px4: TC_A<N>_ID, the accelerometer's device id (CAL_ACCn_ID)")
     exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
     exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
 
