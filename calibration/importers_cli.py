@@ -38,6 +38,11 @@ from calibration.errors import CalibrationError
 from calibration.recording import Recording, write_recording
 
 
+# An interval longer than this is a log at rest while something drifts (a warm-up), not
+# a hand-placed position: its noise is estimated from sample-to-sample differences.
+DRIFT_INTERVAL_S = 60.0
+
+
 def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """Run one import; returns the process exit code (0 ok, 2 bad input)."""
     out = out or sys.stdout
@@ -113,11 +118,18 @@ def summary(
     if dur.size:
         lines.append(f"  duration s: min {dur.min():.2f}  median {np.median(dur):.2f}  "
                      f"max {dur.max():.2f}")
-        sd = np.array([raw.acc_g[s:e].std(axis=0, ddof=1) for s, e in intervals])
         n = np.array([e - s for s, e in intervals])
+        if dur.max() > DRIFT_INTERVAL_S:
+            # a warm-up drifts inside its one long interval: its sd would be the drift
+            sd = np.array([np.diff(raw.acc_g[s:e], axis=0).std(axis=0, ddof=1) / np.sqrt(2.0)
+                           for s, e in intervals])
+            how = " (successive differences / √2: the slow drift removed)"
+        else:
+            sd = np.array([raw.acc_g[s:e].std(axis=0, ddof=1) for s, e in intervals])
+            how = ""
         noise_ug = np.median(sd, axis=0) * 1e6
         floor_ug = np.median(sd / np.sqrt(n)[:, None], axis=0) * 1e6
-        lines.append("  noise per sample, median µg: " + _xyz(noise_ug))
+        lines.append(f"  noise per sample{how}, median µg: " + _xyz(noise_ug))
         lines.append("  noise of each mean (sd/√n), median µg: " + _xyz(floor_ug, 2))
         means = np.array([raw.acc_g[s:e].mean(axis=0) for s, e in intervals])
         g = np.linalg.norm(means, axis=1)

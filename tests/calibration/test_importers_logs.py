@@ -225,3 +225,14 @@ def test_the_command_line_instance_and_block_flags_reach_the_log_readers(tmp_pat
     rec = read_recording(out)
     assert len(rec) == 4
     np.testing.assert_allclose(rec.raw_g[0, 0], (acc[:50, 0].mean() + 1.0) / G, atol=1e-6)
+
+
+def test_warmup_noise_is_not_the_drift(tmp_path, capsys):
+    """A 70-s warm-up drifts 20 mg on z with 100 µg noise: the summary's noise is ~100 µg."""
+    t_us, acc, temp = warmup_samples(n=3500)
+    src = write_ulog(tmp_path / "log.ulg", t_us, acc, temp)
+    assert run_import(_args("ulog", src, tmp_path / "rec.csv")) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "noise per sample" in x)
+    assert "successive differences" in line
+    z_ug = float(line.split(" z ")[1])
+    assert 85.0 < z_ug < 115.0
