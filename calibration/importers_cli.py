@@ -37,7 +37,6 @@ from calibration import importers, static_choice
 from calibration.errors import CalibrationError
 from calibration.recording import Recording, write_recording
 
-
 # An interval longer than this is a log at rest while something drifts (a warm-up), not
 # a hand-placed position: its noise is estimated from sample-to-sample differences.
 DRIFT_INTERVAL_S = 60.0
