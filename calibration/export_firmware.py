@@ -108,6 +108,10 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
             if not ok]
     if held:
         out.append(f"{', '.join(held)} held, not fitted: that axis' offset is not a calibration")
+    held_nominal = [n for n in getattr(model, "held", {}) if n not in sfem.PARAM_NAMES[:3]]
+    if held_nominal:
+        out.append(f"not calibrated by this model (held at nominal): {', '.join(held_nominal)}; "
+                   "the firmware's ordinary accelerometer calibration stays in charge of them")
     return out
 
 
@@ -120,6 +124,18 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
     t_ref = 0.5 * (lo + hi)  # as PX4's process_sensor_caldata.py: mid-range reference
     c = bias_polynomials_m_s2(model, t_ref)
     limits = left_out(model)
+    # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
+    # is then 0, as PX4's own script leaves it (~0, readings minus their median), and the
+    # constant stays with the ordinary calibration's CAL_ACCn_xOFF.
+    absolute = model.mode != "warmup" and bool(np.all(model.identifiable[sfem.BIAS]))
+    if absolute:
+        x0_note = ("X0 is the whole offset at TREF: PX4 subtracts CAL_ACCn_xOFF as well, so "
+                   "set those to 0 (or zero X0 and keep the ordinary calibration's offsets)")
+    else:
+        c[:, 0] = 0.0
+        x0_note = ("X0 = 0: this model does not identify the constant offset (a warm-up: "
+                   "gravity's projection is unknown); it stays with CAL_ACCn_xOFF from "
+                   "PX4's ordinary accelerometer calibration")
     if device_id == 0:
         limits.append(f"TC_A{instance}_ID is 0: PX4 applies these only to the accelerometer "
                       "whose device id matches; give --device-id (CAL_ACCn_ID)")
@@ -137,8 +153,7 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
          "d = clamp(T, TMIN, TMAX) - TREF; subtracted from sensor_accel x/y/z (i = 0, 1, 2)",
          "T is the accelerometer's own temperature reading (sensor_accel.temperature)",
          "outside TMIN..TMAX the firmware holds the offset at the edge value (clamp)",
-         "X0 is the whole offset at TREF: PX4 subtracts CAL_ACCn_xOFF as well, so set "
-         "those to 0 (or zero X0 and keep the ordinary calibration's offsets)"],
+         x0_note],
         limits)
     body = "\n".join(f"1\t1\t{n}\t{_num(v, t)}\t{t}" for n, v, t in rows)
     text = head + "# Vehicle-Id Component-Id Name Value Type\n" + body + "\n"

@@ -162,6 +162,23 @@ def test_what_the_firmware_cannot_express_is_said_and_bounded(tmp_path, capsys):
     assert 0.6 * bound_mg < worst_mg <= bound_mg * 1.001
 
 
+def test_px4_warmup_model_leaves_the_constant_to_the_ordinary_calibration() -> None:
+    """A warm-up identifies the bias change only: X0 = 0, and the firmware plus the
+    CAL_ACC offset an ordinary calibration measures at TREF reproduce compensate."""
+    from calibration.export_firmware import export_px4
+
+    model = _model()
+    model.mode = "warmup"
+    fw = export_px4(model, device_id=1)
+    p = _px4_params(fw.text)
+    assert [p[f"TC_A0_X0_{i}"] for i in range(3)] == [0.0, 0.0, 0.0]
+    assert "X0 = 0: this model does not identify the constant offset" in fw.text
+    raw, temp = _readings()
+    cal_off = model.params_vector_at(p["TC_A0_TREF"])[:3] * G  # CAL_ACC0_OFF measured at TREF
+    fw_g = (_px4_correct(p, raw * G, temp) - cal_off) / G
+    np.testing.assert_allclose(fw_g, model.compensate(raw, temp), atol=2e-6)
+
+
 @pytest.mark.parametrize("kw,words", [
     ({"degree": 4}, "offset polynomial is cubic"),
     ({"source": "chamber_c"}, "fitted on chamber_c"),
