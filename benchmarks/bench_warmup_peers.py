@@ -26,7 +26,8 @@ Methods:
   to the fit span, as the firmware does.
 * ``soakcal``: the fit blocks as 1-s mean rows (``soakcal import --block-s 1``'s
   layout: mean, sd, n, mean ``sensor_c``), ``soakcal calibrate``, then ``soakcal
-  compensate`` of every 1-s row of the log; a refusal (exit 2) is reported as such.
+  compensate`` of every 1-s row of the log, its temperature clamped to the fit rows'
+  span (as the firmwares clamp); a refusal (exit 2) is reported as such.
 * ``floor``: the noise floor of a held-out 5-s mean: the RMS difference of the two
   5-s means inside each held-out block, divided by √2 (white noise; slow drift cancels).
 
@@ -250,17 +251,23 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     _, fit = blocks(log.t_s)
     fit_csv, all_csv = workdir / "fit.csv", workdir / "all.csv"
     model, comp = workdir / "model.json", workdir / "comp.csv"
-    _write_rows(fit_csv, rows_1s(log, fit))
+    fit_rows = rows_1s(log, fit)
+    _write_rows(fit_csv, fit_rows)
     all_rows = rows_1s(log, np.ones(log.t_s.size, bool))
-    _write_rows(all_csv, all_rows)
+    # Temperatures clamped to the fit rows' span, as both firmwares clamp to TMIN/TMAX:
+    # a held-out row a little beyond the fitted span is compensated at its edge.
+    t_lo, t_hi = min(r[1] for r in fit_rows), max(r[1] for r in fit_rows)
+    _write_rows(all_csv, [[r[0], min(max(r[1], t_lo), t_hi), *r[2:]] for r in all_rows])
     t0 = time.perf_counter()
     cal = subprocess.run([SOAKCAL, "calibrate", str(fit_csv), "-o", str(model), "--json"],
                          capture_output=True, text=True)
     fit_s = time.perf_counter() - t0
     if cal.returncode != 0:
         return None, f"calibrate exit {cal.returncode}: {_last_line(cal.stderr)}"
-    c = subprocess.run([SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp)],
-                       capture_output=True, text=True)
+    # --extrapolate: the rows are clamped to the fit span already; compensate's own
+    # conditioning of the temperature may still step a hair past the model's range.
+    c = subprocess.run([SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp),
+                        "--extrapolate"], capture_output=True, text=True)
     if c.returncode != 0:
         return None, f"compensate exit {c.returncode}: {_last_line(c.stderr)}"
     with comp.open() as f:
