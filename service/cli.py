@@ -166,7 +166,9 @@ def _add_calibration_commands(sub: Any) -> None:
     diag.set_defaults(handler=_delegate("calibration.discrepancy.cli", "run_diagnose", "diagnose"))
 
     imp = sub.add_parser("import", help="convert a raw recording to recording format v1")
-    imp.add_argument("--format", required=True, metavar="FMT", help="raw format name")
+    imp.add_argument("--format", required=True, metavar="FMT",
+                     help="openaxes, imu_tk, ferraris, mpu6050, ulog (PX4), dataflash "
+                     "(ArduPilot) or csv")
     imp.add_argument("raw", metavar="RAW", help="raw input file")
     imp.add_argument("-o", "--output", required=True, metavar="REC", help="recording to write")
     imp.add_argument("--min-static-s", type=float, metavar="S", help="shortest static segment")
