@@ -26,7 +26,7 @@ import math
 import textwrap
 from typing import Any
 
-from calibration import sfem
+from calibration import export_firmware, sfem
 from calibration.errors import ModelFileError
 from calibration.temperature_conditioning import (
     CompensationConditioning,
@@ -34,7 +34,7 @@ from calibration.temperature_conditioning import (
 )
 from calibration.thermal import ThermalModel
 
-FORMATS = ("c", "json-flat")
+FORMATS = ("c", "json-flat", "px4", "ardupilot")
 FLAT_FORMAT = "soakcal-flat"
 FLAT_VERSION = 1
 # Measured bound of the float twin against the Python (double) compensation over
@@ -369,7 +369,23 @@ def export_text(
     if fmt == "json-flat":
         return json.dumps(export_flat_dict(model, conditioning), indent=2,
                           allow_nan=False) + "\n"
+    if fmt in ("px4", "ardupilot"):
+        return firmware_export(model, fmt, source_name=source_name).text
     raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+
+
+def firmware_export(
+    model: ThermalModel, fmt: str, *, source_name: str = "model", instance: int | None = None,
+    device_id: int = 0,
+) -> export_firmware.FirmwareExport:
+    """The autopilot parameter file (``px4`` or ``ardupilot``) and what it cannot express."""
+    if fmt == "px4":
+        return export_firmware.export_px4(model, instance=0 if instance is None else instance,
+                                          device_id=device_id, source_name=source_name)
+    if fmt == "ardupilot":
+        return export_firmware.export_ardupilot(
+            model, instance=1 if instance is None else instance, source_name=source_name)
+    raise ValueError(f"not a firmware format: {fmt!r}")
 
 
 _ASCII = {"°": "deg", "σ": "sigma", "µ": "u", "−": "-", "±": "+/-", "·": "*", "→": "->"}

@@ -1,4 +1,8 @@
-"""``soakcal export MODEL.json --format c|json-flat -o OUT`` (contract: ``docs/model-file.md``).
+"""``soakcal export MODEL.json --format c|json-flat|px4|ardupilot -o OUT``.
+
+Contract: ``docs/model-file.md`` (c, json-flat) and ``docs/firmware-export.md`` (px4,
+ardupilot: ``--instance N``, ``--device-id ID``); what a firmware cannot express is
+written in the file's header and, one line each, on stderr.
 
 Exit 0 on success; exit 2 with one line on stderr for a bad model file, an
 unknown format or an unwritable output, in which case nothing is written.
@@ -12,7 +16,7 @@ import sys
 from pathlib import Path
 
 from calibration.errors import CalibrationError
-from calibration.export import FORMATS, export_text
+from calibration.export import FORMATS, export_text, firmware_export
 from calibration.model_file import load_model_file
 from calibration.recording import atomic_write_text
 
@@ -30,13 +34,23 @@ def run_export(args: argparse.Namespace) -> int:
         return _fail(f"{out_path}: the output would overwrite the model file; choose another -o")
     try:
         model, conditioning = load_model_file(model_path)
-        text = export_text(model, fmt, source_name=model_path.name, conditioning=conditioning)
+        limitations: list[str] = []
+        if fmt in ("px4", "ardupilot"):
+            fw = firmware_export(model, fmt, source_name=model_path.name,
+                                 instance=getattr(args, "instance", None),
+                                 device_id=int(getattr(args, "device_id", None) or 0))
+            text, limitations = fw.text, fw.limitations
+        else:
+            text = export_text(model, fmt, source_name=model_path.name,
+                               conditioning=conditioning)
     except CalibrationError as exc:  # ModelFileError included
         return _fail(str(exc))
     try:
         atomic_write_text(out_path, text)
     except OSError as exc:
         return _fail(f"{out_path}: cannot write ({exc.strerror or exc})")
+    for line in limitations:
+        print(f"warning: {fmt} cannot express: {line}", file=sys.stderr)
     print(f"exported {model_path} as {fmt} -> {out_path}")
     return EXIT_OK
 

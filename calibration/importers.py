@@ -11,9 +11,12 @@ into static intervals and averaged into one v1 row per interval:
 * ``mpu6050``  -- tomisuarez2/ImuCalibration: 4-line ``key,value`` preamble, int16
   counts at ±2 g (16384 LSB/g).
 
-None of these files carries a temperature. The rows are written with an empty
-``chamber_c`` column: the recording is one step at an unknown temperature. We
-never invent a temperature.
+Logs that carry the sensor's own temperature (:mod:`calibration.importers_logs`:
+``ulog`` PX4, ``dataflash`` ArduPilot; :mod:`calibration.importers_table`: ``csv``; and
+``openaxes`` when its ``TEMP`` output was logged) keep it as ``sensor_c`` (recording
+format: the sensor's own temperature reading). A source without one is written with an
+empty ``chamber_c`` column: one step at an unknown temperature. We never invent a
+temperature, and every reader says in its notes what it could not read.
 
 Static-interval rule (:func:`detect_static_intervals`, after Tedaldi et al. ICRA 2014
 and imu_tk): for every sample, the variance of each axis over a centred window of
@@ -32,7 +35,7 @@ import io
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +45,16 @@ from calibration.placement import HAND_HELD_TOL_DEG, REF_TOL_COLUMN
 from calibration.recording import Recording
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # m/s² per g (CGPM 1901), converts m/s² files to g
-FORMATS: tuple[str, ...] = ("openaxes", "imu_tk", "ferraris", "mpu6050")
+FORMATS: tuple[str, ...] = (
+    "openaxes", "imu_tk", "ferraris", "mpu6050", "ulog", "dataflash", "csv")
+# Formats that are time series of one (or a few) orientations with a temperature (a
+# warm-up): their default output is every sample, not static-interval means.
+LOG_FORMATS: tuple[str, ...] = ("ulog", "dataflash", "csv")
+# A die temperature outside this span is a unit or scale mistake, not a reading
+# (MEMS parts are specified over -40..+125 °C; margin for chamber overshoot).
+PLAUSIBLE_DIE_C: tuple[float, float] = (-60.0, 150.0)
+# A log at rest reads |a| ≈ 1 g; a median outside this span means a wrong unit.
+PLAUSIBLE_MEDIAN_G: tuple[float, float] = (0.5, 2.0)
 
 # imu_tk defaults: the Xsens MTi factory values printed by imu_tk_matlab's calibrate.m
 # (README): 415 counts per m/s² (the x/z entry of diag(415, 413, 415); one nominal
@@ -80,6 +92,10 @@ DEFAULT_DETECTOR: dict[str, DetectorSettings] = {
     "mpu6050": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=1.5, trim_s=0.5),
     # Ferraris: the session list gives the sections; the detector is not used by default.
     "ferraris": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=2.0, trim_s=0.5),
+    # Flight-controller and table logs: a board on a bench, long still stretches.
+    "ulog": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=5.0, trim_s=0.5),
+    "dataflash": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=5.0, trim_s=0.5),
+    "csv": DetectorSettings(window_s=1.0, threshold=6.0, min_duration_s=2.0, trim_s=0.5),
 }
 
 
@@ -95,6 +111,69 @@ class RawImport:
     sections: list[tuple[int, int]] | None = None  # given static sections [start, end)
     section_refs: list[tuple[float, float, float]] | None = None  # ref per section, g
     notes: list[str] = field(default_factory=list)
+    temp_c: np.ndarray | None = None  # (N,) the sensor's own temperature, °C, if the source has it
+
+    @property
+    def has_temperature(self) -> bool:
+        return self.temp_c is not None and bool(np.any(np.isfinite(self.temp_c)))
+
+
+def temperature_columns(raw: RawImport, picks: Sequence[np.ndarray]) -> dict[str, list[float]]:
+    """``sensor_c`` (mean of each pick's finite temperatures) when the source has a
+    temperature, else an empty ``chamber_c``: one step at an unknown temperature."""
+    if not raw.has_temperature:
+        return {"chamber_c": [math.nan] * len(picks)}
+    assert raw.temp_c is not None
+    out = []
+    for idx in picks:
+        seg = raw.temp_c[idx]
+        seg = seg[np.isfinite(seg)]
+        out.append(float(seg.mean()) if seg.size else math.nan)
+    return {"sensor_c": out}
+
+
+def drop_samples_without_temperature(raw: RawImport) -> RawImport:
+    """A recording's temperature column is filled in every row or in none: samples whose
+    temperature is missing (an empty cell, a NaN) are dropped from a source that has one,
+    and the notes say how many. Nothing is interpolated."""
+    if not raw.has_temperature:
+        return raw
+    assert raw.temp_c is not None
+    keep = np.isfinite(raw.temp_c)
+    if keep.all():
+        return raw
+    if raw.sections is not None:
+        raise RecordingError(raw.path, None, None, "missing temperatures inside given sections")
+    dropped = int((~keep).sum())
+    return replace(raw, t_s=raw.t_s[keep], acc_g=raw.acc_g[keep], temp_c=raw.temp_c[keep],
+                   notes=[*raw.notes, f"{dropped} of {keep.size} samples have no temperature: "
+                          "dropped"])
+
+
+def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str) -> None:
+    """Refuse a unit mistake a lab engineer would catch by eye: the median |a| of a log
+    is about 1 g, a die temperature is within :data:`PLAUSIBLE_DIE_C`."""
+    g = float(np.median(np.linalg.norm(raw.acc_g, axis=1)))
+    lo, hi = PLAUSIBLE_MEDIAN_G
+    if not lo <= g <= hi:
+        hint = ""
+        for name, factor in (("m/s²", STANDARD_GRAVITY_M_S2), ("mg", 1000.0),
+                             ("g (the file is in g)", 1.0 / STANDARD_GRAVITY_M_S2)):
+            if lo <= g / factor <= hi:
+                hint = f"; it looks like {name}"
+                break
+        raise RecordingError(raw.path, None, None,
+                             f"median |a| is {g:.4g} g, not about 1 g{hint}: {accel_fix}")
+    if raw.has_temperature:
+        assert raw.temp_c is not None
+        finite = raw.temp_c[np.isfinite(raw.temp_c)]
+        t_lo, t_hi = float(finite.min()), float(finite.max())
+        if t_lo < PLAUSIBLE_DIE_C[0] or t_hi > PLAUSIBLE_DIE_C[1]:
+            hint = "; it looks like kelvin" if t_lo >= 200.0 and t_hi <= 420.0 else ""
+            raise RecordingError(
+                raw.path, None, None,
+                f"temperature spans {t_lo:.4g} .. {t_hi:.4g} °C, outside a die's "
+                f"{PLAUSIBLE_DIE_C[0]:g} .. {PLAUSIBLE_DIE_C[1]:g} °C{hint}: {temp_fix}")
 
 
 # --- static-interval detection ---------------------------------------------
@@ -183,16 +262,17 @@ def intervals_to_recording(
 ) -> Recording:
     """One v1 row per interval: t_s = middle, mean and sample sd in g, n, position index.
 
-    ``chamber_c`` is present but empty (no temperature in any of these sources).
+    The temperature is the interval's mean ``sensor_c`` when the source has one, else
+    an empty ``chamber_c`` (:func:`temperature_columns`).
     """
     if not intervals:
         raise RecordingError(raw.path, None, None, "no static interval found")
     cols: dict[str, list[float]] = {k: [] for k in (
-        "t_s", "chamber_c", "position", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")}
+        "t_s", "position", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")}
+    cols.update(temperature_columns(raw, [np.arange(s, e) for s, e in intervals]))
     for k, (s, e) in enumerate(intervals):
         seg = raw.acc_g[s:e]
         cols["t_s"].append(0.5 * (raw.t_s[s] + raw.t_s[e - 1]))
-        cols["chamber_c"].append(math.nan)
         cols["position"].append(float(k))
         mean = seg.mean(axis=0)
         sd = seg.std(axis=0, ddof=1) if seg.shape[0] > 1 else np.full(3, math.nan)
@@ -212,13 +292,42 @@ def intervals_to_recording(
 
 
 def samples_to_recording(raw: RawImport, *, path: str = "<memory>") -> Recording:
-    """Raw time series: one v1 row per sample (``n`` = 1), empty ``chamber_c``."""
+    """Raw time series: one v1 row per sample (``n`` = 1), with the sample's ``sensor_c``
+    when the source has a temperature, else an empty ``chamber_c``."""
     n = raw.t_s.size
+    temp = (
+        {"sensor_c": raw.temp_c} if raw.has_temperature else {"chamber_c": np.full(n, math.nan)})
     cols = {
-        "t_s": raw.t_s, "chamber_c": np.full(n, math.nan),
+        "t_s": raw.t_s, **temp,
         "ax": raw.acc_g[:, 0], "ay": raw.acc_g[:, 1], "az": raw.acc_g[:, 2],
         "n": np.ones(n),
     }
+    rec = Recording.from_columns(cols, path=path)
+    rec.notes.extend(raw.notes)
+    return rec
+
+
+def blocks_to_recording(raw: RawImport, block_s: float, *, path: str = "<memory>") -> Recording:
+    """Consecutive ``block_s``-second blocks of a time series: one row per block with the
+    block's mean, sample sd, ``n`` and mean temperature (a smaller file than every
+    sample, for a log that is one orientation throughout; the blocks are not checked
+    for stillness)."""
+    if not (math.isfinite(block_s) and block_s > 0):
+        raise RecordingError(raw.path, None, None, f"block length must be > 0 s, got {block_s}")
+    k = np.floor((raw.t_s - raw.t_s[0]) / block_s).astype(np.int64)
+    starts = np.flatnonzero(np.r_[True, np.diff(k) != 0])
+    bounds = list(zip(starts, np.r_[starts[1:], k.size], strict=True))
+    cols: dict[str, list[float]] = {c: [] for c in (
+        "t_s", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")}
+    cols.update(temperature_columns(raw, [np.arange(s, e) for s, e in bounds]))
+    for s, e in bounds:
+        seg = raw.acc_g[s:e]
+        cols["t_s"].append(0.5 * (raw.t_s[s] + raw.t_s[e - 1]))
+        sd = seg.std(axis=0, ddof=1) if seg.shape[0] > 1 else np.full(3, math.nan)
+        for c, m, d in zip(("x", "y", "z"), seg.mean(axis=0), sd, strict=True):
+            cols["a" + c].append(float(m))
+            cols["sd_" + c].append(float(d))
+        cols["n"].append(float(e - s))
     rec = Recording.from_columns(cols, path=path)
     rec.notes.extend(raw.notes)
     return rec
@@ -236,23 +345,49 @@ def find_intervals(raw: RawImport, settings: DetectorSettings) -> list[tuple[int
 
 
 # --- readers -----------------------------------------------------------------
-def read_openaxes(path: str | Path, *, sensor: str = "adxl355") -> RawImport:
+OPENAXES_TEMP_COLUMN = "TEMP"
+
+
+def read_openaxes(
+    path: str | Path,
+    *,
+    sensor: str = "adxl355",
+    temp_c_per_count: float | None = None,
+    temp_offset_c: float | None = None,
+) -> RawImport:
     """OpenAXES semicolon CSV: TIME (µs, host clock), ACCEL_<SENSOR>_0..2 in m/s² → g.
 
-    The 40 s initial rest is the logger's documented procedure.
+    The 40 s initial rest is the logger's documented procedure. The logger's ``TEMP``
+    output (``--mode …,TEMP``) is a raw int16 whose unit the OpenAXES tools do not
+    document (scale 1 in ``imu_control``): it becomes ``sensor_c`` = offset + count ×
+    ``temp_c_per_count`` only when both are given, otherwise the notes say why the
+    temperature was left empty.
     """
     p = str(path)
     key = sensor.strip().upper()
     if key not in ("ADXL355", "BMI160"):
         raise RecordingError(p, None, None, f"unknown sensor {sensor!r}: adxl355 or bmi160")
-    cols = ("TIME", f"ACCEL_{key}_0", f"ACCEL_{key}_1", f"ACCEL_{key}_2")
+    header = [h.strip() for h in (_read_text(p).splitlines() or [""])[0].split(";")]
+    has_temp = OPENAXES_TEMP_COLUMN in header
+    cols = ("TIME", f"ACCEL_{key}_0", f"ACCEL_{key}_1", f"ACCEL_{key}_2") + (
+        (OPENAXES_TEMP_COLUMN,) if has_temp else ())
     data = _read_delimited(p, ";", cols)
     time_us = data[:, 0]
     _check_monotonic(p, time_us, "TIME", first_line=2)
     t = (time_us - time_us[0]) * 1e-6
     acc = data[:, 1:4] / STANDARD_GRAVITY_M_S2
-    return RawImport(p, "openaxes", t, acc, init_rest_s=40.0,
-                     notes=[f"OpenAXES {key}: m/s² / {STANDARD_GRAVITY_M_S2} → g"])
+    notes = [f"OpenAXES {key}: m/s² / {STANDARD_GRAVITY_M_S2} → g"]
+    temp_c = None
+    if not has_temp:
+        notes.append("no TEMP column (the logger's TEMP output was not enabled); "
+                     "temperature left empty")
+    elif temp_c_per_count is None or temp_offset_c is None:
+        notes.append("TEMP column present but its unit is undocumented (raw int16); "
+                     "temperature left empty: give --temp-c-per-count and --temp-offset-c")
+    else:
+        temp_c = temp_offset_c + data[:, 4] * temp_c_per_count
+        notes.append(f"TEMP → sensor_c = {temp_offset_c:g} + count × {temp_c_per_count:g} °C")
+    return RawImport(p, "openaxes", t, acc, init_rest_s=40.0, notes=notes, temp_c=temp_c)
 
 
 def read_imu_tk(
@@ -407,8 +542,13 @@ def _read_ferraris_annotated(p: str, text: str, counts_per_g: float, fs: float) 
 
 def read_source(fmt: str, path: str | Path, **options: object) -> RawImport:
     """Dispatch on ``fmt`` (one of :data:`FORMATS`); options go to the reader."""
+    # Imported here: those modules build on this one (RawImport, the parsing helpers).
+    from calibration import importers_logs, importers_table
+
     readers = {"openaxes": read_openaxes, "imu_tk": read_imu_tk,
-               "ferraris": read_ferraris, "mpu6050": read_mpu6050}
+               "ferraris": read_ferraris, "mpu6050": read_mpu6050,
+               "ulog": importers_logs.read_ulog, "dataflash": importers_logs.read_dataflash,
+               "csv": importers_table.read_table}
     if fmt not in readers:
         raise RecordingError(str(path), None, None,
                              f"unknown import format {fmt!r}; expected one of {', '.join(FORMATS)}")

@@ -1,7 +1,14 @@
-"""``soakcal import``: a lab's raw static recording → recording format v1.
+"""``soakcal import``: another tool's log → recording format v1.
 
-``soakcal import --format openaxes|imu_tk|ferraris|mpu6050 RAW -o REC.csv
-[--min-static-s S] [--threshold X] [--raw]``
+``soakcal import --format openaxes|imu_tk|ferraris|mpu6050|ulog|dataflash|csv RAW -o REC.csv
+[--min-static-s S] [--threshold X] [--raw] [--block-s S]``
+
+Static multi-position formats (openaxes, imu_tk, ferraris, mpu6050) are written as one
+row per static interval by default; the logs of a board warming at one orientation
+(ulog, dataflash, csv: :data:`calibration.importers.LOG_FORMATS`) as every sample.
+``--raw`` writes every sample, ``--block-s S`` one row per consecutive S-second block.
+The sensor's temperature is kept as ``sensor_c`` wherever the source has one; the
+summary's notes say what could not be read.
 
 The argparse wiring lives in ``service/cli.py``; :func:`run_import` takes its
 Namespace. Attributes: ``format``, ``raw_path``, ``output``, ``min_static_s``,
@@ -30,6 +37,10 @@ from calibration import importers, static_choice
 from calibration.errors import CalibrationError
 from calibration.recording import Recording, write_recording
 
+# An interval longer than this is a log at rest while something drifts (a warm-up), not
+# a hand-placed position: its noise is estimated from sample-to-sample differences.
+DRIFT_INTERVAL_S = 60.0
+
 
 def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """Run one import; returns the process exit code (0 ok, 2 bad input)."""
@@ -41,9 +52,13 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
                 f"unknown --format {fmt!r}; expected one of {', '.join(importers.FORMATS)}")
         settings = _settings(args, fmt)
         src, raw_rows = _source_and_mode(args)
-        raw = importers.read_source(fmt, src, **_reader_options(args, fmt))
+        block_s = getattr(args, "block_s", None)
+        if fmt in importers.LOG_FORMATS and block_s is None:
+            raw_rows = True
+        raw = importers.drop_samples_without_temperature(
+            importers.read_source(fmt, src, **_reader_options(args, fmt)))
         choice = None
-        if raw_rows:  # every sample is written: the intervals only feed the summary
+        if raw_rows or block_s is not None:  # the intervals only feed the summary
             intervals = importers.find_intervals(raw, settings)
         else:
             # Threshold and trim by leave-one-interval-out error unless the flags fix them.
@@ -51,7 +66,9 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
                               if getattr(args, a, None) is not None)
             choice = static_choice.choose_detector(raw, settings, fixed=fixed)
             intervals = choice.intervals
-        if raw_rows:
+        if block_s is not None:
+            rec = importers.blocks_to_recording(raw, float(block_s), path=str(args.output))
+        elif raw_rows:
             rec = importers.samples_to_recording(raw, path=str(args.output))
         else:
             rec = importers.intervals_to_recording(raw, intervals, path=str(args.output))
@@ -59,7 +76,9 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except (CalibrationError, OSError, ValueError) as exc:
         print(f"soakcal import: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    print(summary(raw, intervals, rec, str(args.output), raw_rows=raw_rows), file=out)
+    kind = ("rows (one per block)" if block_s is not None
+            else "raw sample rows" if raw_rows else "rows (one per static interval)")
+    print(summary(raw, intervals, rec, str(args.output), kind=kind), file=out)
     if choice is not None:
         print(choice.summary(), file=out)
     return 0
@@ -87,9 +106,10 @@ def summary(
     rec: Recording,
     output: str,
     *,
-    raw_rows: bool = False,
+    kind: str = "rows (one per static interval)",
 ) -> str:
-    """Human summary: intervals, durations, per-axis noise (µg), |g| range of the means."""
+    """Human summary: intervals, durations, per-axis noise (µg), |g| range of the means,
+    the temperature kept (or why none), what was written."""
     lines = [f"{raw.path} ({raw.fmt}): {raw.t_s.size} samples over {raw.t_s[-1]:.1f} s"]
     lines += [f"  note: {n}" for n in raw.notes]
     dur = np.array([raw.t_s[e - 1] - raw.t_s[s] for s, e in intervals])
@@ -97,19 +117,32 @@ def summary(
     if dur.size:
         lines.append(f"  duration s: min {dur.min():.2f}  median {np.median(dur):.2f}  "
                      f"max {dur.max():.2f}")
-        sd = np.array([raw.acc_g[s:e].std(axis=0, ddof=1) for s, e in intervals])
         n = np.array([e - s for s, e in intervals])
+        if dur.max() > DRIFT_INTERVAL_S:
+            # a warm-up drifts inside its one long interval: its sd would be the drift
+            sd = np.array([np.diff(raw.acc_g[s:e], axis=0).std(axis=0, ddof=1) / np.sqrt(2.0)
+                           for s, e in intervals])
+            how = " (successive differences / √2: the slow drift removed)"
+        else:
+            sd = np.array([raw.acc_g[s:e].std(axis=0, ddof=1) for s, e in intervals])
+            how = ""
         noise_ug = np.median(sd, axis=0) * 1e6
         floor_ug = np.median(sd / np.sqrt(n)[:, None], axis=0) * 1e6
-        lines.append("  noise per sample, median µg: " + _xyz(noise_ug))
+        lines.append(f"  noise per sample{how}, median µg: " + _xyz(noise_ug))
         lines.append("  noise of each mean (sd/√n), median µg: " + _xyz(floor_ug, 2))
         means = np.array([raw.acc_g[s:e].mean(axis=0) for s, e in intervals])
         g = np.linalg.norm(means, axis=1)
         lines.append(f"  |g| of interval means: {g.min():.6f} .. {g.max():.6f} g "
                      "(nominal scale, uncalibrated)")
-    kind = "raw sample rows" if raw_rows else "rows (one per static interval)"
-    lines.append(f"wrote {len(rec)} {kind} to {output}; temperature columns empty "
-                 "(source has none: one step at unknown temperature)")
+    if raw.has_temperature:
+        assert raw.temp_c is not None
+        tc = raw.temp_c[np.isfinite(raw.temp_c)]
+        lines.append(f"temperature (sensor_c): {tc.min():.2f} .. {tc.max():.2f} °C, "
+                     f"{tc.size} of {raw.temp_c.size} samples")
+        lines.append(f"wrote {len(rec)} {kind} to {output}")
+    else:
+        lines.append(f"wrote {len(rec)} {kind} to {output}; temperature columns empty "
+                     "(no temperature read: one step at unknown temperature)")
     return "\n".join(lines)
 
 
@@ -140,7 +173,41 @@ def _reader_options(args: argparse.Namespace, fmt: str) -> dict[str, object]:
             opts["offset_counts"] = _numbers(args.offset, "--offset")
     if fmt == "ferraris" and getattr(args, "session_list", None):
         opts["session_list"] = str(args.session_list)
+    if fmt == "openaxes":
+        for attr in ("temp_c_per_count", "temp_offset_c"):
+            if getattr(args, attr, None) is not None:
+                opts[attr] = float(getattr(args, attr))
+    if fmt in ("ulog", "dataflash") and getattr(args, "instance", None) is not None:
+        opts["instance"] = int(args.instance)
+    if fmt == "csv":
+        opts.update(_table_options(args))
     return opts
+
+
+def _table_options(args: argparse.Namespace) -> dict[str, object]:
+    """``--columns``, ``--delimiter`` and the units of ``--format csv``."""
+    from calibration.importers_table import TableUnits
+
+    def opt(name: str, default: object = None) -> object:
+        v = getattr(args, name, None)
+        return default if v is None else v
+
+    counts = opt("counts_per_g")
+    offset = opt("offset")
+    units = TableUnits(
+        accel=opt("accel_unit"),  # type: ignore[arg-type]
+        counts_per_g=None if counts is None else _numbers(counts, "--counts-per-g"),
+        offset_counts=0.0 if offset is None else _numbers(offset, "--offset"),
+        temp=str(opt("temp_unit", "C")),
+        temp_c_per_count=opt("temp_c_per_count"),  # type: ignore[arg-type]
+        temp_offset_c=opt("temp_offset_c"),  # type: ignore[arg-type]
+        time=str(opt("time_unit", "s")),
+        rate_hz=opt("rate_hz"),  # type: ignore[arg-type]
+    )
+    delim = opt("delimiter")
+    if delim == "tab":
+        delim = "\t"
+    return {"columns": opt("columns"), "units": units, "delimiter": delim}
 
 
 def _numbers(value: object, flag: str) -> float | tuple[float, ...]:

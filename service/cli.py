@@ -166,7 +166,9 @@ def _add_calibration_commands(sub: Any) -> None:
     diag.set_defaults(handler=_delegate("calibration.discrepancy.cli", "run_diagnose", "diagnose"))
 
     imp = sub.add_parser("import", help="convert a raw recording to recording format v1")
-    imp.add_argument("--format", required=True, metavar="FMT", help="raw format name")
+    imp.add_argument("--format", required=True, metavar="FMT",
+                     help="openaxes, imu_tk, ferraris, mpu6050, ulog (PX4), dataflash "
+                     "(ArduPilot) or csv")
     imp.add_argument("raw", metavar="RAW", help="raw input file")
     imp.add_argument("-o", "--output", required=True, metavar="REC", help="recording to write")
     imp.add_argument("--min-static-s", type=float, metavar="S", help="shortest static segment")
@@ -178,19 +180,42 @@ def _add_calibration_commands(sub: Any) -> None:
         help="write every raw sample as a row instead of one averaged row per static interval",
     )
     imp.add_argument("--sensor", choices=("adxl355", "bmi160"), help="openaxes: which sensor")
-    imp.add_argument("--counts-per-g", metavar="K|KX,KY,KZ", help="imu_tk: counts per g")
-    imp.add_argument("--offset", metavar="O|OX,OY,OZ", help="imu_tk: offset in counts")
+    imp.add_argument("--counts-per-g", metavar="K|KX,KY,KZ", help="imu_tk/csv: counts per g")
+    imp.add_argument("--offset", metavar="O|OX,OY,OZ", help="imu_tk/csv: offset in counts")
     imp.add_argument("--session-list", metavar="JSON", help="ferraris: the session list")
     imp.add_argument("--window-s", type=float, metavar="S", help="static-detection window")
     imp.add_argument("--trim-s", type=float, metavar="S", help="trimmed from each interval end")
+    imp.add_argument("--block-s", type=float, metavar="S",
+                     help="one row per consecutive S-second block (mean, sd, n, temperature)")
+    imp.add_argument("--instance", type=int, metavar="N",
+                     help="ulog/dataflash: which accelerometer (0 = the first)")
+    imp.add_argument("--columns", metavar="ROLE=COL,...",
+                     help="csv: t=,ax=,ay=,az=,temp= source column names")
+    imp.add_argument("--delimiter", metavar="D", help="csv: ',' ';' or 'tab' (default: sniffed)")
+    imp.add_argument("--accel-unit", choices=("g", "mg", "m/s2", "counts"),
+                     help="csv: acceleration unit (required; counts needs --counts-per-g)")
+    imp.add_argument("--temp-unit", choices=("C", "F", "K", "counts"),
+                     help="csv: temperature unit (default C)")
+    imp.add_argument("--temp-c-per-count", type=float, metavar="K",
+                     help="csv/openaxes: degC per temperature count")
+    imp.add_argument("--temp-offset-c", type=float, metavar="C",
+                     help="csv/openaxes: degC at temperature count 0")
+    imp.add_argument("--time-unit", choices=("s", "ms", "us"), help="csv: time unit (default s)")
+    imp.add_argument("--rate-hz", type=float, metavar="HZ",
+                     help="csv without a time column: t = i / HZ")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
 
 
 def _add_export(sub: Any) -> None:
     exp = sub.add_parser("export", help="export a model for firmware (C99 header) or other code")
     exp.add_argument("model", metavar="MODEL", help="model JSON from calibrate")
-    exp.add_argument("--format", choices=("c", "json-flat"), default="c",
-                     help="c: one C99 header (default); json-flat: plain arrays and a recipe")
+    exp.add_argument("--format", choices=("c", "json-flat", "px4", "ardupilot"), default="c",
+                     help="c: one C99 header (default); json-flat: plain arrays and a recipe; "
+                     "px4: TC_A* parameter file; ardupilot: INS_TCAL* parameter file")
+    exp.add_argument("--instance", type=int, metavar="N",
+                     help="px4: TC_A<N> (0-3, default 0); ardupilot: INS_TCAL<N> (1-3, default 1)")
+    exp.add_argument("--device-id", type=int, metavar="ID",
+                     help="px4: TC_A<N>_ID, the accelerometer's device id (CAL_ACCn_ID)")
     exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
     exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
 

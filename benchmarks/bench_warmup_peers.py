@@ -1,0 +1,372 @@
+"""One-orientation warm-ups: PX4's and ArduPilot's thermal calibration beside soakcal's.
+
+Usage::
+
+    .venv/bin/python -m benchmarks.bench_warmup_peers [--out DIR] [--realdata DIR]
+
+Each log is a board at rest at one orientation while its temperature changes: raw
+samples (t, acceleration in g, the sensor's temperature reading). Its 10-s blocks
+are alternately *fit* (even) and *held out* (odd). Each method fits on the fit blocks'
+samples only and compensates every sample; the figure per axis is the RMS, over the
+held-out blocks' 5-s means, of the compensated mean minus the mean of the compensated
+fit-block samples (the gravity projection of one orientation is an unknown constant,
+so only the change with temperature counts). In mg.
+
+Methods:
+
+* ``none``: no compensation (the constant only).
+* ``px4``: the method of PX4's ``Tools/process_sensor_caldata.py``, re-implemented here
+  from its public source: per axis, ``numpy.polyfit`` of order 3 of (reading − median)
+  against (T − TREF) on the raw samples, TREF the middle of the temperature span; the
+  offset is subtracted with T clamped to the fit span (``calc_thermal_offsets_3D``).
+* ``ardupilot``: ArduPilot's ``tempcal_IMU.py`` as shipped in the
+  ``ardupilot-methodic-configurator`` package (used when it is installed: its
+  ``IMUData`` 2-s moving-average filter and its order-3 fit vs T − 35 °C); otherwise
+  the same steps re-implemented (the table says which). Offset applied with T clamped
+  to the fit span, as the firmware does.
+* ``soakcal``: the fit blocks as 1-s mean rows (``soakcal import --block-s 1``'s
+  layout: mean, sd, n, mean ``sensor_c``), ``soakcal calibrate``, then ``soakcal
+  compensate`` of every 1-s row of the log, its temperature clamped to the fit rows'
+  span (as the firmwares clamp); a refusal (exit 2) is reported as such.
+* ``floor``: the noise floor of a held-out 5-s mean: the RMS difference of the two
+  5-s means inside each held-out block, divided by √2 (white noise; slow drift cancels).
+
+Logs: the twin (``simulators``: an ADXL355-class sensor drawn at random, z up, the die
+warming from 25 °C toward 45 °C with a 10-min time constant, then after 24 min cooling
+toward 30 °C; 40 min at 50 Hz) as is, with a
+temperature-rate sensitivity, with the temperature channel lagging the die by 60 s,
+and both; plus the BMI270 real logs (``bmi270-ganesh``: one orientation per file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from calibration.discrepancy.effects.temperature_rate import rate_offset_g
+from calibration.thermal_plant import lag_series
+from simulators.truth import SensorTruth
+
+BLOCK_S = 10.0
+MEAN_S = 5.0
+ROW_S = 1.0
+SOAKCAL = str(Path(sys.executable).with_name("soakcal"))
+
+
+@dataclass
+class WarmupLog:
+    name: str
+    t_s: np.ndarray  # (N,)
+    acc_g: np.ndarray  # (N,3)
+    temp_c: np.ndarray  # (N,) the temperature channel the methods see
+
+
+# --- logs --------------------------------------------------------------------------
+def twin_log(name: str, *, rate_ug_per_c_per_min: float = 0.0, channel_lag_s: float = 0.0,
+             seed: int = 7, minutes: float = 40.0, rate_hz: float = 50.0) -> WarmupLog:
+    """The twin's sensor at rest (z up): its die warms from 25 °C toward 45 °C (τ 10 min)
+    for the first 60 % of the log, then cools toward 30 °C (a heater switched off).
+
+    Warming and cooling both: in a monotonic warm-up a rate effect or a lagging channel
+    is itself a function of the temperature and any polynomial in T absorbs it."""
+    rng = np.random.default_rng(seed)
+    truth = SensorTruth.adxl355_typical(seed=seed, odr_hz=rate_hz)
+    n = int(minutes * 60 * rate_hz)
+    t = np.arange(n) / rate_hz
+    t_off = 0.6 * t[-1]
+    hot = 25.0 + 20.0 * (1.0 - np.exp(-t / 600.0))
+    at_off = 25.0 + 20.0 * (1.0 - np.exp(-t_off / 600.0))
+    die = np.where(t <= t_off, hot, 30.0 + (at_off - 30.0) * np.exp(-(t - t_off) / 600.0))
+    ref = np.tile([0.0, 0.0, 1.0], (n, 1))
+    acc = truth.ideal_raw_g(ref, die)
+    if rate_ug_per_c_per_min:
+        k = np.array([1.0, -0.6, 0.8]) * rate_ug_per_c_per_min * 1e-6 * 60.0  # per °C/s
+        acc = acc + rate_offset_g(np.gradient(die, t), k)
+    acc = acc + rng.normal(0.0, truth.sample_sd_g(), acc.shape)
+    channel = lag_series(die, 1.0 / rate_hz, channel_lag_s) if channel_lag_s else die
+    temp = channel + truth.temp_offset_c + rng.normal(0.0, truth.temp_noise_c, n)
+    return WarmupLog(name, t, acc, temp)
+
+
+def bmi270_logs(folder: Path) -> list[WarmupLog]:
+    """The BMI270 files: ``temp_C, ax, ay, az, gx, gy, gz``, accel printed as g/4, ~50 Hz
+    with no time column (the firmware's 20 ms loop); lines that do not parse are skipped."""
+    out = []
+    for path in sorted(folder.glob("BMI_270_*.csv")):
+        rows = []
+        for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+            cells = line.split(",")
+            if len(cells) != 7:
+                continue
+            try:
+                vals = [float(c) for c in cells[:4]]
+            except ValueError:
+                continue
+            if vals[0] <= 0.0:  # the hot log's truncated first line reads 0 °C
+                continue
+            rows.append(vals)
+        data = np.asarray(rows)
+        t = np.arange(data.shape[0]) / 50.0
+        out.append(WarmupLog(f"bmi270 {path.stem}", t, data[:, 1:4] * 4.0, data[:, 0]))
+    return out
+
+
+# --- split and metric -----------------------------------------------------------------
+def blocks(t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(block index of each sample, True where the sample is in a fit block)."""
+    k = np.floor((t_s - t_s[0]) / BLOCK_S).astype(int)
+    return k, k % 2 == 0
+
+
+def heldout_rms_mg(log: WarmupLog, compensated_g: np.ndarray) -> np.ndarray:
+    """Per axis: RMS of held-out 5-s means minus the mean over the fit samples (mg)."""
+    k, fit = blocks(log.t_s)
+    ref = compensated_g[fit].mean(axis=0)
+    half = np.floor((log.t_s - log.t_s[0]) / MEAN_S).astype(int)
+    means = [compensated_g[half == h].mean(axis=0) for h in np.unique(half[~fit])
+             if np.sum(half == h) > 0.8 * MEAN_S * _rate(log)]
+    return np.sqrt(np.mean((np.asarray(means) - ref) ** 2, axis=0)) * 1e3
+
+
+def noise_floor_mg(log: WarmupLog) -> np.ndarray:
+    k, fit = blocks(log.t_s)
+    half = np.floor((log.t_s - log.t_s[0]) / MEAN_S).astype(int)
+    diffs = []
+    for b in np.unique(k[~fit]):
+        hs = np.unique(half[k == b])
+        if hs.size == 2 and all(np.sum(half == h) > 0.8 * MEAN_S * _rate(log) for h in hs):
+            diffs.append(log.acc_g[half == hs[0]].mean(axis=0)
+                         - log.acc_g[half == hs[1]].mean(axis=0))
+    return np.sqrt(np.mean(np.asarray(diffs) ** 2, axis=0) / 2.0) * 1e3
+
+
+def _rate(log: WarmupLog) -> float:
+    return (log.t_s.size - 1) / (log.t_s[-1] - log.t_s[0])
+
+
+# --- methods ---------------------------------------------------------------------------
+def method_none(log: WarmupLog) -> np.ndarray:
+    return log.acc_g
+
+
+def method_px4(log: WarmupLog) -> np.ndarray:
+    """process_sensor_caldata.py's accel fit, applied as calc_thermal_offsets_3D does."""
+    _, fit = blocks(log.t_s)
+    T = log.temp_c[fit]
+    t_min, t_max = float(T.min()), float(T.max())
+    t_ref = 0.5 * (t_min + t_max)
+    out = np.empty_like(log.acc_g)
+    d = np.clip(log.temp_c, t_min, t_max) - t_ref
+    for i in range(3):
+        a = log.acc_g[fit, i]
+        coef = np.polyfit(T - t_ref, a - np.median(a), 3)
+        out[:, i] = log.acc_g[:, i] - np.polyval(coef, d)
+    return out
+
+
+def method_ardupilot(log: WarmupLog) -> tuple[np.ndarray, str]:
+    """tempcal_IMU.py: 2-s moving average of X, Y, Z, T and time, order-3 fit vs T − 35."""
+    _, fit = blocks(log.t_s)
+    try:
+        from ardupilot_methodic_configurator import tempcal_imu as tc
+        source = "ardupilot-methodic-configurator tempcal_imu"
+    except ImportError:
+        tc, source = None, "re-implemented (package not installed)"
+    # each fit block separately: the moving average must not run across held-out gaps
+    k, _ = blocks(log.t_s)
+    xs, ts = [], []
+    for b in np.unique(k[fit]):
+        m = k == b
+        cols = {"X": log.acc_g[m, 0], "Y": log.acc_g[m, 1], "Z": log.acc_g[m, 2],
+                "T": log.temp_c[m], "time": log.t_s[m]}
+        if tc is not None:
+            cols = tc.IMUData().filter_array(dict(cols), 2)
+        else:
+            cols = _moving_average_2s(cols)
+        xs.append(np.column_stack([cols["X"], cols["Y"], cols["Z"]]))
+        ts.append(cols["T"])
+    X, T = np.vstack(xs), np.concatenate(ts)
+    temp_ref = tc.TEMP_REF if tc is not None else 35.0
+    order = tc.POLY_ORDER if tc is not None else 3
+    t_min, t_max = float(T.min()), float(T.max())
+    out = np.empty_like(log.acc_g)
+    for i in range(3):
+        coef = np.polyfit(T - temp_ref, X[:, i] - X[:, i].mean(), order)
+        out[:, i] = log.acc_g[:, i] - np.polyval(coef, np.clip(log.temp_c, t_min, t_max)
+                                                  - temp_ref)
+    return out, source
+
+
+def _moving_average_2s(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    n = cols["time"].size
+    w = int(n / (cols["time"][-1] - cols["time"][0])) * 2
+    if w <= 1:
+        return cols
+    out = {}
+    for key, v in cols.items():
+        c = np.cumsum(v)
+        c[w:] = c[w:] - c[:-w]
+        out[key] = c[w - 1:] / w
+    return out
+
+
+def rows_1s(log: WarmupLog, mask: np.ndarray) -> list[list[float]]:
+    """1-s mean rows (t_s, sensor_c, ax, ay, az, n, sd_x, sd_y, sd_z) of the masked samples."""
+    sec = np.floor((log.t_s - log.t_s[0]) / ROW_S).astype(int)
+    rows = []
+    for s in np.unique(sec[mask]):
+        m = (sec == s) & mask
+        if m.sum() < 2:
+            continue
+        a = log.acc_g[m]
+        rows.append([float(log.t_s[m].mean()), float(log.temp_c[m].mean()), *a.mean(axis=0),
+                     float(m.sum()), *a.std(axis=0, ddof=1)])
+    return rows
+
+
+def _write_rows(path: Path, rows: list[list[float]]) -> None:
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t_s", "sensor_c", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z"])
+        w.writerows([[repr(float(v)) for v in r] for r in rows])
+
+
+def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, str]:
+    """``soakcal calibrate`` on the fit blocks' 1-s rows, ``compensate`` on all 1-s rows.
+
+    Returns the compensated value of every sample (its 1-s row's output minus that row's
+    raw mean, added to the sample: the model is smooth over 1 s) or None and the reason.
+    """
+    _, fit = blocks(log.t_s)
+    fit_csv, all_csv = workdir / "fit.csv", workdir / "all.csv"
+    model, comp = workdir / "model.json", workdir / "comp.csv"
+    fit_rows = rows_1s(log, fit)
+    _write_rows(fit_csv, fit_rows)
+    all_rows = rows_1s(log, np.ones(log.t_s.size, bool))
+    # Temperatures clamped to the fit rows' span, as both firmwares clamp to TMIN/TMAX:
+    # a held-out row a little beyond the fitted span is compensated at its edge.
+    t_lo, t_hi = min(r[1] for r in fit_rows), max(r[1] for r in fit_rows)
+    _write_rows(all_csv, [[r[0], min(max(r[1], t_lo), t_hi), *r[2:]] for r in all_rows])
+    t0 = time.perf_counter()
+    cal = subprocess.run([SOAKCAL, "calibrate", str(fit_csv), "-o", str(model), "--json"],
+                         capture_output=True, text=True)
+    fit_s = time.perf_counter() - t0
+    if cal.returncode != 0:
+        return None, f"calibrate exit {cal.returncode}: {_last_line(cal.stderr)}"
+    # --extrapolate: the rows are clamped to the fit span already; compensate's own
+    # conditioning of the temperature may still step a hair past the model's range.
+    c = subprocess.run([SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp),
+                        "--extrapolate"], capture_output=True, text=True)
+    if c.returncode != 0:
+        return None, f"compensate exit {c.returncode}: {_last_line(c.stderr)}"
+    with comp.open() as f:
+        out_rows = list(csv.DictReader(f))
+    delta = np.array([[float(r["cx"]) - float(r["ax"]), float(r["cy"]) - float(r["ay"]),
+                       float(r["cz"]) - float(r["az"])] for r in out_rows])
+    sec = np.floor((log.t_s - log.t_s[0]) / ROW_S).astype(int)
+    row_of_sec = {int(np.floor(r[0] - log.t_s[0])): i for i, r in enumerate(all_rows)}
+    idx = np.array([row_of_sec.get(int(s), -1) for s in sec])
+    keep = idx >= 0
+    out = np.full_like(log.acc_g, np.nan)
+    out[keep] = log.acc_g[keep] + delta[idx[keep]]
+    try:
+        info = json.loads(cal.stdout)
+        note = f"calibrate {fit_s:.1f} s; " + ", ".join(
+            f"{k}={info[k]}" for k in ("mode", "dof") if k in info)
+    except ValueError:
+        note = f"calibrate {fit_s:.1f} s"
+    return out, note
+
+
+def _last_line(text: str) -> str:
+    lines = [x for x in text.strip().splitlines() if x.strip()]
+    return lines[-1][:300] if lines else "(no message)"
+
+
+# --- run ---------------------------------------------------------------------------------
+def evaluate(log: WarmupLog, workdir: Path) -> dict[str, object]:
+    res: dict[str, object] = {"log": log.name, "n": int(log.t_s.size),
+                              "minutes": float((log.t_s[-1] - log.t_s[0]) / 60.0),
+                              "temp_span_c": [float(log.temp_c.min()), float(log.temp_c.max())]}
+    res["none"] = heldout_rms_mg(log, method_none(log)).tolist()
+    res["px4"] = heldout_rms_mg(log, method_px4(log)).tolist()
+    ap, res["ardupilot_source"] = method_ardupilot(log)
+    res["ardupilot"] = heldout_rms_mg(log, ap).tolist()
+    sc, res["soakcal_note"] = method_soakcal(log, workdir)
+    if sc is not None:
+        ok = np.all(np.isfinite(sc), axis=1)
+        res["soakcal"] = heldout_rms_mg(_subset(log, ok), sc[ok]).tolist()
+    else:
+        res["soakcal"] = None
+    res["floor"] = noise_floor_mg(log).tolist()
+    return res
+
+
+def _subset(log: WarmupLog, mask: np.ndarray) -> WarmupLog:
+    return WarmupLog(log.name, log.t_s[mask], log.acc_g[mask], log.temp_c[mask])
+
+
+def table(results: list[dict[str, object]]) -> str:
+    head = ("| log | °C span | none | PX4 method | ArduPilot tempcal | soakcal | floor |\n"
+            "|---|---|---|---|---|---|---|")
+    lines = [head]
+
+    def fmt(v: object) -> str:
+        return "no model" if v is None else " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+
+    for r in results:
+        lo, hi = r["temp_span_c"]  # type: ignore[misc]
+        lines.append(f"| {r['log']} | {lo:.2f} … {hi:.2f} | {fmt(r['none'])} | {fmt(r['px4'])} "
+                     f"| {fmt(r['ardupilot'])} | {fmt(r['soakcal'])} | {fmt(r['floor'])} |")
+    return "\n".join(lines)
+
+
+LOGS: dict[str, Callable[[], WarmupLog]] = {
+    "twin": lambda: twin_log("twin"),
+    "twin+rate": lambda: twin_log("twin + rate 40 µg/(°C/min)", rate_ug_per_c_per_min=40.0),
+    "twin+lag": lambda: twin_log("twin + channel lag 60 s", channel_lag_s=60.0),
+    "twin+rate+lag": lambda: twin_log("twin + rate + lag", rate_ug_per_c_per_min=40.0,
+                                      channel_lag_s=60.0),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, help="write results.json and table.md here")
+    ap.add_argument("--realdata", type=Path,
+                    default=Path(os.environ.get("SOAKCAL_REALDATA", "/work/shared/realdata")),
+                    help="folder holding bmi270-ganesh/ (skipped when absent)")
+    args = ap.parse_args(argv)
+    logs = [make() for make in LOGS.values()]
+    bmi = args.realdata / "bmi270-ganesh"
+    if bmi.is_dir():
+        logs += bmi270_logs(bmi)
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for log in logs:
+            results.append(evaluate(log, Path(tmp)))
+            print(json.dumps(results[-1]), flush=True)
+    text = table(results)
+    print(text)
+    for r in results:
+        print(f"{r['log']}: ardupilot = {r['ardupilot_source']}; soakcal: {r['soakcal_note']}")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "results.json").write_text(json.dumps(results, indent=2))
+        (args.out / "table.md").write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,213 @@
+"""Parameter files for the autopilots people fly: PX4 ``TC_A*`` and ArduPilot ``INS_TCAL*``.
+
+Both firmwares correct an accelerometer for temperature with an *offset-only* cubic,
+subtracted from the reading in m/s² in the sensor frame before the ordinary
+calibration's offsets and scales (read from their application code):
+
+* PX4 (``TemperatureCompensation::calc_thermal_offsets_3D``, applied in
+  ``calibration::Accelerometer::Correct``): ``out = R · ((raw − o(T) − CAL_OFF) ⊙
+  CAL_SCALE)`` with ``o_i(T) = X0_i + X1_i·d + X2_i·d² + X3_i·d³``, ``d = clamp(T, TMIN,
+  TMAX) − TREF``, coefficients in m/s²/°C^j. There is no thermal scale (the
+  ``TC_A*_SCL_*`` of early releases is gone).
+* ArduPilot (``AP_InertialSensor::TCal::correct_sensor``, before ``INS_ACCOFFS`` and
+  ``INS_ACCSCAL``): ``v −= P(clamp(T) − 35) − P(clamp(T_cal) − 35)`` with ``P(d) =
+  (ACC1·d + ACC2·d² + ACC3·d³)·1e−6`` m/s², 35 °C a fixed reference in the firmware
+  (no parameter), ``T_cal`` the temperature of the ordinary accelerometer calibration
+  (``INS_ACCn_CALTEMP``). No constant term: the offset at ``T_cal`` is ``INS_ACCOFFS``.
+
+soakcal's model is ``out = A(T) · (raw − b(T))`` (seed Eq. 1 with Eq. 8): the export
+writes ``b(T)`` (× g in m/s²) and reports what it leaves out: ``A(T) − I`` (scale
+factors, non-orthogonality, misalignment and their temperature change), as the
+largest error that costs at |a| ≤ 1 g over the valid range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.polynomial import Polynomial
+
+from calibration import sfem
+from calibration.errors import ModelFileError
+from calibration.thermal import ThermalModel
+
+STANDARD_GRAVITY_M_S2 = 9.80665  # PX4 CONSTANTS_ONE_G and ArduPilot GRAVITY_MSS
+FIRMWARE_DEGREE = 3  # both firmwares: cubic offset polynomial
+ARDUPILOT_TEMP_REFERENCE_C = 35.0  # TEMP_REFERENCE in AP_InertialSensor_tempcal.cpp
+ARDUPILOT_SCALE_FACTOR = 1.0e6  # SCALE_FACTOR there: parameters are 1e6 × m/s²/°C^j
+ARDUPILOT_TEMP_LIMITS_C = (-70.0, 80.0)  # INS_TCALn_TMIN/TMAX @Range
+PX4_PARAM_INT32, PX4_PARAM_REAL32 = 6, 9  # MAV_PARAM_TYPE in QGroundControl .params files
+
+
+@dataclass
+class FirmwareExport:
+    """The parameter file text and the one-line limitations for stderr."""
+
+    text: str
+    limitations: list[str]
+
+
+def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float) -> np.ndarray:
+    """(3, 4): bias b_i(T) in m/s² as Σ_j c_ij (T − t_ref)^j (exact re-expansion of Eq. 8)."""
+    shift = Polynomial([(t_ref_c - model.t_centre_c) / model.t_scale_c, 1.0 / model.t_scale_c])
+    out = np.zeros((3, FIRMWARE_DEGREE + 1))
+    for i in range(3):
+        poly = Polynomial(model.coeffs[sfem.BIAS][i])(shift)
+        c = poly.coef * STANDARD_GRAVITY_M_S2
+        out[i, : c.size] = c
+    return out
+
+
+def _check(model: ThermalModel, firmware: str) -> tuple[float, float]:
+    if model.extensions:
+        kinds = ", ".join(str(e.get("kind")) for e in model.extensions)
+        raise ModelFileError(f"model field 'extensions': {firmware} cannot express {kinds}; "
+                             "export a model from `soakcal calibrate`")
+    if model.valid_c is None:
+        raise ModelFileError(f"model has no temperature dependence: nothing for {firmware}'s "
+                             "thermal compensation; calibrate a recording with a temperature")
+    if model.temperature_source != "sensor_c":
+        raise ModelFileError(
+            f"model fitted on {model.temperature_source} (not the sensor's own temperature); "
+            f"{firmware} compensates with the IMU's temperature reading: calibrate a "
+            "recording with sensor_c")
+    if model.degree > FIRMWARE_DEGREE:
+        raise ModelFileError(f"model degree {model.degree}: {firmware}'s offset polynomial is "
+                             f"cubic; calibrate with degree <= {FIRMWARE_DEGREE}")
+    lo, hi = model.valid_c
+    return float(lo), float(hi)
+
+
+def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
+    """What an offset-only export cannot express, each with the error it costs (mg at 1 g)."""
+    lo, hi = model.valid_c or (0.0, 0.0)
+    temps = np.linspace(lo, hi, n_temps)
+    P = model.params_vector_at(temps, extrapolate=True)
+    A = sfem.matrix_from_vector(P)  # (n,3,3)
+    dev = A - np.eye(3)
+    err_mg = float(np.max(np.linalg.norm(dev, ord=2, axis=(1, 2)))) * 1e3
+    out: list[str] = []
+    s = P[:, sfem.SCALE]
+    s_mid = s[n_temps // 2]
+    if np.max(np.abs(s_mid - 1.0)) > 0:
+        out.append("scale factors (" + ", ".join(
+            f"s{c}-1 {(v - 1.0) * 1e6:+.0f} ppm" for c, v in zip("xyz", s_mid, strict=True))
+            + " at mid-range)")
+    ds = np.max(np.ptp(s, axis=0)) * 1e6
+    if ds > 0:
+        out.append(f"scale change with temperature (up to {ds:.0f} ppm over the range)")
+    ang = np.max(np.abs(P[:, 6:12])) * 1e3
+    if ang > 0:
+        out.append(f"non-orthogonality and misalignment (up to {ang:.3f} mrad)")
+    if out:
+        out.append(f"leaving them out costs up to {err_mg:.3f} mg at |a| <= 1 g "
+                   f"over {lo:.2f} .. {hi:.2f} degC")
+    held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
+            if not ok]
+    if held:
+        out.append(f"{', '.join(held)} held, not fitted: that axis' offset is not a calibration")
+    held_nominal = [n for n in getattr(model, "held", {}) if n not in sfem.PARAM_NAMES[:3]]
+    if held_nominal:
+        out.append(f"not calibrated by this model (held at nominal): {', '.join(held_nominal)}; "
+                   "the firmware's ordinary accelerometer calibration stays in charge of them")
+    return out
+
+
+def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
+               source_name: str = "model") -> FirmwareExport:
+    """A QGroundControl parameter file of ``TC_A{instance}_*`` (see module docstring)."""
+    if not 0 <= instance <= 3:
+        raise ModelFileError(f"PX4 has TC_A0..TC_A3; --instance {instance} is out of range")
+    lo, hi = _check(model, "PX4")
+    t_ref = 0.5 * (lo + hi)  # as PX4's process_sensor_caldata.py: mid-range reference
+    c = bias_polynomials_m_s2(model, t_ref)
+    limits = left_out(model)
+    # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
+    # is then 0, as PX4's own script leaves it (~0, readings minus their median), and the
+    # constant stays with the ordinary calibration's CAL_ACCn_xOFF.
+    absolute = model.mode != "warmup" and bool(np.all(model.identifiable[sfem.BIAS]))
+    if absolute:
+        x0_note = ("X0 is the whole offset at TREF: PX4 subtracts CAL_ACCn_xOFF as well, so "
+                   "set those to 0 (or zero X0 and keep the ordinary calibration's offsets)")
+    else:
+        c[:, 0] = 0.0
+        x0_note = ("X0 = 0: this model does not identify the constant offset (a warm-up: "
+                   "gravity's projection is unknown); it stays with CAL_ACCn_xOFF from "
+                   "PX4's ordinary accelerometer calibration")
+    if device_id == 0:
+        limits.append(f"TC_A{instance}_ID is 0: PX4 applies these only to the accelerometer "
+                      "whose device id matches; give --device-id (CAL_ACCn_ID)")
+    a = f"TC_A{instance}"
+    rows: list[tuple[str, float, int]] = [
+        ("TC_A_ENABLE", 1, PX4_PARAM_INT32), (f"{a}_ID", device_id, PX4_PARAM_INT32),
+        (f"{a}_TMIN", lo, PX4_PARAM_REAL32), (f"{a}_TMAX", hi, PX4_PARAM_REAL32),
+        (f"{a}_TREF", t_ref, PX4_PARAM_REAL32)]
+    for j in range(FIRMWARE_DEGREE + 1):
+        for i in range(3):
+            rows.append((f"{a}_X{j}_{i}", float(c[i, j]), PX4_PARAM_REAL32))
+    head = _header(
+        f"PX4 accelerometer thermal compensation from {source_name} (soakcal export)",
+        ["offset_i(T) = X0_i + X1_i*d + X2_i*d^2 + X3_i*d^3 in m/s^2, "
+         "d = clamp(T, TMIN, TMAX) - TREF; subtracted from sensor_accel x/y/z (i = 0, 1, 2)",
+         "T is the accelerometer's own temperature reading (sensor_accel.temperature)",
+         "outside TMIN..TMAX the firmware holds the offset at the edge value (clamp)",
+         x0_note],
+        limits)
+    body = "\n".join(f"1\t1\t{n}\t{_num(v, t)}\t{t}" for n, v, t in rows)
+    text = head + "# Vehicle-Id Component-Id Name Value Type\n" + body + "\n"
+    return FirmwareExport(text, limits)
+
+
+def export_ardupilot(model: ThermalModel, *, instance: int = 1,
+                     source_name: str = "model") -> FirmwareExport:
+    """A Mission Planner / MAVProxy parameter file of ``INS_TCAL{instance}_*``."""
+    if not 1 <= instance <= 3:
+        raise ModelFileError(f"ArduPilot has INS_TCAL1..3; --instance {instance} is out of range")
+    lo, hi = _check(model, "ArduPilot")
+    a_lo, a_hi = ARDUPILOT_TEMP_LIMITS_C
+    if lo < a_lo or hi > a_hi:
+        raise ModelFileError(f"valid range {lo:.2f} .. {hi:.2f} degC is outside ArduPilot's "
+                             f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
+    c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C) * ARDUPILOT_SCALE_FACTOR
+    limits = left_out(model)
+    limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
+                  f"INS_ACC{'' if instance == 1 else instance}OFFS, measured by the ordinary "
+                  "accelerometer calibration at INS_ACC"
+                  f"{instance}_CALTEMP")
+    p = f"INS_TCAL{instance}"
+    rows: list[tuple[str, float]] = [(f"{p}_ENABLE", 1), (f"{p}_TMIN", lo), (f"{p}_TMAX", hi)]
+    for j in (1, 2, 3):
+        for i, axis in enumerate("XYZ"):
+            rows.append((f"{p}_ACC{j}_{axis}", float(c[i, j])))
+    head = _header(
+        f"ArduPilot IMU temperature calibration from {source_name} (soakcal export)",
+        ["v -= P(clamp(T) - 35) - P(clamp(T_cal) - 35), "
+         "P(d) = (ACC1*d + ACC2*d^2 + ACC3*d^3) * 1e-6 m/s^2, per axis X, Y, Z",
+         "35 degC is fixed in the firmware (TEMP_REFERENCE; there is no parameter for it)",
+         "T is the IMU's own temperature; T_cal is INS_ACCn_CALTEMP; clamp to TMIN..TMAX",
+         "the gyro coefficients (INS_TCALn_GYR*) are not touched"],
+        limits)
+    text = head + "\n".join(f"{n},{_num(v, 0)}" for n, v in rows) + "\n"
+    return FirmwareExport(text, limits)
+
+
+def _header(title: str, formula: list[str], limits: list[str]) -> str:
+    lines = [title, *formula]
+    if limits:
+        lines.append("NOT EXPRESSED by this firmware's parameters:")
+        lines += [f"  - {x}" for x in limits]
+    return "".join(f"# {_ascii(x)}\n" for x in lines)
+
+
+def _num(v: float, kind: int) -> str:
+    if kind == PX4_PARAM_INT32:
+        return str(int(v))
+    if not math.isfinite(v):
+        raise ModelFileError(f"coefficient {v!r} is not finite")
+    return f"{v:.9g}"
+
+
+def _ascii(text: str) -> str:
+    return text.replace("°", "deg").replace("µ", "u").replace("−", "-")

@@ -1,0 +1,199 @@
+"""A generic delimited table with a column map and units (``soakcal import --format csv``).
+
+The map names which source column holds what (``--columns
+t=TIME,ax=AX,ay=AY,az=AZ,temp=DIE_T``; unnamed roles keep their defaults ``t_s``,
+``ax``, ``ay``, ``az``, ``temp_c``). Units are never guessed: the acceleration unit
+is required (``g``, ``mg``, ``m/s2``, or ``counts`` with ``--counts-per-g`` and
+optionally ``--offset``), the temperature unit defaults to ``C`` (``C``, ``F``, ``K``,
+or ``counts`` with ``--temp-c-per-count`` and ``--temp-offset-c``), the time unit to
+``s`` (``s``, ``ms``, ``us``). Without a time column, ``--rate-hz`` gives t = i / rate.
+A result a lab engineer would catch by eye is refused
+(:func:`calibration.importers.check_plausible`): a median |a| far from 1 g names the
+unit it looks like.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from calibration.errors import RecordingError
+from calibration.importers import (
+    STANDARD_GRAVITY_M_S2,
+    RawImport,
+    _check_monotonic,
+    _fmt3,
+    _number,
+    _read_text,
+    check_plausible,
+)
+
+ROLES: tuple[str, ...] = ("t", "ax", "ay", "az", "temp")
+DEFAULT_COLUMNS: dict[str, str] = {
+    "t": "t_s", "ax": "ax", "ay": "ay", "az": "az", "temp": "temp_c"}
+# g per unit of each acceleration unit ("counts" goes through counts_per_g).
+ACCEL_UNITS: dict[str, float] = {"g": 1.0, "mg": 1e-3, "m/s2": 1.0 / STANDARD_GRAVITY_M_S2}
+TEMP_UNITS: tuple[str, ...] = ("C", "F", "K", "counts")
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+
+
+@dataclass(frozen=True)
+class TableUnits:
+    """How to read the numbers of a table (see the module docstring)."""
+
+    accel: str | None = None
+    counts_per_g: float | Sequence[float] | None = None
+    offset_counts: float | Sequence[float] = 0.0
+    temp: str = "C"
+    temp_c_per_count: float | None = None
+    temp_offset_c: float | None = None
+    time: str = "s"
+    rate_hz: float | None = None
+
+
+def parse_column_map(text: str | None) -> dict[str, str]:
+    """``"t=TIME,ax=AX,…"`` → {role: column}; unknown roles and empty names are errors."""
+    out = dict(DEFAULT_COLUMNS)
+    if not text:
+        return out
+    for item in text.split(","):
+        role, sep, name = item.partition("=")
+        role, name = role.strip(), name.strip()
+        if not sep or role not in ROLES or not name:
+            raise ValueError(f"--columns: expected ROLE=COLUMN with ROLE one of "
+                             f"{', '.join(ROLES)}, got {item.strip()!r}")
+        out[role] = name
+    return out
+
+
+def read_table(
+    path: str | Path,
+    *,
+    columns: Mapping[str, str] | str | None = None,
+    units: TableUnits | None = None,
+    delimiter: str | None = None,
+) -> RawImport:
+    """Read a delimited table (delimiter sniffed among ``, ; tab`` unless given)."""
+    p = str(path)
+    u = units or TableUnits()
+    cmap = parse_column_map(columns) if columns is None or isinstance(columns, str) else {
+        **DEFAULT_COLUMNS, **dict(columns)}
+    _check_units(p, u)
+    text = _read_text(p)
+    lines = text.splitlines()
+    if not lines:
+        raise RecordingError(p, 1, None, "empty file: expected a header row")
+    delim = delimiter or _sniff(lines[0])
+    reader = csv.reader(io.StringIO(text), delimiter=delim)
+    header = [h.strip() for h in next(reader)]
+    notes: list[str] = []
+    wanted = ["ax", "ay", "az"]
+    if cmap["t"] in header:
+        wanted.insert(0, "t")
+    elif u.rate_hz is None:
+        raise RecordingError(p, 1, cmap["t"], "time column missing: name it with --columns "
+                             f"t=NAME or give --rate-hz (header: {delim.join(header)})")
+    else:
+        notes.append(f"no time column: t = i / {u.rate_hz:g} Hz")
+    has_temp = cmap["temp"] in header
+    if has_temp:
+        wanted.append("temp")
+    else:
+        notes.append(f"no temperature column {cmap['temp']!r} (--columns temp=NAME); "
+                     "temperature left empty")
+    for role in ("ax", "ay", "az"):
+        if cmap[role] not in header:
+            raise RecordingError(p, 1, cmap[role], f"column missing (--columns {role}=NAME; "
+                                 f"header: {delim.join(header)})")
+    idx = [header.index(cmap[r]) for r in wanted]
+    rows: list[list[float]] = []
+    for line_no, row in enumerate(reader, start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise RecordingError(p, line_no, None,
+                                 f"has {len(row)} cells, header has {len(header)}")
+        vals = []
+        for r, i in zip(wanted, idx, strict=True):
+            cell = row[i].strip()
+            # An empty temperature cell is "not recorded" (recording format), not an error.
+            empty_temp = r == "temp" and not cell
+            vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
+        rows.append(vals)
+    if not rows:
+        raise RecordingError(p, 2, None, "no data rows after the header")
+    data = np.asarray(rows, float)
+    col = {r: data[:, k] for k, r in enumerate(wanted)}
+    if "t" in col:
+        _check_monotonic(p, col["t"], cmap["t"], first_line=2)
+        t = (col["t"] - col["t"][0]) * TIME_UNITS[u.time]
+    else:
+        assert u.rate_hz is not None
+        t = np.arange(data.shape[0]) / u.rate_hz
+    acc_raw = np.column_stack([col["ax"], col["ay"], col["az"]])
+    acc, acc_note = _to_g(acc_raw, u)
+    notes.insert(0, acc_note)
+    temp_c = None
+    if has_temp:
+        temp_c, temp_note = _to_c(col["temp"], u)
+        notes.append(temp_note)
+    raw = RawImport(p, "csv", t, acc, init_rest_s=None, notes=notes, temp_c=temp_c)
+    check_plausible(raw, accel_fix="give the right --accel-unit",
+                    temp_fix="give the right --temp-unit")
+    return raw
+
+
+def _check_units(p: str, u: TableUnits) -> None:
+    if u.accel is None:
+        raise RecordingError(p, None, None, "the acceleration unit is not guessed: give "
+                             f"--accel-unit ({', '.join([*ACCEL_UNITS, 'counts'])})")
+    if u.accel not in ACCEL_UNITS and u.accel != "counts":
+        raise RecordingError(p, None, None, f"--accel-unit {u.accel!r}: expected one of "
+                             f"{', '.join([*ACCEL_UNITS, 'counts'])}")
+    if u.accel == "counts" and u.counts_per_g is None:
+        raise RecordingError(p, None, None, "--accel-unit counts needs --counts-per-g "
+                             "(the sensitivity, counts per g)")
+    if u.temp not in TEMP_UNITS:
+        raise RecordingError(p, None, None,
+                             f"--temp-unit {u.temp!r}: expected one of {', '.join(TEMP_UNITS)}")
+    if u.temp == "counts" and (u.temp_c_per_count is None or u.temp_offset_c is None):
+        raise RecordingError(p, None, None, "--temp-unit counts needs --temp-c-per-count "
+                             "and --temp-offset-c")
+    if u.time not in TIME_UNITS:
+        raise RecordingError(p, None, None,
+                             f"--time-unit {u.time!r}: expected one of {', '.join(TIME_UNITS)}")
+    if u.rate_hz is not None and not u.rate_hz > 0:
+        raise RecordingError(p, None, None, f"--rate-hz must be > 0, got {u.rate_hz}")
+
+
+def _to_g(acc: np.ndarray, u: TableUnits) -> tuple[np.ndarray, str]:
+    if u.accel == "counts":
+        scale = np.broadcast_to(np.asarray(u.counts_per_g, float), (3,))
+        offset = np.broadcast_to(np.asarray(u.offset_counts, float), (3,))
+        return (acc - offset) / scale, f"counts: (c − {_fmt3(offset)}) / {_fmt3(scale)} → g"
+    assert u.accel is not None
+    return acc * ACCEL_UNITS[u.accel], f"acceleration in {u.accel} → g"
+
+
+def _to_c(temp: np.ndarray, u: TableUnits) -> tuple[np.ndarray, str]:
+    if u.temp == "C":
+        return temp, "temperature in °C → sensor_c"
+    if u.temp == "F":
+        return (temp - 32.0) * 5.0 / 9.0, "temperature in °F → sensor_c (°C)"
+    if u.temp == "K":
+        return temp - 273.15, "temperature in K → sensor_c (°C)"
+    assert u.temp_c_per_count is not None and u.temp_offset_c is not None
+    return (u.temp_offset_c + temp * u.temp_c_per_count,
+            f"temperature counts → sensor_c = {u.temp_offset_c:g} + c × {u.temp_c_per_count:g}")
+
+
+def _sniff(header_line: str) -> str:
+    counts = {d: header_line.count(d) for d in (",", ";", "\t")}
+    best = max(counts, key=lambda d: counts[d])
+    return best if counts[best] else ","
+

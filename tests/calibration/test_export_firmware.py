@@ -1,0 +1,191 @@
+"""``soakcal export --format px4|ardupilot``: each firmware's own application formula,
+written here from its source (PX4 TemperatureCompensation::calc_thermal_offsets_3D and
+calibration::Accelerometer::Correct; ArduPilot AP_InertialSensor::TCal::correct_sensor),
+applied to the exported parameters, against ``soakcal compensate``."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration.model_file import save_model
+from calibration.thermal import ThermalModel
+from service.cli import main
+
+G = 9.80665
+F32 = np.float32
+
+
+def _model(*, scale_ppm: float = 0.0, scale_tc_ppm: float = 0.0, misalign_rad: float = 0.0,
+           degree: int = 3, source: str = "sensor_c") -> ThermalModel:
+    """Bias cubics in x = (T − 20)/30 over −10..50 °C (g), optional scale/misalignment."""
+    coeffs = np.zeros((12, degree + 1))
+    coeffs[0, :4] = [0.004, 0.0015, -0.0004, 0.0002][: degree + 1] if degree >= 3 else 0.004
+    coeffs[1, :2] = [-0.003, 0.0008]
+    coeffs[2, :3] = [0.010, -0.0020, 0.0009]
+    coeffs[3:6, 0] = 1.0 + scale_ppm * 1e-6
+    if degree >= 1:
+        coeffs[5, 1] = scale_tc_ppm * 1e-6
+    coeffs[9, 0] = misalign_rad
+    return ThermalModel(coeffs=coeffs, t_centre_c=20.0, t_scale_c=30.0, valid_c=(-10.0, 50.0),
+                        mode="reference", identifiable=np.ones(12, bool),
+                        temperature_source=source)
+
+
+def _readings(n: int = 200, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    raw = rng.normal(0, 1, (n, 3))
+    raw /= np.linalg.norm(raw, axis=1)[:, None]
+    return raw, rng.uniform(-10.0, 50.0, n)
+
+
+def _compensate(tmp: Path, model: Path, raw: np.ndarray, temp: np.ndarray) -> np.ndarray:
+    rec = tmp / "rec.csv"
+    with rec.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t_s", "sensor_c", "ax", "ay", "az"])
+        for i, (r, t) in enumerate(zip(raw, temp, strict=True)):
+            w.writerow([i, repr(float(t)), *map(repr, map(float, r))])
+    out = tmp / "comp.csv"
+    assert main(["compensate", str(model), str(rec), "-o", str(out), "--raw-temperature"]) == 0
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    return np.array([[float(r["cx"]), float(r["cy"]), float(r["cz"])] for r in rows])
+
+
+def _export(tmp: Path, model: ThermalModel, fmt: str, *extra: str) -> tuple[Path, str, int]:
+    path = tmp / "model.json"
+    save_model(path, model)
+    out = tmp / f"out.{fmt}"
+    code = main(["export", str(path), "--format", fmt, "-o", str(out), *extra])
+    return path, out.read_text() if out.exists() else "", code
+
+
+def _px4_params(text: str) -> dict[str, float]:
+    out = {}
+    for line in text.splitlines():
+        if line.startswith("#"):
+            continue
+        _veh, _comp, name, value, _type = line.split("\t")
+        out[name] = float(value)
+    return out
+
+
+def _px4_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray) -> np.ndarray:
+    """PX4: offset = X0 + X1 d + X2 d² + X3 d³, d = clamp(T) − TREF; data − offset (float)."""
+    out = np.empty_like(raw_ms2, dtype=F32)
+    for n, (r, t) in enumerate(zip(raw_ms2, temp_c, strict=True)):
+        t = F32(t)
+        if t > F32(p["TC_A0_TMAX"]):
+            d = F32(p["TC_A0_TMAX"]) - F32(p["TC_A0_TREF"])
+        elif t < F32(p["TC_A0_TMIN"]):
+            d = F32(p["TC_A0_TMIN"]) - F32(p["TC_A0_TREF"])
+        else:
+            d = t - F32(p["TC_A0_TREF"])
+        d2, d3 = d * d, d * d * d
+        for i in range(3):
+            off = (F32(p[f"TC_A0_X0_{i}"]) + F32(p[f"TC_A0_X1_{i}"]) * d
+                   + F32(p[f"TC_A0_X2_{i}"]) * d2 + F32(p[f"TC_A0_X3_{i}"]) * d3)
+            out[n, i] = F32(r[i]) - off
+    return out.astype(float)
+
+
+def _ap_params(text: str) -> dict[str, float]:
+    return {n: float(v) for n, v in (line.split(",") for line in text.splitlines()
+                                      if line and not line.startswith("#"))}
+
+
+def _ap_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray,
+                cal_temp_c: float) -> np.ndarray:
+    """ArduPilot: v −= P(clamp(T) − 35) − P(clamp(T_cal) − 35), P = (c1 d + c2 d² + c3 d³)e-6."""
+    def poly(d: F32) -> np.ndarray:
+        c = [np.array([F32(p[f"INS_TCAL1_ACC{k}_{a}"]) for a in "XYZ"], F32) for k in (1, 2, 3)]
+        return (c[0] + (c[1] + c[2] * d) * d) * d * F32(1e-6)
+
+    lo, hi = F32(p["INS_TCAL1_TMIN"]), F32(p["INS_TCAL1_TMAX"])
+    cal = F32(min(max(cal_temp_c, lo), hi))
+    out = np.empty_like(raw_ms2, dtype=F32)
+    for n, (r, t) in enumerate(zip(raw_ms2, temp_c, strict=True)):
+        tc = F32(min(max(F32(t), lo), hi))
+        v = r.astype(F32) - poly(tc - F32(35.0)) + poly(cal - F32(35.0))
+        out[n] = v
+    return out.astype(float)
+
+
+def test_px4_firmware_formula_reproduces_compensate(tmp_path, capsys):
+    model = _model()
+    path, text, code = _export(tmp_path, model, "px4", "--device-id", "1310988")
+    assert code == 0
+    p = _px4_params(text)
+    assert p["TC_A_ENABLE"] == 1 and p["TC_A0_ID"] == 1310988
+    assert (p["TC_A0_TMIN"], p["TC_A0_TMAX"], p["TC_A0_TREF"]) == (-10.0, 50.0, 20.0)
+    raw, temp = _readings()
+    fw_g = _px4_correct(p, raw * G, temp) / G
+    ours = _compensate(tmp_path, path, raw, temp)
+    assert np.max(np.abs(fw_g - ours)) < 2e-6  # float32 firmware vs double: within 2 µg
+    assert "cannot express" not in capsys.readouterr().err  # bias-only: nothing left out
+
+
+def test_ardupilot_firmware_formula_reproduces_compensate(tmp_path, capsys):
+    model = _model()
+    path, text, code = _export(tmp_path, model, "ardupilot")
+    assert code == 0
+    p = _ap_params(text)
+    assert (p["INS_TCAL1_ENABLE"], p["INS_TCAL1_TMIN"], p["INS_TCAL1_TMAX"]) == (1, -10, 50)
+    raw, temp = _readings()
+    cal_temp = 27.0  # INS_ACC1_CALTEMP of the ordinary calibration...
+    accoffs = model.params_vector_at(cal_temp)[:3] * G  # ...which measured INS_ACCOFFS there
+    fw_g = (_ap_correct(p, raw * G, temp, cal_temp) - accoffs) / G
+    ours = _compensate(tmp_path, path, raw, temp)
+    assert np.max(np.abs(fw_g - ours)) < 2e-6
+    err = capsys.readouterr().err
+    assert "the constant offset is not in INS_TCAL" in err
+
+
+def test_what_the_firmware_cannot_express_is_said_and_bounded(tmp_path, capsys):
+    model = _model(scale_ppm=800.0, scale_tc_ppm=300.0, misalign_rad=0.002)
+    path, text, code = _export(tmp_path, model, "px4")
+    assert code == 0
+    err = capsys.readouterr().err
+    for words in ("scale factors", "scale change with temperature",
+                  "misalignment (up to 2.000 mrad)", "TC_A0_ID is 0"):
+        assert words in err and words in text
+    bound_mg = float(err.split("costs up to ")[1].split(" mg")[0])
+    raw, temp = _readings()
+    fw_g = _px4_correct(_px4_params(text), raw * G, temp) / G
+    ours = _compensate(tmp_path, path, raw, temp)
+    worst_mg = np.max(np.linalg.norm(fw_g - ours, axis=1)) * 1e3
+    # the stated bound holds and is not vacuous (the readings reach 60 % of it at least)
+    assert 0.6 * bound_mg < worst_mg <= bound_mg * 1.001
+
+
+def test_px4_warmup_model_leaves_the_constant_to_the_ordinary_calibration() -> None:
+    """A warm-up identifies the bias change only: X0 = 0, and the firmware plus the
+    CAL_ACC offset an ordinary calibration measures at TREF reproduce compensate."""
+    from calibration.export_firmware import export_px4
+
+    model = _model()
+    model.mode = "warmup"
+    fw = export_px4(model, device_id=1)
+    p = _px4_params(fw.text)
+    assert [p[f"TC_A0_X0_{i}"] for i in range(3)] == [0.0, 0.0, 0.0]
+    assert "X0 = 0: this model does not identify the constant offset" in fw.text
+    raw, temp = _readings()
+    cal_off = model.params_vector_at(p["TC_A0_TREF"])[:3] * G  # CAL_ACC0_OFF measured at TREF
+    fw_g = (_px4_correct(p, raw * G, temp) - cal_off) / G
+    np.testing.assert_allclose(fw_g, model.compensate(raw, temp), atol=2e-6)
+
+
+@pytest.mark.parametrize("kw,words", [
+    ({"degree": 4}, "offset polynomial is cubic"),
+    ({"source": "chamber_c"}, "fitted on chamber_c"),
+])
+@pytest.mark.parametrize("fmt", ["px4", "ardupilot"])
+def test_models_the_firmware_would_apply_wrongly_are_refused(tmp_path, capsys, kw, words, fmt):
+    _, text, code = _export(tmp_path, _model(**kw), fmt)
+    assert code == 2 and text == ""
+    err = capsys.readouterr().err.strip()
+    assert words in err and len(err.splitlines()) == 1

@@ -1,0 +1,238 @@
+"""``soakcal import`` of logs that keep the temperature: PX4 ULog, ArduPilot DataFlash, CSV,
+OpenAXES with TEMP. The binary logs are built in the test (tests/calibration/log_writers.py)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration import importers
+from calibration.errors import RecordingError
+from calibration.importers_cli import run_import
+from calibration.recording import read_recording
+from tests.calibration.log_writers import warmup_samples, write_dataflash, write_ulog
+
+G = 9.80665
+
+
+def _args(fmt: str, src: Path, out: Path, **kw: object) -> argparse.Namespace:
+    base = dict(format=fmt, raw=str(src), output=str(out), raw_samples=False,
+                min_static_s=None, threshold=None, window_s=None, trim_s=None)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_flight_log_keeps_the_temperature_of_every_sample(tmp_path, capsys, fmt, writer):
+    t_us, acc, temp = warmup_samples()
+    src = writer(tmp_path / f"log.{fmt}", t_us, acc, temp)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args(fmt, src, out)) == 0
+    rec = read_recording(out)
+    assert len(rec) == 400  # a warm-up is a time series: every sample is a row
+    np.testing.assert_allclose(rec.columns["sensor_c"], temp, atol=1e-6)
+    np.testing.assert_allclose(rec.raw_g, acc / G, atol=1e-6)
+    np.testing.assert_allclose(rec.t_s[:3], [0.0, 0.02, 0.04], atol=1e-9)
+    text = capsys.readouterr().out
+    assert "temperature (sensor_c): 30.00 .. 40.00 °C, 400 of 400 samples" in text
+    assert "wrote 400 raw sample rows" in text
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_flight_log_without_temperature_says_so(tmp_path, capsys, fmt, writer):
+    t_us, acc, _ = warmup_samples(n=100)
+    src = writer(tmp_path / f"log.{fmt}", t_us, acc, None)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args(fmt, src, out)) == 0
+    text = capsys.readouterr().out
+    expected = ("no sensor_accel temperature field; temperature left empty" if fmt == "ulog"
+                else "no IMU T field")
+    assert expected in text
+    assert "temperature columns empty" in text
+    assert not read_recording(out).has("sensor_c")
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_flight_log_instance_is_chosen_and_a_missing_one_is_refused(tmp_path, capsys, fmt,
+                                                                     writer):
+    t_us, acc, temp = warmup_samples(n=50)
+    src = writer(tmp_path / f"log.{fmt}", t_us, acc, temp, instances=2)
+    raw = importers.read_source(fmt, src, instance=1)
+    np.testing.assert_allclose(raw.acc_g[:, 0], (acc[:, 0] + 1.0) / G, atol=1e-6)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args(fmt, src, out, instance=3)) == 2
+    err = capsys.readouterr().err
+    assert "instance" in err and "--instance N" in err
+    assert err.count(str(src)) <= 1
+    assert not out.exists()
+
+
+def test_block_rows_average_samples_and_their_temperature(tmp_path, capsys):
+    t_us, acc, temp = warmup_samples(n=400, rate_hz=50.0)
+    src = write_ulog(tmp_path / "log.ulg", t_us, acc, temp)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("ulog", src, out, block_s=2.0)) == 0
+    rec = read_recording(out)
+    assert len(rec) == 4  # 8 s of samples in 2-s blocks
+    np.testing.assert_allclose(rec.columns["n"], [100] * 4)
+    np.testing.assert_allclose(rec.columns["sensor_c"], temp.reshape(4, 100).mean(axis=1),
+                               atol=1e-6)
+    np.testing.assert_allclose(rec.raw_g[:, 2], (acc[:, 2] / G).reshape(4, 100).mean(axis=1),
+                               atol=1e-7)
+    assert "wrote 4 rows (one per block)" in capsys.readouterr().out
+
+
+def test_dataflash_says_when_the_autopilot_already_compensated(tmp_path):
+    t_us, acc, temp = warmup_samples(n=20)
+    src = write_dataflash(tmp_path / "log.bin", t_us, acc, temp,
+                          params={"INS_TCAL1_ENABLE": 1.0, "INS_TCAL2_ENABLE": 0.0})
+    raw = importers.read_source("dataflash", src)
+    assert any("INS_TCAL1_ENABLE = 1 in this log" in n for n in raw.notes)
+
+
+@pytest.mark.parametrize("fmt", ["ulog", "dataflash"])
+def test_a_file_that_is_not_a_log_is_refused_with_its_kind(tmp_path, fmt):
+    src = tmp_path / "x.bin"
+    src.write_text("t_s,ax\n1,2\n")
+    with pytest.raises(RecordingError, match="not a readable|no IMU messages|no sensor_accel"):
+        importers.read_source(fmt, src)
+
+
+# --- csv -------------------------------------------------------------------------
+def _table(path: Path, header: str, rows: list[str]) -> Path:
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_csv_with_column_map_and_units_converts_to_g_and_celsius(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "ms;X;Y;Z;TF",
+                 ["0;0;0;1000;68", "10;0;0;1000;69.8", "20;2;0;1000;", "30;0;0;1000;71.6"])
+    out = tmp_path / "rec.csv"
+    args = _args("csv", src, out, columns="t=ms,ax=X,ay=Y,az=Z,temp=TF", accel_unit="mg",
+                 temp_unit="F", time_unit="ms")
+    assert run_import(args) == 0
+    rec = read_recording(out)
+    np.testing.assert_allclose(rec.t_s, [0.0, 0.01, 0.03])
+    np.testing.assert_allclose(rec.raw_g[:, 2], [1.0, 1.0, 1.0])
+    np.testing.assert_allclose(rec.columns["sensor_c"], [20.0, 21.0, 22.0])
+    text = capsys.readouterr().out
+    assert "temperature in °F → sensor_c (°C)" in text
+    # the row without a temperature is dropped, not filled in
+    assert "1 of 4 samples have no temperature: dropped" in text
+
+
+def test_csv_counts_and_kelvin(tmp_path):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
+                 ["0,100,-50,16484,300.15", "0.01,100,-50,16484,301.15"])
+    from calibration.importers_table import TableUnits
+
+    raw = importers.read_source("csv", src, units=TableUnits(
+        accel="counts", counts_per_g=16384.0, offset_counts=100.0, temp="K"))
+    np.testing.assert_allclose(raw.acc_g[0], [0.0, -150 / 16384, 1.0])
+    np.testing.assert_allclose(raw.temp_c, [27.0, 28.0])
+
+
+def test_csv_refuses_a_wrong_unit_and_names_the_likely_one(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
+                 ["0,0,0,9.81,25", "0.01,0,0,9.80,25"])
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("csv", src, out, accel_unit="g")) == 2
+    err = capsys.readouterr().err.strip()
+    assert "median |a| is 9.805 g, not about 1 g; it looks like m/s²" in err
+    assert "--accel-unit" in err and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+def test_csv_refuses_kelvin_read_as_celsius(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
+                 ["0,0,0,1,298.1", "0.01,0,0,1,298.2"])
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("csv", src, out, accel_unit="g")) == 2
+    err = capsys.readouterr().err
+    assert "it looks like kelvin" in err and "--temp-unit" in err
+
+
+def test_csv_needs_an_accel_unit_and_says_which(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az", ["0,0,0,1"])
+    assert run_import(_args("csv", src, tmp_path / "o.csv")) == 2
+    err = capsys.readouterr().err
+    assert "give --accel-unit (g, mg, m/s2, counts)" in err
+
+
+def test_csv_without_temperature_column_says_so(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az", ["0,0,0,1", "0.01,0,0,1"])
+    assert run_import(_args("csv", src, tmp_path / "o.csv", accel_unit="g")) == 0
+    assert "no temperature column 'temp_c' (--columns temp=NAME); temperature left empty" in (
+        capsys.readouterr().out)
+
+
+# --- openaxes TEMP ---------------------------------------------------------------
+def _openaxes(path: Path, with_temp: bool) -> Path:
+    head = "MAC;IMU;TIME;INDEX;ACCEL_ADXL355_0;ACCEL_ADXL355_1;ACCEL_ADXL355_2"
+    head += ";TEMP" if with_temp else ""
+    rows = []
+    for i in range(600):
+        row = f"aa;imu9;{1_000_000 + i * 10_000};{i};0.0;0.0;9.80665"
+        rows.append(row + (f";{512 * 2 + i // 300}" if with_temp else ""))
+    return _table(path, head, rows)
+
+
+def test_openaxes_temp_kept_only_with_its_conversion(tmp_path):
+    src = _openaxes(tmp_path / "oa.csv", with_temp=True)
+    raw = importers.read_source("openaxes", src)
+    assert raw.temp_c is None
+    assert any("TEMP column present but its unit is undocumented" in n for n in raw.notes)
+    raw = importers.read_source("openaxes", src, temp_c_per_count=1 / 512, temp_offset_c=23.0)
+    np.testing.assert_allclose(raw.temp_c[[0, 599]], [25.0, 25.0 + 1 / 512])
+
+
+def test_openaxes_without_temp_names_what_is_missing(tmp_path):
+    raw = importers.read_source("openaxes", _openaxes(tmp_path / "oa.csv", with_temp=False))
+    assert any("no TEMP column" in n for n in raw.notes)
+
+
+def test_the_command_line_wiring_reaches_the_table_reader(tmp_path, capsys):
+    """`soakcal import` as typed: every csv flag arrives where the reader needs it."""
+    from service.cli import main
+
+    src = _table(tmp_path / "t.txt", "time\tA\tB\tC\tDIE",
+                 ["0\t0\t0\t4096\t3000", "500\t4\t0\t4096\t3512", "1000\t0\t0\t4096\t4024"])
+    out = tmp_path / "rec.csv"
+    code = main(["import", "--format", "csv", str(src), "-o", str(out),
+                 "--columns", "t=time,ax=A,ay=B,az=C,temp=DIE", "--delimiter", "tab",
+                 "--accel-unit", "counts", "--counts-per-g", "4096",
+                 "--temp-unit", "counts", "--temp-c-per-count", "0.001953125",
+                 "--temp-offset-c", "23", "--time-unit", "ms"])
+    assert code == 0, capsys.readouterr().err
+    rec = read_recording(out)
+    np.testing.assert_allclose(rec.t_s, [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(rec.raw_g[1], [4 / 4096, 0.0, 1.0])
+    np.testing.assert_allclose(rec.columns["sensor_c"], [23 + 3000 / 512, 23 + 3512 / 512,
+                                                         23 + 4024 / 512])
+
+
+def test_the_command_line_instance_and_block_flags_reach_the_log_readers(tmp_path):
+    from service.cli import main
+
+    t_us, acc, temp = warmup_samples(n=200)
+    src = write_dataflash(tmp_path / "log.bin", t_us, acc, temp, instances=2)
+    out = tmp_path / "rec.csv"
+    assert main(["import", "--format", "dataflash", str(src), "-o", str(out),
+                 "--instance", "1", "--block-s", "1"]) == 0
+    rec = read_recording(out)
+    assert len(rec) == 4
+    np.testing.assert_allclose(rec.raw_g[0, 0], (acc[:50, 0].mean() + 1.0) / G, atol=1e-6)
+
+
+def test_warmup_noise_is_not_the_drift(tmp_path, capsys):
+    """A 70-s warm-up drifts 20 mg on z with 100 µg noise: the summary's noise is ~100 µg."""
+    t_us, acc, temp = warmup_samples(n=3500)
+    src = write_ulog(tmp_path / "log.ulg", t_us, acc, temp)
+    assert run_import(_args("ulog", src, tmp_path / "rec.csv")) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "noise per sample" in x)
+    assert "successive differences" in line
+    z_ug = float(line.split(" z ")[1])
+    assert 85.0 < z_ug < 115.0
