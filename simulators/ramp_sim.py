@@ -117,8 +117,8 @@ def simulate_ramp(
     n_rows = t_mid.size
     pos = np.arange(n_rows) % refs.shape[0]
     ref = refs[pos]
-    slope = np.interp(t_mid, bt[:-1] + 0.5 * np.diff(bt), np.sign(np.diff(bv)))
-    direction = _direction(np.sign(np.round(slope)), start=-1)
+    segment = np.clip(np.searchsorted(bt, t_mid, side="right") - 1, 0, bt.size - 2)
+    direction = _direction(np.sign(np.diff(bv))[segment], start=-1)
     air_row = np.interp(t_mid, grid, air)
     runs = []
     for truth, tau in zip(truths, die_tau_s, strict=True):
