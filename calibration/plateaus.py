@@ -116,7 +116,7 @@ def segment_recording(rec: Recording) -> Segmentation:
         step = find_plateaus(t, temp, noise_c, max_cost)
         for s in np.unique(step):
             idx = np.flatnonzero(step == s)
-            keep = longest_stable_prefix(t[idx], temp[idx], max_cost)
+            keep = longest_stable_prefix(t[idx], temp[idx], max_cost, noise_c)
             step[idx[keep:]] = -1
     # a plateau too short to hold a step fit is continuous rows, not a step
     for s in np.unique(step[step >= 0]):
@@ -167,10 +167,13 @@ def find_plateaus(t_s: np.ndarray, temp_c: np.ndarray, noise_c: float,
     return step
 
 
-def longest_stable_prefix(t_s: np.ndarray, temp_c: np.ndarray, max_cost_ug: float) -> int:
-    """Rows of the longest leading part of a run whose cost at the slope's point estimate is
-    within ``max_cost_ug`` (a run grown with the slope's lower bound may reach into the
-    next ramp: that end is trimmed off)."""
+def longest_stable_prefix(t_s: np.ndarray, temp_c: np.ndarray, max_cost_ug: float,
+                          noise_c: float = 0.0) -> int:
+    """Rows of the longest leading part of a run whose cost is within ``max_cost_ug`` (a run
+    grown with the slope's lower bound may reach into the next ramp: that end is trimmed
+    off). The cost here is the larger of the line's at its slope's point estimate and the
+    temperature's own rms about its mean less the channel noise (a flat start bending into
+    a ramp is not a line)."""
     t = np.asarray(t_s, float) - float(t_s[0])
     y = np.asarray(temp_c, float)
     s0 = np.arange(1, t.size + 1, dtype=float)
@@ -179,6 +182,9 @@ def longest_stable_prefix(t_s: np.ndarray, temp_c: np.ndarray, max_cost_ug: floa
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = np.where(sxx > 0, (sty - st * sy / s0) / sxx, 0.0)
         cost = TEMPCO_BOUND_UG_PER_C * np.abs(slope) * np.sqrt(np.clip(sxx, 0, None) / s0)
+        var = np.cumsum(y * y) / s0 - (sy / s0) ** 2
+        excess = TEMPCO_BOUND_UG_PER_C * np.sqrt(np.clip(var - noise_c**2, 0, None))
+    cost = np.maximum(cost, excess)
     ok = np.flatnonzero(cost <= max_cost_ug)
     return int(ok[-1] + 1) if ok.size else 0
 

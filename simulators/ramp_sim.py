@@ -15,7 +15,8 @@ Physics (one rig, several sensors on it):
   :mod:`calibration.thermal_plant` (``lag_series``), each sensor its own ``die_tau_s``;
 * the output: :class:`simulators.truth.SensorTruth` (Eq. 1 with cubic parameters of the
   die temperature, Eq. 8) plus its effects (``temperature_rate`` on the die's rate over
-  the capture, ``thermal_hysteresis`` with the chamber's direction: +1 heating, −1 cooling);
+  the capture, ``thermal_hysteresis`` with the die's own last excursion: +1 heating, −1
+  cooling, held while the die stands; −1 before the first, the rig having cooled to the start);
 * noise: averaged readings drawn from their sampling distribution (σ/√n), sd from a χ
   distribution; the temperature channel reads die + offset + noise/√n, optionally with
   extra per-row noise (``temp_row_noise_c``) and quantised (``temp_lsb_c``, 0.11 °C on
@@ -36,6 +37,9 @@ from calibration.schedules import table1
 from calibration.thermal_plant import DEFAULT_AIR_TAU_S, lag_series
 from simulators.effects import TemperatureRate, ThermalHysteresis
 from simulators.truth import Context, SensorTruth
+
+# The die counts as moving (its hysteresis direction set) above this rate: 0.01 °C/min.
+DIRECTION_RATE_C_PER_S = 0.01 / 60.0
 
 
 @dataclass(frozen=True)
@@ -117,8 +121,6 @@ def simulate_ramp(
     n_rows = t_mid.size
     pos = np.arange(n_rows) % refs.shape[0]
     ref = refs[pos]
-    segment = np.clip(np.searchsorted(bt, t_mid, side="right") - 1, 0, bt.size - 2)
-    direction = _direction(np.sign(np.diff(bv))[segment], start=-1)
     air_row = np.interp(t_mid, grid, air)
     runs = []
     for truth, tau in zip(truths, die_tau_s, strict=True):
@@ -126,6 +128,9 @@ def simulate_ramp(
         die_row = np.interp(t_mid, grid, die)
         rate = (np.interp(t_mid + capture_s / 2, grid, die)
                 - np.interp(t_mid - capture_s / 2, grid, die)) / capture_s
+        # the die's own last excursion (it, not the air, carries the sensor's history)
+        moving = np.where(np.abs(rate) > DIRECTION_RATE_C_PER_S, np.sign(rate), 0.0)
+        direction = _direction(moving, start=-1)
         ctx = Context(t_s=t_mid, die_c=die_row, air_c=air_row, die_rate_c_per_s=rate, ref_g=ref,
                       step=np.zeros(n_rows, int), direction=direction,
                       session=np.zeros(n_rows, int), n_samples=np.full(n_rows, float(n)),
