@@ -73,7 +73,7 @@ def ramp_report(model: ThermalModel, rec: Recording, seg: Segmentation, raw_g: n
         "segmentation": {"source": seg.source, "plateaus": len(seg.plateau_ids),
                          "plateau_rows": int(np.sum(seg.step >= 0)),
                          "continuous_rows": seg.continuous_rows},
-        "degree_heldout_chi2": {str(d): _r(s, 2) for d, s in scores.items()},
+        "degree_heldout_rms_ug": {str(d): _r(s, 3) for d, s in scores.items()},
         "chi2_red": _r(solution.chi2_red, 3),
         "rate_gain_ug_per_c_per_min": None if solution.rate_gain_ug is None else {
             "value": [_r(v, 2) for v in solution.rate_gain_ug],
@@ -163,8 +163,8 @@ def format_ramp_report(fit: ThermalFit) -> str:
         f"soakcal calibration of {r['recording']} ({r['rows']} rows), continuous temperature "
         f"(ramp): {seg['continuous_rows']} continuous rows, {seg['plateaus']} plateau(s)",
         f"mode: {m.mode} ({int(m.identifiable.sum())} of 12 SFEM parameters identifiable), "
-        f"method: {METHOD}, polynomial degree {m.degree} (held-out chi2 by degree: "
-        + ", ".join(f"{d}: {s}" for d, s in r["degree_heldout_chi2"].items())
+        f"method: {METHOD}, polynomial degree {m.degree} (held-out rms residual by degree: "
+        + ", ".join(f"{d}: {s:.2f} µg" for d, s in r["degree_heldout_rms_ug"].items())
         + f"), reduced chi2 {r['chi2_red']}",
         f"temperature: {m.temperature_conditioning}",
         f"valid range: {m.valid_c[0]:.2f} .. {m.valid_c[1]:.2f} °C",  # type: ignore[index]
