@@ -36,7 +36,7 @@ from calibration.recording import Recording
 from calibration.schedules import table1
 from calibration.thermal_plant import DEFAULT_AIR_TAU_S, lag_series
 from simulators.effects import TemperatureRate, ThermalHysteresis
-from simulators.truth import Context, SensorTruth
+from simulators.truth import Context, SensorTruth, averaged_readings
 
 # The die counts as moving (its hysteresis direction set) above this rate: 0.01 °C/min.
 DIRECTION_RATE_C_PER_S = 0.01 / 60.0
@@ -187,25 +187,14 @@ def _readings(truth: SensorTruth, ctx: Context, rng: np.random.Generator, pv_noi
               temp_row_noise_c: float, temp_lsb_c: float) -> dict[str, np.ndarray]:
     """Averaged raw readings and the two temperature columns for the rows of ``ctx``."""
     N = ctx.t_s.size
-    n = ctx.n_samples
-    ideal = truth.ideal_raw_g(ctx.ref_g, ctx.die_c)
-    temp_delta = np.zeros(N)
-    for eff in truth.effects:
-        ideal = ideal + eff.raw_delta_g(ctx, truth, rng)
-        temp_delta = temp_delta + eff.temperature_delta_c(ctx, rng)
-    sd1 = truth.sample_sd_g()
-    mean = ideal + rng.normal(size=(N, 3)) * (sd1 / np.sqrt(n))[:, None]
-    dof = np.maximum(n - 1, 1)[:, None]
-    sd = sd1 * np.sqrt(rng.chisquare(dof, (N, 3)) / dof)
-    sensor_c = (ctx.die_c + truth.temp_offset_c + temp_delta
-                + rng.normal(size=N) * truth.temp_noise_c / np.sqrt(n)
-                + rng.normal(0.0, temp_row_noise_c, N))
+    mean, sd, sensor_c = averaged_readings(truth, ctx, rng)
+    sensor_c = sensor_c + rng.normal(0.0, temp_row_noise_c, N)
     if temp_lsb_c > 0:
         sensor_c = np.round(sensor_c / temp_lsb_c) * temp_lsb_c
     return {
         "t_s": ctx.t_s, "chamber_c": ctx.air_c + rng.normal(0.0, pv_noise_c, N),
         "sensor_c": sensor_c,
         "ref_x": ctx.ref_g[:, 0], "ref_y": ctx.ref_g[:, 1], "ref_z": ctx.ref_g[:, 2],
-        "ax": mean[:, 0], "ay": mean[:, 1], "az": mean[:, 2], "n": np.asarray(n, float),
+        "ax": mean[:, 0], "ay": mean[:, 1], "az": mean[:, 2], "n": ctx.n_samples,
         "sd_x": sd[:, 0], "sd_y": sd[:, 1], "sd_z": sd[:, 2],
     }
