@@ -49,7 +49,13 @@ from calibration.plateaus import (
 )
 from calibration.recording import Recording
 from calibration.temperature_conditioning import condition_continuous, rate_corrected_raw_g
-from calibration.thermal import RANGE_MARGIN_C, ThermalFit, ThermalModel, _row_sigma
+from calibration.thermal import (
+    JOINT_MAX_JACOBIAN,
+    RANGE_MARGIN_C,
+    ThermalFit,
+    ThermalModel,
+    _row_sigma,
+)
 
 METHOD = "continuous"
 MAX_DEGREE = 5
@@ -165,6 +171,12 @@ def fit_continuous(
     elif g_local is None:
         g_local = 1.0
     _check_orientations(recording, mode)
+    n_cols = int(np.sum(free_parameters(mode))) * (max_degree + 1) + 6
+    if len(recording) * 3 * n_cols > JOINT_MAX_JACOBIAN:
+        raise CalibrationError(
+            f"{len(recording)} rows are too many for the continuous fit (a "
+            f"{3 * len(recording)}x{n_cols} Jacobian): average the raw samples into one row "
+            f"per capture (n and sd_x/sd_y/sd_z columns)")
 
     cond = condition_continuous(recording.t_s, recording.temperature_c(), seg.step)
     row_c, rate = cond.row_c, np.asarray(cond.row_rate_c_per_min, float)
@@ -180,9 +192,7 @@ def fit_continuous(
 
     lo, hi = float(np.min(row_c)), float(np.max(row_c))
     centre, scale = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1.0)
-    free = np.ones(sfem.N_PARAMS, bool)
-    if mode == "norm":
-        free[sfem.MISALIGN] = False
+    free = free_parameters(mode)
     direction = last_direction(_legs(rate, DIRECTION_RATE_C_PER_MIN))
     terms = np.column_stack([rate, direction]) if fit_rate else np.zeros((len(rate), 0))
     prob = _Problem(raw, ref, sigma, (row_c - centre) / scale, terms, g_local, free)
@@ -244,6 +254,14 @@ def fit_continuous(
                          scores, notes, fit_rate)
     return ThermalFit(model, [], report, row_c, np.zeros(len(recording), int), notes,
                       used_raw)
+
+
+def free_parameters(mode: str) -> np.ndarray:
+    """The SFEM parameters a fit can see: all 12 in reference mode, M not in norm mode."""
+    free = np.ones(sfem.N_PARAMS, bool)
+    if mode == "norm":
+        free[sfem.MISALIGN] = False
+    return free
 
 
 def _legs(rate_c_per_min: np.ndarray, threshold: float = LEG_RATE_C_PER_MIN) -> np.ndarray:

@@ -15,6 +15,7 @@ from calibration.continuous import fit_continuous
 from calibration.model_file import load_model
 from calibration.plateaus import segment_recording
 from calibration.recording import write_recording
+from calibration.temperature_conditioning import condition_continuous
 from simulators.ramp_sim import RampProfile, RampRun, ramp_twin_sensors, simulate_ramp
 from simulators.truth import SensorTruth
 
@@ -116,3 +117,15 @@ def test_a_one_way_ramp_says_rate_sensitivity_was_not_identified() -> None:
     fit = fit_continuous(run.recording, segment_recording(run.recording))
     assert fit.report["rate_gain_ug_per_c_per_min"] is None
     assert any("one way only" in s for s in fit.report["identified"]["not_identified"])
+
+
+def test_per_row_conditioning_averages_a_noisy_quantised_channel_on_a_ramp() -> None:
+    t = np.arange(600) * 15.2
+    die = -40.0 + t / 60.0  # 1 °C/min
+    rng = np.random.default_rng(3)
+    read = np.round((die + rng.normal(0, 0.1, t.size)) / 0.11) * 0.11
+    cond = condition_continuous(t, read, np.full(t.size, -1))
+    inner = slice(40, -40)  # away from the run's ends, where the window is one-sided
+    assert np.sqrt(np.mean((cond.row_c - die)[inner] ** 2)) < 0.04  # raw: ~0.105 °C
+    # the rate's noise × a 20 µg per °C/min rate gain: < 1 µg per row
+    assert np.sqrt(np.mean((cond.row_rate_c_per_min[inner] - 1.0) ** 2)) < 0.04
