@@ -20,7 +20,7 @@ projected σ (norm mode, Eq. 3; M not identifiable).
   direction-dependent offset (``thermal_hysteresis``) is ±h on the legs: at one ramp rate
   it looks exactly like k·rate and is absorbed by it (the report says that too).
 * **Degree**: by held-out error. Rows are split into folds by 2 °C temperature bands
-  (fold = band index mod 5); each degree 1…:data:`MAX_DEGREE` is refitted without each
+  (fold = the occupied band's rank mod 5); each degree 1…:data:`MAX_DEGREE` is refitted without each
   fold and scored by the fold's weighted residuals; the lowest held-out χ² wins (reported
   as an rms residual in µg).
 * **Valid range**: the conditioned die temperatures covered, widened by the soak
@@ -198,9 +198,11 @@ def fit_continuous(
     prob = _Problem(raw, ref, sigma, (row_c - centre) / scale, terms, g_local, free)
     _check_rank(prob, recording)
 
-    bands = np.floor((row_c - lo) / CV_BAND_C).astype(int)
-    folds = bands % CV_FOLDS
-    n_bands = int(np.unique(bands).size)
+    # occupied bands numbered in order, so soak-like steps 10 °C apart spread over the folds
+    # (band index mod 5 would put every step at a multiple of 10 °C into one fold)
+    _, rank = np.unique(np.floor((row_c - lo) / CV_BAND_C).astype(int), return_inverse=True)
+    folds = rank.ravel() % CV_FOLDS
+    n_bands = int(rank.max()) + 1
     top = max(1, min(max_degree, n_bands - 1))
     scores: dict[int, float] = {}
     full: dict[int, np.ndarray] = {}

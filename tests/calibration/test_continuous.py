@@ -129,3 +129,18 @@ def test_per_row_conditioning_averages_a_noisy_quantised_channel_on_a_ramp() -> 
     assert np.sqrt(np.mean((cond.row_c - die)[inner] ** 2)) < 0.04  # raw: ~0.105 °C
     # the rate's noise × a 20 µg per °C/min rate gain: < 1 µg per row
     assert np.sqrt(np.mean((cond.row_rate_c_per_min[inner] - 1.0) ** 2)) < 0.04
+
+
+def test_a_short_soak_whose_steps_still_move_is_fitted_continuously_within_noise() -> None:
+    # 20 min soaks, die τ = 600 s: the die still moves ~0.6 °C over each step's positions,
+    # so the steps are not plateaus; steps 10 °C apart must still spread over the folds
+    from simulators.campaign_sim import RigPhysics, simulate_campaign
+
+    truth = SensorTruth.adxl355_typical(12)
+    rec = simulate_campaign(truth, (-20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0), soak_min=20.0,
+                            seed=13, physics=RigPhysics(die_tau_s=600.0))
+    seg = segment_recording(rec)
+    assert seg.continuous_rows > 0.5 * len(rec)
+    fit = fit_continuous(rec, seg)
+    assert fit.model.degree >= 2
+    assert heldout_ratio(fit.model, truth) < 1.10
