@@ -55,6 +55,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
         if seg.is_continuous:
             fit = fit_continuous(rec, seg, g_local=None if gravity is None else gravity.g,
                                  rate_gain_ug_per_c_per_min=rate_gain)
+            if getattr(args, "method", None):
+                note = (f"--method {method} applies to step fits; this recording has rows "
+                        "on no plateau and was fitted continuously")
+                fit.notes.append(note)
+                fit.report["notes"].append(note)
         else:
             fit = fit_campaign(rec, method=method,
                                g_local=None if gravity is None else gravity.g,

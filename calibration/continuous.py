@@ -112,7 +112,8 @@ class _Problem:
         """(N,3) the extra terms' offsets of the raw output, g."""
         return self.terms @ extra_ug * 1e-6
 
-    def _eval(self, q: np.ndarray, n_coef: int, jac: bool):  # noqa: ANN202
+    def _eval(self, q: np.ndarray, n_coef: int, jac: bool
+              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         c, extra = self.unpack(q, n_coef)
         V = np.vander(self.x, n_coef, increasing=True)
         raw = self.raw - self.offsets_g(extra)
@@ -246,11 +247,13 @@ def fit_continuous(
             [float(v) for v in np.asarray(rate_gain_ug_per_c_per_min, float).reshape(3)],
             "rate_gain_fitted_ug_per_c_per_min": None if solution.rate_gain_ug is None
             else [float(v) for v in solution.rate_gain_ug],
+            "hysteresis_fitted_ug": None if solution.hysteresis_ug is None
+            else [float(v) for v in solution.hysteresis_ug],
             "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
         },
     )
     used_raw = raw - prob.offsets_g(prob.unpack(q, degree + 1)[1])
-    from calibration.ramp_report import ramp_report  # the report needs the model
+    from calibration.ramp_report import ramp_report  # it imports this module's constants
 
     report = ramp_report(model, recording, seg, used_raw, row_c, rate, legs, solution,
                          scores, notes, fit_rate)
