@@ -73,6 +73,8 @@ def ramp_report(model: ThermalModel, rec: Recording, seg: Segmentation, raw_g: n
         "segmentation": {"source": seg.source, "plateaus": len(seg.plateau_ids),
                          "plateau_rows": int(np.sum(seg.step >= 0)),
                          "continuous_rows": seg.continuous_rows},
+        "plateaus": [_plateau_row(s, seg, row_c, raw_g, cal, resid, orient, model.g_local)
+                     for s in seg.plateau_ids],
         "degree_heldout_rms_ug": {str(d): _r(s, 3) for d, s in scores.items()},
         "chi2_red": _r(solution.chi2_red, 3),
         "rate_gain_ug_per_c_per_min": None if solution.rate_gain_ug is None else {
@@ -86,6 +88,19 @@ def ramp_report(model: ThermalModel, rec: Recording, seg: Segmentation, raw_g: n
         "notes": list(notes),
         "steps": [],
     }
+
+
+def _plateau_row(step: int, seg: Segmentation, row_c: np.ndarray, raw_g: np.ndarray,
+                 cal: np.ndarray, resid: np.ndarray, orient: np.ndarray,
+                 g_local: float) -> dict[str, Any]:
+    """A plateau of a mixed recording as a Table 6 row (its rows fitted with all the others)."""
+    m = seg.step == step
+    return {"step": int(step), "temperature_c": _r(float(np.mean(row_c[m])), 3),
+            "rows": int(m.sum()), "positions": int(np.unique(orient[m]).size),
+            "rmse_before_mg": _r(norm_rmse_ug(raw_g[m], g_local) / 1e3),
+            "rmse_after_mg": _r(norm_rmse_ug(cal[m], g_local) / 1e3),
+            "rmse_vector_after_mg": None if resid.shape[1] == 1 else
+            _r(float(np.sqrt(np.mean(resid[m] ** 2))) * 1e3)}
 
 
 def _legs_agreement(resid: np.ndarray, m: np.ndarray, legs: np.ndarray) -> dict[str, Any] | None:
@@ -187,6 +202,14 @@ def format_ramp_report(fit: ThermalFit) -> str:
             cells.append(f"{b['rmse_vector_after_mg']:.4f} mg")
         cells.append(leg_txt)
         lines.append("  ".join(c.rjust(w) for c, w in zip(cells, _WIDTHS, strict=False)))
+    if r["plateaus"]:
+        lines += ["", "plateaus (steps of the recording; fitted with every other row):"]
+        for p in r["plateaus"]:
+            vec = "" if p["rmse_vector_after_mg"] is None else \
+                f", vector after {p['rmse_vector_after_mg']:.4f} mg"
+            lines.append(f"  step {p['step']}: {p['temperature_c']:.2f} °C, {p['rows']} rows, "
+                         f"{p['positions']} positions, |g| RMSE before "
+                         f"{p['rmse_before_mg']:.3f} mg, after {p['rmse_after_mg']:.4f} mg{vec}")
     ident = r["identified"]
     lines.append("")
     lines += [f"identified: {s}" for s in ident["identified"]]

@@ -144,3 +144,18 @@ def test_a_short_soak_whose_steps_still_move_is_fitted_continuously_within_noise
     fit = fit_continuous(rec, seg)
     assert fit.model.degree >= 2
     assert heldout_ratio(fit.model, truth) < 1.10
+
+
+def test_a_mixed_recording_reports_its_soaks_as_steps(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    truths, taus = ramp_twin_sensors(1, 7)
+    mixed = RampProfile(start_c=-20.0, peak_c=40.0, end_c=20.0, edge_hold_min=30.0)
+    run = simulate_ramp(truths, taus, mixed, seed=8)[0]
+    src = tmp_path / "mixed.csv"
+    write_recording(src, run.recording)
+    assert _calibrate(src, tmp_path / "m.json", json=True) == 0
+    doc = json.loads(capsys.readouterr().out)
+    temps = sorted(p["temperature_c"] - run.truth.temp_offset_c for p in doc["plateaus"])
+    assert temps and abs(temps[0] + 20.0) < 0.5 and abs(temps[-1] - 40.0) < 0.5
+    assert all(p["rows"] >= 5 and p["rmse_after_mg"] < 0.03 for p in doc["plateaus"])
+    assert doc["segmentation"]["continuous_rows"] > 0
