@@ -17,9 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.continuous import METHOD as CONTINUOUS
+from calibration.continuous import fit_continuous
 from calibration.errors import CalibrationError, RecordingError
 from calibration.gravity import NOT_IDENTIFIABLE_NOTE, GravityError, LocalGravity, from_arguments
 from calibration.model_file import load_model_file, save_model
+from calibration.plateaus import segment_recording
 from calibration.recording import Recording, atomic_write_text, read_recording
 from calibration.temperature_conditioning import (
     CompensationConditioning,
@@ -48,8 +51,19 @@ def run_calibrate(args: argparse.Namespace) -> int:
         return _fail(f"--rate-gain-ug-per-c-per-min: {exc}")
     try:
         rec = read_recording(args.recording)
-        fit = fit_campaign(rec, method=method, g_local=None if gravity is None else gravity.g,
-                           rate_gain_ug_per_c_per_min=rate_gain)
+        seg = segment_recording(rec)  # steps only where the die stood still (plateaus.py)
+        if seg.is_continuous:
+            fit = fit_continuous(rec, seg, g_local=None if gravity is None else gravity.g,
+                                 rate_gain_ug_per_c_per_min=rate_gain)
+            if getattr(args, "method", None):
+                note = (f"--method {method} applies to step fits; this recording has rows "
+                        "on no plateau and was fitted continuously")
+                fit.notes.append(note)
+                fit.report["notes"].append(note)
+        else:
+            fit = fit_campaign(rec, method=method,
+                               g_local=None if gravity is None else gravity.g,
+                               rate_gain_ug_per_c_per_min=rate_gain)
     except RecordingError as exc:
         return _fail(str(exc))
     except CalibrationError as exc:
@@ -60,6 +74,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except OSError as exc:
         return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
 
+    if fit.model.method == CONTINUOUS:
+        return _report_continuous(args, fit)
     from calibration import holdout, report  # matplotlib is only needed from here on
 
     report.add_sections(fit, rec)  # coefficients, and Table 5 for reference recordings
@@ -80,6 +96,22 @@ def run_calibrate(args: argparse.Namespace) -> int:
         print(f"\nmodel written to {args.output}")
         for p in figures:
             print(f"figure: {p}")
+    return EXIT_OK
+
+
+def _report_continuous(args: argparse.Namespace, fit: ThermalFit) -> int:
+    """The ramp fit's report (calibration/ramp_report.py): per temperature band, not per step."""
+    from calibration.ramp_report import format_ramp_report
+
+    if getattr(args, "report_dir", None):
+        fit.report.setdefault("notes", []).append(
+            "figures are drawn for soak (step) fits only; none for a continuous fit")
+    if getattr(args, "json", False):
+        doc = dict(fit.report, model_file=str(args.output), figures=[])
+        print(json.dumps(doc, indent=2, allow_nan=False))
+    else:
+        print(format_ramp_report(fit))
+        print(f"\nmodel written to {args.output}")
     return EXIT_OK
 
 

@@ -136,9 +136,14 @@ SMOOTH_DESCRIPTION = (
 
 
 def smooth_over_time(
-    t_s: np.ndarray, temperature_c: np.ndarray, window_s: float, jump_c: float = 1.0
+    t_s: np.ndarray, temperature_c: np.ndarray, window_s: float, jump_c: float = 1.0,
+    degree: int = 1,
 ) -> np.ndarray:
     """Each row's temperature from a local straight line over ±window_s/2 (for compensation).
+
+    ``degree`` 2 fits a local parabola instead: at a ramp's turnaround the die's rate
+    reverses within the window and a line there is biased by ~T''·W²/24 (0.1 °C for
+    W = 300 s); a parabola is not, at ~1.5× the line's noise.
 
     The die temperature moves slowly (time constant of minutes), so a local line
     over a few minutes keeps ramps (a cooling run, seed Fig. 11) while averaging
@@ -163,17 +168,63 @@ def smooth_over_time(
         hi = np.searchsorted(ts, ts + half, side="right")
         for j in range(idx.size):
             tt, yy = ts[lo[j] : hi[j]], ys[lo[j] : hi[j]]
-            if tt.size < 3 or np.ptp(tt) <= 0:
+            if tt.size < degree + 2 or np.ptp(tt) <= 0:
                 out[idx[j]] = float(np.median(yy))
                 continue
-            coef = np.polyfit(tt - ts[j], yy, 1)
+            coef = np.polyfit(tt - ts[j], yy, degree)
             res = yy - np.polyval(coef, tt - ts[j])
             sd = _robust_sd(res)
             keep = np.abs(res) <= 4.0 * sd if sd > 0 else np.ones(tt.size, bool)
-            if keep.sum() >= 3 and not keep.all():
-                coef = np.polyfit(tt[keep] - ts[j], yy[keep], 1)
-            out[idx[j]] = float(coef[1])
+            if keep.sum() >= degree + 2 and not keep.all():
+                coef = np.polyfit(tt[keep] - ts[j], yy[keep], degree)
+            out[idx[j]] = float(coef[-1])
     return out
+
+
+RAMP_WINDOW_S = 600.0
+RAMP_DESCRIPTION = (
+    "plateau rows: " + DESCRIPTION + "; continuous rows: robust local parabola of "
+    "temperature vs time over +/-{half:g} s within each continuous run, the row's rate "
+    "its time derivative"
+)
+
+
+def condition_continuous(
+    t_s: np.ndarray, temperature_c: np.ndarray, steps: np.ndarray,
+    window_s: float = RAMP_WINDOW_S,
+) -> ConditionedTemperature:
+    """Per-row temperature and rate of a recording with plateaus (``steps`` ≥ 0) and
+    continuous rows (−1): plateaus as :func:`condition_temperature`, continuous runs by
+    :func:`smooth_over_time` with a parabola (degree 2; the window several rows wide so a
+    0.1 °C, 0.11 °C-quantised channel averages down, and short against the die's
+    minutes-long time constant). A run's jump threshold is 5× its median row-to-row
+    change (at least 1 °C), so a fast ramp is not cut at every row.
+    """
+    t = np.asarray(t_s, float)
+    temp = np.asarray(temperature_c, float)
+    steps = np.asarray(steps)
+    on = steps >= 0
+    row_c = temp.copy()
+    rate = np.zeros_like(temp)
+    step_c: dict[int, float] = {}
+    noise: dict[int, float] = {}
+    rejected = 0
+    if on.any():
+        cond = condition_temperature(t[on], temp[on], steps[on])
+        row_c[on] = cond.row_c
+        rate[on] = cond.row_rate_c_per_min if cond.row_rate_c_per_min is not None else 0.0
+        step_c, noise, rejected = cond.step_c, cond.step_noise_c, cond.rejected_rows
+    run = np.cumsum(np.r_[True, on[1:] != on[:-1]])
+    for r in np.unique(run[~on]):
+        idx = np.flatnonzero(run == r)
+        jump = max(1.0, 5.0 * float(np.median(np.abs(np.diff(temp[idx]))))) \
+            if idx.size > 1 else 1.0
+        row_c[idx] = smooth_over_time(t[idx], temp[idx], window_s, jump_c=jump, degree=2)
+        if idx.size > 1 and np.ptp(t[idx]) > 0:
+            rate[idx] = 60.0 * np.gradient(row_c[idx], t[idx])
+    return ConditionedTemperature(row_c, step_c, noise, rejected,
+                                  RAMP_DESCRIPTION.format(half=window_s / 2),
+                                  row_rate_c_per_min=rate)
 
 
 # --- conditioning at compensation time (issue 11: "right by default") ----------

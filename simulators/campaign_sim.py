@@ -30,7 +30,7 @@ from calibration.thermal_plant import (
     rate_limited,
 )
 from service.engine import plan
-from simulators.truth import Context, SensorTruth
+from simulators.truth import Context, SensorTruth, averaged_readings
 
 DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 10))
 
@@ -233,17 +233,7 @@ def readings_to_recording(
     """Averaged raw readings + temperatures for each reading of ``ctx``, as a v1 Recording."""
     N = ctx.t_s.size
     n = ctx.n_samples
-    ideal = truth.ideal_raw_g(ctx.ref_g, ctx.die_c)
-    temp_delta = np.zeros(N)
-    for eff in truth.effects:
-        ideal = ideal + eff.raw_delta_g(ctx, truth, rng)
-        temp_delta = temp_delta + eff.temperature_delta_c(ctx, rng)
-    sd1 = np.sqrt(truth.sample_sd_g() ** 2 + ctx.vib_sd_g**2)  # per-sample sd incl. vibration
-    mean = ideal + rng.normal(size=(N, 3)) * (sd1 / np.sqrt(n))[:, None]
-    sd = sd1[:, None] * np.sqrt(rng.chisquare(np.maximum(n - 1, 1)[:, None], (N, 3)) /
-                                np.maximum(n - 1, 1)[:, None])
-    sensor_c = (ctx.die_c + truth.temp_offset_c + temp_delta
-                + rng.normal(size=N) * truth.temp_noise_c / np.sqrt(n))
+    mean, sd, sensor_c = averaged_readings(truth, ctx, rng)
     cols: dict[str, np.ndarray] = {
         "t_s": ctx.t_s,
         "step": ctx.step.astype(float),

@@ -167,6 +167,29 @@ class SensorTruth:
         return die_c + self.temp_offset_c + rng.normal(0.0, self.temp_noise_c, n)
 
 
+def averaged_readings(truth: SensorTruth, ctx: Context, rng: np.random.Generator
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Averaged raw readings (N,3), their sample sd (N,3) and the temperature channel (N,)
+    for the readings of ``ctx``: base model plus effects, then noise drawn from the
+    sampling distribution of a mean of n samples (σ/√n; sd from a χ distribution; the
+    channel's noise per sample over √n), exact for white noise and ~200× faster than
+    drawing every sample. The twins' one way to make a reading (offline soak, ramp)."""
+    N = ctx.t_s.size
+    n = ctx.n_samples
+    ideal = truth.ideal_raw_g(ctx.ref_g, ctx.die_c)
+    temp_delta = np.zeros(N)
+    for eff in truth.effects:
+        ideal = ideal + eff.raw_delta_g(ctx, truth, rng)
+        temp_delta = temp_delta + eff.temperature_delta_c(ctx, rng)
+    sd1 = np.sqrt(truth.sample_sd_g() ** 2 + ctx.vib_sd_g**2)  # per-sample sd incl. vibration
+    mean = ideal + rng.normal(size=(N, 3)) * (sd1 / np.sqrt(n))[:, None]
+    sd = sd1[:, None] * np.sqrt(rng.chisquare(np.maximum(n - 1, 1)[:, None], (N, 3)) /
+                                np.maximum(n - 1, 1)[:, None])
+    sensor_c = (ctx.die_c + truth.temp_offset_c + temp_delta
+                + rng.normal(size=N) * truth.temp_noise_c / np.sqrt(n))
+    return mean, sd, sensor_c
+
+
 def static_context(
     ref_g: np.ndarray, die_c: np.ndarray, t_s: np.ndarray, n: int | np.ndarray
 ) -> Context:

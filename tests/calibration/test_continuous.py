@@ -1,0 +1,161 @@
+"""Continuous-temperature (ramp) fit and its calibrate dispatch (calibration/continuous.py)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration import sfem
+from calibration.cli import run_calibrate, run_compensate
+from calibration.continuous import fit_continuous
+from calibration.model_file import load_model
+from calibration.plateaus import segment_recording
+from calibration.recording import write_recording
+from calibration.temperature_conditioning import condition_continuous
+from simulators.ramp_sim import RampProfile, RampRun, ramp_twin_sensors, simulate_ramp
+from simulators.truth import SensorTruth
+
+SHORT = RampProfile(start_c=-20.0, peak_c=40.0, end_c=20.0, rate_c_per_min=1.0)
+HELDOUT_C = (-15.0, 5.0, 25.0, 35.0)
+
+
+@pytest.fixture(scope="module")
+def ramp() -> RampRun:
+    truths, taus = ramp_twin_sensors(1, 5, rate_ug_per_c_per_min=20.0, hysteresis_ug=15.0)
+    return simulate_ramp(truths, taus, SHORT, seed=6, temp_row_noise_c=0.1, temp_lsb_c=0.11)[0]
+
+
+def heldout_ratio(model: object, truth: SensorTruth, seed: int = 9) -> float:
+    """RMS vector error of the model over the noise-limited oracle (true parameters at the
+    true die temperature) on fresh static readings at HELDOUT_C, 60 random orientations each."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(60 * len(HELDOUT_C), 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    die = np.repeat(HELDOUT_C, 60)
+    base = SensorTruth(coeffs=truth.coeffs, temp_offset_c=truth.temp_offset_c)
+    raw = base.ideal_raw_g(v, die) + rng.normal(size=v.shape) * base.sample_sd_g() / np.sqrt(200)
+    cal = model.compensate(raw, die + base.temp_offset_c)  # type: ignore[attr-defined]
+    oracle = sfem.forward(base.params_vector_at(die), raw)
+    return float(np.sqrt(np.sum((cal - v) ** 2) / np.sum((oracle - v) ** 2)))
+
+
+def _calibrate(rec_path: Path, out: Path, **kw: object) -> int:
+    ns = argparse.Namespace(recording=str(rec_path), output=str(out), json=False,
+                            report_dir=None, method=None)
+    for k, v in kw.items():
+        setattr(ns, k, v)
+    return run_calibrate(ns)
+
+
+def test_the_continuous_fit_recovers_truth_within_noise(ramp: RampRun) -> None:
+    fit = fit_continuous(ramp.recording, segment_recording(ramp.recording))
+    assert fit.model.method == "continuous" and fit.model.identifiable.all()
+    assert heldout_ratio(fit.model, ramp.truth) < 1.10
+    lo, hi = fit.model.valid_c  # the die temperatures covered (±1 °C)
+    assert lo == pytest.approx(ramp.die_c.min() + ramp.truth.temp_offset_c, abs=1.2)
+    assert hi == pytest.approx(ramp.die_c.max() + ramp.truth.temp_offset_c, abs=1.2)
+    k_true = ramp.truth.effects[0].k_g_per_c_per_s / 60.0 * 1e6  # µg per °C/min
+    h_true = ramp.truth.effects[1].h_g * 1e6
+    k = np.array(fit.report["rate_gain_ug_per_c_per_min"]["value"])
+    h = np.array(fit.report["hysteresis_ug"]["value"])
+    k_se = np.array(fit.report["rate_gain_ug_per_c_per_min"]["stderr"])
+    assert np.all(np.abs(k + h - (k_true + h_true)) < 5 * k_se + 3.0)  # their sum at 1 °C/min
+
+
+def test_calibrate_on_a_ramp_exits_0_with_a_model_near_the_noise(
+        ramp: RampRun, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    src, out = tmp_path / "ramp.csv", tmp_path / "model.json"
+    write_recording(src, ramp.recording)
+    assert _calibrate(src, out) == 0
+    text = capsys.readouterr().out
+    assert "continuous temperature (ramp)" in text and "Band (°C)" in text
+    assert "-20..-10" in text and "identified: rate sensitivity k" in text
+    model = load_model(out)
+    assert model.method == "continuous"
+    assert heldout_ratio(model, ramp.truth) < 1.10
+    comp = tmp_path / "comp.csv"
+    # each row's own reading: the default causal filter overshoots the die at the turnaround
+    ns = argparse.Namespace(model=str(out), recording=str(src), output=str(comp),
+                            extrapolate=False, raw_temperature=True)
+    assert run_compensate(ns) == 0
+    assert "cx" in comp.read_text().splitlines()[0]
+
+
+def test_calibrate_json_reports_bands_and_legs(ramp: RampRun, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture) -> None:
+    src = tmp_path / "ramp.csv"
+    write_recording(src, ramp.recording)
+    assert _calibrate(src, tmp_path / "m.json", json=True) == 0
+    doc = json.loads(capsys.readouterr().out)
+    both = [b for b in doc["bands"] if b["legs"] is not None]
+    assert both and all(b["band_c"][0] >= 10.0 for b in both)  # 20..40 °C was crossed both ways
+    assert all(len(b["legs"]["difference_se_ug"]) == 3 for b in both)
+    assert doc["segmentation"]["continuous_rows"] > 0.9 * doc["rows"]
+
+
+def test_a_ramp_over_too_few_orientations_is_refused(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture) -> None:
+    truths, taus = ramp_twin_sensors(1, 2)
+    schedule = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    run = simulate_ramp(truths, taus, SHORT, seed=3, schedule=schedule)[0]
+    src, out = tmp_path / "three.csv", tmp_path / "m.json"
+    write_recording(src, run.recording)
+    assert _calibrate(src, out) == 2
+    err = capsys.readouterr().err
+    assert "only 3 distinct orientation(s)" in err and "needs at least 5" in err
+    assert not out.exists()
+
+
+def test_a_one_way_ramp_says_rate_sensitivity_was_not_identified() -> None:
+    truths, taus = ramp_twin_sensors(1, 4)
+    one_way = RampProfile(start_c=-20.0, peak_c=40.0, end_c=40.0)
+    run = simulate_ramp(truths, taus, one_way, seed=5)[0]
+    fit = fit_continuous(run.recording, segment_recording(run.recording))
+    assert fit.report["rate_gain_ug_per_c_per_min"] is None
+    assert any("one way only" in s for s in fit.report["identified"]["not_identified"])
+
+
+def test_per_row_conditioning_averages_a_noisy_quantised_channel_on_a_ramp() -> None:
+    t = np.arange(600) * 15.2
+    die = -40.0 + t / 60.0  # 1 °C/min
+    rng = np.random.default_rng(3)
+    read = np.round((die + rng.normal(0, 0.1, t.size)) / 0.11) * 0.11
+    cond = condition_continuous(t, read, np.full(t.size, -1))
+    inner = slice(40, -40)  # away from the run's ends, where the window is one-sided
+    assert np.sqrt(np.mean((cond.row_c - die)[inner] ** 2)) < 0.04  # raw: ~0.105 °C
+    # the rate's noise × a 20 µg per °C/min rate gain: < 1 µg per row
+    assert np.sqrt(np.mean((cond.row_rate_c_per_min[inner] - 1.0) ** 2)) < 0.04
+
+
+def test_a_short_soak_whose_steps_still_move_is_fitted_continuously_within_noise() -> None:
+    # 20 min soaks, die τ = 600 s: the die still moves ~0.6 °C over each step's positions,
+    # so the steps are not plateaus; steps 10 °C apart must still spread over the folds
+    from simulators.campaign_sim import RigPhysics, simulate_campaign
+
+    truth = SensorTruth.adxl355_typical(12)
+    rec = simulate_campaign(truth, (-20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0), soak_min=20.0,
+                            seed=13, physics=RigPhysics(die_tau_s=600.0))
+    seg = segment_recording(rec)
+    assert seg.continuous_rows > 0.5 * len(rec)
+    fit = fit_continuous(rec, seg)
+    assert fit.model.degree >= 2
+    assert heldout_ratio(fit.model, truth) < 1.10
+
+
+def test_a_mixed_recording_reports_its_soaks_as_steps(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    truths, taus = ramp_twin_sensors(1, 7)
+    mixed = RampProfile(start_c=-20.0, peak_c=40.0, end_c=20.0, edge_hold_min=30.0)
+    run = simulate_ramp(truths, taus, mixed, seed=8)[0]
+    src = tmp_path / "mixed.csv"
+    write_recording(src, run.recording)
+    assert _calibrate(src, tmp_path / "m.json", json=True) == 0
+    doc = json.loads(capsys.readouterr().out)
+    temps = sorted(p["temperature_c"] - run.truth.temp_offset_c for p in doc["plateaus"])
+    assert temps and abs(temps[0] + 20.0) < 0.5 and abs(temps[-1] - 40.0) < 0.5
+    assert all(p["rows"] >= 5 and p["rmse_after_mg"] < 0.03 for p in doc["plateaus"])
+    assert doc["segmentation"]["continuous_rows"] > 0
