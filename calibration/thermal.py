@@ -84,6 +84,10 @@ class ThermalModel:
     notes: list[str] = field(default_factory=list)
     provenance: dict[str, Any] = field(default_factory=dict)
     model_version: str = MODEL_VERSION
+    # Which parameters the data determined and which were held, each with why
+    # (calibration/gate.py decides; the model file and the report say it).
+    fitted: dict[str, str] = field(default_factory=dict)
+    held: dict[str, str] = field(default_factory=dict)
 
     @property
     def degree(self) -> int:
@@ -292,8 +296,8 @@ def fit_campaign(
         fits.append((int(s), idx, fr))
     if not fits:
         raise NotIdentifiable(
-            f"{recording.path}: no temperature step has enough distinct positions for an "
-            f"SFEM fit ({mode} mode needs {'4' if mode == 'reference' else '10'} or more)"
+            f"no temperature step has enough distinct orientations for an SFEM fit ({mode} "
+            f"mode needs {'4' if mode == 'reference' else '10'} or more)"
         )
     step_temps = np.array(
         [cond.step_c.get(s, math.nan) if cond else math.nan for s, _, _ in fits]
@@ -312,7 +316,12 @@ def fit_campaign(
         lo, hi = float(np.min(step_temps)), float(np.max(step_temps))
         centre = 0.5 * (lo + hi)
         scale = max(0.5 * (hi - lo), 1.0)
-        valid_c: tuple[float, float] | None = (lo - RANGE_MARGIN_C, hi + RANGE_MARGIN_C)
+        # The data's own span is always valid: a reading hotter than its step's mean is
+        # still inside what the model was fitted on.
+        row_t = recording.temperature_c()
+        valid_c: tuple[float, float] | None = (
+            min(lo - RANGE_MARGIN_C, float(np.nanmin(row_t))),
+            max(hi + RANGE_MARGIN_C, float(np.nanmax(row_t))))
     else:
         used_degree, centre, scale, valid_c = 0, 0.0, 1.0, None
         if degree > 0:
@@ -349,7 +358,12 @@ def fit_campaign(
         notes.append("joint fit skipped: one temperature, nothing to fit across steps; "
                      "per-step result used")
 
+    why_held = {n: why for _, _, fr in fits for n, why in fr.not_identifiable_why.items()}
     model = ThermalModel(
+        fitted={n: "fitted" for n, ok in zip(sfem.PARAM_NAMES, identifiable, strict=True)
+                if ok},
+        held={n: "held at nominal: " + why_held.get(n, "not identifiable")
+              for n, ok in zip(sfem.PARAM_NAMES, identifiable, strict=True) if not ok},
         coeffs=coeffs,
         t_centre_c=centre,
         t_scale_c=scale,
@@ -516,6 +530,8 @@ def _report(
         "identifiable": {
             n: bool(v) for n, v in zip(sfem.PARAM_NAMES, model.identifiable, strict=True)
         },
+        "fitted": dict(model.fitted),
+        "held": dict(model.held),
         "polynomial_chi2_red": {
             n: num(c) for n, c in zip(sfem.PARAM_NAMES, poly_chi2, strict=True)
         },
