@@ -170,3 +170,15 @@ def test_a_joint_fit_that_did_not_converge_is_refused() -> None:
     result.report["joint_fit"]["message"] = "max evaluations"
     with pytest.raises(gate.GateRefusal, match="joint thermal fit did not converge"):
         gate.check_thermal_fit(result, rec)
+
+
+def test_an_sfem_models_valid_range_covers_every_reading_it_was_fitted_on() -> None:
+    import thermal_sim
+
+    from calibration.thermal import fit_campaign
+
+    _, rec = thermal_sim.campaign(seed=6, setpoints=(-20.0, 20.0, 60.0))
+    model = fit_campaign(rec).model
+    temp = rec.temperature_c()
+    assert model.first_out_of_range(temp) is None
+    assert model.valid_c[0] <= temp.min() and model.valid_c[1] >= temp.max()
