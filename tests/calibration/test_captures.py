@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -10,9 +9,7 @@ import numpy as np
 from calibration import cli
 from calibration.captures import capture_means, capture_temperature_c, is_raw_samples
 from calibration.recording import Recording, write_recording
-
-sys.path.insert(0, str(Path(__file__).parent))
-from warmup_sim import warmup_log  # noqa: E402
+from simulators.warmup_log import warmup_log
 
 
 def test_raw_samples_become_five_second_capture_means_with_sd_and_n() -> None:

@@ -9,15 +9,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import thermal_sim
 
 from calibration import cli, fit, gate, schedules, sfem
 from calibration.errors import NotIdentifiable
 from calibration.model_file import load_model
 from calibration.recording import write_recording
-from calibration.thermal import ThermalModel
-
-sys.path.insert(0, str(Path(__file__).parent))
-from warmup_sim import warmup_log  # noqa: E402
+from calibration.thermal import ThermalModel, fit_campaign
+from simulators.warmup_log import warmup_log
 
 
 def _args(recording: Path, output: Path, **kw: object) -> object:
@@ -159,10 +158,6 @@ def test_diagnose_cannot_judge_a_warmup_with_calibrates_reason(tmp_path: Path,
 
 
 def test_a_joint_fit_that_did_not_converge_is_refused() -> None:
-    import thermal_sim
-
-    from calibration.thermal import fit_campaign
-
     _, rec = thermal_sim.campaign(seed=5, setpoints=(-20.0, 20.0, 60.0))
     result = fit_campaign(rec)
     gate.check_thermal_fit(result, rec)  # converged: passes
@@ -173,10 +168,6 @@ def test_a_joint_fit_that_did_not_converge_is_refused() -> None:
 
 
 def test_an_sfem_models_valid_range_covers_every_reading_it_was_fitted_on() -> None:
-    import thermal_sim
-
-    from calibration.thermal import fit_campaign
-
     _, rec = thermal_sim.campaign(seed=6, setpoints=(-20.0, 20.0, 60.0))
     model = fit_campaign(rec).model
     temp = rec.temperature_c()
