@@ -173,3 +173,20 @@ def test_an_sfem_models_valid_range_covers_every_reading_it_was_fitted_on() -> N
     temp = rec.temperature_c()
     assert model.first_out_of_range(temp) is None
     assert model.valid_c[0] <= temp.min() and model.valid_c[1] >= temp.max()
+
+
+def test_a_norm_mode_report_and_model_file_say_what_was_held() -> None:
+    from calibration.model_file import dump_model_dict
+    from calibration.recording import Recording
+    from calibration.report import format_table6
+
+    _, rec = thermal_sim.campaign(seed=7, setpoints=(-20.0, 20.0, 60.0))
+    norm = Recording.from_columns({k: v for k, v in rec.columns.items()
+                                   if not k.startswith("ref_")})
+    result = fit_campaign(norm)
+    text = format_table6(result)
+    assert "fitted: bx, by, bz, sx, sy, sz, ayx, azx, azy" in text
+    assert "mx (held at nominal: a rotation of the sensor frame leaves |g| unchanged" in text
+    doc = dump_model_dict(result.model)
+    assert sorted(doc["held"]) == ["mx", "my", "mz"]
+    assert result.report["held"] == doc["held"]
