@@ -348,9 +348,13 @@ def cannot_judge(recording: Recording) -> str | None:
     as capture means, as ``calibrate`` reads them.
     """
     from calibration.captures import capture_means
+    from calibration.warmup import fit_warmup  # warmup imports this module
 
+    captures = capture_means(recording).recording
     try:
-        decided = plan(capture_means(recording).recording)
+        decided = plan(captures)
+        if decided.kind == "warmup":  # calibrate's refusal of the warm-up, if it refuses
+            check_model(fit_warmup(captures, decided.orientations).model, captures)
     except GateRefusal as exc:
         return str(exc)
     if decided.kind == "warmup":

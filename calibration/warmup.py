@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from calibration import sfem
-from calibration.gate import GateRefusal, Orientations
+from calibration.gate import GateRefusal, Orientations, direction_name
 from calibration.recording import Recording
 from calibration.thermal import ThermalModel
 
@@ -74,10 +74,12 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     top = min(max_degree, n_temps - 1)
     if top < 1:
         raise GateRefusal(
-            f"{orientations.count} distinct orientation(s) ({orientations.names()}) and a "
-            f"temperature span of {hi - lo:.2f} °C: too little to see a change of bias with "
-            f"temperature; record while the temperature changes by a few °C, or "
-            f"at least 10 distinct orientations per step for an SFEM fit")
+            f"{orientations.count} distinct orientation(s) ({orientations.names()}) and "
+            f"capture temperatures spanning {np.ptp(T):.2f} °C ({np.min(T):.2f} .. "
+            f"{np.max(T):.2f} °C): too little to see a change of bias with temperature; "
+            f"record while the temperature changes by a few °C, or at least 10 distinct "
+            f"orientations per step for an SFEM fit")
+    _check_connected(T, orientations)
     centre = 0.5 * (lo + hi)
     scale = max(0.5 * (hi - lo), 1.0)
     x = (T - centre) / scale
@@ -125,6 +127,33 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     )
     report = _report(model, captures, orientations, heldout, totals, degree)
     return WarmupFit(model, report, notes)
+
+
+def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
+    """Refuse orientations seen at separate temperatures (GateRefusal).
+
+    Each orientation has its own unknown gravity constant, so a bias change is seen
+    only within an orientation's own temperatures; between two orientations recorded
+    at different temperatures (a cold log lying on one face, a hot one on another) the
+    change of bias cannot be told from the change of orientation. The orientations'
+    temperature intervals must overlap into one.
+    """
+    k = orientations.count
+    if k < 2:
+        return
+    spans = sorted((float(np.min(T[orientations.labels == o])),
+                    float(np.max(T[orientations.labels == o])), o) for o in range(k))
+    reach = spans[0][1]
+    for lo, hi, _ in spans[1:]:
+        if lo > reach + DISTINCT_C:
+            shown = "; ".join(
+                f"{direction_name(orientations.directions[o])} {a:.2f} .. {b:.2f} °C"
+                for a, b, o in spans[:4])
+            raise GateRefusal(
+                f"{k} orientations recorded at separate temperatures ({shown}): a change of "
+                f"bias between them cannot be told from the change of orientation; record "
+                f"one orientation across the whole temperature range")
+        reach = max(reach, hi)
 
 
 def _design(x: np.ndarray, labels: np.ndarray, k: int, degree: int) -> np.ndarray:

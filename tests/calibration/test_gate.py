@@ -153,7 +153,8 @@ def test_diagnose_cannot_judge_a_warmup_with_calibrates_reason(tmp_path: Path,
     doc = json.loads(capsys.readouterr().out)
     assert doc["verdict"] == "cannot judge"
     assert doc["mismatch"] is None
-    assert doc["reason"].startswith("1 distinct orientation(s) (z up) in 72 reading(s)")
+    assert doc["reason"].startswith("1 distinct orientation(s) (z up) and capture "
+                                    "temperatures spanning 0.00 °C")
     assert doc["baseline"]["rmse_ug"] is None
 
 
@@ -190,3 +191,29 @@ def test_a_norm_mode_report_and_model_file_say_what_was_held() -> None:
     doc = dump_model_dict(result.model)
     assert sorted(doc["held"]) == ["mx", "my", "mz"]
     assert result.report["held"] == doc["held"]
+
+
+def test_orientations_at_separate_temperatures_are_refused_by_calibrate_and_diagnose(
+        tmp_path: Path, capsys) -> None:
+    # A cold log lying on one face and a hot one on another (the shape of a real BMI270
+    # pair): the bias change between them is confounded with the change of orientation.
+    from calibration.recording import Recording
+
+    cold, _ = warmup_log(seconds=60, rate_hz=50, t_start_c=12.9, t_end_c=13.3, seed=8,
+                         up=(0.29, 0.08, -0.95))
+    hot, _ = warmup_log(seconds=120, rate_hz=50, t_start_c=49.3, t_end_c=47.2, seed=9,
+                        up=(1, 0, 0))
+    cols = {k: np.r_[cold.columns[k], hot.columns[k] + (60.0 if k == "t_s" else 0.0)]
+            for k in cold.columns}
+    src, out = tmp_path / "pair.csv", tmp_path / "model.json"
+    write_recording(src, Recording.from_columns(cols))
+    assert cli.run_calibrate(_args(src, out)) == 2
+    err = capsys.readouterr().err.strip()
+    assert "2 orientations recorded at separate temperatures" in err
+    assert "x up 47." in err and "record one orientation across the whole" in err
+    assert not out.exists()
+    args = _args(src, out, json=True, model=None, n_null=None, against=None,
+                 write_twin=None, report_dir=None, seed=None)
+    assert cli.run_diagnose(args) == 0
+    reason = json.loads(capsys.readouterr().out)["reason"]
+    assert reason in err  # the same reason, word for word
