@@ -85,22 +85,8 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     key = seg.astype(np.int64) * (int(block.max()) + 1) + block
     inv = np.r_[0, np.cumsum(key[1:] != key[:-1])]  # rows are in time order: runs
     groups = int(inv[-1]) + 1
-    count = np.bincount(inv, minlength=groups).astype(float)
-    cols: dict[str, np.ndarray] = {}
-    for name, v in rec.columns.items():
-        if name == "n":
-            continue
-        ok = np.isfinite(v)
-        k = np.bincount(inv[ok], minlength=groups)
-        s = np.bincount(inv[ok], weights=v[ok], minlength=groups)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cols[name] = np.where(k > 0, s / np.maximum(k, 1), np.nan)
-    for axis, sd in zip(AXES, SD_COLUMNS, strict=True):
-        d = rec.columns[axis] - cols[axis][inv]
-        ss = np.bincount(inv, weights=d * d, minlength=groups)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cols[sd] = np.where(count > 1, np.sqrt(ss / np.maximum(count - 1, 1)), np.nan)
-    cols["n"] = count
+    cols = group_means(rec, inv)
+    count = cols["n"]
     for name in ("step", "position"):  # labels stay whole numbers
         if name in cols:
             cols[name] = np.round(cols[name])
@@ -114,6 +100,35 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     out.notes.extend(rec.notes)
     new_index = np.where(keep, np.cumsum(keep) - 1, -1)
     return Captures(out, n_rows, True, new_index[inv], notes)
+
+
+def group_means(rec: Recording, group: np.ndarray) -> dict[str, np.ndarray]:
+    """Columns of one row per group (``group``: 0..G-1 per row): means, sample sd, count.
+
+    Every numeric column is averaged over the group's finite cells (NaN where none);
+    ``n`` is the number of rows and ``sd_*`` the scatter of ``ax ay az`` (ddof = 1,
+    two-pass: the µg scatter of ~1 g values is lost in Σx² − n·x̄²; NaN for one row).
+    The aggregation of every reader of raw samples (diagnose's per-position means too).
+    """
+    inv = np.asarray(group, np.int64)
+    groups = int(inv.max()) + 1 if inv.size else 0
+    count = np.bincount(inv, minlength=groups).astype(float)
+    cols: dict[str, np.ndarray] = {}
+    for name, v in rec.columns.items():
+        if name == "n":
+            continue
+        ok = np.isfinite(v)
+        k = np.bincount(inv[ok], minlength=groups)
+        total = np.bincount(inv[ok], weights=v[ok], minlength=groups)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cols[name] = np.where(k > 0, total / np.maximum(k, 1), np.nan)
+    for axis, sd in zip(AXES, SD_COLUMNS, strict=True):
+        d = rec.columns[axis] - cols[axis][inv]
+        ss = np.bincount(inv, weights=d * d, minlength=groups)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cols[sd] = np.where(count > 1, np.sqrt(ss / np.maximum(count - 1, 1)), np.nan)
+    cols["n"] = count
+    return cols
 
 
 def capture_temperature_c(rec: Recording, caps: Captures) -> np.ndarray:
