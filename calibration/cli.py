@@ -54,10 +54,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         decided = gate.plan(caps.recording)
         if decided.kind == "warmup":
             return _calibrate_warmup(args, rec, caps, decided)
-        fit = fit_campaign(caps.recording, method=method,
+        fit = fit_campaign(caps.recording, method=method,  # gated inside
                            g_local=None if gravity is None else gravity.g,
                            rate_gain_ug_per_c_per_min=rate_gain)
-        gate.check_thermal_fit(fit, caps.recording)
     except RecordingError as exc:
         return _fail(str(exc))
     except CalibrationError as exc:
@@ -112,6 +111,9 @@ def _calibrate_warmup(args: argparse.Namespace, rec: Recording, caps: Captures,
         return _fail(f"{args.recording}: {exc}")
     wf.model.notes[:0] = caps.notes
     wf.report["notes"][:0] = caps.notes + [decided.reason]
+    if getattr(args, "report_dir", None):
+        wf.report["notes"].append("--report-dir: no figures are drawn for a warm-up; the "
+                                  "report is this text (or --json)")
     try:
         save_model(args.output, wf.model)
     except OSError as exc:

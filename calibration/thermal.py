@@ -34,6 +34,7 @@ from calibration import extensions as _ext
 from calibration import metrics, sfem
 from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.fit import FitResult, fit_norm, fit_reference, rmse_norm_ug
+from calibration.gate import check_thermal_fit
 from calibration.placement import reference_tolerance_rad
 from calibration.recording import Recording
 from calibration.temperature_conditioning import condition_temperature, rate_corrected_raw_g
@@ -223,6 +224,10 @@ def fit_campaign(
     per-step line) is subtracted before the fits
     (:func:`calibration.temperature_conditioning.rate_corrected_raw_g`), so the model
     is the sensor's at rest. Needs a temperature in the recording.
+
+    Raises :class:`calibration.gate.GateRefusal` for a result the gate refuses (did
+    not converge, negative spare degrees of freedom counted on orientations, not
+    physical) and :class:`NotIdentifiable` when no step can be fitted.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -422,8 +427,12 @@ def fit_campaign(
         row_step[idx] = s
     report = _report(model, step_results, notes, poly_chi2, joint_info, recording)
     report["drift"] = _drift(model, recording, fits, row_c)
-    return ThermalFit(model, step_results, report, row_c, row_step, notes,
-                      raw if rate_gain_ug_per_c_per_min is not None else None)
+    result = ThermalFit(model, step_results, report, row_c, row_step, notes,
+                        raw if rate_gain_ug_per_c_per_min is not None else None)
+    # The one gate (calibration/gate.py): no caller -- CLI, engine, benchmark -- gets a
+    # model that did not converge, has no spare orientations, or is not physical.
+    check_thermal_fit(result, recording)
+    return result
 
 
 # --- helpers ----------------------------------------------------------------

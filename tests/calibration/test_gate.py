@@ -160,8 +160,7 @@ def test_diagnose_cannot_judge_a_warmup_with_calibrates_reason(tmp_path: Path,
 
 def test_a_joint_fit_that_did_not_converge_is_refused() -> None:
     _, rec = thermal_sim.campaign(seed=5, setpoints=(-20.0, 20.0, 60.0))
-    result = fit_campaign(rec)
-    gate.check_thermal_fit(result, rec)  # converged: passes
+    result = fit_campaign(rec)  # converged: passes the gate inside fit_campaign
     result.report["joint_fit"]["success"] = False
     result.report["joint_fit"]["message"] = "max evaluations"
     with pytest.raises(gate.GateRefusal, match="joint thermal fit did not converge"):
@@ -217,3 +216,24 @@ def test_orientations_at_separate_temperatures_are_refused_by_calibrate_and_diag
     assert cli.run_diagnose(args) == 0
     reason = json.loads(capsys.readouterr().out)["reason"]
     assert reason in err  # the same reason, word for word
+
+
+def test_a_real_bmi270_cold_and_hot_pair_is_refused_not_fitted(tmp_path: Path,
+                                                                 capsys) -> None:
+    # Vendored slices of a real pair (tests/calibration/data/bmi270/README.md): fitted
+    # as one warm-up it once gave bz = -0.93 g.
+    from calibration.recording import Recording
+
+    data = Path(__file__).parent / "data" / "bmi270"
+    rows = np.vstack([np.loadtxt(data / name, delimiter=",")
+                      for name in ("cold_slice.csv", "hot_slice.csv")])
+    rec = Recording.from_columns({"t_s": np.arange(len(rows)) / 50.0, "sensor_c": rows[:, 0],
+                                  "ax": 4 * rows[:, 1], "ay": 4 * rows[:, 2],
+                                  "az": 4 * rows[:, 3]})
+    src, out = tmp_path / "bmi270.csv", tmp_path / "model.json"
+    write_recording(src, rec)
+    assert cli.run_calibrate(_args(src, out)) == 2
+    err = capsys.readouterr().err
+    assert "2 orientations recorded at separate temperatures" in err
+    assert "x up 47." in err
+    assert not out.exists()
