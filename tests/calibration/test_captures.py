@@ -69,3 +69,27 @@ def test_compensate_reads_raw_rows_at_their_captures_temperature(tmp_path: Path,
     # and with each row's own (quantised) reading, still no --extrapolate needed
     a.raw_temperature = True
     assert cli.run_compensate(a) == 0
+
+
+def test_raw_rows_and_their_five_second_means_give_the_same_model(tmp_path: Path) -> None:
+    # Acceptance must not depend on the noise level of the rows: the raw log and the
+    # same data as 5-s means are one warm-up with one bias change.
+    from calibration.model_file import load_model
+
+    rec, _ = warmup_log(seconds=150, rate_hz=50, seed=10)
+    raw, means = tmp_path / "raw.csv", tmp_path / "means.csv"
+    write_recording(raw, rec)
+    write_recording(means, capture_means(rec).recording)
+    models = []
+    for src in (raw, means):
+        class A:
+            pass
+
+        a = A()
+        a.recording, a.output = str(src), str(tmp_path / f"{src.stem}.json")
+        assert cli.run_calibrate(a) == 0
+        models.append(load_model(a.output))
+    assert [m.mode for m in models] == ["warmup", "warmup"]
+    lo, hi = models[1].valid_c  # the means' span, inside the raw rows' span
+    changes = [m.params_vector_at(hi)[:3] - m.params_vector_at(lo)[:3] for m in models]
+    np.testing.assert_allclose(changes[0], changes[1], atol=1e-6)
