@@ -247,13 +247,17 @@ def _temperatures(
     elif smooth_s > 0:
         temp_c = smooth_over_time(rec.t_s, temp_c, float(smooth_s))
         how = f"temperature smoothed by a centred local line over {float(smooth_s):g} s"
-    elif (caps := capture_means(rec)).is_raw and not (rec.has("step") or rec.has("setpoint_c")):
-        # Raw samples of a continuous log: the model was fitted at the capture means'
-        # temperatures, so each row gets its capture's, linear in time between captures.
+    elif model.mode == "warmup" or (
+            (caps := capture_means(rec)).is_raw and not (rec.has("step") or rec.has("setpoint_c"))):
+        # A warm-up is fitted in each capture's own mean temperature, and so are raw
+        # samples of a continuous log: each row gets its capture's (linear in time
+        # between captures); an averaged reading is its own capture.
+        caps = capture_means(rec)
         temp_c = capture_temperature_c(rec, caps)
         how = ("temperature: raw samples read as capture means (calibrate's reader); each "
                "row at its capture's mean temperature, linear in time between captures "
-               "(--raw-temperature: use each row's own reading)")
+               "(--raw-temperature: use each row's own reading)" if caps.is_raw else
+               "temperature: each reading's own, as the warm-up model was fitted")
     else:
         temp_c, how = compensation_temperature(
             rec.t_s, temp_c,
