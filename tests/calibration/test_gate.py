@@ -237,3 +237,25 @@ def test_a_real_bmi270_cold_and_hot_pair_is_refused_not_fitted(tmp_path: Path,
     assert "2 orientations recorded at separate temperatures" in err
     assert "x up 47." in err
     assert not out.exists()
+
+
+def test_six_axis_directions_per_step_fit_bias_and_scale_and_hold_the_rest(
+        tmp_path: Path, capsys) -> None:
+    # Six axis directions per step, each visited twice, determine b and S in norm mode
+    # (the gate's identifiability on the orientations, spare readings from the repeat
+    # visits): fitted, the α and M held and said so. Visited once, the 6 readings leave
+    # no spare degree of freedom and the recording is calibrated as a warm-up.
+    from calibration.recording import Recording
+
+    _, rec = thermal_sim.campaign(seed=11, setpoints=(-20.0, 20.0, 60.0),
+                                  schedule=np.vstack([schedules.six_position()] * 2))
+    norm = Recording.from_columns({k: v for k, v in rec.columns.items()
+                                   if not k.startswith("ref_")})
+    src, out = tmp_path / "six.csv", tmp_path / "model.json"
+    write_recording(src, norm)
+    assert cli.run_calibrate(_args(src, out, json=True)) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["mode"] == "norm"
+    assert list(doc["fitted"]) == ["bx", "by", "bz", "sx", "sy", "sz"]
+    assert sorted(doc["held"]) == ["ayx", "azx", "azy", "mx", "my", "mz"]
+    assert "do not constrain" in doc["held"]["ayx"]
