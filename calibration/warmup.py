@@ -48,7 +48,8 @@ HELD_WHY = {
              "directions or many orientations",
 }
 BIAS_NOTE = ("fitted: its change with temperature, referred to centre_c (the constant part "
-             "is gravity's unknown projection and is not identified)")
+             "is gravity's unknown projection and is not identified; a change of scale "
+             "with temperature is included as seen at the recorded orientation(s))")
 
 
 @dataclass
