@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.recording import Recording
+from simulators.truth import SensorTruth
 
 
 @dataclass
@@ -31,11 +32,15 @@ def warmup_log(*, seconds: float = 200.0, rate_hz: float = 500.0, t_start_c: flo
                t_end_c: float = -13.3, tau_s: float = 80.0, noise_g: float = 1e-3,
                quantum_c: float | None = 0.06, up: tuple[float, float, float] = (0, 0, 1),
                segments: list[tuple[float, tuple[float, float, float]]] | None = None,
+               sensor: SensorTruth | None = None,
                seed: int = 0) -> tuple[Recording, WarmupTruth]:
     """A raw-sample warm-up log and its truth.
 
     ``segments``: [(start_s, up), ...] changes the orientation at those times (a hand
-    turning the board); default one orientation ``up`` throughout.
+    turning the board); default one orientation ``up`` throughout. ``sensor``: the
+    twin's sensor (simulators/truth.py: full SFEM, every parameter cubic in the die
+    temperature, its channel offset) instead of the bias-only truth; the returned
+    WarmupTruth then describes nothing (the sensor is the truth).
     """
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, seconds, 1.0 / rate_hz)
@@ -52,8 +57,12 @@ def warmup_log(*, seconds: float = 200.0, rate_hz: float = 500.0, t_start_c: flo
     ups = np.tile(truth.up, (t.size, 1))
     for start_s, u in segments or []:
         ups[t >= start_s] = np.asarray(u, float) / np.linalg.norm(u)
-    raw = ups + truth.bias_g(temp) + rng.normal(0.0, noise_g, (t.size, 3))
-    read_c = temp + rng.normal(0.0, 0.01, t.size)
+    if sensor is None:
+        raw = ups + truth.bias_g(temp) + rng.normal(0.0, noise_g, (t.size, 3))
+        read_c = temp + rng.normal(0.0, 0.01, t.size)
+    else:
+        raw = sensor.ideal_raw_g(ups, temp) + rng.normal(0.0, noise_g, (t.size, 3))
+        read_c = temp + sensor.temp_offset_c + rng.normal(0.0, 0.01, t.size)
     if quantum_c:
         read_c = np.round(read_c / quantum_c) * quantum_c
     rec = Recording.from_columns({"t_s": t, "sensor_c": read_c, "ax": raw[:, 0],
