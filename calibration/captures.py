@@ -30,6 +30,7 @@ from calibration.recording import Recording
 
 AXES = ("ax", "ay", "az")
 SD_COLUMNS = ("sd_x", "sd_y", "sd_z")
+LABELS = ("step", "position", "visit")  # whole-number labels, never averaged
 # Longest capture, s: 5-s means are what a warm-up's held-out error is judged on, and the
 # temperature moves by < 0.1 °C in 5 s in any warm-up a sensor survives.
 CAPTURE_BLOCK_S = 5.0
@@ -87,9 +88,10 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     groups = int(inv[-1]) + 1
     cols = group_means(rec, inv)
     count = cols["n"]
-    for name in ("step", "position"):  # labels stay whole numbers
+    first = np.r_[0, np.flatnonzero(np.diff(inv)) + 1]
+    for name in LABELS:  # labels are not averaged: each capture keeps its first row's
         if name in cols:
-            cols[name] = np.round(cols[name])
+            cols[name] = rec.columns[name][first]
     keep = _steady(cols, count)
     notes = [f"raw samples: {n_rows} rows read as {groups} capture means (runs of the same "
              f"step and position, at most {block_s:g} s each; sd and n of their samples)"]

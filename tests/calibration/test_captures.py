@@ -99,3 +99,13 @@ def test_raw_rows_and_their_five_second_means_give_the_same_model(tmp_path: Path
     assert cli.run_compensate(a) == 0
     cz = np.genfromtxt(a.output, delimiter=",", names=True)["cz"]
     assert np.ptp(cz) < 0.5 * np.ptp(capture_means(rec).recording.raw_g[:, 2])
+
+
+def test_labels_are_kept_whole_not_averaged() -> None:
+    rec, _ = warmup_log(seconds=20, rate_hz=50, seed=3)
+    cols = dict(rec.columns)
+    cols["position"] = np.zeros(len(rec))
+    cols["visit"] = np.arange(len(rec), dtype=float)  # a per-sample index
+    means = capture_means(Recording.from_columns(cols)).recording
+    np.testing.assert_array_equal(means.columns["visit"], [0, 250, 500, 750])
+    np.testing.assert_array_equal(means.columns["position"], 0)
