@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from calibration import sfem
+from calibration.captures import CAPTURE_BLOCK_S
 from calibration.gate import GateRefusal, Orientations, direction_name
 from calibration.recording import Recording
 from calibration.thermal import ThermalModel
@@ -88,6 +89,15 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     folds = _folds(captures.t_s)
     heldout = [_heldout_rms_g(x, labels, raw, folds, d) for d in range(top + 1)]
     totals = [float(np.sqrt(np.mean(h ** 2))) for h in heldout]
+    judged = [d for d in range(top + 1) if np.isfinite(totals[d])]
+    if len(judged) < 2 or judged != list(range(len(judged))):
+        raise GateRefusal(
+            f"{len(captures)} capture(s) of {orientations.count} orientation(s) "
+            f"({orientations.names()}): too few to judge a bias change by held-out error "
+            f"({HOLDOUT_BLOCKS} alternate time blocks); record a longer warm-up (more "
+            f"captures of {CAPTURE_BLOCK_S:g} s)")
+    top = judged[-1]
+    heldout, totals = heldout[: top + 1], totals[: top + 1]
     degree = 0
     for d in range(1, top + 1):
         if totals[d] < totals[degree] * (1.0 - MIN_GAIN):

@@ -286,3 +286,15 @@ def test_a_twin_sensor_warmup_is_compensated_at_its_orientation_and_not_distorte
     norms = np.linalg.norm(model.compensate(side, np.array([lo, hi])), axis=1)
     raw_norms = np.linalg.norm(side, axis=1)
     assert np.all(np.abs(norms - raw_norms) < 5e-3)  # at most the removed drift, mg-level
+
+
+def test_a_warmup_too_short_to_judge_is_refused_not_a_json_crash(tmp_path: Path,
+                                                                  capsys) -> None:
+    rec, _ = warmup_log(seconds=12, rate_hz=50, t_start_c=20.0, t_end_c=23.0, tau_s=20)
+    src, out = tmp_path / "short.csv", tmp_path / "model.json"
+    write_recording(src, rec)
+    assert cli.run_calibrate(_args(src, out, json=True)) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert "3 capture(s) of 1 orientation(s) (z up): too few to judge a bias change" in err
+    assert not out.exists()
