@@ -30,6 +30,13 @@ def _args(recording: Path, output: Path, **kw: object) -> object:
     return a
 
 
+def _calibrate(tmp_path: Path, rec: object, **kw: object) -> tuple[int, Path]:
+    """Write ``rec`` and run ``soakcal calibrate`` on it: (exit status, model path)."""
+    src, out = tmp_path / "rec.csv", tmp_path / "model.json"
+    write_recording(src, rec)
+    return cli.run_calibrate(_args(src, out, **kw)), out
+
+
 def test_noise_scatter_of_one_orientation_is_one_orientation() -> None:
     rng = np.random.default_rng(1)
     raw = np.array([0.0, 0.0, 1.0]) + rng.normal(0, 2e-3, (5000, 3))
@@ -77,9 +84,8 @@ def test_a_scale_of_0_014_is_refused() -> None:
 def test_one_orientation_warmup_is_calibrated_as_a_bias_change(tmp_path: Path,
                                                                  capsys) -> None:
     rec, truth = warmup_log(seconds=200, rate_hz=100, seed=3)
-    src, out = tmp_path / "warm.csv", tmp_path / "model.json"
-    write_recording(src, rec)
-    assert cli.run_calibrate(_args(src, out, json=True)) == 0
+    status, out = _calibrate(tmp_path, rec, json=True)
+    assert status == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["mode"] == "warmup" and doc["orientations"] == 1
     assert sorted(doc["fitted"]) == ["bx", "by", "bz"]
@@ -108,9 +114,8 @@ def test_one_orientation_warmup_is_calibrated_as_a_bias_change(tmp_path: Path,
 def test_a_warmup_turned_over_once_uses_both_orientations(tmp_path: Path, capsys) -> None:
     rec, truth = warmup_log(seconds=200, rate_hz=50, seed=4,
                             segments=[(100.0, (0, 0, -1))])
-    src, out = tmp_path / "warm2.csv", tmp_path / "model.json"
-    write_recording(src, rec)
-    assert cli.run_calibrate(_args(src, out)) == 0
+    status, out = _calibrate(tmp_path, rec)
+    assert status == 0
     text = capsys.readouterr().out
     assert "2 orientation(s) (z up, z down)" in text
     assert "fitted: bx, by, bz" in text
@@ -230,9 +235,8 @@ def test_a_real_bmi270_cold_and_hot_pair_is_refused_not_fitted(tmp_path: Path,
     rec = Recording.from_columns({"t_s": np.arange(len(rows)) / 50.0, "sensor_c": rows[:, 0],
                                   "ax": 4 * rows[:, 1], "ay": 4 * rows[:, 2],
                                   "az": 4 * rows[:, 3]})
-    src, out = tmp_path / "bmi270.csv", tmp_path / "model.json"
-    write_recording(src, rec)
-    assert cli.run_calibrate(_args(src, out)) == 2
+    status, out = _calibrate(tmp_path, rec)
+    assert status == 2
     err = capsys.readouterr().err
     assert "2 orientations recorded at separate temperatures" in err
     assert "x up 47." in err
@@ -251,9 +255,8 @@ def test_six_axis_directions_per_step_fit_bias_and_scale_and_hold_the_rest(
                                   schedule=np.vstack([schedules.six_position()] * 2))
     norm = Recording.from_columns({k: v for k, v in rec.columns.items()
                                    if not k.startswith("ref_")})
-    src, out = tmp_path / "six.csv", tmp_path / "model.json"
-    write_recording(src, norm)
-    assert cli.run_calibrate(_args(src, out, json=True)) == 0
+    status, out = _calibrate(tmp_path, norm, json=True)
+    assert status == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["mode"] == "norm"
     assert list(doc["fitted"]) == ["bx", "by", "bz", "sx", "sy", "sz"]
@@ -271,9 +274,8 @@ def test_a_twin_sensor_warmup_is_compensated_at_its_orientation_and_not_distorte
     sensor = SensorTruth.adxl355_typical(seed=4)
     rec, _ = warmup_log(seconds=300, rate_hz=50, t_start_c=20.0, t_end_c=30.0, tau_s=150,
                         sensor=sensor, quantum_c=None, seed=12)
-    src, out = tmp_path / "twin.csv", tmp_path / "model.json"
-    write_recording(src, rec)
-    assert cli.run_calibrate(_args(src, out)) == 0
+    status, out = _calibrate(tmp_path, rec)
+    assert status == 0
     model = load_model(out)
     lo, hi = model.valid_c
     die = np.array([lo, hi]) - sensor.temp_offset_c
@@ -291,9 +293,8 @@ def test_a_twin_sensor_warmup_is_compensated_at_its_orientation_and_not_distorte
 def test_a_warmup_too_short_to_judge_is_refused_not_a_json_crash(tmp_path: Path,
                                                                   capsys) -> None:
     rec, _ = warmup_log(seconds=12, rate_hz=50, t_start_c=20.0, t_end_c=23.0, tau_s=20)
-    src, out = tmp_path / "short.csv", tmp_path / "model.json"
-    write_recording(src, rec)
-    assert cli.run_calibrate(_args(src, out, json=True)) == 2
+    status, out = _calibrate(tmp_path, rec, json=True)
+    assert status == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
     assert "3 capture(s) of 1 orientation(s) (z up): too few to judge a bias change" in err
