@@ -61,8 +61,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     except CalibrationError as exc:
         return _fail(f"{args.recording}: {exc}")
-    fit.notes[:0] = caps.notes
-    fit.report["notes"][:0] = caps.notes
+    fit.notes[:0] = caps.notes + [decided.reason]
+    fit.report["notes"][:0] = caps.notes + [decided.reason]
+    fit.report["orientations"] = decided.orientations.count
     fit.model.notes[:0] = caps.notes
     rec = caps.recording
     _record_gravity(fit, gravity)

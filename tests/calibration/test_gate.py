@@ -259,6 +259,9 @@ def test_six_axis_directions_per_step_fit_bias_and_scale_and_hold_the_rest(
     assert status == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["mode"] == "norm"
+    assert doc["orientations"] == 6  # 36 readings: 6 orientations, each twice per step
+    assert any(n.startswith("6 distinct orientation(s) (x up, x down, y up, y down and 2 "
+                            "more) in 36 reading(s)") for n in doc["notes"])
     assert list(doc["fitted"]) == ["bx", "by", "bz", "sx", "sy", "sz"]
     assert sorted(doc["held"]) == ["ayx", "azx", "azy", "mx", "my", "mz"]
     assert "do not constrain" in doc["held"]["ayx"]
