@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration import gate
+from calibration.captures import Captures, capture_means, capture_temperature_c
 from calibration.continuous import METHOD as CONTINUOUS
 from calibration.continuous import fit_continuous
 from calibration.errors import CalibrationError, RecordingError
@@ -51,23 +53,34 @@ def run_calibrate(args: argparse.Namespace) -> int:
         return _fail(f"--rate-gain-ug-per-c-per-min: {exc}")
     try:
         rec = read_recording(args.recording)
-        seg = segment_recording(rec)  # steps only where the die stood still (plateaus.py)
-        if seg.is_continuous:
-            fit = fit_continuous(rec, seg, g_local=None if gravity is None else gravity.g,
+        caps = capture_means(rec)
+        seg = segment_recording(caps.recording)  # steps only where the die stood still
+        decided = gate.plan(caps.recording, continuous=seg.is_continuous)
+        if decided.kind == "warmup":
+            return _calibrate_warmup(args, rec, caps, decided)
+        if decided.kind == "continuous":
+            fit = fit_continuous(caps.recording, seg,
+                                 g_local=None if gravity is None else gravity.g,
                                  rate_gain_ug_per_c_per_min=rate_gain)
+            gate.check_model(fit.model, caps.recording, fit.row_temperature_c)
             if getattr(args, "method", None):
                 note = (f"--method {method} applies to step fits; this recording has rows "
                         "on no plateau and was fitted continuously")
                 fit.notes.append(note)
                 fit.report["notes"].append(note)
         else:
-            fit = fit_campaign(rec, method=method,
+            fit = fit_campaign(caps.recording, method=method,  # gated inside
                                g_local=None if gravity is None else gravity.g,
                                rate_gain_ug_per_c_per_min=rate_gain)
     except RecordingError as exc:
         return _fail(str(exc))
     except CalibrationError as exc:
         return _fail(f"{args.recording}: {exc}")
+    fit.notes[:0] = caps.notes + [decided.reason]
+    fit.report["notes"][:0] = caps.notes + [decided.reason]
+    fit.report["orientations"] = decided.orientations.count
+    fit.model.notes[:0] = caps.notes
+    rec = caps.recording
     _record_gravity(fit, gravity)
     try:
         save_model(args.output, fit.model)
@@ -112,6 +125,67 @@ def _report_continuous(args: argparse.Namespace, fit: ThermalFit) -> int:
     else:
         print(format_ramp_report(fit))
         print(f"\nmodel written to {args.output}")
+    return EXIT_OK
+
+
+def _calibrate_warmup(args: argparse.Namespace, rec: Recording, caps: Captures,
+                      decided: gate.Plan) -> int:
+    """Too few orientations for the SFEM: each axis' bias change with temperature."""
+    from calibration.warmup import fit_warmup, format_warmup
+
+    if getattr(args, "rate_gain_ug_per_c_per_min", None) is not None:
+        return _fail("--rate-gain-ug-per-c-per-min: not applied to a warm-up "
+                     f"({decided.reason.split(':')[0]}); the bias change fitted includes it")
+    temp = rec.temperature_c()
+    try:
+        wf = fit_warmup(caps.recording, decided.orientations,
+                        span_c=(float(np.min(temp)), float(np.max(temp))))
+        gate.check_model(wf.model, caps.recording)
+    except CalibrationError as exc:
+        return _fail(f"{args.recording}: {exc}")
+    wf.model.notes[:0] = caps.notes
+    wf.report["notes"][:0] = caps.notes + [decided.reason]
+    if getattr(args, "report_dir", None):
+        wf.report["notes"].append("--report-dir: no figures are drawn for a warm-up; the "
+                                  "report is this text (or --json)")
+    try:
+        save_model(args.output, wf.model)
+    except OSError as exc:
+        return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
+    if getattr(args, "json", False):
+        doc = dict(wf.report)
+        doc["model_file"] = str(args.output)
+        doc["figures"] = []
+        print(json.dumps(doc, indent=2, allow_nan=False))
+    else:
+        print(format_warmup(wf.report))
+        for note in wf.report["notes"]:
+            print(f"note: {note}")
+        print(f"\nmodel written to {args.output}")
+    return EXIT_OK
+
+
+def run_diagnose(args: argparse.Namespace) -> int:
+    """``soakcal diagnose``: the gate first (calibration/gate.py), then the diagnosis.
+
+    Data the gate does not let an SFEM be fitted to (one orientation, a warm-up, no
+    spare degrees of freedom) get "cannot judge" with calibrate's reason, in the
+    diagnosis' own text and JSON forms; everything else goes to
+    :func:`calibration.discrepancy.cli.run_diagnose` unchanged.
+    """
+    from calibration.discrepancy import cli as discrepancy_cli
+
+    try:
+        rec = read_recording(args.recording)
+    except RecordingError as exc:
+        return _fail(str(exc))
+    why = gate.cannot_judge(rec)
+    if why is None:
+        return int(discrepancy_cli.run_diagnose(args))
+    from calibration.discrepancy.diagnose import _cannot_judge
+
+    diag = _cannot_judge(rec, why, int(getattr(args, "n_null", None) or 200), 0.01, [])
+    print(diag.to_json() if getattr(args, "json", False) else diag.report())
     return EXIT_OK
 
 
@@ -207,6 +281,17 @@ def _temperatures(
     elif smooth_s > 0:
         temp_c = smooth_over_time(rec.t_s, temp_c, float(smooth_s))
         how = f"temperature smoothed by a centred local line over {float(smooth_s):g} s"
+    elif model.mode == "warmup" or (
+            (caps := capture_means(rec)).is_raw and not (rec.has("step") or rec.has("setpoint_c"))):
+        # A warm-up is fitted in each capture's own mean temperature, and so are raw
+        # samples of a continuous log: each row gets its capture's (linear in time
+        # between captures); an averaged reading is its own capture.
+        caps = capture_means(rec)
+        temp_c = capture_temperature_c(rec, caps)
+        how = ("temperature: raw samples read as capture means (calibrate's reader); each "
+               "row at its capture's mean temperature, linear in time between captures "
+               "(--raw-temperature: use each row's own reading)" if caps.is_raw else
+               "temperature: each reading's own, as the warm-up model was fitted")
     else:
         temp_c, how = compensation_temperature(
             rec.t_s, temp_c,

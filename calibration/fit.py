@@ -27,14 +27,15 @@ from scipy.stats import chi2 as _chi2
 
 from calibration import sfem
 from calibration.errors import NotIdentifiable
+from calibration.gate import (
+    NORM_MIN_ORIENTATIONS,
+    REFERENCE_MIN_ORIENTATIONS,
+    STRUCTURAL_REL_TOL,
+    capacity,
+    undetermined_parameters,
+)
 
 NORM_FREE = np.array([True] * 9 + [False] * 3)  # M is invisible to |g|
-# Singular values of the nominal Jacobian below this fraction of the largest mean
-# "not determined by these positions". Good schedules (Table 1, Table 4 spheres,
-# cube14) have condition numbers 2-3; six axis directions give exact zeros for
-# the α in norm mode, which measured (slightly tilted) directions turn into
-# ~1e-5 -- far from determined, but full rank to a naive check.
-STRUCTURAL_REL_TOL = 1e-3
 
 
 @dataclass
@@ -88,8 +89,7 @@ def fit_reference(
     if raw.shape != ref.shape:
         raise ValueError(f"raw_g {raw.shape} and ref_g {ref.shape} differ in shape")
     n = raw.shape[0]
-    if n < 4:
-        raise NotIdentifiable(f"reference fit needs at least 4 positions, got {n}")
+    _check_capacity(raw, "reference")
     sig = _sigma(sigma_g, n)
     tol = None
     if ref_tol_rad is not None:
@@ -183,10 +183,7 @@ def fit_norm(
     """
     raw = _as_n3(raw_g, "raw_g")
     n = raw.shape[0]
-    if n < 10:
-        raise NotIdentifiable(
-            f"norm-mode fit of 9 parameters needs at least 10 positions, got {n}"
-        )
+    _check_capacity(raw, "norm")
     sig = _sigma(sigma_g, n)
     return _with_floor(lambda s: _fit_norm_once(raw, s, g_local), raw, sig,
                        sigma_g is not None, model_floor)
@@ -425,6 +422,15 @@ def ellipsoid_start(raw: np.ndarray, g_local: float = 1.0) -> np.ndarray:
         return sfem.identity_vector()
 
 
+def _check_capacity(raw: np.ndarray, mode: str) -> None:
+    """NotIdentifiable unless the readings' distinct orientations (not rows) leave spare
+    degrees of freedom for the parameters they determine (calibration/gate.py)."""
+    why = capacity(raw, mode).refusal()
+    if why:
+        need = NORM_MIN_ORIENTATIONS if mode == "norm" else REFERENCE_MIN_ORIENTATIONS
+        raise NotIdentifiable(f"{why}; record at least {need} distinct orientations")
+
+
 def _as_n3(a: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(a, dtype=float)
     if arr.ndim != 2 or arr.shape[1] != 3:
@@ -471,11 +477,8 @@ _UNSEEN = (
 
 
 def _structurally_undetermined(directions_g: np.ndarray, mode: str) -> tuple[str, ...]:
-    """SFEM parameters the positions cannot determine (see :data:`STRUCTURAL_REL_TOL`)."""
-    from calibration.schedules import identifiability  # schedules imports sfem only
-
-    check = identifiability(directions_g, mode, rel_tol=STRUCTURAL_REL_TOL, component_tol=0.1)
-    return check.undetermined
+    """SFEM parameters the distinct orientations cannot determine (the gate decides)."""
+    return undetermined_parameters(directions_g, mode)
 
 
 def _why(ident: np.ndarray, *, norm_mode: bool = False) -> dict[str, str]:

@@ -34,7 +34,7 @@ from calibration.thermal import MODEL_VERSION, StepParams, ThermalModel
 FORMAT = "soakcal-model"
 VERSION = 2
 READABLE_VERSIONS = (1, 2)
-MODES = ("reference", "norm")
+MODES = ("reference", "norm", "warmup")
 
 _Doc = TypeVar("_Doc")
 
@@ -57,6 +57,8 @@ def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
         "parameters": list(names),
         "parameter_units": dict(zip(names, sfem.PARAM_UNITS, strict=True)),
         "identifiable": {n: bool(v) for n, v in zip(names, model.identifiable, strict=True)},
+        "fitted": dict(model.fitted),
+        "held": dict(model.held),
         "temperature": {
             "source": model.temperature_source,
             "conditioning": model.temperature_conditioning,
@@ -200,6 +202,7 @@ def load_model_dict(doc: Any) -> ThermalModel:
     if not isinstance(notes, list):
         raise _bad("notes", "expected a list of strings")
     load_conditioning_dict(doc)  # validated here so a bad document is refused at load
+    fitted, held = (_reasons(doc, k) for k in ("fitted", "held"))
     method = doc.get("method", "per_step")
     if not isinstance(method, str):
         raise _bad("method", "expected a string")
@@ -220,7 +223,18 @@ def load_model_dict(doc: Any) -> ThermalModel:
         notes=[str(n) for n in notes],
         provenance=dict(prov),
         model_version=mv,
+        fitted=fitted,
+        held=held,
     )
+
+
+def _reasons(doc: dict[str, Any], key: str) -> dict[str, str]:
+    """``fitted``/``held``: parameter name → why (absent in files before they existed)."""
+    obj = doc.get(key, {})
+    if not isinstance(obj, dict) or any(
+            k not in sfem.PARAM_NAMES or not isinstance(v, str) for k, v in obj.items()):
+        raise _bad(key, "expected an object of parameter name -> reason (string)")
+    return dict(obj)
 
 
 def load_conditioning_dict(doc: dict[str, Any]) -> CompensationConditioning:

@@ -245,18 +245,14 @@ def row_sigma_ug(rec: Recording) -> float:
 
 
 def orientation_labels(rec: Recording) -> np.ndarray:
-    """An orientation label per row: the reference direction (to ~1°), else the ``position``
-    column, else the raw reading's direction (to ~1°)."""
+    """An orientation label per row: the reference directions, else the readings' own,
+    clustered into distinct orientations within the noise
+    (:func:`calibration.gate.distinct_orientations`: never rows, never noise scatter)."""
+    from calibration.gate import distinct_orientations
+
     if rec.has_reference:
-        v = rec.ref_g
-    elif rec.has("position"):
-        return np.nan_to_num(rec.columns["position"], nan=-1).astype(int)
-    else:
-        v = rec.raw_g
-    u = v / np.linalg.norm(v, axis=1, keepdims=True)
-    q = np.round(u * 60.0).astype(int)  # 1/60 of a unit vector ≈ 1°
-    _, labels = np.unique(q, axis=0, return_inverse=True)
-    return labels.ravel()
+        return distinct_orientations(rec.ref_g).labels
+    return distinct_orientations(rec.raw_g, rec.sigma_g).labels
 
 
 def _renumber(step: np.ndarray) -> np.ndarray:

@@ -221,6 +221,9 @@ def format_table6(fit: ThermalFit) -> str:
     ]
     if m.valid_c is not None:
         lines.append(f"valid range: {m.valid_c[0]:.2f} .. {m.valid_c[1]:.2f} °C")
+    lines.append("fitted: " + (", ".join(m.fitted) or "none"))
+    if m.held:
+        lines.append("held: " + "; ".join(f"{n} ({why})" for n, why in m.held.items()))
     for note in fit.notes:
         if not note.startswith("temperature conditioning"):
             lines.append(f"note: {note}")

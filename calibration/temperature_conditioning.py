@@ -5,7 +5,8 @@ chamber PV has noise of its own (``recording.md``: a reader may condition the
 temperature but must say so). What we do, per temperature step:
 
 1. robust straight line of temperature against time (two passes; the second
-   drops rows more than 4 robust σ from the first line), because the die may
+   drops rows more than 4 × (robust σ + the channel's quantum, if it is
+   quantised) from the first line), because the die may
    still creep by a few hundredths of a degree over the ~6 min a step's
    positions take, and a line keeps that creep while averaging the noise;
    the slope is kept only where it exceeds 3 standard errors, else the rows
@@ -53,6 +54,7 @@ def condition_temperature(
     step_c: dict[int, float] = {}
     step_noise: dict[int, float] = {}
     rejected = 0
+    quantum = channel_quantum_c(temp)
     for s in np.unique(steps):
         idx = np.flatnonzero(steps == s)
         tt, yy = t_s[idx], temp[idx]
@@ -69,7 +71,7 @@ def condition_temperature(
         coef = np.polyfit(tt[ok] - t0, yy[ok], 1)
         res = yy - np.polyval(coef, tt - t0)
         sd = _robust_sd(res[ok])
-        keep = ok & (np.abs(res) <= 4.0 * sd) if sd > 0 else ok
+        keep = ok & (np.abs(res) <= 4.0 * (sd + quantum)) if sd > 0 else ok
         rejected += int(ok.sum() - keep.sum())
         if keep.sum() >= 3:
             coef = np.polyfit(tt[keep] - t0, yy[keep], 1)
@@ -123,6 +125,28 @@ def _slope_significant(tt: np.ndarray, yy: np.ndarray, coef: np.ndarray, t0: flo
     return abs(float(coef[0])) > SLOPE_SIGMAS * sd / np.sqrt(sxx)
 
 
+def channel_quantum_c(temperature_c: np.ndarray) -> float:
+    """The temperature channel's resolution (°C) when it is quantised, else 0.
+
+    Why: a die channel read in steps of 0.06 °C with less noise than a step puts its
+    readings a step or so off any line drawn through them, while their robust σ (the
+    median deviation) can be a fraction of a step: "more than 4 robust σ" then threw
+    3.3 % of honest readings away (and when nearly all readings share one level, the
+    robust σ is a rounding error and every reading off that level went). The robust σ
+    of quantised readings is wrong by up to a quantum, so a reading is an outlier only
+    beyond 4 × (robust σ + quantum). Quantised: at most half the readings have
+    distinct values; the quantum is the smallest gap between them.
+    """
+    y = np.asarray(temperature_c, float)
+    y = y[np.isfinite(y)]
+    levels = np.unique(y)
+    if levels.size < 2 or levels.size > 0.5 * y.size:
+        return 0.0
+    gaps = np.diff(levels)
+    gaps = gaps[gaps > 1e-9 * max(1.0, float(np.max(np.abs(levels))))]
+    return float(np.min(gaps)) if gaps.size else 0.0
+
+
 def _robust_sd(x: np.ndarray) -> float:
     if x.size == 0:
         return 0.0
@@ -161,6 +185,7 @@ def smooth_over_time(
     seg = np.r_[0, np.cumsum(np.abs(np.diff(med)) > jump_c)]
     out = y.copy()
     half = 0.5 * window_s
+    quantum = channel_quantum_c(y)
     for s in np.unique(seg):
         idx = np.flatnonzero(seg == s)
         ts, ys = t[idx], y[idx]
@@ -174,7 +199,7 @@ def smooth_over_time(
             coef = np.polyfit(tt - ts[j], yy, degree)
             res = yy - np.polyval(coef, tt - ts[j])
             sd = _robust_sd(res)
-            keep = np.abs(res) <= 4.0 * sd if sd > 0 else np.ones(tt.size, bool)
+            keep = np.abs(res) <= 4.0 * (sd + quantum) if sd > 0 else np.ones(tt.size, bool)
             if keep.sum() >= degree + 2 and not keep.all():
                 coef = np.polyfit(tt[keep] - ts[j], yy[keep], degree)
             out[idx[j]] = float(coef[-1])

@@ -34,6 +34,7 @@ from calibration import extensions as _ext
 from calibration import metrics, sfem
 from calibration.errors import CalibrationError, NotIdentifiable, OutOfRange
 from calibration.fit import FitResult, fit_norm, fit_reference, rmse_norm_ug
+from calibration.gate import check_thermal_fit
 from calibration.placement import reference_tolerance_rad
 from calibration.recording import Recording
 from calibration.temperature_conditioning import condition_temperature, rate_corrected_raw_g
@@ -84,6 +85,10 @@ class ThermalModel:
     notes: list[str] = field(default_factory=list)
     provenance: dict[str, Any] = field(default_factory=dict)
     model_version: str = MODEL_VERSION
+    # Which parameters the data determined and which were held, each with why
+    # (calibration/gate.py decides; the model file and the report say it).
+    fitted: dict[str, str] = field(default_factory=dict)
+    held: dict[str, str] = field(default_factory=dict)
 
     @property
     def degree(self) -> int:
@@ -219,6 +224,10 @@ def fit_campaign(
     per-step line) is subtracted before the fits
     (:func:`calibration.temperature_conditioning.rate_corrected_raw_g`), so the model
     is the sensor's at rest. Needs a temperature in the recording.
+
+    Raises :class:`calibration.gate.GateRefusal` for a result the gate refuses (did
+    not converge, negative spare degrees of freedom counted on orientations, not
+    physical) and :class:`NotIdentifiable` when no step can be fitted.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -292,8 +301,8 @@ def fit_campaign(
         fits.append((int(s), idx, fr))
     if not fits:
         raise NotIdentifiable(
-            f"{recording.path}: no temperature step has enough distinct positions for an "
-            f"SFEM fit ({mode} mode needs {'4' if mode == 'reference' else '10'} or more)"
+            f"no temperature step has enough distinct orientations for an SFEM fit ({mode} "
+            f"mode needs {'4' if mode == 'reference' else '10'} or more)"
         )
     step_temps = np.array(
         [cond.step_c.get(s, math.nan) if cond else math.nan for s, _, _ in fits]
@@ -312,7 +321,12 @@ def fit_campaign(
         lo, hi = float(np.min(step_temps)), float(np.max(step_temps))
         centre = 0.5 * (lo + hi)
         scale = max(0.5 * (hi - lo), 1.0)
-        valid_c: tuple[float, float] | None = (lo - RANGE_MARGIN_C, hi + RANGE_MARGIN_C)
+        # The data's own span is always valid: a reading hotter than its step's mean is
+        # still inside what the model was fitted on.
+        row_t = recording.temperature_c()
+        valid_c: tuple[float, float] | None = (
+            min(lo - RANGE_MARGIN_C, float(np.nanmin(row_t))),
+            max(hi + RANGE_MARGIN_C, float(np.nanmax(row_t))))
     else:
         used_degree, centre, scale, valid_c = 0, 0.0, 1.0, None
         if degree > 0:
@@ -349,7 +363,12 @@ def fit_campaign(
         notes.append("joint fit skipped: one temperature, nothing to fit across steps; "
                      "per-step result used")
 
+    why_held = {n: why for _, _, fr in fits for n, why in fr.not_identifiable_why.items()}
     model = ThermalModel(
+        fitted={n: "fitted" for n, ok in zip(sfem.PARAM_NAMES, identifiable, strict=True)
+                if ok},
+        held={n: "held at nominal: " + why_held.get(n, "not identifiable")
+              for n, ok in zip(sfem.PARAM_NAMES, identifiable, strict=True) if not ok},
         coeffs=coeffs,
         t_centre_c=centre,
         t_scale_c=scale,
@@ -408,8 +427,12 @@ def fit_campaign(
         row_step[idx] = s
     report = _report(model, step_results, notes, poly_chi2, joint_info, recording)
     report["drift"] = _drift(model, recording, fits, row_c)
-    return ThermalFit(model, step_results, report, row_c, row_step, notes,
-                      raw if rate_gain_ug_per_c_per_min is not None else None)
+    result = ThermalFit(model, step_results, report, row_c, row_step, notes,
+                        raw if rate_gain_ug_per_c_per_min is not None else None)
+    # The one gate (calibration/gate.py): no caller -- CLI, engine, benchmark -- gets a
+    # model that did not converge, has no spare orientations, or is not physical.
+    check_thermal_fit(result, recording)
+    return result
 
 
 # --- helpers ----------------------------------------------------------------
@@ -516,6 +539,8 @@ def _report(
         "identifiable": {
             n: bool(v) for n, v in zip(sfem.PARAM_NAMES, model.identifiable, strict=True)
         },
+        "fitted": dict(model.fitted),
+        "held": dict(model.held),
         "polynomial_chi2_red": {
             n: num(c) for n, c in zip(sfem.PARAM_NAMES, poly_chi2, strict=True)
         },

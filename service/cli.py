@@ -163,7 +163,7 @@ def _add_calibration_commands(sub: Any) -> None:
     diag.add_argument("--n-null", type=int, metavar="N", help="null-distribution draws")
     diag.add_argument("--against", metavar="FILE", help="model or twin JSON held fixed (no refit)")
     diag.add_argument("--write-twin", metavar="OUT", help="with --against: corrected twin JSON")
-    diag.set_defaults(handler=_delegate("calibration.discrepancy.cli", "run_diagnose", "diagnose"))
+    diag.set_defaults(handler=_delegate("calibration.cli", "run_diagnose", "diagnose"))
 
     imp = sub.add_parser("import", help="convert a raw recording to recording format v1")
     imp.add_argument("--format", required=True, metavar="FMT",

@@ -94,3 +94,23 @@ def test_settled_step_gets_its_mean_and_a_creeping_step_its_line() -> None:
     assert cond.row_c[:24][0] == pytest.approx(np.mean(settled))
     slope = np.polyfit(t[24:], cond.row_c[24:], 1)[0]
     assert slope == pytest.approx(0.002, rel=0.2)  # a real creep is kept
+
+
+@pytest.mark.parametrize(("true_c", "noise_c"), [(20.02, 0.012), (20.035, 0.02)])
+def test_a_quantised_channel_is_not_thrown_away_but_a_glitch_still_is(
+        true_c: float, noise_c: float) -> None:
+    # A settled die read in 0.06 °C steps with less noise than a step: most readings
+    # share a level, the robust sigma is a fraction of a step (or a rounding error),
+    # and "more than 4 robust sigma" threw away every reading off that level.
+    from calibration.temperature_conditioning import channel_quantum_c, condition_temperature
+
+    rng = np.random.default_rng(5)
+    t = np.arange(3000) * 0.2
+    read = np.round((true_c + rng.normal(0, noise_c, t.size)) / 0.06) * 0.06
+    assert channel_quantum_c(read) == pytest.approx(0.06)
+    c = condition_temperature(t, read, np.zeros(t.size, int))
+    assert c.rejected_rows == 0
+    assert abs(c.step_c[0] - true_c) < 0.015  # the mean of honest readings
+    read[1234] += 1.2  # a glitch of twenty quanta
+    assert condition_temperature(t, read, np.zeros(t.size, int)).rejected_rows == 1
+    assert channel_quantum_c(20.0 + rng.normal(0, 0.01, 500)) == 0.0  # not quantised

@@ -1,0 +1,166 @@
+"""The one reader of raw rows: raw samples → capture means with their sd and n.
+
+A logger that streams every sample (PX4, ArduPilot, a 500 Hz inclinometer, the
+rig's raw mode) writes thousands of rows per orientation. The rows of one
+capture are not independent positions: they share the placement and the
+temperature of their seconds. Eq. 1 of the seed paper is fitted to averaged
+readings, so ``calibrate``, ``compensate``, the gate (:mod:`calibration.gate`)
+and ``diagnose`` all read raw rows through :func:`capture_means`:
+
+* a capture is a run of consecutive rows with the same ``step`` and ``position``
+  (each where recorded), cut into blocks of at most :data:`CAPTURE_BLOCK_S`
+  seconds, so that a continuous warm-up keeps its temperature resolution;
+* its row is the mean of every numeric column, ``n`` the number of samples and
+  ``sd_*`` their scatter (ddof = 1, two-pass);
+* a capture whose scatter is many times the typical one was taken while the
+  sensor moved (a hand turning it, the table slewing) and is left out, said in
+  the notes.
+
+Averaged recordings (``n`` > 1 or ``sd_*`` given, or one row every few seconds)
+pass through unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calibration.recording import Recording
+
+AXES = ("ax", "ay", "az")
+SD_COLUMNS = ("sd_x", "sd_y", "sd_z")
+LABELS = ("step", "position", "visit")  # whole-number labels, never averaged
+# Longest capture, s: 5-s means are what a warm-up's held-out error is judged on, and the
+# temperature moves by < 0.1 °C in 5 s in any warm-up a sensor survives.
+CAPTURE_BLOCK_S = 5.0
+# Rows closer in time than this (median) are samples, not averaged readings.
+RAW_MAX_DT_S = 0.5
+MIN_RAW_ROWS = 50
+# A capture whose sample sd exceeds this multiple of the median capture's sd (on any
+# axis) was taken while the orientation changed.
+MOVING_SD_FACTOR = 20.0
+
+
+@dataclass
+class Captures:
+    """Capture means of a recording and how they were obtained."""
+
+    recording: Recording  # one row per capture (the input itself when not raw)
+    raw_rows: int  # rows read
+    is_raw: bool
+    row_capture: np.ndarray  # (raw_rows,) capture index of each input row, -1: left out
+    notes: list[str] = field(default_factory=list)
+
+
+def is_raw_samples(rec: Recording) -> bool:
+    """Rows that are single samples: no ``sd_*``, ``n`` ≤ 1, and either repeated
+    (step, position) labels or rows closer than :data:`RAW_MAX_DT_S` in time."""
+    if any(rec.has(c) for c in SD_COLUMNS):
+        return False
+    n = rec.columns.get("n")
+    if n is not None and np.any(np.isfinite(n) & (n > 1)):
+        return False
+    if len(rec) < 2:
+        return False
+    if rec.has("position"):
+        keys = _segment_keys(rec)
+        return bool(np.any(keys[1:] == keys[:-1]))
+    if len(rec) < MIN_RAW_ROWS:
+        return False
+    dt = np.diff(rec.t_s)
+    return bool(np.median(dt) < RAW_MAX_DT_S)
+
+
+def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captures:
+    """The capture means of ``rec`` (see the module docstring)."""
+    n_rows = len(rec)
+    if not is_raw_samples(rec):
+        return Captures(rec, n_rows, False, np.arange(n_rows))
+    seg = np.r_[0, np.cumsum(_segment_keys(rec)[1:] != _segment_keys(rec)[:-1])]
+    t = rec.t_s
+    seg_start = np.zeros(int(seg[-1]) + 1)
+    first = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
+    seg_start[seg[first]] = t[first]
+    block = np.floor((t - seg_start[seg]) / block_s).astype(np.int64)
+    key = seg.astype(np.int64) * (int(block.max()) + 1) + block
+    inv = np.r_[0, np.cumsum(key[1:] != key[:-1])]  # rows are in time order: runs
+    groups = int(inv[-1]) + 1
+    cols = group_means(rec, inv)
+    count = cols["n"]
+    first = np.r_[0, np.flatnonzero(np.diff(inv)) + 1]
+    for name in LABELS:  # labels are not averaged: each capture keeps its first row's
+        if name in cols:
+            cols[name] = rec.columns[name][first]
+    keep = _steady(cols, count)
+    notes = [f"raw samples: {n_rows} rows read as {groups} capture means (runs of the same "
+             f"step and position, at most {block_s:g} s each; sd and n of their samples)"]
+    if not keep.all():
+        notes.append(f"{int(np.sum(~keep))} capture(s) left out: their sample scatter is over "
+                     f"{MOVING_SD_FACTOR:g}x the typical one (the sensor was moving)")
+    out = Recording.from_columns({k: v[keep] for k, v in cols.items()}, path=rec.path)
+    out.notes.extend(rec.notes)
+    new_index = np.where(keep, np.cumsum(keep) - 1, -1)
+    return Captures(out, n_rows, True, new_index[inv], notes)
+
+
+def group_means(rec: Recording, group: np.ndarray) -> dict[str, np.ndarray]:
+    """Columns of one row per group (``group``: 0..G-1 per row): means, sample sd, count.
+
+    Every numeric column is averaged over the group's finite cells (NaN where none);
+    ``n`` is the number of rows and ``sd_*`` the scatter of ``ax ay az`` (ddof = 1,
+    two-pass: the µg scatter of ~1 g values is lost in Σx² − n·x̄²; NaN for one row).
+    The aggregation of every reader of raw samples (diagnose's per-position means too).
+    """
+    inv = np.asarray(group, np.int64)
+    groups = int(inv.max()) + 1 if inv.size else 0
+    count = np.bincount(inv, minlength=groups).astype(float)
+    cols: dict[str, np.ndarray] = {}
+    for name, v in rec.columns.items():
+        if name == "n":
+            continue
+        ok = np.isfinite(v)
+        k = np.bincount(inv[ok], minlength=groups)
+        total = np.bincount(inv[ok], weights=v[ok], minlength=groups)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cols[name] = np.where(k > 0, total / np.maximum(k, 1), np.nan)
+    for axis, sd in zip(AXES, SD_COLUMNS, strict=True):
+        d = rec.columns[axis] - cols[axis][inv]
+        ss = np.bincount(inv, weights=d * d, minlength=groups)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cols[sd] = np.where(count > 1, np.sqrt(ss / np.maximum(count - 1, 1)), np.nan)
+    cols["n"] = count
+    return cols
+
+
+def capture_temperature_c(rec: Recording, caps: Captures) -> np.ndarray:
+    """Each raw row's temperature read from the capture means: linear in time between
+    capture centres (a quantised or noisy channel averaged over each capture)."""
+    temp = rec.temperature_c()
+    if not caps.is_raw or not caps.recording.has_temperature:
+        return temp
+    means = caps.recording
+    return np.interp(rec.t_s, means.t_s, means.temperature_c())
+
+
+def _segment_keys(rec: Recording) -> np.ndarray:
+    """One integer per row: its (step, position) label where recorded, else 0."""
+    key = np.zeros(len(rec), np.int64)
+    for name in ("step", "position"):
+        if name in rec.columns:
+            v = np.nan_to_num(rec.columns[name], nan=-1.0).astype(np.int64)
+            key = key * (int(v.max(initial=0)) + 2) + (v + 1)
+    return key
+
+
+def _steady(cols: dict[str, np.ndarray], count: np.ndarray) -> np.ndarray:
+    """Captures not taken while moving (see :data:`MOVING_SD_FACTOR`)."""
+    sd = np.column_stack([cols[c] for c in SD_COLUMNS])
+    ok = np.isfinite(sd).all(axis=1) & (count > 2)
+    if ok.sum() < 3:
+        return np.ones(count.size, bool)
+    typical = np.median(sd[ok], axis=0)
+    typical = np.where(typical > 0, typical, np.max(typical))
+    if not np.all(typical > 0):
+        return np.ones(count.size, bool)
+    return ~(np.isfinite(sd) & (sd > MOVING_SD_FACTOR * typical)).any(axis=1)

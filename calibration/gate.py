@@ -1,0 +1,388 @@
+"""The one gate before and after a calibration: what the data identify, and refusals.
+
+Three questions, answered in one place for ``calibrate`` and ``diagnose``:
+
+1. **How many orientations?** Capture directions are clustered within the noise
+   (:func:`distinct_orientations`): rows, or the noise scatter of one resting
+   orientation, are never counted as positions. A one-orientation warm-up of
+   100,000 samples is one orientation.
+2. **What do they identify?** (:func:`plan`) The SFEM (Eq. 1) needs, per
+   temperature step, 10 distinct orientations in norm mode (Eq. 3: 9 parameters)
+   or 4 with reference vectors (Eq. 4: 12 parameters, 3 residuals each); which
+   parameters the orientations determine is decided by
+   :func:`calibration.schedules.identifiability` on the orientations' mean
+   directions (:func:`undetermined_parameters`, also used by :mod:`calibration.fit`).
+   Fewer orientations with a temperature channel: a warm-up (:mod:`calibration.warmup`),
+   each axis' bias change with temperature, everything else held. Neither: refused.
+3. **Is the model physical?** (:func:`check_model`, :func:`check_thermal_fit`) A fit
+   that did not converge, negative spare degrees of freedom counted on orientations,
+   a bias beyond :data:`BIAS_MAX_G`, a scale more than :data:`SCALE_MAX_DEV` from 1,
+   angles beyond :data:`ANGLE_MAX_RAD`, or a compensated |g| more than
+   :data:`NORM_MAX_DEV_G` off local gravity on the data's own captures is refused
+   (:class:`GateRefusal`: one line, why and which data would fix it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from calibration import sfem
+from calibration.errors import CalibrationError
+
+if TYPE_CHECKING:  # thermal imports fit, which imports this module
+    from calibration.recording import Recording
+    from calibration.thermal import ThermalFit, ThermalModel
+
+# Orientations closer than this are one: no SFEM parameter is determined by a spread of
+# a degree or two, and a hand re-placing a box on the same face differs by about that.
+MIN_SEPARATION_DEG = 2.0
+# ... or closer than this many angular noise sd of a reading (raw samples of a noisy part).
+NOISE_SIGMAS = 6.0
+# Relative singular value below which the orientations do not determine a parameter
+# (good schedules have condition numbers 2-3; six axis directions a little off true give
+# ~1e-5 for the α in norm mode: far from determined, full rank to a naive check).
+STRUCTURAL_REL_TOL = 1e-3
+NORM_MIN_ORIENTATIONS = 10  # 9 parameters (b, S, C) + 1 spare: Eq. 3
+REFERENCE_MIN_ORIENTATIONS = 4  # 12 parameters, 3 residuals per orientation: Eq. 4
+# A step calibrates the SFEM when its orientations determine at least bias and scale of
+# all three axes (six axis directions: norm mode, α held); fewer is a warm-up.
+SFEM_MIN_FITTED = 6
+# Physical sense. No MEMS accelerometer's zero-g offset comes near half a g (ADXL355:
+# ±25 mg; consumer parts ±150 mg); sensitivities are within a few percent of nominal;
+# axes within a degree or two of orthogonal and of the package.
+BIAS_MAX_G = 0.5
+SCALE_MAX_DEV = 0.25
+ANGLE_MAX_RAD = 0.35
+# |compensated| − g on the captures the model was fitted to: a calibrated sensor is
+# within a few mg; 50 mg off on its own data is not a calibration.
+NORM_MAX_DEV_G = 0.05
+# The fix a refusal names when there are too few orientations.
+MORE_ORIENTATIONS = (
+    f"record at least {NORM_MIN_ORIENTATIONS} distinct orientations per temperature step "
+    f"(or {REFERENCE_MIN_ORIENTATIONS} with reference vectors ref_x/ref_y/ref_z)"
+)
+
+
+class GateRefusal(CalibrationError):
+    """The data cannot give a calibration that is not wrong; the message says what would."""
+
+
+@dataclass
+class Orientations:
+    """Readings grouped into distinct orientations."""
+
+    labels: np.ndarray  # (N,) orientation index of each reading
+    directions: np.ndarray  # (K, 3) unit mean direction of each orientation
+    counts: np.ndarray  # (K,) readings per orientation
+    threshold_deg: float
+
+    @property
+    def count(self) -> int:
+        return int(self.directions.shape[0])
+
+    def names(self, limit: int = 4) -> str:
+        """'z up', 'x down', or a direction vector, for the first ``limit`` orientations."""
+        shown = [direction_name(d) for d in self.directions[:limit]]
+        more = self.count - len(shown)
+        return ", ".join(shown) + (f" and {more} more" if more > 0 else "")
+
+
+def direction_name(u: np.ndarray) -> str:
+    """The axis pointing up (gravity's reaction reads +1 g on it) within 10°, else the vector."""
+    k = int(np.argmax(np.abs(u)))
+    if abs(u[k]) >= math.cos(math.radians(10.0)):
+        return f"{'xyz'[k]} {'up' if u[k] > 0 else 'down'}"
+    return "(" + ", ".join(f"{v:+.2f}" for v in u) + ")"
+
+
+def distinct_orientations(raw_g: np.ndarray, sigma_g: np.ndarray | None = None) -> Orientations:
+    """Cluster reading directions into orientations within the noise.
+
+    Two readings are the same orientation when their directions are closer than
+    max(:data:`MIN_SEPARATION_DEG`, :data:`NOISE_SIGMAS` × the readings' median angular
+    noise |σ|/|a|). Leader clustering in time order (the first unlabelled reading
+    leads an orientation and takes every unlabelled reading within the threshold),
+    then each orientation's direction is the mean of its readings.
+    """
+    raw = np.atleast_2d(np.asarray(raw_g, float))
+    norm = np.linalg.norm(raw, axis=1)
+    u = raw / np.where(norm > 0, norm, 1.0)[:, None]
+    thr = math.radians(MIN_SEPARATION_DEG)
+    if sigma_g is not None:
+        sig = np.broadcast_to(np.asarray(sigma_g, float), raw.shape)
+        ang = np.linalg.norm(sig, axis=1) / np.where(norm > 0, norm, 1.0)
+        ang = ang[np.isfinite(ang)]
+        if ang.size:
+            thr = max(thr, NOISE_SIGMAS * float(np.median(ang)))
+    cos_thr = math.cos(thr)
+    labels = np.full(raw.shape[0], -1)
+    # Schedules of distinct positions (the common case) are settled by one tree query: no
+    # reading with another within the threshold means each is its own orientation (the
+    # leader loop below costs one pass per orientation: 1296 of them in a sphere).
+    chord = 2.0 * math.sin(0.5 * thr)  # the threshold angle as a distance between unit vectors
+    if 1 < raw.shape[0] <= 20_000 and np.all(np.isinf(
+            cKDTree(u).query(u, k=2, distance_upper_bound=chord)[0][:, 1])):
+        return Orientations(np.arange(raw.shape[0]), u.copy(), np.ones(raw.shape[0], int),
+                            math.degrees(thr))
+    # Leader clustering in time order: the first unlabelled reading leads a new
+    # orientation and takes every unlabelled reading within the threshold of it.
+    centres: list[np.ndarray] = []
+    todo = np.arange(raw.shape[0])
+    while todo.size:
+        lead = u[todo[0]]
+        near = u[todo] @ lead >= cos_thr
+        labels[todo[near]] = len(centres)
+        centres.append(lead)
+        todo = todo[~near]
+    K = len(centres)
+    sums = np.zeros((K, 3))
+    np.add.at(sums, labels, u)
+    counts = np.bincount(labels, minlength=K)
+    dirs = sums / np.linalg.norm(sums, axis=1, keepdims=True)
+    return Orientations(labels, dirs, counts, math.degrees(thr))
+
+
+def undetermined_parameters(directions_g: np.ndarray, mode: str,
+                            sigma_g: np.ndarray | None = None) -> tuple[str, ...]:
+    """SFEM parameters the distinct orientations of ``directions_g`` cannot determine.
+
+    The identifiability check (:func:`calibration.schedules.identifiability`, relative
+    singular value :data:`STRUCTURAL_REL_TOL`) on the orientations' mean directions, not
+    on the readings: the noise scatter of one orientation's readings is not a spread of
+    directions.
+    """
+    return _undetermined(distinct_orientations(directions_g, sigma_g), directions_g, mode)
+
+
+def _undetermined(ori: Orientations, directions_g: np.ndarray, mode: str) -> tuple[str, ...]:
+    from calibration.schedules import identifiability  # schedules imports sfem only
+
+    g = float(np.median(np.linalg.norm(directions_g, axis=1)))
+    check = identifiability(ori.directions * g, mode, rel_tol=STRUCTURAL_REL_TOL,
+                            component_tol=0.1)
+    return check.undetermined
+
+
+@dataclass
+class Capacity:
+    """What one set of readings can give an SFEM fit, counted on orientations."""
+
+    orientations: Orientations
+    mode: str
+    fitted: tuple[str, ...]  # parameters the orientations determine
+    readings: int
+
+    @property
+    def spare(self) -> int:
+        """Residuals per orientation (3 reference, 1 norm) × orientations − fitted."""
+        return (3 if self.mode == "reference" else 1) * self.orientations.count - len(
+            self.fitted)
+
+    def refusal(self) -> str | None:
+        """Why an SFEM fit of these readings would not be a calibration, or None."""
+        k, p = self.orientations.count, len(self.fitted)
+        names = self.orientations.names()
+        if p == 0:
+            return (f"the {k} distinct orientation(s) ({names}) determine no SFEM "
+                    f"parameter in {self.mode} mode")
+        if self.mode == "reference" and k < REFERENCE_MIN_ORIENTATIONS:
+            # the reference fit moves all 12 parameters: 3 residuals per orientation
+            return (f"a reference-mode fit needs at least {REFERENCE_MIN_ORIENTATIONS} "
+                    f"distinct orientations, got {k} ({names})")
+        if self.spare < 0:
+            return (f"{k} distinct orientation(s) ({names}) for {p} parameters "
+                    f"({self.spare} spare degrees of freedom)")
+        per = 3 if self.mode == "reference" else 1
+        if per * self.readings <= p:
+            return (f"a {self.mode}-mode fit of {p} parameters needs more than {p} "
+                    f"residuals, got {per * self.readings} from {self.readings} reading(s)")
+        return None
+
+
+def capacity(raw_g: np.ndarray, mode: str, sigma_g: np.ndarray | None = None) -> Capacity:
+    """Distinct orientations of the readings and the SFEM parameters they determine."""
+    ori = distinct_orientations(raw_g, sigma_g)
+    free = sfem.PARAM_NAMES if mode == "reference" else sfem.PARAM_NAMES[:9]
+    unseen = set(_undetermined(ori, raw_g, mode))
+    return Capacity(ori, mode, tuple(n for n in free if n not in unseen),
+                    int(np.atleast_2d(raw_g).shape[0]))
+
+
+@dataclass
+class Plan:
+    """What ``calibrate`` will fit: the SFEM per step, or a warm-up's bias change."""
+
+    kind: str  # "sfem" | "continuous" | "warmup"
+    mode: str  # "reference" | "norm" | "warmup"
+    orientations: Orientations
+    reason: str  # one line: why this kind
+    notes: list[str] = field(default_factory=list)
+
+
+def plan(captures: Recording, *, continuous: bool = False) -> Plan:
+    """Decide from the capture means what the data identify (module docstring, 2.).
+
+    ``continuous``: the recording has rows on no temperature plateau
+    (:func:`calibration.plateaus.segment_recording`); its orientations are then counted
+    over the whole recording, for the SFEM in each reading's own temperature
+    (:mod:`calibration.continuous`), never per invented step. Raises
+    :class:`GateRefusal` when nothing can be calibrated.
+    """
+    raw = captures.raw_g
+    ori = distinct_orientations(raw, captures.sigma_g)
+    mode = "reference" if captures.has_reference else "norm"
+    summary = (f"{ori.count} distinct orientation(s) ({ori.names()}) in {len(captures)} "
+               f"reading(s)")
+    if continuous and captures.has_temperature:
+        from calibration.plateaus import MIN_POSITIONS_NORM, MIN_POSITIONS_REFERENCE
+
+        need = MIN_POSITIONS_REFERENCE if mode == "reference" else MIN_POSITIONS_NORM
+        whole = capacity(raw, mode, captures.sigma_g)
+        if (ori.count >= need and whole.refusal() is None
+                and len(whole.fitted) >= SFEM_MIN_FITTED):
+            return Plan("continuous", mode, ori,
+                        f"{summary} on no temperature plateau: the SFEM fitted in each "
+                        f"reading's own die temperature")
+    per_step = _capacity_per_step(captures, mode)
+    enough = [s for s, c in per_step.items()
+              if c.refusal() is None and len(c.fitted) >= SFEM_MIN_FITTED]
+    if enough:
+        return Plan("sfem", mode, ori, f"{summary}; {len(enough)} of {len(per_step)} step(s) "
+                    f"determine {SFEM_MIN_FITTED} or more SFEM parameters")
+    if captures.has_temperature:
+        most = max((c.orientations.count for c in per_step.values()), default=ori.count)
+        return Plan("warmup", "warmup", ori,
+                    f"{summary}, at most {most} per temperature step: too few for an SFEM "
+                    f"fit of bias and scale; calibrated as a warm-up (each axis' bias change "
+                    f"with temperature; scale, non-orthogonality and misalignment held)")
+    raise GateRefusal(
+        f"{summary} and no temperature: nothing can be calibrated; {MORE_ORIENTATIONS}, "
+        f"or record a temperature (sensor_c) while the sensor warms up")
+
+
+def _capacity_per_step(captures: Recording, mode: str) -> dict[int, Capacity]:
+    steps = captures.steps() if captures.has_temperature else np.zeros(len(captures), int)
+    sig = captures.sigma_g
+    return {int(s): capacity(captures.raw_g[steps == s], mode,
+                             None if sig is None else sig[steps == s])
+            for s in np.unique(steps[steps >= 0])}
+
+
+# --- after the fit --------------------------------------------------------------
+def check_thermal_fit(fit: ThermalFit, captures: Recording) -> None:
+    """Refuse an SFEM thermal fit that did not converge or has no spare degrees of freedom.
+
+    Spare degrees of freedom per step are counted on orientations: residuals
+    (3 per orientation in reference mode, 1 in norm mode) less the fitted parameters.
+    """
+    joint = fit.report.get("joint_fit")
+    if joint and not joint.get("success", True):
+        raise GateRefusal(
+            f"the joint thermal fit did not converge ({joint.get('message')}); no model "
+            f"written: record more orientations per step, or use --method per_step")
+    sig = captures.sigma_g
+    for st in fit.steps:
+        if not st.fit.success:
+            raise GateRefusal(
+                f"the SFEM fit of step {st.step} did not converge ({st.fit.message}); "
+                f"no model written: {MORE_ORIENTATIONS}")
+        idx = fit.row_step == st.step
+        cap = capacity(captures.raw_g[idx], fit.model.mode, None if sig is None else sig[idx])
+        fitted = int(np.sum(st.fit.identifiable))
+        spare = (3 if fit.model.mode == "reference" else 1) * cap.orientations.count - fitted
+        if spare < 0:
+            raise GateRefusal(
+                f"step {st.step} has {cap.orientations.count} distinct orientation(s) for "
+                f"{fitted} fitted parameters ({spare} spare degrees of freedom); no model "
+                f"written: {MORE_ORIENTATIONS}")
+    check_model(fit.model, captures, fit.row_temperature_c)
+
+
+def check_model(model: ThermalModel, captures: Recording,
+                temperature_c: np.ndarray | None = None) -> None:
+    """Refuse a model outside physical sense (module docstring, 3.).
+
+    The parameters are checked at the ends and the centre of the valid range; the
+    compensated |g| on the captures (at ``temperature_c``, each capture's own) for a
+    model that claims to give |g| (not a warm-up's bias change).
+    """
+    temps = [model.t_centre_c]
+    if model.valid_c is not None:
+        temps += list(model.valid_c)
+    names = sfem.PARAM_NAMES
+    for T in temps:
+        p = model.params_vector_at(T, extrapolate=True)
+        at = f" at {T:.1f} °C" if model.temperature_dependent else ""
+        k = int(np.argmax(np.abs(p[sfem.BIAS])))
+        if abs(p[k]) > BIAS_MAX_G:
+            raise GateRefusal(
+                f"the fitted bias {names[k]} = {p[k]:+.3g} g{at} is not physical (no "
+                f"accelerometer is {BIAS_MAX_G:g} g off); no model written: "
+                f"{_fix(model)}")
+        s = p[sfem.SCALE]
+        k = int(np.argmax(np.abs(s - 1.0)))
+        if abs(s[k] - 1.0) > SCALE_MAX_DEV:
+            raise GateRefusal(
+                f"the fitted scale {names[3 + k]} = {s[k]:.4g}{at} is not physical (more "
+                f"than {SCALE_MAX_DEV:.0%} from 1); no model written: {_fix(model)}")
+        a = p[6:]
+        k = int(np.argmax(np.abs(a)))
+        if abs(a[k]) > ANGLE_MAX_RAD:
+            raise GateRefusal(
+                f"the fitted angle {names[6 + k]} = {a[k]:+.3g} rad{at} is not physical; "
+                f"no model written: {_fix(model)}")
+    if model.mode == "warmup" or temperature_c is None:
+        return
+    used = np.isfinite(temperature_c) | (not model.temperature_dependent)
+    if not used.any():
+        return
+    cal = model.compensate(captures.raw_g[used],
+                           np.nan_to_num(temperature_c[used], nan=model.t_centre_c),
+                           extrapolate=True)
+    dev = np.abs(np.linalg.norm(cal, axis=1) - model.g_local)
+    i = int(np.argmax(dev))
+    if dev[i] > NORM_MAX_DEV_G:
+        raise GateRefusal(
+            f"the model gives |g| = {float(np.linalg.norm(cal[i])):.4f} g "
+            f"(local gravity {model.g_local:.4f} g) on its own reading {i + 1}; a calibration "
+            f"is within a few mg; no model written: {_fix(model)}")
+
+
+def _fix(model: ThermalModel) -> str:
+    if model.mode == "warmup":
+        return "check the temperature channel and record a longer, smoother warm-up"
+    return MORE_ORIENTATIONS + ", spread over the sphere"
+
+
+def cannot_judge(recording: Recording) -> str | None:
+    """Why the SFEM's residuals of ``recording`` cannot be judged, or None.
+
+    ``diagnose`` asks this before it runs: what the base model leaves out can only be
+    judged where the gate lets an SFEM be fitted. The reason is the line ``calibrate``
+    gives (its refusal, or why it calibrates a warm-up instead). Raw rows are read
+    as capture means, as ``calibrate`` reads them.
+    """
+    from calibration.captures import capture_means
+    from calibration.plateaus import segment_recording
+    from calibration.warmup import fit_warmup  # warmup imports this module
+
+    captures = capture_means(recording).recording
+    try:
+        decided = plan(captures, continuous=segment_recording(captures).is_continuous)
+        if decided.kind == "warmup":  # calibrate's refusal of the warm-up, if it refuses
+            check_model(fit_warmup(captures, decided.orientations).model, captures)
+    except GateRefusal as exc:
+        return str(exc)
+    if decided.kind == "continuous":
+        return (f"{decided.reason}; the diagnosis judges per-step residuals, so a recording "
+                f"without temperature plateaus cannot be judged: `soakcal calibrate` fits it "
+                f"continuously and reports its residuals per temperature band")
+    if decided.kind == "warmup":
+        return (f"{decided.reason}; the SFEM cannot be fitted, so what it leaves out cannot "
+                f"be judged")
+    return None

@@ -1,0 +1,284 @@
+"""Warm-ups calibrated as far as they go: each axis' bias change with temperature.
+
+A board kept still while it warms (PX4's and ArduPilot's thermal calibration logs)
+shows one orientation, or a few, at a continuously changing temperature. Gravity's
+projection on each axis is constant per orientation but unknown (no reference, too
+few orientations for Eq. 3), so what the data identify is the *change* of each
+axis' bias with temperature. Per axis ``a`` and capture ``i`` (orientation ``o``):
+
+    raw_a,i = G_a,o + Σ_{j=1..d} c_a,j · x_i^j,    x = (T_i − centre_c) / scale_c
+
+fitted by linear least squares to the capture means (:mod:`calibration.captures`),
+each at its own mean temperature. The model stores ``b_a(T) = Σ_{j≥1} c_a,j x^j``
+(zero at ``centre_c``: the bias is referred to that temperature) as the SFEM bias
+polynomial (Eq. 8); scale, non-orthogonality and misalignment are held at nominal
+and the model file says so (``fitted``/``held``).
+
+The degree d (0 … 3) is chosen by held-out error: the captures are cut into
+:data:`HOLDOUT_BLOCKS` equal time blocks, alternately fitted and held out (then the
+other way round), and the degree with the lowest RMS error on the held-out captures
+wins. The valid range is the span of the data's temperatures.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibration import sfem
+from calibration.captures import CAPTURE_BLOCK_S
+from calibration.gate import GateRefusal, Orientations, direction_name
+from calibration.recording import Recording
+from calibration.thermal import ThermalModel
+
+MAX_DEGREE = 3
+HOLDOUT_BLOCKS = 10
+# Capture temperatures closer than this are one temperature when bounding the degree.
+DISTINCT_C = 0.25
+# A degree must lower the held-out RMS by more than this fraction to be preferred to a
+# lower one: a gain below it is no evidence the extra term predicts unseen captures.
+MIN_GAIN = 0.005
+HELD_WHY = {
+    "scale": "held at 1: one orientation per axis cannot separate scale from gravity's "
+             "unknown projection",
+    "angle": "held at 0: a rotation of the sensor frame is invisible without reference "
+             "directions or many orientations",
+}
+BIAS_NOTE = ("fitted: its change with temperature, referred to centre_c (the constant part "
+             "is gravity's unknown projection and is not identified; a change of scale "
+             "with temperature is included as seen at the recorded orientation(s))")
+
+
+@dataclass
+class WarmupFit:
+    model: ThermalModel
+    report: dict[str, Any]
+    notes: list[str] = field(default_factory=list)
+
+
+def fit_warmup(captures: Recording, orientations: Orientations,
+               span_c: tuple[float, float] | None = None,
+               max_degree: int = MAX_DEGREE) -> WarmupFit:
+    """Fit each axis' bias change with temperature (module docstring) to capture means.
+
+    ``span_c``: the temperature span of the data as read (the raw rows'); default the
+    captures'. Raises :class:`GateRefusal` when the temperature does not change enough
+    to see anything.
+    """
+    T = captures.temperature_c()
+    raw = captures.raw_g
+    lo, hi = span_c if span_c is not None else (float(np.min(T)), float(np.max(T)))
+    n_temps = _count_distinct(T, DISTINCT_C)
+    top = min(max_degree, n_temps - 1)
+    if top < 1:
+        raise GateRefusal(
+            f"{orientations.count} distinct orientation(s) ({orientations.names()}) and "
+            f"capture temperatures spanning {np.ptp(T):.2f} °C ({np.min(T):.2f} .. "
+            f"{np.max(T):.2f} °C): too little to see a change of bias with temperature; "
+            f"record while the temperature changes by a few °C, or at least 10 distinct "
+            f"orientations per step for an SFEM fit")
+    _check_connected(T, orientations)
+    centre = 0.5 * (lo + hi)
+    scale = max(0.5 * (hi - lo), 1.0)
+    x = (T - centre) / scale
+    labels = orientations.labels
+    folds = _folds(captures.t_s)
+    heldout = [_heldout_rms_g(x, labels, raw, folds, d) for d in range(top + 1)]
+    totals = [float(np.sqrt(np.mean(h ** 2))) for h in heldout]
+    judged = [d for d in range(top + 1) if np.isfinite(totals[d])]
+    if len(judged) < 2 or judged != list(range(len(judged))):
+        raise GateRefusal(
+            f"{len(captures)} capture(s) of {orientations.count} orientation(s) "
+            f"({orientations.names()}): too few to judge a bias change by held-out error "
+            f"({HOLDOUT_BLOCKS} alternate time blocks); record a longer warm-up (more "
+            f"captures of {CAPTURE_BLOCK_S:g} s)")
+    top = judged[-1]
+    heldout, totals = heldout[: top + 1], totals[: top + 1]
+    degree = 0
+    for d in range(1, top + 1):
+        if totals[d] < totals[degree] * (1.0 - MIN_GAIN):
+            degree = d
+    coef, se = _fit(x, labels, raw, degree)
+    coeffs = np.tile(sfem.identity_vector()[:, None], (1, degree + 1))
+    coeffs[:, 1:] = 0.0
+    coeffs[sfem.BIAS, 0] = 0.0
+    coeffs[sfem.BIAS, 1:] = coef
+    coeff_se = np.full_like(coeffs, np.nan)
+    coeff_se[sfem.BIAS, 1:] = se
+    identifiable = np.zeros(sfem.N_PARAMS, bool)
+    identifiable[sfem.BIAS] = degree > 0
+    fitted = {n: BIAS_NOTE for n in sfem.PARAM_NAMES[:3]} if degree > 0 else {}
+    held = {n: HELD_WHY["scale"] for n in sfem.PARAM_NAMES[3:6]}
+    held.update({n: HELD_WHY["angle"] for n in sfem.PARAM_NAMES[6:]})
+    if degree == 0:
+        held.update({n: "held at 0: no change with temperature above the noise (degree 0 "
+                        "chosen by held-out error)" for n in sfem.PARAM_NAMES[:3]})
+    conditioning = (f"{captures.temperature_source}: each capture's mean temperature "
+                    "(a warm-up: the model in each reading's own temperature)")
+    notes = [f"warm-up: {orientations.count} distinct orientation(s) "
+             f"({orientations.names()}); degree {degree} chosen by held-out error over "
+             f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span"]
+    model = ThermalModel(
+        coeffs=coeffs, t_centre_c=centre, t_scale_c=scale, valid_c=(lo, hi), mode="warmup",
+        identifiable=identifiable, coeff_stderr=coeff_se, method="warmup",
+        temperature_source=captures.temperature_source, temperature_conditioning=conditioning,
+        notes=list(notes), fitted=fitted, held=held,
+        provenance={
+            "input_file": os.path.basename(str(captures.path)),
+            "captures": len(captures),
+            "orientations": orientations.count,
+            "mode": "warmup",
+            "method": "warmup",
+            "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
+        },
+    )
+    report = _report(model, captures, orientations, heldout, totals, degree)
+    return WarmupFit(model, report, notes)
+
+
+def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
+    """Refuse orientations seen at separate temperatures (GateRefusal).
+
+    Each orientation has its own unknown gravity constant, so a bias change is seen
+    only within an orientation's own temperatures; between two orientations recorded
+    at different temperatures (a cold log lying on one face, a hot one on another) the
+    change of bias cannot be told from the change of orientation. The orientations'
+    temperature intervals must overlap into one.
+    """
+    k = orientations.count
+    if k < 2:
+        return
+    spans = sorted((float(np.min(T[orientations.labels == o])),
+                    float(np.max(T[orientations.labels == o])), o) for o in range(k))
+    reach = spans[0][1]
+    for lo, hi, _ in spans[1:]:
+        if lo > reach + DISTINCT_C:
+            shown = "; ".join(
+                f"{direction_name(orientations.directions[o])} {a:.2f} .. {b:.2f} °C"
+                for a, b, o in spans[:4])
+            raise GateRefusal(
+                f"{k} orientations recorded at separate temperatures ({shown}): a change of "
+                f"bias between them cannot be told from the change of orientation; record "
+                f"one orientation across the whole temperature range")
+        reach = max(reach, hi)
+
+
+def _design(x: np.ndarray, labels: np.ndarray, k: int, degree: int) -> np.ndarray:
+    """Columns: one constant per orientation (gravity's projection), then x¹ … x^d."""
+    onehot = (labels[:, None] == np.arange(k)[None, :]).astype(float)
+    powers = np.vander(x, degree + 1, increasing=True)[:, 1:]
+    return np.hstack([onehot, powers])
+
+
+def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """(3, d) drift coefficients and their standard errors."""
+    k = int(labels.max()) + 1
+    X = _design(x, labels, k, degree)
+    beta, *_ = np.linalg.lstsq(X, raw, rcond=None)
+    dof = max(X.shape[0] - X.shape[1], 1)
+    s2 = np.sum((raw - X @ beta) ** 2, axis=0) / dof
+    cov = np.linalg.pinv(X.T @ X)
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))[k:, None] * np.sqrt(s2)[None, :]
+    return beta[k:].T, se.T
+
+
+def _folds(t_s: np.ndarray) -> np.ndarray:
+    """0/1 per capture: alternate blocks of equal duration."""
+    t0, t1 = float(np.min(t_s)), float(np.max(t_s))
+    width = max(t1 - t0, 1e-9) / HOLDOUT_BLOCKS
+    return (np.minimum(((t_s - t0) // width).astype(int), HOLDOUT_BLOCKS - 1)) % 2
+
+
+def _heldout_rms_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.ndarray,
+                   degree: int) -> np.ndarray:
+    """(3,) RMS over held-out captures per axis, g, both ways round.
+
+    A held-out capture whose orientation the fitted half never saw cannot be predicted
+    (its constant is unknown) and is not counted.
+    """
+    k = int(labels.max()) + 1
+    errs: list[np.ndarray] = []
+    for held in (0, 1):
+        fit, test = folds != held, folds == held
+        seen = np.isin(labels, np.unique(labels[fit])) & test
+        if not seen.any() or fit.sum() <= k + degree:
+            continue
+        Xf = _design(x[fit], labels[fit], k, degree)
+        beta, *_ = np.linalg.lstsq(Xf, raw[fit], rcond=None)
+        errs.append(raw[seen] - _design(x[seen], labels[seen], k, degree) @ beta)
+    if not errs:
+        return np.full(3, np.nan)
+    e = np.vstack(errs)
+    return np.sqrt(np.mean(e ** 2, axis=0))
+
+
+def _count_distinct(values: np.ndarray, tol: float) -> int:
+    v = np.sort(np.asarray(values, float))
+    return int(1 + np.sum(np.diff(v) > tol)) if v.size else 0
+
+
+def _report(model: ThermalModel, captures: Recording, orientations: Orientations,
+            heldout: list[np.ndarray], totals: list[float], degree: int) -> dict[str, Any]:
+    phys = model.physical_coeffs()
+    lo, hi = model.valid_c  # type: ignore[misc]
+    change = model.params_vector_at(hi, True)[:3] - model.params_vector_at(lo, True)[:3]
+    return {
+        "recording": os.path.basename(str(captures.path)),
+        "mode": "warmup",
+        "method": "warmup",
+        "captures": len(captures),
+        "orientations": orientations.count,
+        "orientation_names": orientations.names(limit=10),
+        "degree": degree,
+        "degree_selection": [
+            {"degree": d, "heldout_rms_mg": round(t * 1e3, 4),
+             "heldout_rms_mg_xyz": [round(float(v) * 1e3, 4) for v in h]}
+            for d, (t, h) in enumerate(zip(totals, heldout, strict=True))
+        ],
+        "heldout_rms_mg_xyz": {
+            "uncompensated": [round(float(v) * 1e3, 4) for v in heldout[0]],
+            "compensated": [round(float(v) * 1e3, 4) for v in heldout[degree]],
+        },
+        "temperature_source": model.temperature_source,
+        "valid_c": [lo, hi],
+        "centre_c": model.t_centre_c,
+        "bias_change_mg": dict(zip(sfem.PARAM_NAMES[:3],
+                                   [round(float(v) * 1e3, 4) for v in change], strict=True)),
+        "bias_tempco_ug_per_c": {
+            n: [round(float(v) * 1e6, 3) for v in phys[k, 1:]]
+            for k, n in enumerate(sfem.PARAM_NAMES[:3])
+        },
+        "fitted": dict(model.fitted),
+        "held": dict(model.held),
+        "notes": list(model.notes),
+    }
+
+
+def format_warmup(report: dict[str, Any]) -> str:
+    """The warm-up report as text: what was fitted and held, and the held-out error."""
+    lo, hi = report["valid_c"]
+    lines = [
+        f"warm-up calibration of {report['recording']}: {report['captures']} capture means, "
+        f"{report['orientations']} orientation(s) ({report['orientation_names']})",
+        f"temperature {report['temperature_source']} {lo:.2f} .. {hi:.2f} °C "
+        f"(valid range: the data's span)",
+        f"degree {report['degree']} chosen by held-out error (RMS of held-out captures, mg): "
+        + ", ".join(f"d={s['degree']}: {s['heldout_rms_mg']:.4f}"
+                    for s in report["degree_selection"]),
+        "held-out RMS per axis x, y, z (mg): uncompensated "
+        + " ".join(f"{v:.4f}" for v in report["heldout_rms_mg_xyz"]["uncompensated"])
+        + "; compensated "
+        + " ".join(f"{v:.4f}" for v in report["heldout_rms_mg_xyz"]["compensated"]),
+        "bias change over the valid range (mg): "
+        + ", ".join(f"{k} {v:+.4f}" for k, v in report["bias_change_mg"].items()),
+        "fitted: " + (", ".join(report["fitted"]) or "nothing (no change with temperature "
+                                                       "above the noise)"),
+        "held: " + "; ".join(f"{k}" for k in report["held"])
+        + " (" + "; ".join(sorted(set(report["held"].values()))) + ")",
+    ]
+    return "\n".join(lines)
