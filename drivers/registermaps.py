@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import struct
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -39,7 +39,8 @@ TABLE_OPTIONAL = ("faults",)
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
             "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
 CHECK_KEYS = {"register", "expect", "what", "fix"}
-REGISTER_KEYS = {"address", "type", "scale", "word_order", "access", "unit", "source", "note",
+REGISTER_KEYS = {"address", "type", "scale", "offset", "word_order", "access", "unit", "source",
+                 "note",
                  "bits", "info_bits"}
 SECTION_KEYS = {
     "defaults": {"word_order"},
@@ -62,39 +63,48 @@ class MapError(ValueError):
 
 @dataclass(frozen=True)
 class Field:
-    """One quantity in the holding-register space (0-based protocol addresses)."""
+    """One quantity in the holding-register space (0-based protocol addresses).
+
+    Engineering value = register value / ``scale`` + ``offset``: a °F controller is
+    mapped to °C with ``scale = 1.8`` (× counts per degree) and ``offset = -17.7778``.
+    """
 
     address: int
     encoding: Encoding = "int16"
-    scale: float = 1.0  # counts per engineering unit (integer encodings only)
+    scale: float = 1.0  # counts per engineering unit
     word_order: codec.WordOrder = "high_first"  # 32-bit encodings only
     access: str = "rw"
+    offset: float = 0.0  # engineering units added after the scale
 
     @property
     def n_registers(self) -> int:
         return 2 if self.encoding in ("int32", "float32") else 1
 
     def decode(self, words: list[int] | tuple[int, ...]) -> float:
+        return self.decode_raw(words) / self.scale + self.offset
+
+    def decode_raw(self, words: list[int] | tuple[int, ...]) -> float:
+        """The register value before scale and offset (counts, or the float as sent)."""
         if self.encoding == "float32":
             return codec.decode_float32(words, self.word_order)
         if self.encoding == "int32":
             hi, lo = (words[0], words[1]) if self.word_order == "high_first" else (
                 words[1], words[0])
-            raw = struct.unpack(">i", struct.pack(">HH", hi & 0xFFFF, lo & 0xFFFF))[0]
-            return raw / self.scale
-        return codec.decode_scaled(words[0], self.scale, signed=self.encoding == "int16")
+            return float(struct.unpack(">i", struct.pack(">HH", hi & 0xFFFF, lo & 0xFFFF))[0])
+        return codec.decode_scaled(words[0], 1.0, signed=self.encoding == "int16")
 
     def encode(self, value: float) -> list[int]:
         """Raises ValueError when the value cannot be represented (the driver maps it)."""
+        raw = (value - self.offset) * self.scale
         if self.encoding == "float32":
-            return codec.encode_float32(value, self.word_order)
+            return codec.encode_float32(raw, self.word_order)
         if self.encoding == "int32":
-            raw = int(round(value * self.scale))
-            if not -(2**31) <= raw < 2**31:
+            counts = int(round(raw))
+            if not -(2**31) <= counts < 2**31:
                 raise ValueError(f"{value} × {self.scale} does not fit a signed 32-bit value")
-            hi, lo = struct.unpack(">HH", struct.pack(">i", raw))
+            hi, lo = struct.unpack(">HH", struct.pack(">i", counts))
             return [hi, lo] if self.word_order == "high_first" else [lo, hi]
-        return [codec.encode_scaled(value, self.scale, signed=self.encoding == "int16")]
+        return [codec.encode_scaled(raw, 1.0, signed=self.encoding == "int16")]
 
 
 @dataclass(frozen=True)
@@ -180,8 +190,7 @@ class TurntableMap:
     undocumented: tuple[str, ...] = ()
 
     def axis_field(self, base: Field, axis: int) -> Field:
-        return Field(base.address + axis * self.axis_stride, base.encoding, base.scale,
-                     base.word_order, base.access)
+        return replace(base, address=base.address + axis * self.axis_stride)
 
 
 # --- loading ------------------------------------------------------------------
@@ -302,8 +311,7 @@ class _MapReader:
         if not isinstance(scale, int | float) or isinstance(scale, bool) or not scale > 0 \
                 or not math.isfinite(scale):
             raise self.fail(f"{key}.scale", f"expected counts per unit > 0, got {scale!r}")
-        if enc == "float32" and scale != 1:
-            raise self.fail(f"{key}.scale", "a float32 register carries the value itself")
+        offset = self.number(f"{key}.offset", spec.get("offset"), 0.0)
         order = spec.get("word_order", default_order)
         if order not in ("high_first", "low_first"):
             raise self.fail(f"{key}.word_order",
@@ -314,7 +322,8 @@ class _MapReader:
                             f"{access!r}")
         if not isinstance(spec.get("source", ""), str):
             raise self.fail(f"{key}.source", "expected the citation as a string")
-        return Field(address, enc, float(scale), order, access)  # type: ignore[arg-type]
+        return Field(address, enc, float(scale), order, access,  # type: ignore[arg-type]
+                     float(offset or 0.0))
 
     def check_overlaps(self, fields: dict[str, Field]) -> None:
         """Two names on one register is a duplicated register too (a copy-paste slip)."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import math
 import sys
@@ -21,11 +22,11 @@ from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 from drivers.clock import Clock, RealClock, ScaledClock
-from drivers.faults import DeviceFault
+from drivers.faults import DeviceFault, ModbusExceptionReply
+from service import rig_plausibility as plausibility
 
 Status = Literal["pass", "fail", "skip"]
 
-NUDGE_C = 0.5  # setpoint nudge, °C: visible at 0.1 °C resolution, harmless to any soak
 TABLE_STEP_DEG = 5.0  # one table move on the outer axis, deg
 ANGLE_TOLERANCE_DEG = 0.1
 MOVE_TIMEOUT_S = 120.0  # rig time for one table move to report in-position
@@ -85,17 +86,32 @@ async def check_rig(rig: dict[str, Any], *, move: bool = False,
     channels = _first_entry_channels(rig)
     try:
         async with open_rig(rig, clock, serials=list(channels.values())) as devices:
-            await _check_chamber(rec, devices.chamber, move, rig)
+            chamber_ok = await _check_chamber(rec, devices.chamber, rig)
             await _check_table(rec, devices.turntable, move, clock)
+            dies_c: list[float] = []
             if not channels:
-                await _check_sensor(rec, devices.accelerometer, rig)
+                dies_c += await _check_sensor(rec, devices.accelerometer, rig)
             # A multiplexing bridge: every channel is a sensor, checked as "sensor @<ch>"
             # against the serial its channel declares.
             accels = devices.accelerometers or {s: devices.accelerometer
                                                 for s in channels.values()}
             for ch, serial in channels.items():
-                await _check_sensor(rec, accels[serial], rig, device=f"sensor @{ch}",
-                                    expected_serial=serial, blank_ok=True)
+                dies_c += await _check_sensor(rec, accels[serial], rig, device=f"sensor @{ch}",
+                                              expected_serial=serial, blank_ok=True)
+            if chamber_ok:
+                plausible = await rec.guard(
+                    "chamber", "pv_vs_die", _CONNECT_FIX,
+                    lambda: plausibility.check_pv_against_die(rec, devices.chamber, dies_c))
+                if not move:
+                    rec.add("chamber", "setpoint_nudge", "skip", "not asked (--move)")
+                elif not plausible:
+                    rec.add("chamber", "setpoint_nudge", "skip",
+                            "not nudged: the PV is not plausible, so a setpoint written "
+                            "through this map would not be the temperature asked")
+                else:
+                    await rec.guard("chamber", "setpoint_nudge", _CONNECT_FIX,
+                                    lambda: plausibility.nudge_and_ramp(rec, devices.chamber,
+                                                                        rig, clock))
     except RigConfigError as exc:
         rec.add("rig", "config", "fail", str(exc), "fix the rig config (PUT /api/v1/rigs/NAME)")
     return rec.checks
@@ -108,8 +124,9 @@ async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
     regmap = driver.regmap
     ident = regmap.identity
     if ident is None:
-        value = await driver.read_status()  # still proves the device answers
-        del value
+        # Still proves the device answers; a refused register is the status check's to name.
+        with contextlib.suppress(ModbusExceptionReply):
+            await driver.read_status()
         rec.add(device, "connect", "pass", f"answers at {driver.link.url}")
         rec.add(device, "identity", "skip",
                 f"map {regmap.name} has no identity register (none documented)")
@@ -144,17 +161,14 @@ async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
     return True
 
 
-async def _check_chamber(rec: _Recorder, chamber: Any, move: bool,
-                         rig: dict[str, Any]) -> None:
+async def _check_chamber(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> bool:
+    """Identity, status and alarms; ``False`` when the chamber cannot be read at all."""
     if not hasattr(chamber, "regmap"):  # not a map-driven driver: nothing to compare against
         rec.add("chamber", "identity", "skip", "driver has no register map")
     elif not await rec.guard("chamber", "connect", _CONNECT_FIX,
                              lambda: _identity(rec, "chamber", chamber)):
-        return
-    lo, hi = chamber.range_c
-    cfg_range = (rig.get("chamber") or {}).get("range_c")
-    if cfg_range:
-        lo, hi = max(lo, float(cfg_range[0])), min(hi, float(cfg_range[1]))
+        return False
+    lo, hi = plausibility.usable_range_c(chamber, rig)
 
     async def status() -> bool:
         st = await chamber.read_status()
@@ -163,37 +177,25 @@ async def _check_chamber(rec: _Recorder, chamber: Any, move: bool,
                   f"{'running' if st.running else 'stopped'}")
         ok = math.isfinite(st.process_c) and lo - 30.0 <= st.process_c <= hi + 30.0
         rec.add("chamber", "status", "pass" if ok else "fail", detail,
-                "" if ok else "the PV is implausible: check the map's scale and the "
-                "controller's units (°C, decimal places)")
+                "" if ok else "the PV is implausible: check the map's scale and word order "
+                "and the controller's units (the pv_vs_die check names the likely cause)")
         if st.alarms:
-            return rec.add("chamber", "alarms", "fail", "active: " + ", ".join(st.alarms),
-                           "clear the alarm at the controller before a campaign")
-        return rec.add("chamber", "alarms", "pass", "none active")
+            rec.add("chamber", "alarms", "fail", "active: " + ", ".join(st.alarms),
+                    "clear the alarm at the controller before a campaign")
+        else:
+            rec.add("chamber", "alarms", "pass", "none active")
+        await plausibility.check_mode(rec, chamber)
+        return True
 
-    if not await rec.guard("chamber", "status", _CONNECT_FIX, status):
-        return
-    if not move:
-        rec.add("chamber", "setpoint_nudge", "skip", "not asked (--move)")
-        return
-
-    async def nudge() -> bool:
-        sp0 = (await chamber.read_status()).setpoint_c
-        target = sp0 + NUDGE_C if sp0 + NUDGE_C <= hi else sp0 - NUDGE_C
-        await chamber.set_setpoint(target)
-        got = (await chamber.read_status()).setpoint_c
-        await chamber.set_setpoint(sp0)
-        back = (await chamber.read_status()).setpoint_c
-        tol = 0.051
-        if abs(got - target) > tol or abs(back - sp0) > tol:
-            return rec.add("chamber", "setpoint_nudge", "fail",
-                           f"wrote {target:.2f} °C, read {got:.2f} °C; restored {sp0:.2f} °C, "
-                           f"read {back:.2f} °C",
-                           "the setpoint register is read-only, remote setpoint is disabled, "
-                           "or the map's scale/word order is wrong")
-        return rec.add("chamber", "setpoint_nudge", "pass",
-                       f"SP {sp0:.1f} → {target:.1f} → {back:.1f} °C")
-
-    await rec.guard("chamber", "setpoint_nudge", _CONNECT_FIX, nudge)
+    try:
+        return await status()
+    except DeviceFault as fault:
+        silent = await plausibility.silent_registers(chamber)
+        if silent:
+            rec.add("chamber", "status", "fail", "; ".join(d for d, _ in silent), silent[0][1])
+        else:
+            rec.add("chamber", "status", "fail", f"no usable answer: {fault}", _CONNECT_FIX)
+        return False
 
 
 # --- turntable -------------------------------------------------------------------------
@@ -278,9 +280,12 @@ def _first_entry_channels(rig: dict[str, Any]) -> dict[int, str]:
 
 async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
                         device: str = "sensor", expected_serial: str | None = None,
-                        blank_ok: bool = False) -> None:
+                        blank_ok: bool = False) -> list[float]:
     """Identity and one static reading of one sensor; ``blank_ok``: a blank fixture EEPROM
-    is not a mismatch (a channel bound by the rig's table, checked at campaign start)."""
+    is not a mismatch (a channel bound by the rig's table, checked at campaign start).
+
+    Returns the die temperature it read (``[]`` when none), for the chamber's PV check."""
+    dies_c: list[float] = []
     sensors = rig.get("sensors") or [{}]
     if expected_serial is None and isinstance(sensors[0], dict):
         expected_serial = sensors[0].get("serial")
@@ -313,10 +318,12 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
         return rec.add(device, "identity", "pass", detail)
 
     if not await rec.guard(device, "identity", fix, identity):
-        return
+        return dies_c
 
     async def acquire() -> bool:
         acq = await accel.acquire(SENSOR_SAMPLES)
+        if math.isfinite(acq.sensor_c):
+            dies_c.append(acq.sensor_c)
         g = math.sqrt(sum(v * v for v in acq.mean_g))
         detail = (f"{acq.n} samples: |g| {g:.4f} g, die {acq.sensor_c:.1f} °C, "
                   f"sd {max(acq.sd_g) * 1e6:.0f} µg")
@@ -330,6 +337,7 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
         return rec.add(device, "acquire", "pass", detail)
 
     await rec.guard(device, "acquire", fix, acquire)
+    return dies_c
 
 
 # --- CLI -------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ from drivers.clock import VirtualClock
 from drivers.protocols import Acquisition
 from drivers.registermaps import CHAMBER_MAPS
 from service.rig_check import Check, check_rig, format_report, passed
-from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
+from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage, ControllerSetup
 from simulators.faults import SimFaults
 from simulators.modbus_server import start_modbus_server
 from simulators.rig import start_sim_rig
@@ -243,3 +243,102 @@ async def test_every_channel_of_a_multiplexing_bridge_is_checked() -> None:
     assert not any(c.device == "sensor @1" and c.check == "acquire" for c in checks)
     dead = _by(checks, "sensor @2", "identity")
     assert dead.status == "fail" and "0x00" in dead.detail
+
+
+# --- physical plausibility: a twin set up unlike the map -------------------------------
+# Each case: the controller's own setup, the map the lab wrote, and what rig check must
+# say (the check that fails, words of its detail naming the cause, words of its fix).
+MISCONFIGURED = {
+    "whole degrees read as tenths (×10)": (
+        ControllerSetup(decimals=0), "eurotherm-3216", "pv_vs_die",
+        ["PV reads 2.3 °C", "die reads 23.0 °C", "×10"],
+        ["`scale = 10`→`1`", "`process_c`", "eurotherm-3216.toml"]),
+    "hundredths read as tenths (×0.1)": (
+        ControllerSetup(decimals=2), "eurotherm-3216", "pv_vs_die",
+        ["PV reads 2", " °C while the die reads 23.0 °C", "×0.1"],
+        ["`scale = 10`→`100`", "eurotherm-3216.toml"]),
+    "display in °F": (
+        ControllerSetup(units="F"), "eurotherm-3216", "pv_vs_die",
+        ["PV reads 73.4 °C", "°F"], ["units to °C", "`offset = -17.7778`"]),
+    "ramp units per hour": (
+        ControllerSetup(ramp_per="hour"), "eurotherm-3216", "ramp",
+        ["0.00 °C/min", "commanded 1 °C/min", "per hour"],
+        ["per minute", "`scale = 10`→`600`", "`ramp_c_per_min`"]),
+    "float words swapped": (
+        ControllerSetup(swap_words=True), "watlow-f4t", "pv_vs_die",
+        ["words", "swapped"], ["`word_order = \"high_first\"`", "watlow-f4t.toml"]),
+    "alarm register missing on this model": (
+        ControllerSetup(silent=frozenset({"alarms"})), "eurotherm-3216", "status",
+        ["`alarms` (address 75) does not answer"], ["correct `address`", "eurotherm-3216.toml"]),
+    "controller in manual": (
+        ControllerSetup(mode="manual"), "eurotherm-3216", "mode",
+        ["manual mode"], ["automatic"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MISCONFIGURED))
+async def test_a_map_unlike_the_controller_fails_naming_cause_and_key(case: str) -> None:
+    setup, chamber_map, failing, detail_words, fix_words = MISCONFIGURED[case]
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=chamber_map, controller=setup) as sim:
+        checks = await check_rig(_config(sim, chamber_map), move=True, clock=clock)
+        # Whatever failed, nothing was left changed on the chamber.
+        assert sim.chamber.setpoint_c == pytest.approx(23.0)
+    assert not passed(checks)
+    bad = _by(checks, "chamber", failing)
+    assert bad.status == "fail", format_report(case, checks)
+    for words in detail_words:
+        assert words in bad.detail, bad.detail
+    for words in fix_words:
+        assert words in bad.fix, bad.fix
+
+
+async def test_a_mis_scaled_chamber_is_not_nudged(monkeypatch: pytest.MonkeyPatch) -> None:
+    """×10: a nudge of 0.5 °C through the map would write 5 °C; rig check writes nothing."""
+    writes: list[int] = []
+    image_write = ChamberRegisterImage.write
+
+    def spy(self: ChamberRegisterImage, address: int, values: list[int]) -> Any:
+        writes.append(address)
+        return image_write(self, address, values)
+
+    monkeypatch.setattr(ChamberRegisterImage, "write", spy)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, controller=ControllerSetup(decimals=0)) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    assert writes == []
+    assert "not nudged" in _by(checks, "chamber", "setpoint_nudge").detail
+
+
+async def test_a_pv_register_pointing_elsewhere_names_the_address(tmp_path: Path) -> None:
+    from drivers.registermaps import shipped_maps
+
+    text = shipped_maps()["eurotherm-3216"].read_text()
+    wrong = tmp_path / "lab-3216.toml"
+    # A slip of the pen: PV at 4 (nothing there on this controller) instead of 1.
+    wrong.write_text(text.replace("[registers.process_c]\naddress = 1\n",
+                                  "[registers.process_c]\naddress = 4\n"))
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        checks = await check_rig(_config(sim, str(wrong)), move=True, clock=clock)
+    bad = _by(checks, "chamber", "pv_vs_die")
+    assert bad.status == "fail" and "PV reads 0.0 °C" in bad.detail
+    assert "no scale, unit or word-order error explains it" in bad.detail
+    assert "`address` of register `process_c` in lab-3216.toml" in bad.fix
+
+
+async def test_a_well_set_up_controller_passes_the_ramp_and_die_checks() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216") as sim:
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    ramp = _by(checks, "chamber", "ramp")
+    assert ramp.status == "pass" and "commanded 1 °C/min" in ramp.detail
+    assert _by(checks, "chamber", "pv_vs_die").status == "pass"
+
+
+async def test_a_stopped_chamber_is_not_started_to_watch_its_ramp() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="soakcal-twin-chamber") as sim:
+        checks = await check_rig(_config(sim, "soakcal-twin-chamber"), move=True, clock=clock)
+        assert not sim.chamber.running
+    assert _by(checks, "chamber", "ramp").status == "skip"
