@@ -26,6 +26,9 @@ from drivers import codec
 Encoding = Literal["int16", "uint16", "int32", "float32"]
 ENCODINGS: tuple[str, ...] = ("int16", "uint16", "int32", "float32")
 ACCESS = ("r", "w", "rw")
+WORD_ORDERS = ("high_first", "low_first")
+#: One Modbus read returns at most 125 registers: a larger gap cannot be spanned.
+MAX_READ_REGISTERS = 125
 SCHEMA = "soakcal-register-map/1"
 MAPS_DIR = Path(__file__).with_name("maps")
 
@@ -39,9 +42,8 @@ TABLE_OPTIONAL = ("faults",)
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
             "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
 CHECK_KEYS = {"register", "expect", "what", "fix"}
-REGISTER_KEYS = {"address", "type", "scale", "offset", "word_order", "access", "unit", "source",
-                 "note",
-                 "bits", "info_bits"}
+REGISTER_KEYS = {"address", "protocol_address", "type", "scale", "offset", "word_order",
+                 "access", "unit", "source", "note", "bits", "info_bits"}
 SECTION_KEYS = {
     "defaults": {"word_order"},
     "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
@@ -224,6 +226,9 @@ def load_map(ref: str | Path) -> ChamberMap | TurntableMap:
     except tomllib.TOMLDecodeError as exc:
         # tomllib reports a key written twice (a duplicated register) with line and column.
         raise MapError(f"{path}: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise MapError(f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02X} at offset "
+                       f"{exc.start}): save the map file as UTF-8") from exc
     except OSError as exc:
         raise MapError(f"{path}: cannot read ({exc.strerror})") from exc
     return _MapReader(path, doc).build()
@@ -285,6 +290,9 @@ class _MapReader:
         if not isinstance(table, dict) or not table:
             raise self.fail("registers", "expected a table of named registers")
         default_order = self.doc.get("defaults", {}).get("word_order", "high_first")
+        if default_order not in WORD_ORDERS:
+            raise self.fail("defaults.word_order", f"expected \"high_first\" or "
+                            f"\"low_first\", got {default_order!r}")
         fields: dict[str, Field] = {}
         for reg, spec in table.items():
             fields[reg] = self.register(reg, spec, default_order)
@@ -303,17 +311,27 @@ class _MapReader:
         if not isinstance(address, int) or isinstance(address, bool) or not 0 <= address <= 65535:
             raise self.fail(f"{key}.address", f"expected a protocol address 0…65535, got "
                             f"{address!r}")
+        if 40001 <= address <= 49999 and spec.get("protocol_address") is not True:
+            raise self.fail(f"{key}.address",
+                            f"{address} looks like a 4xxxx holding-register reference (the "
+                            f"\"4\" names the table, counting from 1): write the protocol "
+                            f"address, address = {address - 40001}; if the manual really "
+                            f"gives protocol address {address}, add protocol_address = true")
         enc = spec.get("type")
         if enc not in ENCODINGS:
             raise self.fail(f"{key}.type", f"unknown type {enc!r} (expected one of "
                             f"{', '.join(ENCODINGS)})")
+        width = 2 if enc in ("int32", "float32") else 1
+        if address + width - 1 > 65535:
+            raise self.fail(f"{key}.address", f"a {enc} at {address} needs registers "
+                            f"{address}…{address + width - 1}, past the last one (65535)")
         scale = spec.get("scale", 1)
         if not isinstance(scale, int | float) or isinstance(scale, bool) or not scale > 0 \
                 or not math.isfinite(scale):
             raise self.fail(f"{key}.scale", f"expected counts per unit > 0, got {scale!r}")
         offset = self.number(f"{key}.offset", spec.get("offset"), 0.0)
         order = spec.get("word_order", default_order)
-        if order not in ("high_first", "low_first"):
+        if order not in WORD_ORDERS:
             raise self.fail(f"{key}.word_order",
                             f"expected \"high_first\" or \"low_first\", got {order!r}")
         access = spec.get("access", "r")
@@ -410,12 +428,18 @@ class _MapReader:
         notes = d.get("undocumented", [])
         if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
             raise self.fail("undocumented", "expected a list of strings")
-        gap = d.get("limits", {}).get("block_read_max_gap", 0)
-        if not isinstance(gap, int) or gap < 0:
-            raise self.fail("limits.block_read_max_gap", "expected an integer ≥ 0")
+        gap = self.gap(0)
         return {"title": str(d.get("title", "")), "source": str(self.path),
                 "undocumented": tuple(notes), "block_read_max_gap": gap,
                 "checks": self.checks(regs), "identity": self.identity(regs), "registers": regs}
+
+    def gap(self, default: int) -> int:
+        gap = self.doc.get("limits", {}).get("block_read_max_gap", default)
+        if not isinstance(gap, int) or isinstance(gap, bool) or not 0 <= gap < MAX_READ_REGISTERS:
+            raise self.fail("limits.block_read_max_gap",
+                            f"expected an integer 0…{MAX_READ_REGISTERS - 1} (one read returns at "
+                            f"most {MAX_READ_REGISTERS} registers), got {gap!r}")
+        return gap
 
     def number(self, key: str, value: Any, default: float | None) -> float | None:
         if value is None:
@@ -434,10 +458,14 @@ class _MapReader:
         limits = d.get("limits", {})
         rng = limits.get("range_c", [-70.0, 180.0])
         if not (isinstance(rng, list) and len(rng) == 2
-                and all(isinstance(v, int | float) for v in rng) and rng[0] < rng[1]):
+                and all(isinstance(v, int | float) and not isinstance(v, bool)
+                        and math.isfinite(v) for v in rng) and rng[0] < rng[1]):
             raise self.fail("limits.range_c", "expected [lo, hi] in °C with lo < hi")
         max_ramp = self.number("limits.max_ramp_c_per_min", limits.get("max_ramp_c_per_min"),
                                None)
+        if max_ramp is not None and not max_ramp > 0:
+            raise self.fail("limits.max_ramp_c_per_min",
+                            f"expected the chamber's fastest ramp, > 0 °C/min, got {max_ramp:g}")
         safe = self.number("safe.setpoint_c", d.get("safe", {}).get("setpoint_c"), 23.0)
         assert safe is not None
         if not rng[0] <= safe <= rng[1]:
@@ -503,14 +531,30 @@ class _MapReader:
         for needed in ("in_position", "moving"):
             if needed not in by_name:
                 raise self.fail("registers.status.bits", f"missing the \"{needed}\" bit")
+        for reg in ("position_deg", "target_deg"):
+            f = regs[reg]
+            last = f.address + (n_axes - 1) * stride + f.n_registers - 1
+            if last > 65535:
+                raise self.fail(f"registers.{reg}.address",
+                                f"axis {n_axes - 1} lands at {last - f.n_registers + 1} "
+                                f"(address {f.address} + {n_axes - 1} × stride {stride}), past "
+                                "the last register (65535)")
         limits = d.get("limits", {})
         rng = self.number("limits.range_deg", limits.get("range_deg"), 720.0)
+        assert rng is not None
+        if not rng > 0:
+            raise self.fail("limits.range_deg", f"expected the largest |angle| > 0°, got {rng:g}")
         safe = d.get("safe", {}).get("angles_deg", [0.0] * n_axes)
         if not isinstance(safe, list) or len(safe) != n_axes:
             raise self.fail("safe.angles_deg", f"expected {n_axes} angles")
+        for i, a in enumerate(safe):
+            angle = self.number(f"safe.angles_deg[{i}]", a, None)
+            if angle is None or abs(angle) > rng:
+                raise self.fail(f"safe.angles_deg[{i}]",
+                                f"{a!r}° outside limits.range_deg ±{rng:g}°")
         faults_raw = d["registers"].get("faults", {})
         common = self.common(regs)
-        common["block_read_max_gap"] = d.get("limits", {}).get("block_read_max_gap", 8)
+        common["block_read_max_gap"] = self.gap(8)
         return TurntableMap(
             name=name, n_axes=n_axes,
             position_deg=regs["position_deg"], target_deg=regs["target_deg"],
@@ -519,10 +563,18 @@ class _MapReader:
             fault_bits=self.bits("registers.faults.bits", faults_raw.get("bits")),
             move_value=move, stop_value=stop,
             in_position_bit=by_name["in_position"], moving_bit=by_name["moving"],
-            range_deg=float(rng or 720.0),
+            range_deg=float(rng),
             safe_angles_deg=tuple(float(a) for a in safe),
             **common,
         )
+
+
+def describe_map(m: ChamberMap | TurntableMap) -> str:
+    """One line naming what a map describes (``soakcal rig validate``)."""
+    kind = "chamber" if isinstance(m, ChamberMap) else f"turntable, {m.n_axes} axes"
+    what = f"{m.name} — {m.title}" if m.title else m.name
+    notes = f", {len(m.undocumented)} undocumented points listed" if m.undocumented else ""
+    return f"{what} ({kind}, {len(m.registers)} registers{notes})"
 
 
 def bits_to_names(word: int, names: dict[int, str]) -> tuple[str, ...]:

@@ -136,12 +136,21 @@ async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
     if got != ident.expect:
         return rec.add(
             device, "identity", "fail",
-            f"register {ident.register} reads {got:g}, map {regmap.name} expects "
-            f"{ident.expect:g}",
+            f"register {ident.register} reads {_number(got)}, map {regmap.name} expects "
+            f"{_number(ident.expect)}",
             "another device answers at this URL/unit id, or the rig names the wrong map")
     rec.add(device, "identity", "pass",
-            f"register {ident.register} = {got:g} as map {regmap.name} expects")
+            f"register {ident.register} = {_number(got)} as map {regmap.name} expects")
     return await _map_checks(rec, device, driver)
+
+
+def _number(value: float | None) -> str:
+    """A register value as the manual prints it: 8126464, not 8.12646e+06."""
+    if value is None:
+        return "nothing"
+    if math.isfinite(value) and value == int(value):
+        return str(int(value))
+    return f"{value:.6g}"
 
 
 async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
@@ -154,8 +163,8 @@ async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
         got = await driver.link.read_field(c.field)
         if got != c.expect:
             rec.add(device, f"register:{c.register}", "fail",
-                    f"{c.register} reads {got:g}, map {driver.regmap.name} expects "
-                    f"{c.expect:g} ({c.what})", c.fix or "set it on the controller")
+                    f"{c.register} reads {_number(got)}, map {driver.regmap.name} expects "
+                    f"{_number(c.expect)} ({c.what})", c.fix or "set it on the controller")
         else:
             rec.add(device, f"register:{c.register}", "pass", c.what)
     return True
@@ -354,12 +363,34 @@ def add_parser(sub: Any) -> None:
                        help="also nudge the setpoint by 0.5 °C and move the table 5°, then back")
     check.add_argument("--json", action="store_true", help="print the checks as JSON")
     check.set_defaults(handler=run_check_cli)
+    validate = rig_sub.add_parser(
+        "validate", help="check a register map file (chamber or turntable) without a device")
+    validate.add_argument("map", metavar="MAP.toml",
+                          help="a map file, or the name of a shipped map")
+    validate.set_defaults(handler=run_validate_cli)
+    from service.cli_ops import add_rig_admin_parsers
+
+    add_rig_admin_parsers(rig_sub)
+
+
+def run_validate_cli(args: argparse.Namespace) -> int:
+    """``soakcal rig validate MAP.toml``: "OK: <what it describes>" or exit 2 naming the key."""
+    from drivers.registermaps import MapError, describe_map, load_map
+
+    try:
+        regmap = load_map(args.map)
+    except MapError as exc:
+        print(f"soakcal rig validate: {exc}", file=sys.stderr)
+        return 2
+    print(f"OK: {describe_map(regmap)}")
+    return 0
 
 
 def run_check_cli(args: argparse.Namespace) -> int:
     from sqlalchemy import make_url, select
     from sqlalchemy.exc import SQLAlchemyError
 
+    from service.campaigns import rig_busy, seed_sim_rig
     from service.config import resolve_database_url
     from service.db.models import Rig
     from service.db.session import make_session_factory, session_scope, upgrade_database
@@ -370,8 +401,10 @@ def run_check_cli(args: argparse.Namespace) -> int:
         factory = make_session_factory(url)
         try:
             with session_scope(factory) as session:
+                seed_sim_rig(session)  # a fresh install has the sim rig before any `serve`
                 row = session.scalar(select(Rig).where(Rig.name == args.name))
                 known = session.scalars(select(Rig.name).order_by(Rig.name)).all()
+                busy = row is not None and rig_busy(session, row.name)
                 rig = None if row is None else {
                     "name": row.name, "chamber": row.chamber or {},
                     "turntable": row.turntable or {}, "sensors": row.sensors or []}
@@ -385,6 +418,10 @@ def run_check_cli(args: argparse.Namespace) -> int:
     if rig is None:
         print(f"soakcal rig check: no rig named {args.name!r} (known: "
               f"{', '.join(known) or 'none'})", file=sys.stderr)
+        return 2
+    if busy:  # as REST answers 409: the campaign owns the devices (a --move would nudge a soak)
+        print(f"soakcal rig check: rig {args.name!r} runs a campaign now: its devices are in "
+              "use; check it once the campaign has finished", file=sys.stderr)
         return 2
     checks = asyncio.run(check_rig(rig, move=args.move))
     if args.json:

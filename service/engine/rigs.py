@@ -157,15 +157,23 @@ def rig_config_errors(
     from drivers.registermaps import MapError, load_chamber_map, load_turntable_map
 
     errors: list[tuple[str, str]] = []
-    driver = chamber.get("driver", "sim")
-    if driver not in DRIVERS:
+    errors += _unknown_keys("chamber", chamber, CHAMBER_KEYS)
+    errors += _unknown_keys("turntable", turntable, TURNTABLE_KEYS)
+    driver = chamber.get("driver")
+    if driver is None:
+        errors.append(("chamber.driver", "missing: \"modbus\" for a controller reached by "
+                                         "url, \"sim\" for the in-process twin"))
+    elif driver not in DRIVERS:
         errors.append(("chamber.driver", f"expected one of {', '.join(DRIVERS)}, got {driver!r}"))
     rng = chamber.get("range_c")
-    if rng is not None and not (
-        isinstance(rng, list | tuple) and len(rng) == 2
-        and all(isinstance(v, int | float) for v in rng) and rng[0] < rng[1]
-    ):
+    rng_ok = isinstance(rng, list | tuple) and len(rng) == 2 and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in rng) and rng[0] < rng[1]
+    if rng is not None and not rng_ok:
         errors.append(("chamber.range_c", "expected [lo, hi] in °C with lo < hi"))
+    rate = chamber.get("max_rate_c_per_min")
+    if rate is not None and (not isinstance(rate, int | float) or isinstance(rate, bool)
+                             or not rate > 0):
+        errors.append(("chamber.max_rate_c_per_min", f"expected a rate > 0 °C/min, got {rate!r}"))
     if driver != "modbus":
         return errors
     manual = is_manual_table(turntable)
@@ -186,9 +194,11 @@ def rig_config_errors(
             errors.append((path, "expected a shipped map name or a map file path"))
             continue
         try:
-            load(ref)
+            regmap = load(ref)
         except MapError as exc:
             errors.append((path, str(exc)))
+            continue
+        errors += _limits_against_map(chamber, turntable, regmap)
     axes = turntable.get("axes", 3)
     if axes not in (2, 3):
         errors.append(("turntable.axes", "expected 2 or 3"))
@@ -230,6 +240,53 @@ def rig_config_errors(
                                                 f"sensors[{declared[name]}]"))
             declared.setdefault(name, i)
     return errors
+
+
+#: Keys a rig's chamber / turntable block may use (docs: service/engine/rigs.py's docstring,
+#: docs/manual-fixtures.md); anything else is a typo that would silently change the rig.
+CHAMBER_KEYS = ("driver", "url", "map", "device_id", "range_c", "time_scale",
+                "max_rate_c_per_min")
+TURNTABLE_KEYS = ("driver", "url", "map", "device_id", "axes", "check_samples", "noise_g")
+
+
+def _unknown_keys(block: str, cfg: Any, allowed: tuple[str, ...]) -> list[tuple[str, str]]:
+    import difflib
+
+    if not isinstance(cfg, dict):
+        return [(block, "expected an object")]
+    out = []
+    for key in (k for k in cfg if k not in allowed):
+        near = difflib.get_close_matches(str(key), allowed, n=1)
+        hint = f"did you mean {near[0]!r}? " if near else ""
+        out.append((f"{block}.{key}", f"unknown key ({hint}expected one of "
+                                      f"{', '.join(allowed)})"))
+    return out
+
+
+def _limits_against_map(chamber: dict[str, Any], turntable: dict[str, Any],
+                        regmap: Any) -> list[tuple[str, str]]:
+    """The rig's limits must lie inside what its map (the controller) allows."""
+    from drivers.registermaps import ChamberMap
+
+    out: list[tuple[str, str]] = []
+    if isinstance(regmap, ChamberMap):
+        rng = chamber.get("range_c")
+        lo, hi = regmap.range_c
+        if (isinstance(rng, list | tuple) and len(rng) == 2
+                and all(isinstance(v, int | float) for v in rng)
+                and (rng[0] < lo or rng[1] > hi)):
+            out.append(("chamber.range_c", f"[{rng[0]:g}, {rng[1]:g}] °C exceeds the map "
+                                           f"{regmap.name}'s limits.range_c [{lo:g}, {hi:g}]"))
+        rate, limit = chamber.get("max_rate_c_per_min"), regmap.max_ramp_c_per_min
+        if isinstance(rate, int | float) and limit is not None and rate > limit:
+            out.append(("chamber.max_rate_c_per_min", f"{rate:g} °C/min exceeds the map "
+                                                      f"{regmap.name}'s {limit:g} °C/min"))
+        return out
+    axes = turntable.get("axes", regmap.n_axes)
+    if isinstance(axes, int) and axes > regmap.n_axes:
+        out.append(("turntable.axes", f"{axes} axes, but the map {regmap.name} describes "
+                                      f"{regmap.n_axes}"))
+    return out
 
 
 def entry_serials(entry: dict[str, Any]) -> list[str]:

@@ -188,3 +188,99 @@ def test_a_register_the_driver_writes_must_be_writable(tmp_path: Path) -> None:
     path = _write(tmp_path, GOOD + "[registers.alarms]\naddress = 74\ntype = \"float32\"\n")
     with pytest.raises(MapError, match=r"registers\.alarms\.type: a bit word"):
         load_map(path)
+
+
+TABLE = """
+schema = "soakcal-register-map/1"
+kind = "turntable"
+name = "test-table"
+[axes]
+count = 2
+stride = 2
+[registers.position_deg]
+address = 100
+type = "float32"
+[registers.status]
+address = 106
+type = "uint16"
+bits = { 0 = "in_position", 1 = "moving" }
+[registers.target_deg]
+address = 200
+type = "float32"
+access = "rw"
+[registers.command]
+address = 210
+type = "uint16"
+access = "w"
+"""
+
+# (map text, the key the refusal must name, words of its reason)
+REFUSED = {
+    "4xxxx reference": (GOOD.replace("address = 35\n", "address = 40036\n"),
+                        "registers.ramp_c_per_min.address",
+                        "40036 looks like a 4xxxx holding-register reference"),
+    "negative max ramp": (GOOD + "[limits]\nmax_ramp_c_per_min = -2.0\n",
+                          "limits.max_ramp_c_per_min", "> 0 °C/min, got -2"),
+    "absurd block gap": (GOOD + "[limits]\nblock_read_max_gap = 100000\n",
+                         "limits.block_read_max_gap", "one read returns at most 125"),
+    "int32 at the last register": (
+        GOOD + "[registers.hours]\naddress = 65535\ntype = \"int32\"\n",
+        "registers.hours.address", "past the last one (65535)"),
+    "bad default word order": (
+        GOOD + "[defaults]\nword_order = \"middle\"\n", "defaults.word_order",
+        "got 'middle'"),
+    "axis past the last register": (
+        TABLE.replace("address = 200\n", "address = 65533\n"), "registers.target_deg.address",
+        "axis 1 lands at 65535"),
+    "negative table range": (TABLE + "[limits]\nrange_deg = -1\n", "limits.range_deg",
+                             "> 0°, got -1"),
+    "safe angle outside the range": (
+        TABLE + "[limits]\nrange_deg = 180\n[safe]\nangles_deg = [0.0, 270.0]\n",
+        "safe.angles_deg[1]", "270.0° outside limits.range_deg ±180°"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(REFUSED))
+def test_a_map_wrong_in_substance_is_refused_naming_key(tmp_path: Path, case: str) -> None:
+    text, key, why = REFUSED[case]
+    path = _write(tmp_path, text)
+    with pytest.raises(MapError) as exc:
+        load_map(path)
+    assert str(exc.value).startswith(f"{path}: {key}: "), str(exc.value)
+    assert why in str(exc.value)
+
+
+def test_a_non_utf8_map_is_a_clear_error(tmp_path: Path) -> None:
+    path = tmp_path / "lab.toml"
+    path.write_bytes(GOOD.replace("test-chamber", "régulateur").encode("latin-1"))
+    with pytest.raises(MapError, match=r"not UTF-8 text \(byte 0xE9 at offset \d+\): save"):
+        load_map(path)
+
+
+def test_a_4xxxx_address_the_manual_really_gives_can_be_said_so(tmp_path: Path) -> None:
+    text = GOOD.replace("address = 35\n", "address = 40036\nprotocol_address = true\n")
+    assert load_chamber_map(_write(tmp_path, text)).ramp_c_per_min.address == 40036
+
+
+def test_offset_and_scale_map_a_fahrenheit_register() -> None:
+    # 0.1 °F per count: 73.4 °F (734 counts) is 23.0 °C.
+    f = Field(1, "int16", scale=18.0, offset=-160 / 9)
+    assert f.decode([734]) == pytest.approx(23.0)
+    assert f.encode(23.0) == [734]
+
+
+def test_rig_validate_says_ok_or_names_file_and_key(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    from service.cli import main
+
+    assert main(["rig", "validate", "eurotherm-3216"]) == 0
+    out = capsys.readouterr().out.strip()
+    assert out.startswith("OK: eurotherm-3216 — Eurotherm 3216") and "chamber" in out
+    assert main(["rig", "validate", str(_write(tmp_path, TABLE))]) == 0
+    assert "turntable, 2 axes" in capsys.readouterr().out
+    bad = _write(tmp_path, REFUSED["bad default word order"][0])
+    assert main(["rig", "validate", str(bad)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.strip() == (f"soakcal rig validate: {bad}: defaults.word_order: "
+                                    "expected \"high_first\" or \"low_first\", got 'middle'")

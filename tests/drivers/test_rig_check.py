@@ -342,3 +342,18 @@ async def test_a_stopped_chamber_is_not_started_to_watch_its_ramp() -> None:
         checks = await check_rig(_config(sim, "soakcal-twin-chamber"), move=True, clock=clock)
         assert not sim.chamber.running
     assert _by(checks, "chamber", "ramp").status == "skip"
+
+
+async def test_an_identity_mismatch_prints_the_register_as_an_integer() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        rng = np.random.default_rng(1)
+        image = ChamberRegisterImage(ChamberPhysics(clock, rng), CHAMBER_MAPS["watlow-f4t"],
+                                     identity_value=8126464)
+        other = await start_modbus_server(image, SimFaults(), rng)
+        try:
+            checks = await check_rig(_config(sim, "watlow-f4t", other.url), clock=clock)
+        finally:
+            await other.stop()
+    bad = _by(checks, "chamber", "identity")
+    assert bad.detail == "register hardware_id reads 8126464, map watlow-f4t expects 124"
