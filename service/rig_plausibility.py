@@ -27,6 +27,9 @@ if TYPE_CHECKING:
 #: Sensor die vs chamber PV at rest, °C: package self-heating, the uncalibrated die
 #: sensor's offset and a little lag fit in this; a ×10, ×0.1, °F or K error does not.
 DIE_PV_TOLERANCE_C = 5.0
+#: How closely a misreading must turn the die's temperature into the PV to be named as
+#: the cause: tighter than the agreement band, so a cause is named only when it fits well.
+CAUSE_TOLERANCE_C = 2.5
 NUDGE_C = 0.5  # setpoint nudge, °C: visible at 0.1 °C resolution, harmless to any soak
 RAMP_CHECK_C_PER_MIN = 1.0  # commanded during the nudge; the WSP must move at this rate
 RAMP_POLL_S = 2.0
@@ -129,6 +132,11 @@ async def _likely_cause(chamber: Any, regmap: Any, pv: float,
     """The misreading that turns the die's temperature into this PV, best match first."""
     f = regmap.process_c
     file = map_file(regmap)
+    words = await chamber.link.read_registers(f.address, f.n_registers)
+    if not any(words):
+        return ("the register reads all bits 0, as an address with nothing behind it does",
+                f"check `address` of register `process_c` in {file} against the manual "
+                "(the control loop's PV)")
     temps = [n for n in TEMPERATURE_REGISTERS[1:]
              if getattr(regmap, n) is not None and getattr(regmap, n).scale == f.scale]
     also = f" (and {', '.join(temps)}, which share its decimal point)" if temps else ""
@@ -153,16 +161,17 @@ async def _likely_cause(chamber: Any, regmap: Any, pv: float,
                            f"(and setpoint_c, working_setpoint_c) `offset = -273.15` in {file}"))
     if f.n_registers == 2:
         other = "low_first" if f.word_order == "high_first" else "high_first"
-        words = await chamber.link.read_registers(f.address, 2)
         swapped = replace(f, word_order=other).decode(words)
         candidates.append((swapped, "the two 16-bit words of the 32-bit value are swapped",
                            f"set `word_order = \"{other}\"` (now \"{f.word_order}\") in "
                            f"[defaults] of {file}, or on register `process_c` alone"))
-    fits = [(abs(t - die), why, fix) for t, why, fix in candidates
-            if math.isfinite(t) and abs(t - die) <= DIE_PV_TOLERANCE_C]
+    fits = sorted((abs(t - die), why, fix) for t, why, fix in candidates
+                  if math.isfinite(t) and abs(t - die) <= CAUSE_TOLERANCE_C)
     if not fits:
         return None, ""
-    _, why, fix = min(fits)
+    _, why, fix = fits[0]
+    if len(fits) > 1:  # two readings explain it: say both rather than guess
+        return f"{why}, or else {fits[1][1]}", f"{fix}; or else: {fits[1][2]}"
     return why, fix
 
 

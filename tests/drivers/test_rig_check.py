@@ -323,8 +323,21 @@ async def test_a_pv_register_pointing_elsewhere_names_the_address(tmp_path: Path
         checks = await check_rig(_config(sim, str(wrong)), move=True, clock=clock)
     bad = _by(checks, "chamber", "pv_vs_die")
     assert bad.status == "fail" and "PV reads 0.0 °C" in bad.detail
-    assert "no scale, unit or word-order error explains it" in bad.detail
+    assert "reads all bits 0, as an address with nothing behind it does" in bad.detail
     assert "`address` of register `process_c` in lab-3216.toml" in bad.fix
+
+
+async def test_a_pv_that_no_misreading_explains_is_not_given_a_cause() -> None:
+    """The sensor is in another chamber (its die 40 °C warmer): no cause is guessed."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216") as sim:
+        sim.chamber.die_c = 63.0
+        sim.chamber.die_tau_s = 1e9  # the die stays where it is
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    bad = _by(checks, "chamber", "pv_vs_die")
+    assert bad.status == "fail"
+    assert "no scale, unit or word-order error explains it" in bad.detail
+    assert "the sensor is inside this chamber" in bad.fix
 
 
 async def test_a_well_set_up_controller_passes_the_ramp_and_die_checks() -> None:
