@@ -260,14 +260,19 @@ async def _judge_ramp(rec: _Recorder, chamber: Any, samples: list[tuple[float, f
                            f"{detail}: the controller is in manual and holds its output",
                            "switch the controller to automatic")
         return rec.add("chamber", "ramp", "fail",
-                       f"{detail}: ≥ {1 / max(ratio, 1 / 60):.0f}× slower — the controller's ramp "
-                       "units are likely per hour (60× slower), or it is in manual/standby",
+                       f"{detail}: {_slower(ratio)} — the controller's ramp units are likely "
+                       "per hour (60× slower), or it is in manual/standby",
                        f"set the controller's ramp units to per minute, or set `scale = "
                        f"{f.scale:g}`→`{f.scale * 60:g}` for register `ramp_c_per_min` in {file}")
     return rec.add("chamber", "ramp", "fail",
                    f"{detail}: {ratio:.2g}× the commanded rate",
                    f"set `scale = {f.scale:g}`→`{f.scale / ratio:.3g}` for register "
                    f"`ramp_c_per_min` in {file}, or check its ramp units")
+
+
+def _slower(ratio: float) -> str:
+    """How much slower than commanded, as far as the reading's resolution tells."""
+    return f"{1 / ratio:.0f}× slower" if ratio > 0 else "not moving within the reading's resolution"
 
 
 async def _restore_ramp(chamber: Any, ramp0: float) -> None:

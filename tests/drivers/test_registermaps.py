@@ -64,8 +64,11 @@ def test_manufacturer_maps_cite_a_document_for_every_register(name: str) -> None
 
 def test_eurotherm_addresses_are_the_handbooks() -> None:
     m = CHAMBER_MAPS["eurotherm-3216"]
+    # Parameters 1, 2, 5, 35 of the handbook's table, in the IEEE region 0x8000 + 2·n.
     assert (m.process_c.address, m.setpoint_c.address, m.working_setpoint_c.address,
-            m.ramp_c_per_min.address) == (1, 2, 5, 35)
+            m.ramp_c_per_min.address) == tuple(0x8000 + 2 * n for n in (1, 2, 5, 35))
+    assert {m.process_c.encoding, m.ramp_c_per_min.encoding} == {"float32"}
+    assert [(c.register, c.expect) for c in m.checks] == [("ramp_units", 0.0)]
     assert m.alarms is not None and m.alarms.address == 75
     assert m.alarm_bits[5] == "sensor_break" and m.info_bits[4] == "manual_mode"
     assert m.run is None and m.identity is None  # not in the cited table: not invented

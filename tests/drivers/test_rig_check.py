@@ -246,24 +246,27 @@ async def test_every_channel_of_a_multiplexing_bridge_is_checked() -> None:
 
 
 # --- physical plausibility: a twin set up unlike the map -------------------------------
+#: The 3216 read through its 16-bit region, whose decimal point the instrument's display
+#: setting implies: the layout a decimal-point misconfiguration mis-scales.
+INT16_3216 = str(Path(__file__).with_name("data") / "eurotherm-3216-int16.toml")
 # Each case: the controller's own setup, the map the lab wrote, and what rig check must
 # say (the check that fails, words of its detail naming the cause, words of its fix).
 MISCONFIGURED = {
     "whole degrees read as tenths (×10)": (
-        ControllerSetup(decimals=0), "eurotherm-3216", "pv_vs_die",
+        ControllerSetup(decimals=0), INT16_3216, "pv_vs_die",
         ["PV reads 2.3 °C", "die reads 23.0 °C", "×10"],
-        ["`scale = 10`→`1`", "`process_c`", "eurotherm-3216.toml"]),
+        ["`scale = 10`→`1`", "`process_c`", "eurotherm-3216-int16.toml"]),
     "hundredths read as tenths (×0.1)": (
-        ControllerSetup(decimals=2), "eurotherm-3216", "pv_vs_die",
+        ControllerSetup(decimals=2), INT16_3216, "pv_vs_die",
         ["PV reads 2", " °C while the die reads 23.0 °C", "×0.1"],
-        ["`scale = 10`→`100`", "eurotherm-3216.toml"]),
+        ["`scale = 10`→`100`", "eurotherm-3216-int16.toml"]),
     "display in °F": (
         ControllerSetup(units="F"), "eurotherm-3216", "pv_vs_die",
-        ["PV reads 73.4 °C", "°F"], ["units to °C", "`offset = -17.7778`"]),
+        ["PV reads 73.4 °C", "°F"], ["units to °C", "`scale = 1.8`", "`offset = -17.7778`"]),
     "ramp units per hour": (
         ControllerSetup(ramp_per="hour"), "eurotherm-3216", "ramp",
-        ["0.00 °C/min", "commanded 1 °C/min", "per hour"],
-        ["per minute", "`scale = 10`→`600`", "`ramp_c_per_min`"]),
+        ["0.02 °C/min, commanded 1 °C/min: 60× slower", "per hour"],
+        ["per minute", "`scale = 1`→`60`", "`ramp_c_per_min`", "eurotherm-3216.toml"]),
     "float words swapped": (
         ControllerSetup(swap_words=True), "watlow-f4t", "pv_vs_die",
         ["words", "swapped"], ["`word_order = \"high_first\"`", "watlow-f4t.toml"]),
@@ -304,22 +307,21 @@ async def test_a_mis_scaled_chamber_is_not_nudged(monkeypatch: pytest.MonkeyPatc
 
     monkeypatch.setattr(ChamberRegisterImage, "write", spy)
     clock = VirtualClock()
-    async with start_sim_rig(clock, seed=4, controller=ControllerSetup(decimals=0)) as sim:
-        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    async with start_sim_rig(clock, seed=4, chamber_map=INT16_3216,
+                             controller=ControllerSetup(decimals=0)) as sim:
+        checks = await check_rig(_config(sim, INT16_3216), move=True, clock=clock)
     assert writes == []
     assert "not nudged" in _by(checks, "chamber", "setpoint_nudge").detail
 
 
 async def test_a_pv_register_pointing_elsewhere_names_the_address(tmp_path: Path) -> None:
-    from drivers.registermaps import shipped_maps
-
-    text = shipped_maps()["eurotherm-3216"].read_text()
+    text = Path(INT16_3216).read_text()
     wrong = tmp_path / "lab-3216.toml"
     # A slip of the pen: PV at 4 (nothing there on this controller) instead of 1.
     wrong.write_text(text.replace("[registers.process_c]\naddress = 1\n",
                                   "[registers.process_c]\naddress = 4\n"))
     clock = VirtualClock()
-    async with start_sim_rig(clock, seed=4) as sim:
+    async with start_sim_rig(clock, seed=4, chamber_map=INT16_3216) as sim:
         checks = await check_rig(_config(sim, str(wrong)), move=True, clock=clock)
     bad = _by(checks, "chamber", "pv_vs_die")
     assert bad.status == "fail" and "PV reads 0.0 °C" in bad.detail
@@ -338,6 +340,16 @@ async def test_a_pv_that_no_misreading_explains_is_not_given_a_cause() -> None:
     assert bad.status == "fail"
     assert "no scale, unit or word-order error explains it" in bad.detail
     assert "the sensor is inside this chamber" in bad.fix
+
+
+async def test_the_shipped_3216_map_reads_floats_whatever_the_decimal_point() -> None:
+    """The float region carries full resolution: a 3216 set to whole degrees reads right."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216",
+                             controller=ControllerSetup(decimals=0)) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    assert passed(checks), format_report("3216 whole degrees", checks)
+    assert _by(checks, "chamber", "register:ramp_units").status == "pass"
 
 
 async def test_a_well_set_up_controller_passes_the_ramp_and_die_checks() -> None:

@@ -140,9 +140,9 @@ def test_a_map_with_a_4xxxx_address_is_a_422_naming_file_and_key(  # type: ignor
 
     text = shipped_maps()["eurotherm-3216"].read_text()
     path = tmp_path / "lab.toml"
-    path.write_text(text.replace("[registers.process_c]\naddress = 1\n",
+    path.write_text(text.replace("[registers.process_c]\naddress = 32770  # 0x8000 + 2 * 1\n",
                                  "[registers.process_c]\naddress = 40002\n"))
     rig = {**LAB, "chamber": {**LAB["chamber"], "map": str(path)}}
     (loc, msg), = _refusal(client, auth, rig)
     assert msg.startswith(f"{path}: registers.process_c.address: 40002 looks like a 4xxxx")
-    assert "address = 1" in msg
+    assert "address = 1;" in msg
