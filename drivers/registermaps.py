@@ -41,7 +41,7 @@ TABLE_OPTIONAL = ("faults",)
 #: Keys a map file may use; anything else is a typo and refused with its key.
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
             "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
-CHECK_KEYS = {"register", "expect", "what", "fix"}
+CHECK_KEYS = {"register", "expect", "one_of", "min", "max", "what", "fix"}
 REGISTER_KEYS = {"address", "protocol_address", "type", "scale", "offset", "word_order",
                  "access", "unit", "source", "note", "bits", "info_bits"}
 SECTION_KEYS = {
@@ -120,13 +120,42 @@ class Identity:
 
 @dataclass(frozen=True)
 class RegisterCheck:
-    """A register ``rig check`` reads and compares (e.g. the F4T's display units = °C)."""
+    """A register ``rig check`` reads and compares (e.g. the F4T's display units = °C).
+
+    The register passes when it reads ``expect`` exactly, or (when given) any of
+    ``one_of``, or a value within ``lo``…``hi``; ``expect`` is then the value a
+    well-set-up device reads (what the twin serves).
+    """
 
     register: str
     field: Field
     expect: float
     what: str  # what a pass means, e.g. "temperature units are °C"
     fix: str = ""
+    one_of: tuple[float, ...] = ()
+    lo: float | None = None
+    hi: float | None = None
+
+    def accepts(self, value: float) -> bool:
+        if self.one_of:
+            return value in self.one_of
+        if self.lo is not None or self.hi is not None:
+            return ((self.lo is None or value >= self.lo)
+                    and (self.hi is None or value <= self.hi))
+        return value == self.expect
+
+    def wanted(self) -> str:
+        """What the check accepts, as a person reads it: 15, one of 15, 16, or 0…10."""
+        def num(v: float) -> str:
+            return str(int(v)) if v == int(v) else f"{v:g}"
+
+        if self.one_of:
+            return "one of " + ", ".join(num(v) for v in self.one_of)
+        if self.lo is not None or self.hi is not None:
+            lo = "" if self.lo is None else num(self.lo)
+            hi = "" if self.hi is None else num(self.hi)
+            return f"{lo}…{hi}"
+        return num(self.expect)
 
 
 @dataclass(frozen=True)
@@ -415,13 +444,37 @@ class _MapReader:
                     raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
                                     f"{', '.join(sorted(CHECK_KEYS))})")
             f = self.ref(regs, f"{key}.register", c.get("register"))
-            expect = self.number(f"{key}.expect", c.get("expect"), None)
-            if expect is None:
-                raise self.fail(f"{key}.expect", "missing")
-            what = c.get("what", f"{c['register']} = {expect:g}")
-            out.append(RegisterCheck(str(c["register"]), f, expect, str(what),
-                                     str(c.get("fix", ""))))
+            out.append(self.check(key, c, f))
         return tuple(out)
+
+    def check(self, key: str, c: dict[str, Any], f: Field) -> RegisterCheck:
+        """One ``[[checks]]`` entry: exactly one of ``expect``, ``one_of``, ``min``/``max``."""
+        given = [k for k in ("expect", "one_of") if k in c] + (
+            ["min/max"] if "min" in c or "max" in c else [])
+        if len(given) != 1:
+            raise self.fail(key, "expected exactly one of expect, one_of, min/max, got "
+                            + (", ".join(given) or "none"))
+        one_of: tuple[float, ...] = ()
+        lo = self.number(f"{key}.min", c.get("min"), None)
+        hi = self.number(f"{key}.max", c.get("max"), None)
+        if "one_of" in c:
+            raw = c["one_of"]
+            if not isinstance(raw, list) or not raw:
+                raise self.fail(f"{key}.one_of", "expected a non-empty list of values")
+            one_of = tuple(self.number(f"{key}.one_of[{i}]", v, None) or 0.0
+                           for i, v in enumerate(raw))
+            expect = one_of[0]
+        elif lo is not None or hi is not None:
+            if lo is not None and hi is not None and lo > hi:
+                raise self.fail(f"{key}.min", f"min {lo:g} > max {hi:g}")
+            expect = lo if lo is not None else hi  # type: ignore[assignment]
+        else:
+            value = self.number(f"{key}.expect", c.get("expect"), None)
+            assert value is not None  # a TOML value is never None
+            expect = value
+        what = c.get("what", f"{c['register']} = {expect:g}")
+        return RegisterCheck(str(c["register"]), f, float(expect), str(what),
+                             str(c.get("fix", "")), one_of, lo, hi)
 
     def common(self, regs: dict[str, Field]) -> dict[str, Any]:
         d = self.doc

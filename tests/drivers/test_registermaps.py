@@ -287,3 +287,38 @@ def test_rig_validate_says_ok_or_names_file_and_key(tmp_path: Path,
     assert captured.out == ""
     assert captured.err.strip() == (f"soakcal rig validate: {bad}: defaults.word_order: "
                                     "expected \"high_first\" or \"low_first\", got 'middle'")
+
+
+def test_checks_accept_a_value_a_set_or_a_range(tmp_path: Path) -> None:
+    text = GOOD + """[registers.units]
+address = 90
+type = "uint16"
+[registers.status]
+address = 91
+type = "uint16"
+[registers.band]
+address = 92
+type = "int16"
+[[checks]]
+register = "units"
+expect = 15
+[[checks]]
+register = "status"
+one_of = [138, 139]
+[[checks]]
+register = "band"
+min = -5
+max = 5
+"""
+    exact, in_set, in_range = load_chamber_map(_write(tmp_path, text)).checks
+    assert exact.accepts(15) and not exact.accepts(30) and exact.wanted() == "15"
+    assert in_set.accepts(139) and not in_set.accepts(32)
+    assert in_set.wanted() == "one of 138, 139" and in_set.expect == 138
+    assert in_range.accepts(-5) and in_range.accepts(5) and not in_range.accepts(5.5)
+    assert in_range.wanted() == "-5…5"
+    both = text.replace("one_of = [138, 139]", "one_of = [138]\nexpect = 138")
+    with pytest.raises(MapError, match=r"checks\[1\]: expected exactly one of expect, one_of, "
+                                       r"min/max, got expect, one_of"):
+        load_map(_write(tmp_path, both))
+    with pytest.raises(MapError, match=r"checks\[2\]\.min: min 5 > max -5"):
+        load_map(_write(tmp_path, text.replace("min = -5\nmax = 5", "min = 5\nmax = -5")))
