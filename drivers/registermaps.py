@@ -23,8 +23,14 @@ from typing import Any, Literal
 
 from drivers import codec
 
-Encoding = Literal["int16", "uint16", "int32", "float32"]
-ENCODINGS: tuple[str, ...] = ("int16", "uint16", "int32", "float32")
+Encoding = Literal["int16", "uint16", "int32", "float32", "bit"]
+ENCODINGS: tuple[str, ...] = ("int16", "uint16", "int32", "float32", "bit")
+#: The four Modbus data tables: holding registers (FC 3/6/16), input registers (FC 4),
+#: coils (FC 1/5) and discrete inputs (FC 2). Bits (coils, discrete inputs) are type "bit".
+Table = Literal["holding", "input", "coil", "discrete"]
+TABLES: tuple[str, ...] = ("holding", "input", "coil", "discrete")
+READ_ONLY_TABLES = ("input", "discrete")
+BIT_TABLES = ("coil", "discrete")
 ACCESS = ("r", "w", "rw")
 WORD_ORDERS = ("high_first", "low_first")
 #: One Modbus read returns at most 125 registers: a larger gap cannot be spanned.
@@ -42,8 +48,8 @@ TABLE_OPTIONAL = ("faults",)
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
             "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
 CHECK_KEYS = {"register", "expect", "one_of", "min", "max", "what", "fix"}
-REGISTER_KEYS = {"address", "protocol_address", "type", "scale", "offset", "word_order",
-                 "access", "unit", "source", "note", "bits", "info_bits"}
+REGISTER_KEYS = {"address", "protocol_address", "table", "type", "scale", "offset",
+                 "word_order", "access", "write", "unit", "source", "note", "bits", "info_bits"}
 SECTION_KEYS = {
     "defaults": {"word_order"},
     "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
@@ -77,6 +83,8 @@ class Field:
     word_order: codec.WordOrder = "high_first"  # 32-bit encodings only
     access: str = "rw"
     offset: float = 0.0  # engineering units added after the scale
+    table: Table = "holding"
+    single_write: bool = False  # FC 6 (one register) instead of FC 16; coils are always FC 5
 
     @property
     def n_registers(self) -> int:
@@ -93,6 +101,8 @@ class Field:
             hi, lo = (words[0], words[1]) if self.word_order == "high_first" else (
                 words[1], words[0])
             return float(struct.unpack(">i", struct.pack(">HH", hi & 0xFFFF, lo & 0xFFFF))[0])
+        if self.encoding == "bit":
+            return float(words[0] & 1)
         return codec.decode_scaled(words[0], 1.0, signed=self.encoding == "int16")
 
     def encode(self, value: float) -> list[int]:
@@ -106,6 +116,10 @@ class Field:
                 raise ValueError(f"{value} × {self.scale} does not fit a signed 32-bit value")
             hi, lo = struct.unpack(">HH", struct.pack(">i", counts))
             return [hi, lo] if self.word_order == "high_first" else [lo, hi]
+        if self.encoding == "bit":
+            if raw not in (0.0, 1.0):
+                raise ValueError(f"{value} is not a bit (0 or 1)")
+            return [int(raw)]
         return [codec.encode_scaled(raw, 1.0, signed=self.encoding == "int16")]
 
 
@@ -350,6 +364,13 @@ class _MapReader:
         if enc not in ENCODINGS:
             raise self.fail(f"{key}.type", f"unknown type {enc!r} (expected one of "
                             f"{', '.join(ENCODINGS)})")
+        table = spec.get("table", "holding")
+        if table not in TABLES:
+            raise self.fail(f"{key}.table", f"expected one of {', '.join(TABLES)}, got {table!r}")
+        if (table in BIT_TABLES) != (enc == "bit"):
+            raise self.fail(f"{key}.type", f"a {table} register is "
+                            + ("type \"bit\"" if table in BIT_TABLES else
+                               f"a 16/32-bit type, not {enc!r}"))
         width = 2 if enc in ("int32", "float32") else 1
         if address + width - 1 > 65535:
             raise self.fail(f"{key}.address", f"a {enc} at {address} needs registers "
@@ -367,20 +388,30 @@ class _MapReader:
         if access not in ACCESS:
             raise self.fail(f"{key}.access", f"expected one of {', '.join(ACCESS)}, got "
                             f"{access!r}")
+        if table in READ_ONLY_TABLES and access != "r":
+            raise self.fail(f"{key}.access", f"{table} registers are read-only in Modbus: "
+                            "expected \"r\"")
+        write = spec.get("write", "multiple")
+        if write not in ("multiple", "single"):
+            raise self.fail(f"{key}.write", f"expected \"multiple\" (FC 16) or \"single\" "
+                            f"(FC 6), got {write!r}")
+        if write == "single" and (width != 1 or table != "holding"):
+            raise self.fail(f"{key}.write", "a single-register write (FC 6) carries one "
+                            "holding register")
         if not isinstance(spec.get("source", ""), str):
             raise self.fail(f"{key}.source", "expected the citation as a string")
         return Field(address, enc, float(scale), order, access,  # type: ignore[arg-type]
-                     float(offset or 0.0))
+                     float(offset or 0.0), table, write == "single")
 
     def check_overlaps(self, fields: dict[str, Field]) -> None:
         """Two names on one register is a duplicated register too (a copy-paste slip)."""
-        owner: dict[int, str] = {}
+        owner: dict[tuple[str, int], str] = {}
         for reg, f in fields.items():
             for a in range(f.address, f.address + f.n_registers):
-                if a in owner:
+                if (f.table, a) in owner:
                     raise self.fail(f"registers.{reg}.address",
-                                    f"register {a} is also registers.{owner[a]}")
-                owner[a] = reg
+                                    f"register {a} is also registers.{owner[f.table, a]}")
+                owner[f.table, a] = reg
 
     def require(self, regs: dict[str, Field], names: tuple[str, ...], kind: str) -> None:
         for reg in names:
@@ -397,7 +428,8 @@ class _MapReader:
 
     def bit_word(self, regs: dict[str, Field], names: tuple[str, ...]) -> None:
         for reg in names:
-            if reg in regs and regs[reg].encoding not in ("uint16", "int16"):
+            if reg in regs and (regs[reg].encoding not in ("uint16", "int16")
+                                or regs[reg].table in BIT_TABLES):
                 raise self.fail(f"registers.{reg}.type",
                                 f"a bit word is one 16-bit register, got {regs[reg].encoding!r}")
 

@@ -173,6 +173,10 @@ class ControllerSetup:
         return value
 
 
+def _key(f: Field) -> tuple[str, int]:
+    return f.table, f.address
+
+
 #: Roles whose value is a temperature (°C in physics, the controller's units on the wire).
 TEMPERATURE_ROLES = ("process_c", "setpoint_c", "working_setpoint_c")
 
@@ -198,16 +202,17 @@ class ChamberRegisterImage:
         self.setup = setup or ControllerSetup()
         physics.manual = self.setup.mode == "manual"
         m = regmap
+        # Keys are (Modbus table, address): the four tables are separate address spaces.
         self._roles = {
-            m.setpoint_c.address: "setpoint_c",
-            m.ramp_c_per_min.address: "ramp_c_per_min",
+            _key(m.setpoint_c): "setpoint_c",
+            _key(m.ramp_c_per_min): "ramp_c_per_min",
         }
         if m.run is not None:
-            self._roles[m.run.address] = "running"
+            self._roles[_key(m.run)] = "running"
         else:
             physics.running = self.setup.mode != "standby"
         # Addresses that answer "illegal address" (ControllerSetup.silent).
-        self._silent = {a for name in self.setup.silent
+        self._silent = {(f.table, a) for name in self.setup.silent
                         for f in [m.registers.get(name) or getattr(m, name, None)]
                         if isinstance(f, Field) for a in range(f.address,
                                                                 f.address + f.n_registers)}
@@ -215,14 +220,14 @@ class ChamberRegisterImage:
                           else m.identity.expect if m.identity is not None else None)
         role_fields = {id(f) for f in (m.process_c, m.setpoint_c, m.working_setpoint_c,
                                        m.ramp_c_per_min, m.run, m.alarms) if f is not None}
-        self._stored: dict[int, tuple[Field, list[int]]] = {}
+        self._stored: dict[tuple[str, int], tuple[Field, list[int]]] = {}
         # A well-set-up controller: registers the map checks read what the map expects.
         checked = {id(c.field): c.expect for c in m.checks}
         for f in m.registers.values():
             if id(f) not in role_fields:
                 value = self._identity if m.identity is not None and f is m.identity.field \
                     else checked.get(id(f), 0.0)
-                self._stored[f.address] = (f, f.encode(value or 0.0))
+                self._stored[_key(f)] = (f, f.encode(value or 0.0))
 
     def _alarm_word(self) -> int:
         m, p = self.regmap, self.physics
@@ -241,14 +246,22 @@ class ChamberRegisterImage:
         return word
 
     def read(self, address: int, count: int) -> list[int] | ExcCodes:
+        return self.read_table("holding", address, count)
+
+    def write(self, address: int, values: list[int]) -> None | ExcCodes:
+        return self.write_table("holding", address, values)
+
+    def read_table(self, table: str, address: int, count: int) -> list[int] | ExcCodes:
+        """Words (bits as 0/1 for coils and discrete inputs) of one Modbus table."""
         p, m, cfg = self.physics, self.regmap, self.setup
         p.advance_to()
-        if self._silent & set(range(address, address + count)):
+        if self._silent & {(table, a) for a in range(address, address + count)}:
             return ExcCodes.ILLEGAL_ADDRESS
         image: dict[int, int] = {}
-        for a, (_f, words) in self._stored.items():
+        for (t, a), (_f, words) in self._stored.items():
             for i, w in enumerate(words):
-                image[a + i] = w
+                if t == table:
+                    image[a + i] = w
         rendered: list[tuple[Field, float]] = [
             (cfg.served(f, role), cfg.to_controller(value, role)) for f, role, value in (
                 (m.process_c, "process_c", p.process_value_c()),
@@ -261,23 +274,26 @@ class ChamberRegisterImage:
         if m.alarms is not None:
             rendered.append((m.alarms, float(self._alarm_word())))
         for f, value in rendered:
-            for i, w in enumerate(f.encode(value)):
-                image[f.address + i] = w
+            if f.table == table:
+                for i, w in enumerate(f.encode(value)):
+                    image[f.address + i] = w
+        if not image:
+            return ExcCodes.ILLEGAL_ADDRESS
         return read_block(image, address, count)
 
-    def write(self, address: int, values: list[int]) -> None | ExcCodes:
+    def write_table(self, table: str, address: int, values: list[int]) -> None | ExcCodes:
         p, m, cfg = self.physics, self.regmap, self.setup
         p.advance_to()
-        if self._silent & set(range(address, address + len(values))):
+        if self._silent & {(table, a) for a in range(address, address + len(values))}:
             return ExcCodes.ILLEGAL_ADDRESS
-        name = self._roles.get(address)
+        name = self._roles.get((table, address))
         if name is None:
-            stored = self._stored.get(address)
+            stored = self._stored.get((table, address))
             if stored is None or "w" not in stored[0].access:
                 return ExcCodes.ILLEGAL_ADDRESS
             if len(values) != len(stored[1]):
                 return ExcCodes.ILLEGAL_VALUE
-            self._stored[address] = (stored[0], list(values))
+            self._stored[table, address] = (stored[0], list(values))
             return None
         f = {"setpoint_c": m.setpoint_c, "ramp_c_per_min": m.ramp_c_per_min,
              "running": m.run}[name]

@@ -237,6 +237,15 @@ REFUSED = {
         "axis 1 lands at 65535"),
     "negative table range": (TABLE + "[limits]\nrange_deg = -1\n", "limits.range_deg",
                              "> 0°, got -1"),
+    "input register written": (
+        GOOD.replace('address = 2\ntype = "int16"', 'address = 2\ntable = "input"\ntype = "int16"'),
+        "registers.setpoint_c.access", "input registers are read-only in Modbus"),
+    "coil that is not a bit": (
+        GOOD + "[registers.door]\ntable = \"coil\"\naddress = 0\ntype = \"uint16\"\n",
+        "registers.door.type", "a coil register is type \"bit\""),
+    "single write of a float": (
+        GOOD + "[registers.sp2]\naddress = 50\ntype = \"float32\"\naccess = \"rw\"\n"
+        "write = \"single\"\n", "registers.sp2.write", "carries one holding register"),
     "safe angle outside the range": (
         TABLE + "[limits]\nrange_deg = 180\n[safe]\nangles_deg = [0.0, 270.0]\n",
         "safe.angles_deg[1]", "270.0° outside limits.range_deg ±180°"),
