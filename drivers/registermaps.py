@@ -51,7 +51,7 @@ CHECK_KEYS = {"register", "expect", "one_of", "min", "max", "what", "fix"}
 REGISTER_KEYS = {"address", "protocol_address", "table", "type", "scale", "offset",
                  "word_order", "access", "write", "unit", "source", "note", "bits", "info_bits"}
 SECTION_KEYS = {
-    "defaults": {"word_order"},
+    "defaults": {"word_order", "unit_id"},
     "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
     "safe": {"setpoint_c", "angles_deg"},
     "identity": {"register", "expect"},
@@ -200,6 +200,7 @@ class ChamberMap:
     title: str = ""
     source: str = ""  # the file the map came from
     undocumented: tuple[str, ...] = ()
+    unit_id: int = 1  # the device's Modbus unit id unless the rig config gives device_id
 
     def fields(self) -> list[Field]:
         """The fields one status read covers (optional ones only when mapped)."""
@@ -233,6 +234,7 @@ class TurntableMap:
     title: str = ""
     source: str = ""
     undocumented: tuple[str, ...] = ()
+    unit_id: int = 1
 
     def axis_field(self, base: Field, axis: int) -> Field:
         return replace(base, address=base.address + axis * self.axis_stride)
@@ -514,7 +516,10 @@ class _MapReader:
         if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
             raise self.fail("undocumented", "expected a list of strings")
         gap = self.gap(0)
-        return {"title": str(d.get("title", "")), "source": str(self.path),
+        unit_id = d.get("defaults", {}).get("unit_id", 1)
+        if not isinstance(unit_id, int) or isinstance(unit_id, bool) or not 0 <= unit_id <= 247:
+            raise self.fail("defaults.unit_id", f"expected a Modbus unit id 0…247, got {unit_id!r}")
+        return {"title": str(d.get("title", "")), "source": str(self.path), "unit_id": unit_id,
                 "undocumented": tuple(notes), "block_read_max_gap": gap,
                 "checks": self.checks(regs), "identity": self.identity(regs), "registers": regs}
 

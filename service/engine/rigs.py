@@ -185,6 +185,11 @@ def rig_config_errors(
         dev_id = cfg.get("device_id", 1)
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
+    if (not manual and chamber.get("url") == turntable.get("url")
+            and chamber.get("device_id", 1) == turntable.get("device_id", 1)):
+        errors.append(("turntable.device_id",
+                       f"the chamber answers unit {chamber.get('device_id', 1)} at the same url: "
+                       "two devices on one bus need different unit ids (device_id)"))
     maps = [("chamber.map", chamber, load_chamber_map, "eurotherm3216")]
     if not manual:
         maps.append(("turntable.map", turntable, load_turntable_map, "soakcal-table"))
@@ -372,18 +377,21 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
     if problems:
         path, why = problems[0]
         raise RigConfigError(f"rig {rig.get('name')!r}: {path}: {why}")
+    chamber_map = load_chamber_map(chamber_cfg.get("map", "eurotherm3216"))
+    # The rig's device_id wins; else the map's [defaults] unit_id (1 unless it says).
     chamber = ModbusChamber(
         ModbusLink(chamber_cfg["url"], clock, device="chamber",
-                   device_id=int(chamber_cfg.get("device_id", 1))),
-        load_chamber_map(chamber_cfg.get("map", "eurotherm3216")),
+                   device_id=int(chamber_cfg.get("device_id", chamber_map.unit_id))),
+        chamber_map,
     )
     n_axes = int(table_cfg.get("axes", 3))
     table: Any = None  # a hand-placed fixture: open_rig puts the operator's table in
     if not is_manual_table(table_cfg):
+        table_map = load_turntable_map(table_cfg.get("map", "soakcal-table"))
         table = ModbusTurntable(
             ModbusLink(table_cfg["url"], clock, device="turntable",
-                       device_id=int(table_cfg.get("device_id", 1))),
-            load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
+                       device_id=int(table_cfg.get("device_id", table_map.unit_id))),
+            table_map, n_axes=n_axes,
         )
     accels: dict[str, Any] = {}
     bindings: dict[str, SerialBinding] = {}

@@ -331,3 +331,10 @@ max = 5
         load_map(_write(tmp_path, both))
     with pytest.raises(MapError, match=r"checks\[2\]\.min: min 5 > max -5"):
         load_map(_write(tmp_path, text.replace("min = -5\nmax = 5", "min = 5\nmax = -5")))
+
+
+def test_a_map_may_name_its_device_unit_id(tmp_path: Path) -> None:
+    m = load_chamber_map(_write(tmp_path, GOOD + "[defaults]\nunit_id = 17\n"))
+    assert m.unit_id == 17 and CHAMBER_MAPS["eurotherm-3216"].unit_id == 1
+    with pytest.raises(MapError, match=r"defaults\.unit_id: expected a Modbus unit id 0…247"):
+        load_map(_write(tmp_path, GOOD + "[defaults]\nunit_id = 300\n"))

@@ -441,3 +441,19 @@ async def test_a_map_with_input_registers_coils_and_single_writes(tmp_path: Path
     assert _by(checks, "chamber", "register:door_closed").detail == "the chamber door is closed"
     assert _by(checks, "chamber", "ramp").status == "pass"
     assert "running" in _by(checks, "chamber", "status").detail  # read from the coil
+
+
+async def test_the_maps_unit_id_applies_unless_the_rig_gives_device_id(tmp_path: Path) -> None:
+    from service.engine.rigs import open_rig
+
+    path = tmp_path / "unit17.toml"
+    path.write_text(Path(INT16_3216).read_text().replace(
+        'word_order = "high_first"', 'word_order = "high_first"\nunit_id = 17'))
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path)) as sim:
+        cfg = _config(sim, str(path))
+        async with open_rig(cfg, clock) as devices:
+            assert devices.chamber.link.device_id == 17
+        cfg["chamber"]["device_id"] = 3
+        async with open_rig(cfg, clock) as devices:
+            assert devices.chamber.link.device_id == 3

@@ -75,7 +75,8 @@ def test_cli_rig_check(client: TestClient, settings, monkeypatch,  # type: ignor
     assert len(err.splitlines()) == 1 and "nope" in err and "sim" in err
     bad = {**LAB, "name": "dead",
            "chamber": {**LAB["chamber"], "url": "tcp://127.0.0.1:9"},
-           "turntable": {"url": "tcp://127.0.0.1:9"}, "sensors": [{"url": "socket://127.0.0.1:9"}]}
+           "turntable": {"url": "tcp://127.0.0.1:9", "device_id": 2},
+           "sensors": [{"url": "socket://127.0.0.1:9"}]}
     assert client.post("/api/v1/rigs", json=bad, headers={**_admin(client)}).status_code == 201
     assert main(["rig", "check", "dead", "--json"]) == 1
     assert '"passed": false' in capsys.readouterr().out

@@ -146,3 +146,14 @@ def test_a_map_with_a_4xxxx_address_is_a_422_naming_file_and_key(  # type: ignor
     (loc, msg), = _refusal(client, auth, rig)
     assert msg.startswith(f"{path}: registers.process_c.address: 40002 looks like a 4xxxx")
     assert "address = 1;" in msg
+
+
+def test_a_chamber_and_table_on_one_bus_need_different_unit_ids(  # type: ignore[no-untyped-def]
+        client: TestClient, auth) -> None:
+    bus = "rtu:///dev/ttyUSB0?baudrate=19200"
+    rig = {**LAB, "chamber": {**LAB["chamber"], "url": bus}, "turntable": {"url": bus}}
+    (loc, msg), = _refusal(client, auth, rig)
+    assert loc == ["body", "turntable", "device_id"]
+    assert "the chamber answers unit 1 at the same url" in msg
+    rig["turntable"] = {"url": bus, "device_id": 2}
+    assert client.post("/api/v1/rigs", json=rig, headers=auth["admin"]).status_code == 201
