@@ -457,3 +457,38 @@ async def test_the_maps_unit_id_applies_unless_the_rig_gives_device_id(tmp_path:
         cfg["chamber"]["device_id"] = 3
         async with open_rig(cfg, clock) as devices:
             assert devices.chamber.link.device_id == 3
+
+
+def test_soakcal_sim_refuses_a_silent_register_the_map_lacks(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from simulators.cli import run_sim
+
+    assert run_sim(["--silent", "alarmz", "--duration-s", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("soakcal sim: --silent alarmz: map eurotherm3216 names no such register")
+
+
+async def test_soakcal_sim_serves_the_controller_set_up_as_asked(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """--decimals 0 --units F: read with the tenths-of-°C map, 23 °C shows as 7.3."""
+    import asyncio
+
+    import simulators.cli as sim_cli
+    from drivers.clock import RealClock
+    from drivers.modbus_link import ModbusLink
+    from drivers.registermaps import load_chamber_map
+
+    started: asyncio.Queue[Any] = asyncio.Queue()
+    monkeypatch.setattr(sim_cli, "describe", lambda rig: started.put_nowait(rig) or "")
+    args = sim_cli.build_parser().parse_args(
+        ["--decimals", "0", "--units", "F", "--duration-s", "2", "--chamber-map", INT16_3216])
+    args.truth, args.die_tau_s = None, 900.0
+    serving = asyncio.create_task(sim_cli._serve(args))
+    rig = await asyncio.wait_for(started.get(), 5)
+    link = ModbusLink(rig.chamber_url, RealClock())
+    try:
+        pv = await link.read_field(load_chamber_map(INT16_3216).process_c)
+    finally:
+        await link.close()
+        serving.cancel()
+    assert pv == pytest.approx(7.3, abs=0.11)  # 73 °F in whole degrees, read as tenths
