@@ -46,10 +46,12 @@ TABLE_OPTIONAL = ("faults",)
 
 #: Keys a map file may use; anything else is a typo and refused with its key.
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
-            "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
+            "safe", "identity", "run", "setup", "registers", "axes", "command", "checks",
+            "alarm_states"}
 CHECK_KEYS = {"register", "expect", "one_of", "min", "max", "what", "fix"}
 REGISTER_KEYS = {"address", "protocol_address", "table", "type", "scale", "offset",
-                 "word_order", "access", "write", "unit", "source", "note", "bits", "info_bits"}
+                 "word_order", "access", "write", "unit", "source", "note", "bits", "info_bits",
+                 "states", "ok"}
 SECTION_KEYS = {
     "defaults": {"word_order", "unit_id"},
     "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
@@ -173,6 +175,24 @@ class RegisterCheck:
 
 
 @dataclass(frozen=True)
+class StateAlarm:
+    """A register whose values are named states (e.g. one alarm's state on a Watlow F4T):
+    any value outside ``ok`` is an active alarm, reported by its state's name."""
+
+    register: str
+    field: Field
+    states: dict[int, str]
+    ok: frozenset[int]
+
+    def alarm(self, value: float) -> str | None:
+        """``None`` in an ok state; else ``"register: state"``."""
+        v = int(value)
+        if v in self.ok:
+            return None
+        return f"{self.register}: {self.states.get(v, f'state {v}')}"
+
+
+@dataclass(frozen=True)
 class ChamberMap:
     """Where a chamber controller keeps PV, SP, WSP, ramp rate, run/stop and alarms."""
 
@@ -183,6 +203,7 @@ class ChamberMap:
     ramp_c_per_min: Field
     run: Field | None = None  # None: the controller controls whenever powered
     alarms: Field | None = None  # bit field, names in ``alarm_bits``
+    alarm_states: tuple[StateAlarm, ...] = ()  # enumerated alarm registers
     alarm_bits: dict[int, str] = field(default_factory=dict)
     info_bits: dict[int, str] = field(default_factory=dict)  # reported, not alarms
     run_on: int = 1
@@ -452,6 +473,39 @@ class _MapReader:
             out[int(bit)] = label
         return out
 
+    def state_alarms(self, regs: dict[str, Field]) -> tuple[StateAlarm, ...]:
+        """``alarm_states = ["alarm_1", ...]``: registers with ``states`` and ``ok``."""
+        names = self.doc.get("alarm_states", [])
+        if not isinstance(names, list):
+            raise self.fail("alarm_states", "expected a list of register names")
+        out = []
+        for i, reg in enumerate(names):
+            f = self.ref(regs, f"alarm_states[{i}]", reg)
+            spec = self.doc["registers"][reg]
+            key = f"registers.{reg}"
+            if f.encoding not in ("uint16", "int16"):
+                raise self.fail(f"{key}.type", "a state register is one 16-bit register")
+            states = spec.get("states")
+            if not isinstance(states, dict) or not states:
+                raise self.fail(f"{key}.states", "expected a table value = \"name\"")
+            named: dict[int, str] = {}
+            for value, label in states.items():
+                if not str(value).lstrip("-").isdigit() or not isinstance(label, str):
+                    raise self.fail(f"{key}.states.{value}", "expected value = \"name\"")
+                named[int(value)] = label
+            ok = spec.get("ok")
+            if not isinstance(ok, list) or not ok or not all(
+                    isinstance(v, int) and v in named for v in ok):
+                raise self.fail(f"{key}.ok", "expected the list of non-alarm values, each "
+                                "named in states")
+            out.append(StateAlarm(reg, f, named, frozenset(ok)))
+        for reg, spec in self.doc["registers"].items():
+            if isinstance(spec, dict) and ("states" in spec or "ok" in spec) \
+                    and reg not in names:
+                raise self.fail(f"registers.{reg}.states",
+                                "only registers listed in alarm_states have states")
+        return tuple(out)
+
     def identity(self, regs: dict[str, Field]) -> Identity | None:
         ident = self.doc.get("identity")
         if ident is None:
@@ -572,6 +626,7 @@ class _MapReader:
                 raise self.fail("run.on", "expected two different register values 0…65535")
         alarms = regs.get("alarms")
         raw_alarms = d["registers"].get("alarms", {})
+        alarm_states = self.state_alarms(regs)
         setup: list[tuple[Field, float]] = []
         for i, step in enumerate(d.get("setup", [])):
             if not isinstance(step, dict):
@@ -590,6 +645,7 @@ class _MapReader:
             ramp_c_per_min=regs["ramp_c_per_min"],
             run=run_field, run_on=on, run_off=off,
             alarms=alarms,
+            alarm_states=alarm_states,
             alarm_bits=self.bits("registers.alarms.bits", raw_alarms.get("bits")),
             info_bits=self.bits("registers.alarms.info_bits", raw_alarms.get("info_bits")),
             setup=tuple(setup),

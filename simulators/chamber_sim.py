@@ -223,6 +223,7 @@ class ChamberRegisterImage:
         self._stored: dict[tuple[str, int], tuple[Field, list[int]]] = {}
         # A well-set-up controller: registers the map checks read what the map expects.
         checked = {id(c.field): c.expect for c in m.checks}
+        checked.update({id(a.field): float(min(a.ok)) for a in m.alarm_states})
         for f in m.registers.values():
             if id(f) not in role_fields:
                 value = self._identity if m.identity is not None and f is m.identity.field \

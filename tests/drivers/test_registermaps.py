@@ -338,3 +338,16 @@ def test_a_map_may_name_its_device_unit_id(tmp_path: Path) -> None:
     assert m.unit_id == 17 and CHAMBER_MAPS["eurotherm-3216"].unit_id == 1
     with pytest.raises(MapError, match=r"defaults\.unit_id: expected a Modbus unit id 0…247"):
         load_map(_write(tmp_path, GOOD + "[defaults]\nunit_id = 300\n"))
+
+
+def test_state_registers_must_name_their_ok_states(tmp_path: Path) -> None:
+    base = 'alarm_states = ["al1"]\n' + GOOD + "[registers.al1]\naddress = 90\ntype = \"uint16\"\n"
+    states = 'states = { 61 = "none", 7 = "high" }\nok = [61]\n'
+    m = load_chamber_map(_write(tmp_path, base + states))
+    (al1,) = m.alarm_states
+    assert al1.alarm(61) is None and al1.alarm(7) == "al1: high" and al1.alarm(9) == "al1: state 9"
+    with pytest.raises(MapError, match=r"registers\.al1\.ok: expected the list of non-alarm"):
+        load_map(_write(tmp_path, base + 'states = { 61 = "none" }\nok = [62]\n'))
+    stray = GOOD + "[registers.al1]\naddress = 90\ntype = \"uint16\"\nstates = { 61 = \"none\" }\n"
+    with pytest.raises(MapError, match=r"registers\.al1\.states: only registers listed in "):
+        load_map(_write(tmp_path, stray))

@@ -492,3 +492,33 @@ async def test_soakcal_sim_serves_the_controller_set_up_as_asked(
         await link.close()
         serving.cancel()
     assert pv == pytest.approx(7.3, abs=0.11)  # 73 °F in whole degrees, read as tenths
+
+
+async def test_an_enumerated_alarm_state_is_reported_by_its_name(tmp_path: Path) -> None:
+    from drivers.modbus_link import ModbusLink
+    from drivers.registermaps import load_chamber_map
+
+    path = tmp_path / "states.toml"
+    text = Path(INT16_3216).read_text() + """
+[registers.alarm_1_state]
+address = 1600
+type = "uint16"
+access = "rw"
+states = { 61 = "none", 88 = "startup", 7 = "alarm high", 8 = "alarm low", 28 = "error" }
+ok = [61, 88]
+"""
+    # a top-level key goes before the first table
+    path.write_text(text.replace('schema = "soakcal-register-map/1"\n',
+                                 'schema = "soakcal-register-map/1"\n'
+                                 'alarm_states = ["alarm_1_state"]\n', 1))
+    regmap = load_chamber_map(path)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path)) as sim:
+        ok_checks = await check_rig(_config(sim, str(path)), clock=clock)
+        link = ModbusLink(sim.chamber_url, clock)
+        await link.write_field(regmap.registers["alarm_1_state"], 7)
+        await link.close()
+        checks = await check_rig(_config(sim, str(path)), clock=clock)
+    assert _by(ok_checks, "chamber", "alarms").status == "pass"  # the twin starts in "none"
+    bad = _by(checks, "chamber", "alarms")
+    assert bad.status == "fail" and bad.detail == "active: alarm_1_state: alarm high"
