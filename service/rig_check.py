@@ -340,13 +340,37 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
             return rec.add(device, "acquire", "fail", detail + ", saturated",
                            "the sensor is being shaken or its range is too small")
         if not G_BAND[0] <= g <= G_BAND[1]:
+            cause, fix = _g_cause(g)
             return rec.add(device, "acquire", "fail",
-                           f"{detail}: outside {G_BAND[0]}…{G_BAND[1]} g",
-                           "the sensor must rest static; check its mounting and range setting")
+                           f"{detail}: outside {G_BAND[0]}…{G_BAND[1]} g of local gravity{cause}",
+                           fix)
         return rec.add(device, "acquire", "pass", detail)
 
     await rec.guard(device, "acquire", fix, acquire)
     return dies_c
+
+
+#: A static sensor reads 1 g; these factors are what a units or range mix-up makes of it.
+G_MISREADINGS = (
+    (9.80665, " — it reads in m/s², not g",
+     "the bridge reports m/s²: set its output to g (or divide by 9.80665 in its config)"),
+    (2.0, " — ×2: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+    (4.0, " — ×4: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+    (0.5, " — ×0.5: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+    (0.25, " — ×0.25: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+)
+
+
+def _g_cause(g: float) -> tuple[str, str]:
+    """The misreading that explains |g| (within 5 %), else the sensor is not at rest."""
+    for factor, cause, fix in G_MISREADINGS:
+        if abs(g / factor - 1.0) <= 0.05:
+            return cause, fix
+    return "", "the sensor must rest static; check its mounting and range setting"
 
 
 # --- CLI -------------------------------------------------------------------------------

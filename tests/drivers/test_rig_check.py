@@ -522,3 +522,26 @@ ok = [61, 88]
     assert _by(ok_checks, "chamber", "alarms").status == "pass"  # the twin starts in "none"
     bad = _by(checks, "chamber", "alarms")
     assert bad.status == "fail" and bad.detail == "active: alarm_1_state: alarm high"
+
+
+@pytest.mark.parametrize(("mean_g", "words"), [
+    ((0.0, 0.0, 0.5), "×0.5: the range setting and the scale the driver assumes disagree"),
+    ((0.0, 0.0, 9.80665), "it reads in m/s², not g"),
+    ((0.0, 0.3, 0.5), "outside 0.9…1.1 g of local gravity"),
+])
+async def test_a_sensor_off_gravity_names_the_misreading(mean_g: tuple[float, float, float],
+                                                         words: str) -> None:
+    from service.rig_check import _check_sensor, _Recorder
+
+    class Accel:
+        async def identify(self) -> Any:
+            from types import SimpleNamespace
+            return SimpleNamespace(model="ADXL355", serial="SN-1", firmware="fw")
+
+        async def acquire(self, n: int) -> Acquisition:
+            return Acquisition(mean_g, (1e-4,) * 3, n, 23.0, 0.0, False, 0.1)
+
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(), {"sensors": [{}]})
+    bad = _by(rec.checks, "sensor", "acquire")
+    assert bad.status == "fail" and words in bad.detail
