@@ -144,9 +144,8 @@ async def _likely_cause(chamber: Any, regmap: Any, pv: float,
     for k in (10.0, 100.0, 0.1, 0.01):
         if not math.isfinite(pv):
             break
-        times = f"×{k:g}" if k > 1 else f"×{k:g}"
         # The map reads 1/k of the truth: its scale (counts per °C) is k times too large.
-        candidates.append((pv * k, f"{times} — the map's scale does not match the "
+        candidates.append((pv * k, f"×{k:g} — the map's scale does not match the "
                            "controller's decimal point",
                            f"set `scale = {f.scale:g}`→`{f.scale / k:g}` for register "
                            f"`process_c`{also} in {file}, or set the controller's decimal "
