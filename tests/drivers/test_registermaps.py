@@ -81,6 +81,10 @@ def test_f4t_identity_run_and_ramp_setup() -> None:
     assert m.run is not None and (m.run_on, m.run_off) == (63, 62)
     assert [(f.address, v) for f, v in m.setup] == [(2794, 85.0), (2796, 57.0)]
     assert m.process_c.word_order == "low_first"
+    # The control loop's PV, not Universal Input 1 (27586); alarms as enumerated states.
+    assert m.process_c.address == 2820
+    assert [(a.register, a.field.address, sorted(a.ok)) for a in m.alarm_states] == [
+        ("alarm_1_state", 1356, [12, 61, 88]), ("alarm_2_state", 1456, [12, 61, 88])]
 
 
 def test_old_names_and_paths_resolve(tmp_path: Path) -> None:
@@ -176,8 +180,9 @@ def test_the_documented_example_map_loads(tmp_path: Path) -> None:
 
 
 def test_map_checks_load_and_refer_to_registers(tmp_path: Path) -> None:
-    checks = {c.register: c.expect for c in CHAMBER_MAPS["watlow-f4t"].checks}
-    assert checks == {"device_status": 138.0, "display_units": 15.0}
+    checks = {c.register: c.wanted() for c in CHAMBER_MAPS["watlow-f4t"].checks}
+    assert checks == {"device_status": "138", "loop_mode": "one of 10, 62",
+                      "display_units": "15"}
     path = _write(tmp_path, GOOD + "[[checks]]\nregister = \"units\"\nexpect = 15\n")
     with pytest.raises(MapError, match=r"checks\[0\]\.register: names no register"):
         load_map(path)
