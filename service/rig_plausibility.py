@@ -98,7 +98,7 @@ async def check_pv_against_die(rec: _Recorder, chamber: Any, dies_c: list[float]
     st = await chamber.read_status()
     pv, die = st.process_c, sum(dies_c) / len(dies_c)
     seen = f"PV reads {_temp(pv)} °C while the die reads {die:.1f} °C"
-    if math.isfinite(pv) and abs(pv - die) <= DIE_PV_TOLERANCE_C:
+    if _is_reading(pv) and abs(pv - die) <= DIE_PV_TOLERANCE_C:
         if 0.9 * abs(die) <= DIE_PV_TOLERANCE_C:
             return rec.add("chamber", "pv_vs_die", "skip",
                            f"{seen}: they agree, but this near 0 °C a ×0.1 scale error would "
@@ -122,9 +122,16 @@ async def check_pv_against_die(rec: _Recorder, chamber: Any, dies_c: list[float]
     return rec.add("chamber", "pv_vs_die", "fail", f"{seen}: {cause}", fix)
 
 
+def _is_reading(value_c: float) -> bool:
+    """A temperature a sensor can report: finite, and not a float's debris (1e-40 °C is
+    what two swapped words of a float often decode to, not a temperature near 0 °C)."""
+    return math.isfinite(value_c) and (value_c == 0.0 or 1e-6 < abs(value_c) < 1e6)
+
+
 def _temp(value_c: float) -> str:
-    """A reading as a person reads it: one decimal, or 3 digits when absurdly large."""
-    return f"{value_c:.1f}" if abs(value_c) < 1e5 else f"{value_c:.3g}"
+    """A reading as a person reads it: one decimal, or 3 digits when absurd."""
+    return f"{value_c:.1f}" if value_c == 0.0 or 0.05 <= abs(value_c) < 1e5 \
+        else f"{value_c:.3g}"
 
 
 async def _likely_cause(chamber: Any, regmap: Any, pv: float,

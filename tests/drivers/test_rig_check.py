@@ -545,3 +545,13 @@ async def test_a_sensor_off_gravity_names_the_misreading(mean_g: tuple[float, fl
     await _check_sensor(rec, Accel(), {"sensors": [{}]})
     bad = _by(rec.checks, "sensor", "acquire")
     assert bad.status == "fail" and words in bad.detail
+
+
+async def test_swapped_words_near_0_c_are_not_taken_for_a_reading() -> None:
+    """Swapped float words often decode to ~1e-38: near 0 °C that must not 'agree'."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t", start_c=3.0,
+                             controller=ControllerSetup(swap_words=True)) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t"), move=True, clock=clock)
+    bad = _by(checks, "chamber", "pv_vs_die")
+    assert bad.status == "fail" and "words of the 32-bit value are swapped" in bad.detail
