@@ -63,7 +63,11 @@ def cases(tmp: Path) -> list[Case]:
         Case("whole degrees, shipped float map", ControllerSetup(decimals=0),
              "eurotherm-3216", ""),
         Case("units °F", ControllerSetup(units="F"), "eurotherm-3216", "°F"),
-        Case("ramp per hour", ControllerSetup(ramp_per="hour"), "eurotherm-3216", "per hour"),
+        # A 3216 set to per-hour ramps shows it in RAMP.U (1) too.
+        Case("ramp per hour", ControllerSetup(ramp_per="hour", holds=(("ramp_units", 1.0),)),
+             "eurotherm-3216", "per hour"),
+        Case("ramp per hour, RAMP.U not mapped", ControllerSetup(ramp_per="hour"),
+             INT16_3216, "per hour"),
         Case("float words swapped (F4T)", ControllerSetup(swap_words=True), "watlow-f4t",
              "swapped"),
         Case("PV register points elsewhere", ControllerSetup(), INT16_3216,
@@ -72,6 +76,8 @@ def cases(tmp: Path) -> list[Case]:
              "eurotherm-3216", "does not answer"),
         Case("controller in manual", ControllerSetup(mode="manual"), "eurotherm-3216",
              "manual"),
+        Case("F4T loop 1 in manual", ControllerSetup(holds=(("loop_mode", 54.0),)),
+             "watlow-f4t", "manual"),
         Case("controller in standby", ControllerSetup(mode="standby"), "eurotherm-3216",
              "standby"),
     ]
@@ -130,7 +136,7 @@ async def main() -> None:
     print("|---|" + "---|" * len(temps) + "---|")
     for name in names:
         mine = [r for r in rows if r[0] == name]
-        check = next((r[5].split(":", 1)[0] for r in mine if r[2] == "caught"), "")
+        check = next((r[5].split(": ", 1)[0] for r in mine if r[2] == "caught"), "")
         print(f"| {name} | " + " | ".join(r[2] + ("" if r[3] else ", SP moved")
                                           for r in mine) + f" | {check} |")
     print()

@@ -133,6 +133,9 @@ class ControllerSetup:
       answers Modbus exception 2 (illegal address), as on a model that lacks it.
     * ``mode``: ``"manual"`` holds the output (WSP and air stay put, the map's
       ``manual_mode`` status bit is set); ``"standby"`` does not control at all.
+    * ``holds``: register name → the value this controller holds there, instead of
+      what the map's ``[[checks]]`` expect (e.g. ``{"loop_mode": 54}``: an F4T loop in
+      Manual; ``{"ramp_units": 1}``: a 3216 set to per-hour ramps).
     """
 
     decimals: int | None = None
@@ -141,6 +144,7 @@ class ControllerSetup:
     swap_words: bool = False
     silent: frozenset[str] = frozenset()
     mode: Literal["auto", "manual", "standby"] = "auto"
+    holds: tuple[tuple[str, float], ...] = ()
 
     def served(self, f: Field, role: str) -> Field:
         """The field as this controller encodes it (the map's address, its own format)."""
@@ -224,6 +228,7 @@ class ChamberRegisterImage:
         # A well-set-up controller: registers the map checks read what the map expects.
         checked = {id(c.field): c.expect for c in m.checks}
         checked.update({id(a.field): float(min(a.ok)) for a in m.alarm_states})
+        checked.update({id(m.registers[name]): value for name, value in self.setup.holds})
         for f in m.registers.values():
             if id(f) not in role_fields:
                 value = self._identity if m.identity is not None and f is m.identity.field \

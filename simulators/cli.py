@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a register (map name) that answers 'illegal address'; repeatable")
     ctl.add_argument("--mode", choices=("auto", "manual", "standby"), default="auto",
                      help="the controller's mode (default auto)")
+    ctl.add_argument("--hold", action="append", default=[], metavar="REGISTER=VALUE",
+                     help="a value the controller holds in a register of the map (instead of "
+                          "what its [[checks]] expect), e.g. loop_mode=54; repeatable")
     p.add_argument("--duration-s", type=float, default=None,
                    help="stop after this many wall seconds (default: run until Ctrl-C)")
     return p
@@ -82,6 +85,19 @@ def run_sim(argv: list[str] | None = None) -> int:
         print(f"soakcal sim: --silent {unknown[0]}: map {args.chamber_map} names no such "
               f"register (it has {', '.join(chamber_regs)})", file=sys.stderr)
         return 2
+    holds = []
+    for item in args.hold:
+        name, _, value = item.partition("=")
+        try:
+            holds.append((name, float(value)))
+        except ValueError:
+            print(f"soakcal sim: --hold {item}: expected REGISTER=NUMBER", file=sys.stderr)
+            return 2
+        if name not in chamber_regs:
+            print(f"soakcal sim: --hold {item}: map {args.chamber_map} names no register "
+                  f"{name!r}", file=sys.stderr)
+            return 2
+    args.holds = tuple(holds)
     if args.decimals is not None and not 0 <= args.decimals <= 4:
         print(f"soakcal sim: --decimals {args.decimals}: expected 0…4", file=sys.stderr)
         return 2
@@ -137,7 +153,8 @@ async def _serve(args: argparse.Namespace) -> None:
     clock = RealClock() if args.speed == 1.0 else ScaledClock(args.speed)
     controller = ControllerSetup(decimals=args.decimals, units=args.units,
                                  ramp_per=args.ramp_per, swap_words=args.swap_words,
-                                 silent=frozenset(args.silent), mode=args.mode)
+                                 silent=frozenset(args.silent), mode=args.mode,
+                                 holds=getattr(args, "holds", ()))
     async with start_sim_rig(clock, seed=args.seed, truth=args.truth,
                              chamber_map=args.chamber_map,
                              faults=faults, ports=args.port, host=args.host,

@@ -555,3 +555,15 @@ async def test_swapped_words_near_0_c_are_not_taken_for_a_reading() -> None:
         checks = await check_rig(_config(sim, "watlow-f4t"), move=True, clock=clock)
     bad = _by(checks, "chamber", "pv_vs_die")
     assert bad.status == "fail" and "words of the 32-bit value are swapped" in bad.detail
+
+
+async def test_an_f4t_loop_left_in_manual_fails_its_mode_check() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t",
+                             controller=ControllerSetup(holds=(("loop_mode", 54.0),))) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t"), clock=clock)
+    bad = _by(checks, "chamber", "register:loop_mode")
+    assert bad.status == "fail"
+    assert bad.detail == ("loop_mode reads 54, map watlow-f4t expects one of 10, 62 "
+                          "(loop 1 is not in manual (Auto 10 or Off 62))")
+    assert "switch loop 1 to Auto" in bad.fix
