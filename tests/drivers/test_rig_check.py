@@ -466,6 +466,11 @@ def test_soakcal_sim_refuses_a_silent_register_the_map_lacks(
     assert run_sim(["--silent", "alarmz", "--duration-s", "0"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("soakcal sim: --silent alarmz: map eurotherm3216 names no such register")
+    assert run_sim(["--hold", "ramp_units=hour", "--duration-s", "0"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "soakcal sim: --hold ramp_units=hour: expected REGISTER=NUMBER")
+    assert run_sim(["--hold", "loop_mode=54", "--duration-s", "0"]) == 2
+    assert "names no register 'loop_mode'" in capsys.readouterr().err
 
 
 async def test_soakcal_sim_serves_the_controller_set_up_as_asked(
