@@ -2,11 +2,14 @@
 
 Connects to the chamber, the turntable and the sensor of one rig (through the
 same drivers a campaign uses, ``service.engine.rigs.open_rig``), reads
-identity, process values and status, and moves nothing unless ``move`` is
-asked: then a small setpoint nudge and one table move, each put back. Every
-check is ``pass``, ``fail`` (with what to fix) or ``skip`` (with why: e.g. the
-map has no identity register because the manual documents none). The rig
-passes when no check fails. docs/rig-check.md describes every check.
+identity, process values and status, compares the chamber's PV with the
+sensors' die temperatures (``service.rig_plausibility``: a mis-scaled map is
+named with the key that fixes it), and moves nothing unless ``move`` is asked:
+then a setpoint nudge at a commanded ramp whose working setpoint is watched,
+and one table move, each put back. Every check is ``pass``, ``fail`` (with what
+to fix) or ``skip`` (with why: e.g. the map has no identity register because
+the manual documents none). The rig passes when no check fails.
+docs/rig-check.md describes every check.
 """
 
 from __future__ import annotations
