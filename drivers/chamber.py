@@ -36,6 +36,10 @@ class ModbusChamber:
             mask = sum(1 << b for b in m.alarm_bits) if m.alarm_bits else 0xFFFF
             alarms = bits_to_names(word & mask & ~sum(1 << b for b in m.info_bits),
                                    m.alarm_bits)
+        for state in m.alarm_states:  # enumerated alarm registers, read one by one
+            active = state.alarm(await self.link.read_field(state.field))
+            if active is not None:
+                alarms += (active,)
         return ChamberStatus(
             process_c=pv,
             setpoint_c=sp,

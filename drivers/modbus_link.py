@@ -106,7 +106,7 @@ class ModbusLink:
 
     # --- public -----------------------------------------------------------
     async def read_field(self, f: Field) -> float:
-        words = await self.read_registers(f.address, f.n_registers)
+        words = await self.read_registers(f.address, f.n_registers, f.table)
         return f.decode(words)
 
     async def read_fields(self, fields: list[Field], max_gap_words: int = 0) -> list[float]:
@@ -118,11 +118,15 @@ class ModbusLink:
         order = sorted(range(len(fields)), key=lambda i: fields[i].address)
         values: list[float] = [0.0] * len(fields)
         block: list[int] = []
+        # One request reads one table: sort by table, then address.
+        order = sorted(order, key=lambda i: (fields[i].table, fields[i].address))
         for i in [*order, -1]:
-            if block and (i < 0 or fields[i].address - _end(fields[block[-1]]) > max_gap_words
+            if block and (i < 0 or fields[i].table != fields[block[0]].table
+                          or fields[i].address - _end(fields[block[-1]]) > max_gap_words
                           or _end(fields[i]) - fields[block[0]].address > 125):
                 start = fields[block[0]].address
-                words = await self.read_registers(start, _end(fields[block[-1]]) - start)
+                words = await self.read_registers(start, _end(fields[block[-1]]) - start,
+                                                  fields[block[0]].table)
                 for j in block:
                     off = fields[j].address - start
                     values[j] = fields[j].decode(words[off: off + fields[j].n_registers])
@@ -136,18 +140,31 @@ class ModbusLink:
             words = f.encode(value)
         except (ValueError, OverflowError) as exc:
             raise ValueOutOfRange(self.device, f"{value} at register {f.address}: {exc}") from exc
-        await self.write_registers(f.address, words)
+        if f.table == "coil":  # FC 5
+            await self._request("write", f.address, lambda c: c.write_coil(
+                f.address, bool(words[0]), device_id=self.device_id))
+        elif f.single_write:  # FC 6: controllers that refuse FC 16
+            await self._request("write", f.address, lambda c: c.write_register(
+                f.address, words[0], device_id=self.device_id))
+        else:
+            await self.write_registers(f.address, words)
 
-    async def read_registers(self, address: int, count: int) -> list[int]:
+    async def read_registers(self, address: int, count: int,
+                             table: str = "holding") -> list[int]:
+        """``count`` words (or bits, as 0/1, from coils and discrete inputs) at ``address``."""
+        read = {"holding": "read_holding_registers", "input": "read_input_registers",
+                "coil": "read_coils", "discrete": "read_discrete_inputs"}[table]
         rr = await self._request(
-            "read", address, lambda c: c.read_holding_registers(
+            "read", address, lambda c: getattr(c, read)(
                 address, count=count, device_id=self.device_id)
         )
-        if len(rr.registers) != count:  # a short reply is a broken device, not noise
+        got = [int(b) for b in rr.bits[:count]] if table in ("coil", "discrete") \
+            else list(rr.registers)
+        if len(got) != count:  # a short reply is a broken device, not noise
             raise ProtocolError(
-                self.device, f"asked {count} registers at {address}, got {len(rr.registers)}"
+                self.device, f"asked {count} registers at {address}, got {len(got)}"
             )
-        return list(rr.registers)
+        return got
 
     async def write_registers(self, address: int, words: list[int]) -> None:
         await self._request(

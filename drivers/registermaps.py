@@ -17,15 +17,24 @@ from __future__ import annotations
 import math
 import struct
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
 from drivers import codec
 
-Encoding = Literal["int16", "uint16", "int32", "float32"]
-ENCODINGS: tuple[str, ...] = ("int16", "uint16", "int32", "float32")
+Encoding = Literal["int16", "uint16", "int32", "float32", "bit"]
+ENCODINGS: tuple[str, ...] = ("int16", "uint16", "int32", "float32", "bit")
+#: The four Modbus data tables: holding registers (FC 3/6/16), input registers (FC 4),
+#: coils (FC 1/5) and discrete inputs (FC 2). Bits (coils, discrete inputs) are type "bit".
+Table = Literal["holding", "input", "coil", "discrete"]
+TABLES: tuple[str, ...] = ("holding", "input", "coil", "discrete")
+READ_ONLY_TABLES = ("input", "discrete")
+BIT_TABLES = ("coil", "discrete")
 ACCESS = ("r", "w", "rw")
+WORD_ORDERS = ("high_first", "low_first")
+#: One Modbus read returns at most 125 registers: a larger gap cannot be spanned.
+MAX_READ_REGISTERS = 125
 SCHEMA = "soakcal-register-map/1"
 MAPS_DIR = Path(__file__).with_name("maps")
 
@@ -37,12 +46,14 @@ TABLE_OPTIONAL = ("faults",)
 
 #: Keys a map file may use; anything else is a typo and refused with its key.
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
-            "safe", "identity", "run", "setup", "registers", "axes", "command", "checks"}
-CHECK_KEYS = {"register", "expect", "what", "fix"}
-REGISTER_KEYS = {"address", "type", "scale", "word_order", "access", "unit", "source", "note",
-                 "bits", "info_bits"}
+            "safe", "identity", "run", "setup", "registers", "axes", "command", "checks",
+            "alarm_states"}
+CHECK_KEYS = {"register", "expect", "one_of", "min", "max", "what", "fix"}
+REGISTER_KEYS = {"address", "protocol_address", "table", "type", "scale", "offset",
+                 "word_order", "access", "write", "unit", "source", "note", "bits", "info_bits",
+                 "states", "ok"}
 SECTION_KEYS = {
-    "defaults": {"word_order"},
+    "defaults": {"word_order", "unit_id"},
     "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
     "safe": {"setpoint_c", "angles_deg"},
     "identity": {"register", "expect"},
@@ -62,39 +73,56 @@ class MapError(ValueError):
 
 @dataclass(frozen=True)
 class Field:
-    """One quantity in the holding-register space (0-based protocol addresses)."""
+    """One quantity in the holding-register space (0-based protocol addresses).
+
+    Engineering value = register value / ``scale`` + ``offset``: a °F controller is
+    mapped to °C with ``scale = 1.8`` (× counts per degree) and ``offset = -17.7778``.
+    """
 
     address: int
     encoding: Encoding = "int16"
-    scale: float = 1.0  # counts per engineering unit (integer encodings only)
+    scale: float = 1.0  # counts per engineering unit
     word_order: codec.WordOrder = "high_first"  # 32-bit encodings only
     access: str = "rw"
+    offset: float = 0.0  # engineering units added after the scale
+    table: Table = "holding"
+    single_write: bool = False  # FC 6 (one register) instead of FC 16; coils are always FC 5
 
     @property
     def n_registers(self) -> int:
         return 2 if self.encoding in ("int32", "float32") else 1
 
     def decode(self, words: list[int] | tuple[int, ...]) -> float:
+        return self.decode_raw(words) / self.scale + self.offset
+
+    def decode_raw(self, words: list[int] | tuple[int, ...]) -> float:
+        """The register value before scale and offset (counts, or the float as sent)."""
         if self.encoding == "float32":
             return codec.decode_float32(words, self.word_order)
         if self.encoding == "int32":
             hi, lo = (words[0], words[1]) if self.word_order == "high_first" else (
                 words[1], words[0])
-            raw = struct.unpack(">i", struct.pack(">HH", hi & 0xFFFF, lo & 0xFFFF))[0]
-            return raw / self.scale
-        return codec.decode_scaled(words[0], self.scale, signed=self.encoding == "int16")
+            return float(struct.unpack(">i", struct.pack(">HH", hi & 0xFFFF, lo & 0xFFFF))[0])
+        if self.encoding == "bit":
+            return float(words[0] & 1)
+        return codec.decode_scaled(words[0], 1.0, signed=self.encoding == "int16")
 
     def encode(self, value: float) -> list[int]:
         """Raises ValueError when the value cannot be represented (the driver maps it)."""
+        raw = (value - self.offset) * self.scale
         if self.encoding == "float32":
-            return codec.encode_float32(value, self.word_order)
+            return codec.encode_float32(raw, self.word_order)
         if self.encoding == "int32":
-            raw = int(round(value * self.scale))
-            if not -(2**31) <= raw < 2**31:
+            counts = int(round(raw))
+            if not -(2**31) <= counts < 2**31:
                 raise ValueError(f"{value} × {self.scale} does not fit a signed 32-bit value")
-            hi, lo = struct.unpack(">HH", struct.pack(">i", raw))
+            hi, lo = struct.unpack(">HH", struct.pack(">i", counts))
             return [hi, lo] if self.word_order == "high_first" else [lo, hi]
-        return [codec.encode_scaled(value, self.scale, signed=self.encoding == "int16")]
+        if self.encoding == "bit":
+            if raw not in (0.0, 1.0):
+                raise ValueError(f"{value} is not a bit (0 or 1)")
+            return [int(raw)]
+        return [codec.encode_scaled(raw, 1.0, signed=self.encoding == "int16")]
 
 
 @dataclass(frozen=True)
@@ -108,13 +136,60 @@ class Identity:
 
 @dataclass(frozen=True)
 class RegisterCheck:
-    """A register ``rig check`` reads and compares (e.g. the F4T's display units = °C)."""
+    """A register ``rig check`` reads and compares (e.g. the F4T's display units = °C).
+
+    The register passes when it reads ``expect`` exactly, or (when given) any of
+    ``one_of``, or a value within ``lo``…``hi``; ``expect`` is then the value a
+    well-set-up device reads (what the twin serves).
+    """
 
     register: str
     field: Field
     expect: float
     what: str  # what a pass means, e.g. "temperature units are °C"
     fix: str = ""
+    one_of: tuple[float, ...] = ()
+    lo: float | None = None
+    hi: float | None = None
+
+    def accepts(self, value: float) -> bool:
+        if self.one_of:
+            return value in self.one_of
+        if self.lo is not None or self.hi is not None:
+            return ((self.lo is None or value >= self.lo)
+                    and (self.hi is None or value <= self.hi))
+        return value == self.expect
+
+    def wanted(self) -> str:
+        """What the check accepts, as a person reads it: 15, one of 15, 16, or 0…10."""
+        def num(v: float) -> str:
+            return str(int(v)) if v == int(v) else f"{v:g}"
+
+        if self.one_of:
+            return "one of " + ", ".join(num(v) for v in self.one_of)
+        if self.lo is not None or self.hi is not None:
+            lo = "" if self.lo is None else num(self.lo)
+            hi = "" if self.hi is None else num(self.hi)
+            return f"{lo}…{hi}"
+        return num(self.expect)
+
+
+@dataclass(frozen=True)
+class StateAlarm:
+    """A register whose values are named states (e.g. one alarm's state on a Watlow F4T):
+    any value outside ``ok`` is an active alarm, reported by its state's name."""
+
+    register: str
+    field: Field
+    states: dict[int, str]
+    ok: frozenset[int]
+
+    def alarm(self, value: float) -> str | None:
+        """``None`` in an ok state; else ``"register: state"``."""
+        v = int(value)
+        if v in self.ok:
+            return None
+        return f"{self.register}: {self.states.get(v, f'state {v}')}"
 
 
 @dataclass(frozen=True)
@@ -128,6 +203,7 @@ class ChamberMap:
     ramp_c_per_min: Field
     run: Field | None = None  # None: the controller controls whenever powered
     alarms: Field | None = None  # bit field, names in ``alarm_bits``
+    alarm_states: tuple[StateAlarm, ...] = ()  # enumerated alarm registers
     alarm_bits: dict[int, str] = field(default_factory=dict)
     info_bits: dict[int, str] = field(default_factory=dict)  # reported, not alarms
     run_on: int = 1
@@ -145,6 +221,7 @@ class ChamberMap:
     title: str = ""
     source: str = ""  # the file the map came from
     undocumented: tuple[str, ...] = ()
+    unit_id: int = 1  # the device's Modbus unit id unless the rig config gives device_id
 
     def fields(self) -> list[Field]:
         """The fields one status read covers (optional ones only when mapped)."""
@@ -178,10 +255,10 @@ class TurntableMap:
     title: str = ""
     source: str = ""
     undocumented: tuple[str, ...] = ()
+    unit_id: int = 1
 
     def axis_field(self, base: Field, axis: int) -> Field:
-        return Field(base.address + axis * self.axis_stride, base.encoding, base.scale,
-                     base.word_order, base.access)
+        return replace(base, address=base.address + axis * self.axis_stride)
 
 
 # --- loading ------------------------------------------------------------------
@@ -215,6 +292,9 @@ def load_map(ref: str | Path) -> ChamberMap | TurntableMap:
     except tomllib.TOMLDecodeError as exc:
         # tomllib reports a key written twice (a duplicated register) with line and column.
         raise MapError(f"{path}: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise MapError(f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02X} at offset "
+                       f"{exc.start}): save the map file as UTF-8") from exc
     except OSError as exc:
         raise MapError(f"{path}: cannot read ({exc.strerror})") from exc
     return _MapReader(path, doc).build()
@@ -276,6 +356,9 @@ class _MapReader:
         if not isinstance(table, dict) or not table:
             raise self.fail("registers", "expected a table of named registers")
         default_order = self.doc.get("defaults", {}).get("word_order", "high_first")
+        if default_order not in WORD_ORDERS:
+            raise self.fail("defaults.word_order", f"expected \"high_first\" or "
+                            f"\"low_first\", got {default_order!r}")
         fields: dict[str, Field] = {}
         for reg, spec in table.items():
             fields[reg] = self.register(reg, spec, default_order)
@@ -294,37 +377,64 @@ class _MapReader:
         if not isinstance(address, int) or isinstance(address, bool) or not 0 <= address <= 65535:
             raise self.fail(f"{key}.address", f"expected a protocol address 0…65535, got "
                             f"{address!r}")
+        if 40001 <= address <= 49999 and spec.get("protocol_address") is not True:
+            raise self.fail(f"{key}.address",
+                            f"{address} looks like a 4xxxx holding-register reference (the "
+                            f"\"4\" names the table, counting from 1): write the protocol "
+                            f"address, address = {address - 40001}; if the manual really "
+                            f"gives protocol address {address}, add protocol_address = true")
         enc = spec.get("type")
         if enc not in ENCODINGS:
             raise self.fail(f"{key}.type", f"unknown type {enc!r} (expected one of "
                             f"{', '.join(ENCODINGS)})")
+        table = spec.get("table", "holding")
+        if table not in TABLES:
+            raise self.fail(f"{key}.table", f"expected one of {', '.join(TABLES)}, got {table!r}")
+        if (table in BIT_TABLES) != (enc == "bit"):
+            raise self.fail(f"{key}.type", f"a {table} register is "
+                            + ("type \"bit\"" if table in BIT_TABLES else
+                               f"a 16/32-bit type, not {enc!r}"))
+        width = 2 if enc in ("int32", "float32") else 1
+        if address + width - 1 > 65535:
+            raise self.fail(f"{key}.address", f"a {enc} at {address} needs registers "
+                            f"{address}…{address + width - 1}, past the last one (65535)")
         scale = spec.get("scale", 1)
         if not isinstance(scale, int | float) or isinstance(scale, bool) or not scale > 0 \
                 or not math.isfinite(scale):
             raise self.fail(f"{key}.scale", f"expected counts per unit > 0, got {scale!r}")
-        if enc == "float32" and scale != 1:
-            raise self.fail(f"{key}.scale", "a float32 register carries the value itself")
+        offset = self.number(f"{key}.offset", spec.get("offset"), 0.0)
         order = spec.get("word_order", default_order)
-        if order not in ("high_first", "low_first"):
+        if order not in WORD_ORDERS:
             raise self.fail(f"{key}.word_order",
                             f"expected \"high_first\" or \"low_first\", got {order!r}")
         access = spec.get("access", "r")
         if access not in ACCESS:
             raise self.fail(f"{key}.access", f"expected one of {', '.join(ACCESS)}, got "
                             f"{access!r}")
+        if table in READ_ONLY_TABLES and access != "r":
+            raise self.fail(f"{key}.access", f"{table} registers are read-only in Modbus: "
+                            "expected \"r\"")
+        write = spec.get("write", "multiple")
+        if write not in ("multiple", "single"):
+            raise self.fail(f"{key}.write", f"expected \"multiple\" (FC 16) or \"single\" "
+                            f"(FC 6), got {write!r}")
+        if write == "single" and (width != 1 or table != "holding"):
+            raise self.fail(f"{key}.write", "a single-register write (FC 6) carries one "
+                            "holding register")
         if not isinstance(spec.get("source", ""), str):
             raise self.fail(f"{key}.source", "expected the citation as a string")
-        return Field(address, enc, float(scale), order, access)  # type: ignore[arg-type]
+        return Field(address, enc, float(scale), order, access,  # type: ignore[arg-type]
+                     float(offset or 0.0), table, write == "single")
 
     def check_overlaps(self, fields: dict[str, Field]) -> None:
         """Two names on one register is a duplicated register too (a copy-paste slip)."""
-        owner: dict[int, str] = {}
+        owner: dict[tuple[str, int], str] = {}
         for reg, f in fields.items():
             for a in range(f.address, f.address + f.n_registers):
-                if a in owner:
+                if (f.table, a) in owner:
                     raise self.fail(f"registers.{reg}.address",
-                                    f"register {a} is also registers.{owner[a]}")
-                owner[a] = reg
+                                    f"register {a} is also registers.{owner[f.table, a]}")
+                owner[f.table, a] = reg
 
     def require(self, regs: dict[str, Field], names: tuple[str, ...], kind: str) -> None:
         for reg in names:
@@ -341,7 +451,8 @@ class _MapReader:
 
     def bit_word(self, regs: dict[str, Field], names: tuple[str, ...]) -> None:
         for reg in names:
-            if reg in regs and regs[reg].encoding not in ("uint16", "int16"):
+            if reg in regs and (regs[reg].encoding not in ("uint16", "int16")
+                                or regs[reg].table in BIT_TABLES):
                 raise self.fail(f"registers.{reg}.type",
                                 f"a bit word is one 16-bit register, got {regs[reg].encoding!r}")
 
@@ -361,6 +472,39 @@ class _MapReader:
                 raise self.fail(f"{key}.{bit}", "expected bit 0…15 = \"name\"")
             out[int(bit)] = label
         return out
+
+    def state_alarms(self, regs: dict[str, Field]) -> tuple[StateAlarm, ...]:
+        """``alarm_states = ["alarm_1", ...]``: registers with ``states`` and ``ok``."""
+        names = self.doc.get("alarm_states", [])
+        if not isinstance(names, list):
+            raise self.fail("alarm_states", "expected a list of register names")
+        out = []
+        for i, reg in enumerate(names):
+            f = self.ref(regs, f"alarm_states[{i}]", reg)
+            spec = self.doc["registers"][reg]
+            key = f"registers.{reg}"
+            if f.encoding not in ("uint16", "int16"):
+                raise self.fail(f"{key}.type", "a state register is one 16-bit register")
+            states = spec.get("states")
+            if not isinstance(states, dict) or not states:
+                raise self.fail(f"{key}.states", "expected a table value = \"name\"")
+            named: dict[int, str] = {}
+            for value, label in states.items():
+                if not str(value).lstrip("-").isdigit() or not isinstance(label, str):
+                    raise self.fail(f"{key}.states.{value}", "expected value = \"name\"")
+                named[int(value)] = label
+            ok = spec.get("ok")
+            if not isinstance(ok, list) or not ok or not all(
+                    isinstance(v, int) and v in named for v in ok):
+                raise self.fail(f"{key}.ok", "expected the list of non-alarm values, each "
+                                "named in states")
+            out.append(StateAlarm(reg, f, named, frozenset(ok)))
+        for reg, spec in self.doc["registers"].items():
+            if isinstance(spec, dict) and ("states" in spec or "ok" in spec) \
+                    and reg not in names:
+                raise self.fail(f"registers.{reg}.states",
+                                "only registers listed in alarm_states have states")
+        return tuple(out)
 
     def identity(self, regs: dict[str, Field]) -> Identity | None:
         ident = self.doc.get("identity")
@@ -388,25 +532,58 @@ class _MapReader:
                     raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
                                     f"{', '.join(sorted(CHECK_KEYS))})")
             f = self.ref(regs, f"{key}.register", c.get("register"))
-            expect = self.number(f"{key}.expect", c.get("expect"), None)
-            if expect is None:
-                raise self.fail(f"{key}.expect", "missing")
-            what = c.get("what", f"{c['register']} = {expect:g}")
-            out.append(RegisterCheck(str(c["register"]), f, expect, str(what),
-                                     str(c.get("fix", ""))))
+            out.append(self.check(key, c, f))
         return tuple(out)
+
+    def check(self, key: str, c: dict[str, Any], f: Field) -> RegisterCheck:
+        """One ``[[checks]]`` entry: exactly one of ``expect``, ``one_of``, ``min``/``max``."""
+        given = [k for k in ("expect", "one_of") if k in c] + (
+            ["min/max"] if "min" in c or "max" in c else [])
+        if len(given) != 1:
+            raise self.fail(key, "expected exactly one of expect, one_of, min/max, got "
+                            + (", ".join(given) or "none"))
+        one_of: tuple[float, ...] = ()
+        lo = self.number(f"{key}.min", c.get("min"), None)
+        hi = self.number(f"{key}.max", c.get("max"), None)
+        if "one_of" in c:
+            raw = c["one_of"]
+            if not isinstance(raw, list) or not raw:
+                raise self.fail(f"{key}.one_of", "expected a non-empty list of values")
+            one_of = tuple(self.number(f"{key}.one_of[{i}]", v, None) or 0.0
+                           for i, v in enumerate(raw))
+            expect = one_of[0]
+        elif lo is not None or hi is not None:
+            if lo is not None and hi is not None and lo > hi:
+                raise self.fail(f"{key}.min", f"min {lo:g} > max {hi:g}")
+            expect = lo if lo is not None else hi  # type: ignore[assignment]
+        else:
+            value = self.number(f"{key}.expect", c.get("expect"), None)
+            assert value is not None  # a TOML value is never None
+            expect = value
+        what = c.get("what", f"{c['register']} = {expect:g}")
+        return RegisterCheck(str(c["register"]), f, float(expect), str(what),
+                             str(c.get("fix", "")), one_of, lo, hi)
 
     def common(self, regs: dict[str, Field]) -> dict[str, Any]:
         d = self.doc
         notes = d.get("undocumented", [])
         if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
             raise self.fail("undocumented", "expected a list of strings")
-        gap = d.get("limits", {}).get("block_read_max_gap", 0)
-        if not isinstance(gap, int) or gap < 0:
-            raise self.fail("limits.block_read_max_gap", "expected an integer ≥ 0")
-        return {"title": str(d.get("title", "")), "source": str(self.path),
+        gap = self.gap(0)
+        unit_id = d.get("defaults", {}).get("unit_id", 1)
+        if not isinstance(unit_id, int) or isinstance(unit_id, bool) or not 0 <= unit_id <= 247:
+            raise self.fail("defaults.unit_id", f"expected a Modbus unit id 0…247, got {unit_id!r}")
+        return {"title": str(d.get("title", "")), "source": str(self.path), "unit_id": unit_id,
                 "undocumented": tuple(notes), "block_read_max_gap": gap,
                 "checks": self.checks(regs), "identity": self.identity(regs), "registers": regs}
+
+    def gap(self, default: int) -> int:
+        gap = self.doc.get("limits", {}).get("block_read_max_gap", default)
+        if not isinstance(gap, int) or isinstance(gap, bool) or not 0 <= gap < MAX_READ_REGISTERS:
+            raise self.fail("limits.block_read_max_gap",
+                            f"expected an integer 0…{MAX_READ_REGISTERS - 1} (one read returns at "
+                            f"most {MAX_READ_REGISTERS} registers), got {gap!r}")
+        return gap
 
     def number(self, key: str, value: Any, default: float | None) -> float | None:
         if value is None:
@@ -425,10 +602,14 @@ class _MapReader:
         limits = d.get("limits", {})
         rng = limits.get("range_c", [-70.0, 180.0])
         if not (isinstance(rng, list) and len(rng) == 2
-                and all(isinstance(v, int | float) for v in rng) and rng[0] < rng[1]):
+                and all(isinstance(v, int | float) and not isinstance(v, bool)
+                        and math.isfinite(v) for v in rng) and rng[0] < rng[1]):
             raise self.fail("limits.range_c", "expected [lo, hi] in °C with lo < hi")
         max_ramp = self.number("limits.max_ramp_c_per_min", limits.get("max_ramp_c_per_min"),
                                None)
+        if max_ramp is not None and not max_ramp > 0:
+            raise self.fail("limits.max_ramp_c_per_min",
+                            f"expected the chamber's fastest ramp, > 0 °C/min, got {max_ramp:g}")
         safe = self.number("safe.setpoint_c", d.get("safe", {}).get("setpoint_c"), 23.0)
         assert safe is not None
         if not rng[0] <= safe <= rng[1]:
@@ -445,6 +626,7 @@ class _MapReader:
                 raise self.fail("run.on", "expected two different register values 0…65535")
         alarms = regs.get("alarms")
         raw_alarms = d["registers"].get("alarms", {})
+        alarm_states = self.state_alarms(regs)
         setup: list[tuple[Field, float]] = []
         for i, step in enumerate(d.get("setup", [])):
             if not isinstance(step, dict):
@@ -463,6 +645,7 @@ class _MapReader:
             ramp_c_per_min=regs["ramp_c_per_min"],
             run=run_field, run_on=on, run_off=off,
             alarms=alarms,
+            alarm_states=alarm_states,
             alarm_bits=self.bits("registers.alarms.bits", raw_alarms.get("bits")),
             info_bits=self.bits("registers.alarms.info_bits", raw_alarms.get("info_bits")),
             setup=tuple(setup),
@@ -494,14 +677,30 @@ class _MapReader:
         for needed in ("in_position", "moving"):
             if needed not in by_name:
                 raise self.fail("registers.status.bits", f"missing the \"{needed}\" bit")
+        for reg in ("position_deg", "target_deg"):
+            f = regs[reg]
+            last = f.address + (n_axes - 1) * stride + f.n_registers - 1
+            if last > 65535:
+                raise self.fail(f"registers.{reg}.address",
+                                f"axis {n_axes - 1} lands at {last - f.n_registers + 1} "
+                                f"(address {f.address} + {n_axes - 1} × stride {stride}), past "
+                                "the last register (65535)")
         limits = d.get("limits", {})
         rng = self.number("limits.range_deg", limits.get("range_deg"), 720.0)
+        assert rng is not None
+        if not rng > 0:
+            raise self.fail("limits.range_deg", f"expected the largest |angle| > 0°, got {rng:g}")
         safe = d.get("safe", {}).get("angles_deg", [0.0] * n_axes)
         if not isinstance(safe, list) or len(safe) != n_axes:
             raise self.fail("safe.angles_deg", f"expected {n_axes} angles")
+        for i, a in enumerate(safe):
+            angle = self.number(f"safe.angles_deg[{i}]", a, None)
+            if angle is None or abs(angle) > rng:
+                raise self.fail(f"safe.angles_deg[{i}]",
+                                f"{a!r}° outside limits.range_deg ±{rng:g}°")
         faults_raw = d["registers"].get("faults", {})
         common = self.common(regs)
-        common["block_read_max_gap"] = d.get("limits", {}).get("block_read_max_gap", 8)
+        common["block_read_max_gap"] = self.gap(8)
         return TurntableMap(
             name=name, n_axes=n_axes,
             position_deg=regs["position_deg"], target_deg=regs["target_deg"],
@@ -510,10 +709,18 @@ class _MapReader:
             fault_bits=self.bits("registers.faults.bits", faults_raw.get("bits")),
             move_value=move, stop_value=stop,
             in_position_bit=by_name["in_position"], moving_bit=by_name["moving"],
-            range_deg=float(rng or 720.0),
+            range_deg=float(rng),
             safe_angles_deg=tuple(float(a) for a in safe),
             **common,
         )
+
+
+def describe_map(m: ChamberMap | TurntableMap) -> str:
+    """One line naming what a map describes (``soakcal rig validate``)."""
+    kind = "chamber" if isinstance(m, ChamberMap) else f"turntable, {m.n_axes} axes"
+    what = f"{m.name} — {m.title}" if m.title else m.name
+    notes = f", {len(m.undocumented)} undocumented points listed" if m.undocumented else ""
+    return f"{what} ({kind}, {len(m.registers)} registers{notes})"
 
 
 def bits_to_names(word: int, names: dict[int, str]) -> tuple[str, ...]:

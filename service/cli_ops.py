@@ -260,3 +260,126 @@ def _coefficients(args: argparse.Namespace) -> int:
         cells = " ".join(f"{v:>12.8f}" for v in row)
         print(f"{axis:>3} {cells}  {bias_g * 1e3:>11.5f}")
     return EXIT_OK
+
+
+# --- rig add | list | rm -----------------------------------------------------------------
+
+
+def add_rig_admin_parsers(rig_sub: Any) -> None:
+    """``soakcal rig add NAME --config RIG.json``, ``rig list``, ``rig rm NAME``: the rigs of
+    ``/api/v1/rigs`` in the configured database, by the API's own rules (its handlers)."""
+    add = rig_sub.add_parser("add", help="add a rig from a JSON config (POST /api/v1/rigs)")
+    add.add_argument("name", metavar="NAME", help="rig name (letters, digits, _ . -)")
+    add.add_argument("--config", required=True, metavar="RIG.json",
+                     help='{"chamber": {...}, "turntable": {...}, "sensors": [...]}')
+    add.set_defaults(handler=run_rig_add)
+    listing = rig_sub.add_parser("list", help="list the rigs (the sim rig included)")
+    listing.add_argument("--json", action="store_true", help="print JSON")
+    listing.set_defaults(handler=run_rig_list)
+    rm = rig_sub.add_parser("rm", help="remove a rig no campaign uses or names")
+    rm.add_argument("name", metavar="NAME")
+    rm.set_defaults(handler=run_rig_rm)
+
+
+def _rig_session(command: str) -> tuple[Any, Any]:
+    """A session on the configured database, with the ``sim`` rig present (a fresh install
+    has it without ``serve`` having run)."""
+    from service.campaigns import seed_sim_rig
+
+    factory, _url = _session_factory(command)
+    session = factory()
+    seed_sim_rig(session)
+    session.commit()
+    return factory, session
+
+
+def _http_refusal(command: str, where: str, exc: Any) -> int:
+    """The API's refusal (404/409/422) as one line on stderr, exit 2."""
+    detail = exc.detail
+    if isinstance(detail, list):  # 422: [{"loc": ["body", "chamber", "x"], "msg": ...}]
+        detail = "; ".join(
+            f"{'.'.join(str(p) for p in d['loc'][1:])}: {d['msg']}" for d in detail)
+    print(f"soakcal {command}: {where}{detail}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def run_rig_add(args: argparse.Namespace) -> int:
+    from fastapi import HTTPException
+    from pydantic import ValidationError
+
+    from service.api.rigs import create_rig
+    from service.api.schemas import RigCreate
+
+    try:
+        with open(args.config, encoding="utf-8") as fh:
+            config = json.load(fh)
+    except OSError as exc:
+        print(f"soakcal rig add: {args.config}: cannot read ({exc.strerror})", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        print(f"soakcal rig add: {args.config}: not JSON ({exc})", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if not isinstance(config, dict):
+        print(f"soakcal rig add: {args.config}: expected an object "
+              '{"chamber", "turntable", "sensors"}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        body = RigCreate(**{**config, "name": args.name})
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        print(f"soakcal rig add: {args.config}: {where}: {first['msg']}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    factory, session = _rig_session("rig add")
+    try:
+        out = create_rig(body, session)
+    except HTTPException as exc:
+        return _http_refusal("rig add", f"{args.config}: " if exc.status_code == 422 else "",
+                             exc)
+    finally:
+        session.close()
+        factory.kw["bind"].dispose()
+    print(f"rig {out.name} added: chamber {_rig_summary(out.chamber)}")
+    return EXIT_OK
+
+
+def run_rig_list(args: argparse.Namespace) -> int:
+    from service.api.rigs import list_rigs
+
+    factory, session = _rig_session("rig list")
+    try:
+        rigs = list_rigs(session)
+    finally:
+        session.close()
+        factory.kw["bind"].dispose()
+    if args.json:
+        print(json.dumps([r.model_dump(mode="json") for r in rigs], indent=2))
+        return EXIT_OK
+    print(f"{'name':<16} {'busy':<5} chamber")
+    for r in rigs:
+        print(f"{r.name:<16} {'yes' if r.busy else 'no':<5} {_rig_summary(r.chamber)}")
+    return EXIT_OK
+
+
+def run_rig_rm(args: argparse.Namespace) -> int:
+    from fastapi import HTTPException
+
+    from service.api.rigs import delete_rig
+
+    factory, session = _rig_session("rig rm")
+    try:
+        delete_rig(args.name, session)
+    except HTTPException as exc:
+        return _http_refusal("rig rm", "", exc)
+    finally:
+        session.close()
+        factory.kw["bind"].dispose()
+    print(f"rig {args.name} removed")
+    return EXIT_OK
+
+
+def _rig_summary(chamber: dict[str, Any]) -> str:
+    driver = chamber.get("driver", "sim")
+    if driver == "modbus":
+        return f"modbus {chamber.get('url', '?')} map {chamber.get('map', 'eurotherm3216')}"
+    return str(driver)

@@ -2,17 +2,21 @@
 
 Connects to the chamber, the turntable and the sensor of one rig (through the
 same drivers a campaign uses, ``service.engine.rigs.open_rig``), reads
-identity, process values and status, and moves nothing unless ``move`` is
-asked: then a small setpoint nudge and one table move, each put back. Every
-check is ``pass``, ``fail`` (with what to fix) or ``skip`` (with why: e.g. the
-map has no identity register because the manual documents none). The rig
-passes when no check fails. docs/rig-check.md describes every check.
+identity, process values and status, compares the chamber's PV with the
+sensors' die temperatures (``service.rig_plausibility``: a mis-scaled map is
+named with the key that fixes it), and moves nothing unless ``move`` is asked:
+then a setpoint nudge at a commanded ramp whose working setpoint is watched,
+and one table move, each put back. Every check is ``pass``, ``fail`` (with what
+to fix) or ``skip`` (with why: e.g. the map has no identity register because
+the manual documents none). The rig passes when no check fails.
+docs/rig-check.md describes every check.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import math
 import sys
@@ -21,11 +25,11 @@ from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 from drivers.clock import Clock, RealClock, ScaledClock
-from drivers.faults import DeviceFault
+from drivers.faults import DeviceFault, ModbusExceptionReply
+from service import rig_plausibility as plausibility
 
 Status = Literal["pass", "fail", "skip"]
 
-NUDGE_C = 0.5  # setpoint nudge, °C: visible at 0.1 °C resolution, harmless to any soak
 TABLE_STEP_DEG = 5.0  # one table move on the outer axis, deg
 ANGLE_TOLERANCE_DEG = 0.1
 MOVE_TIMEOUT_S = 120.0  # rig time for one table move to report in-position
@@ -85,17 +89,32 @@ async def check_rig(rig: dict[str, Any], *, move: bool = False,
     channels = _first_entry_channels(rig)
     try:
         async with open_rig(rig, clock, serials=list(channels.values())) as devices:
-            await _check_chamber(rec, devices.chamber, move, rig)
+            chamber_ok = await _check_chamber(rec, devices.chamber, rig)
             await _check_table(rec, devices.turntable, move, clock)
+            dies_c: list[float] = []
             if not channels:
-                await _check_sensor(rec, devices.accelerometer, rig)
+                dies_c += await _check_sensor(rec, devices.accelerometer, rig)
             # A multiplexing bridge: every channel is a sensor, checked as "sensor @<ch>"
             # against the serial its channel declares.
             accels = devices.accelerometers or {s: devices.accelerometer
                                                 for s in channels.values()}
             for ch, serial in channels.items():
-                await _check_sensor(rec, accels[serial], rig, device=f"sensor @{ch}",
-                                    expected_serial=serial, blank_ok=True)
+                dies_c += await _check_sensor(rec, accels[serial], rig, device=f"sensor @{ch}",
+                                              expected_serial=serial, blank_ok=True)
+            if chamber_ok:
+                plausible = await rec.guard(
+                    "chamber", "pv_vs_die", _CONNECT_FIX,
+                    lambda: plausibility.check_pv_against_die(rec, devices.chamber, dies_c))
+                if not move:
+                    rec.add("chamber", "setpoint_nudge", "skip", "not asked (--move)")
+                elif not plausible:
+                    rec.add("chamber", "setpoint_nudge", "skip",
+                            "not nudged: the PV is not plausible, so a setpoint written "
+                            "through this map would not be the temperature asked")
+                else:
+                    await rec.guard("chamber", "setpoint_nudge", _CONNECT_FIX,
+                                    lambda: plausibility.nudge_and_ramp(rec, devices.chamber,
+                                                                        rig, clock))
     except RigConfigError as exc:
         rec.add("rig", "config", "fail", str(exc), "fix the rig config (PUT /api/v1/rigs/NAME)")
     return rec.checks
@@ -108,8 +127,9 @@ async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
     regmap = driver.regmap
     ident = regmap.identity
     if ident is None:
-        value = await driver.read_status()  # still proves the device answers
-        del value
+        # Still proves the device answers; a refused register is the status check's to name.
+        with contextlib.suppress(ModbusExceptionReply):
+            await driver.read_status()
         rec.add(device, "connect", "pass", f"answers at {driver.link.url}")
         rec.add(device, "identity", "skip",
                 f"map {regmap.name} has no identity register (none documented)")
@@ -119,12 +139,21 @@ async def _identity(rec: _Recorder, device: str, driver: Any) -> bool:
     if got != ident.expect:
         return rec.add(
             device, "identity", "fail",
-            f"register {ident.register} reads {got:g}, map {regmap.name} expects "
-            f"{ident.expect:g}",
+            f"register {ident.register} reads {_number(got)}, map {regmap.name} expects "
+            f"{_number(ident.expect)}",
             "another device answers at this URL/unit id, or the rig names the wrong map")
     rec.add(device, "identity", "pass",
-            f"register {ident.register} = {got:g} as map {regmap.name} expects")
+            f"register {ident.register} = {_number(got)} as map {regmap.name} expects")
     return await _map_checks(rec, device, driver)
+
+
+def _number(value: float | None) -> str:
+    """A register value as the manual prints it: 8126464, not 8.12646e+06."""
+    if value is None:
+        return "nothing"
+    if math.isfinite(value) and value == int(value):
+        return str(int(value))
+    return f"{value:.6g}"
 
 
 async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
@@ -135,26 +164,23 @@ async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
     """
     for c in driver.regmap.checks:
         got = await driver.link.read_field(c.field)
-        if got != c.expect:
+        if not c.accepts(got):
             rec.add(device, f"register:{c.register}", "fail",
-                    f"{c.register} reads {got:g}, map {driver.regmap.name} expects "
-                    f"{c.expect:g} ({c.what})", c.fix or "set it on the controller")
+                    f"{c.register} reads {_number(got)}, map {driver.regmap.name} expects "
+                    f"{c.wanted()} ({c.what})", c.fix or "set it on the controller")
         else:
             rec.add(device, f"register:{c.register}", "pass", c.what)
     return True
 
 
-async def _check_chamber(rec: _Recorder, chamber: Any, move: bool,
-                         rig: dict[str, Any]) -> None:
+async def _check_chamber(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> bool:
+    """Identity, status and alarms; ``False`` when the chamber cannot be read at all."""
     if not hasattr(chamber, "regmap"):  # not a map-driven driver: nothing to compare against
         rec.add("chamber", "identity", "skip", "driver has no register map")
     elif not await rec.guard("chamber", "connect", _CONNECT_FIX,
                              lambda: _identity(rec, "chamber", chamber)):
-        return
-    lo, hi = chamber.range_c
-    cfg_range = (rig.get("chamber") or {}).get("range_c")
-    if cfg_range:
-        lo, hi = max(lo, float(cfg_range[0])), min(hi, float(cfg_range[1]))
+        return False
+    lo, hi = plausibility.usable_range_c(chamber, rig)
 
     async def status() -> bool:
         st = await chamber.read_status()
@@ -163,37 +189,25 @@ async def _check_chamber(rec: _Recorder, chamber: Any, move: bool,
                   f"{'running' if st.running else 'stopped'}")
         ok = math.isfinite(st.process_c) and lo - 30.0 <= st.process_c <= hi + 30.0
         rec.add("chamber", "status", "pass" if ok else "fail", detail,
-                "" if ok else "the PV is implausible: check the map's scale and the "
-                "controller's units (°C, decimal places)")
+                "" if ok else "the PV is implausible: check the map's scale and word order "
+                "and the controller's units (the pv_vs_die check names the likely cause)")
         if st.alarms:
-            return rec.add("chamber", "alarms", "fail", "active: " + ", ".join(st.alarms),
-                           "clear the alarm at the controller before a campaign")
-        return rec.add("chamber", "alarms", "pass", "none active")
+            rec.add("chamber", "alarms", "fail", "active: " + ", ".join(st.alarms),
+                    "clear the alarm at the controller before a campaign")
+        else:
+            rec.add("chamber", "alarms", "pass", "none active")
+        await plausibility.check_mode(rec, chamber)
+        return True
 
-    if not await rec.guard("chamber", "status", _CONNECT_FIX, status):
-        return
-    if not move:
-        rec.add("chamber", "setpoint_nudge", "skip", "not asked (--move)")
-        return
-
-    async def nudge() -> bool:
-        sp0 = (await chamber.read_status()).setpoint_c
-        target = sp0 + NUDGE_C if sp0 + NUDGE_C <= hi else sp0 - NUDGE_C
-        await chamber.set_setpoint(target)
-        got = (await chamber.read_status()).setpoint_c
-        await chamber.set_setpoint(sp0)
-        back = (await chamber.read_status()).setpoint_c
-        tol = 0.051
-        if abs(got - target) > tol or abs(back - sp0) > tol:
-            return rec.add("chamber", "setpoint_nudge", "fail",
-                           f"wrote {target:.2f} °C, read {got:.2f} °C; restored {sp0:.2f} °C, "
-                           f"read {back:.2f} °C",
-                           "the setpoint register is read-only, remote setpoint is disabled, "
-                           "or the map's scale/word order is wrong")
-        return rec.add("chamber", "setpoint_nudge", "pass",
-                       f"SP {sp0:.1f} → {target:.1f} → {back:.1f} °C")
-
-    await rec.guard("chamber", "setpoint_nudge", _CONNECT_FIX, nudge)
+    try:
+        return await status()
+    except DeviceFault as fault:
+        silent = await plausibility.silent_registers(chamber)
+        if silent:
+            rec.add("chamber", "status", "fail", "; ".join(d for d, _ in silent), silent[0][1])
+        else:
+            rec.add("chamber", "status", "fail", f"no usable answer: {fault}", _CONNECT_FIX)
+        return False
 
 
 # --- turntable -------------------------------------------------------------------------
@@ -278,9 +292,12 @@ def _first_entry_channels(rig: dict[str, Any]) -> dict[int, str]:
 
 async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
                         device: str = "sensor", expected_serial: str | None = None,
-                        blank_ok: bool = False) -> None:
+                        blank_ok: bool = False) -> list[float]:
     """Identity and one static reading of one sensor; ``blank_ok``: a blank fixture EEPROM
-    is not a mismatch (a channel bound by the rig's table, checked at campaign start)."""
+    is not a mismatch (a channel bound by the rig's table, checked at campaign start).
+
+    Returns the die temperature it read (``[]`` when none), for the chamber's PV check."""
+    dies_c: list[float] = []
     sensors = rig.get("sensors") or [{}]
     if expected_serial is None and isinstance(sensors[0], dict):
         expected_serial = sensors[0].get("serial")
@@ -313,10 +330,12 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
         return rec.add(device, "identity", "pass", detail)
 
     if not await rec.guard(device, "identity", fix, identity):
-        return
+        return dies_c
 
     async def acquire() -> bool:
         acq = await accel.acquire(SENSOR_SAMPLES)
+        if math.isfinite(acq.sensor_c):
+            dies_c.append(acq.sensor_c)
         g = math.sqrt(sum(v * v for v in acq.mean_g))
         detail = (f"{acq.n} samples: |g| {g:.4f} g, die {acq.sensor_c:.1f} °C, "
                   f"sd {max(acq.sd_g) * 1e6:.0f} µg")
@@ -324,12 +343,37 @@ async def _check_sensor(rec: _Recorder, accel: Any, rig: dict[str, Any], *,
             return rec.add(device, "acquire", "fail", detail + ", saturated",
                            "the sensor is being shaken or its range is too small")
         if not G_BAND[0] <= g <= G_BAND[1]:
+            cause, fix = _g_cause(g)
             return rec.add(device, "acquire", "fail",
-                           f"{detail}: outside {G_BAND[0]}…{G_BAND[1]} g",
-                           "the sensor must rest static; check its mounting and range setting")
+                           f"{detail}: outside {G_BAND[0]}…{G_BAND[1]} g of local gravity{cause}",
+                           fix)
         return rec.add(device, "acquire", "pass", detail)
 
     await rec.guard(device, "acquire", fix, acquire)
+    return dies_c
+
+
+#: A static sensor reads 1 g; these factors are what a units or range mix-up makes of it.
+G_MISREADINGS = (
+    (9.80665, " — it reads in m/s², not g",
+     "the bridge reports m/s²: set its output to g (or divide by 9.80665 in its config)"),
+    (2.0, " — ×2: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+    (4.0, " — ×4: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+    (0.5, " — ×0.5: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+    (0.25, " — ×0.25: the range setting and the scale the driver assumes disagree",
+     "set the same range (±2/±4/±8 g) on the sensor and in the rig's sensor config"),
+)
+
+
+def _g_cause(g: float) -> tuple[str, str]:
+    """The misreading that explains |g| (within 5 %), else the sensor is not at rest."""
+    for factor, cause, fix in G_MISREADINGS:
+        if abs(g / factor - 1.0) <= 0.05:
+            return cause, fix
+    return "", "the sensor must rest static; check its mounting and range setting"
 
 
 # --- CLI -------------------------------------------------------------------------------
@@ -346,12 +390,34 @@ def add_parser(sub: Any) -> None:
                        help="also nudge the setpoint by 0.5 °C and move the table 5°, then back")
     check.add_argument("--json", action="store_true", help="print the checks as JSON")
     check.set_defaults(handler=run_check_cli)
+    validate = rig_sub.add_parser(
+        "validate", help="check a register map file (chamber or turntable) without a device")
+    validate.add_argument("map", metavar="MAP.toml",
+                          help="a map file, or the name of a shipped map")
+    validate.set_defaults(handler=run_validate_cli)
+    from service.cli_ops import add_rig_admin_parsers
+
+    add_rig_admin_parsers(rig_sub)
+
+
+def run_validate_cli(args: argparse.Namespace) -> int:
+    """``soakcal rig validate MAP.toml``: "OK: <what it describes>" or exit 2 naming the key."""
+    from drivers.registermaps import MapError, describe_map, load_map
+
+    try:
+        regmap = load_map(args.map)
+    except MapError as exc:
+        print(f"soakcal rig validate: {exc}", file=sys.stderr)
+        return 2
+    print(f"OK: {describe_map(regmap)}")
+    return 0
 
 
 def run_check_cli(args: argparse.Namespace) -> int:
     from sqlalchemy import make_url, select
     from sqlalchemy.exc import SQLAlchemyError
 
+    from service.campaigns import rig_busy, seed_sim_rig
     from service.config import resolve_database_url
     from service.db.models import Rig
     from service.db.session import make_session_factory, session_scope, upgrade_database
@@ -362,8 +428,10 @@ def run_check_cli(args: argparse.Namespace) -> int:
         factory = make_session_factory(url)
         try:
             with session_scope(factory) as session:
+                seed_sim_rig(session)  # a fresh install has the sim rig before any `serve`
                 row = session.scalar(select(Rig).where(Rig.name == args.name))
                 known = session.scalars(select(Rig.name).order_by(Rig.name)).all()
+                busy = row is not None and rig_busy(session, row.name)
                 rig = None if row is None else {
                     "name": row.name, "chamber": row.chamber or {},
                     "turntable": row.turntable or {}, "sensors": row.sensors or []}
@@ -377,6 +445,10 @@ def run_check_cli(args: argparse.Namespace) -> int:
     if rig is None:
         print(f"soakcal rig check: no rig named {args.name!r} (known: "
               f"{', '.join(known) or 'none'})", file=sys.stderr)
+        return 2
+    if busy:  # as REST answers 409: the campaign owns the devices (a --move would nudge a soak)
+        print(f"soakcal rig check: rig {args.name!r} runs a campaign now: its devices are in "
+              "use; check it once the campaign has finished", file=sys.stderr)
         return 2
     checks = asyncio.run(check_rig(rig, move=args.move))
     if args.json:

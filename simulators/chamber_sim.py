@@ -8,7 +8,8 @@ no longer than ``max_step_s`` so the ramp, the air lag and the die lag compose.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import numpy as np
 from pymodbus.constants import ExcCodes
@@ -51,6 +52,8 @@ class ChamberPhysics:
     off_tau_s: float = 1800.0
     max_rate_c_per_min: float = 5.0
     die_tau_s: float = 900.0
+    # Manual mode: the controller holds its output; WSP stays put, SP is stored but not followed.
+    manual: bool = False
     pv_noise_c: float = 0.02
     deviation_alarm_c: float = 5.0
     max_step_s: float = 2.0
@@ -92,7 +95,9 @@ class ChamberPhysics:
 
     # --- internals -----------------------------------------------------------
     def _step(self, dt: float) -> None:
-        if self.running:
+        if self.running and self.manual:
+            target, tau = self.air_c, self.air_tau_s  # output held: the air stays where it is
+        elif self.running:
             max_dw = self.ramp_c_per_min / 60.0 * dt if self.ramp_c_per_min > 0 else math.inf
             self.working_setpoint_c = rate_limited(self.working_setpoint_c, self.setpoint_c,
                                                    max_dw)
@@ -109,6 +114,77 @@ class ChamberPhysics:
         self.air_c = new_air
 
 
+@dataclass(frozen=True)
+class ControllerSetup:
+    """How the simulated controller is configured, whatever the map a client reads it with.
+
+    A real controller is set up at its front panel; a lab's map file may or may not
+    agree. The twin serves the map's addresses but encodes each value the way the
+    controller is set up, so a map that does not match the controller reads wrong
+    values exactly as it would on the bench (and the sensor die, which follows the
+    real air, disagrees with them).
+
+    * ``decimals``: the decimal-point setting of integer temperature registers
+      (counts = value · 10^decimals); ``None``: as the map's ``scale`` says.
+    * ``units``: ``"F"`` serves PV, SP, WSP in °F and the ramp in °F per time unit.
+    * ``ramp_per``: ``"hour"``: the ramp register is degrees per hour.
+    * ``swap_words``: 32-bit values in the opposite word order to the map's.
+    * ``silent``: role names (``alarms``, ``working_setpoint_c``...) whose register
+      answers Modbus exception 2 (illegal address), as on a model that lacks it.
+    * ``mode``: ``"manual"`` holds the output (WSP and air stay put, the map's
+      ``manual_mode`` status bit is set); ``"standby"`` does not control at all.
+    * ``holds``: register name → the value this controller holds there, instead of
+      what the map's ``[[checks]]`` expect (e.g. ``{"loop_mode": 54}``: an F4T loop in
+      Manual; ``{"ramp_units": 1}``: a 3216 set to per-hour ramps).
+    """
+
+    decimals: int | None = None
+    units: Literal["C", "F"] = "C"
+    ramp_per: Literal["min", "hour"] = "min"
+    swap_words: bool = False
+    silent: frozenset[str] = frozenset()
+    mode: Literal["auto", "manual", "standby"] = "auto"
+    holds: tuple[tuple[str, float], ...] = ()
+
+    def served(self, f: Field, role: str) -> Field:
+        """The field as this controller encodes it (the map's address, its own format)."""
+        out = f
+        if self.decimals is not None and f.encoding != "float32":
+            out = replace(out, scale=float(10 ** self.decimals))
+        if self.swap_words and f.n_registers == 2:
+            out = replace(out, word_order="low_first" if f.word_order == "high_first"
+                          else "high_first")
+        if self.units == "F" and role in TEMPERATURE_ROLES:
+            # Back to the register's own units: the map's offset is the map's business.
+            out = replace(out, offset=0.0)
+        return out
+
+    def to_controller(self, value_c: float, role: str) -> float:
+        """A physics value (°C, °C/min) in the controller's display units."""
+        if role == "ramp_c_per_min":
+            value_c *= 60.0 if self.ramp_per == "hour" else 1.0
+            return value_c * 1.8 if self.units == "F" else value_c
+        if role in TEMPERATURE_ROLES and self.units == "F":
+            return value_c * 1.8 + 32.0
+        return value_c
+
+    def from_controller(self, value: float, role: str) -> float:
+        if role == "ramp_c_per_min":
+            value /= 60.0 if self.ramp_per == "hour" else 1.0
+            return value / 1.8 if self.units == "F" else value
+        if role in TEMPERATURE_ROLES and self.units == "F":
+            return (value - 32.0) / 1.8
+        return value
+
+
+def _key(f: Field) -> tuple[str, int]:
+    return f.table, f.address
+
+
+#: Roles whose value is a temperature (°C in physics, the controller's units on the wire).
+TEMPERATURE_ROLES = ("process_c", "setpoint_c", "working_setpoint_c")
+
+
 class ChamberRegisterImage:
     """Renders :class:`ChamberPhysics` into any :class:`ChamberMap` and applies writes.
 
@@ -120,40 +196,52 @@ class ChamberRegisterImage:
     """
 
     #: Alarm and status bit names the twin can raise, by what the physics knows.
-    SIMULATED_BITS = ("deviation_high", "deviation_low", "ramp_running")
+    SIMULATED_BITS = ("deviation_high", "deviation_low", "ramp_running", "manual_mode")
 
     def __init__(self, physics: ChamberPhysics, regmap: ChamberMap,
-                 identity_value: float | None = None) -> None:
+                 identity_value: float | None = None,
+                 setup: ControllerSetup | None = None) -> None:
         self.physics = physics
         self.regmap = regmap
+        self.setup = setup or ControllerSetup()
+        physics.manual = self.setup.mode == "manual"
         m = regmap
+        # Keys are (Modbus table, address): the four tables are separate address spaces.
         self._roles = {
-            m.setpoint_c.address: "setpoint_c",
-            m.ramp_c_per_min.address: "ramp_c_per_min",
+            _key(m.setpoint_c): "setpoint_c",
+            _key(m.ramp_c_per_min): "ramp_c_per_min",
         }
         if m.run is not None:
-            self._roles[m.run.address] = "running"
+            self._roles[_key(m.run)] = "running"
         else:
-            physics.running = True
+            physics.running = self.setup.mode != "standby"
+        # Addresses that answer "illegal address" (ControllerSetup.silent).
+        self._silent = {(f.table, a) for name in self.setup.silent
+                        for f in [m.registers.get(name) or getattr(m, name, None)]
+                        if isinstance(f, Field) for a in range(f.address,
+                                                                f.address + f.n_registers)}
         self._identity = (identity_value if identity_value is not None
                           else m.identity.expect if m.identity is not None else None)
         role_fields = {id(f) for f in (m.process_c, m.setpoint_c, m.working_setpoint_c,
                                        m.ramp_c_per_min, m.run, m.alarms) if f is not None}
-        self._stored: dict[int, tuple[Field, list[int]]] = {}
+        self._stored: dict[tuple[str, int], tuple[Field, list[int]]] = {}
         # A well-set-up controller: registers the map checks read what the map expects.
         checked = {id(c.field): c.expect for c in m.checks}
+        checked.update({id(a.field): float(min(a.ok)) for a in m.alarm_states})
+        checked.update({id(m.registers[name]): value for name, value in self.setup.holds})
         for f in m.registers.values():
             if id(f) not in role_fields:
                 value = self._identity if m.identity is not None and f is m.identity.field \
                     else checked.get(id(f), 0.0)
-                self._stored[f.address] = (f, f.encode(value or 0.0))
+                self._stored[_key(f)] = (f, f.encode(value or 0.0))
 
     def _alarm_word(self) -> int:
         m, p = self.regmap, self.physics
         names = {n: b for b, n in {**m.alarm_bits, **m.info_bits}.items()}
         bits = p.alarm_bits()
         raised = {"deviation_high": bool(bits & 1), "deviation_low": bool(bits & 2),
-                  "ramp_running": p.running and abs(p.working_setpoint_c - p.setpoint_c) > 1e-9}
+                  "ramp_running": p.running and abs(p.working_setpoint_c - p.setpoint_c) > 1e-9,
+                  "manual_mode": p.manual}
         word = 0
         for name, on in raised.items():
             # A controller whose map names user-configured alarms (Eurotherm 3216: alarm_1..4)
@@ -164,45 +252,64 @@ class ChamberRegisterImage:
         return word
 
     def read(self, address: int, count: int) -> list[int] | ExcCodes:
-        p, m = self.physics, self.regmap
+        return self.read_table("holding", address, count)
+
+    def write(self, address: int, values: list[int]) -> None | ExcCodes:
+        return self.write_table("holding", address, values)
+
+    def read_table(self, table: str, address: int, count: int) -> list[int] | ExcCodes:
+        """Words (bits as 0/1 for coils and discrete inputs) of one Modbus table."""
+        p, m, cfg = self.physics, self.regmap, self.setup
         p.advance_to()
+        if self._silent & {(table, a) for a in range(address, address + count)}:
+            return ExcCodes.ILLEGAL_ADDRESS
         image: dict[int, int] = {}
-        for a, (_f, words) in self._stored.items():
+        for (t, a), (_f, words) in self._stored.items():
             for i, w in enumerate(words):
-                image[a + i] = w
+                if t == table:
+                    image[a + i] = w
         rendered: list[tuple[Field, float]] = [
-            (m.process_c, p.process_value_c()),
-            (m.setpoint_c, p.setpoint_c),
-            (m.working_setpoint_c, p.working_setpoint_c),
-            (m.ramp_c_per_min, p.ramp_c_per_min),
+            (cfg.served(f, role), cfg.to_controller(value, role)) for f, role, value in (
+                (m.process_c, "process_c", p.process_value_c()),
+                (m.setpoint_c, "setpoint_c", p.setpoint_c),
+                (m.working_setpoint_c, "working_setpoint_c", p.working_setpoint_c),
+                (m.ramp_c_per_min, "ramp_c_per_min", p.ramp_c_per_min))
         ]
         if m.run is not None:
             rendered.append((m.run, float(m.run_on if p.running else m.run_off)))
         if m.alarms is not None:
             rendered.append((m.alarms, float(self._alarm_word())))
         for f, value in rendered:
-            for i, w in enumerate(f.encode(value)):
-                image[f.address + i] = w
+            if f.table == table:
+                for i, w in enumerate(f.encode(value)):
+                    image[f.address + i] = w
+        if not image:
+            return ExcCodes.ILLEGAL_ADDRESS
         return read_block(image, address, count)
 
-    def write(self, address: int, values: list[int]) -> None | ExcCodes:
-        p, m = self.physics, self.regmap
+    def write_table(self, table: str, address: int, values: list[int]) -> None | ExcCodes:
+        p, m, cfg = self.physics, self.regmap, self.setup
         p.advance_to()
-        name = self._roles.get(address)
+        if self._silent & {(table, a) for a in range(address, address + len(values))}:
+            return ExcCodes.ILLEGAL_ADDRESS
+        name = self._roles.get((table, address))
         if name is None:
-            stored = self._stored.get(address)
+            stored = self._stored.get((table, address))
             if stored is None or "w" not in stored[0].access:
                 return ExcCodes.ILLEGAL_ADDRESS
             if len(values) != len(stored[1]):
                 return ExcCodes.ILLEGAL_VALUE
-            self._stored[address] = (stored[0], list(values))
+            self._stored[table, address] = (stored[0], list(values))
             return None
         f = {"setpoint_c": m.setpoint_c, "ramp_c_per_min": m.ramp_c_per_min,
              "running": m.run}[name]
         assert f is not None
         if len(values) != f.n_registers:
             return ExcCodes.ILLEGAL_VALUE
-        value = f.decode(values)
+        if name == "running":
+            value = f.decode(values)
+        else:
+            value = cfg.from_controller(cfg.served(f, name).decode(values), name)
         if name == "setpoint_c":
             lo, hi = m.range_c
             if not lo <= value <= hi:

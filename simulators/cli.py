@@ -12,6 +12,7 @@ import sys
 
 from drivers.clock import RealClock, ScaledClock
 from drivers.registermaps import MapError, load_chamber_map, load_turntable_map, shipped_maps
+from simulators.chamber_sim import ControllerSetup
 from simulators.faults import SimFaults
 from simulators.rig import RigFaults, SimRig, start_sim_rig
 
@@ -46,6 +47,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stuck-pv", action="store_true", help="chamber PV frozen")
     p.add_argument("--never-in-position", action="store_true",
                    help="table never reports in-position")
+    # The chamber controller set up unlike its map, as controllers are found in labs:
+    # `soakcal rig check NAME --move` against it must fail naming the cause.
+    ctl = p.add_argument_group("controller setup (docs/rig-check.md, physical plausibility)")
+    ctl.add_argument("--decimals", type=int, default=None, metavar="N",
+                     help="decimal places of integer temperature registers (default: the map's)")
+    ctl.add_argument("--units", choices=("C", "F"), default="C",
+                     help="temperature units the controller serves (default C)")
+    ctl.add_argument("--ramp-per", choices=("min", "hour"), default="min",
+                     help="time unit of the ramp register (default min)")
+    ctl.add_argument("--swap-words", action="store_true",
+                     help="32-bit values in the opposite word order to the map's")
+    ctl.add_argument("--silent", action="append", default=[], metavar="REGISTER",
+                     help="a register (map name) that answers 'illegal address'; repeatable")
+    ctl.add_argument("--mode", choices=("auto", "manual", "standby"), default="auto",
+                     help="the controller's mode (default auto)")
+    ctl.add_argument("--hold", action="append", default=[], metavar="REGISTER=VALUE",
+                     help="a value the controller holds in a register of the map (instead of "
+                          "what its [[checks]] expect), e.g. loop_mode=54; repeatable")
     p.add_argument("--duration-s", type=float, default=None,
                    help="stop after this many wall seconds (default: run until Ctrl-C)")
     return p
@@ -59,6 +78,28 @@ def run_sim(argv: list[str] | None = None) -> int:
         load_turntable_map(args.table_map)
     except MapError as exc:
         print(f"soakcal sim: {exc}", file=sys.stderr)
+        return 2
+    chamber_regs = load_chamber_map(args.chamber_map).registers
+    unknown = [r for r in args.silent if r not in chamber_regs]
+    if unknown:
+        print(f"soakcal sim: --silent {unknown[0]}: map {args.chamber_map} names no such "
+              f"register (it has {', '.join(chamber_regs)})", file=sys.stderr)
+        return 2
+    holds = []
+    for item in args.hold:
+        name, _, value = item.partition("=")
+        try:
+            holds.append((name, float(value)))
+        except ValueError:
+            print(f"soakcal sim: --hold {item}: expected REGISTER=NUMBER", file=sys.stderr)
+            return 2
+        if name not in chamber_regs:
+            print(f"soakcal sim: --hold {item}: map {args.chamber_map} names no register "
+                  f"{name!r}", file=sys.stderr)
+            return 2
+    args.holds = tuple(holds)
+    if args.decimals is not None and not 0 <= args.decimals <= 4:
+        print(f"soakcal sim: --decimals {args.decimals}: expected 0…4", file=sys.stderr)
         return 2
     args.truth = None
     if args.twin:
@@ -110,10 +151,15 @@ async def _serve(args: argparse.Namespace) -> None:
     faults.chamber.stuck_process_value = args.stuck_pv
     faults.table.never_in_position = args.never_in_position
     clock = RealClock() if args.speed == 1.0 else ScaledClock(args.speed)
+    controller = ControllerSetup(decimals=args.decimals, units=args.units,
+                                 ramp_per=args.ramp_per, swap_words=args.swap_words,
+                                 silent=frozenset(args.silent), mode=args.mode,
+                                 holds=getattr(args, "holds", ()))
     async with start_sim_rig(clock, seed=args.seed, truth=args.truth,
                              chamber_map=args.chamber_map,
                              faults=faults, ports=args.port, host=args.host,
-                             die_tau_s=args.die_tau_s, table_map=args.table_map) as rig:
+                             die_tau_s=args.die_tau_s, table_map=args.table_map,
+                             controller=controller) as rig:
         print(describe(rig), flush=True)
         stop = asyncio.Event()
         if args.duration_s is not None:

@@ -29,6 +29,10 @@ class RegisterImage(Protocol):
     def write(self, address: int, values: list[int]) -> None | ExcCodes: ...
 
 
+#: pymodbus' datastore letters → the map's table names (drivers.registermaps.TABLES).
+_TABLES = {"h": "holding", "i": "input", "c": "coil", "d": "discrete"}
+
+
 def read_block(image: dict[int, int], address: int, count: int) -> list[int] | ExcCodes:
     """Words ``address…address+count-1`` of a sparse image.
 
@@ -58,20 +62,33 @@ class _PhysicsContext(ModbusBaseDeviceContext):
     def getValues(  # noqa: N802 - pymodbus name
         self, func_code: int, address: int, count: int = 1
     ) -> list[int] | list[bool] | ExcCodes:
-        if self.decode(func_code) != "h":
+        table = _TABLES.get(self.decode(func_code))
+        # An image with tables (a chamber map may use input registers, coils, discrete
+        # inputs) serves each; one without serves holding registers only.
+        read_table = getattr(self.image, "read_table", None)
+        if table is None or (read_table is None and table != "holding"):
             return ExcCodes.ILLEGAL_FUNCTION
         if self._busy():
             return ExcCodes.DEVICE_BUSY
-        return self.image.read(address, count)
+        if read_table is None:
+            return self.image.read(address, count)
+        got = read_table(table, address, count)
+        if isinstance(got, list) and table in ("coil", "discrete"):
+            return [bool(b) for b in got]
+        return got
 
     def setValues(  # noqa: N802 - pymodbus name
         self, func_code: int, address: int, values: list[int] | list[bool]
     ) -> None | ExcCodes:
-        if self.decode(func_code) != "h":
+        table = _TABLES.get(self.decode(func_code))
+        write_table = getattr(self.image, "write_table", None)
+        if table not in ("holding", "coil") or (write_table is None and table != "holding"):
             return ExcCodes.ILLEGAL_FUNCTION
         if self._busy():
             return ExcCodes.DEVICE_BUSY
-        return self.image.write(address, [int(v) for v in values])
+        if write_table is None:
+            return self.image.write(address, [int(v) for v in values])
+        return write_table(table, address, [int(v) for v in values])
 
 
 @dataclass

@@ -42,7 +42,7 @@ from simulators.bridge_sim import (
     MultiplexedBridgeDevice,
     start_bridge_server,
 )
-from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
+from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage, ControllerSetup
 from simulators.faults import SimFaults
 from simulators.modbus_server import IN_MEMORY_HOST, ModbusSimServer, start_modbus_server
 from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage
@@ -147,6 +147,7 @@ async def start_sim_rig(
     serials: Sequence[str] = (),
     truths: Mapping[str, Any] | None = None,
     multiplexed: bool = False,
+    controller: ControllerSetup | None = None,
 ) -> AsyncIterator[SimRig]:
     """Start chamber, table and bridge servers; ``ports=0`` means ephemeral ports.
 
@@ -162,12 +163,14 @@ async def start_sim_rig(
     triple. ``truth`` defaults to ``SensorTruth.adxl355_typical(seed)``.
     ``modbus_in_memory=True`` serves chamber and table over pymodbus' in-process
     null modem instead of TCP (about 2× faster; the sensor bridge stays on TCP).
+    ``controller``: how the chamber controller is set up (decimal point, units, ramp
+    units, word order, silent registers, mode); default: exactly as the map says.
     """
     rig = await _start(clock, seed=seed, truth=truth, chamber_map=chamber_map,
                        faults=faults, ports=ports, host=host, n_axes=n_axes,
                        die_tau_s=die_tau_s, start_c=start_c, modbus_in_memory=modbus_in_memory,
                        table_map=table_map, serials=serials, truths=truths,
-                       multiplexed=multiplexed)
+                       multiplexed=multiplexed, controller=controller)
     try:
         yield rig
     finally:
@@ -209,7 +212,8 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                  modbus_in_memory: bool = False, table_map: str = "soakcal-table",
                  serials: Sequence[str] = (),
                  truths: Mapping[str, Any] | None = None,
-                 multiplexed: bool = False) -> SimRig:
+                 multiplexed: bool = False,
+                 controller: ControllerSetup | None = None) -> SimRig:
     # Any map file: the twin renders whatever layout the map describes (MapError if unusable).
     chamber_regmap = load_chamber_map(chamber_map)
     table_regmap = load_turntable_map(table_map)
@@ -250,7 +254,8 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
         modbus_host = IN_MEMORY_HOST
         port_c = next(_in_memory_ports)
         port_t = port_c + 1
-    cs = await start_modbus_server(ChamberRegisterImage(chamber, chamber_regmap),
+    cs = await start_modbus_server(ChamberRegisterImage(chamber, chamber_regmap,
+                                                        setup=controller),
                                    faults.chamber, rng_c, host=modbus_host, port=port_c)
     ts = await start_modbus_server(TurntableRegisterImage(table, table_regmap),
                                    faults.table, rng_t, host=modbus_host, port=port_t)

@@ -157,15 +157,23 @@ def rig_config_errors(
     from drivers.registermaps import MapError, load_chamber_map, load_turntable_map
 
     errors: list[tuple[str, str]] = []
-    driver = chamber.get("driver", "sim")
-    if driver not in DRIVERS:
+    errors += _unknown_keys("chamber", chamber, CHAMBER_KEYS)
+    errors += _unknown_keys("turntable", turntable, TURNTABLE_KEYS)
+    driver = chamber.get("driver")
+    if driver is None:
+        errors.append(("chamber.driver", "missing: \"modbus\" for a controller reached by "
+                                         "url, \"sim\" for the in-process twin"))
+    elif driver not in DRIVERS:
         errors.append(("chamber.driver", f"expected one of {', '.join(DRIVERS)}, got {driver!r}"))
     rng = chamber.get("range_c")
-    if rng is not None and not (
-        isinstance(rng, list | tuple) and len(rng) == 2
-        and all(isinstance(v, int | float) for v in rng) and rng[0] < rng[1]
-    ):
+    rng_ok = isinstance(rng, list | tuple) and len(rng) == 2 and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in rng) and rng[0] < rng[1]
+    if rng is not None and not rng_ok:
         errors.append(("chamber.range_c", "expected [lo, hi] in °C with lo < hi"))
+    rate = chamber.get("max_rate_c_per_min")
+    if rate is not None and (not isinstance(rate, int | float) or isinstance(rate, bool)
+                             or not rate > 0):
+        errors.append(("chamber.max_rate_c_per_min", f"expected a rate > 0 °C/min, got {rate!r}"))
     if driver != "modbus":
         return errors
     manual = is_manual_table(turntable)
@@ -177,6 +185,11 @@ def rig_config_errors(
         dev_id = cfg.get("device_id", 1)
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
+    if (not manual and chamber.get("url") == turntable.get("url")
+            and chamber.get("device_id", 1) == turntable.get("device_id", 1)):
+        errors.append(("turntable.device_id",
+                       f"the chamber answers unit {chamber.get('device_id', 1)} at the same url: "
+                       "two devices on one bus need different unit ids (device_id)"))
     maps = [("chamber.map", chamber, load_chamber_map, "eurotherm3216")]
     if not manual:
         maps.append(("turntable.map", turntable, load_turntable_map, "soakcal-table"))
@@ -186,9 +199,11 @@ def rig_config_errors(
             errors.append((path, "expected a shipped map name or a map file path"))
             continue
         try:
-            load(ref)
+            regmap = load(ref)
         except MapError as exc:
             errors.append((path, str(exc)))
+            continue
+        errors += _limits_against_map(chamber, turntable, regmap)
     axes = turntable.get("axes", 3)
     if axes not in (2, 3):
         errors.append(("turntable.axes", "expected 2 or 3"))
@@ -230,6 +245,53 @@ def rig_config_errors(
                                                 f"sensors[{declared[name]}]"))
             declared.setdefault(name, i)
     return errors
+
+
+#: Keys a rig's chamber / turntable block may use (docs: service/engine/rigs.py's docstring,
+#: docs/manual-fixtures.md); anything else is a typo that would silently change the rig.
+CHAMBER_KEYS = ("driver", "url", "map", "device_id", "range_c", "time_scale",
+                "max_rate_c_per_min")
+TURNTABLE_KEYS = ("driver", "url", "map", "device_id", "axes", "check_samples", "noise_g")
+
+
+def _unknown_keys(block: str, cfg: Any, allowed: tuple[str, ...]) -> list[tuple[str, str]]:
+    import difflib
+
+    if not isinstance(cfg, dict):
+        return [(block, "expected an object")]
+    out = []
+    for key in (k for k in cfg if k not in allowed):
+        near = difflib.get_close_matches(str(key), allowed, n=1)
+        hint = f"did you mean {near[0]!r}? " if near else ""
+        out.append((f"{block}.{key}", f"unknown key ({hint}expected one of "
+                                      f"{', '.join(allowed)})"))
+    return out
+
+
+def _limits_against_map(chamber: dict[str, Any], turntable: dict[str, Any],
+                        regmap: Any) -> list[tuple[str, str]]:
+    """The rig's limits must lie inside what its map (the controller) allows."""
+    from drivers.registermaps import ChamberMap
+
+    out: list[tuple[str, str]] = []
+    if isinstance(regmap, ChamberMap):
+        rng = chamber.get("range_c")
+        lo, hi = regmap.range_c
+        if (isinstance(rng, list | tuple) and len(rng) == 2
+                and all(isinstance(v, int | float) for v in rng)
+                and (rng[0] < lo or rng[1] > hi)):
+            out.append(("chamber.range_c", f"[{rng[0]:g}, {rng[1]:g}] °C exceeds the map "
+                                           f"{regmap.name}'s limits.range_c [{lo:g}, {hi:g}]"))
+        rate, limit = chamber.get("max_rate_c_per_min"), regmap.max_ramp_c_per_min
+        if isinstance(rate, int | float) and limit is not None and rate > limit:
+            out.append(("chamber.max_rate_c_per_min", f"{rate:g} °C/min exceeds the map "
+                                                      f"{regmap.name}'s {limit:g} °C/min"))
+        return out
+    axes = turntable.get("axes", regmap.n_axes)
+    if isinstance(axes, int) and axes > regmap.n_axes:
+        out.append(("turntable.axes", f"{axes} axes, but the map {regmap.name} describes "
+                                      f"{regmap.n_axes}"))
+    return out
 
 
 def entry_serials(entry: dict[str, Any]) -> list[str]:
@@ -315,18 +377,21 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
     if problems:
         path, why = problems[0]
         raise RigConfigError(f"rig {rig.get('name')!r}: {path}: {why}")
+    chamber_map = load_chamber_map(chamber_cfg.get("map", "eurotherm3216"))
+    # The rig's device_id wins; else the map's [defaults] unit_id (1 unless it says).
     chamber = ModbusChamber(
         ModbusLink(chamber_cfg["url"], clock, device="chamber",
-                   device_id=int(chamber_cfg.get("device_id", 1))),
-        load_chamber_map(chamber_cfg.get("map", "eurotherm3216")),
+                   device_id=int(chamber_cfg.get("device_id", chamber_map.unit_id))),
+        chamber_map,
     )
     n_axes = int(table_cfg.get("axes", 3))
     table: Any = None  # a hand-placed fixture: open_rig puts the operator's table in
     if not is_manual_table(table_cfg):
+        table_map = load_turntable_map(table_cfg.get("map", "soakcal-table"))
         table = ModbusTurntable(
             ModbusLink(table_cfg["url"], clock, device="turntable",
-                       device_id=int(table_cfg.get("device_id", 1))),
-            load_turntable_map(table_cfg.get("map", "soakcal-table")), n_axes=n_axes,
+                       device_id=int(table_cfg.get("device_id", table_map.unit_id))),
+            table_map, n_axes=n_axes,
         )
     accels: dict[str, Any] = {}
     bindings: dict[str, SerialBinding] = {}

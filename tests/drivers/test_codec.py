@@ -10,7 +10,7 @@ import pytest
 from drivers import adxl355, codec
 from drivers.bridge_protocol import decode_frame, encode_frame
 from drivers.faults import ProtocolError
-from drivers.registermaps import EUROTHERM_3216, WATLOW_F4T, Field, bits_to_names
+from drivers.registermaps import TWIN_CHAMBER, WATLOW_F4T, Field, bits_to_names
 
 
 def test_int16_edges() -> None:
@@ -26,7 +26,7 @@ def test_int16_edges() -> None:
 
 
 def test_scaled_negative_temperatures_one_decimal() -> None:
-    f = EUROTHERM_3216.process_c
+    f = TWIN_CHAMBER.process_c  # int16, 0.1 °C per count
     assert f.encode(-40.0) == [0xFE70]  # −400 counts
     assert f.decode([0xFE70]) == -40.0
     assert f.decode(f.encode(-0.1)) == pytest.approx(-0.1)
@@ -38,7 +38,7 @@ def test_scaled_negative_temperatures_one_decimal() -> None:
 
 def test_unsigned_scaled_rejects_negative() -> None:
     with pytest.raises(ValueError):
-        EUROTHERM_3216.ramp_c_per_min.encode(-1.0)
+        TWIN_CHAMBER.ramp_c_per_min.encode(-1.0)
 
 
 @pytest.mark.parametrize("value", [-40.0, 0.0, 1.5, -273.15, 1e6, float("inf")])

@@ -13,7 +13,7 @@ from drivers.clock import VirtualClock
 from drivers.protocols import Acquisition
 from drivers.registermaps import CHAMBER_MAPS
 from service.rig_check import Check, check_rig, format_report, passed
-from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
+from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage, ControllerSetup
 from simulators.faults import SimFaults
 from simulators.modbus_server import start_modbus_server
 from simulators.rig import start_sim_rig
@@ -243,3 +243,332 @@ async def test_every_channel_of_a_multiplexing_bridge_is_checked() -> None:
     assert not any(c.device == "sensor @1" and c.check == "acquire" for c in checks)
     dead = _by(checks, "sensor @2", "identity")
     assert dead.status == "fail" and "0x00" in dead.detail
+
+
+# --- physical plausibility: a twin set up unlike the map -------------------------------
+#: The 3216 read through its 16-bit region, whose decimal point the instrument's display
+#: setting implies: the layout a decimal-point misconfiguration mis-scales.
+INT16_3216 = str(Path(__file__).with_name("data") / "eurotherm-3216-int16.toml")
+# Each case: the controller's own setup, the map the lab wrote, and what rig check must
+# say (the check that fails, words of its detail naming the cause, words of its fix).
+MISCONFIGURED = {
+    "whole degrees read as tenths (×10)": (
+        ControllerSetup(decimals=0), INT16_3216, "pv_vs_die",
+        ["PV reads 2.3 °C", "die reads 23.0 °C", "×10"],
+        ["`scale = 10`→`1`", "`process_c`", "eurotherm-3216-int16.toml"]),
+    "hundredths read as tenths (×0.1)": (
+        ControllerSetup(decimals=2), INT16_3216, "pv_vs_die",
+        ["PV reads 2", " °C while the die reads 23.0 °C", "×0.1"],
+        ["`scale = 10`→`100`", "eurotherm-3216-int16.toml"]),
+    "display in °F": (
+        ControllerSetup(units="F"), "eurotherm-3216", "pv_vs_die",
+        ["PV reads 73.4 °C", "°F"], ["units to °C", "`scale = 1.8`", "`offset = -17.7778`"]),
+    "ramp units per hour": (
+        ControllerSetup(ramp_per="hour"), "eurotherm-3216", "ramp",
+        ["0.02 °C/min, commanded 1 °C/min: 60× slower", "per hour"],
+        ["per minute", "`scale = 1`→`60`", "`ramp_c_per_min`", "eurotherm-3216.toml"]),
+    "float words swapped": (
+        ControllerSetup(swap_words=True), "watlow-f4t", "pv_vs_die",
+        ["words", "swapped"], ["`word_order = \"high_first\"`", "watlow-f4t.toml"]),
+    "alarm register missing on this model": (
+        ControllerSetup(silent=frozenset({"alarms"})), "eurotherm-3216", "status",
+        ["`alarms` (address 75) does not answer"], ["correct `address`", "eurotherm-3216.toml"]),
+    "controller in manual": (
+        ControllerSetup(mode="manual"), "eurotherm-3216", "mode",
+        ["manual mode"], ["automatic"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MISCONFIGURED))
+async def test_a_map_unlike_the_controller_fails_naming_cause_and_key(case: str) -> None:
+    setup, chamber_map, failing, detail_words, fix_words = MISCONFIGURED[case]
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=chamber_map, controller=setup) as sim:
+        checks = await check_rig(_config(sim, chamber_map), move=True, clock=clock)
+        # Whatever failed, nothing was left changed on the chamber.
+        assert sim.chamber.setpoint_c == pytest.approx(23.0)
+    assert not passed(checks)
+    bad = _by(checks, "chamber", failing)
+    assert bad.status == "fail", format_report(case, checks)
+    for words in detail_words:
+        assert words in bad.detail, bad.detail
+    for words in fix_words:
+        assert words in bad.fix, bad.fix
+
+
+async def test_a_mis_scaled_chamber_is_not_nudged(monkeypatch: pytest.MonkeyPatch) -> None:
+    """×10: a nudge of 0.5 °C through the map would write 5 °C; rig check writes nothing."""
+    writes: list[int] = []
+    image_write = ChamberRegisterImage.write
+
+    def spy(self: ChamberRegisterImage, address: int, values: list[int]) -> Any:
+        writes.append(address)
+        return image_write(self, address, values)
+
+    monkeypatch.setattr(ChamberRegisterImage, "write", spy)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=INT16_3216,
+                             controller=ControllerSetup(decimals=0)) as sim:
+        checks = await check_rig(_config(sim, INT16_3216), move=True, clock=clock)
+    assert writes == []
+    assert "not nudged" in _by(checks, "chamber", "setpoint_nudge").detail
+
+
+async def test_a_pv_register_pointing_elsewhere_names_the_address(tmp_path: Path) -> None:
+    text = Path(INT16_3216).read_text()
+    wrong = tmp_path / "lab-3216.toml"
+    # A slip of the pen: PV at 4 (nothing there on this controller) instead of 1.
+    wrong.write_text(text.replace("[registers.process_c]\naddress = 1\n",
+                                  "[registers.process_c]\naddress = 4\n"))
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=INT16_3216) as sim:
+        checks = await check_rig(_config(sim, str(wrong)), move=True, clock=clock)
+    bad = _by(checks, "chamber", "pv_vs_die")
+    assert bad.status == "fail" and "PV reads 0.0 °C" in bad.detail
+    assert "reads all bits 0, as an address with nothing behind it does" in bad.detail
+    assert "`address` of register `process_c` in lab-3216.toml" in bad.fix
+
+
+async def test_a_pv_that_no_misreading_explains_is_not_given_a_cause() -> None:
+    """The sensor is in another chamber (its die 40 °C warmer): no cause is guessed."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216") as sim:
+        sim.chamber.die_c = 63.0
+        sim.chamber.die_tau_s = 1e9  # the die stays where it is
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    bad = _by(checks, "chamber", "pv_vs_die")
+    assert bad.status == "fail"
+    assert "no scale, unit or word-order error explains it" in bad.detail
+    assert "the sensor is inside this chamber" in bad.fix
+
+
+async def test_the_shipped_3216_map_reads_floats_whatever_the_decimal_point() -> None:
+    """The float region carries full resolution: a 3216 set to whole degrees reads right."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216",
+                             controller=ControllerSetup(decimals=0)) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    assert passed(checks), format_report("3216 whole degrees", checks)
+    assert _by(checks, "chamber", "register:ramp_units").status == "pass"
+
+
+async def test_a_well_set_up_controller_passes_the_ramp_and_die_checks() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216") as sim:
+        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
+    ramp = _by(checks, "chamber", "ramp")
+    assert ramp.status == "pass" and "commanded 1 °C/min" in ramp.detail
+    assert _by(checks, "chamber", "pv_vs_die").status == "pass"
+
+
+async def test_a_stopped_chamber_is_not_started_to_watch_its_ramp() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="soakcal-twin-chamber") as sim:
+        checks = await check_rig(_config(sim, "soakcal-twin-chamber"), move=True, clock=clock)
+        assert not sim.chamber.running
+    assert _by(checks, "chamber", "ramp").status == "skip"
+
+
+async def test_an_identity_mismatch_prints_the_register_as_an_integer() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4) as sim:
+        rng = np.random.default_rng(1)
+        image = ChamberRegisterImage(ChamberPhysics(clock, rng), CHAMBER_MAPS["watlow-f4t"],
+                                     identity_value=8126464)
+        other = await start_modbus_server(image, SimFaults(), rng)
+        try:
+            checks = await check_rig(_config(sim, "watlow-f4t", other.url), clock=clock)
+        finally:
+            await other.stop()
+    bad = _by(checks, "chamber", "identity")
+    assert bad.detail == "register hardware_id reads 8126464, map watlow-f4t expects 124"
+
+
+# Map format v2: input registers, a coil, a discrete input and single-register writes,
+# with the same addresses in different tables (separate address spaces in Modbus).
+TABLES_MAP = """
+schema = "soakcal-register-map/1"
+kind = "chamber"
+name = "tables-chamber"
+[run]
+register = "run"
+[[checks]]
+register = "door_closed"
+expect = 1
+what = "the chamber door is closed"
+[registers.process_c]
+table = "input"
+address = 0
+type = "int16"
+scale = 10
+[registers.working_setpoint_c]
+table = "input"
+address = 1
+type = "int16"
+scale = 10
+[registers.setpoint_c]
+address = 0
+type = "int16"
+scale = 10
+access = "rw"
+write = "single"
+[registers.ramp_c_per_min]
+address = 1
+type = "uint16"
+scale = 10
+access = "rw"
+write = "single"
+[registers.run]
+table = "coil"
+address = 0
+type = "bit"
+access = "rw"
+[registers.door_closed]
+table = "discrete"
+address = 0
+type = "bit"
+"""
+
+
+async def test_a_map_with_input_registers_coils_and_single_writes(tmp_path: Path) -> None:
+    path = tmp_path / "tables.toml"
+    path.write_text(TABLES_MAP)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path)) as sim:
+        sim.chamber.running = True  # as if started: the ramp is watched while it runs
+        checks = await check_rig(_config(sim, str(path)), move=True, clock=clock)
+    assert passed(checks), format_report("tables", checks)
+    assert _by(checks, "chamber", "register:door_closed").detail == "the chamber door is closed"
+    assert _by(checks, "chamber", "ramp").status == "pass"
+    assert "running" in _by(checks, "chamber", "status").detail  # read from the coil
+
+
+async def test_the_maps_unit_id_applies_unless_the_rig_gives_device_id(tmp_path: Path) -> None:
+    from service.engine.rigs import open_rig
+
+    path = tmp_path / "unit17.toml"
+    path.write_text(Path(INT16_3216).read_text().replace(
+        'word_order = "high_first"', 'word_order = "high_first"\nunit_id = 17'))
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path)) as sim:
+        cfg = _config(sim, str(path))
+        async with open_rig(cfg, clock) as devices:
+            assert devices.chamber.link.device_id == 17
+        cfg["chamber"]["device_id"] = 3
+        async with open_rig(cfg, clock) as devices:
+            assert devices.chamber.link.device_id == 3
+
+
+def test_soakcal_sim_refuses_a_silent_register_the_map_lacks(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from simulators.cli import run_sim
+
+    assert run_sim(["--silent", "alarmz", "--duration-s", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("soakcal sim: --silent alarmz: map eurotherm3216 names no such register")
+    assert run_sim(["--hold", "ramp_units=hour", "--duration-s", "0"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "soakcal sim: --hold ramp_units=hour: expected REGISTER=NUMBER")
+    assert run_sim(["--hold", "loop_mode=54", "--duration-s", "0"]) == 2
+    assert "names no register 'loop_mode'" in capsys.readouterr().err
+
+
+async def test_soakcal_sim_serves_the_controller_set_up_as_asked(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """--decimals 0 --units F: read with the tenths-of-°C map, 23 °C shows as 7.3."""
+    import asyncio
+
+    import simulators.cli as sim_cli
+    from drivers.clock import RealClock
+    from drivers.modbus_link import ModbusLink
+    from drivers.registermaps import load_chamber_map
+
+    started: asyncio.Queue[Any] = asyncio.Queue()
+    monkeypatch.setattr(sim_cli, "describe", lambda rig: started.put_nowait(rig) or "")
+    args = sim_cli.build_parser().parse_args(
+        ["--decimals", "0", "--units", "F", "--duration-s", "2", "--chamber-map", INT16_3216])
+    args.truth, args.die_tau_s = None, 900.0
+    serving = asyncio.create_task(sim_cli._serve(args))
+    rig = await asyncio.wait_for(started.get(), 5)
+    link = ModbusLink(rig.chamber_url, RealClock())
+    try:
+        pv = await link.read_field(load_chamber_map(INT16_3216).process_c)
+    finally:
+        await link.close()
+        serving.cancel()
+    assert pv == pytest.approx(7.3, abs=0.11)  # 73 °F in whole degrees, read as tenths
+
+
+async def test_an_enumerated_alarm_state_is_reported_by_its_name(tmp_path: Path) -> None:
+    from drivers.modbus_link import ModbusLink
+    from drivers.registermaps import load_chamber_map
+
+    path = tmp_path / "states.toml"
+    text = Path(INT16_3216).read_text() + """
+[registers.alarm_1_state]
+address = 1600
+type = "uint16"
+access = "rw"
+states = { 61 = "none", 88 = "startup", 7 = "alarm high", 8 = "alarm low", 28 = "error" }
+ok = [61, 88]
+"""
+    # a top-level key goes before the first table
+    path.write_text(text.replace('schema = "soakcal-register-map/1"\n',
+                                 'schema = "soakcal-register-map/1"\n'
+                                 'alarm_states = ["alarm_1_state"]\n', 1))
+    regmap = load_chamber_map(path)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path)) as sim:
+        ok_checks = await check_rig(_config(sim, str(path)), clock=clock)
+        link = ModbusLink(sim.chamber_url, clock)
+        await link.write_field(regmap.registers["alarm_1_state"], 7)
+        await link.close()
+        checks = await check_rig(_config(sim, str(path)), clock=clock)
+    assert _by(ok_checks, "chamber", "alarms").status == "pass"  # the twin starts in "none"
+    bad = _by(checks, "chamber", "alarms")
+    assert bad.status == "fail" and bad.detail == "active: alarm_1_state: alarm high"
+
+
+@pytest.mark.parametrize(("mean_g", "words"), [
+    ((0.0, 0.0, 0.5), "×0.5: the range setting and the scale the driver assumes disagree"),
+    ((0.0, 0.0, 9.80665), "it reads in m/s², not g"),
+    ((0.0, 0.3, 0.5), "outside 0.9…1.1 g of local gravity"),
+])
+async def test_a_sensor_off_gravity_names_the_misreading(mean_g: tuple[float, float, float],
+                                                         words: str) -> None:
+    from service.rig_check import _check_sensor, _Recorder
+
+    class Accel:
+        async def identify(self) -> Any:
+            from types import SimpleNamespace
+            return SimpleNamespace(model="ADXL355", serial="SN-1", firmware="fw")
+
+        async def acquire(self, n: int) -> Acquisition:
+            return Acquisition(mean_g, (1e-4,) * 3, n, 23.0, 0.0, False, 0.1)
+
+    rec = _Recorder()
+    await _check_sensor(rec, Accel(), {"sensors": [{}]})
+    bad = _by(rec.checks, "sensor", "acquire")
+    assert bad.status == "fail" and words in bad.detail
+
+
+async def test_swapped_words_near_0_c_are_not_taken_for_a_reading() -> None:
+    """Swapped float words often decode to ~1e-38: near 0 °C that must not 'agree'."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t", start_c=3.0,
+                             controller=ControllerSetup(swap_words=True)) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t"), move=True, clock=clock)
+    bad = _by(checks, "chamber", "pv_vs_die")
+    assert bad.status == "fail" and "words of the 32-bit value are swapped" in bad.detail
+
+
+async def test_an_f4t_loop_left_in_manual_fails_its_mode_check() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t",
+                             controller=ControllerSetup(holds=(("loop_mode", 54.0),))) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t"), clock=clock)
+    bad = _by(checks, "chamber", "register:loop_mode")
+    assert bad.status == "fail"
+    assert bad.detail == ("loop_mode reads 54, map watlow-f4t expects one of 10, 62 "
+                          "(loop 1 is not in manual (Auto 10 or Off 62))")
+    assert "switch loop 1 to Auto" in bad.fix

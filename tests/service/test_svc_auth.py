@@ -31,7 +31,7 @@ def test_viewer_reads_but_cannot_start_a_campaign(client: TestClient, auth) -> N
 
 
 def test_operator_cannot_add_rigs_or_tokens_admin_can(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
-    rig = {"name": "lab2", "chamber": {"range_c": [-40, 120]}}
+    rig = {"name": "lab2", "chamber": {"driver": "sim", "range_c": [-40, 120]}}
     assert client.post("/api/v1/rigs", json=rig, headers=auth["operator"]).status_code == 403
     assert client.post("/api/v1/rigs", json=rig, headers=auth["admin"]).status_code == 201
     assert client.post("/api/v1/rigs", json=rig, headers=auth["admin"]).status_code == 409

@@ -75,7 +75,8 @@ def test_cli_rig_check(client: TestClient, settings, monkeypatch,  # type: ignor
     assert len(err.splitlines()) == 1 and "nope" in err and "sim" in err
     bad = {**LAB, "name": "dead",
            "chamber": {**LAB["chamber"], "url": "tcp://127.0.0.1:9"},
-           "turntable": {"url": "tcp://127.0.0.1:9"}, "sensors": [{"url": "socket://127.0.0.1:9"}]}
+           "turntable": {"url": "tcp://127.0.0.1:9", "device_id": 2},
+           "sensors": [{"url": "socket://127.0.0.1:9"}]}
     assert client.post("/api/v1/rigs", json=bad, headers={**_admin(client)}).status_code == 201
     assert main(["rig", "check", "dead", "--json"]) == 1
     assert '"passed": false' in capsys.readouterr().out
@@ -87,3 +88,67 @@ def _admin(client: TestClient) -> dict[str, str]:
 
     with session_scope(client.app.state.session_factory) as s:  # type: ignore[attr-defined]
         return {"Authorization": f"Bearer {create_token(s, 'admin')}"}
+
+
+# --- rig add | list | rm, and the rules they share with the API -----------------------
+
+
+def _cli(monkeypatch, url: str, *argv: str) -> int:  # type: ignore[no-untyped-def]
+    from service.cli import main
+
+    monkeypatch.setenv("SOAKCAL_DATABASE_URL", url)
+    return main(list(argv))
+
+
+def test_cli_rig_add_list_rm(tmp_path, monkeypatch,  # type: ignore[no-untyped-def]
+                             capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    url = f"sqlite:///{tmp_path / 'fresh.db'}"  # a fresh install: no `serve` has run
+    cfg = tmp_path / "lab.json"
+    cfg.write_text(json.dumps({k: v for k, v in LAB.items() if k != "name"}))
+    assert _cli(monkeypatch, url, "rig", "add", "lab-1", "--config", str(cfg)) == 0
+    assert "rig lab-1 added: chamber modbus tcp://10.0.0.5:502" in capsys.readouterr().out
+    assert _cli(monkeypatch, url, "rig", "list") == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[1].split()[:2] == ["lab-1", "no"] and rows[2].split() == ["sim", "no", "sim"]
+    assert _cli(monkeypatch, url, "rig", "add", "lab-1", "--config", str(cfg)) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert _cli(monkeypatch, url, "rig", "rm", "lab-1") == 0
+    assert capsys.readouterr().out.strip() == "rig lab-1 removed"
+    assert _cli(monkeypatch, url, "rig", "rm", "lab-1") == 2
+    assert "no rig 'lab-1'" in capsys.readouterr().err
+
+
+def test_cli_rig_add_names_file_and_key_of_a_misspelt_limit(  # type: ignore[no-untyped-def]
+        tmp_path, monkeypatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    url = f"sqlite:///{tmp_path / 'fresh.db'}"
+    cfg = tmp_path / "lab.json"
+    cfg.write_text(json.dumps({"chamber": {**LAB["chamber"], "rnage_c": [-40, 85]},
+                               "turntable": LAB["turntable"], "sensors": LAB["sensors"]}))
+    assert _cli(monkeypatch, url, "rig", "add", "lab-1", "--config", str(cfg)) == 2
+    # (the first line says which database, as every database subcommand does)
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith(f"soakcal rig add: {cfg}: chamber.rnage_c: unknown key")
+    assert "did you mean 'range_c'?" in err
+    assert _cli(monkeypatch, url, "rig", "list") == 0
+    assert "lab-1" not in capsys.readouterr().out  # nothing stored
+
+
+def test_cli_rig_check_sim_on_a_fresh_database(tmp_path, monkeypatch,  # type: ignore[no-untyped-def]
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 'fresh.db'}"
+    assert _cli(monkeypatch, url, "rig", "check", "sim") == 0
+    assert "PASS  chamber" in capsys.readouterr().out
+
+
+def test_cli_rig_check_refuses_a_rig_a_campaign_holds(  # type: ignore[no-untyped-def]
+        client: TestClient, settings, auth, sf, monkeypatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    campaign = new_campaign(client, auth["operator"])
+    set_campaign(sf, campaign["id"], state="running")
+    assert _cli(monkeypatch, settings.database_url, "rig", "check", "sim", "--move") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "runs a campaign now" in err

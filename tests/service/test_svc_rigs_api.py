@@ -88,3 +88,72 @@ def test_rigs_file_registers_rigs_at_start_and_a_bad_one_stops_the_start(  # typ
     bad_app = create_app(dataclasses.replace(settings, rigs_file=str(path)))
     with pytest.raises(ValueError, match=r"rig 'lab-sim': turntable.url"), TestClient(bad_app):
         pass
+
+
+LAB = {
+    "name": "lab-9",
+    "chamber": {"driver": "modbus", "url": "tcp://10.0.0.5:502", "map": "eurotherm-3216"},
+    "turntable": {"url": "tcp://10.0.0.6:502"},
+    "sensors": [{"url": "/dev/ttyUSB0"}],
+}
+
+
+def _refusal(client: TestClient, auth, rig: dict) -> list[tuple[list, str]]:  # type: ignore[no-untyped-def, type-arg]
+    r = client.post("/api/v1/rigs", json=rig, headers=auth["admin"])
+    assert r.status_code == 422, r.text
+    return [(d["loc"], d["msg"]) for d in r.json()["detail"]]
+
+
+def test_a_misspelt_chamber_key_is_refused_not_ignored(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    rig = {**LAB, "chamber": {**LAB["chamber"], "rnage_c": [-40, 85]}}
+    (loc, msg), = _refusal(client, auth, rig)
+    assert loc == ["body", "chamber", "rnage_c"] and "did you mean 'range_c'?" in msg
+
+
+def test_a_chamber_without_driver_is_refused(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    rig = {**LAB, "chamber": {"url": "tcp://10.0.0.5:502", "garbage": 1}}
+    found = dict((tuple(loc), msg) for loc, msg in _refusal(client, auth, rig))
+    assert "missing" in found[("body", "chamber", "driver")]
+    assert "unknown key" in found[("body", "chamber", "garbage")]
+
+
+def test_limits_beyond_the_map_are_refused(client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
+    rig = {**LAB, "chamber": {**LAB["chamber"], "range_c": [-70, 200]}}
+    (loc, msg), = _refusal(client, auth, rig)
+    assert loc == ["body", "chamber", "range_c"]
+    assert "exceeds the map eurotherm-3216's limits.range_c [-70, 180]" in msg
+
+
+def test_a_map_file_that_is_not_utf8_is_a_422_naming_the_file(  # type: ignore[no-untyped-def]
+        client: TestClient, auth, tmp_path) -> None:
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes('name = "régulateur"\n'.encode("latin-1"))
+    rig = {**LAB, "chamber": {**LAB["chamber"], "map": str(bad)}}
+    (loc, msg), = _refusal(client, auth, rig)
+    assert loc == ["body", "chamber", "map"]
+    assert msg.startswith(f"{bad}: not UTF-8 text") and "save the map file as UTF-8" in msg
+
+
+def test_a_map_with_a_4xxxx_address_is_a_422_naming_file_and_key(  # type: ignore[no-untyped-def]
+        client: TestClient, auth, tmp_path) -> None:
+    from drivers.registermaps import shipped_maps
+
+    text = shipped_maps()["eurotherm-3216"].read_text()
+    path = tmp_path / "lab.toml"
+    path.write_text(text.replace("[registers.process_c]\naddress = 32770  # 0x8000 + 2 * 1\n",
+                                 "[registers.process_c]\naddress = 40002\n"))
+    rig = {**LAB, "chamber": {**LAB["chamber"], "map": str(path)}}
+    (loc, msg), = _refusal(client, auth, rig)
+    assert msg.startswith(f"{path}: registers.process_c.address: 40002 looks like a 4xxxx")
+    assert "address = 1;" in msg
+
+
+def test_a_chamber_and_table_on_one_bus_need_different_unit_ids(  # type: ignore[no-untyped-def]
+        client: TestClient, auth) -> None:
+    bus = "rtu:///dev/ttyUSB0?baudrate=19200"
+    rig = {**LAB, "chamber": {**LAB["chamber"], "url": bus}, "turntable": {"url": bus}}
+    (loc, msg), = _refusal(client, auth, rig)
+    assert loc == ["body", "turntable", "device_id"]
+    assert "the chamber answers unit 1 at the same url" in msg
+    rig["turntable"] = {"url": bus, "device_id": 2}
+    assert client.post("/api/v1/rigs", json=rig, headers=auth["admin"]).status_code == 201
