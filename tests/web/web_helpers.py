@@ -72,8 +72,8 @@ def open_view(page: Any, service: LiveService, fragment: str, ready: str) -> Non
 
 
 def table_rows(page: Any, selector: str) -> list[list[str]]:
-    """The visible cells of a table's body rows (the header row left out)."""
+    """The data cells (td) of a table's rows that have any (header rows left out)."""
     return page.eval_on_selector(
         selector,
-        "(t) => Array.from(t.querySelectorAll('tr')).filter((r) => !r.querySelector('th'))"
+        "(t) => Array.from(t.querySelectorAll('tr')).filter((r) => r.querySelector('td'))"
         ".map((r) => Array.from(r.querySelectorAll('td')).map((c) => c.innerText.trim()))")

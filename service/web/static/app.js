@@ -386,49 +386,106 @@ async function sensorsView(serial) {
     nodes.push(h("table", {}, h("tr", {}, ...["id", "campaign", "created", "valid range", "RMSE"].map((t) => h("th", {}, t))),
       list.map((k) => h("tr", {}, h("td", {}, h("a", { href: `#/calibrations/${k.id}` }, k.id)),
         h("td", {}, k.campaign_id ? h("a", { href: `#/campaigns/${k.campaign_id}` }, k.campaign_id) : "–"),
-        h("td", {}, when(k.created_at)), h("td", {}, `${fmt(k.valid_c[0], 1)} .. ${fmt(k.valid_c[1], 1)} °C`),
+        h("td", {}, when(k.created_at)), h("td", {}, `${fmt(k.valid_c[0], 1)} … ${fmt(k.valid_c[1], 1)} °C`),
         h("td", { class: "num" }, fmt(k.rmse_ug, 1, "µg"))))));
     if (!list.length) nodes.push(h("p", { class: "muted" }, "no calibration for this serial"));
-    else nodes.push(coefficientForm(serial));
+    else nodes.push(coefficientForm(serial, list[0]));
   }
   showView(seq, ...nodes);
 }
 
-function coefficientForm(serial) {
+function coefficientForm(serial, latest) {
   const t = h("input", { name: "temperature_c", type: "number", step: "any", value: "25", required: true });
+  const extrapolate = h("input", { name: "extrapolate", type: "checkbox", id: "extrapolate" });
   const out = h("div", { id: "coefficients" });
+  const [lo, hi] = latest.valid_c;
   const form = h("form", { class: "inline", onsubmit: (ev) => { ev.preventDefault(); guarded(async () => {
-    const k = await api("GET", `/api/v1/sensors/${encodeURIComponent(serial)}/coefficients?temperature_c=${encodeURIComponent(t.value)}`);
+    out.replaceChildren();
+    const query = `temperature_c=${encodeURIComponent(t.value)}${extrapolate.checked ? "&extrapolate=true" : ""}`;
+    let k;
+    try {
+      k = await api("GET", `/api/v1/sensors/${encodeURIComponent(serial)}/coefficients?${query}`);
+    } catch (e) {
+      const outside = e.status === 422 && Array.isArray(e.detail) && e.detail.some((d) => /outside/.test(d.msg || ""));
+      if (!outside) throw e;
+      // the service's words are for API users (raw floats, a query parameter): say it with
+      // this page's control
+      throw new Error(`${fmt(Number(t.value), 1, "°C")} is outside calibration ${latest.id}'s valid range ` +
+        `${fmt(lo, 1)} … ${fmt(hi, 1)} °C, where the model was not measured. Tick ` +
+        `"extrapolate outside the valid range" to evaluate it there anyway.`);
+    }
     out.replaceChildren(h("p", {}, `calibration ${k.calibration_id} at ${fmt(k.temperature_c, 2, "°C")}`,
-      k.extrapolated ? h("span", { class: "warn" }, " (extrapolated)") : "", ": calibrated = M · (raw − bias)"),
+      k.extrapolated ? h("span", { class: "warn", id: "extrapolated" }, " (extrapolated: outside the valid range)") : "", ": calibrated = M · (raw − bias)"),
     h("table", {}, h("tr", {}, h("th", {}, "M (row)"), h("th", {}, "x"), h("th", {}, "y"), h("th", {}, "z"), h("th", {}, "bias (mg)")),
       k.matrix.map((row, i) => h("tr", {}, h("th", {}, "xyz"[i]), row.map((v) => h("td", { class: "num" }, v.toFixed(6))),
         h("td", { class: "num" }, (k.bias_g[i] * 1e3).toFixed(4))))));
-  }); } }, h("label", {}, "Temperature (°C)", t), h("button", { type: "submit", id: "coef-btn" }, "Coefficients"));
-  return h("div", {}, h("h3", {}, "Coefficients at a temperature (latest calibration)"), form, out);
+  }); } }, h("label", {}, "Temperature (°C)", t),
+  h("label", { class: "check" }, h("span", {}, extrapolate, " extrapolate outside the valid range")),
+  h("button", { type: "submit", id: "coef-btn" }, "Coefficients"));
+  return h("div", {}, h("h3", {}, "Coefficients at a temperature (latest calibration)"),
+    h("p", { class: "muted" }, `valid ${fmt(lo, 1)} … ${fmt(hi, 1)} °C`), form, out);
 }
+
+// |g| errors: µg below 1 mg, mg above (a raw sensor is off by mg, a calibrated one by µg)
+function gErr(ug) {
+  if (ug === null || ug === undefined) return "–";
+  return Math.abs(ug) >= 1000 ? `${(ug / 1000).toFixed(2)} mg` : `${ug.toFixed(1)} µg`;
+}
+const words = (s) => (s ? String(s).replaceAll("_", " ") : "–");
 
 async function calibrationView(id) {
   const seq = viewSeq;
-  const doc = await api("GET", `/api/v1/calibrations/${id}`);
+  const [doc, sum] = await Promise.all([api("GET", `/api/v1/calibrations/${id}`),
+    api("GET", `/web/calibrations/${id}/summary`)]);
   const prov = doc.provenance || {};
   const figs = h("div", { id: "figures" }, h("p", { class: "muted" }, "drawing the figures (the fit is redone from the stored measurements)…"));
-  showView(seq, h("h2", {}, `Calibration ${id}`),
+  const heldOut = h("dd", { id: "loo" }, "computing (the fit is redone from the stored measurements)…");
+  const degree = sum.degree === null ? "–" : `${sum.degree}` +
+    (sum.degree_requested !== null && sum.degree_requested !== sum.degree ? ` (${sum.degree_requested} asked; see notes)` : "");
+  const all12 = sum.held.length === 0 && sum.fitted.length === 12;
+  const jf = sum.joint_fit;
+  const stepTable = h("table", { id: "cal-steps" },
+    h("tr", {}, ...["step", "setpoint", "die temperature", "positions", "|g| RMSE raw", "after step fit",
+      "after thermal model", "χ²red", "soak (rig clock)", "soak ended because"].map((t) => h("th", {}, t))),
+    sum.steps.map((st) => h("tr", {}, h("td", { class: "num" }, st.step),
+      h("td", { class: "num" }, fmt(st.setpoint_c, 1, "°C")), h("td", { class: "num" }, fmt(st.temperature_c, 2, "°C")),
+      h("td", { class: "num" }, st.positions ?? "–"), h("td", { class: "num" }, gErr(st.rmse_before_ug)),
+      h("td", { class: "num" }, gErr(st.rmse_step_fit_ug)), h("td", { class: "num" }, gErr(st.rmse_after_ug)),
+      h("td", { class: "num" }, fmt(st.chi2_red, 2)), h("td", { class: "num" }, duration(st.soak_s)),
+      h("td", {}, words(st.soak_reason)))));
+  if (!showView(seq, h("h2", {}, `Calibration ${id}`),
     h("p", {}, h("a", { href: `/api/v1/calibrations/${id}`, download: `calibration-${id}.json` }, "model document (JSON)"),
       " · ", h("a", { href: `/api/v1/calibrations/${id}/export?format=c`, id: "export-c" }, "firmware header (C99)"),
       " · ", h("a", { href: `/api/v1/calibrations/${id}/export?format=json-flat` }, "flat JSON for other languages")),
-    h("dl", { class: "facts" },
-      h("dt", {}, "model"), h("dd", {}, `${doc.model_version} (${doc.mode} mode, ${doc.method} fit)`),
-      h("dt", {}, "sensor / campaign"), h("dd", {}, `${prov.sensor || "–"} / ${prov.campaign_id || "–"}`),
-      h("dt", {}, "rows"), h("dd", {}, prov.rows === undefined ? "–" : String(prov.rows)),
+    h("dl", { class: "facts", id: "cal-facts" },
+      h("dt", {}, "sensor / campaign"), h("dd", {}, h("a", { href: `#/sensors/${encodeURIComponent(sum.sensor)}` }, sum.sensor), " / ",
+        sum.campaign_id ? h("a", { href: `#/campaigns/${sum.campaign_id}` }, sum.campaign_id) : "–"),
+      h("dt", {}, "|g| RMSE before (raw)"), h("dd", { id: "rmse-before" }, gErr(sum.rmse_before_ug)),
+      h("dt", {}, "|g| RMSE after (thermal model)"), h("dd", { id: "rmse-after" }, gErr(sum.rmse_after_ug)),
+      h("dt", {}, "held out (leave one position out)"), heldOut,
+      h("dt", {}, "valid range"), h("dd", { id: "valid" }, `${fmt(sum.valid_c[0], 1)} … ${fmt(sum.valid_c[1], 1)} °C (${words(sum.temperature_source)})`),
+      h("dt", {}, "drift at fixed orientation"), h("dd", { id: "drift" }, `${fmt(sum.drift_ug_per_k.before, 1)} → ${fmt(sum.drift_ug_per_k.after, 2)} µg/K`),
+      h("dt", {}, "model"), h("dd", {}, `${sum.model_version}, ${sum.mode} mode, ${sum.method} fit, thermal polynomial degree ${degree}`),
+      h("dt", {}, "fitted"), h("dd", { id: "fitted" }, all12 ? "all 12 SFEM parameters (Eq. 1)" : sum.fitted.join(", ") || "none"),
+      h("dt", {}, "held at nominal"), h("dd", { id: "held" }, sum.held.length ? `${sum.held.join(", ")} (the positions cannot identify them)` : "none"),
+      h("dt", {}, "joint fit"), h("dd", { id: "joint" }, jf ? `${jf.success ? "converged" : "DID NOT CONVERGE"}, χ²red ${fmt(jf.chi2_red, 2)}` : "–"),
       h("dt", {}, "created"), h("dd", {}, when(prov.created_utc))),
-    figs,
+    h("h3", {}, "Per step"), stepTable,
+    sum.notes.length ? h("div", {}, h("h3", {}, "Notes"), h("ul", { id: "cal-notes" }, sum.notes.map((n) => h("li", {}, n)))) : "",
+    h("h3", {}, "Figures"), figs,
     prov.steps_log ? h("details", {}, h("summary", {}, "steps log (soak ends and their reasons)"),
-      h("pre", {}, JSON.stringify(prov.steps_log, null, 1))) : "");
+      h("pre", {}, JSON.stringify(prov.steps_log, null, 1))) : "")) return;
   try {
     const names = await api("GET", `/web/calibrations/${id}/figures`);
     figs.replaceChildren(...names.map((n) => h("figure", {}, h("img", { class: "figure", alt: n, src: `/web/calibrations/${id}/figures/${n}.png` }), h("figcaption", {}, n))));
-  } catch (e) { figs.replaceChildren(h("p", { class: "muted" }, e.message)); }
+    const ho = await api("GET", `/web/calibrations/${id}/holdout`);
+    heldOut.replaceChildren(ho.loo_rmse_ug === null
+      ? h("span", { class: "warn" }, `not given: ${(ho.warnings || []).join("; ") || "too few spare degrees of freedom"}`)
+      : `${gErr(ho.loo_rmse_ug)} (in-sample ${gErr(ho.rmse_ug)}; ${ho.dof.spare} spare degrees of freedom in the worst step)`);
+  } catch (e) {
+    figs.replaceChildren(h("p", { class: "muted" }, e.message));
+    heldOut.replaceChildren(`not available: ${e.message}`);
+  }
 }
 
 // --- schedules, rigs, tokens ----------------------------------------------------------
