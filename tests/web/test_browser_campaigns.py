@@ -140,6 +140,13 @@ def test_watch_a_campaign_live_pause_and_abort_ask_first(
     page.click("#pause-btn")
     _wait_state(page, "paused")
     assert asked and asked[0].startswith("Pause campaign")
+    # reloaded mid-campaign, the chart still has everything stored before the page opened
+    seen = int(page.get_attribute("#temp-chart polyline[data-series=chamber]", "data-n"))
+    page.reload()
+    page.wait_for_selector("#temp-chart polyline[data-series=chamber]")
+    assert page.inner_text("#state") == "paused"
+    assert int(page.get_attribute("#temp-chart polyline[data-series=chamber]", "data-n")) >= seen
+    assert page.locator("#temp-chart polyline[data-series='die:SN-LIVE']").count() == 1
     # abort asks too: "no" keeps it paused, "yes" aborts
     page.once("dialog", lambda d: d.dismiss())
     page.click("#abort-btn")
@@ -150,7 +157,7 @@ def test_watch_a_campaign_live_pause_and_abort_ask_first(
     _wait_state(page, "aborted")
     assert "cannot be resumed" in asked[1]
     journal = page.inner_text("#journal")
-    assert "→ paused" in journal and "→ aborted" in journal
+    assert "state paused → aborted" in journal  # seen since the reload
     # finished: no stale progress (no ETA, no chamber reading, no buttons)
     assert page.locator("#eta").count() == 0 and page.locator("#chamber").count() == 0
     assert page.inner_text("#step").startswith("stopped at step ")

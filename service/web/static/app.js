@@ -524,6 +524,7 @@ async function schedulesView() {
       h("td", {}, s.last_campaign_id ? h("a", { href: `#/campaigns/${s.last_campaign_id}` }, s.last_campaign_id) : "–"),
       h("td", {}, `${s.campaign.rig} / ${s.campaign.sensor}`),
       h("td", {}, atLeast("operator") ? h("button", { onclick: () => guarded(async () => {
+        if (!confirm(`Remove schedule ${s.id} (${s.campaign.rig} / ${s.campaign.sensor})? No further campaigns start from it.`)) return;
         await api("DELETE", `/api/v1/schedules/${s.id}`); route(); }) }, "remove") : "")))),
   list.length ? "" : h("p", { class: "muted" }, "no schedules (soakcal schedule add)"));
 }
