@@ -226,3 +226,66 @@ def test_the_calibration_summary_reads_the_stored_report(client: TestClient, sf,
     assert second["soak_reason"] is None
     missing = client.get("/web/calibrations/999/summary", headers=auth["viewer"])
     assert missing.status_code == 404
+
+
+def _model_doc(bx_g: float, tempco_g_per_c: float, valid_c: tuple[float, float]) -> dict:  # type: ignore[type-arg]
+    """A model document's thermal part: bx = bx_g + tempco·(T − 25), the rest nominal."""
+    names = ("bx", "by", "bz", "sx", "sy", "sz", "ayx", "azx", "azy", "mx", "my", "mz")
+    coefficients = {n: [1.0 if n.startswith("s") else 0.0, 0.0] for n in names}
+    coefficients["bx"] = [bx_g, tempco_g_per_c]
+    units = {n: (["1", "1/degC"] if n.startswith("s") else ["g", "g/degC"]) for n in names}
+    return {"temperature": {"centre_c": 25.0, "valid_c": list(valid_c)},
+            "polynomial": {"physical_coefficients": coefficients, "physical_units": units},
+            "provenance": {"sensor_identity": {"reported_model": "ADXL355"}}}
+
+
+def test_lot_statistics_flag_the_sensor_outside_four_sigma(client: TestClient, sf, auth) -> None:  # type: ignore[no-untyped-def]
+    from service.db.models import Calibration
+    from service.db.session import session_scope
+
+    bx_mg = [1.0, 1.2, 0.9, 1.1, 1.05, 0.95, 9.0]  # the last one is off its lot
+    ids = {}
+    with session_scope(sf) as session:
+        for i, bx in enumerate(bx_mg):
+            # an older calibration of the same sensor does not count, only its latest
+            for version, value in (("old", 50.0), ("new", bx)):
+                row = Calibration(sensor=f"SN-LOT-{i}", valid_lo_c=0.0, valid_hi_c=50.0,
+                                  rmse_ug=30.0, model_version=version,
+                                  model=_model_doc(value * 1e-3, 2e-6, (0.0, 50.0)))
+                session.add(row)
+                session.flush()
+                ids[i] = row.id
+        session.add(Calibration(sensor="SN-LOT-COLD", valid_lo_c=-40.0, valid_hi_c=0.0,
+                                rmse_ug=30.0, model_version="new",
+                                model=_model_doc(1e-3, 2e-6, (-40.0, 0.0))))
+    body = client.get("/api/v1/fleet/lots", headers=auth["viewer"]).json()
+    (lot,) = body["lots"]
+    assert lot["model"] == "ADXL355" and lot["sensors"] == 7
+    assert lot["left_out"] == ["SN-LOT-COLD"]  # 25 °C is outside its valid range
+    bx = next(s for s in lot["spreads"] if s["name"] == "bx")
+    assert bx["median"] == pytest.approx(1.05e-3)
+    assert bx["sigma"] == pytest.approx(1.4826 * 0.1e-3, rel=1e-6)
+    assert [(f["sensor"], f["name"]) for f in lot["flags"]] == [("SN-LOT-6", "bx")]
+    assert lot["flags"][0]["z"] == pytest.approx((9.0 - 1.05) / (1.4826 * 0.1), abs=0.1)
+    tempco = next(s for s in lot["spreads"] if s["name"] == "dbx/dT")
+    assert tempco["median"] == pytest.approx(2e-6) and tempco["unit"] == "g/degC"
+    flagged = client.get(f"/api/v1/fleet/calibrations/{ids[6]}", headers=auth["viewer"]).json()
+    assert [f["name"] for f in flagged] == ["bx"]
+    assert client.get(f"/api/v1/fleet/calibrations/{ids[0]}", headers=auth["viewer"]).json() == []
+    # at 45 °C the tempco moves every sensor alike: the same one stands out
+    warm = client.get("/api/v1/fleet/lots?reference_c=45", headers=auth["viewer"]).json()
+    assert [f["sensor"] for f in warm["lots"][0]["flags"]] == ["SN-LOT-6"]
+
+
+def test_a_small_lot_flags_no_one_and_says_why(client: TestClient, sf, auth) -> None:  # type: ignore[no-untyped-def]
+    from service.db.models import Calibration
+    from service.db.session import session_scope
+
+    with session_scope(sf) as session:
+        for i, bx in enumerate((1.0, 1.1, 30.0)):
+            session.add(Calibration(sensor=f"SN-FEW-{i}", valid_lo_c=0.0, valid_hi_c=50.0,
+                                    rmse_ug=30.0, model_version="v",
+                                    model=_model_doc(bx * 1e-3, 0.0, (0.0, 50.0))))
+    (lot,) = client.get("/api/v1/fleet/lots", headers=auth["viewer"]).json()["lots"]
+    assert lot["flags"] == []
+    assert lot["note"] == "3 sensor(s) at 25 °C: at least 5 are needed to flag one"
