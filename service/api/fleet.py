@@ -89,17 +89,33 @@ def lot_statistics(
     return LotStatistics(reference_c=reference_c, flag_sigma=FLAG_SIGMA, lots=lots)
 
 
-@router.get("/calibrations/{calibration_id}", response_model=list[Flag],
+class LotCheck(BaseModel):
+    calibration_id: int
+    model: str | None = Field(description="its lot (sensor model); null: not in any lot")
+    sensors: int = Field(description="sensors in the lot at reference_c")
+    flags: list[Flag] = Field(description="its parameters outside 4 σ of the lot")
+    note: str | None = Field(description="why no verdict can be given, when none can")
+
+
+@router.get("/calibrations/{calibration_id}", response_model=LotCheck,
             responses={404: {"description": "no such calibration"}})
-def calibration_flags(
+def calibration_lot_check(
     calibration_id: DbIdPath, session: SessionDep,
     reference_c: Annotated[float, Query(ge=-100, le=200, allow_inf_nan=False)] = 25.0,
-) -> list[Flag]:
-    """This calibration's parameters outside 4 σ of its lot (empty: within its lot)."""
+) -> LotCheck:
+    """This calibration against its lot: its parameters outside 4 σ, or why no verdict."""
     if session.get(Calibration, calibration_id) is None:
         raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
     stats = lot_statistics(session, reference_c)
-    return [f for lot in stats.lots for f in lot.flags if f.calibration_id == calibration_id]
+    for lot in stats.lots:
+        members = {c for points in lot.values.values() for _, c, _ in points}
+        if calibration_id in members:
+            mine = [f for f in lot.flags if f.calibration_id == calibration_id]
+            return LotCheck(calibration_id=calibration_id, model=lot.model,
+                            sensors=lot.sensors, flags=mine, note=lot.note)
+    return LotCheck(calibration_id=calibration_id, model=None, sensors=0, flags=[], note=(
+        f"not compared: not its sensor's latest calibration, or {reference_c:g} °C is "
+        "outside its valid range"))
 
 
 def parameters_at(doc: dict[str, Any], t_c: float) -> dict[str, tuple[float, str]] | None:

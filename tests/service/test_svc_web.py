@@ -270,8 +270,11 @@ def test_lot_statistics_flag_the_sensor_outside_four_sigma(client: TestClient, s
     tempco = next(s for s in lot["spreads"] if s["name"] == "dbx/dT")
     assert tempco["median"] == pytest.approx(2e-6) and tempco["unit"] == "g/degC"
     flagged = client.get(f"/api/v1/fleet/calibrations/{ids[6]}", headers=auth["viewer"]).json()
-    assert [f["name"] for f in flagged] == ["bx"]
-    assert client.get(f"/api/v1/fleet/calibrations/{ids[0]}", headers=auth["viewer"]).json() == []
+    assert [f["name"] for f in flagged["flags"]] == ["bx"] and flagged["sensors"] == 7
+    within = client.get(f"/api/v1/fleet/calibrations/{ids[0]}", headers=auth["viewer"]).json()
+    assert (within["model"], within["flags"], within["note"]) == ("ADXL355", [], None)
+    older = client.get(f"/api/v1/fleet/calibrations/{ids[0] - 1}", headers=auth["viewer"]).json()
+    assert older["model"] is None and older["note"].startswith("not compared: not its sensor")
     # at 45 °C the tempco moves every sensor alike: the same one stands out
     warm = client.get("/api/v1/fleet/lots?reference_c=45", headers=auth["viewer"]).json()
     assert [f["sensor"] for f in warm["lots"][0]["flags"]] == ["SN-LOT-6"]

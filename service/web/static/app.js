@@ -440,6 +440,15 @@ async function calibrationView(id) {
   const prov = doc.provenance || {};
   const figs = h("div", { id: "figures" }, h("p", { class: "muted" }, "drawing the figures (the fit is redone from the stored measurements)…"));
   const heldOut = h("dd", { id: "loo" }, "computing (the fit is redone from the stored measurements)…");
+  const lotCheck = h("dd", { id: "lot" }, "…");
+  quietly(async () => {
+    const k = await api("GET", `/api/v1/fleet/calibrations/${id}`);
+    lotCheck.replaceChildren(k.flags.length
+      ? h("span", { class: "warn" }, `OUTSIDE its lot (${k.model}, ${k.sensors} sensors): ` +
+        k.flags.map((f) => `${f.name} ${f.z > 0 ? "+" : ""}${f.z.toFixed(1)}σ`).join(", "))
+      : k.note ? `no verdict: ${k.note}` : `within ±4σ of its lot (${k.model}, ${k.sensors} sensors)`,
+    " · ", h("a", { href: "#/fleet" }, "fleet"));
+  });
   const degree = sum.degree === null ? "–" : `${sum.degree}` +
     (sum.degree_requested !== null && sum.degree_requested !== sum.degree ? ` (${sum.degree_requested} asked; see notes)` : "");
   const all12 = sum.held.length === 0 && sum.fitted.length === 12;
@@ -468,6 +477,7 @@ async function calibrationView(id) {
       h("dt", {}, "model"), h("dd", {}, `${sum.model_version}, ${sum.mode} mode, ${sum.method} fit, thermal polynomial degree ${degree}`),
       h("dt", {}, "fitted"), h("dd", { id: "fitted" }, all12 ? "all 12 SFEM parameters (Eq. 1)" : sum.fitted.join(", ") || "none"),
       h("dt", {}, "held at nominal"), h("dd", { id: "held" }, sum.held.length ? `${sum.held.join(", ")} (the positions cannot identify them)` : "none"),
+      h("dt", {}, "against its lot"), lotCheck,
       h("dt", {}, "joint fit"), h("dd", { id: "joint" }, jf ? `${jf.success ? "converged" : "DID NOT CONVERGE"}, χ²red ${fmt(jf.chi2_red, 2)}` : "–"),
       h("dt", {}, "created"), h("dd", {}, when(prov.created_utc))),
     h("h3", {}, "Per step"), stepTable,
@@ -486,6 +496,92 @@ async function calibrationView(id) {
     figs.replaceChildren(h("p", { class: "muted" }, e.message));
     heldOut.replaceChildren(`not available: ${e.message}`);
   }
+}
+
+// --- fleet: lot statistics -------------------------------------------------------------
+// A parameter's value in the unit a person reads: biases in mg, gains and angles in ppm /
+// mrad, their tempcos per °C.
+function lotValue(v, unit) {
+  const base = unit.split("/")[0];
+  if (unit.includes("/")) {  // a tempco: µg, ppm, µrad per °C
+    const name = { g: "µg", 1: "ppm", rad: "µrad" }[base];
+    return name ? `${(v * 1e6).toPrecision(4)} ${name}/°C` : `${v.toPrecision(4)} ${unit}`;
+  }
+  if (base === "g") return `${(v * 1e3).toPrecision(4)} mg`;
+  if (base === "1") return v.toFixed(6);  // a gain: near 1
+  if (base === "rad") return `${(v * 1e3).toPrecision(4)} mrad`;
+  return `${v.toPrecision(4)} ${unit}`;
+}
+
+function zChart(lot, names, id, title) {
+  // every sensor's distance from its lot's median in σ, one column per parameter
+  const W = 760, H = 230, L = 40, B = 40, T = 20, R = 10, ZMAX = 8;
+  const NS = "http://www.w3.org/2000/svg";
+  const svg = document.createElementNS(NS, "svg");
+  svg.setAttribute("class", "chart"); svg.setAttribute("id", id);
+  svg.setAttribute("width", W); svg.setAttribute("height", H); svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
+  const el = (tag, attrs, text) => {
+    const e = document.createElementNS(NS, tag);
+    for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+    if (text !== undefined) e.textContent = text;
+    svg.append(e); return e;
+  };
+  const y = (z) => T + (H - T - B) * (1 - (Math.max(-ZMAX, Math.min(ZMAX, z)) + ZMAX) / (2 * ZMAX));
+  const x = (i) => L + (W - L - R) * (i + 0.5) / names.length;
+  el("text", { x: L, y: 13, class: "legend" }, title);
+  for (const z of [-4, 0, 4]) {
+    el("line", { class: z ? "limit" : "grid", x1: L, x2: W - R, y1: y(z), y2: y(z) });
+    el("text", { x: 4, y: y(z) + 4 }, `${z > 0 ? "+" : ""}${z}σ`);
+  }
+  const spread = Object.fromEntries(lot.spreads.map((s) => [s.name, s]));
+  names.forEach((name, i) => {
+    el("text", { x: x(i) - 12, y: H - B + 16, class: "tick" }, name.replace(/^d(.*)\/dT$/, "$1′"));
+    const sp = spread[name];
+    for (const [serial, cal, v] of lot.values[name] || []) {
+      const z = sp && sp.sigma > 0 ? (v - sp.median) / sp.sigma : 0;
+      const out = Math.abs(z) > 4 && lot.flags.some((f) => f.calibration_id === cal && f.name === name);
+      const dot = el("circle", { cx: x(i), cy: y(z), r: out ? 4 : 2.5, class: out ? "outlier" : "member",
+        "data-sensor": serial, "data-name": name });
+      const t = document.createElementNS(NS, "title");
+      t.textContent = `${serial}: ${lotValue(v, sp.unit)} (${z.toFixed(1)}σ)`;
+      dot.append(t);
+    }
+  });
+  el("text", { x: L, y: H - 6 }, `distance from the lot's median in σ = 1.4826 × MAD (clipped at ±${ZMAX}σ); red: beyond ±4σ`);
+  return svg;
+}
+
+async function fleetView() {
+  const seq = viewSeq;
+  const t = h("input", { name: "reference_c", type: "number", step: "any", value: fleetView.reference_c ?? 25, required: true });
+  const stats = await api("GET", `/api/v1/fleet/lots?reference_c=${encodeURIComponent(t.value)}`);
+  const form = h("form", { class: "inline", id: "fleet-form", onsubmit: (ev) => {
+    ev.preventDefault(); fleetView.reference_c = t.value; route(); } },
+  h("label", {}, "Parameters at (°C)", t), h("button", { type: "submit" }, "Show"));
+  const params = ["bx", "by", "bz", "sx", "sy", "sz", "ayx", "azx", "azy", "mx", "my", "mz"];
+  const lots = stats.lots.map((lot) => h("section", { class: "lot", "data-model": lot.model },
+    h("h3", {}, `${lot.model}: ${lot.sensors} sensor(s) at ${stats.reference_c} °C`),
+    lot.note ? h("p", { class: "warn lot-note" }, lot.note) : "",
+    lot.left_out.length ? h("p", { class: "muted" }, `left out (${stats.reference_c} °C outside their valid range): ${lot.left_out.join(", ")}`) : "",
+    lot.flags.length
+      ? h("table", { class: "lot-flags" }, h("tr", {}, ...["sensor", "calibration", "parameter", "value", "lot median", "distance"].map((x) => h("th", {}, x))),
+        lot.flags.map((f) => {
+          const sp = lot.spreads.find((x) => x.name === f.name);
+          return h("tr", { class: "fail" }, h("td", {}, h("a", { href: `#/sensors/${encodeURIComponent(f.sensor)}` }, f.sensor)),
+            h("td", {}, h("a", { href: `#/calibrations/${f.calibration_id}` }, f.calibration_id)), h("td", {}, f.name),
+            h("td", { class: "num" }, lotValue(f.value, sp.unit)), h("td", { class: "num" }, lotValue(sp.median, sp.unit)),
+            h("td", { class: "num" }, `${f.z > 0 ? "+" : ""}${f.z.toFixed(1)}σ`));
+        }))
+      : h("p", { class: "lot-ok" }, lot.note ? "no sensor flagged (too few to judge)" : `every sensor within ±${stats.flag_sigma}σ of its lot`),
+    zChart(lot, params, `z-${lot.model}`, "SFEM parameters (Eq. 1)"),
+    zChart(lot, params.map((p) => `d${p}/dT`), `zt-${lot.model}`, "their temperature coefficients (′ = d/dT)"),
+    h("details", {}, h("summary", {}, "median and σ per parameter"),
+      h("table", { class: "lot-spreads" }, h("tr", {}, ...["parameter", "n", "median", "σ"].map((x) => h("th", {}, x))),
+        lot.spreads.map((sp) => h("tr", {}, h("td", {}, sp.name), h("td", { class: "num" }, sp.n),
+          h("td", { class: "num" }, lotValue(sp.median, sp.unit)), h("td", { class: "num" }, lotValue(sp.sigma, sp.unit))))))));
+  showView(seq, h("h2", {}, "Fleet: lot statistics"),
+    h("p", { class: "muted" }, "The latest calibration of each sensor, grouped by sensor model; a sensor more than 4σ from its lot's median is flagged (a bad mount or a damaged part more often than a real outlier)."),
+    form, ...lots, stats.lots.length ? "" : h("p", { class: "muted" }, "no calibrations yet"));
 }
 
 // --- schedules, rigs, tokens ----------------------------------------------------------
@@ -572,7 +668,7 @@ function route() {
     campaigns: () => (parts[1] ? campaignView(Number(parts[1])) : campaignsView()),
     sensors: () => sensorsView(parts[1]),
     calibrations: () => calibrationView(Number(parts[1])),
-    schedules: schedulesView, rigs: rigsView, tokens: tokensView,
+    schedules: schedulesView, rigs: rigsView, tokens: tokensView, fleet: fleetView,
   };
   guarded(views[parts[0]] || views.campaigns);
 }
