@@ -20,7 +20,9 @@ from typing import Annotated, Any
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query
 from pydantic import BaseModel, Field
-from sqlalchemy import func, select
+from sqlalchemy import cast, func, select
+from sqlalchemy.dialects.postgresql import JSONB
+from sqlalchemy.orm import Session
 
 from service.api import auth
 from service.api.deps import DbIdPath, SessionDep
@@ -29,6 +31,9 @@ from service.db.models import Calibration, Sensor
 FLAG_SIGMA = 4.0
 MAD_TO_SIGMA = 1.4826  # σ of a normal distribution = 1.4826 × its MAD
 MIN_LOT = 5  # fewer sensors: a median and MAD say too little to flag anyone
+# Sensors per lot whose values are sent for the plot (every flagged one, and an even sample
+# of the rest): 10,000 sensors × 24 values would be megabytes for dots that overlap anyway.
+MAX_PLOTTED = 400
 PARAMETERS = ("bx", "by", "bz", "sx", "sy", "sz", "ayx", "azx", "azy", "mx", "my", "mz")
 
 router = APIRouter(prefix="/api/v1/fleet", tags=["fleet"], dependencies=[Depends(auth.viewer)])
@@ -57,7 +62,9 @@ class Lot(BaseModel):
     spreads: list[Spread]
     flags: list[Flag]
     values: dict[str, list[tuple[str, int, float]]] = Field(
-        description="name → [sensor, calibration id, value] (for the fleet page's plot)")
+        description="name → [sensor, calibration id, value] for the fleet page's plot: every "
+        f"flagged sensor and an even sample of the rest, {MAX_PLOTTED} sensors at most")
+    plotted: int = Field(description="sensors in values")
     note: str | None
 
 
@@ -76,17 +83,40 @@ def lot_statistics(
 ) -> LotStatistics:
     """Per sensor model: every SFEM parameter's and tempco's median and σ over the latest
     calibration of each sensor, and the sensors outside 4 σ."""
-    latest = select(func.max(Calibration.id)).group_by(Calibration.sensor)
-    rows = session.execute(
-        select(Calibration.id, Calibration.sensor, Calibration.model, Sensor.model)
-        .outerjoin(Sensor, Sensor.serial == Calibration.sensor)
-        .where(Calibration.id.in_(latest)).order_by(Calibration.sensor)).all()
-    by_model: dict[str, list[tuple[str, int, dict[str, Any]]]] = {}
-    for cal_id, serial, doc, sensor_model in rows:
-        model = sensor_model or _reported_model(doc) or "unknown"
-        by_model.setdefault(model, []).append((serial, cal_id, doc))
-    lots = [_lot(model, members, reference_c) for model, members in sorted(by_model.items())]
+    lots = [lot for lot, _ in _lots(session, reference_c)]
     return LotStatistics(reference_c=reference_c, flag_sigma=FLAG_SIGMA, lots=lots)
+
+
+def _lots(session: Session, reference_c: float) -> list[tuple[Lot, set[int]]]:
+    """Each lot and the calibration ids it was computed from."""
+    latest = select(func.max(Calibration.id)).group_by(Calibration.sensor)
+    doc: Any = Calibration.model
+    source: Any = Calibration
+    if session.get_bind().dialect.name == "postgresql":
+        # A json column is text: every path below would parse the ~15 kB document again.
+        # Parse each once, into jsonb, in a materialised CTE (not inlined into each path).
+        parsed = (select(Calibration.id, Calibration.sensor,
+                         cast(Calibration.model, JSONB).label("doc"))
+                  .where(Calibration.id.in_(latest)).cte("parsed").prefix_with("MATERIALIZED"))
+        doc, source = parsed.c.doc, parsed.c
+    # Only the parts of each model document the statistics read, extracted by the database.
+    query = (select(source.id, source.sensor, Sensor.model,
+                    doc["provenance"]["sensor_identity"]["reported_model"],
+                    doc["temperature"]["centre_c"], doc["temperature"]["valid_c"],
+                    doc["polynomial"]["physical_coefficients"],
+                    doc["polynomial"]["physical_units"])
+             .outerjoin(Sensor, Sensor.serial == source.sensor)
+             .order_by(source.sensor))
+    if source is Calibration:
+        query = query.where(Calibration.id.in_(latest))
+    rows = session.execute(query).all()
+    by_model: dict[str, list[tuple[str, int, dict[str, Any]]]] = {}
+    for cal_id, serial, sensor_model, reported, centre_c, valid_c, coeffs, units in rows:
+        model = sensor_model or reported or "unknown"
+        part = {"temperature": {"centre_c": centre_c, "valid_c": valid_c},
+                "polynomial": {"physical_coefficients": coeffs, "physical_units": units}}
+        by_model.setdefault(model, []).append((serial, cal_id, part))
+    return [_lot(model, members, reference_c) for model, members in sorted(by_model.items())]
 
 
 class LotCheck(BaseModel):
@@ -106,9 +136,7 @@ def calibration_lot_check(
     """This calibration against its lot: its parameters outside 4 σ, or why no verdict."""
     if session.get(Calibration, calibration_id) is None:
         raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
-    stats = lot_statistics(session, reference_c)
-    for lot in stats.lots:
-        members = {c for points in lot.values.values() for _, c, _ in points}
+    for lot, members in _lots(session, reference_c):
         if calibration_id in members:
             mine = [f for f in lot.flags if f.calibration_id == calibration_id]
             return LotCheck(calibration_id=calibration_id, model=lot.model,
@@ -142,7 +170,8 @@ def parameters_at(doc: dict[str, Any], t_c: float) -> dict[str, tuple[float, str
     return out
 
 
-def _lot(model: str, members: list[tuple[str, int, dict[str, Any]]], t_c: float) -> Lot:
+def _lot(model: str, members: list[tuple[str, int, dict[str, Any]]], t_c: float
+         ) -> tuple[Lot, set[int]]:
     values: dict[str, list[tuple[str, int, float]]] = {}
     units: dict[str, str] = {}
     left_out: list[str] = []
@@ -172,10 +201,17 @@ def _lot(model: str, members: list[tuple[str, int, dict[str, Any]]], t_c: float)
     n = len(members) - len(left_out)
     note = None if n >= MIN_LOT else (
         f"{n} sensor(s) at {t_c:g} °C: at least {MIN_LOT} are needed to flag one")
+    compared = {c for points in values.values() for _, c, _ in points}
+    shown = _plotted(compared, {f.calibration_id for f in flags})
+    values = {k: [p for p in points if p[1] in shown] for k, points in values.items()}
     return Lot(model=model, sensors=n, left_out=left_out, spreads=spreads, flags=flags,
-               values=values, note=note)
+               values=values, plotted=len(shown), note=note), compared
 
 
-def _reported_model(doc: dict[str, Any] | None) -> str | None:
-    identity = ((doc or {}).get("provenance") or {}).get("sensor_identity") or {}
-    return identity.get("reported_model")
+def _plotted(members: set[int], flagged: set[int]) -> set[int]:
+    """Every flagged calibration and an even sample of the others, MAX_PLOTTED at most."""
+    if len(members) <= MAX_PLOTTED:
+        return members
+    rest = sorted(members - flagged)
+    room = max(0, MAX_PLOTTED - len(flagged))
+    return set(flagged) | {rest[i * len(rest) // room] for i in range(room)}

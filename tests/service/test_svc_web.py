@@ -292,3 +292,13 @@ def test_a_small_lot_flags_no_one_and_says_why(client: TestClient, sf, auth) -> 
     (lot,) = client.get("/api/v1/fleet/lots", headers=auth["viewer"]).json()["lots"]
     assert lot["flags"] == []
     assert lot["note"] == "3 sensor(s) at 25 °C: at least 5 are needed to flag one"
+
+
+def test_a_large_lot_plots_a_sample_and_every_flagged_sensor() -> None:
+    from service.api.fleet import MAX_PLOTTED, _plotted
+
+    members = set(range(1, 2001))
+    shown = _plotted(members, {7, 1999})
+    assert {7, 1999} <= shown and len(shown) <= MAX_PLOTTED
+    assert len(shown) > MAX_PLOTTED * 0.9  # an even sample, not a handful
+    assert _plotted({1, 2, 3}, set()) == {1, 2, 3}

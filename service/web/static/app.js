@@ -573,6 +573,7 @@ async function fleetView() {
             h("td", { class: "num" }, `${f.z > 0 ? "+" : ""}${f.z.toFixed(1)}σ`));
         }))
       : h("p", { class: "lot-ok" }, lot.note ? "no sensor flagged (too few to judge)" : `every sensor within ±${stats.flag_sigma}σ of its lot`),
+    lot.plotted < lot.sensors ? h("p", { class: "muted" }, `plotted: every flagged sensor and an even sample of the rest, ${lot.plotted} of ${lot.sensors}`) : "",
     zChart(lot, params, `z-${lot.model}`, "SFEM parameters (Eq. 1)"),
     zChart(lot, params.map((p) => `d${p}/dT`), `zt-${lot.model}`, "their temperature coefficients (′ = d/dT)"),
     h("details", {}, h("summary", {}, "median and σ per parameter"),
