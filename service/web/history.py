@@ -48,7 +48,8 @@ def temperature_history(campaign_id: DbIdPath, session: SessionDep) -> Temperatu
     campaign = session.get(Campaign, campaign_id)
     if campaign is None:
         raise HTTPException(status_code=404, detail=f"campaign {campaign_id} not found")
-    first = campaign_serials(campaign.spec or {}, campaign.sensor)[0]
+    serials = campaign_serials(campaign.spec or {}, campaign.sensor)
+    first = serials[0]
     rows = session.execute(_history_query(campaign_id)).all()
     chamber: list[tuple[float, float]] = []
     setpoint: list[tuple[float, float]] = []
@@ -66,7 +67,10 @@ def temperature_history(campaign_id: DbIdPath, session: SessionDep) -> Temperatu
     return TemperatureHistory(
         campaign_id=campaign_id, time="seconds since the campaign started (rig clock)",
         chamber_c=thin(chamber), setpoint_c=thin(setpoint),
-        die_c={serial: thin(points) for serial, points in die.items()}, soaks=soaks)
+        # in the campaign's order of sensors (then any other serial the rows name)
+        die_c={serial: thin(die[serial]) for serial in
+               [*(s for s in serials if s in die), *(s for s in die if s not in serials)]},
+        soaks=soaks)
 
 
 def _history_query(campaign_id: int) -> Any:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 
 import pytest
-from web_helpers import LiveService, sign_in, table_rows
+from web_helpers import LiveService, open_view, sign_in, table_rows
 
 
 def test_the_campaign_list_shows_one_row_per_campaign(
@@ -194,3 +194,21 @@ def test_a_finished_campaign_read_the_next_morning(
     ticks = [t for t in texts if t.endswith("°C") and "(" not in t]
     temps = [float(t.split()[0]) for t in ticks]
     assert min(temps) <= 20.5 and max(temps) >= 49.5, ticks
+
+
+def test_a_two_sensor_campaign_shows_each_die_and_calibration(
+    page, live_engine_service: LiveService,  # type: ignore[no-untyped-def]
+) -> None:
+    created = live_engine_service.start_campaign(None, sensors=["SN-PAIR-B", "SN-PAIR-A"])
+    done = live_engine_service.wait_campaign(created["id"], "completed", "failed", "aborted")
+    assert done["state"] == "completed", done["error"]
+    sign_in(page, live_engine_service, "viewer")
+    open_view(page, live_engine_service, f"#/campaigns/{done['id']}",
+              "#temp-chart polyline[data-series=chamber]")
+    assert page.inner_text("#result") == "2 of 2 sensors calibrated"
+    legend = page.locator("#temp-chart text.legend").all_text_contents()
+    assert legend[2:] == ["die SN-PAIR-B (°C)", "die SN-PAIR-A (°C)"]  # the campaign's order
+    links = page.locator("#links a").all_inner_texts()
+    assert [t for t in links if t.startswith("calibration")] == [
+        f"calibration {done['calibration_ids'][s]} ({s})" for s in ("SN-PAIR-B", "SN-PAIR-A")]
+    assert "recording SN-PAIR-A (CSV)" in links

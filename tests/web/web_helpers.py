@@ -33,9 +33,12 @@ class LiveService:
             raw = response.read()
         return json.loads(raw) if raw else None
 
-    def start_campaign(self, sensor: str, **spec: Any) -> dict[str, Any]:
-        body = {"rig": "sim", "sensor": sensor, "setpoints_c": [20, 35, 50], "soak_min": 10,
+    def start_campaign(self, sensor: str | None, **spec: Any) -> dict[str, Any]:
+        """A short campaign on the sim rig (``sensor`` None: give ``sensors=[...]``)."""
+        body = {"rig": "sim", "setpoints_c": [20, 35, 50], "soak_min": 10,
                 "positions": "table1", "samples_per_position": 20, **spec}
+        if sensor is not None:
+            body["sensor"] = sensor
         return self.call("POST", "/api/v1/campaigns", body)
 
     def wait_campaign(self, campaign_id: int, *states: str, timeout_s: float = 60) -> dict:

@@ -319,7 +319,8 @@ async function campaignView(id) {
       rows.push(h("dt", {}, "finished"), h("dd", { id: "finished" }, `${when(c.finished_at)} (took ${duration(took)} wall clock)`),
         h("dt", {}, "steps"), h("dd", { id: "step" }, stepText(c)),
         h("dt", {}, "result"), h("dd", { id: "result" }, c.state === "completed"
-          ? (c.calibration_id ? `calibration ${c.calibration_id}` : "no calibration stored")
+          ? (c.sensors.length > 1 ? `${Object.keys(c.calibration_ids || {}).length} of ${c.sensors.length} sensors calibrated`
+            : c.calibration_id ? `calibration ${c.calibration_id}` : "no calibration stored")
           : (c.error || `${c.state}, no calibration`)));
     } else {
       rows.push(
@@ -339,8 +340,16 @@ async function campaignView(id) {
       if (c.state === "paused") buttons.append(control("resume"), " ");
       buttons.append(control("abort"));
     }
-    links.replaceChildren(h("a", { href: `/api/v1/campaigns/${id}/recording.csv`, id: "recording" }, "recording (CSV, format v1)"));
-    if (c.calibration_id) links.append(" · ", h("a", { href: `#/calibrations/${c.calibration_id}`, id: "calibration-link" }, `calibration ${c.calibration_id} and its figures`));
+    const several = c.sensors.length > 1;
+    links.replaceChildren(...(several
+      ? c.sensors.map((sn, i) => [i ? " · " : "", h("a", { href: `/api/v1/campaigns/${id}/recording.csv?sensor=${encodeURIComponent(sn)}` }, `recording ${sn} (CSV)`)]).flat()
+      : [h("a", { href: `/api/v1/campaigns/${id}/recording.csv`, id: "recording" }, "recording (CSV, format v1)")]));
+    if (several) {
+      for (const [sn, cal] of Object.entries(c.calibration_ids || {})) links.append(" · ", h("a", { href: `#/calibrations/${cal}` }, `calibration ${cal} (${sn})`));
+      for (const [sn, why] of Object.entries(c.sensors_dropped || {})) links.append(" · ", h("span", { class: "warn" }, `${sn} dropped: ${why}`));
+    } else if (c.calibration_id) {
+      links.append(" · ", h("a", { href: `#/calibrations/${c.calibration_id}`, id: "calibration-link" }, `calibration ${c.calibration_id} and its figures`));
+    }
   }
   // The chart is re-read from the database (at most every 2 s while the campaign runs).
   let histAt = 0, histBusy = false;
