@@ -27,7 +27,7 @@ def test_the_campaign_list_shows_one_row_per_campaign(
     page.click(f"#campaigns a[href='#/campaigns/{queued['id']}']")
     page.wait_for_selector("#facts dd")
     assert page.inner_text("#state") == "paused"
-    live_engine_service.call("POST", f"/api/v1/campaigns/{queued['id']}/abort")
+    live_engine_service.abort(queued["id"])
 
 
 @pytest.mark.parametrize(("kind", "said"), [
@@ -80,7 +80,7 @@ def test_a_refusal_stays_until_the_next_action(page, live_engine_service: LiveSe
     page.click("#start button")
     page.wait_for_selector("#facts dd")
     assert page.is_hidden("#error")
-    live_engine_service.call("POST", f"/api/v1/campaigns/{page.url.rsplit('/', 1)[1]}/abort")
+    live_engine_service.abort(page.url.rsplit("/", 1)[1])
 
 
 def test_the_header_stays_on_one_line_at_800_px(page, live_engine_service: LiveService) -> None:  # type: ignore[no-untyped-def]

@@ -51,6 +51,13 @@ class LiveService:
             time.sleep(0.1)
 
 
+    def abort(self, campaign_id: int | str) -> None:
+        """Abort and wait until the rig is free again (an abort acts at the runner's next
+        safe point; the next test may want the rig)."""
+        self.call("POST", f"/api/v1/campaigns/{campaign_id}/abort")
+        self.wait_campaign(int(campaign_id), "aborted", "completed", "failed")
+
+
 def chromium_or_skip() -> str:
     """Debian's chromium and the playwright package, or skip with the reason."""
     if not CHROMIUM.exists() and not shutil.which("chromium"):
