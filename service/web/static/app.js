@@ -241,8 +241,13 @@ function chart(hist) {
     const c = lo + (hi - lo) * i / 4;
     el("line", { class: "grid", x1: L, x2: W - R, y1: y(c), y2: y(c) });
     el("text", { x: 4, y: y(c) + 4 }, `${c.toFixed(1)} °C`);
-    const t = t1 * i / 4;
-    el("text", { x: x(t) - (i === 4 ? 20 : i ? 10 : 0), y: H - B + 14, class: "tick" }, (t / per).toFixed(t1 / per < 4 ? 1 : 0));
+  }
+  // time ticks at round numbers of the unit (0, 30, 60 min; 0, 2, 4 h), at most 7
+  const span = t1 / per;
+  const step = [0.1, 0.2, 0.25, 0.5, 1, 2, 5, 10, 15, 20, 30, 60, 120, 240, 480].find((s) => span / s <= 6) || span;
+  for (let v = 0; v <= span + 1e-9; v += step) {
+    el("line", { class: "grid", x1: x(v * per), x2: x(v * per), y1: T, y2: H - B });
+    el("text", { x: x(v * per) - 6, y: H - B + 14, class: "tick" }, String(Number(v.toFixed(2))));
   }
   el("line", { class: "axis", x1: L, x2: W - R, y1: H - B, y2: H - B });
   el("text", { x: L, y: H - 4, id: "x-label" }, `time since the campaign started (${unit}, rig clock)`);
