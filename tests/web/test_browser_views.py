@@ -130,3 +130,20 @@ def test_a_viewer_sees_no_tokens_and_no_controls(
     assert page.locator("#start").count() == 0  # no start form
     open_view(page, live_engine_service, "#/rigs", "#rigs td")
     assert page.locator("#rigs button").count() == 0
+
+
+def test_a_token_revoked_while_the_page_is_open_signs_it_out_saying_why(
+    page, live_engine_service: LiveService,  # type: ignore[no-untyped-def]
+) -> None:
+    created = live_engine_service.call("POST", "/api/v1/tokens",
+                                       {"role": "viewer", "name": "lab-pc-9"}, role="admin")
+    page.goto(live_engine_service.url + "/")
+    page.fill("#token", created["token"])
+    page.click("#signin button")
+    page.wait_for_selector("#main h2:text('Campaigns')")
+    live_engine_service.call("DELETE", f"/api/v1/tokens/{created['id']}", role="admin")
+    page.click("a[href='#/rigs']")
+    page.wait_for_selector("#token")  # back on the sign-in form
+    assert page.inner_text("#error") == (
+        "Signed out: this token has been revoked; ask an admin for a new one.")
+    assert page.is_hidden("#nav")
