@@ -326,9 +326,9 @@ def progress_of(campaign: Campaign) -> Progress:
     positions = live.get("positions")
     if positions is None and spec.get("positions"):
         positions = positions_count(str(spec["positions"]))
-    eta_s = live.get("eta_s")
+    eta_s, eta_wall_s = live.get("eta_s"), live.get("eta_wall_s")
     if campaign.state in TERMINAL:
-        eta_s = 0.0 if campaign.state == "completed" else None
+        eta_s = eta_wall_s = 0.0 if campaign.state == "completed" else None
     return Progress(
         step=step,
         steps=int(_first(live.get("steps"), len(setpoints_c))),
@@ -339,6 +339,7 @@ def progress_of(campaign: Campaign) -> Progress:
         chamber_c=live.get("chamber_c"),
         setpoint_c=setpoint_c,
         eta_s=eta_s,
+        eta_wall_s=eta_wall_s,
     )
 
 

@@ -13,7 +13,7 @@ from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from service import web
-from service.api import calibrations, campaigns, door, health, rigs, schedules, tokens
+from service.api import calibrations, campaigns, door, fleet, health, rigs, schedules, tokens
 from service.api import placement as placement_api  # manual fixtures (issue 9)
 from service.campaigns import load_rigs_file, seed_sim_rig, upsert_rigs
 from service.config import Settings, service_version
@@ -44,7 +44,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.engine = engine
     app.state.session_factory = make_session_factory(engine)
-    for module in (health, rigs, campaigns, calibrations, schedules, tokens):
+    for module in (health, rigs, campaigns, calibrations, schedules, tokens, fleet):
         app.include_router(module.router)
     app.include_router(placement_api.router)
     app.include_router(web.router)

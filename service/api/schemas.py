@@ -98,6 +98,8 @@ class Progress(BaseModel):
     chamber_c: float | None
     setpoint_c: float | None
     eta_s: float | None
+    eta_wall_s: float | None = Field(
+        default=None, description="eta_s on the wall clock (shorter on a sped-up sim rig)")
 
 
 class CampaignOut(BaseModel):

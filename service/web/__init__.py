@@ -8,12 +8,12 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.web import docs, figures, pages, session
+from service.web import calibration_page, docs, figures, history, pages, session
 from service.web.cors import add_cors
 from service.web.pages import mount_static
 
 router = APIRouter()
-for _module in (pages, docs, session, figures):
+for _module in (pages, docs, session, figures, history, calibration_page):
     router.include_router(_module.router)
 
 __all__ = ["add_cors", "mount_static", "router"]

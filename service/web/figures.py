@@ -16,8 +16,9 @@ import re
 import tempfile
 import threading
 from collections import OrderedDict
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi import Path as PathParam
@@ -44,28 +45,41 @@ router = APIRouter(
 CalibrationId = Annotated[int, PathParam(ge=1, le=2**31 - 1)]
 
 
+@dataclass(frozen=True)
+class Refit:
+    """What the redone fit gives that the calibration row does not keep."""
+
+    pngs: dict[str, bytes]
+    holdout: dict[str, Any]  # calibration.holdout.leave_one_out: loo_rmse_ug, dof, warnings
+
+
 class FigureCache:
-    """PNG bytes per calibration, least recently used dropped; one fit at a time."""
+    """The refit's figures and held-out figures per calibration, least recently used dropped;
+    one fit at a time."""
 
     def __init__(self, max_entries: int = CACHE_CALIBRATIONS) -> None:
-        self._entries: OrderedDict[int, dict[str, bytes]] = OrderedDict()
+        self._entries: OrderedDict[int, Refit] = OrderedDict()
         self._max = max_entries
         self._lock = threading.Lock()
 
-    def figures(self, factory: sessionmaker[Session], calibration_id: int) -> dict[str, bytes]:
+    def refit(self, factory: sessionmaker[Session], calibration_id: int) -> Refit:
         with self._lock:  # matplotlib is not thread-safe, and a fit costs seconds: do one
             if calibration_id in self._entries:
                 self._entries.move_to_end(calibration_id)
                 return self._entries[calibration_id]
-            pngs = draw_figures(factory, calibration_id)
-            self._entries[calibration_id] = pngs
+            done = redo_fit(factory, calibration_id)
+            self._entries[calibration_id] = done
             while len(self._entries) > self._max:
                 self._entries.popitem(last=False)
-            return pngs
+            return done
+
+    def figures(self, factory: sessionmaker[Session], calibration_id: int) -> dict[str, bytes]:
+        return self.refit(factory, calibration_id).pngs
 
 
-def draw_figures(factory: sessionmaker[Session], calibration_id: int) -> dict[str, bytes]:
-    """Refit the calibration's campaign and draw its figures: ``{name: png bytes}``."""
+def redo_fit(factory: sessionmaker[Session], calibration_id: int) -> Refit:
+    """Refit the calibration's campaign: its figures (``{name: png bytes}``) and the
+    leave-one-position-out figures of ``soakcal calibrate`` (calibration/holdout.py)."""
     from calibration.recording import Recording
     from calibration.report import write_figures
     from service.engine import store
@@ -87,9 +101,12 @@ def draw_figures(factory: sessionmaker[Session], calibration_id: int) -> dict[st
     recording = Recording.from_columns(
         {k: np.asarray(v, float) for k, v in columns.items()}, path=f"campaign-{campaign_id}.csv"
     )
+    from calibration.holdout import leave_one_out
+
     with tempfile.TemporaryDirectory(prefix="soakcal-figures-") as tmp:
         paths = write_figures(values["_fit"], recording, tmp)
-        return {Path(p).stem: Path(p).read_bytes() for p in paths}
+        pngs = {Path(p).stem: Path(p).read_bytes() for p in paths}
+    return Refit(pngs=pngs, holdout=leave_one_out(recording, values["_fit"]))
 
 
 def _cache(request: Request) -> FigureCache:
@@ -99,13 +116,18 @@ def _cache(request: Request) -> FigureCache:
     return cache
 
 
-async def _figures(request: Request, calibration_id: int) -> dict[str, bytes]:
+async def refit_of(request: Request, calibration_id: int) -> Refit:
+    """The calibration's refit (redone on first request, a few seconds), 404 when impossible."""
     try:
         return await run_in_threadpool(
-            _cache(request).figures, request.app.state.session_factory, calibration_id
+            _cache(request).refit, request.app.state.session_factory, calibration_id
         )
     except LookupError as exc:
         raise HTTPException(status_code=404, detail=str(exc)) from exc
+
+
+async def _figures(request: Request, calibration_id: int) -> dict[str, bytes]:
+    return (await refit_of(request, calibration_id)).pngs
 
 
 @router.get("/{calibration_id}/figures", response_model=list[str])

@@ -1,4 +1,9 @@
-"""A live service with the campaign engine on the ``sim`` rig, for the browser test."""
+"""One live service (engine on the ``sim`` rig, fast) and one Chromium for the whole browser suite.
+
+Starting uvicorn and Chromium costs seconds each; every test gets its own
+browser context (own cookies) and page instead, and the campaigns it needs
+are short accelerated ones on the shared service.
+"""
 
 from __future__ import annotations
 
@@ -12,9 +17,13 @@ import pytest
 import uvicorn
 from web_helpers import LiveService, chromium_or_skip
 
+TIMEOUT_MS = 30_000
+# 3000× wall: a three-step campaign of 10-min soaks ends in a few seconds.
+SIM_SPEED = 3000.0
 
-@pytest.fixture
-def live_engine_service(tmp_path: Path) -> Iterator[LiveService]:
+
+@pytest.fixture(scope="session")
+def live_engine_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveService]:
     """uvicorn in a thread on a free port, the engine running the sim rig fast."""
     chromium_or_skip()  # before starting anything
     from service.api.app import create_app
@@ -22,12 +31,12 @@ def live_engine_service(tmp_path: Path) -> Iterator[LiveService]:
     from service.config import Settings
     from service.db.session import session_scope
 
+    db = Path(tmp_path_factory.mktemp("browser")) / "browser.db"
     settings = Settings(
-        database_url=f"sqlite:///{tmp_path / 'browser.db'}",
+        database_url=f"sqlite:///{db}",
         run_engine=True,
         run_scheduler=False,
-        # fast enough to finish in seconds, slow enough that a pause lands mid-campaign
-        sim_speed=1200.0,
+        sim_speed=SIM_SPEED,
         events_poll_s=0.1,
     )
     app = create_app(settings)
@@ -43,8 +52,46 @@ def live_engine_service(tmp_path: Path) -> Iterator[LiveService]:
     assert server.started, "the service did not start within 20 s"
     tokens = {}
     with session_scope(app.state.session_factory) as session:
-        for role in ("viewer", "operator"):
+        for role in ("viewer", "operator", "admin"):
             tokens[role] = create_token(session, role, f"browser {role}")
-    yield LiveService(url=f"http://127.0.0.1:{port}", tokens=tokens)
+    yield LiveService(url=f"http://127.0.0.1:{port}", tokens=tokens,
+                      session_factory=app.state.session_factory)
     server.should_exit = True
     thread.join(timeout=20)
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[object]:
+    executable = chromium_or_skip()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(executable_path=executable, args=["--no-sandbox"])
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def page(browser, live_engine_service: LiveService) -> Iterator[object]:  # type: ignore[no-untyped-def]
+    """A fresh context (no cookie) and page; fails the test on any script error or on a
+    request to another host (the dashboard must work on a lab network with no internet)."""
+    context = browser.new_context(viewport={"width": 1200, "height": 900})
+    tab = context.new_page()
+    tab.set_default_timeout(TIMEOUT_MS)
+    errors: list[str] = []
+    requested: list[str] = []
+    tab.on("pageerror", lambda e: errors.append(str(e)))
+    tab.on("request", lambda r: requested.append(r.url))
+    yield tab
+    context.close()
+    assert not errors, errors
+    base = live_engine_service.url
+    foreign = [u for u in requested if not u.startswith((base + "/", "data:"))]
+    assert not foreign, f"the dashboard asked other hosts: {foreign}"
+
+
+@pytest.fixture(scope="session")
+def completed_campaign(live_engine_service: LiveService) -> dict:
+    """A short campaign on the sim rig run to its calibration (a few seconds at 3000×)."""
+    created = live_engine_service.start_campaign("SN-DONE")
+    return live_engine_service.wait_campaign(created["id"], "completed", "failed", "aborted")

@@ -1,10 +1,15 @@
-"""Helpers of the browser tests: the live service's address and tokens, Chromium or skip."""
+"""Helpers of the browser tests: the live service, Chromium or skip, sign-in, campaigns."""
 
 from __future__ import annotations
 
+import json
 import shutil
+import time
+import urllib.error
+import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -15,6 +20,42 @@ CHROMIUM = Path("/usr/bin/chromium")
 class LiveService:
     url: str
     tokens: dict[str, str]
+    session_factory: Any = None
+
+    def call(self, method: str, path: str, body: Any = None, role: str = "operator") -> Any:
+        """The REST API with a bearer token: the JSON answer (HTTPError on 4xx/5xx)."""
+        data = None if body is None else json.dumps(body).encode()
+        request = urllib.request.Request(
+            self.url + path, data=data, method=method,
+            headers={"Authorization": f"Bearer {self.tokens[role]}",
+                     "Content-Type": "application/json"})
+        with urllib.request.urlopen(request, timeout=30) as response:
+            raw = response.read()
+        return json.loads(raw) if raw else None
+
+    def start_campaign(self, sensor: str | None, **spec: Any) -> dict[str, Any]:
+        """A short campaign on the sim rig (``sensor`` None: give ``sensors=[...]``)."""
+        body = {"rig": "sim", "setpoints_c": [20, 35, 50], "soak_min": 10,
+                "positions": "table1", "samples_per_position": 20, **spec}
+        if sensor is not None:
+            body["sensor"] = sensor
+        return self.call("POST", "/api/v1/campaigns", body)
+
+    def wait_campaign(self, campaign_id: int, *states: str, timeout_s: float = 60) -> dict:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            c = self.call("GET", f"/api/v1/campaigns/{campaign_id}")
+            if c["state"] in states:
+                return c
+            assert time.monotonic() < deadline, f"campaign {campaign_id} still {c['state']}"
+            time.sleep(0.1)
+
+
+    def abort(self, campaign_id: int | str) -> None:
+        """Abort and wait until the rig is free again (an abort acts at the runner's next
+        safe point; the next test may want the rig)."""
+        self.call("POST", f"/api/v1/campaigns/{campaign_id}/abort")
+        self.wait_campaign(int(campaign_id), "aborted", "completed", "failed")
 
 
 def chromium_or_skip() -> str:
@@ -23,3 +64,26 @@ def chromium_or_skip() -> str:
         pytest.skip("no Chromium (apt-get install chromium; .ci/run installs it)")
     pytest.importorskip("playwright.sync_api", reason="pip install playwright (test extra)")
     return str(CHROMIUM if CHROMIUM.exists() else shutil.which("chromium"))
+
+
+def sign_in(page: Any, service: LiveService, role: str) -> None:
+    page.goto(service.url + "/")
+    page.fill("#token", service.tokens[role])
+    page.click("#signin button")
+    page.wait_for_selector("#nav:not([hidden])")
+    page.wait_for_selector("#main h2:text('Campaigns')")  # the first view is drawn
+    assert f"({role})" in page.inner_text("#who")
+
+
+def open_view(page: Any, service: LiveService, fragment: str, ready: str) -> None:
+    """Go to a view (``#/...``) and wait for its ``ready`` selector."""
+    page.goto(f"{service.url}/{fragment}")
+    page.wait_for_selector(ready)
+
+
+def table_rows(page: Any, selector: str) -> list[list[str]]:
+    """The data cells (td) of a table's rows that have any (header rows left out)."""
+    return page.eval_on_selector(
+        selector,
+        "(t) => Array.from(t.querySelectorAll('tr')).filter((r) => r.querySelector('td'))"
+        ".map((r) => Array.from(r.querySelectorAll('td')).map((c) => c.innerText.trim()))")

@@ -1,0 +1,124 @@
+"""The numbers that decide a calibration's pass or fail, for the dashboard's calibration page.
+
+The calibration row keeps its fit report (``calibration.thermal.fit_campaign``'s
+``report``) beside the model document; ``GET /api/v1/calibrations/{id}`` gives
+only the model. This reads the report into what a lab engineer checks: the
+|g| RMSE (the seed paper's Eq. 9) before and after the thermal model, the
+valid range, each step's figures, which SFEM parameters were fitted and which
+were held at nominal (not identifiable from the positions), and the
+polynomial degree asked for and used. The held-out (leave-one-position-out)
+figure needs the fit redone: ``/holdout`` shares the figures' refit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException, Request
+from pydantic import BaseModel, Field
+
+from service.api import auth
+from service.api.deps import DbIdPath, SessionDep
+from service.db.models import Calibration
+from service.db.timestamps import as_utc
+from service.web.figures import refit_of
+
+router = APIRouter(prefix="/web/calibrations", tags=["dashboard"],
+                   dependencies=[Depends(auth.viewer)],
+                   responses={404: {"description": "no such calibration"}})
+
+
+class StepRow(BaseModel):
+    step: int
+    setpoint_c: float | None
+    temperature_c: float | None = Field(description="the step's die temperature the fit used")
+    positions: int | None
+    rmse_before_ug: float | None = Field(description="|g| error of the raw readings (Eq. 9)")
+    rmse_step_fit_ug: float | None = Field(description="after this step's own SFEM fit")
+    rmse_after_ug: float | None = Field(description="after the thermal polynomial model")
+    chi2_red: float | None
+    soak_s: float | None = Field(description="rig seconds the step soaked")
+    soak_reason: str | None = Field(description="why the soak ended")
+
+
+class CalibrationPage(BaseModel):
+    id: int
+    sensor: str
+    campaign_id: int | None
+    created_at: Any
+    model_version: str
+    mode: str | None
+    method: str | None
+    degree: int | None = Field(description="degree of the thermal polynomials used")
+    degree_requested: int | None
+    temperature_source: str | None
+    valid_c: tuple[float, float]
+    rmse_before_ug: float | None = Field(description="rms over steps, raw readings")
+    rmse_after_ug: float = Field(description="rms over steps, after the thermal model "
+                                 "(the calibration's rmse_ug)")
+    fitted: list[str] = Field(description="SFEM parameters fitted")
+    held: list[str] = Field(description="SFEM parameters held at nominal: the positions "
+                            "cannot identify them")
+    joint_fit: dict[str, Any] | None
+    drift_ug_per_k: dict[str, float | None] = Field(
+        description="|slope| of the output at fixed orientation vs temperature, before/after")
+    steps: list[StepRow]
+    notes: list[str]
+
+
+@router.get("/{calibration_id}/summary", response_model=CalibrationPage)
+def calibration_page(calibration_id: DbIdPath, session: SessionDep) -> CalibrationPage:
+    """RMSE before and after, valid range, per-step table, what was fitted and what held."""
+    row = session.get(Calibration, calibration_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail=f"calibration {calibration_id} not found")
+    report: dict[str, Any] = row.report or {}
+    provenance: dict[str, Any] = row.provenance or {}
+    soaks = {s.get("step"): s for s in provenance.get("steps_log") or []}
+    steps = [_step_row(st, soaks.get(st.get("step"), {})) for st in report.get("steps") or []]
+    identifiable: dict[str, bool] = report.get("identifiable") or {}
+    drift = report.get("drift") or {}
+    return CalibrationPage(
+        id=row.id, sensor=row.sensor, campaign_id=row.campaign_id,
+        created_at=as_utc(row.created_at), model_version=row.model_version,
+        mode=report.get("mode"), method=report.get("method"), degree=report.get("degree"),
+        degree_requested=(row.model or {}).get("provenance", {}).get("degree_requested"),
+        temperature_source=report.get("temperature_source"),
+        valid_c=(row.valid_lo_c, row.valid_hi_c),
+        rmse_before_ug=_rms([s.rmse_before_ug for s in steps]),
+        rmse_after_ug=row.rmse_ug,
+        fitted=[k for k, ok in identifiable.items() if ok],
+        held=[k for k, ok in identifiable.items() if not ok],
+        joint_fit=report.get("joint_fit"),
+        drift_ug_per_k={k: (drift.get(k) or {}).get("abs_slope_ug_per_k")
+                        for k in ("before", "after")},
+        steps=steps, notes=[str(n) for n in report.get("notes") or []],
+    )
+
+
+@router.get("/{calibration_id}/holdout", response_model=dict[str, Any])
+async def calibration_holdout(calibration_id: DbIdPath, request: Request) -> dict[str, Any]:
+    """The leave-one-position-out figures (``loo_rmse_ug``, ``dof``, ``warnings``) of
+    ``soakcal calibrate``, from the fit redone on the stored measurements."""
+    return (await refit_of(request, calibration_id)).holdout
+
+
+def _step_row(st: dict[str, Any], soak: dict[str, Any]) -> StepRow:
+    return StepRow(
+        step=int(st.get("step", 0)), setpoint_c=st.get("setpoint_c"),
+        temperature_c=st.get("temperature_c"), positions=st.get("positions"),
+        rmse_before_ug=_ug(st.get("rmse_before_mg")),
+        rmse_step_fit_ug=_ug(st.get("rmse_measurement_mg")),
+        rmse_after_ug=_ug(st.get("rmse_polynomial_mg")),
+        chi2_red=st.get("chi2_red"), soak_s=soak.get("soak_s"), soak_reason=soak.get("reason"))
+
+
+def _ug(mg: float | None) -> float | None:
+    return None if mg is None or not math.isfinite(mg) else round(mg * 1e3, 1)
+
+
+def _rms(values: list[float | None]) -> float | None:
+    """Over steps, as the calibration's own rmse_ug (service/engine/calibrate.rmse_after_ug)."""
+    finite = [v for v in values if v is not None]
+    return round(math.sqrt(sum(v * v for v in finite) / len(finite)), 1) if finite else None

@@ -1,0 +1,214 @@
+"""Campaigns in Chromium: the list's rows, sign-in refusals, a refusal that stays, the header,
+a campaign watched live (ETA, chart, pause and abort asked first) and read after it finished."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from web_helpers import LiveService, open_view, sign_in, table_rows
+
+
+def test_the_campaign_list_shows_one_row_per_campaign(
+    page, live_engine_service: LiveService, completed_campaign: dict,  # type: ignore[no-untyped-def]
+) -> None:
+    queued = live_engine_service.start_campaign("SN-LIST", soak_min=30)
+    live_engine_service.call("POST", f"/api/v1/campaigns/{queued['id']}/pause")
+    sign_in(page, live_engine_service, "viewer")  # lands on the campaigns
+    page.wait_for_selector("#campaigns td")
+    assert "[object" not in page.inner_text("#main")
+    rows = {r[0]: r for r in table_rows(page, "#campaigns")}
+    done = rows[str(completed_campaign["id"])]
+    assert done[1:4] == ["completed", "sim", "SN-DONE"]
+    assert done[4] == "all 3 steps" and done[5] == "100 %"
+    paused = rows[str(queued["id"])]
+    assert paused[1:4] == ["paused", "sim", "SN-LIST"]
+    # a row opens its campaign
+    page.click(f"#campaigns a[href='#/campaigns/{queued['id']}']")
+    page.wait_for_selector("#facts dd")
+    assert page.inner_text("#state") == "paused"
+    live_engine_service.abort(queued["id"])
+
+
+@pytest.mark.parametrize(("kind", "said"), [
+    ("unknown", "not known to this service"),
+    ("revoked", "has been revoked"),
+    ("expired", "has expired"),
+])
+def test_a_refused_token_says_why(
+    page, live_engine_service: LiveService, kind: str, said: str,  # type: ignore[no-untyped-def]
+) -> None:
+    import datetime as dt
+
+    from service.api.auth import create_token, hash_token
+    from service.db.models import ApiToken
+    from service.db.session import session_scope
+
+    token = "sct_not-a-token-of-this-service"
+    if kind != "unknown":
+        with session_scope(live_engine_service.session_factory) as session:
+            token = create_token(session, "viewer", f"refused {kind}")
+            row = session.query(ApiToken).filter_by(token_hash=hash_token(token)).one()
+            past = dt.datetime.now(dt.UTC) - dt.timedelta(minutes=1)
+            if kind == "revoked":
+                row.revoked_at = past
+            else:
+                row.expires_at = past
+    page.goto(live_engine_service.url + "/")
+    page.fill("#token", token)
+    page.click("#signin button")
+    page.wait_for_selector("#error:not([hidden])")
+    assert page.inner_text("#error").startswith("Sign-in refused: ")
+    assert said in page.inner_text("#error")
+    assert page.is_hidden("#nav")
+
+
+def test_a_refusal_stays_until_the_next_action(page, live_engine_service: LiveService) -> None:  # type: ignore[no-untyped-def]
+    sign_in(page, live_engine_service, "operator")  # lands on the campaigns
+    page.fill("input[name=sensor]", "SN-REFUSED")
+    page.fill("input[name=positions]", "sphere1")
+    page.click("#start button")
+    page.wait_for_selector("#error:not([hidden])")
+    refusal = page.inner_text("#error")
+    assert refusal.startswith("HTTP 422: body.positions") and "sphere1" in refusal, refusal
+    # the list re-reads every 5 s: the refusal must survive it
+    reads = page.evaluate("() => window.__listReads")
+    page.wait_for_function("(n) => window.__listReads > n", arg=reads, timeout=15_000)
+    assert page.inner_text("#error") == refusal
+    # the next action clears it
+    page.fill("input[name=positions]", "table1")
+    page.click("#start button")
+    page.wait_for_selector("#facts dd")
+    assert page.is_hidden("#error")
+    live_engine_service.abort(page.url.rsplit("/", 1)[1])
+
+
+def test_the_header_stays_on_one_line_at_800_px(page, live_engine_service: LiveService) -> None:  # type: ignore[no-untyped-def]
+    page.set_viewport_size({"width": 800, "height": 700})
+    sign_in(page, live_engine_service, "admin")  # the admin sees every link
+    tops = page.eval_on_selector_all(
+        "header > *:not([hidden]), header nav a:not([hidden])",
+        "(els) => els.map((e) => Math.round(e.getBoundingClientRect().top + "
+        "e.getBoundingClientRect().height / 2))")
+    assert len(tops) >= 8 and max(tops) - min(tops) <= 2, tops
+    assert page.eval_on_selector("header", "(e) => e.scrollWidth <= e.clientWidth")
+
+
+def _wait_state(page, *states: str) -> None:  # type: ignore[no-untyped-def]
+    """Until the campaign's state on the page is one of ``states`` (an arrow function: the
+    page's CSP forbids eval, which a bare expression would need)."""
+    page.wait_for_function(
+        "(states) => states.includes(document.querySelector('#state').textContent)",
+        arg=list(states))
+
+
+def test_watch_a_campaign_live_pause_and_abort_ask_first(
+    page, live_engine_service: LiveService,  # type: ignore[no-untyped-def]
+) -> None:
+    sign_in(page, live_engine_service, "operator")
+    page.fill("input[name=sensor]", "SN-LIVE")
+    page.fill("input[name=setpoints_c]", "20,30,40,50,60")
+    page.fill("input[name=soak_min]", "60")  # ≈ 8 h of rig time: ≈ 10 s at 3000×
+    page.fill("input[name=positions]", "table1")
+    page.fill("input[name=samples_per_position]", "20")
+    page.click("#start button")
+    page.wait_for_selector("#facts dd")
+    page.wait_for_function("() => Number(document.querySelector('#events').textContent) > 2")
+    # the ETA is wall time, labelled, with the rig's own time beside it at 3000×
+    assert page.inner_text("#facts").count("ETA (wall clock)") == 1
+    eta = page.inner_text("#eta")
+    span = r"(\d+ s|\d+ min \d\d s|\d+ h \d\d min)"
+    match = re.fullmatch(rf"ends in {span} \(rig time {span} at (\d+)×\)", eta)
+    assert match, eta
+    assert 2700 <= int(match[3]) <= 3300
+    # the chart is drawn from the stored history: chamber and setpoint at least
+    page.wait_for_selector("#temp-chart polyline[data-series=chamber]")
+    assert page.locator("#temp-chart polyline[data-series=setpoint]").count() == 1
+
+    # pause asks first; "no" leaves it running
+    page.once("dialog", lambda d: d.dismiss())
+    page.click("#pause-btn")
+    page.wait_for_timeout(300)
+    assert page.inner_text("#state") in ("queued", "running")
+    asked: list[str] = []
+
+    def accept(dialog) -> None:  # type: ignore[no-untyped-def]
+        asked.append(dialog.message)
+        dialog.accept()
+
+    page.once("dialog", accept)
+    page.click("#pause-btn")
+    _wait_state(page, "paused")
+    assert asked and asked[0].startswith("Pause campaign")
+    # reloaded mid-campaign, the chart still has everything stored before the page opened
+    seen = int(page.get_attribute("#temp-chart polyline[data-series=chamber]", "data-n"))
+    page.reload()
+    page.wait_for_selector("#temp-chart polyline[data-series=chamber]")
+    assert page.inner_text("#state") == "paused"
+    assert int(page.get_attribute("#temp-chart polyline[data-series=chamber]", "data-n")) >= seen
+    assert page.locator("#temp-chart polyline[data-series='die:SN-LIVE']").count() == 1
+    # abort asks too: "no" keeps it paused, "yes" aborts
+    page.once("dialog", lambda d: d.dismiss())
+    page.click("#abort-btn")
+    page.wait_for_timeout(300)
+    assert page.inner_text("#state") == "paused"
+    page.once("dialog", accept)
+    page.click("#abort-btn")
+    _wait_state(page, "aborted")
+    assert "cannot be resumed" in asked[1]
+    journal = page.inner_text("#journal")
+    assert "state paused → aborted" in journal  # seen since the reload
+    # finished: no stale progress (no ETA, no chamber reading, no buttons)
+    assert page.locator("#eta").count() == 0 and page.locator("#chamber").count() == 0
+    assert page.inner_text("#step").startswith("stopped at step ")
+    assert page.locator("#controls button").count() == 0
+
+
+def test_a_finished_campaign_read_the_next_morning(
+    page, live_engine_service: LiveService, completed_campaign: dict,  # type: ignore[no-untyped-def]
+) -> None:
+    cid = completed_campaign["id"]
+    history = live_engine_service.call("GET", f"/web/campaigns/{cid}/temperatures")
+    sign_in(page, live_engine_service, "viewer")
+    page.goto(f"{live_engine_service.url}/#/campaigns/{cid}")
+    page.reload()  # a fresh page: nothing of it was seen live
+    page.wait_for_selector("#temp-chart polyline[data-series=chamber]")
+    assert page.inner_text("#state") == "completed"
+    assert page.inner_text("#step") == "all 3 steps"
+    assert page.inner_text("#result") == f"calibration {completed_campaign['calibration_id']}"
+    assert re.search(r"\(took \d+ s wall clock\)", page.inner_text("#finished"))
+    assert page.locator("#eta").count() == 0
+    # the whole stored history: chamber, setpoint and the die, with legend and axis label
+    chart = page.locator("#temp-chart")
+    n = {s: int(chart.locator(f"polyline[data-series='{s}']").get_attribute("data-n"))
+         for s in ("chamber", "setpoint", "die:SN-DONE")}
+    assert n == {"chamber": len(history["chamber_c"]), "setpoint": len(history["setpoint_c"]),
+                 "die:SN-DONE": len(history["die_c"]["SN-DONE"])}
+    assert n["chamber"] > 60  # 72 measurements and the soak probes
+    legend = chart.locator("text.legend").all_text_contents()
+    assert legend == ["chamber air (°C)", "setpoint (°C)", "die SN-DONE (°C)"]
+    assert "time since the campaign started" in page.text_content("#x-label")
+    assert "waiting" not in page.inner_text("#chart-box")
+    # the chart spans the three setpoints
+    texts = chart.locator("text").all_text_contents()
+    ticks = [t for t in texts if t.endswith("°C") and "(" not in t]
+    temps = [float(t.split()[0]) for t in ticks]
+    assert min(temps) <= 20.5 and max(temps) >= 49.5, ticks
+
+
+def test_a_two_sensor_campaign_shows_each_die_and_calibration(
+    page, live_engine_service: LiveService,  # type: ignore[no-untyped-def]
+) -> None:
+    created = live_engine_service.start_campaign(None, sensors=["SN-PAIR-B", "SN-PAIR-A"])
+    done = live_engine_service.wait_campaign(created["id"], "completed", "failed", "aborted")
+    assert done["state"] == "completed", done["error"]
+    sign_in(page, live_engine_service, "viewer")
+    open_view(page, live_engine_service, f"#/campaigns/{done['id']}",
+              "#temp-chart polyline[data-series=chamber]")
+    assert page.inner_text("#result") == "2 of 2 sensors calibrated"
+    legend = page.locator("#temp-chart text.legend").all_text_contents()
+    assert legend[2:] == ["die SN-PAIR-B (°C)", "die SN-PAIR-A (°C)"]  # the campaign's order
+    links = page.locator("#links a").all_inner_texts()
+    assert [t for t in links if t.startswith("calibration")] == [
+        f"calibration {done['calibration_ids'][s]} ({s})" for s in ("SN-PAIR-B", "SN-PAIR-A")]
+    assert "recording SN-PAIR-A (CSV)" in links
