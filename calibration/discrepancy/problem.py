@@ -68,6 +68,10 @@ class LinearProblem:
     # fitted to the residual (capture_noise).
     between_sd_g: float | None = None
     scatter_factor: float | None = None
+    # σ fitted to each plateau's own affine residual (within_step_residual), not to the
+    # base residual: the χ² of the final residual against it still tests between-plateau
+    # structure (diagnose._excess_test).
+    noise_within_plateaus: bool = False
 
     @property
     def m(self) -> int:
@@ -75,6 +79,11 @@ class LinearProblem:
 
     def whiten(self, a: np.ndarray) -> np.ndarray:
         return a * (self.w if a.ndim == 1 else self.w[:, None])
+
+
+# Noise of every recording with sd_* columns: κ·sd²/n + τ² fitted to its base residual
+# (capture_noise), not sd/√n alone (issue 22: placement and slow vibration flagged nulls).
+SCATTER_FROM_RESIDUAL = True
 
 
 def pooled_sigma_g(rec: Recording, steps: np.ndarray) -> np.ndarray | None:
@@ -115,8 +124,8 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
     return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
 
 
-def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float
-                  ) -> tuple[np.ndarray, float, float]:
+def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
+                  known_var: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
     """σ of capture means from their base residual: ``(σ, κ, τ)``, σ² = κ·sd²/n + τ².
 
     ``e`` (N, a) is the base residual of the capture means, ``sig`` (N, a) their sd/√n
@@ -131,23 +140,81 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float
     alarms (docs/benchmarks.md, *Raw-sample recordings*). When the steps' sd²/n are
     nearly equal, κ and τ trade off along a ridge of the likelihood on which σ, all
     the whitening needs, hardly changes.
+
+    ``known_var`` (N, a): variance already known per entry (the temperature channel's
+    noise through ∂raw/∂T), added to the model, not fitted: fitted before it, τ took the
+    temperature noise in and the term was then added a second time.
     """
     from scipy.optimize import minimize
 
+    known = np.zeros_like(np.asarray(sig, float)) if known_var is None else known_var
     w = np.asarray(sig, float) ** 2
     e2 = (np.asarray(e, float) * dof_corr) ** 2
     ok = np.isfinite(e2) & np.isfinite(w) & (w > 0)
-    w, e2 = w[ok], e2[ok]
+    w, e2, kv = w[ok], e2[ok], np.asarray(known, float)[ok]
     w0 = float(np.median(w))
 
     def nll(q: np.ndarray) -> float:  # κ = 1 + q0, τ² = q1·median(sd²/n)
-        v = (1.0 + q[0]) * w + q[1] * w0
+        v = (1.0 + q[0]) * w + q[1] * w0 + kv
         return float(np.sum(np.log(v) + e2 / v)) / w.size
 
-    start = np.array([0.0, max(0.0, float(np.mean(e2 - w)) / w0)])
+    start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0)])
     q = minimize(nll, start, method="L-BFGS-B", bounds=[(0.0, 1e4), (0.0, 1e6)]).x
     kappa, tau2 = 1.0 + float(q[0]), float(q[1]) * w0
-    return np.sqrt(kappa * np.asarray(sig, float) ** 2 + tau2), kappa, float(np.sqrt(tau2))
+    return (np.sqrt(kappa * np.asarray(sig, float) ** 2 + tau2 + known), kappa,
+            float(np.sqrt(tau2)))
+
+
+def within_step_residual(raw: np.ndarray, ref: np.ndarray, ctx: DesignContext) -> np.ndarray:
+    """Residual (N,3) of each plateau's own affine fit, scaled to unit dof (NaN where too few).
+
+    Columns per step and axis: (1, ref_x, ref_y, ref_z) × (1, t − t̄, (t − t̄)²) and T − T̄
+    (fewer powers of t on a plateau with few readings). Why (issue 22):
+    the noise the recording itself shows must not include the effects under test; the base
+    residual does (a strong lag raised σ 30-fold), but every catalogue effect that is a bias
+    or scale change of a plateau, or a slow trend of them within it, is absorbed here. What stays
+    is placement, vibration and the temperature channel's reading-to-reading noise.
+    """
+    e = np.full(raw.shape, np.nan)
+    for k in np.unique(ctx.steps):
+        m = np.flatnonzero(ctx.steps == k)
+        dt_h = (ctx.t_s[m] - ctx.t_s[m].mean()) / 3600.0
+        u = np.column_stack([np.ones(m.size), ref[m]])
+        dT = (ctx.temp_c[m] - ctx.temp_c[m].mean())[:, None]
+        for powers in (3, 2, 1):  # the richest trend the plateau's readings can carry
+            X = np.hstack([u * (dt_h**p)[:, None] for p in range(powers)] + [dT])
+            rank = np.linalg.matrix_rank(X)
+            if m.size - rank >= MIN_STEP_DOF:
+                beta = np.linalg.lstsq(X, raw[m], rcond=None)[0]
+                e[m] = (raw[m] - X @ beta) * np.sqrt(m.size / (m.size - rank))
+                break
+    return e
+
+
+MIN_STEP_DOF = 6
+STEP_PRIOR_ENTRIES = 30.0  # shrinkage of a step's scatter ratio towards 1 (entries' worth)
+
+
+def step_inflation(e: np.ndarray, sig: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Per-reading factor ≥ 1 on σ where a step scatters more than the global noise model.
+
+    Why (issue 22): sources average down differently — a bench's slow vibration barely
+    averages within a short capture, a sensor's own noise may average faster than white —
+    so one κ for all steps leaves the vibrating steps under-weighted by up to ~1.5× in σ,
+    and their largest readings were called outliers on null recordings. The step's mean
+    of (e/σ)² is shrunk towards 1 by ``STEP_PRIOR_ENTRIES`` entries (a step holds 50–100)
+    and only inflates: a quiet step keeps its σ, so power elsewhere is unchanged, and an
+    effect spread over many steps raises each step's ratio by a few per cent only.
+    """
+    z2 = (np.asarray(e, float) / np.asarray(sig, float)) ** 2
+    out = np.ones(len(steps))
+    for k in np.unique(steps):
+        m = steps == k
+        vals = z2[m].ravel()
+        vals = vals[np.isfinite(vals)]
+        ratio = (float(np.sum(vals)) + STEP_PRIOR_ENTRIES) / (vals.size + STEP_PRIOR_ENTRIES)
+        out[m] = np.sqrt(max(1.0, ratio))
+    return out
 
 
 def build_problem(rec: Recording, *, capture_means: bool = False) -> LinearProblem:
@@ -189,31 +256,40 @@ def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearPro
         dof_corr = np.sqrt(3 * n / max(3 * n - X0.shape[1], 1))
         s = 1.4826 * np.median(np.abs(e - np.median(e, axis=0)), axis=0) * dof_corr
         sig = np.broadcast_to(np.maximum(s, 1e-9), (n, 3))
-    tau = kappa = None
-    if from_sd and capture_means:
-        sig = np.asarray(sig, float)
-        beta = _wls(X0, 1.0 / sig.ravel(), y)
-        e = (y - X0 @ beta).reshape(n, 3)
-        dof_corr = float(np.sqrt(3 * n / max(3 * n - X0.shape[1], 1)))
-        sig, kappa, tau = capture_noise(e, sig, dof_corr)
-    w = 1.0 / np.asarray(sig, float).ravel()
+    tau = kappa = local = None
+    sig_sd = np.asarray(sig, float)
+    w = 1.0 / sig_sd.ravel()
     beta = _wls(X0, w, y)
     sig_T = temperature_noise_c(ctx)
-    loading = None
-    if np.any(sig_T > 0):
+    t_part = np.zeros((n, 3))
+    if np.any(sig_T > 0) and degree > 0:
         # Errors in the temperature regressor: a reading's T noise moves the model along
         # ∂raw/∂T. Without it, a sensor with a large tempco read on a noisy chamber PV
         # shows "outliers" and lag-like patterns that are only temperature noise.
-        d0 = np.zeros((n, 3))
-        if degree > 0:
-            dP0 = np.column_stack([np.zeros(n)] + [p_ * P[:, p_ - 1] for p_ in
-                                                   range(1, degree + 1)]) / half
-            db0 = (u[:, :, None] * dP0[:, None, :]).reshape(n, -1)
-            d0 = np.column_stack([db0 @ beta[a * k:(a + 1) * k] for a in range(3)])
-        sig = np.sqrt(np.asarray(sig, float) ** 2 + (d0 * sig_T[:, None]) ** 2)
-        w = 1.0 / sig.ravel()
-        beta = _wls(X0, w, y)
-        loading = (d0 * sig_T[:, None]).ravel() * w  # |loading| ≤ 1: its share of σ
+        dP0 = np.column_stack([np.zeros(n)] + [p_ * P[:, p_ - 1] for p_ in
+                                               range(1, degree + 1)]) / half
+        db0 = (u[:, :, None] * dP0[:, None, :]).reshape(n, -1)
+        d0 = np.column_stack([db0 @ beta[a * k:(a + 1) * k] for a in range(3)])
+        t_part = d0 * sig_T[:, None]
+        sig = np.sqrt(sig_sd**2 + t_part**2)
+        beta = _wls(X0, 1.0 / sig.ravel(), y)
+    if from_sd and (capture_means or SCATTER_FROM_RESIDUAL):
+        # The recording's own scatter (issue 22): sd/√n misses what a capture shares
+        # (placement, slow vibration), unequally from step to step; an outlier or a local
+        # block must stand out from that, not from sd/√n. κ, τ are fitted with the
+        # temperature term known (capture_noise), so it is not counted twice.
+        local = None if capture_means else within_step_residual(raw, ref, ctx)
+        if local is None or not np.any(np.isfinite(local)):  # plateaus too small: base's
+            e = (y - X0 @ beta).reshape(n, 3)
+            dof_corr = float(np.sqrt(3 * n / max(3 * n - X0.shape[1], 1)))
+        else:
+            e, dof_corr = local, 1.0
+        sig, kappa, tau = capture_noise(e, sig_sd, dof_corr, t_part**2)
+        if local is not None:
+            sig = sig * step_inflation(e, sig, ctx.steps)[:, None]
+        beta = _wls(X0, 1.0 / sig.ravel(), y)
+    w = 1.0 / np.asarray(sig, float).ravel()
+    loading = t_part.ravel() * w if np.any(t_part != 0) else None  # |loading| ≤ 1
     t_scaled = P[:, 1] if degree > 0 else np.zeros(n)
     remainder = _sfem_remainder(raw, ref, np.asarray(sig, float).reshape(n, 3), t_scaled,
                                 degree, ctx, beta, X0, w)
@@ -264,6 +340,7 @@ def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearPro
         "reference", y, X0, w, np.repeat(np.arange(n), 3), np.tile(np.arange(3), n), lift, ctx,
         from_sd, degree, mid, half, lift_rows,
         loading if loading is not None and np.any(loading != 0) else None, tau, kappa,
+        noise_within_plateaus=local is not None and np.any(np.isfinite(local)),
     )
 
 
