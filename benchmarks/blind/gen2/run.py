@@ -52,6 +52,14 @@ def diagnose_case(csv_path: str) -> tuple[str, dict]:
     return case, out
 
 
+def _shown_args(args: list[str]) -> str:
+    """The command line as recorded: machine paths (--realdata, --out) as placeholders."""
+    out, hide = [], {"--realdata": "DIR", "--out": "OUT"}
+    for i, a in enumerate(args):
+        out.append(hide[args[i - 1]] if i and args[i - 1] in hide else a)
+    return " ".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--realdata", default=None,
@@ -90,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     keys = {p.stem: json.loads(p.read_text()) for p in (out / "keys").glob("*.json")}
     res = score.score(keys, diags)
     res["meta"] = {"mode": mode, "n_null": n_null, "cases": len(csvs), "wall_s": wall,
-                   "command": "python -m benchmarks.blind.gen2.run " + " ".join(
+                   "command": "python -m benchmarks.blind.gen2.run " + _shown_args(
                        argv if argv is not None else sys.argv[1:])}
     md = score.markdown(res, f"## Second generator ({mode}): n_null={n_null}, {len(csvs)} "
                              f"cases, {wall:.0f} s on {a.jobs} processes")
