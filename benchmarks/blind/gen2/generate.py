@@ -115,8 +115,9 @@ def build(spec: dict, out: Path) -> dict:
         key.update(magnitude=m, unit=fx.UNIT[eid])
     cols = sim.record(proto, sensor, pools, eid, m, pat, spec["seed"])
     write_recording(out / "cases" / f"{spec['case']}.csv", cols)
-    key.update(protocol=proto.name, protocol_detail=_jsonable(asdict(proto)), pattern=pat)
-    (out / "keys" / f"{spec['case']}.json").write_text(json.dumps(_jsonable(key), indent=1))
+    key.update(protocol=proto.name, protocol_detail=asdict(proto), pattern=pat)
+    (out / "keys" / f"{spec['case']}.json").write_text(
+        json.dumps(key, indent=1, default=_json_default))
     return key
 
 
@@ -134,20 +135,14 @@ def _build_against(spec: dict, sensor, rng: np.random.Generator, out: Path) -> d
                     sim.record(again, moved, pools, None, 0.0, pat, spec["seed"] + 7))
     key = {**spec, "protocol": again.name, "given_protocol": cal.name,
            "remount_rad": REMOUNT_RAD if spec["change"] == "remount_z" else 0.0}
-    (out / "keys" / f"{spec['case']}.json").write_text(json.dumps(_jsonable(key), indent=1))
+    (out / "keys" / f"{spec['case']}.json").write_text(
+        json.dumps(key, indent=1, default=_json_default))
     return key
 
 
-def _jsonable(v):
-    if isinstance(v, dict):
-        return {k: _jsonable(x) for k, x in v.items()}
-    if isinstance(v, list | tuple | np.ndarray):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v
+def _json_default(v: object) -> object:
+    """numpy values for json.dumps (non-finite floats stay Infinity/NaN, read back by json)."""
+    return v.tolist() if isinstance(v, np.ndarray | np.generic) else str(v)
 
 
 def _init(realdata: str) -> None:

@@ -41,12 +41,18 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
         if k["kind"] != "catalogue":
             continue
         top = (_named(diags[c]) or [None])[0]
+        listed = {n.get("effect") for n in diags[c].get("not_identifiable") or []}
         attrib[k["effect"]][f"{k['multiple']:g}x"].append(
             {"case": c, "top": top, "right": top == k["catalogue_id"],
-             "among": k["catalogue_id"] in _named(diags[c])})
+             "among": k["catalogue_id"] in _named(diags[c]),
+             # an honest miss: nothing wrong named and the effect listed as not separable
+             "listed": top is None and k["catalogue_id"] in listed,
+             "wrong": top is not None and top != k["catalogue_id"] and top not in BEYOND})
     res["attribution"] = {
         eid: {m: {**_rate(sum(r["right"] for r in rs), len(rs)),
                   "among_findings": sum(r["among"] for r in rs),
+                  "missed_but_listed_not_identifiable": sum(r["listed"] for r in rs),
+                  "wrong_catalogue_name": sum(r["wrong"] for r in rs),
                   "named": [r["top"] for r in rs]} for m, rs in sorted(ms.items())}
         for eid, ms in sorted(attrib.items())}
     two = [r for ms in attrib.values() for r in ms.get("2x", [])]
@@ -101,12 +107,15 @@ def markdown(res: dict, header: str) -> str:
            f"(unchanged sensor given a parameter_shift: {res['against']['unchanged_with_shift']})",
            f"* hidden (undetectable under the drawn protocol) named anyway: "
            f"{_pct(res['hidden_named'])}", f"* crashes: {len(res['errors'])}", "",
-           "| effect | 1× right | 2× right | 2× named |", "|---|---|---|---|"]
+           "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed, listed "
+           "not identifiable |", "|---|---|---|---|---|---|"]
     for eid, ms in res["attribution"].items():
         one, two = ms.get("1x"), ms.get("2x")
         out.append(f"| {eid} | {one['k']}/{one['n'] if one else 0} | "
                    f"{two['k'] if two else 0}/{two['n'] if two else 0} | "
-                   f"{', '.join(str(x) for x in two['named']) if two else ''} |")
+                   f"{', '.join(str(x) for x in two['named']) if two else ''} | "
+                   f"{two['wrong_catalogue_name'] if two else ''} | "
+                   f"{two['missed_but_listed_not_identifiable'] if two else ''} |")
     out += ["", "| null protocol | flagged / n |", "|---|---|"]
     for k, (f, n) in sorted(res["false_alarms"]["by_protocol"].items()):
         out.append(f"| {k} | {f}/{n} |")
