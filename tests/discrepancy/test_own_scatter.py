@@ -90,3 +90,17 @@ def test_within_plateau_residual_keeps_noise_and_drops_plateau_changes():
     ctx = base_context(rec, "reference", rec.ref_g)
     e = problem.within_step_residual(rec.raw_g, rec.ref_g, ctx)
     assert float(np.sqrt(np.mean(e**2))) == pytest.approx(10e-6, rel=0.3)
+
+
+def test_the_temperature_term_is_not_counted_twice():
+    """Residuals that are exactly sd²/n plus a known temperature-channel variance: the fit
+    leaves κ ≈ 1 and τ ≈ 0, and σ² is their sum once (fitted before the term, τ took it
+    in and the term was added again on top)."""
+    rng = np.random.default_rng(5)
+    sig2 = np.full((400, 3), 10e-6**2)
+    known = np.zeros((400, 3))
+    known[:200] = 30e-6**2  # the cold half: a large tempco on a noisy channel
+    e = rng.standard_normal((400, 3)) * np.sqrt(sig2 + known)
+    sig, kappa, tau = problem.capture_noise(e, np.sqrt(sig2), 1.0, known)
+    assert kappa == pytest.approx(1.0, abs=0.2) and tau < 4e-6
+    assert np.median(sig[:200] ** 2 / (sig2 + known)[:200]) == pytest.approx(1.0, rel=0.2)
