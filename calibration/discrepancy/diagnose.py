@@ -372,7 +372,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         unexplained=unexplained,
         recording=str(recording.path), mode=pb.mode,
         rmse_ug=base_rmse, noise_ug=noise,
-        noise_source=("sd/sqrt(n) + between-capture sd (residual MAD)"
+        noise_source=("sd/sqrt(n) scaled to the scatter within plateaus (kappa, tau, "
+                      "per plateau)" if pb.noise_within_plateaus else
+                      "sd/sqrt(n) + between-capture sd (residual MAD)"
                       if pb.between_sd_g is not None else
                       "sd/sqrt(n)" if pb.noise_from_sd else "residual MAD"),
         findings=findings, not_identifiable=list(not_ident.values()),
@@ -606,7 +608,8 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
     """
     if not pb.noise_from_sd:
         return {"test": "not run: no sd_* columns, noise estimated from the residuals"}
-    if pb.between_sd_g is not None:  # σ was matched to this residual: χ² ≈ dof by design
+    if pb.between_sd_g is not None and not pb.noise_within_plateaus:
+        # σ was matched to this residual: χ² ≈ dof by design
         return {"test": "not run: raw samples, the between-capture noise is estimated from "
                         "the residuals"}
     from scipy.stats import chi2
@@ -617,7 +620,9 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
     c2 = float(z @ z)
     p = float(chi2.sf(c2, dof))
     red = c2 / dof
-    return {"test": "chi-square of the residuals against sd/sqrt(n)", "chi2_per_dof":
+    against = ("the scatter within plateaus (kappa*sd^2/n + tau^2)"
+               if pb.noise_within_plateaus else "sd/sqrt(n)")
+    return {"test": f"chi-square of the residuals against {against}", "chi2_per_dof":
             round(red, 3), "dof": dof, "p_value": float(f"{p:.3g}"),
             "significant": bool(p < alpha and red > EXCESS_CHI2_RED),
             "rms_over_noise": round(float(np.sqrt(red)), 3)}

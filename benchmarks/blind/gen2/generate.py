@@ -1,0 +1,188 @@
+"""Second, independently written generator of the blind benchmark.
+
+    python -m benchmarks.blind.gen2.generate --realdata DIR --out OUT [--quick] [--reps R]
+                                             [--nulls N] [--seed S]
+
+Writes ``OUT/cases/NNNN.csv`` (and ``OUT/given/NNNN.csv`` for twin-against-recording
+pairs: the recording a model is calibrated on) and, apart, ``OUT/keys/NNNN.json``. Nothing
+here imports the project's twin (``simulators/``) or the diagnosis' effect physics: the
+sensor (sensor.py), the protocols (protocol.py), the effects (effects.py) and the noise
+(realnoise.py, drawn from the shared real recordings) are written afresh. Case kinds:
+
+* ``null`` — no effect; random protocols (one-way up or down staircases, up-down,
+  irregular order of temperatures, sparse 5-temperature campaigns, 10–45 min soaks, 24, 18
+  or 36 positions, shuffled/skipped positions, 20–200 samples per capture, vibration that is
+  not rectified), each its own sensor;
+* ``catalogue`` — one catalogue effect at 1× and 2× its minimum detectable size (detect.py)
+  under a protocol that shows it; a case where it stays undetectable is ``hidden``;
+* ``outside`` — an ADC error confined to a band of codes; a crack that appears in the middle
+  of a plateau (a bias and scale change of one axis from then on);
+* ``against`` — a model calibrated on one recording held against another of the same
+  sensor: unchanged on another protocol (a one-way staircase, sparse positions), or
+  re-mounted 2 mrad about its z axis.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import asdict
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.blind.gen2 import detect
+from benchmarks.blind.gen2 import effects as fx
+from benchmarks.blind.gen2 import simulate as sim
+from benchmarks.blind.gen2.protocol import KINDS, draw_protocol
+from benchmarks.blind.gen2.realnoise import RealDataMissing, load_pools, realdata_dir
+from benchmarks.blind.gen2.sensor import draw_sensor
+from calibration.recording import write_recording
+
+REMOUNT_RAD = 2e-3
+OUTSIDE_SIZE_UG = {"adc_band": 80.0, "crack": 60.0}
+MAX_LAG_S = 7200.0  # a die lag beyond 2 h is not a fixture; longer m* means "hidden"
+_POOLS: dict = {}
+
+
+def _need(eid: str) -> dict:
+    """Protocol constraints under which an effect can show."""
+    return {"thermal_lag": {"columns": ("chamber_c",)},
+            "thermal_hysteresis": {"kind": "updown"}, "bias_drift": {"kind": "updown"},
+            "session_offset": {"kind": "updown"},
+            "temperature_rate": {"columns": ("sensor_c",), "soak_min": 10.0},
+            "temperature_sensor": {"columns": ("sensor_c",)},
+            "cross_coupling": {"schedule": "oblique36"}}.get(eid, {})
+
+
+def plan(quick: bool, reps: int, n_null: int, seed0: int) -> list[dict]:
+    specs: list[dict] = []
+
+    def add(**kw) -> None:
+        specs.append({"seed": seed0 * 100_000 + len(specs), **kw})
+
+    for i in range(n_null):
+        add(kind="null", proto_kind=KINDS[i % len(KINDS)])
+    for eid in fx.DOF:
+        for mult in (1.0, 2.0):
+            for _ in range(reps):
+                add(kind="catalogue", effect=eid, multiple=mult)
+    for eid in fx.OUTSIDE:
+        for _ in range(2 * reps):
+            add(kind="outside", effect=eid)
+    for change in ("unchanged", "remount_z"):
+        for _ in range(2 * reps if quick else 3 * reps):
+            add(kind="against", change=change)
+    perm = np.random.default_rng(seed0).permutation(len(specs))
+    for s, k in zip(specs, perm, strict=True):
+        s["case"] = f"{k:04d}"
+    return specs
+
+
+def build(spec: dict, out: Path) -> dict:
+    pools = _POOLS["pools"]
+    rng = np.random.default_rng(spec["seed"])
+    sensor = draw_sensor(rng)
+    key = dict(spec)
+    eid, m = spec.get("effect"), 0.0
+    if spec["kind"] == "against":
+        return _build_against(spec, sensor, rng, out)
+    for _attempt in range(6):
+        need = {"kind": spec.get("proto_kind"), **(_need(eid) if eid else {})}
+        proto = draw_protocol(rng, **need)
+        pat = fx.pattern(rng, len(proto.setpoints_c), 10_000)
+        n_read = len(sim.scene(proto, None, 0.0, pat, spec["seed"]).t_s)
+        pat["rows"] = sorted(rng.choice(n_read, 2, replace=False).tolist())
+        if spec["kind"] != "catalogue":
+            break
+        mds = detect.minimum_detectable(proto, sensor, pools, eid, pat, spec["seed"])
+        if eid == "thermal_lag" and mds > MAX_LAG_S:
+            mds = float("inf")
+        if np.isfinite(mds):
+            break
+    if spec["kind"] == "catalogue":
+        key.update(mds=mds, unit=fx.UNIT[eid], catalogue_id=fx.CATALOGUE_ID[eid])
+        if np.isfinite(mds):
+            m = spec["multiple"] * mds
+        else:
+            key["kind"] = "hidden"
+            m = {"thermal_lag": 1800.0}.get(eid, 50.0)
+        key["magnitude"] = m
+    elif spec["kind"] == "outside":
+        m = OUTSIDE_SIZE_UG[eid]
+        key.update(magnitude=m, unit=fx.UNIT[eid])
+    cols = sim.record(proto, sensor, pools, eid, m, pat, spec["seed"])
+    write_recording(out / "cases" / f"{spec['case']}.csv", cols)
+    key.update(protocol=proto.name, protocol_detail=asdict(proto), pattern=pat)
+    (out / "keys" / f"{spec['case']}.json").write_text(
+        json.dumps(key, indent=1, default=_json_default))
+    return key
+
+
+def _build_against(spec: dict, sensor, rng: np.random.Generator, out: Path) -> dict:
+    pools = _POOLS["pools"]
+    cal = draw_protocol(rng, kind="updown", schedule="dense24", columns=("sensor_c",),
+                        soak_min=20.0)
+    again = draw_protocol(rng, kind=str(rng.choice(["oneway", "staircase_down", "sparse"])),
+                          columns=("sensor_c",))
+    pat = fx.pattern(rng, 3, 10)
+    write_recording(out / "given" / f"{spec['case']}.csv",
+                    sim.record(cal, sensor, pools, None, 0.0, pat, spec["seed"]))
+    moved = sensor.rotated_z(REMOUNT_RAD) if spec["change"] == "remount_z" else sensor
+    write_recording(out / "cases" / f"{spec['case']}.csv",
+                    sim.record(again, moved, pools, None, 0.0, pat, spec["seed"] + 7))
+    key = {**spec, "protocol": again.name, "given_protocol": cal.name,
+           "remount_rad": REMOUNT_RAD if spec["change"] == "remount_z" else 0.0}
+    (out / "keys" / f"{spec['case']}.json").write_text(
+        json.dumps(key, indent=1, default=_json_default))
+    return key
+
+
+def _json_default(v: object) -> object:
+    """numpy values for json.dumps (non-finite floats stay Infinity/NaN, read back by json)."""
+    return v.tolist() if isinstance(v, np.ndarray | np.generic) else str(v)
+
+
+def _init(realdata: str) -> None:
+    _POOLS["pools"] = load_pools(Path(realdata))
+
+
+def _build_star(args: tuple[dict, Path]) -> dict:
+    return build(*args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--realdata", default=None,
+                    help="directory of the shared real recordings (or SOAKCAL_REALDATA)")
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/blind/gen2/out"))
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--reps", type=int, default=1)
+    ap.add_argument("--nulls", type=int, default=None, help="null cases (quick 15, full 300)")
+    ap.add_argument("--seed", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=2)
+    a = ap.parse_args(argv)
+    try:
+        rd = realdata_dir(a.realdata)
+    except RealDataMissing as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    n_null = a.nulls if a.nulls is not None else (15 if a.quick else 300)
+    specs = plan(a.quick, a.reps, n_null, a.seed)
+    for sub in ("cases", "keys", "given"):
+        d = a.out / sub
+        d.mkdir(parents=True, exist_ok=True)
+        for f in d.glob("*"):
+            f.unlink()
+    with Pool(a.jobs, initializer=_init, initargs=(str(rd),)) as pool:
+        keys = pool.map(_build_star, [(s, a.out) for s in specs], chunksize=2)
+    kinds = {k: sum(x["kind"] == k for x in keys) for k in
+             ("null", "catalogue", "hidden", "outside", "against")}
+    print(f"wrote {len(keys)} cases to {a.out}/cases (keys apart in {a.out}/keys): {kinds}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

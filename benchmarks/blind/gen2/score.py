@@ -1,0 +1,125 @@
+"""Score diagnoses of the second generator's cases against its keys (after all ran)."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+from benchmarks.blind.score import clopper_pearson
+from calibration.discrepancy.effects import BY_ID
+
+BEYOND = {"unexplained", "not_identifiable", "parameter_shift"}
+
+
+def _rate(k: int, n: int) -> dict[str, Any]:
+    lo, hi = clopper_pearson(k, n)
+    return {"k": k, "n": n, "rate": k / n if n else None, "ci95": [lo, hi]}
+
+
+def _named(d: dict) -> list[str]:
+    return [f.get("effect") for f in d.get("findings") or []]
+
+
+def _flagged(d: dict) -> bool:
+    return bool(d.get("mismatch")) or bool(d.get("findings"))
+
+
+def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
+    res: dict[str, Any] = {"errors": sorted(c for c, d in diags.items() if "error" in d)}
+    nulls = [c for c, k in keys.items() if k["kind"] == "null"]
+    fa = [c for c in nulls if _flagged(diags[c])]
+    by_kind: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+    for c in nulls:
+        kind = keys[c]["protocol"].split("/")[0] + "/" + keys[c]["protocol"].split("/")[1]
+        by_kind[kind][1] += 1
+        by_kind[kind][0] += _flagged(diags[c])
+    res["false_alarms"] = {**_rate(len(fa), len(nulls)), "by_protocol": dict(by_kind),
+                           "named": sorted({e for c in fa for e in _named(diags[c])}),
+                           "cases": sorted(fa)}
+    attrib: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for c, k in keys.items():
+        if k["kind"] != "catalogue":
+            continue
+        top = (_named(diags[c]) or [None])[0]
+        listed = {n.get("effect") for n in diags[c].get("not_identifiable") or []}
+        attrib[k["effect"]][f"{k['multiple']:g}x"].append(
+            {"case": c, "top": top, "right": top == k["catalogue_id"],
+             "among": k["catalogue_id"] in _named(diags[c]),
+             # an honest miss: nothing wrong named and the effect listed as not separable
+             "listed": top is None and k["catalogue_id"] in listed,
+             "wrong": top is not None and top != k["catalogue_id"] and top not in BEYOND})
+    res["attribution"] = {
+        eid: {m: {**_rate(sum(r["right"] for r in rs), len(rs)),
+                  "among_findings": sum(r["among"] for r in rs),
+                  "missed_but_listed_not_identifiable": sum(r["listed"] for r in rs),
+                  "wrong_catalogue_name": sum(r["wrong"] for r in rs),
+                  "named": [r["top"] for r in rs]} for m, rs in sorted(ms.items())}
+        for eid, ms in sorted(attrib.items())}
+    two = [r for ms in attrib.values() for r in ms.get("2x", [])]
+    res["attribution_2x_all"] = _rate(sum(r["right"] for r in two), len(two))
+    hidden = [c for c, k in keys.items() if k["kind"] == "hidden"]
+    res["hidden_named"] = _rate(sum(keys[c]["catalogue_id"] in _named(diags[c])
+                                    for c in hidden), len(hidden))
+    outs = [c for c, k in keys.items() if k["kind"] == "outside"]
+    cat = [c for c in outs if any(e in BY_ID and e not in BEYOND for e in _named(diags[c]))]
+    res["outside_given_catalogue_name"] = {
+        **_rate(len(cat), len(outs)),
+        "by_effect": {e: [[_named(diags[c]) for c in outs if keys[c]["effect"] == e]]
+                      for e in sorted({keys[c]["effect"] for c in outs})}}
+    tw = [c for c, k in keys.items() if k["kind"] == "against"]
+    rows = []
+    for c in tw:
+        d, k = diags[c], keys[c]
+        shift = [f for f in d.get("findings") or [] if f.get("effect") == "parameter_shift"]
+        names = sorted((shift[0].get("parameters") or {}) if shift else [])
+        if k["change"] == "unchanged":
+            right = not shift
+        else:
+            right = bool(shift) and any("_mz" in n for n in names) and not any(
+                n.startswith(("d_bx", "d_by", "d_bz")) for n in names)
+        rows.append({"case": c, "change": k["change"], "right": right, "shifted": names,
+                     "protocol": k["protocol"]})
+    res["against"] = {**_rate(sum(r["right"] for r in rows), len(rows)),
+                      "unchanged_with_shift": sum(r["change"] == "unchanged" and not r["right"]
+                                                  for r in rows),
+                      "by_change": {ch: _rate(sum(r["right"] for r in rows if r["change"] == ch),
+                                              sum(r["change"] == ch for r in rows))
+                                    for ch in ("unchanged", "remount_z")},
+                      "cases": rows}
+    return res
+
+
+def _pct(r: dict) -> str:
+    if not r["n"]:
+        return "–"
+    lo, hi = r["ci95"]
+    return f"{r['k']}/{r['n']} = {100 * r['rate']:.1f} % (95 % CI {100 * lo:.1f}–{100 * hi:.1f})"
+
+
+def markdown(res: dict, header: str) -> str:
+    out = [header, "", f"* false alarms on nulls: {_pct(res['false_alarms'])}; named: "
+           f"{', '.join(res['false_alarms']['named']) or '–'}",
+           f"* attribution at 2× (top finding = key), all effects: "
+           f"{_pct(res['attribution_2x_all'])}",
+           f"* outside-catalogue effects given a catalogue name: "
+           f"{_pct(res['outside_given_catalogue_name'])}",
+           f"* twin against recording right: {_pct(res['against'])} "
+           f"(unchanged sensor given a parameter_shift: {res['against']['unchanged_with_shift']})",
+           f"* hidden (undetectable under the drawn protocol) named anyway: "
+           f"{_pct(res['hidden_named'])}", f"* crashes: {len(res['errors'])}", "",
+           "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed, listed "
+           "not identifiable |", "|---|---|---|---|---|---|"]
+    for eid, ms in res["attribution"].items():
+        one, two = ms.get("1x"), ms.get("2x")
+        out.append(f"| {eid} | {one['k']}/{one['n'] if one else 0} | "
+                   f"{two['k'] if two else 0}/{two['n'] if two else 0} | "
+                   f"{', '.join(str(x) for x in two['named']) if two else ''} | "
+                   f"{two['wrong_catalogue_name'] if two else ''} | "
+                   f"{two['missed_but_listed_not_identifiable'] if two else ''} |")
+    out += ["", "| null protocol | flagged / n |", "|---|---|"]
+    for k, (f, n) in sorted(res["false_alarms"]["by_protocol"].items()):
+        out.append(f"| {k} | {f}/{n} |")
+    out += ["", "| outside effect | findings per case |", "|---|---|"]
+    for e, v in res["outside_given_catalogue_name"]["by_effect"].items():
+        out.append(f"| {e} | {v[0]} |")
+    return "\n".join(out) + "\n"
