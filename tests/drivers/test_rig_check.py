@@ -572,3 +572,25 @@ async def test_an_f4t_loop_left_in_manual_fails_its_mode_check() -> None:
     assert bad.detail == ("loop_mode reads 54, map watlow-f4t expects one of 10, 62 "
                           "(loop 1 is not in manual (Auto 10 or Off 62))")
     assert "switch loop 1 to Auto" in bad.fix
+
+
+async def test_a_2400_left_in_manual_fails_its_mode_check() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-2400",
+                             controller=ControllerSetup(holds=(("mode", 1.0),))) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-2400"), clock=clock)
+    bad = _by(checks, "chamber", "register:mode")
+    assert bad.status == "fail"
+    assert bad.detail == ("mode reads 1, map eurotherm-2400 expects 0 "
+                          "(the loop is in Auto (Auto-man select = 0))")
+    assert "switch the 2400 to Auto" in bad.fix
+
+
+async def test_the_2400_map_reads_floats_whatever_the_decimal_point() -> None:
+    """A 2400 displaying whole degrees: the IEEE region still reads full resolution."""
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-2400",
+                             controller=ControllerSetup(decimals=0)) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-2400"), move=True, clock=clock)
+    assert passed(checks), format_report("2400 whole degrees", checks)
+    assert _by(checks, "chamber", "pv_vs_die").status == "pass"
