@@ -57,7 +57,8 @@ MANUFACTURER_MAPS = sorted(n for n in shipped_maps() if not n.startswith("soakca
 
 
 def test_the_manufacturer_maps_are_the_ones_shipped() -> None:
-    assert {"eurotherm-2400", "eurotherm-3216", "watlow-f4t"} <= set(MANUFACTURER_MAPS)
+    assert {"eurotherm-2400", "eurotherm-3216", "watlow-f4t",
+            "watlow-f4t-cascade"} <= set(MANUFACTURER_MAPS)
 
 
 @pytest.mark.parametrize("name", MANUFACTURER_MAPS)
@@ -97,6 +98,21 @@ def test_eurotherm_2400_addresses_are_the_communications_handbooks() -> None:
     assert m.run is None and m.identity is None  # not verified: not invented
     doc = tomllib.loads(shipped_maps()["eurotherm-2400"].read_text())
     assert any(u.startswith("setpoint rate limit: parameter 35") for u in doc["undocumented"])
+
+
+def test_f4t_cascade_reads_the_air_loop_of_the_cascade_table() -> None:
+    m = CHAMBER_MAPS["watlow-f4t-cascade"]
+    # TestEquity F4T (cascade) ch. 3 p. 15: SP 4042, closed-loop SP 4190, air PV 4182 (the
+    # part PV is 4180), manual ramp action 4054 / scale 2956 / rate 4058, all low word first.
+    assert (m.setpoint_c.address, m.working_setpoint_c.address, m.process_c.address,
+            m.ramp_c_per_min.address) == (4042, 4190, 4182, 4058)
+    assert m.process_c.word_order == "low_first" and m.ramp_c_per_min.encoding == "uint16"
+    assert [(f.address, v) for f, v in m.setup] == [(4054, 85.0), (2956, 57.0)]
+    assert [c.register for c in m.checks] == ["device_status", "display_units",
+                                              "simple_setpoint"]
+    assert m.checks[2].expect == 63.0  # Simple Set Point On: cascade control off
+    assert m.identity is not None and m.identity.expect == 124.0
+    assert m.alarm_states == () and m.alarms is None  # none in the cited table
 
 
 def test_f4t_identity_run_and_ramp_setup() -> None:

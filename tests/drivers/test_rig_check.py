@@ -594,3 +594,15 @@ async def test_the_2400_map_reads_floats_whatever_the_decimal_point() -> None:
         checks = await check_rig(_config(sim, "eurotherm-2400"), move=True, clock=clock)
     assert passed(checks), format_report("2400 whole degrees", checks)
     assert _by(checks, "chamber", "pv_vs_die").status == "pass"
+
+
+async def test_a_cascade_f4t_with_cascade_control_on_fails_its_check() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t-cascade",
+                             controller=ControllerSetup(holds=(("simple_setpoint", 62.0),))
+                             ) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t-cascade"), clock=clock)
+    bad = _by(checks, "chamber", "register:simple_setpoint")
+    assert bad.status == "fail"
+    assert bad.detail.startswith("simple_setpoint reads 62, map watlow-f4t-cascade expects 63")
+    assert "set Simple Set Point to On (63, register 4200)" in bad.fix
