@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import tracemalloc
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -19,6 +18,12 @@ import numpy as np
 import pytest
 from pty_device import PtyDevice
 
+from benchmarks.bench_firmware_raw_heap import (
+    SyntheticSensor,
+    WriteMeter,
+    mux,
+    peak_heap_serving,
+)
 from drivers.bridge_protocol import encode_frame, parse_frame
 from drivers.clock import VirtualClock
 from drivers.faults import ExceptionReply
@@ -26,73 +31,6 @@ from drivers.sensor_bridge import SerialAccelerometer
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware" / "rp2040"
 DOC = Path(__file__).resolve().parents[2] / "docs" / "sensor-bridge.md"
-UID = "E6614104035F2B2F"
-
-
-class SyntheticSensor:
-    """adxl355_spi.ADXL355 stand-in making each sample when read (stores nothing).
-
-    ``stall_after``: DATA_RDY never sets again after that many samples (sensor stopped).
-    """
-
-    def __init__(self, stall_after: int | None = None) -> None:
-        self.i = 0
-        self.stall_after = stall_after
-
-    def configure(self, range_g: int, odr_hz: float) -> tuple[int, float]:
-        return range_g, odr_hz
-
-    def ids(self) -> tuple[int, int, int, int]:
-        return 0xAD, 0x1D, 0xED, 0x01
-
-    def data_ready(self) -> bool:
-        return self.stall_after is None or self.i < self.stall_after
-
-    def sample(self) -> tuple[tuple[int, int, int], int]:
-        self.i += 1
-        i = self.i
-        return ((i * 7919) % 524288 - 262144, -(i * 104729) % 524287, 250000 - i % 977), \
-            1800 + i % 300
-
-
-class WriteMeter:
-    """The board's ``write``: keeps no data, only the largest write, the count and the bytes'
-    total (optionally the bytes themselves, for small captures)."""
-
-    def __init__(self, keep: bool = False) -> None:
-        self.largest = 0
-        self.writes = 0
-        self.total = 0
-        self.kept: list[bytes] | None = [] if keep else None
-
-    def __call__(self, data: bytes) -> None:
-        self.largest = max(self.largest, len(data))
-        self.writes += 1
-        self.total += len(data)
-        if self.kept is not None:
-            self.kept.append(data)
-
-
-def mux(stall_after: int | None = None) -> bridge_app.MuxBridge:
-    return bridge_app.MuxBridge({0: bridge_app.Bridge(SyntheticSensor(stall_after), UID),
-                                 1: bridge_app.Bridge(SyntheticSensor(stall_after), UID)})
-
-
-def peak_heap_serving(line: bytes) -> tuple[int, WriteMeter]:
-    """Peak bytes allocated (tracemalloc) while the firmware serves ``line``."""
-    board = mux()
-    meter = WriteMeter()
-    tracemalloc.start()
-    try:
-        tracemalloc.reset_peak()
-        base = tracemalloc.get_traced_memory()[0]
-        board.serve_line(line, meter)
-        peak = tracemalloc.get_traced_memory()[1] - base
-    finally:
-        tracemalloc.stop()
-    return peak, meter
-
-
 @pytest.mark.parametrize("address", [(), ("@1",)])
 def test_raw_heap_does_not_grow_with_the_capture(address: tuple[str, ...]) -> None:
     small_peak, small = peak_heap_serving(encode_frame(*address, "RAW", 200))
