@@ -7,15 +7,22 @@
 # channel 0's, answered exactly as a one-sensor bridge does. Its group capture
 # "AVG,<n>,@<ch>,@<ch>,..." averages n samples on every listed channel at once (each chip
 # read in turn within each sample period) and answers one line per channel, then END.
+# Replies are produced one line at a time (generators) and written as they come
+# (serve_line): a RAW capture of 100000 samples never holds more than one line, so the
+# heap a reply needs does not grow with n (a Pico has ~190 kB free).
 # Averages are computed in exact integer arithmetic: the RP2040 port of
 # MicroPython has single-precision floats only, which would round a mean of
 # 256000 counts to 1/64 count; integers are exact and identical under CPython.
-# MicroPython-safe: no typing, no f-strings, no math.isqrt, no int.bit_length.
+# MicroPython-safe: no typing, no math.isqrt, no int.bit_length; syntax of MicroPython
+# MIN_MICROPYTHON or newer (checked with that version's mpy-cross in tests/firmware).
 
 import adxl355_spi as adx
 import bridge_proto as proto
 
-FIRMWARE = "soakcal-fw-2.2"  # 2.1: channel addressing (MuxBridge); 2.2: group capture
+# 2.1: channel addressing (MuxBridge); 2.2: group capture; 2.3: RAW streamed line by line,
+# REPL command (leave the command loop so a running board can be updated)
+FIRMWARE = "soakcal-fw-2.3"
+MIN_MICROPYTHON = "1.20.0"  # oldest MicroPython whose compiler accepts every module here
 MODEL = "ADXL355"
 MAX_SAMPLES = 100000
 LSB_PER_G = {2: 256000, 4: 128000, 8: 64000}
@@ -128,24 +135,38 @@ class Bridge:
 
     # --- commands -------------------------------------------------------------------
     def handle_line(self, line):
-        """One received line -> list of reply frames (bytes)."""
+        """One received line -> list of reply frames (bytes); for tests and short replies."""
+        return list(self.frames(line))
+
+    def serve_line(self, line, write):
+        """Answer one received line, each reply frame passed to ``write`` as it is made."""
+        for frame in self.frames(line):
+            write(frame)
+
+    def frames(self, line):
+        """Reply frames (bytes) for one received line, one at a time."""
         parsed = proto.unframe(line)
         if parsed is None:
-            return [proto.frame(["ERR", 2, "bad frame or checksum"])]
+            yield proto.frame(["ERR", 2, "bad frame or checksum"])
+            return
         fields, v1 = parsed
-        return [proto.frame(r, v1) for r in self.answer(fields, v1)]
+        for r in self.answer(fields, v1):
+            yield proto.frame(r, v1)
 
     def answer(self, fields, v1=False):
-        """Reply field lists for one command, a stalled sensor answered with ERR 5."""
+        """Reply field lists for one command, one at a time; a stalled sensor ends them with
+        ERR 5 (after the R lines already sent, in a RAW capture: the host drops the capture).
+        """
         try:
-            return self.replies(fields, v1)
+            yield from self.replies(fields, v1)
         except SensorStalled:
-            return [NOT_READY]
+            yield NOT_READY
 
     def eeprom_serial(self):
         return self.eeprom.read_serial() if self.eeprom is not None else ""
 
     def replies(self, fields, v1=False):
+        """Reply field lists for one command (an iterable: RAW's lines are made as read)."""
         cmd = fields[0]
         if cmd == "ID" and len(fields) == 1:
             reply = ["ID", MODEL, self.eeprom_serial(), FIRMWARE]
@@ -193,12 +214,11 @@ class Bridge:
         return [acc.reply()]
 
     def _raw(self, n):
-        out = []
+        """``R`` lines made one per sample as it is read, then ``END``: nothing is kept."""
         for i in range(n):
             xyz, t = self.next_sample()
-            out.append(["R", i] + [f"{c & 0xFFFFF:05X}" for c in xyz] + [t])
-        out.append(["END", n])
-        return out
+            yield ["R", i] + [f"{c & 0xFFFFF:05X}" for c in xyz] + [t]
+        yield ["END", n]
 
     # --- plain streaming mode ---------------------------------------------------------
     def stream_line(self):
@@ -223,11 +243,23 @@ class MuxBridge:
 
     def __init__(self, bridges):
         self.bridges = bridges
+        self.leave = False  # set by REPL: serve() returns to the MicroPython REPL
 
     def handle_line(self, line):
+        """One received line -> list of reply frames (bytes); for tests and short replies."""
+        return list(self.frames(line))
+
+    def serve_line(self, line, write):
+        """Answer one received line, each reply frame passed to ``write`` as it is made."""
+        for frame in self.frames(line):
+            write(frame)
+
+    def frames(self, line):
+        """Reply frames (bytes) for one received line, one at a time."""
         parsed = proto.unframe(line)
         if parsed is None:
-            return [proto.frame(["ERR", 2, "bad frame or checksum"])]
+            yield proto.frame(["ERR", 2, "bad frame or checksum"])
+            return
         fields, v1 = parsed
         head = fields[0]
         address = []
@@ -235,19 +267,30 @@ class MuxBridge:
         if head.startswith("@"):
             channel = channel_number(head)
             if channel is None or len(fields) < 2:
-                return [proto.frame(["ERR", 3, "bad channel address " + head], v1)]
+                yield proto.frame(["ERR", 3, "bad channel address " + head], v1)
+                return
             address = [head]
             fields = fields[1:]
         elif fields == ["CHANNELS"]:
-            return [proto.frame(self.channels_reply(), v1)]
+            yield proto.frame(self.channels_reply(), v1)
+            return
+        elif fields == ["REPL"]:
+            # Leave the command loop for the MicroPython REPL (Ctrl-C is data while the loop
+            # runs, so mpremote cannot interrupt it): how a running board is updated.
+            self.leave = True
+            yield proto.frame(["OK", "REPL"], v1)
+            return
         elif head == "AVG" and len(fields) > 2:
-            return [proto.frame(r, v1) for r in self.group_avg(fields)]
+            for r in self.group_avg(fields):
+                yield proto.frame(r, v1)
+            return
         bridge = self.bridges.get(channel)
         if bridge is None:
             replies = [["ERR", 7, "no sensor on channel " + str(channel)]]
         else:
             replies = bridge.answer(fields, v1)
-        return [proto.frame(address + r, v1) for r in replies]
+        for r in replies:
+            yield proto.frame(address + r, v1)
 
     def channels_reply(self):
         out = ["CHANNELS", len(self.bridges)]
@@ -306,3 +349,29 @@ def channel_number(head):
     if not digits.isdigit() or str(int(digits)) != digits or int(digits) > MAX_CHANNEL:
         return None
     return int(digits)
+
+
+MAX_LINE = 200  # no command is this long: a longer line is dropped (resynchronise on LF)
+
+
+def serve(bridge, read_byte, write):
+    """The command loop: bytes in (``read_byte()`` -> one byte, b"" if none), replies out.
+
+    Returns once ``bridge.leave`` is set (the ``REPL`` command), after its reply is
+    written; main.py then gives the console back to the MicroPython REPL. Bytes that are no
+    command (mpremote's Ctrl-C / Ctrl-A while the loop runs) are dropped at the next "$",
+    which only ever starts a frame; a line that is no frame is answered ERR 2 at its LF.
+    """
+    line = b""
+    while not bridge.leave:
+        ch = read_byte()
+        if not ch:
+            continue
+        if ch == b"$":
+            line = b""  # "$" only ever starts a frame: drop whatever came before it
+        line += ch
+        if ch == b"\n":
+            bridge.serve_line(line, write)
+            line = b""
+        elif len(line) > MAX_LINE:
+            line = b""

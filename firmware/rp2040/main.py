@@ -7,6 +7,9 @@
 # Pico's native USB CDC serial port (/dev/ttyACM0); the baud rate is ignored.
 # Pull GP15 to ground at boot for the plain streaming mode (x_g,y_g,z_g,temp_c
 # lines, channel 0 only) instead of framed commands.
+# Updating a running board (docs/sensor-bridge.md, "Updating a running board"): the framed
+# command REPL (`$REPL*6D39`) leaves the command loop; GP14 pulled to ground at boot skips
+# the bridge altogether. Either way the MicroPython REPL answers mpremote again.
 #
 # Several sensors on one bridge (docs/sensor-bridge.md, "Channels"): one chip select
 # per sensor, channel i on CS_PINS[i], all on SPI0; channel i's fixture EEPROM at I2C
@@ -56,6 +59,8 @@ def open_eeprom(i2c, present, channel):
 
 
 def main():
+    if Pin(14, Pin.IN, Pin.PULL_UP).value() == 0:
+        return  # boot-pin escape: no bridge, the REPL stays free for mpremote
     # ADXL355: SPI mode 0 (CPOL = 0, CPHA = 0), up to 10 MHz; 5 MHz leaves margin on a cable.
     spi = SPI(0, baudrate=5000000, polarity=0, phase=0, sck=Pin(18), mosi=Pin(19),
               miso=Pin(16))
@@ -77,23 +82,19 @@ def main():
     if stream_mode:
         while True:
             out.write(bridges[0].stream_line())
-    micropython.kbd_intr(-1)  # 0x03 on the line is data, not Ctrl-C
     inp = sys.stdin.buffer if hasattr(sys.stdin, "buffer") else sys.stdin
     poll = select.poll()
     poll.register(inp, select.POLLIN)
-    line = b""
-    while True:
+
+    def read_byte():
         poll.poll()
-        ch = inp.read(1)
-        if not ch:
-            continue
-        line += ch
-        if ch == b"\n":
-            for reply in bridge.handle_line(line):
-                out.write(reply)
-            line = b""
-        elif len(line) > 200:  # no command is this long: resynchronise on the next LF
-            line = b""
+        return inp.read(1)
+
+    micropython.kbd_intr(-1)  # 0x03 on the line is data, not Ctrl-C
+    try:
+        bridge_app.serve(bridge, read_byte, out.write)  # returns on the REPL command
+    finally:
+        micropython.kbd_intr(3)  # Ctrl-C interrupts again: mpremote can take the REPL
 
 
 main()

@@ -53,7 +53,15 @@ def test_every_shipped_map_loads_and_names_itself() -> None:
         assert load_map(path).name == name
 
 
-@pytest.mark.parametrize("name", ["eurotherm-3216", "watlow-f4t"])
+MANUFACTURER_MAPS = sorted(n for n in shipped_maps() if not n.startswith("soakcal-"))
+
+
+def test_the_manufacturer_maps_are_the_ones_shipped() -> None:
+    assert {"eurotherm-2400", "eurotherm-3216", "watlow-f4t",
+            "watlow-f4t-cascade"} <= set(MANUFACTURER_MAPS)
+
+
+@pytest.mark.parametrize("name", MANUFACTURER_MAPS)
 def test_manufacturer_maps_cite_a_document_for_every_register(name: str) -> None:
     doc = tomllib.loads(shipped_maps()[name].read_text())
     assert doc["source"]["document"] and doc["source"]["table"]
@@ -72,6 +80,39 @@ def test_eurotherm_addresses_are_the_handbooks() -> None:
     assert m.alarms is not None and m.alarms.address == 75
     assert m.alarm_bits[5] == "sensor_break" and m.info_bits[4] == "manual_mode"
     assert m.run is None and m.identity is None  # not in the cited table: not invented
+
+
+def test_eurotherm_2400_addresses_are_the_communications_handbooks() -> None:
+    m = CHAMBER_MAPS["eurotherm-2400"]
+    # HA026230 p. 5-4: PV 1, target SP 2, working SP 5; SP rate 35 (undocumented there);
+    # all in the 2000-series IEEE region 8000h + 2n (HA027664 B.8.1), high word first (7.4).
+    assert (m.process_c.address, m.setpoint_c.address, m.working_setpoint_c.address,
+            m.ramp_c_per_min.address) == tuple(0x8000 + 2 * n for n in (1, 2, 5, 35))
+    assert m.setpoint_c.address == 0x8004  # the handbook's own worked example
+    assert {m.process_c.word_order, m.setpoint_c.word_order} == {"high_first"}
+    assert [(c.register, c.expect) for c in m.checks] == [("mode", 0.0)]
+    assert m.alarms is not None and m.alarms.address == 76
+    assert m.alarm_bits == {1: "pv_sensor_broken", 2: "pv_out_of_sensor_range",
+                            6: "loop_break"}
+    assert m.info_bits[15] == "manual_mode"
+    assert m.run is None and m.identity is None  # not verified: not invented
+    doc = tomllib.loads(shipped_maps()["eurotherm-2400"].read_text())
+    assert any(u.startswith("setpoint rate limit: parameter 35") for u in doc["undocumented"])
+
+
+def test_f4t_cascade_reads_the_air_loop_of_the_cascade_table() -> None:
+    m = CHAMBER_MAPS["watlow-f4t-cascade"]
+    # TestEquity F4T (cascade) ch. 3 p. 15: SP 4042, closed-loop SP 4190, air PV 4182 (the
+    # part PV is 4180), manual ramp action 4054 / scale 2956 / rate 4058, all low word first.
+    assert (m.setpoint_c.address, m.working_setpoint_c.address, m.process_c.address,
+            m.ramp_c_per_min.address) == (4042, 4190, 4182, 4058)
+    assert m.process_c.word_order == "low_first" and m.ramp_c_per_min.encoding == "uint16"
+    assert [(f.address, v) for f, v in m.setup] == [(4054, 85.0), (2956, 57.0)]
+    assert [c.register for c in m.checks] == ["device_status", "display_units",
+                                              "simple_setpoint"]
+    assert m.checks[2].expect == 63.0  # Simple Set Point On: cascade control off
+    assert m.identity is not None and m.identity.expect == 124.0
+    assert m.alarm_states == () and m.alarms is None  # none in the cited table
 
 
 def test_f4t_identity_run_and_ramp_setup() -> None:

@@ -342,14 +342,18 @@ async def test_a_pv_that_no_misreading_explains_is_not_given_a_cause() -> None:
     assert "the sensor is inside this chamber" in bad.fix
 
 
-async def test_the_shipped_3216_map_reads_floats_whatever_the_decimal_point() -> None:
-    """The float region carries full resolution: a 3216 set to whole degrees reads right."""
+@pytest.mark.parametrize("chamber_map", ["eurotherm-3216", "eurotherm-2400"])
+async def test_the_eurotherm_maps_read_floats_whatever_the_decimal_point(
+        chamber_map: str) -> None:
+    """The IEEE region carries full resolution: a Eurotherm set to whole degrees reads right."""
     clock = VirtualClock()
-    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-3216",
+    async with start_sim_rig(clock, seed=4, chamber_map=chamber_map,
                              controller=ControllerSetup(decimals=0)) as sim:
-        checks = await check_rig(_config(sim, "eurotherm-3216"), move=True, clock=clock)
-    assert passed(checks), format_report("3216 whole degrees", checks)
-    assert _by(checks, "chamber", "register:ramp_units").status == "pass"
+        checks = await check_rig(_config(sim, chamber_map), move=True, clock=clock)
+    assert passed(checks), format_report(f"{chamber_map} whole degrees", checks)
+    assert _by(checks, "chamber", "pv_vs_die").status == "pass"
+    if chamber_map == "eurotherm-3216":
+        assert _by(checks, "chamber", "register:ramp_units").status == "pass"
 
 
 async def test_a_well_set_up_controller_passes_the_ramp_and_die_checks() -> None:
@@ -572,3 +576,27 @@ async def test_an_f4t_loop_left_in_manual_fails_its_mode_check() -> None:
     assert bad.detail == ("loop_mode reads 54, map watlow-f4t expects one of 10, 62 "
                           "(loop 1 is not in manual (Auto 10 or Off 62))")
     assert "switch loop 1 to Auto" in bad.fix
+
+
+async def test_a_2400_left_in_manual_fails_its_mode_check() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="eurotherm-2400",
+                             controller=ControllerSetup(holds=(("mode", 1.0),))) as sim:
+        checks = await check_rig(_config(sim, "eurotherm-2400"), clock=clock)
+    bad = _by(checks, "chamber", "register:mode")
+    assert bad.status == "fail"
+    assert bad.detail == ("mode reads 1, map eurotherm-2400 expects 0 "
+                          "(the loop is in Auto (Auto-man select = 0))")
+    assert "switch the 2400 to Auto" in bad.fix
+
+
+async def test_a_cascade_f4t_with_cascade_control_on_fails_its_check() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4t-cascade",
+                             controller=ControllerSetup(holds=(("simple_setpoint", 62.0),))
+                             ) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4t-cascade"), clock=clock)
+    bad = _by(checks, "chamber", "register:simple_setpoint")
+    assert bad.status == "fail"
+    assert bad.detail.startswith("simple_setpoint reads 62, map watlow-f4t-cascade expects 63")
+    assert "set Simple Set Point to On (63, register 4200)" in bad.fix

@@ -188,7 +188,7 @@ async def test_identify_configure_acquire_over_a_pty(pty_board: tuple[Board, Pty
     try:
         ident = await accel.identify()
         assert (ident.serial, ident.board_uid, ident.firmware) == ("SN-0001", UID,
-                                                                    "soakcal-fw-2.2")
+                                                                    "soakcal-fw-2.3")
         assert (ident.devid_ad, ident.devid_mst, ident.partid, ident.revid) == (
             0xAD, 0x1D, 0xED, 0x01)
         await accel.configure(4.0, 250.0)
