@@ -7,6 +7,9 @@ from drivers.modbus_link import ModbusLink
 from drivers.protocols import ChamberStatus
 from drivers.registermaps import ChamberMap, bits_to_names
 
+# Largest relative difference between the ramp rate asked for and the one the register holds.
+RAMP_WRITE_TOLERANCE = 0.05
+
 
 class ModbusChamber:
     """Any chamber controller whose registers a :class:`ChamberMap` describes."""
@@ -82,8 +85,21 @@ class ModbusChamber:
         if limit is not None and ramp_c_per_min > limit:
             raise ValueOutOfRange(self.link.device,
                                   f"ramp rate {ramp_c_per_min} °C/min > the map's {limit} °C/min")
+        field = self.regmap.ramp_c_per_min
+        try:
+            held = field.decode(field.encode(ramp_c_per_min))
+        except (ValueError, OverflowError):
+            held = ramp_c_per_min  # write_field names the unrepresentable value
+        # A register of whole °C/min would run 1.5 as 2 and 0.4 as 0 (no limit at all on an
+        # F4T): refuse what the controller would not do rather than ramp at another rate.
+        if abs(held - ramp_c_per_min) > RAMP_WRITE_TOLERANCE * ramp_c_per_min:
+            raise ValueOutOfRange(
+                self.link.device,
+                f"ramp rate {ramp_c_per_min:g} °C/min cannot be written to register "
+                f"{field.address}: it would hold {held:g} °C/min (the map's scale "
+                f"{field.scale:g}); choose a rate the register can hold")
         await self._setup()
-        await self.link.write_field(self.regmap.ramp_c_per_min, ramp_c_per_min)
+        await self.link.write_field(field, ramp_c_per_min)
 
     async def run(self) -> None:
         if self.regmap.run is not None:

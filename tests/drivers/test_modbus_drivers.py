@@ -74,14 +74,28 @@ async def table_rig() -> AsyncIterator[TableRig]:
 
 async def test_chamber_status_roundtrip(chamber_rig: ChamberRig) -> None:
     ch = chamber_rig.driver
-    await ch.set_ramp_rate(1.5)
+    await ch.set_ramp_rate(2.0)
     await ch.set_setpoint(-40.0)
     st = await ch.read_status()
     assert st.setpoint_c == -40.0
-    assert st.ramp_c_per_min == 1.5
+    assert st.ramp_c_per_min == 2.0
     # A controller without a run register controls whenever powered (eurotherm-3216).
     assert st.running is (chamber_rig.driver.regmap.run is None)
     assert st.process_c == pytest.approx(23.0, abs=0.2)
+
+
+async def test_a_ramp_rate_the_register_cannot_hold_is_refused(chamber_rig: ChamberRig) -> None:
+    """Whole-°C/min registers (watlow-f4t-cascade) would run 1.5 as 2 and 0.4 as 0."""
+    ch = chamber_rig.driver
+    f = ch.regmap.ramp_c_per_min
+    for rate in (1.5, 0.4):
+        held = f.decode(f.encode(rate))
+        if abs(held - rate) <= 0.05 * rate:
+            await ch.set_ramp_rate(rate)  # the register holds it: written as asked
+            assert (await ch.read_status()).ramp_c_per_min == pytest.approx(rate, rel=0.05)
+            continue
+        with pytest.raises(ValueOutOfRange, match=f"register {f.address}: it would hold"):
+            await ch.set_ramp_rate(rate)
 
 
 async def test_chamber_ramps_then_settles(chamber_rig: ChamberRig) -> None:
