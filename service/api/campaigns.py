@@ -7,9 +7,9 @@ import time
 from collections.abc import AsyncIterator
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import PlainTextResponse, StreamingResponse
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
@@ -56,14 +56,31 @@ def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
     return campaign_out(campaign)
 
 
+# Largest page of ``GET /campaigns?limit=``: a dashboard screen is a few dozen rows.
+MAX_PAGE = 1000
+
+
 @router.get("", response_model=list[CampaignOut], dependencies=[Depends(auth.viewer)])
 def list_campaigns(
     session: SessionDep,
+    response: Response,
     state: Annotated[CampaignState | None, Query()] = None,
+    limit: Annotated[int | None, Query(
+        ge=1, le=MAX_PAGE, description="at most this many campaigns, newest first "
+        "(without it: every campaign, as before)")] = None,
+    offset: Annotated[int, Query(
+        ge=0, le=2**31 - 1, description="skip this many newest campaigns first")] = 0,
 ) -> list[CampaignOut]:
+    """Campaigns, newest first. With ``limit``/``offset`` one page of them; the
+    ``X-Total-Count`` header gives how many match, so a client knows when to stop."""
     query = select(Campaign).order_by(Campaign.id.desc())
+    count = select(func.count(Campaign.id))
     if state is not None:
         query = query.where(Campaign.state == state)
+        count = count.where(Campaign.state == state)
+    if limit is not None or offset:
+        query = query.offset(offset).limit(limit)
+    response.headers["X-Total-Count"] = str(session.scalar(count))
     return [campaign_out(c) for c in session.scalars(query)]
 
 
