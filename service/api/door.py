@@ -321,7 +321,9 @@ def short_errors(errors: Any) -> list[dict[str, Any]]:
         loc = [part if isinstance(part, int) else short(str(part))
                for part in error.get("loc", ())]
         msg = str(error.get("msg", ""))
-        if error.get("type") == "extra_forbidden" and loc:
+        if error.get("type") == "extra_forbidden" and loc and loc[0] == "query":
+            msg = f"unknown query parameter {loc[-1]!r}; see docs/api.md"
+        elif error.get("type") == "extra_forbidden" and loc:
             msg = (f"unknown field {loc[-1]!r}; see the campaign and schedule fields in "
                    "docs/api.md")
         out.append({"type": str(error.get("type", "value_error")), "loc": loc,

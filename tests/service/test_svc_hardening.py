@@ -133,6 +133,8 @@ def test_the_campaign_list_pages_newest_first(client: TestClient, auth) -> None:
     assert queued.json() == [] and queued.headers["x-total-count"] == "0"
     too_many = _one_error(client.get(CAMPAIGNS, params={"limit": 5000}, headers=viewer))
     assert too_many["loc"] == ["query", "limit"]
+    typo = _one_error(client.get(CAMPAIGNS, params={"limt": 2}, headers=viewer))
+    assert typo["msg"] == "unknown query parameter 'limt'; see docs/api.md"
     # the stored prediction is the same in the list as at creation
     first = json.loads(everything.content)[-1]
     assert first["predicted_duration_s"] == client.get(
