@@ -182,8 +182,10 @@ def test_campaign_start_list_pause_and_watch(live_service, capsys, monkeypatch) 
     # stdout is not a terminal here (a log file, a pipe): plain lines, no redrawing
     assert "\r" not in out and "\x1b" not in out
     lines = out.splitlines()
-    assert lines[0].startswith("[") and lines[0].endswith("paused")
+    assert lines[-1] == "calibration 5 of sensor SN-7: soakcal coefficients SN-7 --temperature-c T"
+    assert all(line.startswith("[") for line in lines[:-1])  # progress lines, then the end
     assert lines[-2].startswith("[########################] 100% step 0 of 0..1 fitting")
+    assert lines[-2].endswith("completed")
     assert len(lines) == len(set(lines))  # one line per change, not one per poll
 
 
