@@ -41,12 +41,15 @@ AMBIENT_C = 23.0
 # (service/engine/progress.py uses the same factor for its ETA).
 PREDICTIVE_SOAK_FRACTION = 0.75
 # The largest campaign the door plans. Planning a step orders its positions for least
-# table travel (a 2-opt tour, cost ~ n² per step), so a schedule is refused before it is
-# built or planned, naming the limit: ``sphere5000`` took 53 s and 3.1 GB, and a few such
-# requests would exhaust the host. 100 positions per step (~25 min of moves, settles and
-# acquisitions) and 2,400 positions over the campaign (~10 h) leave room for every real
-# protocol: the seed's Table 1 is 24 positions × 11 steps = 264.
-MAX_POSITIONS = 100
+# table travel (a 2-opt tour, its cost growing faster than n² per step), so a schedule is
+# refused before it is built or planned, naming the limit: ``sphere5000`` took 53 s and
+# 3.1 GB, and a few such requests would exhaust the host. 64 positions per step (the
+# seed's Table 4 goes up to 64 below its 1296-point reference set; ~15 min of moves,
+# settles and acquisitions) and 2,400 positions over the campaign (~10 h) leave room for
+# every real protocol: the seed's Table 1 is 24 positions × 11 steps = 264. Planned on
+# the shared 2-core machine: 64 × 16 steps 0.4 s, where 100 × 11 took 10 s
+# (benchmarks/bench_plan_bound.py).
+MAX_POSITIONS = 64
 MAX_CAMPAIGN_POSITIONS = 2400
 # The built-in simulated chamber's physics limit (simulators/chamber_sim.py).
 SIM_MAX_RATE_C_PER_MIN = 5.0
