@@ -17,12 +17,20 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/soakcal demo
 
+# Two worker processes (the CI machine has 2 cores); a test file stays on one worker so
+# its module fixtures (a fitted twin, a simulated campaign) are built once. Each worker
+# has its own PostgreSQL schemas and temp dirs (tests/conftest.py). PYTEST_WORKERS=0 runs
+# in one process.
+PYTEST_WORKERS ?= 2
+
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q
+	$(BIN)/lint-imports --no-cache
+	$(BIN)/python -m pytest -q -p xdist -n $(PYTEST_WORKERS) --dist loadfile --durations=15
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/lint-imports --no-cache
 
 bench: $(STAMP)
 	@echo "see docs/benchmarks.md for the individual benchmark commands"

@@ -258,16 +258,24 @@ def rig_busy(session: Session, rig_name: str) -> bool:
     A campaign paused while still queued has not touched the rig and does not
     hold it: the other queued campaigns run (a paused queue cannot jam).
     """
-    active = session.scalar(
-        select(Campaign.id).where(
-            Campaign.rig == rig_name,
-            (Campaign.state == "running")
-            | ((Campaign.state == "paused") & Campaign.started_at.is_not(None)))
-    )
-    if active is not None:
-        return True
-    lease = session.get(RigLease, rig_name)
-    return lease is not None and (as_utc(lease.lease_until) or utcnow()) > utcnow()
+    return rig_name in busy_rig_names(session, rig_name)
+
+
+def busy_rig_names(session: Session, rig_name: str | None = None) -> set[str]:
+    """The rigs :func:`rig_busy` calls busy (only ``rig_name`` when given): two queries for
+    any number of rigs, so ``GET /rigs`` does not cost two queries per rig."""
+    holding = (Campaign.state == "running") | (
+        (Campaign.state == "paused") & Campaign.started_at.is_not(None))
+    campaigns = select(Campaign.rig).where(holding).distinct()
+    leases = select(RigLease.rig, RigLease.lease_until)
+    if rig_name is not None:
+        campaigns = campaigns.where(Campaign.rig == rig_name)
+        leases = leases.where(RigLease.rig == rig_name)
+    busy = set(session.scalars(campaigns))
+    now = utcnow()
+    busy.update(name for name, until in session.execute(leases)
+                if until is not None and as_utc(until) > now)  # type: ignore[operator]
+    return busy
 
 
 def campaign_out(campaign: Campaign) -> CampaignOut:
@@ -297,16 +305,36 @@ def campaign_out(campaign: Campaign) -> CampaignOut:
 
 
 def stored_prediction_s(stored: dict[str, Any]) -> float | None:
-    """The dry run's duration estimate for a stored spec (None if it is not valid any more)."""
-    from pydantic import ValidationError
+    """The dry run's duration estimate for a stored spec (None if it is not valid any more).
+
+    Planned once per distinct spec and process, not on every GET, list row and SSE poll:
+    the plan orders every step's positions (``service.engine.plan``), far dearer than
+    the read it would be attached to. The key is the spec's contract and tuning keys as
+    canonical JSON, so campaigns that differ only in rig or sensors share one plan.
+    """
+    import json
 
     known = {k: v for k, v in stored.items() if k in CampaignSpec.model_fields}
     try:
-        spec = CampaignSpec.model_validate(known)
+        key = json.dumps(known, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):
+        return None
+    return _prediction_of(key)
+
+
+@functools.lru_cache(maxsize=1024)
+def _prediction_of(spec_json: str) -> float | None:
+    import json
+
+    from pydantic import ValidationError
+
+    try:
+        spec = CampaignSpec.model_validate(json.loads(spec_json))
     except ValidationError:
         return None
-    n_positions = positions_count(spec.positions)
-    return None if n_positions is None else predicted_duration_s(spec)
+    if positions_count(spec.positions) is None:
+        return None
+    return predicted_duration_s(spec)
 
 
 def progress_of(campaign: Campaign) -> Progress:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
@@ -19,9 +21,46 @@ ROLES = ("viewer", "operator", "admin")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    try:
+        code = _main(argv)
+        sys.stdout.flush()  # a closed pipe shows here, not at exit as "Exception ignored"
+    except BrokenPipeError:
+        # `soakcal campaign list | head`: the reader has what it wanted. Nothing more can be
+        # written; point stdout at /dev/null so the interpreter's final flush is silent too.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_OK
+    return code
+
+
+# A comma list starting with a minus sign (`--setpoints -40,20`): argparse takes it for an
+# option and says only "expected one argument"; it is joined to its option as `=-40,20`.
+# The value's own parser then says what is wrong with it (`-40,x`: "'x' is not a ...").
+_NEGATIVE_LIST = re.compile(r"^-\.?\d[^=]*,")
+
+
+def join_negative_lists(argv: list[str]) -> list[str]:
+    """``["--setpoints", "-40,20"]`` → ``["--setpoints=-40,20"]`` (an option then a value
+    argparse would refuse as another option); everything else unchanged."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        if (arg.startswith("--") and "=" not in arg and i + 1 < len(argv)
+                and _NEGATIVE_LIST.match(argv[i + 1])):
+            out.append(f"{arg}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(arg)
+        i += 1
+    return out
+
+
+def _main(argv: Sequence[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "sim":  # everything after `sim` belongs to the simulators' own parser
         return _delegate("simulators.cli", "run_sim", "sim")(argv[1:])
+    argv = join_negative_lists(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "handler", None):

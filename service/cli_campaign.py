@@ -33,7 +33,7 @@ def add_parser(sub: Any) -> None:
     actions = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
 
     start = actions.add_parser("start", parents=[common], help="queue a campaign")
-    add_campaign_options(start)
+    add_campaign_options(start, spec_file=True)
     start.add_argument("--watch", action="store_true", help="follow it until it ends")
     start.set_defaults(handler=_start)
 
@@ -59,16 +59,24 @@ def add_parser(sub: Any) -> None:
     add_placement_parser(actions)
 
 
-def add_campaign_options(parser: argparse.ArgumentParser) -> None:
+def add_campaign_options(parser: argparse.ArgumentParser, *, spec_file: bool = False) -> None:
     """The campaign a request asks for (``campaign start``, ``schedule add``);
-    :func:`campaign_body` turns them into the API's campaign object."""
-    parser.add_argument("--rig", default="sim")
-    parser.add_argument("--sensor", required=True, help="sensor serial, e.g. SN-0001")
+    :func:`campaign_body` turns them into the API's campaign object. With ``spec_file``
+    a ``--spec FILE`` gives the whole body, and the options given override its keys."""
+    if spec_file:
+        parser.add_argument(
+            "--spec", metavar="FILE.json",
+            help="the campaign as JSON (the POST /campaigns body, any key of docs/api.md); "
+            "options given here override its keys")
+    parser.add_argument("--rig", default=None if spec_file else "sim",
+                        help="rig name (default sim)")
+    parser.add_argument("--sensor", required=not spec_file,
+                        help="sensor serial, e.g. SN-0001")
     parser.add_argument(
         "--setpoints",
         type=parse_setpoints,
         metavar="C,C,...",
-        help="setpoints in °C, e.g. --setpoints=-40,-20,0 (default -40..60 step 10)",
+        help="setpoints in °C, e.g. --setpoints -40,-20,0 (default -40..60 step 10)",
     )
     parser.add_argument("--soak-min", type=float, help="soak per step in minutes (default 60)")
     parser.add_argument("--positions", help="position schedule (default table1)")
@@ -78,7 +86,20 @@ def add_campaign_options(parser: argparse.ArgumentParser) -> None:
 def campaign_body(args: argparse.Namespace) -> dict[str, Any]:
     """The API's campaign object from :func:`add_campaign_options`' arguments; an option
     not given is left out so the service applies its default."""
-    body: dict[str, Any] = {"rig": args.rig, "sensor": args.sensor}
+    body: dict[str, Any] = {}
+    if getattr(args, "spec", None):
+        from service.cli_plan import read_spec_file
+
+        body.update(read_spec_file(args.spec))
+    if args.rig is not None or "rig" not in body:
+        body["rig"] = args.rig or "sim"
+    if args.sensor is not None:
+        body.pop("sensors", None)
+        body["sensor"] = args.sensor
+    if "sensor" not in body and "sensors" not in body:
+        raise ValueError(f"{args.spec}: names no sensor; add \"sensor\" to the file or give "
+                         "--sensor SERIAL" if getattr(args, "spec", None)
+                         else "name the sensor: --sensor SERIAL")
     optional = {
         "setpoints_c": args.setpoints,
         "soak_min": args.soak_min,
@@ -90,10 +111,20 @@ def campaign_body(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def parse_setpoints(text: str) -> list[float]:
-    try:
-        return [float(part) for part in text.split(",") if part.strip()]
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas: {exc}") from exc
+    """``-40,-20,0`` → ``[-40.0, -20.0, 0.0]``; what is wrong, in the person's words."""
+    values: list[float] = []
+    for part in text.split(","):
+        if not part.strip():
+            continue
+        try:
+            values.append(float(part))
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{part.strip()[:20]!r} is not a temperature; expected °C numbers separated "
+                "by commas, e.g. -40,-20,0") from None
+    if not values:
+        raise argparse.ArgumentTypeError("no setpoints given; expected e.g. -40,-20,0")
+    return values
 
 
 class ApiError(Exception):
@@ -156,7 +187,12 @@ _guarded = guarded("campaign")
 
 @_guarded
 def _start(args: argparse.Namespace) -> int:
-    campaign = call(args, "POST", "/api/v1/campaigns", json=campaign_body(args))
+    try:
+        body = campaign_body(args)
+    except ValueError as exc:
+        print(f"soakcal campaign start: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    campaign = call(args, "POST", "/api/v1/campaigns", json=body)
     print(f"campaign {campaign['id']} {campaign['state']} on rig {campaign['rig']}")
     if args.watch:
         args.id = campaign["id"]
@@ -205,6 +241,7 @@ def print_listing(args: argparse.Namespace, path: str, header: str,
 def _watch(args: argparse.Namespace) -> int:
     """Follow the SSE stream; fall back to polling if the stream breaks."""
     last: dict[str, Any] | None = None
+    _last_drawn.clear()
     try:
         for campaign in _sse_campaigns(args):
             last = campaign
@@ -217,7 +254,8 @@ def _watch(args: argparse.Namespace) -> int:
             _draw(last)
             if last["state"] not in TERMINAL:
                 time.sleep(1.0)
-    sys.stdout.write("\n")
+    if sys.stdout.isatty():
+        sys.stdout.write("\n")  # end the line redrawn in place
     if last is None:
         return EXIT_FAILED
     if last.get("error"):
@@ -252,8 +290,18 @@ def _sse_campaigns(args: argparse.Namespace):  # type: ignore[no-untyped-def]
                 event, data = "message", []
 
 
+_last_drawn: list[str] = []  # the last line written to a non-terminal (one per change)
+
+
 def _draw(campaign: dict[str, Any]) -> None:
-    sys.stdout.write("\r" + progress_line(campaign) + "\x1b[K")
+    """The progress line: redrawn in place on a terminal; on a pipe or a log file one plain
+    line whenever it changes (no carriage returns, no escape codes in the file)."""
+    line = progress_line(campaign)
+    if sys.stdout.isatty():
+        sys.stdout.write("\r" + line + "\x1b[K")
+    elif not _last_drawn or _last_drawn[-1] != line:
+        sys.stdout.write(line + "\n")
+        _last_drawn[:] = [line]
     sys.stdout.flush()
 
 

@@ -72,26 +72,34 @@ def run_plan(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def read_spec_file(path_text: str) -> dict[str, Any]:
+    """A campaign spec file (the ``POST /campaigns`` body as JSON); ``ValueError`` naming the
+    file, and the line and column when it is not JSON."""
+    path = Path(path_text)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: "
+                         f"{getattr(exc, 'strerror', None) or exc})") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}:{exc.lineno}:{exc.colno}: not JSON ({exc.msg})") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: expected a JSON object (the campaign spec)")
+    return doc
+
+
 def _spec_body(args: argparse.Namespace) -> dict[str, Any]:
+    from service.cli_campaign import parse_setpoints
+
     body: dict[str, Any] = {}
     if args.spec:
-        path = Path(args.spec)
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: "
-                             f"{getattr(exc, 'strerror', None) or exc})") from None
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}:{exc.lineno}:{exc.colno}: not JSON ({exc.msg})") from None
-        if not isinstance(doc, dict):
-            raise ValueError(f"{path}: expected a JSON object (the campaign spec)")
-        body.update({k: v for k, v in doc.items() if k not in ("rig", "sensor")})
+        body.update({k: v for k, v in read_spec_file(args.spec).items()
+                     if k not in ("rig", "sensor", "sensors")})
     if args.setpoints is not None:
         try:
-            body["setpoints_c"] = [float(p) for p in args.setpoints.split(",") if p.strip()]
-        except ValueError:
-            raise ValueError(f"--setpoints: expected numbers separated by commas, "
-                             f"got {args.setpoints[:40]!r}") from None
+            body["setpoints_c"] = parse_setpoints(args.setpoints)
+        except argparse.ArgumentTypeError as exc:
+            raise ValueError(f"--setpoints: {exc}") from None
     for key in ("positions", "soak_min", "samples_per_position", "ramp_c_per_min",
                 "stability"):
         value = getattr(args, key)

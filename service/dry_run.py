@@ -40,8 +40,17 @@ AMBIENT_C = 23.0
 # The predictive stability policy ends a soak at ~3/4 of the nominal soak on average
 # (service/engine/progress.py uses the same factor for its ETA).
 PREDICTIVE_SOAK_FRACTION = 0.75
-# sphere<N> beyond this is refused before it is built (sphere10**9 would exhaust memory).
-MAX_POSITIONS = 5000
+# The largest campaign the door plans. Planning a step orders its positions for least
+# table travel (a 2-opt tour, its cost growing faster than n² per step), so a schedule is
+# refused before it is built or planned, naming the limit: ``sphere5000`` took 53 s and
+# 3.1 GB, and a few such requests would exhaust the host. 64 positions per step (the
+# seed's Table 4 goes up to 64 below its 1296-point reference set; ~15 min of moves,
+# settles and acquisitions) and 2,400 positions over the campaign (~10 h) leave room for
+# every real protocol: the seed's Table 1 is 24 positions × 11 steps = 264. Planned on
+# the shared 2-core machine: 64 × 16 steps 0.4 s, where 100 × 11 took 10 s
+# (benchmarks/bench_plan_bound.py).
+MAX_POSITIONS = 64
+MAX_CAMPAIGN_POSITIONS = 2400
 # The built-in simulated chamber's physics limit (simulators/chamber_sim.py).
 SIM_MAX_RATE_C_PER_MIN = 5.0
 
@@ -100,6 +109,13 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
             ("ramp_c_per_min",), f"ramp {spec.ramp_c_per_min:g} °C/min is faster than the "
             f"chamber of rig {name!r} can follow ({max_rate:g} °C/min)", spec.ramp_c_per_min))
     n_positions, why = schedule_verdict(spec.positions, RIG_FIT_MODE)
+    if why is None and n_positions is not None and (
+            n_positions * len(spec.setpoints_c) > MAX_CAMPAIGN_POSITIONS):
+        n_positions, why = None, (
+            f"{len(spec.setpoints_c)} setpoints × {n_positions} positions is "
+            f"{len(spec.setpoints_c) * n_positions} positions, more than the "
+            f"{MAX_CAMPAIGN_POSITIONS} a campaign may have; use fewer setpoints or a "
+            "smaller position schedule")
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
     duration = None if n_positions is None else predicted_duration_s(spec)
@@ -137,11 +153,14 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
     """(number of positions, None) when ``name`` identifies the SFEM in ``mode``, else why not."""
     from calibration.schedules import get_schedule, identifiability
 
-    for part in name.strip().lower().split("+"):
-        if part.startswith("sphere") and part[6:].isdigit() and int(part[6:]) > MAX_POSITIONS:
-            return None, (f"position schedule {name!r}: {part} has more than {MAX_POSITIONS} "
-                          "positions (a night has room for far fewer)")
     try:
+        # Counted before anything is built: sphere<N> has N positions.
+        n_total = sum(int(part[6:]) if part.startswith("sphere") and part[6:].isdigit()
+                      else len(get_schedule(part)) for part in name.strip().lower().split("+"))
+        if n_total > MAX_POSITIONS:
+            return None, (f"position schedule {name!r} has {n_total} positions, more than the "
+                          f"{MAX_POSITIONS} per step the door plans (a night has room for far "
+                          "fewer); use a smaller schedule such as table1 or sphere48")
         refs = get_schedule(name)
     except (ValueError, KeyError):
         return None, (f"unknown position schedule {name!r}; expected table1, six, cube14, "

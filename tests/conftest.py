@@ -3,7 +3,9 @@
 
 On PostgreSQL each test gets its own freshly created schema, selected with the
 connection option ``search_path``, so tests never see each other's rows and
-the schema is dropped afterwards. The URL returned is empty of tables: call
+the schema is dropped afterwards. The names are random, so the worker processes of
+``make test`` (pytest-xdist) and concurrent runs share the one database safely
+(tests/pg_schemas.py). The URL returned is empty of tables: call
 ``service.db.session.upgrade_database(db_url)`` (or use ``migrated_db_url``).
 """
 
@@ -13,18 +15,24 @@ import atexit
 import os
 import shutil
 import tempfile
-import uuid
 import warnings
 from collections.abc import Iterator
-from urllib.parse import quote
 
 import pytest
+from pg_schemas import new_schema_name, postgres_schema
 
 # starlette's TestClient warns about httpx at import; not ours to fix, and noise in every run.
 warnings.filterwarnings("ignore", message=".*httpx.*starlette.testclient.*")
 warnings.filterwarnings("ignore", message=".*starlette.testclient.*httpx.*")
 
 POSTGRES_ENV = "SOAKCAL_TEST_DATABASE_URL"
+
+# One BLAS thread per process, set before anything imports numpy: `make test` runs one
+# worker per core (pytest-xdist), and OpenBLAS' own threads on top of that spin against
+# each other; on a busy 2-core machine a least-squares solve took 10x longer with 2
+# threads than with 1. Exported, so the subprocesses the tests start inherit it.
+for _blas in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_blas, "1")
 
 # The suite never touches the real configuration home or a developer's database: every
 # process it starts (and every subcommand it runs in-process) sees a throw-away home.
@@ -107,18 +115,4 @@ def clean_db_url(shared_db_url: str) -> str:
 
 
 def _postgres_schema(base_url: str) -> Iterator[str]:
-    from sqlalchemy import create_engine, text
-
-    schema = f"t_{uuid.uuid4().hex[:16]}"
-    admin = create_engine(base_url, isolation_level="AUTOCOMMIT")
-    try:
-        with admin.connect() as conn:
-            conn.execute(text(f'CREATE SCHEMA "{schema}"'))
-        separator = "&" if "?" in base_url else "?"
-        yield f"{base_url}{separator}options={quote(f'-csearch_path={schema}')}"
-    finally:
-        with admin.connect() as conn:
-            # A leaked connection must not hang the suite: give up on the drop instead.
-            conn.execute(text("SET lock_timeout = '5s'"))
-            conn.execute(text(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE'))
-        admin.dispose()
+    yield from postgres_schema(base_url, new_schema_name())

@@ -69,7 +69,7 @@ class Protocol:
     temperature: str  # "none" | "one plateau" | "one way" | "both ways"
     temperature_source: str  # "sensor_c" | "chamber_c" | "none"
     n_plateaus: int
-    position_order: str  # "fixed" | "random" | "balanced" | "one plateau"
+    position_order: str  # "fixed" | "varied" | "balanced" | "one plateau"
     order_from: str  # "visit column" | "t_s within steps"
     references: bool
     sessions: int | None  # levels of the session column; None when not recorded
@@ -102,13 +102,16 @@ class Protocol:
 
 def position_order_kind(steps: np.ndarray, positions: np.ndarray, t_s: np.ndarray,
                         visit: np.ndarray | None = None) -> str:
-    """``fixed`` (same order on every plateau), ``balanced`` or ``random``; ``one plateau``.
+    """``fixed`` (same order on every plateau), ``balanced`` or ``varied``; ``one plateau``.
 
     ``balanced``: over the plateaus every position takes every visiting slot equally
-    often, ±1 (a Latin/Williams square, protocol_order.py); ``random``: orders differ
-    without that balance. The order is ``visit`` when recorded, else ``t_s``. Only
-    ``fixed`` changes what is separable; the other two are descriptive (with fewer
-    plateaus than positions a lucky random order can read as balanced).
+    often, ±1 (a Latin/Williams square, protocol_order.py); ``varied``: orders differ
+    without that balance. ``varied``, not ``random``: a recording does not say why its
+    orders differ, and the engine's least-travel order (each plateau starting where the
+    last one ended) differs between plateaus without being random. The order is
+    ``visit`` when recorded, else ``t_s``. Only ``fixed`` changes what is separable; the
+    other two are descriptive (with fewer plateaus than positions a lucky random order
+    can read as balanced).
     """
     key = t_s if visit is None else visit
     ids = np.unique(steps)
@@ -125,7 +128,7 @@ def position_order_kind(steps: np.ndarray, positions: np.ndarray, t_s: np.ndarra
         for slot, p in enumerate(order[:pos_ids.size]):
             slots[index[int(p)], slot] += 1
     balanced = np.ptp(slots) <= 1  # each position in each slot as often as any other (±1)
-    return "balanced" if balanced else "random"
+    return "balanced" if balanced else "varied"
 
 
 def assess(ctx: DesignContext, visit: np.ndarray | None = None,

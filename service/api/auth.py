@@ -117,16 +117,17 @@ def request_token(
     cookie = request.cookies.get(SESSION_COOKIE)
     if cookie:
         if request.method not in SAFE_METHODS:
-            _check_csrf(request)
+            check_csrf(request, "cookie-authenticated change")
         return cookie, True
     raise _unauthorized("missing bearer token (Authorization: Bearer <token>)")
 
 
-def _check_csrf(request: Request) -> None:
+def check_csrf(request: Request, what: str) -> None:
+    """403 unless the request carries :data:`CSRF_HEADER` and, when the browser sends
+    ``Origin``, the service's own origin (sign-in and sign-out included: another site's
+    page must not sign a browser in or out)."""
     if not request.headers.get(CSRF_HEADER):
-        raise HTTPException(
-            status_code=403, detail=f"cookie-authenticated change without the {CSRF_HEADER} header"
-        )
+        raise HTTPException(status_code=403, detail=f"{what} without the {CSRF_HEADER} header")
     origin = request.headers.get("origin")
     if origin is not None:
         own = f"{request.url.scheme}://{request.url.netloc}"

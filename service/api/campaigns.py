@@ -7,9 +7,10 @@ import time
 from collections.abc import AsyncIterator
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import PlainTextResponse, StreamingResponse
-from sqlalchemy import select
+from pydantic import BaseModel, ConfigDict, Field
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
@@ -56,15 +57,38 @@ def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
     return campaign_out(campaign)
 
 
+# Largest page of ``GET /campaigns?limit=``: a dashboard screen is a few dozen rows.
+MAX_PAGE = 1000
+
+
+class CampaignListQuery(BaseModel):
+    """``GET /campaigns`` parameters; an unknown one (``?limt=10``) is a 422 naming it
+    instead of a silently unfiltered list."""
+
+    model_config = ConfigDict(extra="forbid")
+    state: CampaignState | None = None
+    limit: int | None = Field(
+        default=None, ge=1, le=MAX_PAGE,
+        description="at most this many campaigns, newest first (without it: every campaign)")
+    offset: int = Field(default=0, ge=0, le=2**31 - 1,
+                        description="skip this many newest campaigns first")
+
+
 @router.get("", response_model=list[CampaignOut], dependencies=[Depends(auth.viewer)])
 def list_campaigns(
-    session: SessionDep,
-    state: Annotated[CampaignState | None, Query()] = None,
+    session: SessionDep, response: Response, query: Annotated[CampaignListQuery, Query()],
 ) -> list[CampaignOut]:
-    query = select(Campaign).order_by(Campaign.id.desc())
-    if state is not None:
-        query = query.where(Campaign.state == state)
-    return [campaign_out(c) for c in session.scalars(query)]
+    """Campaigns, newest first. With ``limit``/``offset`` one page of them; the
+    ``X-Total-Count`` header gives how many match, so a client knows when to stop."""
+    rows = select(Campaign).order_by(Campaign.id.desc())
+    count = select(func.count(Campaign.id))
+    if query.state is not None:
+        rows = rows.where(Campaign.state == query.state)
+        count = count.where(Campaign.state == query.state)
+    if query.limit is not None or query.offset:
+        rows = rows.offset(query.offset).limit(query.limit)
+    response.headers["X-Total-Count"] = str(session.scalar(count))
+    return [campaign_out(c) for c in session.scalars(rows)]
 
 
 @router.get(

@@ -11,6 +11,10 @@
   decodes the body before it runs the route's auth dependency; with valid JSON
   the dependency runs first anyway). Every 422 echoes at most
   ``ECHO_CHARS`` characters of any input, so a 50 MB field is not sent back.
+* Text PostgreSQL cannot store and numbers JSON does not have are refused at the
+  door with a 422 naming where they are, on both databases alike: a NUL character
+  (``\\u0000`` in a JSON body, ``%00`` in a path or query) and the ``NaN`` /
+  ``Infinity`` tokens Python's JSON reader accepts.
 * :class:`AllowHeaderMiddleware` makes a 405's ``Allow`` list every method of the path.
 * :func:`document_auth_responses` adds 401 and 403 to every operation that
   declares a security requirement in ``/openapi.json``.
@@ -19,6 +23,7 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -47,7 +52,14 @@ class BodyLimitMiddleware:
         self.authenticated = authenticated
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["method"] not in WITH_BODY:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        nul = _nul_in_url(scope)
+        if nul is not None:
+            await self._refuse(scope, send, nul)
+            return
+        if scope["method"] not in WITH_BODY:
             await self.app(scope, receive, send)
             return
         headers = _headers(scope)
@@ -79,7 +91,18 @@ class BodyLimitMiddleware:
                     "msg": f"JSON body is not UTF-8 (byte {exc.start}: {exc.reason})",
                     "input": None}]})
                 return
+            refused = unstorable_json(body)
+            if refused is not None:
+                await self._refuse(scope, send, refused)
+                return
         await self.app(scope, _replay(body, receive), send)
+
+    async def _refuse(self, scope: Scope, send: Send, error: dict[str, Any]) -> None:
+        """422 for input no database row can hold (401 first when unauthenticated)."""
+        if not await self.authenticated(scope):
+            await _send_json(send, 401, UNAUTHORIZED_BODY, {"www-authenticate": "Bearer"})
+            return
+        await _send_json(send, 422, {"detail": [error]})
 
     async def _too_large(self, scope: Scope, send: Send) -> None:
         if not await self.authenticated(scope):
@@ -88,6 +111,78 @@ class BodyLimitMiddleware:
         await _send_json(send, 413, {"detail": (
             f"request body over the limit of {self.max_body_bytes} bytes "
             "(SOAKCAL_MAX_BODY_BYTES)")})
+
+
+# JSON's grammar has no NaN or Infinity; Python's reader accepts them, PostgreSQL's JSON
+# columns do not, and a 422 echoing them could not be serialised.
+_NON_JSON_CONSTANTS = (b"NaN", b"Infinity")
+_NUL_ESCAPE = b"\\u0000"
+
+
+class _NotJsonNumber(ValueError):
+    pass
+
+
+def _no_constant(token: str) -> Any:
+    raise _NotJsonNumber(token)
+
+
+def unstorable_json(body: bytes) -> dict[str, Any] | None:
+    """A 422 ``detail`` entry for a NUL character or a NaN/Infinity in a JSON body, else None.
+
+    A byte scan first, so an ordinary body is not parsed twice; a body that is not
+    JSON at all is left to FastAPI's own ``json_invalid``.
+    """
+    if _NUL_ESCAPE not in body and not any(c in body for c in _NON_JSON_CONSTANTS):
+        return None
+    try:
+        doc = json.loads(body, parse_constant=_no_constant)
+    except _NotJsonNumber as exc:
+        return {"type": "finite_number", "loc": ["body"],
+                "msg": f"{exc} is not a JSON number; give a finite number", "input": str(exc)}
+    except ValueError:
+        return None
+    where = _nul_path(doc, ["body"])
+    if where is None:
+        return None
+    return {"type": "string_nul", "loc": [short(str(p)) if not isinstance(p, int) else p
+                                         for p in where],
+            "msg": "text contains a NUL character (\\u0000), which cannot be stored; remove it",
+            "input": None}
+
+
+def _nul_path(value: Any, loc: list[str | int]) -> list[str | int] | None:
+    """Where the first NUL character of a parsed JSON document is (a key or a string)."""
+    if isinstance(value, str):
+        return loc if "\x00" in value else None
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found = (loc + [key]) if "\x00" in key else _nul_path(item, loc + [key])
+            if found is not None:
+                return found
+    if isinstance(value, list):
+        for i, item in enumerate(value):
+            found = _nul_path(item, loc + [i])
+            if found is not None:
+                return found
+    return None
+
+
+def _nul_in_url(scope: Scope) -> dict[str, Any] | None:
+    """A 422 entry for a NUL character (``%00``) in the path or the query string, else None."""
+    if "\x00" in scope.get("path", ""):
+        return {"type": "string_nul", "loc": ["path"],
+                "msg": "the path contains a NUL character (%00); remove it", "input": None}
+    query = scope.get("query_string", b"")
+    if b"%00" in query or b"\x00" in query:
+        from urllib.parse import parse_qsl
+
+        for name, value in parse_qsl(query.decode("latin-1"), keep_blank_values=True):
+            if "\x00" in name or "\x00" in value:
+                return {"type": "string_nul", "loc": ["query", short(name.replace("\x00", ""))],
+                        "msg": "the query contains a NUL character (%00); remove it",
+                        "input": None}
+    return None
 
 
 class AllowHeaderMiddleware:
@@ -212,6 +307,8 @@ def short(value: Any) -> Any:
     if isinstance(value, list | tuple):
         text = json.dumps(jsonable_encoder(list(value)), ensure_ascii=False)
         return value if len(text) <= ECHO_CHARS else f"<array of {len(value)} item(s)>"
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)  # JSON has no NaN or Infinity: echoed as text
     if isinstance(value, bool | int | float) or value is None:
         return value
     return short(str(value))
@@ -224,7 +321,9 @@ def short_errors(errors: Any) -> list[dict[str, Any]]:
         loc = [part if isinstance(part, int) else short(str(part))
                for part in error.get("loc", ())]
         msg = str(error.get("msg", ""))
-        if error.get("type") == "extra_forbidden" and loc:
+        if error.get("type") == "extra_forbidden" and loc and loc[0] == "query":
+            msg = f"unknown query parameter {loc[-1]!r}; see docs/api.md"
+        elif error.get("type") == "extra_forbidden" and loc:
             msg = (f"unknown field {loc[-1]!r}; see the campaign and schedule fields in "
                    "docs/api.md")
         out.append({"type": str(error.get("type", "value_error")), "loc": loc,

@@ -13,7 +13,7 @@ from sqlalchemy.orm import Session
 from service.api import auth
 from service.api.deps import SessionDep
 from service.api.schemas import RigCreate, RigOut
-from service.campaigns import rig_busy
+from service.campaigns import busy_rig_names, rig_busy
 from service.db.models import Campaign, Rig, RigLease
 from service.engine.rigs import rig_config_errors
 
@@ -23,7 +23,8 @@ router = APIRouter(prefix="/api/v1/rigs", tags=["rigs"])
 @router.get("", response_model=list[RigOut], dependencies=[Depends(auth.viewer)])
 def list_rigs(session: SessionDep) -> list[RigOut]:
     rigs = session.scalars(select(Rig).order_by(Rig.name)).all()
-    return [_rig_out(session, rig) for rig in rigs]
+    busy = busy_rig_names(session)
+    return [_rig_out(session, rig, busy=rig.name in busy) for rig in rigs]
 
 
 @router.post(
@@ -55,13 +56,13 @@ def _loc(path: str) -> list[str | int]:
     return out
 
 
-def _rig_out(session: Session, rig: Rig) -> RigOut:
+def _rig_out(session: Session, rig: Rig, busy: bool | None = None) -> RigOut:
     return RigOut(
         name=rig.name,
         chamber=rig.chamber or {},
         turntable=rig.turntable or {},
         sensors=rig.sensors or [],
-        busy=rig_busy(session, rig.name),
+        busy=rig_busy(session, rig.name) if busy is None else busy,
     )
 
 

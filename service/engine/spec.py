@@ -17,6 +17,7 @@ The defaults are the seed paper's protocol (section 3: −40…60 °C in 10 °C 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
@@ -68,6 +69,12 @@ DEFAULT_PROBE_SAMPLES = 8
 DEFAULT_MEASURED_PROBE_SAMPLES = 250
 # Plausible air temperatures for any climatic chamber; the rig's own range is the dry run's.
 PLAUSIBLE_C = (-200.0, 500.0)
+# Floors of the noise and tempco figures the soak budget is derived from: far below any
+# MEMS accelerometer (the ADXL355's noise is ~25 µg per sample at 62.5 Hz, its tempco
+# ~100 µg/°C), far above the denormal floats that would underflow the budget to 0 °C.
+MIN_SD_G = 1e-9
+MIN_TEMPCO_UG_PER_C = 1e-6
+MIN_DRIFT_BUDGET = 1e-6
 
 # Strict numbers: a JSON boolean is refused; ints are accepted where floats are expected.
 Float = Annotated[float, Field(strict=True, allow_inf_nan=False)]
@@ -135,9 +142,9 @@ class CampaignSpec(BaseModel):
     die_tol_c: Float | None = _f(None, 0, 10, doc="optional |T − T∞| rule on the die, °C")
     temp_budget_c: Float | None = _f(None, 0, 10,
                                      doc="rms die-temperature error allowed, °C (derived)")
-    tempco_ug_per_c: Float = _f(DEFAULT_TEMPCO_UG_PER_C, 0, 1e5,
-                                doc="sensor output change per °C, µg/°C")
-    drift_budget: Float = _f(DEFAULT_DRIFT_BUDGET, 0, 10,
+    tempco_ug_per_c: Float = _f(DEFAULT_TEMPCO_UG_PER_C, MIN_TEMPCO_UG_PER_C, 1e5,
+                                open_lo=False, doc="sensor output change per °C, µg/°C")
+    drift_budget: Float = _f(DEFAULT_DRIFT_BUDGET, MIN_DRIFT_BUDGET, 10, open_lo=False,
                              doc="soak error allowed as a fraction of one reading's noise")
     gradient_lag_s: Float = _f(DEFAULT_GRADIENT_LAG_S, 0, 3600, open_lo=False,
                                doc="package lag behind the die reading, s")
@@ -150,7 +157,7 @@ class CampaignSpec(BaseModel):
     edge_tol_c: Float = _f(DEFAULT_EDGE_TOL_C, 0, 50, doc="extreme steps: sweep offset, °C")
 
     # --- per-position quality checks (service/engine/quality.py) -----------------------
-    expected_sd_g: Float = _f(QualityLimits.expected_sd_g, 0, 1.0,
+    expected_sd_g: Float = _f(QualityLimits.expected_sd_g, MIN_SD_G, 1.0, open_lo=False,
                               doc="rms noise of one raw sample, g")
     max_span_c: Float = _f(QualityLimits.max_span_c, 0, 50,
                            doc="die temperature movement allowed in one capture, °C")
@@ -183,6 +190,33 @@ class CampaignSpec(BaseModel):
     suspend_clear_s: Float = _f(DEFAULT_CLEAR_S, 0, MAX_POLL_S, open_lo=False,
                                 doc="a chamber alarm or band excursion must stay clear this "
                                     "long before the campaign resumes, s")
+
+    @model_validator(mode="after")
+    def _soak_window_is_ordered(self) -> CampaignSpec:
+        # The defaults as run_spec applies them: min(10, soak_min) and 2 × soak_min.
+        lo_min = _or(self.min_soak_min, min(10.0, self.soak_min))
+        hi_min = _or(self.max_soak_min, 2.0 * self.soak_min)
+        if lo_min > hi_min:
+            raise ValueError(
+                f"min_soak_min {lo_min:g} is above max_soak_min {hi_min:g}: a soak cannot end "
+                "before its earliest end; lower min_soak_min or raise max_soak_min")
+        return self
+
+    @model_validator(mode="after")
+    def _derived_budget_is_usable(self) -> CampaignSpec:
+        # The floors above keep this positive; the check names the fields if a mix still
+        # underflows or overflows (the engine would refuse it at start, a 500 at the door).
+        if self.temp_budget_c is not None:
+            return self
+        budget_c = temperature_budget_c(
+            self.expected_sd_g / self.samples_per_position ** 0.5, self.tempco_ug_per_c,
+            self.drift_budget)
+        if not (math.isfinite(budget_c) and budget_c > 0.0):
+            raise ValueError(
+                f"the die-temperature budget derived from expected_sd_g, samples_per_position, "
+                f"tempco_ug_per_c and drift_budget is {budget_c:g} °C; give temp_budget_c or "
+                "realistic values of those fields")
+        return self
 
     @model_validator(mode="after")
     def _measured_rate_needs_precise_probes(self) -> CampaignSpec:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi import APIRouter, Depends, Request, Response
 from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
@@ -42,13 +42,12 @@ class WhoAmI(BaseModel):
     response_model=WhoAmI,
     responses={
         401: {"description": "unknown, revoked or expired token"},
-        403: {"description": "without the X-Soakcal-CSRF header"},
+        403: {"description": "without the X-Soakcal-CSRF header, or from another origin"},
     },
 )
 async def sign_in(body: SignIn, request: Request, response: Response) -> WhoAmI:
     """Check the token and keep it in the session cookie."""
-    if not request.headers.get(auth.CSRF_HEADER):
-        raise HTTPException(status_code=403, detail=f"sign-in needs the {auth.CSRF_HEADER} header")
+    auth.check_csrf(request, "sign-in")
 
     def lookup() -> ApiToken:
         with request.app.state.session_factory() as session:
@@ -84,8 +83,7 @@ async def who_am_i(row: Annotated[ApiToken, Depends(auth.viewer)]) -> WhoAmI:
     "/session", status_code=204, responses={403: {"description": "without X-Soakcal-CSRF"}}
 )
 async def sign_out(request: Request) -> Response:
-    if not request.headers.get(auth.CSRF_HEADER):
-        raise HTTPException(status_code=403, detail=f"sign-out needs the {auth.CSRF_HEADER} header")
+    auth.check_csrf(request, "sign-out")
     response = Response(status_code=204)
     response.delete_cookie(auth.SESSION_COOKIE, path="/", httponly=True, samesite="strict")
     return response

@@ -13,6 +13,7 @@ from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.extensions import extension_specs
 from calibration.discrepancy.protocol import assess, position_order_kind
 from calibration.discrepancy.protocol_order import position_order
+from calibration.discrepancy.report import protocol_lines
 from calibration.recording import Recording
 from simulators.campaign_sim import RigPhysics, simulate_campaign
 from simulators.truth import SensorTruth
@@ -48,12 +49,26 @@ def groups(pr) -> dict[frozenset[str], object]:
     return {frozenset(c.effects): c for c in pr.not_separable}
 
 
-@pytest.mark.parametrize("scheme", ["fixed", "random", "balanced"])
-def test_position_order_is_read_from_time_within_steps(scheme):
+@pytest.mark.parametrize(("scheme", "seen"),
+                         [("fixed", "fixed"), ("random", "varied"), ("balanced", "balanced")])
+def test_position_order_is_read_from_time_within_steps(scheme, seen):
     order = position_order(6, 6, scheme, seed=3)
     ctx = ctx_of([0.0] * 6, order)
-    assert position_order_kind(ctx.steps, ctx.positions, ctx.t_s) == scheme
+    assert position_order_kind(ctx.steps, ctx.positions, ctx.t_s) == seen
     assert position_order_kind(ctx.steps[:6], ctx.positions[:6], ctx.t_s[:6]) == "one plateau"
+
+
+def test_a_least_travel_order_is_called_varied_not_random():
+    """The engine's default order: each plateau starts where the last ended (not random)."""
+    from calibration.schedules import cube14
+    from service.engine.soak_order import angles_of, step_orders
+
+    travel = np.array(step_orders(angles_of(cube14()), 6, "travel"))
+    ctx = ctx_of(UP_DOWN, travel, n_pos=14)
+    pr = assess(ctx)
+    assert pr.position_order == "varied"
+    line = protocol_lines(pr.to_json())[0]
+    assert "position order varied (from t_s within steps)" in line and "random" not in line
 
 
 def test_a_visit_column_overrides_the_time_order():

@@ -179,6 +179,64 @@ def test_campaign_start_list_pause_and_watch(live_service, capsys, monkeypatch) 
     out = capsys.readouterr().out
     assert "step 0 of 0..1" in out and "100%" in out and "completed" in out  # 0-based, as the API
     assert "calibration 5 of sensor SN-7" in out
+    # stdout is not a terminal here (a log file, a pipe): plain lines, no redrawing
+    assert "\r" not in out and "\x1b" not in out
+    lines = out.splitlines()
+    assert lines[-1] == "calibration 5 of sensor SN-7: soakcal coefficients SN-7 --temperature-c T"
+    assert all(line.startswith("[") for line in lines[:-1])  # progress lines, then the end
+    assert lines[-2].startswith("[########################] 100% step 0 of 0..1 fitting")
+    assert lines[-2].endswith("completed")
+    assert len(lines) == len(set(lines))  # one line per change, not one per poll
+
+
+def test_campaign_start_from_a_spec_file_and_negative_setpoints_without_equals(
+        live_service, capsys, monkeypatch, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    url, token, _ = live_service
+    monkeypatch.setenv("SOAKCAL_TOKEN", token)
+    spec = tmp_path / "night.json"
+    spec.write_text(json.dumps({"sensor": "SN-SPEC", "setpoints_c": [-20, 0, 20],
+                                "positions": "six", "soak_min": 45, "stability": "fixed"}))
+    assert main(["campaign", "start", "--url", url, "--spec", str(spec)]) == 0
+    assert "queued on rig sim" in capsys.readouterr().out
+    assert main(["campaign", "start", "--url", url, "--spec", str(spec), "--sensor", "SN-B",
+                 "--setpoints", "-40,20"]) == 0
+    capsys.readouterr()
+    assert main(["campaign", "list", "--url", url, "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    assert [(c["sensor"], c["spec"]["setpoints_c"], c["spec"]["soak_min"]) for c in listed] == [
+        ("SN-B", [-40.0, 20.0], 45), ("SN-SPEC", [-20, 0, 20], 45)]
+    # what a person reads when the list or the file is wrong
+    with pytest.raises(SystemExit):
+        main(["campaign", "start", "--url", url, "--sensor", "S", "--setpoints", "-40,x"])
+    assert ("argument --setpoints: 'x' is not a temperature; expected °C numbers separated by "
+            "commas, e.g. -40,-20,0") in capsys.readouterr().err
+    spec.write_text(json.dumps({"positions": "six"}))
+    assert main(["campaign", "start", "--url", url, "--spec", str(spec)]) == 2
+    assert capsys.readouterr().err == (f"soakcal campaign start: {spec}: names no sensor; add "
+                                       '"sensor" to the file or give --sensor SERIAL\n')
+    spec.write_text("{\n  \"sensor\": \"S\",\n}")
+    assert main(["campaign", "start", "--url", url, "--spec", str(spec)]) == 2
+    assert f"{spec}:3:1: not JSON" in capsys.readouterr().err
+
+
+def test_a_closed_pipe_ends_the_output_quietly(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """`soakcal ... | head`: the reader left; no BrokenPipeError traceback on the terminal."""
+    import os
+    import subprocess
+    import sys
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line is written
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "service.cli", "campaign", "plan", "--positions", "six",
+             "--setpoints", "-40,20"], stdout=write_end, stderr=subprocess.PIPE, text=True,
+            env={**os.environ, "SOAKCAL_DATABASE_URL": f"sqlite:///{tmp_path / 'none.db'}"},
+            timeout=120)
+    finally:
+        os.close(write_end)
+    assert "Traceback" not in done.stderr and "BrokenPipe" not in done.stderr, done.stderr
+    assert done.returncode == 0
 
 
 def test_campaign_commands_without_a_token_exit_2(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]
