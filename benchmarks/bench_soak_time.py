@@ -27,7 +27,7 @@ comparison meaningful rather than a coin toss:
 
 ``--noise-free`` switches the accelerometer noise off: the held-out error is
 then the soak-induced (systematic) part only. ``--rate-ug-per-c-per-min K``
-adds the ``temperature_rate`` effect of shared/spec/effects.md (output ∝ dT/dt
+adds the ``temperature_rate`` effect of docs/effects.md (output ∝ dT/dt
 of the die, gains up to K µg per °C/min per axis), which the rig simulator
 does not model on its own; the die rate is the simulated die's instantaneous
 rate at the capture.

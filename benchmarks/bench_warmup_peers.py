@@ -345,7 +345,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
     ap.add_argument("--realdata", type=Path,
-                    default=Path(os.environ.get("SOAKCAL_REALDATA", "/work/shared/realdata")),
+                    default=Path(os.environ.get("SOAKCAL_REALDATA", Path(__file__).resolve()
+                                                .parents[1] / "tests/data/realdata")),
                     help="folder holding bmi270-ganesh/ (skipped when absent)")
     args = ap.parse_args(argv)
     logs = [make() for make in LOGS.values()]

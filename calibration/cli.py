@@ -1,4 +1,4 @@
-"""``soakcal calibrate`` and ``soakcal compensate`` (contract: ``shared/spec/cli.md``).
+"""``soakcal calibrate`` and ``soakcal compensate`` (contract: ``docs/cli.md``).
 
 The argparse wiring lives in ``service/cli.py``; these functions take its
 Namespace and return the exit status: 0 on success, 2 with one line on stderr

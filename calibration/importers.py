@@ -1,8 +1,8 @@
 """Import static multi-position recordings from other labs into recording format v1.
 
-Four source formats (``/work/shared/realdata``), each read into a :class:`RawImport`
-(time, acceleration in g, and what the file says about its initial rest), then cut
-into static intervals and averaged into one v1 row per interval:
+Four source formats (public recordings from other labs, docs/realdata.md), each read
+into a :class:`RawImport` (time, acceleration in g, and what the file says about its
+initial rest), then cut into static intervals and averaged into one v1 row per interval:
 
 * ``openaxes`` -- OpenAXES IMU logger, semicolon CSV, ADXL355 (or BMI160) in m/s².
 * ``imu_tk``   -- imu_tk / Tedaldi test data: ASCII ``t ax ay az`` in raw ADC counts.

@@ -88,7 +88,7 @@ def condition_temperature(
 
 def rate_corrected_raw_g(raw_g: np.ndarray, row_rate_c_per_min: np.ndarray,
                          rate_gain_ug_per_c_per_min: np.ndarray) -> np.ndarray:
-    """The raw rows less the ``temperature_rate`` effect k·dT/dt (shared/spec/effects.md).
+    """The raw rows less the ``temperature_rate`` effect k·dT/dt (docs/effects.md).
 
     While the die moves, package and board lag it and each axis reads an extra
     k·dT/dt (k in µg per °C/min, per axis, measured by the campaign from its soak

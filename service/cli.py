@@ -1,4 +1,4 @@
-"""``soakcal``: one command, argparse subcommands per spec/cli.md.
+"""``soakcal``: one command, argparse subcommands per docs/cli.md.
 
 Subcommands owned by other packages are registered here (so ``--help`` lists
 them and their arguments are validated) but imported only when run, so a
@@ -96,7 +96,7 @@ def _overwrites_an_input(args: argparse.Namespace) -> str | None:
 
 
 class _OneLineParser(argparse.ArgumentParser):
-    """argparse whose usage errors are one line on stderr and exit 2 (spec/cli.md)."""
+    """argparse whose usage errors are one line on stderr and exit 2 (docs/cli.md)."""
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")

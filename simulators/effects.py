@@ -1,4 +1,4 @@
-"""Truth-model effects: the physics the base model leaves out (``shared/spec/effects.md``).
+"""Truth-model effects: the physics the base model leaves out (``docs/effects.md``).
 
 Each class implements the :class:`simulators.truth.Effect` protocol with the
 catalogue id as ``effect_id`` and the compact model of effects.md, with its

@@ -8,7 +8,7 @@
 * The temperature channel reads the die temperature plus a constant offset
   (the ADXL355 channel is "not absolute") with its own noise, quantised at
   0.11 °C/LSB by the bridge.
-* Extra physics of ``shared/spec/effects.md`` enters through :class:`Effect`
+* Extra physics of ``docs/effects.md`` enters through :class:`Effect`
   objects (see ``simulators/effects.py``), each adding to the raw output or to
   the temperature reading given a :class:`Context` of the readings.
 

@@ -2,7 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m benchmarks.blind.outside [--reps 12] [--seed0 K]
 
-Five effects the catalogue (shared/spec/effects.md) does not hold, each on its own sensor
+Five effects the catalogue (docs/effects.md) does not hold, each on its own sensor
 and seed, one-way −40…60 °C, Table 1, 30-min soaks, sensor_c + chamber_c:
 
 * ``scale_step``: one axis's scale factor differs by 40…120 ppm on one plateau only;

@@ -1,1 +1,1 @@
-"""The REST service: FastAPI app factory, auth and one router per resource (spec/api.md)."""
+"""The REST service: FastAPI app factory, auth and one router per resource (docs/api.md)."""

@@ -30,7 +30,7 @@ Every call except `GET /api/v1/health` needs `Authorization: Bearer <token>`
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """The REST service of spec/api.md over ``settings.database_url``."""
+    """The REST service of docs/rest-contract.md over ``settings.database_url``."""
     settings = settings or Settings()
     engine = make_engine(settings.database_url)
     app = FastAPI(

@@ -1,4 +1,4 @@
-"""Recording format v1 (spec/recording.md) rendered from the measurements table."""
+"""Recording format v1 (docs/recording.md) rendered from the measurements table."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Pydantic bodies and responses of spec/api.md (so /openapi.json describes every one)."""
+"""Pydantic bodies and responses of docs/api.md (so /openapi.json describes every one)."""
 
 from __future__ import annotations
 

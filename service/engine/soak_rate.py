@@ -1,7 +1,7 @@
 """The sensor's sensitivity to the rate of die-temperature change, from the campaign's own probes.
 
 While the die moves, package and board lag it and the output carries a term
-k × dT/dt (the ``temperature_rate`` effect of shared/spec/effects.md, k in
+k × dT/dt (the ``temperature_rate`` effect of docs/effects.md, k in
 µg per °C/min). The soak must wait until k × rate is below the noise
 (:mod:`service.engine.stability`), so k sets the soak; today it is assumed
 (``gradient_lag_s``). Here it is measured from the soak probes the engine
@@ -38,7 +38,7 @@ import numpy as np
 from service.engine.stability import fit_approach
 
 # What a sensor is assumed to have until the campaign has measured it: the catalogue's
-# typical temperature_rate gain (shared/spec/effects.md), the safe side for a new die.
+# typical temperature_rate gain (docs/effects.md), the safe side for a new die.
 PRIOR_RATE_GAIN_UG_PER_C_PER_MIN = 100.0
 MIN_PROBES_PER_SOAK = 6  # fewer and the soak's approach cannot be fitted
 # A campaign of at least this many soaks at one pose measures k well enough for the fit to

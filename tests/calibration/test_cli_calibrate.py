@@ -1,4 +1,4 @@
-"""`soakcal calibrate` / `soakcal compensate` (shared/spec/cli.md): exit codes, files, columns."""
+"""`soakcal calibrate` / `soakcal compensate` (docs/cli.md): exit codes, files, columns."""
 
 from __future__ import annotations
 

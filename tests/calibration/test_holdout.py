@@ -17,6 +17,7 @@ from calibration.errors import RecordingError
 from calibration.recording import Recording, recording_text
 from calibration.thermal import fit_campaign
 from simulators.truth import SensorTruth
+from tests.realdata import need_realdata
 
 
 def _static_recording(directions: np.ndarray, seed: int, *, ref: bool = False,
@@ -125,17 +126,16 @@ def test_calibrate_refuses_a_bad_ref_tol_cell_with_exit_2(tmp_path: Path,
     assert "ref_tol_deg" in capsys.readouterr().err and not out.exists()
 
 
-FERRARIS = Path("/work/shared/realdata/imucal-ferraris/example_ferraris_session.csv")
+FERRARIS = "imucal-ferraris/example_ferraris_session.csv"
 
 
 def test_real_ferraris_hand_placed_beats_imucal_on_the_held_out_rests() -> None:
-    """Issue 9: |g| on the six and on the seven other static periods vs imucal 0.04 / 0.5 mg."""
-    if not FERRARIS.exists():
-        pytest.skip(f"{FERRARIS} missing")
+    """|g| on the six and on the seven other static periods vs imucal 0.04 / 0.5 mg."""
+    ferraris = need_realdata(FERRARIS)
     from benchmarks.bench_realdata import other_static_periods
     from calibration import importers
 
-    raw = importers.read_source("ferraris", FERRARIS)
+    raw = importers.read_source("ferraris", ferraris)
     rec = importers.intervals_to_recording(
         raw, importers.find_intervals(raw, importers.DEFAULT_DETECTOR["ferraris"]))
     fit = fit_campaign(rec)  # the calibrate path: ref_tol_deg written by the import

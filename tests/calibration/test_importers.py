@@ -12,11 +12,9 @@ from calibration.errors import RecordingError
 from calibration.fit import fit_norm
 from calibration.importers_cli import run_import
 from calibration.recording import read_recording
+from tests.realdata import need_realdata
 
-REALDATA = Path("/work/shared/realdata")
-needs_realdata = pytest.mark.skipif(
-    not REALDATA.is_dir(), reason=f"real recordings not present at {REALDATA}")
-OPENAXES = REALDATA / "openaxes-adxl355/log_imu9_2022-06-22_22-13-55.csv"
+OPENAXES = "openaxes-adxl355/log_imu9_2022-06-22_22-13-55.csv"
 
 
 # --- synthetic signal: rest, then moves between static positions ---------------
@@ -311,31 +309,26 @@ def _excerpt(src: Path, dst: Path, n_lines: int) -> Path:
     return dst
 
 
-@needs_realdata
-def test_real_excerpts_parse_to_one_g_at_rest(tmp_path: Path) -> None:
-    cases = [
-        (importers.read_openaxes, "openaxes-adxl355/log_imu9_2022-06-22_22-13-55.csv", 300,
-         (1.01, 1.06)),  # ~3 % nominal-scale error on this ADXL355 (README: 10.07-10.26 m/s²)
-        (importers.read_imu_tk, "imu_tk-xsens/xsens_acc.mat", 300, (0.98, 1.02)),
-        (importers.read_mpu6050, "tomisuarez2-mpu6050/example_data_calibration.csv", 300,
-         (0.85, 1.15)),
-    ]
-    for reader, rel, n, (lo, hi) in cases:
-        src = REALDATA / rel
-        if not src.exists():
-            pytest.skip(f"{src} missing")
-        raw = reader(_excerpt(src, tmp_path / Path(rel).name, n))
-        g = np.linalg.norm(raw.acc_g.mean(axis=0))
-        assert lo < g < hi, (rel, g)
-        assert np.all(np.diff(raw.t_s) > 0) and raw.t_s[0] == 0.0
+@pytest.mark.parametrize(("reader", "rel", "n", "g_range"), [
+    (importers.read_openaxes, OPENAXES, 300,
+     (1.01, 1.06)),  # ~3 % nominal-scale error on this ADXL355 (README: 10.07-10.26 m/s²)
+    (importers.read_imu_tk, "imu_tk-xsens/xsens_acc.mat", 300, (0.98, 1.02)),
+    (importers.read_mpu6050, "tomisuarez2-mpu6050/example_data_calibration.csv", 300,
+     (0.85, 1.15)),
+], ids=["openaxes", "imu_tk", "mpu6050"])
+def test_real_excerpts_parse_to_one_g_at_rest(tmp_path: Path, reader, rel: str, n: int,
+                                              g_range: tuple[float, float]) -> None:
+    src = need_realdata(rel)
+    raw = reader(_excerpt(src, tmp_path / Path(rel).name, n))
+    g = np.linalg.norm(raw.acc_g.mean(axis=0))
+    lo, hi = g_range
+    assert lo < g < hi, (rel, g)
+    assert np.all(np.diff(raw.t_s) > 0) and raw.t_s[0] == 0.0
 
 
-@needs_realdata
 def test_real_ferraris_files_give_six_labelled_positions() -> None:
     for name in ("example_ferraris_session.csv", "annotated_session.csv"):
-        src = REALDATA / "imucal-ferraris" / name
-        if not src.exists():
-            pytest.skip(f"{src} missing")
+        src = need_realdata(f"imucal-ferraris/{name}")
         _, iv, rec = importers.import_static("ferraris", src)
         assert len(rec) == 6
         # Each section reads ~±1 g along its labelled axis (uncalibrated: within 8 %).
@@ -343,11 +336,8 @@ def test_real_ferraris_files_give_six_labelled_positions() -> None:
         assert np.all(np.abs(along - 1.0) < 0.08), along
 
 
-@needs_realdata
 def test_openaxes_norm_fit_reaches_0_30_mg() -> None:
-    if not OPENAXES.exists():
-        pytest.skip(f"{OPENAXES} missing")
-    _, iv, rec = importers.import_static("openaxes", OPENAXES)
+    _, iv, rec = importers.import_static("openaxes", need_realdata(OPENAXES))
     assert 30 <= len(iv) <= 40  # README: 33 at 5×, 38 at 10× (plus the initial rest)
     for sigma in (None, rec.sigma_g):
         res = fit_norm(rec.raw_g, sigma)

@@ -1,4 +1,4 @@
-"""Recording format v1 (shared/spec/recording.md): the rules the readers apply."""
+"""Recording format v1 (docs/recording.md): the rules the readers apply."""
 
 from pathlib import Path
 

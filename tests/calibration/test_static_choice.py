@@ -12,8 +12,9 @@ from calibration import importers, schedules, static_choice
 from calibration.fit import fit_norm
 from calibration.importers_cli import run_import
 from simulators.truth import SensorTruth
+from tests.realdata import need_realdata
 
-XSENS = Path("/work/shared/realdata/imu_tk-xsens/xsens_acc.mat")
+XSENS = "imu_tk-xsens/xsens_acc.mat"
 
 
 def _settling_raw(seed: int = 0, n_pos: int = 20, settle_g: float = 4e-3) -> importers.RawImport:
@@ -98,20 +99,17 @@ def test_too_few_intervals_keep_the_defaults_and_say_why() -> None:
 
 
 def test_run_import_reports_the_choice(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    if not XSENS.exists():
-        pytest.skip(f"{XSENS} missing")
+    xsens = need_realdata(XSENS)
     out = tmp_path / "x.csv"
-    ns = argparse.Namespace(format="imu_tk", raw_path=str(XSENS), output=str(out),
+    ns = argparse.Namespace(format="imu_tk", raw_path=str(xsens), output=str(out),
                             min_static_s=None, threshold=10.0, trim_s=0.0, raw=False)
     assert run_import(ns) == 0
     assert "threshold 10x, trim 0 s (flags)" in capsys.readouterr().out
 
 
 def test_xsens_choice_is_no_worse_than_imu_tk() -> None:
-    if not XSENS.exists():
-        pytest.skip(f"{XSENS} missing")
-    raw = importers.read_source("imu_tk", XSENS)
+    raw = importers.read_source("imu_tk", need_realdata(XSENS))
     choice = static_choice.choose_detector(raw, importers.DEFAULT_DETECTOR["imu_tk"])
-    # imu_tk on its own data: 0.135 mg leave-one-interval-out (issue 11).
+    # imu_tk on its own data: 0.135 mg leave-one-interval-out (docs/realdata.md).
     assert choice.loo_ug is not None and choice.loo_ug <= 135.0
     assert choice.default_loo_ug is not None and choice.loo_ug < choice.default_loo_ug

@@ -1,4 +1,4 @@
-"""One place per effect's physics (issue 10, DESIGN.md "Effects carry their own behaviour").
+"""One place per effect's physics (docs/diagnosis.md, "Where each effect's physics lives").
 
 The twin's truth effects (``simulators/effects.py``) and the diagnosis effect modules
 (``calibration/discrepancy/effects/``) compute the same physical term with the same

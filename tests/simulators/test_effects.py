@@ -1,5 +1,5 @@
 """Each catalogue effect changes the output as its compact model says, and only where it should
-(shared/spec/effects.md)."""
+(docs/effects.md)."""
 
 from __future__ import annotations
 
