@@ -35,6 +35,7 @@ def test_create_fills_the_contract_defaults(client: TestClient, auth) -> None:  
         "chamber_c",
         "setpoint_c",
         "eta_s",
+        "eta_wall_s",
     }
     assert (progress["steps"], progress["positions"], progress["setpoint_c"]) == (11, 24, -40)
 

@@ -60,7 +60,10 @@ def live_engine_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
     thread.join(timeout=20)
 
 
-@pytest.fixture(scope="session")
+# Module scope, not session: Playwright's sync API keeps an event loop running on this thread
+# while it is open, and under xdist the worker goes on to other files (whose asyncio tests
+# then fail with "Runner.run() cannot be called from a running event loop").
+@pytest.fixture(scope="module")
 def browser() -> Iterator[object]:
     executable = chromium_or_skip()
     from playwright.sync_api import sync_playwright
