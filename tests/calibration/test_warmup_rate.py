@@ -132,3 +132,23 @@ def test_export_of_a_rate_term_refuses_or_lists_it(tmp_path, capsys, fmt):
     else:
         assert code == 0
         assert "rate term k(T)*dT/dt" in err and "rate term k(T)*dT/dt" in out.read_text()
+
+
+def test_a_board_tilting_as_it_warms_is_refused_not_a_30_mg_per_c_tempco(tmp_path, capsys):
+    # 2 minutes, the channel creeping up 0.5 °C while the board tilts 15 mrad about x (y
+    # and z readings move by ~15 mg): no offset drifts 30 mg/°C, so no model is written.
+    rng = np.random.default_rng(5)
+    t = np.arange(120, dtype=float)
+    tilt = 0.015 * t / t[-1]
+    cols = {"t_s": t, "sensor_c": 47.2 + 0.5 * t / t[-1] + rng.normal(0, 0.01, t.size),
+            "ax": np.full(t.size, 0.99), "ay": 0.1 - 0.1 * tilt + rng.normal(0, 1e-5, t.size),
+            "az": -0.1 + 0.1 * tilt + tilt * 0.99 + rng.normal(0, 1e-5, t.size),
+            "sd_x": np.full(t.size, 1e-4), "sd_y": np.full(t.size, 1e-4),
+            "sd_z": np.full(t.size, 1e-4), "n": np.full(t.size, 50.0)}
+    src, model = tmp_path / "hot.csv", tmp_path / "model.json"
+    write_recording(src, cols)
+    code = cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model)))
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and not model.exists()
+    assert "mg/°C" in err and "beyond any MEMS accelerometer's offset drift" in err
+    assert "keep the board still" in err and len(err.splitlines()) == 1
