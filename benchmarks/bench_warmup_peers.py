@@ -323,7 +323,7 @@ def table(results: list[dict[str, object]]) -> str:
     lines = [head]
 
     def fmt(v: object) -> str:
-        return "no model" if v is None else " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+        return "refused (exit 2)" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
 
     for r in results:
         lo, hi = r["temp_span_c"]  # type: ignore[misc]

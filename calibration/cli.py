@@ -242,6 +242,10 @@ def run_compensate(args: argparse.Namespace) -> int:
         cal = model.compensate(rec.raw_g, temp_c, extrapolate=True)
     except CalibrationError as exc:
         return _fail(str(exc))
+    if model.temperature_rate:
+        cal = cal - _rate_offset_rows(model, rec)
+        how += ("; the warm-up's rate term k·dT/dt applied (dT/dt from the capture-mean "
+                f"temperatures over {float(model.temperature_rate['window_s']):g} s)")
     try:
         atomic_write_text(args.output, _output_csv(rec, cal))
     except OSError as exc:
@@ -314,6 +318,16 @@ def _temperatures(
                 f"[{lo:.2f}, {hi:.2f}] °C (use --extrapolate to compensate anyway)",
             )
     return temp_c, how
+
+
+def _rate_offset_rows(model: ThermalModel, rec: Recording) -> np.ndarray:
+    """(N,3) a warm-up model's rate term at each row, g: dT/dt read from the capture means
+    as calibrate read it, linear in time between captures."""
+    from calibration.warmup import rate_offset_g
+
+    means = capture_means(rec).recording
+    off = rate_offset_g(model, means.t_s, means.temperature_c())
+    return np.column_stack([np.interp(rec.t_s, means.t_s, off[:, i]) for i in range(3)])
 
 
 def _output_csv(rec: Recording, cal_g: np.ndarray) -> str:

@@ -43,6 +43,11 @@ FLOAT_BOUND_UG = 1.0
 
 
 def _check_exportable(model: ThermalModel) -> None:
+    if model.temperature_rate:
+        raise ModelFileError(
+            "model field 'temperature.rate': this export evaluates a polynomial in T only and "
+            "cannot carry the warm-up's rate term k(T)*dT/dt; use --format px4 or ardupilot "
+            "(which list it as left out) or compensate with `soakcal compensate`")
     if model.extensions:
         kinds = ", ".join(str(e.get("kind")) for e in model.extensions)
         raise ModelFileError(

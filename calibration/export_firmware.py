@@ -104,6 +104,10 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
     if out:
         out.append(f"leaving them out costs up to {err_mg:.3f} mg at |a| <= 1 g "
                    f"over {lo:.2f} .. {hi:.2f} degC")
+    if model.temperature_rate:
+        gain = np.asarray(model.temperature_rate["gain_ug_per_c_per_min"], float)[:, 0]
+        out.append(f"the warm-up's rate term k(T)*dT/dt (|k| up to {np.abs(gain).max():.1f} ug "
+                   "per degC/min at mid-range): the firmware's offset is a function of T only")
     held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
             if not ok]
     if held:

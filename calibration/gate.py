@@ -58,6 +58,11 @@ SFEM_MIN_FITTED = 6
 BIAS_MAX_G = 0.5
 SCALE_MAX_DEV = 0.25
 ANGLE_MAX_RAD = 0.35
+# No MEMS accelerometer's zero-g offset drifts faster than a few mg/°C (ADXL355
+# ±0.15 mg/°C, consumer parts ±0.2 … 1.5 mg/°C in their datasheets). A fitted slope
+# above this is something else that changed with the temperature: a board tilting as it
+# warms (1 mrad reads 1 mg), a channel that is not the sensor's.
+BIAS_TEMPCO_MAX_G_PER_C = 5e-3
 # |compensated| − g on the captures the model was fitted to: a calibrated sensor is
 # within a few mg; 50 mg off on its own data is not a calibration.
 NORM_MAX_DEV_G = 0.05
@@ -336,6 +341,7 @@ def check_model(model: ThermalModel, captures: Recording,
             raise GateRefusal(
                 f"the fitted angle {names[6 + k]} = {a[k]:+.3g} rad{at} is not physical; "
                 f"no model written: {_fix(model)}")
+    _check_bias_tempco(model)
     if model.mode == "warmup" or temperature_c is None:
         return
     used = np.isfinite(temperature_c) | (not model.temperature_dependent)
@@ -351,6 +357,26 @@ def check_model(model: ThermalModel, captures: Recording,
             f"the model gives |g| = {float(np.linalg.norm(cal[i])):.4f} g "
             f"(local gravity {model.g_local:.4f} g) on its own reading {i + 1}; a calibration "
             f"is within a few mg; no model written: {_fix(model)}")
+
+
+def _check_bias_tempco(model: ThermalModel, n_temps: int = 21) -> None:
+    """Refuse a bias slope over the valid range beyond :data:`BIAS_TEMPCO_MAX_G_PER_C`."""
+    if not model.temperature_dependent or model.degree == 0:
+        return
+    lo, hi = model.valid_c  # type: ignore[misc]
+    temps = np.linspace(lo, hi, n_temps)
+    bias = model.physical_coeffs()[sfem.BIAS]  # (3, d+1) in (T − centre_c)^j
+    slope = np.array([np.polyval(np.polyder(c[::-1]), temps - model.t_centre_c)
+                      for c in bias])  # (3, n) g/°C
+    k, i = np.unravel_index(int(np.argmax(np.abs(slope))), slope.shape)
+    if abs(slope[k, i]) > BIAS_TEMPCO_MAX_G_PER_C:
+        raise GateRefusal(
+            f"the fitted bias {sfem.PARAM_NAMES[k]} changes by {slope[k, i] * 1e3:+.2f} "
+            f"mg/°C at {temps[i]:.2f} °C, beyond any MEMS accelerometer's offset drift "
+            f"({BIAS_TEMPCO_MAX_G_PER_C * 1e3:g} mg/°C): something else changed with the "
+            f"temperature (the board tilting or settling: 1 mrad reads 1 mg; a temperature "
+            f"channel that is not this sensor's); no model written: keep the board still "
+            f"and record over a wider temperature change")
 
 
 def _fix(model: ThermalModel) -> str:

@@ -26,9 +26,15 @@ from typing import Any, TypeVar
 import numpy as np
 
 from calibration import sfem
+from calibration.captures import CAPTURE_BLOCK_S
 from calibration.errors import ModelFileError
 from calibration.recording import atomic_write_text
-from calibration.temperature_conditioning import CompensationConditioning
+from calibration.temperature_conditioning import (
+    CAPTURE_MEAN_KIND,
+    CAUSAL_KIND,
+    CompensationConditioning,
+    default_streaming_filter,
+)
 from calibration.thermal import MODEL_VERSION, StepParams, ThermalModel
 
 FORMAT = "soakcal-model"
@@ -66,8 +72,10 @@ def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
             "centre_c": model.t_centre_c,
             "scale_c": model.t_scale_c,
             "variable": "x = (T - centre_c) / scale_c",
-            "compensation": _conditioning.to_dict(),
-            "streaming_filter": _conditioning.to_dict()["otherwise"],
+            "compensation": conditioning_of(model).to_dict(),
+            "streaming_filter": default_streaming_filter(conditioning_of(model).tau_s,
+                                                         conditioning_of(model).jump_c),
+            "rate": None if model.temperature_rate is None else dict(model.temperature_rate),
         },
         "polynomial": {
             "degree": d,
@@ -98,8 +106,13 @@ def dump_model_dict(model: ThermalModel) -> dict[str, Any]:
     }
 
 
-# calibrate always conditions per step (calibration.thermal); compensate mirrors it.
-_conditioning = CompensationConditioning()
+def conditioning_of(model: ThermalModel) -> CompensationConditioning:
+    """How ``compensate`` conditions the temperature for this model by default: a soak
+    model per step as calibrate did (the causal filter otherwise); a warm-up model at each
+    capture's mean temperature, as :mod:`calibration.warmup` fitted it."""
+    if model.mode == "warmup":
+        return CompensationConditioning.for_warmup(CAPTURE_BLOCK_S)
+    return CompensationConditioning()
 
 
 def save_model(path: str | os.PathLike, model: ThermalModel) -> None:
@@ -225,6 +238,7 @@ def load_model_dict(doc: Any) -> ThermalModel:
         model_version=mv,
         fitted=fitted,
         held=held,
+        temperature_rate=_rate_term(temp.get("rate")),
     )
 
 
@@ -234,6 +248,26 @@ def _reasons(doc: dict[str, Any], key: str) -> dict[str, str]:
     if not isinstance(obj, dict) or any(
             k not in sfem.PARAM_NAMES or not isinstance(v, str) for k, v in obj.items()):
         raise _bad(key, "expected an object of parameter name -> reason (string)")
+    return dict(obj)
+
+
+def _rate_term(obj: Any) -> dict[str, Any] | None:
+    """``temperature.rate``: null/absent, or a warm-up's k(T)·dT/dt term (per axis the gain's
+    coefficients in x, and the window dT/dt is read over)."""
+    if obj is None:
+        return None
+    if not isinstance(obj, dict):
+        raise _bad("temperature.rate", "expected null or an object")
+    gain = obj.get("gain_ug_per_c_per_min")
+    field = "temperature.rate.gain_ug_per_c_per_min"
+    if not (isinstance(gain, list) and len(gain) == 3 and all(
+            isinstance(g, list) and g and len(g) == len(gain[0]) for g in gain)):
+        raise _bad(field, "expected three equal, non-empty lists (X, Y, Z) of coefficients")
+    for axis in gain:
+        for v in axis:
+            _num(v, field)
+    if _num(obj.get("window_s"), "temperature.rate.window_s") <= 0:
+        raise _bad("temperature.rate.window_s", "must be positive")
     return dict(obj)
 
 
@@ -252,10 +286,15 @@ def load_conditioning_dict(doc: dict[str, Any]) -> CompensationConditioning:
     enabled = per.get("enabled", True)
     if not isinstance(enabled, bool):
         raise _bad("temperature.compensation.per_step.enabled", "expected a boolean")
-    kind = other.get("kind", "causal_exponential_line")
-    if kind != "causal_exponential_line":
+    kind = other.get("kind", CAUSAL_KIND)
+    if kind == CAPTURE_MEAN_KIND:
+        block = _num(other.get("block_s"), "temperature.compensation.otherwise.block_s")
+        if block <= 0:
+            raise _bad("temperature.compensation.otherwise.block_s", "must be positive")
+        return CompensationConditioning.for_warmup(block)
+    if kind != CAUSAL_KIND:
         raise _bad("temperature.compensation.otherwise.kind",
-                   f"expected 'causal_exponential_line', got {kind!r}")
+                   f"expected {CAUSAL_KIND!r} or {CAPTURE_MEAN_KIND!r}, got {kind!r}")
     tau = _num(other.get("tau_s", 600.0), "temperature.compensation.otherwise.tau_s")
     jump = _num(other.get("jump_c", 1.0), "temperature.compensation.otherwise.jump_c")
     if tau <= 0 or jump <= 0:

@@ -206,6 +206,18 @@ def smooth_over_time(
     return out
 
 
+def temperature_rate_c_per_min(t_s: np.ndarray, temperature_c: np.ndarray,
+                               window_s: float) -> np.ndarray:
+    """Each row's dT/dt in °C/min: the time derivative of the robust local parabola of
+    :func:`smooth_over_time` over ``window_s`` (a parabola: at a warm-up's turnaround,
+    heating to cooling, a line would smear the reversal). 0 for fewer than two rows."""
+    t = np.asarray(t_s, float)
+    if t.size < 2 or np.ptp(t) <= 0:
+        return np.zeros(t.size)
+    smooth = smooth_over_time(t, temperature_c, window_s, degree=2)
+    return 60.0 * np.gradient(smooth, t)
+
+
 RAMP_WINDOW_S = 600.0
 RAMP_DESCRIPTION = (
     "plateau rows: " + DESCRIPTION + "; continuous rows: robust local parabola of "
@@ -261,6 +273,7 @@ CAUSAL_TAU_S = 600.0
 CAUSAL_JUMP_C = 1.0
 CAUSAL_KIND = "causal_exponential_line"
 PER_STEP_KIND = "per_step_line"
+CAPTURE_MEAN_KIND = "capture_mean"
 
 
 def default_streaming_filter(tau_s: float = CAUSAL_TAU_S,
@@ -398,8 +411,31 @@ class CompensationConditioning:
     per_step: bool = True
     tau_s: float = CAUSAL_TAU_S
     jump_c: float = CAUSAL_JUMP_C
+    # A warm-up model: each row at its capture's mean temperature (captures of this many
+    # seconds, linear in time between them), as the model was fitted; no per-step line and
+    # no long causal filter (a 600-s one lags a warm-up's curve). None for a soak model.
+    capture_block_s: float | None = None
+
+    @classmethod
+    def for_warmup(cls, capture_block_s: float) -> CompensationConditioning:
+        """A warm-up's conditioning: capture means; a streaming consumer's filter of about
+        one capture (an exponentially weighted line does not lag a ramp)."""
+        return cls(per_step=False, tau_s=capture_block_s, capture_block_s=capture_block_s)
 
     def to_dict(self) -> dict[str, object]:
+        if self.capture_block_s is not None:
+            return {
+                "per_step": {"kind": PER_STEP_KIND, "enabled": False,
+                             "description": "not used: a warm-up model is fitted in each "
+                             "capture's own mean temperature"},
+                "otherwise": {
+                    "kind": CAPTURE_MEAN_KIND, "block_s": float(self.capture_block_s),
+                    "description": (
+                        f"each row at the mean temperature of its capture (runs of at most "
+                        f"{self.capture_block_s:g} s; averaged rows are their own capture), "
+                        "linear in time between capture centres: as the warm-up was fitted"),
+                },
+            }
         return {
             "per_step": {"kind": PER_STEP_KIND, "enabled": self.per_step,
                          "description": "where the recording has steps (step or setpoint_c "

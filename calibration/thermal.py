@@ -89,6 +89,9 @@ class ThermalModel:
     # (calibration/gate.py decides; the model file and the report say it).
     fitted: dict[str, str] = field(default_factory=dict)
     held: dict[str, str] = field(default_factory=dict)
+    # A warm-up's rate term k·dT/dt (calibration/warmup.py), or None: applied by
+    # ``compensate`` (it needs the rows' times), not by :meth:`compensate` here.
+    temperature_rate: dict[str, Any] | None = None
 
     @property
     def degree(self) -> int:

@@ -18,6 +18,20 @@ The degree d (0 … 3) is chosen by held-out error: the captures are cut into
 :data:`HOLDOUT_BLOCKS` equal time blocks, alternately fitted and held out (then the
 other way round), and the degree with the lowest RMS error on the held-out captures
 wins. The valid range is the span of the data's temperatures.
+
+A rate term ``k_a(T) · dT/dt`` joins the model when the warm-up heats *and* cools
+(:data:`BOTH_WAYS_FRACTION` of the captures each way) and held-out error prefers it.
+It stands for two physical things: a part whose bias depends on how fast its die
+changes temperature (the ``temperature_rate`` effect, shared/spec/effects.md: a
+constant k), and a temperature channel that lags the die by τ (a first-order lag:
+die = channel + τ·dT/dt exactly, so b(T_die) ≈ b(T_channel) + b'(T)·τ·dT/dt, a gain
+that follows the bias slope: a polynomial of degree ≤ d − 1 in x). The gain's degree
+m (0 … d − 1) is chosen with d by held-out error, simplest first. In a one-way warm-up
+dT/dt is itself a function of T and the polynomial absorbs both; only a log that goes
+both ways separates them.
+dT/dt is the derivative of a local parabola of the capture temperatures over
+:data:`RATE_WINDOW_S` (:func:`calibration.temperature_conditioning.temperature_rate_c_per_min`),
+the same at calibrate and compensate.
 """
 
 from __future__ import annotations
@@ -33,6 +47,7 @@ from calibration import sfem
 from calibration.captures import CAPTURE_BLOCK_S
 from calibration.gate import GateRefusal, Orientations, direction_name
 from calibration.recording import Recording
+from calibration.temperature_conditioning import temperature_rate_c_per_min
 from calibration.thermal import ThermalModel
 
 MAX_DEGREE = 3
@@ -42,6 +57,13 @@ DISTINCT_C = 0.25
 # A degree must lower the held-out RMS by more than this fraction to be preferred to a
 # lower one: a gain below it is no evidence the extra term predicts unseen captures.
 MIN_GAIN = 0.005
+# dT/dt is read from a local parabola of the capture temperatures over this window, s:
+# long enough to average a 0.06-°C quantised channel, short against a warm-up's minutes.
+RATE_WINDOW_S = 120.0
+# A rate term is tried only when at least this fraction of the captures heat and as many
+# cool faster than RATE_MIN_C_PER_MIN: otherwise dT/dt is a function of T (see above).
+BOTH_WAYS_FRACTION = 0.1
+RATE_MIN_C_PER_MIN = 0.05
 HELD_WHY = {
     "scale": "held at 1: one orientation per axis cannot separate scale from gravity's "
              "unknown projection",
@@ -87,6 +109,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     x = (T - centre) / scale
     labels = orientations.labels
     folds = _folds(captures.t_s)
+    rate = temperature_rate_c_per_min(captures.t_s, T, RATE_WINDOW_S)
     heldout = [_heldout_rms_g(x, labels, raw, folds, d) for d in range(top + 1)]
     totals = [float(np.sqrt(np.mean(h ** 2))) for h in heldout]
     judged = [d for d in range(top + 1) if np.isfinite(totals[d])]
@@ -98,11 +121,22 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             f"captures of {CAPTURE_BLOCK_S:g} s)")
     top = judged[-1]
     heldout, totals = heldout[: top + 1], totals[: top + 1]
-    degree = 0
-    for d in range(1, top + 1):
-        if totals[d] < totals[degree] * (1.0 - MIN_GAIN):
-            degree = d
-    coef, se = _fit(x, labels, raw, degree)
+    degree = _choose(totals)
+    # (d, m) candidates with a rate gain of degree m, simplest first
+    candidates = sorted(((d, m) for d in range(top + 1) for m in range(max(d, 1))),
+                        key=lambda dm: (dm[0] + dm[1], dm[0]))
+    with_rate: list[float] = []
+    if goes_both_ways(rate):
+        with_rate = [float(np.sqrt(np.mean(
+            _heldout_rms_g(x, labels, raw, folds, d, _rate_columns(rate, x, m)) ** 2)))
+            for d, m in candidates]
+    best = _choose(with_rate) if with_rate else None
+    use_rate = best is not None and with_rate[best] < totals[degree] * (1.0 - MIN_GAIN)
+    rate_cols = None
+    if use_rate:
+        degree, gain_degree = candidates[int(best)]  # type: ignore[arg-type]
+        rate_cols = _rate_columns(rate, x, gain_degree)
+    coef, se, k_rate, k_se = _fit(x, labels, raw, degree, rate_cols)
     coeffs = np.tile(sfem.identity_vector()[:, None], (1, degree + 1))
     coeffs[:, 1:] = 0.0
     coeffs[sfem.BIAS, 0] = 0.0
@@ -122,9 +156,27 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     notes = [f"warm-up: {orientations.count} distinct orientation(s) "
              f"({orientations.names()}); degree {degree} chosen by held-out error over "
              f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span"]
+    temperature_rate = None
+    if use_rate:
+        temperature_rate = {
+            "gain_ug_per_c_per_min": [[float(v) * 1e6 for v in axis] for axis in k_rate],
+            "stderr_ug_per_c_per_min": [[float(v) * 1e6 for v in axis] for axis in k_se],
+            "basis": "k(T) = sum_j gain[axis][j] * x**j, x = (T - centre_c) / scale_c",
+            "window_s": RATE_WINDOW_S,
+            "description": RATE_DESCRIPTION.format(window=RATE_WINDOW_S),
+        }
+        notes.append(
+            "rate term k·dT/dt fitted (the warm-up heats and cools; held-out RMS "
+            f"{with_rate[int(best)] * 1e3:.4f} mg with it, {totals[_choose(totals)] * 1e3:.4f} "
+            f"mg without; gain of degree {gain_degree} in T): a rate-sensitive part or a "
+            "temperature channel lagging the die")
+    elif with_rate:
+        notes.append("rate term k·dT/dt tried (the warm-up heats and cools) and not kept: "
+                     "held-out error does not prefer it")
     model = ThermalModel(
         coeffs=coeffs, t_centre_c=centre, t_scale_c=scale, valid_c=(lo, hi), mode="warmup",
         identifiable=identifiable, coeff_stderr=coeff_se, method="warmup",
+        temperature_rate=temperature_rate,
         temperature_source=captures.temperature_source, temperature_conditioning=conditioning,
         notes=list(notes), fitted=fitted, held=held,
         provenance={
@@ -136,8 +188,56 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
         },
     )
-    report = _report(model, captures, orientations, heldout, totals, degree)
+    chosen = heldout[degree] if rate_cols is None else \
+        _heldout_rms_g(x, labels, raw, folds, degree, rate_cols)
+    tried = [{"degree": d, "gain_degree": m, "heldout_rms_mg": round(t * 1e3, 4)}
+             for (d, m), t in zip(candidates, with_rate, strict=False)]
+    report = _report(model, captures, orientations, heldout, totals, degree, chosen, tried)
     return WarmupFit(model, report, notes)
+
+
+RATE_DESCRIPTION = (
+    "bias += k * dT/dt (k in ug per degC/min per axis); dT/dt in degC/min is the time "
+    "derivative of a robust local parabola of the capture-mean temperatures over "
+    "+/-{window:g}/2 s (centred: not available to a causal consumer before that much later)")
+
+
+def goes_both_ways(rate_c_per_min: np.ndarray) -> bool:
+    """True when enough captures heat and enough cool (:data:`BOTH_WAYS_FRACTION`)."""
+    r = np.asarray(rate_c_per_min, float)
+    if r.size == 0:
+        return False
+    return bool(np.mean(r > RATE_MIN_C_PER_MIN) >= BOTH_WAYS_FRACTION
+                and np.mean(r < -RATE_MIN_C_PER_MIN) >= BOTH_WAYS_FRACTION)
+
+
+def rate_offset_g(model: ThermalModel, t_s: np.ndarray, temperature_c: np.ndarray
+                  ) -> np.ndarray:
+    """(N,3) a warm-up model's rate term k(T)·dT/dt at each row, g (zeros without one).
+
+    ``temperature_c`` must be the capture-mean temperature the model was fitted in."""
+    t = np.asarray(t_s, float)
+    term = model.temperature_rate
+    if not term:
+        return np.zeros((t.size, 3))
+    gain_g = np.asarray(term["gain_ug_per_c_per_min"], float) * 1e-6  # (3, m+1)
+    rate = temperature_rate_c_per_min(t, temperature_c, float(term["window_s"]))
+    cols = _rate_columns(rate, model.x_of(temperature_c), gain_g.shape[1] - 1)
+    return cols @ gain_g.T
+
+
+def _rate_columns(rate: np.ndarray, x: np.ndarray, gain_degree: int) -> np.ndarray:
+    """(N, m+1) dT/dt · x^j, j = 0 … m: the rate term's columns (gain a polynomial in x)."""
+    return np.asarray(rate, float)[:, None] * np.vander(x, gain_degree + 1, increasing=True)
+
+
+def _choose(totals: list[float]) -> int:
+    """The lowest degree no higher one beats by more than :data:`MIN_GAIN`."""
+    degree = 0
+    for d in range(1, len(totals)):
+        if totals[d] < totals[degree] * (1.0 - MIN_GAIN):
+            degree = d
+    return degree
 
 
 def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
@@ -167,24 +267,29 @@ def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
         reach = max(reach, hi)
 
 
-def _design(x: np.ndarray, labels: np.ndarray, k: int, degree: int) -> np.ndarray:
-    """Columns: one constant per orientation (gravity's projection), then x¹ … x^d."""
+def _design(x: np.ndarray, labels: np.ndarray, k: int, degree: int,
+            rate_cols: np.ndarray | None = None) -> np.ndarray:
+    """Columns: one constant per orientation (gravity's projection), x¹ … x^d, then the
+    rate term's (:func:`_rate_columns`) when given."""
     onehot = (labels[:, None] == np.arange(k)[None, :]).astype(float)
     powers = np.vander(x, degree + 1, increasing=True)[:, 1:]
-    return np.hstack([onehot, powers])
+    return np.hstack([onehot, powers] + ([rate_cols] if rate_cols is not None else []))
 
 
-def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int
-         ) -> tuple[np.ndarray, np.ndarray]:
-    """(3, d) drift coefficients and their standard errors."""
+def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
+         rate_cols: np.ndarray | None = None
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(3, d) drift coefficients and their standard errors; (3, m+1) rate gains (g per
+    °C/min, polynomial in x) and theirs ((3, 0) without ``rate_cols``)."""
     k = int(labels.max()) + 1
-    X = _design(x, labels, k, degree)
+    X = _design(x, labels, k, degree, rate_cols)
     beta, *_ = np.linalg.lstsq(X, raw, rcond=None)
     dof = max(X.shape[0] - X.shape[1], 1)
     s2 = np.sum((raw - X @ beta) ** 2, axis=0) / dof
     cov = np.linalg.pinv(X.T @ X)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))[k:, None] * np.sqrt(s2)[None, :]
-    return beta[k:].T, se.T
+    e = k + degree
+    return beta[k:e].T, se[:degree].T, beta[e:].T, se[degree:].T
 
 
 def _folds(t_s: np.ndarray) -> np.ndarray:
@@ -195,7 +300,7 @@ def _folds(t_s: np.ndarray) -> np.ndarray:
 
 
 def _heldout_rms_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.ndarray,
-                   degree: int) -> np.ndarray:
+                   degree: int, rate_cols: np.ndarray | None = None) -> np.ndarray:
     """(3,) RMS over held-out captures per axis, g, both ways round.
 
     A held-out capture whose orientation the fitted half never saw cannot be predicted
@@ -206,11 +311,15 @@ def _heldout_rms_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np
     for held in (0, 1):
         fit, test = folds != held, folds == held
         seen = np.isin(labels, np.unique(labels[fit])) & test
-        if not seen.any() or fit.sum() <= k + degree:
+        n_rate = 0 if rate_cols is None else rate_cols.shape[1]
+        if not seen.any() or fit.sum() <= k + degree + n_rate:
             continue
-        Xf = _design(x[fit], labels[fit], k, degree)
+        Xf = _design(x[fit], labels[fit], k, degree,
+                     None if rate_cols is None else rate_cols[fit])
         beta, *_ = np.linalg.lstsq(Xf, raw[fit], rcond=None)
-        errs.append(raw[seen] - _design(x[seen], labels[seen], k, degree) @ beta)
+        Xs = _design(x[seen], labels[seen], k, degree,
+                     None if rate_cols is None else rate_cols[seen])
+        errs.append(raw[seen] - Xs @ beta)
     if not errs:
         return np.full(3, np.nan)
     e = np.vstack(errs)
@@ -218,12 +327,17 @@ def _heldout_rms_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np
 
 
 def _count_distinct(values: np.ndarray, tol: float) -> int:
-    v = np.sort(np.asarray(values, float))
-    return int(1 + np.sum(np.diff(v) > tol)) if v.size else 0
+    """Temperatures ``tol`` apart: the number of ``tol``-wide bins the values occupy. (Not
+    the gaps wider than ``tol`` between sorted values: a dense continuous warm-up has none
+    and would count as one temperature however far it went.)"""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    return int(np.unique(np.floor((v - v.min()) / tol)).size) if v.size else 0
 
 
 def _report(model: ThermalModel, captures: Recording, orientations: Orientations,
-            heldout: list[np.ndarray], totals: list[float], degree: int) -> dict[str, Any]:
+            heldout: list[np.ndarray], totals: list[float], degree: int,
+            chosen: np.ndarray, rate_tried: list[dict[str, Any]]) -> dict[str, Any]:
     phys = model.physical_coeffs()
     lo, hi = model.valid_c  # type: ignore[misc]
     change = model.params_vector_at(hi, True)[:3] - model.params_vector_at(lo, True)[:3]
@@ -242,8 +356,10 @@ def _report(model: ThermalModel, captures: Recording, orientations: Orientations
         ],
         "heldout_rms_mg_xyz": {
             "uncompensated": [round(float(v) * 1e3, 4) for v in heldout[0]],
-            "compensated": [round(float(v) * 1e3, 4) for v in heldout[degree]],
+            "compensated": [round(float(v) * 1e3, 4) for v in chosen],
         },
+        "rate_term": model.temperature_rate,
+        "rate_selection": rate_tried,
         "temperature_source": model.temperature_source,
         "valid_c": [lo, hi],
         "centre_c": model.t_centre_c,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from calibration.captures import group_means
 from calibration.recording import Recording
 
 AXIS_COLUMNS = (("ax", "sd_x"), ("ay", "sd_y"), ("az", "sd_z"))
@@ -57,28 +58,15 @@ def position_means(rec: Recording) -> Recording:
     """
     _, first, inv = np.unique(_keys(rec), return_index=True, return_inverse=True)
     inv = inv.ravel()
-    groups = int(inv.max()) + 1
-    count = np.bincount(inv, minlength=groups).astype(float)
     # The step and position of each capture as the samples were grouped (a derived step,
-    # from setpoint runs or plateaus, is written out so the means keep it).
+    # from setpoint runs or plateaus, is written out so the means keep it); every other
+    # column as the one reader of raw samples aggregates it (calibration.captures).
     cols: dict[str, np.ndarray] = {
         "step": rec.steps()[first].astype(float),
         "position": rec.positions()[first].astype(float),
     }
-    for name, v in rec.columns.items():
-        if name in ("n", "step", "position"):
-            continue
-        ok = np.isfinite(v)
-        k = np.bincount(inv[ok], minlength=groups)
-        s = np.bincount(inv[ok], weights=v[ok], minlength=groups)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cols[name] = np.where(k > 0, s / np.maximum(k, 1), np.nan)
-    for axis, sd in AXIS_COLUMNS:
-        d = rec.columns[axis] - cols[axis][inv]
-        ss = np.bincount(inv, weights=d * d, minlength=groups)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cols[sd] = np.where(count > 1, np.sqrt(ss / np.maximum(count - 1, 1)), np.nan)
-    cols["n"] = count
+    cols.update({k: v for k, v in group_means(rec, inv).items()
+                 if k not in ("step", "position")})
     order = np.argsort(cols["t_s"], kind="stable")
     out = Recording.from_columns({k: v[order] for k, v in cols.items()}, path=rec.path)
     out.notes.extend(rec.notes)

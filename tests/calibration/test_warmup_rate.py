@@ -1,0 +1,154 @@
+"""A warm-up that heats then cools: the rate term k(T)·dT/dt, and what the model file says.
+
+The logs are 1-s mean rows (mean, sd, n) of a sensor at rest, z up, its die warming
+from 25 °C toward 45 °C (τ 10 min) for 15 min and then cooling toward 30 °C.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from calibration import cli, export_cli
+from calibration.model_file import load_model, load_model_file
+from calibration.recording import write_recording
+from calibration.thermal_plant import lag_series
+
+TEMPCO_G_PER_C = np.array([12e-6, -6e-6, 20e-6])  # a linear-plus-quadratic bias drift
+CURVE_G_PER_C2 = np.array([0.4e-6, 0.3e-6, -0.5e-6])
+NOISE_G = 4e-6  # one 1-s mean's
+
+
+def _die(t_s: np.ndarray, heat_s: float | None = 900.0) -> np.ndarray:
+    hot = 25.0 + 20.0 * (1.0 - np.exp(-t_s / 600.0))
+    if heat_s is None:
+        return hot
+    at_off = 25.0 + 20.0 * (1.0 - np.exp(-heat_s / 600.0))
+    return np.where(t_s <= heat_s, hot, 30.0 + (at_off - 30.0) * np.exp(-(t_s - heat_s) / 600.0))
+
+
+def _log(*, lag_s: float = 0.0, rate_ug_per_c_per_min: float = 0.0, seconds: int = 1500,
+         both_ways: bool = True, seed: int = 1) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = np.arange(seconds, dtype=float)
+    die = _die(t, 900.0 if both_ways else None)
+    d = die - 35.0
+    acc = np.array([0.0, 0.0, 1.0]) + d[:, None] * TEMPCO_G_PER_C + d[:, None] ** 2 * CURVE_G_PER_C2
+    rate_c_per_min = 60.0 * np.gradient(die, t)
+    acc = acc + rate_c_per_min[:, None] * np.array([1.0, -0.6, 0.8]) * rate_ug_per_c_per_min * 1e-6
+    acc = acc + rng.normal(0.0, NOISE_G, acc.shape)
+    channel = lag_series(die, 1.0, lag_s) if lag_s else die
+    sd = np.full(seconds, NOISE_G * 7.0)
+    return {"t_s": t, "sensor_c": channel + rng.normal(0.0, 0.005, seconds),
+            "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2],
+            "sd_x": sd, "sd_y": sd, "sd_z": sd, "n": np.full(seconds, 50.0)}
+
+
+def _calibrate(tmp_path: Path, cols: dict[str, np.ndarray], capsys) -> tuple[dict, Path]:
+    src, model = tmp_path / "warmup.csv", tmp_path / "model.json"
+    write_recording(src, cols)
+    args = SimpleNamespace(recording=str(src), output=str(model), json=True)
+    assert cli.run_calibrate(args) == 0
+    return json.loads(capsys.readouterr().out), model
+
+
+def _compensate_residual_ug(tmp_path: Path, cols: dict[str, np.ndarray], model: Path,
+                            die_drift_g: np.ndarray) -> np.ndarray:
+    """Per axis: RMS (µg) of the compensated output less its mean, over 5-s means."""
+    src, out = tmp_path / "all.csv", tmp_path / "comp.csv"
+    write_recording(src, cols)
+    args = SimpleNamespace(model=str(model), recording=str(src), output=str(out),
+                           extrapolate=True)
+    assert cli.run_compensate(args) == 0
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    comp = np.array([[float(r[c]) for c in ("cx", "cy", "cz")] for r in rows])
+    means = comp[: comp.shape[0] // 5 * 5].reshape(-1, 5, 3).mean(axis=1)
+    return np.sqrt(np.mean((means - means.mean(axis=0)) ** 2, axis=0)) * 1e6
+
+
+def test_a_lagging_channel_on_a_warmup_and_cooldown_gets_a_rate_term(tmp_path, capsys):
+    # (also: 1500 densely spaced temperatures over 15 °C are many temperatures, not one)
+    cols = _log(lag_s=60.0)
+    doc, model_path = _calibrate(tmp_path, cols, capsys)
+    assert doc["rate_term"] is not None
+    assert any("rate term k·dT/dt fitted" in n for n in doc["notes"])
+    model = load_model(model_path)
+    assert model.temperature_rate is not None
+    assert len(model.temperature_rate["gain_ug_per_c_per_min"]) == 3
+    # What the rate term buys, through `compensate` itself: the same model without it
+    # leaves the lag's error (tempco × 60 s × dT/dt: tens of µg); with it, about the
+    # noise of a 5-s mean (4 µg / √5 ≈ 1.8 µg).
+    with_rate = _compensate_residual_ug(tmp_path, cols, model_path, TEMPCO_G_PER_C)
+    doc_file = json.loads(model_path.read_text())
+    doc_file["temperature"]["rate"] = None
+    no_rate = tmp_path / "no_rate.json"
+    no_rate.write_text(json.dumps(doc_file))
+    without = _compensate_residual_ug(tmp_path, cols, no_rate, TEMPCO_G_PER_C)
+    assert np.all(with_rate < 4.0), with_rate
+    assert without[2] > 3.0 * with_rate[2], (without, with_rate)
+
+
+def test_a_rate_sensitive_part_gets_its_gain_back(tmp_path, capsys):
+    doc, model_path = _calibrate(tmp_path, _log(rate_ug_per_c_per_min=40.0), capsys)
+    gain = np.asarray(load_model(model_path).temperature_rate["gain_ug_per_c_per_min"])
+    # the constant part of the gain (at mid-range) is the part's, within a few µg/(°C/min)
+    np.testing.assert_allclose(gain[:, 0], [40.0, -24.0, 32.0], atol=4.0)
+
+
+def test_a_one_way_warmup_has_no_rate_term(tmp_path, capsys):
+    # Warming only: dT/dt is a function of T there and the polynomial already absorbs it.
+    doc, model_path = _calibrate(tmp_path, _log(lag_s=60.0, both_ways=False), capsys)
+    assert doc["rate_term"] is None and doc["rate_selection"] == []
+    assert load_model(model_path).temperature_rate is None
+
+
+def test_the_model_file_says_how_a_warmup_is_compensated(tmp_path, capsys):
+    _, model_path = _calibrate(tmp_path, _log(), capsys)
+    temp = json.loads(model_path.read_text())["temperature"]
+    assert temp["compensation"]["otherwise"]["kind"] == "capture_mean"
+    assert temp["compensation"]["per_step"]["enabled"] is False
+    # a streaming consumer's filter: about one capture, not the soak models' 600 s
+    assert temp["streaming_filter"]["tau_s"] == 5.0
+    _, conditioning = load_model_file(model_path)
+    assert conditioning.capture_block_s == 5.0 and conditioning.tau_s == 5.0
+
+
+@pytest.mark.parametrize("fmt", ["c", "px4"])
+def test_export_of_a_rate_term_refuses_or_lists_it(tmp_path, capsys, fmt):
+    _, model_path = _calibrate(tmp_path, _log(lag_s=60.0), capsys)
+    out = tmp_path / f"out.{fmt}"
+    code = export_cli.run_export(SimpleNamespace(model=str(model_path), output=str(out),
+                                                 format=fmt, instance=None, device_id=None))
+    err = capsys.readouterr().err
+    if fmt == "c":
+        assert code == 2 and not out.exists()
+        assert "temperature.rate" in err and "rate term" in err
+    else:
+        assert code == 0
+        assert "rate term k(T)*dT/dt" in err and "rate term k(T)*dT/dt" in out.read_text()
+
+
+def test_a_board_tilting_as_it_warms_is_refused_not_a_30_mg_per_c_tempco(tmp_path, capsys):
+    # 2 minutes, the channel creeping up 0.5 °C while the board tilts 15 mrad about x (y
+    # and z readings move by ~15 mg): no offset drifts 30 mg/°C, so no model is written.
+    rng = np.random.default_rng(5)
+    t = np.arange(120, dtype=float)
+    tilt = 0.015 * t / t[-1]
+    cols = {"t_s": t, "sensor_c": 47.2 + 0.5 * t / t[-1] + rng.normal(0, 0.01, t.size),
+            "ax": np.full(t.size, 0.99), "ay": 0.1 - 0.1 * tilt + rng.normal(0, 1e-5, t.size),
+            "az": -0.1 + 0.1 * tilt + tilt * 0.99 + rng.normal(0, 1e-5, t.size),
+            "sd_x": np.full(t.size, 1e-4), "sd_y": np.full(t.size, 1e-4),
+            "sd_z": np.full(t.size, 1e-4), "n": np.full(t.size, 50.0)}
+    src, model = tmp_path / "hot.csv", tmp_path / "model.json"
+    write_recording(src, cols)
+    code = cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model)))
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and not model.exists()
+    assert "mg/°C" in err and "beyond any MEMS accelerometer's offset drift" in err
+    assert "keep the board still" in err and len(err.splitlines()) == 1
