@@ -34,6 +34,7 @@ NUDGE_C = 0.5  # setpoint nudge, °C: visible at 0.1 °C resolution, harmless to
 RAMP_CHECK_C_PER_MIN = 1.0  # commanded during the nudge; the WSP must move at this rate
 RAMP_POLL_S = 2.0
 RAMP_RATIO_OK = (0.5, 2.0)  # observed / commanded WSP rate accepted as "the same"
+RAMP_FACTOR_TOLERANCE = 0.2  # a ratio this close to ×10, ×0.1 or ×60 is blamed on the map
 SETPOINT_TOLERANCE_C = 0.051  # read-back of a written setpoint at 0.1 °C resolution
 #: Registers whose scale is the controller's decimal point, like the PV's.
 TEMPERATURE_REGISTERS = ("process_c", "setpoint_c", "working_setpoint_c", "ramp_c_per_min")
@@ -270,10 +271,27 @@ async def _judge_ramp(rec: _Recorder, chamber: Any, samples: list[tuple[float, f
                        "per hour (60× slower), or it is in manual/standby",
                        f"set the controller's ramp units to per minute, or set `scale = "
                        f"{f.scale:g}`→`{f.scale * 60:g}` for register `ramp_c_per_min` in {file}")
-    return rec.add("chamber", "ramp", "fail",
-                   f"{detail}: {ratio:.2g}× the commanded rate",
-                   f"set `scale = {f.scale:g}`→`{f.scale / ratio:.3g}` for register "
-                   f"`ramp_c_per_min` in {file}, or check its ramp units")
+    cause, fix = _ramp_cause(ratio, f.scale, file)
+    return rec.add("chamber", "ramp", "fail", f"{detail}: {ratio:.2g}× the commanded rate; "
+                   f"{cause}", fix)
+
+
+def _ramp_cause(ratio: float, scale: float, file: str) -> tuple[str, str]:
+    """The likely cause of a working setpoint moving ``ratio`` × the commanded rate.
+
+    Only a ratio that a map mistake explains (a power of ten: decimal places; 60: per
+    second against per minute) is blamed on the map; any other is most often a clock that
+    does not run at the speed the rig config says (a simulator or a sped-up twin).
+    """
+    for factor in (10.0, 100.0, 0.1, 0.01, 60.0):
+        if abs(ratio / factor - 1.0) <= RAMP_FACTOR_TOLERANCE:
+            return (f"the ramp register's scale is likely off by ×{factor:g}",
+                    f"set `scale = {scale:g}`→`{scale / factor:.3g}` for register "
+                    f"`ramp_c_per_min` in {file}, or check the controller's ramp units")
+    return ("no scale or unit mistake gives that ratio",
+            "if the rig runs on a sped-up clock (a simulator), set the rig config's "
+            f"`time_scale` to its speed-up; otherwise check register `ramp_c_per_min` in {file} "
+            "and the controller's ramp units")
 
 
 def _slower(ratio: float) -> str:

@@ -600,3 +600,15 @@ async def test_a_cascade_f4t_with_cascade_control_on_fails_its_check() -> None:
     assert bad.status == "fail"
     assert bad.detail.startswith("simple_setpoint reads 62, map watlow-f4t-cascade expects 63")
     assert "set Simple Set Point to On (63, register 4200)" in bad.fix
+
+
+def test_a_ramp_ratio_no_map_mistake_explains_is_not_blamed_on_the_map() -> None:
+    """A twin run 60× against a rig config of 4× shows the WSP ramping 15× too fast: no
+    scale or unit gives 15, so the fix names the rig's time_scale, not a new scale."""
+    from service.rig_plausibility import _ramp_cause
+
+    cause, fix = _ramp_cause(15.0, 1.0, "watlow-f4t.toml")
+    assert "no scale or unit mistake" in cause
+    assert "`time_scale`" in fix and "`scale =" not in fix
+    cause, fix = _ramp_cause(10.3, 1.0, "watlow-f4t.toml")
+    assert "off by ×10" in cause and "`scale = 1`→`0.1`" in fix
