@@ -31,6 +31,7 @@ from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import soak_rate, stability, store
 from service.engine.calibrate import calibrate_columns
+from service.engine.fencing import fence_devices
 from service.engine.guard import (
     AbortRequested,
     CampaignFailed,
@@ -77,6 +78,8 @@ MIN_SOAK_POLL_S = 15.0
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
 SAFE_ATTEMPTS = 3  # tries per safe-state command
+SAFE_COMMANDS = ("chamber.set_setpoint", "turntable.stop", "turntable.move_to")  # the park
+LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)
 
 
@@ -96,11 +99,13 @@ class CampaignRunner:
     ) -> None:
         self.sf = session_factory
         self.id = campaign_id
-        self.dev = devices
+        # Fenced: every command that changes the rig first confirms the lease (fencing.py).
+        self.dev = devices if fence is None else fence_devices(devices, self._confirm_lease)
         self.clock = clock
         self.calibrate = calibrate
         self.on_step = on_step
-        self.fence = fence  # every measurement commit checks this lease (manager-run campaigns)
+        # Every measurement commit and every rig command checks this lease (manager-run).
+        self.fence = fence
         self.fit_result: Any = None  # the core's fit object, for the demo's report
         self._progress: dict[str, Any] = {}
         # Called with (message, started_s, ended_s) for every plan message executed.
@@ -113,6 +118,11 @@ class CampaignRunner:
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
+
+    def _confirm_lease(self) -> None:
+        """The device fence's check (fencing.py): :class:`store.LeaseLost` when not held."""
+        assert self.fence is not None
+        store.confirm_lease(self.sf, self.fence, self.id)
 
     def subscribe(self, fn: Subscriber) -> None:
         """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""
@@ -161,10 +171,21 @@ class CampaignRunner:
             log.exception("campaign %s: unexpected error", self.id)
             outcome = ("failed", {"error": f"engine error: {type(exc).__name__}: {exc}"})
         finally:
-            if self._touched:
+            if self._touched and lost is None:
                 cancelled = await self._park_through_cancel() or cancelled
+            elif self._touched:
+                # The rig is another process's now: parking it would move the table and the
+                # setpoint under the new holder's measurement. It parks when it is done.
+                log.error("campaign %s: rig not parked: the lease is lost", self.id)
+                self.safe_report = dict.fromkeys(SAFE_COMMANDS, LEASE_LOST_REPORT)
         if cancelled is not None:
             raise cancelled
+        if lost is None and outcome is not None and self.fence is not None:
+            try:  # a terminal state is a write like a measurement: only the holder's counts
+                self._confirm_lease()
+            except store.LeaseLost as exc:
+                log.error("campaign %s: %s; leaving its state to the holder", self.id, exc)
+                lost = exc
         if lost is not None:
             return store.read_control(self.sf, self.id).state
         assert outcome is not None
@@ -383,6 +404,7 @@ class CampaignRunner:
             await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
             await self._wait(self.spec.settle_s)
             remeasured = await remeasure()
+
 
     async def _save_each(self, msg: Save) -> None:
         """Commit every live sensor's reading of a position and the cursor in one transaction."""
@@ -891,11 +913,21 @@ class CampaignRunner:
             safe_c = min(max(safe_c, lo_c), hi_c)
         home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
         ch, tt = self.dev.chamber, self.dev.turntable
-        self.safe_report = {
-            "chamber.set_setpoint": await self._try_safe(lambda: ch.set_setpoint(safe_c)),
-            "turntable.stop": await self._try_safe(tt.stop),
-            "turntable.move_to": await self._try_safe(lambda: tt.move_to(home)),
+        commands: dict[str, Callable[[], Awaitable[Any]]] = {
+            "chamber.set_setpoint": lambda: ch.set_setpoint(safe_c),
+            "turntable.stop": tt.stop,
+            "turntable.move_to": lambda: tt.move_to(home),
         }
+        self.safe_report = {}
+        for name, fn in commands.items():
+            try:
+                self.safe_report[name] = await self._try_safe(fn)
+            except store.LeaseLost as exc:
+                # Lost while parking (a fenced runner): the rest is the new holder's to do.
+                log.error("campaign %s: park stopped, %s", self.id, exc)
+                self.safe_report.update({n: LEASE_LOST_REPORT for n in commands
+                                         if n not in self.safe_report})
+                return
 
     async def _try_safe(self, fn: Callable[[], Awaitable[Any]]) -> str:
         delay_s = 1.0
@@ -904,7 +936,7 @@ class CampaignRunner:
             try:
                 await fn()
                 return "ok"
-            except asyncio.CancelledError:
+            except (asyncio.CancelledError, store.LeaseLost):
                 raise
             except Exception as exc:  # noqa: BLE001 - any failure: log, retry, move on
                 last = f"{type(exc).__name__}: {exc}"

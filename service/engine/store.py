@@ -8,12 +8,13 @@ move are one transaction (:func:`commit_measurement`).
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy import select, text, update
+from sqlalchemy.exc import DBAPIError, IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe, utcnow
@@ -174,13 +175,53 @@ class LeaseLost(Exception):
     """A fenced write found the rig lease expired or held by another process."""
 
 
+# Every statement on the lease row waits at most this long for a row lock (PostgreSQL's
+# lock_timeout; SQLite's busy timeout, service/db/session.py, bounds it there).
+LEASE_LOCK_TIMEOUT_S = 2.0
+# A fenced transaction left open by a stalled process (SIGSTOP inside a commit) holds the
+# lease row's lock; PostgreSQL ends such a session after this long idle, so a takeover waits
+# for it at most this long — well inside one lease period (manager.py's lease_s, 30 s).
+FENCED_IDLE_TIMEOUT_S = 5.0
+
+
+def bound_lease_locks(s: Session, *, fenced: bool = False) -> None:
+    """Start the caller's transaction with the lease row's lock waits bounded (PostgreSQL).
+
+    ``fenced``: also end the session if this process stalls with the transaction open
+    (``idle_in_transaction_session_timeout``), so its row lock cannot outlive the stall.
+    SQLite has one writer and its busy timeout; nothing to set there.
+    """
+    if s.get_bind().dialect.name != "postgresql":
+        return
+    s.execute(text(f"SET LOCAL lock_timeout = '{int(LEASE_LOCK_TIMEOUT_S * 1000)}ms'"))
+    if fenced:
+        s.execute(text("SET LOCAL idle_in_transaction_session_timeout = "
+                       f"'{int(FENCED_IDLE_TIMEOUT_S * 1000)}ms'"))
+
+
+def confirm_lease(sf: SessionFactory, fence: Fence, campaign_id: int) -> None:
+    """This process holds a live lease on ``fence.rig`` for ``campaign_id``; else
+    :class:`LeaseLost`. A plain read (it takes no lock): the device fence's check
+    before every command that changes the rig (service/engine/fencing.py)."""
+    with sf.kw["bind"].connect() as conn:
+        owner = conn.execute(
+            select(RigLease.owner).where(
+                RigLease.rig == fence.rig, RigLease.owner == fence.owner,
+                RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
+        ).scalar()
+    if owner is None:
+        raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
+
+
 def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
     """Inside the caller's transaction: this process still holds a live lease on the rig.
 
     A no-op UPDATE rather than a SELECT so PostgreSQL locks the lease row until
     the commit: a takeover (a conditional UPDATE on the same row) waits for this
-    transaction and then sees the lease as it is after it.
+    transaction and then sees the lease as it is after it. The wait is bounded on
+    both sides (:func:`bound_lease_locks`).
     """
+    bound_lease_locks(s, fenced=True)
     res = s.execute(
         update(RigLease)
         .where(RigLease.rig == fence.rig, RigLease.owner == fence.owner,
@@ -236,6 +277,15 @@ def commit_measurements(
         except LeaseLost:
             s.rollback()
             raise
+        except DBAPIError as exc:
+            if fence is None:
+                raise
+            # A lock wait timed out, or the server ended this session while we stalled:
+            # the lease cannot be confirmed, so this process stops writing (and commanding).
+            with contextlib.suppress(Exception):
+                s.rollback()
+            raise LeaseLost(f"rig {fence.rig!r}: lease not confirmed "
+                            f"({type(exc).__name__}: {str(exc).splitlines()[0]})") from exc
     set_cursor(sf, campaign_id, step, "positions", next_position, progress)
     return False
 
