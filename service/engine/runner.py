@@ -47,6 +47,7 @@ from service.engine.multi import (
     sensor_call,
     slowest_decision,
 )
+from service.engine.placement import MAX_ANGLE_DEG, check_pose
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -78,6 +79,7 @@ MIN_SOAK_POLL_S = 15.0
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
 SAFE_ATTEMPTS = 3  # tries per safe-state command
+POSE_ATTEMPTS = 3  # captures of one position off its pose before the campaign fails
 SAFE_COMMANDS = ("chamber.set_setpoint", "turntable.stop", "turntable.move_to")  # the park
 LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)
@@ -118,6 +120,8 @@ class CampaignRunner:
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
+        # Every capture found off its pose and measured again (step, position, attempt, angle).
+        self.pose_log: list[dict[str, Any]] = []
 
     def _confirm_lease(self) -> None:
         """The device fence's check (fencing.py): :class:`store.LeaseLost` when not held."""
@@ -401,19 +405,66 @@ class CampaignRunner:
             await self._hold(*tripped, setpoint_c=msg.setpoint_c)
             if tripped[0].restart_soak and self._last_soak is not None:
                 await self._soak(dataclasses.replace(self._last_soak, resumed=True))
-            await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
-            await self._wait(self.spec.settle_s)
-            remeasured = await remeasure()
+            remeasured = await self._measure_again(msg, remeasure)
 
+    async def _measure_again(self, msg: Save, remeasure: Callable[[], Awaitable[Any]]) -> Any:
+        """Return to the position, settle and measure again (``remeasure``)."""
+        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+        await self._wait(self.spec.settle_s)
+        return await remeasure()
+
+    async def _checked_readings(
+        self, msg: Save, readings: dict[str, Any], remeasure: Callable[[], Awaitable[Any]]
+    ) -> tuple[ChamberStatus, dict[str, Any]]:
+        """The chamber in band (:meth:`_chamber_in_band`) and every reading at its pose.
+
+        ``readings``: serial → (acquisition, flags, attempts). A capture that does not
+        read gravity from the direction its position claims (placement.check_pose: a
+        table that reported in-position somewhere else) is never stored under that
+        label: the position is moved to, settled and measured again, up to
+        ``POSE_ATTEMPTS`` captures in all. Then the campaign fails naming the position
+        and the angle; with several sensors, only the ones still off are dropped while
+        another reads the pose right (its mount, not the table, is wrong).
+        """
+        for attempt in range(1, POSE_ATTEMPTS + 1):
+            status, again = await self._chamber_in_band(msg, remeasure)
+            if again is not None:
+                readings = again
+            off = {serial: check_pose(r[0].mean_g, msg.ref_g)
+                   for serial, r in readings.items()}
+            off = {serial: c for serial, c in off.items() if not c.ok}
+            if not off:
+                return status, readings
+            worst = max(c.angle_deg for c in off.values())
+            where = (f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position} "
+                     f"(reference {_ref_text(msg.ref_g)}, table at {self._pose} deg)")
+            self.pose_log.append({"step": msg.step, "position": msg.position,
+                                  "attempt": attempt, "angle_deg": round(worst, 2),
+                                  "sensors": sorted(s for s in off if s)})
+            log.warning("campaign %s: %s: capture %.1f° from its reference, measuring again",
+                        self.id, where, worst)
+            if attempt == POSE_ATTEMPTS:
+                if len(off) < len(readings):
+                    for serial, c in off.items():
+                        self._drop(SensorDropped(serial, f"{where}: reads gravity "
+                                                 f"{c.angle_deg:.0f}° from its reference "
+                                                 f"(limit {MAX_ANGLE_DEG:.0f}°): check its "
+                                                 "mount"))
+                    return status, {s: r for s, r in readings.items() if s not in off}
+                raise CampaignFailed(
+                    f"{where}: the capture reads gravity {worst:.0f}° from its reference "
+                    f"(limit {MAX_ANGLE_DEG:.0f}°) after {POSE_ATTEMPTS} moves to it; the table "
+                    "does not stand where it reports: check its homing and encoders")
+            readings = await self._measure_again(msg, remeasure)
+        raise AssertionError("unreachable")
 
     async def _save_each(self, msg: Save) -> None:
         """Commit every live sensor's reading of a position and the cursor in one transaction."""
         readings = {s: r for s, r in dict(msg.acquisition).items()
                     if r is not None and s not in self.dropped}
-        status, again = await self._chamber_in_band(
-            msg, lambda: self._measure_live(self.spec.samples_per_position, self._live))
-        if again is not None:
-            readings = again
+        status, readings = await self._checked_readings(
+            msg, readings,
+            lambda: self._measure_live(self.spec.samples_per_position, self._live))
         readings = {s: r for s, r in readings.items() if s not in self.dropped}
         if not readings:
             raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
@@ -442,11 +493,11 @@ class CampaignRunner:
         if msg.sensors:
             await self._save_each(msg)
             return
-        acq, flags, attempts = msg.acquisition
-        status, again = await self._chamber_in_band(
-            msg, lambda: self._measure(self.spec.samples_per_position))
-        if again is not None:
-            acq, flags, attempts = again
+        async def measure() -> dict[str, Any]:
+            return {"": await self._measure(self.spec.samples_per_position)}
+
+        status, readings = await self._checked_readings(msg, {"": msg.acquisition}, measure)
+        acq, flags, attempts = readings[""]
         t_mid = self.clock.now() - acq.duration_s / 2.0
         ref = msg.ref_g
         row = {
@@ -1045,6 +1096,10 @@ class CampaignRunner:
         if write:
             store.update_campaign(self.sf, self.id, progress=progress)
         return progress
+
+
+def _ref_text(ref_g: tuple[float, ...]) -> str:
+    return "(" + ", ".join(f"{float(v):+.3f}" for v in ref_g) + ") g"
 
 
 def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
