@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -189,7 +190,8 @@ def bound_lease_locks(s: Session, *, fenced: bool = False) -> None:
 
     ``fenced``: also end the session if this process stalls with the transaction open
     (``idle_in_transaction_session_timeout``), so its row lock cannot outlive the stall.
-    SQLite has one writer and its busy timeout; nothing to set there.
+    SQLite has one writer and its busy timeout (:func:`lease_session` shortens it for the
+    manager's lease statements).
     """
     if s.get_bind().dialect.name != "postgresql":
         return
@@ -197,6 +199,31 @@ def bound_lease_locks(s: Session, *, fenced: bool = False) -> None:
     if fenced:
         s.execute(text("SET LOCAL idle_in_transaction_session_timeout = "
                        f"'{int(FENCED_IDLE_TIMEOUT_S * 1000)}ms'"))
+
+
+@contextlib.contextmanager
+def lease_session(sf: SessionFactory) -> Iterator[Session]:
+    """A session for the manager's lease statements (claim, renew, release), each of
+    whose lock waits ends after :data:`LEASE_LOCK_TIMEOUT_S` with an ``OperationalError``.
+
+    PostgreSQL: call :func:`bound_lease_locks` at the start of each transaction
+    (``SET LOCAL`` lasts one). SQLite: the connection's busy timeout is shortened for
+    the session and put back after it (it is the pooled connection's setting).
+    """
+    with sf() as s:
+        sqlite = s.get_bind().dialect.name == "sqlite"
+        if sqlite:
+            s.execute(text(f"PRAGMA busy_timeout = {int(LEASE_LOCK_TIMEOUT_S * 1000)}"))
+        try:
+            yield s
+        finally:
+            if sqlite:
+                from service.db.session import SQLITE_BUSY_TIMEOUT_MS
+
+                with contextlib.suppress(Exception):
+                    s.rollback()
+                    s.execute(text(f"PRAGMA busy_timeout = {SQLITE_BUSY_TIMEOUT_MS}"))
+                    s.commit()
 
 
 def confirm_lease(sf: SessionFactory, fence: Fence, campaign_id: int) -> None:
