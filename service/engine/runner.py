@@ -122,6 +122,11 @@ class CampaignRunner:
         self._abort_checked_s = -math.inf
         # Every capture found off its pose and measured again (step, position, attempt, angle).
         self.pose_log: list[dict[str, Any]] = []
+        # Clock time the campaign stood still (paused or suspended): never soak time, never
+        # a ramp's, never in the ETA's measured durations (:meth:`_held_total_s`).
+        self._held_s = 0.0
+        self._held_since_s: float | None = None
+        self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
 
     def _confirm_lease(self) -> None:
         """The device fence's check (fencing.py): :class:`store.LeaseLost` when not held."""
@@ -263,7 +268,7 @@ class CampaignRunner:
         A ``Save`` is announced *before* its commit (the reading is complete), so
         the progress committed with it already counts it.
         """
-        started_s = self.clock.now()
+        started_s = self._active_s()
         if isinstance(msg, Save):
             self._notify(msg, started_s)
             await self._save(msg)
@@ -273,9 +278,18 @@ class CampaignRunner:
         self._notify(msg, started_s)
         return result
 
+    def _held_total_s(self) -> float:
+        """Clock time held (paused or suspended) so far, an ongoing hold included."""
+        ongoing_s = 0.0 if self._held_since_s is None else self.clock.now() - self._held_since_s
+        return self._held_s + ongoing_s
+
+    def _active_s(self) -> float:
+        """The clock without the held time: subscribers' (the ETA's) durations exclude it."""
+        return self.clock.now() - self._held_total_s()
+
     def _notify(self, msg: Msg, started_s: float) -> None:
         for sub in self._subscribers:
-            sub(msg, started_s, self.clock.now())
+            sub(msg, started_s, self._active_s())
 
     @property
     def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
@@ -532,6 +546,7 @@ class CampaignRunner:
             # of delaying it, and the soak's probes start after both.
             await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
         start_s = self.clock.now()
+        held0_s = self._held_total_s()
         status = await self._chamber()
         limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
         limit_s += spec.stability.max_soak_s
@@ -543,7 +558,7 @@ class CampaignRunner:
         try:
             while not (_wsp_at_target(status, target_c)
                        and abs(status.process_c - target_c) <= spec.stability.tol_c):
-                if self.clock.now() - start_s > limit_s:
+                if self.clock.now() - start_s - (self._held_total_s() - held0_s) > limit_s:
                     raise CampaignFailed(
                         f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
                         f"(PV {status.process_c:.2f} °C)")
@@ -581,6 +596,7 @@ class CampaignRunner:
         store.set_cursor(self.sf, self.id, step, "soak", 0)
         self._cursor = (step, "soak")
         start_s = self.clock.now()
+        held0_s = self._held_total_s()  # held time before this soak: not this soak's
         ch_t: list[float] = []
         ch_pv: list[float] = []
         ch_wsp: list[float] = []
@@ -597,10 +613,13 @@ class CampaignRunner:
                 # (the probes so far are still an approach: they stay for the rate gain).
                 self._keep_soak(dies)
                 await self._hold(*tripped, setpoint_c=target_c)
-                start_s = self.clock.now()
+                start_s, held0_s = self.clock.now(), self._held_total_s()
                 ch_t, ch_pv, ch_wsp, dies = [], [], [], self._no_dies()
                 continue
             now_s = self.clock.now()
+            # Soak time: the clock since the soak began, less the time paused or suspended
+            # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
+            soaked_s = now_s - start_s - (self._held_total_s() - held0_s)
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
             ch_wsp.append(status.working_setpoint_c)
@@ -619,7 +638,7 @@ class CampaignRunner:
             for key in sorted(live, key=lambda k: k != waiting_on):
                 probes = live[key]
                 decisions.append(stability.decide(
-                    cfg, now_s - start_s, settled, np.array([p.clock_s for p in probes]),
+                    cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
                     np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
                     n_positions=self.n_pos, edge=edge,
                     rate_gain_ug_per_c_per_min=gains[key], order_repeats=msg.order_repeats))
@@ -628,7 +647,7 @@ class CampaignRunner:
                     break
             decision = slowest_decision(decisions)
             self._publish(step, "soak", 0, status, target_c,
-                          soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
+                          soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
             if decision.stable:
                 break
             await self._checkpoint()
@@ -637,11 +656,12 @@ class CampaignRunner:
             await self._wait(stability.next_poll_s(
                 decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
         self._keep_soak(dies)
-        soak_s = self.clock.now() - start_s
+        held_s = self._held_total_s() - held0_s
+        soak_s = self.clock.now() - start_s - held_s
         used = [g for g in gains.values() if g is not None]
         entry = {
             "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
-            "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
+            "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s, "held_s": held_s,
             "reason": decision.reason, "tau_s": decision.tau_s,
             "predicted_offset_c": decision.predicted_offset_c,
             "predicted_error_c": decision.predicted_error_c,
@@ -894,10 +914,12 @@ class CampaignRunner:
         ``limit_s`` of real time (clock time over the clock's speed-up).
         """
         since_s = self.clock.now()
+        paused0_s = self._paused_s
         clear_since_s: float | None = None
         self._suspend(f"{susp.name}: {why}")
         while True:
-            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
+            held_s = self.clock.now() - since_s - (self._paused_s - paused0_s)  # pause: not
+            if held_s / clock_speed(self.clock) >= susp.limit_s:
                 raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
                                      "real time")
             await self._checkpoint()
@@ -1014,6 +1036,16 @@ class CampaignRunner:
             await self._lost_control()
             return
         await self.guard.call("turntable.stop", self.dev.turntable.stop)
+        paused_since_s = self.clock.now()
+        try:
+            await self._wait_for_resume()
+        finally:
+            paused_s = self.clock.now() - paused_since_s
+            self._paused_s += paused_s
+            if self._held_since_s is None:  # inside a suspension its interval covers it
+                self._held_s += paused_s
+
+    async def _wait_for_resume(self) -> None:
         while True:
             await self.clock.sleep(self.spec.soak_poll_s)
             ctl = store.read_control(self.sf, self.id)
@@ -1066,10 +1098,15 @@ class CampaignRunner:
         return ctl.state == "aborted" or ctl.requested_action == "abort"
 
     def _suspend(self, reason: str) -> None:
+        if self._held_since_s is None:
+            self._held_since_s = self.clock.now()
         self._progress = {**self._progress, "suspended_reason": reason}
         store.update_campaign(self.sf, self.id, suspended_reason=reason, progress=self._progress)
 
     def _unsuspend(self) -> None:
+        if self._held_since_s is not None:
+            self._held_s += self.clock.now() - self._held_since_s
+            self._held_since_s = None
         self._progress = {k: v for k, v in self._progress.items() if k != "suspended_reason"}
         store.update_campaign(self.sf, self.id, suspended_reason=None, progress=self._progress)
 
