@@ -16,23 +16,29 @@ one that cannot be confirmed (the database does not answer), raises
 :class:`service.engine.store.LeaseLost` and the command is not sent. Reads
 (status, acquisitions, identity) pass through unchecked: they change nothing.
 
-The devices carry no fencing token themselves (a Modbus register map has no
-place for one), so a stall that falls exactly between the confirmation and the
-command's first byte is not covered: that window is one database round trip.
+The confirmation returns when the lease ends, and the wall clock is read again
+once the database has answered: a process stopped after the answer resumes past
+that end and sends nothing. The devices carry no fencing token themselves (a
+Modbus register map has no place for one), so a stall that falls after that
+last clock reading and before the command's bytes leave (inside the driver's
+call; a table move is two writes, targets then command) is not covered.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import datetime as dt
 import logging
 from collections.abc import Callable
 from typing import Any
 
+from service.db.timestamps import utcnow
 from service.engine.rigs import RigDevices
 from service.engine.store import LeaseLost
 
 log = logging.getLogger(__name__)
-ConfirmLease = Callable[[], None]  # returns when the lease is held; raises LeaseLost otherwise
+# Returns when the lease held ends (UTC; None: not known); raises LeaseLost when not held.
+ConfirmLease = Callable[[], dt.datetime | None]
 
 # The commands of each device protocol (drivers/protocols.py) that change the rig.
 CHAMBER_COMMANDS = frozenset({"set_setpoint", "set_ramp_rate", "run", "stop"})
@@ -64,12 +70,18 @@ class FencedDevice:
 
 def _confirm(confirm: ConfirmLease, command: str) -> None:
     try:
-        confirm()
+        until = confirm()
     except LeaseLost as exc:
         raise LeaseLost(f"{command} not sent: {exc}") from exc
     except Exception as exc:  # the database does not answer: the lease is not confirmed
         raise LeaseLost(f"{command} not sent: lease not confirmed "
                         f"({type(exc).__name__}: {exc})") from exc
+    # Read the wall clock again, after the database answered: a process stopped between
+    # that answer and here (seen: SIGSTOP right after a commit) resumes past its lease's
+    # end, and another process may hold the rig by then.
+    if until is not None and utcnow() >= until:
+        raise LeaseLost(f"{command} not sent: the lease ended at {until.isoformat()} "
+                        "while it was being confirmed")
 
 
 def fence_devices(devices: RigDevices, confirm: ConfirmLease) -> RigDevices:

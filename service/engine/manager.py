@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import datetime as dt
+import importlib
 import logging
 import os
 import socket
@@ -42,6 +43,19 @@ from service.engine.store import cas_transition
 
 log = logging.getLogger(__name__)
 POLL_WALL_S = 1.0
+
+
+# Imported by the engine on first use, heavy: the plan's travel order (soak_order.py)
+# imports the discrepancy package and scipy, ~2 s on a loaded host; on the event loop that
+# is 2 s without HTTP answers at the first campaign's start, or at a takeover.
+LAZY_ENGINE_MODULES = ("service.engine.soak_order",)
+
+
+async def _import_engine_modules() -> None:
+    """Import :data:`LAZY_ENGINE_MODULES` in a thread (a no-op once imported)."""
+    for name in LAZY_ENGINE_MODULES:
+        with contextlib.suppress(Exception):
+            await asyncio.to_thread(importlib.import_module, name)
 
 
 def default_owner() -> str:
@@ -120,6 +134,7 @@ class CampaignManager:
 
     # --- loop ---------------------------------------------------------------------
     async def _loop(self) -> None:
+        asyncio.create_task(_import_engine_modules())  # warm up meanwhile (scans go on)
         while True:
             try:
                 await self.run_once()
@@ -209,6 +224,7 @@ class CampaignManager:
     async def _run(self, rig: str, campaign_id: int) -> None:
         renewer = asyncio.create_task(self._keep_lease(rig, asyncio.current_task()))
         try:
+            await _import_engine_modules()
             with self.sf() as s:
                 row = s.execute(select(Rig).where(Rig.name == rig)).scalar_one()
                 rig_cfg = {"name": row.name, "chamber": row.chamber, "turntable": row.turntable,

@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import datetime as dt
 import functools
 import logging
 import math
@@ -128,10 +129,11 @@ class CampaignRunner:
         self._held_since_s: float | None = None
         self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
 
-    def _confirm_lease(self) -> None:
-        """The device fence's check (fencing.py): :class:`store.LeaseLost` when not held."""
+    def _confirm_lease(self) -> dt.datetime:
+        """The device fence's check (fencing.py): when the lease ends, or
+        :class:`store.LeaseLost` when it is not held."""
         assert self.fence is not None
-        store.confirm_lease(self.sf, self.fence, self.id)
+        return store.confirm_lease(self.sf, self.fence, self.id)
 
     def subscribe(self, fn: Subscriber) -> None:
         """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""

@@ -19,6 +19,7 @@ from sqlalchemy.exc import DBAPIError, IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe, utcnow
+from service.db.timestamps import as_utc
 from service.engine.states import TERMINAL, TRANSITIONS
 from service.event_log import log_event
 
@@ -226,18 +227,19 @@ def lease_session(sf: SessionFactory) -> Iterator[Session]:
                     s.commit()
 
 
-def confirm_lease(sf: SessionFactory, fence: Fence, campaign_id: int) -> None:
-    """This process holds a live lease on ``fence.rig`` for ``campaign_id``; else
-    :class:`LeaseLost`. A plain read (it takes no lock): the device fence's check
-    before every command that changes the rig (service/engine/fencing.py)."""
+def confirm_lease(sf: SessionFactory, fence: Fence, campaign_id: int) -> dt.datetime:
+    """When this process's live lease on ``fence.rig`` for ``campaign_id`` ends (UTC);
+    :class:`LeaseLost` when it holds none. A plain read (it takes no lock): the device
+    fence's check before every command that changes the rig (service/engine/fencing.py)."""
     with sf.kw["bind"].connect() as conn:
-        owner = conn.execute(
-            select(RigLease.owner).where(
+        until = conn.execute(
+            select(RigLease.lease_until).where(
                 RigLease.rig == fence.rig, RigLease.owner == fence.owner,
                 RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
         ).scalar()
-    if owner is None:
+    if until is None:
         raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
+    return as_utc(until) or until
 
 
 def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:

@@ -117,7 +117,7 @@ async def test_a_lease_that_cannot_be_confirmed_sends_nothing() -> None:
     rig = make_fake_rig(clock)
     sent = record_commands(rig)
 
-    def unreachable() -> None:
+    def unreachable() -> Any:
         raise ConnectionError("database at 10.0.0.9 does not answer")
 
     fenced = fence_devices(rig.devices, unreachable)
@@ -129,3 +129,25 @@ async def test_a_lease_that_cannot_be_confirmed_sends_nothing() -> None:
     assert sent == []
     status = await fenced.chamber.read_status()  # a read changes nothing: not fenced
     assert status.setpoint_c == 23.0 and fenced.turntable.n_axes == 2
+
+
+async def test_a_stop_between_the_confirmation_and_the_command_sends_nothing() -> None:
+    """Stopped after the database confirmed the lease, resumed after it ended (the stall
+    benchmark's SIGSTOP right after a commit): the command is not sent."""
+    import datetime as dt
+    import time
+
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    sent = record_commands(rig)
+
+    def confirmed_then_stopped() -> dt.datetime:
+        until = dt.datetime.now(dt.UTC) + dt.timedelta(seconds=0.05)  # what the row said
+        time.sleep(0.08)  # the process is stopped here, past the lease's end
+        return until
+
+    fenced = fence_devices(rig.devices, confirmed_then_stopped)
+    with pytest.raises(store.LeaseLost, match=r"turntable\.move_to not sent: the lease ended "
+                                              r"at .* while it was being confirmed"):
+        await fenced.turntable.move_to((90.0, 0.0))
+    assert sent == []
