@@ -53,7 +53,10 @@ def take_over(sf: Any, rig: str = "sim") -> None:
         s.commit()
 
 
-async def test_a_runner_whose_lease_is_taken_sends_no_command_park_included(sf) -> None:  # type: ignore[no-untyped-def]
+async def run_until_taken_over(sf: Any, rows_first: int
+                               ) -> tuple[FakeRig, list[str], CampaignRunner, asyncio.Task]:
+    """proc-a runs a fenced campaign; proc-b takes the rig over once ``rows_first`` rows
+    are stored. Returns the rig, its recorded commands, the runner and its task."""
     clock = VirtualClock(idle_wall_s=0.0)
     rig = make_fake_rig(clock)
     sent = record_commands(rig)
@@ -62,9 +65,14 @@ async def test_a_runner_whose_lease_is_taken_sends_no_command_park_included(sf) 
     runner = CampaignRunner(sf, cid, rig.devices, clock, calibrate=fake_calibrate,
                             fence=store.Fence("sim", "proc-a"))
     task = asyncio.create_task(runner.run())
-    while n_rows(sf, cid) < 3:
+    while n_rows(sf, cid) < rows_first:
         await asyncio.sleep(0.001)
     take_over(sf)
+    return rig, sent, runner, task
+
+
+async def test_a_runner_whose_lease_is_taken_sends_no_command_park_included(sf) -> None:  # type: ignore[no-untyped-def]
+    rig, sent, runner, task = await run_until_taken_over(sf, 3)
     n_sent, setpoint_c, angles = len(sent), rig.physics.setpoint_c, rig.turntable.angles
     assert await asyncio.wait_for(task, 30) == "running"  # left to proc-b, not failed
     assert sent[n_sent:] == []  # not one command after the takeover, the park's included
@@ -76,17 +84,7 @@ async def test_a_runner_whose_lease_is_taken_sends_no_command_park_included(sf) 
 async def test_a_cancel_after_the_lease_is_lost_parks_nothing(sf) -> None:  # type: ignore[no-untyped-def]
     """The manager's renewer cancels the run when it finds the lease taken: the shielded
     park then runs, and finds every command fenced."""
-    clock = VirtualClock(idle_wall_s=0.0)
-    rig = make_fake_rig(clock)
-    sent = record_commands(rig)
-    cid = add_campaign(sf)
-    assert CampaignManager(sf, owner="proc-a", lease_s=3600)._claim("sim", cid)
-    runner = CampaignRunner(sf, cid, rig.devices, clock, calibrate=fake_calibrate,
-                            fence=store.Fence("sim", "proc-a"))
-    task = asyncio.create_task(runner.run())
-    while n_rows(sf, cid) < 2:
-        await asyncio.sleep(0.001)
-    take_over(sf)
+    _rig, sent, runner, task = await run_until_taken_over(sf, 2)
     n_sent = len(sent)
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
