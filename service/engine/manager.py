@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import datetime as dt
+import importlib
 import logging
 import os
 import socket
@@ -27,7 +28,7 @@ import uuid
 from collections.abc import Callable, Collection
 from typing import Any
 
-from sqlalchemy import delete, insert, select, text, update
+from sqlalchemy import delete, insert, select, update
 from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -42,6 +43,19 @@ from service.engine.store import cas_transition
 
 log = logging.getLogger(__name__)
 POLL_WALL_S = 1.0
+
+
+# Imported by the engine on first use, heavy: the plan's travel order (soak_order.py)
+# imports the discrepancy package and scipy, ~2 s on a loaded host; on the event loop that
+# is 2 s without HTTP answers at the first campaign's start, or at a takeover.
+LAZY_ENGINE_MODULES = ("service.engine.soak_order",)
+
+
+async def _import_engine_modules() -> None:
+    """Import :data:`LAZY_ENGINE_MODULES` in a thread (a no-op once imported)."""
+    for name in LAZY_ENGINE_MODULES:
+        with contextlib.suppress(Exception):
+            await asyncio.to_thread(importlib.import_module, name)
 
 
 def default_owner() -> str:
@@ -94,23 +108,33 @@ class CampaignManager:
         self._runs.clear()
 
     async def run_once(self) -> None:
-        """One scan of all rigs (the loop body; tests call it directly)."""
-        with self.sf() as s:
-            rigs = s.execute(select(Rig.name)).scalars().all()
+        """One scan of all rigs (the loop body; tests call it directly).
+
+        Its database work runs in a thread (``asyncio.to_thread``): a claim waiting for
+        a lock (at most ``store.LEASE_LOCK_TIMEOUT_S``) must not stop the event loop the
+        HTTP API and the other rigs' campaigns share.
+        """
+        rigs = await asyncio.to_thread(self._rig_names)
         for rig in rigs:
             if self.rigs is not None and rig not in self.rigs:
                 continue  # another host drives it
             task = self._runs.get(rig)
             if task is not None and not task.done():
                 continue
-            campaign_id = self._pick(rig)
-            if campaign_id is None or not self._claim(rig, campaign_id):
+            campaign_id = await asyncio.to_thread(self._pick, rig)
+            if campaign_id is None or not await asyncio.to_thread(self._claim, rig,
+                                                                  campaign_id):
                 continue
             self._runs[rig] = asyncio.create_task(self._run(rig, campaign_id),
                                                   name=f"campaign-{campaign_id}")
 
+    def _rig_names(self) -> list[str]:
+        with self.sf() as s:
+            return list(s.execute(select(Rig.name)).scalars().all())
+
     # --- loop ---------------------------------------------------------------------
     async def _loop(self) -> None:
+        asyncio.create_task(_import_engine_modules())  # warm up meanwhile (scans go on)
         while True:
             try:
                 await self.run_once()
@@ -146,22 +170,28 @@ class CampaignManager:
             return None if queued is None else int(queued)
 
     def _claim(self, rig: str, campaign_id: int) -> bool:
-        """Take the rig lease for ``campaign_id``; the database arbitrates between processes."""
+        """Take the rig lease for ``campaign_id``; the database arbitrates between processes.
+
+        Both statements give up after ``store.LEASE_LOCK_TIMEOUT_S``: a stalled holder may
+        sit inside a fenced commit holding the lease row's lock (store._check_fence), and
+        the INSERT waits for that lock as the UPDATE does. The next scan tries again.
+        """
         now = utcnow()
         until = now + dt.timedelta(seconds=self.lease_s)
-        with self.sf() as s:
+        with store.lease_session(self.sf) as s:
             try:
+                store.bound_lease_locks(s)
                 s.execute(insert(RigLease).values(rig=rig, campaign_id=campaign_id,
                                                   owner=self.owner, lease_until=until))
                 s.commit()
                 return True
             except IntegrityError:
                 s.rollback()
-            if s.get_bind().dialect.name == "postgresql":
-                # A stalled holder may sit inside a fenced commit holding the lease row's
-                # lock (store._check_fence): give up after 2 s rather than hang the scan.
-                s.execute(text("SET LOCAL lock_timeout = '2s'"))
+            except OperationalError:  # the lock wait timed out
+                s.rollback()
+                return False
             try:
+                store.bound_lease_locks(s)
                 res = s.execute(
                     update(RigLease)
                     .where(RigLease.rig == rig,
@@ -176,7 +206,8 @@ class CampaignManager:
 
     def _renew(self, rig: str) -> bool:
         until = utcnow() + dt.timedelta(seconds=self.lease_s)
-        with self.sf() as s:
+        with store.lease_session(self.sf) as s:
+            store.bound_lease_locks(s)
             res = s.execute(
                 update(RigLease).where(RigLease.rig == rig, RigLease.owner == self.owner)
                 .values(lease_until=until)
@@ -185,13 +216,15 @@ class CampaignManager:
             return res.rowcount == 1
 
     def _release(self, rig: str) -> None:
-        with self.sf() as s:
+        with store.lease_session(self.sf) as s:
+            store.bound_lease_locks(s)
             s.execute(delete(RigLease).where(RigLease.rig == rig, RigLease.owner == self.owner))
             s.commit()
 
     async def _run(self, rig: str, campaign_id: int) -> None:
         renewer = asyncio.create_task(self._keep_lease(rig, asyncio.current_task()))
         try:
+            await _import_engine_modules()
             with self.sf() as s:
                 row = s.execute(select(Rig).where(Rig.name == rig)).scalar_one()
                 rig_cfg = {"name": row.name, "chamber": row.chamber, "turntable": row.turntable,
@@ -227,7 +260,7 @@ class CampaignManager:
             with contextlib.suppress(asyncio.CancelledError):
                 await renewer
             with contextlib.suppress(Exception):
-                self._release(rig)
+                await asyncio.to_thread(self._release, rig)
 
     def _clock_for(self, rig_cfg: dict[str, Any]) -> Clock:
         scale = None if self._clock_injected else rig_time_scale(rig_cfg)
@@ -239,7 +272,7 @@ class CampaignManager:
         while True:
             await asyncio.sleep(self.lease_s / 3.0)
             try:
-                ok = self._renew(rig)
+                ok = await asyncio.to_thread(self._renew, rig)
             except Exception:
                 log.exception("lease renewal failed for rig %s", rig)
                 continue

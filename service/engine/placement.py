@@ -92,24 +92,41 @@ def check_placement(mean_g: np.ndarray, sd_g: np.ndarray, ref_g: np.ndarray, noi
     """Is the sensor static and roughly where asked?
 
     Static: every axis' capture sd below ``static_factor`` × ``noise_g`` (the
-    sensor's own noise per sample, g). Where asked: the angle between the
-    measured specific force and the scheduled direction below ``max_angle_deg``
-    (a hand placement is good to a few degrees; the fit carries that as
-    ``ref_tol_deg``, docs/fit-honesty.md — this check only catches a wrong face).
+    sensor's own noise per sample, g). Where asked: :func:`check_pose` (a hand
+    placement is good to a few degrees; the fit carries that as ``ref_tol_deg``,
+    docs/fit-honesty.md — this check only catches a wrong face).
     """
-    m = np.asarray(mean_g, float)
-    r = np.asarray(ref_g, float)
     sd_max = float(np.max(np.asarray(sd_g, float)))
-    static = sd_max <= static_factor * noise_g
-    cos = float(np.dot(m, r) / (np.linalg.norm(m) * np.linalg.norm(r)))
-    angle_deg = math.degrees(math.acos(max(-1.0, min(1.0, cos))))
-    if not static:
-        return PlacementCheck(False, angle_deg, False, (
+    if sd_max > static_factor * noise_g:
+        return PlacementCheck(False, direction_error_deg(mean_g, ref_g), False, (
             f"the sensor is moving (sd {sd_max * 1e3:.2f} mg against {noise_g * 1e3:.3f} mg "
             f"noise): let it rest, then confirm again"))
+    return check_pose(mean_g, ref_g, max_angle_deg=max_angle_deg)
+
+
+def direction_error_deg(mean_g: np.ndarray, ref_g: np.ndarray) -> float:
+    """Angle between the measured specific force and the reference direction, degrees."""
+    m = np.asarray(mean_g, float)
+    r = np.asarray(ref_g, float)
+    cos = float(np.dot(m, r) / (np.linalg.norm(m) * np.linalg.norm(r)))
+    return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
+
+
+def check_pose(mean_g: np.ndarray, ref_g: np.ndarray, *,
+               max_angle_deg: float = MAX_ANGLE_DEG) -> PlacementCheck:
+    """Does a static capture read gravity from the direction its pose claims?
+
+    The one pose check, of a hand placement (:func:`check_placement`) and of every
+    capture the engine stores (a table that silently stopped elsewhere). An
+    uncalibrated sensor's direction is off by its zero-g offset and misalignment
+    (a few degrees for an ADXL355-class part: 75 mg over temperature is 4.3°), far
+    inside ``max_angle_deg``; a wrong face or pose is 45° or more away on the
+    shipped schedules. ``reason`` says which axis is where, for the operator.
+    """
+    angle_deg = direction_error_deg(mean_g, ref_g)
     if angle_deg < max_angle_deg:
         return PlacementCheck(True, angle_deg, True)
-    el_asked, el_seen = elevations_deg(r), elevations_deg(m)
+    el_asked, el_seen = elevations_deg(np.asarray(ref_g, float)), elevations_deg(mean_g)
     main = int(np.argmax(np.abs(el_asked)))
     asked = "up" if el_asked[main] > 0 else "down"
     seen = "up" if el_seen[main] > 30 else "down" if el_seen[main] < -30 else "sideways"

@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import datetime as dt
 import functools
 import logging
 import math
@@ -31,6 +32,7 @@ from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import soak_rate, stability, store
 from service.engine.calibrate import calibrate_columns
+from service.engine.fencing import fence_devices
 from service.engine.guard import (
     AbortRequested,
     CampaignFailed,
@@ -46,6 +48,7 @@ from service.engine.multi import (
     sensor_call,
     slowest_decision,
 )
+from service.engine.placement import MAX_ANGLE_DEG, check_pose
 from service.engine.plan import (
     Acquire,
     Checkpoint,
@@ -77,6 +80,9 @@ MIN_SOAK_POLL_S = 15.0
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
 SAFE_ATTEMPTS = 3  # tries per safe-state command
+POSE_ATTEMPTS = 3  # captures of one position off its pose before the campaign fails
+SAFE_COMMANDS = ("chamber.set_setpoint", "turntable.stop", "turntable.move_to")  # the park
+LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)
 
 
@@ -96,11 +102,13 @@ class CampaignRunner:
     ) -> None:
         self.sf = session_factory
         self.id = campaign_id
-        self.dev = devices
+        # Fenced: every command that changes the rig first confirms the lease (fencing.py).
+        self.dev = devices if fence is None else fence_devices(devices, self._confirm_lease)
         self.clock = clock
         self.calibrate = calibrate
         self.on_step = on_step
-        self.fence = fence  # every measurement commit checks this lease (manager-run campaigns)
+        # Every measurement commit and every rig command checks this lease (manager-run).
+        self.fence = fence
         self.fit_result: Any = None  # the core's fit object, for the demo's report
         self._progress: dict[str, Any] = {}
         # Called with (message, started_s, ended_s) for every plan message executed.
@@ -113,6 +121,19 @@ class CampaignRunner:
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
+        # Every capture found off its pose and measured again (step, position, attempt, angle).
+        self.pose_log: list[dict[str, Any]] = []
+        # Clock time the campaign stood still (paused or suspended): never soak time, never
+        # a ramp's, never in the ETA's measured durations (:meth:`_held_total_s`).
+        self._held_s = 0.0
+        self._held_since_s: float | None = None
+        self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
+
+    def _confirm_lease(self) -> dt.datetime:
+        """The device fence's check (fencing.py): when the lease ends, or
+        :class:`store.LeaseLost` when it is not held."""
+        assert self.fence is not None
+        return store.confirm_lease(self.sf, self.fence, self.id)
 
     def subscribe(self, fn: Subscriber) -> None:
         """Call ``fn(message, started_s, ended_s)`` after each plan message is executed."""
@@ -161,10 +182,21 @@ class CampaignRunner:
             log.exception("campaign %s: unexpected error", self.id)
             outcome = ("failed", {"error": f"engine error: {type(exc).__name__}: {exc}"})
         finally:
-            if self._touched:
+            if self._touched and lost is None:
                 cancelled = await self._park_through_cancel() or cancelled
+            elif self._touched:
+                # The rig is another process's now: parking it would move the table and the
+                # setpoint under the new holder's measurement. It parks when it is done.
+                log.error("campaign %s: rig not parked: the lease is lost", self.id)
+                self.safe_report = dict.fromkeys(SAFE_COMMANDS, LEASE_LOST_REPORT)
         if cancelled is not None:
             raise cancelled
+        if lost is None and outcome is not None and self.fence is not None:
+            try:  # a terminal state is a write like a measurement: only the holder's counts
+                self._confirm_lease()
+            except store.LeaseLost as exc:
+                log.error("campaign %s: %s; leaving its state to the holder", self.id, exc)
+                lost = exc
         if lost is not None:
             return store.read_control(self.sf, self.id).state
         assert outcome is not None
@@ -238,7 +270,7 @@ class CampaignRunner:
         A ``Save`` is announced *before* its commit (the reading is complete), so
         the progress committed with it already counts it.
         """
-        started_s = self.clock.now()
+        started_s = self._active_s()
         if isinstance(msg, Save):
             self._notify(msg, started_s)
             await self._save(msg)
@@ -248,9 +280,18 @@ class CampaignRunner:
         self._notify(msg, started_s)
         return result
 
+    def _held_total_s(self) -> float:
+        """Clock time held (paused or suspended) so far, an ongoing hold included."""
+        ongoing_s = 0.0 if self._held_since_s is None else self.clock.now() - self._held_since_s
+        return self._held_s + ongoing_s
+
+    def _active_s(self) -> float:
+        """The clock without the held time: subscribers' (the ETA's) durations exclude it."""
+        return self.clock.now() - self._held_total_s()
+
     def _notify(self, msg: Msg, started_s: float) -> None:
         for sub in self._subscribers:
-            sub(msg, started_s, self.clock.now())
+            sub(msg, started_s, self._active_s())
 
     @property
     def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
@@ -380,18 +421,66 @@ class CampaignRunner:
             await self._hold(*tripped, setpoint_c=msg.setpoint_c)
             if tripped[0].restart_soak and self._last_soak is not None:
                 await self._soak(dataclasses.replace(self._last_soak, resumed=True))
-            await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
-            await self._wait(self.spec.settle_s)
-            remeasured = await remeasure()
+            remeasured = await self._measure_again(msg, remeasure)
+
+    async def _measure_again(self, msg: Save, remeasure: Callable[[], Awaitable[Any]]) -> Any:
+        """Return to the position, settle and measure again (``remeasure``)."""
+        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+        await self._wait(self.spec.settle_s)
+        return await remeasure()
+
+    async def _checked_readings(
+        self, msg: Save, readings: dict[str, Any], remeasure: Callable[[], Awaitable[Any]]
+    ) -> tuple[ChamberStatus, dict[str, Any]]:
+        """The chamber in band (:meth:`_chamber_in_band`) and every reading at its pose.
+
+        ``readings``: serial → (acquisition, flags, attempts). A capture that does not
+        read gravity from the direction its position claims (placement.check_pose: a
+        table that reported in-position somewhere else) is never stored under that
+        label: the position is moved to, settled and measured again, up to
+        ``POSE_ATTEMPTS`` captures in all. Then the campaign fails naming the position
+        and the angle; with several sensors, only the ones still off are dropped while
+        another reads the pose right (its mount, not the table, is wrong).
+        """
+        for attempt in range(1, POSE_ATTEMPTS + 1):
+            status, again = await self._chamber_in_band(msg, remeasure)
+            if again is not None:
+                readings = again
+            off = {serial: check_pose(r[0].mean_g, msg.ref_g)
+                   for serial, r in readings.items()}
+            off = {serial: c for serial, c in off.items() if not c.ok}
+            if not off:
+                return status, readings
+            worst = max(c.angle_deg for c in off.values())
+            where = (f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position} "
+                     f"(reference {_ref_text(msg.ref_g)}, table at {self._pose} deg)")
+            self.pose_log.append({"step": msg.step, "position": msg.position,
+                                  "attempt": attempt, "angle_deg": round(worst, 2),
+                                  "sensors": sorted(s for s in off if s)})
+            log.warning("campaign %s: %s: capture %.1f° from its reference, measuring again",
+                        self.id, where, worst)
+            if attempt == POSE_ATTEMPTS:
+                if len(off) < len(readings):
+                    for serial, c in off.items():
+                        self._drop(SensorDropped(serial, f"{where}: reads gravity "
+                                                 f"{c.angle_deg:.0f}° from its reference "
+                                                 f"(limit {MAX_ANGLE_DEG:.0f}°): check its "
+                                                 "mount"))
+                    return status, {s: r for s, r in readings.items() if s not in off}
+                raise CampaignFailed(
+                    f"{where}: the capture reads gravity {worst:.0f}° from its reference "
+                    f"(limit {MAX_ANGLE_DEG:.0f}°) after {POSE_ATTEMPTS} moves to it; the table "
+                    "does not stand where it reports: check its homing and encoders")
+            readings = await self._measure_again(msg, remeasure)
+        raise AssertionError("unreachable")
 
     async def _save_each(self, msg: Save) -> None:
         """Commit every live sensor's reading of a position and the cursor in one transaction."""
         readings = {s: r for s, r in dict(msg.acquisition).items()
                     if r is not None and s not in self.dropped}
-        status, again = await self._chamber_in_band(
-            msg, lambda: self._measure_live(self.spec.samples_per_position, self._live))
-        if again is not None:
-            readings = again
+        status, readings = await self._checked_readings(
+            msg, readings,
+            lambda: self._measure_live(self.spec.samples_per_position, self._live))
         readings = {s: r for s, r in readings.items() if s not in self.dropped}
         if not readings:
             raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
@@ -420,11 +509,11 @@ class CampaignRunner:
         if msg.sensors:
             await self._save_each(msg)
             return
-        acq, flags, attempts = msg.acquisition
-        status, again = await self._chamber_in_band(
-            msg, lambda: self._measure(self.spec.samples_per_position))
-        if again is not None:
-            acq, flags, attempts = again
+        async def measure() -> dict[str, Any]:
+            return {"": await self._measure(self.spec.samples_per_position)}
+
+        status, readings = await self._checked_readings(msg, {"": msg.acquisition}, measure)
+        acq, flags, attempts = readings[""]
         t_mid = self.clock.now() - acq.duration_s / 2.0
         ref = msg.ref_g
         row = {
@@ -459,6 +548,7 @@ class CampaignRunner:
             # of delaying it, and the soak's probes start after both.
             await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
         start_s = self.clock.now()
+        held0_s = self._held_total_s()
         status = await self._chamber()
         limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
         limit_s += spec.stability.max_soak_s
@@ -470,7 +560,7 @@ class CampaignRunner:
         try:
             while not (_wsp_at_target(status, target_c)
                        and abs(status.process_c - target_c) <= spec.stability.tol_c):
-                if self.clock.now() - start_s > limit_s:
+                if self.clock.now() - start_s - (self._held_total_s() - held0_s) > limit_s:
                     raise CampaignFailed(
                         f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
                         f"(PV {status.process_c:.2f} °C)")
@@ -508,6 +598,7 @@ class CampaignRunner:
         store.set_cursor(self.sf, self.id, step, "soak", 0)
         self._cursor = (step, "soak")
         start_s = self.clock.now()
+        held0_s = self._held_total_s()  # held time before this soak: not this soak's
         ch_t: list[float] = []
         ch_pv: list[float] = []
         ch_wsp: list[float] = []
@@ -524,10 +615,13 @@ class CampaignRunner:
                 # (the probes so far are still an approach: they stay for the rate gain).
                 self._keep_soak(dies)
                 await self._hold(*tripped, setpoint_c=target_c)
-                start_s = self.clock.now()
+                start_s, held0_s = self.clock.now(), self._held_total_s()
                 ch_t, ch_pv, ch_wsp, dies = [], [], [], self._no_dies()
                 continue
             now_s = self.clock.now()
+            # Soak time: the clock since the soak began, less the time paused or suspended
+            # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
+            soaked_s = now_s - start_s - (self._held_total_s() - held0_s)
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
             ch_wsp.append(status.working_setpoint_c)
@@ -546,7 +640,7 @@ class CampaignRunner:
             for key in sorted(live, key=lambda k: k != waiting_on):
                 probes = live[key]
                 decisions.append(stability.decide(
-                    cfg, now_s - start_s, settled, np.array([p.clock_s for p in probes]),
+                    cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
                     np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
                     n_positions=self.n_pos, edge=edge,
                     rate_gain_ug_per_c_per_min=gains[key], order_repeats=msg.order_repeats))
@@ -555,7 +649,7 @@ class CampaignRunner:
                     break
             decision = slowest_decision(decisions)
             self._publish(step, "soak", 0, status, target_c,
-                          soak_remaining_s=max(0.0, self.eta.soak_s - (now_s - start_s)))
+                          soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
             if decision.stable:
                 break
             await self._checkpoint()
@@ -564,11 +658,12 @@ class CampaignRunner:
             await self._wait(stability.next_poll_s(
                 decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
         self._keep_soak(dies)
-        soak_s = self.clock.now() - start_s
+        held_s = self._held_total_s() - held0_s
+        soak_s = self.clock.now() - start_s - held_s
         used = [g for g in gains.values() if g is not None]
         entry = {
             "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
-            "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s,
+            "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s, "held_s": held_s,
             "reason": decision.reason, "tau_s": decision.tau_s,
             "predicted_offset_c": decision.predicted_offset_c,
             "predicted_error_c": decision.predicted_error_c,
@@ -821,10 +916,12 @@ class CampaignRunner:
         ``limit_s`` of real time (clock time over the clock's speed-up).
         """
         since_s = self.clock.now()
+        paused0_s = self._paused_s
         clear_since_s: float | None = None
         self._suspend(f"{susp.name}: {why}")
         while True:
-            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
+            held_s = self.clock.now() - since_s - (self._paused_s - paused0_s)  # pause: not
+            if held_s / clock_speed(self.clock) >= susp.limit_s:
                 raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
                                      "real time")
             await self._checkpoint()
@@ -891,11 +988,21 @@ class CampaignRunner:
             safe_c = min(max(safe_c, lo_c), hi_c)
         home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
         ch, tt = self.dev.chamber, self.dev.turntable
-        self.safe_report = {
-            "chamber.set_setpoint": await self._try_safe(lambda: ch.set_setpoint(safe_c)),
-            "turntable.stop": await self._try_safe(tt.stop),
-            "turntable.move_to": await self._try_safe(lambda: tt.move_to(home)),
+        commands: dict[str, Callable[[], Awaitable[Any]]] = {
+            "chamber.set_setpoint": lambda: ch.set_setpoint(safe_c),
+            "turntable.stop": tt.stop,
+            "turntable.move_to": lambda: tt.move_to(home),
         }
+        self.safe_report = {}
+        for name, fn in commands.items():
+            try:
+                self.safe_report[name] = await self._try_safe(fn)
+            except store.LeaseLost as exc:
+                # Lost while parking (a fenced runner): the rest is the new holder's to do.
+                log.error("campaign %s: park stopped, %s", self.id, exc)
+                self.safe_report.update({n: LEASE_LOST_REPORT for n in commands
+                                         if n not in self.safe_report})
+                return
 
     async def _try_safe(self, fn: Callable[[], Awaitable[Any]]) -> str:
         delay_s = 1.0
@@ -904,7 +1011,7 @@ class CampaignRunner:
             try:
                 await fn()
                 return "ok"
-            except asyncio.CancelledError:
+            except (asyncio.CancelledError, store.LeaseLost):
                 raise
             except Exception as exc:  # noqa: BLE001 - any failure: log, retry, move on
                 last = f"{type(exc).__name__}: {exc}"
@@ -931,6 +1038,16 @@ class CampaignRunner:
             await self._lost_control()
             return
         await self.guard.call("turntable.stop", self.dev.turntable.stop)
+        paused_since_s = self.clock.now()
+        try:
+            await self._wait_for_resume()
+        finally:
+            paused_s = self.clock.now() - paused_since_s
+            self._paused_s += paused_s
+            if self._held_since_s is None:  # inside a suspension its interval covers it
+                self._held_s += paused_s
+
+    async def _wait_for_resume(self) -> None:
         while True:
             await self.clock.sleep(self.spec.soak_poll_s)
             ctl = store.read_control(self.sf, self.id)
@@ -983,10 +1100,15 @@ class CampaignRunner:
         return ctl.state == "aborted" or ctl.requested_action == "abort"
 
     def _suspend(self, reason: str) -> None:
+        if self._held_since_s is None:
+            self._held_since_s = self.clock.now()
         self._progress = {**self._progress, "suspended_reason": reason}
         store.update_campaign(self.sf, self.id, suspended_reason=reason, progress=self._progress)
 
     def _unsuspend(self) -> None:
+        if self._held_since_s is not None:
+            self._held_s += self.clock.now() - self._held_since_s
+            self._held_since_s = None
         self._progress = {k: v for k, v in self._progress.items() if k != "suspended_reason"}
         store.update_campaign(self.sf, self.id, suspended_reason=None, progress=self._progress)
 
@@ -1013,6 +1135,10 @@ class CampaignRunner:
         if write:
             store.update_campaign(self.sf, self.id, progress=progress)
         return progress
+
+
+def _ref_text(ref_g: tuple[float, ...]) -> str:
+    return "(" + ", ".join(f"{float(v):+.3f}" for v in ref_g) + ") g"
 
 
 def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:

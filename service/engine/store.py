@@ -8,15 +8,18 @@ move are one transaction (:func:`commit_measurement`).
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy import select, text, update
+from sqlalchemy.exc import DBAPIError, IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe, utcnow
+from service.db.timestamps import as_utc
 from service.engine.states import TERMINAL, TRANSITIONS
 from service.event_log import log_event
 
@@ -174,13 +177,80 @@ class LeaseLost(Exception):
     """A fenced write found the rig lease expired or held by another process."""
 
 
+# Every statement on the lease row waits at most this long for a row lock (PostgreSQL's
+# lock_timeout; SQLite's busy timeout, service/db/session.py, bounds it there).
+LEASE_LOCK_TIMEOUT_S = 2.0
+# A fenced transaction left open by a stalled process (SIGSTOP inside a commit) holds the
+# lease row's lock; PostgreSQL ends such a session after this long idle, so a takeover waits
+# for it at most this long — well inside one lease period (manager.py's lease_s, 30 s).
+FENCED_IDLE_TIMEOUT_S = 5.0
+
+
+def bound_lease_locks(s: Session, *, fenced: bool = False) -> None:
+    """Start the caller's transaction with the lease row's lock waits bounded (PostgreSQL).
+
+    ``fenced``: also end the session if this process stalls with the transaction open
+    (``idle_in_transaction_session_timeout``), so its row lock cannot outlive the stall.
+    SQLite has one writer and its busy timeout (:func:`lease_session` shortens it for the
+    manager's lease statements).
+    """
+    if s.get_bind().dialect.name != "postgresql":
+        return
+    s.execute(text(f"SET LOCAL lock_timeout = '{int(LEASE_LOCK_TIMEOUT_S * 1000)}ms'"))
+    if fenced:
+        s.execute(text("SET LOCAL idle_in_transaction_session_timeout = "
+                       f"'{int(FENCED_IDLE_TIMEOUT_S * 1000)}ms'"))
+
+
+@contextlib.contextmanager
+def lease_session(sf: SessionFactory) -> Iterator[Session]:
+    """A session for the manager's lease statements (claim, renew, release), each of
+    whose lock waits ends after :data:`LEASE_LOCK_TIMEOUT_S` with an ``OperationalError``.
+
+    PostgreSQL: call :func:`bound_lease_locks` at the start of each transaction
+    (``SET LOCAL`` lasts one). SQLite: the connection's busy timeout is shortened for
+    the session and put back after it (it is the pooled connection's setting).
+    """
+    with sf() as s:
+        sqlite = s.get_bind().dialect.name == "sqlite"
+        if sqlite:
+            s.execute(text(f"PRAGMA busy_timeout = {int(LEASE_LOCK_TIMEOUT_S * 1000)}"))
+        try:
+            yield s
+        finally:
+            if sqlite:
+                from service.db.session import SQLITE_BUSY_TIMEOUT_MS
+
+                with contextlib.suppress(Exception):
+                    s.rollback()
+                    s.execute(text(f"PRAGMA busy_timeout = {SQLITE_BUSY_TIMEOUT_MS}"))
+                    s.commit()
+
+
+def confirm_lease(sf: SessionFactory, fence: Fence, campaign_id: int) -> dt.datetime:
+    """When this process's live lease on ``fence.rig`` for ``campaign_id`` ends (UTC);
+    :class:`LeaseLost` when it holds none. A plain read (it takes no lock): the device
+    fence's check before every command that changes the rig (service/engine/fencing.py)."""
+    with sf.kw["bind"].connect() as conn:
+        until = conn.execute(
+            select(RigLease.lease_until).where(
+                RigLease.rig == fence.rig, RigLease.owner == fence.owner,
+                RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
+        ).scalar()
+    if until is None:
+        raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
+    return as_utc(until) or until
+
+
 def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
     """Inside the caller's transaction: this process still holds a live lease on the rig.
 
     A no-op UPDATE rather than a SELECT so PostgreSQL locks the lease row until
     the commit: a takeover (a conditional UPDATE on the same row) waits for this
-    transaction and then sees the lease as it is after it.
+    transaction and then sees the lease as it is after it. The wait is bounded on
+    both sides (:func:`bound_lease_locks`).
     """
+    bound_lease_locks(s, fenced=True)
     res = s.execute(
         update(RigLease)
         .where(RigLease.rig == fence.rig, RigLease.owner == fence.owner,
@@ -236,6 +306,15 @@ def commit_measurements(
         except LeaseLost:
             s.rollback()
             raise
+        except DBAPIError as exc:
+            if fence is None:
+                raise
+            # A lock wait timed out, or the server ended this session while we stalled:
+            # the lease cannot be confirmed, so this process stops writing (and commanding).
+            with contextlib.suppress(Exception):
+                s.rollback()
+            raise LeaseLost(f"rig {fence.rig!r}: lease not confirmed "
+                            f"({type(exc).__name__}: {str(exc).splitlines()[0]})") from exc
     set_cursor(sf, campaign_id, step, "positions", next_position, progress)
     return False
 

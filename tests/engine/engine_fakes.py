@@ -120,10 +120,13 @@ class FakeTurntable:
 
     def __init__(self, clock: Clock, faults: Faults) -> None:
         self.clock, self.faults = clock, faults
-        self.angles: tuple[float, ...] = (0.0, 0.0)
+        self.angles: tuple[float, ...] = (0.0, 0.0)  # what the table reports
+        self.physical_angles: tuple[float, ...] = (0.0, 0.0)  # where it stands (the sensor's)
         self.arrive_s = 0.0
         self.moves = 0
         self.stops = 0
+        # Moves (1-based numbers) that silently land at home: reported as commanded.
+        self.silent_home_moves: set[int] = set()
 
     @property
     def n_axes(self) -> int:
@@ -134,6 +137,8 @@ class FakeTurntable:
         self.angles = tuple(angles_deg)
         self.arrive_s = self.clock.now() + self.SLEW_S
         self.moves += 1
+        home = tuple(0.0 for _ in angles_deg)
+        self.physical_angles = home if self.moves in self.silent_home_moves else self.angles
 
     async def read_status(self) -> TurntableStatus:
         self.faults.maybe_raise("turntable", self.clock.now())
@@ -178,7 +183,7 @@ class FakeAccelerometer:
         await self.ph.clock.sleep(duration_s)
         self.ph.advance()
         self.acquisitions += 1
-        ref = ref_for(self.table.angles)
+        ref = ref_for(self.table.physical_angles)
         s = self.truth.sample_g(ref, self.ph.die_c, n_samples, self.rng)
         if self.bad_captures > 0:
             self.bad_captures -= 1

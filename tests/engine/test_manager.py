@@ -106,4 +106,5 @@ async def test_a_measurement_commit_is_fenced_by_the_rig_lease(sf) -> None:  # t
     n_at_takeover = n_rows()
     assert await asyncio.wait_for(task, 30) == "running"  # left for proc-b, not failed
     assert n_rows() == n_at_takeover
-    assert rig.physics.setpoint_c == 23.0  # parked: the lost lease is an exit like any other
+    # not parked: the rig is proc-b's now (tests/engine/test_fencing.py)
+    assert rig.physics.setpoint_c == -10.0
