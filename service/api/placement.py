@@ -34,7 +34,11 @@ def _campaign_or_404(session: SessionDep, campaign_id: int) -> Campaign:
     return camp
 
 
-@router.get("/{campaign_id}/placement", dependencies=[Depends(auth.viewer)])
+_NOT_FOUND = {404: {"description": "no such campaign"}}
+
+
+@router.get("/{campaign_id}/placement", dependencies=[Depends(auth.viewer)],
+            responses=_NOT_FOUND)
 def get_placement(campaign_id: DbIdPath, session: SessionDep) -> dict[str, Any]:
     """The campaign's current placement request (``request`` null when none was made)."""
     camp = _campaign_or_404(session, campaign_id)
@@ -43,7 +47,8 @@ def get_placement(campaign_id: DbIdPath, session: SessionDep) -> dict[str, Any]:
 
 
 @router.post("/{campaign_id}/placement", dependencies=[Depends(auth.operator)],
-             responses={409: {"description": "nothing pending, or another position is asked"}})
+             responses={**_NOT_FOUND,
+                        409: {"description": "nothing pending, or another position is asked"}})
 def confirm_placement(campaign_id: DbIdPath, body: PlacementConfirm,
                       session: SessionDep) -> dict[str, Any]:
     """Confirm the pending placement (409 when none is pending or ``position`` differs)."""
