@@ -15,18 +15,19 @@ spread. A sensor more than :data:`FLAG_SIGMA` σ from its lot's median is flagge
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query
 from pydantic import BaseModel, Field
-from sqlalchemy import cast, func, select
-from sqlalchemy.dialects.postgresql import JSONB
+from sqlalchemy import and_, case, func, literal, literal_column, select, union_all
 from sqlalchemy.orm import Session
 
 from service.api import auth
 from service.api.deps import DbIdPath, SessionDep
-from service.db.models import Calibration, Sensor
+from service.db.calibration_parameters import PARAMETERS, slope_at, value_at
+from service.db.models import Calibration, CalibrationParameter, Sensor
 
 FLAG_SIGMA = 4.0
 MAD_TO_SIGMA = 1.4826  # σ of a normal distribution = 1.4826 × its MAD
@@ -34,7 +35,6 @@ MIN_LOT = 5  # fewer sensors: a median and MAD say too little to flag anyone
 # Sensors per lot whose values are sent for the plot (every flagged one, and an even sample
 # of the rest): 10,000 sensors × 24 values would be megabytes for dots that overlap anyway.
 MAX_PLOTTED = 400
-PARAMETERS = ("bx", "by", "bz", "sx", "sy", "sz", "ayx", "azx", "azy", "mx", "my", "mz")
 
 router = APIRouter(prefix="/api/v1/fleet", tags=["fleet"], dependencies=[Depends(auth.viewer)])
 
@@ -88,35 +88,204 @@ def lot_statistics(
 
 
 def _lots(session: Session, reference_c: float) -> list[tuple[Lot, set[int]]]:
-    """Each lot and the calibration ids it was computed from."""
-    latest = select(func.max(Calibration.id)).group_by(Calibration.sensor)
-    doc: Any = Calibration.model
-    source: Any = Calibration
+    """Each lot and the calibration ids it was computed from.
+
+    The values come from ``calibration_parameters`` (one row per calibration and SFEM
+    parameter, written when the calibration is stored), evaluated at ``reference_c`` by
+    the database. PostgreSQL also computes the medians and MADs (``percentile_cont``) and
+    picks the flagged values, so only the plotted sample travels; SQLite has no
+    percentile, so there numpy computes the same from the same rows.
+    """
+    members = _members(session, reference_c)
     if session.get_bind().dialect.name == "postgresql":
-        # A json column is text: every path below would parse the ~15 kB document again.
-        # Parse each once, into jsonb, in a materialised CTE (not inlined into each path).
-        parsed = (select(Calibration.id, Calibration.sensor,
-                         cast(Calibration.model, JSONB).label("doc"))
-                  .where(Calibration.id.in_(latest)).cte("parsed").prefix_with("MATERIALIZED"))
-        doc, source = parsed.c.doc, parsed.c
-    # Only the parts of each model document the statistics read, extracted by the database.
-    query = (select(source.id, source.sensor, Sensor.model,
-                    doc["provenance"]["sensor_identity"]["reported_model"],
-                    doc["temperature"]["centre_c"], doc["temperature"]["valid_c"],
-                    doc["polynomial"]["physical_coefficients"],
-                    doc["polynomial"]["physical_units"])
-             .outerjoin(Sensor, Sensor.serial == source.sensor)
-             .order_by(source.sensor))
-    if source is Calibration:
-        query = query.where(Calibration.id.in_(latest))
+        spreads, flags = _spreads_in_sql(session, reference_c)
+        shown = _plotted_by_lot(members, flags)
+        values, _ = _values(session, reference_c, shown)
+    else:
+        values, units = _values(session, reference_c, None)
+        spreads, flags = _spreads_in_python(values, units)
+        shown = _plotted_by_lot(members, flags)
+    by_lot: dict[str, list[_Member]] = {}
+    for m in members:
+        by_lot.setdefault(m.lot, []).append(m)
+    out = []
+    for model, lot_members in sorted(by_lot.items()):
+        compared = {m.calibration_id for m in lot_members if m.in_range}
+        n = len(compared)
+        note = None if n >= MIN_LOT else (
+            f"{n} sensor(s) at {reference_c:g} °C: at least {MIN_LOT} are needed to flag one")
+        lot_shown = shown.get(model, set())
+        lot_values = {name: [p for p in points if p[1] in lot_shown]
+                      for name, points in values.get(model, {}).items()}
+        out.append((Lot(model=model, sensors=n,
+                        left_out=[m.sensor for m in lot_members if not m.in_range],
+                        spreads=spreads.get(model, []), flags=flags.get(model, []),
+                        values=lot_values, plotted=len(lot_shown), note=note), compared))
+    return out
+
+
+def _plotted_by_lot(members: list[_Member], flags: Flags) -> dict[str, set[int]]:
+    """lot → the calibration ids its plot shows (:func:`_plotted`)."""
+    compared: dict[str, set[int]] = {}
+    for m in members:
+        if m.in_range:
+            compared.setdefault(m.lot, set()).add(m.calibration_id)
+    return {lot: _plotted(ids, {f.calibration_id for f in flags.get(lot, [])})
+            for lot, ids in compared.items()}
+
+
+@dataclass(frozen=True)
+class _Member:
+    calibration_id: int
+    sensor: str
+    lot: str
+    in_range: bool  # reference_c inside the calibration's valid range
+
+
+def _lot_of() -> Any:
+    """A sensor's lot: its registered model, else the model it reported, else 'unknown'."""
+    # literals, not bound parameters: the expression is grouped by and must read the same
+    empty = literal_column("''")
+    return func.coalesce(func.nullif(Sensor.model, empty),
+                         func.nullif(CalibrationParameter.reported_model, empty),
+                         literal_column("'unknown'"))
+
+
+def _latest() -> Any:
+    return select(func.max(Calibration.id)).group_by(Calibration.sensor)
+
+
+def _members(session: Session, t_c: float) -> list[_Member]:
+    """The latest calibration of every sensor that has stored parameters, by sensor."""
+    cp = CalibrationParameter
+    in_range = and_(cp.centre_c.is_not(None), cp.valid_lo_c <= t_c, cp.valid_hi_c >= t_c)
+    rows = session.execute(
+        select(cp.calibration_id, cp.sensor, _lot_of(),
+               func.max(case((in_range, 1), else_=0)))
+        .outerjoin(Sensor, Sensor.serial == cp.sensor)
+        .where(cp.calibration_id.in_(_latest()))
+        .group_by(cp.calibration_id, cp.sensor, _lot_of())
+        .order_by(cp.sensor)).all()
+    return [_Member(int(c), s, lot, bool(r)) for c, s, lot, r in rows]
+
+
+def _value_rows(t_c: float) -> Any:
+    """Every compared (calibration, parameter)'s value and tempco at ``t_c``: a select."""
+    cp = CalibrationParameter
+    return (select(cp.calibration_id, cp.sensor, _lot_of().label("lot"), cp.name,
+                   value_at(t_c).label("x"), slope_at(t_c).label("dx"),
+                   cp.unit, cp.tempco_unit)
+            .outerjoin(Sensor, Sensor.serial == cp.sensor)
+            .where(cp.calibration_id.in_(_latest()), cp.centre_c.is_not(None),
+                   cp.valid_lo_c <= t_c, cp.valid_hi_c >= t_c))
+
+
+Values = dict[str, dict[str, list[tuple[str, int, float]]]]  # lot → name → points
+
+
+def _values(session: Session, t_c: float, ids: dict[str, set[int]] | None
+            ) -> tuple[Values, dict[str, str]]:
+    """lot → name → [(sensor, calibration id, value)] by sensor, names in :data:`PARAMETERS`
+    order (each followed by its tempco), and each name's unit; only ``ids`` when given."""
+    query = _value_rows(t_c)
+    if ids is not None:
+        wanted = sorted(set().union(*ids.values()))
+        query = query.where(CalibrationParameter.calibration_id.in_(wanted))
     rows = session.execute(query).all()
-    by_model: dict[str, list[tuple[str, int, dict[str, Any]]]] = {}
-    for cal_id, serial, sensor_model, reported, centre_c, valid_c, coeffs, units in rows:
-        model = sensor_model or reported or "unknown"
-        part = {"temperature": {"centre_c": centre_c, "valid_c": valid_c},
-                "polynomial": {"physical_coefficients": coeffs, "physical_units": units}}
-        by_model.setdefault(model, []).append((serial, cal_id, part))
-    return [_lot(model, members, reference_c) for model, members in sorted(by_model.items())]
+    out: Values = {}
+    units: dict[str, str] = {}
+    for cal_id, serial, lot, name, x, dx, unit, tempco_unit in sorted(
+            rows, key=lambda r: (r.lot, r.sensor)):
+        for key, value, key_unit in ((name, x, unit), (f"d{name}/dT", dx, tempco_unit)):
+            if value is not None and math.isfinite(value):
+                out.setdefault(lot, {}).setdefault(key, []).append((serial, cal_id, float(value)))
+                units[key] = key_unit
+    return ({lot: dict(sorted(named.items(), key=lambda kv: name_order(kv[0])))
+             for lot, named in out.items()}, units)
+
+
+def name_order(name: str) -> int:
+    """bx, dbx/dT, by, dby/dT, …: the order spreads, flags and plots list the names in."""
+    if name.startswith("d") and name.endswith("/dT"):
+        return 2 * PARAMETERS.index(name[1:-3]) + 1
+    return 2 * PARAMETERS.index(name)
+
+
+Spreads = dict[str, list[Spread]]
+Flags = dict[str, list[Flag]]
+
+
+def _flag(serial: str, cal_id: int, name: str, value: float, spread: Spread) -> Flag | None:
+    """The flag of one value against its lot's spread (None: within 4 σ or no verdict)."""
+    if spread.n < MIN_LOT or spread.sigma <= 0:
+        return None
+    z = (value - spread.median) / spread.sigma
+    if abs(z) <= FLAG_SIGMA:
+        return None
+    return Flag(sensor=serial, calibration_id=cal_id, name=name, value=value, z=round(z, 1))
+
+
+def _spreads_in_python(values: Values, units: dict[str, str]) -> tuple[Spreads, Flags]:
+    """Median and σ = 1.4826 · MAD of every lot's parameter with numpy; the flags."""
+    spreads: Spreads = {}
+    flags: Flags = {}
+    for lot, named in values.items():
+        for name, points in named.items():
+            x = np.array([p[2] for p in points])
+            median = float(np.median(x))
+            sigma = MAD_TO_SIGMA * float(np.median(np.abs(x - median)))
+            spread = Spread(name=name, unit=units[name], n=x.size, median=median, sigma=sigma)
+            spreads.setdefault(lot, []).append(spread)
+            for serial, cal_id, value in points:
+                flag = _flag(serial, cal_id, name, value, spread)
+                if flag is not None:
+                    flags.setdefault(lot, []).append(flag)
+    return spreads, flags
+
+
+def _spreads_in_sql(session: Session, t_c: float) -> tuple[Spreads, Flags]:
+    """The same as :func:`_spreads_in_python`, computed by PostgreSQL.
+
+    Two statements over one unpivoted set of values (parameters and tempcos): the medians
+    and MADs, ``percentile_cont(0.5)`` over the values and then over ``|x − median|``
+    per lot and name; then the values beyond 4 σ of their lot.
+    """
+    rows = _value_rows(t_c).cte("cp_rows")
+    tempco_name = literal("d") + rows.c.name + literal("/dT")
+    v = union_all(
+        select(rows.c.calibration_id, rows.c.sensor, rows.c.lot, rows.c.name.label("name"),
+               rows.c.x.label("value"), rows.c.unit.label("unit")),
+        select(rows.c.calibration_id, rows.c.sensor, rows.c.lot, tempco_name.label("name"),
+               rows.c.dx.label("value"), rows.c.tempco_unit.label("unit")),
+    ).cte("v").prefix_with("MATERIALIZED")
+    centre = (select(v.c.lot, v.c.name, func.count().label("n"), func.max(v.c.unit).label("unit"),
+                     func.percentile_cont(0.5).within_group(v.c.value).label("median"))
+              .group_by(v.c.lot, v.c.name).cte("centre"))
+    stats = (select(centre.c.lot, centre.c.name, centre.c.n, centre.c.unit, centre.c.median,
+                    func.percentile_cont(0.5).within_group(
+                        func.abs(v.c.value - centre.c.median)).label("mad"))
+             .join(v, and_(v.c.lot == centre.c.lot, v.c.name == centre.c.name))
+             .group_by(centre.c.lot, centre.c.name, centre.c.n, centre.c.unit, centre.c.median))
+    spreads: Spreads = {}
+    by_key: dict[tuple[str, str], Spread] = {}
+    for lot, name, n, unit, median, mad in sorted(
+            session.execute(stats).all(), key=lambda r: (r.lot, name_order(r.name))):
+        spread = Spread(name=name, unit=unit, n=n, median=median, sigma=MAD_TO_SIGMA * mad)
+        spreads.setdefault(lot, []).append(spread)
+        by_key[(lot, name)] = spread
+    stats_cte = stats.cte("stats")
+    beyond = (select(v.c.lot, v.c.name, v.c.sensor, v.c.calibration_id, v.c.value)
+              .join(stats_cte, and_(v.c.lot == stats_cte.c.lot, v.c.name == stats_cte.c.name))
+              .where(stats_cte.c.n >= MIN_LOT, stats_cte.c.mad > 0,
+                     func.abs(v.c.value - stats_cte.c.median)
+                     > FLAG_SIGMA * MAD_TO_SIGMA * stats_cte.c.mad))
+    flags: Flags = {}
+    for lot, name, serial, cal_id, value in sorted(
+            session.execute(beyond).all(), key=lambda r: (r.lot, name_order(r.name), r.sensor)):
+        flag = _flag(serial, cal_id, name, value, by_key[(lot, name)])
+        if flag is not None:  # the same rule as in Python decides at the boundary
+            flags.setdefault(lot, []).append(flag)
+    return spreads, flags
 
 
 class LotCheck(BaseModel):
@@ -144,68 +313,6 @@ def calibration_lot_check(
     return LotCheck(calibration_id=calibration_id, model=None, sensors=0, flags=[], note=(
         f"not compared: not its sensor's latest calibration, or {reference_c:g} °C is "
         "outside its valid range"))
-
-
-def parameters_at(doc: dict[str, Any], t_c: float) -> dict[str, tuple[float, str]] | None:
-    """``{name: (value, unit)}`` of the 12 parameters and their d/dT at ``t_c`` from the
-    model document's physical polynomials; None when ``t_c`` is outside its valid range."""
-    poly = doc.get("polynomial") or {}
-    temp = doc.get("temperature") or {}
-    coefficients = poly.get("physical_coefficients") or {}
-    units = poly.get("physical_units") or {}
-    valid = temp.get("valid_c") or [math.nan, math.nan]
-    centre = temp.get("centre_c")
-    if centre is None or not valid[0] <= t_c <= valid[1]:
-        return None
-    dt = t_c - float(centre)
-    out: dict[str, tuple[float, str]] = {}
-    for name in PARAMETERS:
-        c = [float(v) for v in coefficients.get(name) or []]
-        if not c:
-            continue
-        unit = (units.get(name) or ["", ""])
-        out[name] = (sum(cj * dt**j for j, cj in enumerate(c)), unit[0])
-        slope = sum(j * cj * dt ** (j - 1) for j, cj in enumerate(c) if j)
-        out[f"d{name}/dT"] = (slope, unit[1] if len(unit) > 1 else f"{unit[0]}/degC")
-    return out
-
-
-def _lot(model: str, members: list[tuple[str, int, dict[str, Any]]], t_c: float
-         ) -> tuple[Lot, set[int]]:
-    values: dict[str, list[tuple[str, int, float]]] = {}
-    units: dict[str, str] = {}
-    left_out: list[str] = []
-    for serial, cal_id, doc in members:
-        params = parameters_at(doc or {}, t_c)
-        if params is None:
-            left_out.append(serial)
-            continue
-        for name, (value, unit) in params.items():
-            if math.isfinite(value):
-                values.setdefault(name, []).append((serial, cal_id, value))
-                units[name] = unit
-    spreads: list[Spread] = []
-    flags: list[Flag] = []
-    for name, points in values.items():
-        x = np.array([p[2] for p in points])
-        median = float(np.median(x))
-        sigma = MAD_TO_SIGMA * float(np.median(np.abs(x - median)))
-        spreads.append(Spread(name=name, unit=units[name], n=x.size, median=median, sigma=sigma))
-        if x.size < MIN_LOT or sigma <= 0:
-            continue
-        for serial, cal_id, value in points:
-            z = (value - median) / sigma
-            if abs(z) > FLAG_SIGMA:
-                flags.append(Flag(sensor=serial, calibration_id=cal_id, name=name, value=value,
-                                  z=round(z, 1)))
-    n = len(members) - len(left_out)
-    note = None if n >= MIN_LOT else (
-        f"{n} sensor(s) at {t_c:g} °C: at least {MIN_LOT} are needed to flag one")
-    compared = {c for points in values.values() for _, c, _ in points}
-    shown = _plotted(compared, {f.calibration_id for f in flags})
-    values = {k: [p for p in points if p[1] in shown] for k, points in values.items()}
-    return Lot(model=model, sensors=n, left_out=left_out, spreads=spreads, flags=flags,
-               values=values, plotted=len(shown), note=note), compared
 
 
 def _plotted(members: set[int], flagged: set[int]) -> set[int]:
