@@ -6,7 +6,9 @@ sees it here before shipping. For each sensor model (``sensors.model``, else
 the model the sensor reported at the campaign), the latest calibration of
 every sensor gives the 12 SFEM parameters of the seed paper's Eq. 1 and their
 temperature coefficients (d/dT), both at one reference temperature from the
-stored thermal polynomials (Eq. 8, ``polynomial.physical_coefficients``).
+stored thermal polynomials (Eq. 8, ``polynomial.physical_coefficients``, copied to
+the ``calibration_parameters`` table when the calibration is stored:
+service/db/calibration_parameters.py), evaluated by the database.
 Centre: the median; spread: σ = 1.4826 · MAD (the median absolute deviation,
 scaled to a normal σ), so one bad sensor does not hide itself by widening the
 spread. A sensor more than :data:`FLAG_SIGMA` σ from its lot's median is flagged.
