@@ -34,33 +34,47 @@ def parameter_rows(calibration_id: int, sensor: str, doc: dict[str, Any] | None
     A parameter whose polynomial is empty, longer than :data:`MAX_DEGREE` + 1 or not finite
     gets no row: there is no number of it to compare.
     """
-    doc = doc or {}
-    poly = doc.get("polynomial") or {}
-    temp = doc.get("temperature") or {}
-    coefficients = poly.get("physical_coefficients") or {}
-    units = poly.get("physical_units") or {}
-    valid = temp.get("valid_c") or [None, None]
-    identity = (doc.get("provenance") or {}).get("sensor_identity") or {}
-    reported = identity.get("reported_model")
-    centre = temp.get("centre_c")
+    # Storing a calibration must never fail here: a document of another shape (hand-made,
+    # older) gets the rows that can be read from it, or none, and is then not compared.
+    doc = doc if isinstance(doc, dict) else {}
+    poly = _mapping(doc.get("polynomial"))
+    temp = _mapping(doc.get("temperature"))
+    coefficients = _mapping(poly.get("physical_coefficients"))
+    units = _mapping(poly.get("physical_units"))
+    valid = temp.get("valid_c")
+    lo_c, hi_c = (_number(valid[0]), _number(valid[1])) if (
+        isinstance(valid, list | tuple) and len(valid) == 2) else (None, None)
+    reported = _mapping(_mapping(doc.get("provenance")).get("sensor_identity")).get(
+        "reported_model")
     rows = []
     for name in PARAMETERS:
-        c = [float(v) for v in coefficients.get(name) or [] if v is not None]
-        if not c or len(c) > MAX_DEGREE + 1 or not all(math.isfinite(v) for v in c):
+        raw = coefficients.get(name)
+        c = [_number(v) for v in raw] if isinstance(raw, list) else []
+        if not c or len(c) > MAX_DEGREE + 1 or any(v is None for v in c):
             continue
-        unit = units.get(name) or ["", ""]
+        unit = [str(u) for u in units.get(name) or ["", ""]] if isinstance(
+            units.get(name), list | tuple) else ["", ""]
         row: dict[str, Any] = {
             "calibration_id": calibration_id, "name": name, "sensor": sensor,
             "reported_model": None if reported is None else str(reported)[:64],
-            "centre_c": None if centre is None else float(centre),
-            "valid_lo_c": None if valid[0] is None else float(valid[0]),
-            "valid_hi_c": None if valid[1] is None else float(valid[1]),
-            "unit": str(unit[0]),
-            "tempco_unit": str(unit[1]) if len(unit) > 1 else f"{unit[0]}/degC",
+            "centre_c": _number(temp.get("centre_c")), "valid_lo_c": lo_c, "valid_hi_c": hi_c,
+            "unit": unit[0][:32] if unit else "",
+            "tempco_unit": (unit[1] if len(unit) > 1 else f"{unit[0] if unit else ''}/degC")[:32],
         }
         row.update({f"c{j}": c[j] if j < len(c) else None for j in range(MAX_DEGREE + 1)})
         rows.append(row)
     return rows
+
+
+def _mapping(x: Any) -> dict[str, Any]:
+    return x if isinstance(x, dict) else {}
+
+
+def _number(x: Any) -> float | None:
+    """A finite float, or None (a string, a bool, NaN, infinity: not a coefficient)."""
+    if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+        return None
+    return float(x)
 
 
 def value_at(t_c: float) -> ColumnElement[float]:

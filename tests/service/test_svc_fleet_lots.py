@@ -133,3 +133,20 @@ def test_database_and_python_statistics_equal_numpy_and_flag_the_planted_outlier
     assert (lot.model, lot.sensors, lot.left_out) == ("ADXL357", 40, ["SN-NUM-COLD"])
     assert members == set(ids)
     assert [(f.sensor, f.name) for f in lot.flags] == [("SN-NUM-17", "by")]
+
+
+def test_a_document_of_another_shape_is_stored_without_rows_it_cannot_read(
+        clean_db_url: str) -> None:
+    sf = make_session_factory(clean_db_url)
+    coefficients = _random_coefficients(np.random.default_rng(3))
+    coefficients["bx"] = ["0.001", 0.0]  # a string is not a coefficient
+    coefficients["by"] = [None]  # type: ignore[list-item]  # a null, as JSON has no NaN
+    odd = _store(sf, "SN-ODD-1", _doc(coefficients))
+    bare = _store(sf, "SN-ODD-2", {"polynomial": "cubic", "temperature": [20.0]})
+    with sf() as session:
+        names = session.scalars(select(CalibrationParameter.name)
+                                .where(CalibrationParameter.calibration_id == odd)).all()
+        assert sorted(names) == sorted(set(PARAMETERS) - {"bx", "by"})
+        assert session.scalars(select(CalibrationParameter)
+                               .where(CalibrationParameter.calibration_id == bare)).all() == []
+        assert session.get(Calibration, bare) is not None
