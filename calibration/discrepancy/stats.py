@@ -134,11 +134,13 @@ def null_replicates(
     return E
 
 
-# Tail of the per-reading statistic (reading_tail_dof): the order statistics at these levels,
-# never the largest readings (the candidates), compared with χ²_g's; a finite ν only when the
+# Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
+# and near TAIL_P_HI, their levels counted as if the TAIL_OUTLIERS largest readings were
+# outliers (not noise) and never above them, compared with χ²_g's; a finite ν only when the
 # ratio exceeds χ²_g's by TAIL_Z standard errors; ν no lower than TAIL_DOF_MIN (finite
 # kurtosis); at least TAIL_MIN_READINGS readings (fewer cannot show a tail).
-TAIL_P_LO, TAIL_P_HI = 0.5, 0.9
+TAIL_P_LO, TAIL_P_HI = 0.5, 0.95
+TAIL_OUTLIERS = 2
 TAIL_Z = 2.0
 TAIL_DOF_MIN = 5.0
 TAIL_DOF_MAX = 1e4
@@ -151,7 +153,7 @@ def reading_tail_dof(t_row: np.ndarray, g: int) -> float:
     ``t_row``: the leave-one-reading-out statistics (:func:`row_stats`, χ²_g under a Gaussian
     null) of the readings not already excluded. Under a per-reading scale mixture (a
     capture's vibration or settling moves its three axes' scatter together) the statistic
-    is g·F(g, ν), whose quantile ratio Q(0.9)/Q(0.5) decreases to χ²_g's as ν → ∞. The
+    is g·F(g, ν), whose quantile ratio Q(0.95)/Q(0.5) decreases to χ²_g's as ν → ∞. The
     data's ratio is read from order statistics that exclude the largest readings, so one
     or two outliers — the candidates the test is about — cannot raise it (a kurtosis would
     be dominated by them). A finite ν is returned only when the ratio exceeds χ²_g's by
@@ -163,22 +165,28 @@ def reading_tail_dof(t_row: np.ndarray, g: int) -> float:
     n = t.size
     if n < TAIL_MIN_READINGS or g < 1:
         return np.inf
-    q_lo, q_hi = (t[int(np.ceil(p * n)) - 1] for p in (TAIL_P_LO, TAIL_P_HI))
+    # The r-th largest reading, r ≥ k + 2: with up to k outliers on top it is still a noise
+    # reading, at level 1 − (r − k − ½)/(n − k) of the n − k noise readings (on a clean
+    # recording it lies lower: the test then leans to the Gaussian null, never away from it).
+    k = TAIL_OUTLIERS
+    r = max(k + 2, int(np.ceil((1 - TAIL_P_HI) * n)))
+    p_lo, p_hi = TAIL_P_LO, 1 - (r - k - 0.5) / (n - k)
+    q_lo, q_hi = t[int(np.ceil(p_lo * n)) - 1], t[n - r]
     if q_lo <= 0:
         return np.inf
     log_r = float(np.log(q_hi / q_lo))
-    c_lo, c_hi = sps.chi2.ppf([TAIL_P_LO, TAIL_P_HI], g)
+    c_lo, c_hi = sps.chi2.ppf([p_lo, p_hi], g)
     f_lo, f_hi = sps.chi2.pdf([c_lo, c_hi], g)
     # var(log Q_p) ≈ p(1 − p) / (n (f q)²); cov for p1 < p2: p1(1 − p2) / (n f1 q1 f2 q2)
     a_lo, a_hi = 1.0 / (f_lo * c_lo), 1.0 / (f_hi * c_hi)
-    var = (TAIL_P_LO * (1 - TAIL_P_LO) * a_lo**2 + TAIL_P_HI * (1 - TAIL_P_HI) * a_hi**2
-           - 2 * TAIL_P_LO * (1 - TAIL_P_HI) * a_lo * a_hi) / n
+    var = (p_lo * (1 - p_lo) * a_lo**2 + p_hi * (1 - p_hi) * a_hi**2
+           - 2 * p_lo * (1 - p_hi) * a_lo * a_hi) / n
     log_r_gauss = float(np.log(c_hi / c_lo))
     if log_r <= log_r_gauss + TAIL_Z * np.sqrt(var):
         return np.inf
 
     def excess(nu: float) -> float:
-        lo, hi = sps.f.ppf([TAIL_P_LO, TAIL_P_HI], g, nu)
+        lo, hi = sps.f.ppf([p_lo, p_hi], g, nu)
         return float(np.log(hi / lo)) - log_r
 
     if excess(TAIL_DOF_MIN) <= 0:
