@@ -70,6 +70,10 @@ from service.engine.states import TERMINAL
 from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
 from service.rig_plausibility import DIE_PV_TOLERANCE_C
 
+# The slowest die a lab mounts lags its air by minutes to tens of minutes; an hour's time
+# constant is the most a gap to the PV is put down to lag (_check_die_against_chamber).
+DIE_LAG_TAU_MAX_S = 3600.0
+
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
 TURNTABLE_POLL_S = 1.0
@@ -124,6 +128,9 @@ class CampaignRunner:
         self._abort_checked_s = -math.inf
         # Every capture found off its pose and measured again (step, position, attempt, angle).
         self.pose_log: list[dict[str, Any]] = []
+        # The last die reading (clock s, median die °C): a die still approaching the air
+        # explains a gap to the PV, a settled one does not (_check_die_against_chamber).
+        self._die_track: tuple[float, float] | None = None
         # Clock time the campaign stood still (paused or suspended): never soak time, never
         # a ramp's, never in the ETA's measured durations (:meth:`_held_total_s`).
         self._held_s = 0.0
@@ -451,7 +458,7 @@ class CampaignRunner:
                    for serial, r in readings.items()}
             off = {serial: c for serial, c in off.items() if not c.ok}
             if not off:
-                _check_die_against_chamber(msg, status, readings)
+                self._check_die_against_chamber(msg, status, readings)
                 return status, readings
             worst = max(c.angle_deg for c in off.values())
             where = (f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position} "
@@ -475,6 +482,40 @@ class CampaignRunner:
                     "does not stand where it reports: check its homing and encoders")
             readings = await self._measure_again(msg, remeasure)
         raise AssertionError("unreachable")
+
+    def _check_die_against_chamber(self, msg: Save, status: ChamberStatus,
+                                   readings: dict[str, Any]) -> None:
+        """Refuse to store a capture whose dies disagree with the chamber's PV where no lag
+        explains it (DESIGN: plausibility at the boundaries).
+
+        The median die of the live sensors more than :data:`DIE_PV_TOLERANCE_C` from the
+        PV is a die still approaching the air (a short soak: it moves towards the PV at
+        about gap/τ) or a chamber read wrong (a map's decimal places, °F, an offset: the
+        die has settled, far from what the PV says). The second would label every capture
+        of the step with a wrong temperature: the campaign fails before this capture is
+        stored. A die moving towards the PV fast enough for a lag of at most
+        :data:`DIE_LAG_TAU_MAX_S` is a lag. Sensors without a temperature channel say
+        nothing; the first reading with nothing before it only starts the track.
+        """
+        dies = [float(r[0].sensor_c) for r in readings.values()
+                if r is not None and math.isfinite(float(r[0].sensor_c))]
+        if not dies or not math.isfinite(status.process_c):
+            return
+        now_s, die_c = self.clock.now(), float(np.median(dies))
+        before, self._die_track = self._die_track, (now_s, die_c)
+        gap_c = status.process_c - die_c
+        if abs(gap_c) <= DIE_PV_TOLERANCE_C or before is None or now_s <= before[0]:
+            return
+        rate_c_per_s = (die_c - before[1]) / (now_s - before[0])
+        if gap_c * rate_c_per_s > 0 and abs(rate_c_per_s) * DIE_LAG_TAU_MAX_S >= abs(gap_c):
+            return  # still approaching the air: a lag, not a mis-read chamber
+        raise CampaignFailed(
+            f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position}: the chamber "
+            f"reads {status.process_c:.1f} °C while the sensors' dies read {die_c:.1f} °C and "
+            f"are not approaching it ({rate_c_per_s * 60:+.2f} °C/min); this capture was not "
+            "stored: the chamber's temperature is likely read with a wrong scale (decimal "
+            "places), unit (°F, K) or offset in its register map — `soakcal rig check RIG` "
+            "names the map key to fix")
 
     async def _save_each(self, msg: Save) -> None:
         """Commit every live sensor's reading of a position and the cursor in one transaction."""
@@ -660,6 +701,10 @@ class CampaignRunner:
             await self._wait(stability.next_poll_s(
                 decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
         self._keep_soak(dies)
+        last = [probes[-1] for probes in dies.values() if probes]
+        if last:
+            self._die_track = (max(p.clock_s for p in last),
+                               float(np.median([p.sensor_c for p in last])))
         held_s = self._held_total_s() - held0_s
         soak_s = self.clock.now() - start_s - held_s
         used = [g for g in gains.values() if g is not None]
@@ -1137,31 +1182,6 @@ class CampaignRunner:
         if write:
             store.update_campaign(self.sf, self.id, progress=progress)
         return progress
-
-
-def _check_die_against_chamber(msg: Save, status: ChamberStatus,
-                               readings: dict[str, Any]) -> None:
-    """Refuse to store a capture whose dies disagree with the chamber's PV (DESIGN:
-    plausibility at the boundaries). After a soak the die is within a degree or so of
-    the air; the median die of the live sensors more than :data:`DIE_PV_TOLERANCE_C`
-    away means the chamber is read wrong (a map's decimal places, °F, an offset) and
-    every label of this step would be a wrong temperature: the campaign fails before
-    the first such capture is stored. Sensors without a temperature channel say nothing.
-    """
-    dies = [float(r[0].sensor_c) for r in readings.values()
-            if r is not None and math.isfinite(float(r[0].sensor_c))]
-    if not dies or not math.isfinite(status.process_c):
-        return
-    die_c = float(np.median(dies))
-    if abs(die_c - status.process_c) <= DIE_PV_TOLERANCE_C:
-        return
-    raise CampaignFailed(
-        f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position}: the chamber reads "
-        f"{status.process_c:.1f} °C while the sensors' dies read {die_c:.1f} °C (more than "
-        f"{DIE_PV_TOLERANCE_C:g} °C apart after the soak); nothing of it was stored: the "
-        "chamber's temperature is likely read with a wrong scale (decimal places), unit "
-        "(°F, K) or offset in its register map — `soakcal rig check RIG` names the map key "
-        "to fix")
 
 
 def _ref_text(ref_g: tuple[float, ...]) -> str:
