@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.placement import MAX_ANGLE_DEG, check_pose
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import soak_rate, stability, store
@@ -48,7 +49,6 @@ from service.engine.multi import (
     sensor_call,
     slowest_decision,
 )
-from service.engine.placement import MAX_ANGLE_DEG, check_pose
 from service.engine.plan import (
     Acquire,
     Checkpoint,
