@@ -28,6 +28,19 @@ from typing import Any
 
 import numpy as np
 
+from calibration.campaign_plan import (
+    Acquire,
+    Checkpoint,
+    Configure,
+    Fit,
+    Move,
+    Msg,
+    Save,
+    SetChamber,
+    Settle,
+    WaitStable,
+    campaign_plan,
+)
 from calibration.placement import MAX_ANGLE_DEG, check_pose
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
@@ -48,19 +61,6 @@ from service.engine.multi import (
     reading_problem,
     sensor_call,
     slowest_decision,
-)
-from service.engine.plan import (
-    Acquire,
-    Checkpoint,
-    Configure,
-    Fit,
-    Move,
-    Msg,
-    Save,
-    SetChamber,
-    Settle,
-    WaitStable,
-    campaign_plan,
 )
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition

@@ -110,7 +110,7 @@ class CampaignSpec(BaseModel):
         default=200, ge=1, le=BRIDGE_MAX_SAMPLES,
         description="samples averaged per position (sensor bridge: 1..100000)")
 
-    # --- position order (service/engine/soak_order.py, docs/engine.md) --------------------
+    # --- position order (calibration/position_order.py, docs/engine.md) --------------------
     position_order: Literal["travel", "random", "balanced", "table"] = Field(
         default="travel",
         description="order of a step's positions: least table travel, seeded random or "
@@ -259,7 +259,7 @@ class RunSpec:
     suspend_limit_s: float = 1800.0  # suspended longer than this: fail the campaign
     chamber_band_c: float = DEFAULT_BAND_C  # air this far off the setpoint while measuring
     suspend_clear_s: float = DEFAULT_CLEAR_S  # a chamber condition clear this long: resume
-    position_order: str = "travel"  # travel | random | balanced | table (soak_order.py)
+    position_order: str = "travel"  # travel | random | balanced | table (position_order.py)
     position_order_seed: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
