@@ -42,12 +42,11 @@ from calibration.campaign_plan import (
     campaign_plan,
     interpret,
 )
+from calibration.thermal_plant import AMBIENT_C
 from service.engine.spec import CampaignSpec
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
 RIG_FIT_MODE = "reference"
-# Where the chamber starts a campaign: the lab's ambient (the runner's safe_c default).
-AMBIENT_C = 23.0
 # Table moves are predicted from the table's own travel in the campaign's position order
 # (``dry_run(move_s=None)``: slowest axis on the trapezoidal profile,
 # plus the in-position poll), so a travel order's saving shows in the prediction.
@@ -208,7 +207,6 @@ def predicted_duration_s(spec: CampaignSpec) -> float:
 
 # --- the dry-run interpreter of the campaign plan (calibration.campaign_plan) ---------------
 DEFAULT_MOVE_S = 12.0  # table slew + in-position between orientations (seed Table 3 rigs)
-DEFAULT_START_C = 23.0
 # Beyond the slew itself a move waits for in-position: the engine polls the table every
 # second (runner.TURNTABLE_POLL_S), so on average ~1 s more than the trapezoid.
 IN_POSITION_S = 1.0
@@ -229,7 +227,7 @@ class DryRun:
 
 
 def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None = None,
-            move_s: float | None = DEFAULT_MOVE_S, start_c: float = DEFAULT_START_C,
+            move_s: float | None = DEFAULT_MOVE_S, start_c: float = AMBIENT_C,
             done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] | None = None,
             angles_deg: np.ndarray | None = None) -> DryRun:
     """Interpret the campaign plan without hardware: predicted duration and counts.

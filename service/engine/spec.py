@@ -31,6 +31,7 @@ from pydantic import (
     model_validator,
 )
 
+from calibration.thermal_plant import AMBIENT_C
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
     DEFAULT_DRIFT_BUDGET,
@@ -175,7 +176,7 @@ class CampaignSpec(BaseModel):
     settle_s: Float = _f(5.0, 0, MAX_SETTLE_S, open_lo=False,
                          doc="wait after in-position before acquiring, s")
     move_timeout_s: Float = _f(120.0, 0, MAX_POLL_S, doc="table move timeout, s")
-    safe_c: TempC = Field(default=23.0, description="chamber temperature at the end, °C")
+    safe_c: TempC = Field(default=AMBIENT_C, description="chamber temperature at the end, °C")
     range_g: Literal[2, 4, 8] = Field(default=2, description="ADXL355 range, ±g")
     odr_hz: Float = _f(62.5, 0, ADXL355_MAX_ODR_HZ, doc="ADXL355 output data rate, Hz")
     retry_attempts: Int = Field(default=4, ge=1, le=20,
@@ -250,7 +251,7 @@ class RunSpec:
     rate_gain: str = "assumed"  # assumed (gradient_lag_s) | measured (soak_rate.py, corrected)
     settle_s: float = 5.0  # wait after in-position before acquiring (table ringing)
     move_timeout_s: float = 120.0
-    safe_c: float = 23.0  # abort leaves the chamber here
+    safe_c: float = AMBIENT_C  # abort leaves the chamber here
     range_g: float = 2.0
     odr_hz: float = 62.5
     retry_attempts: int = 4  # tries of one device call before the campaign suspends
