@@ -136,6 +136,13 @@ Msg = Configure | SetChamber | WaitStable | Checkpoint | Move | Settle | Acquire
 Plan = Generator[Msg, Any, None]
 
 
+# The campaign's commanded chamber ramp when its spec does not give one, °C/min: the API's
+# default (service.engine.spec) and the plan's. The offline twin commands its own rig's
+# rate (simulators.campaign_sim.RigPhysics, calibration.thermal_plant.DEFAULT_RAMP_C_PER_MIN,
+# 2 °C/min), on which its recordings and the diagnosis' assumed ramp were measured.
+CAMPAIGN_RAMP_C_PER_MIN = 1.0
+
+
 @dataclass(frozen=True)
 class PlanSpec:
     """The part of a campaign spec the plan reads (RunSpec satisfies it too)."""
@@ -143,7 +150,7 @@ class PlanSpec:
     setpoints_c: Sequence[float]
     samples_per_position: int
     settle_s: float = 5.0
-    ramp_c_per_min: float = 1.0
+    ramp_c_per_min: float = CAMPAIGN_RAMP_C_PER_MIN
     range_g: float = 2.0
     odr_hz: float = 62.5
     # The offline simulator's default is the schedule's order (its recordings feed

@@ -31,6 +31,7 @@ from pydantic import (
     model_validator,
 )
 
+from calibration.campaign_plan import CAMPAIGN_RAMP_C_PER_MIN
 from calibration.thermal_plant import AMBIENT_C
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
@@ -166,7 +167,7 @@ class CampaignSpec(BaseModel):
                              doc="rms noise of the raw temperature channel, °C")
 
     # --- devices and timing --------------------------------------------------------------
-    ramp_c_per_min: Float = _f(1.0, 0, REGISTER_MAX_RAMP_C_PER_MIN,
+    ramp_c_per_min: Float = _f(CAMPAIGN_RAMP_C_PER_MIN, 0, REGISTER_MAX_RAMP_C_PER_MIN,
                                doc="chamber setpoint ramp, °C/min (≤ the rig's max rate)")
     soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
     soak_probe_samples: Int | None = Field(
@@ -245,7 +246,7 @@ class RunSpec:
     stability: StabilityConfig
     quality: QualityLimits
     on_max_soak: str = "continue"  # continue | fail
-    ramp_c_per_min: float = 1.0
+    ramp_c_per_min: float = CAMPAIGN_RAMP_C_PER_MIN
     soak_poll_s: float = 60.0  # cheap sensor/chamber poll period during a soak
     soak_probe_samples: int = 8  # samples per cheap die-temperature probe
     rate_gain: str = "assumed"  # assumed (gradient_lag_s) | measured (soak_rate.py, corrected)
