@@ -22,7 +22,7 @@ wins. The valid range is the span of the data's temperatures.
 A rate term ``k_a(T) · dT/dt`` joins the model when the warm-up heats *and* cools
 (:data:`BOTH_WAYS_FRACTION` of the captures each way) and held-out error prefers it.
 It stands for two physical things: a part whose bias depends on how fast its die
-changes temperature (the ``temperature_rate`` effect, shared/spec/effects.md: a
+changes temperature (the ``temperature_rate`` effect, docs/effects.md: a
 constant k), and a temperature channel that lags the die by τ (a first-order lag:
 die = channel + τ·dT/dt exactly, so b(T_die) ≈ b(T_channel) + b'(T)·τ·dT/dt, a gain
 that follows the bias slope: a polynomial of degree ≤ d − 1 in x). The gain's degree

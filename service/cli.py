@@ -121,6 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
+    demo.add_argument("--method", choices=("soak", "ramp"), default="soak",
+                      help="soak (default); ramp is refused: not run by this engine yet")
     demo.set_defaults(handler=_delegate("service.demo", "run_demo", "demo"))
     _add_demo_sensors(sub)
     sub.add_parser(

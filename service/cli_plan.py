@@ -31,6 +31,8 @@ def add_plan_parser(actions: Any) -> None:
     plan.add_argument("--samples-per-position", type=int, help="default 200")
     plan.add_argument("--ramp-c-per-min", type=float, help="chamber ramp, °C/min (default 1)")
     plan.add_argument("--stability", help="predictive | dwell | fixed (default predictive)")
+    plan.add_argument("--method", choices=("soak", "ramp"),
+                      help="soak (default) or ramp (refused: not run by this engine yet)")
     plan.add_argument("--json", action="store_true", help="print the verdict as JSON")
     plan.set_defaults(handler=run_plan)
 
@@ -101,7 +103,7 @@ def _spec_body(args: argparse.Namespace) -> dict[str, Any]:
         except argparse.ArgumentTypeError as exc:
             raise ValueError(f"--setpoints: {exc}") from None
     for key in ("positions", "soak_min", "samples_per_position", "ramp_c_per_min",
-                "stability"):
+                "stability", "method"):
         value = getattr(args, key)
         if value is not None:
             body[key] = value

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -54,7 +55,12 @@ def demo_serials(n: int) -> list[str]:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    """Entry point of ``soakcal demo [--out DIR] [--fast] [--sensors N]``; the exit code."""
+    """Entry point of ``soakcal demo [--method soak] [--out DIR] [--fast] [--sensors N]``."""
+    if getattr(args, "method", None) == "ramp":
+        from service.engine.spec import RAMP_NOT_RUN
+
+        print(f"soakcal demo: --method ramp: {RAMP_NOT_RUN}", file=sys.stderr)
+        return 2
     out = Path(getattr(args, "out", None) or "soakcal-demo")
     fast = bool(getattr(args, "fast", False))
     spec = demo_spec(fast)

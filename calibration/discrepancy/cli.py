@@ -1,4 +1,4 @@
-"""``soakcal diagnose`` (shared/spec/cli.md): ``run_diagnose(args) -> exit code``.
+"""``soakcal diagnose`` (docs/cli.md): ``run_diagnose(args) -> exit code``.
 
 ``args`` carries: recording (path), model (path or None), json (bool),
 report_dir (path or None), seed (int), n_null (int). Bad input: one line on

@@ -134,6 +134,90 @@ def null_replicates(
     return E
 
 
+# Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
+# and near TAIL_P_HI, their levels counted as if the TAIL_OUTLIERS largest readings were
+# outliers (not noise) and never above them, compared with χ²_g's; a finite ν only when the
+# ratio exceeds χ²_g's by TAIL_Z standard errors; ν no lower than TAIL_DOF_MIN (finite
+# kurtosis); at least TAIL_MIN_READINGS readings (fewer cannot show a tail).
+TAIL_P_LO, TAIL_P_HI = 0.5, 0.95
+TAIL_OUTLIERS = 2
+TAIL_Z = 2.0
+TAIL_DOF_MIN = 5.0
+TAIL_DOF_MAX = 1e4
+TAIL_MIN_READINGS = 20
+
+
+def reading_tail_dof(t_row: np.ndarray, g: int) -> float:
+    """ν of the Student-t scale mixture the recording's per-reading statistics show (∞: none).
+
+    ``t_row``: the leave-one-reading-out statistics (:func:`row_stats`, χ²_g under a Gaussian
+    null) of the readings not already excluded. Under a per-reading scale mixture (a
+    capture's vibration or settling moves its three axes' scatter together) the statistic
+    is g·F(g, ν), whose quantile ratio Q(0.95)/Q(0.5) decreases to χ²_g's as ν → ∞. The
+    data's ratio is read from order statistics that exclude the largest readings, so one
+    or two outliers — the candidates the test is about — cannot raise it (a kurtosis would
+    be dominated by them). A finite ν is returned only when the ratio exceeds χ²_g's by
+    :data:`TAIL_Z` standard errors of the sample quantiles (asymptotic order-statistic
+    covariance), so Gaussian recordings keep the Gaussian null; it is floored at
+    :data:`TAIL_DOF_MIN`.
+    """
+    t = np.sort(np.asarray(t_row, float)[np.isfinite(t_row)])
+    n = t.size
+    if n < TAIL_MIN_READINGS or g < 1:
+        return np.inf
+    # The r-th largest reading, r ≥ k + 2: with up to k outliers on top it is still a noise
+    # reading, at level 1 − (r − k − ½)/(n − k) of the n − k noise readings (on a clean
+    # recording it lies lower: the test then leans to the Gaussian null, never away from it).
+    k = TAIL_OUTLIERS
+    r = max(k + 2, int(np.ceil((1 - TAIL_P_HI) * n)))
+    p_lo, p_hi = TAIL_P_LO, 1 - (r - k - 0.5) / (n - k)
+    q_lo, q_hi = t[int(np.ceil(p_lo * n)) - 1], t[n - r]
+    if q_lo <= 0:
+        return np.inf
+    log_r = float(np.log(q_hi / q_lo))
+    c_lo, c_hi = sps.chi2.ppf([p_lo, p_hi], g)
+    f_lo, f_hi = sps.chi2.pdf([c_lo, c_hi], g)
+    # var(log Q_p) ≈ p(1 − p) / (n (f q)²); cov for p1 < p2: p1(1 − p2) / (n f1 q1 f2 q2)
+    a_lo, a_hi = 1.0 / (f_lo * c_lo), 1.0 / (f_hi * c_hi)
+    var = (p_lo * (1 - p_lo) * a_lo**2 + p_hi * (1 - p_hi) * a_hi**2
+           - 2 * p_lo * (1 - p_hi) * a_lo * a_hi) / n
+    log_r_gauss = float(np.log(c_hi / c_lo))
+    if log_r <= log_r_gauss + TAIL_Z * np.sqrt(var):
+        return np.inf
+
+    def excess(nu: float) -> float:
+        lo, hi = sps.f.ppf([p_lo, p_hi], g, nu)
+        return float(np.log(hi / lo)) - log_r
+
+    if excess(TAIL_DOF_MIN) <= 0:
+        return TAIL_DOF_MIN
+    if excess(TAIL_DOF_MAX) >= 0:
+        return np.inf
+    from scipy.optimize import brentq
+
+    return float(brentq(excess, TAIL_DOF_MIN, TAIL_DOF_MAX, xtol=1e-3))
+
+
+def tail_scale(nu: float) -> float:
+    """(MAD of t_ν / MAD of N(0,1))²: the Student-t mixture's entries against a MAD scale.
+
+    The statistics divide by a MAD scale s²; a reading drawn from the mixture √w·z with
+    w ~ ν/χ²_ν has entries t_ν, whose MAD exceeds the Gaussian's by this factor's root.
+    """
+    return 1.0 if not np.isfinite(nu) else float((sps.t.ppf(0.75, nu) / sps.norm.ppf(0.75))**2)
+
+
+def reading_logsf(t: np.ndarray | float, g: int, nu: float = np.inf) -> np.ndarray:
+    """log P(statistic > t) of a per-reading statistic: χ²_g, or under the Student-t
+    mixture with ν (:func:`reading_tail_dof`) g·F(g, ν) on the MAD-scaled statistic."""
+    if not np.isfinite(nu):
+        return chi2_logsf(t, g)
+    x = np.maximum(np.asarray(t, float), 0.0) * tail_scale(nu) / g
+    with np.errstate(divide="ignore"):
+        v = sps.f.logsf(x, g, nu)
+    return np.where(np.isfinite(v), v, chi2_logsf(t, g))
+
+
 def _residual_cov_blocks(
     U: np.ndarray, Ug: np.ndarray, c: np.ndarray, idx: np.ndarray
 ) -> np.ndarray:
@@ -329,6 +413,8 @@ def row_stats(
     s_null: np.ndarray,
     skip: set[int],
     shared: np.ndarray | None = None,
+    reading_dof: float = np.inf,
+    rng: np.random.Generator | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
 
@@ -343,9 +429,17 @@ def row_stats(
     dominates (c ≈ ±0.95 on all axes at the cold end) it is nearly singular and a null
     reading scored p ≈ 0.
 
+    ``reading_dof`` ν finite (with ``rng``): the recording's readings are heavier-tailed
+    than Gaussian (:func:`reading_tail_dof`). Each null reading's statistic is multiplied
+    by w·:func:`tail_scale` (ν), w ~ ν/χ²_ν drawn per reading and replicate: the Student-t
+    scale mixture of that reading's noise, against the MAD scale such noise gives. Only the
+    per-reading family sees it; the replicates themselves stay Gaussian for the others.
+
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
     """
+    mix = np.isfinite(reading_dof) and rng is not None
+    k_mix = tail_scale(reading_dof) if mix else 1.0
     g = int(np.bincount(row).max())
     idx = np.argsort(row, kind="stable").reshape(n_rows, g)
     if np.array_equal(idx.ravel(), np.arange(idx.size)):
@@ -369,5 +463,7 @@ def row_stats(
     step = max(1, CHUNK_BYTES // (8 * g * max(E.shape[1], 1)))
     for i in range(0, n_rows, step):
         q = np.einsum("ngb,ngh,nhb->nb", Eg[i : i + step], Minv[i : i + step], Eg[i : i + step])
+        if mix:
+            q *= k_mix * reading_dof / rng.chisquare(reading_dof, q.shape)
         tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
     return t, tn_max, g

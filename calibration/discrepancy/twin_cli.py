@@ -1,4 +1,4 @@
-"""``soakcal twin fit RECORDING -o TWIN.json`` (shared/spec/cli.md): ``run_twin_fit(args)``.
+"""``soakcal twin fit RECORDING -o TWIN.json`` (docs/cli.md): ``run_twin_fit(args)``.
 
 Bad input: one line on stderr naming the file, exit 2, nothing written.
 """

@@ -21,6 +21,7 @@ from sqlalchemy import (
     Float,
     ForeignKey,
     Integer,
+    PrimaryKeyConstraint,
     String,
     Text,
     UniqueConstraint,
@@ -192,6 +193,41 @@ class Calibration(Base):
     provenance: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
 
 
+class CalibrationParameter(Base):
+    """One SFEM parameter's thermal polynomial of one calibration (migration 0007).
+
+    Copied from the model document when the calibration is stored
+    (service/db/calibration_parameters.py) so lot statistics read numbers, not JSON:
+    ``p(T) = sum_j c<j> * (T - centre_c)**j`` (the seed paper's Eq. 8 in physical units),
+    ``c0``…``c10`` (NULL above the polynomial's degree). ``sensor``, ``reported_model``,
+    ``centre_c`` and the valid range repeat the calibration's, so one table answers.
+    """
+
+    __tablename__ = "calibration_parameters"
+    __table_args__ = (PrimaryKeyConstraint("calibration_id", "name"),)
+    calibration_id: Mapped[int] = mapped_column(
+        ForeignKey("calibrations.id", ondelete="CASCADE"))
+    name: Mapped[str] = mapped_column(String(16))  # bx … mz
+    sensor: Mapped[str] = mapped_column(String(64), index=True)
+    reported_model: Mapped[str | None] = mapped_column(String(64))
+    centre_c: Mapped[float | None] = mapped_column(Float)
+    valid_lo_c: Mapped[float | None] = mapped_column(Float)
+    valid_hi_c: Mapped[float | None] = mapped_column(Float)
+    unit: Mapped[str] = mapped_column(String(32))
+    tempco_unit: Mapped[str] = mapped_column(String(32))
+    c0: Mapped[float | None] = mapped_column(Float)
+    c1: Mapped[float | None] = mapped_column(Float)
+    c2: Mapped[float | None] = mapped_column(Float)
+    c3: Mapped[float | None] = mapped_column(Float)
+    c4: Mapped[float | None] = mapped_column(Float)
+    c5: Mapped[float | None] = mapped_column(Float)
+    c6: Mapped[float | None] = mapped_column(Float)
+    c7: Mapped[float | None] = mapped_column(Float)
+    c8: Mapped[float | None] = mapped_column(Float)
+    c9: Mapped[float | None] = mapped_column(Float)
+    c10: Mapped[float | None] = mapped_column(Float)
+
+
 class Schedule(Base):
     __tablename__ = "schedules"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
@@ -239,3 +275,7 @@ class PlacementRequest(Base):
     state: Mapped[str] = mapped_column(String(16), default="pending")
     requested_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     confirmed_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+
+
+# Registers the listener that fills calibration_parameters whenever a calibration is stored.
+from service.db import calibration_parameters as _calibration_parameters  # noqa: E402,F401

@@ -69,6 +69,7 @@ from service.engine.rigs import RigDevices
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
 from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
+from service.rig_plausibility import DIE_PV_TOLERANCE_C
 
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
@@ -450,6 +451,7 @@ class CampaignRunner:
                    for serial, r in readings.items()}
             off = {serial: c for serial, c in off.items() if not c.ok}
             if not off:
+                _check_die_against_chamber(msg, status, readings)
                 return status, readings
             worst = max(c.angle_deg for c in off.values())
             where = (f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position} "
@@ -1135,6 +1137,31 @@ class CampaignRunner:
         if write:
             store.update_campaign(self.sf, self.id, progress=progress)
         return progress
+
+
+def _check_die_against_chamber(msg: Save, status: ChamberStatus,
+                               readings: dict[str, Any]) -> None:
+    """Refuse to store a capture whose dies disagree with the chamber's PV (DESIGN:
+    plausibility at the boundaries). After a soak the die is within a degree or so of
+    the air; the median die of the live sensors more than :data:`DIE_PV_TOLERANCE_C`
+    away means the chamber is read wrong (a map's decimal places, °F, an offset) and
+    every label of this step would be a wrong temperature: the campaign fails before
+    the first such capture is stored. Sensors without a temperature channel say nothing.
+    """
+    dies = [float(r[0].sensor_c) for r in readings.values()
+            if r is not None and math.isfinite(float(r[0].sensor_c))]
+    if not dies or not math.isfinite(status.process_c):
+        return
+    die_c = float(np.median(dies))
+    if abs(die_c - status.process_c) <= DIE_PV_TOLERANCE_C:
+        return
+    raise CampaignFailed(
+        f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position}: the chamber reads "
+        f"{status.process_c:.1f} °C while the sensors' dies read {die_c:.1f} °C (more than "
+        f"{DIE_PV_TOLERANCE_C:g} °C apart after the soak); nothing of it was stored: the "
+        "chamber's temperature is likely read with a wrong scale (decimal places), unit "
+        "(°F, K) or offset in its register map — `soakcal rig check RIG` names the map key "
+        "to fix")
 
 
 def _ref_text(ref_g: tuple[float, ...]) -> str:

@@ -95,6 +95,14 @@ def _f(default: float | None, lo: float | None = None, hi: float | None = None, 
     return Field(default=default, description=doc, **bounds)
 
 
+# A refusal, not a silent soak: a ramp campaign asked for must never run as another method.
+RAMP_NOT_RUN = (
+    "ramp campaigns are not run by this engine yet (the chamber would never stop, each "
+    "reading at its die's own temperature): use \"method\": \"soak\", or record a ramp "
+    "with the chamber's own program and calibrate it with `soakcal calibrate`, which fits "
+    "a recording without plateaus continuously")
+
+
 class CampaignSpec(BaseModel):
     """Every campaign key the engine reads, typed and bounded (units in the names)."""
 
@@ -111,6 +119,18 @@ class CampaignSpec(BaseModel):
     samples_per_position: Int = Field(
         default=200, ge=1, le=BRIDGE_MAX_SAMPLES,
         description="samples averaged per position (sensor bridge: 1..100000)")
+
+    method: Literal["soak", "ramp"] = Field(
+        default="soak",
+        description="soak: the chamber holds each setpoint until the die is stable; ramp: "
+        "the chamber never stops (not run by this engine yet: refused with the reason)")
+
+    @field_validator("method")
+    @classmethod
+    def _ramp_not_run_yet(cls, method: str) -> str:
+        if method == "ramp":
+            raise ValueError(RAMP_NOT_RUN)
+        return method
 
     # --- position order (calibration/position_order.py, docs/engine.md) --------------------
     position_order: Literal["travel", "random", "balanced", "table"] = Field(
@@ -232,7 +252,7 @@ class CampaignSpec(BaseModel):
 
 
 # The contract fields; every other field of CampaignSpec is an engine tuning key.
-CONTRACT_FIELDS = ("setpoints_c", "soak_min", "positions", "samples_per_position")
+CONTRACT_FIELDS = ("setpoints_c", "soak_min", "positions", "samples_per_position", "method")
 TUNING_KEYS = frozenset(CampaignSpec.model_fields) - set(CONTRACT_FIELDS)
 
 

@@ -224,14 +224,13 @@ def test_extended_model_compensates_better():
     assert after < 0.5 * before
 
 
-OPENAXES = "/work/shared/realdata/openaxes-adxl355/log_imu9_2022-06-22_22-13-55.csv"
-
-
-@pytest.mark.skipif(not __import__("os").path.exists(OPENAXES), reason="real data not present")
 def test_real_openaxes_norm_mode():
+    from realdata import need_realdata
+
     from calibration.importers import import_static
 
-    _, _, rec = import_static("openaxes", OPENAXES)
+    src = need_realdata("openaxes-adxl355/log_imu9_2022-06-22_22-13-55.csv")
+    _, _, rec = import_static("openaxes", src)
     d = diagnose(rec, n_null=50, seed=0)
     assert d.mode == "norm" and d.heldout_scheme.startswith("leave-one-interval-out")
     assert d.rmse_ug > 2.5 * d.noise_ug  # the linear fit sits well above its noise floor

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from benchmarks.blind.outside import _lag_channel
-from calibration.discrepancy import diagnose
+from calibration.discrepancy import diagnose, stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.outlier import reading_log_p
 from calibration.discrepancy.effects.structure import direction_groups
@@ -71,9 +71,19 @@ def _base_basis(rec) -> tuple[object, np.ndarray, np.ndarray]:
     return pb, U, yw - U @ (U.T @ yw)
 
 
-def test_product_at_oblique_positions_is_unexplained_not_an_outlier():
-    """outside.py z_product case 0: reading 7 (position 7, oblique) was named ``outlier``."""
+def test_product_at_oblique_positions_is_unexplained_not_an_outlier(monkeypatch):
+    """outside.py z_product case 0: reading 7 (position 7, oblique) was named ``outlier``.
+
+    The structure makes the readings heavier-tailed than Gaussian, so the outlier test's
+    null matched to them (stats.reading_tail_dof) does not flag reading 7 at all; the
+    physics check that withdraws it is exercised with the Gaussian null (below)."""
     rec = _campaign(31000, 41000, [ZProduct(-7.492123495360357e-05)])
+    d = diagnose(rec, n_null=200, seed=0)
+    assert "outlier" not in [f.effect for f in d.findings]
+    (f,) = [f for f in d.findings if f.effect == "unexplained"]
+    assert f.axes == ["z"] and set(f.where["positions"]) <= OBLIQUE_XY
+    assert any("heavier-tailed than Gaussian" in n for n in d.notes)
+    monkeypatch.setattr(stats, "TAIL_Z", np.inf)  # the Gaussian null per reading
     d = diagnose(rec, n_null=200, seed=0)
     assert "outlier" not in [f.effect for f in d.findings]
     (f,) = [f for f in d.findings if f.effect == "unexplained"]
@@ -115,10 +125,15 @@ def test_isolated_spikes_are_still_outliers():
         assert BY_ID["outlier"].misses(pb, U, e, float(r), {}, ["x", "z"], 0.01) is None
 
 
-def test_a_run_of_readings_drifting_with_a_lagging_channel_is_not_an_outlier():
+def test_a_run_of_readings_drifting_with_a_lagging_channel_is_not_an_outlier(monkeypatch):
     """outside.py lagging_channel case 16: readings 22, 23 (the end of the first plateau,
-    where the whole run drifts) were named ``outlier``."""
+    where the whole run drifts) were named ``outlier``. With the null matched to the
+    readings' own tails they are not flagged at all (and the run at step 0 is then not
+    located); with the Gaussian null they are flagged and withdrawn as a run in time."""
     rec = _lag_channel(_campaign(31016, 41016, []), 776.1924110859652)
+    d = diagnose(rec, n_null=200, seed=16)
+    assert "outlier" not in [f.effect for f in d.findings] and d.mismatch
+    monkeypatch.setattr(stats, "TAIL_Z", np.inf)
     d = diagnose(rec, n_null=200, seed=16)
     assert "outlier" not in [f.effect for f in d.findings]
     (f,) = [f for f in d.findings if f.effect == "unexplained"]

@@ -1,4 +1,4 @@
-"""One module per catalogue effect (shared/spec/effects.md), all with the EffectModule interface."""
+"""One module per catalogue effect (docs/effects.md), all with the EffectModule interface."""
 
 from calibration.discrepancy.effects.base import EffectModule
 from calibration.discrepancy.effects.bias_drift import BiasDrift

@@ -10,8 +10,8 @@ each confuser (``told_apart``), and what it adds to a model file
 registered by :mod:`calibration.discrepancy.extensions`). Its twin counterpart
 is the class with the same ``effect_id`` in ``simulators/effects.py``
 (``from_finding``): the simulators import the calibration side, never the
-reverse (shared/DESIGN.md). Whether the *base model* absorbs it is measured,
-not declared: ``absorbed_fraction`` in :mod:`calibration.discrepancy.stats`.
+reverse (the one-way doors, checked by ``make test``). Whether the *base model* absorbs
+it is measured, not declared: ``absorbed_fraction`` in :mod:`calibration.discrepancy.stats`.
 
 Adding an effect is one module here plus its entry in ``ALL_EFFECTS``; nothing
 in ``diagnose``, ``extensions`` or ``report`` names effect ids.
