@@ -1,6 +1,6 @@
 """Table move time of one step's sweep: Table 1 order vs least travel vs seeded random orders.
 
-Move times by the trapezoidal profile of service.engine.soak_order (the simulated
+Move times by the trapezoidal profile of calibration.position_order (the simulated
 table's 20 °/s, 40 °/s² unless given), from the home pose (all axes 0°), for the
 positions of a schedule mapped to table angles by drivers.geometry. Pure
 arithmetic, < 1 s.
@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from service.engine.soak_order import (
+from calibration.position_order import (
     DEFAULT_ACCEL_DEG_PER_S2,
     DEFAULT_SLEW_DEG_PER_S,
-    angles_of,
     order_positions,
     travel_s,
 )
+from drivers.geometry import angles_for_references
 from service.engine.spec import schedule_refs
 
 
@@ -49,7 +49,7 @@ def main() -> int:
     args = ap.parse_args()
     if args.demo:
         return demo_orders(args.orders.split(","))
-    a = angles_of(schedule_refs(args.positions))
+    a = angles_for_references(schedule_refs(args.positions))
     home = tuple(0.0 for _ in range(a.shape[1]))
     kw = {"slew_deg_per_s": args.slew_deg_per_s, "accel_deg_per_s2": args.accel_deg_per_s2}
     table = travel_s(a, range(len(a)), home, **kw)

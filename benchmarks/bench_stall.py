@@ -232,9 +232,9 @@ def scenario(name: str, base: str, urls: list[str], speed: float, lease_s: float
     import numpy as np
     from sqlalchemy import select
 
+    from calibration.placement import MAX_ANGLE_DEG, direction_error_deg
     from service.db.models import Campaign, Measurement, Rig
     from service.db.session import make_session_factory, upgrade_database
-    from service.engine.placement import MAX_ANGLE_DEG, direction_error_deg
 
     url, (admin, schema) = _schema_url(base)
     upgrade_database(url)

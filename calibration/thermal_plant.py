@@ -28,11 +28,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 # The offline rig's defaults (simulators.campaign_sim.RigPhysics), which are also what the
 # diagnosis assumes where a recording does not say (it holds the plateaus, not the ramps).
-AMBIENT_C = 25.0  # the rig (air and die) at lab ambient before the first ramp
+# The lab's ambient, the one value: the rig (air and die) before the first ramp in the
+# offline twin and the diagnosis, where the real-wire twin's chamber starts and relaxes
+# to when stopped, where the dry run starts a campaign, and the default safe setpoint
+# (the engine's ``safe_c``, a chamber map's ``[safe] setpoint_c``).
+AMBIENT_C = 23.0
 DEFAULT_RAMP_C_PER_MIN = 2.0  # working-setpoint ramp between steps (seed Table 3: 0.1–5 °C/min)
 DEFAULT_AIR_TAU_S = 120.0  # the air's settling behind the working setpoint
 
@@ -72,6 +75,8 @@ def lag_series(u: np.ndarray, dt_s: float, tau_s: float) -> np.ndarray:
     u = np.asarray(u, dtype=float)
     if tau_s <= 0:
         return u.copy()
+    from scipy.signal import lfilter  # on first use: the service imports AMBIENT_C lightly
+
     a = float(np.exp(-dt_s / tau_s))
     y, _ = lfilter([1.0 - a], [1.0, -a], u, zi=[a * u[0]])
     return y

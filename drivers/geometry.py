@@ -65,3 +65,8 @@ def _ry(a: float) -> np.ndarray:
 def _rz(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def angles_for_references(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
+    """Table angles (n, axes) of each unit gravity reference (n, 3): what the engine commands."""
+    return np.array([angles_for_reference(r, n_axes) for r in np.asarray(refs_g, float)])

@@ -8,7 +8,7 @@ request ("face +z up, x towards the door" plus a sketch) on a
 :class:`service.engine.placement.PlacementBoard`. ``read_status`` reports
 ``in_position`` only once the operator confirmed (REST or CLI) *and* a short
 capture shows the sensor static and within 15° of the asked direction
-(:func:`service.engine.placement.check_placement`); otherwise the request is
+(:func:`calibration.placement.check_placement`); otherwise the request is
 re-issued with the reason.
 
 The driver never waits itself: the engine polls ``read_status`` on its
@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.placement import check_placement
 from drivers.geometry import reference_for_angles
 from drivers.protocols import Accelerometer, TurntableStatus
 
@@ -67,8 +68,6 @@ class ManualTurntable:
         if self.board.state() != "confirmed":
             return TurntableStatus(angles, in_position=False, moving=False)
         if self.accelerometer is not None:
-            from service.engine.placement import check_placement
-
             acq = await self.accelerometer.acquire(self.check_samples)
             check = check_placement(np.asarray(acq.mean_g), np.asarray(acq.sd_g), self._ref,
                                     self.noise_g)

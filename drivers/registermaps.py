@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from calibration.thermal_plant import AMBIENT_C
 from drivers import codec
 
 Encoding = Literal["int16", "uint16", "int32", "float32", "bit"]
@@ -215,7 +216,7 @@ class ChamberMap:
     registers: dict[str, Field] = field(default_factory=dict)  # every named register
     range_c: tuple[float, float] = (-70.0, 180.0)
     max_ramp_c_per_min: float | None = None
-    safe_setpoint_c: float = 23.0
+    safe_setpoint_c: float = AMBIENT_C
     # Largest run of undefined registers one read may span (0: read field by field).
     block_read_max_gap: int = 0
     title: str = ""
@@ -610,7 +611,8 @@ class _MapReader:
         if max_ramp is not None and not max_ramp > 0:
             raise self.fail("limits.max_ramp_c_per_min",
                             f"expected the chamber's fastest ramp, > 0 °C/min, got {max_ramp:g}")
-        safe = self.number("safe.setpoint_c", d.get("safe", {}).get("setpoint_c"), 23.0)
+        safe = self.number("safe.setpoint_c", d.get("safe", {}).get("setpoint_c"),
+                           AMBIENT_C)
         assert safe is not None
         if not rng[0] <= safe <= rng[1]:
             raise self.fail("safe.setpoint_c", f"{safe} °C outside limits.range_c {rng}")

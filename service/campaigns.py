@@ -308,7 +308,7 @@ def stored_prediction_s(stored: dict[str, Any]) -> float | None:
     """The dry run's duration estimate for a stored spec (None if it is not valid any more).
 
     Planned once per distinct spec and process, not on every GET, list row and SSE poll:
-    the plan orders every step's positions (``service.engine.plan``), far dearer than
+    the plan orders every step's positions (``calibration.campaign_plan``), far dearer than
     the read it would be attached to. The key is the spec's contract and tuning keys as
     canonical JSON, so campaigns that differ only in rig or sensors share one plan.
     """

@@ -17,7 +17,7 @@ One function, :func:`check_campaign`, decides it without hardware, for
 
 and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`).
 
-The prediction interprets the engine's own plan (``service.engine.plan.dry_run``);
+The prediction interprets the campaign's own plan (:func:`dry_run` below);
 the checks stay here, in one place.
 """
 
@@ -25,17 +25,30 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
+from calibration.campaign_plan import (
+    Acquire,
+    Move,
+    Msg,
+    Save,
+    SetChamber,
+    Settle,
+    WaitStable,
+    campaign_plan,
+    interpret,
+)
+from calibration.thermal_plant import AMBIENT_C
 from service.engine.spec import CampaignSpec
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
 RIG_FIT_MODE = "reference"
-# Where the chamber starts a campaign: the lab's ambient (the runner's safe_c default).
-AMBIENT_C = 23.0
 # Table moves are predicted from the table's own travel in the campaign's position order
-# (``service.engine.plan.dry_run(move_s=None)``: slowest axis on the trapezoidal profile,
+# (``dry_run(move_s=None)``: slowest axis on the trapezoidal profile,
 # plus the in-position poll), so a travel order's saving shows in the prediction.
 # The predictive stability policy ends a soak at ~3/4 of the nominal soak on average
 # (service/engine/progress.py uses the same factor for its ETA).
@@ -177,18 +190,118 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
 def predicted_duration_s(spec: CampaignSpec) -> float:
     """Rig-time estimate of the whole campaign, s (a sped-up sim rig: divide by its speed).
 
-    The campaign's own plan interpreted without hardware (``service.engine.plan.dry_run``):
+    The campaign's own plan interpreted without hardware (:func:`dry_run`):
     ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per step
     (the nominal soak; ~3/4 of it under the predictive policy), and per position a move
     (the table's travel from the pose before, in the spec's ``position_order``), the
     settle and one acquisition (``samples / odr_hz``) for all its sensors: a campaign's
     sensors are read at once, so eight take the time of one.
     """
-    from service.engine.plan import dry_run
-
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
     plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s, move_s=None,
                    start_c=AMBIENT_C)
     return plan.duration_s
+
+
+# --- the dry-run interpreter of the campaign plan (calibration.campaign_plan) ---------------
+DEFAULT_MOVE_S = 12.0  # table slew + in-position between orientations (seed Table 3 rigs)
+# Beyond the slew itself a move waits for in-position: the engine polls the table every
+# second (runner.TURNTABLE_POLL_S), so on average ~1 s more than the trapezoid.
+IN_POSITION_S = 1.0
+
+
+@dataclass
+class DryRun:
+    """What a campaign will do, predicted without hardware."""
+
+    duration_s: float  # predicted campaign time (rig clock), s
+    n_steps: int  # setpoints that will be visited
+    n_positions: int  # orientations per step
+    n_saves: int  # readings the campaign will store
+    ramp_s: float  # predicted total ramping, s
+    soak_s: float  # predicted total soaking, s
+    positions_s: float  # predicted total moving + settling + acquiring, s
+    steps: list[dict[str, float]] = field(default_factory=list)  # per step: setpoint_c, *_s
+
+
+def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None = None,
+            move_s: float | None = DEFAULT_MOVE_S, start_c: float = AMBIENT_C,
+            done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] | None = None,
+            angles_deg: np.ndarray | None = None) -> DryRun:
+    """Interpret the campaign plan without hardware: predicted duration and counts.
+
+    ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict)
+    or an already parsed ``RunSpec``; ``ValueError`` when it cannot be parsed.
+    ``refs`` defaults to the spec's named schedule; ``soak_s`` to the nominal
+    soak (``soak_min`` × 60: the predictive policy usually ends earlier, so
+    the prediction is an upper estimate); ``move_s`` is the time per table
+    move, or ``None`` for the table's own travel: each move's slowest axis on
+    the trapezoidal profile of :mod:`calibration.position_order` from the pose
+    before (home at the start), plus :data:`IN_POSITION_S`, so the position
+    order's saving is in the figure; ``start_c`` the chamber's temperature at
+    the start. Ramps are predicted at the commanded rate, acquisitions at
+    ``n_samples / odr_hz`` once per position however many sensors (they are read
+    concurrently; ``sensors`` default the spec's). Pass ``done`` (stored (step,
+    position) pairs) to predict the rest of a resumed campaign.
+    """
+    from calibration.position_order import axis_move_s
+    from drivers.geometry import angles_for_references
+    from service.engine.spec import parse_spec, schedule_refs
+
+    if isinstance(spec, dict):
+        spec = parse_spec(spec)
+    if refs is None:
+        refs = schedule_refs(spec.positions)
+    if soak_s is None:
+        soak_s = float(spec.stability.soak_s)
+    if sensors is None:
+        named = getattr(spec, "extra", {}).get("sensors")
+        sensors = [str(v) for v in named] if isinstance(named, list) else []
+    refs = np.asarray(refs, float)
+    poses = angles_for_references(refs) if angles_deg is None else np.asarray(angles_deg, float)
+    pose_of = {tuple(np.round(r, 12)): poses[i] for i, r in enumerate(refs)}
+    here = {"deg": np.zeros(poses.shape[1])}
+
+    def travel_move_s(ref_g: tuple[float, float, float]) -> float:
+        to = pose_of[tuple(np.round(np.asarray(ref_g, float), 12))]
+        dt_s = float(axis_move_s(to - here["deg"], *_table_limits()).max())
+        here["deg"] = to
+        return dt_s + IN_POSITION_S
+
+    state = {"c": float(start_c)}
+    odr_hz = float(spec.odr_hz)
+    out = DryRun(0.0, 0, int(np.asarray(refs).shape[0]), 0, 0.0, 0.0, 0.0)
+
+    def handle(msg: Msg) -> Any:
+        if isinstance(msg, SetChamber):
+            dt_s = abs(msg.setpoint_c - state["c"]) / max(msg.ramp_c_per_min, 1e-6) * 60.0
+            state["c"] = msg.setpoint_c
+            out.ramp_s += dt_s
+            out.n_steps += 1
+            out.steps.append({"setpoint_c": msg.setpoint_c, "ramp_s": dt_s, "soak_s": 0.0,
+                              "positions_s": 0.0})
+        elif isinstance(msg, WaitStable):
+            out.soak_s += soak_s
+            out.steps[-1]["soak_s"] = soak_s
+        elif isinstance(msg, Move | Settle | Acquire):
+            if isinstance(msg, Move):
+                dt_s = travel_move_s(msg.ref_g) if move_s is None else move_s
+            else:
+                dt_s = msg.settle_s if isinstance(msg, Settle) else msg.n_samples / odr_hz
+            out.positions_s += dt_s
+            out.steps[-1]["positions_s"] += dt_s
+        elif isinstance(msg, Save):
+            out.n_saves += 1
+        return None
+
+    interpret(campaign_plan(spec, refs, done, sensors, poses), handle)
+    out.duration_s = out.ramp_s + out.soak_s + out.positions_s
+    return out
+
+
+def _table_limits() -> tuple[float, float]:
+    from calibration.position_order import DEFAULT_ACCEL_DEG_PER_S2, DEFAULT_SLEW_DEG_PER_S
+
+    return DEFAULT_SLEW_DEG_PER_S, DEFAULT_ACCEL_DEG_PER_S2

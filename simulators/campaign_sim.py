@@ -1,6 +1,6 @@
 """Offline soak-campaign simulator: the twin's physics without the wire, for tests and benchmarks.
 
-It interprets the campaign's one plan (service/engine/plan.py) -- ramp the
+It interprets the campaign's one plan (calibration/campaign_plan.py) -- ramp the
 chamber at its rate limit, soak, visit each scheduled position (move, settle,
 capture N samples) --
 integrating the air temperature and the die temperature (first-order lag
@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration import campaign_plan as plan
 from calibration.recording import Recording
 from calibration.thermal_plant import (
     AMBIENT_C,
@@ -29,7 +30,6 @@ from calibration.thermal_plant import (
     lag_step,
     rate_limited,
 )
-from service.engine import plan
 from simulators.truth import Context, SensorTruth, averaged_readings
 
 DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 10))
@@ -115,9 +115,10 @@ def simulate_campaign(
         die = lag_step(die, air, dt, ph.die_tau_s)  # driven by the air at the step's end
         t += dt
 
-    # The campaign's one plan (service/engine/plan.py), interpreted with this module's physics:
-    # the chamber ramps at the rig's rate limit, the soak is a fixed soak_min, a move costs
-    # move_s (slew and settle), an acquisition n / odr_hz with its reading at mid-capture.
+    # The campaign's one plan (calibration/campaign_plan.py), interpreted with this module's
+    # physics: the chamber ramps at the rig's rate limit, the soak is a fixed soak_min, a
+    # move costs move_s (slew and settle), an acquisition n / odr_hz with its reading at
+    # mid-capture.
     def handle(msg: plan.Msg) -> None:
         nonlocal direction, last_sp, die_before, visits
         if isinstance(msg, plan.SetChamber):

@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 from pymodbus.constants import ExcCodes
 
-from calibration.thermal_plant import lag_step, rate_limited
+from calibration.thermal_plant import AMBIENT_C, lag_step, rate_limited
 from drivers.clock import Clock
 from drivers.registermaps import ChamberMap, Field
 from simulators.faults import SimFaults
@@ -43,11 +43,11 @@ class ChamberPhysics:
 
     clock: Clock
     rng: np.random.Generator
-    air_c: float = 23.0
-    setpoint_c: float = 23.0
+    air_c: float = AMBIENT_C
+    setpoint_c: float = AMBIENT_C
     ramp_c_per_min: float = 1.0
     running: bool = False
-    ambient_c: float = 23.0
+    ambient_c: float = AMBIENT_C
     air_tau_s: float = 60.0
     off_tau_s: float = 1800.0
     max_rate_c_per_min: float = 5.0

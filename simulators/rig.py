@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.thermal_plant import AMBIENT_C
 from drivers.chamber import ModbusChamber
 from drivers.clock import Clock
 from drivers.modbus_link import ModbusLink, RetryPolicy
@@ -141,7 +142,7 @@ async def start_sim_rig(
     host: str = "127.0.0.1",
     n_axes: int = 3,
     die_tau_s: float = 900.0,
-    start_c: float = 23.0,
+    start_c: float = AMBIENT_C,
     modbus_in_memory: bool = False,
     table_map: str = "soakcal-table",
     serials: Sequence[str] = (),

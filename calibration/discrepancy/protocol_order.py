@@ -11,7 +11,7 @@ positions in a different order on each plateau separates them:
   position once (first-order carry-over balanced), with the labels permuted by the seed.
 
 This module is the one place those orders are drawn: the engine's
-``position_order`` (``service/engine/soak_order.py``, which also has the least-travel
+``position_order`` (``calibration/position_order.py``, which also has the least-travel
 order) calls :func:`position_order` and visits ``order[step]`` on each step; the
 recording carries ``position`` and ``visit`` (the row's index within its step), and the
 campaign's spec the scheme and seed, so a diagnosis can rebuild the order.

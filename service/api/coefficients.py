@@ -44,17 +44,6 @@ def evaluate(
     return _as_lists(matrix), [float(b) for b in _flat(bias_g)]
 
 
-def evaluate_model(
-    doc: dict[str, Any], temperature_c: float, extrapolate: bool
-) -> tuple[list[list[float]], list[float]]:
-    """``(matrix 3x3, bias_g 3)`` of ``doc`` at ``temperature_c``.
-
-    Raises ``calibration.errors.OutOfRange`` outside the valid range unless
-    ``extrapolate``; ``ModelUnavailable`` if ``calibration.model_file`` is missing.
-    """
-    return evaluate(load_model(doc), temperature_c, extrapolate)
-
-
 class ModelCache:
     """Loaded models by calibration id, least recently used evicted; safe across threads.
 

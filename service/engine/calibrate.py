@@ -55,30 +55,9 @@ def rmse_after_ug(fit: Any) -> float:
 
 
 def model_document(model: Any) -> dict[str, Any]:
-    """The model JSON document (the same one ``soakcal calibrate -o`` writes).
+    """The model JSON document (the same one ``soakcal calibrate -o`` writes)."""
+    from calibration.model_file import dump_model_dict  # the fitting phase's import, on use
 
-    Uses ``calibration.model_file.dump_model_dict`` when the core provides it;
-    until then a faithful field dump of the ThermalModel.
-    """
-    try:
-        from calibration.model_file import dump_model_dict  # type: ignore[import-not-found]
-    except ImportError:
-        return _jsonable({
-            "format": "soakcal-model",
-            "model_version": model.model_version,
-            "mode": model.mode,
-            "method": model.method,
-            "degree": model.degree,
-            "t_centre_c": model.t_centre_c,
-            "t_scale_c": model.t_scale_c,
-            "valid_c": list(model.valid_c) if model.valid_c else None,
-            "temperature_source": model.temperature_source,
-            "g_local": model.g_local,
-            "coeffs": model.coeffs,
-            "identifiable": model.identifiable,
-            "notes": list(model.notes),
-            "provenance": dict(model.provenance),
-        })
     return _jsonable(dump_model_dict(model))
 
 

@@ -45,10 +45,11 @@ log = logging.getLogger(__name__)
 POLL_WALL_S = 1.0
 
 
-# Imported by the engine on first use, heavy: the plan's travel order (soak_order.py)
-# imports the discrepancy package and scipy, ~2 s on a loaded host; on the event loop that
-# is 2 s without HTTP answers at the first campaign's start, or at a takeover.
-LAZY_ENGINE_MODULES = ("service.engine.soak_order",)
+# Imported by the engine on first use, heavy: the plan's travel order
+# (calibration/position_order.py) imports the discrepancy package and scipy, ~2 s on a
+# loaded host; on the event loop that is 2 s without HTTP answers at the first campaign's
+# start, or at a takeover.
+LAZY_ENGINE_MODULES = ("calibration.position_order",)
 
 
 async def _import_engine_modules() -> None:

@@ -84,7 +84,7 @@ class EtaSubscriber:
         self._position_start_s: float | None = None
 
     def __call__(self, msg: Any, started_s: float, ended_s: float) -> None:
-        from service.engine import plan
+        from calibration import campaign_plan as plan
 
         if isinstance(msg, plan.SetChamber):
             self.eta.ramp_done(ended_s - started_s)

@@ -28,6 +28,21 @@ from typing import Any
 
 import numpy as np
 
+from calibration.campaign_plan import (
+    Acquire,
+    Checkpoint,
+    Configure,
+    Fit,
+    Move,
+    Msg,
+    Save,
+    SetChamber,
+    Settle,
+    WaitStable,
+    campaign_plan,
+)
+from calibration.placement import MAX_ANGLE_DEG, check_pose
+from calibration.thermal_plant import AMBIENT_C
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import soak_rate, stability, store
@@ -48,20 +63,6 @@ from service.engine.multi import (
     sensor_call,
     slowest_decision,
 )
-from service.engine.placement import MAX_ANGLE_DEG, check_pose
-from service.engine.plan import (
-    Acquire,
-    Checkpoint,
-    Configure,
-    Fit,
-    Move,
-    Msg,
-    Save,
-    SetChamber,
-    Settle,
-    WaitStable,
-    campaign_plan,
-)
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
 from service.engine.rigs import RigDevices
@@ -77,7 +78,6 @@ DIE_LAG_TAU_MAX_S = 3600.0
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
 TURNTABLE_POLL_S = 1.0
-DEFAULT_SAFE_C = 23.0  # before the spec is parsed (RunSpec.safe_c otherwise)
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 # Shortest wait between two soak polls when the decision predicts stability sooner than a
 # period (stability.next_poll_s): a poll costs a die probe (≈ 4 s at 250 samples) and a fit.
@@ -1029,7 +1029,7 @@ class CampaignRunner:
         whatever failed is logged and kept in ``self.safe_report``.
         """
         spec = getattr(self, "spec", None)
-        safe_c = spec.safe_c if spec is not None else DEFAULT_SAFE_C
+        safe_c = spec.safe_c if spec is not None else AMBIENT_C  # spec not parsed yet
         with contextlib.suppress(Exception):  # keep the target inside the chamber's range
             lo_c, hi_c = self.dev.chamber.range_c
             safe_c = min(max(safe_c, lo_c), hi_c)

@@ -31,6 +31,8 @@ from pydantic import (
     model_validator,
 )
 
+from calibration.campaign_plan import CAMPAIGN_RAMP_C_PER_MIN
+from calibration.thermal_plant import AMBIENT_C
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
     DEFAULT_DRIFT_BUDGET,
@@ -130,7 +132,7 @@ class CampaignSpec(BaseModel):
             raise ValueError(RAMP_NOT_RUN)
         return method
 
-    # --- position order (service/engine/soak_order.py, docs/engine.md) --------------------
+    # --- position order (calibration/position_order.py, docs/engine.md) --------------------
     position_order: Literal["travel", "random", "balanced", "table"] = Field(
         default="travel",
         description="order of a step's positions: least table travel, seeded random or "
@@ -185,7 +187,7 @@ class CampaignSpec(BaseModel):
                              doc="rms noise of the raw temperature channel, °C")
 
     # --- devices and timing --------------------------------------------------------------
-    ramp_c_per_min: Float = _f(1.0, 0, REGISTER_MAX_RAMP_C_PER_MIN,
+    ramp_c_per_min: Float = _f(CAMPAIGN_RAMP_C_PER_MIN, 0, REGISTER_MAX_RAMP_C_PER_MIN,
                                doc="chamber setpoint ramp, °C/min (≤ the rig's max rate)")
     soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
     soak_probe_samples: Int | None = Field(
@@ -195,7 +197,7 @@ class CampaignSpec(BaseModel):
     settle_s: Float = _f(5.0, 0, MAX_SETTLE_S, open_lo=False,
                          doc="wait after in-position before acquiring, s")
     move_timeout_s: Float = _f(120.0, 0, MAX_POLL_S, doc="table move timeout, s")
-    safe_c: TempC = Field(default=23.0, description="chamber temperature at the end, °C")
+    safe_c: TempC = Field(default=AMBIENT_C, description="chamber temperature at the end, °C")
     range_g: Literal[2, 4, 8] = Field(default=2, description="ADXL355 range, ±g")
     odr_hz: Float = _f(62.5, 0, ADXL355_MAX_ODR_HZ, doc="ADXL355 output data rate, Hz")
     retry_attempts: Int = Field(default=4, ge=1, le=20,
@@ -264,13 +266,13 @@ class RunSpec:
     stability: StabilityConfig
     quality: QualityLimits
     on_max_soak: str = "continue"  # continue | fail
-    ramp_c_per_min: float = 1.0
+    ramp_c_per_min: float = CAMPAIGN_RAMP_C_PER_MIN
     soak_poll_s: float = 60.0  # cheap sensor/chamber poll period during a soak
     soak_probe_samples: int = 8  # samples per cheap die-temperature probe
     rate_gain: str = "assumed"  # assumed (gradient_lag_s) | measured (soak_rate.py, corrected)
     settle_s: float = 5.0  # wait after in-position before acquiring (table ringing)
     move_timeout_s: float = 120.0
-    safe_c: float = 23.0  # abort leaves the chamber here
+    safe_c: float = AMBIENT_C  # abort leaves the chamber here
     range_g: float = 2.0
     odr_hz: float = 62.5
     retry_attempts: int = 4  # tries of one device call before the campaign suspends
@@ -279,7 +281,7 @@ class RunSpec:
     suspend_limit_s: float = 1800.0  # suspended longer than this: fail the campaign
     chamber_band_c: float = DEFAULT_BAND_C  # air this far off the setpoint while measuring
     suspend_clear_s: float = DEFAULT_CLEAR_S  # a chamber condition clear this long: resume
-    position_order: str = "travel"  # travel | random | balanced | table (soak_order.py)
+    position_order: str = "travel"  # travel | random | balanced | table (position_order.py)
     position_order_seed: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 

@@ -60,10 +60,11 @@ def test_position_order_is_read_from_time_within_steps(scheme, seen):
 
 def test_a_least_travel_order_is_called_varied_not_random():
     """The engine's default order: each plateau starts where the last ended (not random)."""
+    from calibration.position_order import step_orders
     from calibration.schedules import cube14
-    from service.engine.soak_order import angles_of, step_orders
+    from drivers.geometry import angles_for_references
 
-    travel = np.array(step_orders(angles_of(cube14()), 6, "travel"))
+    travel = np.array(step_orders(angles_for_references(cube14()), 6, "travel"))
     ctx = ctx_of(UP_DOWN, travel, n_pos=14)
     pr = assess(ctx)
     assert pr.position_order == "varied"

@@ -12,6 +12,7 @@ import pytest
 from engine_helpers import add_campaign, fake_calibrate
 from sqlalchemy import select, update
 
+from calibration.placement import check_placement, instruction_for, sketch_for
 from drivers.clock import VirtualClock
 from drivers.geometry import angles_for_reference
 from drivers.manual_table import ManualTurntable
@@ -19,14 +20,7 @@ from service.api.app import create_app
 from service.api.auth import create_token
 from service.config import Settings
 from service.db.models import Calibration, Campaign, Measurement, Rig
-from service.engine.placement import (
-    PlacementBoard,
-    check_placement,
-    hand_placed_calibrate,
-    instruction_for,
-    manual_devices,
-    sketch_for,
-)
+from service.engine.placement import PlacementBoard, hand_placed_calibrate, manual_devices
 from service.engine.rigs import open_rig
 from service.engine.runner import CampaignRunner
 

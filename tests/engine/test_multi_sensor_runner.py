@@ -147,7 +147,7 @@ async def test_resume_mid_sweep_stores_every_sensor_once(sf) -> None:  # type: i
 
 async def _acquire_s(sf, serials: list[str]) -> list[float]:  # type: ignore[no-untyped-def]
     """Clock time of every Acquire of a one-step campaign reading ``serials`` (one: alone)."""
-    from service.engine.plan import Acquire
+    from calibration.campaign_plan import Acquire
 
     spec = {**SMALL_SPEC, "setpoints_c": [20.0], "soak_min": 2, "stability": "fixed",
             "samples_per_position": 1000}  # 16 s per capture at 62.5 Hz

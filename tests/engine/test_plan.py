@@ -10,8 +10,10 @@ import pytest
 from engine_fakes import make_fake_rig
 from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
 
+from calibration import campaign_plan as pl
 from drivers.clock import VirtualClock
-from service.engine import plan as pl
+from drivers.geometry import angles_for_references
+from service.dry_run import dry_run
 from service.engine.runner import CampaignRunner
 from service.engine.spec import parse_spec, schedule_refs
 
@@ -27,7 +29,9 @@ def messages(spec: dict, done: set[tuple[int, int]] = frozenset(),  # type: igno
         out.append(msg)
         return ("reading", getattr(msg, "step", None), getattr(msg, "position", None))
 
-    pl.interpret(pl.campaign_plan(rs, schedule_refs(rs.positions), done, sensors), handle)
+    refs = schedule_refs(rs.positions)
+    pl.interpret(pl.campaign_plan(rs, refs, done, sensors, angles_for_references(refs)),
+                 handle)
     return out
 
 
@@ -63,7 +67,7 @@ def test_resume_is_a_replay_that_skips_what_is_stored() -> None:
 
 def test_dry_run_predicts_duration_and_counts() -> None:
     spec = {**SMALL_SPEC, "settle_s": 5.0, "odr_hz": 62.5}
-    dr = pl.dry_run(spec, move_s=12.0, start_c=23.0)
+    dr = dry_run(spec, move_s=12.0, start_c=23.0)
     ramp_s = (33.0 + 20.0 + 20.0) / 2.0 * 60.0  # 23 → −10 → 10 → 30 °C at 2 °C/min
     soak_s = 3 * 30 * 60.0
     positions_s = 3 * 6 * (12.0 + 5.0 + 50 / 62.5)
@@ -72,13 +76,13 @@ def test_dry_run_predicts_duration_and_counts() -> None:
     assert dr.soak_s == pytest.approx(soak_s)
     assert dr.positions_s == pytest.approx(positions_s)
     assert dr.duration_s == pytest.approx(ramp_s + soak_s + positions_s)
-    rest = pl.dry_run(spec, done={(0, p) for p in range(6)}, start_c=-10.0)
+    rest = dry_run(spec, done={(0, p) for p in range(6)}, start_c=-10.0)
     assert rest.n_saves == 12 and rest.duration_s < dr.duration_s
 
 
 def test_dry_run_refuses_an_unparsable_spec() -> None:
     with pytest.raises(ValueError, match="on_max_soak"):
-        pl.dry_run({**SMALL_SPEC, "on_max_soak": "explode"})
+        dry_run({**SMALL_SPEC, "on_max_soak": "explode"})
 
 
 async def test_engine_executes_exactly_the_plan(sf) -> None:  # type: ignore[no-untyped-def]
@@ -128,13 +132,13 @@ def test_offline_simulator_interprets_the_same_plan(monkeypatch) -> None:  # typ
 
 
 def test_the_default_travel_order_visits_each_position_once_and_moves_less() -> None:
-    from service.engine.soak_order import angles_of, travel_s
+    from calibration.position_order import travel_s
 
     spec = {**SMALL_SPEC, "positions": "table1"}
     saves = saves_of(messages(spec))
     table = saves_of(messages({**spec, "position_order": "table"}))
     assert sorted(saves) == sorted(table)
-    poses = angles_of(schedule_refs("table1"))
+    poses = angles_for_references(schedule_refs("table1"))
     home = (0.0, 0.0, 0.0)
     chained = [p for _, p in saves]  # the whole campaign's moves, step after step
     assert travel_s(poses, chained, home) < 0.7 * travel_s(poses, [p for _, p in table], home)
@@ -187,10 +191,10 @@ def test_several_sensors_are_read_by_one_acquire_per_position() -> None:
 
 def test_dry_run_counts_the_order_s_table_travel_and_one_capture_for_all_sensors() -> None:
     spec = {**SMALL_SPEC, "positions": "table1"}
-    travel = pl.dry_run(spec, move_s=None)
-    table = pl.dry_run({**spec, "position_order": "table"}, move_s=None)
+    travel = dry_run(spec, move_s=None)
+    table = dry_run({**spec, "position_order": "table"}, move_s=None)
     assert travel.positions_s < table.positions_s - 3 * 20.0  # ≥ 20 s of moves saved per step
-    eight = pl.dry_run({**spec, "sensors": [f"SN-{i}" for i in range(8)]}, move_s=None)
+    eight = dry_run({**spec, "sensors": [f"SN-{i}" for i in range(8)]}, move_s=None)
     assert eight.positions_s == pytest.approx(travel.positions_s)  # read concurrently
     assert eight.n_saves == travel.n_saves
 
@@ -198,8 +202,8 @@ def test_dry_run_counts_the_order_s_table_travel_and_one_capture_for_all_sensors
 def test_wait_stable_says_how_many_steps_share_its_position_order() -> None:
     """A campaign measuring the rate gain starts every step from home, so every step of the
     travel order is the same permutation; chained from the step before, they differ."""
+    from calibration.campaign_plan import PlanSpec, WaitStable, campaign_plan
     from calibration.schedules import table1
-    from service.engine.plan import PlanSpec, WaitStable, campaign_plan
 
     @dataclasses.dataclass(frozen=True)
     class Spec(PlanSpec):
@@ -207,7 +211,9 @@ def test_wait_stable_says_how_many_steps_share_its_position_order() -> None:
 
     sp = [-40.0, -30.0, -20.0, -10.0, 0.0]
     home = Spec(sp, 200, position_order="travel", rate_gain="measured")
-    waits = [m for m in campaign_plan(home, table1()) if isinstance(m, WaitStable)]
+    poses = angles_for_references(table1())
+    waits = [m for m in campaign_plan(home, table1(), angles_deg=poses)
+             if isinstance(m, WaitStable)]
     assert [w.order_repeats for w in waits] == [len(sp)] * len(sp)
     seeded = Spec(sp, 200, position_order="random", position_order_seed=1)
     waits = [m for m in campaign_plan(seeded, table1()) if isinstance(m, WaitStable)]

@@ -14,10 +14,10 @@ from engine_fakes import make_fake_rig
 from engine_helpers import add_campaign, fake_calibrate
 from sqlalchemy import select
 
+from calibration.placement import MAX_ANGLE_DEG, direction_error_deg
 from drivers.clock import VirtualClock
 from service.db.models import Measurement
 from service.engine import store
-from service.engine.placement import MAX_ANGLE_DEG, direction_error_deg
 from service.engine.runner import CampaignRunner
 
 SPEC = {"setpoints_c": [10.0], "soak_min": 30, "positions": "six", "samples_per_position": 20}

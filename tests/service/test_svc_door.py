@@ -8,9 +8,10 @@ import threading
 import pytest
 from fastapi.testclient import TestClient
 
+from calibration.position_order import step_orders, travel_s
+from drivers.geometry import angles_for_references
 from service.api.app import create_app
 from service.config import Settings
-from service.engine.soak_order import angles_of, step_orders, travel_s
 from service.engine.spec import schedule_refs
 
 CAMPAIGNS = "/api/v1/campaigns"
@@ -53,7 +54,7 @@ def test_201_carries_the_predicted_duration(client: TestClient, auth) -> None:  
     # ramps 23 → −10 → 20 °C at 2 °C/min, two fixed 30 min soaks, 12 positions of
     # 3 s settle + 2 s acquisition, and the table's moves in the travel order (from home,
     # step 1 from where step 0 ended), each + 1 s to see it in position
-    poses = angles_of(schedule_refs("six"))
+    poses = angles_for_references(schedule_refs("six"))
     orders = step_orders(poses, 2, "travel")
     moves_s = (travel_s(poses, orders[0], (0.0, 0.0, 0.0))
                + travel_s(poses, orders[1], tuple(poses[orders[0][-1]])) + 12 * 1.0)

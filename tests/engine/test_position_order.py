@@ -7,12 +7,12 @@ import itertools
 import numpy as np
 import pytest
 
-from service.engine.soak_order import (
-    angles_of,
+from calibration.position_order import (
     axis_move_s,
     order_positions,
     travel_s,
 )
+from drivers.geometry import angles_for_references
 from service.engine.spec import schedule_refs
 
 
@@ -23,7 +23,7 @@ def test_move_time_trapezoid_and_triangle() -> None:
 
 
 def test_travel_order_is_a_permutation_and_beats_the_table_order() -> None:
-    a = angles_of(schedule_refs("table1"))
+    a = angles_for_references(schedule_refs("table1"))
     order = order_positions(a, start_deg=(0.0, 0.0, 0.0))
     assert sorted(order) == list(range(len(a)))
     assert travel_s(a, order, (0.0, 0.0, 0.0)) < 0.75 * travel_s(a, range(len(a)), (0, 0, 0))
@@ -38,7 +38,7 @@ def test_travel_order_is_optimal_on_a_small_case() -> None:
 
 
 def test_random_order_is_seeded_and_reproducible() -> None:
-    a = angles_of(schedule_refs("table1"))
+    a = angles_for_references(schedule_refs("table1"))
     o1 = order_positions(a, method="random", seed=7)
     assert o1 == order_positions(a, method="random", seed=7)
     assert o1 != order_positions(a, method="random", seed=8)
@@ -55,13 +55,16 @@ def test_a_campaign_measuring_the_rate_gain_plans_every_step_from_home() -> None
     # travel order must then start every step there, not where the last sweep ended.
     from types import SimpleNamespace
 
-    from service.engine.plan import visit_orders
+    from calibration.campaign_plan import visit_orders
 
     refs = schedule_refs("table1")
     spec = SimpleNamespace(setpoints_c=[-40.0, -30.0, -20.0], position_order="travel",
                            position_order_seed=None, rate_gain="assumed")
-    chained = visit_orders(spec, refs)
-    homed = visit_orders(SimpleNamespace(**{**vars(spec), "rate_gain": "measured"}), refs)
-    from_home = order_positions(angles_of(refs), start_deg=(0.0, 0.0, 0.0))
+    poses = angles_for_references(refs)
+    chained = visit_orders(spec, refs, poses)
+    homed = visit_orders(SimpleNamespace(**{**vars(spec), "rate_gain": "measured"}), refs, poses)
+    with pytest.raises(ValueError, match="travel position order needs the table pose"):
+        visit_orders(spec, refs)  # the plan does not guess a rig's geometry
+    from_home = order_positions(angles_for_references(refs), start_deg=(0.0, 0.0, 0.0))
     assert homed == [from_home] * 3
     assert chained[0] == from_home and chained[1] != from_home

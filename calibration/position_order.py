@@ -12,7 +12,7 @@ total move time it finds (nearest neighbour from where the table stands, then
 seeded per-plateau orders of :mod:`calibration.discrepancy.protocol_order`
 (the one place those orders are drawn; for a diagnosis that wants the order
 decorrelated from time). :func:`step_orders` gives the order of every step of
-a campaign, which the plan (``service/engine/plan.py``) visits.
+a campaign, which the plan (:mod:`calibration.campaign_plan`) visits.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from calibration.discrepancy.protocol_order import position_order
 DEFAULT_SLEW_DEG_PER_S = 20.0
 DEFAULT_ACCEL_DEG_PER_S2 = 40.0
 METHODS = ("travel", "random", "balanced", "table")
-# soak_order's method name → protocol_order's scheme name (the seeded orders live there).
+# position_order's method name → protocol_order's scheme name (the seeded orders live there).
 _SCHEME = {"random": "random", "balanced": "balanced", "table": "fixed"}
 
 
@@ -145,14 +145,6 @@ def _two_opt(cost: np.ndarray, order: list[int], from_start: np.ndarray | None) 
     return best
 
 
-def angles_of(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
-    """Table angles (n, axes) of unit gravity references, by the rig geometry of
-    ``drivers.geometry`` (what the engine commands)."""
-    from drivers.geometry import angles_for_reference
-
-    return np.array([angles_for_reference(r, n_axes) for r in np.asarray(refs_g, float)])
-
-
 def step_orders(angles_deg: np.ndarray, n_steps: int, method: str = "travel",
                 seed: int | None = None, start_deg: Sequence[float] | None = None,
                 slew_deg_per_s: float = DEFAULT_SLEW_DEG_PER_S,
@@ -194,5 +186,5 @@ def _step_orders(raw: bytes, shape: tuple[int, ...], n_steps: int, method: str,
     return tuple(out)
 
 
-__all__ = ["METHODS", "angles_of", "axis_move_s", "move_s", "order_positions", "step_orders",
+__all__ = ["METHODS", "axis_move_s", "move_s", "order_positions", "step_orders",
            "travel_s"]

@@ -10,7 +10,11 @@ parameters identified from the collected readings) is this one generator,
   abort at ``Checkpoint``, and feeds progress/ETA subscribers;
 * the offline simulator (:func:`simulators.campaign_sim.simulate_campaign`)
   integrates the chamber and die physics for each message;
-* :func:`dry_run` predicts the duration and counts without any hardware.
+* the service's dry run (:func:`service.dry_run.dry_run`) predicts the duration
+  and counts without any hardware.
+
+It is pure protocol (numpy only), so the engine and the simulators both import
+it without either climbing into the other.
 
 The model is bluesky's RunEngine: a plan yields messages, the interpreter
 executes each and ``send``\\ s the result back (``Acquire`` returns the
@@ -20,7 +24,7 @@ pairs as ``done``; a step with every position stored is skipped entirely, a
 step with some stored is re-ramped (idempotent) and re-soaked as ``resumed``.
 
 A step's positions are visited in the spec's ``position_order``
-(:func:`service.engine.soak_order.step_orders`: least table travel, a seeded
+(:func:`calibration.position_order.step_orders`: least table travel, a seeded
 random or balanced order per plateau, or the schedule's). The order of every
 step is computed from the whole campaign, never from what is stored, so a
 resumed step visits its missing positions in the order it had.
@@ -29,7 +33,7 @@ resumed step visits its missing positions in the order it had.
 from __future__ import annotations
 
 from collections.abc import Generator, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -132,6 +136,13 @@ Msg = Configure | SetChamber | WaitStable | Checkpoint | Move | Settle | Acquire
 Plan = Generator[Msg, Any, None]
 
 
+# The campaign's commanded chamber ramp when its spec does not give one, °C/min: the API's
+# default (service.engine.spec) and the plan's. The offline twin commands its own rig's
+# rate (simulators.campaign_sim.RigPhysics, calibration.thermal_plant.DEFAULT_RAMP_C_PER_MIN,
+# 2 °C/min), on which its recordings and the diagnosis' assumed ramp were measured.
+CAMPAIGN_RAMP_C_PER_MIN = 1.0
+
+
 @dataclass(frozen=True)
 class PlanSpec:
     """The part of a campaign spec the plan reads (RunSpec satisfies it too)."""
@@ -139,7 +150,7 @@ class PlanSpec:
     setpoints_c: Sequence[float]
     samples_per_position: int
     settle_s: float = 5.0
-    ramp_c_per_min: float = 1.0
+    ramp_c_per_min: float = CAMPAIGN_RAMP_C_PER_MIN
     range_g: float = 2.0
     odr_hz: float = 62.5
     # The offline simulator's default is the schedule's order (its recordings feed
@@ -152,10 +163,11 @@ def visit_orders(spec: Any, refs: np.ndarray,
                  angles_deg: np.ndarray | None = None) -> list[list[int]]:
     """The order each step visits its positions (``spec.position_order``, default table).
 
-    ``angles_deg`` (n, axes): the rig's table pose of each reference (default the
-    3-axis geometry of ``drivers.geometry``); only the ``travel`` order reads it.
+    ``angles_deg`` (n, axes): the rig's table pose of each reference
+    (``drivers.geometry.angles_for_references`` for the 3-axis geometry); only the
+    ``travel`` order reads it, and needs it: the plan does not guess a rig's geometry.
     """
-    from service.engine.soak_order import angles_of, step_orders
+    from calibration.position_order import step_orders  # heavy: imported on first use
 
     method = str(getattr(spec, "position_order", "table"))
     refs = np.asarray(refs, float)
@@ -163,7 +175,8 @@ def visit_orders(spec: Any, refs: np.ndarray,
     if method != "travel":
         angles_deg = np.zeros((refs.shape[0], 1))
     elif angles_deg is None:
-        angles_deg = angles_of(refs)
+        raise ValueError("the travel position order needs the table pose of each position "
+                         "(angles_deg, e.g. drivers.geometry.angles_for_references(refs))")
     # A campaign measuring the rate gain parks the table at home before each ramp
     # (runner._ramp): every step then starts there.
     return step_orders(np.asarray(angles_deg, float), n_steps, method,
@@ -226,105 +239,3 @@ def interpret(plan: Plan, handle: Any) -> None:
             reply = handle(plan.send(reply))
     except StopIteration:
         return
-
-
-# --- the dry-run interpreter ------------------------------------------------------------
-DEFAULT_MOVE_S = 12.0  # table slew + in-position between orientations (seed Table 3 rigs)
-DEFAULT_START_C = 23.0
-# Beyond the slew itself a move waits for in-position: the engine polls the table every
-# second (runner.TURNTABLE_POLL_S), so on average ~1 s more than the trapezoid.
-IN_POSITION_S = 1.0
-
-
-@dataclass
-class DryRun:
-    """What a campaign will do, predicted without hardware."""
-
-    duration_s: float  # predicted campaign time (rig clock), s
-    n_steps: int  # setpoints that will be visited
-    n_positions: int  # orientations per step
-    n_saves: int  # readings the campaign will store
-    ramp_s: float  # predicted total ramping, s
-    soak_s: float  # predicted total soaking, s
-    positions_s: float  # predicted total moving + settling + acquiring, s
-    steps: list[dict[str, float]] = field(default_factory=list)  # per step: setpoint_c, *_s
-
-
-def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None = None,
-            move_s: float | None = DEFAULT_MOVE_S, start_c: float = DEFAULT_START_C,
-            done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] | None = None,
-            angles_deg: np.ndarray | None = None) -> DryRun:
-    """Interpret the campaign plan without hardware: predicted duration and counts.
-
-    ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict)
-    or an already parsed ``RunSpec``; ``ValueError`` when it cannot be parsed.
-    ``refs`` defaults to the spec's named schedule; ``soak_s`` to the nominal
-    soak (``soak_min`` × 60: the predictive policy usually ends earlier, so
-    the prediction is an upper estimate); ``move_s`` is the time per table
-    move, or ``None`` for the table's own travel: each move's slowest axis on
-    the trapezoidal profile of :mod:`service.engine.soak_order` from the pose
-    before (home at the start), plus :data:`IN_POSITION_S`, so the position
-    order's saving is in the figure; ``start_c`` the chamber's temperature at
-    the start. Ramps are predicted at the commanded rate, acquisitions at
-    ``n_samples / odr_hz`` once per position however many sensors (they are read
-    concurrently; ``sensors`` default the spec's). Pass ``done`` (stored (step,
-    position) pairs) to predict the rest of a resumed campaign.
-    """
-    from service.engine.soak_order import angles_of, axis_move_s
-    from service.engine.spec import parse_spec, schedule_refs
-
-    if isinstance(spec, dict):
-        spec = parse_spec(spec)
-    if refs is None:
-        refs = schedule_refs(spec.positions)
-    if soak_s is None:
-        soak_s = float(spec.stability.soak_s)
-    if sensors is None:
-        named = getattr(spec, "extra", {}).get("sensors")
-        sensors = [str(v) for v in named] if isinstance(named, list) else []
-    refs = np.asarray(refs, float)
-    poses = angles_of(refs) if angles_deg is None else np.asarray(angles_deg, float)
-    pose_of = {tuple(np.round(r, 12)): poses[i] for i, r in enumerate(refs)}
-    here = {"deg": np.zeros(poses.shape[1])}
-
-    def travel_move_s(ref_g: tuple[float, float, float]) -> float:
-        to = pose_of[tuple(np.round(np.asarray(ref_g, float), 12))]
-        dt_s = float(axis_move_s(to - here["deg"], *_table_limits()).max())
-        here["deg"] = to
-        return dt_s + IN_POSITION_S
-
-    state = {"c": float(start_c)}
-    odr_hz = float(spec.odr_hz)
-    out = DryRun(0.0, 0, int(np.asarray(refs).shape[0]), 0, 0.0, 0.0, 0.0)
-
-    def handle(msg: Msg) -> Any:
-        if isinstance(msg, SetChamber):
-            dt_s = abs(msg.setpoint_c - state["c"]) / max(msg.ramp_c_per_min, 1e-6) * 60.0
-            state["c"] = msg.setpoint_c
-            out.ramp_s += dt_s
-            out.n_steps += 1
-            out.steps.append({"setpoint_c": msg.setpoint_c, "ramp_s": dt_s, "soak_s": 0.0,
-                              "positions_s": 0.0})
-        elif isinstance(msg, WaitStable):
-            out.soak_s += soak_s
-            out.steps[-1]["soak_s"] = soak_s
-        elif isinstance(msg, Move | Settle | Acquire):
-            if isinstance(msg, Move):
-                dt_s = travel_move_s(msg.ref_g) if move_s is None else move_s
-            else:
-                dt_s = msg.settle_s if isinstance(msg, Settle) else msg.n_samples / odr_hz
-            out.positions_s += dt_s
-            out.steps[-1]["positions_s"] += dt_s
-        elif isinstance(msg, Save):
-            out.n_saves += 1
-        return None
-
-    interpret(campaign_plan(spec, refs, done, sensors, poses), handle)
-    out.duration_s = out.ramp_s + out.soak_s + out.positions_s
-    return out
-
-
-def _table_limits() -> tuple[float, float]:
-    from service.engine.soak_order import DEFAULT_ACCEL_DEG_PER_S2, DEFAULT_SLEW_DEG_PER_S
-
-    return DEFAULT_SLEW_DEG_PER_S, DEFAULT_ACCEL_DEG_PER_S2
