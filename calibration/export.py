@@ -209,8 +209,8 @@ static inline int soakcal_compensate_f(const float raw_g[3], float temp_c, float
     if (SOAKCAL_TEMPERATURE_DEPENDENT) {{
         if (isnan(temp_c)) {{
             status = 2;
-        }} else if ((double)temp_c < SOAKCAL_VALID_LOW_C
-                   || (double)temp_c > SOAKCAL_VALID_HIGH_C) {{
+        }} else if (temp_c < (float)SOAKCAL_VALID_LOW_C
+                   || temp_c > (float)SOAKCAL_VALID_HIGH_C) {{  /* the limits in float */
             status = 1;
         }}
         x = (temp_c - (float)SOAKCAL_T_CENTRE_C) / (float)SOAKCAL_T_SCALE_C;
