@@ -23,6 +23,11 @@ class ModbusChamber:
     def range_c(self) -> tuple[float, float]:
         return self.regmap.range_c
 
+    @property
+    def safe_setpoint_c(self) -> float:
+        """Where the chamber is left at the end of a campaign: the map's ``[safe]``."""
+        return self.regmap.safe_setpoint_c
+
     async def read_status(self) -> ChamberStatus:
         m = self.regmap
         values = await self.link.read_fields(m.fields(), m.block_read_max_gap)

@@ -22,6 +22,12 @@ class ModbusTurntable:
     def n_axes(self) -> int:
         return self._n_axes
 
+    @property
+    def safe_angles_deg(self) -> tuple[float, ...]:
+        """Where the table rests at the end of a campaign: the map's ``[safe]`` (else home)."""
+        safe = tuple(self.regmap.safe_angles_deg[: self.n_axes])
+        return safe if len(safe) == self.n_axes else tuple(0.0 for _ in range(self.n_axes))
+
     async def move_to(self, angles_deg: tuple[float, ...]) -> None:
         if len(angles_deg) != self.n_axes:
             raise ValueOutOfRange(

@@ -112,7 +112,7 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
                 ("setpoints_c", i),
                 f"setpoint {setpoint_c:g} °C is outside the chamber range of rig {name!r}, "
                 f"[{lo_c:g}, {hi_c:g}] °C", setpoint_c))
-    if not lo_c <= spec.safe_c <= hi_c:
+    if spec.safe_c is not None and not lo_c <= spec.safe_c <= hi_c:
         issues.append(PlanIssue(
             ("safe_c",), f"safe temperature {spec.safe_c:g} °C is outside the chamber range "
             f"of rig {name!r}, [{lo_c:g}, {hi_c:g}] °C", spec.safe_c))

@@ -1029,12 +1029,15 @@ class CampaignRunner:
         whatever failed is logged and kept in ``self.safe_report``.
         """
         spec = getattr(self, "spec", None)
-        safe_c = spec.safe_c if spec is not None else AMBIENT_C  # spec not parsed yet
-        with contextlib.suppress(Exception):  # keep the target inside the chamber's range
-            lo_c, hi_c = self.dev.chamber.range_c
-            safe_c = min(max(safe_c, lo_c), hi_c)
-        home = tuple(0.0 for _ in range(self.dev.turntable.n_axes))
         ch, tt = self.dev.chamber, self.dev.turntable
+        # The devices own their safe state (the map's [safe]); a campaign may set safe_c.
+        safe_c = spec.safe_c if spec is not None and spec.safe_c is not None else None
+        if safe_c is None:
+            safe_c = float(getattr(ch, "safe_setpoint_c", AMBIENT_C))
+        with contextlib.suppress(Exception):  # keep the target inside the chamber's range
+            lo_c, hi_c = ch.range_c
+            safe_c = min(max(safe_c, lo_c), hi_c)
+        home = tuple(getattr(tt, "safe_angles_deg", ())) or tuple(0.0 for _ in range(tt.n_axes))
         commands: dict[str, Callable[[], Awaitable[Any]]] = {
             "chamber.set_setpoint": lambda: ch.set_setpoint(safe_c),
             "turntable.stop": tt.stop,

@@ -32,7 +32,6 @@ from pydantic import (
 )
 
 from calibration.campaign_plan import CAMPAIGN_RAMP_C_PER_MIN
-from calibration.thermal_plant import AMBIENT_C
 from service.engine.quality import QualityLimits
 from service.engine.stability import (
     DEFAULT_DRIFT_BUDGET,
@@ -197,7 +196,9 @@ class CampaignSpec(BaseModel):
     settle_s: Float = _f(5.0, 0, MAX_SETTLE_S, open_lo=False,
                          doc="wait after in-position before acquiring, s")
     move_timeout_s: Float = _f(120.0, 0, MAX_POLL_S, doc="table move timeout, s")
-    safe_c: TempC = Field(default=AMBIENT_C, description="chamber temperature at the end, °C")
+    safe_c: TempC | None = Field(
+        default=None, description="chamber temperature at the end, °C (default: the chamber "
+        "map's [safe] setpoint_c; 23 °C where the chamber has no map)")
     range_g: Literal[2, 4, 8] = Field(default=2, description="ADXL355 range, ±g")
     odr_hz: Float = _f(62.5, 0, ADXL355_MAX_ODR_HZ, doc="ADXL355 output data rate, Hz")
     retry_attempts: Int = Field(default=4, ge=1, le=20,
@@ -272,7 +273,7 @@ class RunSpec:
     rate_gain: str = "assumed"  # assumed (gradient_lag_s) | measured (soak_rate.py, corrected)
     settle_s: float = 5.0  # wait after in-position before acquiring (table ringing)
     move_timeout_s: float = 120.0
-    safe_c: float = AMBIENT_C  # abort leaves the chamber here
+    safe_c: float | None = None  # every exit leaves the chamber here (None: the rig's own)
     range_g: float = 2.0
     odr_hz: float = 62.5
     retry_attempts: int = 4  # tries of one device call before the campaign suspends

@@ -11,12 +11,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
 import pytest
 from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select, update
 
+from drivers import registermaps
 from drivers.clock import VirtualClock
 from service.db.models import Campaign, Measurement, RigLease
 from service.engine import manager as manager_mod
@@ -89,6 +91,29 @@ async def test_completed_campaign_ends_safe(sf) -> None:  # type: ignore[no-unty
         runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
         assert await asyncio.wait_for(runner.run(), 60) == "completed"
         assert_safe(*await rig_state(sim, clock))
+
+
+@SQLITE_ONLY
+async def test_the_chamber_maps_safe_setpoint_is_where_a_campaign_leaves_it(
+        sf, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The rig owns its safe state: a map whose [safe] says 10 °C gets 10 °C at the end
+    (the campaign sets no safe_c); a campaign's own safe_c still wins."""
+    text = (Path(registermaps.__file__).parent / "maps" / "eurotherm-3216.toml").read_text()
+    assert "[safe]\nsetpoint_c = 23.0" in text
+    cold = tmp_path / "cold-safe-3216.toml"
+    cold.write_text(text.replace("[safe]\nsetpoint_c = 23.0", "[safe]\nsetpoint_c = 10.0"))
+    for spec_safe_c, expected_c in ((None, 10.0), (15.0, 15.0)):
+        clock = VirtualClock(idle_wall_s=0.0003)
+        extra = {} if spec_safe_c is None else {"safe_c": spec_safe_c}
+        cid = add_campaign(sf, {**SPEC, "setpoints_c": [-40.0], **extra}, rig="lab")
+        async with start_sim_rig(clock, seed=5, chamber_map=str(cold)) as sim, \
+                open_rig({**_cfg(sim), "chamber": {"driver": "modbus", "url": sim.chamber_url,
+                                                   "map": str(cold)}}, clock) as devices:
+            runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+            assert await asyncio.wait_for(runner.run(), 60) == "completed"
+            setpoint_c, table = await rig_state(sim, clock)
+        assert setpoint_c == pytest.approx(expected_c, abs=0.05)
+        assert not table.moving and table.in_position
 
 
 @SQLITE_ONLY
