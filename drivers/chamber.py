@@ -28,6 +28,11 @@ class ModbusChamber:
         """Where the chamber is left at the end of a campaign: the map's ``[safe]``."""
         return self.regmap.safe_setpoint_c
 
+    @property
+    def stop_when_safe(self) -> bool:
+        """The map's ``[safe] stop``: the park also stops the controller."""
+        return self.regmap.safe_stop
+
     async def read_status(self) -> ChamberStatus:
         m = self.regmap
         values = await self.link.read_fields(m.fields(), m.block_read_max_gap)

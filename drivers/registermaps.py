@@ -56,7 +56,7 @@ REGISTER_KEYS = {"address", "protocol_address", "table", "type", "scale", "offse
 SECTION_KEYS = {
     "defaults": {"word_order", "unit_id"},
     "limits": {"range_c", "max_ramp_c_per_min", "range_deg", "block_read_max_gap"},
-    "safe": {"setpoint_c", "angles_deg"},
+    "safe": {"setpoint_c", "angles_deg", "stop"},
     "identity": {"register", "expect"},
     "run": {"register", "on", "off"},
     "axes": {"count", "stride"},
@@ -217,6 +217,9 @@ class ChamberMap:
     range_c: tuple[float, float] = (-70.0, 180.0)
     max_ramp_c_per_min: float | None = None
     safe_setpoint_c: float = AMBIENT_C
+    # [safe] stop = true: the park also stops the controller (its run register), after the
+    # safe setpoint is written; false (the default) leaves it controlling at that setpoint.
+    safe_stop: bool = False
     # Largest run of undefined registers one read may span (0: read field by field).
     block_read_max_gap: int = 0
     title: str = ""
@@ -616,6 +619,11 @@ class _MapReader:
         assert safe is not None
         if not rng[0] <= safe <= rng[1]:
             raise self.fail("safe.setpoint_c", f"{safe} °C outside limits.range_c {rng}")
+        safe_stop = d.get("safe", {}).get("stop", False)
+        if not isinstance(safe_stop, bool):
+            raise self.fail("safe.stop", f"expected true or false, got {safe_stop!r}")
+        if safe_stop and d.get("run") is None:
+            raise self.fail("safe.stop", "stop = true needs a [run] register to stop with")
         run_field, on, off = None, 1, 0
         run = d.get("run")
         if run is not None:
@@ -654,6 +662,7 @@ class _MapReader:
             range_c=(float(rng[0]), float(rng[1])),
             max_ramp_c_per_min=max_ramp,
             safe_setpoint_c=safe,
+            safe_stop=safe_stop,
             **self.common(regs),
         )
 

@@ -1039,10 +1039,11 @@ class CampaignRunner:
             safe_c = min(max(safe_c, lo_c), hi_c)
         home = tuple(getattr(tt, "safe_angles_deg", ())) or tuple(0.0 for _ in range(tt.n_axes))
         commands: dict[str, Callable[[], Awaitable[Any]]] = {
-            "chamber.set_setpoint": lambda: ch.set_setpoint(safe_c),
-            "turntable.stop": tt.stop,
-            "turntable.move_to": lambda: tt.move_to(home),
-        }
+            "chamber.set_setpoint": lambda: ch.set_setpoint(safe_c)}
+        if getattr(ch, "stop_when_safe", False) is True:  # the map's [safe] stop
+            commands["chamber.stop"] = ch.stop
+        commands.update({"turntable.stop": tt.stop,
+                         "turntable.move_to": lambda: tt.move_to(home)})
         self.safe_report = {}
         for name, fn in commands.items():
             try:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from drivers import registermaps
 from drivers.registermaps import (
     CHAMBER_MAPS,
     Field,
@@ -397,3 +398,17 @@ def test_state_registers_must_name_their_ok_states(tmp_path: Path) -> None:
     stray = GOOD + "[registers.al1]\naddress = 90\ntype = \"uint16\"\nstates = { 61 = \"none\" }\n"
     with pytest.raises(MapError, match=r"registers\.al1\.states: only registers listed in "):
         load_map(_write(tmp_path, stray))
+
+
+def test_safe_stop_must_be_a_boolean_and_needs_a_run_register(tmp_path: Path) -> None:
+    text = (Path(registermaps.__file__).parent / "maps" / "soakcal-twin-chamber.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("[safe]\nsetpoint_c = 23.0", "[safe]\nsetpoint_c = 23.0\nstop = 1"))
+    with pytest.raises(registermaps.MapError, match="safe.stop"):
+        registermaps.load_chamber_map(bad)
+    no_run = (Path(registermaps.__file__).parent / "maps" / "eurotherm-3216.toml").read_text()
+    assert "[run]" not in no_run
+    bad.write_text(no_run.replace("[safe]\nsetpoint_c = 23.0",
+                                  "[safe]\nsetpoint_c = 23.0\nstop = true"))
+    with pytest.raises(registermaps.MapError, match="needs a \\[run\\] register"):
+        registermaps.load_chamber_map(bad)

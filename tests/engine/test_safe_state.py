@@ -117,6 +117,35 @@ async def test_the_chamber_maps_safe_setpoint_is_where_a_campaign_leaves_it(
 
 
 @SQLITE_ONLY
+async def test_a_map_whose_safe_state_says_stop_gets_its_chamber_stopped(
+        sf, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """[safe] stop = true: the park writes the safe setpoint, then stops the controller."""
+    text = (Path(registermaps.__file__).parent / "maps" / "soakcal-twin-chamber.toml").read_text()
+    stopping = tmp_path / "stopping-twin.toml"
+    stopping.write_text(text.replace("[safe]\nsetpoint_c = 23.0",
+                                     "[safe]\nsetpoint_c = 23.0\nstop = true"))
+    assert registermaps.load_chamber_map(stopping).safe_stop
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, {**SPEC, "setpoints_c": [-40.0]}, rig="lab")
+    async with start_sim_rig(clock, seed=5, chamber_map=str(stopping)) as sim, \
+            open_rig({**_cfg(sim), "chamber": {"driver": "modbus", "url": sim.chamber_url,
+                                               "map": str(stopping)}}, clock) as devices:
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        assert await asyncio.wait_for(runner.run(), 60) == "completed"
+        assert list(runner.safe_report) == ["chamber.set_setpoint", "chamber.stop",
+                                            "turntable.stop", "turntable.move_to"]
+        chamber, table, sensor = await connect_rig(sim, clock)
+        try:
+            status = await chamber.read_status()
+        finally:
+            await chamber.close()
+            await table.close()
+            with contextlib.suppress(Exception):
+                await sensor.close()
+    assert status.setpoint_c == pytest.approx(SAFE_C, abs=0.05) and not status.running
+
+
+@SQLITE_ONLY
 async def test_abort_during_soak_ends_safe(sf) -> None:  # type: ignore[no-untyped-def]
     clock = VirtualClock(idle_wall_s=0.0003)
     cid = add_campaign(sf, SPEC, rig="lab")
