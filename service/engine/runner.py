@@ -1031,7 +1031,7 @@ class CampaignRunner:
         spec = getattr(self, "spec", None)
         ch, tt = self.dev.chamber, self.dev.turntable
         # The devices own their safe state (the map's [safe]); a campaign may set safe_c.
-        safe_c = spec.safe_c if spec is not None and spec.safe_c is not None else None
+        safe_c = getattr(spec, "safe_c", None)  # spec None: not parsed yet
         if safe_c is None:
             safe_c = float(getattr(ch, "safe_setpoint_c", AMBIENT_C))
         with contextlib.suppress(Exception):  # keep the target inside the chamber's range
