@@ -44,10 +44,10 @@ def run_plan(args: argparse.Namespace) -> int:
         return _refuse(str(exc))
     from pydantic import ValidationError
 
-    from service.engine.spec import CampaignSpec
+    from service.engine.spec import EngineSpec
 
     try:
-        spec = CampaignSpec.model_validate(body)
+        spec = EngineSpec.model_validate(body)
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "spec"

@@ -15,7 +15,9 @@ One function, :func:`check_campaign`, decides it without hardware, for
 * a ramp faster than the chamber can follow (``chamber.max_rate_c_per_min``;
   the built-in ``sim`` chamber's physics limit is 5 °C/min).
 
-and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`).
+and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`;
+:func:`prediction` is the form a campaign row stores at creation, so that reading a
+campaign never plans it again).
 
 The prediction interprets the campaign's own plan (:func:`dry_run` below);
 the checks stay here, in one place.
@@ -42,8 +44,8 @@ from calibration.campaign_plan import (
     campaign_plan,
     interpret,
 )
+from calibration.campaign_spec import CampaignSpec
 from calibration.thermal_plant import AMBIENT_C
-from service.engine.spec import CampaignSpec
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
 RIG_FIT_MODE = "reference"
@@ -83,6 +85,8 @@ class PlanCheck:
 
     issues: list[PlanIssue] = field(default_factory=list)
     predicted_duration_s: float | None = None
+    # The stored form of the prediction (:func:`prediction`); None when the check refused.
+    prediction: dict[str, Any] | None = None
     n_steps: int = 0
     n_positions: int | None = None
     mode: str = RIG_FIT_MODE
@@ -131,8 +135,9 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
             "smaller position schedule")
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
-    duration = None if n_positions is None else predicted_duration_s(spec)
-    return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions)
+    predicted = None if n_positions is None else prediction(spec)
+    duration = None if predicted is None else predicted["duration_s"]
+    return PlanCheck(issues, duration, predicted, len(spec.setpoints_c), n_positions)
 
 
 def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:
@@ -188,7 +193,14 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
 
 
 def predicted_duration_s(spec: CampaignSpec) -> float:
-    """Rig-time estimate of the whole campaign, s (a sped-up sim rig: divide by its speed).
+    """Rig-time estimate of the whole campaign, s (:func:`prediction`'s ``duration_s``)."""
+    return float(prediction(spec)["duration_s"])
+
+
+def prediction(spec: CampaignSpec) -> dict[str, Any]:
+    """The dry run of ``spec`` as a campaign row stores it (JSON): ``duration_s``,
+    ``ramp_s``, ``soak_s``, ``positions_s`` (rig time, s; a sped-up sim rig: divide by its
+    speed), ``n_steps``, ``n_positions`` and ``n_saves``.
 
     The campaign's own plan interpreted without hardware (:func:`dry_run`):
     ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per step
@@ -200,9 +212,10 @@ def predicted_duration_s(spec: CampaignSpec) -> float:
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
-    plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s, move_s=None,
-                   start_c=AMBIENT_C)
-    return plan.duration_s
+    plan = dry_run(spec, soak_s=soak_s, move_s=None, start_c=AMBIENT_C)
+    return {"duration_s": plan.duration_s, "ramp_s": plan.ramp_s, "soak_s": plan.soak_s,
+            "positions_s": plan.positions_s, "n_steps": plan.n_steps,
+            "n_positions": plan.n_positions, "n_saves": plan.n_saves}
 
 
 # --- the dry-run interpreter of the campaign plan (calibration.campaign_plan) ---------------
@@ -232,8 +245,9 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
             angles_deg: np.ndarray | None = None) -> DryRun:
     """Interpret the campaign plan without hardware: predicted duration and counts.
 
-    ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict)
-    or an already parsed ``RunSpec``; ``ValueError`` when it cannot be parsed.
+    ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict), a
+    validated :class:`CampaignSpec` or the engine's ``RunSpec``; ``ValueError`` when
+    it cannot be parsed.
     ``refs`` defaults to the spec's named schedule; ``soak_s`` to the nominal
     soak (``soak_min`` × 60: the predictive policy usually ends earlier, so
     the prediction is an upper estimate); ``move_s`` is the time per table
@@ -243,22 +257,23 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
     order's saving is in the figure; ``start_c`` the chamber's temperature at
     the start. Ramps are predicted at the commanded rate, acquisitions at
     ``n_samples / odr_hz`` once per position however many sensors (they are read
-    concurrently; ``sensors`` default the spec's). Pass ``done`` (stored (step,
+    concurrently; ``sensors`` default the spec's serials). Pass ``done`` (stored (step,
     position) pairs) to predict the rest of a resumed campaign.
     """
     from calibration.position_order import axis_move_s
     from drivers.geometry import angles_for_references
-    from service.engine.spec import parse_spec, schedule_refs
+    from service.engine.spec import parse_spec, run_spec, schedule_refs
 
     if isinstance(spec, dict):
         spec = parse_spec(spec)
+    elif isinstance(spec, CampaignSpec):
+        spec = run_spec(spec)
     if refs is None:
         refs = schedule_refs(spec.positions)
     if soak_s is None:
         soak_s = float(spec.stability.soak_s)
     if sensors is None:
-        named = getattr(spec, "extra", {}).get("sensors")
-        sensors = [str(v) for v in named] if isinstance(named, list) else []
+        sensors = list(spec.sensors)
     refs = np.asarray(refs, float)
     poses = angles_for_references(refs) if angles_deg is None else np.asarray(angles_deg, float)
     pose_of = {tuple(np.round(r, 12)): poses[i] for i, r in enumerate(refs)}
