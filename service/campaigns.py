@@ -114,11 +114,6 @@ def plan_check(session: Session, spec: CampaignCreate) -> PlanCheck:
     return check_campaign(spec, rig_cfg, spec.rig)
 
 
-def spec_issues(session: Session, spec: CampaignCreate) -> list[PlanIssue]:
-    """The dry run's and the mounting check's refusals of ``spec`` (each naming its field)."""
-    return plan_check(session, spec).issues + mount_issues(session, spec)
-
-
 def campaign_serials(stored: dict[str, Any], first: str) -> list[str]:
     """The sensors a stored campaign spec names, in order (``[first]`` for a one-sensor one)."""
     return list(stored_serials(stored, first)) or [first]
@@ -177,8 +172,9 @@ def create_campaign(
     session: Session, spec: CampaignCreate, schedule_id: int | None = None,
     check: PlanCheck | None = None,
 ) -> Campaign:
-    """A new ``queued`` campaign with its dry run stored (caller checked ``spec_issues``;
-    ``check``: its verdict, so the campaign is not planned twice); flushed, not committed."""
+    """A new ``queued`` campaign with its dry run stored (the caller checked
+    :func:`plan_check` and :func:`mount_issues`; ``check``: that verdict, so the campaign
+    is not planned twice); flushed, not committed."""
     for serial in spec.serials:
         ensure_sensor(session, serial)
     campaign = Campaign(

@@ -85,11 +85,11 @@ class PlanCheck:
 
     issues: list[PlanIssue] = field(default_factory=list)
     predicted_duration_s: float | None = None
-    # The stored form of the prediction (:func:`prediction`); None when the check refused.
-    prediction: dict[str, Any] | None = None
     n_steps: int = 0
     n_positions: int | None = None
     mode: str = RIG_FIT_MODE
+    # The stored form of the prediction (:func:`prediction`); None when the check refused.
+    prediction: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
@@ -137,7 +137,8 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
         issues.append(PlanIssue(("positions",), why, spec.positions))
     predicted = None if n_positions is None else prediction(spec)
     duration = None if predicted is None else predicted["duration_s"]
-    return PlanCheck(issues, duration, predicted, len(spec.setpoints_c), n_positions)
+    return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions,
+                     prediction=predicted)
 
 
 def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:

@@ -13,7 +13,7 @@ from service.api import auth
 from service.api.campaigns import field_error, issue_errors
 from service.api.deps import DbIdPath, SessionDep
 from service.api.schemas import ScheduleCreate, ScheduleOut
-from service.campaigns import plan_check, spec_issues, stored_duration_s
+from service.campaigns import mount_issues, plan_check, stored_duration_s
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
 from service.scheduler import cron_is_valid, next_cron_run, timezone_is_valid
@@ -24,8 +24,8 @@ router = APIRouter(prefix="/api/v1/schedules", tags=["schedules"])
 @router.post("", response_model=ScheduleOut, status_code=201, dependencies=[Depends(auth.operator)])
 def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
     check = plan_check(session, body.campaign)
-    errors: list[dict[str, Any]] = issue_errors(spec_issues(session, body.campaign),
-                                                ("body", "campaign"))
+    errors: list[dict[str, Any]] = issue_errors(
+        check.issues + mount_issues(session, body.campaign), ("body", "campaign"))
     now = utcnow()
     if body.at is not None and as_utc(body.at) <= now:  # type: ignore[operator]
         errors.append(field_error(
