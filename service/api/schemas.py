@@ -13,7 +13,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 # The campaign request is the service's, not the HTTP layer's (the scheduler validates
 # stored schedules with it): defined with the spec, named here for the API's schema.
-from service.engine.spec import TUNING_KEYS, CampaignCreate
+from calibration.campaign_spec import TUNING_KEYS
+from service.engine.spec import CampaignCreate
 
 CampaignState = Literal["queued", "running", "paused", "completed", "failed", "aborted"]
 Phase = Literal["ramp", "soak", "positions", "fitting"]

@@ -24,17 +24,9 @@ from typing import Any
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from calibration.campaign_spec import (
-    CONTRACT_FIELDS,
-    TUNING_KEYS,
-    CampaignSpec,
-    Serial,
-)
+from calibration.campaign_spec import CampaignSpec, Serial
 from service.engine.quality import QualityLimits
 from service.engine.stability import StabilityConfig, temperature_budget_c
-
-__all__ = ["CONTRACT_FIELDS", "RAMP_NOT_RUN", "TUNING_KEYS", "CampaignCreate", "CampaignSpec",
-           "EngineSpec", "RunSpec", "parse_spec", "run_spec", "schedule_refs", "stored_serials"]
 
 # A refusal, not a silent soak: a ramp campaign asked for must never run as another method.
 RAMP_NOT_RUN = (
