@@ -112,7 +112,10 @@ async def check_pv_against_die(rec: _Recorder, chamber: Any, dies_c: list[float]
                        "check the chamber driver's units and scale")
     cause, fix = await _likely_cause(chamber, regmap, pv, die)
     if cause is None:
-        unsettled = abs(st.working_setpoint_c - st.setpoint_c) > 0.1
+        # Without a working-setpoint register, the PV's distance from SP says "still moving".
+        moving_c = st.working_setpoint_c if st.working_setpoint_c is not None else st.process_c
+        unsettled = abs(moving_c - st.setpoint_c) > (0.1 if st.working_setpoint_c is not None
+                                                     else DIE_PV_TOLERANCE_C)
         return rec.add("chamber", "pv_vs_die", "fail",
                        f"{seen}: no scale, unit or word-order error explains it"
                        + ("; the chamber is still ramping, so the die may lag" if unsettled
@@ -197,20 +200,24 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
     regmap = getattr(chamber, "regmap", None)
     limit = getattr(regmap, "max_ramp_c_per_min", None)
     rate = min(RAMP_CHECK_C_PER_MIN, limit) if limit else RAMP_CHECK_C_PER_MIN
+    # Optional roles: a controller without a static ramp steps (nothing to command), one
+    # without a working setpoint has nothing to time the ramp on.
+    ramps = regmap is None or regmap.ramp_field() is not None
+    timed = ramps and st0.working_setpoint_c is not None
     watch: tuple[list[tuple[float, float]], float] | None = None
-    if st0.running:
+    if st0.running and timed:
         await chamber.set_ramp_rate(rate)
     try:
         await chamber.set_setpoint(target)
         t0 = clock.now()
         first = await chamber.read_status()
         got = first.setpoint_c
-        if st0.running:
+        if st0.running and timed and first.working_setpoint_c is not None:
             watch = await _watch_wsp(chamber, clock, target, rate, t0,
                                      first.working_setpoint_c)
     finally:
         await chamber.set_setpoint(sp0)
-        if st0.running:
+        if st0.running and timed:
             await _restore_ramp(chamber, ramp0)
     back = (await chamber.read_status()).setpoint_c
     if abs(got - target) > SETPOINT_TOLERANCE_C or abs(back - sp0) > SETPOINT_TOLERANCE_C:
@@ -222,8 +229,16 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
     nudged = f"SP {sp0:.1f} → {target:.1f} → {back:.1f} °C"
     if watch is None:
         rec.add("chamber", "setpoint_nudge", "pass", nudged)
-        return rec.add("chamber", "ramp", "skip",
-                       "the chamber is stopped: the ramp is watched only while it runs")
+        file = map_file(regmap) if regmap is not None else "the map"
+        if not ramps:
+            why = (f"{file} lists ramp_c_per_min under absent_roles: the controller steps to "
+                   "each setpoint, there is no commanded ramp to time")
+        elif not timed:
+            why = (f"{file} has no working-setpoint register (absent_roles): the ramp cannot "
+                   "be timed here; a campaign judges arrival on the PV")
+        else:
+            why = "the chamber is stopped: the ramp is watched only while it runs"
+        return rec.add("chamber", "ramp", "skip", why)
     rec.add("chamber", "setpoint_nudge", "pass", nudged)
     samples, _ = watch
     return await _judge_ramp(rec, chamber, samples, target, rate)
@@ -238,7 +253,8 @@ async def _watch_wsp(chamber: Any, clock: Clock, target: float, rate: float, t0:
         if abs(samples[-1][1] - target) <= SETPOINT_TOLERANCE_C:
             break
         await clock.sleep(RAMP_POLL_S)
-        samples.append((clock.now(), (await chamber.read_status()).working_setpoint_c))
+        wsp = (await chamber.read_status()).working_setpoint_c
+        samples.append((clock.now(), samples[-1][1] if wsp is None else wsp))
     return samples, expected_s
 
 
@@ -259,7 +275,7 @@ async def _judge_ramp(rec: _Recorder, chamber: Any, samples: list[tuple[float, f
         return rec.add("chamber", "ramp", "pass", detail)
     regmap = chamber.regmap
     file = map_file(regmap)
-    f = regmap.ramp_c_per_min
+    f = regmap.ramp_field()
     if ratio < 0.1:
         info = await chamber.read_info_bits() if hasattr(chamber, "read_info_bits") else ()
         if "manual_mode" in info:
@@ -300,8 +316,11 @@ def _slower(ratio: float) -> str:
 
 
 async def _restore_ramp(chamber: Any, ramp0: float) -> None:
-    """The ramp as it was, even when it was above the map's limit (we did not set it)."""
+    """The ramp as it was, even when it was above the map's limit (we did not set it).
+    A rate that was never read (a sequence-written ramp before its first write) is left."""
+    if not math.isfinite(ramp0):
+        return
     try:
         await chamber.set_ramp_rate(ramp0)
     except ValueOutOfRange:
-        await chamber.link.write_field(chamber.regmap.ramp_c_per_min, ramp0)
+        await chamber.link.write_field(chamber.regmap.ramp_field(), ramp0)

@@ -65,6 +65,13 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--hold", action="append", default=[], metavar="REGISTER=VALUE",
                      help="a value the controller holds in a register of the map (instead of "
                           "what its [[checks]] expect), e.g. loop_mode=54; repeatable")
+    ctl.add_argument("--profile-owns-setpoint", default=None, metavar="REGISTER=VALUE",
+                     help="a profile runs and owns the setpoint (a Watlow F4): setpoint writes "
+                          "are not followed until REGISTER is written VALUE, e.g. "
+                          "terminate_profile=1")
+    ctl.add_argument("--single-writes-only", action="store_true",
+                     help="multiple-register writes (FC 16) are acknowledged but not executed "
+                          "(a CSZ EZT-430i)")
     p.add_argument("--duration-s", type=float, default=None,
                    help="stop after this many wall seconds (default: run until Ctrl-C)")
     return p
@@ -98,6 +105,19 @@ def run_sim(argv: list[str] | None = None) -> int:
                   f"{name!r}", file=sys.stderr)
             return 2
     args.holds = tuple(holds)
+    args.profile = None
+    if args.profile_owns_setpoint is not None:
+        name, _, value = args.profile_owns_setpoint.partition("=")
+        try:
+            args.profile = (name, float(value))
+        except ValueError:
+            print(f"soakcal sim: --profile-owns-setpoint {args.profile_owns_setpoint}: expected "
+                  "REGISTER=NUMBER", file=sys.stderr)
+            return 2
+        if name not in chamber_regs:
+            print(f"soakcal sim: --profile-owns-setpoint: map {args.chamber_map} names no "
+                  f"register {name!r}", file=sys.stderr)
+            return 2
     if args.decimals is not None and not 0 <= args.decimals <= 4:
         print(f"soakcal sim: --decimals {args.decimals}: expected 0…4", file=sys.stderr)
         return 2
@@ -154,7 +174,9 @@ async def _serve(args: argparse.Namespace) -> None:
     controller = ControllerSetup(decimals=args.decimals, units=args.units,
                                  ramp_per=args.ramp_per, swap_words=args.swap_words,
                                  silent=frozenset(args.silent), mode=args.mode,
-                                 holds=getattr(args, "holds", ()))
+                                 holds=getattr(args, "holds", ()),
+                                 profile_owns_setpoint=getattr(args, "profile", None),
+                                 single_writes_only=args.single_writes_only)
     async with start_sim_rig(clock, seed=args.seed, truth=args.truth,
                              chamber_map=args.chamber_map,
                              faults=faults, ports=args.port, host=args.host,
