@@ -14,6 +14,7 @@ from drivers.clock import RealClock, ScaledClock
 from drivers.registermaps import MapError, load_chamber_map, load_turntable_map, shipped_maps
 from simulators.chamber_sim import ControllerSetup
 from simulators.faults import SimFaults
+from simulators.pty_link import open_pty_link
 from simulators.rig import RigFaults, SimRig, start_sim_rig
 
 
@@ -72,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--single-writes-only", action="store_true",
                      help="multiple-register writes (FC 16) are acknowledged but not executed "
                           "(a CSZ EZT-430i)")
+    p.add_argument("--serial", action="store_true",
+                   help="also expose each simulated sensor bridge on a pseudo-terminal "
+                        "(/dev/pts/N) that a serial reader opens like a USB-serial port")
     p.add_argument("--duration-s", type=float, default=None,
                    help="stop after this many wall seconds (default: run until Ctrl-C)")
     return p
@@ -142,16 +146,19 @@ def run_sim(argv: list[str] | None = None) -> int:
     return 0
 
 
-def describe(rig: SimRig) -> str:
-    """How to reach each device (printed at start)."""
+def describe(rig: SimRig, ptys: list[str] | None = None) -> str:
+    """How to reach each device (printed at start); ``ptys``: the ``--serial`` ports."""
     c_host, c_port = rig.chamber_server.host, rig.chamber_server.port
     m = load_chamber_map(rig.chamber_map)
+    ports = [f"  sensor   serial {path}  (pseudo-terminal: open it as a serial port, any "
+             "baud rate; docs/sensor-bridge.md)" for path in ptys or []]
     return "\n".join([
         "soakcal simulated rig",
-        f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id=1 "
+        f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id={m.unit_id} "
         f"(PV holding reg {m.process_c.address}, SP {m.setpoint_c.address})",
         f"  table    modbus {rig.table_url}  map={rig.table_map}  axes={rig.table.n_axes}",
         f"  sensor   serial {rig.sensor_url}  (pyserial serial_for_url; docs/sensor-bridge.md)",
+        *ports,
         "  example:",
         "    python -c \"import asyncio; from pymodbus.client import AsyncModbusTcpClient as C\n"
         f"    async def m():\n      c = C('{c_host}', port={c_port}); await c.connect()\n"
@@ -182,9 +189,18 @@ async def _serve(args: argparse.Namespace) -> None:
                              faults=faults, ports=args.port, host=args.host,
                              die_tau_s=args.die_tau_s, table_map=args.table_map,
                              controller=controller) as rig:
-        print(describe(rig), flush=True)
-        stop = asyncio.Event()
-        if args.duration_s is not None:
-            asyncio.get_running_loop().call_later(args.duration_s, stop.set)
-        with contextlib.suppress(asyncio.CancelledError):
-            await stop.wait()
+        links = [await open_pty_link(rig.bridge_server.host, rig.bridge_server.port)
+                 ] if args.serial else []
+        try:
+            if links:
+                print(describe(rig, [link.path for link in links]), flush=True)
+            else:
+                print(describe(rig), flush=True)
+            stop = asyncio.Event()
+            if args.duration_s is not None:
+                asyncio.get_running_loop().call_later(args.duration_s, stop.set)
+            with contextlib.suppress(asyncio.CancelledError):
+                await stop.wait()
+        finally:
+            for link in links:
+                await link.close()
