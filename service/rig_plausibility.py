@@ -126,6 +126,17 @@ async def check_pv_against_die(rec: _Recorder, chamber: Any, dies_c: list[float]
     return rec.add("chamber", "pv_vs_die", "fail", f"{seen}: {cause}", fix)
 
 
+def _fc16_hint(regmap: Any) -> str:
+    """A written setpoint that reads back unchanged may be a write the controller
+    acknowledged and ignored: some accept only single-register writes (FC 6) outside
+    their program area (CSZ EZT-430i manual §4.9)."""
+    f = getattr(regmap, "setpoint_c", None)
+    if f is None or f.single_write or f.n_registers != 1 or f.table != "holding":
+        return ""
+    return (f"; or the controller ignores multi-register writes (FC 16): set "
+            f"`write = \"single\"` on register `setpoint_c` in {map_file(regmap)}")
+
+
 def _is_reading(value_c: float) -> bool:
     """A temperature a sensor can report: finite, and not a float's debris (1e-40 °C is
     what two swapped words of a float often decode to, not a temperature near 0 °C)."""
@@ -225,7 +236,7 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
                        f"wrote {target:.2f} °C, read {got:.2f} °C; restored {sp0:.2f} °C, "
                        f"read {back:.2f} °C",
                        "the setpoint register is read-only, remote setpoint is disabled, "
-                       "or the map's scale/word order is wrong")
+                       "or the map's scale/word order is wrong" + _fc16_hint(regmap))
     nudged = f"SP {sp0:.1f} → {target:.1f} → {back:.1f} °C"
     if watch is None:
         rec.add("chamber", "setpoint_nudge", "pass", nudged)

@@ -260,3 +260,30 @@ def test_soakcal_sim_refuses_a_profile_register_the_map_lacks(
     assert run_sim(["--chamber-map", "watlow-f4", "--profile-owns-setpoint",
                     "terminate_profile=yes", "--duration-s", "0"]) == 2
     assert "expected REGISTER=NUMBER" in capsys.readouterr().err
+
+
+async def test_an_fc16_setpoint_the_controller_ignores_names_single_writes(
+        tmp_path: Path) -> None:
+    path = tmp_path / "ezt-fc16.toml"
+    path.write_text((MAPS / "csz-ezt-430i.toml").read_text().replace(
+        'write = "single"', 'write = "multiple"'))
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path),
+                             controller=ControllerSetup(single_writes_only=True)) as sim:
+        checks = await check_rig(_config(sim, str(path)), move=True, clock=clock)
+    nudge = _by(checks, "setpoint_nudge")
+    assert nudge.status == "fail" and "wrote 23.50 °C, read 23.00 °C" in nudge.detail
+    assert 'set `write = "single"` on register `setpoint_c` in ezt-fc16.toml' in nudge.fix
+
+
+async def test_an_f4_left_running_a_profile_fails_its_check() -> None:
+    clock = VirtualClock()
+    setup = ControllerSetup(profile_owns_setpoint=("terminate_profile", 1),
+                            holds=(("profile_status", 2),))
+    async with start_sim_rig(clock, seed=4, chamber_map="watlow-f4", controller=setup) as sim:
+        checks = await check_rig(_config(sim, "watlow-f4"), move=True, clock=clock)
+        # The nudge went through the sequence: the profile is terminated, SP followed back.
+        assert sim.chamber.setpoint_c == pytest.approx(23.0)
+    profile = _by(checks, "register:profile_status")
+    assert profile.status == "fail" and "reads 2" in profile.detail
+    assert "terminate the profile" in profile.fix
