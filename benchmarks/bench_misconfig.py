@@ -102,6 +102,9 @@ def cases(tmp: Path) -> list[Case]:
         Case("EZT-430i whole degrees (×10)", ControllerSetup(decimals=0), "csz-ezt-430i",
              "×10"),
         Case("EZT-430i in °F", ControllerSetup(units="F"), "csz-ezt-430i", "°F"),
+        # No run register, no WSP, no ramp: nothing the check reads tells standby apart.
+        Case("EZT-430i in standby", ControllerSetup(mode="standby"), "csz-ezt-430i",
+             "standby"),
         Case("EZT-430i, map writes SP by FC 16", ControllerSetup(single_writes_only=True),
              "csz-ezt-430i", 'write = "single"', lab_map=_ezt_fc16_map(tmp)),
         Case("F4 as the map says (control)", ControllerSetup(), "watlow-f4", ""),

@@ -851,8 +851,13 @@ def describe_map(m: ChamberMap | TurntableMap) -> str:
     """One line naming what a map describes (``soakcal rig validate``)."""
     kind = "chamber" if isinstance(m, ChamberMap) else f"turntable, {m.n_axes} axes"
     what = f"{m.name} — {m.title}" if m.title else m.name
+    extra = ""
+    if isinstance(m, ChamberMap):  # what the drivers will do differently, said up front
+        extra += "".join(f", no {role}" for role in CHAMBER_ABSENT_OK if getattr(m, role) is None)
+        extra += "".join(f", sequence {name} of {len(steps)} writes"
+                         for name, steps in m.sequences.items())
     notes = f", {len(m.undocumented)} undocumented points listed" if m.undocumented else ""
-    return f"{what} ({kind}, {len(m.registers)} registers{notes})"
+    return f"{what} ({kind}, {len(m.registers)} registers{extra}{notes})"
 
 
 def bits_to_names(word: int, names: dict[int, str]) -> tuple[str, ...]:

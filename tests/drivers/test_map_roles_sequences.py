@@ -142,7 +142,10 @@ def test_rig_validate_accepts_the_new_keys_and_names_a_bad_one(
     from service.cli import main
 
     assert main(["rig", "validate", "watlow-f4"]) == 0
-    assert capsys.readouterr().out.startswith("OK: watlow-f4 — Watlow Series F4")
+    out = capsys.readouterr().out
+    assert out.startswith("OK: watlow-f4 — Watlow Series F4")
+    assert ("5 registers, no working_setpoint_c, no ramp_c_per_min, sequence set_setpoint "
+            "of 2 writes, 7 undocumented points listed)") in out
     bad = tmp_path / "f4.toml"
     bad.write_text((MAPS / "watlow-f4.toml").read_text().replace(
         'register = "terminate_profile"', 'register = "terminate"'))
@@ -287,3 +290,49 @@ async def test_an_f4_left_running_a_profile_fails_its_check() -> None:
     profile = _by(checks, "register:profile_status")
     assert profile.status == "fail" and "reads 2" in profile.detail
     assert "terminate the profile" in profile.fix
+
+
+class _RecordingLink:
+    """Records every write in order (what goes on the wire, by register address)."""
+
+    device = "chamber"
+
+    def __init__(self) -> None:
+        self.writes: list[tuple[int, float]] = []
+
+    async def write_field(self, f: Any, value: float) -> None:
+        f.encode(value)  # a value the register cannot hold fails here, as on the wire
+        self.writes.append((f.address, value))
+
+
+async def test_sequences_write_in_file_order_with_the_commanded_value(tmp_path: Path) -> None:
+    from drivers.chamber import ModbusChamber
+
+    m = _load(tmp_path, 'absent_roles = ["working_setpoint_c", "ramp_c_per_min"]\n' + BASE + """
+[registers.profile_rate]
+address = 10
+type = "uint16"
+scale = 10
+access = "rw"
+[[sequence.set_ramp_rate]]
+register = "trigger"
+value = 2
+[[sequence.set_ramp_rate]]
+register = "profile_rate"
+from = "ramp_c_per_min"
+[[sequence.set_setpoint]]
+register = "setpoint_c"
+from = "setpoint_c"
+[[sequence.set_setpoint]]
+register = "trigger"
+value = 5
+""")
+    link = _RecordingLink()
+    chamber = ModbusChamber(link, m)  # type: ignore[arg-type]
+    await chamber.set_ramp_rate(1.5)
+    await chamber.set_setpoint(-20.0)
+    assert link.writes == [(3, 2.0), (10, 1.5), (2, -20.0), (3, 5.0)]
+    # The rate's register holds tenths: 0.04 °C/min would be written as 0, refused first.
+    with pytest.raises(ValueOutOfRange, match="register 10: it would hold 0"):
+        await chamber.set_ramp_rate(0.04)
+    assert len(link.writes) == 4
