@@ -36,6 +36,15 @@ RAMP_POLL_S = 2.0
 RAMP_RATIO_OK = (0.5, 2.0)  # observed / commanded WSP rate accepted as "the same"
 RAMP_FACTOR_TOLERANCE = 0.2  # a ratio this close to ×10, ×0.1 or ×60 is blamed on the map
 SETPOINT_TOLERANCE_C = 0.051  # read-back of a written setpoint at 0.1 °C resolution
+#: Without a working setpoint the PV must follow the nudge PV_FOLLOW_C towards it, then
+#: come back PV_RETURN_C once the setpoint is restored (less: it can only come back as far as
+#: the old setpoint), each within PV_FOLLOW_MAX_S (the air's lag: minutes on a real chamber),
+#: from a chamber settled within PV_SETTLED_C: steps of 0.1 °C readings, far above a settled
+#: PV's noise.
+PV_FOLLOW_C = 0.3
+PV_RETURN_C = 0.2
+PV_FOLLOW_MAX_S = 240.0
+PV_SETTLED_C = 0.3
 #: Registers whose scale is the controller's decimal point, like the PV's.
 TEMPERATURE_REGISTERS = ("process_c", "setpoint_c", "working_setpoint_c", "ramp_c_per_min")
 
@@ -216,6 +225,11 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
     ramps = regmap is None or regmap.ramp_field() is not None
     timed = ramps and st0.working_setpoint_c is not None
     watch: tuple[list[tuple[float, float]], float] | None = None
+    # Nothing to time: the PV itself must follow the nudge there and back (a chamber in
+    # standby drifts one way, a profile-owned setpoint does not move it at all).
+    follow = st0.running and not timed and abs(st0.process_c - sp0) <= PV_SETTLED_C
+    legs: list[tuple[float, float]] = []
+    sign = 1.0 if target > sp0 else -1.0
     if st0.running and timed:
         await chamber.set_ramp_rate(rate)
     try:
@@ -226,10 +240,15 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
         if st0.running and timed and first.working_setpoint_c is not None:
             watch = await _watch_wsp(chamber, clock, target, rate, t0,
                                      first.working_setpoint_c)
+        if follow:
+            legs.append(await _watch_pv(chamber, clock, sign, first.process_c, PV_FOLLOW_C))
     finally:
         await chamber.set_setpoint(sp0)
         if st0.running and timed:
             await _restore_ramp(chamber, ramp0)
+    if legs and _moved(legs[0][0], PV_FOLLOW_C):
+        legs.append(await _watch_pv(chamber, clock, -sign,
+                                    (await chamber.read_status()).process_c, PV_RETURN_C))
     back = (await chamber.read_status()).setpoint_c
     if abs(got - target) > SETPOINT_TOLERANCE_C or abs(back - sp0) > SETPOINT_TOLERANCE_C:
         return rec.add("chamber", "setpoint_nudge", "fail",
@@ -249,10 +268,61 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
                    "be timed here; a campaign judges arrival on the PV")
         else:
             why = "the chamber is stopped: the ramp is watched only while it runs"
-        return rec.add("chamber", "ramp", "skip", why)
+        rec.add("chamber", "ramp", "skip", why)
+        if st0.running and not timed:
+            return _judge_follow(rec, legs, st0.process_c, sp0, target)
+        return True
     rec.add("chamber", "setpoint_nudge", "pass", nudged)
     samples, _ = watch
     return await _judge_ramp(rec, chamber, samples, target, rate)
+
+
+async def _watch_pv(chamber: Any, clock: Clock, sign: float, pv0: float,
+                    enough_c: float) -> tuple[float, float]:
+    """(°C the PV moved in direction ``sign`` from ``pv0``, seconds): polled until it
+    moved ``enough_c`` or :data:`PV_FOLLOW_MAX_S` passed."""
+    t0, moved = clock.now(), 0.0
+    while clock.now() - t0 < PV_FOLLOW_MAX_S:
+        await clock.sleep(RAMP_POLL_S)
+        moved = ((await chamber.read_status()).process_c - pv0) * sign
+        if _moved(moved, enough_c):
+            break
+    return moved, clock.now() - t0
+
+
+def _moved(moved_c: float, enough_c: float) -> bool:
+    """Moved far enough: readings of 0.1 °C resolution differ by 0.19999... for 0.2."""
+    return moved_c >= enough_c - 1e-6
+
+
+def _judge_follow(rec: _Recorder, legs: list[tuple[float, float]], pv0: float, sp0: float,
+                  target: float) -> bool:
+    """Without a working setpoint, the PV following the nudge there and back is the only
+    sign that the controller controls at the setpoint it was given."""
+    if not legs:
+        return rec.add("chamber", "pv_follows", "skip",
+                       f"the chamber is not settled (PV {pv0:.1f} °C, SP {sp0:.1f} °C): the PV "
+                       "is watched following the nudge only from a settled chamber",
+                       "rerun the check once the chamber has settled at its setpoint")
+    (up, t_up), *rest = legs
+    there = f"{target:.1f} °C"
+    if not _moved(up, PV_FOLLOW_C):
+        return rec.add("chamber", "pv_follows", "fail",
+                       f"the PV moved {up:+.2f} °C toward the nudged setpoint {there} in "
+                       f"{t_up:.0f} s (needed {PV_FOLLOW_C:g} °C): the controller does not "
+                       "follow the setpoint it was given",
+                       "check at the controller that it is controlling (not in standby or "
+                       "manual) and that no running program or profile owns its setpoint (a "
+                       "map may need a [[sequence.set_setpoint]], docs/registers.md)")
+    down, t_down = rest[0]
+    detail = (f"the PV moved {up:+.2f} °C toward {there} in {t_up:.0f} s, then "
+              f"{down:+.2f} °C back toward {sp0:.1f} °C in {t_down:.0f} s")
+    if not _moved(down, PV_RETURN_C):
+        return rec.add("chamber", "pv_follows", "fail",
+                       f"{detail} (needed {PV_RETURN_C:g} °C back): it went on one way, as a "
+                       "chamber drifting in standby does",
+                       "check at the controller that it is controlling (not in standby)")
+    return rec.add("chamber", "pv_follows", "pass", detail)
 
 
 async def _watch_wsp(chamber: Any, clock: Clock, target: float, rate: float, t0: float,

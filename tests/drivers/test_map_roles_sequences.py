@@ -226,6 +226,40 @@ async def test_rig_check_says_why_the_ramp_is_not_timed_without_those_roles() ->
     assert "csz-ezt-430i.toml lists ramp_c_per_min under absent_roles" in ramp.detail
     assert _by(checks, "setpoint_nudge").status == "pass"
     assert _by(checks, "pv_vs_die").status == "pass"
+    follows = _by(checks, "pv_follows")
+    assert follows.status == "pass" and "toward 23.5 °C" in follows.detail
+    assert "back toward 23.0 °C" in follows.detail
+
+
+@pytest.mark.parametrize(("start_c", "words"), [
+    (23.0, "the controller does not follow the setpoint it was given"),
+    # Drifting back to room temperature in standby: up with the nudge, never back.
+    (-20.0, "it went on one way, as a chamber drifting in standby does"),
+])
+async def test_an_ezt_in_standby_fails_pv_follows(start_c: float, words: str) -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="csz-ezt-430i", start_c=start_c,
+                             controller=ControllerSetup(mode="standby")) as sim:
+        sim.chamber.ambient_c = 23.0  # the room: a chamber left cold drifts up towards it
+        checks = await check_rig(_config(sim, "csz-ezt-430i"), move=True, clock=clock)
+    follows = _by(checks, "pv_follows")
+    assert follows.status == "fail" and words in follows.detail, follows
+    assert "standby" in follows.fix
+
+
+async def test_an_f4_profile_owning_the_setpoint_fails_pv_follows_without_the_sequence(
+        tmp_path: Path) -> None:
+    text = (MAPS / "watlow-f4.toml").read_text()
+    head, _, rest = text.partition("# Every setpoint change")
+    path = tmp_path / "f4.toml"
+    path.write_text(head + rest[rest.index("[registers.process_c]"):])
+    clock = VirtualClock()
+    # The profile status reads "constant" here, so only the PV can tell.
+    setup = ControllerSetup(profile_owns_setpoint=("terminate_profile", 1))
+    async with start_sim_rig(clock, seed=4, chamber_map=str(path), controller=setup) as sim:
+        checks = await check_rig(_config(sim, str(path)), move=True, clock=clock)
+    follows = _by(checks, "pv_follows")
+    assert follows.status == "fail" and "[[sequence.set_setpoint]]" in follows.fix
 
 
 async def test_rig_check_without_wsp_but_with_a_ramp_says_it_cannot_time_it(
