@@ -182,13 +182,16 @@ async def _likely_cause(chamber: Any, regmap: Any, pv: float,
                            f"`process_c`{also} in {file}, or set the controller's decimal "
                            "point to match the map"))
     if math.isfinite(pv):
+        # The other temperature registers this map has (a WSP may be absent).
+        others = " and ".join(n for n in ("setpoint_c", "working_setpoint_c")
+                              if getattr(regmap, n, None) is not None)
         candidates.append(((pv - 32.0) / 1.8, "the controller reads in °F",
                            f"set the controller's temperature units to °C, or map °F in {file}: "
                            f"register `process_c` `scale = {f.scale * 1.8:g}`, "
-                           f"`offset = -17.7778`, likewise setpoint_c and working_setpoint_c"))
+                           f"`offset = -17.7778`, likewise {others}"))
         candidates.append((pv - 273.15, "the controller reads in kelvin",
                            f"set the controller's units to °C, or give register `process_c` "
-                           f"(and setpoint_c, working_setpoint_c) `offset = -273.15` in {file}"))
+                           f"(and {others}) `offset = -273.15` in {file}"))
     if f.n_registers == 2:
         other = "low_first" if f.word_order == "high_first" else "high_first"
         swapped = replace(f, word_order=other).decode(words)

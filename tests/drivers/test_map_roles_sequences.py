@@ -370,3 +370,14 @@ value = 5
     with pytest.raises(ValueOutOfRange, match="register 10: it would hold 0"):
         await chamber.set_ramp_rate(0.04)
     assert len(link.writes) == 4
+
+
+async def test_a_fahrenheit_ezt_is_named_with_only_the_registers_it_has() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, chamber_map="csz-ezt-430i",
+                             controller=ControllerSetup(units="F")) as sim:
+        checks = await check_rig(_config(sim, "csz-ezt-430i"), move=True, clock=clock)
+    die = _by(checks, "pv_vs_die")
+    assert die.status == "fail" and "the controller reads in °F" in die.detail
+    assert "`offset = -17.7778`, likewise setpoint_c" in die.fix
+    assert "working_setpoint_c" not in die.fix
