@@ -34,6 +34,8 @@ order. Devices without a Modbus link (the sensor bridge, a hand-placed table,
 test fakes) are fenced per command only. The devices carry no fencing token
 themselves (a register map has no place for one), so what stays uncovered is a
 stall between a write's last clock reading and its bytes leaving the socket.
+
+The rows have their fence too: :func:`service.engine.store.fenced_sessions`.
 """
 
 from __future__ import annotations

@@ -103,7 +103,7 @@ class CampaignRunner:
         on_step: StepReporter | None = None,
         fence: store.Fence | None = None,
     ) -> None:
-        self.sf = session_factory
+        self.sf = store.fenced_sessions(session_factory, fence, campaign_id)  # fenced writes
         self.id = campaign_id
         # Fenced: every command that changes the rig first confirms the lease (fencing.py).
         self.dev = devices if fence is None else fence_devices(devices, self._confirm_lease)
