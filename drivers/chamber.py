@@ -163,3 +163,21 @@ class ModbusChamber:
         for f, value in self.regmap.setup:
             await self.link.write_field(f, value)
         self._setup_done = True
+
+    async def park(self, setpoint_c: float | None = None) -> str:
+        """The chamber's safe state (:meth:`drivers.protocols.Chamber.park`): the setpoint
+        to ``setpoint_c`` or the map's ``[safe] setpoint_c``, then, where the map says
+        ``[safe] stop = true``, the controller stopped. A target beyond the chamber's
+        range goes to the range's edge (the park must not be refused) and the report
+        says so."""
+        asked_c = self.safe_setpoint_c if setpoint_c is None else float(setpoint_c)
+        lo_c, hi_c = self.range_c
+        target_c = min(max(asked_c, lo_c), hi_c)
+        await self.set_setpoint(target_c)
+        done = f"setpoint {target_c:g} °C"
+        if target_c != asked_c:
+            done += f" (the range's edge; {asked_c:g} °C asked)"
+        if self.stop_when_safe:
+            await self.stop()
+            done += ", controller stopped"
+        return done

@@ -81,3 +81,9 @@ class ManualTurntable:
 
     async def stop(self) -> None:
         """Nothing moves; the open request stays open."""
+
+    async def park(self) -> str:
+        """Nothing to move: the table is a person, and the sensor stays where the operator
+        last placed it. No request is published (a campaign that ended cannot have a
+        placement confirmed, so a last "home" request would only wait for ever)."""
+        return "nothing to move (hand-placed fixture: the sensor stays where it was placed)"

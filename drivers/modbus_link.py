@@ -103,6 +103,10 @@ class ModbusLink:
         self._lock = asyncio.Lock()
         self._was_connected = False
         self.stats = {"requests": 0, "retries": 0, "reconnects": 0}
+        # Called with a label ("chamber write of register 300") right before every write
+        # request goes out, each try included; whatever it raises stops the write unsent.
+        # The campaign engine's device fence sets it (the rig lease is confirmed per write).
+        self.before_write: Callable[[str], None] | None = None
 
     # --- public -----------------------------------------------------------
     async def read_field(self, f: Field) -> float:
@@ -191,6 +195,8 @@ class ModbusLink:
                 cancels = task.cancelling() if task is not None else 0
                 try:
                     client = await self._connected()
+                    if what == "write" and self.before_write is not None:
+                        self.before_write(f"{self.device} write of register {address}")
                     self.stats["requests"] += 1
                     rr = await call(client)
                     if task is not None and task.cancelling() > cancels:

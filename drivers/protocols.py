@@ -42,6 +42,16 @@ class Chamber(Protocol):
         """Allowed setpoint range of this chamber, °C."""
         ...
 
+    async def park(self, setpoint_c: float | None = None) -> str:
+        """Leave the chamber in its own safe state (its teardown at a campaign's end).
+
+        The setpoint goes to ``setpoint_c`` when given (a campaign's override), else to
+        the device's own safe setpoint (a register map's ``[safe] setpoint_c``); where the
+        device says so (``[safe] stop``) the controller is then stopped. Returns what was
+        done, in words, for the park report a person reads.
+        """
+        ...
+
 
 @dataclass(frozen=True)
 class TurntableStatus:
@@ -63,6 +73,14 @@ class Turntable(Protocol):
     async def read_status(self) -> TurntableStatus: ...
 
     async def stop(self) -> None: ...
+
+    async def park(self) -> str:
+        """Leave the table in its own safe state: stopped, then sent to its rest angles (a
+        register map's ``[safe] angles_deg``, else home); returns once the move is
+        accepted, not when arrived. A table with nothing to move says so. Returns what
+        was done, in words, for the park report a person reads.
+        """
+        ...
 
 
 @dataclass(frozen=True)

@@ -76,3 +76,11 @@ class ModbusTurntable:
     async def close(self) -> None:
         """Release the connection (does not stop the table)."""
         await self.link.close()
+
+    async def park(self) -> str:
+        """The table's safe state (:meth:`drivers.protocols.Turntable.park`): stopped, then
+        sent to the map's ``[safe] angles_deg`` (home when the map has none)."""
+        await self.stop()
+        rest = self.safe_angles_deg
+        await self.move_to(rest)
+        return "stopped, sent to (" + ", ".join(f"{a:g}" for a in rest) + ")°"

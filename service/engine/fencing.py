@@ -15,19 +15,34 @@ configuration) first confirms the lease with ``confirm()``; a lease lost, or
 one that cannot be confirmed (the database does not answer), raises
 :class:`service.engine.store.LeaseLost` and the command is not sent. Reads
 (status, acquisitions, identity) pass through unchecked: they change nothing.
+A device's ``park`` (service/engine/park.py) is such a command, so a process
+without the lease parks nothing.
 
 The confirmation returns when the lease ends, and the wall clock is read again
 once the database has answered: a process stopped after the answer resumes past
-that end and sends nothing. The devices carry no fencing token themselves (a
-Modbus register map has no place for one), so a stall that falls after that
-last clock reading and before the command's bytes leave (inside the driver's
-call; a table move is two writes, targets then command) is not covered.
+that end and sends nothing.
+
+A command is often several writes (a table move is the targets, then the move
+command; a park is a setpoint, a stop, a move). A stall between two of them
+would leave the rest unfenced, so the fence is also put at the link level: a
+Modbus device's :class:`drivers.modbus_link.ModbusLink` confirms the lease
+before *every write request* it sends, each retry included (``before_write``).
+One request per command was the other way, and it does not work in general: the
+shipped table map keeps its targets (200–205) and its command (210) apart, and
+Modbus does not promise that a device applies one multi-register write in address
+order. Devices without a Modbus link (the sensor bridge, a hand-placed table,
+test fakes) are fenced per command only. The devices carry no fencing token
+themselves (a register map has no place for one), so what stays uncovered is a
+stall between a write's last clock reading and its bytes leaving the socket.
+
+The rows have their fence too: :func:`service.engine.store.fenced_sessions`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import functools
 import logging
 from collections.abc import Callable
 from typing import Any
@@ -41,8 +56,8 @@ log = logging.getLogger(__name__)
 ConfirmLease = Callable[[], dt.datetime | None]
 
 # The commands of each device protocol (drivers/protocols.py) that change the rig.
-CHAMBER_COMMANDS = frozenset({"set_setpoint", "set_ramp_rate", "run", "stop"})
-TURNTABLE_COMMANDS = frozenset({"move_to", "stop", "home"})
+CHAMBER_COMMANDS = frozenset({"set_setpoint", "set_ramp_rate", "run", "stop", "park"})
+TURNTABLE_COMMANDS = frozenset({"move_to", "stop", "home", "park"})
 SENSOR_COMMANDS = frozenset({"configure"})
 
 
@@ -85,9 +100,16 @@ def _confirm(confirm: ConfirmLease, command: str) -> None:
 
 
 def fence_devices(devices: RigDevices, confirm: ConfirmLease) -> RigDevices:
-    """``devices`` with every rig-changing command behind ``confirm()`` (see the module doc)."""
+    """``devices`` with every rig-changing command behind ``confirm()``, and every write
+    request of a Modbus device's link too (see the module doc; the links are the
+    devices' own, so this sets their ``before_write`` for as long as they live)."""
     def wrap(dev: Any, name: str, commands: frozenset[str]) -> Any:
-        return None if dev is None else FencedDevice(dev, name, commands, confirm)
+        if dev is None:
+            return None
+        link = getattr(dev, "link", None)
+        if hasattr(link, "before_write"):
+            link.before_write = functools.partial(_confirm, confirm)
+        return FencedDevice(dev, name, commands, confirm)
 
     return dataclasses.replace(
         devices,

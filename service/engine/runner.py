@@ -17,7 +17,6 @@ safe points (every soak poll, every position), not per-phase code.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import dataclasses
 import datetime as dt
 import functools
@@ -42,7 +41,6 @@ from calibration.campaign_plan import (
     campaign_plan,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
-from calibration.thermal_plant import AMBIENT_C
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import soak_rate, stability, store
@@ -63,6 +61,7 @@ from service.engine.multi import (
     sensor_call,
     slowest_decision,
 )
+from service.engine.park import PARKED_DEVICES, park_rig, parked
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
 from service.engine.rigs import RigDevices
@@ -84,9 +83,8 @@ HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 MIN_SOAK_POLL_S = 15.0
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
-SAFE_ATTEMPTS = 3  # tries per safe-state command
 POSE_ATTEMPTS = 3  # captures of one position off its pose before the campaign fails
-SAFE_COMMANDS = ("chamber.set_setpoint", "turntable.stop", "turntable.move_to")  # the park
+SAFE_COMMANDS = PARKED_DEVICES  # the park report's keys (park.py)
 LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)
 
@@ -105,7 +103,7 @@ class CampaignRunner:
         on_step: StepReporter | None = None,
         fence: store.Fence | None = None,
     ) -> None:
-        self.sf = session_factory
+        self.sf = store.fenced_sessions(session_factory, fence, campaign_id)  # fenced writes
         self.id = campaign_id
         # Fenced: every command that changes the rig first confirms the lease (fencing.py).
         self.dev = devices if fence is None else fence_devices(devices, self._confirm_lease)
@@ -1003,8 +1001,8 @@ class CampaignRunner:
         itself would leave the table where it stood (seen: 90° off home). So the
         park runs as its own task behind :func:`asyncio.shield`; a cancel that
         arrives meanwhile is absorbed and returned, to be raised once the rig is
-        safe. Every safe-state command is bounded (its tries and back-off), so
-        this cannot wait for ever.
+        safe. Every device's park is bounded (a timeout per try, a few tries:
+        park.py), so this cannot wait for ever.
         """
         park = asyncio.ensure_future(self._drive_safe())
         late: asyncio.CancelledError | None = None
@@ -1021,55 +1019,22 @@ class CampaignRunner:
                     task.uncancel()
 
     async def _drive_safe(self) -> None:
-        """The rig's safe state: chamber at the safe temperature, table stopped and home.
+        """The rig's safe state: each device parks itself (service/engine/park.py).
 
         The one place every exit of :meth:`run` ends. Not through the guard (a
-        pending abort or a suspension must not stop it): each command gets a few
-        tries with back-off on the clock, then the next command is tried anyway;
-        whatever failed is logged and kept in ``self.safe_report``.
+        pending abort or a suspension must not stop it): each device's park has
+        its own timeout and a few tries, and one device's failure never skips
+        another's. A campaign's ``safe_c`` overrides the chamber's own safe
+        setpoint. The outcome per device is kept in ``self.safe_report``; what
+        did not park is logged. On a fenced runner a lost lease parks nothing
+        (``not sent: lease lost``): every park is a fenced command.
         """
-        spec = getattr(self, "spec", None)
-        ch, tt = self.dev.chamber, self.dev.turntable
-        # The devices own their safe state (the map's [safe]); a campaign may set safe_c.
-        safe_c = getattr(spec, "safe_c", None)  # spec None: not parsed yet
-        if safe_c is None:
-            safe_c = float(getattr(ch, "safe_setpoint_c", AMBIENT_C))
-        with contextlib.suppress(Exception):  # keep the target inside the chamber's range
-            lo_c, hi_c = ch.range_c
-            safe_c = min(max(safe_c, lo_c), hi_c)
-        home = tuple(getattr(tt, "safe_angles_deg", ())) or tuple(0.0 for _ in range(tt.n_axes))
-        commands: dict[str, Callable[[], Awaitable[Any]]] = {
-            "chamber.set_setpoint": lambda: ch.set_setpoint(safe_c)}
-        if getattr(ch, "stop_when_safe", False) is True:  # the map's [safe] stop
-            commands["chamber.stop"] = ch.stop
-        commands.update({"turntable.stop": tt.stop,
-                         "turntable.move_to": lambda: tt.move_to(home)})
-        self.safe_report = {}
-        for name, fn in commands.items():
-            try:
-                self.safe_report[name] = await self._try_safe(fn)
-            except store.LeaseLost as exc:
-                # Lost while parking (a fenced runner): the rest is the new holder's to do.
-                log.error("campaign %s: park stopped, %s", self.id, exc)
-                self.safe_report.update({n: LEASE_LOST_REPORT for n in commands
-                                         if n not in self.safe_report})
-                return
-
-    async def _try_safe(self, fn: Callable[[], Awaitable[Any]]) -> str:
-        delay_s = 1.0
-        last = ""
-        for _ in range(SAFE_ATTEMPTS):
-            try:
-                await fn()
-                return "ok"
-            except (asyncio.CancelledError, store.LeaseLost):
-                raise
-            except Exception as exc:  # noqa: BLE001 - any failure: log, retry, move on
-                last = f"{type(exc).__name__}: {exc}"
-                await self.clock.sleep(delay_s)
-                delay_s *= 2.0
-        log.error("campaign %s: safe state not reached: %s", self.id, last)
-        return last
+        spec = getattr(self, "spec", None)  # None: the spec was not parsed
+        self.safe_report = await park_rig(self.dev, self.clock,
+                                          safe_c=getattr(spec, "safe_c", None))
+        for device, outcome in self.safe_report.items():
+            if not parked(outcome):
+                log.error("campaign %s: %s not parked: %s", self.id, device, outcome)
 
     # --- control: pause / resume / abort --------------------------------------------
     async def _checkpoint(self) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -24,6 +25,7 @@ from service.engine.states import TERMINAL, TRANSITIONS
 from service.event_log import log_event
 
 SessionFactory = sessionmaker[Session]
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,10 @@ def transition(
     Reads the current state, then a conditional UPDATE on it (:func:`cas_transition`),
     so a concurrent writer (the API, another process) is never overwritten:
     returns False when the table forbids the move or the state changed under us.
-    Already in ``to_state`` counts as done (True).
+    Already in ``to_state`` counts as done (True). Through :func:`fenced_sessions`, a
+    process whose lease is lost writes nothing and gets False too (the state is the
+    holder's to decide): never an exception that a caller could take for a failure of
+    the campaign and write down unfenced.
     """
     with sf() as s:
         current = s.execute(select(Campaign.state).where(Campaign.id == campaign_id)).scalar_one()
@@ -92,7 +97,12 @@ def transition(
         values: dict[str, Any] = dict(fields)
         if clear_action:
             values["requested_action"] = None
-        ok = cas_transition(s, campaign_id, current, to_state, **values)
+        try:
+            ok = cas_transition(s, campaign_id, current, to_state, **values)
+        except LeaseLost as exc:
+            _log.error("campaign %s: %s → %s not written: %s", campaign_id, current,
+                       to_state, exc)
+            return False
         s.commit()
     if ok:
         _log_transition(campaign_id, current, to_state, fields.get("error"))
@@ -242,6 +252,11 @@ def confirm_lease(sf: SessionFactory, fence: Fence, campaign_id: int) -> dt.date
     return as_utc(until) or until
 
 
+# Session.info keys: the transaction whose lease is confirmed; a confirmation under way.
+_FENCED_TRANSACTION = "soakcal.fenced_transaction"
+_CONFIRMING = "soakcal.confirming_lease"
+
+
 def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
     """Inside the caller's transaction: this process still holds a live lease on the rig.
 
@@ -250,15 +265,68 @@ def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
     transaction and then sees the lease as it is after it. The wait is bounded on
     both sides (:func:`bound_lease_locks`).
     """
-    bound_lease_locks(s, fenced=True)
-    res = s.execute(
-        update(RigLease)
-        .where(RigLease.rig == fence.rig, RigLease.owner == fence.owner,
-               RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
-        .values(owner=fence.owner)
-    )
+    s.info[_CONFIRMING] = True  # the check's own UPDATE asks for no check (fenced_sessions)
+    try:
+        bound_lease_locks(s, fenced=True)
+        res = s.execute(
+            update(RigLease)
+            .where(RigLease.rig == fence.rig, RigLease.owner == fence.owner,
+                   RigLease.campaign_id == campaign_id, RigLease.lease_until > utcnow())
+            .values(owner=fence.owner)
+        )
+    finally:
+        s.info.pop(_CONFIRMING, None)
     if res.rowcount != 1:
         raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
+    s.info[_FENCED_TRANSACTION] = s.get_transaction()  # begun by now: the UPDATE ran in it
+
+
+def fenced_sessions(sf: SessionFactory, fence: Fence | None,
+                    campaign_id: int) -> SessionFactory:
+    """``sf``'s sessions, with every transaction that writes confirming the lease in itself.
+
+    The runner's writes for a campaign (progress, cursor, soak probes, step log,
+    dropped sensors, suspensions, state changes, calibrations) go through plain
+    :func:`update_campaign`-like functions. Given this factory, each transaction
+    that is about to write first runs :func:`_check_fence` in the same transaction
+    (once per transaction): an ORM INSERT/UPDATE/DELETE statement
+    (``do_orm_execute``) or a flush with pending objects (``before_flush``). A process
+    whose lease is lost or cannot be confirmed (a lock wait that timed out, a session
+    the server ended) gets :class:`LeaseLost` and the transaction writes nothing.
+    Reads pay nothing: a SELECT and a flush with nothing pending are not checked, and
+    :func:`read_control` / :func:`confirm_lease` use a bare connection. Plain-text
+    SQL (``text()``) is not recognised as a write; the store writes none.
+    ``fence`` None: ``sf`` itself (an unfenced runner: tests, the demo).
+    """
+    if fence is None:
+        return sf
+    from sqlalchemy import event
+
+    fenced: SessionFactory = sessionmaker(class_=sf.class_, **sf.kw)
+
+    def confirm(s: Session) -> None:
+        if s.info.get(_CONFIRMING):
+            return  # the check's own UPDATE
+        tx = s.get_transaction()  # None: not begun (the write about to run begins it)
+        if tx is not None and s.info.get(_FENCED_TRANSACTION) is tx:
+            return  # confirmed in this transaction already (its row lock holds to the commit)
+        try:
+            _check_fence(s, fence, campaign_id)
+        except DBAPIError as exc:
+            raise LeaseLost(f"rig {fence.rig!r}: lease not confirmed "
+                            f"({type(exc).__name__}: {str(exc).splitlines()[0]})") from exc
+
+    @event.listens_for(fenced, "do_orm_execute")
+    def _before_write(state: Any) -> None:
+        if state.is_insert or state.is_update or state.is_delete:
+            confirm(state.session)
+
+    @event.listens_for(fenced, "before_flush")
+    def _before_flush(s: Session, _context: Any, _instances: Any) -> None:
+        if s.new or s.dirty or s.deleted:
+            confirm(s)
+
+    return fenced
 
 
 def commit_measurement(

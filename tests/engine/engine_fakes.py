@@ -114,6 +114,12 @@ class FakeChamber:
         self._io()
         self.ph.running = False
 
+    async def park(self, setpoint_c: float | None = None) -> str:
+        """The shipped maps' safe state: 23 °C, the controller left running."""
+        target_c = 23.0 if setpoint_c is None else setpoint_c
+        await self.set_setpoint(target_c)
+        return f"setpoint {target_c:g} °C"
+
 
 class FakeTurntable:
     SLEW_S = 4.0
@@ -148,6 +154,11 @@ class FakeTurntable:
     async def stop(self) -> None:
         self.stops += 1
         self.arrive_s = min(self.arrive_s, self.clock.now())
+
+    async def park(self) -> str:
+        await self.stop()
+        await self.move_to((0.0, 0.0))
+        return "stopped, sent to (0, 0)°"
 
 
 def angles_for(ref: np.ndarray) -> tuple[float, float]:

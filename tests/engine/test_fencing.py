@@ -105,8 +105,8 @@ async def test_a_fenced_runner_that_keeps_its_lease_parks_as_always(sf) -> None:
     assert await asyncio.wait_for(runner.run(), 30) == "completed"
     assert sent[-3:] == ["chamber.set_setpoint", "turntable.stop", "turntable.move_to"]
     assert rig.physics.setpoint_c == 23.0 and rig.turntable.angles == (0.0, 0.0)
-    assert runner.safe_report == dict.fromkeys(
-        ("chamber.set_setpoint", "turntable.stop", "turntable.move_to"), "ok")
+    assert runner.safe_report == {"chamber": "ok: setpoint 23 °C",
+                                  "turntable": "ok: stopped, sent to (0, 0)°"}
 
 
 async def test_a_lease_that_cannot_be_confirmed_sends_nothing() -> None:

@@ -93,7 +93,7 @@ async def _operator(client: httpx.AsyncClient, headers: dict[str, str], clock: V
                                   json={"position": req["position"]})
             if r.status_code == 200:
                 confirmed.append(req)
-            else:  # only once the campaign ended (the safe state asks for home)
+            else:  # only once the campaign ended between the read and the confirmation
                 assert r.status_code == 409, r.text
         await clock.sleep(5.0)
 

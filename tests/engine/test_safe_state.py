@@ -132,8 +132,8 @@ async def test_a_map_whose_safe_state_says_stop_gets_its_chamber_stopped(
                                                "map": str(stopping)}}, clock) as devices:
         runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
         assert await asyncio.wait_for(runner.run(), 60) == "completed"
-        assert list(runner.safe_report) == ["chamber.set_setpoint", "chamber.stop",
-                                            "turntable.stop", "turntable.move_to"]
+        assert runner.safe_report == {"chamber": "ok: setpoint 23 °C, controller stopped",
+                                      "turntable": "ok: stopped, sent to (0, 0, 0)°"}
         chamber, table, sensor = await connect_rig(sim, clock)
         try:
             status = await chamber.read_status()
