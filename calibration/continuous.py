@@ -157,6 +157,9 @@ def fit_continuous(
 ) -> ThermalFit:
     """Fit the continuous-temperature SFEM to a ramp (or mixed) recording (module docstring).
 
+    The continuous solver behind :func:`calibration.fitting.fit`: to calibrate a
+    recording, call that.
+
     ``orientation``: each row's distinct orientation as the gate clustered them
     (:func:`calibration.gate.distinct_orientations`' labels); None: clustered here.
 

@@ -228,6 +228,9 @@ def fit_campaign(
 ) -> ThermalFit:
     """Fit SFEM at each step and the cubic thermal model (Eq. 1, 4–8) to a recording.
 
+    The step solver behind :func:`calibration.fitting.fit` (which decides, through the
+    gate, that the recording has steps): to calibrate a recording, call that.
+
     ``g_local`` (units of standard gravity; :mod:`calibration.gravity`): the
     reference directions are scaled to it (reference mode) or |g| is fitted to
     it (norm mode). None: the references' median magnitude, or 1.0.
