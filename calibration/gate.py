@@ -418,7 +418,6 @@ def cannot_judge(recording: Recording) -> str | None:
     """
     from calibration.captures import capture_means
     from calibration.plateaus import segment_recording
-    from calibration.warmup import fit_warmup  # warmup imports this module
 
     captures = capture_means(recording).recording
     ori = distinct_orientations(captures.raw_g, captures.sigma_g)
@@ -426,7 +425,9 @@ def cannot_judge(recording: Recording) -> str | None:
         decided = plan(captures, orientations=ori,
                        continuous=segment_recording(captures, ori.labels).is_continuous)
         if decided.kind == "warmup":  # calibrate's refusal of the warm-up, if it refuses
-            check_model(fit_warmup(captures, decided.orientations).model, captures)
+            from calibration.fitting import fit  # fitting imports this module
+
+            fit(recording)
     except GateRefusal as exc:
         return str(exc)
     if decided.kind == "continuous":
