@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from calibration.fitting import CalibrationFit
 
 
 @dataclass(frozen=True)
@@ -30,7 +33,7 @@ class CalibrationRow:
     model: dict[str, Any]
     report: dict[str, Any]
     provenance: dict[str, Any]
-    fit: Any = None
+    fit: CalibrationFit | None = None
 
     def columns(self) -> dict[str, Any]:
         """The stored columns of the ``calibrations`` table."""
