@@ -115,7 +115,7 @@ def real_model() -> tuple[Any, dict[str, Any], float]:
     recording = simulate_campaign(SensorTruth.adxl355_typical(seed=1), seed=1)
     columns = {k: [float(v) for v in col] for k, col in recording.columns.items()}
     values = calibrate_columns(columns, {"recording": "bench-campaign.csv"})
-    return load_model_dict(values["model"]), values["report"], float(values["rmse_ug"])
+    return load_model_dict(values.model), values.report, float(values.rmse_ug)
 
 
 def model_variants(model: Any, n: int, rng: np.random.Generator) -> Iterator[Any]:

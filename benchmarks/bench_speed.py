@@ -37,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from benchmarks.batch_fit import fit_reference_batch  # noqa: E402
 from calibration import fit, schedules, sfem  # noqa: E402
 from simulators.campaign_sim import simulate_campaign, simulate_static_run  # noqa: E402
 from simulators.truth import SensorTruth  # noqa: E402
@@ -89,7 +90,7 @@ def _chunk_job(job: tuple[str, int, int]) -> tuple[float, np.ndarray]:
     raw, ref, sig = make_problems(k, seed)
     t0 = time.perf_counter()
     if kind == "batch":
-        P = fit.fit_reference_batch(raw, ref, sig).params
+        P = fit_reference_batch(raw, ref, sig).params
     elif kind == "single":
         P = np.array([fit.fit_reference(raw[i], ref[i], sig[i]).params.to_vector()
                       for i in range(k)])
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         raw, ref, sig = rec.raw_g, rec.ref_g, rec.sigma_g
         ours = best_time(lambda: fit.fit_reference(raw, ref, sig), reps)  # noqa: B023
         base = best_time(lambda: plain_scipy_fit(raw, ref, sig), max(reps // 5, 1))  # noqa: B023
-        batch = best_time(lambda: fit.fit_reference_batch(raw[None], ref[None], sig[None]), reps)  # noqa: B023
+        batch = best_time(lambda: fit_reference_batch(raw[None], ref[None], sig[None]), reps)  # noqa: B023
         rows.append((label, f"{ours * 1e3:.2f} ms", f"{base * 1e3:.1f} ms",
                      f"{base / ours:.0f}x  (batch path, K=1: {batch * 1e3:.2f} ms)"))
 
@@ -180,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # Agreement: batch vs single vs scipy on the same problems.
     raw, ref, sig = make_problems(200, 7)
-    Pb = fit.fit_reference_batch(raw, ref, sig).params
+    Pb = fit_reference_batch(raw, ref, sig).params
     Ps = np.array([fit.fit_reference(raw[i], ref[i], sig[i]).params.to_vector()
                    for i in range(200)])
     Pq = np.array([plain_scipy_fit(raw[i], ref[i], sig[i]) for i in range(200)])

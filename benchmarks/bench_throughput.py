@@ -48,6 +48,7 @@ import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -65,7 +66,7 @@ from drivers.clock import VirtualClock  # noqa: E402
 from service.db.session import make_session_factory, upgrade_database  # noqa: E402
 from service.demo import SETPOINTS_C, _create_campaign, demo_spec  # noqa: E402
 from service.engine import store  # noqa: E402
-from service.engine.calibrate import calibrate_columns  # noqa: E402
+from service.engine.calibrate import CalibrationRow, calibrate_columns  # noqa: E402
 from service.engine.rigs import open_rig  # noqa: E402
 from service.engine.runner import CampaignRunner  # noqa: E402
 
@@ -117,9 +118,9 @@ async def run_several(spec: dict[str, Any], db_dir: Path, truths: dict[str, Any]
     fits: dict[str, Any] = {}
     k_hats: dict[str, tuple[list[float], list[float]]] = {}
 
-    def calibrate(cols: Any, provenance: dict[str, Any]) -> dict[str, Any]:
+    def calibrate(cols: Any, provenance: dict[str, Any]) -> CalibrationRow:
         values = calibrate_columns(cols, provenance)
-        fits[str(provenance["sensor"])] = values.get("_fit")  # the runner keeps the first only
+        fits[str(provenance["sensor"])] = SimpleNamespace(model=values.fit.model)
         est = provenance.get("rate_gain_estimate")  # rate_gain measured: the campaign's k̂
         if est:
             k_hats[str(provenance["sensor"])] = (est["gain_ug_per_c_per_min"],

@@ -17,21 +17,19 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration import gate
-from calibration.captures import Captures, capture_means, capture_temperature_c
-from calibration.continuous import METHOD as CONTINUOUS
-from calibration.continuous import fit_continuous
+from calibration import fitting, gate
+from calibration.captures import capture_means, capture_temperature_c
 from calibration.errors import CalibrationError, RecordingError
-from calibration.gravity import NOT_IDENTIFIABLE_NOTE, GravityError, LocalGravity, from_arguments
+from calibration.fitting import CalibrationFit, FitOptions, OptionNotApplicable
+from calibration.gravity import GravityError, LocalGravity, from_arguments
 from calibration.model_file import load_model_file, save_model
-from calibration.plateaus import segment_recording
 from calibration.recording import Recording, atomic_write_text, read_recording
 from calibration.temperature_conditioning import (
     CompensationConditioning,
     compensation_temperature,
     smooth_over_time,
 )
-from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalFit, ThermalModel, fit_campaign
+from calibration.thermal import DEFAULT_METHOD, METHODS, ThermalModel
 
 OUTPUT_COLUMNS = ("cx", "cy", "cz")
 EXIT_OK = 0
@@ -39,7 +37,7 @@ EXIT_BAD_INPUT = 2
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    """Fit the SFEM-cubic model to ``args.recording`` and write ``args.output``."""
+    """Calibrate ``args.recording`` (:func:`calibration.fitting.fit`) and write ``args.output``."""
     method = getattr(args, "method", None) or DEFAULT_METHOD
     if method not in METHODS:
         return _fail(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
@@ -51,46 +49,28 @@ def run_calibrate(args: argparse.Namespace) -> int:
         rate_gain = _rate_gain(getattr(args, "rate_gain_ug_per_c_per_min", None))
     except ValueError as exc:
         return _fail(f"--rate-gain-ug-per-c-per-min: {exc}")
+    options = FitOptions(method=getattr(args, "method", None), gravity=gravity,
+                         rate_gain_ug_per_c_per_min=rate_gain)
     try:
         rec = read_recording(args.recording)
-        caps = capture_means(rec)
-        seg = segment_recording(caps.recording)  # steps only where the die stood still
-        decided = gate.plan(caps.recording, continuous=seg.is_continuous)
-        if decided.kind == "warmup":
-            return _calibrate_warmup(args, rec, caps, decided)
-        if decided.kind == "continuous":
-            fit = fit_continuous(caps.recording, seg,
-                                 g_local=None if gravity is None else gravity.g,
-                                 rate_gain_ug_per_c_per_min=rate_gain)
-            gate.check_model(fit.model, caps.recording, fit.row_temperature_c)
-            if getattr(args, "method", None):
-                note = (f"--method {method} applies to step fits; this recording has rows "
-                        "on no plateau and was fitted continuously")
-                fit.notes.append(note)
-                fit.report["notes"].append(note)
-        else:
-            fit = fit_campaign(caps.recording, method=method,  # gated inside
-                               g_local=None if gravity is None else gravity.g,
-                               rate_gain_ug_per_c_per_min=rate_gain)
+        fit = fitting.fit(rec, options)
     except RecordingError as exc:
         return _fail(str(exc))
+    except OptionNotApplicable as exc:
+        return _fail(f"--{exc.option.replace('_', '-')}: {exc}")
     except CalibrationError as exc:
         return _fail(f"{args.recording}: {exc}")
-    fit.notes[:0] = caps.notes + [decided.reason]
-    fit.report["notes"][:0] = caps.notes + [decided.reason]
-    fit.report["orientations"] = decided.orientations.count
-    fit.model.notes[:0] = caps.notes
-    rec = caps.recording
-    _record_gravity(fit, gravity)
     try:
         save_model(args.output, fit.model)
     except OSError as exc:
         return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
-
-    if fit.model.method == CONTINUOUS:
+    if fit.kind == "warmup":
+        return _report_warmup(args, fit)
+    if fit.kind == "continuous":
         return _report_continuous(args, fit)
     from calibration import holdout, report  # matplotlib is only needed from here on
 
+    rec = fit.recording
     report.add_sections(fit, rec)  # coefficients, and Table 5 for reference recordings
 
     figures: list[Path] = []
@@ -112,7 +92,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _report_continuous(args: argparse.Namespace, fit: ThermalFit) -> int:
+def _report_continuous(args: argparse.Namespace, fit: CalibrationFit) -> int:
     """The ramp fit's report (calibration/ramp_report.py): per temperature band, not per step."""
     from calibration.ramp_report import format_ramp_report
 
@@ -128,38 +108,21 @@ def _report_continuous(args: argparse.Namespace, fit: ThermalFit) -> int:
     return EXIT_OK
 
 
-def _calibrate_warmup(args: argparse.Namespace, rec: Recording, caps: Captures,
-                      decided: gate.Plan) -> int:
-    """Too few orientations for the SFEM: each axis' bias change with temperature."""
-    from calibration.warmup import fit_warmup, format_warmup
+def _report_warmup(args: argparse.Namespace, fit: CalibrationFit) -> int:
+    """A warm-up's report (calibration/warmup.py): each axis' bias change with temperature."""
+    from calibration.warmup import format_warmup
 
-    if getattr(args, "rate_gain_ug_per_c_per_min", None) is not None:
-        return _fail("--rate-gain-ug-per-c-per-min: not applied to a warm-up "
-                     f"({decided.reason.split(':')[0]}); the bias change fitted includes it")
-    temp = rec.temperature_c()
-    try:
-        wf = fit_warmup(caps.recording, decided.orientations,
-                        span_c=(float(np.min(temp)), float(np.max(temp))))
-        gate.check_model(wf.model, caps.recording)
-    except CalibrationError as exc:
-        return _fail(f"{args.recording}: {exc}")
-    wf.model.notes[:0] = caps.notes
-    wf.report["notes"][:0] = caps.notes + [decided.reason]
     if getattr(args, "report_dir", None):
-        wf.report["notes"].append("--report-dir: no figures are drawn for a warm-up; the "
-                                  "report is this text (or --json)")
-    try:
-        save_model(args.output, wf.model)
-    except OSError as exc:
-        return _fail(f"{args.output}: cannot write the model file ({exc.strerror or exc})")
+        fit.report["notes"].append("--report-dir: no figures are drawn for a warm-up; the "
+                                   "report is this text (or --json)")
     if getattr(args, "json", False):
-        doc = dict(wf.report)
+        doc = dict(fit.report)
         doc["model_file"] = str(args.output)
         doc["figures"] = []
         print(json.dumps(doc, indent=2, allow_nan=False))
     else:
-        print(format_warmup(wf.report))
-        for note in wf.report["notes"]:
+        print(format_warmup(fit.report))
+        for note in fit.report["notes"]:
             print(f"note: {note}")
         print(f"\nmodel written to {args.output}")
     return EXIT_OK
@@ -189,8 +152,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _rate_gain(text: str | None) -> np.ndarray | None:
-    """``X,Y,Z`` (µg per °C/min, finite) → array, or None when not given."""
+def _rate_gain(text: str | None) -> tuple[float, float, float] | None:
+    """``X,Y,Z`` (µg per °C/min, finite) → (x, y, z), or None when not given."""
     if text is None:
         return None
     try:
@@ -199,27 +162,13 @@ def _rate_gain(text: str | None) -> np.ndarray | None:
         raise ValueError(f"expected three numbers X,Y,Z, got {text!r}") from None
     if k.shape != (3,) or not np.all(np.isfinite(k)):
         raise ValueError(f"expected three finite numbers X,Y,Z, got {text!r}")
-    return k
+    return (float(k[0]), float(k[1]), float(k[2]))
 
 
 def _local_gravity(args: argparse.Namespace) -> LocalGravity | None:
     """``--gravity-g`` or ``--latitude-deg``/``--height-m`` (GravityError when implausible)."""
     return from_arguments(getattr(args, "gravity_g", None), getattr(args, "latitude_deg", None),
                           getattr(args, "height_m", None))
-
-
-def _record_gravity(fit: ThermalFit, gravity: LocalGravity | None) -> None:
-    """Say in the model file and the report which local gravity was used and why it is input."""
-    g = gravity or LocalGravity(
-        fit.model.g_local,
-        "default: magnitude of the reference vectors (median)" if fit.model.mode == "reference"
-        else "default; set it with --gravity-g or --latitude-deg/--height-m")
-    fit.model.provenance["gravity"] = g.to_dict()
-    fit.report["gravity"] = {**g.to_dict(), "identifiable": False, "why": NOT_IDENTIFIABLE_NOTE}
-    note = f"local gravity {g.g:.6f} g ({g.source}); {NOT_IDENTIFIABLE_NOTE}"
-    fit.model.notes.append(note)
-    fit.notes.append(note)
-    fit.report.setdefault("notes", []).append(note)
 
 
 def run_compensate(args: argparse.Namespace) -> int:

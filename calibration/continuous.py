@@ -52,6 +52,7 @@ from calibration.temperature_conditioning import condition_continuous, rate_corr
 from calibration.thermal import (
     JOINT_MAX_JACOBIAN,
     RANGE_MARGIN_C,
+    SolverStatus,
     ThermalFit,
     ThermalModel,
     _row_sigma,
@@ -152,8 +153,15 @@ def fit_continuous(
     g_local: float | None = None,
     rate_gain_ug_per_c_per_min: np.ndarray | None = None,
     max_degree: int = MAX_DEGREE,
+    orientation: np.ndarray | None = None,
 ) -> ThermalFit:
     """Fit the continuous-temperature SFEM to a ramp (or mixed) recording (module docstring).
+
+    The continuous solver behind :func:`calibration.fitting.fit`: to calibrate a
+    recording, call that.
+
+    ``orientation``: each row's distinct orientation as the gate clustered them
+    (:func:`calibration.gate.distinct_orientations`' labels); None: clustered here.
 
     Raises :class:`NotIdentifiable` when the orientations visited do not determine the
     model, :class:`CalibrationError` when the recording has no temperature.
@@ -171,7 +179,8 @@ def fit_continuous(
         g_local = float(np.median(np.linalg.norm(ref, axis=1)))
     elif g_local is None:
         g_local = 1.0
-    _check_orientations(recording, mode)
+    labels = orientation_labels(recording) if orientation is None else orientation
+    _check_orientations(labels, mode)
     n_cols = int(np.sum(free_parameters(mode))) * (max_degree + 1) + 6
     if len(recording) * 3 * n_cols > JOINT_MAX_JACOBIAN:
         raise CalibrationError(
@@ -197,7 +206,7 @@ def fit_continuous(
     direction = last_direction(_legs(rate, DIRECTION_RATE_C_PER_MIN))
     terms = np.column_stack([rate, direction]) if fit_rate else np.zeros((len(rate), 0))
     prob = _Problem(raw, ref, sigma, (row_c - centre) / scale, terms, g_local, free)
-    _check_rank(prob, recording)
+    _check_rank(prob, labels)
 
     # occupied bands numbered in order, so soak-like steps 10 °C apart spread over the folds
     # (band index mod 5 would put every step at a multiple of 10 °C into one fold)
@@ -258,7 +267,7 @@ def fit_continuous(
     report = ramp_report(model, recording, seg, used_raw, row_c, rate, legs, solution,
                          scores, notes, fit_rate)
     return ThermalFit(model, [], report, row_c, np.zeros(len(recording), int), notes,
-                      used_raw)
+                      used_raw, SolverStatus(bool(sol.success), str(sol.message), int(sol.nfev)))
 
 
 def free_parameters(mode: str) -> np.ndarray:
@@ -287,9 +296,9 @@ def last_direction(legs: np.ndarray) -> np.ndarray:
     return out.astype(float)
 
 
-def _check_orientations(rec: Recording, mode: str) -> None:
+def _check_orientations(labels: np.ndarray, mode: str) -> None:
     need = MIN_POSITIONS_REFERENCE if mode == "reference" else MIN_POSITIONS_NORM
-    have = int(np.unique(orientation_labels(rec)).size)
+    have = int(np.unique(labels).size)
     if have < need:
         raise NotIdentifiable(
             f"the recording visits only {have} distinct orientation(s); a {mode}-mode "
@@ -297,7 +306,7 @@ def _check_orientations(rec: Recording, mode: str) -> None:
             f"(e.g. the 24 of seed Table 1) over and over while the chamber ramps")
 
 
-def _check_rank(prob: _Problem, rec: Recording) -> None:
+def _check_rank(prob: _Problem, labels: np.ndarray) -> None:
     """Refuse when the orientations visited do not determine the parameters (degree 0)."""
     q0 = np.r_[sfem.identity_vector()[prob.free], np.zeros(prob.n_extra)]
     J = prob.jacobian(q0, 1)
@@ -310,7 +319,7 @@ def _check_rank(prob: _Problem, rec: Recording) -> None:
     s = np.linalg.svd(J / norms, compute_uv=False)
     if s[-1] <= 0 or s[0] / s[-1] > CONDITION_LIMIT:
         raise NotIdentifiable(
-            f"the {np.unique(orientation_labels(rec)).size} orientations visited do not "
+            f"the {np.unique(labels).size} orientations visited do not "
             f"determine the SFEM parameters (they lie too close to a plane or a line): "
             f"sweep positions that span all three axes")
 

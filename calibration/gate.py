@@ -47,8 +47,29 @@ NOISE_SIGMAS = 6.0
 # (good schedules have condition numbers 2-3; six axis directions a little off true give
 # ~1e-5 for the α in norm mode: far from determined, full rank to a naive check).
 STRUCTURAL_REL_TOL = 1e-3
-NORM_MIN_ORIENTATIONS = 10  # 9 parameters (b, S, C) + 1 spare: Eq. 3
-REFERENCE_MIN_ORIENTATIONS = 4  # 12 parameters, 3 residuals per orientation: Eq. 4
+
+
+def free_parameter_count(mode: str) -> int:
+    """SFEM parameters a fit frees: all 12 of Eq. 1 with references (Eq. 4); 9 in norm
+    mode (Eq. 3: b, S, C; a rotation M leaves |g| unchanged)."""
+    return sfem.N_PARAMS if mode == "reference" else 9
+
+
+def min_orientations(mode: str, spare_dof: int) -> int:
+    """Distinct orientations a ``mode`` fit needs for ``spare_dof`` spare degrees of freedom:
+    ⌈(free parameters + spare) / residuals per orientation⌉ (3 with references, 1 in norm
+    mode). The one place every minimum count below comes from."""
+    per = 3 if mode == "reference" else 1
+    return -(-(free_parameter_count(mode) + spare_dof) // per)
+
+
+# An SFEM fit at all: norm mode one spare (a χ² to weigh it: 9 + 1, Eq. 3), reference mode
+# none counted on orientations (12 residuals from 4; repeat readings give the spare).
+NORM_MIN_ORIENTATIONS = min_orientations("norm", 1)  # 10
+REFERENCE_MIN_ORIENTATIONS = min_orientations("reference", 0)  # 4
+# A temperature step (or a continuous fit) with a held-out figure: 3 spare degrees of
+# freedom (calibration.holdout.MIN_SPARE_DOF), so 12 in norm mode and 5 with references.
+STEP_SPARE_DOF = 3
 # A step calibrates the SFEM when its orientations determine at least bias and scale of
 # all three axes (six axis directions: norm mode, α held); fewer is a warm-up.
 SFEM_MIN_FITTED = 6
@@ -229,17 +250,19 @@ class Plan:
     notes: list[str] = field(default_factory=list)
 
 
-def plan(captures: Recording, *, continuous: bool = False) -> Plan:
+def plan(captures: Recording, *, continuous: bool = False,
+         orientations: Orientations | None = None) -> Plan:
     """Decide from the capture means what the data identify (module docstring, 2.).
 
     ``continuous``: the recording has rows on no temperature plateau
     (:func:`calibration.plateaus.segment_recording`); its orientations are then counted
     over the whole recording, for the SFEM in each reading's own temperature
-    (:mod:`calibration.continuous`), never per invented step. Raises
+    (:mod:`calibration.continuous`), never per invented step. ``orientations``: the
+    captures' :func:`distinct_orientations`, when the caller has them. Raises
     :class:`GateRefusal` when nothing can be calibrated.
     """
     raw = captures.raw_g
-    ori = distinct_orientations(raw, captures.sigma_g)
+    ori = orientations or distinct_orientations(raw, captures.sigma_g)
     mode = "reference" if captures.has_reference else "norm"
     summary = (f"{ori.count} distinct orientation(s) ({ori.names()}) in {len(captures)} "
                f"reading(s)")
@@ -395,13 +418,16 @@ def cannot_judge(recording: Recording) -> str | None:
     """
     from calibration.captures import capture_means
     from calibration.plateaus import segment_recording
-    from calibration.warmup import fit_warmup  # warmup imports this module
 
     captures = capture_means(recording).recording
+    ori = distinct_orientations(captures.raw_g, captures.sigma_g)
     try:
-        decided = plan(captures, continuous=segment_recording(captures).is_continuous)
+        decided = plan(captures, orientations=ori,
+                       continuous=segment_recording(captures, ori.labels).is_continuous)
         if decided.kind == "warmup":  # calibrate's refusal of the warm-up, if it refuses
-            check_model(fit_warmup(captures, decided.orientations).model, captures)
+            from calibration.fitting import fit  # fitting imports this module
+
+            fit(recording)
     except GateRefusal as exc:
         return str(exc)
     if decided.kind == "continuous":

@@ -34,6 +34,23 @@ Declared steps (``step`` column, else ``setpoint_c`` changes) are checked the
 same way: a declared step whose die moved too much is not a plateau, and its rows
 are continuous (said in the notes). A soak step measured after a 60 min soak
 costs < 1 µg against ~10 µg of noise and stays a step.
+
+A declared step whose ``setpoint_c`` is held (one finite value over all its rows) is a
+*soak*: the chamber air stood at one setpoint and the die is on the tail of its
+first-order approach to it (a soakcal campaign's die still creeps 0.2–0.35 °C over a
+sweep of 24 positions, after the engine's own stability decision). The step fit takes
+each row at the step's conditioned temperature, a straight line in time
+(:func:`calibration.temperature_conditioning.condition_temperature`), and the joint fit
+evaluates every row at it; what matters is then not the creep but what that line
+misses. So a soak is kept as a step when
+
+    tempco · sqrt(max(rms(T − line)² − channel noise², 0))  ≤  PLATEAU_NOISE_FRACTION · σ_row
+
+(:func:`line_miss_cost_ug`), and its rows are continuous otherwise (said in the notes).
+An exponential tail with τ ≈ 15 min bends from its line by < 0.01 °C over a 4-min sweep:
+a campaign's soaks are steps whether ``soakcal calibrate`` reads its recording or the
+service fits its stored rows. A step column without a held setpoint (a ramping
+setpoint, several soaks declared as one step) gets the excursion test above.
 """
 
 from __future__ import annotations
@@ -43,6 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.gate import STEP_SPARE_DOF, min_orientations
 from calibration.recording import Recording
 
 TEMPCO_BOUND_UG_PER_C = 150.0
@@ -50,10 +68,11 @@ TEMPCO_BOUND_UG_PER_C = 150.0
 # quadrature, so 0.5 makes a step's rows at most √1.25 ≈ 1.12× noisier than at rest.
 PLATEAU_NOISE_FRACTION = 0.5
 ADXL355_SAMPLE_SD_UG = 25.0 * math.sqrt(62.5 / 2.0)  # 25 µg/√Hz over ODR/2 = 31.25 Hz
-# A step fit with at least 3 spare degrees of freedom (calibration.holdout.MIN_SPARE_DOF):
-# 12 parameters from 3 components per position, or 9 from one |g| per position.
-MIN_POSITIONS_REFERENCE = 5
-MIN_POSITIONS_NORM = 12
+# A step fit with calibration.gate.STEP_SPARE_DOF (3) spare degrees of freedom, counted as
+# the gate counts them (calibration.gate.min_orientations): 12 parameters from 3 components
+# per position, or 9 from one |g| per position.
+MIN_POSITIONS_REFERENCE = min_orientations("reference", STEP_SPARE_DOF)  # 5
+MIN_POSITIONS_NORM = min_orientations("norm", STEP_SPARE_DOF)  # 12
 SLOPE_SIGMAS = 2.0  # the slope taken at its lower bound: noise alone does not end a plateau
 
 
@@ -81,8 +100,12 @@ class Segmentation:
         return [int(s) for s in np.unique(self.step[self.step >= 0])]
 
 
-def segment_recording(rec: Recording) -> Segmentation:
-    """Steps where the recording has plateaus (or declared steps that are), −1 elsewhere."""
+def segment_recording(rec: Recording, orientation: np.ndarray | None = None) -> Segmentation:
+    """Steps where the recording has plateaus (or declared steps that are), −1 elsewhere.
+
+    ``orientation``: each row's distinct orientation (``gate.distinct_orientations``'
+    labels, as the gate clustered them); None: clustered here (:func:`orientation_labels`).
+    """
     n = len(rec)
     if not rec.has_temperature:  # one step at an unknown temperature (the soak fit's case)
         return Segmentation(np.zeros(n, int), "no temperature", math.nan, math.nan)
@@ -92,15 +115,24 @@ def segment_recording(rec: Recording) -> Segmentation:
     noise_c = channel_noise_c(t, temp)
     max_cost = PLATEAU_NOISE_FRACTION * sigma_ug
     need = MIN_POSITIONS_REFERENCE if rec.has_reference else MIN_POSITIONS_NORM
-    orient = orientation_labels(rec)
+    orient = orientation_labels(rec) if orientation is None else orientation
     notes: list[str] = []
     if rec.has("step") or rec.has("setpoint_c"):
         declared = rec.steps()
         source = "step column" if rec.has("step") else "setpoint_c"
         step = declared.copy()
         dropped: list[str] = []
+        setpoint = rec.columns.get("setpoint_c")
+        dropped: list[str] = []
+        bent: list[str] = []
         for s in np.unique(declared[declared >= 0]):
             idx = np.flatnonzero(declared == s)
+            if setpoint is not None and held_setpoint(setpoint[idx]):  # a soak: the line
+                cost = line_miss_cost_ug(t[idx], temp[idx], noise_c)
+                if cost > max_cost:
+                    step[idx] = -1
+                    bent.append(f"{int(s)} ({np.ptp(temp[idx]):.2f} °C, {cost:.1f} µg)")
+                continue
             cost = excursion_cost_ug(t[idx], temp[idx], noise_c)
             if cost > max_cost:
                 step[idx] = -1
@@ -111,6 +143,12 @@ def segment_recording(rec: Recording) -> Segmentation:
                 f"as continuous rows (temperature span, cost of one temperature vs "
                 f"{max_cost:.1f} µg allowed): " + ", ".join(dropped[:8])
                 + (" …" if len(dropped) > 8 else ""))
+        if bent:
+            notes.append(
+                f"{len(bent)} soak(s) at a held setpoint are fitted as continuous rows: their "
+                f"die does not follow the step's straight line in time (temperature span, "
+                f"cost of what the line misses vs {max_cost:.1f} µg allowed): "
+                + ", ".join(bent[:8]) + (" …" if len(bent) > 8 else ""))
     else:
         source = "temperature plateaus"
         step = find_plateaus(t, temp, noise_c, max_cost)
@@ -199,6 +237,24 @@ def excursion_cost_ug(t_s: np.ndarray, temp_c: np.ndarray, noise_c: float,
                  noise_c, slope_sigmas)
 
 
+def held_setpoint(setpoint_c: np.ndarray) -> bool:
+    """True when a step's setpoint is one finite value over all its rows (a soak)."""
+    sp = np.asarray(setpoint_c, float)
+    return bool(sp.size and np.all(np.isfinite(sp)) and np.all(sp == sp[0]))
+
+
+def line_miss_cost_ug(t_s: np.ndarray, temp_c: np.ndarray, noise_c: float) -> float:
+    """tempco × the rms of the temperature about its straight line in time, less the
+    channel noise (in quadrature), µg: what a soak's conditioning line misses."""
+    t = np.asarray(t_s, float) - float(t_s[0])
+    y = np.asarray(temp_c, float)
+    ok = np.isfinite(y)
+    if ok.sum() < 3 or np.ptp(t[ok]) <= 0:
+        return 0.0
+    res = y[ok] - np.polyval(np.polyfit(t[ok], y[ok], 1), t[ok])
+    return TEMPCO_BOUND_UG_PER_C * math.sqrt(max(float(np.mean(res**2)) - noise_c**2, 0.0))
+
+
 def _cost(s0: float, st: float, stt: float, sy: float, sty: float, noise_c: float,
           slope_sigmas: float = SLOPE_SIGMAS) -> float:
     sxx = stt - st * st / s0
@@ -245,13 +301,11 @@ def row_sigma_ug(rec: Recording) -> float:
 
 
 def orientation_labels(rec: Recording) -> np.ndarray:
-    """An orientation label per row: the reference directions, else the readings' own,
-    clustered into distinct orientations within the noise
+    """An orientation label per row: the readings' directions clustered into distinct
+    orientations within the noise, as the gate counts them
     (:func:`calibration.gate.distinct_orientations`: never rows, never noise scatter)."""
     from calibration.gate import distinct_orientations
 
-    if rec.has_reference:
-        return distinct_orientations(rec.ref_g).labels
     return distinct_orientations(rec.raw_g, rec.sigma_g).labels
 
 

@@ -194,6 +194,15 @@ class StepResult:
     temperature_noise_c: float | None = None
 
 
+@dataclass(frozen=True)
+class SolverStatus:
+    """Whether the fits behind a model converged, the solver's message, its evaluations."""
+
+    converged: bool
+    message: str
+    nfev: int
+
+
 @dataclass
 class ThermalFit:
     model: ThermalModel
@@ -206,6 +215,7 @@ class ThermalFit:
     # temperature_rate correction); None: the recording's own. Held-out refits
     # (calibration/holdout.py) must see the same rows as the fit they judge.
     raw_used_g: np.ndarray | None = None
+    status: SolverStatus = SolverStatus(True, "", 0)
 
 
 def fit_campaign(
@@ -217,6 +227,9 @@ def fit_campaign(
     rate_gain_ug_per_c_per_min: np.ndarray | None = None,
 ) -> ThermalFit:
     """Fit SFEM at each step and the cubic thermal model (Eq. 1, 4–8) to a recording.
+
+    The step solver behind :func:`calibration.fitting.fit` (which decides, through the
+    gate, that the recording has steps): to calibrate a recording, call that.
 
     ``g_local`` (units of standard gravity; :mod:`calibration.gravity`): the
     reference directions are scaled to it (reference mode) or |g| is fitted to
@@ -430,8 +443,16 @@ def fit_campaign(
         row_step[idx] = s
     report = _report(model, step_results, notes, poly_chi2, joint_info, recording)
     report["drift"] = _drift(model, recording, fits, row_c)
+    failed = [f"step {s}: {fr.message}" for s, _, fr in fits if not fr.success]
+    status = SolverStatus(
+        converged=not failed and (joint_info is None or bool(joint_info["success"])),
+        message="; ".join(failed) if failed else (
+            f"joint fit: {joint_info['message']}" if joint_info is not None
+            else f"{len(fits)} step fit(s) converged"),
+        nfev=sum(int(fr.nfev) for _, _, fr in fits)
+        + (0 if joint_info is None else int(joint_info["nfev"])))
     result = ThermalFit(model, step_results, report, row_c, row_step, notes,
-                        raw if rate_gain_ug_per_c_per_min is not None else None)
+                        raw if rate_gain_ug_per_c_per_min is not None else None, status)
     # The one gate (calibration/gate.py): no caller -- CLI, engine, benchmark -- gets a
     # model that did not converge, has no spare orientations, or is not physical.
     check_thermal_fit(result, recording)

@@ -87,6 +87,9 @@ def fit_warmup(captures: Recording, orientations: Orientations,
                max_degree: int = MAX_DEGREE) -> WarmupFit:
     """Fit each axis' bias change with temperature (module docstring) to capture means.
 
+    The warm-up solver behind :func:`calibration.fitting.fit`: to calibrate a
+    recording, call that.
+
     ``span_c``: the temperature span of the data as read (the raw rows'); default the
     captures'. Raises :class:`GateRefusal` when the temperature does not change enough
     to see anything.

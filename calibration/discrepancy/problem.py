@@ -549,24 +549,21 @@ def _norm_problem(rec: Recording, capture_means: bool = False) -> LinearProblem:
     ctx0 = base_context(rec, "norm", raw)
     P, degree, mid, half = _powers(ctx0.temp_c, ctx0.steps)
     npow = P.shape[1]
-    q = np.zeros((free.sum(), npow))
-    q[:, 0] = start.params.to_vector()[free]
     fixed = start.params.to_vector()
+    coeffs0 = np.zeros((sfem.N_PARAMS, npow))
+    coeffs0[:, 0] = fixed
 
     def params(qq: np.ndarray) -> np.ndarray:
         Pm = np.tile(fixed, (n, 1))
         Pm[:, free] = P @ qq.T
         return Pm
 
-    for _ in range(8):  # Gauss–Newton on the 9×(d+1) coefficients; starts at the pooled fit
-        Pm = params(q)
-        f, jac = sfem.forward_jacobian(Pm, raw)
-        r = np.linalg.norm(f, axis=1) - 1.0
-        J = sfem.coefficient_jacobian(sfem.norm_jacobian(f, jac[:, :, free]), P)  # (N,9·(d+1))
-        step = np.linalg.lstsq(J, -r, rcond=None)[0].reshape(q.shape)
-        q = q + step
-        if np.max(np.abs(step)) < 1e-12:
-            break
+    # the joint SFEM fit (thermal_joint: the 9×(d+1) coefficients, equal weights, |f| − 1)
+    # started at the pooled fit
+    from calibration.thermal_joint import fit_joint
+
+    x = P[:, 1] if npow > 1 else np.zeros(n)
+    q = fit_joint(raw, None, np.ones((n, 3)), x, coeffs0, free).coeffs[free]
     Pm = params(q)
     f, jac = sfem.forward_jacobian(Pm, raw)
     nf = np.linalg.norm(f, axis=1)

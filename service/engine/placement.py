@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import datetime as dt
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sqlalchemy import select
@@ -22,6 +22,9 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from calibration.placement import instruction_for, sketch_for
 from service.db.models import Campaign, PlacementRequest
+
+if TYPE_CHECKING:
+    from service.engine.calibrate import CalibrationRow
 
 
 class PlacementConflict(ValueError):
@@ -160,9 +163,9 @@ def manual_devices(rig: dict[str, Any], devices: Any, sf: sessionmaker[Session] 
 
 
 def hand_placed_calibrate(calibrate: Callable[[dict[str, list[float]], dict[str, Any]],
-                                              dict[str, Any]] | None = None,
+                                              CalibrationRow] | None = None,
                           tol_deg: float | None = None
-                          ) -> Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]:
+                          ) -> Callable[[dict[str, list[float]], dict[str, Any]], CalibrationRow]:
     """The engine's calibrate step for a manual rig: every row gets ``ref_tol_deg``.
 
     A hand placement is good to a degree or two, not to the table's arc-seconds;
@@ -177,7 +180,7 @@ def hand_placed_calibrate(calibrate: Callable[[dict[str, list[float]], dict[str,
     inner = calibrate or calibrate_columns
     tol = HAND_HELD_TOL_DEG if tol_deg is None else float(tol_deg)
 
-    def run(columns: dict[str, list[float]], provenance: dict[str, Any]) -> dict[str, Any]:
+    def run(columns: dict[str, list[float]], provenance: dict[str, Any]) -> CalibrationRow:
         n = len(columns["t_s"])
         with_tol = {**columns, REF_TOL_COLUMN: [tol] * n}
         return inner(with_tol, {**provenance, REF_TOL_COLUMN: tol, "placement": "manual"})

@@ -866,9 +866,8 @@ class CampaignRunner:
             except Exception as exc:  # one sensor's fit failing drops it, not the others
                 self._drop(SensorDropped(serial, f"calibration fit failed: {exc}"))
                 continue
-            fit = values.pop("_fit", None)
             if self.fit_result is None:
-                self.fit_result = fit
+                self.fit_result = values.fit
             store.store_calibration(self.sf, self.id, values, sensor=serial)
 
     async def _fitting(self) -> None:
@@ -893,7 +892,7 @@ class CampaignRunner:
             values = await asyncio.to_thread(self.calibrate, cols, provenance)
         except Exception as exc:  # a fit failure fails this campaign, not the service
             raise CampaignFailed(f"calibration fit failed: {exc}") from exc
-        self.fit_result = values.pop("_fit", None)
+        self.fit_result = values.fit
         store.store_calibration(self.sf, self.id, values)
 
     # --- device helpers -----------------------------------------------------------

@@ -21,6 +21,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe, utcnow
 from service.db.timestamps import as_utc
+from service.engine.calibrate import CalibrationRow
 from service.engine.states import TERMINAL, TRANSITIONS
 from service.event_log import log_event
 
@@ -464,9 +465,10 @@ def measurement_columns(sf: SessionFactory, campaign_id: int,
     return cols
 
 
-def store_calibration(sf: SessionFactory, campaign_id: int, values: dict[str, Any],
+def store_calibration(sf: SessionFactory, campaign_id: int, values: CalibrationRow,
                       sensor: str | None = None) -> int:
-    """Insert the Calibration row and link it from the campaign in one transaction.
+    """Insert the Calibration row (``values.columns()``) and link it from the campaign in
+    one transaction.
 
     ``sensor`` (several-sensor campaigns): the row is that sensor's and is linked in
     ``calibration_ids``; ``calibration_id`` is set for the campaign's first sensor.
@@ -480,7 +482,7 @@ def store_calibration(sf: SessionFactory, campaign_id: int, values: dict[str, An
         elif sensor in (c.calibration_ids or {}):
             return int((c.calibration_ids or {})[sensor])
         serial = c.sensor if sensor is None else sensor
-        cal = Calibration(campaign_id=campaign_id, sensor=serial, **values)
+        cal = Calibration(campaign_id=campaign_id, sensor=serial, **values.columns())
         s.add(cal)
         s.flush()
         if sensor is None or sensor == c.sensor:

@@ -119,6 +119,6 @@ def _ug(mg: float | None) -> float | None:
 
 
 def _rms(values: list[float | None]) -> float | None:
-    """Over steps, as the calibration's own rmse_ug (service/engine/calibrate.rmse_after_ug)."""
+    """Over steps, as the calibration's own rmse_ug (calibration.fitting.rmse_after_ug)."""
     finite = [v for v in values if v is not None]
     return round(math.sqrt(sum(v * v for v in finite) / len(finite)), 1) if finite else None

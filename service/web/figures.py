@@ -104,9 +104,9 @@ def redo_fit(factory: sessionmaker[Session], calibration_id: int) -> Refit:
     from calibration.holdout import leave_one_out
 
     with tempfile.TemporaryDirectory(prefix="soakcal-figures-") as tmp:
-        paths = write_figures(values["_fit"], recording, tmp)
+        paths = write_figures(values.fit, recording, tmp)
         pngs = {Path(p).stem: Path(p).read_bytes() for p in paths}
-    return Refit(pngs=pngs, holdout=leave_one_out(recording, values["_fit"]))
+    return Refit(pngs=pngs, holdout=leave_one_out(recording, values.fit))
 
 
 def _cache(request: Request) -> FigureCache:

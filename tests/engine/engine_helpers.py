@@ -7,6 +7,7 @@ from typing import Any
 import pytest
 
 from service.db.models import Campaign, Rig
+from service.engine.calibrate import CalibrationRow
 
 # For tests of device and engine logic (Modbus faults, safe states, suspenders, register maps):
 # their store calls are the ones test_runner, test_control and test_crash run on both backends,
@@ -40,9 +41,10 @@ def add_campaign(sf, spec: dict[str, Any] | None = None, rig: str = "sim",  # ty
 def fake_calibrate(columns, provenance):  # type: ignore[no-untyped-def]
     """A stand-in for the calibration core: fast, and records what it was given."""
     fake_calibrate.calls.append(len(columns["t_s"]))
-    return {"valid_lo_c": min(columns["sensor_c"]), "valid_hi_c": max(columns["sensor_c"]),
-            "rmse_ug": 1.0, "model_version": "fake", "model": {"fake": True},
-            "report": {}, "provenance": provenance}
+    return CalibrationRow(valid_lo_c=min(columns["sensor_c"]),
+                          valid_hi_c=max(columns["sensor_c"]), rmse_ug=1.0,
+                          model_version="fake", model={"fake": True}, report={},
+                          provenance=provenance)
 
 
 fake_calibrate.calls = []  # type: ignore[attr-defined]
