@@ -100,22 +100,24 @@ class Settle:
 
 @dataclass(frozen=True)
 class Acquire:
-    """Average ``n_samples`` raw samples; the interpreter returns the acquisition.
+    """Average ``n_samples`` raw samples of every sensor in ``sensors``, read *at once*
+    (one capture time for all, issue 12; one sensor is a list of one).
 
-    ``sensors``: a several-sensor campaign reads these sensors *at once* (one capture
-    time for all, issue 12); the interpreter returns ``{serial: acquisition}`` with
-    ``None`` for a sensor it has dropped. Empty: the one sensor, one acquisition.
+    The interpreter returns ``{serial: acquisition}`` with ``None`` for a sensor it
+    has dropped.
     """
 
     step: int
     position: int
     n_samples: int
-    sensors: tuple[str, ...] = ()
+    sensors: tuple[str, ...]
 
 
 @dataclass(frozen=True)
 class Save:
-    """Store the acquisition of (step, position); ``next_position`` is the cursor after it."""
+    """Store every sensor's acquisition of (step, position) with the cursor past it
+    (``next_position``) in one transaction: a position is stored for every live sensor
+    or for none. ``acquisition`` is ``Acquire``'s reply, {serial: acquisition or None}."""
 
     step: int
     position: int
@@ -123,8 +125,7 @@ class Save:
     ref_g: tuple[float, float, float]
     acquisition: Any
     next_position: int
-    # Several sensors: ``acquisition`` is {serial: acquisition or None}, these serials, in order.
-    sensors: tuple[str, ...] = ()
+    sensors: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,8 @@ Plan = Generator[Msg, Any, None]
 # rate (simulators.campaign_sim.RigPhysics, calibration.thermal_plant.DEFAULT_RAMP_C_PER_MIN,
 # 2 °C/min), on which its recordings and the diagnosis' assumed ramp were measured.
 CAMPAIGN_RAMP_C_PER_MIN = 1.0
+# The serial a plan names when its interpreter models no particular sensor.
+ANY_SENSOR = "sensor"
 
 
 @dataclass(frozen=True)
@@ -194,12 +197,13 @@ def campaign_plan(spec: Any, refs: np.ndarray,
     engine's RunSpec), and may give ``position_order`` / ``position_order_seed``;
     ``refs`` is the (n, 3) schedule of unit gravity vectors; ``angles_deg`` the
     rig's table pose of each (for the ``travel`` order; :func:`visit_orders`).
-    ``sensors`` (two or more serials, issue 12): every position is acquired by one
-    ``Acquire`` naming them all (read concurrently) and saved by one ``Save``
-    carrying them all, so the interpreter stores a position for every sensor in one
-    transaction.
+    ``sensors``: the campaign's serials, one or several (issue 12): every position is
+    acquired by one ``Acquire`` naming them all (read concurrently) and saved by one
+    ``Save`` carrying them all, so the interpreter stores a position for every sensor
+    in one transaction. An interpreter that models no particular sensor (the offline
+    simulator, the dry run) may pass none: the plan then names :data:`ANY_SENSOR`.
     """
-    several = tuple(str(s) for s in sensors) if len(sensors) > 1 else ()
+    serials = tuple(str(s) for s in sensors) or (ANY_SENSOR,)
     stored = set(done)
     refs = np.asarray(refs, float)
     n_pos = refs.shape[0]
@@ -222,12 +226,8 @@ def campaign_plan(spec: Any, refs: np.ndarray,
             yield Move(step, pos, ref)
             yield Settle(float(spec.settle_s))
             next_pos = missing[k + 1] if k + 1 < len(missing) else n_pos
-            if several:
-                by_sensor = yield Acquire(step, pos, int(spec.samples_per_position), several)
-                yield Save(step, pos, setpoint_c, ref, by_sensor, next_pos, several)
-                continue
-            acquisition = yield Acquire(step, pos, int(spec.samples_per_position))
-            yield Save(step, pos, setpoint_c, ref, acquisition, next_pos)
+            by_sensor = yield Acquire(step, pos, int(spec.samples_per_position), serials)
+            yield Save(step, pos, setpoint_c, ref, by_sensor, next_pos, serials)
     yield Fit()
 
 

@@ -23,7 +23,7 @@ import datetime as dt
 import functools
 import logging
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -45,7 +45,7 @@ from calibration.placement import MAX_ANGLE_DEG, check_pose
 from calibration.thermal_plant import AMBIENT_C
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
-from service.engine import soak_rate, stability, store
+from service.engine import rate_gain, stability, store
 from service.engine.calibrate import calibrate_columns
 from service.engine.fencing import fence_devices
 from service.engine.guard import (
@@ -56,16 +56,10 @@ from service.engine.guard import (
     clock_speed,
 )
 from service.engine.identity import verify_sensor
-from service.engine.multi import (
-    SensorDropped,
-    read_all,
-    reading_problem,
-    sensor_call,
-    slowest_decision,
-)
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
 from service.engine.rigs import RigDevices
+from service.engine.sensors import SensorDropped, read_all, reading_problem, slowest_decision
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
 from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
@@ -120,9 +114,9 @@ class CampaignRunner:
         self._subscribers: list[Subscriber] = []
         self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
         self._last_soak: WaitStable | None = None
-        # Finished (or interrupted) soaks' probes per sensor (None: the one sensor), for the
-        # measured rate gain (soak_rate.py); reloaded from the soak_probes table on resume.
-        self._soaks: dict[str | None, list[soak_rate.SoakProbes]] = {}
+        # Finished (or interrupted) soaks' probes per sensor, for the measured rate gain
+        # (rate_gain.py); reloaded from the soak_probes table on resume.
+        self._soaks: dict[str, list[rate_gain.SoakProbes]] = {}
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
@@ -221,9 +215,11 @@ class CampaignRunner:
             raise CampaignFailed(f"spec: {exc}") from exc
         self.sensor_serial = str(camp.sensor)
         several = spec.extra.get("sensors")
-        # Several sensors (issue 12): each read at every position, dropped alone on a fault.
+        # The campaign's sensors, one or several (issue 12): each read at every position,
+        # dropped alone on a fault while another still reads (sensors.py).
         self.serials: list[str] = ([str(s) for s in several]
-                                   if isinstance(several, list) and len(several) > 1 else [])
+                                   if isinstance(several, list) and len(several) > 1
+                                   else [self.sensor_serial])
         self.dropped: dict[str, str] = dict(camp.sensors_dropped or {})
         self.identities: dict[str, dict[str, Any]] = {}
         self.sensor_identity: dict[str, Any] | None = None
@@ -256,7 +252,7 @@ class CampaignRunner:
         self._touched = True
         self._subscribers.append(EtaSubscriber(self.eta))
         self._soaks = self._stored_soaks()
-        if self.serials:
+        if len(self.serials) > 1:
             missing = [s for s in self.serials if s not in self.dev.accelerometers]
             if missing:
                 raise CampaignFailed(f"rig has no sensor {', '.join(missing)} mounted "
@@ -309,13 +305,22 @@ class CampaignRunner:
             Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
         }
 
-    # --- several sensors (service/engine/multi.py) ------------------------------------
+    # --- the campaign's sensors, one or several (service/engine/sensors.py) -------------
     @property
     def _live(self) -> list[str]:
         return [s for s in self.serials if s not in self.dropped]
 
+    def _accelerometer(self, serial: str) -> Any:
+        """A several-sensor rig's sensor by serial; a one-sensor rig's one accelerometer."""
+        return self.dev.accelerometers.get(serial, self.dev.accelerometer)
+
     def _drop(self, exc: SensorDropped) -> None:
-        """Flag and drop one sensor with its reason; the campaign fails only with none left."""
+        """Flag and drop one sensor with its reason; the campaign fails only with none left.
+
+        A one-sensor campaign fails with the reason itself: its sensor is the campaign.
+        """
+        if len(self.serials) == 1:
+            raise CampaignFailed(exc.reason) from exc
         self.dropped[exc.serial] = exc.reason
         store.drop_sensor(self.sf, self.id, exc.serial, exc.reason)
         if not self._live:
@@ -324,46 +329,59 @@ class CampaignRunner:
 
     async def _sensor_call(self, serial: str, label: str,
                            fn: Callable[[], Awaitable[Any]]) -> Any:
-        return await sensor_call(self.clock, self.guard.policy, self._abort_asked_recently,
-                                 serial, f"{label} [{serial}]", fn)
+        """One sensor's call under the guard's one retry policy: while another sensor still
+        reads, a sensor that fails for good or outlasts its retries is given up
+        (:class:`SensorDropped`); the last one left suspends or fails the campaign."""
+        if len(self.serials) == 1:
+            return await self.guard.call(label, fn)
+        label = f"{label} [{serial}]"
+        if len(self._live) == 1:
+            return await self.guard.call(label, fn)
+        return await self.guard.call(label, fn,
+                                     give_up=lambda why: SensorDropped(serial, why))
 
-    async def _configure_each(self, msg: Configure) -> None:
-        """Identity and configuration of every sensor; a failing one is dropped."""
+    async def _configure(self, msg: Configure) -> None:
+        """Identity and configuration of every sensor; a failing one is dropped.
+
+        Before any reading: the sensor connected must be the one the campaign names
+        (a typo must not store a calibration under the wrong part). A mismatch is a
+        configuration fault, named with both serials.
+        """
         for serial in self._live:
-            acc = self.dev.accelerometers[serial]
+            acc = self._accelerometer(serial)
+            binding = self.dev.bindings.get(serial, self.dev.serial_binding)
             try:
                 if serial not in self.identities:
                     verified = await self._sensor_call(
                         serial, "sensor.identify",
-                        lambda acc=acc, serial=serial: verify_sensor(  # type: ignore[misc]
-                            acc, serial, self.dev.bindings.get(serial, self.dev.serial_binding)))
+                        functools.partial(verify_sensor, acc, serial, binding))
                     self.identities[serial] = verified.as_dict()
                 await self._sensor_call(serial, "accelerometer.configure",
-                                        lambda acc=acc: acc.configure(  # type: ignore[misc]
-                                            msg.range_g, msg.odr_hz))
+                                        functools.partial(acc.configure, msg.range_g,
+                                                          msg.odr_hz))
             except SensorDropped as exc:
                 self._drop(exc)
         self.sensor_identity = self.identities.get(self.sensor_serial)
 
     async def _measure_one(self, serial: str, n: int) -> tuple[Acquisition, list[str], int]:
-        """:meth:`_measure` for one sensor of several; out of range: :class:`SensorDropped`."""
-        acc = self.dev.accelerometers[serial]
+        """Acquire; on a failed quality check measure once more and keep the second capture.
+        A reading out of range for a static sensor: :class:`SensorDropped`."""
+        acquire = functools.partial(self._accelerometer(serial).acquire, n)
         attempts = 1
-        acq = await self._sensor_call(serial, "accelerometer.acquire", lambda: acc.acquire(n))
+        acq = await self._sensor_call(serial, "accelerometer.acquire", acquire)
         flags = check_acquisition(acq, n, self.spec.quality)
         if flags:
             attempts = 2
-            acq = await self._sensor_call(serial, "accelerometer.acquire",
-                                          lambda: acc.acquire(n))
+            acq = await self._sensor_call(serial, "accelerometer.acquire", acquire)
             flags = check_acquisition(acq, n, self.spec.quality)
         problem = reading_problem(acq, self.spec.range_g)
         if problem is not None:
             raise SensorDropped(serial, problem)
         return acq, flags, attempts
 
-    async def _measure_live(self, n: int, serials: list[str]) -> dict[str, Any]:
-        """Every live sensor of ``serials`` read at once (:func:`multi.read_all`); the ones
-        that fail are dropped after all have answered (a drop may fail the campaign)."""
+    async def _measure(self, n: int, serials: Sequence[str]) -> dict[str, Any]:
+        """Every live sensor of ``serials`` read at once (:func:`sensors.read_all`); the
+        ones that fail are dropped after all have answered (a drop may fail the campaign)."""
         live = [s for s in serials if s not in self.dropped]
         got = await read_all(live, lambda serial: self._measure_one(serial, n))
         out: dict[str, Any] = {}
@@ -373,22 +391,6 @@ class CampaignRunner:
             else:
                 out[serial] = result
         return out
-
-    async def _configure(self, msg: Configure) -> None:
-        if self.serials:
-            await self._configure_each(msg)
-            return
-        acc = self.dev.accelerometer
-        if self.sensor_identity is None:
-            # Before any reading: the sensor connected must be the one the campaign names
-            # (a typo must not store a calibration under the wrong part). A mismatch is a
-            # configuration fault: the campaign fails at once with both serials named.
-            verified = await self.guard.call(
-                "sensor.identify",
-                lambda: verify_sensor(acc, self.sensor_serial, self.dev.serial_binding))
-            self.sensor_identity = verified.as_dict()
-        await self.guard.call("accelerometer.configure",
-                              lambda: acc.configure(msg.range_g, msg.odr_hz))
 
     async def _at_checkpoint(self, _msg: Checkpoint) -> None:
         await self._checkpoint()
@@ -403,9 +405,7 @@ class CampaignRunner:
         await self._wait(msg.settle_s)
 
     async def _acquire_msg(self, msg: Acquire) -> Any:
-        if not msg.sensors:
-            return await self._measure(msg.n_samples)
-        got = await self._measure_live(msg.n_samples, list(msg.sensors))
+        got = await self._measure(msg.n_samples, msg.sensors)
         return {serial: got.get(serial) for serial in msg.sensors}
 
     async def _fit(self, _msg: Fit) -> None:
@@ -465,7 +465,7 @@ class CampaignRunner:
                      f"(reference {_ref_text(msg.ref_g)}, table at {self._pose} deg)")
             self.pose_log.append({"step": msg.step, "position": msg.position,
                                   "attempt": attempt, "angle_deg": round(worst, 2),
-                                  "sensors": sorted(s for s in off if s)})
+                                  "sensors": sorted(off)})
             log.warning("campaign %s: %s: capture %.1f° from its reference, measuring again",
                         self.id, where, worst)
             if attempt == POSE_ATTEMPTS:
@@ -517,13 +517,13 @@ class CampaignRunner:
             "places), unit (°F, K) or offset in its register map — `soakcal rig check RIG` "
             "names the map key to fix")
 
-    async def _save_each(self, msg: Save) -> None:
-        """Commit every live sensor's reading of a position and the cursor in one transaction."""
+    async def _save(self, msg: Save) -> None:
+        """Commit every live sensor's reading of a position and the cursor past it in one
+        transaction (the crash rule)."""
         readings = {s: r for s, r in dict(msg.acquisition).items()
                     if r is not None and s not in self.dropped}
         status, readings = await self._checked_readings(
-            msg, readings,
-            lambda: self._measure_live(self.spec.samples_per_position, self._live))
+            msg, readings, lambda: self._measure(self.spec.samples_per_position, self._live))
         readings = {s: r for s, r in readings.items() if s not in self.dropped}
         if not readings:
             raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
@@ -534,44 +534,18 @@ class CampaignRunner:
                 continue
             acq, flags, attempts = readings[serial]
             rows.append({
-                "sensor": serial, "step": msg.step, "position": msg.position,
+                "step": msg.step, "position": msg.position,
                 "t_s": self._t(self.clock.now() - acq.duration_s / 2.0),
                 "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
                 "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
                 "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
                 "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
-                "attempts": attempts, "flags": ",".join(flags) or None,
+                "attempts": attempts, "flags": ",".join(flags) or None, "sensor": serial,
             })
         progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
                                  write=False)
         store.commit_measurements(self.sf, self.id, rows, msg.step, msg.next_position,
                                   progress, fence=self.fence)
-
-    async def _save(self, msg: Save) -> None:
-        """Commit the reading and the cursor past it in one transaction (the crash rule)."""
-        if msg.sensors:
-            await self._save_each(msg)
-            return
-        async def measure() -> dict[str, Any]:
-            return {"": await self._measure(self.spec.samples_per_position)}
-
-        status, readings = await self._checked_readings(msg, {"": msg.acquisition}, measure)
-        acq, flags, attempts = readings[""]
-        t_mid = self.clock.now() - acq.duration_s / 2.0
-        ref = msg.ref_g
-        row = {
-            "step": msg.step, "position": msg.position, "t_s": self._t(t_mid),
-            "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
-            "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
-            "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
-            "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
-            "attempts": attempts, "flags": ",".join(flags) or None,
-            "sensor": self.sensor_serial,
-        }
-        progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
-                                 write=False)
-        store.commit_measurement(self.sf, self.id, row, msg.next_position, progress,
-                                 fence=self.fence)
 
     # --- phases -------------------------------------------------------------
     async def _ramp(self, msg: SetChamber) -> None:
@@ -586,7 +560,7 @@ class CampaignRunner:
         await self.guard.call("chamber.run", ch.run)
         if spec.rate_gain == "measured":
             # Every soak at one pose (home), so every soak's probes compare directly and k
-            # is known from the second soak on (soak_rate.estimate_rate_gain). Parked after
+            # is known from the second soak on (rate_gain.estimate_rate_gain). Parked after
             # the setpoint is commanded: the move (≈ 10 s) then runs during the ramp instead
             # of delaying it, and the soak's probes start after both.
             await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
@@ -597,7 +571,7 @@ class CampaignRunner:
         limit_s += spec.stability.max_soak_s
         # With the rate gain measured, the dies are probed during the ramp too (at home, like
         # the soaks): the die's rate is large then, and the first ramp with the first soak
-        # measures k during that soak instead of after it (soak_rate.estimate_rate_gain).
+        # measures k during that soak instead of after it (rate_gain.estimate_rate_gain).
         probe_ramp = spec.rate_gain == "measured" and spec.stability.policy == "predictive"
         dies = self._no_dies()
         try:
@@ -645,10 +619,9 @@ class CampaignRunner:
         ch_t: list[float] = []
         ch_pv: list[float] = []
         ch_wsp: list[float] = []
-        # Die probes per sensor (the key None: the one sensor of a one-sensor campaign).
-        dies: dict[str | None, list[_Probe]] = self._no_dies()
+        dies = self._no_dies()  # die probes per sensor
         decision = stability.Decision(False, "started")
-        gains: dict[str | None, float | None] = {}
+        gains: dict[str, float | None] = {}
         waiting_on: str | None = None  # the die that said "not yet" last
         while True:
             status = await self._chamber()
@@ -672,7 +645,7 @@ class CampaignRunner:
                 await self._probe_dies(dies, step, target_c, status, self._t(start_s))
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
-            live = {k: v for k, v in dies.items() if k is None or k not in self.dropped}
+            live = {k: v for k, v in dies.items() if k not in self.dropped}
             gains = {k: self._rate_gain_for_decision(k, v) for k, v in live.items()}
             # Every die decides, with its own rate gain; the slowest one ends the soak. The
             # die that kept the soak going last poll is asked first and the first "not yet"
@@ -727,41 +700,38 @@ class CampaignRunner:
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
-    def _no_dies(self) -> dict[str | None, list[_Probe]]:
-        keys: list[str | None] = list(self._live) if self.serials else [None]
-        return {k: [] for k in keys}
+    def _no_dies(self) -> dict[str, list[_Probe]]:
+        return {serial: [] for serial in self._live}
 
-    async def _probe_dies(self, dies: dict[str | None, list[_Probe]], step: int,
+    async def _probe_dies(self, dies: dict[str, list[_Probe]], step: int,
                           setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
                           ) -> None:
-        """One die-temperature probe of every live sensor (of the one sensor), each stored
-        as it is taken (``soak_probes``: the measured rate gain and a resume need them)."""
+        """One die-temperature probe of every live sensor, each stored as it is taken
+        (``soak_probes``: the measured rate gain and a resume need them).
+
+        Every live die at once, as a position's captures (:func:`sensors.read_all`): a
+        poll of eight sensors takes one capture's time, not eight.
+        """
         n = self.spec.soak_probe_samples
+
+        def read(serial: str) -> Awaitable[Any]:
+            return self._sensor_call(serial, "accelerometer.acquire",
+                                     functools.partial(self._accelerometer(serial).acquire, n))
+
+        taken = await read_all([k for k in dies if k not in self.dropped], read)
         rows: list[dict[str, Any]] = []
-        if None in dies:
-            taken: dict[str | None, Any] = {None: await self._acquire(n)}
-        else:
-            # Every live die at once, as a position's captures (multi.read_all): a poll of
-            # eight sensors takes one capture's time, not eight.
-            def read(serial: str) -> Awaitable[Any]:
-                acc = self.dev.accelerometers[serial]
-                return self._sensor_call(serial, "accelerometer.acquire",
-                                         lambda: acc.acquire(n))
-            live = [k for k in dies if k is not None and k not in self.dropped]
-            taken = dict(await read_all(live, read))
-        for key, probe in taken.items():
+        for serial, probe in taken.items():
             if isinstance(probe, SensorDropped):
                 self._drop(probe)
                 continue
-            probes = dies[key]
             # mid-capture (captures end together; each keeps its own duration)
             mid_s = self.clock.now() - probe.duration_s / 2.0
             t_s = self._t(mid_s)
-            probes.append(_Probe(mid_s, t_s, float(probe.sensor_c),
-                                 tuple(float(v) for v in probe.mean_g)))
+            dies[serial].append(_Probe(mid_s, t_s, float(probe.sensor_c),
+                                       tuple(float(v) for v in probe.mean_g)))
             ref = self._pose_ref or (math.nan, math.nan, math.nan)
             rows.append({
-                "sensor": key if key is not None else self.sensor_serial, "step": step,
+                "sensor": serial, "step": step,
                 "soak_start_t_s": soak_start_t_s, "pose": self._pose, "t_s": t_s,
                 "setpoint_c": setpoint_c, "chamber_c": status.process_c,
                 "sensor_c": probe.sensor_c,
@@ -771,7 +741,7 @@ class CampaignRunner:
             })
         store.add_soak_probes(self.sf, self.id, rows)
 
-    # --- the sensor's rate gain (soak_rate.py) ---------------------------------------
+    # --- the sensor's rate gain (rate_gain.py) ---------------------------------------
     def _set_pose(self, angles_deg: tuple[float, ...]) -> None:
         """The table stands at ``angles_deg``: the probes' orientation key and reference."""
         from drivers.geometry import reference_for_angles
@@ -783,46 +753,46 @@ class CampaignRunner:
         except ValueError:  # a table geometry the reference formula does not cover
             self._pose_ref = None
 
-    def _keep_soak(self, dies: dict[str | None, list[_Probe]], ramp: bool = False) -> None:
+    def _keep_soak(self, dies: dict[str, list[_Probe]], ramp: bool = False) -> None:
         """Add this soak's (``ramp``: this ramp's) probes to the finished soaks of each
         sensor."""
         for key, probes in dies.items():
-            if len(probes) >= soak_rate.MIN_PROBES_PER_SOAK:
+            if len(probes) >= rate_gain.MIN_PROBES_PER_SOAK:
                 self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes, ramp))
 
-    def _stored_soaks(self) -> dict[str | None, list[soak_rate.SoakProbes]]:
+    def _stored_soaks(self) -> dict[str, list[rate_gain.SoakProbes]]:
         """The soaks of an interrupted run, from the soak_probes table, per sensor."""
-        groups: dict[tuple[str | None, int, float, str], list[dict[str, Any]]] = {}
+        groups: dict[tuple[str, int, float, str], list[dict[str, Any]]] = {}
         for r in store.soak_probe_rows(self.sf, self.id):
-            key = r["sensor"] if self.serials else None
+            key = r["sensor"]
             groups.setdefault((key, r["step"], r["soak_start_t_s"], r["pose"]), []).append(r)
-        out: dict[str | None, list[soak_rate.SoakProbes]] = {}
+        out: dict[str, list[rate_gain.SoakProbes]] = {}
         for (key, _, _, pose), rows in groups.items():
-            if len(rows) >= soak_rate.MIN_PROBES_PER_SOAK:
+            if len(rows) >= rate_gain.MIN_PROBES_PER_SOAK:
                 # A ramp's probes begin with the air outside the band (a soak starts once
                 # the air is in it): no column needed to tell them apart.
                 first = min(rows, key=lambda r: r["t_s"])
                 air_c, setpoint_c = first.get("chamber_c"), first.get("setpoint_c")
                 ramp = (air_c is not None and setpoint_c is not None
                         and abs(air_c - setpoint_c) > self.spec.stability.tol_c)
-                out.setdefault(key, []).append(soak_rate.SoakProbes(
+                out.setdefault(key, []).append(rate_gain.SoakProbes(
                     pose, np.array([r["t_s"] for r in rows], float),
                     np.array([r["sensor_c"] for r in rows], float),
                     np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float), ramp))
         return out
 
-    def _rate_estimate(self, key: str | None,
-                       current: list[_Probe] | None = None) -> soak_rate.RateGain | None:
+    def _rate_estimate(self, key: str,
+                       current: list[_Probe] | None = None) -> rate_gain.RateGain | None:
         soaks = list(self._soaks.get(key, []))
-        if current is not None and len(current) >= soak_rate.MIN_PROBES_PER_SOAK:
+        if current is not None and len(current) >= rate_gain.MIN_PROBES_PER_SOAK:
             soaks.append(_soak_probes(self._pose, current))
-        return soak_rate.estimate_rate_gain(soaks)
+        return rate_gain.estimate_rate_gain(soaks)
 
-    def _rate_gain_for_decision(self, key: str | None, current: list[_Probe]) -> float | None:
+    def _rate_gain_for_decision(self, key: str, current: list[_Probe]) -> float | None:
         """k (µg per °C/min) for ``stability.decide``; None: the spec's ``gradient_lag_s``.
 
         Measured: the calibration subtracts k̂·rate, so only what the correction may get
-        wrong counts (``soak_rate.residual_rate_gain_for_decision``).
+        wrong counts (``rate_gain.residual_rate_gain_for_decision``).
         """
         if self.spec.rate_gain != "measured":
             return None
@@ -830,16 +800,16 @@ class CampaignRunner:
         # campaign with the soaks to measure it may soak for that correction's residual
         # before its own estimate is informative (the first soak: the prior's 100 would
         # otherwise keep it ≈ 30 min longer).
-        will_correct = self.spec.n_steps >= soak_rate.SOAKS_TO_CORRECT
-        return soak_rate.residual_rate_gain_for_decision(self._rate_estimate(key, current),
+        will_correct = self.spec.n_steps >= rate_gain.SOAKS_TO_CORRECT
+        return rate_gain.residual_rate_gain_for_decision(self._rate_estimate(key, current),
                                                          will_correct=will_correct)
 
-    def _rate_provenance(self, key: str | None) -> dict[str, Any] | None:
+    def _rate_provenance(self, key: str) -> dict[str, Any] | None:
         """The campaign's measured rate gain of one sensor, for the fit and its provenance."""
         if self.spec.rate_gain != "measured":
             return None
         est = self._rate_estimate(key)
-        k_hat = soak_rate.correction_gain_ug_per_c_per_min(est)
+        k_hat = rate_gain.correction_gain_ug_per_c_per_min(est)
         return {
             "rate_gain_ug_per_c_per_min": None if k_hat is None else k_hat.tolist(),
             "rate_gain_estimate": None if est is None else {
@@ -848,72 +818,44 @@ class CampaignRunner:
                 "probes": est.n, "soaks": est.soaks},
         }
 
-    async def _fitting_each(self, camp: Any) -> None:
-        """One calibration per live sensor (a fit that fails drops that sensor)."""
-        done = dict(camp.calibration_ids or {})
+    async def _fitting(self) -> None:
+        """One calibration per live sensor, each stored as it is fitted (a resumed fit skips
+        the stored ones); a fit that fails drops that sensor (fails a one-sensor campaign)."""
+        camp = store.load_campaign(self.sf, self.id)
+        store.set_cursor(self.sf, self.id, self.spec.n_steps - 1, "fitting", self.n_pos,
+                         {**self._progress, "phase": "fitting", "fraction": 1.0, "eta_s": 0.0})
+        several = len(self.serials) > 1
+        done = (set(camp.calibration_ids or {}) if several
+                else {self.sensor_serial} if camp.calibration_id is not None else set())
         for serial in self._live:
             if serial in done:
                 continue
             cols = store.measurement_columns(self.sf, self.id, serial)
             provenance = {
                 "campaign_id": self.id, "rig": camp.rig, "sensor": serial,
-                "sensors": self.serials, "spec": camp.spec, "positions": self.spec.positions,
+                **({"sensors": self.serials} if several else {}),
+                "spec": camp.spec, "positions": self.spec.positions,
                 "steps_log": camp.steps_log,
-                "recording": f"campaign-{self.id}-{serial}.csv",
+                "recording": (f"campaign-{self.id}-{serial}.csv" if several
+                              else f"campaign-{self.id}.csv"),
                 "sensor_identity": self.identities.get(serial),
                 **(self._rate_provenance(serial) or {}),
             }
             try:
+                # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
                 values = await asyncio.to_thread(self.calibrate, cols, provenance)
-            except Exception as exc:  # one sensor's fit failing drops it, not the others
+            except Exception as exc:  # one sensor's fit failing drops it, not the service
                 self._drop(SensorDropped(serial, f"calibration fit failed: {exc}"))
                 continue
             fit = values.pop("_fit", None)
             if self.fit_result is None:
                 self.fit_result = fit
-            store.store_calibration(self.sf, self.id, values, sensor=serial)
-
-    async def _fitting(self) -> None:
-        camp = store.load_campaign(self.sf, self.id)
-        store.set_cursor(self.sf, self.id, self.spec.n_steps - 1, "fitting", self.n_pos,
-                         {**self._progress, "phase": "fitting", "fraction": 1.0, "eta_s": 0.0})
-        if self.serials:
-            await self._fitting_each(camp)
-            return
-        if camp.calibration_id is not None:
-            return
-        cols = store.measurement_columns(self.sf, self.id)
-        provenance = {
-            "campaign_id": self.id, "rig": camp.rig, "sensor": camp.sensor,
-            "spec": camp.spec, "positions": self.spec.positions,
-            "steps_log": camp.steps_log, "recording": f"campaign-{self.id}.csv",
-            "sensor_identity": self.sensor_identity,
-            **(self._rate_provenance(None) or {}),
-        }
-        try:
-            # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
-            values = await asyncio.to_thread(self.calibrate, cols, provenance)
-        except Exception as exc:  # a fit failure fails this campaign, not the service
-            raise CampaignFailed(f"calibration fit failed: {exc}") from exc
-        self.fit_result = values.pop("_fit", None)
-        store.store_calibration(self.sf, self.id, values)
+            store.store_calibration(self.sf, self.id, values,
+                                    sensor=serial if several else None)
 
     # --- device helpers -----------------------------------------------------------
     async def _chamber(self) -> ChamberStatus:
         return await self.guard.call("chamber.read_status", self.dev.chamber.read_status)
-
-    async def _acquire(self, n: int) -> Acquisition:
-        return await self.guard.call("accelerometer.acquire",
-                                     lambda: self.dev.accelerometer.acquire(n))
-
-    async def _measure(self, n: int) -> tuple[Acquisition, list[str], int]:
-        """Acquire; on a failed quality check measure once more and keep the second capture."""
-        acq = await self._acquire(n)
-        flags = check_acquisition(acq, n, self.spec.quality)
-        if not flags:
-            return acq, [], 1
-        acq = await self._acquire(n)
-        return acq, check_acquisition(acq, n, self.spec.quality), 2
 
     async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
         """Command the table and wait for in-position; a table that misses it suspends.
@@ -1211,8 +1153,8 @@ class _Probe:
     mean_g: tuple[float, ...]
 
 
-def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> soak_rate.SoakProbes:
-    return soak_rate.SoakProbes(pose, np.array([p.t_s for p in probes]),
+def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> rate_gain.SoakProbes:
+    return rate_gain.SoakProbes(pose, np.array([p.t_s for p in probes]),
                                 np.array([p.sensor_c for p in probes]),
                                 np.array([p.mean_g for p in probes], float), ramp)
 
