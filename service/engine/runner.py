@@ -29,15 +29,19 @@ from typing import Any
 import numpy as np
 
 from calibration.campaign_plan import (
+    RETAKE,
     Acquire,
     Checkpoint,
     Configure,
     Fit,
+    Home,
     Move,
     Msg,
+    ReadChamber,
     Save,
     SetChamber,
     Settle,
+    WaitChamber,
     WaitStable,
     campaign_plan,
 )
@@ -113,7 +117,7 @@ class CampaignRunner:
         # Called with (message, started_s, ended_s) for every plan message executed.
         self._subscribers: list[Subscriber] = []
         self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
-        self._last_soak: WaitStable | None = None
+        self._pose_attempts: dict[tuple[int, int], int] = {}  # captures off their pose
         # Finished (or interrupted) soaks' probes per sensor, for the measured rate gain
         # (rate_gain.py); reloaded from the soak_probes table on resume.
         self._soaks: dict[str, list[rate_gain.SoakProbes]] = {}
@@ -259,7 +263,21 @@ class CampaignRunner:
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
         # The table's pose of each position, by this rig's geometry: the travel order's costs.
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
-        plan = campaign_plan(spec, self.refs, done, sensors=self.serials, angles_deg=angles_deg)
+        while True:
+            plan = campaign_plan(spec, self.refs, done, sensors=self.serials,
+                                 angles_deg=angles_deg)
+            try:
+                await self._run_plan(plan)
+                return
+            except Rewind as rewind:
+                # A suspension is a rewind: the plan resumes from what is stored, as after
+                # a restart (the step re-ramped, re-soaked where the physics needs it,
+                # its missing positions measured), and every subscriber sees it.
+                log.info("campaign %s: %s; the plan resumes from its stored measurements",
+                         self.id, rewind)
+                done = store.measured_positions(self.sf, self.id)
+
+    async def _run_plan(self, plan: Any) -> None:
         reply: Any = None
         while True:
             try:
@@ -271,16 +289,19 @@ class CampaignRunner:
     async def _interpret(self, msg: Msg) -> Any:
         """Execute one plan message; subscribers hear of it once it is done.
 
-        A ``Save`` is announced *before* its commit (the reading is complete), so
-        the progress committed with it already counts it.
+        A ``Save`` is committed here, with the cursor past it (the crash rule), and
+        announced *before* its commit (the reading is complete), so the progress
+        committed with it already counts it; a capture sent back to be taken again
+        (:data:`RETAKE`) is neither announced nor stored.
         """
         started_s = self._active_s()
+        result = await self._handlers[type(msg)](msg)
         if isinstance(msg, Save):
+            if result == RETAKE:
+                return RETAKE
             self._notify(msg, started_s)
-            await self._save(msg)
+            self._commit(msg, *result)
             return None
-        handler = self._handlers[type(msg)]
-        result = await handler(msg)
         self._notify(msg, started_s)
         return result
 
@@ -301,8 +322,10 @@ class CampaignRunner:
     def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
         return {
             Configure: self._configure, Checkpoint: self._at_checkpoint,
-            SetChamber: self._ramp, WaitStable: self._soak, Move: self._move,
-            Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
+            SetChamber: self._set_chamber, WaitChamber: self._wait_chamber,
+            ReadChamber: self._read_chamber, Home: self._home, WaitStable: self._soak,
+            Move: self._move, Settle: self._settle, Acquire: self._acquire_msg,
+            Save: self._save, Fit: self._fit,
         }
 
     # --- the campaign's sensors, one or several (service/engine/sensors.py) -------------
@@ -404,6 +427,12 @@ class CampaignRunner:
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
 
+    async def _home(self, _msg: Home) -> None:
+        await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
+
+    async def _read_chamber(self, _msg: ReadChamber) -> ChamberStatus:
+        return await self._chamber()
+
     async def _acquire_msg(self, msg: Acquire) -> Any:
         got = await self._measure(msg.n_samples, msg.sensors)
         return {serial: got.get(serial) for serial in msg.sensors}
@@ -411,55 +440,35 @@ class CampaignRunner:
     async def _fit(self, _msg: Fit) -> None:
         await self._fitting()
 
-    async def _chamber_in_band(
-        self, msg: Save, remeasure: Callable[[], Awaitable[Any]]
-    ) -> tuple[ChamberStatus, Any]:
-        """The chamber's status once it is in band for this save, and the readings taken
-        again if it was not (None when the readings in hand stand).
+    async def _save(self, msg: Save) -> tuple[ChamberStatus, dict[str, Any]] | str:
+        """Check a position's readings before they are stored: (chamber status, readings)
+        for :meth:`_commit`, or :data:`RETAKE`.
 
-        A reading taken while the chamber misbehaved is discarded: hold, re-soak where the
-        physics needs it, return to the position and measure it again (``remeasure``).
+        The chamber first (alarms; its PV in band of the setpoint unless ``msg.band`` is
+        off): a reading taken while it misbehaved is discarded, the campaign holds
+        (:meth:`_hold`) and the plan rewinds (:class:`Rewind`): the step is re-soaked
+        where the physics needs it and the position measured again, as after a restart.
+
+        Then every reading at its pose. A capture that does not read gravity from the
+        direction its position claims (placement.check_pose: a table that reported
+        in-position somewhere else) is never stored under that label: the plan measures
+        the position again (:data:`RETAKE`), up to ``POSE_ATTEMPTS`` captures in all.
+        Then the campaign fails naming the position and the angle; with several
+        sensors, only the ones still off are dropped while another reads the pose right
+        (its mount, not the table, is wrong).
         """
-        remeasured: Any = None
-        while True:
-            status = await self._chamber()
-            tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
-            if tripped is None:
-                return status, remeasured
-            await self._hold(*tripped, setpoint_c=msg.setpoint_c)
-            if tripped[0].restart_soak and self._last_soak is not None:
-                await self._soak(dataclasses.replace(self._last_soak, resumed=True))
-            remeasured = await self._measure_again(msg, remeasure)
-
-    async def _measure_again(self, msg: Save, remeasure: Callable[[], Awaitable[Any]]) -> Any:
-        """Return to the position, settle and measure again (``remeasure``)."""
-        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
-        await self._wait(self.spec.settle_s)
-        return await remeasure()
-
-    async def _checked_readings(
-        self, msg: Save, readings: dict[str, Any], remeasure: Callable[[], Awaitable[Any]]
-    ) -> tuple[ChamberStatus, dict[str, Any]]:
-        """The chamber in band (:meth:`_chamber_in_band`) and every reading at its pose.
-
-        ``readings``: serial → (acquisition, flags, attempts). A capture that does not
-        read gravity from the direction its position claims (placement.check_pose: a
-        table that reported in-position somewhere else) is never stored under that
-        label: the position is moved to, settled and measured again, up to
-        ``POSE_ATTEMPTS`` captures in all. Then the campaign fails naming the position
-        and the angle; with several sensors, only the ones still off are dropped while
-        another reads the pose right (its mount, not the table, is wrong).
-        """
-        for attempt in range(1, POSE_ATTEMPTS + 1):
-            status, again = await self._chamber_in_band(msg, remeasure)
-            if again is not None:
-                readings = again
-            off = {serial: check_pose(r[0].mean_g, msg.ref_g)
-                   for serial, r in readings.items()}
-            off = {serial: c for serial, c in off.items() if not c.ok}
-            if not off:
-                self._check_die_against_chamber(msg, status, readings)
-                return status, readings
+        readings = {s: r for s, r in dict(msg.acquisition).items()
+                    if r is not None and s not in self.dropped}
+        status = await self._chamber()
+        tripped = self.suspenders.check_chamber(status, msg.setpoint_c if msg.band else None)
+        if tripped is not None:
+            await self._hold_chamber(*tripped, setpoint_c=msg.setpoint_c)
+            raise Rewind(f"step {msg.step} position {msg.position}: {tripped[0].name}")
+        off = {serial: check_pose(r[0].mean_g, msg.ref_g) for serial, r in readings.items()}
+        off = {serial: c for serial, c in off.items() if not c.ok}
+        if off:
+            key = (msg.step, msg.position)
+            attempt = self._pose_attempts[key] = self._pose_attempts.get(key, 0) + 1
             worst = max(c.angle_deg for c in off.values())
             where = (f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position} "
                      f"(reference {_ref_text(msg.ref_g)}, table at {self._pose} deg)")
@@ -468,20 +477,22 @@ class CampaignRunner:
                                   "sensors": sorted(off)})
             log.warning("campaign %s: %s: capture %.1f° from its reference, measuring again",
                         self.id, where, worst)
-            if attempt == POSE_ATTEMPTS:
-                if len(off) < len(readings):
-                    for serial, c in off.items():
-                        self._drop(SensorDropped(serial, f"{where}: reads gravity "
-                                                 f"{c.angle_deg:.0f}° from its reference "
-                                                 f"(limit {MAX_ANGLE_DEG:.0f}°): check its "
-                                                 "mount"))
-                    return status, {s: r for s, r in readings.items() if s not in off}
+            if attempt < POSE_ATTEMPTS:
+                return RETAKE
+            if len(off) == len(readings):
                 raise CampaignFailed(
                     f"{where}: the capture reads gravity {worst:.0f}° from its reference "
                     f"(limit {MAX_ANGLE_DEG:.0f}°) after {POSE_ATTEMPTS} moves to it; the table "
                     "does not stand where it reports: check its homing and encoders")
-            readings = await self._measure_again(msg, remeasure)
-        raise AssertionError("unreachable")
+            for serial, c in off.items():
+                self._drop(SensorDropped(serial, f"{where}: reads gravity {c.angle_deg:.0f}° "
+                                         f"from its reference (limit {MAX_ANGLE_DEG:.0f}°): "
+                                         "check its mount"))
+        readings = {s: r for s, r in readings.items() if s not in self.dropped}
+        if not readings:
+            raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
+        self._check_die_against_chamber(msg, status, readings)
+        return status, readings
 
     def _check_die_against_chamber(self, msg: Save, status: ChamberStatus,
                                    readings: dict[str, Any]) -> None:
@@ -517,16 +528,9 @@ class CampaignRunner:
             "places), unit (°F, K) or offset in its register map — `soakcal rig check RIG` "
             "names the map key to fix")
 
-    async def _save(self, msg: Save) -> None:
+    def _commit(self, msg: Save, status: ChamberStatus, readings: dict[str, Any]) -> None:
         """Commit every live sensor's reading of a position and the cursor past it in one
         transaction (the crash rule)."""
-        readings = {s: r for s, r in dict(msg.acquisition).items()
-                    if r is not None and s not in self.dropped}
-        status, readings = await self._checked_readings(
-            msg, readings, lambda: self._measure(self.spec.samples_per_position, self._live))
-        readings = {s: r for s, r in readings.items() if s not in self.dropped}
-        if not readings:
-            raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
         ref = msg.ref_g
         rows = []
         for serial in msg.sensors:
@@ -546,24 +550,23 @@ class CampaignRunner:
                                  write=False)
         store.commit_measurements(self.sf, self.id, rows, msg.step, msg.next_position,
                                   progress, fence=self.fence)
+        self._pose_attempts.pop((msg.step, msg.position), None)
 
     # --- phases -------------------------------------------------------------
-    async def _ramp(self, msg: SetChamber) -> None:
-        """Command the setpoint and wait until the working setpoint and PV reach it."""
-        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        store.set_cursor(self.sf, self.id, step, "ramp", 0)
-        self._cursor = (step, "ramp")
+    async def _set_chamber(self, msg: SetChamber) -> None:
+        """Command the ramp rate and the setpoint and run the controller (no waiting)."""
+        store.set_cursor(self.sf, self.id, msg.step, "ramp", 0)
+        self._cursor = (msg.step, "ramp")
         ch = self.dev.chamber
         await self.guard.call("chamber.set_ramp_rate",
                               lambda: ch.set_ramp_rate(msg.ramp_c_per_min))
-        await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(target_c))
+        await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(msg.setpoint_c))
         await self.guard.call("chamber.run", ch.run)
-        if spec.rate_gain == "measured":
-            # Every soak at one pose (home), so every soak's probes compare directly and k
-            # is known from the second soak on (rate_gain.estimate_rate_gain). Parked after
-            # the setpoint is commanded: the move (≈ 10 s) then runs during the ramp instead
-            # of delaying it, and the soak's probes start after both.
-            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
+
+    async def _wait_chamber(self, msg: WaitChamber) -> None:
+        """Wait until the working setpoint (where the controller has one) and the PV
+        reach the setpoint; an alarm meanwhile holds, then rewinds (re-ramps)."""
+        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         start_s = self.clock.now()
         held0_s = self._held_total_s()
         status = await self._chamber()
@@ -589,7 +592,11 @@ class CampaignRunner:
                 # The probe's capture (≈ 4 s) is part of the poll period, not added to it:
                 # the ramp's end is seen as soon as without probes.
                 await self._wait(spec.soak_poll_s - (self.clock.now() - polled_s))
-                status = await self._chamber_watched(None)
+                status = await self._chamber()
+                tripped = self.suspenders.check_chamber(status, None)
+                if tripped is not None:
+                    await self._hold_chamber(*tripped, setpoint_c=None)
+                    raise Rewind(f"step {step} ramp: {tripped[0].name}")
         finally:
             self._keep_soak(dies, ramp=True)
 
@@ -602,8 +609,6 @@ class CampaignRunner:
         """
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         resumed, edge = msg.resumed, msg.edge
-        if not resumed or self._last_soak is None or self._last_soak.step != step:
-            self._last_soak = msg
         cfg = spec.stability
         sweep_s = msg.n_positions * self.eta.position_s
         if resumed:
@@ -627,20 +632,21 @@ class CampaignRunner:
             status = await self._chamber()
             tripped = self.suspenders.check_chamber(status, target_c)
             if tripped is not None:
-                # The die was disturbed: hold until the chamber is back, then soak afresh
-                # (the probes so far are still an approach: they stay for the rate gain).
+                # The die was disturbed: hold until the chamber is back, then the plan
+                # rewinds and soaks afresh (the probes so far are still an approach: they
+                # stay for the rate gain).
                 self._keep_soak(dies)
-                await self._hold(*tripped, setpoint_c=target_c)
-                start_s, held0_s = self.clock.now(), self._held_total_s()
-                ch_t, ch_pv, ch_wsp, dies = [], [], [], self._no_dies()
-                continue
+                await self._hold_chamber(*tripped, setpoint_c=target_c)
+                raise Rewind(f"step {step} soak: {tripped[0].name}")
             now_s = self.clock.now()
             # Soak time: the clock since the soak began, less the time paused or suspended
             # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
             soaked_s = now_s - start_s - (self._held_total_s() - held0_s)
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
-            ch_wsp.append(status.working_setpoint_c)
+            # A controller without a working setpoint: the PV alone says it has arrived.
+            ch_wsp.append(target_c if status.working_setpoint_c is None
+                          else status.working_setpoint_c)
             if cfg.policy == "predictive":
                 await self._probe_dies(dies, step, target_c, status, self._t(start_s))
             settled = stability.chamber_settled(
@@ -860,49 +866,62 @@ class CampaignRunner:
     async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
         """Command the table and wait for in-position; a table that misses it suspends.
 
-        The table suspender stops the table and commands the move again after each
-        ``move_timeout_s``; it fails the campaign once it lasted ``suspend_limit_s``
-        of real time (no soak restart: the table does not disturb the temperature).
+        The table suspender holds (:meth:`_hold`): the table is stopped and the move
+        commanded again until it arrives, every ``move_timeout_s``; the campaign fails
+        once that lasted ``suspend_limit_s`` of real time. No rewind: the table does not
+        disturb the temperature.
         """
+        why = await self._move_once(angles_deg)
+        if why is not None:
+            tt = self.dev.turntable
+
+            async def move_again() -> str | None:
+                await self.guard.call("turntable.stop", tt.stop)
+                return await self._move_once(angles_deg)
+
+            await self._hold(self.suspenders.table, why, move_again, poll_s=0.0)
+        self._set_pose(angles_deg)
+
+    async def _move_once(self, angles_deg: tuple[float, ...]) -> str | None:
+        """Command one move and wait up to ``move_timeout_s`` for in-position: None once
+        there, else why not."""
         tt = self.dev.turntable
-        susp = self.suspenders.table
-        since_s: float | None = None
+        await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
+        start_s = self.clock.now()
         while True:
-            await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
-            start_s = self.clock.now()
-            while True:
-                await self.clock.sleep(TURNTABLE_POLL_S)
-                st = await self.guard.call("turntable.read_status", tt.read_status)
-                if st.in_position and not st.moving:
-                    if since_s is not None:
-                        self._resumed(susp, since_s)
-                    self._set_pose(angles_deg)
-                    return
-                if self.clock.now() - start_s > self.spec.move_timeout_s:
-                    break
-            why = table_not_in_position(st, angles_deg, self.clock.now() - start_s)
-            if since_s is None:
-                since_s = self.clock.now()
-                self._suspend(f"{susp.name}: {why}")
-            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
-                raise CampaignFailed(f"{why}; suspended {susp.limit_s:.0f} s of real time")
-            await self.guard.call("turntable.stop", tt.stop)
-            await self._checkpoint()
+            await self.clock.sleep(TURNTABLE_POLL_S)
+            st = await self.guard.call("turntable.read_status", tt.read_status)
+            if st.in_position and not st.moving:
+                return None
+            if self.clock.now() - start_s > self.spec.move_timeout_s:
+                return table_not_in_position(st, angles_deg, self.clock.now() - start_s)
 
-    async def _chamber_watched(self, setpoint_c: float | None) -> ChamberStatus:
-        """Read the chamber; hold while a chamber suspender is tripped (band armed if given)."""
-        while True:
+    async def _hold_chamber(self, susp: Suspender, why: str, *,
+                            setpoint_c: float | None) -> None:
+        """Hold while a chamber suspender is tripped (band armed with ``setpoint_c``)."""
+
+        async def still_tripped() -> str | None:
             status = await self._chamber()
+            if setpoint_c is not None and abs(status.setpoint_c - setpoint_c) > 1e-3:
+                # Someone changed the controller behind the engine (a front panel, a
+                # process that lost the rig parking it): command our setpoint again.
+                await self.guard.call("chamber.set_setpoint",
+                                      functools.partial(self.dev.chamber.set_setpoint, setpoint_c))
             tripped = self.suspenders.check_chamber(status, setpoint_c)
-            if tripped is None:
-                return status
-            await self._hold(*tripped, setpoint_c=setpoint_c)
+            return None if tripped is None else tripped[1]
 
-    async def _hold(self, susp: Suspender, why: str, *, setpoint_c: float | None) -> None:
-        """Suspended: no readings, chamber keeps its setpoint, until clear for ``clear_s``.
+        await self._hold(susp, why, still_tripped,
+                         poll_s=min(self.spec.soak_poll_s, HOLD_POLL_S))
 
-        Pause and abort still apply. Fails the campaign when the condition lasted
-        ``limit_s`` of real time (clock time over the clock's speed-up).
+    async def _hold(self, susp: Suspender, why: str,
+                    still_tripped: Callable[[], Awaitable[str | None]], *,
+                    poll_s: float) -> None:
+        """The one hold loop: suspended (no readings, chamber at its setpoint) until
+        ``still_tripped()`` has said None for ``susp.clear_s``.
+
+        Pause and abort still apply (a checkpoint every round); paused time is not
+        held time. Fails the campaign when the condition lasted ``susp.limit_s`` of
+        real time (clock time over the clock's speed-up).
         """
         since_s = self.clock.now()
         paused0_s = self._paused_s
@@ -914,16 +933,11 @@ class CampaignRunner:
                 raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
                                      "real time")
             await self._checkpoint()
-            await self._wait(min(self.spec.soak_poll_s, HOLD_POLL_S))
-            status = await self._chamber()
-            if setpoint_c is not None and abs(status.setpoint_c - setpoint_c) > 1e-3:
-                # Someone changed the controller behind the engine (a front panel, a
-                # process that lost the rig parking it): command our setpoint again.
-                await self.guard.call("chamber.set_setpoint",
-                                      functools.partial(self.dev.chamber.set_setpoint, setpoint_c))
-            tripped = self.suspenders.check_chamber(status, setpoint_c)
-            if tripped is not None:
-                why, clear_since_s = tripped[1], None
+            if poll_s > 0:
+                await self._wait(poll_s)
+            now_why = await still_tripped()
+            if now_why is not None:
+                why, clear_since_s = now_why, None
                 continue
             if clear_since_s is None:
                 clear_since_s = self.clock.now()
@@ -1135,8 +1149,15 @@ def _ref_text(ref_g: tuple[float, ...]) -> str:
 
 
 def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
-    return (abs(status.working_setpoint_c - target_c) < 1e-3
+    """The controller's setpoint, and its working setpoint where it has one, at the target
+    (a controller without one: the PV within tolerance alone says it arrived)."""
+    wsp_c = status.working_setpoint_c
+    return ((wsp_c is None or abs(wsp_c - target_c) < 1e-3)
             and abs(status.setpoint_c - target_c) < 1e-3)
+
+
+class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error
+    """A suspender held the campaign: resume the plan from its stored measurements."""
 
 
 def _clean_json(d: dict[str, Any]) -> dict[str, Any]:

@@ -279,3 +279,21 @@ async def test_a_one_sensor_reading_out_of_range_fails_naming_the_reading(sf) ->
     assert "dropped" not in c.error and not c.sensors_dropped
     # the first position whose gravity lies on z is where it fails: nothing stored after it
     assert all(abs(m.ref_z) < 0.5 for m in measurements(sf, cid))
+
+
+async def test_a_controller_without_a_working_setpoint_arrives_on_its_pv(sf) -> None:  # type: ignore[no-untyped-def]
+    # Some controllers have no working-setpoint register (ChamberStatus.working_setpoint_c
+    # None): the ramp has arrived once the PV is within the stability tolerance.
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    read = rig.devices.chamber.read_status
+
+    async def no_wsp() -> Any:
+        return dataclasses.replace(await read(), working_setpoint_c=None)
+
+    rig.devices.chamber.read_status = no_wsp  # type: ignore[method-assign]
+    cid = add_campaign(sf, {**SMALL_SPEC, "setpoints_c": [-10.0, 20.0]})
+    assert await run(sf, cid, rig, clock) == "completed"
+    rows = measurements(sf, cid)
+    assert len(rows) == 2 * N_POS
+    assert all(abs(m.chamber_c - (-10.0, 20.0)[m.step]) < 2.0 for m in rows)
