@@ -58,6 +58,7 @@ from service.engine.guard import (
     DeviceGuard,
     FaultPolicy,
     clock_speed,
+    hold,
 )
 from service.engine.identity import verify_sensor
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
@@ -916,34 +917,14 @@ class CampaignRunner:
     async def _hold(self, susp: Suspender, why: str,
                     still_tripped: Callable[[], Awaitable[str | None]], *,
                     poll_s: float) -> None:
-        """The one hold loop: suspended (no readings, chamber at its setpoint) until
-        ``still_tripped()`` has said None for ``susp.clear_s``.
-
-        Pause and abort still apply (a checkpoint every round); paused time is not
-        held time. Fails the campaign when the condition lasted ``susp.limit_s`` of
-        real time (clock time over the clock's speed-up).
-        """
-        since_s = self.clock.now()
-        paused0_s = self._paused_s
-        clear_since_s: float | None = None
-        self._suspend(f"{susp.name}: {why}")
-        while True:
-            held_s = self.clock.now() - since_s - (self._paused_s - paused0_s)  # pause: not
-            if held_s / clock_speed(self.clock) >= susp.limit_s:
-                raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
-                                     "real time")
-            await self._checkpoint()
-            if poll_s > 0:
-                await self._wait(poll_s)
-            now_why = await still_tripped()
-            if now_why is not None:
-                why, clear_since_s = now_why, None
-                continue
-            if clear_since_s is None:
-                clear_since_s = self.clock.now()
-            if self.clock.now() - clear_since_s >= susp.clear_s:
-                self._resumed(susp, since_s)
-                return
+        """Suspended (no readings, chamber at its setpoint) until ``still_tripped()`` has
+        said None for ``susp.clear_s``: the one hold loop (:func:`guard.hold`), with the
+        campaign's checkpoint (pause, abort) every round; paused time is not held time."""
+        await hold(self.clock, susp, why, still_tripped, poll_s=poll_s,
+                   checkpoint=self._checkpoint, wait=self._wait,
+                   on_hold=lambda why: self._suspend(f"{susp.name}: {why}"),
+                   on_clear=lambda since_s: self._resumed(susp, since_s),
+                   paused_s=lambda: self._paused_s)
 
     def _resumed(self, susp: Suspender, since_s: float) -> None:
         self.suspension_log.append({"suspender": susp.name, "t_s": round(self._t(since_s), 3),
