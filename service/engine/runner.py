@@ -121,7 +121,7 @@ class CampaignRunner:
         self._pose_attempts: dict[tuple[int, int], int] = {}  # captures off their pose
         # Finished (or interrupted) soaks' probes per sensor, for the measured rate gain
         # (rate_gain.py); reloaded from the soak_probes table on resume.
-        self._soaks: dict[str, list[rate_gain.SoakProbes]] = {}
+        self.rate_book = rate_gain.RateGainBook(False, 0, {})
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
@@ -256,7 +256,9 @@ class CampaignRunner:
         self._clock0_s = self.clock.now()
         self._touched = True
         self._subscribers.append(EtaSubscriber(self.eta))
-        self._soaks = self._stored_soaks()
+        self.rate_book = rate_gain.RateGainBook.from_rows(
+            store.soak_probe_rows(self.sf, self.id), measured=spec.rate_gain == "measured",
+            n_steps=spec.n_steps, tol_c=spec.stability.tol_c)
         if len(self.serials) > 1:
             missing = [s for s in self.serials if s not in self.dev.accelerometers]
             if missing:
@@ -599,7 +601,7 @@ class CampaignRunner:
                     await self._hold_chamber(*tripped, setpoint_c=None)
                     raise Rewind(f"step {step} ramp: {tripped[0].name}")
         finally:
-            self._keep_soak(dies, ramp=True)
+            self.rate_book.keep(self._pose, dies, ramp=True)
 
     async def _soak(self, msg: WaitStable) -> None:
         """Wait for stability (policy of the spec); log the decision in steps_log.
@@ -636,7 +638,7 @@ class CampaignRunner:
                 # The die was disturbed: hold until the chamber is back, then the plan
                 # rewinds and soaks afresh (the probes so far are still an approach: they
                 # stay for the rate gain).
-                self._keep_soak(dies)
+                self.rate_book.keep(self._pose, dies)
                 await self._hold_chamber(*tripped, setpoint_c=target_c)
                 raise Rewind(f"step {step} soak: {tripped[0].name}")
             now_s = self.clock.now()
@@ -653,7 +655,7 @@ class CampaignRunner:
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
             live = {k: v for k, v in dies.items() if k not in self.dropped}
-            gains = {k: self._rate_gain_for_decision(k, v) for k, v in live.items()}
+            gains = {k: self.rate_book.for_decision(k, self._pose, v) for k, v in live.items()}
             # Every die decides, with its own rate gain; the slowest one ends the soak. The
             # die that kept the soak going last poll is asked first and the first "not yet"
             # ends the round: the soak goes on whatever the others say, and on the poll
@@ -680,7 +682,7 @@ class CampaignRunner:
             # (the soak ends at a poll: a fixed period overshoots by half of one on average).
             await self._wait(stability.next_poll_s(
                 decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
-        self._keep_soak(dies)
+        self.rate_book.keep(self._pose, dies)
         last = [probes[-1] for probes in dies.values() if probes]
         if last:
             self._die_track = (max(p.clock_s for p in last),
@@ -707,10 +709,10 @@ class CampaignRunner:
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
-    def _no_dies(self) -> dict[str, list[_Probe]]:
+    def _no_dies(self) -> dict[str, list[rate_gain.Probe]]:
         return {serial: [] for serial in self._live}
 
-    async def _probe_dies(self, dies: dict[str, list[_Probe]], step: int,
+    async def _probe_dies(self, dies: dict[str, list[rate_gain.Probe]], step: int,
                           setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
                           ) -> None:
         """One die-temperature probe of every live sensor, each stored as it is taken
@@ -734,7 +736,7 @@ class CampaignRunner:
             # mid-capture (captures end together; each keeps its own duration)
             mid_s = self.clock.now() - probe.duration_s / 2.0
             t_s = self._t(mid_s)
-            dies[serial].append(_Probe(mid_s, t_s, float(probe.sensor_c),
+            dies[serial].append(rate_gain.Probe(mid_s, t_s, float(probe.sensor_c),
                                        tuple(float(v) for v in probe.mean_g)))
             ref = self._pose_ref or (math.nan, math.nan, math.nan)
             rows.append({
@@ -748,7 +750,7 @@ class CampaignRunner:
             })
         store.add_soak_probes(self.sf, self.id, rows)
 
-    # --- the sensor's rate gain (rate_gain.py) ---------------------------------------
+    # --- the table's pose: the probes' orientation key (rate_gain.py) -------------------
     def _set_pose(self, angles_deg: tuple[float, ...]) -> None:
         """The table stands at ``angles_deg``: the probes' orientation key and reference."""
         from drivers.geometry import reference_for_angles
@@ -759,71 +761,6 @@ class CampaignRunner:
             self._pose_ref = (float(ref[0]), float(ref[1]), float(ref[2]))
         except ValueError:  # a table geometry the reference formula does not cover
             self._pose_ref = None
-
-    def _keep_soak(self, dies: dict[str, list[_Probe]], ramp: bool = False) -> None:
-        """Add this soak's (``ramp``: this ramp's) probes to the finished soaks of each
-        sensor."""
-        for key, probes in dies.items():
-            if len(probes) >= rate_gain.MIN_PROBES_PER_SOAK:
-                self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes, ramp))
-
-    def _stored_soaks(self) -> dict[str, list[rate_gain.SoakProbes]]:
-        """The soaks of an interrupted run, from the soak_probes table, per sensor."""
-        groups: dict[tuple[str, int, float, str], list[dict[str, Any]]] = {}
-        for r in store.soak_probe_rows(self.sf, self.id):
-            key = r["sensor"]
-            groups.setdefault((key, r["step"], r["soak_start_t_s"], r["pose"]), []).append(r)
-        out: dict[str, list[rate_gain.SoakProbes]] = {}
-        for (key, _, _, pose), rows in groups.items():
-            if len(rows) >= rate_gain.MIN_PROBES_PER_SOAK:
-                # A ramp's probes begin with the air outside the band (a soak starts once
-                # the air is in it): no column needed to tell them apart.
-                first = min(rows, key=lambda r: r["t_s"])
-                air_c, setpoint_c = first.get("chamber_c"), first.get("setpoint_c")
-                ramp = (air_c is not None and setpoint_c is not None
-                        and abs(air_c - setpoint_c) > self.spec.stability.tol_c)
-                out.setdefault(key, []).append(rate_gain.SoakProbes(
-                    pose, np.array([r["t_s"] for r in rows], float),
-                    np.array([r["sensor_c"] for r in rows], float),
-                    np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float), ramp))
-        return out
-
-    def _rate_estimate(self, key: str,
-                       current: list[_Probe] | None = None) -> rate_gain.RateGain | None:
-        soaks = list(self._soaks.get(key, []))
-        if current is not None and len(current) >= rate_gain.MIN_PROBES_PER_SOAK:
-            soaks.append(_soak_probes(self._pose, current))
-        return rate_gain.estimate_rate_gain(soaks)
-
-    def _rate_gain_for_decision(self, key: str, current: list[_Probe]) -> float | None:
-        """k (µg per °C/min) for ``stability.decide``; None: the spec's ``gradient_lag_s``.
-
-        Measured: the calibration subtracts k̂·rate, so only what the correction may get
-        wrong counts (``rate_gain.residual_rate_gain_for_decision``).
-        """
-        if self.spec.rate_gain != "measured":
-            return None
-        # The fit corrects every row, this soak's too, with the campaign's final k̂: a
-        # campaign with the soaks to measure it may soak for that correction's residual
-        # before its own estimate is informative (the first soak: the prior's 100 would
-        # otherwise keep it ≈ 30 min longer).
-        will_correct = self.spec.n_steps >= rate_gain.SOAKS_TO_CORRECT
-        return rate_gain.residual_rate_gain_for_decision(self._rate_estimate(key, current),
-                                                         will_correct=will_correct)
-
-    def _rate_provenance(self, key: str) -> dict[str, Any] | None:
-        """The campaign's measured rate gain of one sensor, for the fit and its provenance."""
-        if self.spec.rate_gain != "measured":
-            return None
-        est = self._rate_estimate(key)
-        k_hat = rate_gain.correction_gain_ug_per_c_per_min(est)
-        return {
-            "rate_gain_ug_per_c_per_min": None if k_hat is None else k_hat.tolist(),
-            "rate_gain_estimate": None if est is None else {
-                "gain_ug_per_c_per_min": est.gain_ug_per_c_per_min.tolist(),
-                "sd_ug_per_c_per_min": est.sd_ug_per_c_per_min.tolist(),
-                "probes": est.n, "soaks": est.soaks},
-        }
 
     async def _fitting(self) -> None:
         """One calibration per live sensor, each stored as it is fitted (a resumed fit skips
@@ -846,7 +783,7 @@ class CampaignRunner:
                 "recording": (f"campaign-{self.id}-{serial}.csv" if several
                               else f"campaign-{self.id}.csv"),
                 "sensor_identity": self.identities.get(serial),
-                **(self._rate_provenance(serial) or {}),
+                **self.rate_book.provenance(serial),
             }
             try:
                 # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
@@ -1143,22 +1080,6 @@ class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error
 
 def _clean_json(d: dict[str, Any]) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Probe:
-    """One soak probe: clock time (the decision's), campaign time, die channel, mean output."""
-
-    clock_s: float
-    t_s: float
-    sensor_c: float
-    mean_g: tuple[float, ...]
-
-
-def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> rate_gain.SoakProbes:
-    return rate_gain.SoakProbes(pose, np.array([p.t_s for p in probes]),
-                                np.array([p.sensor_c for p in probes]),
-                                np.array([p.mean_g for p in probes], float), ramp)
 
 
 def _finite(d: dict[str, float]) -> dict[str, float | None]:
