@@ -37,13 +37,19 @@ from calibration.campaign_plan import (
     Home,
     Move,
     Msg,
+    Poll,
+    PollChamber,
+    PollSoak,
     ReadChamber,
     Save,
     SetChamber,
     Settle,
+    Wait,
     WaitChamber,
     WaitStable,
     campaign_plan,
+    soak_until_stable,
+    wait_for_chamber,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
 from calibration.thermal_plant import AMBIENT_C
@@ -328,7 +334,8 @@ class CampaignRunner:
             SetChamber: self._set_chamber, WaitChamber: self._wait_chamber,
             ReadChamber: self._read_chamber, Home: self._home, WaitStable: self._soak,
             Move: self._move, Settle: self._settle, Acquire: self._acquire_msg,
-            Save: self._save, Fit: self._fit,
+            Save: self._save, Fit: self._fit, Wait: self._wait_msg,
+            PollChamber: self._poll_chamber, PollSoak: self._poll_soak,
         }
 
     # --- the campaign's sensors, one or several (service/engine/sensors.py) -------------
@@ -429,6 +436,9 @@ class CampaignRunner:
 
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
+
+    async def _wait_msg(self, msg: Wait) -> None:
+        await self._wait(msg.seconds)
 
     async def _home(self, _msg: Home) -> None:
         await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
@@ -568,53 +578,61 @@ class CampaignRunner:
 
     async def _wait_chamber(self, msg: WaitChamber) -> None:
         """Wait until the working setpoint (where the controller has one) and the PV
-        reach the setpoint; an alarm meanwhile holds, then rewinds (re-ramps)."""
-        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        start_s = self.clock.now()
-        held0_s = self._held_total_s()
-        status = await self._chamber()
-        limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
-        limit_s += spec.stability.max_soak_s
-        # With the rate gain measured, the dies are probed during the ramp too (at home, like
-        # the soaks): the die's rate is large then, and the first ramp with the first soak
-        # measures k during that soak instead of after it (rate_gain.estimate_rate_gain).
-        probe_ramp = spec.rate_gain == "measured" and spec.stability.policy == "predictive"
-        dies = self._no_dies()
+        reach the setpoint (the plan's :func:`wait_for_chamber`); an alarm meanwhile
+        holds, then rewinds (re-ramps). Bounded by twice the nominal ramp and a max soak.
+
+        With the rate gain measured, the dies are probed during the ramp too (at home,
+        like the soaks): the die's rate is large then, and the first ramp with the first
+        soak measures k during that soak instead of after it
+        (rate_gain.estimate_rate_gain).
+        """
+        spec = self.spec
+        self._ramping = _Ramp(start_s=self.clock.now(), held0_s=self._held_total_s(),
+                              dies=self._no_dies(),
+                              probe=(spec.rate_gain == "measured"
+                                     and spec.stability.policy == "predictive"))
         try:
-            while not (_wsp_at_target(status, target_c)
-                       and abs(status.process_c - target_c) <= spec.stability.tol_c):
-                if self.clock.now() - start_s - (self._held_total_s() - held0_s) > limit_s:
-                    raise CampaignFailed(
-                        f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
-                        f"(PV {status.process_c:.2f} °C)")
-                polled_s = self.clock.now()
-                if probe_ramp:
-                    await self._probe_dies(dies, step, target_c, status, self._t(start_s))
-                self._publish(step, "ramp", 0, status, target_c)
-                await self._checkpoint()
-                # The probe's capture (≈ 4 s) is part of the poll period, not added to it:
-                # the ramp's end is seen as soon as without probes.
-                await self._wait(spec.soak_poll_s - (self.clock.now() - polled_s))
-                status = await self._chamber()
-                tripped = self.suspenders.check_chamber(status, None)
-                if tripped is not None:
-                    await self._hold_chamber(*tripped, setpoint_c=None)
-                    raise Rewind(f"step {step} ramp: {tripped[0].name}")
+            await self._run_plan(wait_for_chamber(msg))
         finally:
-            self.rate_book.keep(self._pose, dies, ramp=True)
+            self.rate_book.keep(self._pose, self._ramping.dies, ramp=True)
+
+    async def _poll_chamber(self, msg: PollChamber) -> Poll:
+        spec, ramp, target_c = self.spec, self._ramping, msg.setpoint_c
+        status = await self._chamber()
+        tripped = self.suspenders.check_chamber(status, None)
+        if tripped is not None:
+            await self._hold_chamber(*tripped, setpoint_c=None)
+            raise Rewind(f"step {msg.step} ramp: {tripped[0].name}")
+        if _wsp_at_target(status, target_c) and abs(status.process_c - target_c) <= \
+                spec.stability.tol_c:
+            return Poll(True)
+        if ramp.limit_s is None:
+            ramp.limit_s = (abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05)
+                            * 60.0 * 2.0 + spec.stability.max_soak_s)
+        if self.clock.now() - ramp.start_s - (self._held_total_s() - ramp.held0_s) \
+                > ramp.limit_s:
+            raise CampaignFailed(f"chamber did not reach {target_c:.1f} °C within "
+                                 f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C)")
+        polled_s = self.clock.now()
+        if ramp.probe:
+            await self._probe_dies(ramp.dies, msg.step, target_c, status, self._t(ramp.start_s))
+        self._publish(msg.step, "ramp", 0, status, target_c)
+        # The probe's capture (≈ 4 s) is part of the poll period, not added to it: the
+        # ramp's end is seen as soon as without probes.
+        return Poll(False, spec.soak_poll_s - (self.clock.now() - polled_s))
 
     async def _soak(self, msg: WaitStable) -> None:
-        """Wait for stability (policy of the spec); log the decision in steps_log.
+        """Wait for stability (policy of the spec; the plan's :func:`soak_until_stable`);
+        log the decision in steps_log.
 
         The predictive policy judges the die against the sweep that follows: its
         duration (positions left × the measured time per position) and whether
         this step is the coldest or hottest (it then sets the model's valid range).
+        A chamber suspender tripped meanwhile holds, then rewinds (a fresh soak).
         """
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        resumed, edge = msg.resumed, msg.edge
         cfg = spec.stability
-        sweep_s = msg.n_positions * self.eta.position_s
-        if resumed:
+        if msg.resumed:
             # The step was soaked before the interruption: re-check, don't re-soak in full.
             cfg = dataclasses.replace(
                 cfg, policy="predictive" if cfg.policy == "fixed" else cfg.policy,
@@ -622,92 +640,92 @@ class CampaignRunner:
             )
         store.set_cursor(self.sf, self.id, step, "soak", 0)
         self._cursor = (step, "soak")
-        start_s = self.clock.now()
-        held0_s = self._held_total_s()  # held time before this soak: not this soak's
-        ch_t: list[float] = []
-        ch_pv: list[float] = []
-        ch_wsp: list[float] = []
-        dies = self._no_dies()  # die probes per sensor
-        decision = stability.Decision(False, "started")
-        gains: dict[str, float | None] = {}
-        waiting_on: str | None = None  # the die that said "not yet" last
-        while True:
-            status = await self._chamber()
-            tripped = self.suspenders.check_chamber(status, target_c)
-            if tripped is not None:
-                # The die was disturbed: hold until the chamber is back, then the plan
-                # rewinds and soaks afresh (the probes so far are still an approach: they
-                # stay for the rate gain).
-                self.rate_book.keep(self._pose, dies)
-                await self._hold_chamber(*tripped, setpoint_c=target_c)
-                raise Rewind(f"step {step} soak: {tripped[0].name}")
-            now_s = self.clock.now()
-            # Soak time: the clock since the soak began, less the time paused or suspended
-            # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
-            soaked_s = now_s - start_s - (self._held_total_s() - held0_s)
-            ch_t.append(now_s)
-            ch_pv.append(status.process_c)
-            # A controller without a working setpoint: the PV alone says it has arrived.
-            ch_wsp.append(target_c if status.working_setpoint_c is None
-                          else status.working_setpoint_c)
-            if cfg.policy == "predictive":
-                await self._probe_dies(dies, step, target_c, status, self._t(start_s))
-            settled = stability.chamber_settled(
-                np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
-            live = {k: v for k, v in dies.items() if k not in self.dropped}
-            gains = {k: self.rate_book.for_decision(k, self._pose, v) for k, v in live.items()}
-            # Every die decides, with its own rate gain; the slowest one ends the soak. The
-            # die that kept the soak going last poll is asked first and the first "not yet"
-            # ends the round: the soak goes on whatever the others say, and on the poll
-            # that ends it every die has been asked (slowest_decision then picks the
-            # slowest), so the outcome is that of asking all, at a fraction of the fits.
-            decisions: list[stability.Decision] = []
-            for key in sorted(live, key=lambda k: k != waiting_on):
-                probes = live[key]
-                decisions.append(stability.decide(
-                    cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
-                    np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
-                    n_positions=self.n_pos, edge=edge,
-                    rate_gain_ug_per_c_per_min=gains[key], order_repeats=msg.order_repeats))
-                if not decisions[-1].stable:
-                    waiting_on = key
-                    break
-            decision = slowest_decision(decisions)
-            self._publish(step, "soak", 0, status, target_c,
-                          soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
-            if decision.stable:
-                break
-            await self._checkpoint()
-            # Sooner than a whole period when the die is predicted to meet its budgets sooner
-            # (the soak ends at a poll: a fixed period overshoots by half of one on average).
-            await self._wait(stability.next_poll_s(
-                decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
-        self.rate_book.keep(self._pose, dies)
-        last = [probes[-1] for probes in dies.values() if probes]
+        # held time before this soak is not this soak's
+        soak = self._soaking = _Soak(cfg, msg.n_positions * self.eta.position_s,
+                                     self.clock.now(), self._held_total_s(), self._no_dies())
+        await self._run_plan(soak_until_stable(msg))
+        self.rate_book.keep(self._pose, soak.dies)
+        last = [probes[-1] for probes in soak.dies.values() if probes]
         if last:
             self._die_track = (max(p.clock_s for p in last),
                                float(np.median([p.sensor_c for p in last])))
-        held_s = self._held_total_s() - held0_s
-        soak_s = self.clock.now() - start_s - held_s
-        used = [g for g in gains.values() if g is not None]
+        held_s = self._held_total_s() - soak.held0_s
+        soak_s = self.clock.now() - soak.start_s - held_s
+        used = [g for g in soak.gains.values() if g is not None]
+        decision = soak.decision
         entry = {
-            "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
+            "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(soak.start_s),
             "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s, "held_s": held_s,
             "reason": decision.reason, "tau_s": decision.tau_s,
             "predicted_offset_c": decision.predicted_offset_c,
             "predicted_error_c": decision.predicted_error_c,
-            "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": sweep_s,
-            "edge": edge, "policy": cfg.policy,
-            "resumed": resumed, "max_soak_reached": decision.max_soak_reached,
+            "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": soak.sweep_s,
+            "edge": msg.edge, "policy": cfg.policy,
+            "resumed": msg.resumed, "max_soak_reached": decision.max_soak_reached,
             # the k (µg per °C/min) the last decision used, largest over the sensors
             "rate_gain_ug_per_c_per_min": max(used) if used else None,
         }
         store.put_step_log(self.sf, self.id, _clean_json(entry))
         if self.on_step:
-            self.on_step({**entry, "chamber_c": ch_pv[-1], "steps": spec.n_steps})
+            self.on_step({**entry, "chamber_c": soak.ch_pv[-1], "steps": spec.n_steps})
         if decision.max_soak_reached and spec.on_max_soak == "fail":
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
+
+    async def _poll_soak(self, msg: PollSoak) -> Poll:
+        """One soak poll: the chamber (a suspender tripped: hold, then rewind), the dies'
+        probes and every live die's decision."""
+        spec, soak, cfg = self.spec, self._soaking, self._soaking.cfg
+        step, target_c = msg.soak.step, msg.soak.setpoint_c
+        status = await self._chamber()
+        tripped = self.suspenders.check_chamber(status, target_c)
+        if tripped is not None:
+            # The die was disturbed: hold until the chamber is back, then the plan rewinds
+            # and soaks afresh (the probes so far are still an approach: they stay for the
+            # rate gain).
+            self.rate_book.keep(self._pose, soak.dies)
+            await self._hold_chamber(*tripped, setpoint_c=target_c)
+            raise Rewind(f"step {step} soak: {tripped[0].name}")
+        now_s = self.clock.now()
+        # Soak time: the clock since the soak began, less the time paused or suspended
+        # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
+        soaked_s = now_s - soak.start_s - (self._held_total_s() - soak.held0_s)
+        soak.ch_t.append(now_s)
+        soak.ch_pv.append(status.process_c)
+        # A controller without a working setpoint: the PV alone says it has arrived.
+        soak.ch_wsp.append(target_c if status.working_setpoint_c is None
+                           else status.working_setpoint_c)
+        if cfg.policy == "predictive":
+            await self._probe_dies(soak.dies, step, target_c, status, self._t(soak.start_s))
+        settled = stability.chamber_settled(np.array(soak.ch_t), np.array(soak.ch_pv),
+                                            np.array(soak.ch_wsp), target_c, cfg.tol_c,
+                                            cfg.dwell_s)
+        live = {k: v for k, v in soak.dies.items() if k not in self.dropped}
+        soak.gains = {k: self.rate_book.for_decision(k, self._pose, v) for k, v in live.items()}
+        # Every die decides, with its own rate gain; the slowest one ends the soak. The die
+        # that kept the soak going last poll is asked first and the first "not yet" ends
+        # the round: the soak goes on whatever the others say, and on the poll that ends it
+        # every die has been asked (slowest_decision then picks the slowest), so the
+        # outcome is that of asking all, at a fraction of the fits.
+        decisions: list[stability.Decision] = []
+        for key in sorted(live, key=lambda k: k != soak.waiting_on):
+            probes = live[key]
+            decisions.append(stability.decide(
+                cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
+                np.array([p.sensor_c for p in probes]), sweep_s=soak.sweep_s,
+                n_positions=self.n_pos, edge=msg.soak.edge,
+                rate_gain_ug_per_c_per_min=soak.gains[key],
+                order_repeats=msg.soak.order_repeats))
+            if not decisions[-1].stable:
+                soak.waiting_on = key
+                break
+        soak.decision = decision = slowest_decision(decisions)
+        self._publish(step, "soak", 0, status, target_c,
+                      soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
+        # Sooner than a whole period when the die is predicted to meet its budgets sooner
+        # (the soak ends at a poll: a fixed period overshoots by half of one on average).
+        return Poll(decision.stable, stability.next_poll_s(
+            decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
 
     def _no_dies(self) -> dict[str, list[rate_gain.Probe]]:
         return {serial: [] for serial in self._live}
@@ -1072,6 +1090,34 @@ def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
     wsp_c = status.working_setpoint_c
     return ((wsp_c is None or abs(wsp_c - target_c) < 1e-3)
             and abs(status.setpoint_c - target_c) < 1e-3)
+
+
+@dataclasses.dataclass
+class _Ramp:
+    """A ramp's state across its polls (:meth:`CampaignRunner._poll_chamber`)."""
+
+    start_s: float
+    held0_s: float  # held time before the ramp: not the ramp's
+    dies: dict[str, list[rate_gain.Probe]]
+    probe: bool  # the dies are probed (the rate gain measured)
+    limit_s: float | None = None
+
+
+@dataclasses.dataclass
+class _Soak:
+    """A soak's state across its polls (:meth:`CampaignRunner._poll_soak`)."""
+
+    cfg: Any  # the spec's StabilityConfig (a resumed step's re-check)
+    sweep_s: float
+    start_s: float
+    held0_s: float  # held time before the soak: not the soak's
+    dies: dict[str, list[rate_gain.Probe]]
+    ch_t: list[float] = dataclasses.field(default_factory=list)
+    ch_pv: list[float] = dataclasses.field(default_factory=list)
+    ch_wsp: list[float] = dataclasses.field(default_factory=list)
+    decision: stability.Decision = stability.Decision(False, "started")
+    gains: dict[str, float | None] = dataclasses.field(default_factory=dict)
+    waiting_on: str | None = None  # the die that said "not yet" last
 
 
 class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error

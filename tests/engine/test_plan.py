@@ -99,9 +99,29 @@ async def test_engine_executes_exactly_the_plan(sf) -> None:  # type: ignore[no-
     expected = []
     pl.interpret(pl.campaign_plan(rs, refs, angles_deg=poses),
                  lambda m: expected.append(m))  # type: ignore[func-returns-value]
-    assert [type(m) for m in seen] == [type(m) for m in expected]
-    assert [(m.step, m.position) for m in seen if isinstance(m, pl.Save)] == [
+    # The composite waits are expanded by the engine into their stubs' polls
+    # (wait_for_chamber, soak_until_stable), announced before the composite itself:
+    # Poll (Checkpoint Wait Poll)* — take them out and the rest is the plan, message by message.
+    top: list[pl.Msg] = []
+    expansions: list[list[type]] = []
+    current: list[type] | None = None
+    for m in seen:
+        if current is None and isinstance(m, pl.PollChamber | pl.PollSoak):
+            current = []
+        if current is not None and not isinstance(m, pl.WaitChamber | pl.WaitStable):
+            current.append(type(m))
+            continue
+        if current is not None:
+            expansions.append(current)
+            current = None
+        top.append(m)
+    assert [type(m) for m in top] == [type(m) for m in expected]
+    assert [(m.step, m.position) for m in top if isinstance(m, pl.Save)] == [
         (m.step, m.position) for m in expected if isinstance(m, pl.Save)]
+    assert len(expansions) == 6  # three ramps, three soaks
+    for run in expansions:
+        assert run[0] in (pl.PollChamber, pl.PollSoak)
+        assert run[1:] == [pl.Checkpoint, pl.Wait, run[0]] * ((len(run) - 1) // 3)
     # ETA learnt from the stream: 18 positions timed, three soaks, three ramps.
     assert len(runner.eta.position_times_s) == 18
     assert len(runner.eta.soak_times_s) == 3 and len(runner.eta.ramp_times_s) == 3
