@@ -17,7 +17,8 @@ Jobs:
 * ``protocol`` — protocol written out by hand in the engine: the waits whose
   end is a decision (ramp arrival, soak), the rate gain's bookkeeping, the fit
   per sensor, and (before) the re-measure slice hidden in the save;
-* ``park`` — the safe state (another helper's rewrite);
+* ``park`` — the safe state;
+* ``helpers`` — module-level functions.
 
 Usage (from the repository root; ``--root`` another checkout, e.g. an export of
 an older commit)::
@@ -43,19 +44,18 @@ JOBS: dict[str, tuple[str, ...]] = {
         "_live", "_accelerometer", "_drop", "_sensor_call", "_configure", "_configure_each",
         "_measure_one", "_measure", "_measure_live", "_move", "_settle", "_home",
         "_read_chamber", "_set_chamber", "_acquire_msg", "_acquire", "_fit", "_chamber",
-        "_move_to", "_move_once", "_set_pose", "_probe_dies",
+        "_move_to", "_move_once", "_set_pose", "_probe_dies", "_wait_msg",
     ),
     "checks": ("_save", "_check_die_against_chamber"),
     "protocol": (
         "_ramp", "_wait_chamber", "_soak", "_no_dies", "_keep_soak", "_stored_soaks",
         "_rate_estimate", "_rate_gain_for_decision", "_rate_provenance", "_fitting",
         "_fitting_each", "_chamber_in_band", "_measure_again", "_checked_readings",
-        "_save_each",
+        "_save_each", "_poll_chamber", "_poll_soak",
     ),
     "park": ("_park_through_cancel", "_drive_safe", "_try_safe"),
+    "helpers": ("_ref_text", "_wsp_at_target", "_clean_json", "_finite", "_soak_probes"),
 }
-# Before the redesign ``_save`` held, re-soaked, moved and measured again inside itself.
-BEFORE_PROTOCOL_SAVE = "_save_each"
 
 
 def function_lines(path: Path) -> tuple[dict[str, int], int]:
