@@ -82,6 +82,10 @@ DIE_LAG_TAU_MAX_S = 3600.0
 
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
+# The plan a campaign runs: (spec, refs, done, *, sensors, angles_deg) → a plan generator
+# (calibration.campaign_plan.campaign_plan's signature); called again with what is stored
+# after a hold (a rewind) and on every restart.
+PlanFactory = Callable[..., Any]
 TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 # Shortest wait between two soak polls when the decision predicts stability sooner than a
@@ -107,6 +111,7 @@ class CampaignRunner:
         clock: Clock,
         *,
         calibrate: Calibrate = calibrate_columns,
+        plan: PlanFactory = campaign_plan,
         on_step: StepReporter | None = None,
         fence: store.Fence | None = None,
     ) -> None:
@@ -116,6 +121,7 @@ class CampaignRunner:
         self.dev = devices if fence is None else fence_devices(devices, self._confirm_lease)
         self.clock = clock
         self.calibrate = calibrate
+        self.plan = plan
         self.on_step = on_step
         # Every measurement commit and every rig command checks this lease (manager-run).
         self.fence = fence
@@ -273,8 +279,8 @@ class CampaignRunner:
         # The table's pose of each position, by this rig's geometry: the travel order's costs.
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
         while True:
-            plan = campaign_plan(spec, self.refs, done, sensors=self.serials,
-                                 angles_deg=angles_deg)
+            plan = self.plan(spec, self.refs, done, sensors=self.serials,
+                             angles_deg=angles_deg)
             try:
                 await self._run_plan(plan)
                 return
