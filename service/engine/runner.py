@@ -86,6 +86,8 @@ StepReporter = Callable[[dict[str, Any]], None]
 # (calibration.campaign_plan.campaign_plan's signature); called again with what is stored
 # after a hold (a rewind) and on every restart.
 PlanFactory = Callable[..., Any]
+# The plan of each campaign method (spec ``method``); a campaign's own ``plan=`` wins.
+PLANS: dict[str, PlanFactory] = {"soak": campaign_plan}
 TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 # Shortest wait between two soak polls when the decision predicts stability sooner than a
@@ -111,7 +113,7 @@ class CampaignRunner:
         clock: Clock,
         *,
         calibrate: Calibrate = calibrate_columns,
-        plan: PlanFactory = campaign_plan,
+        plan: PlanFactory | None = None,
         on_step: StepReporter | None = None,
         fence: store.Fence | None = None,
     ) -> None:
@@ -230,6 +232,13 @@ class CampaignRunner:
             self.spec = spec = parse_spec(camp.spec)
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
+        if self.plan is None:
+            method = str(getattr(spec, "method", None)
+                         or getattr(spec, "extra", {}).get("method") or "soak")
+            if method not in PLANS:
+                raise CampaignFailed(f"spec: method {method!r}: this engine runs "
+                                     f"{', '.join(PLANS)}")
+            self.plan = PLANS[method]
         self.sensor_serial = str(camp.sensor)
         several = spec.extra.get("sensors")
         # The campaign's sensors, one or several (issue 12): each read at every position,
@@ -278,6 +287,7 @@ class CampaignRunner:
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
         # The table's pose of each position, by this rig's geometry: the travel order's costs.
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
+        assert self.plan is not None  # chosen by _start
         while True:
             plan = self.plan(spec, self.refs, done, sensors=self.serials,
                              angles_deg=angles_deg)
