@@ -1,17 +1,22 @@
-"""The campaign interpreter: one plan (ramp → soak → positions per step, then fitting)
-executed over a persisted cursor.
+"""The campaign engine: the message loop that runs a plan (calibration/campaign_plan.py)
+over a persisted cursor.
+
+The plan is the protocol (ramp, soak, the sweep of positions, the retake of a
+capture off its pose); the engine executes its verbs, one handler each, and
+owns what no plan should: checkpoints (pause, abort), the one hold loop of
+the suspenders and the rewind after it, progress and its subscribers, the
+commit of each save, and the one ``finally`` that parks the rig.
 
 Crash safety rests on one rule: a measurement row and the cursor move past it
 are committed in one transaction *before the table moves again*. On start the
-runner reads the measurements table (the ground truth, not the cursor), skips
-every (step, position) already stored and resumes at the first missing one;
-a step with some positions measured is re-ramped (idempotent) and re-soaked
-with a short re-check, because the chamber may have drifted while nobody ran
-it. The database's UNIQUE(campaign_id, step, position) turns a duplicate
-insert into "already stored".
-
-Pause, resume, abort and device suspensions are engine features, checked at
-safe points (every soak poll, every position), not per-phase code.
+runner reads the measurements table (the ground truth, not the cursor) and
+runs the plan with what is stored as ``done``: every (step, position) already
+stored is skipped; a step with some positions measured is re-ramped
+(idempotent) and re-soaked with a short re-check, because the chamber may
+have drifted while nobody ran it. A suspension is the same replay: after a
+chamber suspender's hold, the plan resumes from what is stored. The
+database's UNIQUE(campaign_id, step, position) turns a duplicate insert into
+"already stored".
 """
 
 from __future__ import annotations
