@@ -59,7 +59,7 @@ def calibrate_columns(
 
     rec = Recording.from_columns({k: np.asarray(v, float) for k, v in columns.items()},
                                  path=provenance.get("recording", "<campaign>"))
-    # The campaign's measured temperature_rate gain (runner: soak_rate.py), when it has one.
+    # The campaign's measured temperature_rate gain (runner: rate_gain.py), when it has one.
     k = provenance.get("rate_gain_ug_per_c_per_min")
     result = fit(rec, FitOptions(
         rate_gain_ug_per_c_per_min=None if k is None else tuple(float(v) for v in k)))
