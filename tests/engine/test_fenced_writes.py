@@ -18,6 +18,7 @@ from sqlalchemy import event, func, select, update
 from drivers.clock import VirtualClock
 from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe
 from service.engine import store
+from service.engine.calibrate import CalibrationRow
 from service.engine.manager import CampaignManager
 from service.engine.runner import CampaignRunner
 
@@ -76,7 +77,7 @@ def test_every_write_confirms_the_lease_once_and_reads_do_not(sf) -> None:  # ty
     store.add_soak_probes(fenced, cid, [PROBE, {**PROBE, "t_s": 6.0}])
     store.put_step_log(fenced, cid, {"step": 0, "soak_s": 60.0})
     store.drop_sensor(fenced, cid, "SN-2", "no reply")
-    assert store.store_calibration(fenced, cid, dict(CALIBRATION)) > 0
+    assert store.store_calibration(fenced, cid, CalibrationRow(**CALIBRATION)) > 0
     assert store.transition(fenced, cid, "paused")
     assert checks == ["UPDATE"] * 7  # one confirmation per writing transaction
     got = snapshot(sf, cid)
@@ -106,7 +107,7 @@ def test_a_process_that_lost_its_lease_writes_nothing(sf) -> None:  # type: igno
     with lost:
         store.drop_sensor(fenced, cid, "SN-2", "no reply")
     with lost:
-        store.store_calibration(fenced, cid, dict(CALIBRATION))
+        store.store_calibration(fenced, cid, CalibrationRow(**CALIBRATION))
     with lost:
         store.clear_action(fenced, cid, "resume")
     # A state change is refused as a lost race (False), never as an error a caller could
