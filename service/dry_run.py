@@ -42,6 +42,12 @@ from calibration.campaign_plan import (
     campaign_plan,
     interpret,
 )
+from calibration.ramp_plan import (
+    RampPrediction,
+    describe_prediction,
+    predict_ramp,
+    travel_move_s,
+)
 from calibration.thermal_plant import AMBIENT_C
 from service.engine.spec import CampaignSpec
 
@@ -86,6 +92,7 @@ class PlanCheck:
     n_steps: int = 0
     n_positions: int | None = None
     mode: str = RIG_FIT_MODE
+    detail: str | None = None  # a ramp campaign's legs and holds (calibration.ramp_plan)
 
     @property
     def ok(self) -> bool:
@@ -94,6 +101,8 @@ class PlanCheck:
     def summary(self) -> str:
         """One line for people: steps × positions, mode, predicted duration."""
         dur = self.predicted_duration_s
+        if self.detail is not None:
+            return f"{self.n_positions} positions per sweep, {self.mode} mode, {self.detail}"
         return (f"{self.n_steps} steps × {self.n_positions} positions, {self.mode} mode, "
                 f"predicted duration {dur:.0f} s ({dur / 3600.0:.1f} h of rig time)")
 
@@ -131,6 +140,10 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
             "smaller position schedule")
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
+    if n_positions is not None and spec.method == "ramp":
+        pred = predicted_ramp(spec)
+        return PlanCheck(issues, pred.duration_s, pred.n_sweeps, n_positions,
+                         detail=describe_prediction(pred, spec.ramp_c_per_min))
     duration = None if n_positions is None else predicted_duration_s(spec)
     return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions)
 
@@ -197,12 +210,28 @@ def predicted_duration_s(spec: CampaignSpec) -> float:
     settle and one acquisition (``samples / odr_hz``) for all its sensors: a campaign's
     sensors are read at once, so eight take the time of one.
     """
+    if spec.method == "ramp":
+        return predicted_ramp(spec).duration_s
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
     plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s, move_s=None,
                    start_c=AMBIENT_C)
     return plan.duration_s
+
+
+def predicted_ramp(spec: CampaignSpec, start_c: float = AMBIENT_C) -> RampPrediction:
+    """A ramp campaign's prediction (:func:`calibration.ramp_plan.predict_ramp`): its plan on
+    a first-order die of the prior lag, moves from the table's travel, back to ``safe_c``."""
+    from drivers.geometry import angles_for_references
+    from service.engine.spec import schedule_refs
+
+    refs = schedule_refs(spec.positions)
+    poses = angles_for_references(refs)
+    move = travel_move_s(refs, poses, *_table_limits(), in_position_s=IN_POSITION_S)
+    end_c = AMBIENT_C if spec.safe_c is None else spec.safe_c
+    return predict_ramp(spec, refs, start_c=start_c, end_c=end_c, move_s=move,
+                        angles_deg=poses)
 
 
 # --- the dry-run interpreter of the campaign plan (calibration.campaign_plan) ---------------
