@@ -28,10 +28,11 @@ def calibrate_columns(
 
     rec = Recording.from_columns({k: np.asarray(v, float) for k, v in columns.items()},
                                  path=provenance.get("recording", "<campaign>"))
+    ramp = (provenance.get("spec") or {}).get("method") == "ramp"
     # The campaign's measured temperature_rate gain (runner: soak_rate.py), when it has one.
     k = provenance.get("rate_gain_ug_per_c_per_min")
-    fit = fit_campaign(rec, rate_gain_ug_per_c_per_min=None if k is None
-                       else np.asarray(k, float))
+    fit = fit_ramp(rec) if ramp else fit_campaign(
+        rec, rate_gain_ug_per_c_per_min=None if k is None else np.asarray(k, float))
     model = fit.model
     valid = model.valid_c or (math.nan, math.nan)
     model_doc = model_document(model)
@@ -48,8 +49,41 @@ def calibrate_columns(
     }
 
 
+def fit_ramp(rec: Any) -> Any:
+    """A ramp campaign's fit, decided as ``soakcal calibrate`` decides (calibration/cli.py):
+    its sweeps are steps only where the die stood still (``segment_recording``), the gate
+    picks the fit, the continuous fit's model is checked. Raises ``CalibrationError``."""
+    from calibration import gate
+    from calibration.continuous import fit_continuous
+    from calibration.errors import CalibrationError
+    from calibration.plateaus import segment_recording
+    from calibration.thermal import fit_campaign
+
+    seg = segment_recording(rec)
+    decided = gate.plan(rec, continuous=seg.is_continuous)
+    if decided.kind == "continuous":
+        fit = fit_continuous(rec, seg)
+        gate.check_model(fit.model, rec, fit.row_temperature_c)
+    elif decided.kind == "sfem":  # every sweep a plateau: the chamber did not move
+        fit = fit_campaign(rec)
+    else:
+        raise CalibrationError(decided.reason)
+    fit.notes.insert(0, decided.reason)
+    fit.report.setdefault("notes", []).insert(0, decided.reason)
+    return fit
+
+
 def rmse_after_ug(fit: Any) -> float:
-    """Campaign RMSE after the thermal model (Eq. 9): rms over steps of the per-step values."""
+    """Campaign RMSE after the thermal model (Eq. 9): rms over steps of the per-step values;
+    a continuous fit's (no steps): over its temperature bands' rows."""
+    bands = fit.report.get("bands") if not fit.steps else None
+    if bands:
+        rows = np.array([b["rows"] for b in bands], float)
+        mg = np.array([np.nan if b["rmse_after_mg"] is None else b["rmse_after_mg"]
+                       for b in bands], float)
+        ok = np.isfinite(mg)
+        return float(np.sqrt(np.sum(rows[ok] * mg[ok] ** 2) / np.sum(rows[ok])) * 1e3) \
+            if ok.any() else math.nan
     vals = [st.rmse_polynomial_ug for st in fit.steps if math.isfinite(st.rmse_polynomial_ug)]
     return float(np.sqrt(np.mean(np.square(vals)))) if vals else math.nan
 

@@ -42,6 +42,7 @@ from calibration.campaign_plan import (
     campaign_plan,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
+from calibration.ramp_plan import CommandChamber, ReadChamber
 from calibration.thermal_plant import AMBIENT_C
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
@@ -65,6 +66,7 @@ from service.engine.multi import (
 )
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
+from service.engine.ramp import RampSteps
 from service.engine.rigs import RigDevices
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
@@ -136,6 +138,7 @@ class CampaignRunner:
         self._held_s = 0.0
         self._held_since_s: float | None = None
         self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
+        self._ramp: RampSteps | None = None  # a ramp campaign's verbs (service/engine/ramp.py)
 
     def _confirm_lease(self) -> dt.datetime:
         """The device fence's check (fencing.py): when the lease ends, or
@@ -263,7 +266,12 @@ class CampaignRunner:
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
         # The table's pose of each position, by this rig's geometry: the travel order's costs.
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
-        plan = campaign_plan(spec, self.refs, done, sensors=self.serials, angles_deg=angles_deg)
+        if spec.method == "ramp":
+            self._ramp = RampSteps(self)
+            plan = self._ramp.plan(done, angles_deg)
+        else:
+            plan = campaign_plan(spec, self.refs, done, sensors=self.serials,
+                                 angles_deg=angles_deg)
         reply: Any = None
         while True:
             try:
@@ -303,11 +311,15 @@ class CampaignRunner:
 
     @property
     def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
-        return {
+        handlers: dict[type, Callable[[Any], Awaitable[Any]]] = {
             Configure: self._configure, Checkpoint: self._at_checkpoint,
-            SetChamber: self._ramp, WaitStable: self._soak, Move: self._move,
+            SetChamber: self._ramp_to, WaitStable: self._soak, Move: self._move,
             Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
         }
+        if self._ramp is not None:
+            handlers.update({ReadChamber: self._ramp.read_chamber,
+                             CommandChamber: self._ramp.command_chamber})
+        return handlers
 
     # --- several sensors (service/engine/multi.py) ------------------------------------
     @property
@@ -421,12 +433,14 @@ class CampaignRunner:
         physics needs it, return to the position and measure it again (``remeasure``).
         """
         remeasured: Any = None
+        # A ramp's capture (RampSave, band False): the air is meant to be off the setpoint.
+        band_c = msg.setpoint_c if getattr(msg, "band", True) else None
         while True:
             status = await self._chamber()
-            tripped = self.suspenders.check_chamber(status, msg.setpoint_c)
+            tripped = self.suspenders.check_chamber(status, band_c)
             if tripped is None:
                 return status, remeasured
-            await self._hold(*tripped, setpoint_c=msg.setpoint_c)
+            await self._hold(*tripped, setpoint_c=band_c)
             if tripped[0].restart_soak and self._last_soak is not None:
                 await self._soak(dataclasses.replace(self._last_soak, resumed=True))
             remeasured = await self._measure_again(msg, remeasure)
@@ -574,7 +588,7 @@ class CampaignRunner:
                                  fence=self.fence)
 
     # --- phases -------------------------------------------------------------
-    async def _ramp(self, msg: SetChamber) -> None:
+    async def _ramp_to(self, msg: SetChamber) -> None:
         """Command the setpoint and wait until the working setpoint and PV reach it."""
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         store.set_cursor(self.sf, self.id, step, "ramp", 0)
@@ -1182,6 +1196,9 @@ class CampaignRunner:
             "eta_wall_s": round(eta_s / clock_speed(self.clock), 1),
             "t_s": round(self._t(self.clock.now()), 3),
         }
+        if self._ramp is not None:  # a ramp has no steps to count: its prediction's ETA
+            progress.update(self._ramp.progress())
+            progress["eta_wall_s"] = round(progress["eta_s"] / clock_speed(self.clock), 1)
         self._progress = progress
         if write:
             store.update_campaign(self.sf, self.id, progress=progress)

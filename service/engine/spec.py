@@ -94,14 +94,6 @@ def _f(default: float | None, lo: float | None = None, hi: float | None = None, 
     return Field(default=default, description=doc, **bounds)
 
 
-# A refusal, not a silent soak: a ramp campaign asked for must never run as another method.
-RAMP_NOT_RUN = (
-    "ramp campaigns are not run by this engine yet (the chamber would never stop, each "
-    "reading at its die's own temperature): use \"method\": \"soak\", or record a ramp "
-    "with the chamber's own program and calibrate it with `soakcal calibrate`, which fits "
-    "a recording without plateaus continuously")
-
-
 class CampaignSpec(BaseModel):
     """Every campaign key the engine reads, typed and bounded (units in the names)."""
 
@@ -122,14 +114,8 @@ class CampaignSpec(BaseModel):
     method: Literal["soak", "ramp"] = Field(
         default="soak",
         description="soak: the chamber holds each setpoint until the die is stable; ramp: "
-        "the chamber never stops (not run by this engine yet: refused with the reason)")
-
-    @field_validator("method")
-    @classmethod
-    def _ramp_not_run_yet(cls, method: str) -> str:
-        if method == "ramp":
-            raise ValueError(RAMP_NOT_RUN)
-        return method
+        "the chamber ramps through the setpoints' range and back while the table sweeps, "
+        "each capture at its die's own temperature (calibration/ramp_plan.py)")
 
     # --- position order (calibration/position_order.py, docs/engine.md) --------------------
     position_order: Literal["travel", "random", "balanced", "table"] = Field(
@@ -242,6 +228,21 @@ class CampaignSpec(BaseModel):
         return self
 
     @model_validator(mode="after")
+    def _ramp_needs_a_range(self) -> CampaignSpec:
+        if self.method != "ramp":
+            return self
+        if max(self.setpoints_c) <= min(self.setpoints_c):
+            raise ValueError(
+                "method 'ramp' ramps through the setpoints' range and back: give at least two "
+                "different setpoints (its ends, e.g. [-40, 60])")
+        if self.rate_gain == "measured":
+            raise ValueError(
+                "rate_gain 'measured' is a soak's (measured from the soak probes); a ramp "
+                "campaign's fit measures the rate gain from its heating and cooling legs: "
+                "leave rate_gain out")
+        return self
+
+    @model_validator(mode="after")
     def _measured_rate_needs_precise_probes(self) -> CampaignSpec:
         if (self.rate_gain == "measured" and self.soak_probe_samples is not None
                 and self.soak_probe_samples < MIN_MEASURED_PROBE_SAMPLES):
@@ -284,6 +285,7 @@ class RunSpec:
     suspend_clear_s: float = DEFAULT_CLEAR_S  # a chamber condition clear this long: resume
     position_order: str = "travel"  # travel | random | balanced | table (position_order.py)
     position_order_seed: int | None = None
+    method: str = "soak"  # soak | ramp (calibration/ramp_plan.py)
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -295,7 +297,7 @@ class RunSpec:
 _DIRECT = ("ramp_c_per_min", "soak_poll_s", "settle_s", "safe_c",
            "odr_hz", "retry_attempts", "retry_backoff_s", "suspend_poll_s", "suspend_limit_s",
            "chamber_band_c", "suspend_clear_s", "move_timeout_s", "on_max_soak", "positions",
-           "samples_per_position", "rate_gain", "position_order", "position_order_seed")
+           "samples_per_position", "rate_gain", "position_order", "position_order_seed", "method")
 
 
 def run_spec(spec: CampaignSpec) -> RunSpec:
