@@ -164,8 +164,9 @@ def sweep_order(base: Sequence[int], sweep: int) -> list[int]:
 
 
 def remaining_approach_c(die_c: Sequence[float], block: int) -> float:
-    """A die's remaining approach to where it settles, °C, from its readings since the air
-    stopped (module docstring, "Holds"): inf until three blocks of ``block`` captures exist.
+    """A die's remaining approach to where it settles, °C, at its last capture, from its
+    readings since the air stopped (module docstring, "Holds"): inf until three blocks of
+    ``block`` captures exist (captures equally spaced in time, as a sweep's are on average).
 
     Blocks are the last three runs of ``block`` consecutive captures; d₁, d₂ the changes of
     their means. A die standing still within the noise (|d₂| within
@@ -187,8 +188,12 @@ def remaining_approach_c(die_c: Sequence[float], block: int) -> float:
         return 0.0
     if d1 == 0.0 or d2 / d1 <= 0.0 or d2 / d1 >= 1.0:
         return math.inf  # not (yet) a decaying approach
-    q = d2 / d1
-    return abs(d2) * q / (1.0 - q)
+    q = d2 / d1  # e^(−block/τ), τ in captures
+    # d₂·q/(1 − q) is the last block *mean*'s gap; the last capture is (block − 1)/2
+    # captures later: its gap is that times mean-to-last of an exponential over the block
+    per = q ** (1.0 / block)
+    last = q ** ((block - 1.0) / block) * block * (1.0 - per) / (1.0 - q)
+    return abs(d2) * q / (1.0 - q) * last
 
 
 def _dies(reply: Any) -> dict[str, float]:

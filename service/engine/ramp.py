@@ -49,6 +49,7 @@ class RampSteps:
         self.predicted_s: float | None = None
         self.active0_s = 0.0
         self.reads = 0
+        self.predicted_sweeps = 0
 
     def plan(self, done: set[tuple[int, int]], angles_deg: np.ndarray) -> Any:
         """The ramp plan, resumed after what is stored."""
@@ -80,9 +81,10 @@ class RampSteps:
 
             move = rp.travel_move_s(self.r.refs, self.angles_deg, DEFAULT_SLEW_DEG_PER_S,
                                     DEFAULT_ACCEL_DEG_PER_S2)
-            self.predicted_s = rp.predict_ramp(
+            pred = rp.predict_ramp(
                 self.r.spec, self.r.refs, start_c=status.process_c, end_c=self.end_c,
-                legs_done=self.legs_done, move_s=move, angles_deg=self.angles_deg).duration_s
+                legs_done=self.legs_done, move_s=move, angles_deg=self.angles_deg)
+            self.predicted_s, self.predicted_sweeps = pred.duration_s, pred.n_sweeps
         target = self.leg.setpoint_c if self.leg is not None else status.setpoint_c
         # One read per capture: the progress row is written every sweep's worth of reads
         # (each capture's commit writes it too).
@@ -108,6 +110,7 @@ class RampSteps:
         done_s = self.r._active_s() - self.active0_s
         eta_s = max(0.0, self.predicted_s - done_s)
         total_s = max(done_s + eta_s, 1e-9)
-        return {"fraction": round(min(1.0, done_s / total_s), 4), "eta_s": round(eta_s, 1),
+        return {"method": "ramp", "steps": self.predicted_sweeps,
+                "fraction": round(min(1.0, done_s / total_s), 4), "eta_s": round(eta_s, 1),
                 "leg": None if self.leg is None else self.leg.leg,
                 "leg_target_c": None if self.leg is None else self.leg.setpoint_c}
