@@ -70,8 +70,15 @@ class RampSteps:
         return end_c(self.r.dev, self.r.spec)
 
     async def read_chamber(self, _msg: rp.ReadChamber) -> ChamberStatus:
-        """The chamber's status; a chamber alarm holds the campaign (band not armed)."""
-        status = await self.r._chamber_watched(None)
+        """The chamber's status; a chamber alarm holds the campaign (band not armed).
+
+        Right after a save (no clock time since) the save's own read, already checked for
+        alarms, is the status: one Modbus read per capture instead of two."""
+        cached = self.r._status_at
+        if cached is not None and cached[0] == self.r.clock.now():
+            status = cached[1]
+        else:
+            status = await self.r._chamber_watched(None)
         if self.predicted_s is None:  # the first read: predict from where the chamber is
             self.active0_s = self.r._active_s()
             from calibration.position_order import (

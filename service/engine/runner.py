@@ -139,6 +139,7 @@ class CampaignRunner:
         self._held_since_s: float | None = None
         self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
         self._ramp: RampSteps | None = None  # a ramp campaign's verbs (service/engine/ramp.py)
+        self._status_at: tuple[float, ChamberStatus] | None = None  # last save's chamber read
 
     def _confirm_lease(self) -> dt.datetime:
         """The device fence's check (fencing.py): when the lease ends, or
@@ -439,6 +440,7 @@ class CampaignRunner:
             status = await self._chamber()
             tripped = self.suspenders.check_chamber(status, band_c)
             if tripped is None:
+                self._status_at = (self.clock.now(), status)  # a ramp's next read reuses it
                 return status, remeasured
             await self._hold(*tripped, setpoint_c=band_c)
             if tripped[0].restart_soak and self._last_soak is not None:
