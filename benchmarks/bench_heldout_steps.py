@@ -48,19 +48,19 @@ from benchmarks.bench_throughput import POLICIES, dump_name, rate_of  # noqa: E4
 from calibration.recording import Recording  # noqa: E402
 from calibration.thermal import fit_campaign  # noqa: E402
 from service.demo import SETPOINTS_C  # noqa: E402
-from service.engine import soak_rate  # noqa: E402
+from service.engine import rate_gain  # noqa: E402
 
 HELDOUT_C = np.arange(SETPOINTS_C[0] + 5.0, SETPOINTS_C[-1], 10.0)
 N_DIRECTIONS = 60  # heldout_errors_g's sphere
 
 
 def correction_gain(k_hat: Any) -> np.ndarray | None:
-    """The k̂ the campaign's fit subtracted (``soak_rate.correction_gain_ug_per_c_per_min``)."""
+    """The k̂ the campaign's fit subtracted (``rate_gain.correction_gain_ug_per_c_per_min``)."""
     if not k_hat:
         return None
     gain, sd = (np.asarray(v, float) for v in k_hat)
-    est = soak_rate.RateGain(gain, sd, 0, 0)
-    return soak_rate.correction_gain_ug_per_c_per_min(est)
+    est = rate_gain.RateGain(gain, sd, 0, 0)
+    return rate_gain.correction_gain_ug_per_c_per_min(est)
 
 
 def refit(columns: dict[str, list[float]], k: np.ndarray | None) -> Any:

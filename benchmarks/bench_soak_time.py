@@ -34,7 +34,7 @@ rate at the capture.
 
 "measured k, corrected" is the engine's ``rate_gain: "measured"``: every soak at
 home, the rate gain k measured from the campaign's own soak probes
-(``service.engine.soak_rate``) at every poll, the calibration subtracting
+(``service.engine.rate_gain``) at every poll, the calibration subtracting
 k̂·dT/dt from the rows, and the soak waiting only for what that correction may
 get wrong. ``--variants 1,4`` runs a subset (the fixed hour always runs: it is
 the reference).

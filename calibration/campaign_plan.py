@@ -49,11 +49,37 @@ class Configure:
 
 @dataclass(frozen=True)
 class SetChamber:
-    """Command the chamber to ``setpoint_c`` at ``ramp_c_per_min``; done when it got there."""
+    """Command the chamber to ``setpoint_c`` at ``ramp_c_per_min`` and run it; done once
+    commanded (it does not wait for the chamber to get there: :class:`WaitChamber`)."""
 
     step: int
     setpoint_c: float
     ramp_c_per_min: float
+
+
+@dataclass(frozen=True)
+class WaitChamber:
+    """Wait until the chamber has arrived at ``setpoint_c``: its working setpoint at the
+    setpoint (a controller without one: skipped) and its PV within the stability
+    tolerance. The interpreter bounds the wait (twice the nominal ramp plus a max
+    soak) and, measuring the rate gain, probes the dies meanwhile."""
+
+    step: int
+    setpoint_c: float
+
+
+@dataclass(frozen=True)
+class ReadChamber:
+    """Read the chamber; the interpreter returns its status
+    (``drivers.protocols.ChamberStatus``)."""
+
+
+@dataclass(frozen=True)
+class Home:
+    """Put the table at its home pose (all axes 0), e.g. before a ramp whose dies are
+    probed at one pose (the measured rate gain)."""
+
+    step: int
 
 
 @dataclass(frozen=True)
@@ -100,22 +126,32 @@ class Settle:
 
 @dataclass(frozen=True)
 class Acquire:
-    """Average ``n_samples`` raw samples; the interpreter returns the acquisition.
+    """Average ``n_samples`` raw samples of every sensor in ``sensors``, read *at once*
+    (one capture time for all, issue 12; one sensor is a list of one).
 
-    ``sensors``: a several-sensor campaign reads these sensors *at once* (one capture
-    time for all, issue 12); the interpreter returns ``{serial: acquisition}`` with
-    ``None`` for a sensor it has dropped. Empty: the one sensor, one acquisition.
+    The interpreter returns ``{serial: acquisition}`` with ``None`` for a sensor it
+    has dropped.
     """
 
     step: int
     position: int
     n_samples: int
-    sensors: tuple[str, ...] = ()
+    sensors: tuple[str, ...]
 
 
 @dataclass(frozen=True)
 class Save:
-    """Store the acquisition of (step, position); ``next_position`` is the cursor after it."""
+    """Store every sensor's acquisition of (step, position) with the cursor past it
+    (``next_position``) in one transaction: a position is stored for every live sensor
+    or for none. ``acquisition`` is ``Acquire``'s reply, {serial: acquisition or None}.
+
+    Before storing, the interpreter checks the chamber (``band``: its PV within the
+    campaign's band of ``setpoint_c``; off for a ramp, whose air is never in a
+    setpoint band; alarms always) and each capture against its pose. The reply is
+    ``None`` once stored, or :data:`RETAKE`: the capture was not stored (it read
+    gravity from another direction than ``ref_g``) and the position must be measured
+    again.
+    """
 
     step: int
     position: int
@@ -123,8 +159,12 @@ class Save:
     ref_g: tuple[float, float, float]
     acquisition: Any
     next_position: int
-    # Several sensors: ``acquisition`` is {serial: acquisition or None}, these serials, in order.
-    sensors: tuple[str, ...] = ()
+    sensors: tuple[str, ...]
+    band: bool = True
+
+
+# Save's reply when its capture was not stored and the position is to be measured again.
+RETAKE = "retake"
 
 
 @dataclass(frozen=True)
@@ -132,7 +172,8 @@ class Fit:
     """Fit the calibration model to everything saved."""
 
 
-Msg = Configure | SetChamber | WaitStable | Checkpoint | Move | Settle | Acquire | Save | Fit
+Msg = (Configure | SetChamber | WaitChamber | ReadChamber | Home | WaitStable | Checkpoint | Move
+       | Settle | Acquire | Save | Fit)
 Plan = Generator[Msg, Any, None]
 
 
@@ -141,6 +182,8 @@ Plan = Generator[Msg, Any, None]
 # rate (simulators.campaign_sim.RigPhysics, calibration.thermal_plant.DEFAULT_RAMP_C_PER_MIN,
 # 2 °C/min), on which its recordings and the diagnosis' assumed ramp were measured.
 CAMPAIGN_RAMP_C_PER_MIN = 1.0
+# The serial a plan names when its interpreter models no particular sensor.
+ANY_SENSOR = "sensor"
 
 
 @dataclass(frozen=True)
@@ -177,11 +220,43 @@ def visit_orders(spec: Any, refs: np.ndarray,
     elif angles_deg is None:
         raise ValueError("the travel position order needs the table pose of each position "
                          "(angles_deg, e.g. drivers.geometry.angles_for_references(refs))")
-    # A campaign measuring the rate gain parks the table at home before each ramp
-    # (runner._ramp): every step then starts there.
+    # A campaign measuring the rate gain sends the table home at each ramp (ramp_to): every
+    # step then starts there.
     return step_orders(np.asarray(angles_deg, float), n_steps, method,
                        getattr(spec, "position_order_seed", None),
                        home_each_step=getattr(spec, "rate_gain", "assumed") == "measured")
+
+
+# --- plan stubs: the protocol's pieces, composed with ``yield from`` -----------------------
+def ramp_to(step: int, setpoint_c: float, ramp_c_per_min: float, *,
+            home_first: bool = False) -> Plan:
+    """Command the setpoint, then wait for the chamber to arrive.
+
+    ``home_first`` (the rate gain measured): every soak's die probes are taken at one
+    pose, home, so the table goes there once the setpoint is commanded: the move runs
+    during the ramp instead of delaying it, and the ramp's probes start at home.
+    """
+    yield SetChamber(step, setpoint_c, ramp_c_per_min)
+    if home_first:
+        yield Home(step)
+    yield WaitChamber(step, setpoint_c)
+
+
+def measure_position(step: int, position: int, setpoint_c: float,
+                     ref_g: tuple[float, float, float], next_position: int,
+                     serials: tuple[str, ...], samples: int, settle_s: float,
+                     band: bool = True) -> Plan:
+    """Move to one position, settle, read every sensor at once and store the readings;
+    again from the move while the interpreter answers the save with :data:`RETAKE`.
+    Returns the stored readings (``Acquire``'s reply: the ramp plan reads the dies)."""
+    while True:
+        yield Checkpoint()
+        yield Move(step, position, ref_g)
+        yield Settle(settle_s)
+        by_sensor = yield Acquire(step, position, samples, serials)
+        if (yield Save(step, position, setpoint_c, ref_g, by_sensor, next_position, serials,
+                       band)) != RETAKE:
+            return by_sensor
 
 
 def campaign_plan(spec: Any, refs: np.ndarray,
@@ -194,12 +269,13 @@ def campaign_plan(spec: Any, refs: np.ndarray,
     engine's RunSpec), and may give ``position_order`` / ``position_order_seed``;
     ``refs`` is the (n, 3) schedule of unit gravity vectors; ``angles_deg`` the
     rig's table pose of each (for the ``travel`` order; :func:`visit_orders`).
-    ``sensors`` (two or more serials, issue 12): every position is acquired by one
-    ``Acquire`` naming them all (read concurrently) and saved by one ``Save``
-    carrying them all, so the interpreter stores a position for every sensor in one
-    transaction.
+    ``sensors``: the campaign's serials, one or several (issue 12): every position is
+    acquired by one ``Acquire`` naming them all (read concurrently) and saved by one
+    ``Save`` carrying them all, so the interpreter stores a position for every sensor
+    in one transaction. An interpreter that models no particular sensor (the offline
+    simulator, the dry run) may pass none: the plan then names :data:`ANY_SENSOR`.
     """
-    several = tuple(str(s) for s in sensors) if len(sensors) > 1 else ()
+    serials = tuple(str(s) for s in sensors) or (ANY_SENSOR,)
     stored = set(done)
     refs = np.asarray(refs, float)
     n_pos = refs.shape[0]
@@ -212,22 +288,16 @@ def campaign_plan(spec: Any, refs: np.ndarray,
         missing = [p for p in orders[step] if (step, p) not in stored]
         if not missing:
             continue
-        yield SetChamber(step, setpoint_c, float(spec.ramp_c_per_min))
+        yield from ramp_to(step, setpoint_c, float(spec.ramp_c_per_min),
+                           home_first=getattr(spec, "rate_gain", "assumed") == "measured")
         yield WaitStable(step, setpoint_c, resumed=len(missing) < n_pos,
                          n_positions=len(missing), edge=setpoint_c in (lo_c, hi_c),
                          order_repeats=sum(o == orders[step] for o in orders))
         for k, pos in enumerate(missing):
             ref = (float(refs[pos, 0]), float(refs[pos, 1]), float(refs[pos, 2]))
-            yield Checkpoint()
-            yield Move(step, pos, ref)
-            yield Settle(float(spec.settle_s))
             next_pos = missing[k + 1] if k + 1 < len(missing) else n_pos
-            if several:
-                by_sensor = yield Acquire(step, pos, int(spec.samples_per_position), several)
-                yield Save(step, pos, setpoint_c, ref, by_sensor, next_pos, several)
-                continue
-            acquisition = yield Acquire(step, pos, int(spec.samples_per_position))
-            yield Save(step, pos, setpoint_c, ref, acquisition, next_pos)
+            yield from measure_position(step, pos, setpoint_c, ref, next_pos, serials,
+                                        int(spec.samples_per_position), float(spec.settle_s))
     yield Fit()
 
 

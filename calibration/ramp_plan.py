@@ -62,13 +62,16 @@ from typing import Any
 import numpy as np
 
 from calibration.campaign_plan import (
+    ANY_SENSOR,
     Acquire,
-    Checkpoint,
     Configure,
     Fit,
     Move,
+    ReadChamber,
     Save,
+    SetChamber,
     Settle,
+    measure_position,
     visit_orders,
 )
 from calibration.thermal_plant import AMBIENT_C, DEFAULT_AIR_TAU_S, lag_step, rate_limited
@@ -88,29 +91,6 @@ STILL_SIGMAS = 3.0
 TYPICAL_MOVE_S = 12.0
 # The air counts as arrived within this of the leg's target (the soak's default tol_c).
 DEFAULT_ARRIVED_C = 0.3
-
-
-@dataclass(frozen=True)
-class ReadChamber:
-    """Read the chamber; the interpreter returns its status (``process_c``, ``setpoint_c``,
-    ``working_setpoint_c``: :class:`drivers.protocols.ChamberStatus`)."""
-
-
-@dataclass(frozen=True)
-class CommandChamber:
-    """Command the setpoint and its ramp rate and return at once: no waiting for arrival."""
-
-    leg: int
-    setpoint_c: float
-    ramp_c_per_min: float
-
-
-@dataclass(frozen=True)
-class RampSave(Save):
-    """Store one capture of a sweep: no setpoint band (the air is meant to be moving)."""
-
-    band: bool = False
-    leg: int = 0
 
 
 @dataclass(frozen=True)
@@ -239,14 +219,17 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
               done: Iterable[tuple[int, int]] = (), legs_done: int = 0,
               sensors: Sequence[str] = (), angles_deg: np.ndarray | None = None,
               edge_gap_c: float = EDGE_GAP_C) -> Any:
-    """The ramp campaign, once (module docstring). A generator of plan messages.
+    """The ramp campaign, once (module docstring). A generator of plan messages: the
+    engine's verbs (``SetChamber`` commands without waiting, ``ReadChamber``) and its
+    :func:`calibration.campaign_plan.measure_position` stub with the band off.
 
     ``spec`` needs ``setpoints_c``, ``samples_per_position``, ``settle_s``,
     ``ramp_c_per_min``, ``range_g``, ``odr_hz`` and may give ``position_order`` /
     ``position_order_seed``, ``tol_c`` and the soak cap; ``end_c`` is where the last leg
     goes (the rig's safe temperature); ``done``/``legs_done`` resume (module docstring).
+    ``sensors``: the campaign's serials (none: the plan names one, ``ANY_SENSOR``).
     """
-    several = tuple(str(s) for s in sensors) if len(sensors) > 1 else ()
+    serials = tuple(str(s) for s in sensors) or (ANY_SENSOR,)
     stored = set(done)
     refs = np.asarray(refs, float)
     n_pos = refs.shape[0]
@@ -261,7 +244,6 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
     base = visit_orders(_OneSweep(spec), refs, angles_deg)[0]
 
     yield Configure(float(spec.range_g), float(spec.odr_hz))
-    yield Checkpoint()
     status = yield ReadChamber()
     start_c = float(getattr(status, "process_c", AMBIENT_C))
     legs = ramp_legs(list(spec.setpoints_c), start_c, end_c)
@@ -271,15 +253,16 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
 
     while leg_i < len(legs):
         leg = legs[leg_i]
-        yield CommandChamber(leg.index, leg.target_c, rate)
+        yield SetChamber(leg.index, leg.target_c, rate)  # the step of a SetChamber: its leg
         arrived_at: int | None = None  # captures since the air arrived (hold legs)
         since: dict[str, list[float]] = {}
         captures = 0
         status = yield ReadChamber()
         while True:
             air_c = float(getattr(status, "process_c", math.nan))
-            wsp_c = float(getattr(status, "working_setpoint_c", air_c))
-            here = abs(air_c - leg.target_c) <= arrived_c and abs(wsp_c - leg.target_c) < 1e-3
+            wsp = getattr(status, "working_setpoint_c", None)  # None: a controller without
+            here = (abs(air_c - leg.target_c) <= arrived_c
+                    and (wsp is None or abs(float(wsp) - leg.target_c) < 1e-3))
             if here and not leg.hold:
                 break
             if here and arrived_at is None:
@@ -296,12 +279,9 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
             pos = queue.pop(0)
             ref = (float(refs[pos, 0]), float(refs[pos, 1]), float(refs[pos, 2]))
             next_pos = queue[0] if queue else n_pos
-            yield Checkpoint()
-            yield Move(sweep, pos, ref)
-            yield Settle(settle_s)
-            reply = yield Acquire(sweep, pos, n, several)
-            yield RampSave(sweep, pos, leg.target_c, ref, reply, next_pos, several,
-                           band=False, leg=leg.index)
+            # each capture stored with its leg's target as setpoint_c, without the band
+            reply = yield from measure_position(sweep, pos, leg.target_c, ref, next_pos,
+                                                serials, n, settle_s, band=False)
             captures += 1
             if arrived_at is not None:
                 for key, die_c in _dies(reply).items():
@@ -408,7 +388,7 @@ def predict_ramp(spec: Any, refs: np.ndarray, *, start_c: float = AMBIENT_C,
     state: dict[str, Any] = {"leg": None, "arrived": None}
 
     def handle(msg: Any) -> Any:
-        if isinstance(msg, CommandChamber):
+        if isinstance(msg, SetChamber):
             _close_leg(out, state, plant)
             plant.setpoint_c, plant.rate_c_per_min = msg.setpoint_c, msg.ramp_c_per_min
             state["leg"] = {"target_c": msg.setpoint_c, "start_s": plant.t_s}
@@ -428,7 +408,7 @@ def predict_ramp(spec: Any, refs: np.ndarray, *, start_c: float = AMBIENT_C,
         elif isinstance(msg, Acquire):
             plant.advance(msg.n_samples / odr_hz)
             reading = _Reading(float(plant.die_c[0]))
-            return {s: reading for s in msg.sensors} if msg.sensors else reading
+            return dict.fromkeys(msg.sensors, reading)
         elif isinstance(msg, Save):
             out.n_saves += 1
             sweeps.add(msg.step)

@@ -92,7 +92,7 @@ def rate_corrected_raw_g(raw_g: np.ndarray, row_rate_c_per_min: np.ndarray,
 
     While the die moves, package and board lag it and each axis reads an extra
     k·dT/dt (k in µg per °C/min, per axis, measured by the campaign from its soak
-    probes: service/engine/soak_rate.py). The SFEM and thermal model (seed paper
+    probes: service/engine/rate_gain.py). The SFEM and thermal model (seed paper
     Eq. 1, 4–8, 12–14) describe the sensor at rest, so that term is removed from
     every row before they are fitted: otherwise a step measured while the die still
     moved carries a bias common to all its positions that the model would take for a

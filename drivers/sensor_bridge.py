@@ -409,7 +409,7 @@ class MultiplexedBridge:
     :meth:`close`).
 
     Averaged captures are grouped: the ``acquire(n)`` calls of several channels that
-    arrive in one event-loop turn (the engine's ``multi.read_all`` starts a position's
+    arrive in one event-loop turn (the engine's ``sensors.read_all`` starts a position's
     reads together) with the same ``n`` become one group command
     ``AVG,<n>,@<ch>,…``, which the bridge captures at once (:meth:`avg_fields`): eight
     sensors on one bridge cost one capture time, not eight. Each channel still gets its
@@ -468,7 +468,7 @@ class MultiplexedBridge:
         ``n`` samples in the same event-loop turn (at any ODR: the group paces at the slowest).
 
         The window is one turn of the loop (``call_soon``), not a wall-time wait: the reads
-        ``multi.read_all`` starts together all reach here before the group is sent, and a
+        ``sensors.read_all`` starts together all reach here before the group is sent, and a
         lone call (a retry, a one-sensor read) goes out as its own ``@<ch>,AVG,<n>``.
         """
         group = self._forming.get(n_samples)

@@ -1,8 +1,11 @@
 """Offline soak-campaign simulator: the twin's physics without the wire, for tests and benchmarks.
 
-It interprets the campaign's one plan (calibration/campaign_plan.py) -- ramp the
-chamber at its rate limit, soak, visit each scheduled position (move, settle,
-capture N samples) --
+It interprets the campaign's one plan (calibration/campaign_plan.py), verb by
+verb -- ``SetChamber`` commands, ``WaitChamber`` ramps the chamber at its rate
+limit until its working setpoint arrives, ``ReadChamber`` returns the simulated
+status, ``WaitStable`` soaks (a fixed ``soak_min``: the composite soak verb,
+expanded here without its stability decision), each scheduled position is a
+move, a settle and a capture of N samples --
 integrating the air temperature and the die temperature (first-order lag
 ``tau_s`` behind the air; the plant's steps are ``calibration.thermal_plant``'s), and
 writes recording format v1 rows. The wire-level
@@ -30,6 +33,7 @@ from calibration.thermal_plant import (
     lag_step,
     rate_limited,
 )
+from drivers.protocols import ChamberStatus
 from simulators.truth import Context, SensorTruth, averaged_readings
 
 DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 10))
@@ -119,15 +123,18 @@ def simulate_campaign(
     # physics: the chamber ramps at the rig's rate limit, the soak is a fixed soak_min, a
     # move costs move_s (slew and settle), an acquisition n / odr_hz with its reading at
     # mid-capture.
-    def handle(msg: plan.Msg) -> None:
+    def handle(msg: plan.Msg) -> ChamberStatus | None:
         nonlocal direction, last_sp, die_before, visits
         if isinstance(msg, plan.SetChamber):
             sp = msg.setpoint_c
             if sp != last_sp:
                 direction = 1 if sp > last_sp else -1
             last_sp = sp
-            while abs(wsp - sp) > 1e-9:  # ramp
-                advance(ph.dt_s, sp)
+        elif isinstance(msg, plan.WaitChamber):
+            while abs(wsp - msg.setpoint_c) > 1e-9:  # ramp: arrived when the WSP is there
+                advance(ph.dt_s, msg.setpoint_c)
+        elif isinstance(msg, plan.ReadChamber):
+            return ChamberStatus(air, last_sp, wsp, ph.ramp_c_per_min, True)
         elif isinstance(msg, plan.WaitStable):
             soak_left = soak_min * 60.0
             while soak_left > 1e-9:
@@ -156,6 +163,7 @@ def simulate_campaign(
             visits[msg.step] = visits.get(msg.step, 0) + 1
             rows["dir"].append(direction)
             rows["session"].append(sessions[msg.step] if sessions is not None else 0)
+        return None  # Save: stored; Home, Checkpoint, Configure, Fit: nothing to simulate
 
     spec = plan.PlanSpec(setpoints_c=list(setpoints_c), samples_per_position=n, settle_s=0.0,
                          ramp_c_per_min=ph.ramp_c_per_min, odr_hz=truth.odr_hz,

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from calibration import ramp_plan as rp
-from calibration.campaign_plan import Acquire, Move, Save, Settle
+from calibration.campaign_plan import Acquire, Move, ReadChamber, Save, SetChamber, Settle
 from calibration.recording import Recording
 from calibration.schedules import table1
 from calibration.thermal_plant import AMBIENT_C
@@ -99,11 +99,11 @@ def simulate_ramp_campaign(
     pending: dict[str, Any] = {}
 
     def handle(msg: Any) -> Any:
-        if isinstance(msg, rp.CommandChamber):
+        if isinstance(msg, SetChamber):
             plant.setpoint_c, plant.rate_c_per_min = msg.setpoint_c, msg.ramp_c_per_min
             legs.append({"target_c": msg.setpoint_c, "start_s": plant.t_s})
             return None
-        if isinstance(msg, rp.ReadChamber):
+        if isinstance(msg, ReadChamber):
             return plant.status()
         if isinstance(msg, Move):
             plant.advance(rig.move_s)
@@ -116,9 +116,8 @@ def simulate_ramp_campaign(
             pending.update(t_s=plant.t_s, air=plant.air_c, die=plant.die_c.copy())
             plant.advance(capture_s / 2.0)
             pending["rate"] = (plant.die_c - before) / capture_s
-            dies = {s: rp._Reading(float(d)) for s, d in zip(serials, pending["die"],
+            return {s: rp._Reading(float(d)) for s, d in zip(serials, pending["die"],
                                                              strict=True)}
-            return dies if msg.sensors else dies[serials[0]]
         elif isinstance(msg, Save):
             for key in ("t_s", "air", "die", "rate"):
                 rows[key].append(pending[key])
@@ -128,8 +127,7 @@ def simulate_ramp_campaign(
             rows["ref"].append(msg.ref_g)
         return None
 
-    gen = rp.ramp_plan(spec, refs, end_c=rig.end_c, sensors=serials if len(serials) > 1
-                       else ())
+    gen = rp.ramp_plan(spec, refs, end_c=rig.end_c, sensors=serials)
     reply: Any = None
     try:
         while True:

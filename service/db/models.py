@@ -149,7 +149,7 @@ class SoakProbe(Base):
     """One die-temperature probe taken during a soak (migration 0006_soak_probes).
 
     The soak decision's own measurements: the campaign measures the sensor's
-    ``temperature_rate`` gain from them (service/engine/soak_rate.py) and a resumed
+    ``temperature_rate`` gain from them (service/engine/rate_gain.py) and a resumed
     campaign reloads them. ``pose`` is the table's commanded angles (deg, "a,b[,c]"),
     the key under which probes of different soaks compare (``ref_*`` its gravity
     reference, NULL when the table's geometry gives none); ``soak_start_t_s`` tells one

@@ -29,7 +29,7 @@ def calibrate_columns(
     rec = Recording.from_columns({k: np.asarray(v, float) for k, v in columns.items()},
                                  path=provenance.get("recording", "<campaign>"))
     ramp = (provenance.get("spec") or {}).get("method") == "ramp"
-    # The campaign's measured temperature_rate gain (runner: soak_rate.py), when it has one.
+    # The campaign's measured temperature_rate gain (runner: rate_gain.py), when it has one.
     k = provenance.get("rate_gain_ug_per_c_per_min")
     fit = fit_ramp(rec) if ramp else fit_campaign(
         rec, rate_gain_ug_per_c_per_min=None if k is None else np.asarray(k, float))

@@ -115,8 +115,14 @@ class DeviceGuard:
         self.suspensions = 0
         self.calls = 0
 
-    async def call(self, label: str, fn: Callable[[], Awaitable[T]]) -> T:
-        """``await fn()`` with the fault policy; ``label`` names the call in messages."""
+    async def call(self, label: str, fn: Callable[[], Awaitable[T]], *,
+                   give_up: Callable[[str], Exception] | None = None) -> T:
+        """``await fn()`` with the fault policy; ``label`` names the call in messages.
+
+        ``give_up``: a device the campaign can go on without (one sensor of several):
+        a configuration fault, or a transient one that outlasts the retries, raises
+        ``give_up(reason)`` instead of failing or suspending the campaign.
+        """
         if self.check_abort():
             raise AbortRequested(label)
         last: DeviceFault | None = None
@@ -126,7 +132,7 @@ class DeviceGuard:
             try:
                 return await fn()
             except DeviceFault as exc:
-                self._fail_if_configuration(label, exc)
+                self._fail_if_configuration(label, exc, give_up)
                 last = exc
                 self.faults_retried += 1
                 await self.clock.sleep(delay_s)
@@ -134,13 +140,20 @@ class DeviceGuard:
                 if self.check_abort():
                     raise AbortRequested(label) from exc
         assert last is not None
+        if give_up is not None:
+            raise give_up(f"{label}: no answer after {self.policy.retry_attempts} tries "
+                          f"(last fault: {last})") from last
         return await self._suspended(label, fn, last)
 
-    def _fail_if_configuration(self, label: str, fault: DeviceFault) -> None:
+    def _fail_if_configuration(self, label: str, fault: DeviceFault,
+                               give_up: Callable[[str], Exception] | None = None) -> None:
         kind, fix = classify(fault)
-        if kind == "configuration":
-            raise CampaignFailed(f"{label}: {fault} (configuration fault, not retried; "
-                                 f"fix: {fix})") from fault
+        if kind != "configuration":
+            return
+        if give_up is not None:
+            raise give_up(f"{label}: {fault}") from fault
+        raise CampaignFailed(f"{label}: {fault} (configuration fault, not retried; "
+                             f"fix: {fix})") from fault
 
     async def _suspended(self, label: str, fn: Callable[[], Awaitable[T]],
                          fault: DeviceFault) -> T:

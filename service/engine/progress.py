@@ -74,20 +74,24 @@ class EtaSubscriber:
     """Keeps an :class:`EtaModel` current from the plan's message stream.
 
     Called with (message, started_s, ended_s) for each message the engine has
-    executed: a ramp's and a soak's durations come from ``SetChamber`` and
-    ``WaitStable`` (a resumed step's short re-check is not a soak), a
+    executed: a ramp's duration from its ``SetChamber`` to its ``WaitChamber``, a
+    soak's from ``WaitStable`` (a resumed step's short re-check is not a soak), a
     position's from its ``Move`` to its ``Save``.
     """
 
     def __init__(self, eta: EtaModel) -> None:
         self.eta = eta
         self._position_start_s: float | None = None
+        self._ramp_start_s: float | None = None
 
     def __call__(self, msg: Any, started_s: float, ended_s: float) -> None:
         from calibration import campaign_plan as plan
 
         if isinstance(msg, plan.SetChamber):
-            self.eta.ramp_done(ended_s - started_s)
+            self._ramp_start_s = started_s
+        elif isinstance(msg, plan.WaitChamber) and self._ramp_start_s is not None:
+            self.eta.ramp_done(ended_s - self._ramp_start_s)
+            self._ramp_start_s = None
         elif isinstance(msg, plan.WaitStable) and not msg.resumed:
             self.eta.soak_done(ended_s - started_s)
         elif isinstance(msg, plan.Move):

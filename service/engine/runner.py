@@ -23,30 +23,33 @@ import datetime as dt
 import functools
 import logging
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from calibration.campaign_plan import (
+    RETAKE,
     Acquire,
     Checkpoint,
     Configure,
     Fit,
+    Home,
     Move,
     Msg,
+    ReadChamber,
     Save,
     SetChamber,
     Settle,
+    WaitChamber,
     WaitStable,
     campaign_plan,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
-from calibration.ramp_plan import CommandChamber, ReadChamber
 from calibration.thermal_plant import AMBIENT_C
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
-from service.engine import soak_rate, stability, store
+from service.engine import rate_gain, stability, store
 from service.engine.calibrate import calibrate_columns
 from service.engine.fencing import fence_devices
 from service.engine.guard import (
@@ -57,17 +60,11 @@ from service.engine.guard import (
     clock_speed,
 )
 from service.engine.identity import verify_sensor
-from service.engine.multi import (
-    SensorDropped,
-    read_all,
-    reading_problem,
-    sensor_call,
-    slowest_decision,
-)
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
-from service.engine.ramp import RampSteps
+from service.engine.ramp import RampProgress
 from service.engine.rigs import RigDevices
+from service.engine.sensors import SensorDropped, read_all, reading_problem, slowest_decision
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
 from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
@@ -121,10 +118,10 @@ class CampaignRunner:
         # Called with (message, started_s, ended_s) for every plan message executed.
         self._subscribers: list[Subscriber] = []
         self.suspension_log: list[dict[str, Any]] = []  # every hold: suspender, when, how long
-        self._last_soak: WaitStable | None = None
-        # Finished (or interrupted) soaks' probes per sensor (None: the one sensor), for the
-        # measured rate gain (soak_rate.py); reloaded from the soak_probes table on resume.
-        self._soaks: dict[str | None, list[soak_rate.SoakProbes]] = {}
+        self._pose_attempts: dict[tuple[int, int], int] = {}  # captures off their pose
+        # Finished (or interrupted) soaks' probes per sensor, for the measured rate gain
+        # (rate_gain.py); reloaded from the soak_probes table on resume.
+        self._soaks: dict[str, list[rate_gain.SoakProbes]] = {}
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
@@ -138,8 +135,7 @@ class CampaignRunner:
         self._held_s = 0.0
         self._held_since_s: float | None = None
         self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
-        self._ramp: RampSteps | None = None  # a ramp campaign's verbs (service/engine/ramp.py)
-        self._status_at: tuple[float, ChamberStatus] | None = None  # last save's chamber read
+        self._ramp: RampProgress | None = None  # a ramp campaign's plan (service/engine/ramp.py)
 
     def _confirm_lease(self) -> dt.datetime:
         """The device fence's check (fencing.py): when the lease ends, or
@@ -225,9 +221,11 @@ class CampaignRunner:
             raise CampaignFailed(f"spec: {exc}") from exc
         self.sensor_serial = str(camp.sensor)
         several = spec.extra.get("sensors")
-        # Several sensors (issue 12): each read at every position, dropped alone on a fault.
+        # The campaign's sensors, one or several (issue 12): each read at every position,
+        # dropped alone on a fault while another still reads (sensors.py).
         self.serials: list[str] = ([str(s) for s in several]
-                                   if isinstance(several, list) and len(several) > 1 else [])
+                                   if isinstance(several, list) and len(several) > 1
+                                   else [self.sensor_serial])
         self.dropped: dict[str, str] = dict(camp.sensors_dropped or {})
         self.identities: dict[str, dict[str, Any]] = {}
         self.sensor_identity: dict[str, Any] | None = None
@@ -260,19 +258,32 @@ class CampaignRunner:
         self._touched = True
         self._subscribers.append(EtaSubscriber(self.eta))
         self._soaks = self._stored_soaks()
-        if self.serials:
+        if len(self.serials) > 1:
             missing = [s for s in self.serials if s not in self.dev.accelerometers]
             if missing:
                 raise CampaignFailed(f"rig has no sensor {', '.join(missing)} mounted "
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
         # The table's pose of each position, by this rig's geometry: the travel order's costs.
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
-        if spec.method == "ramp":
-            self._ramp = RampSteps(self)
-            plan = self._ramp.plan(done, angles_deg)
-        else:
-            plan = campaign_plan(spec, self.refs, done, sensors=self.serials,
-                                 angles_deg=angles_deg)
+        while True:
+            if spec.method == "ramp":  # the ramp plan, resumed from the store (engine/ramp.py)
+                self._ramp = self._ramp or RampProgress(self)
+                plan = self._ramp.plan(done, angles_deg)
+            else:
+                plan = campaign_plan(spec, self.refs, done, sensors=self.serials,
+                                     angles_deg=angles_deg)
+            try:
+                await self._run_plan(plan)
+                return
+            except Rewind as rewind:
+                # A suspension is a rewind: the plan resumes from what is stored, as after
+                # a restart (the step re-ramped, re-soaked where the physics needs it,
+                # its missing positions measured), and every subscriber sees it.
+                log.info("campaign %s: %s; the plan resumes from its stored measurements",
+                         self.id, rewind)
+                done = store.measured_positions(self.sf, self.id)
+
+    async def _run_plan(self, plan: Any) -> None:
         reply: Any = None
         while True:
             try:
@@ -284,16 +295,19 @@ class CampaignRunner:
     async def _interpret(self, msg: Msg) -> Any:
         """Execute one plan message; subscribers hear of it once it is done.
 
-        A ``Save`` is announced *before* its commit (the reading is complete), so
-        the progress committed with it already counts it.
+        A ``Save`` is committed here, with the cursor past it (the crash rule), and
+        announced *before* its commit (the reading is complete), so the progress
+        committed with it already counts it; a capture sent back to be taken again
+        (:data:`RETAKE`) is neither announced nor stored.
         """
         started_s = self._active_s()
+        result = await self._handlers[type(msg)](msg)
         if isinstance(msg, Save):
+            if result == RETAKE:
+                return RETAKE
             self._notify(msg, started_s)
-            await self._save(msg)
+            self._commit(msg, *result)
             return None
-        handler = self._handlers[type(msg)]
-        result = await handler(msg)
         self._notify(msg, started_s)
         return result
 
@@ -312,23 +326,30 @@ class CampaignRunner:
 
     @property
     def _handlers(self) -> dict[type, Callable[[Any], Awaitable[Any]]]:
-        handlers: dict[type, Callable[[Any], Awaitable[Any]]] = {
+        return {
             Configure: self._configure, Checkpoint: self._at_checkpoint,
-            SetChamber: self._ramp_to, WaitStable: self._soak, Move: self._move,
-            Settle: self._settle, Acquire: self._acquire_msg, Fit: self._fit,
+            SetChamber: self._set_chamber, WaitChamber: self._wait_chamber,
+            ReadChamber: self._read_chamber, Home: self._home, WaitStable: self._soak,
+            Move: self._move, Settle: self._settle, Acquire: self._acquire_msg,
+            Save: self._save, Fit: self._fit,
         }
-        if self._ramp is not None:
-            handlers.update({ReadChamber: self._ramp.read_chamber,
-                             CommandChamber: self._ramp.command_chamber})
-        return handlers
 
-    # --- several sensors (service/engine/multi.py) ------------------------------------
+    # --- the campaign's sensors, one or several (service/engine/sensors.py) -------------
     @property
     def _live(self) -> list[str]:
         return [s for s in self.serials if s not in self.dropped]
 
+    def _accelerometer(self, serial: str) -> Any:
+        """A several-sensor rig's sensor by serial; a one-sensor rig's one accelerometer."""
+        return self.dev.accelerometers.get(serial, self.dev.accelerometer)
+
     def _drop(self, exc: SensorDropped) -> None:
-        """Flag and drop one sensor with its reason; the campaign fails only with none left."""
+        """Flag and drop one sensor with its reason; the campaign fails only with none left.
+
+        A one-sensor campaign fails with the reason itself: its sensor is the campaign.
+        """
+        if len(self.serials) == 1:
+            raise CampaignFailed(exc.reason) from exc
         self.dropped[exc.serial] = exc.reason
         store.drop_sensor(self.sf, self.id, exc.serial, exc.reason)
         if not self._live:
@@ -337,46 +358,59 @@ class CampaignRunner:
 
     async def _sensor_call(self, serial: str, label: str,
                            fn: Callable[[], Awaitable[Any]]) -> Any:
-        return await sensor_call(self.clock, self.guard.policy, self._abort_asked_recently,
-                                 serial, f"{label} [{serial}]", fn)
+        """One sensor's call under the guard's one retry policy: while another sensor still
+        reads, a sensor that fails for good or outlasts its retries is given up
+        (:class:`SensorDropped`); the last one left suspends or fails the campaign."""
+        if len(self.serials) == 1:
+            return await self.guard.call(label, fn)
+        label = f"{label} [{serial}]"
+        if len(self._live) == 1:
+            return await self.guard.call(label, fn)
+        return await self.guard.call(label, fn,
+                                     give_up=lambda why: SensorDropped(serial, why))
 
-    async def _configure_each(self, msg: Configure) -> None:
-        """Identity and configuration of every sensor; a failing one is dropped."""
+    async def _configure(self, msg: Configure) -> None:
+        """Identity and configuration of every sensor; a failing one is dropped.
+
+        Before any reading: the sensor connected must be the one the campaign names
+        (a typo must not store a calibration under the wrong part). A mismatch is a
+        configuration fault, named with both serials.
+        """
         for serial in self._live:
-            acc = self.dev.accelerometers[serial]
+            acc = self._accelerometer(serial)
+            binding = self.dev.bindings.get(serial, self.dev.serial_binding)
             try:
                 if serial not in self.identities:
                     verified = await self._sensor_call(
                         serial, "sensor.identify",
-                        lambda acc=acc, serial=serial: verify_sensor(  # type: ignore[misc]
-                            acc, serial, self.dev.bindings.get(serial, self.dev.serial_binding)))
+                        functools.partial(verify_sensor, acc, serial, binding))
                     self.identities[serial] = verified.as_dict()
                 await self._sensor_call(serial, "accelerometer.configure",
-                                        lambda acc=acc: acc.configure(  # type: ignore[misc]
-                                            msg.range_g, msg.odr_hz))
+                                        functools.partial(acc.configure, msg.range_g,
+                                                          msg.odr_hz))
             except SensorDropped as exc:
                 self._drop(exc)
         self.sensor_identity = self.identities.get(self.sensor_serial)
 
     async def _measure_one(self, serial: str, n: int) -> tuple[Acquisition, list[str], int]:
-        """:meth:`_measure` for one sensor of several; out of range: :class:`SensorDropped`."""
-        acc = self.dev.accelerometers[serial]
+        """Acquire; on a failed quality check measure once more and keep the second capture.
+        A reading out of range for a static sensor: :class:`SensorDropped`."""
+        acquire = functools.partial(self._accelerometer(serial).acquire, n)
         attempts = 1
-        acq = await self._sensor_call(serial, "accelerometer.acquire", lambda: acc.acquire(n))
+        acq = await self._sensor_call(serial, "accelerometer.acquire", acquire)
         flags = check_acquisition(acq, n, self.spec.quality)
         if flags:
             attempts = 2
-            acq = await self._sensor_call(serial, "accelerometer.acquire",
-                                          lambda: acc.acquire(n))
+            acq = await self._sensor_call(serial, "accelerometer.acquire", acquire)
             flags = check_acquisition(acq, n, self.spec.quality)
         problem = reading_problem(acq, self.spec.range_g)
         if problem is not None:
             raise SensorDropped(serial, problem)
         return acq, flags, attempts
 
-    async def _measure_live(self, n: int, serials: list[str]) -> dict[str, Any]:
-        """Every live sensor of ``serials`` read at once (:func:`multi.read_all`); the ones
-        that fail are dropped after all have answered (a drop may fail the campaign)."""
+    async def _measure(self, n: int, serials: Sequence[str]) -> dict[str, Any]:
+        """Every live sensor of ``serials`` read at once (:func:`sensors.read_all`); the
+        ones that fail are dropped after all have answered (a drop may fail the campaign)."""
         live = [s for s in serials if s not in self.dropped]
         got = await read_all(live, lambda serial: self._measure_one(serial, n))
         out: dict[str, Any] = {}
@@ -386,22 +420,6 @@ class CampaignRunner:
             else:
                 out[serial] = result
         return out
-
-    async def _configure(self, msg: Configure) -> None:
-        if self.serials:
-            await self._configure_each(msg)
-            return
-        acc = self.dev.accelerometer
-        if self.sensor_identity is None:
-            # Before any reading: the sensor connected must be the one the campaign names
-            # (a typo must not store a calibration under the wrong part). A mismatch is a
-            # configuration fault: the campaign fails at once with both serials named.
-            verified = await self.guard.call(
-                "sensor.identify",
-                lambda: verify_sensor(acc, self.sensor_serial, self.dev.serial_binding))
-            self.sensor_identity = verified.as_dict()
-        await self.guard.call("accelerometer.configure",
-                              lambda: acc.configure(msg.range_g, msg.odr_hz))
 
     async def _at_checkpoint(self, _msg: Checkpoint) -> None:
         await self._checkpoint()
@@ -415,89 +433,73 @@ class CampaignRunner:
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
 
+    async def _home(self, _msg: Home) -> None:
+        await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
+
+    async def _read_chamber(self, _msg: ReadChamber) -> ChamberStatus:
+        return await self._chamber()
+
     async def _acquire_msg(self, msg: Acquire) -> Any:
-        if not msg.sensors:
-            return await self._measure(msg.n_samples)
-        got = await self._measure_live(msg.n_samples, list(msg.sensors))
+        got = await self._measure(msg.n_samples, msg.sensors)
         return {serial: got.get(serial) for serial in msg.sensors}
 
     async def _fit(self, _msg: Fit) -> None:
         await self._fitting()
 
-    async def _chamber_in_band(
-        self, msg: Save, remeasure: Callable[[], Awaitable[Any]]
-    ) -> tuple[ChamberStatus, Any]:
-        """The chamber's status once it is in band for this save, and the readings taken
-        again if it was not (None when the readings in hand stand).
+    async def _save(self, msg: Save) -> tuple[ChamberStatus, dict[str, Any]] | str:
+        """Check a position's readings before they are stored: (chamber status, readings)
+        for :meth:`_commit`, or :data:`RETAKE`.
 
-        A reading taken while the chamber misbehaved is discarded: hold, re-soak where the
-        physics needs it, return to the position and measure it again (``remeasure``).
+        The chamber first (alarms; its PV in band of the setpoint unless ``msg.band`` is
+        off): a reading taken while it misbehaved is discarded, the campaign holds
+        (:meth:`_hold`) and the plan rewinds (:class:`Rewind`): the step is re-soaked
+        where the physics needs it and the position measured again, as after a restart.
+
+        Then every reading at its pose. A capture that does not read gravity from the
+        direction its position claims (placement.check_pose: a table that reported
+        in-position somewhere else) is never stored under that label: the plan measures
+        the position again (:data:`RETAKE`), up to ``POSE_ATTEMPTS`` captures in all.
+        Then the campaign fails naming the position and the angle; with several
+        sensors, only the ones still off are dropped while another reads the pose right
+        (its mount, not the table, is wrong).
         """
-        remeasured: Any = None
-        # A ramp's capture (RampSave, band False): the air is meant to be off the setpoint.
-        band_c = msg.setpoint_c if getattr(msg, "band", True) else None
-        while True:
-            status = await self._chamber()
-            tripped = self.suspenders.check_chamber(status, band_c)
-            if tripped is None:
-                self._status_at = (self.clock.now(), status)  # a ramp's next read reuses it
-                return status, remeasured
-            await self._hold(*tripped, setpoint_c=band_c)
-            if tripped[0].restart_soak and self._last_soak is not None:
-                await self._soak(dataclasses.replace(self._last_soak, resumed=True))
-            remeasured = await self._measure_again(msg, remeasure)
-
-    async def _measure_again(self, msg: Save, remeasure: Callable[[], Awaitable[Any]]) -> Any:
-        """Return to the position, settle and measure again (``remeasure``)."""
-        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
-        await self._wait(self.spec.settle_s)
-        return await remeasure()
-
-    async def _checked_readings(
-        self, msg: Save, readings: dict[str, Any], remeasure: Callable[[], Awaitable[Any]]
-    ) -> tuple[ChamberStatus, dict[str, Any]]:
-        """The chamber in band (:meth:`_chamber_in_band`) and every reading at its pose.
-
-        ``readings``: serial → (acquisition, flags, attempts). A capture that does not
-        read gravity from the direction its position claims (placement.check_pose: a
-        table that reported in-position somewhere else) is never stored under that
-        label: the position is moved to, settled and measured again, up to
-        ``POSE_ATTEMPTS`` captures in all. Then the campaign fails naming the position
-        and the angle; with several sensors, only the ones still off are dropped while
-        another reads the pose right (its mount, not the table, is wrong).
-        """
-        for attempt in range(1, POSE_ATTEMPTS + 1):
-            status, again = await self._chamber_in_band(msg, remeasure)
-            if again is not None:
-                readings = again
-            off = {serial: check_pose(r[0].mean_g, msg.ref_g)
-                   for serial, r in readings.items()}
-            off = {serial: c for serial, c in off.items() if not c.ok}
-            if not off:
-                self._check_die_against_chamber(msg, status, readings)
-                return status, readings
+        readings = {s: r for s, r in dict(msg.acquisition).items()
+                    if r is not None and s not in self.dropped}
+        status = await self._chamber()
+        band_c = msg.setpoint_c if msg.band else None  # a ramp's air is off the setpoint
+        tripped = self.suspenders.check_chamber(status, band_c)
+        if tripped is not None:
+            await self._hold_chamber(*tripped, setpoint_c=band_c)
+            raise Rewind(f"step {msg.step} position {msg.position}: {tripped[0].name}")
+        off = {serial: check_pose(r[0].mean_g, msg.ref_g) for serial, r in readings.items()}
+        off = {serial: c for serial, c in off.items() if not c.ok}
+        if off:
+            key = (msg.step, msg.position)
+            attempt = self._pose_attempts[key] = self._pose_attempts.get(key, 0) + 1
             worst = max(c.angle_deg for c in off.values())
             where = (f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position} "
                      f"(reference {_ref_text(msg.ref_g)}, table at {self._pose} deg)")
             self.pose_log.append({"step": msg.step, "position": msg.position,
                                   "attempt": attempt, "angle_deg": round(worst, 2),
-                                  "sensors": sorted(s for s in off if s)})
+                                  "sensors": sorted(off)})
             log.warning("campaign %s: %s: capture %.1f° from its reference, measuring again",
                         self.id, where, worst)
-            if attempt == POSE_ATTEMPTS:
-                if len(off) < len(readings):
-                    for serial, c in off.items():
-                        self._drop(SensorDropped(serial, f"{where}: reads gravity "
-                                                 f"{c.angle_deg:.0f}° from its reference "
-                                                 f"(limit {MAX_ANGLE_DEG:.0f}°): check its "
-                                                 "mount"))
-                    return status, {s: r for s, r in readings.items() if s not in off}
+            if attempt < POSE_ATTEMPTS:
+                return RETAKE
+            if len(off) == len(readings):
                 raise CampaignFailed(
                     f"{where}: the capture reads gravity {worst:.0f}° from its reference "
                     f"(limit {MAX_ANGLE_DEG:.0f}°) after {POSE_ATTEMPTS} moves to it; the table "
                     "does not stand where it reports: check its homing and encoders")
-            readings = await self._measure_again(msg, remeasure)
-        raise AssertionError("unreachable")
+            for serial, c in off.items():
+                self._drop(SensorDropped(serial, f"{where}: reads gravity {c.angle_deg:.0f}° "
+                                         f"from its reference (limit {MAX_ANGLE_DEG:.0f}°): "
+                                         "check its mount"))
+        readings = {s: r for s, r in readings.items() if s not in self.dropped}
+        if not readings:
+            raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
+        self._check_die_against_chamber(msg, status, readings)
+        return status, readings
 
     def _check_die_against_chamber(self, msg: Save, status: ChamberStatus,
                                    readings: dict[str, Any]) -> None:
@@ -533,16 +535,9 @@ class CampaignRunner:
             "places), unit (°F, K) or offset in its register map — `soakcal rig check RIG` "
             "names the map key to fix")
 
-    async def _save_each(self, msg: Save) -> None:
-        """Commit every live sensor's reading of a position and the cursor in one transaction."""
-        readings = {s: r for s, r in dict(msg.acquisition).items()
-                    if r is not None and s not in self.dropped}
-        status, readings = await self._checked_readings(
-            msg, readings,
-            lambda: self._measure_live(self.spec.samples_per_position, self._live))
-        readings = {s: r for s, r in readings.items() if s not in self.dropped}
-        if not readings:
-            raise CampaignFailed(f"step {msg.step} position {msg.position}: no sensor read")
+    def _commit(self, msg: Save, status: ChamberStatus, readings: dict[str, Any]) -> None:
+        """Commit every live sensor's reading of a position and the cursor past it in one
+        transaction (the crash rule)."""
         ref = msg.ref_g
         rows = []
         for serial in msg.sensors:
@@ -550,62 +545,35 @@ class CampaignRunner:
                 continue
             acq, flags, attempts = readings[serial]
             rows.append({
-                "sensor": serial, "step": msg.step, "position": msg.position,
+                "step": msg.step, "position": msg.position,
                 "t_s": self._t(self.clock.now() - acq.duration_s / 2.0),
                 "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
                 "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
                 "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
                 "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
-                "attempts": attempts, "flags": ",".join(flags) or None,
+                "attempts": attempts, "flags": ",".join(flags) or None, "sensor": serial,
             })
         progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
                                  write=False)
         store.commit_measurements(self.sf, self.id, rows, msg.step, msg.next_position,
                                   progress, fence=self.fence)
-
-    async def _save(self, msg: Save) -> None:
-        """Commit the reading and the cursor past it in one transaction (the crash rule)."""
-        if msg.sensors:
-            await self._save_each(msg)
-            return
-        async def measure() -> dict[str, Any]:
-            return {"": await self._measure(self.spec.samples_per_position)}
-
-        status, readings = await self._checked_readings(msg, {"": msg.acquisition}, measure)
-        acq, flags, attempts = readings[""]
-        t_mid = self.clock.now() - acq.duration_s / 2.0
-        ref = msg.ref_g
-        row = {
-            "step": msg.step, "position": msg.position, "t_s": self._t(t_mid),
-            "setpoint_c": msg.setpoint_c, "chamber_c": status.process_c,
-            "sensor_c": acq.sensor_c, "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
-            "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
-            "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
-            "attempts": attempts, "flags": ",".join(flags) or None,
-            "sensor": self.sensor_serial,
-        }
-        progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
-                                 write=False)
-        store.commit_measurement(self.sf, self.id, row, msg.next_position, progress,
-                                 fence=self.fence)
+        self._pose_attempts.pop((msg.step, msg.position), None)
 
     # --- phases -------------------------------------------------------------
-    async def _ramp_to(self, msg: SetChamber) -> None:
-        """Command the setpoint and wait until the working setpoint and PV reach it."""
-        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        store.set_cursor(self.sf, self.id, step, "ramp", 0)
-        self._cursor = (step, "ramp")
+    async def _set_chamber(self, msg: SetChamber) -> None:
+        """Command the ramp rate and the setpoint and run the controller (no waiting)."""
+        store.set_cursor(self.sf, self.id, msg.step, "ramp", 0)
+        self._cursor = (msg.step, "ramp")
         ch = self.dev.chamber
         await self.guard.call("chamber.set_ramp_rate",
                               lambda: ch.set_ramp_rate(msg.ramp_c_per_min))
-        await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(target_c))
+        await self.guard.call("chamber.set_setpoint", lambda: ch.set_setpoint(msg.setpoint_c))
         await self.guard.call("chamber.run", ch.run)
-        if spec.rate_gain == "measured":
-            # Every soak at one pose (home), so every soak's probes compare directly and k
-            # is known from the second soak on (soak_rate.estimate_rate_gain). Parked after
-            # the setpoint is commanded: the move (≈ 10 s) then runs during the ramp instead
-            # of delaying it, and the soak's probes start after both.
-            await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
+
+    async def _wait_chamber(self, msg: WaitChamber) -> None:
+        """Wait until the working setpoint (where the controller has one) and the PV
+        reach the setpoint; an alarm meanwhile holds, then rewinds (re-ramps)."""
+        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         start_s = self.clock.now()
         held0_s = self._held_total_s()
         status = await self._chamber()
@@ -613,7 +581,7 @@ class CampaignRunner:
         limit_s += spec.stability.max_soak_s
         # With the rate gain measured, the dies are probed during the ramp too (at home, like
         # the soaks): the die's rate is large then, and the first ramp with the first soak
-        # measures k during that soak instead of after it (soak_rate.estimate_rate_gain).
+        # measures k during that soak instead of after it (rate_gain.estimate_rate_gain).
         probe_ramp = spec.rate_gain == "measured" and spec.stability.policy == "predictive"
         dies = self._no_dies()
         try:
@@ -631,7 +599,11 @@ class CampaignRunner:
                 # The probe's capture (≈ 4 s) is part of the poll period, not added to it:
                 # the ramp's end is seen as soon as without probes.
                 await self._wait(spec.soak_poll_s - (self.clock.now() - polled_s))
-                status = await self._chamber_watched(None)
+                status = await self._chamber()
+                tripped = self.suspenders.check_chamber(status, None)
+                if tripped is not None:
+                    await self._hold_chamber(*tripped, setpoint_c=None)
+                    raise Rewind(f"step {step} ramp: {tripped[0].name}")
         finally:
             self._keep_soak(dies, ramp=True)
 
@@ -644,8 +616,6 @@ class CampaignRunner:
         """
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
         resumed, edge = msg.resumed, msg.edge
-        if not resumed or self._last_soak is None or self._last_soak.step != step:
-            self._last_soak = msg
         cfg = spec.stability
         sweep_s = msg.n_positions * self.eta.position_s
         if resumed:
@@ -661,34 +631,34 @@ class CampaignRunner:
         ch_t: list[float] = []
         ch_pv: list[float] = []
         ch_wsp: list[float] = []
-        # Die probes per sensor (the key None: the one sensor of a one-sensor campaign).
-        dies: dict[str | None, list[_Probe]] = self._no_dies()
+        dies = self._no_dies()  # die probes per sensor
         decision = stability.Decision(False, "started")
-        gains: dict[str | None, float | None] = {}
+        gains: dict[str, float | None] = {}
         waiting_on: str | None = None  # the die that said "not yet" last
         while True:
             status = await self._chamber()
             tripped = self.suspenders.check_chamber(status, target_c)
             if tripped is not None:
-                # The die was disturbed: hold until the chamber is back, then soak afresh
-                # (the probes so far are still an approach: they stay for the rate gain).
+                # The die was disturbed: hold until the chamber is back, then the plan
+                # rewinds and soaks afresh (the probes so far are still an approach: they
+                # stay for the rate gain).
                 self._keep_soak(dies)
-                await self._hold(*tripped, setpoint_c=target_c)
-                start_s, held0_s = self.clock.now(), self._held_total_s()
-                ch_t, ch_pv, ch_wsp, dies = [], [], [], self._no_dies()
-                continue
+                await self._hold_chamber(*tripped, setpoint_c=target_c)
+                raise Rewind(f"step {step} soak: {tripped[0].name}")
             now_s = self.clock.now()
             # Soak time: the clock since the soak began, less the time paused or suspended
             # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
             soaked_s = now_s - start_s - (self._held_total_s() - held0_s)
             ch_t.append(now_s)
             ch_pv.append(status.process_c)
-            ch_wsp.append(status.working_setpoint_c)
+            # A controller without a working setpoint: the PV alone says it has arrived.
+            ch_wsp.append(target_c if status.working_setpoint_c is None
+                          else status.working_setpoint_c)
             if cfg.policy == "predictive":
                 await self._probe_dies(dies, step, target_c, status, self._t(start_s))
             settled = stability.chamber_settled(
                 np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
-            live = {k: v for k, v in dies.items() if k is None or k not in self.dropped}
+            live = {k: v for k, v in dies.items() if k not in self.dropped}
             gains = {k: self._rate_gain_for_decision(k, v) for k, v in live.items()}
             # Every die decides, with its own rate gain; the slowest one ends the soak. The
             # die that kept the soak going last poll is asked first and the first "not yet"
@@ -743,41 +713,38 @@ class CampaignRunner:
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
-    def _no_dies(self) -> dict[str | None, list[_Probe]]:
-        keys: list[str | None] = list(self._live) if self.serials else [None]
-        return {k: [] for k in keys}
+    def _no_dies(self) -> dict[str, list[_Probe]]:
+        return {serial: [] for serial in self._live}
 
-    async def _probe_dies(self, dies: dict[str | None, list[_Probe]], step: int,
+    async def _probe_dies(self, dies: dict[str, list[_Probe]], step: int,
                           setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
                           ) -> None:
-        """One die-temperature probe of every live sensor (of the one sensor), each stored
-        as it is taken (``soak_probes``: the measured rate gain and a resume need them)."""
+        """One die-temperature probe of every live sensor, each stored as it is taken
+        (``soak_probes``: the measured rate gain and a resume need them).
+
+        Every live die at once, as a position's captures (:func:`sensors.read_all`): a
+        poll of eight sensors takes one capture's time, not eight.
+        """
         n = self.spec.soak_probe_samples
+
+        def read(serial: str) -> Awaitable[Any]:
+            return self._sensor_call(serial, "accelerometer.acquire",
+                                     functools.partial(self._accelerometer(serial).acquire, n))
+
+        taken = await read_all([k for k in dies if k not in self.dropped], read)
         rows: list[dict[str, Any]] = []
-        if None in dies:
-            taken: dict[str | None, Any] = {None: await self._acquire(n)}
-        else:
-            # Every live die at once, as a position's captures (multi.read_all): a poll of
-            # eight sensors takes one capture's time, not eight.
-            def read(serial: str) -> Awaitable[Any]:
-                acc = self.dev.accelerometers[serial]
-                return self._sensor_call(serial, "accelerometer.acquire",
-                                         lambda: acc.acquire(n))
-            live = [k for k in dies if k is not None and k not in self.dropped]
-            taken = dict(await read_all(live, read))
-        for key, probe in taken.items():
+        for serial, probe in taken.items():
             if isinstance(probe, SensorDropped):
                 self._drop(probe)
                 continue
-            probes = dies[key]
             # mid-capture (captures end together; each keeps its own duration)
             mid_s = self.clock.now() - probe.duration_s / 2.0
             t_s = self._t(mid_s)
-            probes.append(_Probe(mid_s, t_s, float(probe.sensor_c),
-                                 tuple(float(v) for v in probe.mean_g)))
+            dies[serial].append(_Probe(mid_s, t_s, float(probe.sensor_c),
+                                       tuple(float(v) for v in probe.mean_g)))
             ref = self._pose_ref or (math.nan, math.nan, math.nan)
             rows.append({
-                "sensor": key if key is not None else self.sensor_serial, "step": step,
+                "sensor": serial, "step": step,
                 "soak_start_t_s": soak_start_t_s, "pose": self._pose, "t_s": t_s,
                 "setpoint_c": setpoint_c, "chamber_c": status.process_c,
                 "sensor_c": probe.sensor_c,
@@ -787,7 +754,7 @@ class CampaignRunner:
             })
         store.add_soak_probes(self.sf, self.id, rows)
 
-    # --- the sensor's rate gain (soak_rate.py) ---------------------------------------
+    # --- the sensor's rate gain (rate_gain.py) ---------------------------------------
     def _set_pose(self, angles_deg: tuple[float, ...]) -> None:
         """The table stands at ``angles_deg``: the probes' orientation key and reference."""
         from drivers.geometry import reference_for_angles
@@ -799,46 +766,46 @@ class CampaignRunner:
         except ValueError:  # a table geometry the reference formula does not cover
             self._pose_ref = None
 
-    def _keep_soak(self, dies: dict[str | None, list[_Probe]], ramp: bool = False) -> None:
+    def _keep_soak(self, dies: dict[str, list[_Probe]], ramp: bool = False) -> None:
         """Add this soak's (``ramp``: this ramp's) probes to the finished soaks of each
         sensor."""
         for key, probes in dies.items():
-            if len(probes) >= soak_rate.MIN_PROBES_PER_SOAK:
+            if len(probes) >= rate_gain.MIN_PROBES_PER_SOAK:
                 self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes, ramp))
 
-    def _stored_soaks(self) -> dict[str | None, list[soak_rate.SoakProbes]]:
+    def _stored_soaks(self) -> dict[str, list[rate_gain.SoakProbes]]:
         """The soaks of an interrupted run, from the soak_probes table, per sensor."""
-        groups: dict[tuple[str | None, int, float, str], list[dict[str, Any]]] = {}
+        groups: dict[tuple[str, int, float, str], list[dict[str, Any]]] = {}
         for r in store.soak_probe_rows(self.sf, self.id):
-            key = r["sensor"] if self.serials else None
+            key = r["sensor"]
             groups.setdefault((key, r["step"], r["soak_start_t_s"], r["pose"]), []).append(r)
-        out: dict[str | None, list[soak_rate.SoakProbes]] = {}
+        out: dict[str, list[rate_gain.SoakProbes]] = {}
         for (key, _, _, pose), rows in groups.items():
-            if len(rows) >= soak_rate.MIN_PROBES_PER_SOAK:
+            if len(rows) >= rate_gain.MIN_PROBES_PER_SOAK:
                 # A ramp's probes begin with the air outside the band (a soak starts once
                 # the air is in it): no column needed to tell them apart.
                 first = min(rows, key=lambda r: r["t_s"])
                 air_c, setpoint_c = first.get("chamber_c"), first.get("setpoint_c")
                 ramp = (air_c is not None and setpoint_c is not None
                         and abs(air_c - setpoint_c) > self.spec.stability.tol_c)
-                out.setdefault(key, []).append(soak_rate.SoakProbes(
+                out.setdefault(key, []).append(rate_gain.SoakProbes(
                     pose, np.array([r["t_s"] for r in rows], float),
                     np.array([r["sensor_c"] for r in rows], float),
                     np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float), ramp))
         return out
 
-    def _rate_estimate(self, key: str | None,
-                       current: list[_Probe] | None = None) -> soak_rate.RateGain | None:
+    def _rate_estimate(self, key: str,
+                       current: list[_Probe] | None = None) -> rate_gain.RateGain | None:
         soaks = list(self._soaks.get(key, []))
-        if current is not None and len(current) >= soak_rate.MIN_PROBES_PER_SOAK:
+        if current is not None and len(current) >= rate_gain.MIN_PROBES_PER_SOAK:
             soaks.append(_soak_probes(self._pose, current))
-        return soak_rate.estimate_rate_gain(soaks)
+        return rate_gain.estimate_rate_gain(soaks)
 
-    def _rate_gain_for_decision(self, key: str | None, current: list[_Probe]) -> float | None:
+    def _rate_gain_for_decision(self, key: str, current: list[_Probe]) -> float | None:
         """k (µg per °C/min) for ``stability.decide``; None: the spec's ``gradient_lag_s``.
 
         Measured: the calibration subtracts k̂·rate, so only what the correction may get
-        wrong counts (``soak_rate.residual_rate_gain_for_decision``).
+        wrong counts (``rate_gain.residual_rate_gain_for_decision``).
         """
         if self.spec.rate_gain != "measured":
             return None
@@ -846,16 +813,16 @@ class CampaignRunner:
         # campaign with the soaks to measure it may soak for that correction's residual
         # before its own estimate is informative (the first soak: the prior's 100 would
         # otherwise keep it ≈ 30 min longer).
-        will_correct = self.spec.n_steps >= soak_rate.SOAKS_TO_CORRECT
-        return soak_rate.residual_rate_gain_for_decision(self._rate_estimate(key, current),
+        will_correct = self.spec.n_steps >= rate_gain.SOAKS_TO_CORRECT
+        return rate_gain.residual_rate_gain_for_decision(self._rate_estimate(key, current),
                                                          will_correct=will_correct)
 
-    def _rate_provenance(self, key: str | None) -> dict[str, Any] | None:
+    def _rate_provenance(self, key: str) -> dict[str, Any] | None:
         """The campaign's measured rate gain of one sensor, for the fit and its provenance."""
         if self.spec.rate_gain != "measured":
             return None
         est = self._rate_estimate(key)
-        k_hat = soak_rate.correction_gain_ug_per_c_per_min(est)
+        k_hat = rate_gain.correction_gain_ug_per_c_per_min(est)
         return {
             "rate_gain_ug_per_c_per_min": None if k_hat is None else k_hat.tolist(),
             "rate_gain_estimate": None if est is None else {
@@ -864,119 +831,104 @@ class CampaignRunner:
                 "probes": est.n, "soaks": est.soaks},
         }
 
-    async def _fitting_each(self, camp: Any) -> None:
-        """One calibration per live sensor (a fit that fails drops that sensor)."""
-        done = dict(camp.calibration_ids or {})
+    async def _fitting(self) -> None:
+        """One calibration per live sensor, each stored as it is fitted (a resumed fit skips
+        the stored ones); a fit that fails drops that sensor (fails a one-sensor campaign)."""
+        camp = store.load_campaign(self.sf, self.id)
+        store.set_cursor(self.sf, self.id, self.spec.n_steps - 1, "fitting", self.n_pos,
+                         {**self._progress, "phase": "fitting", "fraction": 1.0, "eta_s": 0.0})
+        several = len(self.serials) > 1
+        done = (set(camp.calibration_ids or {}) if several
+                else {self.sensor_serial} if camp.calibration_id is not None else set())
         for serial in self._live:
             if serial in done:
                 continue
             cols = store.measurement_columns(self.sf, self.id, serial)
             provenance = {
                 "campaign_id": self.id, "rig": camp.rig, "sensor": serial,
-                "sensors": self.serials, "spec": camp.spec, "positions": self.spec.positions,
+                **({"sensors": self.serials} if several else {}),
+                "spec": camp.spec, "positions": self.spec.positions,
                 "steps_log": camp.steps_log,
-                "recording": f"campaign-{self.id}-{serial}.csv",
+                "recording": (f"campaign-{self.id}-{serial}.csv" if several
+                              else f"campaign-{self.id}.csv"),
                 "sensor_identity": self.identities.get(serial),
                 **(self._rate_provenance(serial) or {}),
             }
             try:
+                # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
                 values = await asyncio.to_thread(self.calibrate, cols, provenance)
-            except Exception as exc:  # one sensor's fit failing drops it, not the others
+            except Exception as exc:  # one sensor's fit failing drops it, not the service
                 self._drop(SensorDropped(serial, f"calibration fit failed: {exc}"))
                 continue
             fit = values.pop("_fit", None)
             if self.fit_result is None:
                 self.fit_result = fit
-            store.store_calibration(self.sf, self.id, values, sensor=serial)
-
-    async def _fitting(self) -> None:
-        camp = store.load_campaign(self.sf, self.id)
-        store.set_cursor(self.sf, self.id, self.spec.n_steps - 1, "fitting", self.n_pos,
-                         {**self._progress, "phase": "fitting", "fraction": 1.0, "eta_s": 0.0})
-        if self.serials:
-            await self._fitting_each(camp)
-            return
-        if camp.calibration_id is not None:
-            return
-        cols = store.measurement_columns(self.sf, self.id)
-        provenance = {
-            "campaign_id": self.id, "rig": camp.rig, "sensor": camp.sensor,
-            "spec": camp.spec, "positions": self.spec.positions,
-            "steps_log": camp.steps_log, "recording": f"campaign-{self.id}.csv",
-            "sensor_identity": self.sensor_identity,
-            **(self._rate_provenance(None) or {}),
-        }
-        try:
-            # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
-            values = await asyncio.to_thread(self.calibrate, cols, provenance)
-        except Exception as exc:  # a fit failure fails this campaign, not the service
-            raise CampaignFailed(f"calibration fit failed: {exc}") from exc
-        self.fit_result = values.pop("_fit", None)
-        store.store_calibration(self.sf, self.id, values)
+            store.store_calibration(self.sf, self.id, values,
+                                    sensor=serial if several else None)
 
     # --- device helpers -----------------------------------------------------------
     async def _chamber(self) -> ChamberStatus:
         return await self.guard.call("chamber.read_status", self.dev.chamber.read_status)
 
-    async def _acquire(self, n: int) -> Acquisition:
-        return await self.guard.call("accelerometer.acquire",
-                                     lambda: self.dev.accelerometer.acquire(n))
-
-    async def _measure(self, n: int) -> tuple[Acquisition, list[str], int]:
-        """Acquire; on a failed quality check measure once more and keep the second capture."""
-        acq = await self._acquire(n)
-        flags = check_acquisition(acq, n, self.spec.quality)
-        if not flags:
-            return acq, [], 1
-        acq = await self._acquire(n)
-        return acq, check_acquisition(acq, n, self.spec.quality), 2
-
     async def _move_to(self, angles_deg: tuple[float, ...]) -> None:
         """Command the table and wait for in-position; a table that misses it suspends.
 
-        The table suspender stops the table and commands the move again after each
-        ``move_timeout_s``; it fails the campaign once it lasted ``suspend_limit_s``
-        of real time (no soak restart: the table does not disturb the temperature).
+        The table suspender holds (:meth:`_hold`): the table is stopped and the move
+        commanded again until it arrives, every ``move_timeout_s``; the campaign fails
+        once that lasted ``suspend_limit_s`` of real time. No rewind: the table does not
+        disturb the temperature.
         """
+        why = await self._move_once(angles_deg)
+        if why is not None:
+            tt = self.dev.turntable
+
+            async def move_again() -> str | None:
+                await self.guard.call("turntable.stop", tt.stop)
+                return await self._move_once(angles_deg)
+
+            await self._hold(self.suspenders.table, why, move_again, poll_s=0.0)
+        self._set_pose(angles_deg)
+
+    async def _move_once(self, angles_deg: tuple[float, ...]) -> str | None:
+        """Command one move and wait up to ``move_timeout_s`` for in-position: None once
+        there, else why not."""
         tt = self.dev.turntable
-        susp = self.suspenders.table
-        since_s: float | None = None
+        await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
+        start_s = self.clock.now()
         while True:
-            await self.guard.call("turntable.move_to", lambda: tt.move_to(angles_deg))
-            start_s = self.clock.now()
-            while True:
-                await self.clock.sleep(TURNTABLE_POLL_S)
-                st = await self.guard.call("turntable.read_status", tt.read_status)
-                if st.in_position and not st.moving:
-                    if since_s is not None:
-                        self._resumed(susp, since_s)
-                    self._set_pose(angles_deg)
-                    return
-                if self.clock.now() - start_s > self.spec.move_timeout_s:
-                    break
-            why = table_not_in_position(st, angles_deg, self.clock.now() - start_s)
-            if since_s is None:
-                since_s = self.clock.now()
-                self._suspend(f"{susp.name}: {why}")
-            if (self.clock.now() - since_s) / clock_speed(self.clock) >= susp.limit_s:
-                raise CampaignFailed(f"{why}; suspended {susp.limit_s:.0f} s of real time")
-            await self.guard.call("turntable.stop", tt.stop)
-            await self._checkpoint()
+            await self.clock.sleep(TURNTABLE_POLL_S)
+            st = await self.guard.call("turntable.read_status", tt.read_status)
+            if st.in_position and not st.moving:
+                return None
+            if self.clock.now() - start_s > self.spec.move_timeout_s:
+                return table_not_in_position(st, angles_deg, self.clock.now() - start_s)
 
-    async def _chamber_watched(self, setpoint_c: float | None) -> ChamberStatus:
-        """Read the chamber; hold while a chamber suspender is tripped (band armed if given)."""
-        while True:
+    async def _hold_chamber(self, susp: Suspender, why: str, *,
+                            setpoint_c: float | None) -> None:
+        """Hold while a chamber suspender is tripped (band armed with ``setpoint_c``)."""
+
+        async def still_tripped() -> str | None:
             status = await self._chamber()
+            if setpoint_c is not None and abs(status.setpoint_c - setpoint_c) > 1e-3:
+                # Someone changed the controller behind the engine (a front panel, a
+                # process that lost the rig parking it): command our setpoint again.
+                await self.guard.call("chamber.set_setpoint",
+                                      functools.partial(self.dev.chamber.set_setpoint, setpoint_c))
             tripped = self.suspenders.check_chamber(status, setpoint_c)
-            if tripped is None:
-                return status
-            await self._hold(*tripped, setpoint_c=setpoint_c)
+            return None if tripped is None else tripped[1]
 
-    async def _hold(self, susp: Suspender, why: str, *, setpoint_c: float | None) -> None:
-        """Suspended: no readings, chamber keeps its setpoint, until clear for ``clear_s``.
+        await self._hold(susp, why, still_tripped,
+                         poll_s=min(self.spec.soak_poll_s, HOLD_POLL_S))
 
-        Pause and abort still apply. Fails the campaign when the condition lasted
-        ``limit_s`` of real time (clock time over the clock's speed-up).
+    async def _hold(self, susp: Suspender, why: str,
+                    still_tripped: Callable[[], Awaitable[str | None]], *,
+                    poll_s: float) -> None:
+        """The one hold loop: suspended (no readings, chamber at its setpoint) until
+        ``still_tripped()`` has said None for ``susp.clear_s``.
+
+        Pause and abort still apply (a checkpoint every round); paused time is not
+        held time. Fails the campaign when the condition lasted ``susp.limit_s`` of
+        real time (clock time over the clock's speed-up).
         """
         since_s = self.clock.now()
         paused0_s = self._paused_s
@@ -988,16 +940,11 @@ class CampaignRunner:
                 raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
                                      "real time")
             await self._checkpoint()
-            await self._wait(min(self.spec.soak_poll_s, HOLD_POLL_S))
-            status = await self._chamber()
-            if setpoint_c is not None and abs(status.setpoint_c - setpoint_c) > 1e-3:
-                # Someone changed the controller behind the engine (a front panel, a
-                # process that lost the rig parking it): command our setpoint again.
-                await self.guard.call("chamber.set_setpoint",
-                                      functools.partial(self.dev.chamber.set_setpoint, setpoint_c))
-            tripped = self.suspenders.check_chamber(status, setpoint_c)
-            if tripped is not None:
-                why, clear_since_s = tripped[1], None
+            if poll_s > 0:
+                await self._wait(poll_s)
+            now_why = await still_tripped()
+            if now_why is not None:
+                why, clear_since_s = now_why, None
                 continue
             if clear_since_s is None:
                 clear_since_s = self.clock.now()
@@ -1198,8 +1145,8 @@ class CampaignRunner:
             "eta_wall_s": round(eta_s / clock_speed(self.clock), 1),
             "t_s": round(self._t(self.clock.now()), 3),
         }
-        if self._ramp is not None:  # a ramp has no steps to count: its prediction's ETA
-            progress.update(self._ramp.progress())
+        if self._ramp is not None:  # a ramp has sweeps, not steps: its prediction's ETA
+            progress.update(self._ramp.fields(status, target_c))
             progress["eta_wall_s"] = round(progress["eta_s"] / clock_speed(self.clock), 1)
         self._progress = progress
         if write:
@@ -1212,8 +1159,15 @@ def _ref_text(ref_g: tuple[float, ...]) -> str:
 
 
 def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
-    return (abs(status.working_setpoint_c - target_c) < 1e-3
+    """The controller's setpoint, and its working setpoint where it has one, at the target
+    (a controller without one: the PV within tolerance alone says it arrived)."""
+    wsp_c = status.working_setpoint_c
+    return ((wsp_c is None or abs(wsp_c - target_c) < 1e-3)
             and abs(status.setpoint_c - target_c) < 1e-3)
+
+
+class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error
+    """A suspender held the campaign: resume the plan from its stored measurements."""
 
 
 def _clean_json(d: dict[str, Any]) -> dict[str, Any]:
@@ -1230,8 +1184,8 @@ class _Probe:
     mean_g: tuple[float, ...]
 
 
-def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> soak_rate.SoakProbes:
-    return soak_rate.SoakProbes(pose, np.array([p.t_s for p in probes]),
+def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> rate_gain.SoakProbes:
+    return rate_gain.SoakProbes(pose, np.array([p.t_s for p in probes]),
                                 np.array([p.sensor_c for p in probes]),
                                 np.array([p.mean_g for p in probes], float), ramp)
 

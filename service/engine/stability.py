@@ -334,7 +334,7 @@ def decide(
     ``edge`` whether this is the coldest or hottest step of the campaign;
     ``rate_gain_ug_per_c_per_min`` the sensor's measured sensitivity to the rate
     of die-temperature change k (upper bound, µg per °C/min, e.g. from
-    :func:`service.engine.soak_rate.rate_gain_for_decision`): the rate lag is then
+    :func:`service.engine.rate_gain.rate_gain_for_decision`): the rate lag is then
     60·k / ``tempco_ug_per_c`` s instead of the assumed ``gradient_lag_s``
     (None, the default, keeps the assumption);
     ``order_repeats`` how many steps visit the positions in this step's order: the varying

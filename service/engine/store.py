@@ -3,7 +3,7 @@
 The runner holds no session across ``await``s: every function opens a
 session, does one thing and commits, so a SIGKILL at any instant leaves the
 database at a transaction boundary. The measurement insert and the cursor
-move are one transaction (:func:`commit_measurement`).
+move are one transaction (:func:`commit_measurements`).
 """
 
 from __future__ import annotations
@@ -261,32 +261,19 @@ def _check_fence(s: Session, fence: Fence, campaign_id: int) -> None:
         raise LeaseLost(f"rig {fence.rig!r}: lease no longer held by {fence.owner}")
 
 
-def commit_measurement(
-    sf: SessionFactory, campaign_id: int, row: dict[str, Any], next_position: int,
-    progress: dict[str, Any], fence: Fence | None = None,
-) -> bool:
-    """Store one measurement and move the cursor past it, atomically.
-
-    Returns False when (step, position) was already stored (a previous process
-    committed it just before dying): that is "done", not an error. With a
-    ``fence``, the same transaction verifies that this process still holds the
-    rig's lease; if not, nothing is written and :class:`LeaseLost` is raised.
-    :func:`commit_measurements` with one row: one fence, cursor and retry tail.
-    """
-    return commit_measurements(sf, campaign_id, [row], int(row["step"]), next_position,
-                               progress, fence=fence)
-
-
 def commit_measurements(
     sf: SessionFactory, campaign_id: int, rows: list[dict[str, Any]], step: int,
     next_position: int, progress: dict[str, Any], fence: Fence | None = None,
 ) -> bool:
-    """Store every sensor's measurement of one position and move the cursor, atomically.
+    """Store every sensor's measurement of one position and move the cursor past it,
+    atomically (one sensor: one row).
 
-    The several-sensor form of :func:`commit_measurement`: all rows of a position and
-    the cursor past it are one transaction, so a position is stored for every live
-    sensor or for none and :func:`measured_positions` stays exact on resume. False
-    when the position was already stored (a previous process committed it).
+    All rows of a position and the cursor past it are one transaction, so a position
+    is stored for every live sensor or for none and :func:`measured_positions` stays
+    exact on resume. Returns False when (step, position) was already stored (a previous
+    process committed it just before dying): that is "done", not an error. With a
+    ``fence``, the same transaction verifies that this process still holds the rig's
+    lease; if not, nothing is written and :class:`LeaseLost` is raised.
     """
     with sf() as s:
         try:

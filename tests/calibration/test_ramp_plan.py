@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration import ramp_plan as rp
-from calibration.campaign_plan import Fit, Save, interpret
+from calibration.campaign_plan import Fit, ReadChamber, Save, SetChamber, interpret
 from calibration.schedules import get_schedule
 from calibration.thermal import RANGE_MARGIN_C
 from simulators.ramp_campaign_sim import RampCampaignSpec, simulate_ramp_campaign
@@ -73,13 +73,13 @@ def _messages(spec: RampCampaignSpec, refs: np.ndarray, **kw) -> list:  # type: 
 
     def handle(msg):  # type: ignore[no-untyped-def]
         out.append(msg)
-        if isinstance(msg, rp.CommandChamber):
+        if isinstance(msg, SetChamber):
             plant.setpoint_c, plant.rate_c_per_min = msg.setpoint_c, msg.ramp_c_per_min
-        elif isinstance(msg, rp.ReadChamber):
+        elif isinstance(msg, ReadChamber):
             return plant.status()
         plant.advance(15.0 if type(msg).__name__ == "Move" else 0.0)
         if type(msg).__name__ == "Acquire":
-            return rp._Reading(float(plant.die_c[0]))
+            return dict.fromkeys(msg.sensors, rp._Reading(float(plant.die_c[0])))
         return None
 
     interpret(rp.ramp_plan(spec, refs, **kw), handle)
@@ -90,7 +90,7 @@ def test_sweeps_alternate_direction_and_resume_skips_what_is_stored() -> None:
     spec = RampCampaignSpec(setpoints_c=(20.0, 26.0), ramp_c_per_min=2.0)
     refs = get_schedule("six")
     saves = [m for m in _messages(spec, refs) if isinstance(m, Save)]
-    assert all(isinstance(m, rp.RampSave) and m.band is False for m in saves)
+    assert all(m.band is False for m in saves)  # no setpoint band: the air is ramping
     by_sweep: dict[int, list[int]] = {}
     for m in saves:
         by_sweep.setdefault(m.step, []).append(m.position)
@@ -102,7 +102,7 @@ def test_sweeps_alternate_direction_and_resume_skips_what_is_stored() -> None:
     again = [m for m in msgs if isinstance(m, Save)]
     assert again[0].step == 1 and again[0].position == by_sweep[1][2]
     assert not {(m.step, m.position) for m in again} & done
-    commands = [m.setpoint_c for m in msgs if isinstance(m, rp.CommandChamber)]
+    commands = [m.setpoint_c for m in msgs if isinstance(m, SetChamber)]
     assert commands == [26.0, 23.0]  # the current leg, then the rest
     assert isinstance(msgs[-1], Fit)
 

@@ -84,7 +84,7 @@ async def test_each_channel_is_its_own_sensor(mux: MuxRig) -> None:
     assert idents[1].as_dict()["channel"] == 1
     await handles[2].configure(4.0, 250.0)  # one channel's range, not the others'
     assert mux.mux.channels[2].truth.range_g == 4.0 and mux.mux.channels[0].truth.range_g == 2.0
-    # read at once, as the engine's multi.read_all does: each answer is its own part's
+    # read at once, as the engine's sensors.read_all does: each answer is its own part's
     acqs = await asyncio.gather(*(h.acquire(20) for h in handles))
     for acq, bias in zip(acqs, BIASES_G, strict=True):
         np.testing.assert_allclose(acq.mean_g, np.add(bias, (0.0, 0.0, 1.0)), atol=2e-5)
@@ -93,7 +93,7 @@ async def test_each_channel_is_its_own_sensor(mux: MuxRig) -> None:
 
 
 async def test_the_channels_of_one_bridge_capture_together(mux: MuxRig) -> None:
-    """Reads started together (as multi.read_all does) are one group capture: two 20 s
+    """Reads started together (as sensors.read_all does) are one group capture: two 20 s
     captures on one bridge take 20 s, a lone read still its own 20 s after them."""
     a, b = mux.bridge.channel(0), mux.bridge.channel(1)
     t0 = mux.clock.now()

@@ -21,15 +21,15 @@ from service.engine.store import fast_sqlite_commits
 
 
 def _report_commits() -> None:
-    commit = store.commit_measurement
+    commit = store.commit_measurements
 
-    def reporting(sf, campaign_id, row, *args, **kwargs):  # type: ignore[no-untyped-def]
-        stored = commit(sf, campaign_id, row, *args, **kwargs)
+    def reporting(sf, campaign_id, rows, *args, **kwargs):  # type: ignore[no-untyped-def]
+        stored = commit(sf, campaign_id, rows, *args, **kwargs)
         if stored:
-            print("commit", row["step"], row["position"], flush=True)
+            print("commit", rows[0]["step"], rows[0]["position"], flush=True)
         return stored
 
-    store.commit_measurement = reporting  # type: ignore[assignment]
+    store.commit_measurements = reporting  # type: ignore[assignment]
 
 
 async def main(url: str, campaign_id: int, lease_s: float) -> int:

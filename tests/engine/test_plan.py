@@ -218,3 +218,38 @@ def test_wait_stable_says_how_many_steps_share_its_position_order() -> None:
     seeded = Spec(sp, 200, position_order="random", position_order_seed=1)
     waits = [m for m in campaign_plan(seeded, table1()) if isinstance(m, WaitStable)]
     assert [w.order_repeats for w in waits] == [1] * len(sp)
+
+
+def test_a_retake_measures_the_position_again_from_the_move() -> None:
+    # The interpreter answers a Save with RETAKE (its capture read another pose): the plan
+    # moves, settles, acquires and saves that position again; nothing else changes.
+    rs = parse_spec(TABLE_ORDER)
+    refs = schedule_refs(rs.positions)
+    out: list[pl.Msg] = []
+    retaken: set[tuple[int, int]] = set()
+
+    def handle(msg: pl.Msg) -> object:
+        out.append(msg)
+        if isinstance(msg, pl.Save) and (msg.step, msg.position) == (1, 3) \
+                and (1, 3) not in retaken:
+            retaken.add((1, 3))
+            return pl.RETAKE
+        return None
+
+    pl.interpret(pl.campaign_plan(rs, refs), handle)
+    assert saves_of(out).count((1, 3)) == 2
+    assert sorted(set(saves_of(out))) == [(s, p) for s in range(3) for p in range(6)]
+    first = saves_of(out).index((1, 3))
+    again = out[[i for i, m in enumerate(out) if isinstance(m, pl.Save)][first] + 1:]
+    assert [type(m) for m in again[:5]] == [pl.Checkpoint, pl.Move, pl.Settle, pl.Acquire,
+                                            pl.Save]
+    assert again[1].position == 3
+
+
+def test_the_ramp_commands_then_waits_and_goes_home_first_when_the_rate_gain_is_measured(
+) -> None:
+    plain = [type(m) for m in pl.ramp_to(0, 20.0, 1.0)]
+    assert plain == [pl.SetChamber, pl.WaitChamber]
+    measured = messages({**TABLE_ORDER, "rate_gain": "measured"})
+    i = next(i for i, m in enumerate(measured) if isinstance(m, pl.SetChamber))
+    assert [type(m) for m in measured[i:i + 3]] == [pl.SetChamber, pl.Home, pl.WaitChamber]

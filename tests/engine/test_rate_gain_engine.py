@@ -13,7 +13,7 @@ from sqlalchemy import select
 
 from drivers.clock import VirtualClock
 from service.db.models import Campaign, SoakProbe
-from service.engine import soak_rate, store
+from service.engine import rate_gain, store
 from service.engine.runner import CampaignRunner
 from service.engine.spec import parse_spec
 
@@ -82,17 +82,17 @@ async def test_probes_are_stored_at_home_and_k_reaches_decision_and_fit(sf) -> N
     # uncorrected prior, less once the first ramp and soak measure k; later soaks a measured,
     # smaller bound (the fake sensor has no rate sensitivity).
     gains = [e["rate_gain_ug_per_c_per_min"] for e in log]
-    assert len(MEASURED["setpoints_c"]) >= soak_rate.SOAKS_TO_CORRECT
+    assert len(MEASURED["setpoints_c"]) >= rate_gain.SOAKS_TO_CORRECT
     assert gains[0] <= 65.0 + 1e-9
-    assert all(g < soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN for g in gains[2:])
+    assert all(g < rate_gain.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN for g in gains[2:])
     # The calibration was given the campaign's k̂ and the estimate it came from (every
     # segment with enough probes: the soaks, and the ramps of 6 probes or more).
     (prov,) = core.provenances
     est = prov["rate_gain_estimate"]
-    long_ramps = sum(len(v) >= soak_rate.MIN_PROBES_PER_SOAK for v in ramps.values())
+    long_ramps = sum(len(v) >= rate_gain.MIN_PROBES_PER_SOAK for v in ramps.values())
     assert est["soaks"] == len(soaks) + long_ramps and long_ramps >= 1
     assert est["probes"] == sum(len(v) for k, v in segments.items()
-                                if k in soaks or len(v) >= soak_rate.MIN_PROBES_PER_SOAK) \
+                                if k in soaks or len(v) >= rate_gain.MIN_PROBES_PER_SOAK) \
         - 2 * long_ramps  # a ramp's first and last probe have no rate
     k_hat = prov["rate_gain_ug_per_c_per_min"]
     assert k_hat is not None and len(k_hat) == 3
@@ -144,7 +144,7 @@ async def test_resume_reloads_the_stored_soaks(sf) -> None:
     log = {e["step"]: e for e in steps_log(sf, cid)}
     resumed = [e for e in log.values() if e["step"] >= 3]
     assert resumed and all(e["rate_gain_ug_per_c_per_min"]
-                           < soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN for e in resumed)
+                           < rate_gain.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN for e in resumed)
 
 
 def test_probe_rows_round_trip_through_the_store(sf) -> None:
@@ -161,34 +161,34 @@ def test_probe_rows_round_trip_through_the_store(sf) -> None:
 
 
 def test_corrected_decision_waits_for_the_uncertainty_not_the_gain() -> None:
-    typical = soak_rate.RateGain(np.array([95.0, -60.0, 40.0]), np.array([6.0, 3.0, 3.0]),
+    typical = rate_gain.RateGain(np.array([95.0, -60.0, 40.0]), np.array([6.0, 3.0, 3.0]),
                                  400, 10)
     # 2σ (12) + 0.1 × (|k̂| + 2σ) (10.7) instead of |k̂| + 2σ (107)
-    assert soak_rate.residual_rate_gain_for_decision(typical) == pytest.approx(12.0 + 10.7)
-    assert soak_rate.rate_gain_for_decision(typical) == pytest.approx(107.0)
+    assert rate_gain.residual_rate_gain_for_decision(typical) == pytest.approx(12.0 + 10.7)
+    assert rate_gain.rate_gain_for_decision(typical) == pytest.approx(107.0)
     # k̂ ≈ 0: 2σ + 0.1 × (1 + 2σ), no floor: what is left to wait for is the uncertainty
-    none = soak_rate.RateGain(np.array([1.0, 0.0, -1.0]), np.array([4.0, 4.0, 4.0]), 400, 10)
-    assert soak_rate.residual_rate_gain_for_decision(none) == pytest.approx(8.0 + 0.9)
-    assert soak_rate.correction_gain_ug_per_c_per_min(typical) == pytest.approx([95, -60, 40])
+    none = rate_gain.RateGain(np.array([1.0, 0.0, -1.0]), np.array([4.0, 4.0, 4.0]), 400, 10)
+    assert rate_gain.residual_rate_gain_for_decision(none) == pytest.approx(8.0 + 0.9)
+    assert rate_gain.correction_gain_ug_per_c_per_min(typical) == pytest.approx([95, -60, 40])
     # Not informative yet: no correction, so the uncorrected rule (the prior) applies.
-    weak = soak_rate.RateGain(np.array([5.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 100, 2)
-    assert soak_rate.correction_gain_ug_per_c_per_min(weak) is None
-    assert soak_rate.residual_rate_gain_for_decision(weak) == \
-        soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
-    assert soak_rate.residual_rate_gain_for_decision(None) == \
-        soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    weak = rate_gain.RateGain(np.array([5.0, 0.0, 0.0]), np.array([30.0, 3.0, 3.0]), 100, 2)
+    assert rate_gain.correction_gain_ug_per_c_per_min(weak) is None
+    assert rate_gain.residual_rate_gain_for_decision(weak) == \
+        rate_gain.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    assert rate_gain.residual_rate_gain_for_decision(None) == \
+        rate_gain.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
     # ... unless the campaign will correct with its final k̂: then the worst residual that
     # correction may leave, the least precise estimate it still uses (2σ = 50) plus a tenth
     # of the larger of the prior and |k̂| (+ 2σ)
-    assert soak_rate.residual_rate_gain_for_decision(None, will_correct=True) == \
+    assert rate_gain.residual_rate_gain_for_decision(None, will_correct=True) == \
         pytest.approx(50.0 + 0.1 * (100.0 + 50.0))
-    assert soak_rate.residual_rate_gain_for_decision(weak, will_correct=True) == \
+    assert rate_gain.residual_rate_gain_for_decision(weak, will_correct=True) == \
         pytest.approx(65.0)
-    worse = soak_rate.RateGain(np.array([180.0, 0.0, 0.0]), np.array([40.0, 3.0, 3.0]), 100, 2)
-    assert soak_rate.residual_rate_gain_for_decision(worse, will_correct=True) == \
+    worse = rate_gain.RateGain(np.array([180.0, 0.0, 0.0]), np.array([40.0, 3.0, 3.0]), 100, 2)
+    assert rate_gain.residual_rate_gain_for_decision(worse, will_correct=True) == \
         pytest.approx(50.0 + 0.1 * (180.0 + 50.0))
     # an informative estimate is used as it is, promise or not
-    assert soak_rate.residual_rate_gain_for_decision(typical, will_correct=True) == \
+    assert rate_gain.residual_rate_gain_for_decision(typical, will_correct=True) == \
         pytest.approx(12.0 + 10.7)
 
 
@@ -209,4 +209,4 @@ async def test_several_sensors_each_get_their_own_probes_and_gain(sf) -> None:  
     log = steps_log(sf, cid)
     # three soaks: the first one counts on the fit's correction (65, not the prior's 100)
     assert log[0]["rate_gain_ug_per_c_per_min"] == pytest.approx(65.0)
-    assert log[-1]["rate_gain_ug_per_c_per_min"] < soak_rate.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN
+    assert log[-1]["rate_gain_ug_per_c_per_min"] < rate_gain.PRIOR_RATE_GAIN_UG_PER_C_PER_MIN

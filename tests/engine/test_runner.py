@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from collections import Counter
 from typing import Any
 
@@ -242,3 +243,57 @@ async def test_crash_during_fitting_resumes_to_calibration_without_remeasuring(s
     assert rig.accelerometer.acquisitions == n_acq  # nothing measured again
     assert campaign(sf, cid).calibration_id is not None
     assert_complete_once(sf, cid)
+
+
+async def test_a_one_sensor_fit_failure_fails_the_campaign_with_its_reason(sf) -> None:  # type: ignore[no-untyped-def]
+    # One sensor is a list of one: its fault is the campaign's, told as it is, never
+    # "every sensor dropped", and nothing is flagged as dropped.
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf, {**SMALL_SPEC, "setpoints_c": [20.0]})
+
+    def broken_fit(columns, provenance):  # type: ignore[no-untyped-def]
+        raise ValueError("singular normal matrix")
+
+    runner = CampaignRunner(sf, cid, rig.devices, clock, calibrate=broken_fit)
+    assert await asyncio.wait_for(runner.run(), 30.0) == "failed"
+    c = campaign(sf, cid)
+    assert c.error == "calibration fit failed: singular normal matrix"
+    assert not c.sensors_dropped and c.calibration_id is None
+
+
+async def test_a_one_sensor_reading_out_of_range_fails_naming_the_reading(sf) -> None:  # type: ignore[no-untyped-def]
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    acquire = rig.devices.accelerometer.acquire
+
+    async def dead_z(n_samples: int) -> Any:
+        acq = await acquire(n_samples)
+        return dataclasses.replace(acq, mean_g=(acq.mean_g[0], acq.mean_g[1], 0.0))
+
+    rig.devices.accelerometer.acquire = dead_z  # type: ignore[method-assign]
+    cid = add_campaign(sf, {**SMALL_SPEC, "setpoints_c": [20.0]})
+    assert await run(sf, cid, rig, clock) == "failed"
+    c = campaign(sf, cid)
+    assert c.error.startswith("reading out of range: |a| = "), c.error
+    assert "dropped" not in c.error and not c.sensors_dropped
+    # the first position whose gravity lies on z is where it fails: nothing stored after it
+    assert all(abs(m.ref_z) < 0.5 for m in measurements(sf, cid))
+
+
+async def test_a_controller_without_a_working_setpoint_arrives_on_its_pv(sf) -> None:  # type: ignore[no-untyped-def]
+    # Some controllers have no working-setpoint register (ChamberStatus.working_setpoint_c
+    # None): the ramp has arrived once the PV is within the stability tolerance.
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    read = rig.devices.chamber.read_status
+
+    async def no_wsp() -> Any:
+        return dataclasses.replace(await read(), working_setpoint_c=None)
+
+    rig.devices.chamber.read_status = no_wsp  # type: ignore[method-assign]
+    cid = add_campaign(sf, {**SMALL_SPEC, "setpoints_c": [-10.0, 20.0]})
+    assert await run(sf, cid, rig, clock) == "completed"
+    rows = measurements(sf, cid)
+    assert len(rows) == 2 * N_POS
+    assert all(abs(m.chamber_c - (-10.0, 20.0)[m.step]) < 2.0 for m in rows)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from service.engine.soak_rate import (
+from service.engine.rate_gain import (
     PRIOR_RATE_GAIN_UG_PER_C_PER_MIN,
     RateGain,
     SoakProbes,
@@ -334,7 +334,7 @@ def test_unknown_policy_is_rejected() -> None:
         StabilityConfig(policy="magic")
 
 
-# --- the measured rate sensitivity (service.engine.soak_rate) -----------------------------
+# --- the measured rate sensitivity (service.engine.rate_gain) -----------------------------
 def synthetic_soaks(k_ug_per_c_per_min: np.ndarray, seed: int = 0, n_steps: int = 10,
                     out_noise_ug: float = 17.7,
                     orientation: str = "pos23") -> list[SoakProbes]:

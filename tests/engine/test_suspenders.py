@@ -16,6 +16,7 @@ from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select
 from test_safe_state import assert_safe, n_measured, rig_state, twin, until
 
+from calibration.campaign_plan import WaitStable
 from drivers.clock import VirtualClock
 from service.db.models import Measurement
 from service.engine import store
@@ -39,6 +40,8 @@ async def test_chamber_alarm_twice_suspends_resoaks_and_completes(sf) -> None:  
     reasons: list[str] = []
     async with twin(clock) as (sim, devices):
         runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        seen: list[Any] = []
+        runner.subscribe(lambda msg, _t0, _t1: seen.append(msg))
         task = asyncio.create_task(runner.run())
         for n in (2, 8):  # open the door twice: the air jumps 12 °C above the setpoint
             await until(lambda n=n: n_measured(sf, cid) >= n)
@@ -53,6 +56,10 @@ async def test_chamber_alarm_twice_suspends_resoaks_and_completes(sf) -> None:  
     assert all(r.startswith("chamber_alarm: chamber alarm: alarm_1") for r in reasons), reasons
     holds = [e["suspender"] for e in runner.suspension_log]
     assert holds.count("chamber_alarm") == 2, runner.suspension_log
+    # A suspension is a rewind: each hold is followed by the plan's own re-ramp and re-soak
+    # of the step it interrupted, which every subscriber sees.
+    resoaks = [(m.step, m.resumed) for m in seen if isinstance(m, WaitStable)]
+    assert resoaks == [(0, False), (0, True), (1, False), (1, True)], resoaks
     counts = keys(sf, cid)
     assert set(counts) == {(s, p) for s in range(2) for p in range(6)}
     assert max(counts.values()) == 1

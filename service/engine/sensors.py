@@ -1,14 +1,15 @@
-"""Several sensors in one campaign (issue 12): one sensor's fault drops it, not the campaign.
+"""A campaign's sensors: read together, judged one by one, given up alone.
 
-A one-sensor campaign sends every device call through the guard
-(:mod:`service.engine.guard`): a transient fault is retried, then the campaign
-*suspends* until the device answers. With several sensors on a fixture that
-would stop every good sensor for one bad one, so a sensor's calls go through
-:func:`sensor_call` instead: the same retries and back-off on the injected
-clock and the same fault classes, but a sensor that still fails after them (a
-bridge timeout), refuses for good (a wrong identity, a bridge ``ERR``), or reads
-out of range (:func:`reading_problem`) raises :class:`SensorDropped`; the engine
-records the reason and goes on with the others.
+A campaign has one sensor or several (issue 12); the engine treats one as a
+list of one. Every sensor call goes through the engine's one retry policy,
+:meth:`service.engine.guard.DeviceGuard.call`: a transient fault is retried
+with back-off on the injected clock. What happens when the retries run out
+depends on what is left: while another sensor still reads, the failing one is
+given up (``give_up`` raises :class:`SensorDropped`; the engine records the
+reason and goes on with the others) instead of suspending every good sensor
+for one bad one; the last sensor left suspends the campaign, and its
+configuration fault fails it, as any other device's. A reading out of range
+for a static sensor (:func:`reading_problem`) is a sensor fault too.
 
 The sensors of a position are read at once (:func:`read_all`): each bridge
 captures on its own, so a position of eight sensors takes about one capture
@@ -27,10 +28,7 @@ import math
 from collections.abc import Awaitable, Callable, Sequence
 from typing import TypeVar
 
-from drivers.clock import Clock
-from drivers.faults import DeviceFault
 from drivers.protocols import Acquisition
-from service.engine.guard import AbortRequested, FaultPolicy, classify
 from service.engine.stability import Decision
 
 T = TypeVar("T")
@@ -41,33 +39,12 @@ SATURATION_FRACTION = 0.98  # |mean| this close to the range limit: the axis is 
 
 
 class SensorDropped(Exception):
-    """A sensor of a several-sensor campaign is given up; ``reason`` goes to the campaign."""
+    """A sensor is given up; ``reason`` goes to the campaign (:meth:`CampaignRunner._drop`)."""
 
     def __init__(self, serial: str, reason: str) -> None:
         super().__init__(f"sensor {serial}: {reason}")
         self.serial = serial
         self.reason = reason
-
-
-async def sensor_call(clock: Clock, policy: FaultPolicy, check_abort: Callable[[], bool],
-                      serial: str, label: str, fn: Callable[[], Awaitable[T]]) -> T:
-    """``await fn()`` with the guard's retries; :class:`SensorDropped` instead of suspending."""
-    delay_s = policy.retry_backoff_s
-    last: DeviceFault | None = None
-    for _ in range(max(1, policy.retry_attempts)):
-        if check_abort():
-            raise AbortRequested(label)
-        try:
-            return await fn()
-        except DeviceFault as exc:
-            kind, _fix = classify(exc)
-            if kind == "configuration":
-                raise SensorDropped(serial, f"{label}: {exc}") from exc
-            last = exc
-            await clock.sleep(delay_s)
-            delay_s *= 2.0
-    raise SensorDropped(serial, f"{label}: no answer after {policy.retry_attempts} tries "
-                                f"(last fault: {last})")
 
 
 async def read_all(serials: Sequence[str], read: Callable[[str], Awaitable[T]]
