@@ -281,6 +281,9 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
 
     if isinstance(spec, dict):
         spec = parse_spec(spec)
+    if getattr(spec, "method", "soak") == "ramp":  # never a soak's figure for a ramp
+        raise ValueError("a ramp campaign is predicted by predicted_ramp "
+                         "(calibration.ramp_plan.predict_ramp), not by the soak plan")
     if refs is None:
         refs = schedule_refs(spec.positions)
     if soak_s is None:
