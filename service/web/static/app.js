@@ -341,7 +341,7 @@ async function campaignView(id) {
     } else {
       rows.push(
         h("dt", {}, "step"), h("dd", { id: "step" }, p.method === "ramp"
-          ? `sweep ${p.step} of about ${p.steps}, leg ${p.leg} → ${fmt(p.leg_target_c, 1, "°C")} (ramp)`
+          ? `sweep ${p.step} of about ${p.steps}, chamber heading to ${fmt(p.leg_target_c, 1, "°C")} (ramp)`
           : `${p.step} of 0..${p.steps - 1} (${p.phase})`),
         h("dt", {}, "position"), h("dd", { id: "position" }, p.positions === null ? `${p.position}` : `${p.position} of 0..${p.positions - 1}`),
         h("dt", {}, "chamber"), h("dd", { id: "chamber" }, `${fmt(p.chamber_c, 2, "°C")} → setpoint ${fmt(p.setpoint_c, 1, "°C")}`),
