@@ -4,16 +4,22 @@ and a resume that skips the stored sweeps (calibration/ramp_plan.py, service/eng
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import io
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from engine_helpers import SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import func, select
 
+from calibration.recording import Recording, write_recording
 from drivers.clock import VirtualClock
 from service.db.models import Calibration, Campaign, Measurement
 from service.engine import store
 from service.engine.rigs import open_rig
+from service.cli import main
 from service.engine.runner import CampaignRunner
 
 # Ambient 23 °C → 20 → 28 → back to 23 at 2 °C/min; a 2-min die: short holds.
@@ -47,7 +53,7 @@ def _rows(sf, cid: int) -> dict[str, np.ndarray]:  # type: ignore[no-untyped-def
 
 @SQLITE_ONLY
 async def test_a_ramp_campaign_sweeps_while_the_chamber_moves_and_is_fitted_continuously(
-        sf) -> None:  # type: ignore[no-untyped-def]
+        sf, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     cid = add_campaign(sf, SPEC)
     assert await _run(sf, cid) == "completed"
     rows = _rows(sf, cid)
@@ -72,7 +78,23 @@ async def test_a_ramp_campaign_sweeps_while_the_chamber_moves_and_is_fitted_cont
         assert cal.model["method"] == "continuous"
         assert 5.0 < cal.rmse_ug < 40.0
         lo, hi = cal.valid_lo_c, cal.valid_hi_c
+        coeffs = cal.model["polynomial"]["coefficients"]
     assert hi - lo >= 8.0 - 2.0 + 2.0  # coverage ± the 1 °C margin
+    # The stored recording, calibrated again by `soakcal calibrate`: the same decision
+    # (its sweeps are not plateaus: continuous) and the same model.
+    csv, model = tmp_path / "ramp.csv", tmp_path / "model.json"
+    write_recording(csv, Recording.from_columns(rows))
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["calibrate", str(csv), "-o", str(model), "--json"]) == 0
+    report = json.loads(out.getvalue())
+    assert report["method"] == "continuous" and report["segmentation"]["continuous_rows"] > 0
+    assert report["valid_c"] == pytest.approx([lo, hi], abs=1e-9)
+    again = json.loads(model.read_text())["polynomial"]["coefficients"]
+    assert again.keys() == coeffs.keys()
+    for name in coeffs:
+        assert np.allclose(np.asarray(again[name], float), np.asarray(coeffs[name], float),
+                           rtol=1e-6, atol=1e-12), name
 
 
 @SQLITE_ONLY
