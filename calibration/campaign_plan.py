@@ -104,6 +104,39 @@ class WaitStable:
 
 
 @dataclass(frozen=True)
+class Wait:
+    """Let ``seconds`` of the clock pass (a poll period)."""
+
+    seconds: float
+
+
+@dataclass(frozen=True)
+class PollChamber:
+    """One poll of a ramp (:func:`wait_for_chamber`): read the chamber (probing the dies
+    where the rate gain is measured); the reply is a :class:`Poll`, done once arrived."""
+
+    step: int
+    setpoint_c: float
+
+
+@dataclass(frozen=True)
+class PollSoak:
+    """One poll of a soak (:func:`soak_until_stable`): read the chamber, probe the dies
+    and decide (seed Sec. 3's soak rule, ``service.engine.stability.decide``, every
+    die; the slowest ends it); the reply is a :class:`Poll`, done once stable."""
+
+    soak: WaitStable
+
+
+@dataclass(frozen=True)
+class Poll:
+    """A poll's reply: ``done``, or wait ``wait_s`` before the next."""
+
+    done: bool
+    wait_s: float = 0.0
+
+
+@dataclass(frozen=True)
 class Checkpoint:
     """A safe point: pause and abort are applied here (and nowhere in between)."""
 
@@ -173,7 +206,7 @@ class Fit:
 
 
 Msg = (Configure | SetChamber | WaitChamber | ReadChamber | Home | WaitStable | Checkpoint | Move
-       | Settle | Acquire | Save | Fit)
+       | Settle | Acquire | Save | Fit | Wait | PollChamber | PollSoak)
 Plan = Generator[Msg, Any, None]
 
 
@@ -240,6 +273,27 @@ def ramp_to(step: int, setpoint_c: float, ramp_c_per_min: float, *,
     if home_first:
         yield Home(step)
     yield WaitChamber(step, setpoint_c)
+
+
+def wait_for_chamber(msg: WaitChamber) -> Plan:
+    """:class:`WaitChamber` as the engine runs it: poll until the chamber has arrived."""
+    while not (poll := (yield PollChamber(msg.step, msg.setpoint_c))).done:
+        yield Checkpoint()
+        yield Wait(poll.wait_s)
+
+
+def soak_until_stable(msg: WaitStable) -> Plan:
+    """:class:`WaitStable` as the engine runs it: poll the chamber and the dies until the
+    decision says stable, waiting between polls as long as the decision asks."""
+    while not (poll := (yield PollSoak(msg))).done:
+        yield Checkpoint()
+        yield Wait(poll.wait_s)
+
+
+# The composite waits and the stubs an interpreter may expand them into: the engine runs
+# these (its stability decision answers each poll); the offline simulator integrates a
+# fixed soak and a rate-limited ramp instead, and the dry run adds their nominal times.
+EXPANSIONS: dict[type, Any] = {WaitChamber: wait_for_chamber, WaitStable: soak_until_stable}
 
 
 def measure_position(step: int, position: int, setpoint_c: float,

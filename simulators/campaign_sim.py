@@ -145,6 +145,8 @@ def simulate_campaign(
             advance(ph.move_s, last_sp)
         elif isinstance(msg, plan.Settle) and msg.settle_s > 0:
             advance(msg.settle_s, last_sp)
+        elif isinstance(msg, plan.Wait) and msg.seconds > 0:
+            advance(msg.seconds, last_sp)
         elif isinstance(msg, plan.Acquire):
             capture_s = msg.n_samples / truth.odr_hz
             die_before = die

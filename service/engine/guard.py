@@ -1,4 +1,5 @@
-"""Device calls with retry, suspension and a suspend limit: the engine's one retry owner.
+"""Device calls with retry, suspension and a suspend limit: the engine's one retry owner,
+and its one hold loop (:func:`hold`), which every suspender uses.
 
 Every device call of the engine goes through :meth:`DeviceGuard.call`, and
 each fault is decided once, here (drivers raise, they do not retry; see
@@ -39,6 +40,7 @@ from drivers.faults import (
     ModbusExceptionReply,
     ValueOutOfRange,
 )
+from service.engine.suspenders import Suspender
 
 T = TypeVar("T")
 FaultClass = Literal["transient", "configuration"]
@@ -157,27 +159,74 @@ class DeviceGuard:
 
     async def _suspended(self, label: str, fn: Callable[[], Awaitable[T]],
                          fault: DeviceFault) -> T:
+        """The device suspender: :func:`hold` until ``fn`` answers, called again every
+        ``suspend_poll_s`` of real time (a sped-up clock must not hammer a dead device)."""
         self.suspensions += 1
-        since_s = self.clock.now()
-        speed = clock_speed(self.clock)
-        self.on_suspend(f"{label}: {fault}")
-        while True:
-            if self.check_abort():
-                raise AbortRequested(label)
-            outage_real_s = (self.clock.now() - since_s) / speed
-            if outage_real_s >= self.policy.suspend_limit_s:
-                raise CampaignFailed(
-                    f"{label}: device did not recover within {self.policy.suspend_limit_s:.0f} s "
-                    f"of real time (last fault: {fault})"
-                )
-            # Poll in real seconds too: a sped-up clock must not hammer a dead device.
-            await self.clock.sleep(self.policy.suspend_poll_s * speed)
+        answer: list[T] = []
+        last = [fault]
+
+        async def still_failing() -> str | None:
             self.calls += 1
             try:
-                result = await fn()
+                answer.append(await fn())
             except DeviceFault as exc:
                 self._fail_if_configuration(label, exc)
-                fault = exc
-                continue
-            self.on_resume()
-            return result
+                last[0] = exc
+                return f"{label}: {exc}"
+            return None
+
+        async def abort_point() -> None:
+            if self.check_abort():
+                raise AbortRequested(label)
+
+        limit_s = self.policy.suspend_limit_s
+        await hold(self.clock, Suspender("device", restart_soak=False, clear_s=0.0,
+                                         limit_s=limit_s),
+                   f"{label}: {fault}", still_failing,
+                   poll_s=self.policy.suspend_poll_s * clock_speed(self.clock),
+                   checkpoint=abort_point, wait=self.clock.sleep,
+                   on_hold=self.on_suspend, on_clear=lambda _since_s: self.on_resume(),
+                   limit_text=lambda _why: (f"{label}: device did not recover within "
+                                            f"{limit_s:.0f} s of real time (last fault: "
+                                            f"{last[0]})"))
+        return answer[0]
+
+
+async def hold(clock: Clock, susp: Suspender, why: str,
+               still_tripped: Callable[[], Awaitable[str | None]], *, poll_s: float,
+               checkpoint: Callable[[], Awaitable[None]],
+               wait: Callable[[float], Awaitable[None]],
+               on_hold: Callable[[str], None], on_clear: Callable[[float], None],
+               paused_s: Callable[[], float] = lambda: 0.0,
+               limit_text: Callable[[str], str] | None = None) -> None:
+    """The engine's one hold loop: suspended until ``still_tripped()`` has said None for
+    ``susp.clear_s`` (a device fault, a chamber out of band or in alarm, a table that
+    missed its position).
+
+    Every round: the limit (``susp.limit_s`` of real time held, the clock's time over
+    its speed-up, time paused by the operator (``paused_s``) excluded: then
+    :class:`CampaignFailed`), a ``checkpoint`` (pause and abort), a ``wait`` of
+    ``poll_s`` and a look (``still_tripped``: None when clear, else why not).
+    ``on_hold(why)`` once at the start; ``on_clear(since_s)`` once cleared.
+    """
+    since_s = clock.now()
+    paused0_s = paused_s()
+    clear_since_s: float | None = None
+    on_hold(why)
+    while True:
+        held_s = clock.now() - since_s - (paused_s() - paused0_s)
+        if held_s / clock_speed(clock) >= susp.limit_s:
+            raise CampaignFailed(limit_text(why) if limit_text is not None else
+                                 f"{why}; not cleared within {susp.limit_s:.0f} s of real time")
+        await checkpoint()
+        if poll_s > 0:
+            await wait(poll_s)
+        now_why = await still_tripped()
+        if now_why is not None:
+            why, clear_since_s = now_why, None
+            continue
+        if clear_since_s is None:
+            clear_since_s = clock.now()
+        if clock.now() - clear_since_s >= susp.clear_s:
+            on_clear(since_s)
+            return

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -261,3 +262,101 @@ def correction_gain_ug_per_c_per_min(estimate: RateGain | None, z: float = 2.0
         return None
     assert estimate is not None
     return np.asarray(estimate.gain_ug_per_c_per_min, float).copy()
+
+
+# --- a campaign's book of soaks, per sensor ------------------------------------------------
+@dataclass(frozen=True)
+class Probe:
+    """One die probe: clock time (the decision's), campaign time, die channel, mean output."""
+
+    clock_s: float
+    t_s: float
+    sensor_c: float
+    mean_g: tuple[float, ...]
+
+
+def soak_probes(pose: str, probes: list[Probe], ramp: bool = False) -> SoakProbes:
+    """One soak's (``ramp``: one ramp's) probes at ``pose`` as :class:`SoakProbes`."""
+    return SoakProbes(pose, np.array([p.t_s for p in probes]),
+                      np.array([p.sensor_c for p in probes]),
+                      np.array([p.mean_g for p in probes], float), ramp)
+
+
+@dataclass
+class RateGainBook:
+    """Every sensor's finished soaks and ramps, from which its k is estimated.
+
+    ``measured``: the campaign measures the rate gain (spec ``rate_gain``); otherwise
+    the decision uses the spec's ``gradient_lag_s`` and the fit gets no k.
+    """
+
+    measured: bool
+    n_steps: int
+    soaks: dict[str, list[SoakProbes]]
+
+    @classmethod
+    def from_rows(cls, rows: list[dict[str, Any]], *, measured: bool, n_steps: int,
+                  tol_c: float) -> RateGainBook:
+        """The soaks of an interrupted run, from its stored probe rows (``soak_probes``)."""
+        groups: dict[tuple[str, int, float, str], list[dict[str, Any]]] = {}
+        for r in rows:
+            groups.setdefault((r["sensor"], r["step"], r["soak_start_t_s"], r["pose"]),
+                              []).append(r)
+        soaks: dict[str, list[SoakProbes]] = {}
+        for (serial, _, _, pose), group in groups.items():
+            if len(group) >= MIN_PROBES_PER_SOAK:
+                # A ramp's probes begin with the air outside the band (a soak starts once
+                # the air is in it): no column needed to tell them apart.
+                first = min(group, key=lambda r: r["t_s"])
+                air_c, setpoint_c = first.get("chamber_c"), first.get("setpoint_c")
+                ramp = (air_c is not None and setpoint_c is not None
+                        and abs(air_c - setpoint_c) > tol_c)
+                soaks.setdefault(serial, []).append(SoakProbes(
+                    pose, np.array([r["t_s"] for r in group], float),
+                    np.array([r["sensor_c"] for r in group], float),
+                    np.array([[r["ax"], r["ay"], r["az"]] for r in group], float), ramp))
+        return cls(measured, n_steps, soaks)
+
+    def keep(self, pose: str, dies: dict[str, list[Probe]], ramp: bool = False) -> None:
+        """Add a finished (or interrupted) soak's (``ramp``: ramp's) probes of each sensor."""
+        for serial, probes in dies.items():
+            if len(probes) >= MIN_PROBES_PER_SOAK:
+                self.soaks.setdefault(serial, []).append(soak_probes(pose, probes, ramp))
+
+    def estimate(self, serial: str, pose: str = "",
+                 current: list[Probe] | None = None) -> RateGain | None:
+        """k of one sensor from its finished soaks and the ``current`` one's probes."""
+        soaks = list(self.soaks.get(serial, []))
+        if current is not None and len(current) >= MIN_PROBES_PER_SOAK:
+            soaks.append(soak_probes(pose, current))
+        return estimate_rate_gain(soaks)
+
+    def for_decision(self, serial: str, pose: str, current: list[Probe]) -> float | None:
+        """k (µg per °C/min) for ``stability.decide``; None: the spec's ``gradient_lag_s``.
+
+        Measured: the calibration subtracts k̂·rate, so only what the correction may get
+        wrong counts (:func:`residual_rate_gain_for_decision`). The fit corrects every
+        row, this soak's too, with the campaign's final k̂: a campaign with the soaks to
+        measure it may soak for that correction's residual before its own estimate is
+        informative (the first soak: the prior's 100 would otherwise keep it ≈ 30 min
+        longer).
+        """
+        if not self.measured:
+            return None
+        return residual_rate_gain_for_decision(self.estimate(serial, pose, current),
+                                               will_correct=self.n_steps >= SOAKS_TO_CORRECT)
+
+    def provenance(self, serial: str) -> dict[str, Any]:
+        """The campaign's measured rate gain of one sensor, for the fit and its provenance
+        (empty when it is not measured)."""
+        if not self.measured:
+            return {}
+        est = self.estimate(serial)
+        k_hat = correction_gain_ug_per_c_per_min(est)
+        return {
+            "rate_gain_ug_per_c_per_min": None if k_hat is None else k_hat.tolist(),
+            "rate_gain_estimate": None if est is None else {
+                "gain_ug_per_c_per_min": est.gain_ug_per_c_per_min.tolist(),
+                "sd_ug_per_c_per_min": est.sd_ug_per_c_per_min.tolist(),
+                "probes": est.n, "soaks": est.soaks},
+        }

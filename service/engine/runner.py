@@ -37,13 +37,19 @@ from calibration.campaign_plan import (
     Home,
     Move,
     Msg,
+    Poll,
+    PollChamber,
+    PollSoak,
     ReadChamber,
     Save,
     SetChamber,
     Settle,
+    Wait,
     WaitChamber,
     WaitStable,
     campaign_plan,
+    soak_until_stable,
+    wait_for_chamber,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
 from calibration.thermal_plant import AMBIENT_C
@@ -58,6 +64,7 @@ from service.engine.guard import (
     DeviceGuard,
     FaultPolicy,
     clock_speed,
+    hold,
 )
 from service.engine.identity import verify_sensor
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
@@ -76,6 +83,10 @@ DIE_LAG_TAU_MAX_S = 3600.0
 
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], dict[str, Any]]
 StepReporter = Callable[[dict[str, Any]], None]
+# The plan a campaign runs: (spec, refs, done, *, sensors, angles_deg) → a plan generator
+# (calibration.campaign_plan.campaign_plan's signature); called again with what is stored
+# after a hold (a rewind) and on every restart.
+PlanFactory = Callable[..., Any]
 TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 # Shortest wait between two soak polls when the decision predicts stability sooner than a
@@ -101,6 +112,7 @@ class CampaignRunner:
         clock: Clock,
         *,
         calibrate: Calibrate = calibrate_columns,
+        plan: PlanFactory = campaign_plan,
         on_step: StepReporter | None = None,
         fence: store.Fence | None = None,
     ) -> None:
@@ -110,6 +122,7 @@ class CampaignRunner:
         self.dev = devices if fence is None else fence_devices(devices, self._confirm_lease)
         self.clock = clock
         self.calibrate = calibrate
+        self.plan = plan
         self.on_step = on_step
         # Every measurement commit and every rig command checks this lease (manager-run).
         self.fence = fence
@@ -121,7 +134,7 @@ class CampaignRunner:
         self._pose_attempts: dict[tuple[int, int], int] = {}  # captures off their pose
         # Finished (or interrupted) soaks' probes per sensor, for the measured rate gain
         # (rate_gain.py); reloaded from the soak_probes table on resume.
-        self._soaks: dict[str, list[rate_gain.SoakProbes]] = {}
+        self.rate_book = rate_gain.RateGainBook(False, 0, {})
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
         self._abort_checked_s = -math.inf
@@ -257,7 +270,9 @@ class CampaignRunner:
         self._clock0_s = self.clock.now()
         self._touched = True
         self._subscribers.append(EtaSubscriber(self.eta))
-        self._soaks = self._stored_soaks()
+        self.rate_book = rate_gain.RateGainBook.from_rows(
+            store.soak_probe_rows(self.sf, self.id), measured=spec.rate_gain == "measured",
+            n_steps=spec.n_steps, tol_c=spec.stability.tol_c)
         if len(self.serials) > 1:
             missing = [s for s in self.serials if s not in self.dev.accelerometers]
             if missing:
@@ -270,8 +285,8 @@ class CampaignRunner:
                 self._ramp = self._ramp or RampProgress(self)
                 plan = self._ramp.plan(done, angles_deg)
             else:
-                plan = campaign_plan(spec, self.refs, done, sensors=self.serials,
-                                     angles_deg=angles_deg)
+                plan = self.plan(spec, self.refs, done, sensors=self.serials,
+                                 angles_deg=angles_deg)
             try:
                 await self._run_plan(plan)
                 return
@@ -331,7 +346,8 @@ class CampaignRunner:
             SetChamber: self._set_chamber, WaitChamber: self._wait_chamber,
             ReadChamber: self._read_chamber, Home: self._home, WaitStable: self._soak,
             Move: self._move, Settle: self._settle, Acquire: self._acquire_msg,
-            Save: self._save, Fit: self._fit,
+            Save: self._save, Fit: self._fit, Wait: self._wait_msg,
+            PollChamber: self._poll_chamber, PollSoak: self._poll_soak,
         }
 
     # --- the campaign's sensors, one or several (service/engine/sensors.py) -------------
@@ -432,6 +448,9 @@ class CampaignRunner:
 
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
+
+    async def _wait_msg(self, msg: Wait) -> None:
+        await self._wait(msg.seconds)
 
     async def _home(self, _msg: Home) -> None:
         await self._move_to(tuple(0.0 for _ in range(self.dev.turntable.n_axes)))
@@ -572,53 +591,61 @@ class CampaignRunner:
 
     async def _wait_chamber(self, msg: WaitChamber) -> None:
         """Wait until the working setpoint (where the controller has one) and the PV
-        reach the setpoint; an alarm meanwhile holds, then rewinds (re-ramps)."""
-        spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        start_s = self.clock.now()
-        held0_s = self._held_total_s()
-        status = await self._chamber()
-        limit_s = abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05) * 60.0 * 2.0
-        limit_s += spec.stability.max_soak_s
-        # With the rate gain measured, the dies are probed during the ramp too (at home, like
-        # the soaks): the die's rate is large then, and the first ramp with the first soak
-        # measures k during that soak instead of after it (rate_gain.estimate_rate_gain).
-        probe_ramp = spec.rate_gain == "measured" and spec.stability.policy == "predictive"
-        dies = self._no_dies()
+        reach the setpoint (the plan's :func:`wait_for_chamber`); an alarm meanwhile
+        holds, then rewinds (re-ramps). Bounded by twice the nominal ramp and a max soak.
+
+        With the rate gain measured, the dies are probed during the ramp too (at home,
+        like the soaks): the die's rate is large then, and the first ramp with the first
+        soak measures k during that soak instead of after it
+        (rate_gain.estimate_rate_gain).
+        """
+        spec = self.spec
+        self._ramping = _Ramp(start_s=self.clock.now(), held0_s=self._held_total_s(),
+                              dies=self._no_dies(),
+                              probe=(spec.rate_gain == "measured"
+                                     and spec.stability.policy == "predictive"))
         try:
-            while not (_wsp_at_target(status, target_c)
-                       and abs(status.process_c - target_c) <= spec.stability.tol_c):
-                if self.clock.now() - start_s - (self._held_total_s() - held0_s) > limit_s:
-                    raise CampaignFailed(
-                        f"chamber did not reach {target_c:.1f} °C within {limit_s:.0f} s "
-                        f"(PV {status.process_c:.2f} °C)")
-                polled_s = self.clock.now()
-                if probe_ramp:
-                    await self._probe_dies(dies, step, target_c, status, self._t(start_s))
-                self._publish(step, "ramp", 0, status, target_c)
-                await self._checkpoint()
-                # The probe's capture (≈ 4 s) is part of the poll period, not added to it:
-                # the ramp's end is seen as soon as without probes.
-                await self._wait(spec.soak_poll_s - (self.clock.now() - polled_s))
-                status = await self._chamber()
-                tripped = self.suspenders.check_chamber(status, None)
-                if tripped is not None:
-                    await self._hold_chamber(*tripped, setpoint_c=None)
-                    raise Rewind(f"step {step} ramp: {tripped[0].name}")
+            await self._run_plan(wait_for_chamber(msg))
         finally:
-            self._keep_soak(dies, ramp=True)
+            self.rate_book.keep(self._pose, self._ramping.dies, ramp=True)
+
+    async def _poll_chamber(self, msg: PollChamber) -> Poll:
+        spec, ramp, target_c = self.spec, self._ramping, msg.setpoint_c
+        status = await self._chamber()
+        tripped = self.suspenders.check_chamber(status, None)
+        if tripped is not None:
+            await self._hold_chamber(*tripped, setpoint_c=None)
+            raise Rewind(f"step {msg.step} ramp: {tripped[0].name}")
+        if _wsp_at_target(status, target_c) and abs(status.process_c - target_c) <= \
+                spec.stability.tol_c:
+            return Poll(True)
+        if ramp.limit_s is None:
+            ramp.limit_s = (abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05)
+                            * 60.0 * 2.0 + spec.stability.max_soak_s)
+        if self.clock.now() - ramp.start_s - (self._held_total_s() - ramp.held0_s) \
+                > ramp.limit_s:
+            raise CampaignFailed(f"chamber did not reach {target_c:.1f} °C within "
+                                 f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C)")
+        polled_s = self.clock.now()
+        if ramp.probe:
+            await self._probe_dies(ramp.dies, msg.step, target_c, status, self._t(ramp.start_s))
+        self._publish(msg.step, "ramp", 0, status, target_c)
+        # The probe's capture (≈ 4 s) is part of the poll period, not added to it: the
+        # ramp's end is seen as soon as without probes.
+        return Poll(False, spec.soak_poll_s - (self.clock.now() - polled_s))
 
     async def _soak(self, msg: WaitStable) -> None:
-        """Wait for stability (policy of the spec); log the decision in steps_log.
+        """Wait for stability (policy of the spec; the plan's :func:`soak_until_stable`);
+        log the decision in steps_log.
 
         The predictive policy judges the die against the sweep that follows: its
         duration (positions left × the measured time per position) and whether
         this step is the coldest or hottest (it then sets the model's valid range).
+        A chamber suspender tripped meanwhile holds, then rewinds (a fresh soak).
         """
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        resumed, edge = msg.resumed, msg.edge
         cfg = spec.stability
-        sweep_s = msg.n_positions * self.eta.position_s
-        if resumed:
+        if msg.resumed:
             # The step was soaked before the interruption: re-check, don't re-soak in full.
             cfg = dataclasses.replace(
                 cfg, policy="predictive" if cfg.policy == "fixed" else cfg.policy,
@@ -626,97 +653,97 @@ class CampaignRunner:
             )
         store.set_cursor(self.sf, self.id, step, "soak", 0)
         self._cursor = (step, "soak")
-        start_s = self.clock.now()
-        held0_s = self._held_total_s()  # held time before this soak: not this soak's
-        ch_t: list[float] = []
-        ch_pv: list[float] = []
-        ch_wsp: list[float] = []
-        dies = self._no_dies()  # die probes per sensor
-        decision = stability.Decision(False, "started")
-        gains: dict[str, float | None] = {}
-        waiting_on: str | None = None  # the die that said "not yet" last
-        while True:
-            status = await self._chamber()
-            tripped = self.suspenders.check_chamber(status, target_c)
-            if tripped is not None:
-                # The die was disturbed: hold until the chamber is back, then the plan
-                # rewinds and soaks afresh (the probes so far are still an approach: they
-                # stay for the rate gain).
-                self._keep_soak(dies)
-                await self._hold_chamber(*tripped, setpoint_c=target_c)
-                raise Rewind(f"step {step} soak: {tripped[0].name}")
-            now_s = self.clock.now()
-            # Soak time: the clock since the soak began, less the time paused or suspended
-            # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
-            soaked_s = now_s - start_s - (self._held_total_s() - held0_s)
-            ch_t.append(now_s)
-            ch_pv.append(status.process_c)
-            # A controller without a working setpoint: the PV alone says it has arrived.
-            ch_wsp.append(target_c if status.working_setpoint_c is None
-                          else status.working_setpoint_c)
-            if cfg.policy == "predictive":
-                await self._probe_dies(dies, step, target_c, status, self._t(start_s))
-            settled = stability.chamber_settled(
-                np.array(ch_t), np.array(ch_pv), np.array(ch_wsp), target_c, cfg.tol_c, cfg.dwell_s)
-            live = {k: v for k, v in dies.items() if k not in self.dropped}
-            gains = {k: self._rate_gain_for_decision(k, v) for k, v in live.items()}
-            # Every die decides, with its own rate gain; the slowest one ends the soak. The
-            # die that kept the soak going last poll is asked first and the first "not yet"
-            # ends the round: the soak goes on whatever the others say, and on the poll
-            # that ends it every die has been asked (slowest_decision then picks the
-            # slowest), so the outcome is that of asking all, at a fraction of the fits.
-            decisions: list[stability.Decision] = []
-            for key in sorted(live, key=lambda k: k != waiting_on):
-                probes = live[key]
-                decisions.append(stability.decide(
-                    cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
-                    np.array([p.sensor_c for p in probes]), sweep_s=sweep_s,
-                    n_positions=self.n_pos, edge=edge,
-                    rate_gain_ug_per_c_per_min=gains[key], order_repeats=msg.order_repeats))
-                if not decisions[-1].stable:
-                    waiting_on = key
-                    break
-            decision = slowest_decision(decisions)
-            self._publish(step, "soak", 0, status, target_c,
-                          soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
-            if decision.stable:
-                break
-            await self._checkpoint()
-            # Sooner than a whole period when the die is predicted to meet its budgets sooner
-            # (the soak ends at a poll: a fixed period overshoots by half of one on average).
-            await self._wait(stability.next_poll_s(
-                decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
-        self._keep_soak(dies)
-        last = [probes[-1] for probes in dies.values() if probes]
+        # held time before this soak is not this soak's
+        soak = self._soaking = _Soak(cfg, msg.n_positions * self.eta.position_s,
+                                     self.clock.now(), self._held_total_s(), self._no_dies())
+        await self._run_plan(soak_until_stable(msg))
+        self.rate_book.keep(self._pose, soak.dies)
+        last = [probes[-1] for probes in soak.dies.values() if probes]
         if last:
             self._die_track = (max(p.clock_s for p in last),
                                float(np.median([p.sensor_c for p in last])))
-        held_s = self._held_total_s() - held0_s
-        soak_s = self.clock.now() - start_s - held_s
-        used = [g for g in gains.values() if g is not None]
+        held_s = self._held_total_s() - soak.held0_s
+        soak_s = self.clock.now() - soak.start_s - held_s
+        used = [g for g in soak.gains.values() if g is not None]
+        decision = soak.decision
         entry = {
-            "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(start_s),
+            "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(soak.start_s),
             "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s, "held_s": held_s,
             "reason": decision.reason, "tau_s": decision.tau_s,
             "predicted_offset_c": decision.predicted_offset_c,
             "predicted_error_c": decision.predicted_error_c,
-            "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": sweep_s,
-            "edge": edge, "policy": cfg.policy,
-            "resumed": resumed, "max_soak_reached": decision.max_soak_reached,
+            "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": soak.sweep_s,
+            "edge": msg.edge, "policy": cfg.policy,
+            "resumed": msg.resumed, "max_soak_reached": decision.max_soak_reached,
             # the k (µg per °C/min) the last decision used, largest over the sensors
             "rate_gain_ug_per_c_per_min": max(used) if used else None,
         }
         store.put_step_log(self.sf, self.id, _clean_json(entry))
         if self.on_step:
-            self.on_step({**entry, "chamber_c": ch_pv[-1], "steps": spec.n_steps})
+            self.on_step({**entry, "chamber_c": soak.ch_pv[-1], "steps": spec.n_steps})
         if decision.max_soak_reached and spec.on_max_soak == "fail":
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
-    def _no_dies(self) -> dict[str, list[_Probe]]:
+    async def _poll_soak(self, msg: PollSoak) -> Poll:
+        """One soak poll: the chamber (a suspender tripped: hold, then rewind), the dies'
+        probes and every live die's decision."""
+        spec, soak, cfg = self.spec, self._soaking, self._soaking.cfg
+        step, target_c = msg.soak.step, msg.soak.setpoint_c
+        status = await self._chamber()
+        tripped = self.suspenders.check_chamber(status, target_c)
+        if tripped is not None:
+            # The die was disturbed: hold until the chamber is back, then the plan rewinds
+            # and soaks afresh (the probes so far are still an approach: they stay for the
+            # rate gain).
+            self.rate_book.keep(self._pose, soak.dies)
+            await self._hold_chamber(*tripped, setpoint_c=target_c)
+            raise Rewind(f"step {step} soak: {tripped[0].name}")
+        now_s = self.clock.now()
+        # Soak time: the clock since the soak began, less the time paused or suspended
+        # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
+        soaked_s = now_s - soak.start_s - (self._held_total_s() - soak.held0_s)
+        soak.ch_t.append(now_s)
+        soak.ch_pv.append(status.process_c)
+        # A controller without a working setpoint: the PV alone says it has arrived.
+        soak.ch_wsp.append(target_c if status.working_setpoint_c is None
+                           else status.working_setpoint_c)
+        if cfg.policy == "predictive":
+            await self._probe_dies(soak.dies, step, target_c, status, self._t(soak.start_s))
+        settled = stability.chamber_settled(np.array(soak.ch_t), np.array(soak.ch_pv),
+                                            np.array(soak.ch_wsp), target_c, cfg.tol_c,
+                                            cfg.dwell_s)
+        live = {k: v for k, v in soak.dies.items() if k not in self.dropped}
+        soak.gains = {k: self.rate_book.for_decision(k, self._pose, v) for k, v in live.items()}
+        # Every die decides, with its own rate gain; the slowest one ends the soak. The die
+        # that kept the soak going last poll is asked first and the first "not yet" ends
+        # the round: the soak goes on whatever the others say, and on the poll that ends it
+        # every die has been asked (slowest_decision then picks the slowest), so the
+        # outcome is that of asking all, at a fraction of the fits.
+        decisions: list[stability.Decision] = []
+        for key in sorted(live, key=lambda k: k != soak.waiting_on):
+            probes = live[key]
+            decisions.append(stability.decide(
+                cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
+                np.array([p.sensor_c for p in probes]), sweep_s=soak.sweep_s,
+                n_positions=self.n_pos, edge=msg.soak.edge,
+                rate_gain_ug_per_c_per_min=soak.gains[key],
+                order_repeats=msg.soak.order_repeats))
+            if not decisions[-1].stable:
+                soak.waiting_on = key
+                break
+        soak.decision = decision = slowest_decision(decisions)
+        self._publish(step, "soak", 0, status, target_c,
+                      soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
+        # Sooner than a whole period when the die is predicted to meet its budgets sooner
+        # (the soak ends at a poll: a fixed period overshoots by half of one on average).
+        return Poll(decision.stable, stability.next_poll_s(
+            decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
+
+    def _no_dies(self) -> dict[str, list[rate_gain.Probe]]:
         return {serial: [] for serial in self._live}
 
-    async def _probe_dies(self, dies: dict[str, list[_Probe]], step: int,
+    async def _probe_dies(self, dies: dict[str, list[rate_gain.Probe]], step: int,
                           setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
                           ) -> None:
         """One die-temperature probe of every live sensor, each stored as it is taken
@@ -740,7 +767,7 @@ class CampaignRunner:
             # mid-capture (captures end together; each keeps its own duration)
             mid_s = self.clock.now() - probe.duration_s / 2.0
             t_s = self._t(mid_s)
-            dies[serial].append(_Probe(mid_s, t_s, float(probe.sensor_c),
+            dies[serial].append(rate_gain.Probe(mid_s, t_s, float(probe.sensor_c),
                                        tuple(float(v) for v in probe.mean_g)))
             ref = self._pose_ref or (math.nan, math.nan, math.nan)
             rows.append({
@@ -754,7 +781,7 @@ class CampaignRunner:
             })
         store.add_soak_probes(self.sf, self.id, rows)
 
-    # --- the sensor's rate gain (rate_gain.py) ---------------------------------------
+    # --- the table's pose: the probes' orientation key (rate_gain.py) -------------------
     def _set_pose(self, angles_deg: tuple[float, ...]) -> None:
         """The table stands at ``angles_deg``: the probes' orientation key and reference."""
         from drivers.geometry import reference_for_angles
@@ -765,71 +792,6 @@ class CampaignRunner:
             self._pose_ref = (float(ref[0]), float(ref[1]), float(ref[2]))
         except ValueError:  # a table geometry the reference formula does not cover
             self._pose_ref = None
-
-    def _keep_soak(self, dies: dict[str, list[_Probe]], ramp: bool = False) -> None:
-        """Add this soak's (``ramp``: this ramp's) probes to the finished soaks of each
-        sensor."""
-        for key, probes in dies.items():
-            if len(probes) >= rate_gain.MIN_PROBES_PER_SOAK:
-                self._soaks.setdefault(key, []).append(_soak_probes(self._pose, probes, ramp))
-
-    def _stored_soaks(self) -> dict[str, list[rate_gain.SoakProbes]]:
-        """The soaks of an interrupted run, from the soak_probes table, per sensor."""
-        groups: dict[tuple[str, int, float, str], list[dict[str, Any]]] = {}
-        for r in store.soak_probe_rows(self.sf, self.id):
-            key = r["sensor"]
-            groups.setdefault((key, r["step"], r["soak_start_t_s"], r["pose"]), []).append(r)
-        out: dict[str, list[rate_gain.SoakProbes]] = {}
-        for (key, _, _, pose), rows in groups.items():
-            if len(rows) >= rate_gain.MIN_PROBES_PER_SOAK:
-                # A ramp's probes begin with the air outside the band (a soak starts once
-                # the air is in it): no column needed to tell them apart.
-                first = min(rows, key=lambda r: r["t_s"])
-                air_c, setpoint_c = first.get("chamber_c"), first.get("setpoint_c")
-                ramp = (air_c is not None and setpoint_c is not None
-                        and abs(air_c - setpoint_c) > self.spec.stability.tol_c)
-                out.setdefault(key, []).append(rate_gain.SoakProbes(
-                    pose, np.array([r["t_s"] for r in rows], float),
-                    np.array([r["sensor_c"] for r in rows], float),
-                    np.array([[r["ax"], r["ay"], r["az"]] for r in rows], float), ramp))
-        return out
-
-    def _rate_estimate(self, key: str,
-                       current: list[_Probe] | None = None) -> rate_gain.RateGain | None:
-        soaks = list(self._soaks.get(key, []))
-        if current is not None and len(current) >= rate_gain.MIN_PROBES_PER_SOAK:
-            soaks.append(_soak_probes(self._pose, current))
-        return rate_gain.estimate_rate_gain(soaks)
-
-    def _rate_gain_for_decision(self, key: str, current: list[_Probe]) -> float | None:
-        """k (µg per °C/min) for ``stability.decide``; None: the spec's ``gradient_lag_s``.
-
-        Measured: the calibration subtracts k̂·rate, so only what the correction may get
-        wrong counts (``rate_gain.residual_rate_gain_for_decision``).
-        """
-        if self.spec.rate_gain != "measured":
-            return None
-        # The fit corrects every row, this soak's too, with the campaign's final k̂: a
-        # campaign with the soaks to measure it may soak for that correction's residual
-        # before its own estimate is informative (the first soak: the prior's 100 would
-        # otherwise keep it ≈ 30 min longer).
-        will_correct = self.spec.n_steps >= rate_gain.SOAKS_TO_CORRECT
-        return rate_gain.residual_rate_gain_for_decision(self._rate_estimate(key, current),
-                                                         will_correct=will_correct)
-
-    def _rate_provenance(self, key: str) -> dict[str, Any] | None:
-        """The campaign's measured rate gain of one sensor, for the fit and its provenance."""
-        if self.spec.rate_gain != "measured":
-            return None
-        est = self._rate_estimate(key)
-        k_hat = rate_gain.correction_gain_ug_per_c_per_min(est)
-        return {
-            "rate_gain_ug_per_c_per_min": None if k_hat is None else k_hat.tolist(),
-            "rate_gain_estimate": None if est is None else {
-                "gain_ug_per_c_per_min": est.gain_ug_per_c_per_min.tolist(),
-                "sd_ug_per_c_per_min": est.sd_ug_per_c_per_min.tolist(),
-                "probes": est.n, "soaks": est.soaks},
-        }
 
     async def _fitting(self) -> None:
         """One calibration per live sensor, each stored as it is fitted (a resumed fit skips
@@ -852,7 +814,7 @@ class CampaignRunner:
                 "recording": (f"campaign-{self.id}-{serial}.csv" if several
                               else f"campaign-{self.id}.csv"),
                 "sensor_identity": self.identities.get(serial),
-                **(self._rate_provenance(serial) or {}),
+                **self.rate_book.provenance(serial),
             }
             try:
                 # In a thread: the fit takes ~1 s of CPU and the API shares this event loop.
@@ -923,34 +885,14 @@ class CampaignRunner:
     async def _hold(self, susp: Suspender, why: str,
                     still_tripped: Callable[[], Awaitable[str | None]], *,
                     poll_s: float) -> None:
-        """The one hold loop: suspended (no readings, chamber at its setpoint) until
-        ``still_tripped()`` has said None for ``susp.clear_s``.
-
-        Pause and abort still apply (a checkpoint every round); paused time is not
-        held time. Fails the campaign when the condition lasted ``susp.limit_s`` of
-        real time (clock time over the clock's speed-up).
-        """
-        since_s = self.clock.now()
-        paused0_s = self._paused_s
-        clear_since_s: float | None = None
-        self._suspend(f"{susp.name}: {why}")
-        while True:
-            held_s = self.clock.now() - since_s - (self._paused_s - paused0_s)  # pause: not
-            if held_s / clock_speed(self.clock) >= susp.limit_s:
-                raise CampaignFailed(f"{why}; not cleared within {susp.limit_s:.0f} s of "
-                                     "real time")
-            await self._checkpoint()
-            if poll_s > 0:
-                await self._wait(poll_s)
-            now_why = await still_tripped()
-            if now_why is not None:
-                why, clear_since_s = now_why, None
-                continue
-            if clear_since_s is None:
-                clear_since_s = self.clock.now()
-            if self.clock.now() - clear_since_s >= susp.clear_s:
-                self._resumed(susp, since_s)
-                return
+        """Suspended (no readings, chamber at its setpoint) until ``still_tripped()`` has
+        said None for ``susp.clear_s``: the one hold loop (:func:`guard.hold`), with the
+        campaign's checkpoint (pause, abort) every round; paused time is not held time."""
+        await hold(self.clock, susp, why, still_tripped, poll_s=poll_s,
+                   checkpoint=self._checkpoint, wait=self._wait,
+                   on_hold=lambda why: self._suspend(f"{susp.name}: {why}"),
+                   on_clear=lambda since_s: self._resumed(susp, since_s),
+                   paused_s=lambda: self._paused_s)
 
     def _resumed(self, susp: Suspender, since_s: float) -> None:
         self.suspension_log.append({"suspender": susp.name, "t_s": round(self._t(since_s), 3),
@@ -1166,28 +1108,40 @@ def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
             and abs(status.setpoint_c - target_c) < 1e-3)
 
 
+@dataclasses.dataclass
+class _Ramp:
+    """A ramp's state across its polls (:meth:`CampaignRunner._poll_chamber`)."""
+
+    start_s: float
+    held0_s: float  # held time before the ramp: not the ramp's
+    dies: dict[str, list[rate_gain.Probe]]
+    probe: bool  # the dies are probed (the rate gain measured)
+    limit_s: float | None = None
+
+
+@dataclasses.dataclass
+class _Soak:
+    """A soak's state across its polls (:meth:`CampaignRunner._poll_soak`)."""
+
+    cfg: Any  # the spec's StabilityConfig (a resumed step's re-check)
+    sweep_s: float
+    start_s: float
+    held0_s: float  # held time before the soak: not the soak's
+    dies: dict[str, list[rate_gain.Probe]]
+    ch_t: list[float] = dataclasses.field(default_factory=list)
+    ch_pv: list[float] = dataclasses.field(default_factory=list)
+    ch_wsp: list[float] = dataclasses.field(default_factory=list)
+    decision: stability.Decision = stability.Decision(False, "started")
+    gains: dict[str, float | None] = dataclasses.field(default_factory=dict)
+    waiting_on: str | None = None  # the die that said "not yet" last
+
+
 class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error
     """A suspender held the campaign: resume the plan from its stored measurements."""
 
 
 def _clean_json(d: dict[str, Any]) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Probe:
-    """One soak probe: clock time (the decision's), campaign time, die channel, mean output."""
-
-    clock_s: float
-    t_s: float
-    sensor_c: float
-    mean_g: tuple[float, ...]
-
-
-def _soak_probes(pose: str, probes: list[_Probe], ramp: bool = False) -> rate_gain.SoakProbes:
-    return rate_gain.SoakProbes(pose, np.array([p.t_s for p in probes]),
-                                np.array([p.sensor_c for p in probes]),
-                                np.array([p.mean_g for p in probes], float), ramp)
 
 
 def _finite(d: dict[str, float]) -> dict[str, float | None]:

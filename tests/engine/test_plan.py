@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 from engine_fakes import make_fake_rig
 from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from sqlalchemy import select
 
 from calibration import campaign_plan as pl
 from drivers.clock import VirtualClock
 from drivers.geometry import angles_for_references
+from service.db.models import Measurement
 from service.dry_run import dry_run
 from service.engine.runner import CampaignRunner
 from service.engine.spec import parse_spec, schedule_refs
@@ -99,9 +101,29 @@ async def test_engine_executes_exactly_the_plan(sf) -> None:  # type: ignore[no-
     expected = []
     pl.interpret(pl.campaign_plan(rs, refs, angles_deg=poses),
                  lambda m: expected.append(m))  # type: ignore[func-returns-value]
-    assert [type(m) for m in seen] == [type(m) for m in expected]
-    assert [(m.step, m.position) for m in seen if isinstance(m, pl.Save)] == [
+    # The composite waits are expanded by the engine into their stubs' polls
+    # (wait_for_chamber, soak_until_stable), announced before the composite itself:
+    # Poll (Checkpoint Wait Poll)* — take them out and the rest is the plan, message by message.
+    top: list[pl.Msg] = []
+    expansions: list[list[type]] = []
+    current: list[type] | None = None
+    for m in seen:
+        if current is None and isinstance(m, pl.PollChamber | pl.PollSoak):
+            current = []
+        if current is not None and not isinstance(m, pl.WaitChamber | pl.WaitStable):
+            current.append(type(m))
+            continue
+        if current is not None:
+            expansions.append(current)
+            current = None
+        top.append(m)
+    assert [type(m) for m in top] == [type(m) for m in expected]
+    assert [(m.step, m.position) for m in top if isinstance(m, pl.Save)] == [
         (m.step, m.position) for m in expected if isinstance(m, pl.Save)]
+    assert len(expansions) == 6  # three ramps, three soaks
+    for run in expansions:
+        assert run[0] in (pl.PollChamber, pl.PollSoak)
+        assert run[1:] == [pl.Checkpoint, pl.Wait, run[0]] * ((len(run) - 1) // 3)
     # ETA learnt from the stream: 18 positions timed, three soaks, three ramps.
     assert len(runner.eta.position_times_s) == 18
     assert len(runner.eta.soak_times_s) == 3 and len(runner.eta.ramp_times_s) == 3
@@ -253,3 +275,35 @@ def test_the_ramp_commands_then_waits_and_goes_home_first_when_the_rate_gain_is_
     measured = messages({**TABLE_ORDER, "rate_gain": "measured"})
     i = next(i for i, m in enumerate(measured) if isinstance(m, pl.SetChamber))
     assert [type(m) for m in measured[i:i + 3]] == [pl.SetChamber, pl.Home, pl.WaitChamber]
+
+
+async def test_a_plan_whose_chamber_never_stops_saves_without_the_band(sf) -> None:  # type: ignore[no-untyped-def]
+    # The verbs a ramp campaign builds on: SetChamber only commands, ReadChamber tells where
+    # the air is, and a Save with band=False stores readings taken while the air moves
+    # (a Save with the band armed would hold instead: the air is far from the setpoint).
+    clock = VirtualClock(idle_wall_s=0.0)
+    rig = make_fake_rig(clock)
+    cid = add_campaign(sf, {**SMALL_SPEC, "setpoints_c": [40.0]})
+    airs: list[float] = []
+
+    def ramp_plan(spec, refs, done, *, sensors, angles_deg):  # type: ignore[no-untyped-def]
+        yield pl.Configure(float(spec.range_g), float(spec.odr_hz))
+        yield pl.SetChamber(0, 40.0, 0.5)
+        for pos in range(refs.shape[0]):
+            if (0, pos) in done:
+                continue
+            airs.append((yield pl.ReadChamber()).process_c)
+            ref = tuple(float(v) for v in refs[pos])
+            yield from pl.measure_position(0, pos, 40.0, ref, pos + 1, tuple(sensors),
+                                           int(spec.samples_per_position), 0.0, band=False)
+
+    runner = CampaignRunner(sf, cid, rig.devices, clock, calibrate=fake_calibrate,
+                            plan=ramp_plan)
+    assert await asyncio.wait_for(runner.run(), 30) == "completed"
+    with sf() as s:
+        rows = s.execute(select(Measurement.position, Measurement.chamber_c)
+                         .where(Measurement.campaign_id == cid)).all()
+    assert sorted(p for p, _ in rows) == list(range(6))
+    assert max(c for _, c in rows) < 40.0 - 2.0  # every reading far outside a 2 °C band
+    assert airs == sorted(airs) and airs[-1] > airs[0]  # the air kept rising meanwhile
+    assert not runner.suspension_log

@@ -51,7 +51,7 @@ def test_random_order_is_seeded_and_reproducible() -> None:
 
 
 def test_a_campaign_measuring_the_rate_gain_plans_every_step_from_home() -> None:
-    # rate_gain "measured" parks the table at home before each ramp (runner._ramp): the
+    # rate_gain "measured" sends the table home at each ramp (campaign_plan.ramp_to): the
     # travel order must then start every step there, not where the last sweep ended.
     from types import SimpleNamespace
 

@@ -16,10 +16,10 @@ from sqlalchemy import func, select
 
 from calibration.recording import Recording, write_recording
 from drivers.clock import VirtualClock
+from service.cli import main
 from service.db.models import Calibration, Campaign, Measurement
 from service.engine import store
 from service.engine.rigs import open_rig
-from service.cli import main
 from service.engine.runner import CampaignRunner
 
 # Ambient 23 °C → 20 → 28 → back to 23 at 2 °C/min; a 2-min die: short holds.

@@ -137,7 +137,7 @@ async def test_resume_reloads_the_stored_soaks(sf) -> None:
     for r in probes(sf, cid):
         groups.setdefault((r.step, r.soak_start_t_s), []).append(r)
     ramps_stored = sum(abs(v[0].chamber_c - v[0].setpoint_c) > 0.3 for v in groups.values())
-    (segments,) = runner._soaks.values()
+    (segments,) = runner.rate_book.soaks.values()
     assert ramps_stored >= 3 and sum(s.ramp for s in segments) == ramps_stored
     assert sum(not s.ramp for s in segments) == len(groups) - ramps_stored
     # The first soak after the restart already had an estimate (not the prior).
