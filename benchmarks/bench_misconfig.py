@@ -45,6 +45,7 @@ class Case:
 #: the IEEE float region and is immune (its row shows it).
 INT16_3216 = str(Path(__file__).resolve().parents[1] / "tests" / "drivers" / "data"
                  / "eurotherm-3216-int16.toml")
+MAPS = Path(__file__).resolve().parents[1] / "drivers" / "maps"
 
 
 def _wrong_pv_map(tmp: Path) -> str:
@@ -52,6 +53,22 @@ def _wrong_pv_map(tmp: Path) -> str:
     path = tmp / "lab-3216-pv-at-4.toml"
     path.write_text(text.replace("[registers.process_c]\naddress = 1\n",
                                  "[registers.process_c]\naddress = 4\n"))
+    return str(path)
+
+
+def _ezt_fc16_map(tmp: Path) -> str:
+    """The EZT-430i map with its setpoint written by FC 16, which the controller ignores."""
+    path = tmp / "lab-ezt-fc16.toml"
+    path.write_text((MAPS / "csz-ezt-430i.toml").read_text().replace(
+        'write = "single"', 'write = "multiple"'))
+    return str(path)
+
+
+def _f4_no_sequence_map(tmp: Path) -> str:
+    """The F4 map without its [[sequence.set_setpoint]] (the setpoint written alone)."""
+    head, _, rest = (MAPS / "watlow-f4.toml").read_text().partition("# Every setpoint change")
+    path = tmp / "lab-f4-no-sequence.toml"
+    path.write_text(head + rest[rest.index("[registers.process_c]"):])
     return str(path)
 
 
@@ -80,6 +97,23 @@ def cases(tmp: Path) -> list[Case]:
              "watlow-f4t", "manual"),
         Case("controller in standby", ControllerSetup(mode="standby"), "eurotherm-3216",
              "standby"),
+        # Controllers without a working setpoint or a static ramp (absent_roles).
+        Case("EZT-430i as the map says (control)", ControllerSetup(), "csz-ezt-430i", ""),
+        Case("EZT-430i whole degrees (×10)", ControllerSetup(decimals=0), "csz-ezt-430i",
+             "×10"),
+        Case("EZT-430i in °F", ControllerSetup(units="F"), "csz-ezt-430i", "°F"),
+        # No run register, no WSP, no ramp: nothing the check reads tells standby apart.
+        Case("EZT-430i in standby", ControllerSetup(mode="standby"), "csz-ezt-430i",
+             "standby"),
+        Case("EZT-430i, map writes SP by FC 16", ControllerSetup(single_writes_only=True),
+             "csz-ezt-430i", 'write = "single"', lab_map=_ezt_fc16_map(tmp)),
+        Case("F4 as the map says (control)", ControllerSetup(), "watlow-f4", ""),
+        Case("F4 running a profile, map without the sequence",
+             ControllerSetup(profile_owns_setpoint=("terminate_profile", 1.0),
+                             holds=(("profile_status", 2.0),)),
+             "watlow-f4", "profile", lab_map=_f4_no_sequence_map(tmp)),
+        Case("F4 in °F", ControllerSetup(units="F", holds=(("units", 0.0),)), "watlow-f4",
+             "°F"),
     ]
 
 

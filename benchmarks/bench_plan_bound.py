@@ -36,11 +36,11 @@ CASES: list[tuple[str, dict[str, object]]] = [
 def main() -> int:
     from service.campaigns import SIM_RIG
     from service.dry_run import check_campaign
-    from service.engine.spec import CampaignSpec
+    from service.engine.spec import EngineSpec
 
-    check_campaign(CampaignSpec(positions="six"), dict(SIM_RIG))  # imports, warm caches
+    check_campaign(EngineSpec(positions="six"), dict(SIM_RIG))  # imports, warm caches
     for label, body in CASES:
-        spec = CampaignSpec.model_validate(body)
+        spec = EngineSpec.model_validate(body)
         t0 = time.perf_counter()
         check = check_campaign(spec, dict(SIM_RIG))
         elapsed_s = time.perf_counter() - t0

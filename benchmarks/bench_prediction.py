@@ -27,7 +27,7 @@ from service.dry_run import predicted_duration_s, schedule_verdict  # noqa: E402
 from service.engine import store  # noqa: E402
 from service.engine.rigs import open_rig  # noqa: E402
 from service.engine.runner import CampaignRunner  # noqa: E402
-from service.engine.spec import CampaignSpec  # noqa: E402
+from service.engine.spec import EngineSpec  # noqa: E402
 
 SPECS: dict[str, dict[str, Any]] = {
     "3 steps, fixed 30 min, six, 100 samples": {
@@ -69,7 +69,7 @@ def main() -> int:
     print(f"{'campaign':48s} {'predicted':>10s} {'simulated':>10s} {'error':>7s}  wall")
     errors = []
     for name, spec in SPECS.items():
-        model = CampaignSpec.model_validate(spec)
+        model = EngineSpec.model_validate(spec)
         n_positions, why = schedule_verdict(model.positions, "reference")
         assert why is None and n_positions is not None
         predicted_s = predicted_duration_s(model)

@@ -53,9 +53,9 @@ AIM_FRACTION = 0.25
 def dry_run_hours(n_sensors: int, rate: float) -> tuple[float, str]:
     from service.campaigns import SIM_RIG
     from service.dry_run import check_campaign
-    from service.engine.spec import CampaignSpec
+    from service.engine.spec import EngineSpec
 
-    spec = CampaignSpec.model_validate({"method": "ramp", "ramp_c_per_min": rate,
+    spec = EngineSpec.model_validate({"method": "ramp", "ramp_c_per_min": rate,
                                         "setpoints_c": [-40, 60]})
     check = check_campaign(spec, dict(SIM_RIG), "sim")
     if not check.ok:

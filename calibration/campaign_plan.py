@@ -219,25 +219,9 @@ CAMPAIGN_RAMP_C_PER_MIN = 1.0
 ANY_SENSOR = "sensor"
 
 
-@dataclass(frozen=True)
-class PlanSpec:
-    """The part of a campaign spec the plan reads (RunSpec satisfies it too)."""
-
-    setpoints_c: Sequence[float]
-    samples_per_position: int
-    settle_s: float = 5.0
-    ramp_c_per_min: float = CAMPAIGN_RAMP_C_PER_MIN
-    range_g: float = 2.0
-    odr_hz: float = 62.5
-    # The offline simulator's default is the schedule's order (its recordings feed
-    # benchmarks whose figures were taken in that order); the engine's is "travel".
-    position_order: str = "table"
-    position_order_seed: int | None = None
-
-
 def visit_orders(spec: Any, refs: np.ndarray,
                  angles_deg: np.ndarray | None = None) -> list[list[int]]:
-    """The order each step visits its positions (``spec.position_order``, default table).
+    """The order each step visits its positions (``spec.position_order``).
 
     ``angles_deg`` (n, axes): the rig's table pose of each reference
     (``drivers.geometry.angles_for_references`` for the 3-axis geometry); only the
@@ -245,7 +229,7 @@ def visit_orders(spec: Any, refs: np.ndarray,
     """
     from calibration.position_order import step_orders  # heavy: imported on first use
 
-    method = str(getattr(spec, "position_order", "table"))
+    method = str(spec.position_order)
     refs = np.asarray(refs, float)
     n_steps = len(spec.setpoints_c)
     if method != "travel":
@@ -256,8 +240,8 @@ def visit_orders(spec: Any, refs: np.ndarray,
     # A campaign measuring the rate gain sends the table home at each ramp (ramp_to): every
     # step then starts there.
     return step_orders(np.asarray(angles_deg, float), n_steps, method,
-                       getattr(spec, "position_order_seed", None),
-                       home_each_step=getattr(spec, "rate_gain", "assumed") == "measured")
+                       spec.position_order_seed,
+                       home_each_step=spec.rate_gain == "measured")
 
 
 # --- plan stubs: the protocol's pieces, composed with ``yield from`` -----------------------
@@ -319,8 +303,8 @@ def campaign_plan(spec: Any, refs: np.ndarray,
     """The campaign, once: ramp, soak, then move/settle/acquire/save per position, then fit.
 
     ``spec`` needs ``setpoints_c``, ``samples_per_position``, ``settle_s``,
-    ``ramp_c_per_min``, ``range_g`` and ``odr_hz`` (a :class:`PlanSpec` or the
-    engine's RunSpec), and may give ``position_order`` / ``position_order_seed``;
+    ``ramp_c_per_min``, ``range_g``, ``odr_hz``, ``position_order``, its seed and
+    ``rate_gain`` (a :class:`calibration.campaign_spec.CampaignSpec`, or the engine's view);
     ``refs`` is the (n, 3) schedule of unit gravity vectors; ``angles_deg`` the
     rig's table pose of each (for the ``travel`` order; :func:`visit_orders`).
     ``sensors``: the campaign's serials, one or several (issue 12): every position is

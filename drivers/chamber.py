@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 from drivers.faults import ValueOutOfRange
 from drivers.modbus_link import ModbusLink
 from drivers.protocols import ChamberStatus
-from drivers.registermaps import ChamberMap, bits_to_names
+from drivers.registermaps import ChamberMap, SequenceStep, bits_to_names
 
 # Largest relative difference between the ramp rate asked for and the one the register holds.
 RAMP_WRITE_TOLERANCE = 0.05
@@ -18,6 +20,9 @@ class ModbusChamber:
         self.link = link
         self.regmap = regmap
         self._setup_done = False
+        # The last rate written through a [[sequence.set_ramp_rate]] when the controller has
+        # no ramp register to read back (NaN before the first write).
+        self._ramp_written = math.nan
 
     @property
     def range_c(self) -> tuple[float, float]:
@@ -35,16 +40,20 @@ class ModbusChamber:
 
     async def read_status(self) -> ChamberStatus:
         m = self.regmap
-        values = await self.link.read_fields(m.fields(), m.block_read_max_gap)
-        pv, sp, wsp, ramp = values[:4]
-        rest = values[4:]
+        roles = m.status_roles()
+        values = await self.link.read_fields([f for _, f in roles], m.block_read_max_gap)
+        got = {name: v for (name, _), v in zip(roles, values, strict=True)}
         # A map without a run register describes a controller that controls whenever powered.
         running = True
         if m.run is not None:
-            running = int(rest.pop(0)) == m.run_on
+            running = int(got["run"]) == m.run_on
+        if m.ramp_c_per_min is not None:
+            ramp = got["ramp_c_per_min"]
+        else:  # no static ramp register: it steps, or ramps as its sequence was last told
+            ramp = self._ramp_written if "set_ramp_rate" in m.sequences else 0.0
         alarms: tuple[str, ...] = ()
         if m.alarms is not None:
-            word = int(rest.pop(0))
+            word = int(got["alarms"])
             # Only the bits the map names as alarms count; informative bits are not faults.
             mask = sum(1 << b for b in m.alarm_bits) if m.alarm_bits else 0xFFFF
             alarms = bits_to_names(word & mask & ~sum(1 << b for b in m.info_bits),
@@ -54,9 +63,9 @@ class ModbusChamber:
             if active is not None:
                 alarms += (active,)
         return ChamberStatus(
-            process_c=pv,
-            setpoint_c=sp,
-            working_setpoint_c=wsp,
+            process_c=got["process_c"],
+            setpoint_c=got["setpoint_c"],
+            working_setpoint_c=got.get("working_setpoint_c"),
             ramp_c_per_min=ramp,
             running=running,
             alarms=alarms,
@@ -86,6 +95,10 @@ class ModbusChamber:
         if not lo <= setpoint_c <= hi:
             raise ValueOutOfRange(
                 self.link.device, f"setpoint {setpoint_c} °C outside {lo}…{hi} °C")
+        steps = self.regmap.sequences.get("set_setpoint")
+        if steps:
+            await self._write_sequence(steps, setpoint_c)
+            return
         await self.link.write_field(self.regmap.setpoint_c, setpoint_c)
 
     async def set_ramp_rate(self, ramp_c_per_min: float) -> None:
@@ -95,7 +108,16 @@ class ModbusChamber:
         if limit is not None and ramp_c_per_min > limit:
             raise ValueOutOfRange(self.link.device,
                                   f"ramp rate {ramp_c_per_min} °C/min > the map's {limit} °C/min")
-        field = self.regmap.ramp_c_per_min
+        field = self.regmap.ramp_field()
+        if field is None:
+            if ramp_c_per_min == 0:
+                return  # a controller without a static ramp steps: nothing to write
+            raise ValueOutOfRange(
+                self.link.device,
+                f"ramp rate {ramp_c_per_min:g} °C/min cannot be set: map {self.regmap.name} "
+                "lists ramp_c_per_min under absent_roles (the controller steps to each "
+                "setpoint at the chamber's own rate); run the campaign with "
+                "ramp_c_per_min = 0, or give the map a [[sequence.set_ramp_rate]]")
         try:
             held = field.decode(field.encode(ramp_c_per_min))
         except (ValueError, OverflowError):
@@ -109,6 +131,11 @@ class ModbusChamber:
                 f"{field.address}: it would hold {held:g} °C/min (the map's scale "
                 f"{field.scale:g}); choose a rate the register can hold")
         await self._setup()
+        steps = self.regmap.sequences.get("set_ramp_rate")
+        if steps:
+            await self._write_sequence(steps, ramp_c_per_min)
+            self._ramp_written = ramp_c_per_min
+            return
         await self.link.write_field(field, ramp_c_per_min)
 
     async def run(self) -> None:
@@ -122,6 +149,12 @@ class ModbusChamber:
     async def close(self) -> None:
         """Release the connection (the controller keeps running its last command)."""
         await self.link.close()
+
+    async def _write_sequence(self, steps: tuple[SequenceStep, ...], commanded: float) -> None:
+        """The map's ordered writes; a failure stops the sequence where it failed (the
+        fault names the register), later steps are not sent."""
+        for step in steps:
+            await self.link.write_field(step.field, step.word_value(commanded))
 
     async def _setup(self) -> None:
         """The map's one-time writes (e.g. the F4T's ramp action and scale), once per driver."""

@@ -17,7 +17,9 @@ class ChamberStatus:
 
     process_c: float  # air temperature (PV), °C
     setpoint_c: float  # target setpoint (SP), °C
-    working_setpoint_c: float  # ramping setpoint the controller is tracking now (WSP), °C
+    # Ramping setpoint the controller is tracking now (WSP), °C; None: the controller has no
+    # such register (its map lists it under absent_roles), arrival is then judged on the PV.
+    working_setpoint_c: float | None
     ramp_c_per_min: float  # ramp-rate limit, °C/min (0 = step)
     running: bool
     alarms: tuple[str, ...] = ()

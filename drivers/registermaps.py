@@ -40,15 +40,23 @@ SCHEMA = "soakcal-register-map/1"
 MAPS_DIR = Path(__file__).with_name("maps")
 
 #: Names the drivers give meaning to; any other register name is free (identity, setup, ...).
-CHAMBER_REQUIRED = ("process_c", "setpoint_c", "working_setpoint_c", "ramp_c_per_min")
+CHAMBER_REQUIRED = ("process_c", "setpoint_c")
+#: Roles a chamber map must define unless it lists them under ``absent_roles`` (a
+#: controller without a working setpoint, e.g. CSZ EZT-430i, or without a static ramp,
+#: e.g. a Watlow F4): an omission by mistake is refused, a documented absence is not.
+CHAMBER_ABSENT_OK = ("working_setpoint_c", "ramp_c_per_min")
 CHAMBER_OPTIONAL = ("alarms",)
+#: Write sequences a chamber map may declare (``[[sequence.NAME]]``): ordered writes made
+#: instead of the single write of the quantity, and the quantity each must carry.
+SEQUENCES = {"set_setpoint": "setpoint_c", "set_ramp_rate": "ramp_c_per_min"}
+SEQUENCE_STEP_KEYS = {"register", "value", "from", "note"}
 TABLE_REQUIRED = ("position_deg", "target_deg", "command", "status")
 TABLE_OPTIONAL = ("faults",)
 
 #: Keys a map file may use; anything else is a typo and refused with its key.
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
             "safe", "identity", "run", "setup", "registers", "axes", "command", "checks",
-            "alarm_states"}
+            "alarm_states", "absent_roles", "sequence"}
 CHECK_KEYS = {"register", "expect", "one_of", "min", "max", "what", "fix"}
 REGISTER_KEYS = {"address", "protocol_address", "table", "type", "scale", "offset",
                  "word_order", "access", "write", "unit", "source", "note", "bits", "info_bits",
@@ -194,14 +202,29 @@ class StateAlarm:
 
 
 @dataclass(frozen=True)
+class SequenceStep:
+    """One write of a ``[[sequence.NAME]]``: a constant (``value``) or the commanded
+    quantity (``source``, e.g. ``"setpoint_c"``) into ``register``."""
+
+    register: str
+    field: Field
+    value: float | None = None
+    source: str | None = None  # "setpoint_c" or "ramp_c_per_min": the value being set
+
+    def word_value(self, commanded: float) -> float:
+        return commanded if self.source is not None else float(self.value or 0.0)
+
+
+@dataclass(frozen=True)
 class ChamberMap:
     """Where a chamber controller keeps PV, SP, WSP, ramp rate, run/stop and alarms."""
 
     name: str
     process_c: Field
     setpoint_c: Field
-    working_setpoint_c: Field
-    ramp_c_per_min: Field
+    # None: the controller has no such register (the map lists it under ``absent_roles``).
+    working_setpoint_c: Field | None
+    ramp_c_per_min: Field | None
     run: Field | None = None  # None: the controller controls whenever powered
     alarms: Field | None = None  # bit field, names in ``alarm_bits``
     alarm_states: tuple[StateAlarm, ...] = ()  # enumerated alarm registers
@@ -226,11 +249,28 @@ class ChamberMap:
     source: str = ""  # the file the map came from
     undocumented: tuple[str, ...] = ()
     unit_id: int = 1  # the device's Modbus unit id unless the rig config gives device_id
+    # ``[[sequence.set_setpoint]]`` / ``[[sequence.set_ramp_rate]]``: ordered writes made
+    # instead of the one write of the quantity (e.g. a Watlow F4's profile terminate first).
+    sequences: dict[str, tuple[SequenceStep, ...]] = field(default_factory=dict)
+
+    def status_roles(self) -> list[tuple[str, Field]]:
+        """(role, field) of one status read, in read order; absent roles left out."""
+        roles = [("process_c", self.process_c), ("setpoint_c", self.setpoint_c),
+                 ("working_setpoint_c", self.working_setpoint_c),
+                 ("ramp_c_per_min", self.ramp_c_per_min), ("run", self.run),
+                 ("alarms", self.alarms)]
+        return [(name, f) for name, f in roles if f is not None]
 
     def fields(self) -> list[Field]:
         """The fields one status read covers (optional ones only when mapped)."""
-        out = [self.process_c, self.setpoint_c, self.working_setpoint_c, self.ramp_c_per_min]
-        return out + [f for f in (self.run, self.alarms) if f is not None]
+        return [f for _, f in self.status_roles()]
+
+    def ramp_field(self) -> Field | None:
+        """The register a ramp rate is written to: the role's, else the sequence step's."""
+        if self.ramp_c_per_min is not None:
+            return self.ramp_c_per_min
+        return next((s.field for s in self.sequences.get("set_ramp_rate", ())
+                     if s.source is not None), None)
 
 
 @dataclass(frozen=True)
@@ -600,7 +640,9 @@ class _MapReader:
     # --- kinds ---------------------------------------------------------------------
     def chamber(self, name: str, regs: dict[str, Field]) -> ChamberMap:
         self.require(regs, CHAMBER_REQUIRED, "chamber")
-        self.writable(regs, ("setpoint_c", "ramp_c_per_min"))
+        absent = self.absent_roles(regs)
+        self.writable(regs, ("setpoint_c",) + (("ramp_c_per_min",) if "ramp_c_per_min" in regs
+                                               else ()))
         self.bit_word(regs, ("alarms",))
         d = self.doc
         limits = d.get("limits", {})
@@ -651,8 +693,10 @@ class _MapReader:
             name=name,
             process_c=regs["process_c"],
             setpoint_c=regs["setpoint_c"],
-            working_setpoint_c=regs["working_setpoint_c"],
-            ramp_c_per_min=regs["ramp_c_per_min"],
+            working_setpoint_c=None if "working_setpoint_c" in absent
+            else regs["working_setpoint_c"],
+            ramp_c_per_min=None if "ramp_c_per_min" in absent else regs["ramp_c_per_min"],
+            sequences=self.sequences(regs),
             run=run_field, run_on=on, run_off=off,
             alarms=alarms,
             alarm_states=alarm_states,
@@ -666,8 +710,85 @@ class _MapReader:
             **self.common(regs),
         )
 
+    def absent_roles(self, regs: dict[str, Field]) -> frozenset[str]:
+        """``absent_roles = ["working_setpoint_c"]``: roles the controller does not have.
+
+        A role neither mapped nor listed is refused (a forgotten register is a mistake),
+        as is one both mapped and listed.
+        """
+        raw = self.doc.get("absent_roles", [])
+        if not isinstance(raw, list) or not all(isinstance(r, str) for r in raw):
+            raise self.fail("absent_roles", "expected a list of role names")
+        for i, role in enumerate(raw):
+            if role not in CHAMBER_ABSENT_OK:
+                raise self.fail(f"absent_roles[{i}]", f"{role!r} cannot be absent (only "
+                                f"{', '.join(CHAMBER_ABSENT_OK)} can)")
+            if role in regs:
+                raise self.fail(f"absent_roles[{i}]", f"{role} is listed as absent but "
+                                f"[registers.{role}] maps it: keep one")
+        for role in CHAMBER_ABSENT_OK:
+            if role not in regs and role not in raw:
+                raise self.fail(f"registers.{role}",
+                                f"missing: map it, or list it in absent_roles = [\"{role}\"] "
+                                "if the controller has no such register")
+        return frozenset(raw)
+
+    def sequences(self, regs: dict[str, Field]) -> dict[str, tuple[SequenceStep, ...]]:
+        """``[[sequence.set_setpoint]]`` etc.: ordered writes, each checked here."""
+        raw = self.doc.get("sequence", {})
+        if not isinstance(raw, dict):
+            raise self.fail("sequence", "expected tables [[sequence.set_setpoint]] ...")
+        out: dict[str, tuple[SequenceStep, ...]] = {}
+        for name, steps in raw.items():
+            key = f"sequence.{name}"
+            if name not in SEQUENCES:
+                raise self.fail(key, f"unknown sequence (expected one of "
+                                f"{', '.join(SEQUENCES)})")
+            if not isinstance(steps, list) or not steps:
+                raise self.fail(key, "expected one or more [[" + key + "]] steps")
+            built = []
+            for i, step in enumerate(steps):
+                built.append(self.sequence_step(f"{key}[{i}]", step, regs, SEQUENCES[name]))
+            carrying = [s for s in built if s.source is not None]
+            if len(carrying) != 1:
+                raise self.fail(key, f"expected exactly one step with from = "
+                                f"\"{SEQUENCES[name]}\" (the value being set), got "
+                                f"{len(carrying)}")
+            out[name] = tuple(built)
+        return out
+
+    def sequence_step(self, key: str, step: Any, regs: dict[str, Field],
+                      quantity: str) -> SequenceStep:
+        if not isinstance(step, dict):
+            raise self.fail(key, "expected {register, value} or {register, from}")
+        for extra in step:
+            if extra not in SEQUENCE_STEP_KEYS:
+                raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
+                                f"{', '.join(sorted(SEQUENCE_STEP_KEYS))})")
+        f = self.ref(regs, f"{key}.register", step.get("register"))
+        self.writable(regs, (str(step["register"]),))
+        if ("value" in step) == ("from" in step):
+            raise self.fail(key, "expected exactly one of value (a constant) or from "
+                            f"(= \"{quantity}\", the value being set)")
+        if "from" in step:
+            if step["from"] != quantity:
+                raise self.fail(f"{key}.from", f"expected \"{quantity}\", got "
+                                f"{step['from']!r}")
+            return SequenceStep(str(step["register"]), f, source=quantity)
+        value = self.number(f"{key}.value", step.get("value"), None)
+        assert value is not None
+        try:
+            f.encode(value)
+        except (ValueError, OverflowError) as exc:
+            raise self.fail(f"{key}.value", f"{value:g} does not fit register "
+                            f"{step['register']}: {exc}") from exc
+        return SequenceStep(str(step["register"]), f, value=value)
+
     def turntable(self, name: str, regs: dict[str, Field]) -> TurntableMap:
         self.require(regs, TABLE_REQUIRED, "turntable")
+        for key in ("absent_roles", "sequence"):
+            if key in self.doc:
+                raise self.fail(key, "only a chamber map has " + key)
         self.writable(regs, ("target_deg", "command"))
         self.bit_word(regs, ("status", "faults"))
         d = self.doc
@@ -730,8 +851,13 @@ def describe_map(m: ChamberMap | TurntableMap) -> str:
     """One line naming what a map describes (``soakcal rig validate``)."""
     kind = "chamber" if isinstance(m, ChamberMap) else f"turntable, {m.n_axes} axes"
     what = f"{m.name} — {m.title}" if m.title else m.name
+    extra = ""
+    if isinstance(m, ChamberMap):  # what the drivers will do differently, said up front
+        extra += "".join(f", no {role}" for role in CHAMBER_ABSENT_OK if getattr(m, role) is None)
+        extra += "".join(f", sequence {name} of {len(steps)} writes"
+                         for name, steps in m.sequences.items())
     notes = f", {len(m.undocumented)} undocumented points listed" if m.undocumented else ""
-    return f"{what} ({kind}, {len(m.registers)} registers{notes})"
+    return f"{what} ({kind}, {len(m.registers)} registers{extra}{notes})"
 
 
 def bits_to_names(word: int, names: dict[int, str]) -> tuple[str, ...]:

@@ -6,6 +6,12 @@ campaign that a runner holds gets a ``requested_action`` that the runner
 applies at its next safe point. Every state write is a conditional UPDATE on
 the state it was read in, so a runner in another process can never be
 overwritten with a stale state.
+
+The dry run's prediction is stored with the campaign when it is created
+(:func:`create_campaign`); a campaign created before the service stored it gets
+it computed once, on first read, and stored (:func:`stored_prediction`). This
+module speaks rows and the campaign spec, not HTTP: the API layer
+(``service.api``) turns what it returns into responses.
 """
 
 from __future__ import annotations
@@ -14,14 +20,14 @@ import functools
 from typing import Any
 
 from sqlalchemy import select, update
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 
-from service.api.schemas import CampaignCreate, CampaignOut, Progress
-from service.db.models import Campaign, Rig, RigLease, Sensor
+from service.db.models import Campaign, Rig, RigLease, Schedule, Sensor
 from service.db.timestamps import as_utc, utcnow
-from service.dry_run import PlanCheck, check_campaign, predicted_duration_s
-from service.engine.spec import CampaignSpec
-from service.engine.states import PHASES, TERMINAL, UNHELD_TARGETS, check_action
+from service.dry_run import PlanCheck, PlanIssue, check_campaign, prediction
+from service.engine.spec import CampaignCreate, EngineSpec, stored_serials
+from service.engine.states import UNHELD_TARGETS, check_action
 from service.engine.store import cas_transition
 
 SIM_RIG_NAME = "sim"
@@ -108,20 +114,9 @@ def plan_check(session: Session, spec: CampaignCreate) -> PlanCheck:
     return check_campaign(spec, rig_cfg, spec.rig)
 
 
-def spec_errors(
-    session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
-) -> list[dict[str, Any]]:
-    """The dry run's and the mounting check's refusals in FastAPI's 422 ``detail`` format."""
-    return [field_error(loc + issue.loc, issue.msg, issue.value)
-            for issue in plan_check(session, spec).issues] + mount_errors(session, spec, loc)
-
-
 def campaign_serials(stored: dict[str, Any], first: str) -> list[str]:
     """The sensors a stored campaign spec names, in order (``[first]`` for a one-sensor one)."""
-    several = stored.get("sensors")
-    if isinstance(several, list) and several:
-        return [str(s) for s in several]
-    return [first]
+    return list(stored_serials(stored, first)) or [first]
 
 
 def rig_mounted_serials(rig_cfg: dict[str, Any]) -> set[str] | None:
@@ -142,10 +137,8 @@ def rig_mounted_serials(rig_cfg: dict[str, Any]) -> set[str] | None:
     return mounted
 
 
-def mount_errors(
-    session: Session, spec: CampaignCreate, loc: tuple[str | int, ...] = ("body",)
-) -> list[dict[str, Any]]:
-    """A ``sensors`` entry a real rig does not mount: 422 naming it (the twin mounts any).
+def mount_issues(session: Session, spec: CampaignCreate) -> list[PlanIssue]:
+    """A ``sensors`` entry a real rig does not mount, named (the twin mounts any).
 
     Only ``sensors`` is checked: a one-sensor campaign (``sensor``) on a rig whose fixture
     binds by EEPROM is verified at start by the identity check, as before.
@@ -158,9 +151,9 @@ def mount_errors(
     mounted = rig_mounted_serials({"chamber": rig.chamber, "sensors": rig.sensors})
     if mounted is None:
         return []
-    return [field_error(loc + ("sensors", i),
-                        f"sensor {serial!r} is not mounted on rig {rig.name!r} "
-                        f"(mounted: {', '.join(sorted(mounted)) or 'none declared'})", serial)
+    return [PlanIssue(("sensors", i),
+                      f"sensor {serial!r} is not mounted on rig {rig.name!r} "
+                      f"(mounted: {', '.join(sorted(mounted)) or 'none declared'})", serial)
             for i, serial in enumerate(spec.sensors) if serial not in mounted]
 
 
@@ -176,19 +169,23 @@ def positions_count(name: str) -> int | None:
 
 
 def create_campaign(
-    session: Session, spec: CampaignCreate, schedule_id: int | None = None
+    session: Session, spec: CampaignCreate, schedule_id: int | None = None,
+    check: PlanCheck | None = None,
 ) -> Campaign:
-    """A new ``queued`` campaign (caller checked ``spec_errors``); flushed, not committed."""
+    """A new ``queued`` campaign with its dry run stored (the caller checked
+    :func:`plan_check` and :func:`mount_issues`; ``check``: that verdict, so the campaign
+    is not planned twice); flushed, not committed."""
     for serial in spec.serials:
         ensure_sensor(session, serial)
     campaign = Campaign(
         rig=spec.rig,
         sensor=spec.serials[0],  # the first sensor: one-sensor readers keep working
-        spec=spec.model_dump(exclude_none=True),
+        spec=spec.stored(),
         state="queued",
         schedule_id=schedule_id,
         progress={},
         steps_log=[],
+        dry_run=_stored_form(check if check is not None else plan_check(session, spec)),
     )
     session.add(campaign)
     session.flush()
@@ -278,105 +275,65 @@ def busy_rig_names(session: Session, rig_name: str | None = None) -> set[str]:
     return busy
 
 
-def campaign_out(campaign: Campaign) -> CampaignOut:
-    """The API view: contract fields, progress completed from the cursor and the spec."""
-    return CampaignOut(
-        id=campaign.id,
-        rig=campaign.rig,
-        sensor=campaign.sensor,
-        sensors=campaign_serials(campaign.spec or {}, campaign.sensor),
-        state=campaign.state,  # type: ignore[arg-type]
-        created_at=as_utc(campaign.created_at),  # type: ignore[arg-type]
-        started_at=as_utc(campaign.started_at),
-        finished_at=as_utc(campaign.finished_at),
-        progress=progress_of(campaign),
-        calibration_id=campaign.calibration_id,
-        calibration_ids=dict(campaign.calibration_ids or {}) or (
-            {} if campaign.calibration_id is None
-            else {campaign.sensor: campaign.calibration_id}),
-        sensors_dropped=dict(campaign.sensors_dropped or {}),
-        error=campaign.error,
-        requested_action=campaign.requested_action,
-        suspended_reason=campaign.suspended_reason,
-        spec=campaign.spec or {},
-        schedule_id=campaign.schedule_id,
-        predicted_duration_s=stored_prediction_s(campaign.spec or {}),
-    )
+def _stored_form(check: PlanCheck) -> dict[str, Any]:
+    """What a row stores of a dry run: the prediction, or why there is none."""
+    if check.prediction is not None:
+        return dict(check.prediction)
+    why = "; ".join(issue.msg for issue in check.issues) or "not predicted"
+    return {"duration_s": None, "why": why}
 
 
-def stored_prediction_s(stored: dict[str, Any]) -> float | None:
-    """The dry run's duration estimate for a stored spec (None if it is not valid any more).
-
-    Planned once per distinct spec and process, not on every GET, list row and SSE poll:
-    the plan orders every step's positions (``calibration.campaign_plan``), far dearer than
-    the read it would be attached to. The key is the spec's contract and tuning keys as
-    canonical JSON, so campaigns that differ only in rig or sensors share one plan.
-    """
+def spec_prediction(stored: dict[str, Any]) -> dict[str, Any]:
+    """The dry run of a stored campaign spec, without its rig (the door checked that):
+    :func:`service.dry_run.prediction`, or ``duration_s`` None with why not."""
     import json
 
-    known = {k: v for k, v in stored.items() if k in CampaignSpec.model_fields}
+    known = {k: v for k, v in stored.items() if k in EngineSpec.model_fields}
     try:
         key = json.dumps(known, sort_keys=True, allow_nan=False)
-    except (TypeError, ValueError):
-        return None
-    return _prediction_of(key)
+    except (TypeError, ValueError) as exc:
+        return {"duration_s": None, "why": f"the stored spec is not JSON: {exc}"}
+    return dict(_prediction_of(key))
 
 
-@functools.lru_cache(maxsize=1024)
-def _prediction_of(spec_json: str) -> float | None:
+@functools.lru_cache(maxsize=256)
+def _prediction_of(spec_json: str) -> dict[str, Any]:
+    # Campaigns that differ only in rig or sensors share one plan (a list of campaigns
+    # stored before migration 0008 is planned once per distinct spec, not once per row).
     import json
 
     from pydantic import ValidationError
 
     try:
-        spec = CampaignSpec.model_validate(json.loads(spec_json))
-    except ValidationError:
-        return None
+        spec = EngineSpec.model_validate(json.loads(spec_json))
+    except ValidationError as exc:
+        return {"duration_s": None, "why": f"the stored spec is not valid any more: "
+                f"{exc.errors()[0]['msg']}"}
     if positions_count(spec.positions) is None:
-        return None
-    return predicted_duration_s(spec)
+        return {"duration_s": None, "why": f"unknown position schedule {spec.positions!r}"}
+    return prediction(spec)
 
 
-def progress_of(campaign: Campaign) -> Progress:
-    """``campaign.progress`` as written by the runner, gaps filled from cursor and spec."""
-    live = dict(campaign.progress or {})
-    spec = campaign.spec or {}
-    setpoints_c = list(spec.get("setpoints_c") or [])
-    step = int(_first(live.get("step"), campaign.cursor_step, 0))
-    phase = _first(live.get("phase"), campaign.cursor_phase, "ramp")
-    if phase not in PHASES:
-        phase = "ramp"
-    default_fraction = 1.0 if campaign.state == "completed" else 0.0
-    fraction = float(_first(live.get("fraction"), default_fraction))
-    setpoint_c = live.get("setpoint_c")
-    if setpoint_c is None and 0 <= step < len(setpoints_c):
-        setpoint_c = setpoints_c[step]
-    positions = live.get("positions")
-    if positions is None and spec.get("positions"):
-        positions = positions_count(str(spec["positions"]))
-    eta_s, eta_wall_s = live.get("eta_s"), live.get("eta_wall_s")
-    if campaign.state in TERMINAL:
-        eta_s = eta_wall_s = 0.0 if campaign.state == "completed" else None
-    return Progress(
-        step=step,
-        steps=int(_first(live.get("steps"), len(setpoints_c))),
-        phase=phase,
-        position=int(_first(live.get("position"), campaign.cursor_position, 0)),
-        positions=positions,
-        fraction=min(1.0, max(0.0, fraction)),
-        chamber_c=live.get("chamber_c"),
-        setpoint_c=setpoint_c,
-        eta_s=eta_s,
-        eta_wall_s=eta_wall_s,
-    )
+def stored_prediction(session: Session, row: Campaign | Schedule) -> dict[str, Any]:
+    """The dry run stored with a campaign or schedule; computed once and stored for a row
+    created before the service stored it (a conditional UPDATE, so a racing reader's
+    identical value is not written twice; a locked database only delays the store)."""
+    if row.dry_run is not None:
+        return dict(row.dry_run)
+    spec = row.spec if isinstance(row, Campaign) else row.campaign
+    predicted = spec_prediction(spec or {})
+    model = type(row)
+    try:
+        session.execute(update(model).where(model.id == row.id, model.dry_run.is_(None))
+                        .values(dry_run=predicted)
+                        .execution_options(synchronize_session=False))
+        session.commit()
+    except OperationalError:  # a busy SQLite: the next read stores it
+        session.rollback()
+    return predicted
 
 
-def _first(*values: Any) -> Any:
-    return next((v for v in values if v is not None), None)
-
-
-def field_error(loc: tuple[str | int, ...], msg: str, value: Any) -> dict[str, Any]:
-    """One 422 ``detail`` entry; the input echoed at most as a short prefix."""
-    from service.api.door import short
-
-    return {"type": "value_error", "loc": list(loc), "msg": msg, "input": short(value)}
+def stored_duration_s(session: Session, row: Campaign | Schedule) -> float | None:
+    """The stored dry run's predicted duration, s (None: it could not be predicted)."""
+    duration = stored_prediction(session, row).get("duration_s")
+    return None if duration is None else float(duration)

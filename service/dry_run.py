@@ -15,7 +15,9 @@ One function, :func:`check_campaign`, decides it without hardware, for
 * a ramp faster than the chamber can follow (``chamber.max_rate_c_per_min``;
   the built-in ``sim`` chamber's physics limit is 5 °C/min).
 
-and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`).
+and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`;
+:func:`prediction` is the form a campaign row stores at creation, so that reading a
+campaign never plans it again).
 
 The prediction interprets the campaign's own plan (:func:`dry_run` below);
 the checks stay here, in one place.
@@ -42,6 +44,7 @@ from calibration.campaign_plan import (
     campaign_plan,
     interpret,
 )
+from calibration.campaign_spec import CampaignSpec
 from calibration.ramp_plan import (
     RampPrediction,
     describe_prediction,
@@ -49,7 +52,6 @@ from calibration.ramp_plan import (
     travel_move_s,
 )
 from calibration.thermal_plant import AMBIENT_C
-from service.engine.spec import CampaignSpec
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
 RIG_FIT_MODE = "reference"
@@ -93,6 +95,8 @@ class PlanCheck:
     n_positions: int | None = None
     mode: str = RIG_FIT_MODE
     detail: str | None = None  # a ramp campaign's legs and holds (calibration.ramp_plan)
+    # The stored form of the prediction (:func:`prediction`); None when the check refused.
+    prediction: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
@@ -143,9 +147,12 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
     if n_positions is not None and spec.method == "ramp":
         pred = predicted_ramp(spec)
         return PlanCheck(issues, pred.duration_s, pred.n_sweeps, n_positions,
-                         detail=describe_prediction(pred, spec.ramp_c_per_min))
-    duration = None if n_positions is None else predicted_duration_s(spec)
-    return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions)
+                         detail=describe_prediction(pred, spec.ramp_c_per_min),
+                         prediction=ramp_prediction(pred))
+    predicted = None if n_positions is None else prediction(spec)
+    duration = None if predicted is None else predicted["duration_s"]
+    return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions,
+                     prediction=predicted)
 
 
 def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:
@@ -201,7 +208,14 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
 
 
 def predicted_duration_s(spec: CampaignSpec) -> float:
-    """Rig-time estimate of the whole campaign, s (a sped-up sim rig: divide by its speed).
+    """Rig-time estimate of the whole campaign, s (:func:`prediction`'s ``duration_s``)."""
+    return float(prediction(spec)["duration_s"])
+
+
+def prediction(spec: CampaignSpec) -> dict[str, Any]:
+    """The dry run of ``spec`` as a campaign row stores it (JSON): ``duration_s``,
+    ``ramp_s``, ``soak_s``, ``positions_s`` (rig time, s; a sped-up sim rig: divide by its
+    speed), ``n_steps``, ``n_positions`` and ``n_saves``.
 
     The campaign's own plan interpreted without hardware (:func:`dry_run`):
     ramps at ``ramp_c_per_min`` from ambient through every setpoint, one soak per step
@@ -211,13 +225,14 @@ def predicted_duration_s(spec: CampaignSpec) -> float:
     sensors are read at once, so eight take the time of one.
     """
     if spec.method == "ramp":
-        return predicted_ramp(spec).duration_s
+        return ramp_prediction(predicted_ramp(spec))
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
-    plan = dry_run(spec.model_dump(exclude_none=True), soak_s=soak_s, move_s=None,
-                   start_c=AMBIENT_C)
-    return plan.duration_s
+    plan = dry_run(spec, soak_s=soak_s, move_s=None, start_c=AMBIENT_C)
+    return {"duration_s": plan.duration_s, "ramp_s": plan.ramp_s, "soak_s": plan.soak_s,
+            "positions_s": plan.positions_s, "n_steps": plan.n_steps,
+            "n_positions": plan.n_positions, "n_saves": plan.n_saves}
 
 
 def predicted_ramp(spec: CampaignSpec, start_c: float = AMBIENT_C) -> RampPrediction:
@@ -232,6 +247,15 @@ def predicted_ramp(spec: CampaignSpec, start_c: float = AMBIENT_C) -> RampPredic
     end_c = AMBIENT_C if spec.safe_c is None else spec.safe_c
     return predict_ramp(spec, refs, start_c=start_c, end_c=end_c, move_s=move,
                         angles_deg=poses)
+
+
+def ramp_prediction(pred: RampPrediction) -> dict[str, Any]:
+    """A ramp's prediction as a campaign row stores it (JSON): ``duration_s`` (rig time, s),
+    ``method``, ``legs`` (target_c, ramp_s, hold_s each), ``n_sweeps``, ``n_saves`` and the
+    die lag it assumed (``die_tau_s``)."""
+    return {"duration_s": pred.duration_s, "method": "ramp",
+            "legs": [dict(leg) for leg in pred.legs], "n_sweeps": pred.n_sweeps,
+            "n_saves": pred.n_saves, "die_tau_s": pred.die_tau_s}
 
 
 # --- the dry-run interpreter of the campaign plan (calibration.campaign_plan) ---------------
@@ -261,8 +285,9 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
             angles_deg: np.ndarray | None = None) -> DryRun:
     """Interpret the campaign plan without hardware: predicted duration and counts.
 
-    ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict)
-    or an already parsed ``RunSpec``; ``ValueError`` when it cannot be parsed.
+    ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict), a
+    validated :class:`CampaignSpec` or the engine's ``RunSpec``; ``ValueError`` when
+    it cannot be parsed.
     ``refs`` defaults to the spec's named schedule; ``soak_s`` to the nominal
     soak (``soak_min`` × 60: the predictive policy usually ends earlier, so
     the prediction is an upper estimate); ``move_s`` is the time per table
@@ -272,16 +297,18 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
     order's saving is in the figure; ``start_c`` the chamber's temperature at
     the start. Ramps are predicted at the commanded rate, acquisitions at
     ``n_samples / odr_hz`` once per position however many sensors (they are read
-    concurrently; ``sensors`` default the spec's). Pass ``done`` (stored (step,
+    concurrently; ``sensors`` default the spec's serials). Pass ``done`` (stored (step,
     position) pairs) to predict the rest of a resumed campaign.
     """
     from calibration.position_order import axis_move_s
     from drivers.geometry import angles_for_references
-    from service.engine.spec import parse_spec, schedule_refs
+    from service.engine.spec import parse_spec, run_spec, schedule_refs
 
     if isinstance(spec, dict):
         spec = parse_spec(spec)
-    if getattr(spec, "method", "soak") == "ramp":  # never a soak's figure for a ramp
+    elif isinstance(spec, CampaignSpec):
+        spec = run_spec(spec)
+    if spec.method == "ramp":  # never a soak's figure for a ramp
         raise ValueError("a ramp campaign is predicted by predicted_ramp "
                          "(calibration.ramp_plan.predict_ramp), not by the soak plan")
     if refs is None:
@@ -289,8 +316,7 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
     if soak_s is None:
         soak_s = float(spec.stability.soak_s)
     if sensors is None:
-        named = getattr(spec, "extra", {}).get("sensors")
-        sensors = [str(v) for v in named] if isinstance(named, list) else []
+        sensors = list(spec.sensors)
     refs = np.asarray(refs, float)
     poses = angles_for_references(refs) if angles_deg is None else np.asarray(angles_deg, float)
     pose_of = {tuple(np.round(r, 12)): poses[i] for i, r in enumerate(refs)}

@@ -184,8 +184,11 @@ async def _check_chamber(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> b
 
     async def status() -> bool:
         st = await chamber.read_status()
-        detail = (f"PV {st.process_c:.1f} °C, SP {st.setpoint_c:.1f} °C, "
-                  f"WSP {st.working_setpoint_c:.1f} °C, ramp {st.ramp_c_per_min:g} °C/min, "
+        wsp = ("no WSP register" if st.working_setpoint_c is None
+               else f"WSP {st.working_setpoint_c:.1f} °C")
+        ramp = ("no ramp register (steps)" if not _has_ramp(chamber)
+                else f"ramp {st.ramp_c_per_min:g} °C/min")
+        detail = (f"PV {st.process_c:.1f} °C, SP {st.setpoint_c:.1f} °C, {wsp}, {ramp}, "
                   f"{'running' if st.running else 'stopped'}")
         ok = math.isfinite(st.process_c) and lo - 30.0 <= st.process_c <= hi + 30.0
         rec.add("chamber", "status", "pass" if ok else "fail", detail,
@@ -208,6 +211,12 @@ async def _check_chamber(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> b
         else:
             rec.add("chamber", "status", "fail", f"no usable answer: {fault}", _CONNECT_FIX)
         return False
+
+
+def _has_ramp(chamber: Any) -> bool:
+    """The chamber has a ramp to set: a map-less driver is taken to have one."""
+    regmap = getattr(chamber, "regmap", None)
+    return regmap is None or regmap.ramp_field() is not None
 
 
 # --- turntable -------------------------------------------------------------------------

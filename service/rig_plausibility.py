@@ -36,6 +36,15 @@ RAMP_POLL_S = 2.0
 RAMP_RATIO_OK = (0.5, 2.0)  # observed / commanded WSP rate accepted as "the same"
 RAMP_FACTOR_TOLERANCE = 0.2  # a ratio this close to ×10, ×0.1 or ×60 is blamed on the map
 SETPOINT_TOLERANCE_C = 0.051  # read-back of a written setpoint at 0.1 °C resolution
+#: Without a working setpoint the PV must follow the nudge PV_FOLLOW_C towards it, then
+#: come back PV_RETURN_C once the setpoint is restored (less: it can only come back as far as
+#: the old setpoint), each within PV_FOLLOW_MAX_S (the air's lag: minutes on a real chamber),
+#: from a chamber settled within PV_SETTLED_C: steps of 0.1 °C readings, far above a settled
+#: PV's noise.
+PV_FOLLOW_C = 0.3
+PV_RETURN_C = 0.2
+PV_FOLLOW_MAX_S = 240.0
+PV_SETTLED_C = 0.3
 #: Registers whose scale is the controller's decimal point, like the PV's.
 TEMPERATURE_REGISTERS = ("process_c", "setpoint_c", "working_setpoint_c", "ramp_c_per_min")
 
@@ -112,7 +121,10 @@ async def check_pv_against_die(rec: _Recorder, chamber: Any, dies_c: list[float]
                        "check the chamber driver's units and scale")
     cause, fix = await _likely_cause(chamber, regmap, pv, die)
     if cause is None:
-        unsettled = abs(st.working_setpoint_c - st.setpoint_c) > 0.1
+        # Without a working-setpoint register, the PV's distance from SP says "still moving".
+        moving_c = st.working_setpoint_c if st.working_setpoint_c is not None else st.process_c
+        unsettled = abs(moving_c - st.setpoint_c) > (0.1 if st.working_setpoint_c is not None
+                                                     else DIE_PV_TOLERANCE_C)
         return rec.add("chamber", "pv_vs_die", "fail",
                        f"{seen}: no scale, unit or word-order error explains it"
                        + ("; the chamber is still ramping, so the die may lag" if unsettled
@@ -121,6 +133,17 @@ async def check_pv_against_die(rec: _Recorder, chamber: Any, dies_c: list[float]
                        "the manual (the control loop's PV, not a spare input), and that the "
                        "sensor is inside this chamber")
     return rec.add("chamber", "pv_vs_die", "fail", f"{seen}: {cause}", fix)
+
+
+def _fc16_hint(regmap: Any) -> str:
+    """A written setpoint that reads back unchanged may be a write the controller
+    acknowledged and ignored: some accept only single-register writes (FC 6) outside
+    their program area (CSZ EZT-430i manual §4.9)."""
+    f = getattr(regmap, "setpoint_c", None)
+    if f is None or f.single_write or f.n_registers != 1 or f.table != "holding":
+        return ""
+    return (f"; or the controller ignores multi-register writes (FC 16): set "
+            f"`write = \"single\"` on register `setpoint_c` in {map_file(regmap)}")
 
 
 def _is_reading(value_c: float) -> bool:
@@ -159,13 +182,16 @@ async def _likely_cause(chamber: Any, regmap: Any, pv: float,
                            f"`process_c`{also} in {file}, or set the controller's decimal "
                            "point to match the map"))
     if math.isfinite(pv):
+        # The other temperature registers this map has (a WSP may be absent).
+        others = " and ".join(n for n in ("setpoint_c", "working_setpoint_c")
+                              if getattr(regmap, n, None) is not None)
         candidates.append(((pv - 32.0) / 1.8, "the controller reads in °F",
                            f"set the controller's temperature units to °C, or map °F in {file}: "
                            f"register `process_c` `scale = {f.scale * 1.8:g}`, "
-                           f"`offset = -17.7778`, likewise setpoint_c and working_setpoint_c"))
+                           f"`offset = -17.7778`, likewise {others}"))
         candidates.append((pv - 273.15, "the controller reads in kelvin",
                            f"set the controller's units to °C, or give register `process_c` "
-                           f"(and setpoint_c, working_setpoint_c) `offset = -273.15` in {file}"))
+                           f"(and {others}) `offset = -273.15` in {file}"))
     if f.n_registers == 2:
         other = "low_first" if f.word_order == "high_first" else "high_first"
         swapped = replace(f, word_order=other).decode(words)
@@ -197,36 +223,109 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
     regmap = getattr(chamber, "regmap", None)
     limit = getattr(regmap, "max_ramp_c_per_min", None)
     rate = min(RAMP_CHECK_C_PER_MIN, limit) if limit else RAMP_CHECK_C_PER_MIN
+    # Optional roles: a controller without a static ramp steps (nothing to command), one
+    # without a working setpoint has nothing to time the ramp on.
+    ramps = regmap is None or regmap.ramp_field() is not None
+    timed = ramps and st0.working_setpoint_c is not None
     watch: tuple[list[tuple[float, float]], float] | None = None
-    if st0.running:
+    # Nothing to time: the PV itself must follow the nudge there and back (a chamber in
+    # standby drifts one way, a profile-owned setpoint does not move it at all).
+    follow = st0.running and not timed and abs(st0.process_c - sp0) <= PV_SETTLED_C
+    legs: list[tuple[float, float]] = []
+    sign = 1.0 if target > sp0 else -1.0
+    if st0.running and timed:
         await chamber.set_ramp_rate(rate)
     try:
         await chamber.set_setpoint(target)
         t0 = clock.now()
         first = await chamber.read_status()
         got = first.setpoint_c
-        if st0.running:
+        if st0.running and timed and first.working_setpoint_c is not None:
             watch = await _watch_wsp(chamber, clock, target, rate, t0,
                                      first.working_setpoint_c)
+        if follow:
+            legs.append(await _watch_pv(chamber, clock, sign, first.process_c, PV_FOLLOW_C))
     finally:
         await chamber.set_setpoint(sp0)
-        if st0.running:
+        if st0.running and timed:
             await _restore_ramp(chamber, ramp0)
+    if legs and _moved(legs[0][0], PV_FOLLOW_C):
+        legs.append(await _watch_pv(chamber, clock, -sign,
+                                    (await chamber.read_status()).process_c, PV_RETURN_C))
     back = (await chamber.read_status()).setpoint_c
     if abs(got - target) > SETPOINT_TOLERANCE_C or abs(back - sp0) > SETPOINT_TOLERANCE_C:
         return rec.add("chamber", "setpoint_nudge", "fail",
                        f"wrote {target:.2f} °C, read {got:.2f} °C; restored {sp0:.2f} °C, "
                        f"read {back:.2f} °C",
                        "the setpoint register is read-only, remote setpoint is disabled, "
-                       "or the map's scale/word order is wrong")
+                       "or the map's scale/word order is wrong" + _fc16_hint(regmap))
     nudged = f"SP {sp0:.1f} → {target:.1f} → {back:.1f} °C"
     if watch is None:
         rec.add("chamber", "setpoint_nudge", "pass", nudged)
-        return rec.add("chamber", "ramp", "skip",
-                       "the chamber is stopped: the ramp is watched only while it runs")
+        file = map_file(regmap) if regmap is not None else "the map"
+        if not ramps:
+            why = (f"{file} lists ramp_c_per_min under absent_roles: the controller steps to "
+                   "each setpoint, there is no commanded ramp to time")
+        elif not timed:
+            why = (f"{file} has no working-setpoint register (absent_roles): the ramp cannot "
+                   "be timed here; a campaign judges arrival on the PV")
+        else:
+            why = "the chamber is stopped: the ramp is watched only while it runs"
+        rec.add("chamber", "ramp", "skip", why)
+        if st0.running and not timed:
+            return _judge_follow(rec, legs, st0.process_c, sp0, target)
+        return True
     rec.add("chamber", "setpoint_nudge", "pass", nudged)
     samples, _ = watch
     return await _judge_ramp(rec, chamber, samples, target, rate)
+
+
+async def _watch_pv(chamber: Any, clock: Clock, sign: float, pv0: float,
+                    enough_c: float) -> tuple[float, float]:
+    """(°C the PV moved in direction ``sign`` from ``pv0``, seconds): polled until it
+    moved ``enough_c`` or :data:`PV_FOLLOW_MAX_S` passed."""
+    t0, moved = clock.now(), 0.0
+    while clock.now() - t0 < PV_FOLLOW_MAX_S:
+        await clock.sleep(RAMP_POLL_S)
+        moved = ((await chamber.read_status()).process_c - pv0) * sign
+        if _moved(moved, enough_c):
+            break
+    return moved, clock.now() - t0
+
+
+def _moved(moved_c: float, enough_c: float) -> bool:
+    """Moved far enough: readings of 0.1 °C resolution differ by 0.19999... for 0.2."""
+    return moved_c >= enough_c - 1e-6
+
+
+def _judge_follow(rec: _Recorder, legs: list[tuple[float, float]], pv0: float, sp0: float,
+                  target: float) -> bool:
+    """Without a working setpoint, the PV following the nudge there and back is the only
+    sign that the controller controls at the setpoint it was given."""
+    if not legs:
+        return rec.add("chamber", "pv_follows", "skip",
+                       f"the chamber is not settled (PV {pv0:.1f} °C, SP {sp0:.1f} °C): the PV "
+                       "is watched following the nudge only from a settled chamber",
+                       "rerun the check once the chamber has settled at its setpoint")
+    (up, t_up), *rest = legs
+    there = f"{target:.1f} °C"
+    if not _moved(up, PV_FOLLOW_C):
+        return rec.add("chamber", "pv_follows", "fail",
+                       f"the PV moved {up:+.2f} °C toward the nudged setpoint {there} in "
+                       f"{t_up:.0f} s (needed {PV_FOLLOW_C:g} °C): the controller does not "
+                       "follow the setpoint it was given",
+                       "check at the controller that it is controlling (not in standby or "
+                       "manual) and that no running program or profile owns its setpoint (a "
+                       "map may need a [[sequence.set_setpoint]], docs/registers.md)")
+    down, t_down = rest[0]
+    detail = (f"the PV moved {up:+.2f} °C toward {there} in {t_up:.0f} s, then "
+              f"{down:+.2f} °C back toward {sp0:.1f} °C in {t_down:.0f} s")
+    if not _moved(down, PV_RETURN_C):
+        return rec.add("chamber", "pv_follows", "fail",
+                       f"{detail} (needed {PV_RETURN_C:g} °C back): it went on one way, as a "
+                       "chamber drifting in standby does",
+                       "check at the controller that it is controlling (not in standby)")
+    return rec.add("chamber", "pv_follows", "pass", detail)
 
 
 async def _watch_wsp(chamber: Any, clock: Clock, target: float, rate: float, t0: float,
@@ -238,7 +337,8 @@ async def _watch_wsp(chamber: Any, clock: Clock, target: float, rate: float, t0:
         if abs(samples[-1][1] - target) <= SETPOINT_TOLERANCE_C:
             break
         await clock.sleep(RAMP_POLL_S)
-        samples.append((clock.now(), (await chamber.read_status()).working_setpoint_c))
+        wsp = (await chamber.read_status()).working_setpoint_c
+        samples.append((clock.now(), samples[-1][1] if wsp is None else wsp))
     return samples, expected_s
 
 
@@ -259,7 +359,7 @@ async def _judge_ramp(rec: _Recorder, chamber: Any, samples: list[tuple[float, f
         return rec.add("chamber", "ramp", "pass", detail)
     regmap = chamber.regmap
     file = map_file(regmap)
-    f = regmap.ramp_c_per_min
+    f = regmap.ramp_field()
     if ratio < 0.1:
         info = await chamber.read_info_bits() if hasattr(chamber, "read_info_bits") else ()
         if "manual_mode" in info:
@@ -300,8 +400,11 @@ def _slower(ratio: float) -> str:
 
 
 async def _restore_ramp(chamber: Any, ramp0: float) -> None:
-    """The ramp as it was, even when it was above the map's limit (we did not set it)."""
+    """The ramp as it was, even when it was above the map's limit (we did not set it).
+    A rate that was never read (a sequence-written ramp before its first write) is left."""
+    if not math.isfinite(ramp0):
+        return
     try:
         await chamber.set_ramp_rate(ramp0)
     except ValueOutOfRange:
-        await chamber.link.write_field(chamber.regmap.ramp_c_per_min, ramp0)
+        await chamber.link.write_field(chamber.regmap.ramp_field(), ramp0)

@@ -23,10 +23,10 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
-from service.api.schemas import CampaignCreate
-from service.campaigns import create_campaign, spec_errors
+from service.campaigns import create_campaign, mount_issues, plan_check
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
+from service.engine.spec import CampaignCreate
 from service.event_log import log_event
 
 log = logging.getLogger(__name__)
@@ -155,9 +155,11 @@ class Scheduler:
             log_event("schedule skipped", schedule=schedule.id,
                       error=f"stored campaign no longer valid: {exc.errors()[:1]}")
             return None
-        errors = spec_errors(session, spec, loc=("campaign",))
-        if errors:  # e.g. the rig was removed since: skip this firing, keep the schedule
+        check = plan_check(session, spec)
+        issues = check.issues + mount_issues(session, spec)
+        if issues:  # e.g. the rig was removed since: skip this firing, keep the schedule
+            where = ".".join(str(p) for p in ("campaign", *issues[0].loc))
             log_event("schedule skipped", schedule=schedule.id,
-                      error=f"campaign not valid any more: {errors[:1]}")
+                      error=f"campaign not valid any more: {where}: {issues[0].msg}")
             return None
-        return create_campaign(session, spec, schedule_id=schedule.id).id
+        return create_campaign(session, spec, schedule_id=schedule.id, check=check).id

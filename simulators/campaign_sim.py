@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration import campaign_plan as plan
+from calibration.campaign_spec import DEFAULT_SETPOINTS_C, CampaignSpec
 from calibration.recording import Recording
 from calibration.thermal_plant import (
     AMBIENT_C,
@@ -35,8 +36,6 @@ from calibration.thermal_plant import (
 )
 from drivers.protocols import ChamberStatus
 from simulators.truth import Context, SensorTruth, averaged_readings
-
-DEFAULT_SETPOINTS_C: tuple[float, ...] = tuple(float(t) for t in range(-40, 61, 10))
 
 
 @dataclass
@@ -167,10 +166,14 @@ def simulate_campaign(
             rows["session"].append(sessions[msg.step] if sessions is not None else 0)
         return None  # Save: stored; Home, Checkpoint, Configure, Fit: nothing to simulate
 
-    spec = plan.PlanSpec(setpoints_c=list(setpoints_c), samples_per_position=n, settle_s=0.0,
-                         ramp_c_per_min=ph.ramp_c_per_min, odr_hz=truth.odr_hz,
-                         position_order=position_order,
-                         position_order_seed=position_order_seed)
+    # The campaign's one spec, with this twin's protocol given explicitly: its rig's ramp,
+    # no settle, and its position order (the schedule's unless asked: the recordings and the
+    # benchmarks on them were taken in that order; the engine's default is "travel").
+    spec = CampaignSpec(setpoints_c=tuple(float(v) for v in setpoints_c), soak_min=soak_min,
+                        samples_per_position=n, settle_s=0.0,
+                        ramp_c_per_min=float(ph.ramp_c_per_min), odr_hz=float(truth.odr_hz),
+                        position_order=position_order,  # type: ignore[arg-type]
+                        position_order_seed=position_order_seed)
     plan.interpret(plan.campaign_plan(spec, refs), handle)
 
     N = len(rows["t_s"])

@@ -136,6 +136,15 @@ class ControllerSetup:
     * ``holds``: register name → the value this controller holds there, instead of
       what the map's ``[[checks]]`` expect (e.g. ``{"loop_mode": 54}``: an F4T loop in
       Manual; ``{"ramp_units": 1}``: a 3216 set to per-hour ramps).
+    * ``profile_owns_setpoint``: ``(register, value)``: a profile is running and owns the
+      setpoint, as on a Watlow F4: a setpoint write is stored (it reads back) but not
+      followed until ``register`` is written ``value`` (the profile terminated); the
+      controller then follows the last setpoint written. A map whose
+      ``[[sequence.set_setpoint]]`` writes the terminate first drives it; one without does
+      not move the chamber.
+    * ``single_writes_only``: a multiple-register write (FC 16) is acknowledged but not
+      executed, as a CSZ EZT-430i does outside its program registers (its manual, §4.9):
+      only a map with ``write = "single"`` (FC 6) moves the chamber.
     """
 
     decimals: int | None = None
@@ -145,6 +154,8 @@ class ControllerSetup:
     silent: frozenset[str] = frozenset()
     mode: Literal["auto", "manual", "standby"] = "auto"
     holds: tuple[tuple[str, float], ...] = ()
+    profile_owns_setpoint: tuple[str, float] | None = None
+    single_writes_only: bool = False
 
     def served(self, f: Field, role: str) -> Field:
         """The field as this controller encodes it (the map's address, its own format)."""
@@ -204,13 +215,23 @@ class ChamberRegisterImage:
         self.physics = physics
         self.regmap = regmap
         self.setup = setup or ControllerSetup()
+        self.ignores_fc16 = self.setup.single_writes_only  # read by the Modbus server
         physics.manual = self.setup.mode == "manual"
         m = regmap
         # Keys are (Modbus table, address): the four tables are separate address spaces.
-        self._roles = {
-            _key(m.setpoint_c): "setpoint_c",
-            _key(m.ramp_c_per_min): "ramp_c_per_min",
-        }
+        self._roles = {_key(m.setpoint_c): "setpoint_c"}
+        if m.ramp_c_per_min is not None:
+            self._roles[_key(m.ramp_c_per_min)] = "ramp_c_per_min"
+        else:  # no static ramp: the controller steps, the air as fast as the chamber goes
+            physics.ramp_c_per_min = 0.0
+        # ControllerSetup.profile_owns_setpoint: the written (static) setpoint while a
+        # profile owns the one the controller follows.
+        self._profile_running = self.setup.profile_owns_setpoint is not None
+        self._static_sp_c: float | None = None
+        if self._profile_running:
+            reg, _ = self.setup.profile_owns_setpoint  # type: ignore[misc]
+            if reg not in m.registers:
+                raise ValueError(f"profile_owns_setpoint: map {m.name} has no register {reg!r}")
         if m.run is not None:
             self._roles[_key(m.run)] = "running"
         else:
@@ -268,12 +289,13 @@ class ChamberRegisterImage:
             for i, w in enumerate(words):
                 if t == table:
                     image[a + i] = w
+        sp_c = p.setpoint_c if self._static_sp_c is None else self._static_sp_c
         rendered: list[tuple[Field, float]] = [
             (cfg.served(f, role), cfg.to_controller(value, role)) for f, role, value in (
                 (m.process_c, "process_c", p.process_value_c()),
-                (m.setpoint_c, "setpoint_c", p.setpoint_c),
+                (m.setpoint_c, "setpoint_c", sp_c),
                 (m.working_setpoint_c, "working_setpoint_c", p.working_setpoint_c),
-                (m.ramp_c_per_min, "ramp_c_per_min", p.ramp_c_per_min))
+                (m.ramp_c_per_min, "ramp_c_per_min", p.ramp_c_per_min)) if f is not None
         ]
         if m.run is not None:
             rendered.append((m.run, float(m.run_on if p.running else m.run_off)))
@@ -300,6 +322,7 @@ class ChamberRegisterImage:
             if len(values) != len(stored[1]):
                 return ExcCodes.ILLEGAL_VALUE
             self._stored[table, address] = (stored[0], list(values))
+            self._maybe_end_profile(stored[0], values)
             return None
         f = {"setpoint_c": m.setpoint_c, "ramp_c_per_min": m.ramp_c_per_min,
              "running": m.run}[name]
@@ -314,6 +337,9 @@ class ChamberRegisterImage:
             lo, hi = m.range_c
             if not lo <= value <= hi:
                 return ExcCodes.ILLEGAL_VALUE
+            if self._profile_running:  # stored and read back, not followed
+                self._static_sp_c = value
+                return None
         if name == "ramp_c_per_min" and value < 0:
             return ExcCodes.ILLEGAL_VALUE
         if name == "running":
@@ -323,3 +349,15 @@ class ChamberRegisterImage:
             return None
         setattr(p, name, value)
         return None
+
+    def _maybe_end_profile(self, f: Field, values: list[int]) -> None:
+        """The write that terminates the running profile (ControllerSetup.profile_owns_setpoint):
+        the controller then follows the static setpoint."""
+        needs = self.setup.profile_owns_setpoint
+        if not self._profile_running or needs is None or self.regmap.registers[needs[0]] != f:
+            return
+        if f.decode(values) == needs[1]:
+            self._profile_running = False
+            if self._static_sp_c is not None:
+                self.physics.setpoint_c = self._static_sp_c
+            self._static_sp_c = None

@@ -14,6 +14,7 @@ from drivers.clock import RealClock, ScaledClock
 from drivers.registermaps import MapError, load_chamber_map, load_turntable_map, shipped_maps
 from simulators.chamber_sim import ControllerSetup
 from simulators.faults import SimFaults
+from simulators.pty_link import open_pty_link
 from simulators.rig import RigFaults, SimRig, start_sim_rig
 
 
@@ -65,6 +66,16 @@ def build_parser() -> argparse.ArgumentParser:
     ctl.add_argument("--hold", action="append", default=[], metavar="REGISTER=VALUE",
                      help="a value the controller holds in a register of the map (instead of "
                           "what its [[checks]] expect), e.g. loop_mode=54; repeatable")
+    ctl.add_argument("--profile-owns-setpoint", default=None, metavar="REGISTER=VALUE",
+                     help="a profile runs and owns the setpoint (a Watlow F4): setpoint writes "
+                          "are not followed until REGISTER is written VALUE, e.g. "
+                          "terminate_profile=1")
+    ctl.add_argument("--single-writes-only", action="store_true",
+                     help="multiple-register writes (FC 16) are acknowledged but not executed "
+                          "(a CSZ EZT-430i)")
+    p.add_argument("--serial", action="store_true",
+                   help="also expose each simulated sensor bridge on a pseudo-terminal "
+                        "(/dev/pts/N) that a serial reader opens like a USB-serial port")
     p.add_argument("--duration-s", type=float, default=None,
                    help="stop after this many wall seconds (default: run until Ctrl-C)")
     return p
@@ -98,6 +109,19 @@ def run_sim(argv: list[str] | None = None) -> int:
                   f"{name!r}", file=sys.stderr)
             return 2
     args.holds = tuple(holds)
+    args.profile = None
+    if args.profile_owns_setpoint is not None:
+        name, _, value = args.profile_owns_setpoint.partition("=")
+        try:
+            args.profile = (name, float(value))
+        except ValueError:
+            print(f"soakcal sim: --profile-owns-setpoint {args.profile_owns_setpoint}: expected "
+                  "REGISTER=NUMBER", file=sys.stderr)
+            return 2
+        if name not in chamber_regs:
+            print(f"soakcal sim: --profile-owns-setpoint: map {args.chamber_map} names no "
+                  f"register {name!r}", file=sys.stderr)
+            return 2
     if args.decimals is not None and not 0 <= args.decimals <= 4:
         print(f"soakcal sim: --decimals {args.decimals}: expected 0…4", file=sys.stderr)
         return 2
@@ -122,16 +146,19 @@ def run_sim(argv: list[str] | None = None) -> int:
     return 0
 
 
-def describe(rig: SimRig) -> str:
-    """How to reach each device (printed at start)."""
+def describe(rig: SimRig, ptys: list[str] | None = None) -> str:
+    """How to reach each device (printed at start); ``ptys``: the ``--serial`` ports."""
     c_host, c_port = rig.chamber_server.host, rig.chamber_server.port
     m = load_chamber_map(rig.chamber_map)
+    ports = [f"  sensor   serial {path}  (pseudo-terminal: open it as a serial port, any "
+             "baud rate; docs/sensor-bridge.md)" for path in ptys or []]
     return "\n".join([
         "soakcal simulated rig",
-        f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id=1 "
+        f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id={m.unit_id} "
         f"(PV holding reg {m.process_c.address}, SP {m.setpoint_c.address})",
         f"  table    modbus {rig.table_url}  map={rig.table_map}  axes={rig.table.n_axes}",
         f"  sensor   serial {rig.sensor_url}  (pyserial serial_for_url; docs/sensor-bridge.md)",
+        *ports,
         "  example:",
         "    python -c \"import asyncio; from pymodbus.client import AsyncModbusTcpClient as C\n"
         f"    async def m():\n      c = C('{c_host}', port={c_port}); await c.connect()\n"
@@ -154,15 +181,26 @@ async def _serve(args: argparse.Namespace) -> None:
     controller = ControllerSetup(decimals=args.decimals, units=args.units,
                                  ramp_per=args.ramp_per, swap_words=args.swap_words,
                                  silent=frozenset(args.silent), mode=args.mode,
-                                 holds=getattr(args, "holds", ()))
+                                 holds=getattr(args, "holds", ()),
+                                 profile_owns_setpoint=getattr(args, "profile", None),
+                                 single_writes_only=args.single_writes_only)
     async with start_sim_rig(clock, seed=args.seed, truth=args.truth,
                              chamber_map=args.chamber_map,
                              faults=faults, ports=args.port, host=args.host,
                              die_tau_s=args.die_tau_s, table_map=args.table_map,
                              controller=controller) as rig:
-        print(describe(rig), flush=True)
-        stop = asyncio.Event()
-        if args.duration_s is not None:
-            asyncio.get_running_loop().call_later(args.duration_s, stop.set)
-        with contextlib.suppress(asyncio.CancelledError):
-            await stop.wait()
+        links = [await open_pty_link(rig.bridge_server.host, rig.bridge_server.port)
+                 ] if args.serial else []
+        try:
+            if links:
+                print(describe(rig, [link.path for link in links]), flush=True)
+            else:
+                print(describe(rig), flush=True)
+            stop = asyncio.Event()
+            if args.duration_s is not None:
+                asyncio.get_running_loop().call_later(args.duration_s, stop.set)
+            with contextlib.suppress(asyncio.CancelledError):
+                await stop.wait()
+        finally:
+            for link in links:
+                await link.close()

@@ -86,6 +86,8 @@ class _PhysicsContext(ModbusBaseDeviceContext):
             return ExcCodes.ILLEGAL_FUNCTION
         if self._busy():
             return ExcCodes.DEVICE_BUSY
+        if func_code == 16 and getattr(self.image, "ignores_fc16", False):
+            return None  # acknowledged, not executed (ControllerSetup.single_writes_only)
         if write_table is None:
             return self.image.write(address, [int(v) for v in values])
         return write_table(table, address, [int(v) for v in values])

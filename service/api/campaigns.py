@@ -18,19 +18,21 @@ from calibration.placement import HAND_HELD_TOL_DEG
 from service.api import auth
 from service.api.deps import DbIdPath, SessionDep
 from service.api.recording_csv import render_probes_csv, render_recording_csv
-from service.api.schemas import CampaignCreate, CampaignOut, CampaignState
+from service.api.schemas import CampaignCreate, CampaignOut, CampaignState, Progress
 from service.campaigns import (
     CampaignNotFound,
     apply_action,
-    campaign_out,
     campaign_serials,
     create_campaign,
-    field_error,
-    mount_errors,
+    mount_issues,
     plan_check,
+    positions_count,
+    stored_duration_s,
 )
 from service.db.models import Campaign, Measurement, Rig, SoakProbe
-from service.engine.states import TERMINAL
+from service.db.timestamps import as_utc
+from service.dry_run import PlanIssue
+from service.engine.states import PHASES, TERMINAL
 
 router = APIRouter(prefix="/api/v1/campaigns", tags=["campaigns"])
 
@@ -48,13 +50,12 @@ def create(body: CampaignCreate, session: SessionDep) -> CampaignOut:
     cannot follow); the 201 carries ``predicted_duration_s``.
     """
     check = plan_check(session, body)
-    errors = [field_error(("body", *issue.loc), issue.msg, issue.value)
-              for issue in check.issues] + mount_errors(session, body)
+    errors = issue_errors(check.issues + mount_issues(session, body), ("body",))
     if errors:
         raise HTTPException(status_code=422, detail=errors)
-    campaign = create_campaign(session, body)
+    campaign = create_campaign(session, body, check=check)
     session.commit()
-    return campaign_out(campaign)
+    return campaign_out(session, campaign)
 
 
 # Largest page of ``GET /campaigns?limit=``: a dashboard screen is a few dozen rows.
@@ -88,7 +89,7 @@ def list_campaigns(
     if query.limit is not None or query.offset:
         rows = rows.offset(query.offset).limit(query.limit)
     response.headers["X-Total-Count"] = str(session.scalar(count))
-    return [campaign_out(c) for c in session.scalars(rows)]
+    return [campaign_out(session, c) for c in session.scalars(rows).all()]
 
 
 @router.get(
@@ -98,13 +99,13 @@ def list_campaigns(
     dependencies=[Depends(auth.viewer)],
 )
 def get_campaign(campaign_id: DbIdPath, session: SessionDep) -> CampaignOut:
-    return campaign_out(_get_or_404(session, campaign_id))
+    return campaign_out(session, _get_or_404(session, campaign_id))
 
 
 def _control(action: str):  # type: ignore[no-untyped-def]
     def handler(campaign_id: DbIdPath, session: SessionDep) -> CampaignOut:
         try:
-            return campaign_out(apply_action(session, campaign_id, action))
+            return campaign_out(session, apply_action(session, campaign_id, action))
         except CampaignNotFound as exc:
             raise HTTPException(status_code=404, detail=str(exc)) from exc
 
@@ -280,7 +281,7 @@ def _end_data(view: CampaignOut) -> str:
 def _load_view(factory: sessionmaker[Session], campaign_id: int) -> CampaignOut | None:
     with factory() as session:
         campaign = session.get(Campaign, campaign_id)
-        return None if campaign is None else campaign_out(campaign)
+        return None if campaign is None else campaign_out(session, campaign)
 
 
 def _get_or_404(session: Session, campaign_id: int) -> Campaign:
@@ -288,3 +289,80 @@ def _get_or_404(session: Session, campaign_id: int) -> Campaign:
     if campaign is None:
         raise HTTPException(status_code=404, detail=f"campaign {campaign_id} not found")
     return campaign
+
+
+def campaign_out(session: Session, campaign: Campaign) -> CampaignOut:
+    """The API view: contract fields, progress completed from the cursor and the spec, and
+    the dry run's prediction as stored at creation (``service.campaigns.stored_prediction``)."""
+    return CampaignOut(
+        id=campaign.id,
+        rig=campaign.rig,
+        sensor=campaign.sensor,
+        sensors=campaign_serials(campaign.spec or {}, campaign.sensor),
+        state=campaign.state,  # type: ignore[arg-type]
+        created_at=as_utc(campaign.created_at),  # type: ignore[arg-type]
+        started_at=as_utc(campaign.started_at),
+        finished_at=as_utc(campaign.finished_at),
+        progress=progress_of(campaign),
+        calibration_id=campaign.calibration_id,
+        calibration_ids=dict(campaign.calibration_ids or {}) or (
+            {} if campaign.calibration_id is None
+            else {campaign.sensor: campaign.calibration_id}),
+        sensors_dropped=dict(campaign.sensors_dropped or {}),
+        error=campaign.error,
+        requested_action=campaign.requested_action,
+        suspended_reason=campaign.suspended_reason,
+        spec=campaign.spec or {},
+        schedule_id=campaign.schedule_id,
+        predicted_duration_s=stored_duration_s(session, campaign),
+    )
+
+
+def progress_of(campaign: Campaign) -> Progress:
+    """``campaign.progress`` as written by the runner, gaps filled from cursor and spec."""
+    live = dict(campaign.progress or {})
+    spec = campaign.spec or {}
+    setpoints_c = list(spec.get("setpoints_c") or [])
+    step = int(_first(live.get("step"), campaign.cursor_step, 0))
+    phase = _first(live.get("phase"), campaign.cursor_phase, "ramp")
+    if phase not in PHASES:
+        phase = "ramp"
+    default_fraction = 1.0 if campaign.state == "completed" else 0.0
+    fraction = float(_first(live.get("fraction"), default_fraction))
+    setpoint_c = live.get("setpoint_c")
+    if setpoint_c is None and 0 <= step < len(setpoints_c):
+        setpoint_c = setpoints_c[step]
+    positions = live.get("positions")
+    if positions is None and spec.get("positions"):
+        positions = positions_count(str(spec["positions"]))
+    eta_s, eta_wall_s = live.get("eta_s"), live.get("eta_wall_s")
+    if campaign.state in TERMINAL:
+        eta_s = eta_wall_s = 0.0 if campaign.state == "completed" else None
+    return Progress(
+        step=step,
+        steps=int(_first(live.get("steps"), len(setpoints_c))),
+        phase=phase,
+        position=int(_first(live.get("position"), campaign.cursor_position, 0)),
+        positions=positions,
+        fraction=min(1.0, max(0.0, fraction)),
+        chamber_c=live.get("chamber_c"),
+        setpoint_c=setpoint_c,
+        eta_s=eta_s,
+        eta_wall_s=eta_wall_s,
+    )
+
+
+def _first(*values: Any) -> Any:
+    return next((v for v in values if v is not None), None)
+
+
+def field_error(loc: tuple[str | int, ...], msg: str, value: Any) -> dict[str, Any]:
+    """One 422 ``detail`` entry; the input echoed at most as a short prefix."""
+    from service.api.door import short
+
+    return {"type": "value_error", "loc": list(loc), "msg": msg, "input": short(value)}
+
+
+def issue_errors(issues: list[PlanIssue], loc: tuple[str | int, ...]) -> list[dict[str, Any]]:
+    """Refusals of the dry run and the mounting check as 422 ``detail`` entries under ``loc``."""
+    return [field_error(loc + issue.loc, issue.msg, issue.value) for issue in issues]

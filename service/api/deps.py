@@ -22,6 +22,7 @@ from fastapi import Depends, Path, Request
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
+from calibration.campaign_spec import SERIAL_PATTERN
 from service.db.session import POOL_MAX_OVERFLOW, POOL_SIZE
 
 # Leave connections for the campaign engine, the scheduler and the event streams.
@@ -57,7 +58,6 @@ SessionDep = Annotated[Session, Depends(get_session)]
 # out-of-range id is a 422 naming the path parameter, never a driver overflow (500).
 MAX_DB_ID = 2**31 - 1
 DbIdPath = Annotated[int, Path(ge=1, le=MAX_DB_ID, description="a database id, 1..2^31-1")]
-# Sensor serials travel in URL paths: the creation pattern (service/api/schemas.py) again.
-SERIAL_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,63}$"
+# Sensor serials travel in URL paths: SERIAL_PATTERN is the campaign spec's serial pattern.
 SerialPath = Annotated[str, Path(pattern=SERIAL_PATTERN, max_length=64,
                                  description="sensor serial: letters, digits and _ . : -")]

@@ -7,11 +7,13 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Response
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from service.api import auth
+from service.api.campaigns import field_error, issue_errors
 from service.api.deps import DbIdPath, SessionDep
 from service.api.schemas import ScheduleCreate, ScheduleOut
-from service.campaigns import field_error, spec_errors, stored_prediction_s
+from service.campaigns import mount_issues, plan_check, stored_duration_s
 from service.db.models import Schedule
 from service.db.timestamps import as_utc, utcnow
 from service.scheduler import cron_is_valid, next_cron_run, timezone_is_valid
@@ -21,7 +23,9 @@ router = APIRouter(prefix="/api/v1/schedules", tags=["schedules"])
 
 @router.post("", response_model=ScheduleOut, status_code=201, dependencies=[Depends(auth.operator)])
 def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
-    errors: list[dict[str, Any]] = spec_errors(session, body.campaign, loc=("body", "campaign"))
+    check = plan_check(session, body.campaign)
+    errors: list[dict[str, Any]] = issue_errors(
+        check.issues + mount_issues(session, body.campaign), ("body", "campaign"))
     now = utcnow()
     if body.at is not None and as_utc(body.at) <= now:  # type: ignore[operator]
         errors.append(field_error(
@@ -46,7 +50,8 @@ def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
         raise HTTPException(status_code=422, detail=errors)
     at = as_utc(body.at)
     schedule = Schedule(
-        campaign=body.campaign.model_dump(exclude_none=True),
+        campaign=body.campaign.stored(),
+        dry_run=None if check.prediction is None else dict(check.prediction),
         at=at,
         cron=body.cron,
         timezone=body.timezone,
@@ -55,12 +60,13 @@ def create_schedule(body: ScheduleCreate, session: SessionDep) -> ScheduleOut:
     )
     session.add(schedule)
     session.commit()
-    return _out(schedule)
+    return _out(session, schedule)
 
 
 @router.get("", response_model=list[ScheduleOut], dependencies=[Depends(auth.viewer)])
 def list_schedules(session: SessionDep) -> list[ScheduleOut]:
-    return [_out(s) for s in session.scalars(select(Schedule).order_by(Schedule.id))]
+    return [_out(session, s)
+            for s in session.scalars(select(Schedule).order_by(Schedule.id)).all()]
 
 
 @router.delete(
@@ -80,7 +86,7 @@ def delete_schedule(schedule_id: DbIdPath, session: SessionDep) -> Response:
     return Response(status_code=204)
 
 
-def _out(s: Schedule) -> ScheduleOut:
+def _out(session: Session, s: Schedule) -> ScheduleOut:
     return ScheduleOut(
         id=s.id,
         campaign=s.campaign,
@@ -91,5 +97,5 @@ def _out(s: Schedule) -> ScheduleOut:
         last_run_at=as_utc(s.last_run_at),
         last_campaign_id=s.last_campaign_id,
         created_at=as_utc(s.created_at) or dt.datetime.now(dt.UTC),
-        predicted_duration_s=stored_prediction_s(s.campaign or {}),
+        predicted_duration_s=stored_duration_s(session, s),
     )

@@ -1,14 +1,20 @@
-"""Pydantic bodies and responses of docs/api.md (so /openapi.json describes every one)."""
+"""Pydantic bodies and responses of docs/api.md (so /openapi.json describes every one).
+
+The campaign body, :class:`CampaignCreate`, is the one campaign spec
+(``calibration.campaign_spec``) plus ``rig`` and ``sensor`` (``service.engine.spec``).
+"""
 
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from service.api.deps import SERIAL_PATTERN
-from service.engine.spec import TUNING_KEYS, CampaignSpec
+# The campaign request is the service's, not the HTTP layer's (the scheduler validates
+# stored schedules with it): defined with the spec, named here for the API's schema.
+from calibration.campaign_spec import TUNING_KEYS
+from service.engine.spec import CampaignCreate
 
 CampaignState = Literal["queued", "running", "paused", "completed", "failed", "aborted"]
 Phase = Literal["ramp", "soak", "positions", "fitting"]
@@ -33,59 +39,8 @@ class RigCreate(BaseModel):
     sensors: list[Any] = Field(default_factory=list)
 
 
-# Sensor serials travel in URL paths (/api/v1/sensors/{serial}/...): no "/", no spaces.
-Serial = Annotated[str, Field(
-    min_length=1, max_length=64, pattern=SERIAL_PATTERN, examples=["SN-0001"],
-    description="sensor serial: letters, digits and _ . : - (first a letter or digit), "
-    "at most 64",
-)]
-# Optional keys the engine reads to tune a run (service/engine/spec.py).
+# Optional keys the engine reads to tune a run (calibration/campaign_spec.py).
 ENGINE_TUNING_KEYS = TUNING_KEYS
-# Sensors one campaign may name: a production fixture holds 8…16 (issue 12); 64 leaves room.
-MAX_SENSORS = 64
-
-
-class CampaignCreate(CampaignSpec):
-    """A campaign request: the engine's :class:`CampaignSpec` plus where and what to calibrate.
-
-    Everything but ``rig`` and the sensor has the lab's default; every key is typed
-    and bounded, and an unknown key is refused (422 naming it). The sensor is named
-    by exactly one of ``sensor`` (one) or ``sensors`` (several, each once; issue 12).
-    """
-
-    model_config = ConfigDict(extra="forbid")
-    rig: str = Field(min_length=1, max_length=64, examples=["sim"])
-    # Declared before ``sensor`` so that the ``sensor`` check sees it (pydantic field order).
-    sensors: list[Serial] | None = Field(
-        default=None, min_length=1, max_length=MAX_SENSORS,
-        description=f"several sensors calibrated together (1…{MAX_SENSORS}, each once)")
-    sensor: Serial | None = Field(default=None, validate_default=True,
-                                  description="the one sensor calibrated (or use `sensors`)")
-
-    @field_validator("sensors")
-    @classmethod
-    def _each_sensor_once(cls, sensors: list[str] | None) -> list[str] | None:
-        seen: set[str] = set()
-        for serial in sensors or []:
-            if serial in seen:
-                raise ValueError(f"sensor {serial!r} is named twice")
-            seen.add(serial)
-        return sensors
-
-    @field_validator("sensor")
-    @classmethod
-    def _sensor_or_sensors(cls, sensor: str | None, info: ValidationInfo) -> str | None:
-        several = info.data.get("sensors")
-        if sensor is None and several is None and "sensors" in info.data:
-            raise ValueError("name the sensor: 'sensor' (one) or 'sensors' (several)")
-        if sensor is not None and several is not None:
-            raise ValueError("give 'sensor' or 'sensors', not both")
-        return sensor
-
-    @property
-    def serials(self) -> list[str]:
-        """The campaign's sensors in order (one for ``sensor``)."""
-        return list(self.sensors) if self.sensors is not None else [str(self.sensor)]
 
 
 class Progress(BaseModel):

@@ -111,6 +111,11 @@ class Campaign(Base):
     # Several-sensor campaigns: serial → why it was dropped; serial → its calibration id.
     sensors_dropped: Mapped[dict[str, str] | None] = mapped_column(JSON)
     calibration_ids: Mapped[dict[str, int] | None] = mapped_column(JSON)
+    # The dry run's prediction, stored at creation (service.dry_run.prediction: duration_s,
+    # ramp_s, soak_s, positions_s, counts; duration_s None with ``why`` when it cannot be
+    # predicted). NULL: created before migration 0008, filled on first read. None is SQL
+    # NULL (not JSON null), so "not computed yet" is one value the conditional fill can test.
+    dry_run: Mapped[dict[str, Any] | None] = mapped_column(JSON(none_as_null=True))
 
 
 class Measurement(Base):
@@ -239,6 +244,8 @@ class Schedule(Base):
     last_run_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
     last_campaign_id: Mapped[int | None] = mapped_column(Integer)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    # The dry run's prediction of each campaign it fires (as Campaign.dry_run).
+    dry_run: Mapped[dict[str, Any] | None] = mapped_column(JSON(none_as_null=True))
 
 
 class ApiToken(Base):

@@ -10,6 +10,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from calibration.campaign_spec import (
+    DEFAULT_EXPECTED_SD_G,
+    DEFAULT_MAX_SPAN_C,
+    DEFAULT_TEMP_NOISE_C,
+)
 from drivers.protocols import Acquisition
 
 CHECKS = ("sample_count", "noise_sd", "temperature_span", "saturated")
@@ -17,13 +22,13 @@ CHECKS = ("sample_count", "noise_sd", "temperature_span", "saturated")
 
 @dataclass(frozen=True)
 class QualityLimits:
-    expected_sd_g: float = 2.5e-4  # rms noise of one raw sample (ADXL355: 25 µg/√Hz @ 62.5 Hz ODR)
+    expected_sd_g: float = DEFAULT_EXPECTED_SD_G  # rms noise of one raw sample
     sd_factor: float = 5.0  # sd above sd_factor × expected_sd_g: vibration, a bump, a bad cable
-    max_span_c: float = 0.2  # die temperature moved during the capture: not a static reading
+    max_span_c: float = DEFAULT_MAX_SPAN_C  # die moved during the capture: not static
     # rms noise of one raw temperature-channel sample. The driver reports max − min of the
     # raw channel, which for n noisy samples is ≈ 2σ·√(2 ln n) even on a still die; that
     # part is allowed on top of max_span_c so only die *movement* fails the check.
-    temp_noise_c: float = 0.1
+    temp_noise_c: float = DEFAULT_TEMP_NOISE_C
 
 
 def check_acquisition(acq: Acquisition, n_requested: int, limits: QualityLimits) -> list[str]:

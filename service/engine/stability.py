@@ -49,24 +49,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# The soak decision's defaults are the campaign spec's (written once there, with why).
+from calibration.campaign_spec import (
+    DEFAULT_DRIFT_BUDGET,
+    DEFAULT_EDGE_TOL_C,
+    DEFAULT_GRADIENT_LAG_S,
+    DEFAULT_STEP_TOL_C,
+    DEFAULT_TEMPCO_UG_PER_C,
+)
+
 POLICIES = ("predictive", "dwell", "fixed")
 
-# ADXL355 datasheet: offset tempco ±0.15 mg/°C (max), sensitivity tempco 0.01 %/°C
-# (0.1 mg/°C at 1 g): the larger is the output change per °C of temperature error.
-DEFAULT_TEMPCO_UG_PER_C = 150.0
-# A soak-induced error may add this fraction of the reading noise (≈ 3 % in quadrature).
-DEFAULT_DRIFT_BUDGET = 0.25
-# Package/board lag behind the die reading while the die moves: ceramic LCC package
-# ≈ 0.15 J/K on ≈ 30 K/W of pads and board → R·C ≈ 5 s, doubled for margin.
-DEFAULT_GRADIENT_LAG_S = 10.0
-# Every position within this of the step's final temperature, so the steps stay where the
-# plan put them. Measured (issue 12, docs/benchmarks.md): with the same position noise, soaks
-# ending ≈ 1.9 °C from the final value (the former 2 °C, a fifth of the seed's spacing) cost
-# a sensor 3–4 % of held-out error, ≈ 0.9 °C nothing measurable.
-DEFAULT_STEP_TOL_C = 1.0
-# The calibration core's valid range is the step temperatures ± 1 °C; keeping the
-# extreme steps within 0.7 °C of their final value leaves 3 σ of a reading's 0.1 °C.
-DEFAULT_EDGE_TOL_C = 0.7
 SWEEP_POINTS = 25  # samples of the sweep used to evaluate its error (~ one per position)
 
 

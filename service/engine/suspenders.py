@@ -17,10 +17,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# The band and the clear time are the campaign spec's defaults (written once there).
+from calibration.campaign_spec import DEFAULT_BAND_C, DEFAULT_CLEAR_S
 from drivers.protocols import ChamberStatus, TurntableStatus
-
-DEFAULT_BAND_C = 2.0  # PV farther than this from the setpoint during a sweep: out of band
-DEFAULT_CLEAR_S = 60.0  # a condition must stay clear this long (clock s) before resuming
 
 
 @dataclass(frozen=True)

@@ -9,10 +9,10 @@ from engine_fakes import make_fake_rig
 from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
 from test_runner import assert_complete_once, campaign, measurements
 
+from calibration.campaign_spec import MAX_SETTLE_S
 from drivers.clock import VirtualClock
 from service.engine import store
 from service.engine.runner import ABORT_CHECK_S, CampaignRunner
-from service.engine.spec import MAX_SETTLE_S
 from service.engine.states import IllegalTransition, check_action
 
 

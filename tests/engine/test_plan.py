@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 
 import numpy as np
 import pytest
@@ -224,20 +223,17 @@ def test_dry_run_counts_the_order_s_table_travel_and_one_capture_for_all_sensors
 def test_wait_stable_says_how_many_steps_share_its_position_order() -> None:
     """A campaign measuring the rate gain starts every step from home, so every step of the
     travel order is the same permutation; chained from the step before, they differ."""
-    from calibration.campaign_plan import PlanSpec, WaitStable, campaign_plan
+    from calibration.campaign_plan import WaitStable, campaign_plan
+    from calibration.campaign_spec import CampaignSpec
     from calibration.schedules import table1
 
-    @dataclasses.dataclass(frozen=True)
-    class Spec(PlanSpec):
-        rate_gain: str = "assumed"
-
-    sp = [-40.0, -30.0, -20.0, -10.0, 0.0]
-    home = Spec(sp, 200, position_order="travel", rate_gain="measured")
+    sp = (-40.0, -30.0, -20.0, -10.0, 0.0)
+    home = CampaignSpec(setpoints_c=sp, position_order="travel", rate_gain="measured")
     poses = angles_for_references(table1())
     waits = [m for m in campaign_plan(home, table1(), angles_deg=poses)
              if isinstance(m, WaitStable)]
     assert [w.order_repeats for w in waits] == [len(sp)] * len(sp)
-    seeded = Spec(sp, 200, position_order="random", position_order_seed=1)
+    seeded = CampaignSpec(setpoints_c=sp, position_order="random", position_order_seed=1)
     waits = [m for m in campaign_plan(seeded, table1()) if isinstance(m, WaitStable)]
     assert [w.order_repeats for w in waits] == [1] * len(sp)
 

@@ -1,4 +1,5 @@
-"""The campaign spec: one pydantic model, every engine key typed, bounded and used."""
+"""The campaign spec: one typed model (calibration/campaign_spec.py), every engine key typed,
+bounded, defaulted once and used; the API body, the engine's view and the plan read it."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ import dataclasses
 import pytest
 from pydantic import ValidationError
 
+from calibration.campaign_spec import TUNING_KEYS, CampaignSpec
 from service.api.schemas import CampaignCreate
-from service.engine.spec import TUNING_KEYS, CampaignSpec, parse_spec
+from service.engine.spec import RunSpec, parse_spec
 
 # A valid, non-default value for every tuning key. The first test keeps this table equal to
 # the model's fields, the second proves each value changes what the runner reads: a key
@@ -77,3 +79,47 @@ def test_bad_values_are_refused_naming_the_field(key: str, value: object) -> Non
 def test_a_stored_spec_with_a_bad_value_is_refused_by_the_engine_too() -> None:
     with pytest.raises(ValueError, match="samples_per_position"):
         parse_spec({"samples_per_position": 200000})
+
+
+def test_the_engine_view_has_no_default_of_its_own() -> None:
+    # A default written on RunSpec would be a second one (the old RunSpec said "travel"
+    # while the plan's spec said "table"); every value comes from the one spec.
+    assert [f.name for f in dataclasses.fields(RunSpec)
+            if f.default is not dataclasses.MISSING
+            or f.default_factory is not dataclasses.MISSING] == []
+    run, spec = parse_spec({}), CampaignSpec()
+    assert (run.position_order, spec.position_order) == ("travel", "travel")
+    assert run.ramp_c_per_min == spec.ramp_c_per_min == 1.0
+    assert run.stability.max_soak_s == spec.max_soak_s == 2 * 60.0 * 60.0
+    assert run.method == "soak"
+
+
+def test_sensors_are_typed_and_one_sensor_is_a_list_of_one() -> None:
+    one = parse_spec(CampaignCreate.model_validate({"rig": "sim", "sensor": "SN-1"}).stored())
+    assert one.sensors == ("SN-1",)
+    body = {"rig": "sim", "sensors": ["SN-2", "SN-1"]}
+    several = CampaignCreate.model_validate(body)
+    assert several.sensors == ("SN-2", "SN-1") and several.serials == ["SN-2", "SN-1"]
+    assert several.stored()["sensors"] == ["SN-2", "SN-1"]  # stored as JSON
+    assert parse_spec(several.stored()).sensors == ("SN-2", "SN-1")
+    for bad, why in ((["SN-1", "SN-1"], "named twice"), (["a/b"], "pattern"), ([], "at least")):
+        with pytest.raises(ValidationError, match=why) as info:
+            CampaignCreate.model_validate({"rig": "sim", "sensors": bad})
+        assert info.value.errors()[0]["loc"][0] == "sensors"
+    with pytest.raises(ValueError, match="named twice"):
+        parse_spec({"sensors": ["SN-1", "SN-1"]})  # a stored spec is checked the same way
+
+
+def test_the_spec_is_immutable_and_the_plan_reads_it_as_given() -> None:
+    from calibration.campaign_plan import Acquire, SetChamber, campaign_plan
+    from calibration.schedules import table1
+
+    spec = CampaignSpec(setpoints_c=(-10, 20), samples_per_position=50, ramp_c_per_min=2.5,
+                        position_order="table")
+    with pytest.raises(ValidationError, match="frozen"):
+        spec.soak_min = 1.0  # type: ignore[misc]
+    msgs = list(campaign_plan(spec, table1()))
+    assert [m.ramp_c_per_min for m in msgs if isinstance(m, SetChamber)] == [2.5, 2.5]
+    assert {m.n_samples for m in msgs if isinstance(m, Acquire)} == {50}
+    with pytest.raises(ValidationError, match="samples_per_position"):
+        CampaignSpec(samples_per_position=200000)  # the simulator's spec is checked too
