@@ -17,8 +17,12 @@ from service.cli import main
 def test_method_soak_is_the_default_and_ramp_is_accepted_with_a_range(
         client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
     assert new_campaign(client, auth["operator"])["spec"]["method"] == "soak"
-    assert new_campaign(client, auth["operator"], method="ramp",
-                        setpoints_c=[-20, 40])["spec"]["method"] == "ramp"
+    ramp = new_campaign(client, auth["operator"], method="ramp", setpoints_c=[-20, 40])
+    assert ramp["spec"]["method"] == "ramp"
+    # the stored dry run is the ramp's: 120 °C of legs at 1 °C/min and two holds, < 8 h
+    assert 120 * 60 < ramp["predicted_duration_s"] < 8 * 3600
+    soak = new_campaign(client, auth["operator"], setpoints_c=[-20, 40])
+    assert ramp["predicted_duration_s"] != soak["predicted_duration_s"]
     r = client.post("/api/v1/campaigns", headers=auth["operator"],
                     json={"rig": "sim", "sensor": "SN-0001", "method": "ramp",
                           "setpoints_c": [20]})
