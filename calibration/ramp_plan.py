@@ -286,7 +286,8 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
             if arrived_at is not None:
                 for key, die_c in _dies(reply).items():
                     since.setdefault(key, []).append(die_c)
-            status = yield ReadChamber()
+            else:  # the chamber is read until it arrives; then the dies decide the hold
+                status = yield ReadChamber()
         leg_i += 1
     yield Fit()
 
