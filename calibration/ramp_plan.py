@@ -8,9 +8,13 @@ own die temperature (``sensor_c``) and the chamber air (``chamber_c``), and the
 calibration fits the twelve SFEM parameters as polynomials of each reading's own die
 temperature (:mod:`calibration.continuous`, no steps).
 
-Like :func:`calibration.campaign_plan.campaign_plan` it is one generator of small
-messages, run by several interpreters: the engine (devices), the offline twin
-(:mod:`simulators.ramp_campaign_sim`) and the dry run (:func:`predict_ramp`).
+Like :func:`calibration.campaign_plan.campaign_plan` it is one generator written with
+the engine's verbs and plan stubs (``SetChamber`` commands the chamber and does not wait
+for it, ``ReadChamber``, ``measure_position`` with ``Save(band=False)``), run by several
+interpreters: the engine (devices), the offline twin (:mod:`simulators.ramp_campaign_sim`)
+and the dry run (:func:`predict_ramp`). A leg ends when the air is within ``tol_c`` of
+its target and the working setpoint (where the controller has one) is there; the
+chamber is read after every capture until then.
 
 **Legs.** ``lo``/``hi`` are the lowest and highest setpoint. From the chamber's
 temperature at the start the legs are: to ``lo``, to ``hi``, back to ``end_c`` (the
