@@ -260,6 +260,7 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
         yield SetChamber(leg.index, leg.target_c, rate)  # the step of a SetChamber: its leg
         arrived_at: int | None = None  # captures since the air arrived (hold legs)
         since: dict[str, list[float]] = {}
+        waiting_on: str | None = None
         captures = 0
         status = yield ReadChamber()
         while True:
@@ -272,9 +273,14 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
             if here and arrived_at is None:
                 arrived_at = captures
             if arrived_at is not None:
-                left = max((remaining_approach_c(v, block) for v in since.values()),
-                           default=math.inf)
-                if left <= edge_gap_c or captures - arrived_at >= hold_cap:
+                # the die that said "not yet" last is asked first; the first "not yet" ends
+                # the round (the slowest die decides; one estimate per capture, not one per die)
+                settled = bool(since)
+                for key in sorted(since, key=lambda k: k != waiting_on):
+                    if remaining_approach_c(since[key], block) > edge_gap_c:
+                        settled, waiting_on = False, key
+                        break
+                if settled or captures - arrived_at >= hold_cap:
                     break
             if not queue:
                 sweep += 1
