@@ -15,6 +15,10 @@ drivers/modbus_link.py):
   ``running`` with ``suspended_reason`` set (``on_suspend``) and the call is
   retried every ``suspend_poll_s`` until the device answers (``on_resume``),
   like a bluesky suspender.
+* a device the campaign can go on without (one sensor of several, while
+  another still reads) is given up instead (``give_up``): its configuration
+  fault, or a transient one that outlasts the retries, drops that sensor
+  (service/engine/sensors.py); the last sensor left suspends like any device.
 * suspended for longer than ``suspend_limit_s`` of **real** outage time:
   :class:`CampaignFailed`. Real time is the clock's time divided by its speed-up
   (``ScaledClock.factor``); a sped-up twin at 3000× would otherwise turn the

@@ -1,17 +1,22 @@
-"""The campaign interpreter: one plan (ramp → soak → positions per step, then fitting)
-executed over a persisted cursor.
+"""The campaign engine: the message loop that runs a plan (calibration/campaign_plan.py)
+over a persisted cursor.
+
+The plan is the protocol (ramp, soak, the sweep of positions, the retake of a
+capture off its pose); the engine executes its verbs, one handler each, and
+owns what no plan should: checkpoints (pause, abort), the one hold loop of
+the suspenders and the rewind after it, progress and its subscribers, the
+commit of each save, and the one ``finally`` that parks the rig.
 
 Crash safety rests on one rule: a measurement row and the cursor move past it
 are committed in one transaction *before the table moves again*. On start the
-runner reads the measurements table (the ground truth, not the cursor), skips
-every (step, position) already stored and resumes at the first missing one;
-a step with some positions measured is re-ramped (idempotent) and re-soaked
-with a short re-check, because the chamber may have drifted while nobody ran
-it. The database's UNIQUE(campaign_id, step, position) turns a duplicate
-insert into "already stored".
-
-Pause, resume, abort and device suspensions are engine features, checked at
-safe points (every soak poll, every position), not per-phase code.
+runner reads the measurements table (the ground truth, not the cursor) and
+runs the plan with what is stored as ``done``: every (step, position) already
+stored is skipped; a step with some positions measured is re-ramped
+(idempotent) and re-soaked with a short re-check, because the chamber may
+have drifted while nobody ran it. A suspension is the same replay: after a
+chamber suspender's hold, the plan resumes from what is stored. The
+database's UNIQUE(campaign_id, step, position) turns a duplicate insert into
+"already stored".
 """
 
 from __future__ import annotations
@@ -87,6 +92,8 @@ StepReporter = Callable[[dict[str, Any]], None]
 # (calibration.campaign_plan.campaign_plan's signature); called again with what is stored
 # after a hold (a rewind) and on every restart.
 PlanFactory = Callable[..., Any]
+# The plan of each campaign method (spec ``method``); a campaign's own ``plan=`` wins.
+PLANS: dict[str, PlanFactory] = {"soak": campaign_plan}
 TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 # Shortest wait between two soak polls when the decision predicts stability sooner than a
@@ -112,7 +119,7 @@ class CampaignRunner:
         clock: Clock,
         *,
         calibrate: Calibrate = calibrate_columns,
-        plan: PlanFactory = campaign_plan,
+        plan: PlanFactory | None = None,
         on_step: StepReporter | None = None,
         fence: store.Fence | None = None,
     ) -> None:
@@ -232,6 +239,13 @@ class CampaignRunner:
             self.spec = spec = parse_spec(camp.spec)
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
+        if self.plan is None:
+            method = str(getattr(spec, "method", None)
+                         or getattr(spec, "extra", {}).get("method") or "soak")
+            if method not in PLANS:
+                raise CampaignFailed(f"spec: method {method!r}: this engine runs "
+                                     f"{', '.join(PLANS)}")
+            self.plan = PLANS[method]
         self.sensor_serial = str(camp.sensor)
         several = spec.extra.get("sensors")
         # The campaign's sensors, one or several (issue 12): each read at every position,
@@ -280,6 +294,7 @@ class CampaignRunner:
                                      f"(mounted: {', '.join(self.dev.accelerometers) or 'one'})")
         # The table's pose of each position, by this rig's geometry: the travel order's costs.
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
+        assert self.plan is not None  # chosen by _start
         while True:
             if spec.method == "ramp":  # the ramp plan, resumed from the store (engine/ramp.py)
                 self._ramp = self._ramp or RampProgress(self)

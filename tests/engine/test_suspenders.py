@@ -16,7 +16,7 @@ from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import select
 from test_safe_state import assert_safe, n_measured, rig_state, twin, until
 
-from calibration.campaign_plan import WaitStable
+from calibration.campaign_plan import PollSoak, SetChamber, WaitStable
 from drivers.clock import VirtualClock
 from service.db.models import Measurement
 from service.engine import store
@@ -108,3 +108,29 @@ async def test_table_never_in_position_suspends_then_fails_safe(sf) -> None:  # 
         assert "600 s of real time" in store.load_campaign(sf, cid).error
         sim.faults.table.never_in_position = False
         assert_safe(*await rig_state(sim, clock))
+
+
+@SQLITE_ONLY
+async def test_a_disturbed_soak_is_a_hold_then_a_fresh_soak(sf) -> None:  # type: ignore[no-untyped-def]
+    # The door opened mid-soak, before any position of the step was stored: after the hold
+    # the plan replays the step from what is stored (nothing), so the soak starts afresh
+    # (not the short re-check of a step with positions stored), and the step has one log.
+    clock = VirtualClock(idle_wall_s=0.0003)
+    cid = add_campaign(sf, SPEC, rig="lab")
+    async with twin(clock) as (sim, devices):
+        runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
+        seen: list[Any] = []
+        runner.subscribe(lambda msg, _t0, _t1: seen.append(msg))
+        task = asyncio.create_task(runner.run())
+        await until(lambda: any(isinstance(m, PollSoak) for m in seen))
+        sim.chamber.advance_to()
+        sim.chamber.air_c += 12.0
+        assert await asyncio.wait_for(task, 60) == "completed"
+    assert [e["suspender"] for e in runner.suspension_log] == ["chamber_alarm"]
+    resoaks = [(m.step, m.resumed) for m in seen if isinstance(m, WaitStable)]
+    assert resoaks == [(0, False), (1, False)], resoaks  # the disturbed one never ended
+    ramps = [m.step for m in seen if isinstance(m, SetChamber)]
+    assert ramps == [0, 0, 1]  # the replay commands the step's setpoint again
+    log = store.load_campaign(sf, cid).steps_log
+    assert [e["step"] for e in log] == [0, 1] and not log[0]["resumed"]
+    assert max(keys(sf, cid).values()) == 1 and len(keys(sf, cid)) == 12
