@@ -53,8 +53,10 @@ class RampProgress:
         self.active0_s = 0.0
         self.legs_done = 0
 
-    def plan(self, done: set[tuple[int, int]], angles_deg: np.ndarray) -> Any:
-        """The ramp plan after what is stored (a fresh prediction at its first publish)."""
+    def plan(self, spec: Any, refs: np.ndarray, done: set[tuple[int, int]], *,
+             sensors: Any, angles_deg: np.ndarray) -> Any:
+        """The ramp plan after what is stored (the runner's plan factory: campaign_plan's
+        signature; a fresh prediction at its first publish)."""
         r = self.r
         cols = store.measurement_columns(r.sf, r.id, r.serials[0] if r.serials else None)
         self.end_c = end_c(r.dev, r.spec)
@@ -64,8 +66,8 @@ class RampProgress:
             self.legs_done = rp.legs_done_from(cols["setpoint_c"], legs)
         self.done, self.angles_deg, self.n_done0 = done, angles_deg, len(done)
         self.predicted_s = None
-        return rp.ramp_plan(r.spec, r.refs, end_c=self.end_c, done=done,
-                            legs_done=self.legs_done, sensors=r.serials, angles_deg=angles_deg)
+        return rp.ramp_plan(spec, refs, end_c=self.end_c, done=done,
+                            legs_done=self.legs_done, sensors=sensors, angles_deg=angles_deg)
 
     def _predict(self, start_c: float) -> None:
         from calibration.position_order import DEFAULT_ACCEL_DEG_PER_S2, DEFAULT_SLEW_DEG_PER_S

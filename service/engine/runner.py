@@ -242,10 +242,14 @@ class CampaignRunner:
         if self.plan is None:
             method = str(getattr(spec, "method", None)
                          or getattr(spec, "extra", {}).get("method") or "soak")
-            if method not in PLANS:
+            if method == "ramp":  # its plan resumes from the store and the rig (engine/ramp.py)
+                self._ramp = RampProgress(self)
+                self.plan = self._ramp.plan
+            elif method not in PLANS:
                 raise CampaignFailed(f"spec: method {method!r}: this engine runs "
-                                     f"{', '.join(PLANS)}")
-            self.plan = PLANS[method]
+                                     f"{', '.join([*PLANS, 'ramp'])}")
+            else:
+                self.plan = PLANS[method]
         self.sensor_serial = str(camp.sensor)
         several = spec.extra.get("sensors")
         # The campaign's sensors, one or several (issue 12): each read at every position,
@@ -296,12 +300,8 @@ class CampaignRunner:
         angles_deg = np.array([self.dev.angles_for(r) for r in self.refs], float)
         assert self.plan is not None  # chosen by _start
         while True:
-            if spec.method == "ramp":  # the ramp plan, resumed from the store (engine/ramp.py)
-                self._ramp = self._ramp or RampProgress(self)
-                plan = self._ramp.plan(done, angles_deg)
-            else:
-                plan = self.plan(spec, self.refs, done, sensors=self.serials,
-                                 angles_deg=angles_deg)
+            plan = self.plan(spec, self.refs, done, sensors=self.serials,
+                             angles_deg=angles_deg)
             try:
                 await self._run_plan(plan)
                 return
