@@ -31,7 +31,9 @@ ramp each orientation is met early and late in a sweep on alternate passes, so n
 orientation is tied to one side of the die's drift). A sweep is one ``step`` index in
 the stored measurements (UNIQUE(campaign, step, position)); a leg may end inside a
 sweep, the sweep goes on into the next leg. Every capture is saved without the
-soak's setpoint band (the air is meant to be away from the setpoint).
+soak's setpoint band (the air is meant to be away from the setpoint), with the setpoint
+in force as ``setpoint_c``: the ramping working setpoint on the way (so the calibration
+never takes a sweep for a soak at a held setpoint), the leg's target while holding.
 
 **Holds, only where the physics needs them.** A die lags its air first-order with its
 time constant τ: during a ramp at r °C/min it trails by r·τ (30 °C for τ = 15 min at
@@ -51,7 +53,7 @@ die (51 min for τ = 15 min at 2 °C/min); it is capped by the soak cap
 none at the end (the range is already covered both ways there).
 
 **Resume.** Pass the stored (step, position) pairs as ``done`` and the number of legs
-finished (:func:`legs_done_from`, from the stored rows' setpoints): stored captures are
+finished (:func:`legs_done_from`, from the stored rows' setpoints in force): stored captures are
 skipped, the sweep count continues, and the current leg is commanded again from
 wherever the chamber now is (a hold restarts: the die may have drifted meanwhile).
 """
@@ -95,6 +97,8 @@ STILL_SIGMAS = 3.0
 TYPICAL_MOVE_S = 12.0
 # The air counts as arrived within this of the leg's target (the soak's default tol_c).
 DEFAULT_ARRIVED_C = 0.3
+# A working setpoint this close to a leg's target is at it (as the runner's WaitChamber).
+TARGET_TOL_C = 1e-3
 
 
 @dataclass(frozen=True)
@@ -130,16 +134,30 @@ def ramp_legs(setpoints_c: Sequence[float], start_c: float, end_c: float) -> lis
 def legs_done_from(stored_setpoints_c: Sequence[float], legs: Sequence[Leg]) -> int:
     """Legs finished before an interruption, from the stored rows' setpoints in time order.
 
-    Every capture is saved with its leg's target as ``setpoint_c``; consecutive legs have
-    different targets, so the runs of equal setpoints are the legs reached.
+    Every capture is saved with the setpoint in force (:func:`setpoint_in_force`): the
+    ramping working setpoint on the way, the leg's target once there. A leg is finished
+    when its target was reached and a later capture's setpoint left it (towards the next).
     """
-    runs = 0
-    last: float | None = None
+    leg, reached = 0, False
     for sp in stored_setpoints_c:
-        if last is None or abs(float(sp) - last) > 1e-9:
-            runs += 1
-            last = float(sp)
-    return max(0, min(runs - 1, len(legs) - 1))
+        at_target = abs(float(sp) - legs[leg].target_c) < TARGET_TOL_C
+        if at_target:
+            reached = True
+        elif reached and leg + 1 < len(legs):
+            leg, reached = leg + 1, abs(float(sp) - legs[leg + 1].target_c) < TARGET_TOL_C
+    return leg
+
+
+def setpoint_in_force(status: Any, target_c: float, arrived: bool) -> float:
+    """A capture's ``setpoint_c``: the chamber setpoint in force (recording format v1).
+
+    On the way it is the controller's ramping working setpoint (a controller without one:
+    the air, within its lag of it), so the calibration never takes a sweep's rows for a
+    soak at a held setpoint; once the air has arrived, the leg's target."""
+    if arrived:
+        return float(target_c)
+    wsp = getattr(status, "working_setpoint_c", None)
+    return float(getattr(status, "process_c", target_c) if wsp is None else wsp)
 
 
 def sweep_order(base: Sequence[int], sweep: int) -> list[int]:
@@ -267,7 +285,7 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
             air_c = float(getattr(status, "process_c", math.nan))
             wsp = getattr(status, "working_setpoint_c", None)  # None: a controller without
             here = (abs(air_c - leg.target_c) <= arrived_c
-                    and (wsp is None or abs(float(wsp) - leg.target_c) < 1e-3))
+                    and (wsp is None or abs(float(wsp) - leg.target_c) < TARGET_TOL_C))
             if here and not leg.hold:
                 break
             if here and arrived_at is None:
@@ -289,8 +307,9 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
             pos = queue.pop(0)
             ref = (float(refs[pos, 0]), float(refs[pos, 1]), float(refs[pos, 2]))
             next_pos = queue[0] if queue else n_pos
-            # each capture stored with its leg's target as setpoint_c, without the band
-            reply = yield from measure_position(sweep, pos, leg.target_c, ref, next_pos,
+            # each capture stored with the setpoint in force, without the band
+            setpoint_c = setpoint_in_force(status, leg.target_c, arrived_at is not None)
+            reply = yield from measure_position(sweep, pos, setpoint_c, ref, next_pos,
                                                 serials, n, settle_s, band=False)
             captures += 1
             if arrived_at is not None:

@@ -30,12 +30,21 @@ def test_legs_go_cold_first_then_hot_then_back_holding_only_at_turnarounds() -> 
     assert [(g.target_c, g.hold) for g in legs] == [(-40.0, True), (0.0, False)]
 
 
-def test_legs_done_counts_the_runs_of_stored_setpoints() -> None:
+def test_legs_done_from_the_stored_setpoints_in_force() -> None:
     legs = rp.ramp_legs([-40.0, 60.0], 23.0, 23.0)
+    down = [20.0, 0.0, -30.0]  # the working setpoint ramping to the cold end
     assert rp.legs_done_from([], legs) == 0
-    assert rp.legs_done_from([-40.0] * 5, legs) == 0
-    assert rp.legs_done_from([-40.0] * 5 + [60.0] * 3, legs) == 1
-    assert rp.legs_done_from([-40.0, 60.0, 23.0, 23.0], legs) == 2
+    assert rp.legs_done_from(down, legs) == 0
+    assert rp.legs_done_from(down + [-40.0] * 5, legs) == 0  # holding at the cold end
+    assert rp.legs_done_from(down + [-40.0] * 5 + [-35.0, 10.0], legs) == 1
+    assert rp.legs_done_from(down + [-40.0, -20.0, 60.0, 60.0], legs) == 1
+    assert rp.legs_done_from(down + [-40.0, 0.0, 60.0, 50.0, 30.0], legs) == 2
+    # a capture's setpoint: the ramping working setpoint, the target once arrived
+    status = type("S", (), {"process_c": 11.0, "working_setpoint_c": 9.5})()
+    assert rp.setpoint_in_force(status, -40.0, arrived=False) == 9.5
+    assert rp.setpoint_in_force(status, -40.0, arrived=True) == -40.0
+    status.working_setpoint_c = None  # a controller without one: the air
+    assert rp.setpoint_in_force(status, -40.0, arrived=False) == 11.0
 
 
 def test_remaining_approach_of_a_first_order_die_is_its_gap() -> None:

@@ -14,6 +14,7 @@ import pytest
 from engine_helpers import SQLITE_ONLY, add_campaign, fake_calibrate
 from sqlalchemy import func, select
 
+from calibration.ramp_plan import legs_done_from, ramp_legs
 from calibration.recording import Recording, write_recording
 from drivers.clock import VirtualClock
 from service.cli import main
@@ -57,10 +58,14 @@ async def test_a_ramp_campaign_sweeps_while_the_chamber_moves_and_is_fitted_cont
     cid = add_campaign(sf, SPEC)
     assert await _run(sf, cid) == "completed"
     rows = _rows(sf, cid)
-    # The legs, in order, are the stored rows' setpoints: 20 (cold end first), 28, back to 23.
-    legs = [rows["setpoint_c"][0]] + [b for a, b in zip(rows["setpoint_c"], rows["setpoint_c"][1:],
-                                                       strict=False) if a != b]
-    assert legs == [20.0, 28.0, 23.0]
+    # The legs, in order, in the stored setpoints in force: 20 (cold end first, held there),
+    # 28 (held), then ramping back towards 23.
+    sp = rows["setpoint_c"]
+    first_cold, first_hot = np.flatnonzero(sp == 20.0)[0], np.flatnonzero(sp == 28.0)[0]
+    assert 0 < first_cold < first_hot and np.all(sp[first_hot:] >= 23.0 - 1e-9)
+    assert np.all(np.diff(sp[:first_cold + 1]) <= 0)
+    assert np.all(np.diff(sp[first_cold:first_hot + 1]) >= 0)
+    assert legs_done_from(sp, ramp_legs(SPEC["setpoints_c"], 23.0, 23.0)) == 2
     # Many sweeps of the six positions, each a step index; every capture with its die and air.
     sweeps = np.unique(rows["step"])
     assert sweeps.size >= 8 and set(np.unique(rows["position"])) == set(range(6))
@@ -112,7 +117,4 @@ async def test_a_resumed_ramp_campaign_skips_the_stored_sweeps_and_continues_the
     # the sweep count continues after the stored ones, and campaign time too
     new = after["t_s"] > before["t_s"].max()
     assert after["step"][new].min() >= before["step"].max()
-    assert [after["setpoint_c"][0]] + [b for a, b in zip(after["setpoint_c"],
-                                                         after["setpoint_c"][1:],
-                                                         strict=False) if a != b] \
-        == [20.0, 28.0, 23.0]
+    assert legs_done_from(after["setpoint_c"], ramp_legs(SPEC["setpoints_c"], 23.0, 23.0)) == 2

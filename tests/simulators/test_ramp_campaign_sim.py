@@ -27,7 +27,10 @@ def test_each_sensor_is_stamped_with_its_own_die_and_the_shared_air() -> None:
     # sweeps are step indices of six captures each; every capture has its leg's target
     steps = a.columns["step"]
     assert np.all(np.diff(steps) >= 0) and np.bincount(steps.astype(int)).max() <= 6
-    assert set(np.unique(a.columns["setpoint_c"])) == {0.0, 40.0, 23.0}
+    # the setpoint in force: ramping on the legs, held at the two ends while holding
+    sp = a.columns["setpoint_c"]
+    assert np.unique(sp).size > 20 and np.sum(sp == 0.0) > 6 and np.sum(sp == 40.0) > 6
+    assert sp.min() == 0.0 and sp.max() == 40.0
 
 
 def test_the_recording_is_fitted_continuously_near_the_noise_limit() -> None:
