@@ -285,7 +285,8 @@ def measure_position(step: int, position: int, setpoint_c: float,
                      serials: tuple[str, ...], samples: int, settle_s: float,
                      band: bool = True) -> Plan:
     """Move to one position, settle, read every sensor at once and store the readings;
-    again from the move while the interpreter answers the save with :data:`RETAKE`."""
+    again from the move while the interpreter answers the save with :data:`RETAKE`.
+    Returns the stored readings (``Acquire``'s reply: the ramp plan reads the dies)."""
     while True:
         yield Checkpoint()
         yield Move(step, position, ref_g)
@@ -293,7 +294,7 @@ def measure_position(step: int, position: int, setpoint_c: float,
         by_sensor = yield Acquire(step, position, samples, serials)
         if (yield Save(step, position, setpoint_c, ref_g, by_sensor, next_position, serials,
                        band)) != RETAKE:
-            return
+            return by_sensor
 
 
 def campaign_plan(spec: Any, refs: np.ndarray,

@@ -143,7 +143,8 @@ class CampaignSpec(BaseModel):
     method: Literal["soak", "ramp"] = Field(
         default="soak",
         description="soak: the chamber holds each setpoint until the die is stable; ramp: "
-        "the chamber never stops (not run by this engine yet: refused with the reason)")
+        "the chamber ramps through the setpoints' range and back while the table sweeps, "
+        "each capture at its die's own temperature (calibration/ramp_plan.py)")
     # Declared before ``sensor`` of the request (pydantic field order: its check sees it).
     sensors: tuple[Serial, ...] | None = Field(
         default=None, min_length=1, max_length=MAX_SENSORS,

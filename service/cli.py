@@ -118,11 +118,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_rig(sub)
     _add_ops(sub)
     _add_twin(sub)
-    demo = sub.add_parser("demo", help="run one simulated soak campaign end to end")
+    demo = sub.add_parser("demo", help="run one simulated campaign (soak or ramp) end to end")
     demo.add_argument("--out", metavar="DIR", help="where the recording, model and report go")
     demo.add_argument("--fast", action="store_true", help="a shorter campaign (smoke test)")
     demo.add_argument("--method", choices=("soak", "ramp"), default="soak",
-                      help="soak (default); ramp is refused: not run by this engine yet")
+                      help="soak (default) or ramp: the chamber ramps −40 → 60 °C and back "
+                      "while the table sweeps (docs/ramp-campaigns.md)")
     demo.set_defaults(handler=_delegate("service.demo", "run_demo", "demo"))
     _add_demo_sensors(sub)
     sub.add_parser(

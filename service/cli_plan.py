@@ -32,7 +32,8 @@ def add_plan_parser(actions: Any) -> None:
     plan.add_argument("--ramp-c-per-min", type=float, help="chamber ramp, °C/min (default 1)")
     plan.add_argument("--stability", help="predictive | dwell | fixed (default predictive)")
     plan.add_argument("--method", choices=("soak", "ramp"),
-                      help="soak (default) or ramp (refused: not run by this engine yet)")
+                      help="soak (default) or ramp (legs through the range and back while "
+                      "the table sweeps: docs/ramp-campaigns.md)")
     plan.add_argument("--json", action="store_true", help="print the verdict as JSON")
     plan.set_defaults(handler=run_plan)
 

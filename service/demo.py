@@ -1,4 +1,8 @@
-"""``soakcal demo``: one complete simulated soak campaign, end to end, in accelerated time.
+"""``soakcal demo``: one complete simulated campaign, end to end, in accelerated time.
+
+``--method ramp``: the ramp method instead (calibration/ramp_plan.py, docs/ramp-campaigns.md):
+the chamber ramps through the range and back while the table sweeps, and the recording
+is fitted continuously in each capture's die temperature.
 
 The real stacks all run: the simulated chamber and turntable as Modbus TCP
 servers on loopback, the simulated ADXL355 behind the serial bridge protocol,
@@ -14,7 +18,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -55,15 +58,10 @@ def demo_serials(n: int) -> list[str]:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    """Entry point of ``soakcal demo [--method soak] [--out DIR] [--fast] [--sensors N]``."""
-    if getattr(args, "method", None) == "ramp":
-        from service.engine.spec import RAMP_NOT_RUN
-
-        print(f"soakcal demo: --method ramp: {RAMP_NOT_RUN}", file=sys.stderr)
-        return 2
+    """Entry point of ``soakcal demo [--method soak|ramp] [--out DIR] [--fast] [--sensors N]``."""
     out = Path(getattr(args, "out", None) or "soakcal-demo")
     fast = bool(getattr(args, "fast", False))
-    spec = demo_spec(fast)
+    spec = ramp_demo_spec(fast) if getattr(args, "method", None) == "ramp" else demo_spec(fast)
     n_sensors = int(getattr(args, "sensors", 1) or 1)
     if n_sensors > 1:
         spec["sensors"] = demo_serials(n_sensors)
@@ -71,6 +69,20 @@ def run_demo(args: argparse.Namespace) -> int:
     if order:  # absent: the engine's default (travel)
         spec["position_order"] = str(order)
     return asyncio.run(_demo(out, spec))
+
+
+def ramp_demo_spec(fast: bool = False) -> dict[str, Any]:
+    """The ramp method over the seed's range: −40 → 60 °C and back at 3 °C/min, Table 1
+    swept over and over, 200 samples per capture (docs/ramp-campaigns.md); ``fast``: a
+    narrow range (0…30 °C)."""
+    return {
+        "method": "ramp",
+        "setpoints_c": [0.0, 30.0] if fast else [-40.0, 60.0],
+        "soak_min": 60,
+        "positions": "table1",
+        "samples_per_position": 200,
+        "ramp_c_per_min": 3.0,
+    }
 
 
 def demo_spec(fast: bool = False) -> dict[str, Any]:
@@ -100,9 +112,17 @@ async def _demo(out: Path, spec: dict[str, Any],
     store.fast_sqlite_commits(sf)
     cid = _create_campaign(sf, spec)
     n_steps = len(spec["setpoints_c"])
-    print(f"soakcal demo: {n_steps} steps {spec['setpoints_c'][0]:g}…{spec['setpoints_c'][-1]:g}"
-          f" °C × 24 positions × {spec['samples_per_position']} samples, simulated rig over "
-          "Modbus TCP + serial on loopback, virtual time", flush=True)
+    ramp = spec.get("method") == "ramp"
+    if ramp:
+        print(f"soakcal demo: ramp {min(spec['setpoints_c']):g} → {max(spec['setpoints_c']):g} "
+              f"°C and back at {spec['ramp_c_per_min']:g} °C/min, 24 positions swept over and "
+              f"over × {spec['samples_per_position']} samples, simulated rig over Modbus TCP + "
+              "serial on loopback, virtual time", flush=True)
+    else:
+        print(f"soakcal demo: {n_steps} steps {spec['setpoints_c'][0]:g}…"
+              f"{spec['setpoints_c'][-1]:g} °C × 24 positions × {spec['samples_per_position']} "
+              "samples, simulated rig over Modbus TCP + serial on loopback, virtual time",
+              flush=True)
 
     def on_step(entry: dict[str, Any]) -> None:
         tau = entry.get("tau_s")
@@ -129,6 +149,12 @@ async def _demo(out: Path, spec: dict[str, Any],
     print()
     print(_table6(runner.fit_result))
     print()
+    if ramp:
+        print(f"campaign {cid}: ramp, {_sweeps(sf, cid)}, simulated {sim_h:.2f} h in "
+              f"{time.monotonic() - wall0:.1f} s wall")
+        for label, path in paths.items():
+            print(f"  {label:<10} {path}")
+        return 0
     soak_min = sum(e["soak_s"] for e in camp.steps_log) / 60.0
     print(f"campaign {cid}: {len(camp.steps_log)} steps, "
           f"{sum(1 for _ in store.measured_positions(sf, cid))} positions stored, "
@@ -159,12 +185,22 @@ def _report_several(sf: Any, cid: int, camp: Any, serials: list[str], sim_h: flo
                   f"{cal.valid_lo_c:.1f}…{cal.valid_hi_c:.1f} °C")
         else:
             print(f"  {serial:<14} dropped: {dropped.get(serial, 'no calibration')}")
+    if (camp.spec or {}).get("method") == "ramp":
+        print(f"campaign {cid}: ramp, {len(serials)} sensors, {len(ids)} calibrated, "
+              f"{_sweeps(sf, cid)}, simulated {sim_h:.2f} h in {wall_s:.1f} s wall")
+        return 0 if ids else 1
     soak_min = sum(e["soak_s"] for e in camp.steps_log) / 60.0
     print(f"campaign {cid}: {len(serials)} sensors, {len(ids)} calibrated, "
           f"{len(camp.steps_log)} steps, "
           f"{sum(1 for _ in store.measured_positions(sf, cid))} positions stored, "
           f"simulated {sim_h:.1f} h (soak total {soak_min:.0f} min) in {wall_s:.1f} s wall")
     return 0 if ids else 1
+
+
+def _sweeps(sf: Any, cid: int) -> str:
+    """'N sweeps, M captures' of a ramp campaign (a sweep is one step index)."""
+    stored = store.measured_positions(sf, cid)
+    return f"{len({s for s, _ in stored})} sweeps, {len(stored)} captures"
 
 
 def _create_campaign(sf: Any, spec: dict[str, Any]) -> int:
@@ -192,6 +228,8 @@ def _write_outputs(sf: Any, cid: int, out: Path, fit: Any) -> dict[str, Path]:
 
     paths["model"].write_text(json.dumps(model_document(fit.model), indent=2) + "\n")
     paths["report"].write_text(json.dumps(_jsonable(fit.report), indent=2) + "\n")
+    if getattr(fit.model, "method", None) == "continuous":
+        return paths  # figures are drawn for step fits only (calibration/cli.py)
     try:
         from calibration.report import write_figures
 
@@ -203,6 +241,10 @@ def _write_outputs(sf: Any, cid: int, out: Path, fit: Any) -> dict[str, Path]:
 
 
 def _table6(fit: Any) -> str:
+    if getattr(fit.model, "method", None) == "continuous":  # a ramp: per temperature band
+        from calibration.ramp_report import format_ramp_report
+
+        return format_ramp_report(fit)
     try:
         from calibration.report import format_table6
     except ImportError:  # the core's report module not there: a minimal table

@@ -45,6 +45,12 @@ from calibration.campaign_plan import (
     interpret,
 )
 from calibration.campaign_spec import CampaignSpec
+from calibration.ramp_plan import (
+    RampPrediction,
+    describe_prediction,
+    predict_ramp,
+    travel_move_s,
+)
 from calibration.thermal_plant import AMBIENT_C
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
@@ -88,6 +94,7 @@ class PlanCheck:
     n_steps: int = 0
     n_positions: int | None = None
     mode: str = RIG_FIT_MODE
+    detail: str | None = None  # a ramp campaign's legs and holds (calibration.ramp_plan)
     # The stored form of the prediction (:func:`prediction`); None when the check refused.
     prediction: dict[str, Any] | None = None
 
@@ -98,6 +105,8 @@ class PlanCheck:
     def summary(self) -> str:
         """One line for people: steps × positions, mode, predicted duration."""
         dur = self.predicted_duration_s
+        if self.detail is not None:
+            return f"{self.n_positions} positions per sweep, {self.mode} mode, {self.detail}"
         return (f"{self.n_steps} steps × {self.n_positions} positions, {self.mode} mode, "
                 f"predicted duration {dur:.0f} s ({dur / 3600.0:.1f} h of rig time)")
 
@@ -135,6 +144,11 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
             "smaller position schedule")
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
+    if n_positions is not None and spec.method == "ramp":
+        pred = predicted_ramp(spec)
+        return PlanCheck(issues, pred.duration_s, pred.n_sweeps, n_positions,
+                         detail=describe_prediction(pred, spec.ramp_c_per_min),
+                         prediction=ramp_prediction(pred))
     predicted = None if n_positions is None else prediction(spec)
     duration = None if predicted is None else predicted["duration_s"]
     return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions,
@@ -210,6 +224,8 @@ def prediction(spec: CampaignSpec) -> dict[str, Any]:
     settle and one acquisition (``samples / odr_hz``) for all its sensors: a campaign's
     sensors are read at once, so eight take the time of one.
     """
+    if spec.method == "ramp":
+        return ramp_prediction(predicted_ramp(spec))
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
@@ -217,6 +233,29 @@ def prediction(spec: CampaignSpec) -> dict[str, Any]:
     return {"duration_s": plan.duration_s, "ramp_s": plan.ramp_s, "soak_s": plan.soak_s,
             "positions_s": plan.positions_s, "n_steps": plan.n_steps,
             "n_positions": plan.n_positions, "n_saves": plan.n_saves}
+
+
+def predicted_ramp(spec: CampaignSpec, start_c: float = AMBIENT_C) -> RampPrediction:
+    """A ramp campaign's prediction (:func:`calibration.ramp_plan.predict_ramp`): its plan on
+    a first-order die of the prior lag, moves from the table's travel, back to ``safe_c``."""
+    from drivers.geometry import angles_for_references
+    from service.engine.spec import schedule_refs
+
+    refs = schedule_refs(spec.positions)
+    poses = angles_for_references(refs)
+    move = travel_move_s(refs, poses, *_table_limits(), in_position_s=IN_POSITION_S)
+    end_c = AMBIENT_C if spec.safe_c is None else spec.safe_c
+    return predict_ramp(spec, refs, start_c=start_c, end_c=end_c, move_s=move,
+                        angles_deg=poses)
+
+
+def ramp_prediction(pred: RampPrediction) -> dict[str, Any]:
+    """A ramp's prediction as a campaign row stores it (JSON): ``duration_s`` (rig time, s),
+    ``method``, ``legs`` (target_c, ramp_s, hold_s each), ``n_sweeps``, ``n_saves`` and the
+    die lag it assumed (``die_tau_s``)."""
+    return {"duration_s": pred.duration_s, "method": "ramp",
+            "legs": [dict(leg) for leg in pred.legs], "n_sweeps": pred.n_sweeps,
+            "n_saves": pred.n_saves, "die_tau_s": pred.die_tau_s}
 
 
 # --- the dry-run interpreter of the campaign plan (calibration.campaign_plan) ---------------
@@ -269,6 +308,9 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
         spec = parse_spec(spec)
     elif isinstance(spec, CampaignSpec):
         spec = run_spec(spec)
+    if spec.method == "ramp":  # never a soak's figure for a ramp
+        raise ValueError("a ramp campaign is predicted by predicted_ramp "
+                         "(calibration.ramp_plan.predict_ramp), not by the soak plan")
     if refs is None:
         refs = schedule_refs(spec.positions)
     if soak_s is None:

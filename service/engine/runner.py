@@ -73,6 +73,7 @@ from service.engine.identity import verify_sensor
 from service.engine.park import PARKED_DEVICES, park_rig, parked
 from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
 from service.engine.quality import check_acquisition
+from service.engine.ramp import RampProgress
 from service.engine.rigs import RigDevices
 from service.engine.sensors import SensorDropped, read_all, reading_problem, slowest_decision
 from service.engine.spec import parse_spec, schedule_refs
@@ -152,6 +153,7 @@ class CampaignRunner:
         self._held_s = 0.0
         self._held_since_s: float | None = None
         self._paused_s = 0.0  # of which paused by the operator (not a suspender's time)
+        self._ramp: RampProgress | None = None  # a ramp campaign's plan (service/engine/ramp.py)
 
     def _confirm_lease(self) -> dt.datetime:
         """The device fence's check (fencing.py): when the lease ends, or
@@ -238,10 +240,14 @@ class CampaignRunner:
         if self.plan is None:
             method = str(getattr(spec, "method", None)
                          or getattr(spec, "extra", {}).get("method") or "soak")
-            if method not in PLANS:
+            if method == "ramp":  # its plan resumes from the store and the rig (engine/ramp.py)
+                self._ramp = RampProgress(self)
+                self.plan = self._ramp.plan
+            elif method not in PLANS:
                 raise CampaignFailed(f"spec: method {method!r}: this engine runs "
-                                     f"{', '.join(PLANS)}")
-            self.plan = PLANS[method]
+                                     f"{', '.join([*PLANS, 'ramp'])}")
+            else:
+                self.plan = PLANS[method]
         self.sensor_serial = str(camp.sensor)
         several = spec.extra.get("sensors")
         # The campaign's sensors, one or several (issue 12): each read at every position,
@@ -492,9 +498,10 @@ class CampaignRunner:
         readings = {s: r for s, r in dict(msg.acquisition).items()
                     if r is not None and s not in self.dropped}
         status = await self._chamber()
-        tripped = self.suspenders.check_chamber(status, msg.setpoint_c if msg.band else None)
+        band_c = msg.setpoint_c if msg.band else None  # a ramp's air is off the setpoint
+        tripped = self.suspenders.check_chamber(status, band_c)
         if tripped is not None:
-            await self._hold_chamber(*tripped, setpoint_c=msg.setpoint_c)
+            await self._hold_chamber(*tripped, setpoint_c=band_c)
             raise Rewind(f"step {msg.step} position {msg.position}: {tripped[0].name}")
         off = {serial: check_pose(r[0].mean_g, msg.ref_g) for serial, r in readings.items()}
         off = {serial: c for serial, c in off.items() if not c.ok}
@@ -1059,6 +1066,9 @@ class CampaignRunner:
             "eta_wall_s": round(eta_s / clock_speed(self.clock), 1),
             "t_s": round(self._t(self.clock.now()), 3),
         }
+        if self._ramp is not None:  # a ramp has sweeps, not steps: its prediction's ETA
+            progress.update(self._ramp.fields(status, target_c))
+            progress["eta_wall_s"] = round(progress["eta_s"] / clock_speed(self.clock), 1)
         self._progress = progress
         if write:
             store.update_campaign(self.sf, self.id, progress=progress)

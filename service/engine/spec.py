@@ -4,9 +4,9 @@ The spec itself is :class:`calibration.campaign_spec.CampaignSpec` (every key,
 its type, bounds and default, written once). Here the service adds only what
 is its own:
 
-* :class:`EngineSpec`: the one spec as this engine accepts it: a ``method`` it
-  does not run is refused naming the field (:data:`RAMP_NOT_RUN`), and so is a
-  mix of keys whose derived soak budget is not a usable temperature;
+* :class:`EngineSpec`: the one spec as this engine accepts it: a ramp without a
+  range or with the soak's measured rate gain is refused naming the reason, and so
+  is a mix of keys whose derived soak budget is not a usable temperature;
 * :class:`CampaignCreate`: a campaign request, the spec plus where (``rig``)
   and with what (``sensor``, or the spec's ``sensors``): the POST body of
   ``/api/v1/campaigns`` and the ``campaign`` of a schedule;
@@ -28,23 +28,25 @@ from calibration.campaign_spec import CampaignSpec, Serial
 from service.engine.quality import QualityLimits
 from service.engine.stability import StabilityConfig, temperature_budget_c
 
-# A refusal, not a silent soak: a ramp campaign asked for must never run as another method.
-RAMP_NOT_RUN = (
-    "ramp campaigns are not run by this engine yet (the chamber would never stop, each "
-    "reading at its die's own temperature): use \"method\": \"soak\", or record a ramp "
-    "with the chamber's own program and calibrate it with `soakcal calibrate`, which fits "
-    "a recording without plateaus continuously")
-
 
 class EngineSpec(CampaignSpec):
     """The one campaign spec, as this engine runs it (no field, no default of its own)."""
 
-    @field_validator("method")
-    @classmethod
-    def _ramp_not_run_yet(cls, method: str) -> str:
-        if method == "ramp":
-            raise ValueError(RAMP_NOT_RUN)
-        return method
+    @model_validator(mode="after")
+    def _ramp_needs_a_range(self) -> EngineSpec:
+        # The ramp plan (calibration/ramp_plan.py) ramps through the setpoints' range.
+        if self.method != "ramp":
+            return self
+        if max(self.setpoints_c) <= min(self.setpoints_c):
+            raise ValueError(
+                "method 'ramp' ramps through the setpoints' range and back: give at least two "
+                "different setpoints (its ends, e.g. [-40, 60])")
+        if self.rate_gain == "measured":
+            raise ValueError(
+                "rate_gain 'measured' is a soak's (measured from the soak probes); a ramp "
+                "campaign's fit measures the rate gain from its heating and cooling legs: "
+                "leave rate_gain out")
+        return self
 
     @model_validator(mode="after")
     def _derived_budget_is_usable(self) -> EngineSpec:

@@ -1,9 +1,10 @@
-"""``method``: soak runs as before; ramp is refused everywhere with the reason, never run
-as a soak (the engine does not run ramp campaigns yet)."""
+"""``method``: soak runs as before; ramp is accepted at the door, dry-run with its legs and
+holds, and refused with the reason where it cannot ramp (one setpoint, a soak-only key)."""
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -13,31 +14,39 @@ from svc_helpers import new_campaign
 from service.cli import main
 
 
-def test_method_soak_is_the_default_and_ramp_is_refused_naming_the_field(
+def test_method_soak_is_the_default_and_ramp_is_accepted_with_a_range(
         client: TestClient, auth) -> None:  # type: ignore[no-untyped-def]
     assert new_campaign(client, auth["operator"])["spec"]["method"] == "soak"
-    assert new_campaign(client, auth["operator"], method="soak")["spec"]["method"] == "soak"
+    ramp = new_campaign(client, auth["operator"], method="ramp", setpoints_c=[-20, 40])
+    assert ramp["spec"]["method"] == "ramp"
+    # the stored dry run is the ramp's: 120 °C of legs at 1 °C/min and two holds, < 8 h
+    assert 120 * 60 < ramp["predicted_duration_s"] < 8 * 3600
+    soak = new_campaign(client, auth["operator"], setpoints_c=[-20, 40])
+    assert ramp["predicted_duration_s"] != soak["predicted_duration_s"]
     r = client.post("/api/v1/campaigns", headers=auth["operator"],
-                    json={"rig": "sim", "sensor": "SN-0001", "method": "ramp"})
+                    json={"rig": "sim", "sensor": "SN-0001", "method": "ramp",
+                          "setpoints_c": [20]})
     assert r.status_code == 422, r.text
-    detail = json.dumps(r.json()["detail"])
-    assert "method" in detail and "ramp campaigns are not run by this engine yet" in detail
+    assert "give at least two different setpoints" in json.dumps(r.json()["detail"])
 
 
-def test_campaign_plan_takes_method(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                    capsys: pytest.CaptureFixture[str]) -> None:
+def test_campaign_plan_predicts_a_ramp_with_its_legs_and_holds(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setenv("SOAKCAL_HOME", str(tmp_path))
     assert main(["campaign", "plan", "--method", "soak", "--positions", "six", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["ok"] is True
-    assert main(["campaign", "plan", "--method", "ramp", "--positions", "six"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("soakcal campaign plan: method:")
-    assert "not run by this engine yet" in err[0] and '"method": "soak"' in err[0]
-
-
-def test_demo_method_ramp_is_refused_before_anything_runs(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["demo", "--method", "ramp", "--out", str(tmp_path / "d")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--method ramp" in err[0] and "soakcal calibrate" in err[0]
-    assert not (tmp_path / "d").exists()
+    soak_s = json.loads(capsys.readouterr().out)["predicted_duration_s"]
+    assert main(["campaign", "plan", "--method", "ramp", "--setpoints=-40,60",
+                 "--ramp-c-per-min", "3"]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"ramp 23 → -40 → 60 → 23 °C at 3 °C/min, holds (\d+) min at -40 °C, "
+                  r"(\d+) min at 60 °C .* predicted duration (\d+) s \(([\d.]+) h", out)
+    assert m, out
+    # 200 °C of travel at 3 °C/min is 67 min; the holds are the 15-min die's approach to 1 °C;
+    # the air's own lag (2 min) costs a few minutes more per leg
+    assert 35 <= int(m[1]) <= 55 and 35 <= int(m[2]) <= 55
+    holds_s = (int(m[1]) + int(m[2])) * 60
+    assert 67 * 60 + holds_s <= int(m[3]) <= 67 * 60 + holds_s + 3 * 10 * 60
+    assert int(m[3]) != round(soak_s)
+    assert main(["campaign", "plan", "--method", "ramp", "--setpoints=20"]) == 2
+    assert "give at least two different setpoints" in capsys.readouterr().err

@@ -177,6 +177,11 @@ function campaignRows(list) {
 // Where a campaign is, in words that stay true after it has ended (no stale "step 2 (ramp)").
 function stepText(c) {
   const p = c.progress, last = p.steps - 1;
+  if (p.method === "ramp") {  // a ramp has sweeps (one step index each), not setpoint steps
+    if (c.state === "completed") return `all ${p.step + 1} sweeps`;
+    if (c.state === "failed" || c.state === "aborted") return `stopped in sweep ${p.step}`;
+    return `sweep ${p.step}`;
+  }
   if (c.state === "completed") return `all ${p.steps} steps`;
   if (c.state === "failed" || c.state === "aborted") return `stopped at step ${Math.min(p.step, last)} of 0..${last}`;
   return `${Math.min(p.step, last)} of 0..${last}`;
@@ -188,8 +193,13 @@ function startForm() {
   const form = h("form", { class: "inline", id: "start" },
     field("rig", "Rig", "sim", { required: true }),
     field("sensor", "Sensor serial", "", { required: true, placeholder: "SN-0001" }),
+    h("label", {}, "Method", h("select", { name: "method", title:
+      "soak: each setpoint held until the die is stable; ramp: the chamber ramps through the " +
+      "setpoints' range and back while the table sweeps, each capture at its die's own temperature" },
+      h("option", { value: "soak" }, "soak"), h("option", { value: "ramp" }, "ramp"))),
     field("setpoints_c", "Setpoints (°C, comma-separated)", "-40,-20,0,20,40,60"),
     field("soak_min", "Soak per step (min)", "60", { type: "number", step: "any", min: "0" }),
+    field("ramp_c_per_min", "Chamber ramp (°C/min)", "1", { type: "number", step: "any", min: "0" }),
     field("positions", "Position schedule", "table1"),
     field("samples_per_position", "Samples per position", "200", { type: "number", min: "1" }),
     h("button", { class: "primary", type: "submit" }, "Start campaign"));
@@ -197,7 +207,8 @@ function startForm() {
     const f = new FormData(form);
     const body = { rig: f.get("rig"), sensor: f.get("sensor"), positions: f.get("positions"),
       setpoints_c: String(f.get("setpoints_c")).split(",").filter((s) => s.trim()).map(Number),
-      soak_min: Number(f.get("soak_min")), samples_per_position: Number(f.get("samples_per_position")) };
+      soak_min: Number(f.get("soak_min")), samples_per_position: Number(f.get("samples_per_position")),
+      method: f.get("method"), ramp_c_per_min: Number(f.get("ramp_c_per_min")) };
     const c = await api("POST", "/api/v1/campaigns", body);
     location.hash = `#/campaigns/${c.id}`;
   }); });
@@ -329,7 +340,9 @@ async function campaignView(id) {
           : (c.error || `${c.state}, no calibration`)));
     } else {
       rows.push(
-        h("dt", {}, "step"), h("dd", { id: "step" }, `${p.step} of 0..${p.steps - 1} (${p.phase})`),
+        h("dt", {}, "step"), h("dd", { id: "step" }, p.method === "ramp"
+          ? `sweep ${p.step} of about ${p.steps}, chamber heading to ${fmt(p.leg_target_c, 1, "°C")} (ramp)`
+          : `${p.step} of 0..${p.steps - 1} (${p.phase})`),
         h("dt", {}, "position"), h("dd", { id: "position" }, p.positions === null ? `${p.position}` : `${p.position} of 0..${p.positions - 1}`),
         h("dt", {}, "chamber"), h("dd", { id: "chamber" }, `${fmt(p.chamber_c, 2, "°C")} → setpoint ${fmt(p.setpoint_c, 1, "°C")}`),
         h("dt", {}, "done"), h("dd", {}, h("progress", { max: 1, value: p.fraction }), ` ${(p.fraction * 100).toFixed(1)} %`),
