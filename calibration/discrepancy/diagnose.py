@@ -20,7 +20,7 @@ from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
-from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, EffectModule
+from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.locate import locate_residuals, where_of
@@ -158,7 +158,7 @@ def heldout_improved(before_ug: float, after_ug: float) -> bool:
 # --- the pipeline ------------------------------------------------------------
 def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0,
              n_null: int = 200, alpha: float = 0.01,
-             effects: tuple[EffectModule, ...] = ALL_EFFECTS) -> Diagnosis:
+             effects: tuple[CatalogueEffect, ...] = ALL_EFFECTS) -> Diagnosis:
     """Diagnose ``recording`` against the base model (docs/diagnosis.md).
 
     ``model`` (a ThermalModel) is accepted for the contract; the statistics
@@ -217,7 +217,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                      "protocol_order.py)")
 
     # Protocol-level identifiability first; the absorbed fraction is checked per stage.
-    live: list[EffectModule] = []
+    live: list[CatalogueEffect] = []
     not_ident: dict[str, dict[str, str]] = {}
     for eff in effects:
         ok, why, exp = eff.identifiable(ctx)
@@ -230,7 +230,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
 
     raw_cache: dict[tuple[str, float], np.ndarray] = {}
 
-    def lifted(eff: EffectModule, theta: float) -> np.ndarray:
+    def lifted(eff: CatalogueEffect, theta: float) -> np.ndarray:
         key = (eff.effect_id, theta)
         if key in raw_cache:
             return raw_cache[key]
@@ -327,7 +327,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         notes.append(f"the readings are heavier-tailed than Gaussian (Student-t, nu = "
                      f"{tail_nu:.1f}, from their own scatter): the null draws them so")
     # Physics checks (issue 10, docs/diagnosis.md §7): a named term must have its physics'
-    # shape (EffectModule.misses: an outlier is isolated, a function of the specific force
+    # shape (CatalogueEffect.misses: an outlier is isolated, a function of the specific force
     # is the same at every visit of a direction). One that is not is withdrawn, and the
     # structure it was fitted to is reported as ``unexplained`` where it is.
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
@@ -544,7 +544,7 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
     Outlier terms are judged against the model without any flagged reading's term (their
     deviation must not be what the other readings predict); every other term against the
     whole model. Returns the kept terms and findings and, per withdrawn term, where the
-    structure is (``EffectModule.misses``) with the term's family p.
+    structure is (``CatalogueEffect.misses``) with the term's family p.
     """
     not_named: list[dict[str, Any]] = []
     for row_terms in (True, False):
@@ -710,7 +710,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
 REFINE_XTOL_LOG = 1e-3  # relative resolution of a refined continuous theta
 
 
-def _refine(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, U: np.ndarray,
+def _refine(pb: LinearProblem, eff: CatalogueEffect, test: stats.CandidateTest, U: np.ndarray,
             e: np.ndarray) -> tuple[stats.CandidateTest, np.ndarray]:
     """Refine a continuous θ (lag τ) between its grid neighbours; sd from the profile curvature.
 
@@ -753,7 +753,7 @@ def _refine(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, U: 
     return replace(test, theta=theta, stat=best_q, theta_sd=sd), columns(best_x)
 
 
-def _make_term(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, lifted,
+def _make_term(pb: LinearProblem, eff: CatalogueEffect, test: stats.CandidateTest, lifted,
                X: np.ndarray | None = None) -> Term:
     if eff.per_reading:
         i = int(test.theta)
@@ -893,7 +893,7 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
     )
 
 
-def _sentence(eff: EffectModule, params, sd, axes, ctx) -> str:
+def _sentence(eff: CatalogueEffect, params, sd, axes, ctx) -> str:
     text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES), ctx)
     return text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")
 

@@ -135,8 +135,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
            identifiable: dict[str, bool] | None = None) -> Protocol:
     """The protocol facts and the confusions they imply (docs/diagnosis.md §11).
 
-    ``identifiable``: effect id → whether the effect module alone can be tested here
-    (``EffectModule.identifiable``); it decides which confusions withhold a name, and
+    ``identifiable``: effect id → whether the effect alone can be tested here
+    (``CatalogueEffect.identifiable``); it decides which confusions withhold a name, and
     ``separable`` lists those not in any confusion (``with_testable`` narrows it once the
     base model's absorbed fractions are known).
     """
