@@ -22,6 +22,7 @@ from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
+from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.problem import LinearProblem, build_problem
@@ -331,6 +332,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # is the same at every visit of a direction). One that is not is withdrawn, and the
     # structure it was fitted to is reported as ``unexplained`` where it is.
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
+    findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -573,6 +575,66 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
     return terms, findings, not_named
 
 
+def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: float,
+                    not_ident: dict[str, dict[str, str]], notes: list[str]) -> Finding:
+    """A function of the specific force named only if it changes the force's length.
+
+    Why (issue 22): a rig geometry error (a tilted table axis, an encoder error) makes the
+    true specific force differ from the recorded reference by a rotation, δ ⊥ ref, the
+    same at every visit of a direction: a function of the reference direction, as a sensor
+    nonlinearity is. The catalogue's nonlinearities (``a_i²``, ``a_i³``, ``a_i·a_j``) also
+    change the output *along* the reference. So a turn is put in the model (fields across
+    the reference of the nonlinearities' own degree, ``turntable_geometry.turn_columns``)
+    and the term's part along the reference is tested after it (F, at α). If it is not
+    needed, the structure only turns the reference: without the
+    table angles (not in the recording format) that cannot be told from
+    ``turntable_geometry``, and the finding is reported as not identifiable with both
+    candidates (the term stays in the model: either removes the structure).
+    """
+    eff = BY_ID.get(f.effect)
+    if eff is None or not eff.input_only or pb.mode != "reference" or f.rows:
+        return f
+    term = next((t for t in terms if t.effect_id == f.effect and not t.rows), None)
+    if term is None:
+        return f
+    ctx = pb.ctx
+    u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
+    turn = turn_columns(u)
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms) + turn.shape[2]
+    if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
+        notes.append(f"{f.effect}: not checked against a turn of the reference (a table "
+                     "tilt or encoder error): the recording is too long for that design")
+        return f
+    X = eff.regressors(ctx, term.theta)
+    along = np.einsum("nak,na->nk", X, u)[:, None, :] * u[:, :, None]
+    turned = Term("turn", float("nan"), pb.lift(turn))
+    Xw, yw = _design(pb, [t for t in terms if t is not term] + [turned])
+    U = stats.orthonormal_basis(Xw)
+    del Xw
+    e = yw - U @ (U.T @ yw)
+    lp = stats.linear_stats(U, pb.whiten(pb.lift(along)), e, e[:, None])[0]  # F on the data
+    p_along = float(np.exp(lp))
+    if p_along <= alpha:
+        return f
+    geo = TURNTABLE_GEOMETRY
+    why = (f"the structure turns the reference direction without changing its length (the "
+           f"{f.effect} term's part along the reference is not needed once each direction "
+           f"may turn: p = {p_along:.2g} > α); a tilted table axis or an encoder error does "
+           "exactly that, and the recording holds the reference in the sensor frame, not the "
+           "table angles that would tell them apart")
+    candidates = [f.effect, geo.effect_id]
+    for c in candidates:
+        other = candidates[1] if c == candidates[0] else candidates[0]
+        not_ident[c] = {"effect": c, "why": f"not separable from {other}: {why}",
+                        "experiment": BY_ID[c].experiment}
+    return replace(
+        f, effect="not_identifiable", where={**f.where, "candidates": candidates},
+        explanation=(f"Structure beyond noise that {' or '.join(candidates)} explain alike: "
+                     f"{why}. It is modelled (with the {f.effect} term) but not named; "
+                     f"to separate them: {geo.experiment}."),
+        parameters={}, parameter_sd={}, confusers=[])
+
+
 def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
                          final_res: np.ndarray, not_named: list[dict[str, Any]] | None = None
                          ) -> Finding:
@@ -686,7 +748,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                 continue
             lp, lpn, k, absorbed, q = stats.linear_stats(U, Xw, e, E, eff.one_sided, EE)
             absorbed_min = min(absorbed_min, absorbed)
-            if k == 0 or absorbed > stats.ABSORBED_MAX:
+            if k == 0 or absorbed > eff.absorbed_max:
                 continue
             usable += 1
             profile[theta] = lp

@@ -187,7 +187,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
         conf.append(Confusion(
             ("thermal_lag", "self_heating", "temperature_sensor"),
             "the model's temperature is the sensor's own channel: a die lag, a die offset and "
-            "a channel offset are re-mappings of T that the cubic absorbs"))
+            "a constant channel offset are re-mappings of T that the cubic absorbs (a step of "
+            "the channel between plateaus is tested)"))
     if not oblique:
         conf.append(Confusion(
             ORIENTATION + ("turntable_geometry",),

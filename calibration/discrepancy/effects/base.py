@@ -68,6 +68,11 @@ class CatalogueEffect:
     # axes' inputs). It must then leave the same residual at every visit of the same
     # reference direction: :meth:`misses` tests that after selection (issue 10).
     input_only: bool = False
+    # Largest fraction of the term's norm² the base model may absorb before the term is
+    # declared not identifiable here (stats.ABSORBED_MAX). A term that is by construction
+    # mostly a re-map of the base's own terms (a temperature-channel step) is judged by the
+    # power of its remnant instead, with the same bootstrap null.
+    absorbed_max: float = 0.99
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:
