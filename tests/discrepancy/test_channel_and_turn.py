@@ -51,3 +51,18 @@ def test_a_real_nonlinearity_keeps_its_name():
                             setpoints_c=ONE_WAY, seed=11)
     d = diagnose(rec, n_null=30, seed=1)
     assert d.findings[0].effect == "scale_nonlinearity"
+
+
+
+def test_a_channel_that_settles_within_the_plateaus_is_not_called_a_step():
+    """A re-seated probe that settles over each plateau (1 °C, τ 15 min, from step 6 on):
+    its error changes with time within the plateaus, which a step cannot do."""
+    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=5), setpoints_c=ONE_WAY, seed=15)
+    col, steps, t = rec.temperature_source, rec.steps(), rec.t_s
+    since = np.zeros_like(t)
+    for s in np.unique(steps):
+        since[steps == s] = t[steps == s] - t[steps == s].min()
+    rec.columns[col] = rec.columns[col] + np.where(steps >= 6, 1 - np.exp(-since / 900.0), 0.0)
+    d = diagnose(rec, n_null=30, seed=5)
+    assert [f.effect for f in d.findings] == ["unexplained"]
+    assert "not a step" in d.findings[0].explanation
