@@ -83,8 +83,9 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
             continue
         W = V[:, keep] / np.sqrt(lam[keep])  # Bᵀ = Wᵀ Zᵀ has orthonormal rows
         dof = max(m - U.shape[1] - k, 1)
-        q = float(np.sum((W.T @ (Xs.T @ _without_largest(e[S]))) ** 2))
-        qn = np.sum((W.T @ (Xs.T @ _without_largest(E[S]))) ** 2, axis=0)
+        Zs = Xs - U[S] @ UX  # the projected block on its support
+        q = float(np.sum((W.T @ _score_without_largest(Xs, Zs, e[S][:, None])[:, 0]) ** 2))
+        qn = np.sum((W.T @ _score_without_largest(Xs, Zs, E[S])) ** 2, axis=0)
         F.append(q / k / max((ee - q) / dof, 1e-300))
         fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
         null_max[(k, dof)] = np.maximum(null_max.get((k, dof), 0.0), fn)
@@ -115,24 +116,23 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
     return ScanResult(float(p_family), bool(p_family <= alpha), len(F), places)
 
 
-def _without_largest(r: np.ndarray) -> np.ndarray:
-    """The block's residual entries with the largest one (per column) set to 0.
+def _score_without_largest(Xs: np.ndarray, Zs: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(k, B) block scores Zᵀr of each residual column with its largest entry left out.
 
     Why (issue 22): a block is a *local* departure carried by several readings; one
     reading far out is the outlier test's question, which has the readings' own tail
     (Student-t) as its null. With that one entry in, a position block of 4 readings on a
     sparse protocol was a single-reading test against a Gaussian null, and realistic
     noise (capture means of 20 samples of a vibrating bench) flagged null recordings.
-    The same trim is applied to every bootstrap replicate, so the null stays exact.
+    Leaving entry i out of a residual r ⊥ U: its projection (I − UUᵀ)(r − r_i·δ_i) scores
+    Zᵀr − r_i·Z_i = Xᵀr − r_i·Z_i (Z = (I − UUᵀ)X). The same trim is applied to every
+    bootstrap replicate, so the null stays exact.
     """
-    out = np.array(r, dtype=float, copy=True)
-    if out.shape[0] < 2:
-        return out
-    if out.ndim == 1:
-        out[int(np.argmax(np.abs(out)))] = 0.0
-        return out
-    out[np.argmax(np.abs(out), axis=0), np.arange(out.shape[1])] = 0.0
-    return out
+    score = Xs.T @ R
+    if R.shape[0] < 2:
+        return score
+    i = np.argmax(np.abs(R), axis=0)
+    return score - Zs[i].T * R[i, np.arange(R.shape[1])]
 
 
 def _blocks(pb: Any):
