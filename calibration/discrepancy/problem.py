@@ -187,7 +187,10 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     q0_bounds = (0.0, 1e6) if floor is None else (1e-3, 1e4)
     bounds = [(0.0, 1e4), (0.0, 1e6), (1.0, 1.0) if floor is None else q0_bounds,
               (0.0, 0.0) if across is None else (0.0, 1e6)]
-    q = minimize(nll, start, method="L-BFGS-B", bounds=bounds).x
+    # Why the tight tolerances: with four parameters the default stop left σ at ~1e-6
+    # relative, enough to differ between the dense and the row-block design (issue 10).
+    q = minimize(nll, start, method="L-BFGS-B", bounds=bounds,
+                 options={"ftol": 1e-14, "gtol": 1e-12, "maxiter": 2000}).x
     kappa, tau2 = 1.0 + float(q[0]), float(q[1]) * w0
     return np.sqrt(var(q, sig2, fl_all, known, ac_all)), kappa, float(np.sqrt(tau2))
 
