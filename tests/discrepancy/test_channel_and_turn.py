@@ -66,3 +66,32 @@ def test_a_channel_that_settles_within_the_plateaus_is_not_called_a_step():
     d = diagnose(rec, n_null=30, seed=5)
     assert [f.effect for f in d.findings] == ["unexplained"]
     assert "not a step" in d.findings[0].explanation
+
+
+def test_soakcal_diagnose_reads_the_recording_once(tmp_path, monkeypatch, capsys):
+    """The gate and the diagnosis share one read of the file (issue 22)."""
+    import json
+    from types import SimpleNamespace
+
+    import calibration.cli as top
+    import calibration.recording as recording_mod
+    from calibration.recording import write_recording
+
+    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=5), setpoints_c=ONE_WAY[:6],
+                            seed=15)
+    src = tmp_path / "r.csv"
+    write_recording(src, rec.columns)
+    reads: list[str] = []
+    real = recording_mod.read_recording
+
+    def counted(path, *a, **k):
+        reads.append(str(path))
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(recording_mod, "read_recording", counted)
+    monkeypatch.setattr(top, "read_recording", counted)
+    args = SimpleNamespace(recording=str(src), json=True, model=None, n_null=20,
+                           against=None, write_twin=None, report_dir=None, seed=1)
+    assert top.run_diagnose(args) == 0
+    assert reads == [str(src)]
+    assert json.loads(capsys.readouterr().out)["verdict"] != "cannot judge"
