@@ -32,8 +32,11 @@ What the protocol gives, and what it does not:
 * No working setpoint (``working_setpoint_c`` is ``None``: arrival is judged on the PV)
   and no static ramp: in constant mode the chamber steps to the setpoint at its own
   rate. A ramp exists only as a program step (``RUN PRGM``), which this driver does not
-  run: a program owns the setpoint and ends in a mode of its own. A non-zero ramp is
-  refused, naming the fix (ramp 0).
+  run: a program owns the setpoint and ends in a mode of its own. A commanded ramp is
+  therefore honoured only when the chamber cannot go faster anyway: a rate at or above
+  the rig's ``max_rate_c_per_min`` (the chamber's own fastest rate) is accepted, since
+  stepping the setpoint then moves the air no faster than asked; a slower one, or any
+  ramp on a rig that does not state its rate, is refused naming the fix.
 
 Transport: anything pyserial's ``serial_for_url`` opens (``/dev/ttyUSB0`` at the
 controller's baud rate, ``socket://host:port`` for a serial-to-Ethernet adapter or the
@@ -98,6 +101,8 @@ class EspecSettings:
     baudrate: int = DEFAULT_BAUDRATE
     safe_setpoint_c: float = 23.0  # where a campaign's end leaves the chamber
     safe_stop: bool = False  # the park also puts the controller in STANDBY
+    # The chamber's own fastest rate, °C/min (its data sheet): the rate it steps at.
+    max_rate_c_per_min: float | None = None
 
 
 def port_url(url: str) -> str:
@@ -170,14 +175,23 @@ class EspecChamber:
     async def set_ramp_rate(self, ramp_c_per_min: float) -> None:
         if ramp_c_per_min < 0:
             raise ValueOutOfRange(self.device, f"ramp rate {ramp_c_per_min} °C/min < 0")
-        if ramp_c_per_min == 0:
-            return  # constant mode steps at the chamber's own rate: nothing to write
+        own = self.settings.max_rate_c_per_min
+        # Constant mode steps at the chamber's own rate: nothing to write. That is the
+        # commanded ramp only when the chamber cannot go faster than it anyway.
+        if ramp_c_per_min == 0 or (own is not None and ramp_c_per_min >= own):
+            return
+        why = (f"ramp rate {ramp_c_per_min:g} °C/min cannot be commanded: an ESPEC "
+               "P-300/SCP-220 has no ramp in constant mode (it ramps only inside a program, "
+               "which this driver does not run) and steps to each setpoint at the chamber's "
+               "own rate")
+        if own is None:
+            raise ValueOutOfRange(
+                self.device, f"{why}, which this rig does not state: set the rig's "
+                "chamber.max_rate_c_per_min to the chamber's fastest rate (its data sheet); "
+                "campaigns ramping at that rate or faster then run")
         raise ValueOutOfRange(
-            self.device,
-            f"ramp rate {ramp_c_per_min:g} °C/min cannot be set: an ESPEC P-300/SCP-220 has "
-            "no ramp in constant mode (it ramps only inside a program, which this driver "
-            "does not run); run the campaign with ramp_c_per_min = 0 (the chamber steps to "
-            "each setpoint at its own rate)")
+            self.device, f"{why}, up to {own:g} °C/min (chamber.max_rate_c_per_min): run the "
+            f"campaign with ramp_c_per_min ≥ {own:g}")
 
     async def run(self) -> None:
         """Constant mode (control at the setpoint written with ``TEMP, S``).

@@ -315,7 +315,8 @@ def _chamber_driver(cfg: dict[str, Any], clock: Clock) -> Any:
             url=cfg["url"], range_c=(float(lo), float(hi)), address=cfg.get("address"),
             baudrate=int(cfg.get("baudrate", DEFAULT_BAUDRATE)),
             safe_setpoint_c=float(cfg.get("safe_setpoint_c", 23.0)),
-            safe_stop=bool(cfg.get("safe_stop", False))), clock)
+            safe_stop=bool(cfg.get("safe_stop", False)),
+            max_rate_c_per_min=cfg.get("max_rate_c_per_min")), clock)
     from drivers.chamber import ModbusChamber
     from drivers.modbus_link import ModbusLink
     from drivers.registermaps import load_chamber_map

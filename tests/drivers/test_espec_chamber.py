@@ -50,12 +50,17 @@ async def test_status_setpoint_and_modes_over_the_wire() -> None:
         assert not (await chamber.read_status()).running
 
 
-async def test_a_ramp_is_refused_naming_the_fix_and_zero_is_accepted() -> None:
+async def test_a_ramp_slower_than_the_chamber_steps_is_refused_naming_the_fix() -> None:
     clock = VirtualClock()
     async with _twin(clock) as (chamber, _):
         await chamber.set_ramp_rate(0.0)
-        with pytest.raises(ValueOutOfRange, match="run the campaign with ramp_c_per_min = 0"):
+        with pytest.raises(ValueOutOfRange, match="set the rig's chamber.max_rate_c_per_min"):
             await chamber.set_ramp_rate(1.0)
+    async with _twin(clock, max_rate_c_per_min=3.0) as (chamber, _):
+        await chamber.set_ramp_rate(3.0)  # the chamber cannot go faster: stepping is that ramp
+        await chamber.set_ramp_rate(5.0)
+        with pytest.raises(ValueOutOfRange, match="run the campaign with ramp_c_per_min ≥ 3"):
+            await chamber.set_ramp_rate(2.0)
 
 
 async def test_refusals_name_the_reason_and_are_permanent() -> None:
