@@ -37,17 +37,16 @@
   ``url`` is ``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200``
   (drivers/modbus_link.py); a sensor ``url`` is anything pyserial's
   ``serial_for_url`` opens (a device, ``socket://host:port``, ``rfc2217://``).
-* ``espec``: an ESPEC P-300 / SCP-220 over its ASCII protocol (drivers/espec_chamber.py,
-  docs/chambers.md); the turntable and sensors as for ``modbus``::
-
-    {"chamber": {"driver": "espec", "url": "/dev/ttyUSB1", "baudrate": 9600,
-                 "range_c": [-40, 85], "safe_setpoint_c": 23, "safe_stop": false}, ...}
-
   ``map`` is a shipped register map (``drivers/maps/``) or the path of a map
   file on the service's machine (docs/registers.md). ``time_scale`` (on the
   chamber config) is how fast the rig's time runs
   against the wall clock: 1 for hardware, the ``--speed`` of a remote
   ``soakcal sim``.
+* ``espec``: an ESPEC P-300 / SCP-220 over its ASCII protocol (drivers/espec_chamber.py,
+  docs/chambers.md); the turntable and sensors as for ``modbus``::
+
+    {"chamber": {"driver": "espec", "url": "/dev/ttyUSB1", "baudrate": 9600,
+                 "range_c": [-40, 85], "safe_setpoint_c": 23, "safe_stop": false}, ...}
 
 :func:`rig_config_errors` checks a config before it is stored (the API's 422).
 """
