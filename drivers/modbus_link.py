@@ -4,7 +4,8 @@ Every register access of the chamber and turntable drivers goes through
 :class:`ModbusLink`. It owns what pymodbus leaves to the caller:
 
 * one request in flight per client (an ``asyncio.Lock`` around each request),
-* reconnect on the next request after the transport dropped,
+* reconnect on the next request after the transport dropped, and give up on a request
+  as soon as its connection closes (pymodbus would wait out the reply timeout),
 * a few quick retries of each *idempotent* request (below),
 * translation of every failure into :mod:`drivers.faults`, with the register
   and the Modbus exception's name in the message.
@@ -78,14 +79,23 @@ class RetryPolicy:
     backoff_max_s: float = 5.0
 
 
-def client_from_url(url: str, timeout_s: float) -> ModbusBaseClient:
-    """``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200&parity=N`` → pymodbus client."""
+def client_from_url(url: str, timeout_s: float,
+                    on_lost: Callable[[], None] | None = None) -> ModbusBaseClient:
+    """``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200&parity=N`` → pymodbus client.
+
+    ``on_lost`` is called when the transport closes (pymodbus' ``trace_connect(False)``).
+    """
+    def trace_connect(up: bool) -> None:
+        if not up and on_lost is not None:
+            on_lost()
+
     u = urlparse(url)
     if u.scheme in ("tcp", "modbus+tcp", ""):
         if not u.hostname:
             raise ValueError(f"Modbus URL {url!r} has no host (expected tcp://host:port)")
         return AsyncModbusTcpClient(
-            u.hostname, port=u.port or 502, timeout=timeout_s, retries=0, reconnect_delay=0
+            u.hostname, port=u.port or 502, timeout=timeout_s, retries=0, reconnect_delay=0,
+            trace_connect=trace_connect,
         )
     if u.scheme == "rtu":
         q = {k: v[-1] for k, v in parse_qs(u.query).items()}
@@ -98,6 +108,7 @@ def client_from_url(url: str, timeout_s: float) -> ModbusBaseClient:
             timeout=timeout_s,
             retries=0,
             reconnect_delay=0,
+            trace_connect=trace_connect,
         )
     raise ValueError(f"unsupported Modbus URL scheme {u.scheme!r} in {url!r} (tcp:// or rtu://)")
 
@@ -120,6 +131,7 @@ class ModbusLink:
         self.device_id = device_id
         self.policy = policy or RetryPolicy()
         self._client: ModbusBaseClient | None = None
+        self._lost = asyncio.Event()  # set when the current client's transport closes
         self._lock = asyncio.Lock()
         self._was_connected = False
         self.stats = {"requests": 0, "retries": 0, "reconnects": 0}
@@ -227,7 +239,7 @@ class ModbusLink:
                 try:
                     client = await self._connected()
                     self.stats["requests"] += 1
-                    rr = await call(client)
+                    rr = await self._reply(call(client))
                     if task is not None and task.cancelling() > cancels:
                         # pymodbus awaits the reply with asyncio.wait_for, which (Python
                         # < 3.12) returns a reply that arrived with our cancellation and
@@ -271,6 +283,28 @@ class ModbusLink:
             assert last is not None
             raise _after_tries(last, tries)
 
+    async def _reply(self, request: Awaitable[ModbusPDU]) -> ModbusPDU:
+        """The request's reply; :class:`ConnectionException` as soon as the transport closes.
+
+        pymodbus waits out the whole reply timeout for a request whose connection the
+        device closed (1.1 s wall against 1 ms for a reply): a reply that cannot come is
+        not waited for, so a dropped connection costs a reconnect, not a timeout.
+        """
+        reply = asyncio.ensure_future(request)
+        closed = asyncio.ensure_future(self._lost.wait())
+        try:
+            await asyncio.wait({reply, closed}, return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:
+            reply.cancel()
+            closed.cancel()
+            raise
+        closed.cancel()
+        if reply.done():
+            return reply.result()
+        reply.cancel()  # pymodbus releases its lock; the link drops this client
+        reply.add_done_callback(_retrieve)
+        raise ConnectionException("the device closed the connection")
+
     async def _connected(self) -> ModbusBaseClient:
         if self._client is not None and self._client.connected:
             return self._client
@@ -278,7 +312,8 @@ class ModbusLink:
             self._drop()
         if self._was_connected:
             self.stats["reconnects"] += 1
-        self._client = client_from_url(self.url, self.policy.timeout_s)
+        self._lost = asyncio.Event()
+        self._client = client_from_url(self.url, self.policy.timeout_s, on_lost=self._lost.set)
         try:
             # pymodbus bounds the connect by ``timeout`` itself (and then idles 0.1 s wall).
             ok = await self._client.connect()
@@ -294,6 +329,12 @@ class ModbusLink:
         if self._client is not None:
             self._client.close()
             self._client = None
+
+
+def _retrieve(fut: asyncio.Future) -> None:
+    """Consume the outcome of a request abandoned on a closed connection (no asyncio warning)."""
+    if not fut.cancelled():
+        fut.exception()
 
 
 def _after_tries(fault: DeviceFault, tries: int) -> DeviceFault:

@@ -9,6 +9,7 @@ table's move command) is sent once.
 
 from __future__ import annotations
 
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 
@@ -17,7 +18,7 @@ import pytest
 
 from drivers.chamber import ModbusChamber
 from drivers.clock import VirtualClock
-from drivers.faults import DeviceFault, ExceptionReply
+from drivers.faults import ConnectionLost, DeviceFault, ExceptionReply
 from drivers.modbus_link import ModbusLink, RetryPolicy
 from drivers.registermaps import CHAMBER_MAPS, SOAKCAL_TABLE
 from drivers.turntable import ModbusTurntable
@@ -159,3 +160,19 @@ async def test_move_command_is_sent_once(table_twin: Twin) -> None:
     assert "tries" not in str(err.value) and err.value.code == 6
     assert tt.link.stats["requests"] == 2  # one targets write, one command
     await tt.close()
+
+
+async def test_a_closed_connection_is_not_waited_out(chamber_twin: Twin) -> None:
+    # The device closes the connection instead of replying: pymodbus alone would wait the
+    # whole reply timeout (5 s here) per try; the link gives up on the request at once.
+    chamber_twin.faults.p_drop = 1.0
+    link = ModbusLink(chamber_twin.server.url, chamber_twin.clock, device="chamber",
+                      policy=RetryPolicy(timeout_s=5.0))
+    t0 = time.perf_counter()
+    with pytest.raises(ConnectionLost, match=r"closed the connection \(3 tries\)"):
+        await link.read_registers(F4T.process_c.address, 2)
+    assert time.perf_counter() - t0 < 2.5  # three tries: a reconnect each, no 5-s timeout
+    assert link.stats["requests"] == 3
+    chamber_twin.faults.p_drop = 0.0
+    assert len(await link.read_registers(F4T.process_c.address, 2)) == 2
+    await link.close()
