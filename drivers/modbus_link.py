@@ -11,11 +11,11 @@ Every register access of the chamber and turntable drivers goes through
   and the Modbus exception's name in the message.
 
 What the link retries, and why there: a fault hits one request, so it is retried
-as one request. A status read is several requests (five on a Eurotherm 3216 map);
-at 20 % faulty requests a five-request read fails 1 − 0.8⁵ = 67 % of the time, and
-retrying the whole read (the engine's guard) rarely gets five successes in a row.
-Retried per request (``read_attempts = 3``), a request fails 0.2³ = 0.8 %, the
-status read 4 %.
+as one request. A status read is several requests where the map's registers are not
+adjacent (four on the Eurotherm 3216, five on the Watlow F4T cascade map); at 20 %
+faulty requests a five-request read fails 1 − 0.8⁵ = 67 % of the time, and retrying
+the whole read (the engine's guard) rarely gets five successes in a row. Retried per
+request (``read_attempts = 3``), a request fails 0.2³ = 0.8 %, the status read 3.9 %.
 
 * Reads (FC 1/2/3/4) are always retried: reading has no effect on the device.
 * A write is retried only when the driver says it is idempotent: it sets a
