@@ -23,9 +23,12 @@ request (``read_attempts = 3``), a request fails 0.2³ = 0.8 %, the status read 
   target angles, a one-time setup value), so a repeat after a reply that was lost
   leaves the device as one write would. ``write_attempts`` tries.
 * A write that triggers an action (the turntable's move/stop command) is sent
-  once: on a positioner whose command is an edge, a repeat restarts or faults the
-  motion. The engine's guard (service/engine/guard.py) re-sends the whole move
-  (targets, then command) and reads the position back.
+  again only after the device answered SERVER DEVICE BUSY (code 6): it did not act
+  and asks for the request again. After a lost reply (timeout, connection closed)
+  the device may have acted, and on a positioner whose command is an edge a repeat
+  restarts or faults the motion: the fault goes to the engine's guard
+  (service/engine/guard.py), which re-sends the whole move (targets, then command)
+  and reads the position back.
 
 Exception codes 1–3 (illegal function/address/value) are never retried. A fault
 that outlasts the link's tries reaches the caller with the number of tries in its
@@ -62,6 +65,8 @@ from drivers.faults import (
 )
 from drivers.registermaps import Field
 
+DEVICE_BUSY = 6  # Modbus exception: "retransmit the message later"; the device did not act
+
 # pymodbus logs every timeout and dumps frames at ERROR; the fault taxonomy below
 # is how failures reach the caller, so keep its logger quiet unless asked.
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
@@ -74,7 +79,7 @@ class RetryPolicy:
 
     timeout_s: float = 1.0  # wall time per attempt
     read_attempts: int = 3  # tries of a read (1 = no retry)
-    write_attempts: int = 3  # tries of an idempotent write; other writes are sent once
+    write_attempts: int = 3  # tries of a write (an action's: after DEVICE BUSY only)
     backoff_s: float = 0.2  # first backoff, clock time; doubles each retry
     backoff_max_s: float = 5.0
 
@@ -169,18 +174,20 @@ class ModbusLink:
 
     async def write_field(self, f: Field, value: float, *, idempotent: bool = False) -> None:
         """Write ``value`` to ``f``; ``idempotent``: a level a repeat leaves unchanged, so a
-        lost reply is retried (module docstring), else the write is sent once."""
+        lost reply is retried too (module docstring); else only DEVICE BUSY is."""
         try:
             words = f.encode(value)
         except (ValueError, OverflowError) as exc:
             raise ValueOutOfRange(self.device, f"{value} at register {f.address}: {exc}") from exc
-        tries = self._write_tries(idempotent)
+        tries = max(1, self.policy.write_attempts)
         if f.table == "coil":  # FC 5
             await self._request("write", f.address, lambda c: c.write_coil(
-                f.address, bool(words[0]), device_id=self.device_id), tries)
+                f.address, bool(words[0]), device_id=self.device_id), tries,
+                repeatable=idempotent)
         elif f.single_write:  # FC 6: controllers that refuse FC 16
             await self._request("write", f.address, lambda c: c.write_register(
-                f.address, words[0], device_id=self.device_id), tries)
+                f.address, words[0], device_id=self.device_id), tries,
+                repeatable=idempotent)
         else:
             await self.write_registers(f.address, words, idempotent=idempotent)
 
@@ -208,7 +215,7 @@ class ModbusLink:
         await self._request(
             "write", address,
             lambda c: c.write_registers(address, words, device_id=self.device_id),
-            self._write_tries(idempotent),
+            max(1, self.policy.write_attempts), repeatable=idempotent,
         )
 
     async def close(self) -> None:
@@ -216,15 +223,15 @@ class ModbusLink:
             self._drop()
 
     # --- internals ----------------------------------------------------------
-    def _write_tries(self, idempotent: bool) -> int:
-        return max(1, self.policy.write_attempts) if idempotent else 1
-
     async def _request(
         self, what: str, address: int, call: Callable[[ModbusBaseClient], Awaitable[ModbusPDU]],
-        tries: int,
+        tries: int, *, repeatable: bool = True,
     ) -> ModbusPDU:
+        """``call`` up to ``tries`` times; ``repeatable=False`` (an action): a lost reply is
+        not retried, since the device may have acted; DEVICE BUSY still is."""
         async with self._lock:
             last: DeviceFault | None = None
+            made = 0
             for attempt in range(tries):
                 if attempt:
                     assert last is not None
@@ -236,6 +243,7 @@ class ModbusLink:
                     await self.clock.sleep(delay)
                 task = asyncio.current_task()
                 cancels = task.cancelling() if task is not None else 0
+                made = attempt + 1
                 try:
                     client = await self._connected()
                     self.stats["requests"] += 1
@@ -252,6 +260,8 @@ class ModbusLink:
                 except ConnectionException as exc:
                     self._drop()
                     last = ConnectionLost(self.device, f"{what}: {exc}")
+                    if not repeatable:
+                        break
                     continue
                 except ModbusIOException as exc:
                     # pymodbus turns a cancellation of our task into ModbusIOException;
@@ -266,6 +276,8 @@ class ModbusLink:
                     else:
                         last = DeviceTimeout(
                             self.device, f"{what}: no reply within {self.policy.timeout_s} s")
+                    if not repeatable:
+                        break
                     continue
                 except ModbusException as exc:
                     raise ProtocolError(self.device, f"{what}: {exc}") from exc
@@ -276,12 +288,13 @@ class ModbusLink:
                         self.device, f"{what} register {address}: exception code {code} "
                                      f"({name})", code, address)
                     # Illegal function/address/value will not heal by retrying: report at once.
-                    if not last.retryable:
-                        raise last
+                    # An action is sent again only when the device said it did not act.
+                    if not last.retryable or not (repeatable or code == DEVICE_BUSY):
+                        break
                     continue
                 return rr
             assert last is not None
-            raise _after_tries(last, tries)
+            raise _after_tries(last, made)
 
     async def _reply(self, request: Awaitable[ModbusPDU]) -> ModbusPDU:
         """The request's reply; :class:`ConnectionException` as soon as the transport closes.

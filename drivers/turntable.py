@@ -45,7 +45,7 @@ class ModbusTurntable:
             words += [0] * (m.axis_stride - f.n_registers) if i < self.n_axes - 1 else []
         # Targets of all axes in one write, then the command: the table never sees half a move.
         # The targets are levels (the link may repeat them); the command is an action, sent
-        # once: a repeated edge restarts or faults the motion on some positioners.
+        # again only after DEVICE BUSY: a repeated edge restarts or faults some positioners.
         await self.link.write_registers(m.target_deg.address, words, idempotent=True)
         await self.link.write_field(m.command, m.move_value)
 

@@ -4,7 +4,7 @@ A chamber status read on the Watlow F4T (cascade) map is five requests. With 20 
 requests refused (DEVICE BUSY, seeded) a five-request read fails two times in three
 unless each request is retried on its own; a fault that does not heal still reaches
 the caller, saying how often it was tried. A write that triggers an action (the
-table's move command) is sent once.
+table's move command) is sent again only when the device answered DEVICE BUSY.
 """
 
 from __future__ import annotations
@@ -138,27 +138,37 @@ async def test_setpoint_write_is_retried_after_a_lost_reply(chamber_twin: Twin) 
     await ch.close()
 
 
-async def test_move_command_is_sent_once(table_twin: Twin) -> None:
+async def test_move_command_is_resent_only_when_the_table_did_not_act(table_twin: Twin) -> None:
     tt = ModbusTurntable(ModbusLink(table_twin.server.url, table_twin.clock, device="turntable",
                                     policy=RETRYING), SOAKCAL_TABLE)
     table_twin.faults.p_exception = 1.0
     with pytest.raises(ExceptionReply, match=r"\(3 tries\)"):
         await tt.move_to((0.0, 90.0, 0.0))  # the targets (a level) are tried three times
     assert tt.link.stats["requests"] == 3
-    # Targets accepted, the command refused: it is an action and is not repeated.
-    tt.link.stats["requests"] = 0
-    table_twin.faults.p_exception = 0.0
     write_field = tt.link.write_field
+    fault = {"p_exception": 1.0}
 
-    async def busy_command(f, value, *, idempotent=False):  # type: ignore[no-untyped-def]
-        table_twin.faults.p_exception = 1.0  # the targets went through; the command is refused
+    async def faulty_command(f, value, *, idempotent=False):  # type: ignore[no-untyped-def]
+        for name, p in fault.items():  # the targets went through; now the command's fault
+            setattr(table_twin.faults, name, p)
         await write_field(f, value, idempotent=idempotent)
 
-    tt.link.write_field = busy_command  # type: ignore[method-assign]
-    with pytest.raises(ExceptionReply) as err:
+    tt.link.write_field = faulty_command  # type: ignore[method-assign]
+    # DEVICE BUSY: the table says it did not act, so the command is sent again.
+    table_twin.faults.p_exception = 0.0
+    tt.link.stats["requests"] = 0
+    with pytest.raises(ExceptionReply, match=r"\(3 tries\)") as err:
         await tt.move_to((0.0, 90.0, 0.0))
-    assert "tries" not in str(err.value) and err.value.code == 6
-    assert tt.link.stats["requests"] == 2  # one targets write, one command
+    assert err.value.code == 6 and tt.link.stats["requests"] == 1 + 3
+    # The connection closed instead of a reply: the table may be moving; not repeated.
+    fault = {"p_exception": 0.0, "p_drop": 1.0}
+    table_twin.faults.p_exception = 0.0
+    tt.link.stats["requests"] = 0
+    with pytest.raises(ConnectionLost) as lost:
+        await tt.move_to((0.0, 90.0, 0.0))
+    assert "tries" not in str(lost.value)
+    assert tt.link.stats["requests"] == 1 + 1  # one targets write, one command
+    table_twin.faults.p_drop = 0.0
     await tt.close()
 
 
