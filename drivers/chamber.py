@@ -156,9 +156,13 @@ class ModbusChamber:
 
     async def _write_sequence(self, steps: tuple[SequenceStep, ...], commanded: float) -> None:
         """The map's ordered writes; a failure stops the sequence where it failed (the
-        fault names the register), later steps are not sent."""
+        fault names the register), later steps are not sent.
+
+        Each step writes a level (a value into a register: end the profile, the setpoint),
+        so writing it again after a lost reply leaves the controller as one write would:
+        the link may repeat it (idempotent)."""
         for step in steps:
-            await self.link.write_field(step.field, step.word_value(commanded))
+            await self.link.write_field(step.field, step.word_value(commanded), idempotent=True)
 
     async def _setup(self) -> None:
         """The map's one-time writes (e.g. the F4T's ramp action and scale), once per driver."""
