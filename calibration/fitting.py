@@ -134,7 +134,7 @@ def fit(recording: Recording, options: FitOptions | None = None) -> CalibrationF
         opts.rate_gain_ug_per_c_per_min, float)
     g_local = None if opts.gravity is None else opts.gravity.g
     if decided.kind == "warmup":
-        return _warmup(recording, captures, caps.notes, decided, k)
+        return _warmup(recording, captures, caps.notes, decided, k, opts.gravity)
     if decided.kind == "continuous":
         from calibration.continuous import fit_continuous
 
@@ -189,8 +189,11 @@ def _from_thermal(tf: ThermalFit, decided: gate.Plan, captures: Recording) -> Ca
 
 
 def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
-            decided: gate.Plan, rate_gain: np.ndarray | None) -> CalibrationFit:
-    """Too few orientations for the SFEM: each axis' bias change with temperature."""
+            decided: gate.Plan, rate_gain: np.ndarray | None,
+            gravity: LocalGravity | None = None) -> CalibrationFit:
+    """Too few orientations for the SFEM: each axis' bias change with temperature, and
+    what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
+    with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -199,9 +202,16 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
             f"not applied to a warm-up ({decided.reason.split(':')[0]}); the bias change "
             f"fitted includes it")
     temp = recording.temperature_c()
+    if gravity is not None:
+        g_local = gravity.g
+    elif captures.has_reference:
+        g_local = float(np.median(np.linalg.norm(captures.ref_g, axis=1)))
+    else:
+        g_local = 1.0
     wf = fit_warmup(captures, decided.orientations,
-                    span_c=(float(np.min(temp)), float(np.max(temp))))
-    gate.check_model(wf.model, captures)
+                    span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
+    # |g| on its own captures is checked where parameters were fitted absolutely
+    gate.check_model(wf.model, captures, captures.temperature_c())
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [decided.reason]
     model = wf.model

@@ -365,8 +365,9 @@ def check_model(model: ThermalModel, captures: Recording,
                 f"the fitted angle {names[6 + k]} = {a[k]:+.3g} rad{at} is not physical; "
                 f"no model written: {_fix(model)}")
     _check_bias_tempco(model)
-    if model.mode == "warmup" or temperature_c is None:
-        return
+    if temperature_c is None or (model.mode == "warmup"
+                                 and not model.provenance.get("absolute")):
+        return  # a warm-up's bias change alone says nothing about |g|
     used = np.isfinite(temperature_c) | (not model.temperature_dependent)
     if not used.any():
         return
