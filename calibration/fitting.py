@@ -210,8 +210,10 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         g_local = 1.0
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
-    # |g| on its own captures is checked where parameters were fitted absolutely
-    gate.check_model(wf.model, captures, captures.temperature_c())
+    gate.check_model(wf.model, captures)
+    if wf.absolute is not None and wf.absolute.names:
+        gate.check_warmup_residuals(wf.absolute.capture_residual_g, decided.orientations,
+                                    wf.absolute.names)
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [decided.reason]
     model = wf.model

@@ -284,10 +284,13 @@ def plan(captures: Recording, *, continuous: bool = False,
                     f"determine {SFEM_MIN_FITTED} or more SFEM parameters")
     if captures.has_temperature:
         most = max((c.orientations.count for c in per_step.values()), default=ori.count)
+        held = ("scale, non-orthogonality and misalignment held" if ori.count < 2 else
+                "and the SFEM parameters the orientations determine absolutely; the rest "
+                "held")
         return Plan("warmup", "warmup", ori,
                     f"{summary}, at most {most} per temperature step: too few for an SFEM "
                     f"fit of bias and scale; calibrated as a warm-up (each axis' bias change "
-                    f"with temperature; scale, non-orthogonality and misalignment held)")
+                    f"with temperature; {held})")
     raise GateRefusal(
         f"{summary} and no temperature: nothing can be calibrated; {MORE_ORIENTATIONS}, "
         f"or record a temperature (sensor_c) while the sensor warms up")
@@ -365,9 +368,8 @@ def check_model(model: ThermalModel, captures: Recording,
                 f"the fitted angle {names[6 + k]} = {a[k]:+.3g} rad{at} is not physical; "
                 f"no model written: {_fix(model)}")
     _check_bias_tempco(model)
-    if temperature_c is None or (model.mode == "warmup"
-                                 and not model.provenance.get("absolute")):
-        return  # a warm-up's bias change alone says nothing about |g|
+    if model.mode == "warmup" or temperature_c is None:
+        return
     used = np.isfinite(temperature_c) | (not model.temperature_dependent)
     if not used.any():
         return
@@ -381,6 +383,23 @@ def check_model(model: ThermalModel, captures: Recording,
             f"the model gives |g| = {float(np.linalg.norm(cal[i])):.4f} g "
             f"(local gravity {model.g_local:.4f} g) on its own reading {i + 1}; a calibration "
             f"is within a few mg; no model written: {_fix(model)}")
+
+
+def check_warmup_residuals(residual_g: np.ndarray, orientations: Orientations,
+                           names: tuple[str, ...]) -> None:
+    """Refuse a warm-up's absolute fit (:mod:`calibration.warmup_absolute`) whose residuals
+    (|f| − g, or f − ref) at one orientation are more than :data:`NORM_MAX_DEV_G` RMS after
+    fitting every parameter that orientation moves: no sensor is that far off."""
+    r = np.asarray(residual_g, float)
+    for o in range(orientations.count):
+        rms = float(np.sqrt(np.mean(r[orientations.labels == o] ** 2)))
+        if rms > NORM_MAX_DEV_G:
+            raise GateRefusal(
+                f"after fitting {', '.join(names)} the readings at "
+                f"{direction_name(orientations.directions[o])} are still {rms * 1e3:.1f} mg "
+                f"off (RMS; a calibration is within a few mg): the orientations were not "
+                f"held still, or the references or gravity are wrong; no model written: "
+                f"keep the board still on each face and check --gravity-g and ref_*")
 
 
 def _check_bias_tempco(model: ThermalModel, n_temps: int = 21) -> None:

@@ -81,6 +81,7 @@ class WarmupFit:
     model: ThermalModel
     report: dict[str, Any]
     notes: list[str] = field(default_factory=list)
+    absolute: AbsoluteFit | None = None  # what 2+ orientations determine absolutely
 
 
 def fit_warmup(captures: Recording, orientations: Orientations,
@@ -158,9 +159,13 @@ def fit_warmup(captures: Recording, orientations: Orientations,
                         "chosen by held-out error)" for n in sfem.PARAM_NAMES[:3]})
     absolute = None
     if orientations.count >= 2:
-        absolute = absolute_part(captures, orientations, x, coeffs, degree,
+        absolute = absolute_part(captures, orientations, x, coeffs, top, folds,
                                  None if rate_cols is None else rate_cols @ k_rate.T, g_local)
     if absolute is not None and absolute.names:
+        if absolute.degree > degree:  # the absolute part's degree, chosen on its own
+            pad = absolute.degree - degree
+            coeffs = np.hstack([coeffs, np.zeros((sfem.N_PARAMS, pad))])
+            coeff_se = np.hstack([coeff_se, np.full((sfem.N_PARAMS, pad), np.nan)])
         rows = [sfem.PARAM_NAMES.index(n) for n in absolute.names]
         coeffs[rows] = 0.0
         coeffs[rows, : absolute.degree + 1] = absolute.coeffs
@@ -225,7 +230,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     report = _report(model, captures, orientations, heldout, totals, degree, chosen, tried)
     if absolute is not None:
         report["absolute"] = absolute_report(model, absolute)
-    return WarmupFit(model, report, notes)
+    return WarmupFit(model, report, notes, absolute)
 
 
 def absolute_summary(absolute: AbsoluteFit, orientations: Orientations,
