@@ -191,6 +191,9 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             "basis": "k(T) = sum_j gain[axis][j] * x**j, x = (T - centre_c) / scale_c",
             "window_s": RATE_WINDOW_S,
             "description": RATE_DESCRIPTION.format(window=RATE_WINDOW_S),
+            # the log's own dT/dt: what the term's effect was (export_firmware says it)
+            "rate_c_per_min_range": [round(float(np.min(rate)), 4),
+                                     round(float(np.max(rate)), 4)],
         }
         notes.append(
             "rate term k·dT/dt fitted (the warm-up heats and cools; held-out RMS "
