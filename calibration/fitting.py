@@ -211,9 +211,9 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
     gate.check_model(wf.model, captures)
-    if wf.absolute is not None and wf.absolute.names:
+    if wf.absolute is not None and wf.absolute.capture_residual_g.size:
         gate.check_warmup_residuals(wf.absolute.capture_residual_g, decided.orientations,
-                                    wf.absolute.names)
+                                    wf.absolute.names + tuple(wf.absolute.loose))
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [decided.reason]
     model = wf.model

@@ -175,6 +175,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         for n in absolute.names:
             fitted[n] = fitted_note(absolute, orientations)
             held.pop(n, None)
+    if absolute is not None:  # why each scale and angle is held, with these orientations
         for n in held:
             if n in sfem.PARAM_NAMES[3:]:
                 held[n] = held_note(n, absolute, orientations)
@@ -239,14 +240,17 @@ def fit_warmup(captures: Recording, orientations: Orientations,
 def absolute_summary(absolute: AbsoluteFit, orientations: Orientations,
                      g_local: float) -> str:
     """The note on what the orientations determine absolutely (or that they do not)."""
+    units = dict(zip(sfem.PARAM_NAMES, sfem.PARAM_UNITS, strict=True))
+    loose = "".join(f"; {n} determined only to ±{v:.2g} {units[n]} and held"
+                    for n, v in absolute.loose.items())
     if not absolute.names:
         return (f"the {orientations.count} orientations ({orientations.names()}) determine no "
                 f"SFEM parameter absolutely in {absolute.mode} mode (identifiability of their "
-                f"directions): only each axis' bias change is fitted")
+                f"directions){loose}: only each axis' bias change is fitted")
     gravity = f", |g| = {g_local:.6f} g" if absolute.mode == "norm" else ""
     return (f"absolute: {', '.join(absolute.names)} determined by the "
             f"{orientations.count} orientations in {absolute.mode} mode{gravity}; residual "
-            f"RMS {absolute.residual_rms_g * 1e6:.1f} ug after the fit")
+            f"RMS {absolute.residual_rms_g * 1e6:.1f} ug after the fit{loose}")
 
 
 def absolute_report(model: ThermalModel, absolute: AbsoluteFit) -> dict[str, Any]:
@@ -265,7 +269,9 @@ def absolute_report(model: ThermalModel, absolute: AbsoluteFit) -> dict[str, Any
             "parameters": params,
             "residual_rms_ug": (round(absolute.residual_rms_g * 1e6, 3)
                                 if absolute.names else None),
-            "not_determined": [n for n in sfem.PARAM_NAMES if n not in absolute.names]}
+            "not_determined": [n for n in sfem.PARAM_NAMES if n not in absolute.names],
+            "too_loose": {n: {"stderr": v, "unit": sfem.PARAM_UNITS[sfem.PARAM_NAMES.index(n)]}
+                          for n, v in absolute.loose.items()}}
 
 
 RATE_DESCRIPTION = (

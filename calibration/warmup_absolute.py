@@ -45,6 +45,10 @@ VISIBLE_REL = 0.1
 # mounting within 5-10 mrad), by unit: how far it is moved to see what it does to the
 # fitted ones (_with_held_spread).
 HELD_SPREAD = {"1": 0.02, "rad": 0.01}
+# A parameter determined no better than this (stated error at centre_c, by unit) is held:
+# a typical sensor's own spread (datasheets: offsets within tens of mg, sensitivity within
+# 1-2 %, axes within 10 mrad); a "fit" that loose says less than the datasheet.
+LOOSE = {"g": 0.01, "1": 0.01, "rad": 0.01}
 # A degree must lower the held-out RMS by this fraction to be preferred (as the warm-up's).
 MIN_GAIN = 0.005
 
@@ -66,6 +70,9 @@ class AbsoluteFit:
     ambiguity: float
     # (N,) each capture's residual at the solution: |f| − g, or |f − ref| (reference)
     capture_residual_g: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # determined in structure but only this loosely (stated error at centre_c, its unit):
+    # not fitted (LOOSE)
+    loose: dict[str, float] = field(default_factory=dict)
 
 
 def absolute_part(captures: Recording, orientations: Orientations, x: np.ndarray,
@@ -104,7 +111,7 @@ def absolute_part(captures: Recording, orientations: Orientations, x: np.ndarray
         if fit is None:
             return empty
         fit = _with_degree_spread(fit, raw, x, coeffs, free, top_degree, g_local, ref)
-        return _with_held_spread(fit, raw, x, coeffs, free, g_local, ref)
+        return _without_loose(_with_held_spread(fit, raw, x, coeffs, free, g_local, ref))
     # Norm mode: across gravity an axis reads its bias plus gravity's component from any
     # tilt, and |g| sees that reading at second order ((25 mg)² / 2 = 0.3 mg). Which of
     # the two it is, |g| cannot tell: the estimate takes the reading across gravity as
@@ -124,7 +131,18 @@ def absolute_part(captures: Recording, orientations: Orientations, x: np.ndarray
         fit = replace(fit, stderr=np.hypot(fit.stderr, ambiguity),
                       ambiguity=float(np.max(ambiguity[:, 0])))
     fit = _with_degree_spread(fit, raw, x, as_bias, free, top_degree, g_local, None)
-    return _with_held_spread(fit, raw, x, as_bias, free, g_local, None)
+    return _without_loose(_with_held_spread(fit, raw, x, as_bias, free, g_local, None))
+
+
+def _without_loose(fit: AbsoluteFit) -> AbsoluteFit:
+    """``fit`` without the parameters whose stated error exceeds :data:`LOOSE`."""
+    loose = {n: float(se) for n, se in zip(fit.names, fit.stderr[:, 0], strict=True)
+             if se > LOOSE[sfem.PARAM_UNITS[sfem.PARAM_NAMES.index(n)]]}
+    if not loose:
+        return fit
+    keep = np.array([n not in loose for n in fit.names])
+    return replace(fit, names=tuple(n for n in fit.names if n not in loose),
+                   coeffs=fit.coeffs[keep], stderr=fit.stderr[keep], loose=loose)
 
 
 def _with_degree_spread(fit: AbsoluteFit, raw: np.ndarray, x: np.ndarray,
@@ -230,6 +248,11 @@ def fitted_note(fit: AbsoluteFit, orientations: Orientations) -> str:
 def held_note(name: str, fit: AbsoluteFit, orientations: Orientations) -> str:
     """Why a scale or angle is held at nominal although there are several orientations."""
     at = "1" if name in sfem.PARAM_NAMES[3:6] else "0"
+    if name in fit.loose:
+        unit = sfem.PARAM_UNITS[sfem.PARAM_NAMES.index(name)]
+        return (f"held at {at}: the {orientations.count} orientations "
+                f"({orientations.names(limit=6)}) determine it only to ±{fit.loose[name]:.2g} "
+                f"{unit}, more than a typical sensor's own spread")
     if fit.mode == "norm" and name in sfem.PARAM_NAMES[9:]:
         return (f"held at {at}: a rotation of the sensor frame leaves |g| unchanged (norm "
                 f"mode, Eq. 3); it needs reference directions")
