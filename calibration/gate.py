@@ -285,8 +285,8 @@ def plan(captures: Recording, *, continuous: bool = False,
     if captures.has_temperature:
         most = max((c.orientations.count for c in per_step.values()), default=ori.count)
         held = ("scale, non-orthogonality and misalignment held" if ori.count < 2 else
-                "and the SFEM parameters the orientations determine absolutely; the rest "
-                "held")
+                "and what the orientations determine absolutely; otherwise scale, "
+                "non-orthogonality and misalignment held")
         return Plan("warmup", "warmup", ori,
                     f"{summary}, at most {most} per temperature step: too few for an SFEM "
                     f"fit of bias and scale; calibrated as a warm-up (each axis' bias change "
