@@ -151,6 +151,9 @@ def real(root: Path) -> list[str]:
                 shown.append(f"{n} {(c - p_full[i]) * unit:+.3g}±{sigma * unit:.2g} "
                              f"({z:.1f}σ)")
                 within.append(z < 2)
+            for n, se in ab.loose.items():
+                unit, u = (1e3, "mg") if n in sfem.PARAM_NAMES[:3] else (1e2, "%")
+                shown.append(f"{n} held: ±{se * unit:.2g} {u}")
             lines.append(f"| {name} | {k} ({ori.count} found) | "
                          f"{', '.join(ab.names) or 'none'} | {'; '.join(shown) or '-'} | "
                          f"{sum(within)}/{len(within)} |")
