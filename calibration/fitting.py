@@ -11,7 +11,8 @@
    ``sfem`` (the SFEM per step, Eq. 4–7, and its cubic in temperature, Eq. 8:
    :mod:`calibration.thermal`), ``continuous`` (the SFEM at each reading's own die
    temperature: :mod:`calibration.continuous`) or ``warmup`` (each axis' bias change
-   with temperature: :mod:`calibration.warmup`), or refuses;
+   with temperature, and what 2 or more orientations determine absolutely:
+   :mod:`calibration.warmup`), or refuses;
 4. the fit, and the gate's physical checks on its result
    (:func:`calibration.gate.check_model`), so no caller gets a model the gate refuses;
 5. the local gravity used, and why it is an input, in the model and the report.

@@ -13,7 +13,9 @@ Three questions, answered in one place for ``calibrate`` and ``diagnose``:
    :func:`calibration.schedules.identifiability` on the orientations' mean
    directions (:func:`undetermined_parameters`, also used by :mod:`calibration.fit`).
    Fewer orientations with a temperature channel: a warm-up (:mod:`calibration.warmup`),
-   each axis' bias change with temperature, everything else held. Neither: refused.
+   each axis' bias change with temperature, and what 2 or more orientations determine
+   absolutely (:mod:`calibration.warmup_absolute`, by the same check), everything else
+   held. Neither: refused.
 3. **Is the model physical?** (:func:`check_model`, :func:`check_thermal_fit`) A fit
    that did not converge, negative spare degrees of freedom counted on orientations,
    a bias beyond :data:`BIAS_MAX_G`, a scale more than :data:`SCALE_MAX_DEV` from 1,

@@ -12,7 +12,9 @@ fitted by linear least squares to the capture means (:mod:`calibration.captures`
 each at its own mean temperature. The model stores ``b_a(T) = Σ_{j≥1} c_a,j x^j``
 (zero at ``centre_c``: the bias is referred to that temperature) as the SFEM bias
 polynomial (Eq. 8); scale, non-orthogonality and misalignment are held at nominal
-and the model file says so (``fitted``/``held``).
+and the model file says so (``fitted``/``held``). With 2 or more orientations, what
+they determine absolutely (±z: the z bias and scale) replaces that:
+:mod:`calibration.warmup_absolute`.
 
 The degree d (0 … 3) is chosen by held-out error: the captures are cut into
 :data:`HOLDOUT_BLOCKS` equal time blocks, alternately fitted and held out (then the
