@@ -83,9 +83,8 @@ def absolute_part(captures: Recording, orientations: Orientations, x: np.ndarray
     ``coeffs`` (12, d+1): the warm-up's model so far (each axis' bias change,
     everything else nominal): the parameters not determined keep it. The degree (0 …
     ``top_degree``) is chosen by held-out error over ``folds`` (0/1 per capture), as the
-    bias change's. ``rate_offset_g``
-    (N,3): the warm-up's rate term at each capture, subtracted first. An empty
-    ``names`` when the orientations determine nothing.
+    bias change's. ``rate_offset_g`` (N,3): the warm-up's rate term at each capture,
+    subtracted first. An empty ``names`` when the orientations determine nothing.
     """
     mode = "reference" if captures.has_reference else "norm"
     labels = orientations.labels
