@@ -105,9 +105,7 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
         out.append(f"leaving them out costs up to {err_mg:.3f} mg at |a| <= 1 g "
                    f"over {lo:.2f} .. {hi:.2f} degC")
     if model.temperature_rate:
-        gain = np.asarray(model.temperature_rate["gain_ug_per_c_per_min"], float)[:, 0]
-        out.append(f"the warm-up's rate term k(T)*dT/dt (|k| up to {np.abs(gain).max():.1f} ug "
-                   "per degC/min at mid-range): the firmware's offset is a function of T only")
+        out.append(rate_term_dropped(model))
     held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
             if not ok]
     if held:
@@ -117,6 +115,31 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
         out.append(f"not calibrated by this model (held at nominal): {', '.join(held_nominal)}; "
                    "the firmware's ordinary accelerometer calibration stays in charge of them")
     return out
+
+
+def rate_term_dropped(model: ThermalModel, n_temps: int = 41) -> str:
+    """What dropping a warm-up's rate term k(T)·dT/dt costs: both firmwares' offsets are
+    functions of T only. Its largest effect at the fit log's own rates (the model's
+    ``rate_c_per_min_range``), or per °C/min for a model without that record."""
+    term = model.temperature_rate or {}
+    gain = np.asarray(term["gain_ug_per_c_per_min"], float)  # (3, m+1) in x
+    lo, hi = model.valid_c or (model.t_centre_c, model.t_centre_c)
+    x = model.x_of(np.linspace(lo, hi, n_temps))
+    k = np.abs(np.array([np.polynomial.polynomial.polyval(x, g) for g in gain]))  # (3, n)
+    axis = int(np.argmax(k.max(axis=1)))
+    k_max = float(k.max())
+    head = (f"DROPPED: the warm-up's rate term k(T)*dT/dt (|k| up to {k_max:.1f} ug per "
+            f"degC/min, axis {'xyz'[axis]}): the firmware's offset is a function of T only")
+    span = term.get("rate_c_per_min_range")
+    if not span:
+        return (f"{head}; at 1 degC/min that leaves up to {k_max:.1f} ug uncorrected (this "
+                f"model does not record its log's rates)")
+    r_max = float(np.max(np.abs(span)))
+    effect = k.max(axis=1) * r_max
+    a = int(np.argmax(effect))
+    return (f"{head}; at the log's rates ({span[0]:+.3g} .. {span[1]:+.3g} degC/min) it "
+            f"corrected up to {effect[a]:.1f} ug (axis {'xyz'[a]}), left uncorrected by the "
+            f"firmware while the temperature changes that fast (none at rest)")
 
 
 def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
@@ -131,7 +154,11 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
     # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
     # is then 0, as PX4's own script leaves it (~0, readings minus their median), and the
     # constant stays with the ordinary calibration's CAL_ACCn_xOFF.
-    absolute = model.mode != "warmup" and bool(np.all(model.identifiable[sfem.BIAS]))
+    # A warm-up of a few orientations may determine every offset absolutely
+    # (calibration/warmup_absolute.py: e.g. ±z with reference directions).
+    fitted_absolutely = (model.provenance.get("absolute") or {}).get("parameters", [])
+    absolute = bool(np.all(model.identifiable[sfem.BIAS])) and (
+        model.mode != "warmup" or all(n in fitted_absolutely for n in sfem.PARAM_NAMES[:3]))
     if absolute:
         x0_note = ("X0 is the whole offset at TREF: PX4 subtracts CAL_ACCn_xOFF as well, so "
                    "set those to 0 (or zero X0 and keep the ordinary calibration's offsets)")

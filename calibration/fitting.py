@@ -11,7 +11,8 @@
    ``sfem`` (the SFEM per step, Eq. 4–7, and its cubic in temperature, Eq. 8:
    :mod:`calibration.thermal`), ``continuous`` (the SFEM at each reading's own die
    temperature: :mod:`calibration.continuous`) or ``warmup`` (each axis' bias change
-   with temperature: :mod:`calibration.warmup`), or refuses;
+   with temperature, and what 2 or more orientations determine absolutely:
+   :mod:`calibration.warmup`), or refuses;
 4. the fit, and the gate's physical checks on its result
    (:func:`calibration.gate.check_model`), so no caller gets a model the gate refuses;
 5. the local gravity used, and why it is an input, in the model and the report.
@@ -134,7 +135,7 @@ def fit(recording: Recording, options: FitOptions | None = None) -> CalibrationF
         opts.rate_gain_ug_per_c_per_min, float)
     g_local = None if opts.gravity is None else opts.gravity.g
     if decided.kind == "warmup":
-        return _warmup(recording, captures, caps.notes, decided, k)
+        return _warmup(recording, captures, caps.notes, decided, k, opts.gravity)
     if decided.kind == "continuous":
         from calibration.continuous import fit_continuous
 
@@ -189,8 +190,11 @@ def _from_thermal(tf: ThermalFit, decided: gate.Plan, captures: Recording) -> Ca
 
 
 def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
-            decided: gate.Plan, rate_gain: np.ndarray | None) -> CalibrationFit:
-    """Too few orientations for the SFEM: each axis' bias change with temperature."""
+            decided: gate.Plan, rate_gain: np.ndarray | None,
+            gravity: LocalGravity | None = None) -> CalibrationFit:
+    """Too few orientations for the SFEM: each axis' bias change with temperature, and
+    what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
+    with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -199,9 +203,18 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
             f"not applied to a warm-up ({decided.reason.split(':')[0]}); the bias change "
             f"fitted includes it")
     temp = recording.temperature_c()
+    if gravity is not None:
+        g_local = gravity.g
+    elif captures.has_reference:
+        g_local = float(np.median(np.linalg.norm(captures.ref_g, axis=1)))
+    else:
+        g_local = 1.0
     wf = fit_warmup(captures, decided.orientations,
-                    span_c=(float(np.min(temp)), float(np.max(temp))))
+                    span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
     gate.check_model(wf.model, captures)
+    if wf.absolute is not None and wf.absolute.capture_residual_g.size:
+        gate.check_warmup_residuals(wf.absolute.capture_residual_g, decided.orientations,
+                                    wf.absolute.names + tuple(wf.absolute.loose))
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [decided.reason]
     model = wf.model

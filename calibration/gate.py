@@ -13,7 +13,9 @@ Three questions, answered in one place for ``calibrate`` and ``diagnose``:
    :func:`calibration.schedules.identifiability` on the orientations' mean
    directions (:func:`undetermined_parameters`, also used by :mod:`calibration.fit`).
    Fewer orientations with a temperature channel: a warm-up (:mod:`calibration.warmup`),
-   each axis' bias change with temperature, everything else held. Neither: refused.
+   each axis' bias change with temperature, and what 2 or more orientations determine
+   absolutely (:mod:`calibration.warmup_absolute`, by the same check), everything else
+   held. Neither: refused.
 3. **Is the model physical?** (:func:`check_model`, :func:`check_thermal_fit`) A fit
    that did not converge, negative spare degrees of freedom counted on orientations,
    a bias beyond :data:`BIAS_MAX_G`, a scale more than :data:`SCALE_MAX_DEV` from 1,
@@ -284,10 +286,13 @@ def plan(captures: Recording, *, continuous: bool = False,
                     f"determine {SFEM_MIN_FITTED} or more SFEM parameters")
     if captures.has_temperature:
         most = max((c.orientations.count for c in per_step.values()), default=ori.count)
+        held = ("scale, non-orthogonality and misalignment held" if ori.count < 2 else
+                "and what the orientations determine absolutely; otherwise scale, "
+                "non-orthogonality and misalignment held")
         return Plan("warmup", "warmup", ori,
                     f"{summary}, at most {most} per temperature step: too few for an SFEM "
                     f"fit of bias and scale; calibrated as a warm-up (each axis' bias change "
-                    f"with temperature; scale, non-orthogonality and misalignment held)")
+                    f"with temperature; {held})")
     raise GateRefusal(
         f"{summary} and no temperature: nothing can be calibrated; {MORE_ORIENTATIONS}, "
         f"or record a temperature (sensor_c) while the sensor warms up")
@@ -380,6 +385,23 @@ def check_model(model: ThermalModel, captures: Recording,
             f"the model gives |g| = {float(np.linalg.norm(cal[i])):.4f} g "
             f"(local gravity {model.g_local:.4f} g) on its own reading {i + 1}; a calibration "
             f"is within a few mg; no model written: {_fix(model)}")
+
+
+def check_warmup_residuals(residual_g: np.ndarray, orientations: Orientations,
+                           names: tuple[str, ...]) -> None:
+    """Refuse a warm-up's absolute fit (:mod:`calibration.warmup_absolute`) whose residuals
+    (|f| − g, or f − ref) at one orientation are more than :data:`NORM_MAX_DEV_G` RMS after
+    fitting every parameter that orientation moves: no sensor is that far off."""
+    r = np.asarray(residual_g, float)
+    for o in range(orientations.count):
+        rms = float(np.sqrt(np.mean(r[orientations.labels == o] ** 2)))
+        if rms > NORM_MAX_DEV_G:
+            raise GateRefusal(
+                f"after fitting {', '.join(names)} the readings at "
+                f"{direction_name(orientations.directions[o])} are still {rms * 1e3:.1f} mg "
+                f"off (RMS; a calibration is within a few mg): the orientations were not "
+                f"held still, or the references or gravity are wrong; no model written: "
+                f"keep the board still on each face and check --gravity-g and ref_*")
 
 
 def _check_bias_tempco(model: ThermalModel, n_temps: int = 21) -> None:

@@ -12,7 +12,9 @@ fitted by linear least squares to the capture means (:mod:`calibration.captures`
 each at its own mean temperature. The model stores ``b_a(T) = Σ_{j≥1} c_a,j x^j``
 (zero at ``centre_c``: the bias is referred to that temperature) as the SFEM bias
 polynomial (Eq. 8); scale, non-orthogonality and misalignment are held at nominal
-and the model file says so (``fitted``/``held``).
+and the model file says so (``fitted``/``held``). With 2 or more orientations, what
+they determine absolutely (±z: the z bias and scale) replaces that:
+:mod:`calibration.warmup_absolute`.
 
 The degree d (0 … 3) is chosen by held-out error: the captures are cut into
 :data:`HOLDOUT_BLOCKS` equal time blocks, alternately fitted and held out (then the
@@ -49,6 +51,7 @@ from calibration.gate import GateRefusal, Orientations, direction_name
 from calibration.recording import Recording
 from calibration.temperature_conditioning import temperature_rate_c_per_min
 from calibration.thermal import ThermalModel
+from calibration.warmup_absolute import AbsoluteFit, absolute_part, fitted_note, held_note
 
 MAX_DEGREE = 3
 HOLDOUT_BLOCKS = 10
@@ -80,18 +83,20 @@ class WarmupFit:
     model: ThermalModel
     report: dict[str, Any]
     notes: list[str] = field(default_factory=list)
+    absolute: AbsoluteFit | None = None  # what 2+ orientations determine absolutely
 
 
 def fit_warmup(captures: Recording, orientations: Orientations,
                span_c: tuple[float, float] | None = None,
-               max_degree: int = MAX_DEGREE) -> WarmupFit:
+               max_degree: int = MAX_DEGREE, g_local: float = 1.0) -> WarmupFit:
     """Fit each axis' bias change with temperature (module docstring) to capture means.
 
     The warm-up solver behind :func:`calibration.fitting.fit`: to calibrate a
     recording, call that.
 
     ``span_c``: the temperature span of the data as read (the raw rows'); default the
-    captures'. Raises :class:`GateRefusal` when the temperature does not change enough
+    captures'. ``g_local``: |g| for a norm-mode absolute fit of 2 or more orientations
+    (:func:`absolute_part`). Raises :class:`GateRefusal` when the temperature does not change enough
     to see anything.
     """
     T = captures.temperature_c()
@@ -154,6 +159,28 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     if degree == 0:
         held.update({n: "held at 0: no change with temperature above the noise (degree 0 "
                         "chosen by held-out error)" for n in sfem.PARAM_NAMES[:3]})
+    absolute = None
+    if orientations.count >= 2:
+        absolute = absolute_part(captures, orientations, x, coeffs, top, folds,
+                                 None if rate_cols is None else rate_cols @ k_rate.T, g_local)
+    if absolute is not None and absolute.names:
+        if absolute.degree > degree:  # the absolute part's degree, chosen on its own
+            pad = absolute.degree - degree
+            coeffs = np.hstack([coeffs, np.zeros((sfem.N_PARAMS, pad))])
+            coeff_se = np.hstack([coeff_se, np.full((sfem.N_PARAMS, pad), np.nan)])
+        rows = [sfem.PARAM_NAMES.index(n) for n in absolute.names]
+        coeffs[rows] = 0.0
+        coeffs[rows, : absolute.degree + 1] = absolute.coeffs
+        coeff_se[rows] = np.nan
+        coeff_se[rows, : absolute.degree + 1] = absolute.stderr
+        identifiable[rows] = True
+        for n in absolute.names:
+            fitted[n] = fitted_note(absolute, orientations)
+            held.pop(n, None)
+    if absolute is not None:  # why each scale and angle is held, with these orientations
+        for n in held:
+            if n in sfem.PARAM_NAMES[3:]:
+                held[n] = held_note(n, absolute, orientations)
     conditioning = (f"{captures.temperature_source}: each capture's mean temperature "
                     "(a warm-up: the model in each reading's own temperature)")
     notes = [f"warm-up: {orientations.count} distinct orientation(s) "
@@ -167,6 +194,9 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             "basis": "k(T) = sum_j gain[axis][j] * x**j, x = (T - centre_c) / scale_c",
             "window_s": RATE_WINDOW_S,
             "description": RATE_DESCRIPTION.format(window=RATE_WINDOW_S),
+            # the log's own dT/dt: what the term's effect was (export_firmware says it)
+            "rate_c_per_min_range": [round(float(np.min(rate)), 4),
+                                     round(float(np.max(rate)), 4)],
         }
         notes.append(
             "rate term k·dT/dt fitted (the warm-up heats and cools; held-out RMS "
@@ -176,6 +206,8 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     elif with_rate:
         notes.append("rate term k·dT/dt tried (the warm-up heats and cools) and not kept: "
                      "held-out error does not prefer it")
+    if absolute is not None:
+        notes.append(absolute_summary(absolute, orientations, g_local))
     model = ThermalModel(
         coeffs=coeffs, t_centre_c=centre, t_scale_c=scale, valid_c=(lo, hi), mode="warmup",
         identifiable=identifiable, coeff_stderr=coeff_se, method="warmup",
@@ -191,12 +223,57 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             "created_utc": _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat(),
         },
     )
+    if absolute is not None and absolute.names:
+        model.g_local = g_local
+        model.provenance["absolute"] = {
+            "mode": absolute.mode, "parameters": list(absolute.names),
+            "degree": absolute.degree, "g_local": g_local,
+            "residual_rms_ug": round(absolute.residual_rms_g * 1e6, 3)}
     chosen = heldout[degree] if rate_cols is None else \
         _heldout_rms_g(x, labels, raw, folds, degree, rate_cols)
     tried = [{"degree": d, "gain_degree": m, "heldout_rms_mg": round(t * 1e3, 4)}
              for (d, m), t in zip(candidates, with_rate, strict=False)]
     report = _report(model, captures, orientations, heldout, totals, degree, chosen, tried)
-    return WarmupFit(model, report, notes)
+    if absolute is not None:
+        report["absolute"] = absolute_report(model, absolute)
+    return WarmupFit(model, report, notes, absolute)
+
+
+def absolute_summary(absolute: AbsoluteFit, orientations: Orientations,
+                     g_local: float) -> str:
+    """The note on what the orientations determine absolutely (or that they do not)."""
+    units = dict(zip(sfem.PARAM_NAMES, sfem.PARAM_UNITS, strict=True))
+    loose = "".join(f"; {n} determined only to ±{v:.2g} {units[n]} and held"
+                    for n, v in absolute.loose.items())
+    if not absolute.names:
+        return (f"the {orientations.count} orientations ({orientations.names()}) determine no "
+                f"SFEM parameter absolutely in {absolute.mode} mode (identifiability of their "
+                f"directions){loose}: only each axis' bias change is fitted")
+    gravity = f", |g| = {g_local:.6f} g" if absolute.mode == "norm" else ""
+    return (f"absolute: {', '.join(absolute.names)} determined by the "
+            f"{orientations.count} orientations in {absolute.mode} mode{gravity}; residual "
+            f"RMS {absolute.residual_rms_g * 1e6:.1f} ug after the fit{loose}")
+
+
+def absolute_report(model: ThermalModel, absolute: AbsoluteFit) -> dict[str, Any]:
+    """``report["absolute"]``: each absolutely fitted parameter at centre_c ± its standard
+    error, its slope per °C, and what the orientations left undetermined."""
+    phys = model.physical_coeffs()
+    se = model.coeff_stderr / model.t_scale_c ** np.arange(model.degree + 1)[None, :]  # type: ignore[operator]
+    params = {}
+    for n in absolute.names:
+        k = sfem.PARAM_NAMES.index(n)
+        params[n] = {"unit": sfem.PARAM_UNITS[k], "value": float(phys[k, 0]),
+                     "stderr": float(se[k, 0]),
+                     "per_c": [float(v) for v in phys[k, 1: absolute.degree + 1]],
+                     "per_c_stderr": [float(v) for v in se[k, 1: absolute.degree + 1]]}
+    return {"mode": absolute.mode, "degree": absolute.degree,
+            "parameters": params,
+            "residual_rms_ug": (round(absolute.residual_rms_g * 1e6, 3)
+                                if absolute.names else None),
+            "not_determined": [n for n in sfem.PARAM_NAMES if n not in absolute.names],
+            "too_loose": {n: {"stderr": v, "unit": sfem.PARAM_UNITS[sfem.PARAM_NAMES.index(n)]}
+                          for n, v in absolute.loose.items()}}
 
 
 RATE_DESCRIPTION = (
@@ -397,7 +474,23 @@ def format_warmup(report: dict[str, Any]) -> str:
         + ", ".join(f"{k} {v:+.4f}" for k, v in report["bias_change_mg"].items()),
         "fitted: " + (", ".join(report["fitted"]) or "nothing (no change with temperature "
                                                        "above the noise)"),
+        *_format_absolute(report.get("absolute")),
         "held: " + "; ".join(f"{k}" for k in report["held"])
         + " (" + "; ".join(sorted(set(report["held"].values()))) + ")",
     ]
     return "\n".join(lines)
+
+
+def _format_absolute(absolute: dict[str, Any] | None) -> list[str]:
+    """The report lines of the parameters fitted absolutely (none without)."""
+    if not absolute or not absolute["parameters"]:
+        return []
+    shown = []
+    for n, p in absolute["parameters"].items():
+        scale, unit = (1e3, "mg") if p["unit"] == "g" else \
+            (1e6, "ppm") if p["unit"] == "1" else (1e3, "mrad")
+        value = p["value"] - (1.0 if p["unit"] == "1" else 0.0)
+        label = f"{n}-1" if p["unit"] == "1" else n
+        shown.append(f"{label} {value * scale:+.4g} ± {p['stderr'] * scale:.2g} {unit}")
+    return [f"absolute at centre_c ({absolute['mode']} mode, degree {absolute['degree']} in "
+            f"T; residual RMS {absolute['residual_rms_ug']:.1f} µg): " + ", ".join(shown)]

@@ -32,7 +32,7 @@ def warmup_log(*, seconds: float = 200.0, rate_hz: float = 500.0, t_start_c: flo
                t_end_c: float = -13.3, tau_s: float = 80.0, noise_g: float = 1e-3,
                quantum_c: float | None = 0.06, up: tuple[float, float, float] = (0, 0, 1),
                segments: list[tuple[float, tuple[float, float, float]]] | None = None,
-               sensor: SensorTruth | None = None,
+               sensor: SensorTruth | None = None, reference: bool = False,
                seed: int = 0) -> tuple[Recording, WarmupTruth]:
     """A raw-sample warm-up log and its truth.
 
@@ -40,7 +40,9 @@ def warmup_log(*, seconds: float = 200.0, rate_hz: float = 500.0, t_start_c: flo
     turning the board); default one orientation ``up`` throughout. ``sensor``: the
     twin's sensor (simulators/truth.py: full SFEM, every parameter cubic in the die
     temperature, its channel offset) instead of the bias-only truth; the returned
-    WarmupTruth then describes nothing (the sensor is the truth).
+    WarmupTruth then describes nothing (the sensor is the truth). ``reference``: add
+    ``ref_x/ref_y/ref_z``, the true direction of gravity's reaction (a fixture with
+    known faces). See :func:`cycled` for orientations visited in turn.
     """
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, seconds, 1.0 / rate_hz)
@@ -65,6 +67,17 @@ def warmup_log(*, seconds: float = 200.0, rate_hz: float = 500.0, t_start_c: flo
         read_c = temp + sensor.temp_offset_c + rng.normal(0.0, 0.01, t.size)
     if quantum_c:
         read_c = np.round(read_c / quantum_c) * quantum_c
-    rec = Recording.from_columns({"t_s": t, "sensor_c": read_c, "ax": raw[:, 0],
-                                  "ay": raw[:, 1], "az": raw[:, 2]}, path="warmup.csv")
+    cols = {"t_s": t, "sensor_c": read_c, "ax": raw[:, 0], "ay": raw[:, 1], "az": raw[:, 2]}
+    if reference:
+        cols.update({"ref_x": ups[:, 0], "ref_y": ups[:, 1], "ref_z": ups[:, 2]})
+    rec = Recording.from_columns(cols, path="warmup.csv")
     return rec, truth
+
+
+def cycled(ups: list[tuple[float, float, float]], seconds: float, dwell_s: float
+           ) -> list[tuple[float, tuple[float, float, float]]]:
+    """``segments`` for :func:`warmup_log`: the orientations ``ups`` in turn, ``dwell_s``
+    each, over ``seconds`` (a hand turning the board while it warms, so that every
+    orientation sees the whole temperature range)."""
+    starts = np.arange(0.0, seconds, dwell_s)
+    return [(float(t0), ups[i % len(ups)]) for i, t0 in enumerate(starts)]
