@@ -65,6 +65,15 @@ def ramp_refusal(ctrl: RampControl, ramp_c_per_min: float) -> str | None:
             f"rate{stated}; run the campaign with ramp_c_per_min = 0 (step){also}")
 
 
+def moving_rate_c_per_min(ctrl: RampControl, ramp_c_per_min: float) -> float | None:
+    """The rate the air is expected to move at between setpoints, °C/min: the commanded
+    ramp on a chamber that controls it (> 0), else (a step) the chamber's own rate;
+    ``None`` when that rate is not stated (never a made-up rate)."""
+    if ctrl.controlled and ramp_c_per_min > 0:
+        return float(ramp_c_per_min)
+    return ctrl.own_rate_c_per_min
+
+
 def ramp_method_refusal(ctrl: RampControl) -> str | None:
     """``None`` when ``ctrl``'s chamber can run a ``method: "ramp"`` campaign (a controlled
     ramp through the setpoints' range), else why not and the fix."""

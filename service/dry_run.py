@@ -59,7 +59,12 @@ from calibration.ramp_plan import (
     travel_move_s,
 )
 from calibration.thermal_plant import AMBIENT_C
-from drivers.ramp_rule import RampControl, ramp_method_refusal, ramp_refusal
+from drivers.ramp_rule import (
+    RampControl,
+    moving_rate_c_per_min,
+    ramp_method_refusal,
+    ramp_refusal,
+)
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
 RIG_FIT_MODE = "reference"
@@ -221,8 +226,8 @@ def _ramp_verdict(spec: CampaignSpec, ctrl: RampControl,
     if why is not None:
         return None, PlanIssue(("ramp_c_per_min",), why, rate)
     if ctrl.controlled and rate > 0:
-        return None, None
-    own = ctrl.own_rate_c_per_min
+        return None, None  # predicted at the commanded rate
+    own = moving_rate_c_per_min(ctrl, rate)
     if own is None:
         return None, PlanIssue(
             ("ramp_c_per_min",),

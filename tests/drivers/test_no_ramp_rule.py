@@ -127,3 +127,13 @@ def test_a_ramp_campaign_needs_a_controlled_ramp() -> None:
     # A controller that says its 0 means "no ramp" takes 0 as the step.
     says = RampControl("map x", True, "", zero_is_step=True)
     assert ramp_refusal(says, 0.0) is None and ramp_refusal(ramps, 0.0) is not None
+
+
+def test_the_air_is_expected_at_the_commanded_ramp_or_the_chambers_own_rate() -> None:
+    from drivers.ramp_rule import moving_rate_c_per_min
+
+    assert moving_rate_c_per_min(RampControl("a", True, ""), 2.0) == 2.0
+    assert moving_rate_c_per_min(RampControl("a", True, "", 4.0, zero_is_step=True), 0.0) == 4.0
+    assert moving_rate_c_per_min(RampControl("b", False, "", 4.0), 0.0) == 4.0
+    assert moving_rate_c_per_min(RampControl("b", False, "", 4.0), 6.0) == 4.0
+    assert moving_rate_c_per_min(RampControl("b", False, ""), 0.0) is None
