@@ -325,7 +325,7 @@ def _chamber_driver(cfg: dict[str, Any], clock: Clock) -> Any:
     return ModbusChamber(
         ModbusLink(cfg["url"], clock, device="chamber",
                    device_id=int(cfg.get("device_id", chamber_map.unit_id))),
-        chamber_map,
+        chamber_map, max_rate_c_per_min=cfg.get("max_rate_c_per_min"),
     )
 
 
