@@ -244,7 +244,8 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
     chamber = ChamberPhysics(clock, rng_pv, air_c=start_c, setpoint_c=start_c,
                              ambient_c=start_c, die_tau_s=die_tau_s, faults=faults.chamber)
     table = TurntablePhysics(clock, n_axes=n_axes, faults=faults.table,
-                             homed_at_start="home" not in table_regmap.sequences)
+                             homed_at_start="home" not in table_regmap.sequences,
+                             settled_at_start=bool(table_regmap.unit_ids))
 
     def die_now() -> float:
         chamber.advance_to()

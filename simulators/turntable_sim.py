@@ -70,11 +70,14 @@ class TurntablePhysics:
     # Each axis' homing state: True once its homing ran (a drive per axis; the twin's own
     # table layout has no homing and ignores it). ``homed_at_start`` sets the power-up state.
     homed_at_start: bool = True
+    # A drive that was never commanded reports its command done (in position) at power-up;
+    # False keeps the twin's own table settling for ``settle_s`` first, as it always has.
+    settled_at_start: bool = False
     _homed: list[bool] = field(init=False)
     _homing: list[bool] = field(init=False)
 
     def __post_init__(self) -> None:
-        now = self.clock.now()
+        now = self.clock.now() - (self.settle_s if self.settled_at_start else 0.0)
         self._moves = [_AxisMove(0.0, 0.0, now, self.slew_deg_per_s, self.accel_deg_per_s2)
                        for _ in range(self.n_axes)]
         self._done_s = now
@@ -221,7 +224,7 @@ class DriveAxisImage:
         self.physics, self.regmap, self.axis = physics, regmap, axis
         m = regmap
         self._words: dict[int, int] = {}
-        for name, f in m.registers.items():  # every register of the drive reads (0 unless set)
+        for f in m.registers.values():  # every register of the drive reads (0 unless set)
             for k in range(f.n_registers):
                 self._words[m.axis_field(f, axis).address + k] = 0
         for check in m.checks:  # registers the map checks read what it expects
@@ -283,4 +286,4 @@ class DriveAxisImage:
 def drive_images(physics: TurntablePhysics, regmap: TurntableMap) -> dict[int, DriveAxisImage]:
     """Unit id → the drive of each axis (a map with ``[axes] unit_ids``)."""
     return {regmap.unit_ids[i]: DriveAxisImage(physics, regmap, i)
-            for i in range(physics.n_axes)}
+            for i in range(min(physics.n_axes, regmap.n_axes))}
