@@ -30,9 +30,9 @@ import numpy as np
 
 def reference_for_angles(angles_deg: tuple[float, ...] | list[float],
                          g_local: float = 1.0) -> np.ndarray:
-    """Table angles (outer first, 1 to 3 axes) → specific force in the sensor frame, in g."""
-    if len(angles_deg) not in (1, 2, 3):
-        raise ValueError(f"expected 1 to 3 table angles, got {len(angles_deg)}")
+    """Table angles (outer first, 2 or 3 axes) → specific force in the sensor frame, in g."""
+    if len(angles_deg) not in (2, 3):
+        raise ValueError(f"expected 2 or 3 table angles, got {len(angles_deg)}")
     a = [math.radians(float(x)) for x in angles_deg] + [0.0] * (3 - len(angles_deg))
     R = _rx(a[0]) @ _ry(a[1]) @ _rz(a[2])
     return R.T @ np.array([0.0, 0.0, g_local])

@@ -84,8 +84,12 @@ class RigDevices:
 async def open_rig(
     rig: dict[str, Any], clock: Clock, *, seed: int = 0, faults: Any = None,
     sim_options: dict[str, Any] | None = None, serials: Sequence[str] = (),
+    placement_sf: Any = None,
 ) -> AsyncIterator[RigDevices]:
     """Devices for a rig config ``{"name", "chamber", "turntable", "sensors"}``.
+
+    ``placement_sf``: the session factory of the placement board of a hand axis (default:
+    the service's database).
 
     ``serials``: the sensors a campaign names; the ``sim`` twin mounts one simulated
     sensor per serial when there are two or more (``simulators.rig``).
@@ -104,7 +108,7 @@ async def open_rig(
     if driver == "modbus":
         async with _open_modbus_rig(rig, clock, serials) as devices:
             if has_hand_axis(rig.get("turntable") or {}):  # docs/manual-fixtures.md
-                devices = hand_axis_devices(rig, devices)
+                devices = hand_axis_devices(rig, devices, placement_sf)
             yield devices
         return
     if driver != "sim":
