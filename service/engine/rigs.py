@@ -15,6 +15,12 @@
      "sensors":   [{"url": "/dev/ttyUSB0", "baudrate": 115200}],
      "time_scale": 1}
 
+  A drive per axis on one bus (a map with ``[axes] unit_ids``, e.g.
+  ``leadshine-rs485-pr``) takes the drives' ids as ``"unit_ids": [3, 4]`` (outer
+  first); a 1-axis motorised stage whose second axis is set by hand is
+  ``"axes": 1, "hand_axis": {"steps_deg": [0, 90, 180, 270]}`` (docs/manual-fixtures.md,
+  "One motorised axis, one by hand").
+
   Several sensors (issue 12): one bridge per sensor, each sensor entry its own
   serial port, declaring the sensor it carries by ``serial`` (or by the values
   of its ``serials`` table, board uid → serial)::
