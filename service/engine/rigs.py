@@ -238,6 +238,7 @@ def rig_config_errors(
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
     if (not manual and chamber.get("url") == turntable.get("url")
+            and not _per_axis_units(turntable)  # a drive per axis: _shared_bus_units
             and chamber.get("device_id", 1) == turntable.get("device_id", 1)):
         errors.append(("turntable.device_id",
                        f"the chamber answers unit {chamber.get('device_id', 1)} at the same url: "
@@ -256,6 +257,7 @@ def rig_config_errors(
             errors.append((path, str(exc)))
             continue
         errors += _limits_against_map(chamber, turntable, regmap)
+        errors += _shared_bus_units(chamber, turntable, regmap)
     errors += _table_axes_errors(chamber, turntable, manual)
     scale = chamber.get("time_scale", 1.0)
     if not isinstance(scale, int | float) or not scale > 0:
@@ -386,6 +388,31 @@ def _limits_against_map(chamber: dict[str, Any], turntable: dict[str, Any],
         out.append(("turntable.unit_ids", f"the map {regmap.name} puts every axis on one unit "
                                           "id (no [axes] unit_ids): use device_id"))
     return out
+
+
+def _per_axis_units(turntable: dict[str, Any]) -> bool:
+    """The table is a drive per axis (its own ``unit_ids`` or its map's)."""
+    from drivers.registermaps import MapError, load_turntable_map
+
+    if turntable.get("unit_ids"):
+        return True
+    try:
+        return bool(load_turntable_map(str(turntable.get("map", "soakcal-table"))).unit_ids)
+    except (MapError, TypeError):
+        return False  # the map's own error is reported where the map is checked
+
+
+def _shared_bus_units(chamber: dict[str, Any], turntable: dict[str, Any],
+                      regmap: Any) -> list[tuple[str, str]]:
+    """A drive per axis on the chamber's bus: no drive may answer the chamber's unit id."""
+    units = turntable.get("unit_ids") or getattr(regmap, "unit_ids", ())
+    ours = chamber.get("device_id", 1)
+    if not units or chamber.get("url") != turntable.get("url") or ours not in units:
+        return []
+    key = "turntable.unit_ids" if turntable.get("unit_ids") else "turntable.map"
+    return [(key, f"the chamber answers unit {ours} at the same url, and so would the drive "
+                  f"of axis {list(units).index(ours)} (unit ids {list(units)}): give the "
+                  "drives other ids (turntable.unit_ids)")]
 
 
 def entry_serials(entry: dict[str, Any]) -> list[str]:

@@ -9,6 +9,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+import pytest
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
@@ -77,14 +78,19 @@ def test_rig_configs_for_drives_and_hand_axes_are_checked_by_key() -> None:
     assert "set turntable.axes = 1" in errs(hand_axis={})["turntable.hand_axis"]
     typo = errs(axes=1, hand_axis={"step_deg": [0]})
     assert "unknown key" in typo["turntable.hand_axis.step_deg"]
+    on_bus = {**table, "url": "tcp://h:502"}  # drives on the chamber's bus (unit 1)
+    assert "the chamber answers unit 1 at the same url, and so would the drive of axis 0" in \
+        dict(rig_config_errors(chamber, on_bus, sensors))["turntable.map"]
+    assert rig_config_errors(chamber, {**on_bus, "unit_ids": [2, 3]}, sensors) == []
     assert "use device_id" in dict(rig_config_errors(
         chamber, {"url": "tcp://h:503", "map": "soakcal-table", "unit_ids": [1, 2, 3]},
         sensors))["turntable.unit_ids"]
 
 
 async def _operator(client: httpx.AsyncClient, headers: dict[str, str], clock: VirtualClock,
-                    sim: Any, cid: int) -> list[dict[str, Any]]:
-    """Read each pending request, turn the twin's hand axis to the angle asked, confirm."""
+                    sim: Any, cid: int, wrong_first: bool = False) -> list[dict[str, Any]]:
+    """Read each pending request, turn the twin's hand axis to the angle asked, confirm;
+    with ``wrong_first`` the first one a quarter turn off."""
     seen: set[int] = set()
     confirmed: list[dict[str, Any]] = []
     while True:
@@ -96,7 +102,8 @@ async def _operator(client: httpx.AsyncClient, headers: dict[str, str], clock: V
             seen.add(req["seq"])
             words = req["instruction"].split()
             assert words[:5] == ["turn", "the", "hand", "axis", "to"], req["instruction"]
-            sim.table.move_axis(1, float(words[5].rstrip("°")))  # the operator's hands
+            hand = float(words[5].rstrip("°")) + (90.0 if wrong_first and not confirmed else 0.0)
+            sim.table.move_axis(1, hand)  # the operator's hands
             while not sim.table.axis_in_position(1):  # turned and locked, then confirmed
                 await clock.sleep(1.0)
             r = await client.post(f"/api/v1/campaigns/{cid}/placement", headers=headers,
@@ -108,9 +115,11 @@ async def _operator(client: httpx.AsyncClient, headers: dict[str, str], clock: V
 
 
 @SQLITE_ONLY
+@pytest.mark.parametrize("wrong_first", [False, True])
 async def test_a_one_axis_stage_with_a_hand_axis_completes_with_the_operator(
-        sf, migrated_db_url: str) -> None:  # type: ignore[no-untyped-def]
-    cid = add_campaign(sf, spec=HAND_SPEC, rig="lab")
+        sf, migrated_db_url: str, wrong_first: bool) -> None:  # type: ignore[no-untyped-def]
+    spec = {**HAND_SPEC, "setpoints_c": [20.0]} if wrong_first else HAND_SPEC
+    cid = add_campaign(sf, spec=spec, rig="lab")
     app = create_app(Settings(database_url=migrated_db_url, run_engine=False,
                               run_scheduler=False, migrate=False))
     with sf() as s:
@@ -127,14 +136,15 @@ async def test_a_one_axis_stage_with_a_hand_axis_completes_with_the_operator(
             runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
             async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app),
                                          base_url="http://t") as client:
-                op = asyncio.create_task(_operator(client, headers, clock, sim, cid))
+                op = asyncio.create_task(_operator(client, headers, clock, sim, cid,
+                                                   wrong_first))
                 state = await asyncio.wait_for(runner.run(), 120.0)
                 confirmed = await asyncio.wait_for(op, 30.0)
     with sf() as s:
         assert state == "completed", s.get(Campaign, cid).error
     with sf() as s:
         rows = s.execute(select(Measurement).where(Measurement.campaign_id == cid)).scalars().all()
-    assert sorted(m.position for m in rows) == sorted(list(range(6)) * 2)
+    assert sorted(m.position for m in rows) == sorted(list(range(6)) * len(spec["setpoints_c"]))
     for m in rows:  # the motor and the operator together put each reference along gravity
         assert _angle_deg(m) < 3.0
     # Only hand-angle changes were asked (six positions need hand 0, ±90, 180; the motor
@@ -144,8 +154,14 @@ async def test_a_one_axis_stage_with_a_hand_axis_completes_with_the_operator(
     # stays), and every placement passed its check.
     asked = [float(c["instruction"].split()[5].rstrip("°")) for c in confirmed]
     assert set(asked) <= {0.0, 90.0, -90.0, 180.0}
-    assert 4 <= len(confirmed) <= 6 * len(HAND_SPEC["setpoints_c"])
-    assert devices.turntable.rejections == []
+    rejections = devices.turntable.rejections
+    if wrong_first:  # a quarter turn off: re-asked with the reason, then placed right
+        assert len(rejections) == 1 and "from the asked direction" in rejections[0]
+        assert confirmed[1]["reason"] == rejections[0]
+        assert confirmed[1]["instruction"] == confirmed[0]["instruction"]
+    else:
+        assert rejections == []
+    assert 4 <= len(confirmed) - len(rejections) <= 6 * len(spec["setpoints_c"])
 
 
 @SQLITE_ONLY
