@@ -303,6 +303,9 @@ class TurntableMap:
     in_position_bit: int = 0
     moving_bit: int | None = 1  # None: the drive has no "moving" bit (moving = not in position)
     homed_bit: int | None = None  # the homing-done bit ("homed"), None if the map has none
+    # Every named status bit. Those whose name starts with "fault" (a drive's status word
+    # carrying its fault flag) are reported as faults, like the ``faults`` register's bits.
+    status_bits: dict[int, str] = field(default_factory=dict)
     identity: Identity | None = None
     checks: tuple[RegisterCheck, ...] = ()
     registers: dict[str, Field] = field(default_factory=dict)
@@ -890,6 +893,7 @@ class _MapReader:
             move_value=move, stop_value=stop,
             in_position_bit=by_name["in_position"], moving_bit=by_name.get("moving"),
             homed_bit=by_name.get("homed"),
+            status_bits=bits,
             range_deg=float(rng),
             safe_angles_deg=tuple(float(a) for a in safe),
             unit_ids=unit_ids, sequences=sequences,

@@ -164,9 +164,11 @@ class ModbusTurntable:
         homed = (all(w >> m.homed_bit & 1 for w in words) if m.homed_bit is not None
                  else None)
         names: list[str] = []
-        for i, word in enumerate(faults):
+        for i, (word, status) in enumerate(zip(faults, words, strict=True)):
             prefix = f"axis {i}: " if len(faults) > 1 else ""
             names += [prefix + n for n in bits_to_names(word, m.fault_bits)]
+            names += [prefix + n for b, n in sorted(m.status_bits.items())
+                      if n.startswith("fault") and status >> b & 1]
         return TurntableStatus(angles_deg=angles, in_position=bool(in_pos), moving=bool(moving),
                                faults=tuple(names), homed=homed)
 

@@ -234,6 +234,8 @@ class DriveAxisImage:
             f = m.axis_field(m.identity.field, axis)
             self._words.update({f.address + k: w
                                 for k, w in enumerate(f.encode(m.identity.expect))})
+        # A status bit named "enabled" reads set: the twin's drives are enabled.
+        self._enabled_mask = sum(1 << b for b, n in m.status_bits.items() if n == "enabled")
         self._triggers: dict[tuple[int, int], str] = {}
         for name, steps in m.sequences.items():
             last = steps[-1]
@@ -253,6 +255,7 @@ class DriveAxisImage:
             status |= 1 << m.moving_bit
         if m.homed_bit is not None and p.axis_homed(i):
             status |= 1 << m.homed_bit
+        status |= self._enabled_mask  # the drive is enabled (a bit the driver only shows)
         image[m.axis_field(m.status, i).address] = status
         return read_block(image, address, count)
 

@@ -48,11 +48,13 @@ def _variant(tmp_path: Path, old: str, new: str, extra: str = "") -> Path:
 
 def test_the_leadshine_profile_loads_and_says_what_it_lacks() -> None:
     m = load_map(LEADSHINE)
-    assert m.unit_ids == (1, 2) and m.position_deg is None and m.command is None
+    assert m.unit_ids == (1, 2) and m.command is None
+    assert m.position_deg is not None and m.position_deg.address == 0x1014
+    assert (m.in_position_bit, m.moving_bit, m.homed_bit) == (4, 2, 6)
     assert [s.register for s in m.sequences["move"]][-1] == "pr0_trigger"
     assert "home" not in m.sequences and "stop" not in m.sequences  # not documented
     line = describe_map(m)
-    assert "unit ids 1/2" in line and "no position_deg" in line
+    assert "unit ids 1/2" in line and "no position_deg" not in line
     assert "sequence move of 7 writes" in line and "7 undocumented points" in line
     assert any("homing and stop" in n for n in m.undocumented)
 
@@ -61,10 +63,12 @@ def test_the_leadshine_profile_loads_and_says_what_it_lacks() -> None:
     ("unit_ids = [1, 2]", "unit_ids = [1, 1]", "", "axes.unit_ids"),
     ("unit_ids = [1, 2]", "unit_ids = [1, 0]", "", "axes.unit_ids[1]"),
     ("unit_ids = [1, 2]", "unit_ids = [1]", "", "axes.unit_ids"),
-    ('bits = { 4 = "in_position", 6 = "homed" }', 'bits = { 4 = "in_position" }', TEST_HOME,
-     "registers.status.bits"),
-    ('absent_roles = ["position_deg"]', "", "", "registers.position_deg"),
-    ('absent_roles = ["position_deg"]', 'absent_roles = ["status"]', "", "absent_roles[0]"),
+    (', 6 = "homed" }', " }", TEST_HOME, "registers.status.bits"),
+    ("[registers.position_deg]", "[registers.feedback]", "", "registers.position_deg"),
+    ('kind = "turntable"', 'kind = "turntable"\nabsent_roles = ["status"]', "",
+     "absent_roles[0]"),
+    ('kind = "turntable"', 'kind = "turntable"\nabsent_roles = ["position_deg"]', "",
+     "absent_roles[0]"),
     ('from = "target_deg"', "value = 3", "", "sequence.move"),
 ])
 def test_a_wrong_drive_map_is_refused_naming_the_key(tmp_path: Path, old: str, new: str,
@@ -108,9 +112,31 @@ async def test_each_axis_is_addressed_on_its_own_unit_id() -> None:
             await clock.sleep(10.0)
             st = await table.read_status()
             assert sim.table.true_angles_deg() == pytest.approx((0.0, -45.0), abs=0.02)
-            # No readback documented: the commanded angles, once the drives say done.
-            assert st.in_position and not st.moving and st.angles_deg == (0.0, -45.0)
+            # Read back from each drive's feedback position (pulses → degrees).
+            assert st.in_position and not st.moving and st.faults == ()
+            assert st.angles_deg == pytest.approx((0.0, -45.0), abs=0.04)
             assert await table.park() == "no stop in the map (undocumented), sent to (0, 0)°"
+        finally:
+            await table.close()
+            await chamber.link.close()
+            await accel.close()
+
+
+async def test_without_a_readback_the_commanded_angles_are_reported(tmp_path: Path) -> None:
+    path = _variant(tmp_path, "[registers.position_deg]", "[registers.feedback]")
+    path.write_text(path.read_text().replace('kind = "turntable"', 'kind = "turntable"\n'
+                                             'absent_roles = ["position_deg"]'))
+    assert "no position_deg" in describe_map(load_map(path))
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=1, table_map=str(path)) as sim:
+        chamber, table, accel = await connect_rig(sim, clock)
+        try:
+            await table.move_to((30.0, 0.0))
+            await clock.sleep(10.0)
+            st = await table.read_status()
+            # 30° is 833.3 pulses: the drive went to 833 (29.988°); the driver says 30.
+            assert st.in_position and st.angles_deg == (30.0, 0.0)
+            assert sim.table.true_angles_deg()[0] == pytest.approx(29.988, abs=1e-3)
         finally:
             await table.close()
             await chamber.link.close()
@@ -184,3 +210,26 @@ def test_the_schedules_unreachable_positions_are_listed_with_why() -> None:
     assert hand_axis_unreachable(get_schedule("six"), (0, 90, 180, 270), 180.0) == []
     bad = hand_axis_unreachable(get_schedule("cube14"), (0, 90, 180, 270), 180.0)
     assert len(bad) == 8 and all("hand axis stops only at" in why for _, why in bad)
+
+
+class _Bus:
+    """Two drives' answers by unit id: (feedback pulses, motion state word)."""
+
+    def __init__(self, answers: dict[int, tuple[float, int]]) -> None:
+        self.answers, self.device_id, self.device, self.asked = answers, 1, "turntable", []
+
+    async def read_fields(self, fields: list, max_gap_words: int = 0) -> list[float]:
+        self.asked.append((self.device_id, [f.address for f in fields]))
+        pulses, word = self.answers[self.device_id]
+        return [fields[0].decode(fields[0].encode(pulses / fields[0].scale)), float(word)]
+
+
+async def test_a_drive_reporting_a_fault_is_named_by_axis() -> None:
+    # Unit 2's motion state: bit 0 faulty, bit 1 enabled, bit 4 command completed.
+    bus = _Bus({1: (0.0, 0b10010), 2: (2500.0, 0b10011)})
+    table = ModbusTurntable(bus, load_map(LEADSHINE))  # type: ignore[arg-type]
+    st = await table.read_status()
+    assert st.faults == ("axis 1: fault",) and st.in_position
+    assert st.angles_deg == pytest.approx((0.0, 90.0))  # 2500 pulses at 27.78 per degree
+    assert bus.asked == [(1, [0x1014, 0x1003]), (2, [0x1014, 0x1003])]
+    assert bus.device_id == 1  # restored after each request
