@@ -130,9 +130,12 @@ class HandAxisTurntable:
         self._asked = (motor_deg, hand_deg)
         if self._hand_deg is not None and hand_deg == self._hand_deg and self._placed:
             return  # the hand axis stays: only the motor moves
+        asked = self.board.publish(reference_for_angles(self._asked),
+                                   instruction=_hand_instruction(hand_deg))
+        if asked is None:  # no campaign to ask in (rig check --move): only the motor moves,
+            self._placed = True  # the hand axis is left as it is and asked in a campaign
+            return
         self._hand_deg, self._placed = hand_deg, False
-        self.board.publish(reference_for_angles(self._asked),
-                           instruction=_hand_instruction(hand_deg))
 
     async def read_status(self) -> TurntableStatus:
         st = await self.motor.read_status()

@@ -233,3 +233,55 @@ async def test_a_drive_reporting_a_fault_is_named_by_axis() -> None:
     assert st.angles_deg == pytest.approx((0.0, 90.0))  # 2500 pulses at 27.78 per degree
     assert bus.asked == [(1, [0x1014, 0x1003]), (2, [0x1014, 0x1003])]
     assert bus.device_id == 1  # restored after each request
+
+
+class _Motor:
+    n_axes = 1
+
+    def __init__(self) -> None:
+        self.moves: list[tuple[float, ...]] = []
+
+    async def move_to(self, angles: tuple[float, ...]) -> None:
+        self.moves.append(angles)
+
+    async def read_status(self):  # type: ignore[no-untyped-def]
+        from drivers.protocols import TurntableStatus
+
+        return TurntableStatus(self.moves[-1] if self.moves else (0.0,), True, False)
+
+
+class _Board:
+    def __init__(self, campaign: bool) -> None:
+        self.campaign, self.published, self.state_ = campaign, [], "pending"
+
+    def publish(self, ref, reason=None, instruction=None):  # type: ignore[no-untyped-def]
+        if not self.campaign:
+            return None
+        self.published.append(instruction)
+        return {"instruction": instruction}
+
+    def state(self) -> str:
+        return self.state_
+
+    def accept(self) -> None:
+        self.state_ = "accepted"
+
+
+async def test_the_hand_axis_is_asked_only_when_it_changes_and_only_in_a_campaign() -> None:
+    from drivers.manual_table import HandAxisTurntable
+
+    motor, board = _Motor(), _Board(campaign=True)
+    table = HandAxisTurntable(motor, board)
+    await table.move_to((0.0, 90.0))
+    assert board.published == ["turn the hand axis to 90° and lock it (the motorised axis "
+                               "moves by itself)"]
+    assert not (await table.read_status()).in_position  # the operator has not confirmed
+    board.state_ = "confirmed"
+    st = await table.read_status()
+    assert st.in_position and st.angles_deg == (0.0, 90.0) and board.state_ == "accepted"
+    await table.move_to((45.0, 90.0))  # the motor alone
+    assert len(board.published) == 1 and motor.moves[-1] == (45.0,)
+    assert (await table.read_status()).in_position
+    idle = HandAxisTurntable(_Motor(), _Board(campaign=False))  # rig check: no campaign
+    await idle.move_to((10.0, 0.0))
+    assert (await idle.read_status()).in_position
