@@ -95,8 +95,10 @@ class PlacementBoard:
         refs = refs / np.linalg.norm(refs, axis=1, keepdims=True)
         return int(np.argmax(refs @ (ref_g / np.linalg.norm(ref_g))))
 
-    def publish(self, ref_g: np.ndarray, reason: str | None = None) -> dict[str, Any] | None:
-        """Ask for ``ref_g`` (again, with ``reason``); keeps an identical open request as is."""
+    def publish(self, ref_g: np.ndarray, reason: str | None = None,
+                instruction: str | None = None) -> dict[str, Any] | None:
+        """Ask for ``ref_g`` (again, with ``reason``); keeps an identical open request as is.
+        ``instruction``: what to do, when not placing the whole fixture (a hand axis)."""
         cid = self.campaign_for()
         if cid is None:
             return None
@@ -114,7 +116,7 @@ class PlacementBoard:
             row.seq = (row.seq or 0) + 1
             row.position = position
             row.ref_x, row.ref_y, row.ref_z = (float(v) for v in r)
-            row.instruction = instruction_for(r)
+            row.instruction = instruction or instruction_for(r)
             row.sketch = sketch_for(r)
             row.reason = reason
             row.state = "pending"
