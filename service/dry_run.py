@@ -20,7 +20,9 @@ One function, :func:`check_campaign`, decides it without hardware, for
   controller whose map does not say its ramp register's 0 means "no ramp"; and
   ``method: "ramp"`` on a chamber that cannot ramp;
 * a step campaign (``ramp_c_per_min`` 0, or any rate on a chamber without a ramp) on a
-  rig whose chamber's own rate is unknown: its duration cannot be predicted.
+  rig whose chamber's own rate is unknown: its duration cannot be predicted;
+* a position schedule a 1-axis stage with a hand axis cannot reach (the motor's range
+  and the indexer's steps, :func:`hand_axis_issue`), which would fail at the start.
 
 and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`;
 :func:`prediction` is the form a campaign row stores at creation, so that reading a
@@ -161,6 +163,11 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
             "smaller position schedule")
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
+    elif n_positions is not None:
+        unreachable = hand_axis_issue(spec.positions, rig)
+        if unreachable is not None:
+            issues.append(unreachable)
+            n_positions = None
     if n_positions is not None and spec.method == "ramp":
         if not ctrl.controlled:  # no ramp to predict: the method is refused above
             return PlanCheck(issues, None, 0, n_positions)
@@ -173,6 +180,41 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
     duration = None if predicted is None else predicted["duration_s"]
     return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions,
                      prediction=predicted)
+
+
+def hand_axis_issue(positions: str, rig: dict[str, Any]) -> PlanIssue | None:
+    """A schedule a 1-axis stage with a hand axis cannot reach (docs/manual-fixtures.md,
+    "One motorised axis, one by hand"): its first unreachable position and why
+    (:func:`drivers.geometry.hand_axis_unreachable`, the engine's own geometry), else None.
+
+    The motor's range is the turntable map's ``range_deg``; a map that does not load is
+    the rig validation's to name, and the engine's geometry refuses at start."""
+    from drivers.geometry import hand_axis_unreachable
+    from drivers.registermaps import MapError, load_turntable_map
+    from service.engine.rigs import hand_axis_steps, has_hand_axis
+    from service.engine.spec import schedule_refs
+
+    table = rig.get("turntable") or {}
+    if not has_hand_axis(table):
+        return None
+    try:
+        motor_range_deg = load_turntable_map(str(table.get("map", "soakcal-table"))).range_deg
+        steps = hand_axis_steps(table)
+        refs = schedule_refs(positions)
+    except (MapError, OSError, ValueError, TypeError):
+        return None
+    bad = hand_axis_unreachable(refs, steps, motor_range_deg)
+    if not bad:
+        return None
+    first, reason = bad[0]
+    ref = ", ".join(f"{v:+.3f}" for v in refs[first] / np.linalg.norm(refs[first]))
+    more = f" (and {len(bad) - 1} more of its {len(refs)} positions)" if len(bad) > 1 else ""
+    fix = ("add the indexer steps they need to turntable.hand_axis.steps_deg, or use a "
+           "schedule whose positions the stage reaches (e.g. six with steps of 90°)")
+    return PlanIssue(("positions",), (
+        f"schedule {positions!r}: rig {rig.get('name')!r} (one motorised axis, the second "
+        f"by hand) cannot reach position {first} (ref ({ref}) g){more}: {reason}; {fix}"),
+        positions)
 
 
 def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:

@@ -44,7 +44,8 @@ def ramp_limit_s(delta_c: float, rate_c_per_min: float | None,
     basis of that limit in words (for the failure message): twice the time at the moving
     rate plus the longest soak; at an unknown rate, at :data:`SLOWEST_RATE_C_PER_MIN`."""
     if rate_c_per_min is not None and rate_c_per_min > 0:
-        rate, basis = float(rate_c_per_min), f"twice {abs(delta_c):.1f} °C at {rate_c_per_min:g} °C/min"
+        rate = float(rate_c_per_min)
+        basis = f"twice {abs(delta_c):.1f} °C at {rate:g} °C/min"
     else:
         rate = SLOWEST_RATE_C_PER_MIN
         basis = (f"the chamber's rate is not known: twice {abs(delta_c):.1f} °C at "
