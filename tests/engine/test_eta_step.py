@@ -66,3 +66,23 @@ def test_a_commanded_ramp_is_predicted_exactly_as_before() -> None:
         assert rate == ramp
         if ramp >= 0.05:
             assert EtaModel.for_spec(spec, 6, rate_c_per_min=rate).ramp_s == legacy_s
+
+
+def test_a_ramps_time_limit_uses_the_moving_rate_and_states_its_basis() -> None:
+    from service.engine.progress import chamber_moving_rate_c_per_min, ramp_limit_s
+
+    class Stepping:  # a driver whose chamber steps at its own 4 °C/min
+        ramp_control = STEPS_CTRL
+
+    rate = chamber_moving_rate_c_per_min(Stepping(), 0.0)
+    assert rate == 4.0
+    limit_s, basis = ramp_limit_s(-20.0, rate, 7200.0)
+    assert limit_s == pytest.approx(20.0 / 4.0 * 60.0 * 2.0 + 7200.0)  # 600 s + the soak
+    assert basis == "twice 20.0 °C at 4 °C/min + the longest soak"
+    # Unknown (a driver without ramp_control, a step): a stated bound, not a silent one.
+    assert chamber_moving_rate_c_per_min(object(), 0.0) is None
+    assert chamber_moving_rate_c_per_min(object(), 2.0) == 2.0
+    limit_s, basis = ramp_limit_s(20.0, None, 7200.0)
+    assert limit_s == pytest.approx(20.0 / 0.05 * 60.0 * 2.0 + 7200.0)
+    assert basis == ("the chamber's rate is not known: twice 20.0 °C at 0.05 °C/min, the "
+                     "slowest the engine waits for + the longest soak")
