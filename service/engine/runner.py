@@ -71,7 +71,13 @@ from service.engine.guard import (
 )
 from service.engine.identity import verify_sensor
 from service.engine.park import PARKED_DEVICES, park_rig, parked
-from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
+from service.engine.progress import (
+    EtaModel,
+    EtaSubscriber,
+    Subscriber,
+    chamber_moving_rate_c_per_min,
+    ramp_limit_s,
+)
 from service.engine.quality import check_acquisition
 from service.engine.ramp import RampProgress
 from service.engine.rigs import RigDevices
@@ -278,7 +284,8 @@ class CampaignRunner:
     async def _execute(self, camp: Any) -> None:
         spec = self.spec
         done = store.measured_positions(self.sf, self.id)
-        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
+        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done), rate_c_per_min=(
+            chamber_moving_rate_c_per_min(self.dev.chamber, spec.ramp_c_per_min)))
         self._cursor: tuple[int, str] | None = None
         # t_s continues where the stored campaign stopped (a new process has a new clock).
         self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
@@ -633,12 +640,15 @@ class CampaignRunner:
                 spec.stability.tol_c:
             return Poll(True)
         if ramp.limit_s is None:
-            ramp.limit_s = (abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05)
-                            * 60.0 * 2.0 + spec.stability.max_soak_s)
+            ramp.limit_s, ramp.limit_basis = ramp_limit_s(
+                status.process_c - target_c,
+                chamber_moving_rate_c_per_min(self.dev.chamber, spec.ramp_c_per_min),
+                spec.stability.max_soak_s)
         if self.clock.now() - ramp.start_s - (self._held_total_s() - ramp.held0_s) \
                 > ramp.limit_s:
             raise CampaignFailed(f"chamber did not reach {target_c:.1f} °C within "
-                                 f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C)")
+                                 f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C; "
+                                 f"limit: {ramp.limit_basis})")
         polled_s = self.clock.now()
         if ramp.probe:
             await self._probe_dies(ramp.dies, msg.step, target_c, status, self._t(ramp.start_s))
@@ -1061,9 +1071,11 @@ class CampaignRunner:
             "positions": self.n_pos,
             "fraction": round(n_done / (self.spec.n_steps * self.n_pos), 4),
             "chamber_c": round(status.process_c, 3), "setpoint_c": target_c,
-            "eta_s": round(eta_s := self.eta.eta_s(step, phase, soak_remaining_s), 1),
+            # None: a ramp's time is not known yet (a step at an unstated rate).
+            "eta_s": None if (eta_s := self.eta.eta_s(step, phase, soak_remaining_s)) is None
+            else round(eta_s, 1),
             # The same remaining time on the wall: a sped-up rig's clock runs faster.
-            "eta_wall_s": round(eta_s / clock_speed(self.clock), 1),
+            "eta_wall_s": None if eta_s is None else round(eta_s / clock_speed(self.clock), 1),
             "t_s": round(self._t(self.clock.now()), 3),
         }
         if self._ramp is not None:  # a ramp has sweeps, not steps: its prediction's ETA
@@ -1096,6 +1108,7 @@ class _Ramp:
     dies: dict[str, list[rate_gain.Probe]]
     probe: bool  # the dies are probed (the rate gain measured)
     limit_s: float | None = None
+    limit_basis: str = ""  # how limit_s was set, for the failure message
 
 
 @dataclasses.dataclass
