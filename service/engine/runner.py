@@ -228,8 +228,7 @@ class CampaignRunner:
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
         if self.plan is None:
-            method = str(getattr(spec, "method", None)
-                         or getattr(spec, "extra", {}).get("method") or "soak")
+            method = spec.method
             if method == "ramp":  # its plan resumes from the store and the rig (engine/ramp.py)
                 self._ramp = RampProgress(self)
                 self.plan = self._ramp.plan
@@ -239,11 +238,9 @@ class CampaignRunner:
             else:
                 self.plan = PLANS[method]
         self.sensor_serial = str(camp.sensor)
-        several = spec.extra.get("sensors")
-        # The campaign's sensors, one or several (issue 12): each read at every position,
-        # dropped alone on a fault while another still reads (sensors.py).
-        self.serials: list[str] = ([str(s) for s in several]
-                                   if isinstance(several, list) and len(several) > 1
+        # The campaign's sensors, one or several (issue 12; the spec's typed list): each
+        # read at every position, dropped alone on a fault while another still reads.
+        self.serials: list[str] = (list(spec.sensors) if len(spec.sensors) > 1
                                    else [self.sensor_serial])
         self.dropped: dict[str, str] = dict(camp.sensors_dropped or {})
         self.identities: dict[str, dict[str, Any]] = {}
