@@ -26,7 +26,6 @@ import numpy as np
 
 from drivers.protocols import ChamberStatus
 from service.engine import rate_gain, stability
-from service.engine.sensors import slowest_decision
 from service.rig_plausibility import DIE_PV_TOLERANCE_C
 
 # Shortest wait between two soak polls when the decision predicts stability sooner than a
@@ -126,7 +125,7 @@ def decide_round(soak: SoakState, soaked_s: float, target_c: float, live: Sequen
     (``gain_for``); the slowest one ends the soak. The die that kept the soak going
     last poll is asked first and the first "not yet" ends the round: the soak goes on
     whatever the others say, and on the poll that ends it every die has been asked
-    (:func:`sensors.slowest_decision` then picks the slowest), so the outcome is that of
+    (:func:`slowest_decision` then picks the slowest), so the outcome is that of
     asking all, at a fraction of the fits.
     """
     cfg = soak.cfg
@@ -148,6 +147,23 @@ def decide_round(soak: SoakState, soaked_s: float, target_c: float, live: Sequen
             break
     soak.decision = slowest_decision(decisions)
     return soak.decision
+
+
+def slowest_decision(decisions: Sequence[stability.Decision]) -> stability.Decision:
+    """The soak decision over every die: not stable while any is not; the slowest reports.
+
+    While some die is not stable its decision is returned (why we wait); once all are,
+    the one with the longest time constant (the slowest die, which decided the end).
+    """
+    if not decisions:
+        raise ValueError("no sensor left to decide the soak")
+    waiting = [d for d in decisions if not d.stable]
+    if waiting:
+        return waiting[0]
+    capped = [d for d in decisions if d.max_soak_reached]
+    if capped:
+        return capped[0]
+    return max(decisions, key=lambda d: -math.inf if d.tau_s is None else d.tau_s)
 
 
 def soak_poll_wait_s(decision: stability.Decision, poll_s: float) -> float:
