@@ -244,7 +244,6 @@ class CampaignRunner:
                                    else [self.sensor_serial])
         self.dropped: dict[str, str] = dict(camp.sensors_dropped or {})
         self.identities: dict[str, dict[str, Any]] = {}
-        self.sensor_identity: dict[str, Any] | None = None
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
         self.guard = DeviceGuard(
@@ -406,7 +405,6 @@ class CampaignRunner:
                                                           msg.odr_hz))
             except SensorDropped as exc:
                 self._drop(exc)
-        self.sensor_identity = self.identities.get(self.sensor_serial)
 
     async def _measure_one(self, serial: str, n: int) -> tuple[Acquisition, list[str], int]:
         """Acquire; on a failed quality check measure once more and keep the second capture.
