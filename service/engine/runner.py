@@ -376,9 +376,8 @@ class CampaignRunner:
         """One sensor's call under the guard's one retry policy: while another sensor still
         reads, a sensor that fails for good or outlasts its retries is given up
         (:class:`SensorDropped`); the last one left suspends or fails the campaign."""
-        if len(self.serials) == 1:
-            return await self.guard.call(label, fn)
-        label = f"{label} [{serial}]"
+        if len(self.serials) > 1:  # name the sensor where there is more than one
+            label = f"{label} [{serial}]"
         if len(self._live) == 1:
             return await self.guard.call(label, fn)
         return await self.guard.call(label, fn,
