@@ -19,7 +19,7 @@ of one interval's |g| (sd/√n projected on the gravity direction; median over
 intervals). Ferraris has only 6 positions: norm mode is rank-deficient there, so its
 row is a reference-mode fit with the section labels (±x, ±y, ±z) as references.
 
-Two more tables (issue 11 / issue 9):
+Three more tables (issue 11 / issue 9 / issue 20):
 
 * **soakcal defaults vs peers** -- exactly what ``soakcal import`` (detector threshold
   and trim chosen by leave-one-interval-out, :mod:`calibration.static_choice`) and
@@ -29,7 +29,16 @@ Two more tables (issue 11 / issue 9):
 * **hand-placed Ferraris** -- |g| error on the six labelled positions and on the
   seven other static periods of the same session (found by the default detector
   outside the labelled sections; never used by the fit), labels exact vs
-  hand-placed, next to imucal's figures quoted in issue 9.
+  hand-placed, next to imucal's figures quoted in issue 9;
+* **imu_tk's method on the same intervals** -- imu_tk's accelerometer calibration
+  (Pretto/Tedaldi: static detector with a 101-sample window and a threshold of
+  ``th_mult`` × the variance norm of the first 3000 samples, ``th_mult`` 2…10, intervals
+  of ≥ 100 samples; 9 parameters, upper-triangular misalignment, |g| residual with
+  equal weights; per sample over each interval's first 100 samples, its default, or on
+  interval means, its ``acc_use_means``), re-implemented here from its description,
+  next to ``soakcal calibrate``'s leave-one-out on *those same intervals*. Every
+  column predicts the same held-out target, the interval's mean; only the fit differs.
+  (``--peers-only`` prints just this table.)
 """
 
 from __future__ import annotations
@@ -48,6 +57,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a plain script from a checkout
     sys.path.insert(0, str(ROOT))
+
+from scipy.optimize import least_squares  # noqa: E402
 
 from calibration import holdout, importers, static_choice  # noqa: E402
 from calibration.errors import NotIdentifiable  # noqa: E402
@@ -258,10 +269,92 @@ def run_ferraris(path: Path) -> list[str]:
     return lines
 
 
+# --- imu_tk's accelerometer method, for the same-intervals comparison --------------------
+IMU_TK_WINDOW = 101  # samples, its staticIntervalsDetector default
+IMU_TK_INIT_SAMPLES = 3000  # its n_init_samples: the rest the threshold is scaled from
+IMU_TK_INTERVAL_SAMPLES = 100  # its interval_n_samples: minimum length, samples fitted
+IMU_TK_TH_MULT = range(2, 11)
+IMU_TK_MIN_INTERVALS = 12
+
+
+def imu_tk_intervals(acc_g: np.ndarray, th_mult: int) -> list[tuple[int, int]]:
+    """Runs where the 101-sample variance norm is below ``th_mult`` × the initial rest's;
+    ``[start, end)``, kept when at least 100 samples long."""
+    h = IMU_TK_WINDOW // 2
+    x = acc_g - acc_g[0]
+    c1 = np.vstack([np.zeros((1, 3)), np.cumsum(x, 0)])
+    c2 = np.vstack([np.zeros((1, 3)), np.cumsum(x * x, 0)])
+    i = np.arange(h, len(x) - h)
+    m = (c1[i + h + 1] - c1[i - h]) / IMU_TK_WINDOW
+    var = ((c2[i + h + 1] - c2[i - h]) - IMU_TK_WINDOW * m * m) / (IMU_TK_WINDOW - 1)
+    quiet = np.zeros(len(x), bool)
+    quiet[i] = np.linalg.norm(var, axis=1) < th_mult * np.linalg.norm(
+        acc_g[: IMU_TK_INIT_SAMPLES + 1].var(axis=0, ddof=1))
+    edges = np.flatnonzero(np.diff(np.r_[0, quiet.astype(np.int8), 0]))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)
+            if b - a >= IMU_TK_INTERVAL_SAMPLES]
+
+
+def _imu_tk_residual(p: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """|T K (y − b)| − 1 with T K upper triangular (its misYZ, misZY, misZX and scales)."""
+    tk = np.array([[p[0], p[1], p[2]], [0.0, p[3], p[4]], [0.0, 0.0, p[5]]])
+    return np.linalg.norm((y - p[6:9]) @ tk.T, axis=1) - 1.0
+
+
+def _imu_tk_fit(y: np.ndarray, p0: np.ndarray | None = None) -> np.ndarray:
+    start = np.array([1.0, 0, 0, 1.0, 0, 1.0, 0, 0, 0]) if p0 is None else p0
+    return least_squares(_imu_tk_residual, start, args=(y,), method="lm").x
+
+
+def imu_tk_loo_mg(acc_g: np.ndarray, intervals: list[tuple[int, int]], per_sample: bool
+                  ) -> float:
+    """Refit without interval i, predict the |g| of interval i's mean; RMS over i, mg."""
+    means = np.array([acc_g[a:b].mean(axis=0) for a, b in intervals])
+    if per_sample:
+        y = np.vstack([acc_g[a:a + IMU_TK_INTERVAL_SAMPLES] for a, _ in intervals])
+        owner = np.repeat(np.arange(len(intervals)), IMU_TK_INTERVAL_SAMPLES)
+    else:
+        y, owner = means, np.arange(len(intervals))
+    p_all = _imu_tk_fit(y)
+    err = [_imu_tk_residual(_imu_tk_fit(y[owner != k], p_all), means[k:k + 1])[0]
+           for k in range(len(intervals))]
+    return float(np.sqrt(np.mean(np.square(err))) * 1e3)
+
+
+def run_same_intervals(name: str, fmt: str, path: Path, options: dict[str, object]
+                       ) -> list[str]:
+    raw = importers.read_source(fmt, path, **options)
+    lines = []
+    for th in IMU_TK_TH_MULT:
+        iv = imu_tk_intervals(raw.acc_g, th)
+        if len(iv) < IMU_TK_MIN_INTERVALS:
+            lines.append(f"{name:28s} {th:3d} {len(iv):3d}  fewer than "
+                         f"{IMU_TK_MIN_INTERVALS} intervals: imu_tk does not calibrate")
+            continue
+        rec = importers.intervals_to_recording(raw, iv, path=str(path))
+        held = holdout.leave_one_out(rec, fit_campaign(rec))
+        ours = _mg(held["loo_rmse_ug"])
+        ours_s = f"{ours:8.4f}" if ours is not None else f"{'null':>8s}"
+        lines.append(f"{name:28s} {th:3d} {len(iv):3d} {imu_tk_loo_mg(raw.acc_g, iv, True):9.4f} "
+                     f"{imu_tk_loo_mg(raw.acc_g, iv, False):9.4f} {ours_s}")
+    return lines
+
+
+def format_same_intervals(lines: list[str]) -> str:
+    head = (f"{'dataset':28s} {'th':>3s} {'N':>3s} {'samples':>9s} {'means':>9s} "
+            f"{'soakcal':>8s}")
+    return "\n".join([head, "-" * len(head), *lines, "",
+                      "leave-one-interval-out |g| RMSE, mg, on imu_tk's intervals at th_mult × "
+                      "the initial rest; samples / means = imu_tk per sample (its default) / "
+                      "on interval means; soakcal = calibrate (sd/√n + model floor)"])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--realdata", type=Path, default=Path(os.environ.get(
         "SOAKCAL_REALDATA", Path(__file__).resolve().parents[1] / "tests/data/realdata")))
+    ap.add_argument("--peers-only", action="store_true",
+                    help="only imu_tk's method and soakcal's fit on the same intervals")
     args = ap.parse_args(argv)
     if not args.realdata.is_dir():
         print(f"no real data at {args.realdata}", file=sys.stderr)
@@ -269,17 +362,26 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[Row] = []
     defaults: list[DefaultsRow] = []
     ferraris: list[str] = []
+    same: list[str] = []
     for name, fmt, rel, options in DATASETS:
         path = args.realdata / rel
         if not path.exists():
             print(f"skip {name}: {path} missing", file=sys.stderr)
+            continue
+        if fmt != "ferraris":
+            same += run_same_intervals(name, fmt, path, options)
+        if args.peers_only:
             continue
         rows += run_dataset(name, fmt, path, options)
         if fmt == "ferraris":
             ferraris += run_ferraris(path)
         else:
             defaults.append(run_defaults(name, fmt, path, options))
-    print("== soakcal defaults (import + calibrate, no flags) vs peer tools, mg of |g| ==")
+    print("== imu_tk's method and soakcal's fit on the same intervals, mg of |g| ==")
+    print(format_same_intervals(same))
+    if args.peers_only:
+        return 0
+    print("\n== soakcal defaults (import + calibrate, no flags) vs peer tools, mg of |g| ==")
     print(format_defaults(defaults))
     print("\n== hand-placed Ferraris positions: |g| RMSE, mg ==")
     print("\n".join(ferraris))

@@ -134,7 +134,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
     Data the gate does not let an SFEM be fitted to (one orientation, a warm-up, no
     spare degrees of freedom) get "cannot judge" with calibrate's reason, in the
     diagnosis' own text and JSON forms; everything else goes to
-    :func:`calibration.discrepancy.cli.run_diagnose` unchanged.
+    :func:`calibration.discrepancy.cli.run_diagnose` with the recording already read.
     """
     from calibration.discrepancy import cli as discrepancy_cli
 
@@ -144,7 +144,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     why = gate.cannot_judge(rec)
     if why is None:
-        return int(discrepancy_cli.run_diagnose(args))
+        return int(discrepancy_cli.run_diagnose(args, rec))  # read once (issue 22)
     from calibration.discrepancy.diagnose import _cannot_judge
 
     diag = _cannot_judge(rec, why, int(getattr(args, "n_null", None) or 200), 0.01, [])

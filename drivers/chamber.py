@@ -14,7 +14,11 @@ RAMP_WRITE_TOLERANCE = 0.05
 
 
 class ModbusChamber:
-    """Any chamber controller whose registers a :class:`ChamberMap` describes."""
+    """Any chamber controller whose registers a :class:`ChamberMap` describes.
+
+    Every write sets a level (setpoint, ramp rate, run/stop, setup values), so each is
+    idempotent and the link may repeat it after a lost reply (drivers/modbus_link.py).
+    """
 
     def __init__(self, link: ModbusLink, regmap: ChamberMap) -> None:
         self.link = link
@@ -99,7 +103,7 @@ class ModbusChamber:
         if steps:
             await self._write_sequence(steps, setpoint_c)
             return
-        await self.link.write_field(self.regmap.setpoint_c, setpoint_c)
+        await self.link.write_field(self.regmap.setpoint_c, setpoint_c, idempotent=True)
 
     async def set_ramp_rate(self, ramp_c_per_min: float) -> None:
         if ramp_c_per_min < 0:
@@ -136,15 +140,15 @@ class ModbusChamber:
             await self._write_sequence(steps, ramp_c_per_min)
             self._ramp_written = ramp_c_per_min
             return
-        await self.link.write_field(field, ramp_c_per_min)
+        await self.link.write_field(field, ramp_c_per_min, idempotent=True)
 
     async def run(self) -> None:
         if self.regmap.run is not None:
-            await self.link.write_field(self.regmap.run, self.regmap.run_on)
+            await self.link.write_field(self.regmap.run, self.regmap.run_on, idempotent=True)
 
     async def stop(self) -> None:
         if self.regmap.run is not None:
-            await self.link.write_field(self.regmap.run, self.regmap.run_off)
+            await self.link.write_field(self.regmap.run, self.regmap.run_off, idempotent=True)
 
     async def close(self) -> None:
         """Release the connection (the controller keeps running its last command)."""
@@ -152,16 +156,20 @@ class ModbusChamber:
 
     async def _write_sequence(self, steps: tuple[SequenceStep, ...], commanded: float) -> None:
         """The map's ordered writes; a failure stops the sequence where it failed (the
-        fault names the register), later steps are not sent."""
+        fault names the register), later steps are not sent.
+
+        Each step writes a level (a value into a register: end the profile, the setpoint),
+        so writing it again after a lost reply leaves the controller as one write would:
+        the link may repeat it (idempotent)."""
         for step in steps:
-            await self.link.write_field(step.field, step.word_value(commanded))
+            await self.link.write_field(step.field, step.word_value(commanded), idempotent=True)
 
     async def _setup(self) -> None:
         """The map's one-time writes (e.g. the F4T's ramp action and scale), once per driver."""
         if self._setup_done:
             return
         for f, value in self.regmap.setup:
-            await self.link.write_field(f, value)
+            await self.link.write_field(f, value, idempotent=True)
         self._setup_done = True
 
     async def park(self, setpoint_c: float | None = None) -> str:

@@ -1,7 +1,8 @@
 """Fault taxonomy shared by all drivers; the engine maps each kind to retry, suspend or fail.
 
 Drivers raise, they do not decide: the campaign engine's
-:class:`service.engine.guard.DeviceGuard` is the one retry owner. ``retryable``
+:class:`service.engine.guard.DeviceGuard` decides what a call's fault means (the Modbus
+link only repeats one idempotent request a few times first, drivers/modbus_link.py). ``retryable``
 says whether waiting can heal the fault (a timeout, a dropped connection, a
 busy device) or whether it is a configuration fault that fails the campaign
 at once (a register the device does not have, a value it refuses).

@@ -4,18 +4,40 @@ Every register access of the chamber and turntable drivers goes through
 :class:`ModbusLink`. It owns what pymodbus leaves to the caller:
 
 * one request in flight per client (an ``asyncio.Lock`` around each request),
-* reconnect on the next request after the transport dropped,
+* reconnect on the next request after the transport dropped, and give up on a request
+  as soon as its connection closes (pymodbus would wait out the reply timeout),
+* a few quick retries of each *idempotent* request (below),
 * translation of every failure into :mod:`drivers.faults`, with the register
   and the Modbus exception's name in the message.
 
-Retrying is *not* the link's job by default (``RetryPolicy.attempts = 1``):
-the campaign engine's guard (service/engine/guard.py) is the one retry owner,
-so a fault is decided once instead of 3 link tries × 4 guard tries. Tools that
-talk to a device without the engine may still ask for link retries.
-pymodbus' own retries and auto-reconnect are switched off. The reply timeout is wall
-time on purpose: it guards a socket, not
-physics, and with a :class:`~drivers.clock.VirtualClock` a clock-based timeout
-would fire whenever the loop is briefly idle while a reply is still in flight.
+What the link retries, and why there: a fault hits one request, so it is retried
+as one request. A status read is several requests where the map's registers are not
+adjacent (four on the Eurotherm 3216, five on the Watlow F4T cascade map); at 20 %
+faulty requests a five-request read fails 1 − 0.8⁵ = 67 % of the time, and retrying
+the whole read (the engine's guard) rarely gets five successes in a row. Retried per
+request (``read_attempts = 3``), a request fails 0.2³ = 0.8 %, the status read 3.9 %.
+
+* Reads (FC 1/2/3/4) are always retried: reading has no effect on the device.
+* A write is retried only when the driver says it is idempotent: it sets a
+  register to a level (a setpoint, a ramp rate, a run/stop level, the table's
+  target angles, a one-time setup value), so a repeat after a reply that was lost
+  leaves the device as one write would. ``write_attempts`` tries.
+* A write that triggers an action (the turntable's move/stop command) is sent
+  again only after the device answered SERVER DEVICE BUSY (code 6): it did not act
+  and asks for the request again. After a lost reply (timeout, connection closed)
+  the device may have acted, and on a positioner whose command is an edge a repeat
+  restarts or faults the motion: the fault goes to the engine's guard
+  (service/engine/guard.py), which re-sends the whole move (targets, then command)
+  and reads the position back.
+
+Exception codes 1–3 (illegal function/address/value) are never retried. A fault
+that outlasts the link's tries reaches the caller with the number of tries in its
+message; the engine's guard then decides (retry the call, suspend, or fail).
+Retries are counted in ``stats`` and logged at DEBUG. The back-off is waited on the
+injected clock. pymodbus' own retries and auto-reconnect are switched off. The reply
+timeout is wall time on purpose: it guards a socket, not physics, and with a
+:class:`~drivers.clock.VirtualClock` a clock-based timeout would fire whenever the
+loop is briefly idle while a reply is still in flight.
 """
 
 from __future__ import annotations
@@ -43,9 +65,12 @@ from drivers.faults import (
 )
 from drivers.registermaps import Field
 
+DEVICE_BUSY = 6  # Modbus exception: "retransmit the message later"; the device did not act
+
 # pymodbus logs every timeout and dumps frames at ERROR; the fault taxonomy below
 # is how failures reach the caller, so keep its logger quiet unless asked.
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -53,19 +78,29 @@ class RetryPolicy:
     """How hard to try before a fault reaches the caller."""
 
     timeout_s: float = 1.0  # wall time per attempt
-    attempts: int = 1  # total tries per request (1 = no retry: the engine's guard retries)
+    read_attempts: int = 3  # tries of a read (1 = no retry)
+    write_attempts: int = 3  # tries of a write (an action's: after DEVICE BUSY only)
     backoff_s: float = 0.2  # first backoff, clock time; doubles each retry
     backoff_max_s: float = 5.0
 
 
-def client_from_url(url: str, timeout_s: float) -> ModbusBaseClient:
-    """``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200&parity=N`` → pymodbus client."""
+def client_from_url(url: str, timeout_s: float,
+                    on_lost: Callable[[], None] | None = None) -> ModbusBaseClient:
+    """``tcp://host:port`` or ``rtu:///dev/ttyUSB0?baudrate=19200&parity=N`` → pymodbus client.
+
+    ``on_lost`` is called when the transport closes (pymodbus' ``trace_connect(False)``).
+    """
+    def trace_connect(up: bool) -> None:
+        if not up and on_lost is not None:
+            on_lost()
+
     u = urlparse(url)
     if u.scheme in ("tcp", "modbus+tcp", ""):
         if not u.hostname:
             raise ValueError(f"Modbus URL {url!r} has no host (expected tcp://host:port)")
         return AsyncModbusTcpClient(
-            u.hostname, port=u.port or 502, timeout=timeout_s, retries=0, reconnect_delay=0
+            u.hostname, port=u.port or 502, timeout=timeout_s, retries=0, reconnect_delay=0,
+            trace_connect=trace_connect,
         )
     if u.scheme == "rtu":
         q = {k: v[-1] for k, v in parse_qs(u.query).items()}
@@ -78,6 +113,7 @@ def client_from_url(url: str, timeout_s: float) -> ModbusBaseClient:
             timeout=timeout_s,
             retries=0,
             reconnect_delay=0,
+            trace_connect=trace_connect,
         )
     raise ValueError(f"unsupported Modbus URL scheme {u.scheme!r} in {url!r} (tcp:// or rtu://)")
 
@@ -100,6 +136,7 @@ class ModbusLink:
         self.device_id = device_id
         self.policy = policy or RetryPolicy()
         self._client: ModbusBaseClient | None = None
+        self._lost = asyncio.Event()  # set when the current client's transport closes
         self._lock = asyncio.Lock()
         self._was_connected = False
         self.stats = {"requests": 0, "retries": 0, "reconnects": 0}
@@ -139,19 +176,24 @@ class ModbusLink:
                 block.append(i)
         return values
 
-    async def write_field(self, f: Field, value: float) -> None:
+    async def write_field(self, f: Field, value: float, *, idempotent: bool = False) -> None:
+        """Write ``value`` to ``f``; ``idempotent``: a level a repeat leaves unchanged, so a
+        lost reply is retried too (module docstring); else only DEVICE BUSY is."""
         try:
             words = f.encode(value)
         except (ValueError, OverflowError) as exc:
             raise ValueOutOfRange(self.device, f"{value} at register {f.address}: {exc}") from exc
+        tries = max(1, self.policy.write_attempts)
         if f.table == "coil":  # FC 5
             await self._request("write", f.address, lambda c: c.write_coil(
-                f.address, bool(words[0]), device_id=self.device_id))
+                f.address, bool(words[0]), device_id=self.device_id), tries,
+                repeatable=idempotent)
         elif f.single_write:  # FC 6: controllers that refuse FC 16
             await self._request("write", f.address, lambda c: c.write_register(
-                f.address, words[0], device_id=self.device_id))
+                f.address, words[0], device_id=self.device_id), tries,
+                repeatable=idempotent)
         else:
-            await self.write_registers(f.address, words)
+            await self.write_registers(f.address, words, idempotent=idempotent)
 
     async def read_registers(self, address: int, count: int,
                              table: str = "holding") -> list[int]:
@@ -160,7 +202,8 @@ class ModbusLink:
                 "coil": "read_coils", "discrete": "read_discrete_inputs"}[table]
         rr = await self._request(
             "read", address, lambda c: getattr(c, read)(
-                address, count=count, device_id=self.device_id)
+                address, count=count, device_id=self.device_id),
+            max(1, self.policy.read_attempts),
         )
         got = [int(b) for b in rr.bits[:count]] if table in ("coil", "discrete") \
             else list(rr.registers)
@@ -170,9 +213,13 @@ class ModbusLink:
             )
         return got
 
-    async def write_registers(self, address: int, words: list[int]) -> None:
+    async def write_registers(self, address: int, words: list[int], *,
+                              idempotent: bool = False) -> None:
+        """FC 16; ``idempotent`` as for :meth:`write_field`."""
         await self._request(
-            "write", address, lambda c: c.write_registers(address, words, device_id=self.device_id)
+            "write", address,
+            lambda c: c.write_registers(address, words, device_id=self.device_id),
+            max(1, self.policy.write_attempts), repeatable=idempotent,
         )
 
     async def close(self) -> None:
@@ -181,24 +228,32 @@ class ModbusLink:
 
     # --- internals ----------------------------------------------------------
     async def _request(
-        self, what: str, address: int, call: Callable[[ModbusBaseClient], Awaitable[ModbusPDU]]
+        self, what: str, address: int, call: Callable[[ModbusBaseClient], Awaitable[ModbusPDU]],
+        tries: int, *, repeatable: bool = True,
     ) -> ModbusPDU:
+        """``call`` up to ``tries`` times; ``repeatable=False`` (an action): a lost reply is
+        not retried, since the device may have acted; DEVICE BUSY still is."""
         async with self._lock:
             last: DeviceFault | None = None
-            for attempt in range(self.policy.attempts):
+            made = 0
+            for attempt in range(tries):
                 if attempt:
+                    assert last is not None
                     self.stats["retries"] += 1
+                    log.debug("%s: %s; try %d of %d", self.device, last.message,
+                              attempt + 1, tries)
                     delay = min(self.policy.backoff_s * 2 ** (attempt - 1),
                                 self.policy.backoff_max_s)
                     await self.clock.sleep(delay)
                 task = asyncio.current_task()
                 cancels = task.cancelling() if task is not None else 0
+                made = attempt + 1
                 try:
                     client = await self._connected()
                     if what == "write" and self.before_write is not None:
                         self.before_write(f"{self.device} write of register {address}")
                     self.stats["requests"] += 1
-                    rr = await call(client)
+                    rr = await self._reply(call(client))
                     if task is not None and task.cancelling() > cancels:
                         # pymodbus awaits the reply with asyncio.wait_for, which (Python
                         # < 3.12) returns a reply that arrived with our cancellation and
@@ -211,6 +266,8 @@ class ModbusLink:
                 except ConnectionException as exc:
                     self._drop()
                     last = ConnectionLost(self.device, f"{what}: {exc}")
+                    if not repeatable:
+                        break
                     continue
                 except ModbusIOException as exc:
                     # pymodbus turns a cancellation of our task into ModbusIOException;
@@ -225,6 +282,8 @@ class ModbusLink:
                     else:
                         last = DeviceTimeout(
                             self.device, f"{what}: no reply within {self.policy.timeout_s} s")
+                    if not repeatable:
+                        break
                     continue
                 except ModbusException as exc:
                     raise ProtocolError(self.device, f"{what}: {exc}") from exc
@@ -235,12 +294,35 @@ class ModbusLink:
                         self.device, f"{what} register {address}: exception code {code} "
                                      f"({name})", code, address)
                     # Illegal function/address/value will not heal by retrying: report at once.
-                    if not last.retryable:
-                        raise last
+                    # An action is sent again only when the device said it did not act.
+                    if not last.retryable or not (repeatable or code == DEVICE_BUSY):
+                        break
                     continue
                 return rr
             assert last is not None
-            raise last
+            raise _after_tries(last, made)
+
+    async def _reply(self, request: Awaitable[ModbusPDU]) -> ModbusPDU:
+        """The request's reply; :class:`ConnectionException` as soon as the transport closes.
+
+        pymodbus waits out the whole reply timeout for a request whose connection the
+        device closed (1.1 s wall against 1 ms for a reply): a reply that cannot come is
+        not waited for, so a dropped connection costs a reconnect, not a timeout.
+        """
+        reply = asyncio.ensure_future(request)
+        closed = asyncio.ensure_future(self._lost.wait())
+        try:
+            await asyncio.wait({reply, closed}, return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:
+            reply.cancel()
+            closed.cancel()
+            raise
+        closed.cancel()
+        if reply.done():
+            return reply.result()
+        reply.cancel()  # pymodbus releases its lock; the link drops this client
+        reply.add_done_callback(_retrieve)
+        raise ConnectionException("the device closed the connection")
 
     async def _connected(self) -> ModbusBaseClient:
         if self._client is not None and self._client.connected:
@@ -249,7 +331,8 @@ class ModbusLink:
             self._drop()
         if self._was_connected:
             self.stats["reconnects"] += 1
-        self._client = client_from_url(self.url, self.policy.timeout_s)
+        self._lost = asyncio.Event()
+        self._client = client_from_url(self.url, self.policy.timeout_s, on_lost=self._lost.set)
         try:
             # pymodbus bounds the connect by ``timeout`` itself (and then idles 0.1 s wall).
             ok = await self._client.connect()
@@ -265,6 +348,20 @@ class ModbusLink:
         if self._client is not None:
             self._client.close()
             self._client = None
+
+
+def _retrieve(fut: asyncio.Future) -> None:
+    """Consume the outcome of a request abandoned on a closed connection (no asyncio warning)."""
+    if not fut.cancelled():
+        fut.exception()
+
+
+def _after_tries(fault: DeviceFault, tries: int) -> DeviceFault:
+    """``fault`` with how often it was tried in its message (a persistent fault says so)."""
+    if tries > 1:
+        fault.message = f"{fault.message} ({tries} tries)"
+        fault.args = (f"{fault.device}: {fault.message}",)
+    return fault
 
 
 def _end(f: Field) -> int:

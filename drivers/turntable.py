@@ -44,7 +44,9 @@ class ModbusTurntable:
             # Axes with a stride wider than the field leave a gap the write must keep.
             words += [0] * (m.axis_stride - f.n_registers) if i < self.n_axes - 1 else []
         # Targets of all axes in one write, then the command: the table never sees half a move.
-        await self.link.write_registers(m.target_deg.address, words)
+        # The targets are levels (the link may repeat them); the command is an action, sent
+        # again only after DEVICE BUSY: a repeated edge restarts or faults some positioners.
+        await self.link.write_registers(m.target_deg.address, words, idempotent=True)
         await self.link.write_field(m.command, m.move_value)
 
     async def read_status(self) -> TurntableStatus:

@@ -128,7 +128,7 @@ def rig_mounted_serials(rig_cfg: dict[str, Any]) -> set[str] | None:
     """
     from service.engine.rigs import entry_serials
 
-    if (rig_cfg.get("chamber") or {}).get("driver", "sim") != "modbus":
+    if (rig_cfg.get("chamber") or {}).get("driver", "sim") == "sim":
         return None
     mounted: set[str] = set()
     for entry in rig_cfg.get("sensors") or []:

@@ -414,7 +414,7 @@ def _add_engine_hosts(sub: Any) -> None:
         if args.rigs is not None:  # Settings reads it (service/config.py engine_rigs)
             import os
 
-            from service.engine.worker import ENGINE_RIGS_ENV
+            from service.config import ENGINE_RIGS_ENV
 
             os.environ[ENGINE_RIGS_ENV] = args.rigs
         return int(run_serve(args))

@@ -16,6 +16,7 @@ same database whatever the current folder:
 from __future__ import annotations
 
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,8 @@ HOME_ENV = "SOAKCAL_HOME"
 DATA_DIR_ENV = "SOAKCAL_DATA_DIR"  # legacy name of SOAKCAL_HOME (kept for container images)
 DATABASE_URL_ENV = "SOAKCAL_DATABASE_URL"
 RIGS_FILE_ENV = "SOAKCAL_RIGS_FILE"
+ENGINE_RIGS_ENV = "SOAKCAL_ENGINE_RIGS"  # the rigs this process drives (``serve --rigs``)
+_RIG_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 MAX_BODY_BYTES_ENV = "SOAKCAL_MAX_BODY_BYTES"
 DEFAULT_MAX_BODY_BYTES = 1_000_000
 SQLITE_FILENAME = "soakcal.db"
@@ -155,11 +158,23 @@ class Settings:
     # Request bodies over this are refused with 413 before they are parsed.
     max_body_bytes: int = field(default_factory=max_body_bytes)
     # The rigs this process's campaign engine drives (``serve --rigs``, SOAKCAL_ENGINE_RIGS):
-    # None every rig, an empty set none (API only). service/engine/worker.py parses it.
-    engine_rigs: frozenset[str] | None = field(default_factory=lambda: _engine_rigs())
+    # None every rig, an empty set none (API only).
+    engine_rigs: frozenset[str] | None = field(
+        default_factory=lambda: parse_rigs(os.environ.get(ENGINE_RIGS_ENV)))
 
 
-def _engine_rigs() -> frozenset[str] | None:
-    from service.engine.worker import engine_rigs_from_env
+def parse_rigs(text: str | None) -> frozenset[str] | None:
+    """``"lab-1,lab-2"`` → those rigs; ``"none"`` → no rig (API only); empty/None → every rig.
 
-    return engine_rigs_from_env()
+    Raises ``ValueError`` naming the bad entry.
+    """
+    if text is None or not text.strip():
+        return None
+    if text.strip().lower() == "none":
+        return frozenset()
+    names = [n.strip() for n in text.split(",")]
+    for i, name in enumerate(names):
+        if not _RIG_NAME.match(name):
+            raise ValueError(f"--rigs entry {i + 1} {name!r} is not a rig name "
+                             "(letters, digits, '-', '_', '.'; or 'none')")
+    return frozenset(names)

@@ -175,7 +175,11 @@ async def _map_checks(rec: _Recorder, device: str, driver: Any) -> bool:
 
 async def _check_chamber(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> bool:
     """Identity, status and alarms; ``False`` when the chamber cannot be read at all."""
-    if not hasattr(chamber, "regmap"):  # not a map-driven driver: nothing to compare against
+    if hasattr(chamber, "rig_checks"):  # a driver that checks its own controller (ESPEC)
+        if not await rec.guard("chamber", "connect", getattr(chamber, "connect_fix", _CONNECT_FIX),
+                               lambda: _driver_checks(rec, chamber, rig)):
+            return False
+    elif not hasattr(chamber, "regmap"):  # not a map-driven driver: nothing to compare against
         rec.add("chamber", "identity", "skip", "driver has no register map")
     elif not await rec.guard("chamber", "connect", _CONNECT_FIX,
                              lambda: _identity(rec, "chamber", chamber)):
@@ -213,10 +217,21 @@ async def _check_chamber(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> b
         return False
 
 
+async def _driver_checks(rec: _Recorder, chamber: Any, rig: dict[str, Any]) -> bool:
+    """The checks a map-less driver makes of its own controller (``rig_checks``)."""
+    for check, status, detail, fix in await chamber.rig_checks(
+            plausibility.usable_range_c(chamber, rig)):
+        rec.add("chamber", check, status, detail, fix)
+    return True
+
+
 def _has_ramp(chamber: Any) -> bool:
-    """The chamber has a ramp to set: a map-less driver is taken to have one."""
+    """The chamber has a ramp to set: a map-less driver says so (``has_static_ramp``), else
+    is taken to have one."""
     regmap = getattr(chamber, "regmap", None)
-    return regmap is None or regmap.ramp_field() is not None
+    if regmap is None:
+        return bool(getattr(chamber, "has_static_ramp", True))
+    return regmap.ramp_field() is not None
 
 
 # --- turntable -------------------------------------------------------------------------

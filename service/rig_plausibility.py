@@ -225,7 +225,8 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
     rate = min(RAMP_CHECK_C_PER_MIN, limit) if limit else RAMP_CHECK_C_PER_MIN
     # Optional roles: a controller without a static ramp steps (nothing to command), one
     # without a working setpoint has nothing to time the ramp on.
-    ramps = regmap is None or regmap.ramp_field() is not None
+    ramps = (bool(getattr(chamber, "has_static_ramp", True)) if regmap is None
+             else regmap.ramp_field() is not None)
     timed = ramps and st0.working_setpoint_c is not None
     watch: tuple[list[tuple[float, float]], float] | None = None
     # Nothing to time: the PV itself must follow the nudge there and back (a chamber in
@@ -263,7 +264,10 @@ async def nudge_and_ramp(rec: _Recorder, chamber: Any, rig: dict[str, Any],
     if watch is None:
         rec.add("chamber", "setpoint_nudge", "pass", nudged)
         file = map_file(regmap) if regmap is not None else "the map"
-        if not ramps:
+        if not ramps and regmap is None:
+            why = ("the controller has no ramp to command (it steps to each setpoint at the "
+                   "chamber's own rate): there is no commanded ramp to time")
+        elif not ramps:
             why = (f"{file} lists ramp_c_per_min under absent_roles: the controller steps to "
                    "each setpoint, there is no commanded ramp to time")
         elif not timed:

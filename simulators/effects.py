@@ -40,7 +40,7 @@ from calibration.discrepancy.effects.scale_nonlinearity import scale_nonlinearit
 from calibration.discrepancy.effects.self_heating import warmup_delta_c
 from calibration.discrepancy.effects.session_offset import session_offset_g
 from calibration.discrepancy.effects.temperature_rate import rate_offset_g
-from calibration.discrepancy.effects.temperature_sensor import channel_error_c
+from calibration.discrepancy.effects.temperature_sensor import channel_error_c, channel_step_c
 from calibration.discrepancy.effects.thermal_hysteresis import hysteresis_offset_g
 from calibration.discrepancy.effects.turntable_geometry import lab_to_sensor as lab_to_sensor
 from calibration.discrepancy.effects.turntable_geometry import tilted_ref_g
@@ -172,7 +172,8 @@ class TemperatureSensor:
     """``temperature_sensor``: errors of the temperature channel only (output untouched).
 
     ``T_read += offset_c + k2_per_c · (T_die − 25)²`` plus glitches of
-    ``glitch_c`` on ``glitch_rows`` (or each reading with ``glitch_probability``).
+    ``glitch_c`` on ``glitch_rows`` (or each reading with ``glitch_probability``), plus a
+    step of ``step_c`` from campaign step ``from_step`` on (a re-zeroed channel).
     """
 
     offset_c: float = 0.0
@@ -180,13 +181,22 @@ class TemperatureSensor:
     glitch_c: float = 0.0
     glitch_rows: tuple[int, ...] = ()
     glitch_probability: float = 0.0
+    step_c: float = 0.0
+    from_step: int = 0
     effect_id: str = "temperature_sensor"
+
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> TemperatureSensor:
+        """The twin counterpart of a channel-step finding."""
+        return cls(step_c=float(p["step_c"]), from_step=int(p["from_step"]))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
         return np.zeros((ctx.t_s.size, 3))
 
     def temperature_delta_c(self, ctx: Context, rng: np.random.Generator) -> np.ndarray:
         d = channel_error_c(ctx.die_c, self.offset_c, self.k2_per_c)
+        if self.step_c:
+            d = d + channel_step_c(ctx.step, self.from_step, self.step_c)
         g = np.zeros(ctx.t_s.size)
         g[list(self.glitch_rows)] = self.glitch_c
         if self.glitch_probability > 0:

@@ -14,15 +14,18 @@ from typing import Any
 from calibration.errors import CalibrationError, RecordingError
 
 
-def run_diagnose(args: Any) -> int:
+def run_diagnose(args: Any, rec: Any = None) -> int:
+    """``rec``: the recording already read (by the gate in ``calibration.cli``), so a large
+    file is parsed once; None reads ``args.recording`` here."""
     from calibration.discrepancy.diagnose import diagnose
     from calibration.recording import read_recording
 
-    try:
-        rec = read_recording(args.recording)
-    except RecordingError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+    if rec is None:
+        try:
+            rec = read_recording(args.recording)
+        except RecordingError as exc:
+            print(str(exc), file=sys.stderr)
+            return 2
     model = None
     model_path = getattr(args, "model", None)
     if model_path:

@@ -1,6 +1,6 @@
-"""Per-reading facts every effect module may use (times, temperatures, steps, inputs).
+"""Per-reading facts every catalogue effect may use (times, temperatures, steps, inputs).
 
-Built once from a :class:`~calibration.recording.Recording`; effect modules
+Built once from a :class:`~calibration.recording.Recording`; the effects
 read it to form their regressors in *raw-output space* ((N,3,k) arrays in g),
 which :mod:`calibration.discrepancy.problem` maps into residual space.
 """
@@ -19,7 +19,7 @@ AXES = ("x", "y", "z")
 
 @dataclass
 class DesignContext:
-    """What the effect modules see (N readings); ``input_g``: ref, or calibrated f in norm mode."""
+    """What each effect sees (N readings); ``input_g``: ref, or calibrated f in norm mode."""
 
     mode: str  # "reference" | "norm"
     t_s: np.ndarray  # (N,)

@@ -20,8 +20,9 @@ from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
-from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, EffectModule
+from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
+from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.problem import LinearProblem, build_problem
@@ -158,7 +159,7 @@ def heldout_improved(before_ug: float, after_ug: float) -> bool:
 # --- the pipeline ------------------------------------------------------------
 def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0,
              n_null: int = 200, alpha: float = 0.01,
-             effects: tuple[EffectModule, ...] = ALL_EFFECTS) -> Diagnosis:
+             effects: tuple[CatalogueEffect, ...] = ALL_EFFECTS) -> Diagnosis:
     """Diagnose ``recording`` against the base model (docs/diagnosis.md).
 
     ``model`` (a ThermalModel) is accepted for the contract; the statistics
@@ -217,7 +218,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                      "protocol_order.py)")
 
     # Protocol-level identifiability first; the absorbed fraction is checked per stage.
-    live: list[EffectModule] = []
+    live: list[CatalogueEffect] = []
     not_ident: dict[str, dict[str, str]] = {}
     for eff in effects:
         ok, why, exp = eff.identifiable(ctx)
@@ -230,7 +231,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
 
     raw_cache: dict[tuple[str, float], np.ndarray] = {}
 
-    def lifted(eff: EffectModule, theta: float) -> np.ndarray:
+    def lifted(eff: CatalogueEffect, theta: float) -> np.ndarray:
         key = (eff.effect_id, theta)
         if key in raw_cache:
             return raw_cache[key]
@@ -327,10 +328,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         notes.append(f"the readings are heavier-tailed than Gaussian (Student-t, nu = "
                      f"{tail_nu:.1f}, from their own scatter): the null draws them so")
     # Physics checks (issue 10, docs/diagnosis.md §7): a named term must have its physics'
-    # shape (EffectModule.misses: an outlier is isolated, a function of the specific force
+    # shape (CatalogueEffect.misses: an outlier is isolated, a function of the specific force
     # is the same at every visit of a direction). One that is not is withdrawn, and the
     # structure it was fitted to is reported as ``unexplained`` where it is.
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
+    findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -473,10 +475,13 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
         U = stats.orthonormal_basis(np.hstack([Xw, pb.whiten(pb.lift(block))]))
         e = yw - U @ (U.T @ yw)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lp, _, k, _, _ = stats.linear_stats(U, Tw, e, np.zeros((pb.m, 1)))
-        # Not the absorbed fraction: a nuisance column confined to the step (the lag's
-        # first-plateau start) is absorbed whole and would dominate it; k and p decide.
-        if k == 0 or lp > np.log(alpha):
+            lp, _, k, absorbed, _ = stats.linear_stats(U, Tw, e, np.zeros((pb.m, 1)))
+        # Not the absorbed fraction in general: a nuisance column confined to the step (the
+        # lag's first-plateau start) is absorbed whole and would dominate it; k and p decide.
+        # A one-column term is judged by its own limit too (a channel step from plateau 1
+        # is "plateau 0 differs" up to its linearisation error, issue 22).
+        gone = Tw.shape[1] == 1 and absorbed > BY_ID[term.effect_id].absorbed_max
+        if k == 0 or lp > np.log(alpha) or gone:
             return step
     return None
 
@@ -544,7 +549,7 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
     Outlier terms are judged against the model without any flagged reading's term (their
     deviation must not be what the other readings predict); every other term against the
     whole model. Returns the kept terms and findings and, per withdrawn term, where the
-    structure is (``EffectModule.misses``) with the term's family p.
+    structure is (``CatalogueEffect.misses``) with the term's family p.
     """
     not_named: list[dict[str, Any]] = []
     for row_terms in (True, False):
@@ -571,6 +576,66 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
                   "position(s) " + ", ".join(str(p) for p in n["positions"]))
             notes.append(f"{n['effect']} not named at {at}: {n['why']}")
     return terms, findings, not_named
+
+
+def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: float,
+                    not_ident: dict[str, dict[str, str]], notes: list[str]) -> Finding:
+    """A function of the specific force named only if it changes the force's length.
+
+    Why (issue 22): a rig geometry error (a tilted table axis, an encoder error) makes the
+    true specific force differ from the recorded reference by a rotation, δ ⊥ ref, the
+    same at every visit of a direction: a function of the reference direction, as a sensor
+    nonlinearity is. The catalogue's nonlinearities (``a_i²``, ``a_i³``, ``a_i·a_j``) also
+    change the output *along* the reference. So a turn is put in the model (fields across
+    the reference of the nonlinearities' own degree, ``turntable_geometry.turn_columns``)
+    and the term's part along the reference is tested after it (F, at α). If it is not
+    needed, the structure only turns the reference: without the
+    table angles (not in the recording format) that cannot be told from
+    ``turntable_geometry``, and the finding is reported as not identifiable with both
+    candidates (the term stays in the model: either removes the structure).
+    """
+    eff = BY_ID.get(f.effect)
+    if eff is None or not eff.input_only or pb.mode != "reference" or f.rows:
+        return f
+    term = next((t for t in terms if t.effect_id == f.effect and not t.rows), None)
+    if term is None:
+        return f
+    ctx = pb.ctx
+    u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
+    turn = turn_columns(u)
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms) + turn.shape[2]
+    if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
+        notes.append(f"{f.effect}: not checked against a turn of the reference (a table "
+                     "tilt or encoder error): the recording is too long for that design")
+        return f
+    X = eff.regressors(ctx, term.theta)
+    along = np.einsum("nak,na->nk", X, u)[:, None, :] * u[:, :, None]
+    turned = Term("turn", float("nan"), pb.lift(turn))
+    Xw, yw = _design(pb, [t for t in terms if t is not term] + [turned])
+    U = stats.orthonormal_basis(Xw)
+    del Xw
+    e = yw - U @ (U.T @ yw)
+    lp = stats.linear_stats(U, pb.whiten(pb.lift(along)), e, e[:, None])[0]  # F on the data
+    p_along = float(np.exp(lp))
+    if p_along <= alpha:
+        return f
+    geo = TURNTABLE_GEOMETRY
+    why = (f"the structure turns the reference direction without changing its length (the "
+           f"{f.effect} term's part along the reference is not needed once each direction "
+           f"may turn: p = {p_along:.2g} > α); a tilted table axis or an encoder error does "
+           "exactly that, and the recording holds the reference in the sensor frame, not the "
+           "table angles that would tell them apart")
+    candidates = [f.effect, geo.effect_id]
+    for c in candidates:
+        other = candidates[1] if c == candidates[0] else candidates[0]
+        not_ident[c] = {"effect": c, "why": f"not separable from {other}: {why}",
+                        "experiment": BY_ID[c].experiment}
+    return replace(
+        f, effect="not_identifiable", where={**f.where, "candidates": candidates},
+        explanation=(f"Structure beyond noise that {' or '.join(candidates)} explain alike: "
+                     f"{why}. It is modelled (with the {f.effect} term) but not named; "
+                     f"to separate them: {geo.experiment}."),
+        parameters={}, parameter_sd={}, confusers=[])
 
 
 def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
@@ -686,7 +751,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                 continue
             lp, lpn, k, absorbed, q = stats.linear_stats(U, Xw, e, E, eff.one_sided, EE)
             absorbed_min = min(absorbed_min, absorbed)
-            if k == 0 or absorbed > stats.ABSORBED_MAX:
+            if k == 0 or absorbed > eff.absorbed_max:
                 continue
             usable += 1
             profile[theta] = lp
@@ -710,7 +775,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
 REFINE_XTOL_LOG = 1e-3  # relative resolution of a refined continuous theta
 
 
-def _refine(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, U: np.ndarray,
+def _refine(pb: LinearProblem, eff: CatalogueEffect, test: stats.CandidateTest, U: np.ndarray,
             e: np.ndarray) -> tuple[stats.CandidateTest, np.ndarray]:
     """Refine a continuous θ (lag τ) between its grid neighbours; sd from the profile curvature.
 
@@ -753,7 +818,7 @@ def _refine(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, U: 
     return replace(test, theta=theta, stat=best_q, theta_sd=sd), columns(best_x)
 
 
-def _make_term(pb: LinearProblem, eff: EffectModule, test: stats.CandidateTest, lifted,
+def _make_term(pb: LinearProblem, eff: CatalogueEffect, test: stats.CandidateTest, lifted,
                X: np.ndarray | None = None) -> Term:
     if eff.per_reading:
         i = int(test.theta)
@@ -893,7 +958,7 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
     )
 
 
-def _sentence(eff: EffectModule, params, sd, axes, ctx) -> str:
+def _sentence(eff: CatalogueEffect, params, sd, axes, ctx) -> str:
     text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES), ctx)
     return text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")
 

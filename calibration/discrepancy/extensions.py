@@ -16,7 +16,7 @@ Kinds (JSON object ``{"kind": ..., ...}``, parameters in g-based SI units):
   temperature; the term documents the lag)
 
 Terms that need context compensate does not have are identity there and say so.
-Each effect module owns its term (``extension_fields``, ``extension_term_g``,
+Each catalogue effect owns its term (``extension_fields``, ``extension_term_g``,
 :mod:`calibration.discrepancy.effects.base`); this module only writes and registers
 them, so no effect id is named here.
 """
@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from calibration.discrepancy.effects import ALL_EFFECTS
-from calibration.discrepancy.effects.base import EffectModule
+from calibration.discrepancy.effects.base import CatalogueEffect
 from calibration.extensions import register_extension
 
 PREFIX = "discrepancy."
@@ -57,7 +57,7 @@ def _absorbed(spec: Mapping[str, Any], a: np.ndarray, temperature_c: np.ndarray)
     return np.einsum("nj,ajp,np->na", u, coef, P)
 
 
-def applier(eff: EffectModule):
+def applier(eff: CatalogueEffect):
     """The ``compensate`` function of an effect's term: remove what the base did not absorb.
 
     Effects without an input-only term (``extension_term_g`` None: they need time or the die
@@ -72,7 +72,7 @@ def applier(eff: EffectModule):
     return apply
 
 
-EXTENDING: dict[str, EffectModule] = {
+EXTENDING: dict[str, CatalogueEffect] = {
     PREFIX + e.effect_id: e for e in ALL_EFFECTS if e.writes_extension}
 KINDS = {kind: applier(eff) for kind, eff in EXTENDING.items()}
 for _kind, _fn in KINDS.items():
@@ -95,7 +95,7 @@ def extension_specs(diag: Any) -> list[dict[str, Any]]:
     return out
 
 
-def _add_absorbed(spec: dict[str, Any], diag: Any, eff: EffectModule) -> None:
+def _add_absorbed(spec: dict[str, Any], diag: Any, eff: CatalogueEffect) -> None:
     """Weighted projection of the term on the base design (reference mode), stored per axis."""
     pb = getattr(diag, "problem", None)
     if pb is None or pb.mode != "reference":

@@ -125,8 +125,8 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
 
 
 def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
-                  known_var: np.ndarray | None = None, floor: np.ndarray | None = None
-                  ) -> tuple[np.ndarray, float, float]:
+                  known_var: np.ndarray | None = None, floor: np.ndarray | None = None,
+                  across: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
     """σ of capture means from their base residual: ``(σ, κ, τ)``, σ² = κ·sd²/n + τ².
 
     ``e`` (N, a) is the base residual of the capture means, ``sig`` (N, a) their sd/√n
@@ -153,6 +153,14 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     recordings: 0.4–0.5 × white for the ADXL355's own noise, up to 20× for slow bench
     motion); one κ for both over-stated the quiet plateaus' noise threefold, the outlier
     test's global scale sat at their level and vibrating plateaus' readings were outliers.
+
+    ``across`` (N, a): ``1 − û_a²`` of each entry (û the unit reference). Re-seating the
+    sensor at each visit turns it by a small random angle δθ (per-axis rms ρ, isotropic):
+    the output error δθ × f has variance ρ²·(1 − f_a²) on axis a — none on the axis along
+    gravity, most on the axes across it, the same at every visit of a position. Fitted as
+    ρ² with κ and τ. Why (issue 22): one τ² for all entries under-stated the axes across
+    gravity and over-stated the one along it, so a position×axis block of the localised
+    scan stood out on null recordings with placement error.
     """
     from scipy.optimize import minimize
 
@@ -160,24 +168,31 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     known = np.zeros_like(sig2) if known_var is None else np.asarray(known_var, float)
     fl_all = np.zeros_like(sig2) if floor is None else np.minimum(floor, sig2)
     e2 = (np.asarray(e, float) * dof_corr) ** 2
+    ac_all = np.zeros_like(sig2) if across is None else np.asarray(across, float)
     ok = np.isfinite(e2) & np.isfinite(sig2) & (sig2 > 0)
-    w, e2, kv, fl = sig2[ok], e2[ok], known[ok], fl_all[ok]
+    w, e2, kv, fl, ac = sig2[ok], e2[ok], known[ok], fl_all[ok], ac_all[ok]
     w0 = float(np.median(w))
 
-    def var(q: np.ndarray, w_: np.ndarray, fl_: np.ndarray, kv_: np.ndarray) -> np.ndarray:
-        # κ = 1 + q0 on the scatter above the floor, κ₀ = q2 on the floor, τ² = q1·w0
-        return (1.0 + q[0]) * (w_ - fl_) + q[2] * fl_ + q[1] * w0 + kv_
+    def var(q: np.ndarray, w_: np.ndarray, fl_: np.ndarray, kv_: np.ndarray,
+            ac_: np.ndarray) -> np.ndarray:
+        # κ = 1 + q0 on the scatter above the floor, κ₀ = q2 on the floor, τ² = q1·w0,
+        # ρ² = q3·w0 across the reference
+        return (1.0 + q[0]) * (w_ - fl_) + q[2] * fl_ + q[1] * w0 + q[3] * w0 * ac_ + kv_
 
     def nll(q: np.ndarray) -> float:
-        v = var(q, w, fl, kv)
+        v = var(q, w, fl, kv, ac)
         return float(np.sum(np.log(v) + e2 / v)) / w.size
 
-    start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0), 1.0])
+    start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0), 1.0, 0.0])
     q0_bounds = (0.0, 1e6) if floor is None else (1e-3, 1e4)
-    bounds = [(0.0, 1e4), (0.0, 1e6), (1.0, 1.0) if floor is None else q0_bounds]
-    q = minimize(nll, start, method="L-BFGS-B", bounds=bounds).x
+    bounds = [(0.0, 1e4), (0.0, 1e6), (1.0, 1.0) if floor is None else q0_bounds,
+              (0.0, 0.0) if across is None else (0.0, 1e6)]
+    # Why the tight tolerances: with four parameters the default stop left σ at ~1e-6
+    # relative, enough to differ between the dense and the row-block design (issue 10).
+    q = minimize(nll, start, method="L-BFGS-B", bounds=bounds,
+                 options={"ftol": 1e-14, "gtol": 1e-12, "maxiter": 2000}).x
     kappa, tau2 = 1.0 + float(q[0]), float(q[1]) * w0
-    return np.sqrt(var(q, sig2, fl_all, known)), kappa, float(np.sqrt(tau2))
+    return np.sqrt(var(q, sig2, fl_all, known, ac_all)), kappa, float(np.sqrt(tau2))
 
 
 def _n_of(rec: Recording) -> np.ndarray:
@@ -317,7 +332,8 @@ def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearPro
         if local is not None:  # the quietest plateau's sd, per axis, at each row's n
             sd_n = sig_sd * np.sqrt(_n_of(rec))[:, None]
             floor = (np.min(sd_n, axis=0)[None, :] / np.sqrt(_n_of(rec))[:, None]) ** 2
-        sig, kappa, tau = capture_noise(e, sig_sd, dof_corr, t_part**2, floor)
+        unit = ref / np.linalg.norm(ref, axis=1, keepdims=True)
+        sig, kappa, tau = capture_noise(e, sig_sd, dof_corr, t_part**2, floor, 1.0 - unit**2)
         if local is not None:  # the plateau's level scales what is not the T channel's
             f = step_inflation(e, sig, ctx.steps)[:, None]
             sig = np.sqrt(f**2 * np.maximum(sig**2 - t_part**2, 0.0) + t_part**2)

@@ -135,8 +135,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
            identifiable: dict[str, bool] | None = None) -> Protocol:
     """The protocol facts and the confusions they imply (docs/diagnosis.md §11).
 
-    ``identifiable``: effect id → whether the effect module alone can be tested here
-    (``EffectModule.identifiable``); it decides which confusions withhold a name, and
+    ``identifiable``: effect id → whether the effect alone can be tested here
+    (``CatalogueEffect.identifiable``); it decides which confusions withhold a name, and
     ``separable`` lists those not in any confusion (``with_testable`` narrows it once the
     base model's absorbed fractions are known).
     """
@@ -187,7 +187,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
         conf.append(Confusion(
             ("thermal_lag", "self_heating", "temperature_sensor"),
             "the model's temperature is the sensor's own channel: a die lag, a die offset and "
-            "a channel offset are re-mappings of T that the cubic absorbs"))
+            "a constant channel offset are re-mappings of T that the cubic absorbs (a step of "
+            "the channel between plateaus is tested)"))
     if not oblique:
         conf.append(Confusion(
             ORIENTATION + ("turntable_geometry",),

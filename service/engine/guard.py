@@ -2,8 +2,8 @@
 and its one hold loop (:func:`hold`), which every suspender uses.
 
 Every device call of the engine goes through :meth:`DeviceGuard.call`, and
-each fault is decided once, here (drivers raise, they do not retry; see
-drivers/modbus_link.py):
+each fault is decided once, here (drivers raise; the Modbus link only repeats one
+idempotent request a few times first, see drivers/modbus_link.py):
 
 * :func:`classify` sorts a fault into *transient* (timeouts, dropped
   connections, DEVICE BUSY, a garbled frame: retried with exponential

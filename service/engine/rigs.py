@@ -1,7 +1,7 @@
 """Rig row → devices: the one place that knows which drivers a rig's config means.
 
 ``open_rig(rig_config, clock)`` is an async context manager yielding
-:class:`RigDevices`. Two chamber drivers exist:
+:class:`RigDevices`. Three chamber drivers exist:
 
 * ``sim``: starts the simulated rig in this process
   (``simulators.rig.start_sim_rig``) and connects to it through the real
@@ -42,6 +42,11 @@
   chamber config) is how fast the rig's time runs
   against the wall clock: 1 for hardware, the ``--speed`` of a remote
   ``soakcal sim``.
+* ``espec``: an ESPEC P-300 / SCP-220 over its ASCII protocol (drivers/espec_chamber.py,
+  docs/chambers.md); the turntable and sensors as for ``modbus``::
+
+    {"chamber": {"driver": "espec", "url": "/dev/ttyUSB1", "baudrate": 9600,
+                 "range_c": [-40, 85], "safe_setpoint_c": 23, "safe_stop": false}, ...}
 
 :func:`rig_config_errors` checks a config before it is stored (the API's 422).
 """
@@ -101,7 +106,7 @@ async def open_rig(
             yield manual_devices(rig, devices)
         return
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
-    if driver == "modbus":
+    if driver in REAL_DRIVERS:
         async with _open_modbus_rig(rig, clock, serials) as devices:
             yield devices
         return
@@ -137,7 +142,9 @@ async def open_rig(
                     await _maybe_await(owner.close())
 
 
-DRIVERS = ("sim", "modbus")
+DRIVERS = ("sim", "modbus", "espec")
+#: Chamber drivers of real (or remote simulated) controllers, reached by url.
+REAL_DRIVERS = ("modbus", "espec")
 _NO_TABLE = "none"  # internal: the manual fixture's devices, opened without a table driver
 
 
@@ -157,12 +164,14 @@ def rig_config_errors(
     from drivers.registermaps import MapError, load_chamber_map, load_turntable_map
 
     errors: list[tuple[str, str]] = []
-    errors += _unknown_keys("chamber", chamber, CHAMBER_KEYS)
+    driver = chamber.get("driver") if isinstance(chamber, dict) else None
+    errors += _unknown_keys("chamber", chamber,
+                            ESPEC_CHAMBER_KEYS if driver == "espec" else CHAMBER_KEYS)
     errors += _unknown_keys("turntable", turntable, TURNTABLE_KEYS)
-    driver = chamber.get("driver")
     if driver is None:
         errors.append(("chamber.driver", "missing: \"modbus\" for a controller reached by "
-                                         "url, \"sim\" for the in-process twin"))
+                                         "url, \"espec\" for an ESPEC P-300/SCP-220, "
+                                         "\"sim\" for the in-process twin"))
     elif driver not in DRIVERS:
         errors.append(("chamber.driver", f"expected one of {', '.join(DRIVERS)}, got {driver!r}"))
     rng = chamber.get("range_c")
@@ -174,10 +183,13 @@ def rig_config_errors(
     if rate is not None and (not isinstance(rate, int | float) or isinstance(rate, bool)
                              or not rate > 0):
         errors.append(("chamber.max_rate_c_per_min", f"expected a rate > 0 °C/min, got {rate!r}"))
-    if driver != "modbus":
+    if driver not in REAL_DRIVERS:
         return errors
+    if driver == "espec":
+        errors += espec_config_errors(chamber)
     manual = is_manual_table(turntable)
-    devices = [("chamber", chamber)] + ([] if manual else [("turntable", turntable)])
+    devices = ([("chamber", chamber)] if driver == "modbus" else []) + (
+        [] if manual else [("turntable", turntable)])
     for path, cfg in devices:
         url = cfg.get("url")
         if not isinstance(url, str) or not url.startswith(("tcp://", "rtu://")):
@@ -185,12 +197,13 @@ def rig_config_errors(
         dev_id = cfg.get("device_id", 1)
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
-    if (not manual and chamber.get("url") == turntable.get("url")
+    if (not manual and driver == "modbus" and chamber.get("url") == turntable.get("url")
             and chamber.get("device_id", 1) == turntable.get("device_id", 1)):
         errors.append(("turntable.device_id",
                        f"the chamber answers unit {chamber.get('device_id', 1)} at the same url: "
                        "two devices on one bus need different unit ids (device_id)"))
-    maps = [("chamber.map", chamber, load_chamber_map, "eurotherm3216")]
+    maps = [("chamber.map", chamber, load_chamber_map, "eurotherm3216")
+            ] if driver == "modbus" else []
     if not manual:
         maps.append(("turntable.map", turntable, load_turntable_map, "soakcal-table"))
     for path, cfg, load, default in maps:
@@ -208,7 +221,7 @@ def rig_config_errors(
     if axes not in (2, 3):
         errors.append(("turntable.axes", "expected 2 or 3"))
     scale = chamber.get("time_scale", 1.0)
-    if not isinstance(scale, int | float) or not scale > 0:
+    if not isinstance(scale, int | float) or isinstance(scale, bool) or not scale > 0:
         errors.append(("chamber.time_scale", "expected a number > 0 (1 for hardware)"))
     if not sensors or not isinstance(sensors[0], dict) or not isinstance(
             sensors[0].get("url"), str):
@@ -252,6 +265,68 @@ def rig_config_errors(
 CHAMBER_KEYS = ("driver", "url", "map", "device_id", "range_c", "time_scale",
                 "max_rate_c_per_min")
 TURNTABLE_KEYS = ("driver", "url", "map", "device_id", "axes", "check_samples", "noise_g")
+#: An ESPEC chamber's block (drivers/espec_chamber.py, docs/chambers.md): no map, so the
+#: range is the rig's to give, and the safe state too.
+ESPEC_CHAMBER_KEYS = ("driver", "url", "address", "baudrate", "range_c", "time_scale",
+                      "max_rate_c_per_min", "safe_setpoint_c", "safe_stop")
+
+
+def espec_config_errors(chamber: dict[str, Any]) -> list[tuple[str, str]]:
+    """The ``espec`` chamber keys' own problems (range_c's shape is checked by the caller)."""
+    out: list[tuple[str, str]] = []
+    url = chamber.get("url")
+    if not isinstance(url, str) or not url.strip() or url.startswith("rtu://"):
+        out.append(("chamber.url", "expected the controller's serial port (/dev/ttyUSB0), "
+                                   "socket://host:port or tcp://host:port"))
+    if chamber.get("range_c") is None:
+        out.append(("chamber.range_c", "required for an ESPEC chamber (no map gives it): "
+                                       "[lo, hi] in °C the chamber may be set to"))
+    addr = chamber.get("address")
+    if addr is not None and (not isinstance(addr, int) or isinstance(addr, bool)
+                             or not 1 <= addr <= 16):
+        out.append(("chamber.address", f"expected the RS-485 address 1…16, got {addr!r} "
+                                       "(omit it on RS-232 or LAN)"))
+    baud = chamber.get("baudrate")
+    if baud is not None and baud not in (4800, 9600, 19200):
+        out.append(("chamber.baudrate", f"expected 4800, 9600 or 19200, got {baud!r}"))
+    safe = chamber.get("safe_setpoint_c")
+    rng = chamber.get("range_c")
+    if safe is not None:
+        if not isinstance(safe, int | float) or isinstance(safe, bool):
+            out.append(("chamber.safe_setpoint_c", f"expected a temperature in °C, got {safe!r}"))
+        elif (isinstance(rng, list | tuple) and len(rng) == 2
+              and all(isinstance(v, int | float) for v in rng) and not rng[0] <= safe <= rng[1]):
+            out.append(("chamber.safe_setpoint_c", f"{safe:g} °C is outside range_c "
+                                                   f"[{rng[0]:g}, {rng[1]:g}]"))
+    stop = chamber.get("safe_stop")
+    if stop is not None and not isinstance(stop, bool):
+        out.append(("chamber.safe_stop", f"expected true or false, got {stop!r}"))
+    return out
+
+
+def _chamber_driver(cfg: dict[str, Any], clock: Clock) -> Any:
+    """The chamber driver a validated real rig's ``chamber`` block names."""
+    if cfg.get("driver") == "espec":
+        from drivers.espec_chamber import DEFAULT_BAUDRATE, EspecChamber, EspecSettings
+
+        lo, hi = cfg["range_c"]
+        return EspecChamber(EspecSettings(
+            url=cfg["url"], range_c=(float(lo), float(hi)), address=cfg.get("address"),
+            baudrate=int(cfg.get("baudrate", DEFAULT_BAUDRATE)),
+            safe_setpoint_c=float(cfg.get("safe_setpoint_c", 23.0)),
+            safe_stop=bool(cfg.get("safe_stop", False)),
+            max_rate_c_per_min=cfg.get("max_rate_c_per_min")), clock)
+    from drivers.chamber import ModbusChamber
+    from drivers.modbus_link import ModbusLink
+    from drivers.registermaps import load_chamber_map
+
+    chamber_map = load_chamber_map(cfg.get("map", "eurotherm3216"))
+    # The rig's device_id wins; else the map's [defaults] unit_id (1 unless it says).
+    return ModbusChamber(
+        ModbusLink(cfg["url"], clock, device="chamber",
+                   device_id=int(cfg.get("device_id", chamber_map.unit_id))),
+        chamber_map,
+    )
 
 
 def _unknown_keys(block: str, cfg: Any, allowed: tuple[str, ...]) -> list[tuple[str, str]]:
@@ -349,7 +424,7 @@ def sensor_entries(rig: dict[str, Any], serials: Sequence[str]
 def rig_time_scale(rig: dict[str, Any]) -> float | None:
     """Rig time per wall second for a ``modbus`` rig; ``None`` for ``sim`` (the service's)."""
     chamber = rig.get("chamber") or {}
-    if chamber.get("driver", "sim") != "modbus":
+    if chamber.get("driver", "sim") not in REAL_DRIVERS:
         return None
     return float(chamber.get("time_scale", 1.0))
 
@@ -359,10 +434,9 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
                           serials: Sequence[str] = ()) -> AsyncIterator[RigDevices]:
     """Real drivers on the URLs of the config (see the module docstring); with two or more
     ``serials``, one driver per serial on the port of the entry that declares it."""
-    from drivers.chamber import ModbusChamber
     from drivers.geometry import angles_for_reference
     from drivers.modbus_link import ModbusLink
-    from drivers.registermaps import load_chamber_map, load_turntable_map
+    from drivers.registermaps import load_turntable_map
     from drivers.sensor_config import (
         make_accelerometer,
         make_multiplexed_bridge,
@@ -377,13 +451,7 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
     if problems:
         path, why = problems[0]
         raise RigConfigError(f"rig {rig.get('name')!r}: {path}: {why}")
-    chamber_map = load_chamber_map(chamber_cfg.get("map", "eurotherm3216"))
-    # The rig's device_id wins; else the map's [defaults] unit_id (1 unless it says).
-    chamber = ModbusChamber(
-        ModbusLink(chamber_cfg["url"], clock, device="chamber",
-                   device_id=int(chamber_cfg.get("device_id", chamber_map.unit_id))),
-        chamber_map,
-    )
+    chamber = _chamber_driver(chamber_cfg, clock)
     n_axes = int(table_cfg.get("axes", 3))
     table: Any = None  # a hand-placed fixture: open_rig puts the operator's table in
     if not is_manual_table(table_cfg):
@@ -420,7 +488,7 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
                          lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
                          binding, accelerometers=accels, bindings=bindings)
     finally:
-        await chamber.link.close()
+        await chamber.close()
         if table is not None:
             await table.link.close()
         for dev in accels.values() or [accel]:

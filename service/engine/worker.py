@@ -13,30 +13,10 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import os
-import re
 import signal
 import sys
 
-ENGINE_RIGS_ENV = "SOAKCAL_ENGINE_RIGS"
-_RIG_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
-
-
-def parse_rigs(text: str | None) -> frozenset[str] | None:
-    """``"lab-1,lab-2"`` → those rigs; ``"none"`` → no rig (API only); empty/None → every rig.
-
-    Raises ``ValueError`` naming the bad entry.
-    """
-    if text is None or not text.strip():
-        return None
-    if text.strip().lower() == "none":
-        return frozenset()
-    names = [n.strip() for n in text.split(",")]
-    for i, name in enumerate(names):
-        if not _RIG_NAME.match(name):
-            raise ValueError(f"--rigs entry {i + 1} {name!r} is not a rig name "
-                             "(letters, digits, '-', '_', '.'; or 'none')")
-    return frozenset(names)
+from service.config import parse_rigs
 
 
 def rigs_argument(text: str) -> str:
@@ -46,11 +26,6 @@ def rigs_argument(text: str) -> str:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
-
-
-def engine_rigs_from_env() -> frozenset[str] | None:
-    """``SOAKCAL_ENGINE_RIGS`` as :func:`parse_rigs` reads it (what ``serve --rigs`` sets)."""
-    return parse_rigs(os.environ.get(ENGINE_RIGS_ENV))
 
 
 def run_worker(args: argparse.Namespace) -> int:

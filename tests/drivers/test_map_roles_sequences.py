@@ -334,7 +334,7 @@ class _RecordingLink:
     def __init__(self) -> None:
         self.writes: list[tuple[int, float]] = []
 
-    async def write_field(self, f: Any, value: float) -> None:
+    async def write_field(self, f: Any, value: float, *, idempotent: bool = False) -> None:
         f.encode(value)  # a value the register cannot hold fails here, as on the wire
         self.writes.append((f.address, value))
 

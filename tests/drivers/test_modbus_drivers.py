@@ -21,7 +21,7 @@ from simulators.modbus_server import ModbusSimServer, start_modbus_server
 from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage
 
 #: Short wall timeouts keep the fault tests fast; backoff is clock time (virtual).
-FAST = RetryPolicy(timeout_s=0.15, attempts=3, backoff_s=0.5)
+FAST = RetryPolicy(timeout_s=0.15, read_attempts=3, write_attempts=3, backoff_s=0.5)
 
 
 @dataclass
@@ -185,7 +185,7 @@ async def test_persistent_busy_reports_exception_reply(chamber_rig: ChamberRig) 
     with pytest.raises(ExceptionReply) as err:
         await chamber_rig.driver.read_status()
     assert err.value.code == 6
-    assert chamber_rig.driver.link.stats["requests"] == FAST.attempts
+    assert chamber_rig.driver.link.stats["requests"] == FAST.read_attempts
 
 
 async def test_no_reply_times_out_then_recovers(chamber_rig: ChamberRig) -> None:
@@ -300,7 +300,7 @@ async def test_concurrent_callers_share_one_link(chamber_rig: ChamberRig) -> Non
 
 async def test_cancellation_is_not_retried(chamber_rig: ChamberRig) -> None:
     chamber_rig.faults.p_no_reply = 1.0
-    policy = RetryPolicy(timeout_s=2.0, attempts=3)
+    policy = RetryPolicy(timeout_s=2.0, read_attempts=3)
     link = ModbusLink(chamber_rig.server.url, chamber_rig.clock, policy=policy)
     task = asyncio.create_task(link.read_registers(1, 1))
     await asyncio.sleep(0.3)  # let the request go out (wall time: the reply never comes)

@@ -62,14 +62,16 @@ async def test_five_percent_modbus_faults_neither_fail_nor_corrupt(sf) -> None: 
 
     assert clean_state == state == "completed"
     assert set(faulty) == set(clean) == {(s, p) for s in range(N_STEPS) for p in range(N_POS)}
-    # Faults really happened and were absorbed by retries and reconnects, all decided by the
-    # engine's guard: the link does not retry on its own (no nested link × guard retries).
-    assert stats["chamber"]["retries"] == stats["table"]["retries"] == 0, stats
-    retries = stats["engine_retried"]
+    # Faults really happened and were absorbed by retries and reconnects. The link retries
+    # each read and idempotent write itself (drivers/modbus_link.py); only what outlasts its
+    # three tries (0.05³ per request) and a lost reply to the table's move command (not
+    # repeated: 2.5 % of about 18 moves) reach the engine's guard, about one call a campaign.
+    retries = stats["chamber"]["retries"] + stats["table"]["retries"]
     requests = stats["chamber"]["requests"] + stats["table"]["requests"]
     assert retries >= 5, stats
     assert stats["chamber"]["reconnects"] + stats["table"]["reconnects"] >= 1, stats
     assert 0.02 < retries / requests < 0.10, stats
+    assert stats["engine_retried"] <= 5, stats
     for key, m in faulty.items():
         ref = clean[key]
         assert (m.ref_x, m.ref_y, m.ref_z) == (ref.ref_x, ref.ref_y, ref.ref_z)

@@ -6,9 +6,8 @@ import pytest
 from engine_helpers import SMALL_SPEC, add_campaign
 
 from service.cli import build_parser, main
-from service.config import Settings
+from service.config import ENGINE_RIGS_ENV, Settings, parse_rigs
 from service.engine.manager import CampaignManager
-from service.engine.worker import ENGINE_RIGS_ENV, parse_rigs
 
 
 def test_parse_rigs() -> None:

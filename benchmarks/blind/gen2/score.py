@@ -20,6 +20,14 @@ def _named(d: dict) -> list[str]:
     return [f.get("effect") for f in d.get("findings") or []]
 
 
+def _not_separable(d: dict, key_id: str) -> bool:
+    """The top finding is ``not_identifiable`` with the key among its candidates: the
+    effect was seen and honestly reported as not separable from its rival(s)."""
+    first = (d.get("findings") or [{}])[0]
+    return first.get("effect") == "not_identifiable" and key_id in (
+        (first.get("where") or {}).get("candidates") or [])
+
+
 def _flagged(d: dict) -> bool:
     return bool(d.get("mismatch")) or bool(d.get("findings"))
 
@@ -47,12 +55,14 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
              "among": k["catalogue_id"] in _named(diags[c]),
              # an honest miss: nothing wrong named and the effect listed as not separable
              "listed": top is None and k["catalogue_id"] in listed,
+             "not_separable": _not_separable(diags[c], k["catalogue_id"]),
              "wrong": top is not None and top != k["catalogue_id"] and top not in BEYOND})
     res["attribution"] = {
         eid: {m: {**_rate(sum(r["right"] for r in rs), len(rs)),
                   "among_findings": sum(r["among"] for r in rs),
                   "missed_but_listed_not_identifiable": sum(r["listed"] for r in rs),
                   "wrong_catalogue_name": sum(r["wrong"] for r in rs),
+                  "not_separable_key_among_candidates": sum(r["not_separable"] for r in rs),
                   "named": [r["top"] for r in rs]} for m, rs in sorted(ms.items())}
         for eid, ms in sorted(attrib.items())}
     two = [r for ms in attrib.values() for r in ms.get("2x", [])]
@@ -108,14 +118,16 @@ def markdown(res: dict, header: str) -> str:
            f"* hidden (undetectable under the drawn protocol) named anyway: "
            f"{_pct(res['hidden_named'])}", f"* crashes: {len(res['errors'])}", "",
            "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed, listed "
-           "not identifiable |", "|---|---|---|---|---|---|"]
+           "not identifiable | 2× not separable, key among the candidates |",
+           "|---|---|---|---|---|---|---|"]
     for eid, ms in res["attribution"].items():
         one, two = ms.get("1x"), ms.get("2x")
         out.append(f"| {eid} | {one['k']}/{one['n'] if one else 0} | "
                    f"{two['k'] if two else 0}/{two['n'] if two else 0} | "
                    f"{', '.join(str(x) for x in two['named']) if two else ''} | "
                    f"{two['wrong_catalogue_name'] if two else ''} | "
-                   f"{two['missed_but_listed_not_identifiable'] if two else ''} |")
+                   f"{two['missed_but_listed_not_identifiable'] if two else ''} | "
+                   f"{two.get('not_separable_key_among_candidates', '') if two else ''} |")
     out += ["", "| null protocol | flagged / n |", "|---|---|"]
     for k, (f, n) in sorted(res["false_alarms"]["by_protocol"].items()):
         out.append(f"| {k} | {f}/{n} |")

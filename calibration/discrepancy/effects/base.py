@@ -1,6 +1,7 @@
-"""The one small interface every catalogue effect module implements (effects.md).
+"""The one small interface every catalogue effect implements (effects.md).
 
-An effect module says how the physics would show in the raw output of each
+Each effect is one frozen :class:`CatalogueEffect` instance (defined in its own module,
+listed in ``ALL_EFFECTS``). It says how the physics would show in the raw output of each
 reading (``regressors``: (N,3,k) g per unit parameter), over a grid of its
 nonlinear parameter if it has one (``grid``: profile), whether a protocol can
 reveal it at all (``identifiable``), and how to say what was found
@@ -31,8 +32,11 @@ UG = 1e6  # g → µg
 
 
 @dataclass(frozen=True)
-class EffectModule:
-    """Base: a linear effect with no nonlinear parameter. Subclasses override what differs."""
+class CatalogueEffect:
+    """One catalogue effect (an instance, listed in ``ALL_EFFECTS``).
+
+    The base is a linear effect with no nonlinear parameter; subclasses override what differs.
+    """
 
     effect_id: str = ""
     confusers: tuple[str, ...] = ()
@@ -64,6 +68,11 @@ class EffectModule:
     # axes' inputs). It must then leave the same residual at every visit of the same
     # reference direction: :meth:`misses` tests that after selection (issue 10).
     input_only: bool = False
+    # Largest fraction of the term's norm² the base model may absorb before the term is
+    # declared not identifiable here (stats.ABSORBED_MAX). A term that is by construction
+    # mostly a re-map of the base's own terms (a temperature-channel step) is judged by the
+    # power of its remnant instead, with the same bootstrap null.
+    absorbed_max: float = 0.99
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:
@@ -154,7 +163,7 @@ class EffectModule:
         return None
 
 
-def how_told_apart(a: EffectModule, b: EffectModule) -> str:
+def how_told_apart(a: CatalogueEffect, b: CatalogueEffect) -> str:
     """The text of either module for the pair, or the generic statement."""
     for one, other in ((a, b), (b, a)):
         for cid, text in one.told_apart:

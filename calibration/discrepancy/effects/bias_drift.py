@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import AXES, DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
+from calibration.discrepancy.effects.base import UG, CatalogueEffect, axis_params, fmt_pm, per_axis
 
 
 def drift_offset_g(t_h: np.ndarray, rate_g_per_h: np.ndarray, relax_g: np.ndarray | float = 0.0,
@@ -30,7 +30,7 @@ def drift_offset_g(t_h: np.ndarray, rate_g_per_h: np.ndarray, relax_g: np.ndarra
 
 
 @dataclass(frozen=True)
-class BiasDrift(EffectModule):
+class BiasDrift(CatalogueEffect):
     effect_id: str = "bias_drift"
     confusers: tuple[str, ...] = ("thermal_hysteresis", "thermal_lag", "session_offset")
     experiment: str = ("revisit a temperature hours later (e.g. a return step to the first "

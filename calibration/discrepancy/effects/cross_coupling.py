@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm
+from calibration.discrepancy.effects.base import UG, CatalogueEffect, fmt_pm
 
 PAIRS = (("xy", 0, 1), ("xz", 0, 2), ("yz", 1, 2))
 
@@ -38,7 +38,7 @@ def cross_coupling_g(a: np.ndarray, k_per_g: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class CrossCoupling(EffectModule):
+class CrossCoupling(CatalogueEffect):
     effect_id: str = "cross_coupling"
     confusers: tuple[str, ...] = ("scale_nonlinearity", "turntable_geometry")
     experiment: str = ("add oblique positions where two axes see gravity at once "

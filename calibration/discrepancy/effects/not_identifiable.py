@@ -7,11 +7,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import EffectModule
+from calibration.discrepancy.effects.base import CatalogueEffect
 
 
 @dataclass(frozen=True)
-class Unobservable(EffectModule):
+class Unobservable(CatalogueEffect):
     """An effect declared not identifiable under this recording's protocol, with the reason."""
 
     why: str = ""

@@ -16,7 +16,7 @@ import numpy as np
 
 from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES, DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule
+from calibration.discrepancy.effects.base import UG, CatalogueEffect
 from calibration.discrepancy.effects.structure import (
     extend,
     log_p,
@@ -43,7 +43,7 @@ def spike_mean_fraction(spike_samples: int | None, n_samples: np.ndarray) -> np.
 
 
 @dataclass(frozen=True)
-class Outlier(EffectModule):
+class Outlier(CatalogueEffect):
     effect_id: str = "outlier"
     confusers: tuple[str, ...] = ("thermal_lag",)
     experiment: str = "repeat the flagged positions"

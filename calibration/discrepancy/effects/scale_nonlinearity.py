@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import AXES, DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, fmt_pm, vec3
+from calibration.discrepancy.effects.base import UG, CatalogueEffect, fmt_pm, vec3
 
 
 def own_powers(a: np.ndarray) -> np.ndarray:
@@ -37,7 +37,7 @@ def scale_nonlinearity_g(a: np.ndarray, k2_per_g: np.ndarray, k3_per_g2: np.ndar
 
 
 @dataclass(frozen=True)
-class ScaleNonlinearity(EffectModule):
+class ScaleNonlinearity(CatalogueEffect):
     effect_id: str = "scale_nonlinearity"
     confusers: tuple[str, ...] = ("cross_coupling", "bias_drift")
     experiment: str = ("add oblique positions (e.g. the cube14 diagonals) so a³ and a² differ "

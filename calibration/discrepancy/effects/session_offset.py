@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
+from calibration.discrepancy.effects.base import UG, CatalogueEffect, axis_params, fmt_pm, per_axis
 
 
 def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
@@ -30,7 +30,7 @@ def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class SessionOffset(EffectModule):
+class SessionOffset(CatalogueEffect):
     effect_id: str = "session_offset"
     confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate")
     experiment: str = ("power-cycle the sensor at one plateau and take the same positions "

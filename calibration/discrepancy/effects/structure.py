@@ -1,4 +1,4 @@
-"""Tests an effect module uses to check that a finding has its own physics' shape (issue 10).
+"""Tests a catalogue effect uses to check that a finding has its own physics' shape (issue 10).
 
 A name is given only if the residual structure looks like the named physics. Two effects
 carry such a check (docs/diagnosis.md §7, *Physics checks after selection*):
@@ -8,7 +8,7 @@ carry such a check (docs/diagnosis.md §7, *Physics checks after selection*):
   orientation class (a smooth function of the reference direction), its neighbours in
   time on the same plateau.
 * input-only terms (``scale_nonlinearity``, ``cross_coupling``: a function of the specific
-  force alone, :meth:`EffectModule.misses`): the same reference direction must leave the
+  force alone, :meth:`CatalogueEffect.misses`): the same reference direction must leave the
   same residual at every visit; a term that leaves the visits of one direction different
   (a memory of the previous position) did not describe what it was fitted to.
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import UG, EffectModule, axis_params, fmt_pm, per_axis
+from calibration.discrepancy.effects.base import UG, CatalogueEffect, axis_params, fmt_pm, per_axis
 
 MIN_RATE_C_PER_MIN = 0.02
 
@@ -28,7 +28,7 @@ def rate_offset_g(rate_c_per_time: np.ndarray, k_g_per_c_per_time: np.ndarray) -
 
 
 @dataclass(frozen=True)
-class TemperatureRate(EffectModule):
+class TemperatureRate(CatalogueEffect):
     effect_id: str = "temperature_rate"
     # session_offset: in a one-way staircase the rate is largest on the first plateau and of
     # one sign, i.e. a jump after it (issue 10; protocol.py withholds the name then).

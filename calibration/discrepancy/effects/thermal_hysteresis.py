@@ -15,7 +15,7 @@ import numpy as np
 from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import (
     UG,
-    EffectModule,
+    CatalogueEffect,
     axis_params,
     fmt_pm,
     per_axis,
@@ -35,7 +35,7 @@ def hysteresis_offset_g(direction: np.ndarray | float, h_g: np.ndarray) -> np.nd
 
 
 @dataclass(frozen=True)
-class ThermalHysteresis(EffectModule):
+class ThermalHysteresis(CatalogueEffect):
     effect_id: str = "thermal_hysteresis"
     confusers: tuple[str, ...] = ("thermal_lag", "bias_drift", "session_offset")
     experiment: str = ("revisit the same setpoints on a heating and a cooling leg "

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import EffectModule
+from calibration.discrepancy.effects.base import CatalogueEffect
 from calibration.thermal_plant import (
     AMBIENT_C,
     DEFAULT_RAMP_C_PER_MIN,
@@ -41,7 +41,7 @@ TAU_GRID_S = tuple(float(v) for v in np.geomspace(120.0, 14400.0, 18))
 
 
 @dataclass(frozen=True)
-class ThermalLag(EffectModule):
+class ThermalLag(CatalogueEffect):
     effect_id: str = "thermal_lag"
     confusers: tuple[str, ...] = ("thermal_hysteresis", "temperature_rate", "bias_drift")
     experiment: str = ("fit on the chamber air temperature (chamber_c) with soaks shorter than "

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from itertools import combinations_with_replacement
+
 import numpy as np
 
 from calibration import sfem
@@ -38,6 +40,30 @@ def tilted_ref_g(ref_g: np.ndarray, base_tilt_rad: np.ndarray) -> np.ndarray:
     up = sfem.rotation_x(tx) @ sfem.rotation_y(ty) @ np.array([0.0, 0.0, 1.0])
     mag = np.linalg.norm(ref_g, axis=1)
     return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
+
+
+TURN_DEGREE = 2  # a_i², a_i·a_j: the catalogue nonlinearities' degree (their a³ aliases)
+
+
+def turn_columns(u: np.ndarray, degree: int = TURN_DEGREE) -> np.ndarray:
+    """(N,3,k): fields across the reference, ``(I − u·uᵀ)·q(u)`` for vector monomials q.
+
+    A small rotation of the specific force ``u`` moves it across itself only. The turns
+    allowed are of the catalogue nonlinearities' own polynomial degree in u: the part of a
+    nonlinearity ``g(u)`` across the reference is then one of them, and what is left to
+    tell it from a turn is exactly its part along the reference, ``u·g(u)``.
+    """
+    n = u.shape[0]
+    mons = [np.ones(n)] + [np.prod(u[:, list(c)], axis=1) for d in range(1, degree + 1)
+                           for c in combinations_with_replacement(range(3), d)]
+    cols = []
+    for m in mons:
+        for a in range(3):
+            q = np.zeros((n, 3))
+            q[:, a] = m
+            cols.append(q - np.sum(q * u, axis=1, keepdims=True) * u)
+    return np.stack(cols, axis=2)
+
 
 TURNTABLE_GEOMETRY = Unobservable(
     effect_id="turntable_geometry", confusers=("cross_coupling",),

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.discrepancy.context import DesignContext
-from calibration.discrepancy.effects.base import EffectModule, axis_params, fmt_pm
+from calibration.discrepancy.effects.base import CatalogueEffect, axis_params, fmt_pm
 
 
 def rectified_offset_g(sd_vib_g: np.ndarray, c_per_g: np.ndarray) -> np.ndarray:
@@ -27,7 +27,7 @@ def rectified_offset_g(sd_vib_g: np.ndarray, c_per_g: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class VibrationRectification(EffectModule):
+class VibrationRectification(CatalogueEffect):
     effect_id: str = "vibration_rectification"
     confusers: tuple[str, ...] = ("bias_drift",)
     experiment: str = ("record sd_* and take positions with the chamber compressor on and off "
