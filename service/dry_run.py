@@ -44,6 +44,7 @@ import numpy as np
 
 from calibration.campaign_plan import (
     Acquire,
+    Home,
     Move,
     Msg,
     Save,
@@ -469,6 +470,8 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
             out.n_steps += 1
             out.steps.append({"setpoint_c": msg.setpoint_c, "ramp_s": dt_s, "soak_s": 0.0,
                               "positions_s": 0.0})
+        elif isinstance(msg, Home):  # the table goes home during the ramp: no time of its own
+            here["deg"] = np.zeros(poses.shape[1])
         elif isinstance(msg, WaitStable):
             out.soak_s += soak_s
             out.steps[-1]["soak_s"] = soak_s

@@ -23,8 +23,7 @@ from service.engine.spec import RunSpec
 
 # Before the first position is measured: move + settle + 200 samples at 62.5 Hz ≈ 15 s.
 DEFAULT_POSITION_S = 15.0
-#: The slowest air the engine waits for (°C/min) when the chamber's rate is not known: a
-#: ramp's time limit is then stated as assuming it (:func:`ramp_limit_s`).
+#: The slowest air the engine assumes when the commanded rate is below it (°C/min).
 SLOWEST_RATE_C_PER_MIN = 0.05
 
 
@@ -36,21 +35,6 @@ def chamber_moving_rate_c_per_min(chamber: Any, ramp_c_per_min: float) -> float 
     if isinstance(ctrl, RampControl):
         return moving_rate_c_per_min(ctrl, ramp_c_per_min)
     return float(ramp_c_per_min) if ramp_c_per_min > 0 else None
-
-
-def ramp_limit_s(delta_c: float, rate_c_per_min: float | None,
-                 max_soak_s: float) -> tuple[float, str]:
-    """How long a ramp of ``|delta_c|`` may take before the chamber is called stuck, and the
-    basis of that limit in words (for the failure message): twice the time at the moving
-    rate plus the longest soak; at an unknown rate, at :data:`SLOWEST_RATE_C_PER_MIN`."""
-    if rate_c_per_min is not None and rate_c_per_min > 0:
-        rate = float(rate_c_per_min)
-        basis = f"twice {abs(delta_c):.1f} °C at {rate:g} °C/min"
-    else:
-        rate = SLOWEST_RATE_C_PER_MIN
-        basis = (f"the chamber's rate is not known: twice {abs(delta_c):.1f} °C at "
-                 f"{rate:g} °C/min, the slowest the engine waits for")
-    return abs(delta_c) / rate * 60.0 * 2.0 + max_soak_s, basis + " + the longest soak"
 
 
 @dataclass

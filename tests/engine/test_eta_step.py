@@ -69,7 +69,8 @@ def test_a_commanded_ramp_is_predicted_exactly_as_before() -> None:
 
 
 def test_a_ramps_time_limit_uses_the_moving_rate_and_states_its_basis() -> None:
-    from service.engine.progress import chamber_moving_rate_c_per_min, ramp_limit_s
+    from service.engine.polls import ramp_limit_s
+    from service.engine.progress import chamber_moving_rate_c_per_min
 
     class Stepping:  # a driver whose chamber steps at its own 4 °C/min
         ramp_control = STEPS_CTRL
