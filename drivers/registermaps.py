@@ -734,27 +734,31 @@ class _MapReader:
             **self.common(regs),
         )
 
-    def absent_roles(self, regs: dict[str, Field]) -> frozenset[str]:
-        """``absent_roles = ["working_setpoint_c"]``: roles the controller does not have.
+    def absent_roles(self, regs: dict[str, Field],
+                     allowed: tuple[str, ...] = CHAMBER_ABSENT_OK,
+                     why_absent: str = "if the controller has no such register"
+                     ) -> frozenset[str]:
+        """``absent_roles = ["working_setpoint_c"]``: roles the device does not have.
 
-        A role neither mapped nor listed is refused (a forgotten register is a mistake),
-        as is one both mapped and listed.
+        Only the ``allowed`` roles may be listed (a chamber's :data:`CHAMBER_ABSENT_OK`, a
+        turntable's :data:`TABLE_ABSENT_OK`). A role neither mapped nor listed is refused
+        (a forgotten register is a mistake), as is one both mapped and listed.
         """
         raw = self.doc.get("absent_roles", [])
         if not isinstance(raw, list) or not all(isinstance(r, str) for r in raw):
             raise self.fail("absent_roles", "expected a list of role names")
         for i, role in enumerate(raw):
-            if role not in CHAMBER_ABSENT_OK:
+            if role not in allowed:
                 raise self.fail(f"absent_roles[{i}]", f"{role!r} cannot be absent (only "
-                                f"{', '.join(CHAMBER_ABSENT_OK)} can)")
+                                f"{', '.join(allowed)} can)")
             if role in regs:
                 raise self.fail(f"absent_roles[{i}]", f"{role} is listed as absent but "
                                 f"[registers.{role}] maps it: keep one")
-        for role in CHAMBER_ABSENT_OK:
+        for role in allowed:
             if role not in regs and role not in raw:
                 raise self.fail(f"registers.{role}",
                                 f"missing: map it, or list it in absent_roles = [\"{role}\"] "
-                                "if the controller has no such register")
+                                f"{why_absent}")
         return frozenset(raw)
 
     def sequences(self, regs: dict[str, Field], allowed: dict[str, str | None] | None = None
@@ -818,7 +822,8 @@ class _MapReader:
         return SequenceStep(str(step["register"]), f, value=value)
 
     def turntable(self, name: str, regs: dict[str, Field]) -> TurntableMap:
-        absent = self.table_absent_roles(regs)
+        absent = self.absent_roles(regs, TABLE_ABSENT_OK,
+                                   "if the drive's position readback is not documented")
         self.require(regs, TABLE_REQUIRED, "turntable")
         sequences = self.sequences(regs, TABLE_SEQUENCES)
         if "move" not in sequences:
@@ -899,24 +904,6 @@ class _MapReader:
             unit_ids=unit_ids, sequences=sequences,
             **common,
         )
-
-    def table_absent_roles(self, regs: dict[str, Field]) -> frozenset[str]:
-        """A turntable's ``absent_roles``: only ``position_deg`` (an undocumented readback)."""
-        raw = self.doc.get("absent_roles", [])
-        if not isinstance(raw, list) or not all(isinstance(r, str) for r in raw):
-            raise self.fail("absent_roles", "expected a list of role names")
-        for i, role in enumerate(raw):
-            if role not in TABLE_ABSENT_OK:
-                raise self.fail(f"absent_roles[{i}]", f"{role!r} cannot be absent (only "
-                                f"{', '.join(TABLE_ABSENT_OK)} can)")
-            if role in regs:
-                raise self.fail(f"absent_roles[{i}]", f"{role} is listed as absent but "
-                                f"[registers.{role}] maps it: keep one")
-        if "position_deg" not in regs and "position_deg" not in raw:
-            raise self.fail("registers.position_deg",
-                            "missing: map it, or list it in absent_roles = [\"position_deg\"] "
-                            "if the drive's position readback is not documented")
-        return frozenset(raw)
 
     def unit_ids(self, raw: Any, n_axes: int) -> tuple[int, ...]:
         """``[axes] unit_ids``: one distinct Modbus unit id 1…247 per axis, outer first."""
