@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from drivers.chamber_park import park_chamber
 from drivers.faults import ValueOutOfRange
 from drivers.modbus_link import ModbusLink
 from drivers.protocols import ChamberStatus
@@ -181,14 +182,4 @@ class ModbusChamber:
         ``[safe] stop = true``, the controller stopped. A target beyond the chamber's
         range goes to the range's edge (the park must not be refused) and the report
         says so."""
-        asked_c = self.safe_setpoint_c if setpoint_c is None else float(setpoint_c)
-        lo_c, hi_c = self.range_c
-        target_c = min(max(asked_c, lo_c), hi_c)
-        await self.set_setpoint(target_c)
-        done = f"setpoint {target_c:g} °C"
-        if target_c != asked_c:
-            done += f" (the range's edge; {asked_c:g} °C asked)"
-        if self.stop_when_safe:
-            await self.stop()
-            done += ", controller stopped"
-        return done
+        return await park_chamber(self, setpoint_c, stopped="controller stopped")

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import serial
 
+from drivers.chamber_park import park_chamber
 from drivers.clock import Clock
 from drivers.faults import (
     ConfigurationFault,
@@ -220,17 +221,7 @@ class EspecChamber:
         """The safe state (:meth:`drivers.protocols.Chamber.park`): the setpoint to
         ``setpoint_c`` or the rig's ``safe_setpoint_c`` (clamped to the range, and said),
         then standby where the rig says ``safe_stop``."""
-        asked_c = self.safe_setpoint_c if setpoint_c is None else float(setpoint_c)
-        lo_c, hi_c = self.range_c
-        target_c = min(max(asked_c, lo_c), hi_c)
-        await self.set_setpoint(target_c)
-        done = f"setpoint {target_c:g} °C"
-        if target_c != asked_c:
-            done += f" (the range's edge; {asked_c:g} °C asked)"
-        if self.stop_when_safe:
-            await self.stop()
-            done += ", controller in standby"
-        return done
+        return await park_chamber(self, setpoint_c, stopped="controller in standby")
 
     #: What to check when the controller does not answer (rig check's connect fix).
     connect_fix = ("check the URL or serial port, the cabling, the baud rate and the RS-485 "
