@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
+import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Literal, TypeVar
@@ -347,13 +348,14 @@ class SerialAccelerometer:
             port.reset_input_buffer()
             port.write(encode_frame(*self._address, *fields, framing=self.framing))
             out: list[list[str]] = []
+            pending = bytearray()
             for i in range(n_lines):
                 # First line of a capture waits for the capture itself (device time).
-                port.timeout = self.timeout_s + (extra_wait_s if i == 0 else 0.0)
-                line = port.read_until(b"\n")
+                wait_s = self.timeout_s + (extra_wait_s if i == 0 else 0.0)
+                line = read_line(port, wait_s, pending)
                 if not line.endswith(b"\n"):
                     raise DeviceTimeout(self.device, f"no reply to {fields[0]} within "
-                                                     f"{port.timeout:.1f} s")
+                                                     f"{wait_s:.1f} s")
                 f = self._reply_fields(decode_frame(line, self.device, self.framing), fields)
                 if f[0] == "ERR":
                     raise self._err_fault(f, fields)
@@ -558,16 +560,17 @@ class MultiplexedBridge:
         try:
             port.reset_input_buffer()
             port.write(encode_frame(*command, framing=self.framing))
+            pending = bytearray()
             for i in range(2 * len(members) + 4):  # a bridge that never says END ends here
                 # The first line waits for the capture itself (device time).
-                port.timeout = timeout_s + (capture_s if i == 0 else 0.0)
-                line = port.read_until(b"\n")
+                wait_s = timeout_s + (capture_s if i == 0 else 0.0)
+                line = read_line(port, wait_s, pending)
                 if not line.endswith(b"\n"):
                     port.close()
                     return {ch: _group_line(members[ch], lines, n, unusable) if lines else
                             DeviceTimeout(members[ch].device, f"no reply line in the group "
                                                               f"capture AVG,{n} within "
-                                                              f"{port.timeout:.1f} s")
+                                                              f"{wait_s:.1f} s")
                             for ch, lines in got.items()}
                 try:
                     channel, rest = split_channel(decode_frame(line, self.device, self.framing),
@@ -646,6 +649,43 @@ def _member_fault(fault: DeviceFault, device: str) -> DeviceFault:
         copy = type(fault)(device, fault.message)
     copy.__cause__ = fault
     return copy
+
+
+def read_line(port: serial.SerialBase, timeout_s: float, pending: bytearray) -> bytes:
+    """The next ``\n``-terminated line within ``timeout_s`` of wall time, or what arrived of
+    it (no ``\n`` at the end: the timeout).
+
+    What has arrived is read in one go, not a byte at a time: pyserial's ``read_until``
+    calls ``read(1)`` per byte, a ``select`` and a ``recv`` (or ``read``) each, which made
+    every 90-byte ``AVG`` reply cost ~180 system calls and as many GIL hand-overs. The bytes
+    after the line stay in ``pending`` for the exchange's next line; what is left there when
+    the exchange ends is what ``reset_input_buffer`` would have discarded before the next
+    command. The wait for the first byte blocks as before (``port.timeout``); the rest is
+    taken with a zero timeout (whatever is there, no waiting).
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        end = pending.find(b"\n")
+        if end >= 0:
+            line = bytes(pending[:end + 1])
+            del pending[:end + 1]
+            return line
+        left_s = deadline - time.monotonic()
+        if left_s <= 0:
+            break
+        port.timeout = left_s
+        first = port.read(1)
+        if not first:
+            break
+        pending += first
+        port.timeout = 0
+        pending += port.read(_CHUNK_BYTES)
+    line = bytes(pending)
+    pending.clear()
+    return line
+
+
+_CHUNK_BYTES = 4096  # per read of what has arrived (a longer reply: the next round takes the rest)
 
 
 def open_serial_port(url: str, baudrate: int, timeout_s: float,

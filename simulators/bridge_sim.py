@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -69,7 +70,7 @@ class BridgeDevice:
     eeprom_serial: str | None = None
 
     def reference_g(self) -> np.ndarray:
-        return reference_for_angles(self.angles_deg(), self.g_local)
+        return _reference(tuple(self.angles_deg()), self.g_local)
 
     async def capture(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Wait the capture time on the clock, then return (counts (n,3), temp raw (n,))."""
@@ -233,6 +234,16 @@ class MultiplexedBridgeDevice:
         return out
 
 
+@functools.lru_cache(maxsize=1024)
+def _reference(angles_deg: tuple[float, ...], g_local: float) -> np.ndarray:
+    """:func:`reference_for_angles`, once per pose: a table sweep revisits its few dozen
+    poses, and every sensor on the table asks for the same one at each capture. Read-only
+    (the array is shared)."""
+    ref = reference_for_angles(angles_deg, g_local)
+    ref.flags.writeable = False
+    return ref
+
+
 def _draw(device: BridgeDevice, p: float) -> bool:
     """One fault draw on the channel's own stream (no draw at p = 0: the noise is unshifted)."""
     return p > 0 and device.rng.random() < p
@@ -247,13 +258,25 @@ def _temperature_samples(truth: Any, die_c: float, n: int,
 
 def _avg_reply(counts: np.ndarray, traw: np.ndarray, range_g: float) -> list[list[object]]:
     n = len(counts)
-    mean = counts.mean(axis=0)
-    sd = counts.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
+    mean, sd = _mean_sd(counts)
     sat = 1 if adxl355.is_saturated(counts, range_g) else 0
     return [[
         "AVG", n, *(f"{x:.3f}" for x in mean), *(f"{x:.3f}" for x in sd),
         f"{traw.mean():.2f}", int(traw.min()), int(traw.max()), sat,
     ]]
+
+
+def _mean_sd(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis mean and sample sd (ddof 1; zeros for one sample) of counts (n,3), with
+    the very operations of ``counts.mean(axis=0)`` and ``counts.std(axis=0, ddof=1)`` (the
+    same sums in float64, in the same order: the same bits), the mean summed once."""
+    n = len(counts)
+    mean = np.add.reduce(counts, axis=0, dtype=np.float64) / n
+    if n < 2:
+        return mean, np.zeros(3)
+    dev = counts - mean
+    np.multiply(dev, dev, out=dev)
+    return mean, np.sqrt(np.add.reduce(dev, axis=0) / (n - 1))
 
 
 def _raw_reply(counts: np.ndarray, traw: np.ndarray) -> list[list[object]]:

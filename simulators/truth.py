@@ -161,7 +161,9 @@ class SensorTruth:
             for eff in self.effects:
                 ideal = ideal + eff.raw_delta_g(ctx, self, rng)[0]
         samples = ideal + rng.normal(0.0, self.sample_sd_g(), size=(n, 3))
-        return np.clip(samples, -self.range_g, self.range_g)
+        # np.clip's bits, without its dispatch (a third of this call at 200 samples)
+        np.minimum(samples, self.range_g, out=samples)
+        return np.maximum(samples, -self.range_g, out=samples)
 
     def temperature_samples_c(self, die_c: float, n: int, rng: np.random.Generator) -> np.ndarray:
         return die_c + self.temp_offset_c + rng.normal(0.0, self.temp_noise_c, n)

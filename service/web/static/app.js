@@ -174,10 +174,13 @@ function campaignRows(list) {
     h("td", {}, when(c.created_at))));
 }
 
+// The campaign's method from its spec (the API's progress carries no method).
+function isRamp(c) { return (c.spec || {}).method === "ramp"; }
+
 // Where a campaign is, in words that stay true after it has ended (no stale "step 2 (ramp)").
 function stepText(c) {
   const p = c.progress, last = p.steps - 1;
-  if (p.method === "ramp") {  // a ramp has sweeps (one step index each), not setpoint steps
+  if (isRamp(c)) {  // a ramp has sweeps (one step index each), not setpoint steps
     if (c.state === "completed") return `all ${p.step + 1} sweeps`;
     if (c.state === "failed" || c.state === "aborted") return `stopped in sweep ${p.step}`;
     return `sweep ${p.step}`;
@@ -340,8 +343,9 @@ async function campaignView(id) {
           : (c.error || `${c.state}, no calibration`)));
     } else {
       rows.push(
-        h("dt", {}, "step"), h("dd", { id: "step" }, p.method === "ramp"
-          ? `sweep ${p.step} of about ${p.steps}, chamber heading to ${fmt(p.leg_target_c, 1, "°C")} (ramp)`
+        h("dt", {}, "step"), h("dd", { id: "step" }, isRamp(c)
+          ? `sweep ${p.step} of about ${p.steps}` + (p.leg_target_c == null ? "" :
+            `, chamber heading to ${fmt(p.leg_target_c, 1, "°C")}`) + " (ramp)"
           : `${p.step} of 0..${p.steps - 1} (${p.phase})`),
         h("dt", {}, "position"), h("dd", { id: "position" }, p.positions === null ? `${p.position}` : `${p.position} of 0..${p.positions - 1}`),
         h("dt", {}, "chamber"), h("dd", { id: "chamber" }, `${fmt(p.chamber_c, 2, "°C")} → setpoint ${fmt(p.setpoint_c, 1, "°C")}`),
