@@ -220,8 +220,21 @@ def fit_continuous(
     scores: dict[int, float] = {}
     full: dict[int, np.ndarray] = {}
     q_prev = _start(prob)
+    per_row = 3 if ref is not None else 1  # residuals per row (reference: x, y, z)
+    # A degree is tried only when every fold's training rows outnumber its coefficients:
+    # fewer residuals than unknowns has no least-squares answer (scipy's LM refuses it).
+    n_train_res = min(int(np.sum(folds != f)) for f in np.unique(folds)) * per_row
     for d in range(1, top + 1):
         q0 = _raise_degree(q_prev, prob, d)
+        if n_train_res <= q0.size:
+            if d == 1:
+                raise CalibrationError(
+                    f"{len(recording)} rows on no temperature plateau are too few for the "
+                    f"continuous fit: its degree-1 model has {q0.size} coefficients and "
+                    f"choosing the degree by held-out error leaves {n_train_res} residuals "
+                    "to fit them; soak until the die settles (each step a plateau: the step "
+                    "fit needs far fewer rows) or measure more positions per step")
+            break
         q, sol_d = prob.solve(d + 1, q0)
         full[d] = q
         scores[d] = _heldout_chi2(prob, folds, q, sol_d, d + 1)

@@ -12,7 +12,7 @@ import pytest
 from calibration import sfem
 from calibration.cli import run_calibrate, run_compensate
 from calibration.continuous import fit_continuous
-from calibration.errors import NotIdentifiable
+from calibration.errors import CalibrationError, NotIdentifiable
 from calibration.model_file import load_model
 from calibration.plateaus import segment_recording
 from calibration.recording import write_recording
@@ -176,3 +176,19 @@ def test_a_mixed_recording_reports_its_soaks_as_steps(tmp_path: Path,
     assert temps and abs(temps[0] + 20.0) < 0.5 and abs(temps[-1] - 40.0) < 0.5
     assert all(p["rows"] >= 5 and p["rmse_after_mg"] < 0.03 for p in doc["plateaus"])
     assert doc["segmentation"]["continuous_rows"] > 0
+
+
+def test_a_continuous_fit_over_few_rows_lowers_its_degree_or_refuses_with_the_reason(
+        ramp: RampRun) -> None:
+    """A few rows on no plateau (a short soak's campaign): a degree whose held-out folds
+    would leave fewer residuals than coefficients is not tried; when not even degree 1 can
+    be chosen that way, the refusal says so and how to record data that fits."""
+    rec = ramp.recording
+    few = rec.subset(np.arange(0, len(rec), len(rec) // 14)[:14])
+    fit = fit_continuous(few, segment_recording(few))
+    assert fit.model.method == "continuous"
+    assert max(int(d) for d in fit.model.provenance["degree_heldout_rms_ug"]) < 3
+    fewer = rec.subset(np.arange(0, len(rec), len(rec) // 10)[:10])
+    with pytest.raises(CalibrationError, match=r"10 rows on no temperature plateau are too "
+                       r"few .* soak until the die settles"):
+        fit_continuous(fewer, segment_recording(fewer))
