@@ -280,17 +280,19 @@ class CampaignSpec(BaseModel):
                 "lower min_soak_min or raise max_soak_min")
         return self
 
-    @model_validator(mode="after")
-    def _ramp_method_needs_a_ramp(self) -> CampaignSpec:
+    @field_validator("ramp_c_per_min")
+    @classmethod
+    def _ramp_method_needs_a_ramp(cls, rate: float, info: ValidationInfo) -> float:
         # A soak's calibration does not depend on the ramp between steps (the soak decides
         # stability), so 0 (step) is a soak's choice; a ramp campaign measures while the
-        # chamber ramps, at the commanded rate (calibration/ramp_plan.py).
-        if self.method == "ramp" and not self.ramp_c_per_min > 0:
+        # chamber ramps, at the commanded rate (calibration/ramp_plan.py). A field validator
+        # (``method`` is validated before it), so the refusal names ramp_c_per_min.
+        if info.data.get("method") == "ramp" and not rate > 0:
             raise ValueError(
                 "method 'ramp' needs a controlled ramp: ramp_c_per_min 0 means step (the "
                 "chamber moves at its own rate), which only method 'soak' accepts; give the "
                 "ramp rate, > 0 °C/min")
-        return self
+        return rate
 
     @model_validator(mode="after")
     def _measured_rate_needs_precise_probes(self) -> CampaignSpec:

@@ -350,6 +350,8 @@ def progress_of(campaign: Campaign) -> Progress:
         setpoint_c=setpoint_c,
         eta_s=eta_s,
         eta_wall_s=eta_wall_s,
+        method="ramp" if spec.get("method") == "ramp" else "soak",
+        leg_target_c=live.get("leg_target_c"),
     )
 
 

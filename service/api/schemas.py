@@ -55,6 +55,10 @@ class Progress(BaseModel):
     eta_s: float | None
     eta_wall_s: float | None = Field(
         default=None, description="eta_s on the wall clock (shorter on a sped-up sim rig)")
+    method: Literal["soak", "ramp"] = Field(
+        default="soak", description="the campaign's method; a ramp's steps are its sweeps")
+    leg_target_c: float | None = Field(
+        default=None, description="a ramp: where the chamber is heading on this leg, °C")
 
 
 class CampaignOut(BaseModel):

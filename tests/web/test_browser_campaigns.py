@@ -98,7 +98,7 @@ def _wait_state(page, *states: str) -> None:  # type: ignore[no-untyped-def]
     """Until the campaign's state on the page is one of ``states`` (an arrow function: the
     page's CSP forbids eval, which a bare expression would need)."""
     page.wait_for_function(
-        "(states) => states.includes(document.querySelector('#state').textContent)",
+        "(states) => states.includes(document.querySelector('#state')?.textContent)",
         arg=list(states))
 
 

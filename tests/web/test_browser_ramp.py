@@ -27,7 +27,7 @@ def _recording_sweeps(service: LiveService, cid: int) -> set[int]:
 
 def _wait_state(page, *states: str) -> None:  # type: ignore[no-untyped-def]
     page.wait_for_function(
-        "(states) => states.includes(document.querySelector('#state').textContent)",
+        "(states) => states.includes(document.querySelector('#state')?.textContent)",
         arg=list(states))
 
 
@@ -41,7 +41,7 @@ def test_the_method_selector_offers_soak_and_ramp_with_the_ramp_rate(
     label = page.locator("#start label", has=page.locator("input[name=ramp_c_per_min]"))
     assert label.inner_text().strip() == "Chamber ramp (°C/min)"
     assert page.input_value("#start input[name=ramp_c_per_min]") == "1"
-    # a ramp at 0 °C/min never reaches the range: refused with the field and the bound
+    # a ramp at 0 °C/min (a step) is no ramp: refused with the field, the reason and the fix
     page.fill("input[name=sensor]", "SN-RAMP-0")
     select.select_option("ramp")
     page.fill("input[name=ramp_c_per_min]", "0")
@@ -49,7 +49,8 @@ def test_the_method_selector_offers_soak_and_ramp_with_the_ramp_rate(
     page.wait_for_selector("#error:not([hidden])")
     refusal = page.inner_text("#error")
     assert refusal.startswith("HTTP 422: body.ramp_c_per_min"), refusal
-    assert "greater than 0" in refusal, refusal
+    assert "method 'ramp' needs a controlled ramp" in refusal, refusal
+    assert "give the ramp rate, > 0 °C/min" in refusal, refusal
     assert page.inner_text("#main h2") == "Campaigns"  # still the list: nothing started
     started = live_engine_service.call("GET", "/api/v1/campaigns")
     assert not [c for c in started if c["sensor"] == "SN-RAMP-0"]
@@ -87,9 +88,10 @@ def test_a_ramp_started_from_the_form_shows_its_sweeps(
     shown = STEP.fullmatch(page.inner_text("#step"))
     assert shown, page.inner_text("#step")
     assert int(shown[1]) == progress["step"] and int(shown[2]) == progress["steps"]
-    # the leg's target only where the API gives it (its progress has no leg_target_c yet)
-    heading = progress.get("leg_target_c")
-    assert shown[3] == (None if heading is None else f"{heading:.1f}")
+    # the API says it is a ramp and where its chamber is heading; the page shows the same
+    assert progress["method"] == "ramp"
+    heading = progress["leg_target_c"]
+    assert heading is not None and shown[3] == f"{heading:.1f}"
     assert progress["steps"] >= 2  # a ramp up and back sweeps the table more than once
     # the chart, from the stored history (reloaded: no progress event comes while paused):
     # chamber, the ramping setpoint and the die

@@ -16,7 +16,7 @@ def test_resume_a_paused_campaign(page, live_engine_service: LiveService) -> Non
     assert page.inner_text("#state") == "paused"
     page.click("#resume-btn")  # resuming loses nothing: no question asked
     page.wait_for_function(
-        "() => ['queued', 'running'].includes(document.querySelector('#state').textContent)")
+        "() => ['queued', 'running'].includes(document.querySelector('#state')?.textContent)")
     assert "state paused → " in page.inner_text("#journal")
     live_engine_service.abort(c["id"])
 
