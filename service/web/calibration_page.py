@@ -84,6 +84,7 @@ class CalibrationPage(BaseModel):
     held: list[str] = Field(description="SFEM parameters held at nominal: the positions "
                             "cannot identify them")
     joint_fit: dict[str, Any] | None
+    chi2_red: float | None = Field(description="a continuous fit's reduced chi-square")
     drift_ug_per_k: dict[str, float | None] = Field(
         description="|slope| of the output at fixed orientation vs temperature, before/after")
     steps: list[StepRow]
@@ -120,8 +121,10 @@ def calibration_page(calibration_id: DbIdPath, session: SessionDep) -> Calibrati
         rmse_after_ug=_ug(report.get("rmse_after_mg")) if warmup else row.rmse_ug,
         scatter_ug=row.rmse_ug if warmup else None,
         heldout_mg_xyz=report.get("heldout_rms_mg_xyz") if warmup else None,
-        fitted=[k for k, ok in identifiable.items() if ok],
-        held=[k for k, ok in identifiable.items() if not ok],
+        # a warm-up's report names them itself (it fits only what it identifies)
+        fitted=[k for k, ok in identifiable.items() if ok] or list(report.get("fitted") or []),
+        held=[k for k, ok in identifiable.items() if not ok] or list(report.get("held") or []),
+        chi2_red=report.get("chi2_red"),
         joint_fit=report.get("joint_fit"),
         drift_ug_per_k={k: (drift.get(k) or {}).get("abs_slope_ug_per_k")
                         for k in ("before", "after")},

@@ -116,6 +116,8 @@ def test_a_ramp_calibration_shows_its_error_before_and_after_and_per_band(
     before, after = _ug(page.inner_text("#rmse-before")), _ug(page.inner_text("#rmse-after"))
     assert before > 1000 and 5 < after < 200, (before, after)
     assert after == round(summary["rmse_after_ug"], 1)
+    assert page.inner_text("#fitted") == "all 12 SFEM parameters (Eq. 1)"
+    assert re.fullmatch(r"none \(continuous fit: χ²red \d+\.\d\d\)", page.inner_text("#joint"))
     rows = _band_rows(page)
     assert len(rows) == len(summary["bands"]) >= 2  # 20 → 40 °C: two 10-°C bands or more
     for row in rows:
@@ -145,7 +147,7 @@ def test_a_warmup_calibration_shows_its_error_per_band_and_what_it_could_not_fit
     before, after = _ug(page.inner_text("#rmse-before")), _ug(page.inner_text("#rmse-after"))
     # one orientation: the constant bias is not identified, so |g| stays mg after
     assert before > 1000 and after > 1000, (before, after)
-    assert "bias change only" in page.inner_text("#cal-facts")
+    assert "only what it fitted" in page.inner_text("#cal-facts")
     scatter = page.inner_text("#scatter")
     assert re.match(r"\d+\.\d µg after; held out x/y/z: [\d. /]+ → [\d. /]+ mg", scatter)
     assert _ug(" ".join(scatter.split()[:2])) == round(summary["scatter_ug"], 1)
@@ -153,4 +155,8 @@ def test_a_warmup_calibration_shows_its_error_per_band_and_what_it_could_not_fit
     assert len(rows) == len(summary["bands"]) >= 1
     assert all(r[2] == "1" and r[5] == "one leg only" for r in rows), rows
     assert page.locator("#cal-steps").count() == 0
+    # what it fitted and what it held, as the model file says
+    assert summary["fitted"] == ["bx", "by", "bz"]
+    assert page.inner_text("#fitted").startswith("bx, by, bz (")
+    assert page.inner_text("#held").startswith("sx, sy, sz, ")
     page.wait_for_selector("#no-figures")

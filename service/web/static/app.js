@@ -510,19 +510,22 @@ async function calibrationView(id) {
       h("dt", {}, "sensor / campaign"), h("dd", {}, h("a", { href: `#/sensors/${encodeURIComponent(sum.sensor)}` }, sum.sensor), " / ",
         sum.campaign_id ? h("a", { href: `#/campaigns/${sum.campaign_id}` }, sum.campaign_id) : "–"),
       h("dt", {}, "|g| RMSE before (raw)"), h("dd", { id: "rmse-before" }, gErr(sum.rmse_before_ug)),
-      h("dt", {}, warmup ? "|g| RMSE after (warm-up model: bias change only)" : "|g| RMSE after (thermal model)"),
+      h("dt", {}, warmup ? "|g| RMSE after (warm-up model: only what it fitted)" : "|g| RMSE after (thermal model)"),
       h("dd", { id: "rmse-after" }, gErr(sum.rmse_after_ug)),
       warmup ? h("dt", {}, "scatter about each orientation's mean (per axis)") : "",
       warmup ? h("dd", { id: "scatter" }, `${gErr(sum.scatter_ug)} after; held out x/y/z: ` +
         `${ho.uncompensated.map((v) => v.toFixed(3)).join(" / ")} → ${ho.compensated.map((v) => v.toFixed(3)).join(" / ")} mg`) : "",
       h("dt", {}, "held out (leave one position out)"), heldOut,
       h("dt", {}, "valid range"), h("dd", { id: "valid" }, `${fmt(sum.valid_c[0], 1)} … ${fmt(sum.valid_c[1], 1)} °C (${words(sum.temperature_source)})`),
-      h("dt", {}, "drift at fixed orientation"), h("dd", { id: "drift" }, `${fmt(sum.drift_ug_per_k.before, 1)} → ${fmt(sum.drift_ug_per_k.after, 2)} µg/K`),
+      h("dt", {}, "drift at fixed orientation"), h("dd", { id: "drift" }, sum.drift_ug_per_k.before === null && sum.drift_ug_per_k.after === null
+        ? `not computed for a ${sum.method} fit` : `${fmt(sum.drift_ug_per_k.before, 1)} → ${fmt(sum.drift_ug_per_k.after, 2)} µg/K`),
       h("dt", {}, "model"), h("dd", {}, `${sum.model_version}, ${sum.mode} mode, ${sum.method} fit, thermal polynomial degree ${degree}`),
-      h("dt", {}, "fitted"), h("dd", { id: "fitted" }, all12 ? "all 12 SFEM parameters (Eq. 1)" : sum.fitted.join(", ") || "none"),
+      h("dt", {}, "fitted"), h("dd", { id: "fitted" }, all12 ? "all 12 SFEM parameters (Eq. 1)" : (sum.fitted.join(", ") || "none") +
+        (warmup && sum.fitted.length ? " (their change with temperature, or absolutely where the notes say so)" : "")),
       h("dt", {}, "held at nominal"), h("dd", { id: "held" }, sum.held.length ? `${sum.held.join(", ")} (the positions cannot identify them)` : "none"),
       h("dt", {}, "against its lot"), lotCheck,
-      h("dt", {}, "joint fit"), h("dd", { id: "joint" }, jf ? `${jf.success ? "converged" : "DID NOT CONVERGE"}, χ²red ${fmt(jf.chi2_red, 2)}` : "–"),
+      h("dt", {}, "joint fit"), h("dd", { id: "joint" }, jf ? `${jf.success ? "converged" : "DID NOT CONVERGE"}, χ²red ${fmt(jf.chi2_red, 2)}`
+        : sum.chi2_red !== null ? `none (continuous fit: χ²red ${fmt(sum.chi2_red, 2)})` : "–"),
       h("dt", {}, "created"), h("dd", {}, when(prov.created_utc))),
     sum.bands.length ? h("div", {}, h("h3", {}, "Per temperature band"), bandTable) : "",
     sum.steps.length || !sum.bands.length ? h("div", {}, h("h3", {}, stepsTitle), stepTable) : "",
