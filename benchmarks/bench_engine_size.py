@@ -20,6 +20,9 @@ Jobs:
 * ``park`` — the safe state;
 * ``helpers`` — module-level functions.
 
+The pure answers to the plan's polls (``service/engine/polls.py``: a ramp's arrival,
+a soak round's decision, the dies against the chamber) are counted beside it too.
+
 Usage (from the repository root; ``--root`` another checkout, e.g. an export of
 an older commit)::
 
@@ -91,8 +94,12 @@ def measure(root: Path) -> dict[str, object]:
     in_functions = sum(by_job.values()) + sum(unknown.values())
     plan_path = root / "calibration" / "campaign_plan.py"
     plan_total = len(plan_path.read_text(encoding="utf-8").splitlines())
+    # The pure answers to the plan's polls, outside the engine (absent before).
+    polls_path = root / "service" / "engine" / "polls.py"
+    polls_total = (len(polls_path.read_text(encoding="utf-8").splitlines())
+                   if polls_path.exists() else 0)
     return {"runner_lines": total, "module_level": total - in_functions, "by_job": by_job,
-            "unclassified": unknown, "plan_lines": plan_total}
+            "unclassified": unknown, "plan_lines": plan_total, "polls_lines": polls_total}
 
 
 def main() -> None:
@@ -107,6 +114,7 @@ def main() -> None:
     if m["unclassified"]:
         print(f"  unclassified: {m['unclassified']}")
     print(f"calibration/campaign_plan.py: {m['plan_lines']} lines")
+    print(f"service/engine/polls.py: {m['polls_lines']} lines")
 
 
 if __name__ == "__main__":

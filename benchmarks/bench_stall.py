@@ -99,15 +99,16 @@ def _log_wire_writes_and_rows() -> None:
 
     request = ModbusLink._request
 
-    async def logged_request(self: Any, what: str, address: int, call: Any) -> Any:
+    async def logged_request(self: Any, what: str, address: int, call: Any,
+                             *args: Any, **kwargs: Any) -> Any:
         if what != "write":
-            return await request(self, what, address, call)
+            return await request(self, what, address, call, *args, **kwargs)
 
         async def sent(client: Any) -> Any:
             print(f"wreq {time.time():.3f} {self.device} {address}", flush=True)
             return await call(client)
 
-        return await request(self, what, address, sent)
+        return await request(self, what, address, sent, *args, **kwargs)
 
     ModbusLink._request = logged_request  # type: ignore[method-assign]
 
@@ -148,8 +149,8 @@ def _stall_mid_move() -> None:
 
     write = ModbusLink.write_registers
 
-    async def slow_write(self: Any, address: int, words: list[int]) -> None:
-        await write(self, address, words)
+    async def slow_write(self: Any, address: int, words: list[int], **kwargs: Any) -> None:
+        await write(self, address, words, **kwargs)
         if self.device == "turntable" and len(words) > 1:
             print(f"mid-move {time.time():.3f}", flush=True)
             time.sleep(0.5)

@@ -122,8 +122,9 @@ class PollChamber:
 @dataclass(frozen=True)
 class PollSoak:
     """One poll of a soak (:func:`soak_until_stable`): read the chamber, probe the dies
-    and decide (seed Sec. 3's soak rule, ``service.engine.stability.decide``, every
-    die; the slowest ends it); the reply is a :class:`Poll`, done once stable."""
+    and decide (seed Sec. 3's soak rule for every die, the slowest ending it: the engine's
+    pure ``service.engine.polls.decide_round``); the reply is a :class:`Poll`, done once
+    stable."""
 
     soak: WaitStable
 

@@ -217,7 +217,10 @@ class CampaignSpec(BaseModel):
 
     # --- devices and timing --------------------------------------------------------------
     ramp_c_per_min: Float = _f(CAMPAIGN_RAMP_C_PER_MIN, 0, REGISTER_MAX_RAMP_C_PER_MIN,
-                               doc="chamber setpoint ramp, °C/min (≤ the rig's max rate)")
+                               open_lo=False,
+                               doc="chamber setpoint ramp, °C/min (≤ the rig's max rate); "
+                                   "0: step, the chamber moves at its own rate (method "
+                                   "'soak' only)")
     soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
     soak_probe_samples: Int | None = Field(
         default=None, ge=1, le=BRIDGE_MAX_SAMPLES,
@@ -275,6 +278,18 @@ class CampaignSpec(BaseModel):
                 f"min_soak_min {self.min_soak_s / 60.0:g} is above max_soak_min "
                 f"{self.max_soak_s / 60.0:g}: a soak cannot end before its earliest end; "
                 "lower min_soak_min or raise max_soak_min")
+        return self
+
+    @model_validator(mode="after")
+    def _ramp_method_needs_a_ramp(self) -> CampaignSpec:
+        # A soak's calibration does not depend on the ramp between steps (the soak decides
+        # stability), so 0 (step) is a soak's choice; a ramp campaign measures while the
+        # chamber ramps, at the commanded rate (calibration/ramp_plan.py).
+        if self.method == "ramp" and not self.ramp_c_per_min > 0:
+            raise ValueError(
+                "method 'ramp' needs a controlled ramp: ramp_c_per_min 0 means step (the "
+                "chamber moves at its own rate), which only method 'soak' accepts; give the "
+                "ramp rate, > 0 °C/min")
         return self
 
     @model_validator(mode="after")

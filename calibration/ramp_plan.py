@@ -256,6 +256,9 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
     refs = np.asarray(refs, float)
     n_pos = refs.shape[0]
     rate = float(spec.ramp_c_per_min)
+    if not rate > 0:  # 0 is a soak's step (calibration/campaign_spec.py): no ramp to sweep
+        raise ValueError(f"a ramp campaign needs a controlled ramp: ramp_c_per_min "
+                         f"{rate:g} °C/min, expected > 0")
     arrived_c = float(_get(spec, "tol_c", DEFAULT_ARRIVED_C))
     n = int(spec.samples_per_position)
     settle_s = float(spec.settle_s)

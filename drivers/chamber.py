@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 
+from drivers.chamber_park import park_chamber
 from drivers.faults import ValueOutOfRange
 from drivers.modbus_link import ModbusLink
 from drivers.protocols import ChamberStatus
+from drivers.ramp_rule import RampControl, map_ramp_control, ramp_refusal
 from drivers.registermaps import ChamberMap, SequenceStep, bits_to_names
 
 # Largest relative difference between the ramp rate asked for and the one the register holds.
@@ -20,9 +22,13 @@ class ModbusChamber:
     idempotent and the link may repeat it after a lost reply (drivers/modbus_link.py).
     """
 
-    def __init__(self, link: ModbusLink, regmap: ChamberMap) -> None:
+    def __init__(self, link: ModbusLink, regmap: ChamberMap, *,
+                 max_rate_c_per_min: float | None = None) -> None:
         self.link = link
         self.regmap = regmap
+        # The rig's chamber.max_rate_c_per_min (the chamber's own fastest rate), else the
+        # map's limits.max_ramp_c_per_min: what a controller without a ramp steps at.
+        self.ramp_control: RampControl = map_ramp_control(regmap, max_rate_c_per_min)
         self._setup_done = False
         # The last rate written through a [[sequence.set_ramp_rate]] when the controller has
         # no ramp register to read back (NaN before the first write).
@@ -106,22 +112,20 @@ class ModbusChamber:
         await self.link.write_field(self.regmap.setpoint_c, setpoint_c, idempotent=True)
 
     async def set_ramp_rate(self, ramp_c_per_min: float) -> None:
+        """Write the ramp rate; 0 means step (one rule for every chamber:
+        :mod:`drivers.ramp_rule`). A controller without a ramp gets nothing written."""
         if ramp_c_per_min < 0:
             raise ValueOutOfRange(self.link.device, f"ramp rate {ramp_c_per_min} °C/min < 0")
+        refused = ramp_refusal(self.ramp_control, ramp_c_per_min)
+        if refused is not None:
+            raise ValueOutOfRange(self.link.device, refused)
+        field = self.regmap.ramp_field()
+        if field is None:
+            return  # it steps at the chamber's own rate: nothing to write
         limit = self.regmap.max_ramp_c_per_min
         if limit is not None and ramp_c_per_min > limit:
             raise ValueOutOfRange(self.link.device,
                                   f"ramp rate {ramp_c_per_min} °C/min > the map's {limit} °C/min")
-        field = self.regmap.ramp_field()
-        if field is None:
-            if ramp_c_per_min == 0:
-                return  # a controller without a static ramp steps: nothing to write
-            raise ValueOutOfRange(
-                self.link.device,
-                f"ramp rate {ramp_c_per_min:g} °C/min cannot be set: map {self.regmap.name} "
-                "lists ramp_c_per_min under absent_roles (the controller steps to each "
-                "setpoint at the chamber's own rate); run the campaign with "
-                "ramp_c_per_min = 0, or give the map a [[sequence.set_ramp_rate]]")
         try:
             held = field.decode(field.encode(ramp_c_per_min))
         except (ValueError, OverflowError):
@@ -178,14 +182,4 @@ class ModbusChamber:
         ``[safe] stop = true``, the controller stopped. A target beyond the chamber's
         range goes to the range's edge (the park must not be refused) and the report
         says so."""
-        asked_c = self.safe_setpoint_c if setpoint_c is None else float(setpoint_c)
-        lo_c, hi_c = self.range_c
-        target_c = min(max(asked_c, lo_c), hi_c)
-        await self.set_setpoint(target_c)
-        done = f"setpoint {target_c:g} °C"
-        if target_c != asked_c:
-            done += f" (the range's edge; {asked_c:g} °C asked)"
-        if self.stop_when_safe:
-            await self.stop()
-            done += ", controller stopped"
-        return done
+        return await park_chamber(self, setpoint_c, stopped="controller stopped")

@@ -33,10 +33,10 @@ What the protocol gives, and what it does not:
   and no static ramp: in constant mode the chamber steps to the setpoint at its own
   rate. A ramp exists only as a program step (``RUN PRGM``), which this driver does not
   run: a program owns the setpoint and ends in a mode of its own. A commanded ramp is
-  therefore honoured only when the chamber cannot go faster anyway: a rate at or above
-  the rig's ``max_rate_c_per_min`` (the chamber's own fastest rate) is accepted, since
-  stepping the setpoint then moves the air no faster than asked; a slower one, or any
-  ramp on a rig that does not state its rate, is refused naming the fix.
+  honoured by the rule every chamber without a ramp follows (:mod:`drivers.ramp_rule`):
+  0 (step) is accepted, and so is a rate at or above the rig's ``max_rate_c_per_min``
+  (the chamber's own fastest rate: stepping the setpoint then moves the air no faster
+  than asked); a slower one is refused naming the fix (``ramp_c_per_min = 0``).
 
 Transport: anything pyserial's ``serial_for_url`` opens (``/dev/ttyUSB0`` at the
 controller's baud rate, ``socket://host:port`` for a serial-to-Ethernet adapter or the
@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import serial
 
+from drivers.chamber_park import park_chamber
 from drivers.clock import Clock
 from drivers.faults import (
     ConfigurationFault,
@@ -61,6 +62,7 @@ from drivers.faults import (
     ValueOutOfRange,
 )
 from drivers.protocols import ChamberStatus
+from drivers.ramp_rule import RampControl, ramp_refusal
 from drivers.sensor_bridge import SerialLine
 
 LINE_END = b"\r\n"
@@ -103,6 +105,13 @@ class EspecSettings:
     safe_stop: bool = False  # the park also puts the controller in STANDBY
     # The chamber's own fastest rate, °C/min (its data sheet): the rate it steps at.
     max_rate_c_per_min: float | None = None
+
+
+def espec_ramp_control(max_rate_c_per_min: float | None) -> RampControl:
+    """What an ESPEC chamber does with a commanded ramp (:mod:`drivers.ramp_rule`): it has
+    none outside a program; it steps at ``max_rate_c_per_min`` (the rig's; None: unstated)."""
+    return RampControl("an ESPEC P-300/SCP-220", False, "it ramps only inside a program, "
+                       "which this driver does not run", max_rate_c_per_min)
 
 
 def port_url(url: str) -> str:
@@ -172,26 +181,20 @@ class EspecChamber:
             raise ValueOutOfRange(self.device, f"setpoint {setpoint_c} °C outside {lo}…{hi} °C")
         await self.command(f"TEMP, S{setpoint_c:.1f}")
 
+    @property
+    def ramp_control(self) -> RampControl:
+        """No static ramp; the chamber's own rate is the rig's ``max_rate_c_per_min``."""
+        return espec_ramp_control(self.settings.max_rate_c_per_min)
+
     async def set_ramp_rate(self, ramp_c_per_min: float) -> None:
+        """Nothing to write: constant mode steps at the chamber's own rate. A commanded
+        rate is honoured when it is 0 (step) or at or above that rate (one rule for every
+        chamber: :mod:`drivers.ramp_rule`); else refused naming the fix."""
         if ramp_c_per_min < 0:
             raise ValueOutOfRange(self.device, f"ramp rate {ramp_c_per_min} °C/min < 0")
-        own = self.settings.max_rate_c_per_min
-        # Constant mode steps at the chamber's own rate: nothing to write. That is the
-        # commanded ramp only when the chamber cannot go faster than it anyway.
-        if ramp_c_per_min == 0 or (own is not None and ramp_c_per_min >= own):
-            return
-        why = (f"ramp rate {ramp_c_per_min:g} °C/min cannot be commanded: an ESPEC "
-               "P-300/SCP-220 has no ramp in constant mode (it ramps only inside a program, "
-               "which this driver does not run) and steps to each setpoint at the chamber's "
-               "own rate")
-        if own is None:
-            raise ValueOutOfRange(
-                self.device, f"{why}, which this rig does not state: set the rig's "
-                "chamber.max_rate_c_per_min to the chamber's fastest rate (its data sheet); "
-                "campaigns ramping at that rate or faster then run")
-        raise ValueOutOfRange(
-            self.device, f"{why}, up to {own:g} °C/min (chamber.max_rate_c_per_min): run the "
-            f"campaign with ramp_c_per_min ≥ {own:g}")
+        refused = ramp_refusal(self.ramp_control, ramp_c_per_min)
+        if refused is not None:
+            raise ValueOutOfRange(self.device, refused)
 
     async def run(self) -> None:
         """Constant mode (control at the setpoint written with ``TEMP, S``).
@@ -218,17 +221,7 @@ class EspecChamber:
         """The safe state (:meth:`drivers.protocols.Chamber.park`): the setpoint to
         ``setpoint_c`` or the rig's ``safe_setpoint_c`` (clamped to the range, and said),
         then standby where the rig says ``safe_stop``."""
-        asked_c = self.safe_setpoint_c if setpoint_c is None else float(setpoint_c)
-        lo_c, hi_c = self.range_c
-        target_c = min(max(asked_c, lo_c), hi_c)
-        await self.set_setpoint(target_c)
-        done = f"setpoint {target_c:g} °C"
-        if target_c != asked_c:
-            done += f" (the range's edge; {asked_c:g} °C asked)"
-        if self.stop_when_safe:
-            await self.stop()
-            done += ", controller in standby"
-        return done
+        return await park_chamber(self, setpoint_c, stopped="controller in standby")
 
     #: What to check when the controller does not answer (rig check's connect fix).
     connect_fix = ("check the URL or serial port, the cabling, the baud rate and the RS-485 "

@@ -59,6 +59,8 @@ class TurntableStatus:
     in_position: bool
     moving: bool
     faults: tuple[str, ...] = ()
+    # Every axis homed (the map's "homed" status bit); None: the table reports no homing.
+    homed: bool | None = None
 
 
 @runtime_checkable

@@ -50,8 +50,16 @@ CHAMBER_OPTIONAL = ("alarms",)
 #: instead of the single write of the quantity, and the quantity each must carry.
 SEQUENCES = {"set_setpoint": "setpoint_c", "set_ramp_rate": "ramp_c_per_min"}
 SEQUENCE_STEP_KEYS = {"register", "value", "from", "note"}
-TABLE_REQUIRED = ("position_deg", "target_deg", "command", "status")
+TABLE_REQUIRED = ("target_deg", "status")
 TABLE_OPTIONAL = ("faults",)
+#: Roles a turntable map may list under ``absent_roles``: a drive whose position readback
+#: register is not documented (the driver then reports the commanded angles, and says so).
+TABLE_ABSENT_OK = ("position_deg",)
+#: Turntable write sequences (``[[sequence.NAME]]``), made per axis on that axis' unit id:
+#: ``move`` replaces the target write + ``[command] move`` (one step carries the target,
+#: ``from = "target_deg"``, the last is usually the trigger); ``home`` starts homing and
+#: ``stop`` halts (constants only).
+TABLE_SEQUENCES = {"move": "target_deg", "home": None, "stop": None}
 
 #: Keys a map file may use; anything else is a typo and refused with its key.
 TOP_KEYS = {"schema", "kind", "name", "title", "undocumented", "source", "defaults", "limits",
@@ -67,7 +75,7 @@ SECTION_KEYS = {
     "safe": {"setpoint_c", "angles_deg", "stop"},
     "identity": {"register", "expect"},
     "run": {"register", "on", "off"},
-    "axes": {"count", "stride"},
+    "axes": {"count", "stride", "unit_ids"},
     "command": {"move", "stop"},
 }
 
@@ -279,18 +287,25 @@ class TurntableMap:
 
     name: str
     n_axes: int
-    position_deg: Field  # axis 0 (outer); readback
+    # axis 0 (outer); readback. None: the map lists it under ``absent_roles`` (no documented
+    # position register): the driver reports the commanded angles once in position.
+    position_deg: Field | None
     target_deg: Field  # axis 0 (outer); written by move commands
     axis_stride: int
-    command: Field  # write ``move_value`` / ``stop_value``
-    status: Field  # bit field: ``in_position_bit``, ``moving_bit``
+    # write ``move_value`` / ``stop_value``; None when ``[[sequence.move]]`` moves the table
+    command: Field | None
+    status: Field  # bit field: ``in_position_bit``, ``moving_bit`` (and ``homed_bit``)
     faults: Field | None = None  # bit field, names in ``fault_bits``
     fault_bits: dict[int, str] = field(default_factory=dict)
     block_read_max_gap: int = 8
     move_value: int = 1
     stop_value: int = 0
     in_position_bit: int = 0
-    moving_bit: int = 1
+    moving_bit: int | None = 1  # None: the drive has no "moving" bit (moving = not in position)
+    homed_bit: int | None = None  # the homing-done bit ("homed"), None if the map has none
+    # Every named status bit. Those whose name starts with "fault" (a drive's status word
+    # carrying its fault flag) are reported as faults, like the ``faults`` register's bits.
+    status_bits: dict[int, str] = field(default_factory=dict)
     identity: Identity | None = None
     checks: tuple[RegisterCheck, ...] = ()
     registers: dict[str, Field] = field(default_factory=dict)
@@ -300,9 +315,18 @@ class TurntableMap:
     source: str = ""
     undocumented: tuple[str, ...] = ()
     unit_id: int = 1
+    # ``[axes] unit_ids``: one Modbus unit id per axis (a drive per axis on one bus), outer
+    # first; empty: every axis answers the one unit id (``unit_id`` or the rig's device_id).
+    unit_ids: tuple[int, ...] = ()
+    # ``[[sequence.move]]`` / ``home`` / ``stop``: ordered writes per axis (see SEQUENCES).
+    sequences: dict[str, tuple[SequenceStep, ...]] = field(default_factory=dict)
 
     def axis_field(self, base: Field, axis: int) -> Field:
         return replace(base, address=base.address + axis * self.axis_stride)
+
+    def axis_unit(self, axis: int, default: int) -> int:
+        """The unit id axis ``axis`` answers: its ``unit_ids`` entry, else ``default``."""
+        return self.unit_ids[axis] if self.unit_ids else default
 
 
 # --- loading ------------------------------------------------------------------
@@ -710,57 +734,70 @@ class _MapReader:
             **self.common(regs),
         )
 
-    def absent_roles(self, regs: dict[str, Field]) -> frozenset[str]:
-        """``absent_roles = ["working_setpoint_c"]``: roles the controller does not have.
+    def absent_roles(self, regs: dict[str, Field],
+                     allowed: tuple[str, ...] = CHAMBER_ABSENT_OK,
+                     why_absent: str = "if the controller has no such register"
+                     ) -> frozenset[str]:
+        """``absent_roles = ["working_setpoint_c"]``: roles the device does not have.
 
-        A role neither mapped nor listed is refused (a forgotten register is a mistake),
-        as is one both mapped and listed.
+        Only the ``allowed`` roles may be listed (a chamber's :data:`CHAMBER_ABSENT_OK`, a
+        turntable's :data:`TABLE_ABSENT_OK`). A role neither mapped nor listed is refused
+        (a forgotten register is a mistake), as is one both mapped and listed.
         """
         raw = self.doc.get("absent_roles", [])
         if not isinstance(raw, list) or not all(isinstance(r, str) for r in raw):
             raise self.fail("absent_roles", "expected a list of role names")
         for i, role in enumerate(raw):
-            if role not in CHAMBER_ABSENT_OK:
+            if role not in allowed:
                 raise self.fail(f"absent_roles[{i}]", f"{role!r} cannot be absent (only "
-                                f"{', '.join(CHAMBER_ABSENT_OK)} can)")
+                                f"{', '.join(allowed)} can)")
             if role in regs:
                 raise self.fail(f"absent_roles[{i}]", f"{role} is listed as absent but "
                                 f"[registers.{role}] maps it: keep one")
-        for role in CHAMBER_ABSENT_OK:
+        for role in allowed:
             if role not in regs and role not in raw:
                 raise self.fail(f"registers.{role}",
                                 f"missing: map it, or list it in absent_roles = [\"{role}\"] "
-                                "if the controller has no such register")
+                                f"{why_absent}")
         return frozenset(raw)
 
-    def sequences(self, regs: dict[str, Field]) -> dict[str, tuple[SequenceStep, ...]]:
-        """``[[sequence.set_setpoint]]`` etc.: ordered writes, each checked here."""
+    def sequences(self, regs: dict[str, Field], allowed: dict[str, str | None] | None = None
+                  ) -> dict[str, tuple[SequenceStep, ...]]:
+        """``[[sequence.set_setpoint]]`` etc.: ordered writes, each checked here.
+
+        ``allowed``: sequence name → the quantity one step must carry (``None``: constants
+        only); the chamber's :data:`SEQUENCES` unless given.
+        """
+        allowed = SEQUENCES if allowed is None else allowed
         raw = self.doc.get("sequence", {})
         if not isinstance(raw, dict):
-            raise self.fail("sequence", "expected tables [[sequence.set_setpoint]] ...")
+            raise self.fail("sequence", "expected tables [[sequence.NAME]] ...")
         out: dict[str, tuple[SequenceStep, ...]] = {}
         for name, steps in raw.items():
             key = f"sequence.{name}"
-            if name not in SEQUENCES:
+            if name not in allowed:
                 raise self.fail(key, f"unknown sequence (expected one of "
-                                f"{', '.join(SEQUENCES)})")
+                                f"{', '.join(allowed)})")
             if not isinstance(steps, list) or not steps:
                 raise self.fail(key, "expected one or more [[" + key + "]] steps")
+            quantity = allowed[name]
             built = []
             for i, step in enumerate(steps):
-                built.append(self.sequence_step(f"{key}[{i}]", step, regs, SEQUENCES[name]))
+                built.append(self.sequence_step(f"{key}[{i}]", step, regs, quantity))
             carrying = [s for s in built if s.source is not None]
-            if len(carrying) != 1:
+            if quantity is not None and len(carrying) != 1:
                 raise self.fail(key, f"expected exactly one step with from = "
-                                f"\"{SEQUENCES[name]}\" (the value being set), got "
+                                f"\"{quantity}\" (the value being set), got "
                                 f"{len(carrying)}")
             out[name] = tuple(built)
         return out
 
     def sequence_step(self, key: str, step: Any, regs: dict[str, Field],
-                      quantity: str) -> SequenceStep:
+                      quantity: str | None) -> SequenceStep:
         if not isinstance(step, dict):
             raise self.fail(key, "expected {register, value} or {register, from}")
+        if quantity is None and "from" in step:
+            raise self.fail(f"{key}.from", "this sequence writes constants only (value = N)")
         for extra in step:
             if extra not in SEQUENCE_STEP_KEYS:
                 raise self.fail(f"{key}.{extra}", "unknown key (expected one of "
@@ -785,19 +822,30 @@ class _MapReader:
         return SequenceStep(str(step["register"]), f, value=value)
 
     def turntable(self, name: str, regs: dict[str, Field]) -> TurntableMap:
+        absent = self.absent_roles(regs, TABLE_ABSENT_OK,
+                                   "if the drive's position readback is not documented")
         self.require(regs, TABLE_REQUIRED, "turntable")
-        for key in ("absent_roles", "sequence"):
-            if key in self.doc:
-                raise self.fail(key, "only a chamber map has " + key)
-        self.writable(regs, ("target_deg", "command"))
+        sequences = self.sequences(regs, TABLE_SEQUENCES)
+        if "move" not in sequences:
+            self.require(regs, ("command",), "turntable without [[sequence.move]]")
+        elif "command" in self.doc:
+            raise self.fail("command", "[[sequence.move]] moves the table: [command] would be "
+                            "a second way (keep one)")
+        self.writable(regs, ("target_deg",) + (("command",) if "move" not in sequences else ()))
         self.bit_word(regs, ("status", "faults"))
         d = self.doc
         axes = d.get("axes", {})
-        n_axes, stride = axes.get("count", 3), axes.get("stride", 2)
+        n_axes = axes.get("count", 3)
         if n_axes not in (1, 2, 3):
             raise self.fail("axes.count", f"expected 1, 2 or 3, got {n_axes!r}")
-        if not isinstance(stride, int) or stride < regs["position_deg"].n_registers:
-            raise self.fail("axes.stride", "expected registers per axis ≥ the field's width")
+        unit_ids = self.unit_ids(axes.get("unit_ids"), n_axes)
+        # A drive per axis: each has the same layout, so per-axis fields share addresses.
+        stride = axes.get("stride", 0 if unit_ids else 2)
+        width = max(regs[r].n_registers for r in ("target_deg", "position_deg") if r in regs)
+        if not isinstance(stride, int) or isinstance(stride, bool) or (
+                stride < width and not (unit_ids and stride == 0)):
+            raise self.fail("axes.stride", "expected registers per axis ≥ the field's width "
+                            "(0 only with unit_ids: a drive per axis)")
         cmd = d.get("command", {})
         move, stop = cmd.get("move", 1), cmd.get("stop", 0)
         if not all(isinstance(v, int) and 0 <= v <= 0xFFFF for v in (move, stop)) \
@@ -806,10 +854,16 @@ class _MapReader:
         status = d.get("registers", {}).get("status", {})
         bits = self.bits("registers.status.bits", status.get("bits"))
         by_name = {v: k for k, v in bits.items()}
-        for needed in ("in_position", "moving"):
-            if needed not in by_name:
-                raise self.fail("registers.status.bits", f"missing the \"{needed}\" bit")
+        if "in_position" not in by_name:
+            raise self.fail("registers.status.bits", "missing the \"in_position\" bit")
+        if "moving" not in by_name and "move" not in sequences:
+            raise self.fail("registers.status.bits", "missing the \"moving\" bit")
+        if "home" in sequences and "homed" not in by_name:
+            raise self.fail("registers.status.bits", "[[sequence.home]] needs the homing-done "
+                            "status: a \"homed\" bit")
         for reg in ("position_deg", "target_deg"):
+            if reg not in regs:
+                continue
             f = regs[reg]
             last = f.address + (n_axes - 1) * stride + f.n_registers - 1
             if last > 65535:
@@ -835,16 +889,36 @@ class _MapReader:
         common["block_read_max_gap"] = self.gap(8)
         return TurntableMap(
             name=name, n_axes=n_axes,
-            position_deg=regs["position_deg"], target_deg=regs["target_deg"],
-            axis_stride=stride, command=regs["command"], status=regs["status"],
+            position_deg=None if "position_deg" in absent else regs["position_deg"],
+            target_deg=regs["target_deg"],
+            axis_stride=stride, command=regs.get("command") if "move" not in sequences
+            else None, status=regs["status"],
             faults=regs.get("faults"),
             fault_bits=self.bits("registers.faults.bits", faults_raw.get("bits")),
             move_value=move, stop_value=stop,
-            in_position_bit=by_name["in_position"], moving_bit=by_name["moving"],
+            in_position_bit=by_name["in_position"], moving_bit=by_name.get("moving"),
+            homed_bit=by_name.get("homed"),
+            status_bits=bits,
             range_deg=float(rng),
             safe_angles_deg=tuple(float(a) for a in safe),
+            unit_ids=unit_ids, sequences=sequences,
             **common,
         )
+
+    def unit_ids(self, raw: Any, n_axes: int) -> tuple[int, ...]:
+        """``[axes] unit_ids``: one distinct Modbus unit id 1…247 per axis, outer first."""
+        if raw is None:
+            return ()
+        if not isinstance(raw, list) or len(raw) != n_axes:
+            raise self.fail("axes.unit_ids", f"expected {n_axes} unit ids (one per axis)")
+        for i, uid in enumerate(raw):
+            if not isinstance(uid, int) or isinstance(uid, bool) or not 1 <= uid <= 247:
+                raise self.fail(f"axes.unit_ids[{i}]", f"expected a Modbus unit id 1…247 "
+                                f"(0 is broadcast), got {uid!r}")
+        if len(set(raw)) != len(raw):
+            raise self.fail("axes.unit_ids", f"{raw}: two axes on one unit id would both "
+                            "answer one request")
+        return tuple(raw)
 
 
 def describe_map(m: ChamberMap | TurntableMap) -> str:
@@ -854,8 +928,11 @@ def describe_map(m: ChamberMap | TurntableMap) -> str:
     extra = ""
     if isinstance(m, ChamberMap):  # what the drivers will do differently, said up front
         extra += "".join(f", no {role}" for role in CHAMBER_ABSENT_OK if getattr(m, role) is None)
-        extra += "".join(f", sequence {name} of {len(steps)} writes"
-                         for name, steps in m.sequences.items())
+    else:
+        extra += (", unit ids " + "/".join(str(u) for u in m.unit_ids)) if m.unit_ids else ""
+        extra += ", no position_deg" if m.position_deg is None else ""
+    extra += "".join(f", sequence {name} of {len(steps)} writes"
+                     for name, steps in m.sequences.items())
     notes = f", {len(m.undocumented)} undocumented points listed" if m.undocumented else ""
     return f"{what} ({kind}, {len(m.registers)} registers{extra}{notes})"
 

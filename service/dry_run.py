@@ -13,7 +13,16 @@ One function, :func:`check_campaign`, decides it without hardware, for
 * a setpoint (or the end-of-campaign ``safe_c``) outside the chamber's range
   (``chamber.range_c``, else the controller's register map range);
 * a ramp faster than the chamber can follow (``chamber.max_rate_c_per_min``;
-  the built-in ``sim`` chamber's physics limit is 5 °C/min).
+  the built-in ``sim`` chamber's physics limit is 5 °C/min);
+* a ramp the chamber cannot command (:mod:`drivers.ramp_rule`, the drivers' own rule):
+  on a chamber without a static ramp (a map listing ``ramp_c_per_min`` under
+  ``absent_roles``, an ESPEC) only 0 (step) or a rate at or above its own; 0 on a
+  controller whose map does not say its ramp register's 0 means "no ramp"; and
+  ``method: "ramp"`` on a chamber that cannot ramp;
+* a step campaign (``ramp_c_per_min`` 0, or any rate on a chamber without a ramp) on a
+  rig whose chamber's own rate is unknown: its duration cannot be predicted;
+* a position schedule a 1-axis stage with a hand axis cannot reach (the motor's range
+  and the indexer's steps, :func:`hand_axis_issue`), which would fail at the start.
 
 and it predicts the campaign's duration in rig time (:func:`predicted_duration_s`;
 :func:`prediction` is the form a campaign row stores at creation, so that reading a
@@ -35,6 +44,7 @@ import numpy as np
 
 from calibration.campaign_plan import (
     Acquire,
+    Home,
     Move,
     Msg,
     Save,
@@ -52,6 +62,12 @@ from calibration.ramp_plan import (
     travel_move_s,
 )
 from calibration.thermal_plant import AMBIENT_C
+from drivers.ramp_rule import (
+    RampControl,
+    moving_rate_c_per_min,
+    ramp_method_refusal,
+    ramp_refusal,
+)
 
 # A rig with a turntable commands every gravity direction: reference-mode fits.
 RIG_FIT_MODE = "reference"
@@ -129,8 +145,12 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
         issues.append(PlanIssue(
             ("safe_c",), f"safe temperature {spec.safe_c:g} °C is outside the chamber range "
             f"of rig {name!r}, [{lo_c:g}, {hi_c:g}] °C", spec.safe_c))
+    ctrl = chamber_ramp_control(rig)
+    step_rate, why_ramp = _ramp_verdict(spec, ctrl, name)
+    if why_ramp is not None:
+        issues.append(why_ramp)
     max_rate = chamber_max_rate_c_per_min(rig)
-    if max_rate is not None and spec.ramp_c_per_min > max_rate:
+    if ctrl.controlled and max_rate is not None and spec.ramp_c_per_min > max_rate:
         issues.append(PlanIssue(
             ("ramp_c_per_min",), f"ramp {spec.ramp_c_per_min:g} °C/min is faster than the "
             f"chamber of rig {name!r} can follow ({max_rate:g} °C/min)", spec.ramp_c_per_min))
@@ -144,15 +164,58 @@ def check_campaign(spec: CampaignSpec, rig: dict[str, Any] | None,
             "smaller position schedule")
     if why is not None:
         issues.append(PlanIssue(("positions",), why, spec.positions))
+    elif n_positions is not None:
+        unreachable = hand_axis_issue(spec.positions, rig)
+        if unreachable is not None:
+            issues.append(unreachable)
+            n_positions = None
     if n_positions is not None and spec.method == "ramp":
+        if not ctrl.controlled:  # no ramp to predict: the method is refused above
+            return PlanCheck(issues, None, 0, n_positions)
         pred = predicted_ramp(spec)
         return PlanCheck(issues, pred.duration_s, pred.n_sweeps, n_positions,
                          detail=describe_prediction(pred, spec.ramp_c_per_min),
                          prediction=ramp_prediction(pred))
-    predicted = None if n_positions is None else prediction(spec)
+    predicted = (None if n_positions is None or (step_rate is None and why_ramp is not None)
+                 else prediction(spec, step_rate))
     duration = None if predicted is None else predicted["duration_s"]
     return PlanCheck(issues, duration, len(spec.setpoints_c), n_positions,
                      prediction=predicted)
+
+
+def hand_axis_issue(positions: str, rig: dict[str, Any]) -> PlanIssue | None:
+    """A schedule a 1-axis stage with a hand axis cannot reach (docs/manual-fixtures.md,
+    "One motorised axis, one by hand"): its first unreachable position and why
+    (:func:`drivers.geometry.hand_axis_unreachable`, the engine's own geometry), else None.
+
+    The motor's range is the turntable map's ``range_deg``; a map that does not load is
+    the rig validation's to name, and the engine's geometry refuses at start."""
+    from drivers.geometry import hand_axis_unreachable
+    from drivers.registermaps import MapError, load_turntable_map
+    from service.engine.rigs import hand_axis_steps, has_hand_axis
+    from service.engine.spec import schedule_refs
+
+    table = rig.get("turntable") or {}
+    if not has_hand_axis(table):
+        return None
+    try:
+        motor_range_deg = load_turntable_map(str(table.get("map", "soakcal-table"))).range_deg
+        steps = hand_axis_steps(table)
+        refs = schedule_refs(positions)
+    except (MapError, OSError, ValueError, TypeError):
+        return None
+    bad = hand_axis_unreachable(refs, steps, motor_range_deg)
+    if not bad:
+        return None
+    first, reason = bad[0]
+    ref = ", ".join(f"{v:+.3f}" for v in refs[first] / np.linalg.norm(refs[first]))
+    more = f" (and {len(bad) - 1} more of its {len(refs)} positions)" if len(bad) > 1 else ""
+    fix = ("add the indexer steps they need to turntable.hand_axis.steps_deg, or use a "
+           "schedule whose positions the stage reaches (e.g. six with steps of 90°)")
+    return PlanIssue(("positions",), (
+        f"schedule {positions!r}: rig {rig.get('name')!r} (one motorised axis, the second "
+        f"by hand) cannot reach position {first} (ref ({ref}) g){more}: {reason}; {fix}"),
+        positions)
 
 
 def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:
@@ -168,6 +231,54 @@ def chamber_range_c(rig: dict[str, Any]) -> tuple[float, float]:
         if regmap is not None:
             return regmap.range_c
     return (-math.inf, math.inf)
+
+
+def chamber_ramp_control(rig: dict[str, Any]) -> RampControl:
+    """What the rig's chamber does with a commanded ramp (:mod:`drivers.ramp_rule`), as its
+    driver will: an ESPEC, or the register map of a ``modbus`` chamber or of the ``sim``
+    twin (which serves the map ``eurotherm-3216``)."""
+    chamber = rig.get("chamber") or {}
+    rate = chamber_max_rate_c_per_min(rig)
+    if chamber.get("driver", "sim") == "espec":
+        from drivers.espec_chamber import espec_ramp_control
+
+        return espec_ramp_control(rate)
+    from drivers.ramp_rule import map_ramp_control
+    from drivers.registermaps import MapError, load_chamber_map
+
+    map_name = str(chamber.get("map", "eurotherm3216"))
+    try:
+        regmap = load_chamber_map(map_name)
+    except (MapError, OSError, ValueError):
+        # The rig's own validation names a bad map; here: a ramp register is assumed and
+        # the driver refuses at the wire what the map cannot do.
+        return RampControl(f"map {map_name}", True, "could not be loaded to say more", rate)
+    return map_ramp_control(regmap, rate)
+
+
+def _ramp_verdict(spec: CampaignSpec, ctrl: RampControl,
+                  rig_name: Any) -> tuple[float | None, PlanIssue | None]:
+    """(the rate a soak campaign's steps are predicted at, °C/min, None for the commanded
+    one; the refusal, if any). A chamber that steps (no ramp, or 0 commanded) moves at its
+    own rate: known, or the duration cannot be predicted and the campaign is refused."""
+    rate = spec.ramp_c_per_min
+    if spec.method == "ramp":
+        why = ramp_method_refusal(ctrl)
+        return None, (None if why is None else PlanIssue(("method",), why, spec.method))
+    why = ramp_refusal(ctrl, rate)
+    if why is not None:
+        return None, PlanIssue(("ramp_c_per_min",), why, rate)
+    if ctrl.controlled and rate > 0:
+        return None, None  # predicted at the commanded rate
+    own = moving_rate_c_per_min(ctrl, rate)
+    if own is None:
+        return None, PlanIssue(
+            ("ramp_c_per_min",),
+            f"ramp_c_per_min {rate:g} on rig {rig_name!r}: its chamber ({ctrl.controller}) "
+            "steps to each setpoint at its own rate, which the rig does not state, so the "
+            f"campaign's duration cannot be predicted; set {ctrl.rate_key} to the "
+            "chamber's fastest rate (its data sheet)", rate)
+    return own, None
 
 
 def chamber_max_rate_c_per_min(rig: dict[str, Any]) -> float | None:
@@ -207,12 +318,16 @@ def schedule_verdict(name: str, mode: str) -> tuple[int | None, str | None]:
     return len(refs), None
 
 
-def predicted_duration_s(spec: CampaignSpec) -> float:
-    """Rig-time estimate of the whole campaign, s (:func:`prediction`'s ``duration_s``)."""
-    return float(prediction(spec)["duration_s"])
+def predicted_duration_s(spec: CampaignSpec, step_rate_c_per_min: float | None = None) -> float:
+    """Rig-time estimate of the whole campaign, s (:func:`prediction`'s ``duration_s``);
+    ``ValueError`` naming why when it cannot be predicted."""
+    predicted = prediction(spec, step_rate_c_per_min)
+    if predicted["duration_s"] is None:
+        raise ValueError(predicted["why"])
+    return float(predicted["duration_s"])
 
 
-def prediction(spec: CampaignSpec) -> dict[str, Any]:
+def prediction(spec: CampaignSpec, step_rate_c_per_min: float | None = None) -> dict[str, Any]:
     """The dry run of ``spec`` as a campaign row stores it (JSON): ``duration_s``,
     ``ramp_s``, ``soak_s``, ``positions_s`` (rig time, s; a sped-up sim rig: divide by its
     speed), ``n_steps``, ``n_positions`` and ``n_saves``.
@@ -223,13 +338,21 @@ def prediction(spec: CampaignSpec) -> dict[str, Any]:
     (the table's travel from the pose before, in the spec's ``position_order``), the
     settle and one acquisition (``samples / odr_hz``) for all its sensors: a campaign's
     sensors are read at once, so eight take the time of one.
+
+    ``step_rate_c_per_min``: the chamber's own rate, for a chamber that steps (no static
+    ramp, or ``ramp_c_per_min`` 0); the steps are then predicted at it. A step campaign
+    without it is not predicted: ``duration_s`` None and ``why``.
     """
     if spec.method == "ramp":
         return ramp_prediction(predicted_ramp(spec))
+    if step_rate_c_per_min is None and not spec.ramp_c_per_min > 0:
+        return {"duration_s": None, "why": "ramp_c_per_min 0 (step): the chamber moves at "
+                "its own rate, which is not known here (the rig's chamber.max_rate_c_per_min)"}
     soak_s = spec.soak_min * 60.0
     if spec.stability == "predictive":
         soak_s *= PREDICTIVE_SOAK_FRACTION
-    plan = dry_run(spec, soak_s=soak_s, move_s=None, start_c=AMBIENT_C)
+    plan = dry_run(spec, soak_s=soak_s, move_s=None, start_c=AMBIENT_C,
+                   step_rate_c_per_min=step_rate_c_per_min)
     return {"duration_s": plan.duration_s, "ramp_s": plan.ramp_s, "soak_s": plan.soak_s,
             "positions_s": plan.positions_s, "n_steps": plan.n_steps,
             "n_positions": plan.n_positions, "n_saves": plan.n_saves}
@@ -282,7 +405,8 @@ class DryRun:
 def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None = None,
             move_s: float | None = DEFAULT_MOVE_S, start_c: float = AMBIENT_C,
             done: Iterable[tuple[int, int]] = (), sensors: Sequence[str] | None = None,
-            angles_deg: np.ndarray | None = None) -> DryRun:
+            angles_deg: np.ndarray | None = None,
+            step_rate_c_per_min: float | None = None) -> DryRun:
     """Interpret the campaign plan without hardware: predicted duration and counts.
 
     ``spec`` is a campaign's JSON spec (the ``POST /campaigns`` body as a dict), a
@@ -298,7 +422,9 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
     the start. Ramps are predicted at the commanded rate, acquisitions at
     ``n_samples / odr_hz`` once per position however many sensors (they are read
     concurrently; ``sensors`` default the spec's serials). Pass ``done`` (stored (step,
-    position) pairs) to predict the rest of a resumed campaign.
+    position) pairs) to predict the rest of a resumed campaign. ``step_rate_c_per_min``:
+    the chamber's own rate when it steps (no static ramp, or ``ramp_c_per_min`` 0): the
+    ramps are predicted at it; a step without it is a ``ValueError`` (never a made-up rate).
     """
     from calibration.position_order import axis_move_s
     from drivers.geometry import angles_for_references
@@ -334,12 +460,18 @@ def dry_run(spec: Any, *, refs: np.ndarray | None = None, soak_s: float | None =
 
     def handle(msg: Msg) -> Any:
         if isinstance(msg, SetChamber):
-            dt_s = abs(msg.setpoint_c - state["c"]) / max(msg.ramp_c_per_min, 1e-6) * 60.0
+            rate = msg.ramp_c_per_min if step_rate_c_per_min is None else step_rate_c_per_min
+            if not rate > 0:
+                raise ValueError("ramp_c_per_min 0 (step): the chamber moves at its own "
+                                 "rate; give it (step_rate_c_per_min) to predict the ramps")
+            dt_s = abs(msg.setpoint_c - state["c"]) / rate * 60.0
             state["c"] = msg.setpoint_c
             out.ramp_s += dt_s
             out.n_steps += 1
             out.steps.append({"setpoint_c": msg.setpoint_c, "ramp_s": dt_s, "soak_s": 0.0,
                               "positions_s": 0.0})
+        elif isinstance(msg, Home):  # the table goes home during the ramp: no time of its own
+            here["deg"] = np.zeros(poses.shape[1])
         elif isinstance(msg, WaitStable):
             out.soak_s += soak_s
             out.steps[-1]["soak_s"] = soak_s

@@ -237,22 +237,50 @@ def _has_ramp(chamber: Any) -> bool:
 # --- turntable -------------------------------------------------------------------------
 
 
+def _table_driver(table: Any) -> Any:
+    """The map-driven driver of a table: itself, or the motor of a hand-axis stage
+    (``drivers.manual_table.HandAxisTurntable``); ``None`` for a table without a map."""
+    if hasattr(table, "regmap"):
+        return table
+    motor = getattr(table, "motor", None)
+    return motor if hasattr(motor, "regmap") else None
+
+
+def _angles_text(table: Any, driver: Any, angles_deg: tuple[float, ...]) -> str:
+    """The status' angles, saying which are read back and which are not: a map without a
+    position readback reports the commanded angles; a hand axis is set by the operator."""
+    regmap = getattr(driver, "regmap", None)
+    read_back = regmap is None or getattr(regmap, "position_deg", True) is not None
+    motor = ", ".join(f"{a:.2f}" for a in angles_deg[: getattr(driver, "n_axes", None)])
+    how = "read back" if read_back else (
+        f"commanded, not read back: map {regmap.name} has no position readback")
+    if driver is not None and driver is not table:  # the motor of a hand-axis stage
+        hand = angles_deg[-1]
+        return (f"motor ({motor})° ({how}), hand axis {hand:.2f}° (set by hand, not read; "
+                "asked only in a campaign)")
+    if regmap is None:
+        return f"angles ({motor})°"
+    return f"angles ({motor})° ({how})"
+
+
 async def _check_table(rec: _Recorder, table: Any, move: bool, clock: Clock) -> None:
-    has_map = hasattr(table, "regmap")
-    if has_map and not await rec.guard("turntable", "connect", _CONNECT_FIX,
-                                       lambda: _identity(rec, "turntable", table)):
+    driver = _table_driver(table)
+    if driver is not None and not await rec.guard("turntable", "connect", _CONNECT_FIX,
+                                                  lambda: _identity(rec, "turntable", driver)):
         return
 
     async def status() -> bool:
         st = await table.read_status()
-        angles = ", ".join(f"{a:.2f}" for a in st.angles_deg)
-        detail = (f"angles ({angles})°, {'in position' if st.in_position else 'not in position'}"
+        detail = (f"{_angles_text(table, driver, tuple(st.angles_deg))}, "
+                  f"{'in position' if st.in_position else 'not in position'}"
                   f"{', moving' if st.moving else ''}")
         if st.faults:
             return rec.add("turntable", "status", "fail",
                            detail + "; faults: " + ", ".join(st.faults),
                            "clear the table's fault (limit switch, encoder, following error)")
-        return rec.add("turntable", "status", "pass", detail)
+        ok = rec.add("turntable", "status", "pass", detail)
+        _check_homed(rec, driver, st.homed)
+        return ok
 
     if not await rec.guard("turntable", "status", _CONNECT_FIX, status):
         return
@@ -266,7 +294,7 @@ async def _check_table(rec: _Recorder, table: Any, move: bool, clock: Clock) -> 
             return rec.add("turntable", "table_move", "fail", "the table is moving already",
                            "wait until nothing else commands the table, then check again")
         start = tuple(st0.angles_deg)
-        limit = getattr(getattr(table, "regmap", None), "range_deg", 720.0)
+        limit = getattr(getattr(driver, "regmap", None), "range_deg", 720.0)
         step = TABLE_STEP_DEG if start[0] + TABLE_STEP_DEG <= limit else -TABLE_STEP_DEG
         target = (start[0] + step, *start[1:])
         for goal in (target, start):
@@ -275,10 +303,34 @@ async def _check_table(rec: _Recorder, table: Any, move: bool, clock: Clock) -> 
             if reached is not None:
                 return rec.add("turntable", "table_move", "fail", reached,
                                "check the drives are enabled and nothing blocks the table")
+        regmap = getattr(driver, "regmap", None)
+        unread = "" if regmap is None or regmap.position_deg is not None else (
+            f" (commanded angles: map {regmap.name} has no position readback, so only the "
+            "drive's in-position report is checked, not where the axis stopped)")
         return rec.add("turntable", "table_move", "pass",
-                       f"axis 0 {start[0]:.2f}° → {target[0]:.2f}° → {start[0]:.2f}°")
+                       f"axis 0 {start[0]:.2f}° → {target[0]:.2f}° → {start[0]:.2f}°{unread}")
 
     await rec.guard("turntable", "table_move", _CONNECT_FIX, one_move)
+
+
+def _check_homed(rec: _Recorder, driver: Any, homed: bool | None) -> None:
+    """The map's ``homed`` status: a table not homed counts its angles from wherever it
+    stood at power-up, so every reference direction of a campaign would be wrong."""
+    regmap = getattr(driver, "regmap", None)
+    if homed is None or regmap is None or getattr(regmap, "homed_bit", None) is None:
+        return
+    if homed:
+        rec.add("turntable", "homed", "pass", "every axis reports homed")
+        return
+    fix = ("home every axis before a campaign: the map's [[sequence.home]] starts it "
+           "(drivers/turntable.py home(); no soakcal command runs it yet), or home at the "
+           "drive (its homing input or the vendor's software); then check again"
+           if "home" in regmap.sequences else
+           "home every axis at the drive before a campaign (its homing input or the "
+           f"vendor's software: map {regmap.name} has no [[sequence.home]]); then check again")
+    rec.add("turntable", "homed", "fail",
+            "not homed: the angles count from where the table stood at power-up, so the "
+            "references a campaign labels would not be where gravity is", fix)
 
 
 async def _wait_in_position(table: Any, goal: tuple[float, ...], clock: Clock) -> str | None:

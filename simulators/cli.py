@@ -156,7 +156,8 @@ def describe(rig: SimRig, ptys: list[str] | None = None) -> str:
         "soakcal simulated rig",
         f"  chamber  modbus {rig.chamber_url}  map={rig.chamber_map}  device_id={m.unit_id} "
         f"(PV holding reg {m.process_c.address}, SP {m.setpoint_c.address})",
-        f"  table    modbus {rig.table_url}  map={rig.table_map}  axes={rig.table.n_axes}",
+        f"  table    modbus {rig.table_url}  map={rig.table_map}  axes={rig.table.n_axes}"
+        + _table_units(rig.table_map),
         f"  sensor   serial {rig.sensor_url}  (pyserial serial_for_url; docs/sensor-bridge.md)",
         *ports,
         "  example:",
@@ -204,3 +205,9 @@ async def _serve(args: argparse.Namespace) -> None:
         finally:
             for link in links:
                 await link.close()
+
+
+def _table_units(table_map: str) -> str:
+    """``  unit ids 1/2`` for a drive per axis (the map's ``[axes] unit_ids``), else ``""``."""
+    units = load_turntable_map(table_map).unit_ids
+    return "  unit ids " + "/".join(str(u) for u in units) if units else ""

@@ -110,14 +110,16 @@ class ModbusSimServer:
 
 
 async def start_modbus_server(
-    image: RegisterImage,
+    image: RegisterImage | dict[int, RegisterImage],
     faults: SimFaults,
     rng: np.random.Generator,
     *,
     host: str = "127.0.0.1",
     port: int = 0,
 ) -> ModbusSimServer:
-    """Listen on ``host:port`` (0 = ephemeral) and serve ``image`` to any device id.
+    """Listen on ``host:port`` (0 = ephemeral) and serve ``image`` to any device id, or
+    each image of a ``{unit id: image}`` to its unit id only (drives sharing one bus: a
+    request to another unit id goes unanswered, as on RS-485).
 
     With ``host=IN_MEMORY_HOST`` the server is pymodbus' in-process null modem
     (``port`` must then be a non-zero number unique in the process); drivers reach
@@ -125,7 +127,12 @@ async def start_modbus_server(
     """
     if host == IN_MEMORY_HOST and not port:
         raise ValueError("an in-memory Modbus server needs an explicit non-zero port")
-    context = ModbusServerContext(devices=_PhysicsContext(image, faults, rng), single=True)
+    if isinstance(image, dict):
+        context = ModbusServerContext(
+            devices={uid: _PhysicsContext(img, faults, rng) for uid, img in image.items()},
+            single=False)
+    else:
+        context = ModbusServerContext(devices=_PhysicsContext(image, faults, rng), single=True)
     holder: dict[str, ModbusTcpServer] = {}
 
     def trace_packet(sending: bool, data: bytes) -> bytes:

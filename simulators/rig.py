@@ -46,7 +46,7 @@ from simulators.bridge_sim import (
 from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage, ControllerSetup
 from simulators.faults import SimFaults
 from simulators.modbus_server import IN_MEMORY_HOST, ModbusSimServer, start_modbus_server
-from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage
+from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage, drive_images
 
 # Null-modem "ports" are names inside this process; hand out fresh ones per rig.
 _in_memory_ports = itertools.count(47000, 2)
@@ -218,6 +218,7 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
     # Any map file: the twin renders whatever layout the map describes (MapError if unusable).
     chamber_regmap = load_chamber_map(chamber_map)
     table_regmap = load_turntable_map(table_map)
+    n_axes = min(n_axes, table_regmap.n_axes)  # the twin's table has the map's axes at most
     several = len(serials) > 1
     truths = dict(truths or {})
     if truths and not several:
@@ -242,7 +243,9 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                                    for s in np.random.SeedSequence(seed).spawn(4))
     chamber = ChamberPhysics(clock, rng_pv, air_c=start_c, setpoint_c=start_c,
                              ambient_c=start_c, die_tau_s=die_tau_s, faults=faults.chamber)
-    table = TurntablePhysics(clock, n_axes=n_axes, faults=faults.table)
+    table = TurntablePhysics(clock, n_axes=n_axes, faults=faults.table,
+                             homed_at_start="home" not in table_regmap.sequences,
+                             settled_at_start=bool(table_regmap.unit_ids))
 
     def die_now() -> float:
         chamber.advance_to()
@@ -258,7 +261,10 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
     cs = await start_modbus_server(ChamberRegisterImage(chamber, chamber_regmap,
                                                         setup=controller),
                                    faults.chamber, rng_c, host=modbus_host, port=port_c)
-    ts = await start_modbus_server(TurntableRegisterImage(table, table_regmap),
+    # A drive per axis (the map's unit_ids): each axis its own unit id on one server.
+    table_image: Any = (drive_images(table, table_regmap) if table_regmap.unit_ids
+                        else TurntableRegisterImage(table, table_regmap))
+    ts = await start_modbus_server(table_image,
                                    faults.table, rng_t, host=modbus_host, port=port_t)
     if several and multiplexed:
         return await _start_multiplexed(clock, serials, seed, truths, bridge, die_now, table,

@@ -32,6 +32,7 @@ from service.campaigns import (
 from service.db.models import Campaign, Measurement, Rig, SoakProbe
 from service.db.timestamps import as_utc
 from service.dry_run import PlanIssue
+from service.engine.placement import hand_placed_references
 from service.engine.states import PHASES, TERMINAL
 
 router = APIRouter(prefix="/api/v1/campaigns", tags=["campaigns"])
@@ -154,7 +155,7 @@ def recording_csv(
         query.order_by(Measurement.t_s, Measurement.step, Measurement.position))
     name = f"campaign-{campaign_id}" + (f"-{sensor}" if len(serials) > 1 else "")
     rig = session.scalar(select(Rig).where(Rig.name == campaign.rig))
-    hand_placed = rig is not None and (rig.turntable or {}).get("driver") == "manual"
+    hand_placed = rig is not None and hand_placed_references(rig.turntable)
     return PlainTextResponse(
         render_recording_csv(rows, HAND_HELD_TOL_DEG if hand_placed else None),
         media_type="text/csv; charset=utf-8",

@@ -36,7 +36,7 @@ from drivers.clock import Clock, RealClock, ScaledClock
 from service.db.models import Campaign, Rig, RigLease
 from service.db.timestamps import as_utc, utcnow
 from service.engine import store
-from service.engine.placement import hand_placed_calibrate
+from service.engine.placement import hand_placed_calibrate, hand_placed_references
 from service.engine.rigs import open_rig, rig_time_scale
 from service.engine.runner import CampaignRunner
 from service.engine.store import cas_transition
@@ -237,8 +237,9 @@ class CampaignManager:
                                 **self.rig_options) as devices:
                 fence = store.Fence(rig, self.owner)
                 options: dict[str, Any] = {}
-                if (rig_cfg.get("turntable") or {}).get("driver") == "manual":
-                    # hand-placed references: fitted as approximate (docs/manual-fixtures.md)
+                if hand_placed_references(rig_cfg.get("turntable")):
+                    # hand-placed references (a fixture, or a hand-set second axis): fitted
+                    # as approximate (docs/manual-fixtures.md, "The fit: ref_tol_deg")
                     options["calibrate"] = hand_placed_calibrate()
                 await CampaignRunner(self.sf, campaign_id, devices, clock, fence=fence,
                                      **options).run()

@@ -7,7 +7,7 @@ instruction for a direction and the check of a capture against it — lives in
 pending request in the ``placement_requests`` table (:class:`PlacementBoard`)
 so it survives a restart and the REST API / CLI can show and confirm it, and
 wires a manual rig into the engine (:func:`manual_devices`,
-:func:`hand_placed_calibrate`).
+:func:`hand_placed_references`, :func:`hand_placed_calibrate`).
 """
 
 from __future__ import annotations
@@ -95,8 +95,10 @@ class PlacementBoard:
         refs = refs / np.linalg.norm(refs, axis=1, keepdims=True)
         return int(np.argmax(refs @ (ref_g / np.linalg.norm(ref_g))))
 
-    def publish(self, ref_g: np.ndarray, reason: str | None = None) -> dict[str, Any] | None:
-        """Ask for ``ref_g`` (again, with ``reason``); keeps an identical open request as is."""
+    def publish(self, ref_g: np.ndarray, reason: str | None = None,
+                instruction: str | None = None) -> dict[str, Any] | None:
+        """Ask for ``ref_g`` (again, with ``reason``); keeps an identical open request as is.
+        ``instruction``: what to do, when not placing the whole fixture (a hand axis)."""
         cid = self.campaign_for()
         if cid is None:
             return None
@@ -114,7 +116,7 @@ class PlacementBoard:
             row.seq = (row.seq or 0) + 1
             row.position = position
             row.ref_x, row.ref_y, row.ref_z = (float(v) for v in r)
-            row.instruction = instruction_for(r)
+            row.instruction = instruction or instruction_for(r)
             row.sketch = sketch_for(r)
             row.reason = reason
             row.state = "pending"
@@ -160,6 +162,19 @@ def manual_devices(rig: dict[str, Any], devices: Any, sf: sessionmaker[Session] 
                             noise_g=float(cfg.get("noise_g", 0.2e-3)))
     return replace(devices, turntable=table,
                    angles_for=lambda ref: tuple(angles_for_reference(np.asarray(ref), 3)))
+
+
+def hand_placed_references(turntable: dict[str, Any] | None) -> bool:
+    """The rig's reference directions are known only to a hand placement's tolerance, so
+    its campaigns are fitted with ``ref_tol_deg`` (:func:`hand_placed_calibrate`): a hand-
+    placed fixture, or a motorised stage whose second axis is set by hand. An indexer's
+    repeatability, its steps' accuracy and the plate's play when locked (arc-minutes at
+    best, a degree on a protractor) are far above σ/g of an averaged position (~10⁻⁵), so
+    taken as exact they would turn into misalignment (docs/manual-fixtures.md, "The fit")."""
+    from service.engine.rigs import has_hand_axis
+
+    table = turntable or {}
+    return table.get("driver") == "manual" or has_hand_axis(table)
 
 
 def hand_placed_calibrate(calibrate: Callable[[dict[str, list[float]], dict[str, Any]],

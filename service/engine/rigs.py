@@ -15,6 +15,12 @@
      "sensors":   [{"url": "/dev/ttyUSB0", "baudrate": 115200}],
      "time_scale": 1}
 
+  A drive per axis on one bus (a map with ``[axes] unit_ids``, e.g.
+  ``leadshine-rs485-pr``) takes the drives' ids as ``"unit_ids": [3, 4]`` (outer
+  first); a 1-axis motorised stage whose second axis is set by hand is
+  ``"axes": 1, "hand_axis": {"steps_deg": [0, 90, 180, 270]}`` (docs/manual-fixtures.md,
+  "One motorised axis, one by hand").
+
   Several sensors (issue 12): one bridge per sensor, each sensor entry its own
   serial port, declaring the sensor it carries by ``serial`` (or by the values
   of its ``serials`` table, board uid → serial)::
@@ -89,8 +95,12 @@ class RigDevices:
 async def open_rig(
     rig: dict[str, Any], clock: Clock, *, seed: int = 0, faults: Any = None,
     sim_options: dict[str, Any] | None = None, serials: Sequence[str] = (),
+    placement_sf: Any = None,
 ) -> AsyncIterator[RigDevices]:
     """Devices for a rig config ``{"name", "chamber", "turntable", "sensors"}``.
+
+    ``placement_sf``: the session factory of the placement board of a hand axis (default:
+    the service's database).
 
     ``serials``: the sensors a campaign names; the ``sim`` twin mounts one simulated
     sensor per serial when there are two or more (``simulators.rig``).
@@ -108,6 +118,8 @@ async def open_rig(
     driver = str((rig.get("chamber") or {}).get("driver", "sim"))
     if driver in REAL_DRIVERS:
         async with _open_modbus_rig(rig, clock, serials) as devices:
+            if has_hand_axis(rig.get("turntable") or {}):  # docs/manual-fixtures.md
+                devices = hand_axis_devices(rig, devices, placement_sf)
             yield devices
         return
     if driver != "sim":
@@ -145,6 +157,46 @@ async def open_rig(
 DRIVERS = ("sim", "modbus", "espec")
 #: Chamber drivers of real (or remote simulated) controllers, reached by url.
 REAL_DRIVERS = ("modbus", "espec")
+
+
+def has_hand_axis(turntable: dict[str, Any]) -> bool:
+    """A 1-axis motorised stage whose second axis is set by hand (docs/manual-fixtures.md)."""
+    return isinstance(turntable, dict) and "hand_axis" in turntable
+
+
+def hand_axis_steps(turntable: dict[str, Any]) -> tuple[float, ...] | None:
+    """The hand axis' indexer steps (°), ``None`` when it turns to any angle."""
+    steps = (turntable.get("hand_axis") or {}).get("steps_deg")
+    return None if steps is None else tuple(float(s) for s in steps)
+
+
+def hand_axis_devices(rig: dict[str, Any], devices: RigDevices, sf: Any = None) -> RigDevices:
+    """``devices`` with the 1-axis motor table wrapped in a
+    :class:`drivers.manual_table.HandAxisTurntable` (placement requests on the service's
+    board for the hand axis) and the hand-axis geometry
+    (:func:`drivers.geometry.angles_for_hand_axis`): a reference the motor range and the
+    hand steps cannot reach raises :class:`drivers.geometry.UnreachablePose` with why."""
+    from dataclasses import replace
+
+    from drivers.geometry import angles_for_hand_axis
+    from drivers.manual_table import HandAxisTurntable
+    from service.engine.placement import PlacementBoard
+
+    if sf is None:
+        from service.db.session import make_session_factory
+
+        sf = make_session_factory()
+    cfg = rig.get("turntable") or {}
+    motor = devices.turntable
+    table = HandAxisTurntable(motor, PlacementBoard(sf, str(rig.get("name", ""))),
+                              devices.accelerometer,
+                              check_samples=int(cfg.get("check_samples", 64)),
+                              noise_g=float(cfg.get("noise_g", 0.2e-3)))
+    steps = hand_axis_steps(cfg)
+    motor_range = float(getattr(getattr(motor, "regmap", None), "range_deg", 180.0))
+    return replace(devices, turntable=table,
+                   angles_for=lambda ref: angles_for_hand_axis(np.asarray(ref), steps,
+                                                               motor_range))
 _NO_TABLE = "none"  # internal: the manual fixture's devices, opened without a table driver
 
 
@@ -198,6 +250,7 @@ def rig_config_errors(
         if not isinstance(dev_id, int) or not 0 <= dev_id <= 247:
             errors.append((f"{path}.device_id", "expected a Modbus unit id 0…247"))
     if (not manual and driver == "modbus" and chamber.get("url") == turntable.get("url")
+            and not _per_axis_units(turntable)  # a drive per axis: _shared_bus_units
             and chamber.get("device_id", 1) == turntable.get("device_id", 1)):
         errors.append(("turntable.device_id",
                        f"the chamber answers unit {chamber.get('device_id', 1)} at the same url: "
@@ -217,9 +270,8 @@ def rig_config_errors(
             errors.append((path, str(exc)))
             continue
         errors += _limits_against_map(chamber, turntable, regmap)
-    axes = turntable.get("axes", 3)
-    if axes not in (2, 3):
-        errors.append(("turntable.axes", "expected 2 or 3"))
+        errors += _shared_bus_units(chamber, turntable, regmap)
+    errors += _table_axes_errors(chamber, turntable, manual)
     scale = chamber.get("time_scale", 1.0)
     if not isinstance(scale, int | float) or isinstance(scale, bool) or not scale > 0:
         errors.append(("chamber.time_scale", "expected a number > 0 (1 for hardware)"))
@@ -264,7 +316,50 @@ def rig_config_errors(
 #: docs/manual-fixtures.md); anything else is a typo that would silently change the rig.
 CHAMBER_KEYS = ("driver", "url", "map", "device_id", "range_c", "time_scale",
                 "max_rate_c_per_min")
-TURNTABLE_KEYS = ("driver", "url", "map", "device_id", "axes", "check_samples", "noise_g")
+TURNTABLE_KEYS = ("driver", "url", "map", "device_id", "axes", "check_samples", "noise_g",
+                  "unit_ids", "hand_axis")
+HAND_AXIS_KEYS = ("steps_deg",)
+
+
+def _table_axes_errors(chamber: dict[str, Any], turntable: dict[str, Any],
+                       manual: bool) -> list[tuple[str, str]]:
+    """Axes, unit ids per axis and the hand axis of a motorised table."""
+    if manual:
+        return []
+    out: list[tuple[str, str]] = []
+    axes = turntable.get("axes")  # None: the map's count (checked against the map below)
+    hand = turntable.get("hand_axis")
+    if axes is not None and (axes not in (1, 2, 3) or isinstance(axes, bool)):
+        out.append(("turntable.axes", "expected 1, 2 or 3"))
+    elif axes == 1 and hand is None:
+        out.append(("turntable.axes", "one motorised axis puts gravity only in one plane of "
+                                      "the sensor: add turntable.hand_axis (the second axis "
+                                      "set by hand, docs/manual-fixtures.md), or use 2 or 3"))
+    if hand is not None:
+        out += _unknown_keys("turntable.hand_axis", hand, HAND_AXIS_KEYS)
+        if axes != 1:
+            out.append(("turntable.hand_axis", f"a hand axis completes a 1-axis stage: set "
+                                               f"turntable.axes = 1 (got {axes!r})"))
+        if chamber.get("driver") not in REAL_DRIVERS:
+            out.append(("turntable.hand_axis", "the motorised axis is reached by url: "
+                                               "a real chamber driver (modbus, espec)"))
+        steps = hand.get("steps_deg") if isinstance(hand, dict) else None
+        if steps is not None and not (
+                isinstance(steps, list) and steps and all(
+                    isinstance(v, int | float) and not isinstance(v, bool) for v in steps)):
+            out.append(("turntable.hand_axis.steps_deg",
+                        "expected the indexer's angles in °, e.g. [0, 90, 180, 270]"))
+    uids = turntable.get("unit_ids")
+    if uids is not None:
+        n = axes if isinstance(axes, int) else len(uids) if isinstance(uids, list) else 0
+        if not (isinstance(uids, list) and len(uids) == n and all(
+                isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in uids)
+                and len(set(uids)) == len(uids)):
+            out.append(("turntable.unit_ids", f"expected {n} distinct Modbus unit ids 1…247, "
+                                              "one per axis, outer first"))
+    return out
+
+
 #: An ESPEC chamber's block (drivers/espec_chamber.py, docs/chambers.md): no map, so the
 #: range is the rig's to give, and the safe state too.
 ESPEC_CHAMBER_KEYS = ("driver", "url", "address", "baudrate", "range_c", "time_scale",
@@ -325,7 +420,7 @@ def _chamber_driver(cfg: dict[str, Any], clock: Clock) -> Any:
     return ModbusChamber(
         ModbusLink(cfg["url"], clock, device="chamber",
                    device_id=int(cfg.get("device_id", chamber_map.unit_id))),
-        chamber_map,
+        chamber_map, max_rate_c_per_min=cfg.get("max_rate_c_per_min"),
     )
 
 
@@ -366,7 +461,35 @@ def _limits_against_map(chamber: dict[str, Any], turntable: dict[str, Any],
     if isinstance(axes, int) and axes > regmap.n_axes:
         out.append(("turntable.axes", f"{axes} axes, but the map {regmap.name} describes "
                                       f"{regmap.n_axes}"))
+    if turntable.get("unit_ids") is not None and not regmap.unit_ids:
+        out.append(("turntable.unit_ids", f"the map {regmap.name} puts every axis on one unit "
+                                          "id (no [axes] unit_ids): use device_id"))
     return out
+
+
+def _per_axis_units(turntable: dict[str, Any]) -> bool:
+    """The table is a drive per axis (its own ``unit_ids`` or its map's)."""
+    from drivers.registermaps import MapError, load_turntable_map
+
+    if turntable.get("unit_ids"):
+        return True
+    try:
+        return bool(load_turntable_map(str(turntable.get("map", "soakcal-table"))).unit_ids)
+    except (MapError, TypeError):
+        return False  # the map's own error is reported where the map is checked
+
+
+def _shared_bus_units(chamber: dict[str, Any], turntable: dict[str, Any],
+                      regmap: Any) -> list[tuple[str, str]]:
+    """A drive per axis on the chamber's bus: no drive may answer the chamber's unit id."""
+    units = turntable.get("unit_ids") or getattr(regmap, "unit_ids", ())
+    ours = chamber.get("device_id", 1)
+    if not units or chamber.get("url") != turntable.get("url") or ours not in units:
+        return []
+    key = "turntable.unit_ids" if turntable.get("unit_ids") else "turntable.map"
+    return [(key, f"the chamber answers unit {ours} at the same url, and so would the drive "
+                  f"of axis {list(units).index(ours)} (unit ids {list(units)}): give the "
+                  "drives other ids (turntable.unit_ids)")]
 
 
 def entry_serials(entry: dict[str, Any]) -> list[str]:
@@ -456,6 +579,12 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
     table: Any = None  # a hand-placed fixture: open_rig puts the operator's table in
     if not is_manual_table(table_cfg):
         table_map = load_turntable_map(table_cfg.get("map", "soakcal-table"))
+        n_axes = int(table_cfg.get("axes", table_map.n_axes))
+        if table_cfg.get("unit_ids") is not None:  # the drives' ids on this rig's bus
+            from dataclasses import replace
+
+            table_map = replace(table_map, unit_ids=tuple(int(u) for u in
+                                                         table_cfg["unit_ids"]))
         table = ModbusTurntable(
             ModbusLink(table_cfg["url"], clock, device="turntable",
                        device_id=int(table_cfg.get("device_id", table_map.unit_id))),

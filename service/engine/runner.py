@@ -22,7 +22,6 @@ database's UNIQUE(campaign_id, step, position) turns a duplicate insert into
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import datetime as dt
 import functools
 import logging
@@ -58,7 +57,7 @@ from calibration.campaign_plan import (
 from calibration.placement import MAX_ANGLE_DEG, check_pose
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
-from service.engine import rate_gain, stability, store
+from service.engine import polls, rate_gain, store
 from service.engine.calibrate import CalibrationRow, calibrate_columns
 from service.engine.fencing import fence_devices
 from service.engine.guard import (
@@ -71,19 +70,19 @@ from service.engine.guard import (
 )
 from service.engine.identity import verify_sensor
 from service.engine.park import PARKED_DEVICES, park_rig, parked
-from service.engine.progress import EtaModel, EtaSubscriber, Subscriber
+from service.engine.progress import (
+    EtaModel,
+    EtaSubscriber,
+    Subscriber,
+    chamber_moving_rate_c_per_min,
+)
 from service.engine.quality import check_acquisition
 from service.engine.ramp import RampProgress
 from service.engine.rigs import RigDevices
-from service.engine.sensors import SensorDropped, read_all, reading_problem, slowest_decision
+from service.engine.sensors import SensorDropped, read_all, reading_problem
 from service.engine.spec import parse_spec, schedule_refs
 from service.engine.states import TERMINAL
 from service.engine.suspenders import Suspender, Suspenders, table_not_in_position
-from service.rig_plausibility import DIE_PV_TOLERANCE_C
-
-# The slowest die a lab mounts lags its air by minutes to tens of minutes; an hour's time
-# constant is the most a gap to the PV is put down to lag (_check_die_against_chamber).
-DIE_LAG_TAU_MAX_S = 3600.0
 
 Calibrate = Callable[[dict[str, list[float]], dict[str, Any]], CalibrationRow]
 StepReporter = Callable[[dict[str, Any]], None]
@@ -95,13 +94,9 @@ PlanFactory = Callable[..., Any]
 PLANS: dict[str, PlanFactory] = {"soak": campaign_plan}
 TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
-# Shortest wait between two soak polls when the decision predicts stability sooner than a
-# period (stability.next_poll_s): a poll costs a die probe (≈ 4 s at 250 samples) and a fit.
-MIN_SOAK_POLL_S = 15.0
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
 POSE_ATTEMPTS = 3  # captures of one position off its pose before the campaign fails
-SAFE_COMMANDS = PARKED_DEVICES  # the park report's keys (park.py)
 LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)
 
@@ -214,7 +209,7 @@ class CampaignRunner:
                 # The rig is another process's now: parking it would move the table and the
                 # setpoint under the new holder's measurement. It parks when it is done.
                 log.error("campaign %s: rig not parked: the lease is lost", self.id)
-                self.safe_report = dict.fromkeys(SAFE_COMMANDS, LEASE_LOST_REPORT)
+                self.safe_report = dict.fromkeys(PARKED_DEVICES, LEASE_LOST_REPORT)
         if cancelled is not None:
             raise cancelled
         if lost is None and outcome is not None and self.fence is not None:
@@ -238,8 +233,7 @@ class CampaignRunner:
         except (ValueError, TypeError, KeyError) as exc:
             raise CampaignFailed(f"spec: {exc}") from exc
         if self.plan is None:
-            method = str(getattr(spec, "method", None)
-                         or getattr(spec, "extra", {}).get("method") or "soak")
+            method = spec.method
             if method == "ramp":  # its plan resumes from the store and the rig (engine/ramp.py)
                 self._ramp = RampProgress(self)
                 self.plan = self._ramp.plan
@@ -249,15 +243,12 @@ class CampaignRunner:
             else:
                 self.plan = PLANS[method]
         self.sensor_serial = str(camp.sensor)
-        several = spec.extra.get("sensors")
-        # The campaign's sensors, one or several (issue 12): each read at every position,
-        # dropped alone on a fault while another still reads (sensors.py).
-        self.serials: list[str] = ([str(s) for s in several]
-                                   if isinstance(several, list) and len(several) > 1
+        # The campaign's sensors, one or several (issue 12; the spec's typed list): each
+        # read at every position, dropped alone on a fault while another still reads.
+        self.serials: list[str] = (list(spec.sensors) if len(spec.sensors) > 1
                                    else [self.sensor_serial])
         self.dropped: dict[str, str] = dict(camp.sensors_dropped or {})
         self.identities: dict[str, dict[str, Any]] = {}
-        self.sensor_identity: dict[str, Any] | None = None
         self.refs = schedule_refs(spec.positions)
         self.n_pos = len(self.refs)
         self.guard = DeviceGuard(
@@ -278,7 +269,8 @@ class CampaignRunner:
     async def _execute(self, camp: Any) -> None:
         spec = self.spec
         done = store.measured_positions(self.sf, self.id)
-        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done))
+        self.eta = EtaModel.for_spec(spec, self.n_pos, n_done=len(done), rate_c_per_min=(
+            chamber_moving_rate_c_per_min(self.dev.chamber, spec.ramp_c_per_min)))
         self._cursor: tuple[int, str] | None = None
         # t_s continues where the stored campaign stopped (a new process has a new clock).
         self._t_base_s = max(store.last_t_s(self.sf, self.id), float(camp.progress.get("t_s", 0.0)
@@ -390,9 +382,8 @@ class CampaignRunner:
         """One sensor's call under the guard's one retry policy: while another sensor still
         reads, a sensor that fails for good or outlasts its retries is given up
         (:class:`SensorDropped`); the last one left suspends or fails the campaign."""
-        if len(self.serials) == 1:
-            return await self.guard.call(label, fn)
-        label = f"{label} [{serial}]"
+        if len(self.serials) > 1:  # name the sensor where there is more than one
+            label = f"{label} [{serial}]"
         if len(self._live) == 1:
             return await self.guard.call(label, fn)
         return await self.guard.call(label, fn,
@@ -419,7 +410,6 @@ class CampaignRunner:
                                                           msg.odr_hz))
             except SensorDropped as exc:
                 self._drop(exc)
-        self.sensor_identity = self.identities.get(self.sensor_serial)
 
     async def _measure_one(self, serial: str, n: int) -> tuple[Acquisition, list[str], int]:
         """Acquire; on a failed quality check measure once more and keep the second capture.
@@ -536,36 +526,14 @@ class CampaignRunner:
     def _check_die_against_chamber(self, msg: Save, status: ChamberStatus,
                                    readings: dict[str, Any]) -> None:
         """Refuse to store a capture whose dies disagree with the chamber's PV where no lag
-        explains it (DESIGN: plausibility at the boundaries).
-
-        The median die of the live sensors more than :data:`DIE_PV_TOLERANCE_C` from the
-        PV is a die still approaching the air (a short soak: it moves towards the PV at
-        about gap/τ) or a chamber read wrong (a map's decimal places, °F, an offset: the
-        die has settled, far from what the PV says). The second would label every capture
-        of the step with a wrong temperature: the campaign fails before this capture is
-        stored. A die moving towards the PV fast enough for a lag of at most
-        :data:`DIE_LAG_TAU_MAX_S` is a lag. Sensors without a temperature channel say
-        nothing; the first reading with nothing before it only starts the track.
-        """
-        dies = [float(r[0].sensor_c) for r in readings.values()
-                if r is not None and math.isfinite(float(r[0].sensor_c))]
-        if not dies or not math.isfinite(status.process_c):
-            return
-        now_s, die_c = self.clock.now(), float(np.median(dies))
-        before, self._die_track = self._die_track, (now_s, die_c)
-        gap_c = status.process_c - die_c
-        if abs(gap_c) <= DIE_PV_TOLERANCE_C or before is None or now_s <= before[0]:
-            return
-        rate_c_per_s = (die_c - before[1]) / (now_s - before[0])
-        if gap_c * rate_c_per_s > 0 and abs(rate_c_per_s) * DIE_LAG_TAU_MAX_S >= abs(gap_c):
-            return  # still approaching the air: a lag, not a mis-read chamber
-        raise CampaignFailed(
-            f"step {msg.step} ({msg.setpoint_c:g} °C) position {msg.position}: the chamber "
-            f"reads {status.process_c:.1f} °C while the sensors' dies read {die_c:.1f} °C and "
-            f"are not approaching it ({rate_c_per_s * 60:+.2f} °C/min); this capture was not "
-            "stored: the chamber's temperature is likely read with a wrong scale (decimal "
-            "places), unit (°F, K) or offset in its register map — `soakcal rig check RIG` "
-            "names the map key to fix")
+        explains it (:func:`polls.die_against_chamber`): it would label every capture of
+        the step with a wrong temperature, so the campaign fails before it is stored."""
+        self._die_track, problem = polls.die_against_chamber(
+            self._die_track, self.clock.now(),
+            [r[0].sensor_c for r in readings.values() if r is not None], status.process_c)
+        if problem is not None:
+            raise CampaignFailed(f"step {msg.step} ({msg.setpoint_c:g} °C) position "
+                                 f"{msg.position}: {problem}")
 
     def _commit(self, msg: Save, status: ChamberStatus, readings: dict[str, Any]) -> None:
         """Commit every live sensor's reading of a position and the cursor past it in one
@@ -613,7 +581,7 @@ class CampaignRunner:
         (rate_gain.estimate_rate_gain).
         """
         spec = self.spec
-        self._ramping = _Ramp(start_s=self.clock.now(), held0_s=self._held_total_s(),
+        self._ramping = polls.RampState(start_s=self.clock.now(), held0_s=self._held_total_s(),
                               dies=self._no_dies(),
                               probe=(spec.rate_gain == "measured"
                                      and spec.stability.policy == "predictive"))
@@ -629,16 +597,18 @@ class CampaignRunner:
         if tripped is not None:
             await self._hold_chamber(*tripped, setpoint_c=None)
             raise Rewind(f"step {msg.step} ramp: {tripped[0].name}")
-        if _wsp_at_target(status, target_c) and abs(status.process_c - target_c) <= \
-                spec.stability.tol_c:
+        if polls.chamber_arrived(status, target_c, spec.stability.tol_c):
             return Poll(True)
         if ramp.limit_s is None:
-            ramp.limit_s = (abs(status.process_c - target_c) / max(spec.ramp_c_per_min, 0.05)
-                            * 60.0 * 2.0 + spec.stability.max_soak_s)
-        if self.clock.now() - ramp.start_s - (self._held_total_s() - ramp.held0_s) \
-                > ramp.limit_s:
+            ramp.limit_s, ramp.limit_basis = polls.ramp_limit_s(
+                status.process_c - target_c,
+                chamber_moving_rate_c_per_min(self.dev.chamber, spec.ramp_c_per_min),
+                spec.stability.max_soak_s)
+        if polls.active_s(self.clock.now(), ramp.start_s, self._held_total_s(),
+                          ramp.held0_s) > ramp.limit_s:
             raise CampaignFailed(f"chamber did not reach {target_c:.1f} °C within "
-                                 f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C)")
+                                 f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C; "
+                                 f"limit: {ramp.limit_basis})")
         polled_s = self.clock.now()
         if ramp.probe:
             await self._probe_dies(ramp.dies, msg.step, target_c, status, self._t(ramp.start_s))
@@ -657,51 +627,34 @@ class CampaignRunner:
         A chamber suspender tripped meanwhile holds, then rewinds (a fresh soak).
         """
         spec, step, target_c = self.spec, msg.step, msg.setpoint_c
-        cfg = spec.stability
-        if msg.resumed:
-            # The step was soaked before the interruption: re-check, don't re-soak in full.
-            cfg = dataclasses.replace(
-                cfg, policy="predictive" if cfg.policy == "fixed" else cfg.policy,
-                min_soak_s=0.0, soak_s=min(cfg.soak_s, cfg.dwell_s),
-            )
+        # A resumed step was soaked before the interruption: re-checked, not re-soaked.
+        cfg = polls.recheck_config(spec.stability, msg.resumed)
         store.set_cursor(self.sf, self.id, step, "soak", 0)
         self._cursor = (step, "soak")
         # held time before this soak is not this soak's
-        soak = self._soaking = _Soak(cfg, msg.n_positions * self.eta.position_s,
+        soak = self._soaking = polls.SoakState(cfg, msg.n_positions * self.eta.position_s,
                                      self.clock.now(), self._held_total_s(), self._no_dies())
         await self._run_plan(soak_until_stable(msg))
         self.rate_book.keep(self._pose, soak.dies)
-        last = [probes[-1] for probes in soak.dies.values() if probes]
-        if last:
-            self._die_track = (max(p.clock_s for p in last),
-                               float(np.median([p.sensor_c for p in last])))
+        self._die_track = polls.die_track_of(soak.dies) or self._die_track
         held_s = self._held_total_s() - soak.held0_s
-        soak_s = self.clock.now() - soak.start_s - held_s
-        used = [g for g in soak.gains.values() if g is not None]
-        decision = soak.decision
-        entry = {
-            "step": step, "setpoint_c": target_c, "soak_start_t_s": self._t(soak.start_s),
-            "soak_end_t_s": self._t(self.clock.now()), "soak_s": soak_s, "held_s": held_s,
-            "reason": decision.reason, "tau_s": decision.tau_s,
-            "predicted_offset_c": decision.predicted_offset_c,
-            "predicted_error_c": decision.predicted_error_c,
-            "die_rate_c_per_min": decision.die_rate_c_per_min, "sweep_s": soak.sweep_s,
-            "edge": msg.edge, "policy": cfg.policy,
-            "resumed": msg.resumed, "max_soak_reached": decision.max_soak_reached,
-            # the k (µg per °C/min) the last decision used, largest over the sensors
-            "rate_gain_ug_per_c_per_min": max(used) if used else None,
-        }
-        store.put_step_log(self.sf, self.id, _clean_json(entry))
+        soak_s = polls.active_s(self.clock.now(), soak.start_s, self._held_total_s(),
+                                soak.held0_s)
+        entry = polls.soak_log_entry(
+            soak, step=step, setpoint_c=target_c, start_t_s=self._t(soak.start_s),
+            end_t_s=self._t(self.clock.now()), soak_s=soak_s, held_s=held_s, edge=msg.edge,
+            resumed=msg.resumed)
+        store.put_step_log(self.sf, self.id, polls.clean_json(entry))
         if self.on_step:
             self.on_step({**entry, "chamber_c": soak.ch_pv[-1], "steps": spec.n_steps})
-        if decision.max_soak_reached and spec.on_max_soak == "fail":
+        if soak.decision.max_soak_reached and spec.on_max_soak == "fail":
             raise CampaignFailed(
                 f"step {step} ({target_c:.1f} °C) not stable after max soak {cfg.max_soak_s:.0f} s")
 
     async def _poll_soak(self, msg: PollSoak) -> Poll:
         """One soak poll: the chamber (a suspender tripped: hold, then rewind), the dies'
-        probes and every live die's decision."""
-        spec, soak, cfg = self.spec, self._soaking, self._soaking.cfg
+        probes, and every live die's decision (:func:`polls.decide_round`)."""
+        spec, soak = self.spec, self._soaking
         step, target_c = msg.soak.step, msg.soak.setpoint_c
         status = await self._chamber()
         tripped = self.suspenders.check_chamber(status, target_c)
@@ -713,45 +666,19 @@ class CampaignRunner:
             await self._hold_chamber(*tripped, setpoint_c=target_c)
             raise Rewind(f"step {step} soak: {tripped[0].name}")
         now_s = self.clock.now()
-        # Soak time: the clock since the soak began, less the time paused or suspended
-        # (a pause longer than max_soak_s must not end the soak as max_soak_reached).
-        soaked_s = now_s - soak.start_s - (self._held_total_s() - soak.held0_s)
-        soak.ch_t.append(now_s)
-        soak.ch_pv.append(status.process_c)
-        # A controller without a working setpoint: the PV alone says it has arrived.
-        soak.ch_wsp.append(target_c if status.working_setpoint_c is None
-                           else status.working_setpoint_c)
-        if cfg.policy == "predictive":
+        # Soak time excludes the time paused or suspended (a pause longer than max_soak_s
+        # must not end the soak as max_soak_reached).
+        soaked_s = polls.active_s(now_s, soak.start_s, self._held_total_s(), soak.held0_s)
+        soak.record_chamber(now_s, status, target_c)
+        if soak.cfg.policy == "predictive":
             await self._probe_dies(soak.dies, step, target_c, status, self._t(soak.start_s))
-        settled = stability.chamber_settled(np.array(soak.ch_t), np.array(soak.ch_pv),
-                                            np.array(soak.ch_wsp), target_c, cfg.tol_c,
-                                            cfg.dwell_s)
-        live = {k: v for k, v in soak.dies.items() if k not in self.dropped}
-        soak.gains = {k: self.rate_book.for_decision(k, self._pose, v) for k, v in live.items()}
-        # Every die decides, with its own rate gain; the slowest one ends the soak. The die
-        # that kept the soak going last poll is asked first and the first "not yet" ends
-        # the round: the soak goes on whatever the others say, and on the poll that ends it
-        # every die has been asked (slowest_decision then picks the slowest), so the
-        # outcome is that of asking all, at a fraction of the fits.
-        decisions: list[stability.Decision] = []
-        for key in sorted(live, key=lambda k: k != soak.waiting_on):
-            probes = live[key]
-            decisions.append(stability.decide(
-                cfg, soaked_s, settled, np.array([p.clock_s for p in probes]),
-                np.array([p.sensor_c for p in probes]), sweep_s=soak.sweep_s,
-                n_positions=self.n_pos, edge=msg.soak.edge,
-                rate_gain_ug_per_c_per_min=soak.gains[key],
-                order_repeats=msg.soak.order_repeats))
-            if not decisions[-1].stable:
-                soak.waiting_on = key
-                break
-        soak.decision = decision = slowest_decision(decisions)
+        decision = polls.decide_round(
+            soak, soaked_s, target_c, self._live,
+            lambda serial, probes: self.rate_book.for_decision(serial, self._pose, probes),
+            n_positions=self.n_pos, edge=msg.soak.edge, order_repeats=msg.soak.order_repeats)
         self._publish(step, "soak", 0, status, target_c,
                       soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
-        # Sooner than a whole period when the die is predicted to meet its budgets sooner
-        # (the soak ends at a poll: a fixed period overshoots by half of one on average).
-        return Poll(decision.stable, stability.next_poll_s(
-            decision, spec.soak_poll_s, min(spec.soak_poll_s, MIN_SOAK_POLL_S)))
+        return Poll(decision.stable, polls.soak_poll_wait_s(decision, spec.soak_poll_s))
 
     def _no_dies(self) -> dict[str, list[rate_gain.Probe]]:
         return {serial: [] for serial in self._live}
@@ -1061,9 +988,11 @@ class CampaignRunner:
             "positions": self.n_pos,
             "fraction": round(n_done / (self.spec.n_steps * self.n_pos), 4),
             "chamber_c": round(status.process_c, 3), "setpoint_c": target_c,
-            "eta_s": round(eta_s := self.eta.eta_s(step, phase, soak_remaining_s), 1),
+            # None: a ramp's time is not known yet (a step at an unstated rate).
+            "eta_s": None if (eta_s := self.eta.eta_s(step, phase, soak_remaining_s)) is None
+            else round(eta_s, 1),
             # The same remaining time on the wall: a sped-up rig's clock runs faster.
-            "eta_wall_s": round(eta_s / clock_speed(self.clock), 1),
+            "eta_wall_s": None if eta_s is None else round(eta_s / clock_speed(self.clock), 1),
             "t_s": round(self._t(self.clock.now()), 3),
         }
         if self._ramp is not None:  # a ramp has sweeps, not steps: its prediction's ETA
@@ -1079,48 +1008,8 @@ def _ref_text(ref_g: tuple[float, ...]) -> str:
     return "(" + ", ".join(f"{float(v):+.3f}" for v in ref_g) + ") g"
 
 
-def _wsp_at_target(status: ChamberStatus, target_c: float) -> bool:
-    """The controller's setpoint, and its working setpoint where it has one, at the target
-    (a controller without one: the PV within tolerance alone says it arrived)."""
-    wsp_c = status.working_setpoint_c
-    return ((wsp_c is None or abs(wsp_c - target_c) < 1e-3)
-            and abs(status.setpoint_c - target_c) < 1e-3)
-
-
-@dataclasses.dataclass
-class _Ramp:
-    """A ramp's state across its polls (:meth:`CampaignRunner._poll_chamber`)."""
-
-    start_s: float
-    held0_s: float  # held time before the ramp: not the ramp's
-    dies: dict[str, list[rate_gain.Probe]]
-    probe: bool  # the dies are probed (the rate gain measured)
-    limit_s: float | None = None
-
-
-@dataclasses.dataclass
-class _Soak:
-    """A soak's state across its polls (:meth:`CampaignRunner._poll_soak`)."""
-
-    cfg: Any  # the spec's StabilityConfig (a resumed step's re-check)
-    sweep_s: float
-    start_s: float
-    held0_s: float  # held time before the soak: not the soak's
-    dies: dict[str, list[rate_gain.Probe]]
-    ch_t: list[float] = dataclasses.field(default_factory=list)
-    ch_pv: list[float] = dataclasses.field(default_factory=list)
-    ch_wsp: list[float] = dataclasses.field(default_factory=list)
-    decision: stability.Decision = stability.Decision(False, "started")
-    gains: dict[str, float | None] = dataclasses.field(default_factory=dict)
-    waiting_on: str | None = None  # the die that said "not yet" last
-
-
 class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error
     """A suspender held the campaign: resume the plan from its stored measurements."""
-
-
-def _clean_json(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
 def _finite(d: dict[str, float]) -> dict[str, float | None]:

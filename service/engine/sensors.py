@@ -16,9 +16,8 @@ captures on its own, so a position of eight sensors takes about one capture
 time, not eight, on the one injectable clock (the simulated bridges overlap in
 virtual time as real ones do on the wall).
 
-The stability decision covers every sensor: each die gets its own decision
-(seed Sec. 3's soak rule, :func:`service.engine.stability.decide`) and the
-soak ends when all are stable (:func:`slowest_decision`).
+Each die's soak decision, and the slowest one ending the soak, are the soak
+poll's answer (:mod:`service.engine.polls`).
 """
 
 from __future__ import annotations
@@ -29,7 +28,6 @@ from collections.abc import Awaitable, Callable, Sequence
 from typing import TypeVar
 
 from drivers.protocols import Acquisition
-from service.engine.stability import Decision
 
 T = TypeVar("T")
 # A static accelerometer reads gravity: |a| ≈ 1 g. Beyond this band the reading is not a
@@ -86,20 +84,3 @@ def reading_problem(acq: Acquisition, range_g: float) -> str | None:
         return (f"reading out of range: |a| = {norm_g:.3f} g outside {lo:g}…{hi:g} g "
                 f"for a static sensor")
     return None
-
-
-def slowest_decision(decisions: Sequence[Decision]) -> Decision:
-    """The soak decision over every die: not stable while any is not; the slowest reports.
-
-    While some die is not stable its decision is returned (why we wait); once all are,
-    the one with the longest time constant (the slowest die, which decided the end).
-    """
-    if not decisions:
-        raise ValueError("no sensor left to decide the soak")
-    waiting = [d for d in decisions if not d.stable]
-    if waiting:
-        return waiting[0]
-    capped = [d for d in decisions if d.max_soak_reached]
-    if capped:
-        return capped[0]
-    return max(decisions, key=lambda d: -math.inf if d.tau_s is None else d.tau_s)

@@ -54,12 +54,13 @@ async def test_a_ramp_slower_than_the_chamber_steps_is_refused_naming_the_fix() 
     clock = VirtualClock()
     async with _twin(clock) as (chamber, _):
         await chamber.set_ramp_rate(0.0)
-        with pytest.raises(ValueOutOfRange, match="set the rig's chamber.max_rate_c_per_min"):
+        with pytest.raises(ValueOutOfRange, match=r"own rate, which is not stated \(chamber\."
+                           r"max_rate_c_per_min\); run the campaign with ramp_c_per_min = 0"):
             await chamber.set_ramp_rate(1.0)
     async with _twin(clock, max_rate_c_per_min=3.0) as (chamber, _):
         await chamber.set_ramp_rate(3.0)  # the chamber cannot go faster: stepping is that ramp
         await chamber.set_ramp_rate(5.0)
-        with pytest.raises(ValueOutOfRange, match="run the campaign with ramp_c_per_min ≥ 3"):
+        with pytest.raises(ValueOutOfRange, match=r"ramp_c_per_min = 0 \(step\) or ≥ 3"):
             await chamber.set_ramp_rate(2.0)
 
 

@@ -155,7 +155,9 @@ async def test_deviation_alarm(chamber_rig: ChamberRig) -> None:
     ch = chamber_rig.driver
     if "deviation_low" not in ch.regmap.alarm_bits.values():
         pytest.skip("this map has no deviation alarm bit (its alarm types are configured)")
-    await ch.set_ramp_rate(0.0)  # step change: WSP jumps, the air cannot follow
+    # Step change (the twin's ramp register 0): WSP jumps, the air cannot follow. Written
+    # to the register: the driver refuses 0 on a map that does not say 0 means "no ramp".
+    await ch.link.write_field(ch.regmap.ramp_c_per_min, 0.0)
     await ch.set_setpoint(60.0)
     await ch.run()
     await chamber_rig.clock.sleep(10.0)

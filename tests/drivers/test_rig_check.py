@@ -608,3 +608,84 @@ def test_a_ramp_ratio_no_map_mistake_explains_is_not_blamed_on_the_map() -> None
     assert "`time_scale`" in fix and "`scale =" not in fix
     cause, fix = _ramp_cause(10.3, 1.0, "watlow-f4t.toml")
     assert "off by ×10" in cause and "`scale = 1`→`0.1`" in fix
+
+
+# --- turntables: commanded vs read-back angles, homing, a hand-axis stage ---------------
+
+LEADSHINE_TEXT = (Path(__file__).parents[2] / "drivers" / "maps"
+                  / "leadshine-rs485-pr.toml").read_text()
+# A homing start for the twin only: the value is not in the drive manual's pages read.
+TEST_HOME = """
+[[sequence.home]]
+register = "pr_control"
+value = 32
+[registers.pr_control]
+address = 24578
+type = "uint16"
+access = "w"
+"""
+
+
+def _drive_map(tmp_path: Path, *, readback: bool = True, home: bool = False) -> str:
+    text = LEADSHINE_TEXT
+    if not readback:
+        text = text.replace("[registers.position_deg]", "[registers.feedback]").replace(
+            'kind = "turntable"', 'kind = "turntable"\nabsent_roles = ["position_deg"]')
+    path = tmp_path / "drive.toml"
+    path.write_text(text + (TEST_HOME if home else ""))
+    return str(path)
+
+
+async def test_a_table_without_readback_says_its_angles_are_commanded(tmp_path: Path) -> None:
+    table_map = _drive_map(tmp_path, readback=False)
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, table_map=table_map) as sim:
+        checks = await check_rig(_config(sim, sim.chamber_map), move=True, clock=clock)
+    assert passed(checks), format_report("bench", checks)
+    status, move = _by(checks, "turntable", "status"), _by(checks, "turntable", "table_move")
+    assert status.detail.startswith("angles (0.00, 0.00)° (commanded, not read back: map "
+                                    "leadshine-rs485-pr has no position readback)")
+    assert move.detail.endswith("(commanded angles: map leadshine-rs485-pr has no position "
+                                "readback, so only the drive's in-position report is "
+                                "checked, not where the axis stopped)")
+
+
+async def test_a_table_with_readback_and_homed_says_so() -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, table_map="leadshine-rs485-pr") as sim:
+        checks = await check_rig(_config(sim, sim.chamber_map), clock=clock)
+    assert passed(checks), format_report("bench", checks)
+    assert "(read back)" in _by(checks, "turntable", "status").detail
+    assert _by(checks, "turntable", "homed").detail == "every axis reports homed"
+    # soakcal's own table layout has no homed bit: no homing check at all.
+    async with start_sim_rig(clock, seed=4) as sim:
+        checks = await check_rig(_config(sim, sim.chamber_map), clock=clock)
+    assert not [c for c in checks if c.check == "homed"]
+
+
+async def test_a_table_not_homed_fails_saying_how_to_home_it(tmp_path: Path) -> None:
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, table_map=_drive_map(tmp_path, home=True)) as sim:
+        checks = await check_rig(_config(sim, sim.chamber_map), clock=clock)
+    assert not passed(checks)
+    homed = _by(checks, "turntable", "homed")
+    assert homed.status == "fail"
+    assert homed.detail.startswith("not homed: the angles count from where the table stood")
+    assert homed.fix.startswith("home every axis before a campaign: the map's "
+                                "[[sequence.home]] starts it")
+
+
+async def test_a_hand_axis_stage_says_the_hand_angle_is_not_read(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SOAKCAL_DATABASE_URL", f"sqlite:///{tmp_path / 'db.sqlite'}")
+    clock = VirtualClock()
+    async with start_sim_rig(clock, seed=4, table_map="leadshine-rs485-pr") as sim:
+        rig = _config(sim, sim.chamber_map)
+        rig["turntable"].update(axes=1, hand_axis={"steps_deg": [0, 90, 180, 270]})
+        checks = await check_rig(rig, clock=clock)
+    assert passed(checks), format_report("bench", checks)
+    # The motor's drive is identified through its map (the stage itself has none).
+    assert _by(checks, "turntable", "identity").status == "skip"
+    assert _by(checks, "turntable", "status").detail.startswith(
+        "motor (0.00)° (read back), hand axis 0.00° (set by hand, not read; asked only in a "
+        "campaign)")

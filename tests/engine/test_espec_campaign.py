@@ -27,7 +27,7 @@ def _espec_config(sim: Any, url: str) -> dict[str, Any]:
             "sensors": [{"url": sim.sensor_url, "serial_binding": "any"}]}
 
 
-@pytest.mark.parametrize("ramp_c_per_min", [5.0, 2.0])
+@pytest.mark.parametrize("ramp_c_per_min", [0.0, 5.0, 2.0])
 @SQLITE_ONLY
 async def test_a_campaign_steps_an_espec_chamber_and_refuses_a_ramp(sf, ramp_c_per_min: float  # type: ignore[no-untyped-def]
                                                                     ) -> None:
@@ -47,8 +47,9 @@ async def test_a_campaign_steps_an_espec_chamber_and_refuses_a_ramp(sf, ramp_c_p
         c = s.get(Campaign, cid)
         rows = s.execute(select(Measurement).where(Measurement.campaign_id == cid)).scalars().all()
         error = c.error
-    if ramp_c_per_min < 5.0:  # slower than the chamber steps (its own 5 °C/min)
-        assert state == "failed" and "run the campaign with ramp_c_per_min ≥ 5" in error
+    if 0 < ramp_c_per_min < 5.0:  # slower than the chamber steps (its own 5 °C/min)
+        assert state == "failed"
+        assert "run the campaign with ramp_c_per_min = 0 (step) or ≥ 5" in error
         assert rows == []
         return
     assert state == "completed", error

@@ -220,6 +220,17 @@ def test_dry_run_counts_the_order_s_table_travel_and_one_capture_for_all_sensors
     assert eight.n_saves == travel.n_saves
 
 
+def test_dry_run_starts_each_step_s_travel_at_home_where_the_plan_sends_the_table_there() -> None:
+    # A campaign measuring the rate gain homes the table at each ramp (the plan's Home):
+    # every step's sweep then starts at home and costs the same travel.
+    spec = {**SMALL_SPEC, "rate_gain": "measured", "setpoints_c": [-10.0, 10.0, 30.0]}
+    steps_s = [s["positions_s"] for s in dry_run(spec, move_s=None).steps]
+    assert steps_s == pytest.approx([steps_s[0]] * 3)
+    assumed = [s["positions_s"] for s in dry_run({**spec, "rate_gain": "assumed"},
+                                                 move_s=None).steps]
+    assert assumed[0] == pytest.approx(steps_s[0])  # the first step starts at home anyway
+
+
 def test_wait_stable_says_how_many_steps_share_its_position_order() -> None:
     """A campaign measuring the rate gain starts every step from home, so every step of the
     travel order is the same permutation; chained from the step before, they differ."""

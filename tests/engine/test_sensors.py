@@ -10,7 +10,8 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.protocols import Acquisition
 from service.engine.guard import AbortRequested
-from service.engine.sensors import SensorDropped, read_all, reading_problem, slowest_decision
+from service.engine.polls import slowest_decision
+from service.engine.sensors import SensorDropped, read_all, reading_problem
 from service.engine.stability import Decision
 
 

@@ -58,7 +58,7 @@ def test_the_api_body_is_the_engine_spec() -> None:
         ("samples_per_position", 0),
         ("samples_per_position", 20.5),
         ("ramp_c_per_min", "fast"),
-        ("ramp_c_per_min", 0),
+        ("ramp_c_per_min", -1),  # 0 is a step (a soak's), below 0 nothing
         ("stability", "bogus"),
         ("on_max_soak", "explode"),
         ("tol_c", -1),
