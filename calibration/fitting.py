@@ -225,6 +225,8 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     np.add.at(means, labels, comp)
     means /= np.bincount(labels, minlength=means.shape[0])[:, None]
     residuals = (comp - means[labels]) * 1e6
+    _add_norm_figures(wf.report, captures.raw_g, model.compensate(captures.raw_g, T, True), T,
+                      g_local, labels)
     return CalibrationFit(
         kind="warmup", mode="warmup", method="warmup", reason=decided.reason,
         orientations=decided.orientations.count, model=model, parameters=parameters(model),
@@ -233,6 +235,18 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         converged=True, message="linear least squares (closed form)", nfev=0,
         notes=tuple(wf.report["notes"]), report=wf.report, recording=captures,
         row_temperature_c=T, row_step=np.zeros(len(captures), int))
+
+
+def _add_norm_figures(report: dict[str, Any], raw_g: np.ndarray, cal_g: np.ndarray,
+                      row_c: np.ndarray, g_local: float, orient: np.ndarray) -> None:
+    """A warm-up's |g| error (Eq. 9) before and after its model, overall and per temperature
+    band (:func:`calibration.ramp_report.temperature_bands`), as a ramp's report has them:
+    what a reader compares across the three kinds. After includes what the warm-up could
+    not identify (a constant bias, a scale the orientations do not see)."""
+    from calibration.ramp_report import norm_rmse_mg, temperature_bands
+
+    report.update(norm_rmse_mg(raw_g, cal_g, g_local))
+    report["bands"] = [b for _, b in temperature_bands(row_c, raw_g, cal_g, g_local, orient)]
 
 
 def parameters(model: ThermalModel) -> tuple[ParameterEstimate, ...]:

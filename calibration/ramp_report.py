@@ -42,17 +42,9 @@ def ramp_report(model: ThermalModel, rec: Recording, seg: Segmentation, raw_g: n
         resid = (np.linalg.norm(cal, axis=1) - model.g_local)[:, None]
     orient = orientation_labels(rec)
     need = MIN_POSITIONS_REFERENCE if model.mode == "reference" else MIN_POSITIONS_NORM
-    edges = np.arange(math.floor(row_c.min() / BAND_C) * BAND_C, row_c.max() + BAND_C, BAND_C)
     bands = []
-    for lo in edges[:-1]:
-        m = (row_c >= lo) & (row_c < lo + BAND_C)
-        if not m.any():
-            continue
-        band: dict[str, Any] = {
-            "band_c": [float(lo), float(lo + BAND_C)], "rows": int(m.sum()),
-            "positions": int(np.unique(orient[m]).size),
-            "rmse_before_mg": _r(norm_rmse_ug(raw_g[m], model.g_local) / 1e3),
-            "rmse_after_mg": _r(norm_rmse_ug(cal[m], model.g_local) / 1e3),
+    for m, band in temperature_bands(row_c, raw_g, cal, model.g_local, orient):
+        band |= {
             "rmse_vector_after_mg": None if ref is None else
             _r(float(np.sqrt(np.mean(resid[m] ** 2))) * 1e3),
             "mean_rate_c_per_min": _r(float(np.mean(rate_c_per_min[m])), 3),
@@ -68,6 +60,7 @@ def ramp_report(model: ThermalModel, rec: Recording, seg: Segmentation, raw_g: n
         "temperature_conditioning": model.temperature_conditioning,
         "valid_c": list(model.valid_c) if model.valid_c else None,
         "g_local": model.g_local,
+        **norm_rmse_mg(raw_g, cal, model.g_local),
         "identifiable": {n: bool(v) for n, v in
                          zip(sfem.PARAM_NAMES, model.identifiable, strict=True)},
         "segmentation": {"source": seg.source, "plateaus": len(seg.plateau_ids),
@@ -88,6 +81,32 @@ def ramp_report(model: ThermalModel, rec: Recording, seg: Segmentation, raw_g: n
         "notes": list(notes),
         "steps": [],
     }
+
+
+def norm_rmse_mg(raw_g: np.ndarray, cal_g: np.ndarray, g_local: float) -> dict[str, Any]:
+    """``rmse_before_mg`` and ``rmse_after_mg``: Eq. 9's |g| RMSE of every fitted row, raw
+    and compensated (the figures a step fit gives as the rms over its steps)."""
+    return {"rmse_before_mg": _r(norm_rmse_ug(raw_g, g_local) / 1e3),
+            "rmse_after_mg": _r(norm_rmse_ug(cal_g, g_local) / 1e3)}
+
+
+def temperature_bands(row_c: np.ndarray, raw_g: np.ndarray, cal_g: np.ndarray,
+                      g_local: float, orient: np.ndarray
+                      ) -> list[tuple[np.ndarray, dict[str, Any]]]:
+    """Table 6 for data with no steps: per :data:`BAND_C` °C band of ``row_c`` that has
+    rows, its row mask and ``band_c``, ``rows``, distinct ``positions`` and Eq. 9's |g|
+    RMSE before (``raw_g``) and after (``cal_g``) calibration, mg."""
+    edges = np.arange(math.floor(row_c.min() / BAND_C) * BAND_C, row_c.max() + BAND_C, BAND_C)
+    out = []
+    for lo in edges[:-1]:
+        m = (row_c >= lo) & (row_c < lo + BAND_C)
+        if m.any():
+            out.append((m, {
+                "band_c": [float(lo), float(lo + BAND_C)], "rows": int(m.sum()),
+                "positions": int(np.unique(orient[m]).size),
+                "rmse_before_mg": _r(norm_rmse_ug(raw_g[m], g_local) / 1e3),
+                "rmse_after_mg": _r(norm_rmse_ug(cal_g[m], g_local) / 1e3)}))
+    return out
 
 
 def _plateau_row(step: int, seg: Segmentation, row_c: np.ndarray, raw_g: np.ndarray,

@@ -8,6 +8,11 @@ valid range, each step's figures, which SFEM parameters were fitted and which
 were held at nominal (not identifiable from the positions), and the
 polynomial degree asked for and used. The held-out (leave-one-position-out)
 figure needs the fit redone: ``/holdout`` shares the figures' refit.
+
+A step fit's figures are per step (rms over the steps); a continuous (ramp) or
+warm-up fit has no steps to average, so its report carries the |g| RMSE of every
+fitted row and Table 6 per temperature band (``calibration.ramp_report``), and a
+continuous fit's plateaus stand in the step table.
 """
 
 from __future__ import annotations
@@ -42,6 +47,18 @@ class StepRow(BaseModel):
     soak_reason: str | None = Field(description="why the soak ended")
 
 
+class BandRow(BaseModel):
+    lo_c: float
+    hi_c: float
+    rows: int
+    positions: int
+    rmse_before_ug: float | None = Field(description="|g| error of the raw readings (Eq. 9)")
+    rmse_after_ug: float | None = Field(description="after the calibration")
+    legs: dict[str, Any] | None = Field(
+        description="heating and cooling legs' mean residuals and whether they agree "
+                    "(calibration.ramp_report); None: crossed one way only")
+
+
 class CalibrationPage(BaseModel):
     id: int
     sensor: str
@@ -54,16 +71,25 @@ class CalibrationPage(BaseModel):
     degree_requested: int | None
     temperature_source: str | None
     valid_c: tuple[float, float]
-    rmse_before_ug: float | None = Field(description="rms over steps, raw readings")
-    rmse_after_ug: float = Field(description="rms over steps, after the thermal model "
-                                 "(the calibration's rmse_ug)")
+    rmse_before_ug: float | None = Field(description="raw readings: rms over steps (a step "
+                                         "fit), over every fitted row (continuous, warm-up)")
+    rmse_after_ug: float | None = Field(
+        description="after the model, as rmse_before_ug (a step or continuous fit: the "
+                    "calibration's rmse_ug; a warm-up: |g| after its bias-change model)")
+    scatter_ug: float | None = Field(description="a warm-up's rmse_ug: each axis' scatter "
+                                     "about its orientation's mean after the model")
+    heldout_mg_xyz: dict[str, list[float]] | None = Field(
+        description="a warm-up's held-out RMS per axis, uncompensated and compensated")
     fitted: list[str] = Field(description="SFEM parameters fitted")
     held: list[str] = Field(description="SFEM parameters held at nominal: the positions "
                             "cannot identify them")
     joint_fit: dict[str, Any] | None
+    chi2_red: float | None = Field(description="a continuous fit's reduced chi-square")
     drift_ug_per_k: dict[str, float | None] = Field(
         description="|slope| of the output at fixed orientation vs temperature, before/after")
     steps: list[StepRow]
+    bands: list[BandRow] = Field(description="Table 6 per temperature band (continuous, "
+                                 "warm-up); empty for a step fit")
     notes: list[str]
 
 
@@ -76,7 +102,11 @@ def calibration_page(calibration_id: DbIdPath, session: SessionDep) -> Calibrati
     report: dict[str, Any] = row.report or {}
     provenance: dict[str, Any] = row.provenance or {}
     soaks = {s.get("step"): s for s in provenance.get("steps_log") or []}
-    steps = [_step_row(st, soaks.get(st.get("step"), {})) for st in report.get("steps") or []]
+    # a continuous fit's plateaus are its steps (fitted with every other row: no own fit)
+    steps = [_step_row(st, soaks.get(st.get("step"), {}))
+             for st in report.get("steps") or report.get("plateaus") or []]
+    warmup = report.get("method") == "warmup"
+    stepped = bool(report.get("steps"))
     identifiable: dict[str, bool] = report.get("identifiable") or {}
     drift = report.get("drift") or {}
     return CalibrationPage(
@@ -86,14 +116,20 @@ def calibration_page(calibration_id: DbIdPath, session: SessionDep) -> Calibrati
         degree_requested=(row.model or {}).get("provenance", {}).get("degree_requested"),
         temperature_source=report.get("temperature_source"),
         valid_c=(row.valid_lo_c, row.valid_hi_c),
-        rmse_before_ug=_rms([s.rmse_before_ug for s in steps]),
-        rmse_after_ug=row.rmse_ug,
-        fitted=[k for k, ok in identifiable.items() if ok],
-        held=[k for k, ok in identifiable.items() if not ok],
+        rmse_before_ug=(_rms([s.rmse_before_ug for s in steps]) if stepped
+                        else _ug(report.get("rmse_before_mg"))),
+        rmse_after_ug=_ug(report.get("rmse_after_mg")) if warmup else row.rmse_ug,
+        scatter_ug=row.rmse_ug if warmup else None,
+        heldout_mg_xyz=report.get("heldout_rms_mg_xyz") if warmup else None,
+        # a warm-up's report names them itself (it fits only what it identifies)
+        fitted=[k for k, ok in identifiable.items() if ok] or list(report.get("fitted") or []),
+        held=[k for k, ok in identifiable.items() if not ok] or list(report.get("held") or []),
+        chi2_red=report.get("chi2_red"),
         joint_fit=report.get("joint_fit"),
         drift_ug_per_k={k: (drift.get(k) or {}).get("abs_slope_ug_per_k")
                         for k in ("before", "after")},
-        steps=steps, notes=[str(n) for n in report.get("notes") or []],
+        steps=steps, bands=[_band_row(b) for b in report.get("bands") or []],
+        notes=[str(n) for n in report.get("notes") or []],
     )
 
 
@@ -106,12 +142,19 @@ async def calibration_holdout(calibration_id: DbIdPath, request: Request) -> dic
 
 def _step_row(st: dict[str, Any], soak: dict[str, Any]) -> StepRow:
     return StepRow(
-        step=int(st.get("step", 0)), setpoint_c=st.get("setpoint_c"),
+        step=int(st.get("step", 0)), setpoint_c=st.get("setpoint_c", soak.get("setpoint_c")),
         temperature_c=st.get("temperature_c"), positions=st.get("positions"),
         rmse_before_ug=_ug(st.get("rmse_before_mg")),
         rmse_step_fit_ug=_ug(st.get("rmse_measurement_mg")),
         rmse_after_ug=_ug(st.get("rmse_polynomial_mg")),
         chi2_red=st.get("chi2_red"), soak_s=soak.get("soak_s"), soak_reason=soak.get("reason"))
+
+
+def _band_row(b: dict[str, Any]) -> BandRow:
+    lo_c, hi_c = b["band_c"]
+    return BandRow(lo_c=lo_c, hi_c=hi_c, rows=b["rows"], positions=b["positions"],
+                   rmse_before_ug=_ug(b.get("rmse_before_mg")),
+                   rmse_after_ug=_ug(b.get("rmse_after_mg")), legs=b.get("legs"))
 
 
 def _ug(mg: float | None) -> float | None:

@@ -30,6 +30,8 @@ from service.api import auth
 from service.db.models import Calibration
 
 CACHE_CALIBRATIONS = 8
+# Fits with no steps: ``soakcal calibrate`` draws no figures and gives no held-out figure.
+STEPLESS = ("continuous", "warmup")
 _NAME = re.compile(r"^[a-z_]{1,64}$")
 
 router = APIRouter(
@@ -90,6 +92,13 @@ def redo_fit(factory: sessionmaker[Session], calibration_id: int) -> Refit:
         if row is None:
             raise LookupError(f"calibration {calibration_id} not found")
         campaign_id = row.campaign_id
+        method, rmse_ug = (row.report or {}).get("method"), row.rmse_ug
+    if method in STEPLESS:
+        # as `soakcal calibrate`: figures and leave-one-position-out are per step
+        return Refit(pngs={}, holdout={
+            "loo_rmse_ug": None, "rmse_ug": rmse_ug, "dof": None,
+            "warnings": [f"leave one position out is given for step fits; a {method} fit has "
+                         f"no steps (its per-band table is its report)"]})
     if campaign_id is None:
         raise LookupError(f"calibration {calibration_id} has no campaign: no stored recording")
     columns = store.measurement_columns(factory, campaign_id)

@@ -95,6 +95,42 @@ def page(browser, live_engine_service: LiveService) -> Iterator[object]:  # type
 
 @pytest.fixture(scope="session")
 def completed_campaign(live_engine_service: LiveService) -> dict:
-    """A short campaign on the sim rig run to its calibration (a few seconds at 3000×)."""
-    created = live_engine_service.start_campaign("SN-DONE")
+    """A short campaign on the sim rig run to its calibration (a few seconds at 3000×).
+
+    Soaked as a lab would: 90 min fixed, 6 time constants of the sim die (15 min), so
+    each step is a plateau and the fit is a step fit whatever the load. A 10-min
+    predictive soak ends with the die still moving; under load the sweep takes more rig
+    time and the steps become continuous rows (calibration/plateaus.py).
+    """
+    created = live_engine_service.start_campaign("SN-DONE", soak_min=90, stability="fixed")
     return live_engine_service.wait_campaign(created["id"], "completed", "failed", "aborted")
+
+
+@pytest.fixture(scope="session")
+def ramp_campaign(live_engine_service: LiveService) -> dict:
+    """A ramp campaign (docs/ramp-campaigns.md) 20 → 40 °C and back at 1 °C/min, run to its
+    continuous calibration (about 3 s at 3000×)."""
+    created = live_engine_service.start_campaign(
+        "SN-RAMP", method="ramp", setpoints_c=[20, 40], ramp_c_per_min=1)
+    return live_engine_service.wait_campaign(created["id"], "completed", "failed", "aborted")
+
+
+@pytest.fixture(scope="session")
+def warmup_calibration(live_engine_service: LiveService) -> int:
+    """A warm-up calibration (one orientation, the bias change with temperature): no
+    campaign makes one (the API refuses a schedule that cannot identify the SFEM), so the
+    engine's fitting phase runs on a simulated warm-up log and its row is stored as the
+    engine stores one."""
+    from service.db.models import Calibration
+    from service.db.session import session_scope
+    from service.engine.calibrate import calibrate_columns
+    from simulators.warmup_log import warmup_log
+
+    rec, _ = warmup_log(seconds=200, rate_hz=100, seed=3)
+    row = calibrate_columns({k: list(v) for k, v in rec.columns.items()},
+                            {"recording": "warmup.csv"})
+    with session_scope(live_engine_service.session_factory) as session:
+        cal = Calibration(campaign_id=None, sensor="SN-WARM", **row.columns())
+        session.add(cal)
+        session.flush()
+        return int(cal.id)

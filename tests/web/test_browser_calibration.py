@@ -94,3 +94,69 @@ def test_sensor_calibrations_and_coefficients_in_and_out_of_range(
     page.wait_for_selector("#coefficients table")
     assert page.is_hidden("#error")
     assert "outside the valid range" in page.inner_text("#extrapolated")
+
+
+def _band_rows(page) -> list[list[str]]:  # type: ignore[no-untyped-def]
+    rows = table_rows(page, "#cal-bands")
+    for row in rows:
+        assert re.fullmatch(r"-?\d+ … -?\d+ °C", row[0]), row
+        assert int(row[1]) > 0 and int(row[2]) >= 1
+    return rows
+
+
+def test_a_ramp_calibration_shows_its_error_before_and_after_and_per_band(
+    page, live_engine_service: LiveService, ramp_campaign: dict,  # type: ignore[no-untyped-def]
+) -> None:
+    assert ramp_campaign["state"] == "completed", ramp_campaign
+    cal_id = ramp_campaign["calibration_id"]
+    summary = live_engine_service.call("GET", f"/web/calibrations/{cal_id}/summary")
+    assert summary["method"] == "continuous"
+    sign_in(page, live_engine_service, "viewer")
+    open_view(page, live_engine_service, f"#/calibrations/{cal_id}", "#cal-facts")
+    before, after = _ug(page.inner_text("#rmse-before")), _ug(page.inner_text("#rmse-after"))
+    assert before > 1000 and 5 < after < 200, (before, after)
+    assert after == round(summary["rmse_after_ug"], 1)
+    assert page.inner_text("#fitted") == "all 12 SFEM parameters (Eq. 1)"
+    assert re.fullmatch(r"none \(continuous fit: χ²red \d+\.\d\d\)", page.inner_text("#joint"))
+    rows = _band_rows(page)
+    assert len(rows) == len(summary["bands"]) >= 2  # 20 → 40 °C: two 10-°C bands or more
+    for row in rows:
+        assert _ug(row[3]) > 1000 and _ug(row[4]) < 200, row
+    # up and back down: a band crossed both ways compares its heating and cooling legs
+    assert any(re.search(r"\((agree|DISAGREE)\)$", r[5]) for r in rows), rows
+    # the bands hold every fitted row: before is their rms
+    n = [b["rows"] for b in summary["bands"]]
+    rms = (sum(k * b["rmse_before_ug"] ** 2 for k, b in zip(n, summary["bands"], strict=True))
+           / sum(n)) ** 0.5
+    assert abs(rms - before) <= 0.01 * before
+    # no step figures or held-out figure for a fit without steps: said, not an error
+    page.wait_for_selector("#no-figures")
+    assert "step fits" in page.inner_text("#no-figures")
+    page.wait_for_function("() => /not given/.test(document.querySelector('#loo').textContent)")
+    assert "continuous fit has no steps" in page.inner_text("#loo")
+
+
+def test_a_warmup_calibration_shows_its_error_per_band_and_what_it_could_not_fit(
+    page, live_engine_service: LiveService, warmup_calibration: int,  # type: ignore[no-untyped-def]
+) -> None:
+    summary = live_engine_service.call(
+        "GET", f"/web/calibrations/{warmup_calibration}/summary")
+    assert summary["method"] == "warmup"
+    sign_in(page, live_engine_service, "viewer")
+    open_view(page, live_engine_service, f"#/calibrations/{warmup_calibration}", "#cal-facts")
+    before, after = _ug(page.inner_text("#rmse-before")), _ug(page.inner_text("#rmse-after"))
+    # one orientation: the constant bias is not identified, so |g| stays mg after
+    assert before > 1000 and after > 1000, (before, after)
+    assert "only what it fitted" in page.inner_text("#cal-facts")
+    scatter = page.inner_text("#scatter")
+    assert re.match(r"\d+\.\d µg after; held out x/y/z: [\d. /]+ → [\d. /]+ mg", scatter)
+    assert _ug(" ".join(scatter.split()[:2])) == round(summary["scatter_ug"], 1)
+    rows = _band_rows(page)
+    assert len(rows) == len(summary["bands"]) >= 1
+    assert all(r[2] == "1" and r[5] == "one leg only" for r in rows), rows
+    assert page.locator("#cal-steps").count() == 0
+    # what it fitted and what it held, as the model file says
+    assert summary["fitted"] == ["bx", "by", "bz"]
+    assert page.inner_text("#fitted").startswith("bx, by, bz (")
+    assert page.inner_text("#held").startswith("sx, sy, sz, ")
+    page.wait_for_selector("#no-figures")

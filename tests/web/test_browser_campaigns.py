@@ -107,14 +107,25 @@ def test_watch_a_campaign_live_pause_and_abort_ask_first(
 ) -> None:
     sign_in(page, live_engine_service, "operator")
     page.fill("input[name=sensor]", "SN-LIVE")
-    page.fill("input[name=setpoints_c]", "20,30,40,50,60")
-    page.fill("input[name=soak_min]", "60")  # ≈ 8 h of rig time: ≈ 10 s at 3000×
+    # The pause must not race the campaign's end: a pause asked after the last position's
+    # checkpoint is never applied (the campaign fits and completes), and a 5-step campaign
+    # of predictive soaks ends in ≈ 9 s at 3000× (benchmarks/bench_pause_latency.py). So
+    # the chamber ramps at 0.005 °C/min: from the sim chamber's start (23 °C, soaked and
+    # charted at once) to 60 °C is ≥ 120 h of rig time, ≥ 148 s: longer than the four
+    # 30-s waits this test can make before its pause applies, so a test that gets there
+    # finds the campaign running whatever the load. A ramp polls, and so can pause, every
+    # soak_poll_s (60 s of rig time). Aborted at the end.
+    page.fill("input[name=setpoints_c]", "23,30,40,50,60")
+    page.fill("input[name=soak_min]", "60")
+    page.fill("input[name=ramp_c_per_min]", "0.005")
     page.fill("input[name=positions]", "table1")
     page.fill("input[name=samples_per_position]", "20")
     page.click("#start button")
     page.wait_for_selector("#facts dd")
     page.wait_for_function("() => Number(document.querySelector('#events').textContent) > 2")
-    # the ETA is wall time, labelled, with the rig's own time beside it at 3000×
+    # the ETA is wall time, labelled, with the rig's own time beside it at 3000× (once the
+    # engine has published a progress: "unknown" before its first poll)
+    page.wait_for_function("() => /^ends in/.test(document.querySelector('#eta').textContent)")
     assert page.inner_text("#facts").count("ETA (wall clock)") == 1
     eta = page.inner_text("#eta")
     span = r"(\d+ s|\d+ min \d\d s|\d+ h \d\d min)"

@@ -493,6 +493,19 @@ async function calibrationView(id) {
       h("td", { class: "num" }, gErr(st.rmse_step_fit_ug)), h("td", { class: "num" }, gErr(st.rmse_after_ug)),
       h("td", { class: "num" }, fmt(st.chi2_red, 2)), h("td", { class: "num" }, duration(st.soak_s)),
       h("td", {}, words(st.soak_reason)))));
+  // a continuous (ramp) or warm-up fit: Table 6 per temperature band, heating and cooling legs
+  const legsText = (l) => (!l ? "one leg only" : l.difference_ug.map((d, i) =>
+    `${d >= 0 ? "+" : ""}${d.toFixed(1)} ± ${l.difference_se_ug[i].toFixed(1)}`).join(" / ") +
+    (l.agree ? " (agree)" : " (DISAGREE)"));
+  const bandTable = h("table", { id: "cal-bands" },
+    h("tr", {}, ...["band", "rows", "positions", "|g| RMSE raw", "after", "heating − cooling residual (µg)"].map((t) => h("th", {}, t))),
+    sum.bands.map((b) => h("tr", {}, h("td", { class: "num" }, `${fmt(b.lo_c, 0)} … ${fmt(b.hi_c, 0)} °C`),
+      h("td", { class: "num" }, b.rows), h("td", { class: "num" }, b.positions),
+      h("td", { class: "num" }, gErr(b.rmse_before_ug)), h("td", { class: "num" }, gErr(b.rmse_after_ug)),
+      h("td", {}, legsText(b.legs)))));
+  const warmup = sum.method === "warmup";
+  const ho = sum.heldout_mg_xyz;
+  const stepsTitle = sum.method === "continuous" ? "Plateaus (fitted with every other row)" : "Per step";
   if (!showView(seq, h("h2", {}, `Calibration ${id}`),
     h("p", {}, h("a", { href: `/api/v1/calibrations/${id}`, download: `calibration-${id}.json` }, "model document (JSON)"),
       " · ", h("a", { href: `/api/v1/calibrations/${id}/export?format=c`, id: "export-c" }, "firmware header (C99)"),
@@ -501,24 +514,33 @@ async function calibrationView(id) {
       h("dt", {}, "sensor / campaign"), h("dd", {}, h("a", { href: `#/sensors/${encodeURIComponent(sum.sensor)}` }, sum.sensor), " / ",
         sum.campaign_id ? h("a", { href: `#/campaigns/${sum.campaign_id}` }, sum.campaign_id) : "–"),
       h("dt", {}, "|g| RMSE before (raw)"), h("dd", { id: "rmse-before" }, gErr(sum.rmse_before_ug)),
-      h("dt", {}, "|g| RMSE after (thermal model)"), h("dd", { id: "rmse-after" }, gErr(sum.rmse_after_ug)),
+      h("dt", {}, warmup ? "|g| RMSE after (warm-up model: only what it fitted)" : "|g| RMSE after (thermal model)"),
+      h("dd", { id: "rmse-after" }, gErr(sum.rmse_after_ug)),
+      warmup ? h("dt", {}, "scatter about each orientation's mean (per axis)") : "",
+      warmup ? h("dd", { id: "scatter" }, `${gErr(sum.scatter_ug)} after; held out x/y/z: ` +
+        `${ho.uncompensated.map((v) => v.toFixed(3)).join(" / ")} → ${ho.compensated.map((v) => v.toFixed(3)).join(" / ")} mg`) : "",
       h("dt", {}, "held out (leave one position out)"), heldOut,
       h("dt", {}, "valid range"), h("dd", { id: "valid" }, `${fmt(sum.valid_c[0], 1)} … ${fmt(sum.valid_c[1], 1)} °C (${words(sum.temperature_source)})`),
-      h("dt", {}, "drift at fixed orientation"), h("dd", { id: "drift" }, `${fmt(sum.drift_ug_per_k.before, 1)} → ${fmt(sum.drift_ug_per_k.after, 2)} µg/K`),
+      h("dt", {}, "drift at fixed orientation"), h("dd", { id: "drift" }, sum.drift_ug_per_k.before === null && sum.drift_ug_per_k.after === null
+        ? `not computed for a ${sum.method} fit` : `${fmt(sum.drift_ug_per_k.before, 1)} → ${fmt(sum.drift_ug_per_k.after, 2)} µg/K`),
       h("dt", {}, "model"), h("dd", {}, `${sum.model_version}, ${sum.mode} mode, ${sum.method} fit, thermal polynomial degree ${degree}`),
-      h("dt", {}, "fitted"), h("dd", { id: "fitted" }, all12 ? "all 12 SFEM parameters (Eq. 1)" : sum.fitted.join(", ") || "none"),
+      h("dt", {}, "fitted"), h("dd", { id: "fitted" }, all12 ? "all 12 SFEM parameters (Eq. 1)" : (sum.fitted.join(", ") || "none") +
+        (warmup && sum.fitted.length ? " (their change with temperature, or absolutely where the notes say so)" : "")),
       h("dt", {}, "held at nominal"), h("dd", { id: "held" }, sum.held.length ? `${sum.held.join(", ")} (the positions cannot identify them)` : "none"),
       h("dt", {}, "against its lot"), lotCheck,
-      h("dt", {}, "joint fit"), h("dd", { id: "joint" }, jf ? `${jf.success ? "converged" : "DID NOT CONVERGE"}, χ²red ${fmt(jf.chi2_red, 2)}` : "–"),
+      h("dt", {}, "joint fit"), h("dd", { id: "joint" }, jf ? `${jf.success ? "converged" : "DID NOT CONVERGE"}, χ²red ${fmt(jf.chi2_red, 2)}`
+        : sum.chi2_red !== null ? `none (continuous fit: χ²red ${fmt(sum.chi2_red, 2)})` : "–"),
       h("dt", {}, "created"), h("dd", {}, when(prov.created_utc))),
-    h("h3", {}, "Per step"), stepTable,
+    sum.bands.length ? h("div", {}, h("h3", {}, "Per temperature band"), bandTable) : "",
+    sum.steps.length || !sum.bands.length ? h("div", {}, h("h3", {}, stepsTitle), stepTable) : "",
     sum.notes.length ? h("div", {}, h("h3", {}, "Notes"), h("ul", { id: "cal-notes" }, sum.notes.map((n) => h("li", {}, n)))) : "",
     h("h3", {}, "Figures"), figs,
     prov.steps_log ? h("details", {}, h("summary", {}, "steps log (soak ends and their reasons)"),
       h("pre", {}, JSON.stringify(prov.steps_log, null, 1))) : "")) return;
   try {
     const names = await api("GET", `/web/calibrations/${id}/figures`);
-    figs.replaceChildren(...names.map((n) => h("figure", {}, h("img", { class: "figure", alt: n, src: `/web/calibrations/${id}/figures/${n}.png` }), h("figcaption", {}, n))));
+    if (!names.length) figs.replaceChildren(h("p", { class: "muted", id: "no-figures" }, `none: figures are drawn for step fits; this is a ${sum.method} fit (its table per temperature band is above)`));
+    else figs.replaceChildren(...names.map((n) => h("figure", {}, h("img", { class: "figure", alt: n, src: `/web/calibrations/${id}/figures/${n}.png` }), h("figcaption", {}, n))));
     const ho = await api("GET", `/web/calibrations/${id}/holdout`);
     heldOut.replaceChildren(ho.loo_rmse_ug === null
       ? h("span", { class: "warn" }, `not given: ${(ho.warnings || []).join("; ") || "too few spare degrees of freedom"}`)
