@@ -36,8 +36,11 @@ def test_create_fills_the_contract_defaults(client: TestClient, auth) -> None:  
         "setpoint_c",
         "eta_s",
         "eta_wall_s",
+        "method",
+        "leg_target_c",
     }
     assert (progress["steps"], progress["positions"], progress["setpoint_c"]) == (11, 24, -40)
+    assert (progress["method"], progress["leg_target_c"]) == ("soak", None)
 
 
 def test_a_second_campaign_on_a_busy_rig_waits_queued(client: TestClient, auth, sf) -> None:  # type: ignore[no-untyped-def]
