@@ -1,0 +1,30 @@
+"""What the crash and stall tests share: a worker process running one campaign over the
+simulated rig, and the measurements it stored."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from sqlalchemy import select
+
+from service.db.models import Measurement
+
+WORKER = Path(__file__).with_name("crash_worker.py")
+ROOT = Path(__file__).resolve().parents[2]
+SPEC = {"setpoints_c": [0.0, 20.0, 40.0], "soak_min": 20, "positions": "table1",
+        "samples_per_position": 50, "ramp_c_per_min": 2.0}
+N_STEPS, N_POS = 3, 24
+
+
+def start_worker(url: str, cid: int) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, str(WORKER), url, str(cid), "1.5"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def count(sf, cid: int) -> int:  # type: ignore[no-untyped-def]
+    with sf() as s:
+        return len(s.execute(select(Measurement.id).where(Measurement.campaign_id == cid)).all())
