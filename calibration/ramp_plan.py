@@ -77,6 +77,7 @@ from calibration.campaign_plan import (
     Save,
     SetChamber,
     Settle,
+    interpret,
     measure_position,
     visit_orders,
 )
@@ -449,14 +450,8 @@ def predict_ramp(spec: Any, refs: np.ndarray, *, start_c: float = AMBIENT_C,
             _close_leg(out, state, plant)
         return None
 
-    gen = ramp_plan(spec, refs, end_c=end_c, done=done, legs_done=legs_done,
-                    angles_deg=angles_deg)
-    reply: Any = None
-    try:
-        while True:
-            reply = handle(gen.send(reply))
-    except StopIteration:
-        pass
+    interpret(ramp_plan(spec, refs, end_c=end_c, done=done, legs_done=legs_done,
+                        angles_deg=angles_deg), handle)
     out.duration_s = plant.t_s
     out.n_sweeps = len(sweeps)
     return out

@@ -25,7 +25,15 @@ from typing import Any
 import numpy as np
 
 from calibration import ramp_plan as rp
-from calibration.campaign_plan import Acquire, Move, ReadChamber, Save, SetChamber, Settle
+from calibration.campaign_plan import (
+    Acquire,
+    Move,
+    ReadChamber,
+    Save,
+    SetChamber,
+    Settle,
+    interpret,
+)
 from calibration.recording import Recording
 from calibration.schedules import table1
 from calibration.thermal_plant import AMBIENT_C
@@ -127,13 +135,7 @@ def simulate_ramp_campaign(
             rows["ref"].append(msg.ref_g)
         return None
 
-    gen = rp.ramp_plan(spec, refs, end_c=rig.end_c, sensors=serials)
-    reply: Any = None
-    try:
-        while True:
-            reply = handle(gen.send(reply))
-    except StopIteration:
-        pass
+    interpret(rp.ramp_plan(spec, refs, end_c=rig.end_c, sensors=serials), handle)
 
     rng = np.random.default_rng(seed)
     N = len(rows["t_s"])
