@@ -26,7 +26,7 @@ import datetime as dt
 import functools
 import logging
 import math
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -430,8 +430,13 @@ class CampaignRunner:
     async def _measure(self, n: int, serials: Sequence[str]) -> dict[str, Any]:
         """Every live sensor of ``serials`` read at once (:func:`sensors.read_all`); the
         ones that fail are dropped after all have answered (a drop may fail the campaign)."""
-        live = [s for s in serials if s not in self.dropped]
-        got = await read_all(live, lambda serial: self._measure_one(serial, n))
+        return await self._read_live(serials, lambda serial: self._measure_one(serial, n))
+
+    async def _read_live(self, serials: Iterable[str],
+                         read: Callable[[str], Awaitable[Any]]) -> dict[str, Any]:
+        """``read`` every live sensor of ``serials`` at once; the ones that raised
+        :class:`SensorDropped` are dropped once all have answered, the rest returned."""
+        got = await read_all([s for s in serials if s not in self.dropped], read)
         out: dict[str, Any] = {}
         for serial, result in got.items():
             if isinstance(result, SensorDropped):
@@ -698,12 +703,9 @@ class CampaignRunner:
             return self._sensor_call(serial, "accelerometer.acquire",
                                      functools.partial(self._accelerometer(serial).acquire, n))
 
-        taken = await read_all([k for k in dies if k not in self.dropped], read)
+        taken = await self._read_live(dies, read)
         rows: list[dict[str, Any]] = []
         for serial, probe in taken.items():
-            if isinstance(probe, SensorDropped):
-                self._drop(probe)
-                continue
             # mid-capture (captures end together; each keeps its own duration)
             mid_s = self.clock.now() - probe.duration_s / 2.0
             t_s = self._t(mid_s)
