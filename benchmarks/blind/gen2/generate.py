@@ -163,6 +163,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--nulls", type=int, default=None, help="null cases (quick 15, full 300)")
     ap.add_argument("--seed", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--only", default=None,
+                    help="comma list of effects, kinds (null, outside, against) or changes "
+                         "to keep; the others are planned (so seeds stay) but not written")
     a = ap.parse_args(argv)
     try:
         rd = realdata_dir(a.realdata)
@@ -171,6 +174,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     n_null = a.nulls if a.nulls is not None else (15 if a.quick else 300)
     specs = plan(a.quick, a.reps, n_null, a.seed)
+    if a.only:
+        keep = set(a.only.split(","))
+        specs = [s for s in specs if keep & {s["kind"], s.get("effect"), s.get("change")}]
     for sub in ("cases", "keys", "given"):
         d = a.out / sub
         d.mkdir(parents=True, exist_ok=True)

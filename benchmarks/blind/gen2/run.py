@@ -1,7 +1,7 @@
 """Run ``diagnose`` on the second generator's cases without their keys, then score.
 
     python -m benchmarks.blind.gen2.run --realdata DIR [--quick] [--reps R] [--nulls N]
-                                        [--n-null B] [--jobs 2] [--regenerate]
+                                        [--n-null B] [--jobs 2] [--regenerate] [--only E,..]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
 the given recording (``calibration.thermal.fit_campaign``, what ``calibrate`` fits) and the
@@ -72,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--regenerate", action="store_true")
     ap.add_argument("--n-null", type=int, default=None, help="diagnose's n_null (quick: 100)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--only", default=None,
+                    help="generate only these effects/kinds (see generate --only)")
     ap.add_argument("--results", type=Path, default=None, help="results stem (no suffix)")
     a = ap.parse_args(argv)
     mode = "quick" if a.quick else "full"
@@ -82,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         gen += (["--realdata", a.realdata] if a.realdata else []) + (["--quick"] if a.quick
                                                                     else [])
         gen += ["--nulls", str(a.nulls)] if a.nulls is not None else []
+        gen += ["--only", a.only] if a.only else []
         if generate.main(gen):
             return 2
     n_null = a.n_null if a.n_null is not None else (100 if a.quick else 200)
