@@ -160,7 +160,17 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         held.update({n: "held at 0: no change with temperature above the noise (degree 0 "
                         "chosen by held-out error)" for n in sfem.PARAM_NAMES[:3]})
     absolute = None
-    if orientations.count >= 2:
+    common_c = _common_span_c(T, orientations)
+    if orientations.count >= 2 and common_c < 2 * DISTINCT_C:
+        notes_absolute = [
+            f"nothing fitted absolutely: the {orientations.count} orientations were seen "
+            f"together over {max(common_c, 0.0):.2f} °C only (each over its own part of "
+            f"the warm-up), where a change of scale with temperature cannot be told from "
+            f"a curvature of the bias; keep the orientations alternating over the whole "
+            f"temperature range to fit them absolutely"]
+    else:
+        notes_absolute = []
+    if orientations.count >= 2 and not notes_absolute:
         absolute = absolute_part(captures, orientations, x, coeffs, top, folds,
                                  None if rate_cols is None else rate_cols @ k_rate.T, g_local)
     if absolute is not None and absolute.names:
@@ -185,7 +195,8 @@ def fit_warmup(captures: Recording, orientations: Orientations,
                     "(a warm-up: the model in each reading's own temperature)")
     notes = [f"warm-up: {orientations.count} distinct orientation(s) "
              f"({orientations.names()}); degree {degree} chosen by held-out error over "
-             f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span"]
+             f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span",
+             *notes_absolute]
     temperature_rate = None
     if use_rate:
         temperature_rate = {
@@ -318,6 +329,15 @@ def _choose(totals: list[float]) -> int:
         if totals[d] < totals[degree] * (1.0 - MIN_GAIN):
             degree = d
     return degree
+
+
+def _common_span_c(T: np.ndarray, orientations: Orientations) -> float:
+    """°C over which every orientation was seen (negative when two never overlap): where
+    the absolute part can tell a scale's change with temperature from the bias's."""
+    k = orientations.count
+    lows = [float(np.min(T[orientations.labels == o])) for o in range(k)]
+    highs = [float(np.max(T[orientations.labels == o])) for o in range(k)]
+    return min(highs) - max(lows)
 
 
 def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
