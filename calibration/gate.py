@@ -395,9 +395,7 @@ def check_model(model: ThermalModel, captures: Recording,
             f"the model gives |g| = {float(np.linalg.norm(cal[i])):.4f} g "
             f"(local gravity {model.g_local:.4f} g) on its own reading {row + 1} "
             f"(t = {float(captures.t_s[row]):.1f} s, |raw| {raw_norm:.4f} g); a calibration "
-            f"is within a few mg; no model written: average only what was recorded with the "
-            f"sensor still (rows taken while it was turned: `soakcal import` keeps the "
-            f"static intervals), and {_fix(model)}")
+            f"is within a few mg; no model written: {_fix(model)}")
 
 
 def check_warmup_residuals(residual_g: np.ndarray, orientations: Orientations,
@@ -440,7 +438,11 @@ def _check_bias_tempco(model: ThermalModel, n_temps: int = 21) -> None:
 def _fix(model: ThermalModel) -> str:
     if model.mode == "warmup":
         return "check the temperature channel and record a longer, smoother warm-up"
-    return MORE_ORIENTATIONS + ", spread over the sphere"
+    # a model outside physical sense comes from too few orientations, or from readings
+    # averaged while the sensor was turned (1-s blocks of a hand-turned log)
+    return (f"average only what was recorded with the sensor still (rows taken while it "
+            f"was turned: `soakcal import` keeps the static intervals), and "
+            f"{MORE_ORIENTATIONS}, spread over the sphere")
 
 
 def cannot_judge(recording: Recording) -> str | None:
