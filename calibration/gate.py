@@ -466,7 +466,8 @@ def cannot_judge(recording: Recording) -> str | None:
     try:
         decided = plan(captures, orientations=ori,
                        continuous=segment_recording(captures, ori.labels).is_continuous)
-        fit(recording)  # calibrate's refusal after the fit, if it refuses
+        if decided.kind != "continuous":  # cannot be judged either way (below)
+            fit(recording)  # calibrate's refusal after the fit, if it refuses
     except CalibrationError as exc:
         return str(exc)
     if decided.kind == "continuous":
