@@ -39,6 +39,13 @@ Three more tables (issue 11 / issue 9 / issue 20):
   next to ``soakcal calibrate``'s leave-one-out on *those same intervals*. Every
   column predicts the same held-out target, the interval's mean; only the fit differs.
   (``--peers-only`` prints just this table.)
+
+``--layouts`` (issue 20: what a person reads, whatever layout the rows come in): each
+recording written three ways -- one row per static interval (``soakcal import``), every
+raw sample (``--raw``), 1-s block means (``--block-s 1``, blocks not checked for
+stillness) -- then ``soakcal calibrate --json`` and ``soakcal diagnose --json`` on each,
+as subprocesses: exit status, what was fitted, the held-out figure, or the refusal;
+diagnose's verdict. Only that table is printed.
 """
 
 from __future__ import annotations
@@ -349,16 +356,81 @@ def format_same_intervals(lines: list[str]) -> str:
                       "on interval means; soakcal = calibrate (sd/√n + model floor)"])
 
 
+LAYOUTS = (("intervals", []), ("raw", ["--raw"]), ("1-s blocks", ["--block-s", "1"]))
+
+
+def _soakcal(args: list[str]) -> tuple[int, str, str]:
+    import subprocess
+
+    r = subprocess.run([sys.executable, "-m", "service.cli", *args], cwd=ROOT,
+                       capture_output=True, text=True, check=False)
+    return r.returncode, r.stdout, r.stderr
+
+
+def run_layouts(name: str, fmt: str, path: Path, options: dict[str, object],
+                tmp: Path) -> list[str]:
+    """Table rows: calibrate and diagnose on the recording in each layout (``--layouts``)."""
+    import json
+
+    extra = [f"--sensor={options['sensor']}"] if "sensor" in options else []
+    lines = []
+    for layout, flags in LAYOUTS:
+        rec = tmp / f"{name.split()[0]}-{layout.split()[0]}.csv"
+        status, _, err = _soakcal(["import", "--format", fmt, str(path), "-o", str(rec),
+                                   *extra, *flags])
+        if status != 0:
+            lines.append(f"| {name} | {layout} | import exit {status}: {err.strip()[-120:]} "
+                         f"| | |")
+            continue
+        status, out, err = _soakcal(["calibrate", str(rec), "-o", str(tmp / "m.json"),
+                                     "--json"])
+        if status == 0:
+            doc = json.loads(out)
+            loo = doc.get("loo_rmse_ug")
+            spare = (doc.get("dof") or {}).get("spare")
+            cal = (f"exit 0: {doc.get('mode')}, {doc.get('orientations')} orientations, "
+                   f"{doc.get('rows')} rows, spare {spare}, LOO "
+                   f"{'null' if loo is None else f'{loo / 1e3:.3f} mg'}")
+        else:
+            cal = f"exit {status}: {err.strip().split(': ', 2)[-1][:150]}"
+        status, out, err = _soakcal(["diagnose", str(rec), "--json"])
+        if status == 0:
+            doc = json.loads(out)
+            base = doc.get("baseline") or {}
+            rmse = base.get("rmse_ug")
+            diag = (f"{doc.get('verdict')}"
+                    + (f", rmse {rmse / 1e3:.3f} mg" if rmse is not None else "")
+                    + (f", {', '.join(f['effect'] for f in doc.get('findings', []))}"
+                       if doc.get("findings") else ""))
+        else:
+            diag = f"exit {status}"
+        lines.append(f"| {name} | {layout} | {cal} | {diag} |")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--realdata", type=Path, default=Path(os.environ.get(
         "SOAKCAL_REALDATA", Path(__file__).resolve().parents[1] / "tests/data/realdata")))
     ap.add_argument("--peers-only", action="store_true",
                     help="only imu_tk's method and soakcal's fit on the same intervals")
+    ap.add_argument("--layouts", action="store_true",
+                    help="calibrate and diagnose each recording as intervals, raw samples "
+                         "and 1-s blocks")
     args = ap.parse_args(argv)
     if not args.realdata.is_dir():
         print(f"no real data at {args.realdata}", file=sys.stderr)
         return 2
+    if args.layouts:
+        import tempfile
+
+        print("| recording | layout | calibrate | diagnose |\n|---|---|---|---|")
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, fmt, rel, options in DATASETS:
+                if (args.realdata / rel).exists() and "annotated" not in name:
+                    print("\n".join(run_layouts(name, fmt, args.realdata / rel, options,
+                                                Path(tmp))), flush=True)
+        return 0
     rows: list[Row] = []
     defaults: list[DefaultsRow] = []
     ferraris: list[str] = []

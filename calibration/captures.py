@@ -10,8 +10,14 @@ and ``diagnose`` all read raw rows through :func:`capture_means`:
 * a capture is a run of consecutive rows with the same ``step`` and ``position``
   (each where recorded), cut into blocks of at most :data:`CAPTURE_BLOCK_S`
   seconds, so that a continuous warm-up keeps its temperature resolution;
+* where no ``position`` is recorded, a run is also cut where the sensor moved: rows
+  whose 1-s moving variance is over :data:`MOVING_VARIANCE_FACTOR` times the still
+  level are left out (the static-interval rule of the importers,
+  :func:`calibration.importers.detect_static_intervals`), so that a capture never
+  averages two placements of a hand-turned sensor into a direction it never had;
 * its row is the mean of every numeric column, ``n`` the number of samples and
-  ``sd_*`` their scatter (ddof = 1, two-pass);
+  ``sd_*`` their scatter (ddof = 1, two-pass); without a recorded ``position``, its
+  ``position`` is the still stretch it came from (one placement);
 * a capture whose scatter is many times the typical one was taken while the
   sensor moved (a hand turning it, the table slewing) and is left out, said in
   the notes.
@@ -40,6 +46,15 @@ MIN_RAW_ROWS = 50
 # A capture whose sample sd exceeds this multiple of the median capture's sd (on any
 # axis) was taken while the orientation changed.
 MOVING_SD_FACTOR = 20.0
+# Rows whose 1-s moving variance (norm over the axes) is over this multiple of the still
+# level (its 10th percentile over the log) were taken while the sensor turned. A turn by
+# θ within the window scatters the readings by about θ·g/√12, so 100× the variance (10×
+# the sd) finds a turn of 2° at 1 mg of noise, the resolution of distinct orientations
+# (calibration.gate), and no warm-up's noise changes 10× with its temperature.
+MOVING_VARIANCE_FACTOR = 100.0
+MOVING_WINDOW_S = 1.0
+# A still stretch shorter than this between two moves is not a capture.
+MIN_STILL_S = 1.0
 
 
 @dataclass
@@ -77,7 +92,11 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     n_rows = len(rec)
     if not is_raw_samples(rec):
         return Captures(rec, n_rows, False, np.arange(n_rows))
-    seg = np.r_[0, np.cumsum(_segment_keys(rec)[1:] != _segment_keys(rec)[:-1])]
+    still = _still_rows(rec)
+    keys = _segment_keys(rec)
+    # a new run where the label changes or the sensor starts or stops moving
+    cut = (keys[1:] != keys[:-1]) | (still[1:] != still[:-1])
+    seg = np.r_[0, np.cumsum(cut)]
     t = rec.t_s
     seg_start = np.zeros(int(seg[-1]) + 1)
     first = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
@@ -92,13 +111,27 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     for name in LABELS:  # labels are not averaged: each capture keeps its first row's
         if name in cols:
             cols[name] = rec.columns[name][first]
-    keep = _steady(cols, count)
-    notes = [f"raw samples: {n_rows} rows read as {groups} capture means (runs of the same "
-             f"step and position, at most {block_s:g} s each; sd and n of their samples)"]
-    if not keep.all():
-        notes.append(f"{int(np.sum(~keep))} capture(s) left out: their sample scatter is over "
+    if "position" not in cols:
+        # the placement each capture was averaged from: captures of one still stretch are
+        # one position (static interval), as an import's interval is, so that a held-out
+        # figure leaves out a placement, not 5 s of it (calibration.holdout)
+        cols["position"] = seg[first].astype(float)
+    moving = np.bincount(inv, weights=(~still).astype(float), minlength=groups) > 0
+    keep = _steady(cols, np.where(moving, 0.0, count)) & ~moving
+    notes = [f"raw samples: {n_rows} rows read as {groups - int(moving.sum())} capture means "
+             f"(runs of the same step and position, at most {block_s:g} s each; sd and n of "
+             f"their samples)"]
+    if moving.any():
+        notes.append(f"{int(np.sum(~still))} row(s) left out: the sensor was moving (1-s "
+                     f"moving variance over {MOVING_VARIANCE_FACTOR:g}x the still level)")
+    if not (keep | moving).all():
+        notes.append(f"{int(np.sum(~keep & ~moving))} capture(s) left out: their sample scatter "
+                     f"is over "
                      f"{MOVING_SD_FACTOR:g}x the typical one (the sensor was moving)")
-    out = Recording.from_columns({k: v[keep] for k, v in cols.items()}, path=rec.path)
+    kept = {k: v[keep] for k, v in cols.items()}
+    if not rec.has("position"):  # placements numbered 0, 1, … over the kept captures
+        kept["position"] = np.unique(kept["position"], return_inverse=True)[1].astype(float)
+    out = Recording.from_columns(kept, path=rec.path)
     out.notes.extend(rec.notes)
     new_index = np.where(keep, np.cumsum(keep) - 1, -1)
     return Captures(out, n_rows, True, new_index[inv], notes)
@@ -133,6 +166,21 @@ def group_means(rec: Recording, group: np.ndarray) -> dict[str, np.ndarray]:
     return cols
 
 
+def placed_samples(rec: Recording, caps: Captures) -> Recording:
+    """The raw rows ``caps`` kept, each labelled with its capture's ``position`` (the
+    still stretch it belongs to): for a reader that averages per (step, position) itself
+    (``diagnose``'s capture model), the same placements ``calibrate`` fits. Recordings
+    that are not raw, or that label their positions, are returned unchanged."""
+    if not caps.is_raw or rec.has("position"):
+        return rec
+    kept = caps.row_capture >= 0
+    cols = {k: v[kept] for k, v in rec.columns.items()}
+    cols["position"] = caps.recording.columns["position"][caps.row_capture[kept]]
+    out = Recording.from_columns(cols, path=rec.path)
+    out.notes.extend(rec.notes)
+    return out
+
+
 def capture_temperature_c(rec: Recording, caps: Captures) -> np.ndarray:
     """Each raw row's temperature read from the capture means: linear in time between
     capture centres (a quantised or noisy channel averaged over each capture)."""
@@ -141,6 +189,22 @@ def capture_temperature_c(rec: Recording, caps: Captures) -> np.ndarray:
         return temp
     means = caps.recording
     return np.interp(rec.t_s, means.t_s, means.temperature_c())
+
+
+def _still_rows(rec: Recording) -> np.ndarray:
+    """Rows not taken while the sensor moved (module docstring). Rows labelled with a
+    ``position`` are the placement the label says: all still here."""
+    from calibration.importers import detect_static_intervals  # importers read recordings
+
+    n = len(rec)
+    if rec.has("position") or n < 3:
+        return np.ones(n, bool)
+    still = np.zeros(n, bool)
+    for start, end in detect_static_intervals(
+            rec.t_s, rec.raw_g, window_s=MOVING_WINDOW_S, threshold=MOVING_VARIANCE_FACTOR,
+            min_duration_s=MIN_STILL_S):
+        still[start:end] = True
+    return still
 
 
 def _segment_keys(rec: Recording) -> np.ndarray:

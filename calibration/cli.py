@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration import fitting, gate
-from calibration.captures import capture_means, capture_temperature_c
+from calibration.captures import capture_means, capture_temperature_c, placed_samples
 from calibration.errors import CalibrationError, RecordingError
 from calibration.fitting import CalibrationFit, FitOptions, OptionNotApplicable
 from calibration.gravity import GravityError, LocalGravity, from_arguments
@@ -144,6 +144,9 @@ def run_diagnose(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     why = gate.cannot_judge(rec)
     if why is None:
+        # raw rows without positions: the placements calibrate fits (rows taken while the
+        # sensor moved left out), not every sample as its own position
+        rec = placed_samples(rec, capture_means(rec))
         return int(discrepancy_cli.run_diagnose(args, rec))  # read once (issue 22)
     from calibration.discrepancy.diagnose import _cannot_judge
 

@@ -73,8 +73,11 @@ REFERENCE_MIN_ORIENTATIONS = min_orientations("reference", 0)  # 4
 # freedom (calibration.holdout.MIN_SPARE_DOF), so 12 in norm mode and 5 with references.
 STEP_SPARE_DOF = 3
 # A step calibrates the SFEM when its orientations determine at least bias and scale of
-# all three axes (six axis directions: norm mode, α held); fewer is a warm-up.
+# all three axes (six axis directions: norm mode, α held); fewer is a warm-up. Counting
+# any six was not enough: ±z, ±x with references determine eight (bx by bz sx sz azx mx
+# my) but not sy, and the per-step fit of all 12 did not converge on such a warm-up.
 SFEM_MIN_FITTED = 6
+SFEM_REQUIRED = ("bx", "by", "bz", "sx", "sy", "sz")
 # Physical sense. No MEMS accelerometer's zero-g offset comes near half a g (ADXL355:
 # ±25 mg; consumer parts ±150 mg); sensitivities are within a few percent of nominal;
 # axes within a degree or two of orthogonal and of the package.
@@ -274,16 +277,16 @@ def plan(captures: Recording, *, continuous: bool = False,
         need = MIN_POSITIONS_REFERENCE if mode == "reference" else MIN_POSITIONS_NORM
         whole = capacity(raw, mode, captures.sigma_g)
         if (ori.count >= need and whole.refusal() is None
-                and len(whole.fitted) >= SFEM_MIN_FITTED):
+                and _determines_sfem(whole)):
             return Plan("continuous", mode, ori,
                         f"{summary} on no temperature plateau: the SFEM fitted in each "
                         f"reading's own die temperature")
     per_step = _capacity_per_step(captures, mode)
     enough = [s for s, c in per_step.items()
-              if c.refusal() is None and len(c.fitted) >= SFEM_MIN_FITTED]
+              if c.refusal() is None and _determines_sfem(c)]
     if enough:
         return Plan("sfem", mode, ori, f"{summary}; {len(enough)} of {len(per_step)} step(s) "
-                    f"determine {SFEM_MIN_FITTED} or more SFEM parameters")
+                    f"determine bias and scale of every axis")
     if captures.has_temperature:
         most = max((c.orientations.count for c in per_step.values()), default=ori.count)
         held = ("scale, non-orthogonality and misalignment held" if ori.count < 2 else
@@ -296,6 +299,11 @@ def plan(captures: Recording, *, continuous: bool = False,
     raise GateRefusal(
         f"{summary} and no temperature: nothing can be calibrated; {MORE_ORIENTATIONS}, "
         f"or record a temperature (sensor_c) while the sensor warms up")
+
+
+def _determines_sfem(c: Capacity) -> bool:
+    """Bias and scale of every axis determined (:data:`SFEM_REQUIRED`), with no refusal."""
+    return c.refusal() is None and set(SFEM_REQUIRED) <= set(c.fitted)
 
 
 def _capacity_per_step(captures: Recording, mode: str) -> dict[int, Capacity]:
@@ -381,9 +389,12 @@ def check_model(model: ThermalModel, captures: Recording,
     dev = np.abs(np.linalg.norm(cal, axis=1) - model.g_local)
     i = int(np.argmax(dev))
     if dev[i] > NORM_MAX_DEV_G:
+        row = int(np.flatnonzero(used)[i])
+        raw_norm = float(np.linalg.norm(captures.raw_g[row]))
         raise GateRefusal(
             f"the model gives |g| = {float(np.linalg.norm(cal[i])):.4f} g "
-            f"(local gravity {model.g_local:.4f} g) on its own reading {i + 1}; a calibration "
+            f"(local gravity {model.g_local:.4f} g) on its own reading {row + 1} "
+            f"(t = {float(captures.t_s[row]):.1f} s, |raw| {raw_norm:.4f} g); a calibration "
             f"is within a few mg; no model written: {_fix(model)}")
 
 
@@ -427,7 +438,11 @@ def _check_bias_tempco(model: ThermalModel, n_temps: int = 21) -> None:
 def _fix(model: ThermalModel) -> str:
     if model.mode == "warmup":
         return "check the temperature channel and record a longer, smoother warm-up"
-    return MORE_ORIENTATIONS + ", spread over the sphere"
+    # a model outside physical sense comes from too few orientations, or from readings
+    # averaged while the sensor was turned (1-s blocks of a hand-turned log)
+    return (f"average only what was recorded with the sensor still (rows taken while it "
+            f"was turned: `soakcal import` keeps the static intervals), and "
+            f"{MORE_ORIENTATIONS}, spread over the sphere")
 
 
 def cannot_judge(recording: Recording) -> str | None:
@@ -436,9 +451,14 @@ def cannot_judge(recording: Recording) -> str | None:
     ``diagnose`` asks this before it runs: what the base model leaves out can only be
     judged where the gate lets an SFEM be fitted. The reason is the line ``calibrate``
     gives (its refusal, or why it calibrates a warm-up instead). Raw rows are read
-    as capture means, as ``calibrate`` reads them.
+    as capture means, as ``calibrate`` reads them, and ``calibrate``'s fit is run
+    with its checks after the fit (:func:`check_thermal_fit`, :func:`check_model`):
+    a model ``calibrate`` refuses (a fit that did not converge, a |g| far off on its
+    own readings: rows taken while the sensor moved) has no residuals worth judging,
+    and judging them found "effects" of hundreds of mg.
     """
     from calibration.captures import capture_means
+    from calibration.fitting import fit  # fitting imports this module
     from calibration.plateaus import segment_recording
 
     captures = capture_means(recording).recording
@@ -446,11 +466,9 @@ def cannot_judge(recording: Recording) -> str | None:
     try:
         decided = plan(captures, orientations=ori,
                        continuous=segment_recording(captures, ori.labels).is_continuous)
-        if decided.kind == "warmup":  # calibrate's refusal of the warm-up, if it refuses
-            from calibration.fitting import fit  # fitting imports this module
-
-            fit(recording)
-    except GateRefusal as exc:
+        if decided.kind != "continuous":  # cannot be judged either way (below)
+            fit(recording)  # calibrate's refusal after the fit, if it refuses
+    except CalibrationError as exc:
         return str(exc)
     if decided.kind == "continuous":
         return (f"{decided.reason}; the diagnosis judges per-step residuals, so a recording "

@@ -9,7 +9,9 @@ did not see is off by more than 1 mg. So next to it ``calibrate`` reports
   without it, predict it, and take the |g| error (Eq. 9) of the prediction; RMS over
   every position of every step. Reference mode also gives ``loo_rmse_vector_ug``.
 * ``dof`` -- observations, fitted parameters and the spare degrees of freedom of the
-  worst step (norm mode: one |g| per position; reference mode: three components;
+  worst step (norm mode: one |g| per position, counted on distinct orientations
+  (:func:`calibration.gate.distinct_orientations`) where fewer; reference mode: three
+  components;
   hand-placed references: one |g| per position against the 9 parameters |g| sees,
   since the labels there are a prior, not a measurement).
 
@@ -26,6 +28,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from calibration import gate
 from calibration.errors import NotIdentifiable
 from calibration.fit import FitResult, fit_norm, fit_reference
 from calibration.placement import reference_tolerance_rad
@@ -102,14 +105,21 @@ def leave_one_out(rec: Recording, fit: ThermalFit) -> dict[str, Any]:
             # Hand-placed: the labels are priors, not data; only |g| (one per position)
             # tests the 9 parameters it sees (b, S, C).
             per_position, n_params = 1, min(n_params, 9)
-        dof = {"observations": per_position * names.size, "parameters": n_params}
+        # Counted on distinct orientations (the gate's, calibration.gate): placements
+        # repeated on one face say how well it repeats, not whether the model predicts a
+        # direction it did not see (6 faces placed twice leave 0 spare for bias and scale).
+        n_ori = gate.distinct_orientations(
+            raw[idx], None if rec.sigma_g is None else rec.sigma_g[idx]).count
+        dof = {"observations": per_position * min(names.size, n_ori), "parameters": n_params}
         dof["spare"] = dof["observations"] - n_params
         if worst is None or dof["spare"] < worst["spare"]:
             worst = dof
         if dof["spare"] < MIN_SPARE_DOF:
+            where = (f"{names.size} positions" if n_ori >= names.size else
+                     f"{names.size} positions, {n_ori} distinct orientations")
             warnings.append(
                 f"step {st.step}: {dof['spare']} spare degree(s) of freedom "
-                f"({names.size} positions, {n_params} parameters, {mode} mode): the fit "
+                f"({where}, {n_params} parameters, {mode} mode): the fit "
                 f"can follow its readings, so its in-sample {st.fit.rmse_norm_ug / 1e3:.4f} mg "
                 f"says little; no held-out figure is given (loo_rmse_ug null); measure "
                 f"more positions")

@@ -22,7 +22,8 @@ other way round), and the degree with the lowest RMS error on the held-out captu
 wins. The valid range is the span of the data's temperatures.
 
 A rate term ``k_a(T) · dT/dt`` joins the model when the warm-up heats *and* cools
-(:data:`BOTH_WAYS_FRACTION` of the captures each way) and held-out error prefers it.
+(:data:`BOTH_WAYS_FRACTION` of the captures each way, in a log at least
+:data:`RATE_MIN_LOG_S` long) and held-out error prefers it.
 It stands for two physical things: a part whose bias depends on how fast its die
 changes temperature (the ``temperature_rate`` effect, docs/effects.md: a
 constant k), and a temperature channel that lags the die by τ (a first-order lag:
@@ -67,6 +68,11 @@ RATE_WINDOW_S = 120.0
 # cool faster than RATE_MIN_C_PER_MIN: otherwise dT/dt is a function of T (see above).
 BOTH_WAYS_FRACTION = 0.1
 RATE_MIN_C_PER_MIN = 0.05
+# ... and only in a log at least this long: dT/dt is resolved over RATE_WINDOW_S, so a
+# shorter log has no heating and cooling stretches, only a channel's jitter (a PX4 log of
+# six 1-s samples, its channel jumping 0.2-0.3 °C, got a rate term "preferred" 4.1 mg
+# against 5.1 mg held out, and a model that compensated x from 3.2 to 4.9 mg).
+RATE_MIN_LOG_S = 2.0 * RATE_WINDOW_S
 HELD_WHY = {
     "scale": "held at 1: one orientation per axis cannot separate scale from gravity's "
              "unknown projection",
@@ -134,7 +140,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     candidates = sorted(((d, m) for d in range(top + 1) for m in range(max(d, 1))),
                         key=lambda dm: (dm[0] + dm[1], dm[0]))
     with_rate: list[float] = []
-    if goes_both_ways(rate):
+    if goes_both_ways(rate) and float(np.ptp(captures.t_s)) >= RATE_MIN_LOG_S:
         with_rate = [float(np.sqrt(np.mean(
             _heldout_rms_g(x, labels, raw, folds, d, _rate_columns(rate, x, m)) ** 2)))
             for d, m in candidates]
@@ -160,7 +166,17 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         held.update({n: "held at 0: no change with temperature above the noise (degree 0 "
                         "chosen by held-out error)" for n in sfem.PARAM_NAMES[:3]})
     absolute = None
-    if orientations.count >= 2:
+    common_c = _common_span_c(T, orientations)
+    if orientations.count >= 2 and common_c < 2 * DISTINCT_C:
+        notes_absolute = [
+            f"nothing fitted absolutely: the {orientations.count} orientations were seen "
+            f"together over {max(common_c, 0.0):.2f} °C only (each over its own part of "
+            f"the warm-up), where a change of scale with temperature cannot be told from "
+            f"a curvature of the bias; keep the orientations alternating over the whole "
+            f"temperature range to fit them absolutely"]
+    else:
+        notes_absolute = []
+    if orientations.count >= 2 and not notes_absolute:
         absolute = absolute_part(captures, orientations, x, coeffs, top, folds,
                                  None if rate_cols is None else rate_cols @ k_rate.T, g_local)
     if absolute is not None and absolute.names:
@@ -185,7 +201,8 @@ def fit_warmup(captures: Recording, orientations: Orientations,
                     "(a warm-up: the model in each reading's own temperature)")
     notes = [f"warm-up: {orientations.count} distinct orientation(s) "
              f"({orientations.names()}); degree {degree} chosen by held-out error over "
-             f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span"]
+             f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span",
+             *notes_absolute]
     temperature_rate = None
     if use_rate:
         temperature_rate = {
@@ -318,6 +335,15 @@ def _choose(totals: list[float]) -> int:
         if totals[d] < totals[degree] * (1.0 - MIN_GAIN):
             degree = d
     return degree
+
+
+def _common_span_c(T: np.ndarray, orientations: Orientations) -> float:
+    """°C over which every orientation was seen (negative when two never overlap): where
+    the absolute part can tell a scale's change with temperature from the bias's."""
+    k = orientations.count
+    lows = [float(np.min(T[orientations.labels == o])) for o in range(k)]
+    highs = [float(np.max(T[orientations.labels == o])) for o in range(k)]
+    return min(highs) - max(lows)
 
 
 def _check_connected(T: np.ndarray, orientations: Orientations) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -35,12 +36,72 @@ def test_averaged_readings_pass_through_unchanged() -> None:
     assert capture_means(rec).recording is rec
 
 
-def test_a_capture_taken_while_turning_is_left_out_and_said() -> None:
+def test_rows_taken_while_turning_are_left_out_and_said() -> None:
     rec, _ = warmup_log(seconds=100, rate_hz=50, seed=2, segments=[(52.5, (1, 0, 0))])
     caps = capture_means(rec)
-    assert len(caps.recording) == 19  # 20 blocks, the one with the turn left out
-    assert any("1 capture(s) left out" in note for note in caps.notes)
-    assert np.all(caps.row_capture[(rec.t_s >= 50) & (rec.t_s < 55)] == -1)
+    turning = np.abs(rec.t_s - 52.5) < 0.45  # the 1-s window reaches the turn
+    assert np.all(caps.row_capture[turning] == -1)
+    assert np.all(caps.row_capture[np.abs(rec.t_s - 52.5) > 1.0] >= 0)
+    assert any("left out: the sensor was moving" in note for note in caps.notes)
+    # no capture mixes the two orientations: each mean is one of them
+    up = caps.recording.raw_g / np.linalg.norm(caps.recording.raw_g, axis=1)[:, None]
+    assert np.all(np.max(np.abs(up), axis=1) > 0.999)
+    assert {int(np.argmax(np.abs(u))) for u in up} == {0, 2}
+
+
+def _hand_turned(seconds_per_face: float = 4.0, sweep_s: float = 1.5, rate_hz: float = 100.0,
+                 seed: int = 0) -> Recording:
+    """Raw rows of a sensor turned by hand through 12 orientations, the turns sweeping
+    gravity across the axes over ``sweep_s``; bias 5 / -3 / 8 mg, scale 1.01 / 0.99 / 1."""
+    rng = np.random.default_rng(seed)
+    ups = [(1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1), (-1, 1, 1), (-1, 1, -1),
+           (-1, -1, 1), (-1, -1, -1), (1, 0, 0), (0, 1, 0), (0, 0, 1), (0, -1, 0)]
+    ups = [np.asarray(u, float) / np.linalg.norm(u) for u in ups]
+    pieces = []
+    for k, u in enumerate(ups):
+        pieces.append(np.tile(u, (int(seconds_per_face * rate_hz), 1)))
+        if k + 1 < len(ups):  # the hand sweeps to the next face
+            f = np.linspace(0, 1, int(sweep_s * rate_hz))[:, None]
+            path = (1 - f) * u + f * ups[k + 1]
+            pieces.append(path / np.linalg.norm(path, axis=1)[:, None])
+    true_g = np.vstack(pieces)
+    raw = true_g * np.array([1.01, 0.99, 1.0]) + np.array([5e-3, -3e-3, 8e-3])
+    raw = raw + rng.normal(0.0, 1e-3, raw.shape)
+    t = np.arange(raw.shape[0]) / rate_hz
+    return Recording.from_columns({"t_s": t, "chamber_c": np.full(t.size, np.nan),
+                                   "ax": raw[:, 0], "ay": raw[:, 1], "az": raw[:, 2]},
+                                  path="turned.csv")
+
+
+def test_raw_rows_of_a_hand_turned_sensor_become_still_captures_only() -> None:
+    caps = capture_means(_hand_turned())
+    norm = np.linalg.norm(caps.recording.raw_g, axis=1)
+    # every capture is one placement: |mean| is the biased, scaled 1 g, none a mid-turn
+    # direction averaged down to 0.7 g (5-s blocks straddling the turns did that)
+    assert np.all(np.abs(norm - 1.0) < 0.03)
+    assert any("left out: the sensor was moving" in note for note in caps.notes)
+
+
+def test_calibrate_fits_a_hand_turned_sensors_raw_rows(tmp_path: Path, capsys) -> None:
+    src = tmp_path / "turned.csv"
+    write_recording(src, _hand_turned(seed=1))
+
+    class A:
+        pass
+
+    a = A()
+    a.recording, a.output = str(src), str(tmp_path / "m.json")
+    a.json = True
+    assert cli.run_calibrate(a) == 0
+    from calibration.model_file import load_model
+
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["mode"] == "norm"
+    # the fitted biases and scales (Eq. 1: A undoes the gain) are the simulated ones
+    m = load_model(a.output)
+    vec = m.params_vector_at(m.t_centre_c, extrapolate=True)
+    np.testing.assert_allclose(vec[:3], [5e-3, -3e-3, 8e-3], atol=1e-3)
+    np.testing.assert_allclose(vec[3:6], 1.0 / np.array([1.01, 0.99, 1.0]), atol=2e-3)
 
 
 def test_compensate_reads_raw_rows_at_their_captures_temperature(tmp_path: Path,
@@ -109,3 +170,30 @@ def test_labels_are_kept_whole_not_averaged() -> None:
     means = capture_means(Recording.from_columns(cols)).recording
     np.testing.assert_array_equal(means.columns["visit"], [0, 250, 500, 750])
     np.testing.assert_array_equal(means.columns["position"], 0)
+
+
+def test_a_model_calibrate_refuses_is_not_diagnosed(tmp_path: Path, capsys) -> None:
+    # 1-s block means of the hand-turned log (`soakcal import --block-s 1`: blocks not
+    # checked for stillness): the blocks across the turns read directions the sensor
+    # never rested in. calibrate refuses the fit, naming the reading; diagnose must say
+    # "cannot judge" with the same line, not report "effects" of the fit's misfit.
+    rec = _hand_turned(seed=2)
+    block = np.floor(rec.t_s).astype(int)
+    from calibration.captures import group_means
+
+    src = tmp_path / "blocks.csv"
+    write_recording(src, Recording.from_columns(group_means(rec, block)))
+
+    class A:
+        pass
+
+    a = A()
+    a.recording, a.output, a.json, a.model = str(src), str(tmp_path / "m.json"), True, None
+    a.n_null, a.against, a.write_twin, a.report_dir, a.seed = None, None, None, None, None
+    assert cli.run_calibrate(a) == 2
+    refusal = capsys.readouterr().err.strip()
+    assert "no model written" in refusal and "sensor still" in refusal
+    assert cli.run_diagnose(a) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["verdict"] == "cannot judge" and doc["mismatch"] is None
+    assert doc["reason"] in refusal

@@ -152,3 +152,28 @@ def test_a_board_tilting_as_it_warms_is_refused_not_a_30_mg_per_c_tempco(tmp_pat
     assert code == 2 and not model.exists()
     assert "mg/°C" in err and "beyond any MEMS accelerometer's offset drift" in err
     assert "keep the board still" in err and len(err.splitlines()) == 1
+
+
+def test_a_short_log_with_a_jumping_channel_gets_no_rate_term():
+    # Six 1-s samples at one orientation, the channel jumping 0.2-0.3 °C up and down (a
+    # PX4 log's sensor_accel at 1 Hz): its "heating and cooling" is the channel's jitter,
+    # shorter than the window dT/dt is read over. No rate term may be fitted to it (one
+    # was "preferred" held out and written into a model that made x worse).
+    from calibration.fitting import fit
+    from calibration.gate import GateRefusal
+    from calibration.recording import Recording
+
+    rng = np.random.default_rng(3)
+    n = 6
+    acc = np.array([0.07, 0.025, -0.99]) + rng.normal(0.0, 4e-3, (n, 3))
+    rec = Recording.from_columns({
+        "t_s": np.arange(n, dtype=float), "sensor_c": np.array([40.0, 40.3, 40.1, 40.3, 40.1,
+                                                                40.3]),
+        "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2], "n": np.ones(n)})
+    try:
+        result = fit(rec)
+    except GateRefusal:
+        return  # no model at all: nothing with a rate term either
+    assert result.report.get("rate_term") is None
+    assert not result.report.get("rate_selection")
+    assert not any("rate term" in note for note in result.report["notes"])
