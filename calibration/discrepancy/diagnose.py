@@ -245,6 +245,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     terms: list[Term] = []
     findings: list[Finding] = []
     rejected: set[str] = set()
+    one_step: dict[str, dict[str, str]] = {}
     stage_log: list[dict[str, Any]] = []
     base_res = _residual(pb, [])
     prev_tests: dict[str, stats.CandidateTest] = {}
@@ -294,6 +295,14 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             stage_log[-1]["rejected_one_step"] = local
             notes.append(f"{eff.effect_id} not named: its evidence is step {local} alone, "
                          "which a local change of that plateau explains as well")
+            # Seen but not separable here (issue 22): listed with the reason, not named (apart
+            # from not_ident, which also says what the protocol could test).
+            one_step.setdefault(eff.effect_id, {
+                "effect": eff.effect_id,
+                "why": (f"its evidence here is step {local} alone (p_family = "
+                        f"{p_family:.2g}), which a local change of that plateau explains "
+                        "as well"),
+                "experiment": eff.experiment})
             continue
         excl_before = _flagged(pb, terms)
         excl_after = _flagged(pb, terms + [term])
@@ -393,7 +402,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                       "sd/sqrt(n) + between-capture sd (residual MAD)"
                       if pb.between_sd_g is not None else
                       "sd/sqrt(n)" if pb.noise_from_sd else "residual MAD"),
-        findings=findings, not_identifiable=list(not_ident.values()),
+        findings=findings, not_identifiable=list(not_ident.values()) + [
+            v for k, v in one_step.items() if k not in not_ident],
         located=locate_residuals(pb, base_res, final_res, flagged), heldout_scheme=scheme,
         n_null=n_null, alpha=alpha, notes=notes, final_rmse_ug=_rms(final_res, flagged),
         residuals_before_ug=(base_res * 1e6).reshape(shape),
