@@ -26,6 +26,18 @@ def test_a_step_of_the_temperature_channel_is_found_with_its_size_and_plateau():
     assert "reads +0.51" in f.explanation and "from step 6 on" in f.explanation
 
 
+def test_a_step_from_the_second_plateau_is_listed_as_not_separable_from_plateau_0():
+    """From plateau 1 on is "plateau 0 differs" to the cubic: seen, not named, and listed
+    with that reason (issue 22), not dropped silently."""
+    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=5), setpoints_c=ONE_WAY, seed=15)
+    col = rec.temperature_source
+    rec.columns[col] = rec.columns[col] + np.where(rec.steps() >= 1, 0.5, 0.0)
+    d = diagnose(rec, n_null=30, seed=5)
+    assert "temperature_sensor" not in [f.effect for f in d.findings]
+    why = {n["effect"]: n["why"] for n in d.not_identifiable}["temperature_sensor"]
+    assert "step 0 alone" in why
+
+
 def test_the_unstepped_channel_gives_no_finding():
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=5), setpoints_c=ONE_WAY, seed=15)
     assert diagnose(rec, n_null=30, seed=5).findings == []
