@@ -84,29 +84,20 @@ def pose_ids(positions: np.ndarray, input_g: np.ndarray, steps: np.ndarray) -> n
 
     Why not the direction alone: a two-axis table reaches the same gravity direction from
     several poses (every inner-axis angle at outer angle 0), and a tilt of the table or an
-    encoder error turns each of them differently. Poses seen on fewer than
-    ``MIN_POSE_PLATEAUS`` plateaus are left out.
+    encoder error turns each of them differently. One position id whose references differ
+    by more than ``SAME_POSE_G`` (a grid cell of that size) is several poses. Poses seen on
+    fewer than ``MIN_POSE_PLATEAUS`` plateaus are left out.
     """
-    out = np.full(positions.size, -1)
-    k = 0
-    for p in np.unique(positions):
-        rows = np.flatnonzero(positions == p)
-        centres: list[np.ndarray] = []
-        label = np.empty(rows.size, int)
-        for j, r in enumerate(rows):
-            for c, v in enumerate(centres):
-                if np.all(np.abs(input_g[r] - v) < SAME_POSE_G):
-                    label[j] = c
-                    break
-            else:
-                centres.append(input_g[r])
-                label[j] = len(centres) - 1
-        for c in range(len(centres)):
-            sel = rows[label == c]
-            if np.unique(steps[sel]).size >= MIN_POSE_PLATEAUS:
-                out[sel] = k
-                k += 1
-    return out
+    cell = np.round(np.asarray(input_g, float) / SAME_POSE_G).astype(np.int64)
+    key = np.column_stack([np.asarray(positions, np.int64), cell])
+    _, pose = np.unique(key, axis=0, return_inverse=True)
+    pose = pose.ravel()
+    seen = np.unique(np.column_stack([pose, np.asarray(steps, np.int64)]), axis=0)[:, 0]
+    keep = np.bincount(seen, minlength=int(pose.max()) + 1 if pose.size else 0
+                       ) >= MIN_POSE_PLATEAUS
+    new_id = np.full(keep.size, -1)
+    new_id[keep] = np.arange(int(keep.sum()))
+    return new_id[pose] if pose.size else np.full(0, -1)
 
 
 def across_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -153,13 +144,15 @@ def _reading_across_basis(pb) -> np.ndarray:
     """(N,3,2): each reading's two whitened directions across its reference, orthonormal."""
     ctx = pb.ctx
     w = pb.w.reshape(ctx.n, 3)
-    mag = np.linalg.norm(ctx.input_g, axis=1)
-    out = np.zeros((ctx.n, 3, 2))
-    for i in range(ctx.n):
-        u = ctx.input_g[i] / mag[i]
-        cols = np.column_stack(across_basis(u)) * w[i][:, None]
-        out[i] = np.linalg.qr(cols)[0]
-    return out
+    u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
+    a = np.eye(3)[np.argmin(np.abs(u), axis=1)]
+    e1 = np.cross(u, a)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    c1, c2 = e1 * w, np.cross(u, e1) * w  # whitened, then Gram–Schmidt per reading
+    c1 /= np.linalg.norm(c1, axis=1, keepdims=True)
+    c2 -= np.sum(c1 * c2, axis=1, keepdims=True) * c1
+    c2 /= np.linalg.norm(c2, axis=1, keepdims=True)
+    return np.stack([c1, c2], axis=2)
 
 
 @dataclass(frozen=True)
@@ -200,6 +193,9 @@ class TurntableGeometry(CatalogueEffect):
         if ctx.mode != "reference":
             return (False, "a turn of the specific force keeps its length, and the recording "
                     "has no reference (norm mode)", self.experiment)
+        if 8 * 3 * ctx.n * 2 * MIN_POSES > MAX_TURN_BYTES:
+            return (False, f"{ctx.n} readings: too large a design to test a turn of each "
+                    "pose here", self.experiment)
         pose = self._poses(ctx)
         n_pose = int(pose.max()) + 1 if pose.size else 0
         if n_pose < MIN_POSES:
