@@ -293,6 +293,12 @@ class TurntableGeometry(_RawOnly):
     base_tilt_rad: np.ndarray
     effect_id: str = "turntable_geometry"
 
+    @classmethod
+    def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> TurntableGeometry:
+        """The lab-frame tilt the finding fitted to its pose turns (lab_to_sensor poses)."""
+        return cls(base_tilt_rad=np.array([float(p["tilt_x_urad"]),
+                                           float(p["tilt_y_urad"])]) * 1e-6)
+
     def true_ref_g(self, ref_g: np.ndarray) -> np.ndarray:
         return tilted_ref_g(ref_g, self.base_tilt_rad)
 

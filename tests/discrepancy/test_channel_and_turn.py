@@ -26,6 +26,18 @@ def test_a_step_of_the_temperature_channel_is_found_with_its_size_and_plateau():
     assert "reads +0.51" in f.explanation and "from step 6 on" in f.explanation
 
 
+def test_a_step_from_the_second_plateau_is_listed_as_not_separable_from_plateau_0():
+    """From plateau 1 on is "plateau 0 differs" to the cubic: seen, not named, and listed
+    with that reason (issue 22), not dropped silently."""
+    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=5), setpoints_c=ONE_WAY, seed=15)
+    col = rec.temperature_source
+    rec.columns[col] = rec.columns[col] + np.where(rec.steps() >= 1, 0.5, 0.0)
+    d = diagnose(rec, n_null=30, seed=5)
+    assert "temperature_sensor" not in [f.effect for f in d.findings]
+    why = {n["effect"]: n["why"] for n in d.not_identifiable}["temperature_sensor"]
+    assert "step 0 alone" in why
+
+
 def test_the_unstepped_channel_gives_no_finding():
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=5), setpoints_c=ONE_WAY, seed=15)
     assert diagnose(rec, n_null=30, seed=5).findings == []
@@ -43,6 +55,65 @@ def test_a_tilted_table_is_not_named_a_nonlinearity():
     assert "without changing its length" in turned[0].explanation
     assert "record the gimbal angles" in turned[0].explanation
     assert "turntable_geometry" in {n["effect"] for n in d.not_identifiable}
+
+
+def _tilted(tilt_rad, order: str = "random"):
+    effects = [E.TurntableGeometry(base_tilt_rad=np.array(tilt_rad))] if any(tilt_rad) else []
+    return simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=effects),
+                             setpoints_c=ONE_WAY, seed=16, position_order=order,
+                             position_order_seed=3)
+
+
+def test_a_tilted_table_visited_in_a_random_order_is_named_with_its_tilt():
+    """A turn of each pose, the same at every visit and none along the reference, is the
+    table's (issue 22); its lab-frame tilt is read back in the twin's pose convention."""
+    d = diagnose(_tilted((20e-6, -10e-6)), n_null=30, seed=6)
+    assert [f.effect for f in d.findings] == ["turntable_geometry"]
+    p = d.findings[0].parameters
+    assert p["tilt_x_urad"] == pytest.approx(20.0, abs=3.0)
+    assert p["tilt_y_urad"] == pytest.approx(-10.0, abs=3.0)
+    assert p["n_poses"] == 24
+    assert "turns the specific force" in d.findings[0].explanation
+
+
+def test_an_untilted_table_in_a_random_order_gives_no_finding():
+    d = diagnose(_tilted((0.0, 0.0)), n_null=30, seed=6)
+    assert d.findings == []
+    assert "turntable_geometry" not in {n["effect"] for n in d.not_identifiable}
+
+
+def test_the_same_order_on_every_plateau_makes_a_turn_untestable_and_says_why():
+    """Pose and time slot are one regressor then: a settling would look the same."""
+    from calibration.discrepancy.effects import BY_ID
+    from calibration.discrepancy.problem import build_problem
+
+    fixed, shuffled = _tilted((20e-6, -10e-6), order="table"), _tilted((20e-6, -10e-6))
+    ok, why, _ = BY_ID["turntable_geometry"].identifiable(build_problem(fixed).ctx)
+    assert not ok and "same order on every plateau" in why
+    assert BY_ID["turntable_geometry"].identifiable(build_problem(shuffled).ctx)[0]
+    d = diagnose(fixed, n_null=30, seed=6)
+    assert "turntable_geometry" not in [f.effect for f in d.findings]
+    assert "turntable_geometry" in {n["effect"] for n in d.not_identifiable}
+
+
+def test_the_heldout_ridge_gives_a_block_without_evidence_no_weight():
+    from calibration.discrepancy.heldout import _shrunk_fit
+
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((400, 6))
+    y = X[:, 0] + rng.standard_normal(400)
+    b = np.array([False, False, True, True, True, True])
+    # the block orthogonal to the data and the plain columns: no evidence, so no weight
+    Q = np.linalg.qr(np.column_stack([X[:, :2], y]))[0]
+    X[:, 2:] -= Q @ (Q.T @ X[:, 2:])
+    beta = _shrunk_fit(X.T @ X, X.T @ y, float(y @ y), 400, b)
+    assert np.all(beta[2:] == 0.0) and beta[0] == pytest.approx(1.0, abs=0.2)
+    # evidence in the block: its coefficients are shrunk towards 0, the plain ones not
+    y2 = y + X[:, 2:] @ np.array([1.0, -1.0, 0.5, 0.5])
+    beta2 = _shrunk_fit(X.T @ X, X.T @ y2, float(y2 @ y2), 400, b)
+    free = np.linalg.solve(X.T @ X, X.T @ y2)
+    assert 0.0 < np.linalg.norm(beta2[2:]) < np.linalg.norm(free[2:])
+    assert beta2[0] == pytest.approx(free[0], abs=0.05)
 
 
 def test_a_real_nonlinearity_keeps_its_name():

@@ -73,6 +73,9 @@ class CatalogueEffect:
     # mostly a re-map of the base's own terms (a temperature-channel step) is judged by the
     # power of its remnant instead, with the same bootstrap null.
     absorbed_max: float = 0.99
+    # True: one free parameter per place (a turn of each table pose); its held-out
+    # prediction fits them with an empirical-Bayes ridge (heldout._shrunk_fit), not freely.
+    shrunk_heldout: bool = False
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:
@@ -92,6 +95,12 @@ class CatalogueEffect:
         always use :meth:`regressors`.
         """
         return self.regressors(ctx, theta)
+
+    def test_stats(self, pb: Any, U: np.ndarray, Xw: np.ndarray, e: np.ndarray,
+                   E: np.ndarray) -> tuple[float, np.ndarray, int, float, float] | None:
+        """The test's (log p, log p per null replicate, dof, absorbed fraction, explained SS)
+        when the effect scales it by a noise of its own; None: ``stats.linear_stats``."""
+        return None
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         """Protocol-level check: (can this recording show it, why not, experiment that would)."""
