@@ -32,8 +32,17 @@ def folds(ctx: DesignContext) -> tuple[list[np.ndarray], str]:
 
 def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
                    fold_masks: list[np.ndarray], exclude_rows: np.ndarray) -> float:
-    """RMS (µg) of held-out prediction errors, fitting weighted LS on the other folds."""
-    sq, cnt = 0.0, 0
+    """Noise-weighted RMS (µg) of held-out prediction errors, fitting weighted LS on the
+    other folds: ``sqrt(Σ w²·err² / Σ w²)`` (the plain RMS when every reading is as noisy).
+
+    Why weighted (issue 22): with unequal noise (a vibrating cold plateau's readings
+    scatter 10–20× more than a quiet one's) the plain RMS is the noisy plateaus' own
+    scatter, and a term's real gain on the quiet plateaus drowned in the cross term of
+    its small change of prediction with that scatter: terms at p ≈ 10⁻¹⁸ were rejected
+    as "no held-out gain". Weighted as the fit itself is, each plateau counts by its
+    information.
+    """
+    sq, cnt = 0.0, 0.0
     # Columns scaled to unit norm: effect columns can be 10⁷ smaller than the base's
     # (a vibration term is ∝ sd² ≈ 1e-7 g²), and pinv's relative cut-off would drop them.
     scale = column_scale(X * w[:, None])
@@ -49,10 +58,10 @@ def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
         Gt = G - Xw[hold].T @ Xw[hold]
         ht = h - Xw[hold].T @ yw[hold]
         beta = np.linalg.pinv(Gt, rcond=1e-12, hermitian=True) @ ht
-        err = y[test] - X[test] @ beta
+        err = (y[test] - X[test] @ beta) * w[test]
         sq += float(err @ err)
-        cnt += int(test.sum())
-    return float(np.sqrt(sq / max(cnt, 1)) * 1e6)
+        cnt += float(w[test] @ w[test])
+    return float(np.sqrt(sq / cnt) * 1e6) if cnt > 0 else 0.0
 
 
 def column_scale(Xw: np.ndarray) -> np.ndarray:
