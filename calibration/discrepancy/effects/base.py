@@ -73,6 +73,9 @@ class CatalogueEffect:
     # mostly a re-map of the base's own terms (a temperature-channel step) is judged by the
     # power of its remnant instead, with the same bootstrap null.
     absorbed_max: float = 0.99
+    # Named among its significant confusers (that set it too) only as the clearly best fit,
+    # else reported not identifiable with the close ones (by_fit.py, issue 22).
+    named_by_fit: bool = False
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:

@@ -48,6 +48,7 @@ class TemperatureRate(CatalogueEffect):
         ("thermal_hysteresis", "a rate term fades as the die settles within each plateau and "
                                "scales with the step's size; hysteresis persists at ±h"),)
     writes_extension: bool = True
+    named_by_fit: bool = True
     absorbed_max: float = ABSORBED_MAX_RATE
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
