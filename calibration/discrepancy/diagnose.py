@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy import by_fit, stats
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
-from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
@@ -249,6 +250,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     stage_log: list[dict[str, Any]] = []
     base_res = _residual(pb, [])
     prev_tests: dict[str, stats.CandidateTest] = {}
+    unresolved: dict[str, list[str]] = {}  # named term → candidates it fits alike (by_fit)
+    told_apart: set[str] = set()  # named over significant rivals by a clear margin (by_fit)
     tail_nu = np.inf
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
@@ -284,6 +287,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                         c["p_after"] = float(f"{tests[k].p_adj:.3g}")
         if p_family > alpha_sel:
             break
+        # The name among confusers that explain the same structure: the clear best fit.
+        best, close = by_fit.name_by_fit(best, tests, e, U.shape[1],
+                                         partial(_explained, pb, U, e, lifted), alpha)
         eff = BY_ID[best.effect_id]
         X_refined = None
         if eff.continuous:
@@ -338,6 +344,10 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         findings.append(_finding(pb, eff, best, term, terms, tests, p_family,
                                  _rms(res_before, excl_before), _rms(res_after, excl_after),
                                  ho_before, ho_after))
+        if close:
+            unresolved[eff.effect_id] = close
+        elif by_fit.rivals(best, tests, alpha):
+            told_apart.add(eff.effect_id)
         prev_tests = tests
     U = E = None  # the last stage's basis and replicates: the scan builds its own
     if np.isfinite(tail_nu):
@@ -378,7 +388,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # What the protocol separates: the effects still testable after the absorbed fractions.
     protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                        for e in effects})
-    findings = [_as_protocol_allows(f, protocol, not_ident, alpha) for f in findings]
+    # A name the data chose over its significant rivals by a clear margin (by_fit) stands
+    # even where the protocol alone would withhold it: the fit, not the protocol, told them.
+    findings = [f if f.effect in told_apart else _as_protocol_allows(f, protocol, not_ident,
+                                                                     alpha) for f in findings]
+    findings = [by_fit.as_not_separable(f, unresolved[f.effect], not_ident)
+                if f.effect in unresolved else f for f in findings]
     findings = _merge_outliers(findings)
     final_res = _residual(pb, terms)
     flagged = _flagged(pb, terms)
@@ -845,6 +860,12 @@ def _make_term(pb: LinearProblem, eff: CatalogueEffect, test: stats.CandidateTes
         return Term(eff.effect_id, float(i), X, (i,))
     X = lifted(eff, test.theta) if X is None else X
     return Term(eff.effect_id, test.theta, X, (), test.theta_sd)
+
+
+def _explained(pb: LinearProblem, U: np.ndarray, e: np.ndarray, lifted,
+               eff: CatalogueEffect, theta: float) -> tuple[float, int]:
+    """Explained SS of an effect's test columns at θ after the current model (by_fit)."""
+    return stats.explained_ss(U, pb.whiten(lifted(eff, theta)), e, eff.one_sided)
 
 
 def _design(pb: LinearProblem, terms: list[Term], whiten: bool = True):

@@ -33,14 +33,22 @@ def folds(ctx: DesignContext) -> tuple[list[np.ndarray], str]:
 def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
                    fold_masks: list[np.ndarray], exclude_rows: np.ndarray,
                    shrunk: np.ndarray | None = None, in_noise_units: bool = False) -> float:
-    """RMS (µg) of held-out prediction errors, fitting weighted LS on the other folds.
+    """Noise-weighted RMS (µg) of held-out prediction errors, fitting weighted LS on the
+    other folds: ``sqrt(Σ w²·err² / Σ w²)`` (the plain RMS when every reading is as noisy).
+
+    Why weighted (issue 22): with unequal noise (a vibrating cold plateau's readings
+    scatter 10–20× more than a quiet one's) the plain RMS is the noisy plateaus' own
+    scatter, and a term's real gain on the quiet plateaus drowned in the cross term of
+    its small change of prediction with that scatter: terms at p ≈ 10⁻¹⁸ were rejected
+    as "no held-out gain". Weighted as the fit itself is, each plateau counts by its
+    information.
 
     ``shrunk`` (p,) bool: columns of a term with one free parameter per place (a turn of
     each table pose) fitted by ridge with an empirical-Bayes prior (:func:`_shrunk_fit`),
     on each fold's training rows only; None: plain least squares for all.
-    ``in_noise_units``: the errors weighted by 1/σ (an RMS in units of the noise, not µg).
+    ``in_noise_units``: ``sqrt(Σ w²·err² / n)``, an RMS in units of the noise (×10⁶).
     """
-    sq, cnt = 0.0, 0
+    sq, cnt = 0.0, 0.0
     yy = float((y * w) @ (y * w))
     # Columns scaled to unit norm: effect columns can be 10⁷ smaller than the base's
     # (a vibration term is ∝ sd² ≈ 1e-7 g²), and pinv's relative cut-off would drop them.
@@ -61,12 +69,10 @@ def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
             beta = _shrunk_fit(Gt, ht, yy - float(yw[hold] @ yw[hold]), n_train, shrunk)
         else:
             beta = np.linalg.pinv(Gt, rcond=1e-12, hermitian=True) @ ht
-        err = y[test] - X[test] @ beta
-        if in_noise_units:
-            err = err * w[test]
+        err = (y[test] - X[test] @ beta) * w[test]
         sq += float(err @ err)
-        cnt += int(test.sum())
-    return float(np.sqrt(sq / max(cnt, 1)) * 1e6)
+        cnt += float(test.sum()) if in_noise_units else float(w[test] @ w[test])
+    return float(np.sqrt(sq / cnt) * 1e6) if cnt > 0 else 0.0
 
 
 def _shrunk_fit(G: np.ndarray, h: np.ndarray, yy: float, n: int, b: np.ndarray) -> np.ndarray:

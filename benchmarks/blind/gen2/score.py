@@ -122,7 +122,7 @@ def markdown(res: dict, header: str) -> str:
            "|---|---|---|---|---|---|---|"]
     for eid, ms in res["attribution"].items():
         one, two = ms.get("1x"), ms.get("2x")
-        out.append(f"| {eid} | {one['k']}/{one['n'] if one else 0} | "
+        out.append(f"| {eid} | {one['k'] if one else 0}/{one['n'] if one else 0} | "
                    f"{two['k'] if two else 0}/{two['n'] if two else 0} | "
                    f"{', '.join(str(x) for x in two['named']) if two else ''} | "
                    f"{two['wrong_catalogue_name'] if two else ''} | "

@@ -76,6 +76,9 @@ class CatalogueEffect:
     # True: one free parameter per place (a turn of each table pose); its held-out
     # prediction fits them with an empirical-Bayes ridge (heldout._shrunk_fit), not freely.
     shrunk_heldout: bool = False
+    # Named among its significant confusers (that set it too) only as the clearly best fit,
+    # else reported not identifiable with the close ones (by_fit.py, issue 22).
+    named_by_fit: bool = False
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:

@@ -37,6 +37,7 @@ class BiasDrift(CatalogueEffect):
                        "setpoint at the end) or hold one plateau for several hours")
     # Needs t_s, which compensate does not have: identity there, recorded for the twin.
     writes_extension: bool = True
+    named_by_fit: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return per_axis(ctx, (ctx.t_s - ctx.t_s.min()) / 3600.0)

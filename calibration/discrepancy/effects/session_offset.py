@@ -43,6 +43,7 @@ class SessionOffset(CatalogueEffect):
                              "change; a session jump does not"),
     )
     writes_extension: bool = True
+    named_by_fit: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         if ctx.session is not None:

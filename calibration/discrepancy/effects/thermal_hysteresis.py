@@ -44,6 +44,7 @@ class ThermalHysteresis(CatalogueEffect):
         ("bias_drift", "hysteresis flips with heating/cooling at revisited temperatures; "
                        "drift is monotonic in time"),)
     writes_extension: bool = True
+    named_by_fit: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return per_axis(ctx, ctx.direction)

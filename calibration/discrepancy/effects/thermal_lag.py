@@ -59,6 +59,7 @@ class ThermalLag(CatalogueEffect):
     )
     # Informational: compensate should use the die temperature; the term documents the lag.
     writes_extension: bool = True
+    named_by_fit: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         return list(TAU_GRID_S)

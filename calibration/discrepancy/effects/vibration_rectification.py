@@ -33,6 +33,7 @@ class VibrationRectification(CatalogueEffect):
     experiment: str = ("record sd_* and take positions with the chamber compressor on and off "
                        "at the same temperature")
     writes_extension: bool = True
+    named_by_fit: bool = True
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         assert ctx.sd_g is not None
