@@ -394,6 +394,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                                                      alpha) for f in findings]
     findings = [by_fit.as_not_separable(f, unresolved[f.effect], not_ident)
                 if f.effect in unresolved else f for f in findings]
+    # Once more, after the two demotions above added to not_ident: candidates the fit
+    # could not tell apart are not "separable" in this recording, and the protocol block
+    # must not say so beside a finding that says the opposite.
+    protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
+                                       for e in effects})
     findings = _merge_outliers(findings)
     final_res = _residual(pb, terms)
     flagged = _flagged(pb, terms)

@@ -129,3 +129,30 @@ def test_effects_outside_the_family_are_left_to_the_p_value_ranking():
     chosen, close = by_fit.name_by_fit(tests["scale_nonlinearity"], tests, e, 0,
                                        lambda eff, th: (0.0, 3), alpha=0.01)
     assert chosen.effect_id == "scale_nonlinearity" and close == []
+
+
+def test_candidates_the_fit_cannot_tell_apart_are_not_listed_as_separable():
+    """A session jump at the turn of an up-down campaign with no session column fits as a
+    hysteresis does: the finding names both as candidates, and the protocol block of the
+    same report must not list either as separated by this recording."""
+    import json
+
+    from benchmarks.blind.gen2 import effects as fx
+    from benchmarks.blind.gen2 import protocol
+    from benchmarks.blind.gen2 import simulate as sim
+    from benchmarks.blind.gen2.sensor import draw_sensor
+    from calibration.discrepancy import diagnose
+    from calibration.recording import Recording
+    from tests.discrepancy.test_own_scatter import _pools
+
+    rng = np.random.default_rng(300)
+    pr = protocol.draw_protocol(rng, kind="updown", schedule="dense24",
+                                columns=("chamber_c",), soak_min=45.0)
+    pat = fx.pattern(rng, len(pr.setpoints_c), 10)
+    cols = sim.record(pr, draw_sensor(rng), _pools(), "session_offset", 8.0, pat, 0)
+    d = json.loads(diagnose(Recording.from_columns(cols), seed=0, n_null=100).to_json())
+    unresolved = [f for f in d["findings"] if f["where"].get("candidates")]
+    assert unresolved, d["findings"]
+    candidates = set(unresolved[0]["where"]["candidates"])
+    assert {"session_offset", "thermal_hysteresis"} <= candidates
+    assert not candidates & set(d["protocol"]["separable"])
