@@ -142,6 +142,7 @@ def fit(recording: Recording, options: FitOptions | None = None) -> CalibrationF
         tf = fit_continuous(captures, seg, g_local=g_local, rate_gain_ug_per_c_per_min=k,
                             orientation=ori.labels)
         gate.check_model(tf.model, captures, tf.row_temperature_c)
+        _say_air_only(tf, captures, seg.continuous_rows)
         if opts.method:
             note = (f"--method {opts.method} applies to step fits; this recording has rows "
                     "on no plateau and was fitted continuously")
@@ -158,6 +159,37 @@ def fit(recording: Recording, options: FitOptions | None = None) -> CalibrationF
     tf.model.notes[:0] = caps.notes
     _record_gravity(tf, opts.gravity)
     return _from_thermal(tf, decided, captures)
+
+
+AIR_ONLY_NOTE = (
+    "only chamber_c (the air) was recorded on {n} row(s) where the chamber moved: the die "
+    "lags the air by its time constant × the ramp rate, unknown without the die's own "
+    "channel, so this model's temperatures are the air's (off by that lag, with opposite "
+    "signs on heating and cooling), and a rate sensitivity k fitted from the legs holds the "
+    "lag, not the sensor's own k; its residuals do not bound its error at rest: record "
+    "sensor_c (the die temperature) on a ramp, or soak")
+
+
+def _say_air_only(tf: ThermalFit, captures: Recording, continuous_rows: int) -> None:
+    """A continuous fit on the chamber air alone cannot know the die temperature: say so
+    plainly (note and 'not identified'), as the gate says what orientations cannot fix."""
+    if captures.temperature_source != "chamber_c" or continuous_rows == 0:
+        return
+    note = AIR_ONLY_NOTE.format(n=continuous_rows)
+    tf.notes.append(note)
+    tf.model.notes.append(note)
+    tf.report.setdefault("notes", []).append(note)
+    ident = tf.report.get("identified")
+    if isinstance(ident, dict):
+        no = ident.setdefault("not_identified", [])
+        no.append("the die temperature of the rows where the chamber moved (only chamber_c): "
+                  "the model is the sensor against the air, not the die")
+        # a k fitted from the legs is the lag seen through the tempco, not the sensor's own
+        for line in [x for x in ident.get("identified", []) if x.startswith("rate sensit")]:
+            ident["identified"].remove(line)
+            no.append("the sensor's own rate sensitivity and hysteresis: with only the air's "
+                      "temperature, the heating and cooling legs' difference is mostly the die "
+                      "lag (" + line.split(" from the heating")[0] + ")")
 
 
 def rmse_after_ug(steps: tuple[StepResult, ...] | list[StepResult]) -> float:

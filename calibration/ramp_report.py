@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from calibration import sfem
-from calibration.continuous import AGREE_SIGMAS, BAND_C, METHOD, norm_rmse_ug
+from calibration.continuous import AGREE_SIGMAS, BAND_C, METHOD, MIN_LEG_ROWS, norm_rmse_ug
 from calibration.plateaus import (
     MIN_POSITIONS_NORM,
     MIN_POSITIONS_REFERENCE,
@@ -170,6 +170,15 @@ def identified(model: ThermalModel, bands: list[dict[str, Any]], solution: Any,
             no.append("rate sensitivity and hysteresis: the die moved one way only, so "
                       "k·dT/dt cannot be told from the bias; it is inside the bias "
                       "polynomial (ramp up and down, or give --rate-gain-ug-per-c-per-min)")
+        elif model.provenance.get("rate_gain_ug_per_c_per_min") is None:
+            # both ways, but a leg too short to tell k from the bias: say so, not nothing
+            rows = {s: int(np.sum(legs == s)) for s in (1, -1)}
+            short = ", ".join(f"{'heating' if s > 0 else 'cooling'} {n} row(s)"
+                              for s, n in rows.items() if n < MIN_LEG_ROWS)
+            no.append(f"rate sensitivity and hysteresis: a leg is too short to fit them "
+                      f"({short}; {MIN_LEG_ROWS} needed each way), so k·dT/dt cannot be told "
+                      f"from the bias; it is inside the bias polynomial (a longer leg each "
+                      f"way, or give --rate-gain-ug-per-c-per-min)")
     thin = [b for b in bands if not b["determined_here"]]
     if thin:
         no.append("bands with too few orientations to determine the model on their own "
