@@ -307,11 +307,13 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         X_after, y_after = _design(pb, terms + [term], whiten=False)
         ho_after = heldout_rms_ug(y_after, X_after, pb.w, pb.row, fold_masks, excl_after)
         del X_after
-        # A flagged reading is evidenced by its own test; scored on the same rows its held-out
-        # gain is only its pull on the other plateaus' fit, often below the 0.01 µg
-        # resolution: it must not make the prediction worse. Every other term must improve.
-        ok = heldout_improved(ho_before, ho_after) or (
-            bool(term.rows) and _r(ho_after) <= _r(ho_before))
+        # A flagged reading is evidenced by its own test, which is a held-out test already:
+        # the reading left out and predicted by all the others. Scored on the same rows, its
+        # gain on the other plateaus is only its pull on their fit, far below their noise,
+        # so "not worse" there was a coin toss (issue 22: half the outliers at twice their
+        # detectable size were rejected by it). Its held-out figures are reported, not
+        # required. Every other term must improve them.
+        ok = bool(term.rows) or heldout_improved(ho_before, ho_after)
         if not ok:
             rejected.add(eff.effect_id)
             stage_log[-1]["rejected_heldout"] = [ho_before, ho_after]

@@ -1,4 +1,4 @@
-"""Held-out residual RMS by whole plateaus (never single rows): docs/diagnosis.md §6.
+"""Held-out residual RMS, noise-weighted, by whole plateaus (not single rows): docs §6.
 
 Folds are the interior temperature steps (leave-one-step-out; the end steps
 are never held out because a cubic does not extrapolate and that would test
@@ -32,8 +32,15 @@ def folds(ctx: DesignContext) -> tuple[list[np.ndarray], str]:
 
 def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
                    fold_masks: list[np.ndarray], exclude_rows: np.ndarray) -> float:
-    """RMS (µg) of held-out prediction errors, fitting weighted LS on the other folds."""
-    sq, cnt = 0.0, 0
+    """Noise-weighted RMS (µg) of held-out prediction errors, weighted LS on the other folds.
+
+    ``sqrt(Σ w²·err² / Σ w²)``: each error counts by its reading's inverse noise variance,
+    as in the fit (equal noise: the plain RMS). Why (issue 22): with one plateau's capture
+    means 10–20 × noisier than the rest (a vibrating bench), the plain RMS is that
+    plateau's noise, and whether a term "improved" it was a coin toss: a nonlinearity at
+    p = 1e-11 was rejected by a 0.04 µg rise in a 103 µg figure.
+    """
+    sq, cnt = 0.0, 0.0
     # Columns scaled to unit norm: effect columns can be 10⁷ smaller than the base's
     # (a vibration term is ∝ sd² ≈ 1e-7 g²), and pinv's relative cut-off would drop them.
     scale = column_scale(X * w[:, None])
@@ -49,10 +56,10 @@ def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
         Gt = G - Xw[hold].T @ Xw[hold]
         ht = h - Xw[hold].T @ yw[hold]
         beta = np.linalg.pinv(Gt, rcond=1e-12, hermitian=True) @ ht
-        err = y[test] - X[test] @ beta
+        err = (y[test] - X[test] @ beta) * w[test]
         sq += float(err @ err)
-        cnt += int(test.sum())
-    return float(np.sqrt(sq / max(cnt, 1)) * 1e6)
+        cnt += float(w[test] @ w[test])
+    return float(np.sqrt(sq / cnt) * 1e6) if cnt > 0 else 0.0
 
 
 def column_scale(Xw: np.ndarray) -> np.ndarray:
