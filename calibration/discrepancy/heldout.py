@@ -1,4 +1,4 @@
-"""Held-out residual RMS, noise-weighted, by whole plateaus (not single rows): docs §6.
+"""Held-out residual RMS by whole plateaus (never single rows): docs/diagnosis.md §6.
 
 Folds are the interior temperature steps (leave-one-step-out; the end steps
 are never held out because a cubic does not extrapolate and that would test
@@ -32,13 +32,15 @@ def folds(ctx: DesignContext) -> tuple[list[np.ndarray], str]:
 
 def heldout_rms_ug(y: np.ndarray, X: np.ndarray, w: np.ndarray, row: np.ndarray,
                    fold_masks: list[np.ndarray], exclude_rows: np.ndarray) -> float:
-    """Noise-weighted RMS (µg) of held-out prediction errors, weighted LS on the other folds.
+    """Noise-weighted RMS (µg) of held-out prediction errors, fitting weighted LS on the
+    other folds: ``sqrt(Σ w²·err² / Σ w²)`` (the plain RMS when every reading is as noisy).
 
-    ``sqrt(Σ w²·err² / Σ w²)``: each error counts by its reading's inverse noise variance,
-    as in the fit (equal noise: the plain RMS). Why (issue 22): with one plateau's capture
-    means 10–20 × noisier than the rest (a vibrating bench), the plain RMS is that
-    plateau's noise, and whether a term "improved" it was a coin toss: a nonlinearity at
-    p = 1e-11 was rejected by a 0.04 µg rise in a 103 µg figure.
+    Why weighted (issue 22): with unequal noise (a vibrating cold plateau's readings
+    scatter 10–20× more than a quiet one's) the plain RMS is the noisy plateaus' own
+    scatter, and a term's real gain on the quiet plateaus drowned in the cross term of
+    its small change of prediction with that scatter: terms at p ≈ 10⁻¹⁸ were rejected
+    as "no held-out gain". Weighted as the fit itself is, each plateau counts by its
+    information.
     """
     sq, cnt = 0.0, 0.0
     # Columns scaled to unit norm: effect columns can be 10⁷ smaller than the base's
