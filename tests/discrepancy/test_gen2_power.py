@@ -112,3 +112,18 @@ def test_too_few_input_levels_cannot_show_a_bend():
     d = diagnose(rec, seed=0, n_null=100)
     assert "scale_nonlinearity" not in [f.effect for f in d.findings]
     assert any("too few input levels" in n for n in d.notes)
+
+
+def test_outliers_do_not_set_the_noise_they_are_judged_against(monkeypatch):
+    """Two captures 15 σ off on all axes among 300: the fitted noise stays the others'."""
+    from calibration.discrepancy import problem
+
+    rng = np.random.default_rng(2)
+    sig2 = np.full((300, 3), 10e-6**2)
+    e = rng.standard_normal((300, 3)) * 10e-6
+    clean = problem.capture_noise(e, np.sqrt(sig2), 1.0)[0]
+    e[[3, 7]] = 150e-6
+    assert np.allclose(problem.capture_noise(e, np.sqrt(sig2), 1.0)[0], clean, rtol=0.05)
+    # Both kept in the fit (no tail left out), the noise is 1.5 × the others' scatter.
+    monkeypatch.setattr(problem, "FAR_ALPHA", 0.0)
+    assert np.median(problem.capture_noise(e, np.sqrt(sig2), 1.0)[0]) > 1.3 * np.median(clean)
