@@ -127,3 +127,15 @@ def test_outliers_do_not_set_the_noise_they_are_judged_against(monkeypatch):
     # Both kept in the fit (no tail left out), the noise is 1.5 × the others' scatter.
     monkeypatch.setattr(problem, "FAR_ALPHA", 0.0)
     assert np.median(problem.capture_noise(e, np.sqrt(sig2), 1.0)[0]) > 1.3 * np.median(clean)
+
+
+def test_a_crack_within_a_plateau_is_not_an_outlier(monkeypatch):
+    """A bias and scale change of y from 40 % into plateau 3 on: two readings of the run were
+    flagged; the first withdrawn by its time companions, the second stood alone. A reading
+    inside a withdrawn run is not isolated either (the crack is ``unexplained``)."""
+    rec = _record(1, "sparse18", "crack", 60.0, axis=1, crack_frac=0.4, from_step=3)
+    d = diagnose(rec, seed=0, n_null=100)
+    assert [f.effect for f in d.findings] == ["unexplained"]
+    assert any("lies in the run of readings withdrawn" in n for n in d.notes)
+    monkeypatch.setattr(diagnose_mod, "_inside_withdrawn_runs", lambda *a: [])
+    assert "outlier" in [f.effect for f in diagnose(rec, seed=0, n_null=100).findings]
