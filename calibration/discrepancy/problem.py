@@ -124,6 +124,9 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
     return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
 
 
+FAR_ALPHA = 0.01  # entries beyond this family-wise χ²₁ tail do not set the noise (capture_noise)
+
+
 def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
                   known_var: np.ndarray | None = None, floor: np.ndarray | None = None,
                   across: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
@@ -161,8 +164,14 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     ρ² with κ and τ. Why (issue 22): one τ² for all entries under-stated the axes across
     gravity and over-stated the one along it, so a position×axis block of the localised
     scan stood out on null recordings with placement error.
+
+    Entries far beyond the fitted σ (χ²₁ tail below :data:`FAR_ALPHA` over all entries)
+    are left out and the fit repeated once: the noise an outlier is judged against must
+    not be raised by the outlier (issue 22: two readings 8 σ off on one plateau doubled
+    κ, and both were then missed).
     """
     from scipy.optimize import minimize
+    from scipy.stats import chi2
 
     sig2 = np.asarray(sig, float) ** 2
     known = np.zeros_like(sig2) if known_var is None else np.asarray(known_var, float)
@@ -179,9 +188,11 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
         # ρ² = q3·w0 across the reference
         return (1.0 + q[0]) * (w_ - fl_) + q[2] * fl_ + q[1] * w0 + q[3] * w0 * ac_ + kv_
 
+    keep = np.ones(w.size, bool)
+
     def nll(q: np.ndarray) -> float:
-        v = var(q, w, fl, kv, ac)
-        return float(np.sum(np.log(v) + e2 / v)) / w.size
+        v = var(q, w[keep], fl[keep], kv[keep], ac[keep])
+        return float(np.sum(np.log(v) + e2[keep] / v)) / int(keep.sum())
 
     start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0), 1.0, 0.0])
     q0_bounds = (0.0, 1e6) if floor is None else (1e-3, 1e4)
@@ -189,8 +200,12 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
               (0.0, 0.0) if across is None else (0.0, 1e6)]
     # Why the tight tolerances: with four parameters the default stop left σ at ~1e-6
     # relative, enough to differ between the dense and the row-block design (issue 10).
-    q = minimize(nll, start, method="L-BFGS-B", bounds=bounds,
-                 options={"ftol": 1e-14, "gtol": 1e-12, "maxiter": 2000}).x
+    opts = {"ftol": 1e-14, "gtol": 1e-12, "maxiter": 2000}
+    q = minimize(nll, start, method="L-BFGS-B", bounds=bounds, options=opts).x
+    far = e2 / var(q, w, fl, kv, ac) > chi2.isf(FAR_ALPHA / max(w.size, 1), 1)
+    if far.any() and int((~far).sum()) >= w.size // 2:
+        keep = ~far
+        q = minimize(nll, q, method="L-BFGS-B", bounds=bounds, options=opts).x
     kappa, tau2 = 1.0 + float(q[0]), float(q[1]) * w0
     return np.sqrt(var(q, sig2, fl_all, known, ac_all)), kappa, float(np.sqrt(tau2))
 

@@ -7,12 +7,22 @@ the absorbed fraction measures that.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, CatalogueEffect, fmt_pm, vec3
+from calibration.discrepancy.effects.structure import (
+    SAME_DIRECTION_G,
+    extend,
+    log_p,
+    per_axis_indicator,
+    whitened,
+)
 
 
 def own_powers(a: np.ndarray) -> np.ndarray:
@@ -50,6 +60,13 @@ class ScaleNonlinearity(CatalogueEffect):
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         return own_powers(ctx.input_g)
+
+    def misses(self, pb: Any, U: np.ndarray, e: np.ndarray, theta: float,
+               where: Mapping[str, Any], axes: list[str], alpha: float) -> dict[str, Any] | None:
+        """Visits that differ (the input-only check), or an input dependence that is not a
+        bend: :func:`bends_otherwise`."""
+        found = super().misses(pb, U, e, theta, where, axes, alpha)
+        return found if found is not None else bends_otherwise(pb, U, e, axes, alpha)
 
     def parameters(self, coef, se, theta, ctx):
         p, s = {}, {}
@@ -89,3 +106,103 @@ class ScaleNonlinearity(CatalogueEffect):
                 parts.append(f"{ax} output grows with the cube of its input: "
                              f"K3 = {fmt_pm(k3, s3, 'µg/g³')}")
         return "; ".join(parts)
+
+
+def direction_ids(positions: np.ndarray, input_g: np.ndarray) -> np.ndarray:
+    """(N,) index of each reading's reference direction (positions within
+    ``SAME_DIRECTION_G`` on every axis share one)."""
+    ids = [int(p) for p in np.unique(positions)]
+    centre: list[np.ndarray] = []
+    of_pos: dict[int, int] = {}
+    for p in ids:
+        d = np.median(input_g[positions == p], axis=0)
+        for j, c in enumerate(centre):
+            if np.all(np.abs(c - d) < SAME_DIRECTION_G):
+                of_pos[p] = j
+                break
+        else:
+            of_pos[p] = len(centre)
+            centre.append(d)
+    return np.array([of_pos[int(p)] for p in positions])
+
+
+BEND_FUNCTIONS = 4  # 1, a, a², a³: the base's bias and scale and the bend's two terms
+LEVEL_G = 0.05  # inputs closer than this on an axis are one level
+
+
+def input_levels(a_g: np.ndarray) -> int:
+    """Distinct levels of one axis's input (within :data:`LEVEL_G`)."""
+    v = np.sort(np.asarray(a_g, float))
+    return int(1 + np.sum(np.diff(v) > LEVEL_G)) if v.size else 0
+
+
+def _own_log10_p(pb: Any, ax: tuple[int, ...]) -> float | None:
+    """log10 p of the a², a³ columns on axes ``ax`` after the base model alone (single test)."""
+    if 8 * pb.m * pb.X0.shape[1] > stats.TALL_BYTES:
+        return None
+    U0 = stats.orthonormal_basis(pb.whiten(np.asarray(pb.X0)))
+    yw = pb.y * pb.w
+    cols = own_powers(pb.ctx.input_g)[:, :, [c for a in ax for c in (a, 3 + a)]]
+    lp, k = log_p(U0, yw - U0 @ (U0.T @ yw), whitened(pb, cols))
+    return round(float(lp / np.log(10)), 1) if k else None
+
+
+def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
+                    alpha: float) -> dict[str, Any] | None:
+    """An input dependence the own-axis a², a³ do not describe, or None (issue 22).
+
+    ``U``, ``e``: the model with the nonlinearity. A free offset per reference direction on
+    the term's axes, the same at every plateau, is tested after the model and a turn of the
+    reference (``turntable_geometry.turn_columns``, whose own confusion with a bend is judged
+    apart). A smooth bend of the output with its input leaves nothing there but noise (the
+    test rejects with probability α); a converter error confined to a band of codes (an
+    offset at the directions whose input falls in the band, none at those on either side)
+    or any other non-polynomial function of the direction does, and the a², a³ term then
+    took only the share of it a parabola can carry. Where the term's axes see at most
+    :data:`BEND_FUNCTIONS` input levels (Table-1-like sparse schedules: |a_z| of 0.5 and 1 g
+    only), bias, scale, a² and a³ fit *any* function of that input: the bend is then not
+    shown, and the structure is reported where it is, not named. Reference mode only (a direction's
+    offset per axis needs the axes). Returns the place (positions, axes, log10 p).
+    """
+    if pb.mode != "reference":
+        return None
+    from calibration.discrepancy.effects.turntable_geometry import turn_columns
+
+    ctx = pb.ctx
+    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
+    levels = {a: input_levels(ctx.input_g[:, a]) for a in ax}
+    if max(levels.values()) <= BEND_FUNCTIONS:
+        shown = ", ".join(f"{AXES[a]}: {levels[a]}" for a in ax)
+        return {"positions": sorted({int(p) for p in ctx.positions}),
+                "axes": [AXES[a] for a in ax], "log10_p": _own_log10_p(pb, ax),
+                "why": (f"the structure is a function of each axis's own input, but the "
+                        f"protocol holds too few input levels on the term's axes ({shown}; "
+                        f"bias, scale, a² and a³ fit any function of up to {BEND_FUNCTIONS} "
+                        "levels): a "
+                        "bend cannot be told from any other input dependence there, e.g. a "
+                        "converter error confined to a band of codes (positions with more "
+                        "input levels on those axes, such as oblique ones, tell them apart)")}
+    dirs = direction_ids(ctx.positions, ctx.input_g)
+    n_dir = int(dirs.max()) + 1
+    if n_dir < 8:  # the base's 4 columns and the bend's 2 per axis leave nothing to test
+        return None
+    X = np.concatenate([per_axis_indicator(ctx.n, np.flatnonzero(dirs == j), ax)
+                        for j in range(n_dir)], axis=2)
+    u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
+    Ut, et = extend(U, e, whitened(pb, turn_columns(u)))
+    Xw = whitened(pb, X)
+    lp, k = log_p(Ut, et, Xw)
+    if k == 0 or lp > np.log(alpha):
+        return None
+    # Where: the directions whose fitted offset is at least half the largest.
+    Z = stats.project_out(Ut, Xw)
+    fit = Z @ np.linalg.lstsq(Z, et, rcond=None)[0]
+    per_dir = np.sqrt(np.bincount(dirs[pb.row], fit**2, minlength=n_dir)
+                      / np.maximum(np.bincount(dirs, minlength=n_dir), 1))
+    big = np.flatnonzero(per_dir >= 0.5 * per_dir.max())
+    return {"positions": sorted({int(p) for p in ctx.positions[np.isin(dirs, big)]}),
+            "axes": [AXES[a] for a in ax], "log10_p": round(float(lp / np.log(10)), 1),
+            "why": ("the output depends on the reference direction in a way own-axis a² and "
+                    "a³ terms do not follow (a free offset per direction is still needed "
+                    "after them and a turn of the reference): e.g. a converter error "
+                    "confined to a band of codes")}
