@@ -14,9 +14,17 @@ from urllib.parse import quote
 
 
 def postgres_schema_url(base_url: str, schema: str) -> str:
-    """``base_url`` with ``schema`` as the connection's ``search_path`` (its own tables)."""
+    """``base_url`` with ``schema`` as the connection's ``search_path`` (its own tables).
+
+    And ``synchronous_commit=off``: a commit returns without waiting for its WAL to reach
+    the disk (measured on the shared test machine: 8.6 ms → 1.8 ms a commit), and the
+    engine tests commit at every position and soak poll. It changes durability only if
+    the PostgreSQL server itself crashes; what other connections see, locks, isolation
+    and the fencing checks are as with the default (a SIGKILLed client loses nothing).
+    """
     separator = "&" if "?" in base_url else "?"
-    return f"{base_url}{separator}options={quote(f'-csearch_path={schema}')}"
+    options = f"-csearch_path={schema} -csynchronous_commit=off"
+    return f"{base_url}{separator}options={quote(options)}"
 
 
 def new_schema_name() -> str:

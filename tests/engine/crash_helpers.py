@@ -14,8 +14,12 @@ from service.db.models import Measurement
 
 WORKER = Path(__file__).with_name("crash_worker.py")
 ROOT = Path(__file__).resolve().parents[2]
-SPEC = {"setpoints_c": [0.0, 20.0, 40.0], "soak_min": 20, "positions": "table1",
-        "samples_per_position": 50, "ramp_c_per_min": 2.0}
+# A fixed soak: what these tests guard (the lease, the cursor, no row lost or doubled
+# across processes) does not depend on the soak's rule, and a predictive soak probes the
+# dies at every poll (a third of a worker's CPU here). tests/engine/test_runner.py resumes
+# predictive soaks.
+SPEC = {"setpoints_c": [0.0, 20.0, 40.0], "soak_min": 20, "stability": "fixed",
+        "positions": "table1", "samples_per_position": 50, "ramp_c_per_min": 2.0}
 N_STEPS, N_POS = 3, 24
 
 
