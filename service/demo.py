@@ -132,7 +132,7 @@ async def _demo(out: Path, spec: dict[str, Any],
               f"({entry['reason']}{tau_txt})  [wall {time.monotonic() - wall0:5.1f} s]",
               flush=True)
 
-    clock = VirtualClock(idle_wall_s=IDLE_WALL_S)
+    clock = VirtualClock(idle_wall_s=IDLE_WALL_S, idle="loop")
     serials = list(spec.get("sensors") or [])
     async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=1,
                         serials=serials, sim_options=sim_options) as devices:
