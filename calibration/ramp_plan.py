@@ -402,8 +402,8 @@ class RampPrediction:
     """What a ramp campaign will do on a plant with die lag ``die_tau_s``."""
 
     duration_s: float
-    n_sweeps: int
-    n_saves: int
+    n_sweeps: int  # the campaign's sweeps: those stored before a resume, then the plan's
+    n_saves: int  # the captures still to store
     die_tau_s: float
     legs: list[dict[str, float]] = field(default_factory=list)  # target_c, ramp_s, hold_s
     start_c: float = AMBIENT_C
@@ -505,10 +505,13 @@ def predict_ramp(spec: Any, refs: np.ndarray, *, start_c: float = AMBIENT_C,
             _close_leg(out, state, plant)
         return None
 
+    done = set(done)
     interpret(ramp_plan(spec, refs, end_c=end_c, done=done, legs_done=legs_done,
                         angles_deg=angles_deg), handle)
     out.duration_s = plant.t_s
-    out.n_sweeps = len(sweeps)
+    # sweeps are numbered on from the stored ones: the last one's index + 1 is the count a
+    # progress "sweep N of about M" means (not the resumed plan's new sweeps alone)
+    out.n_sweeps = max(sweeps | {s for s, _ in done}, default=-1) + 1
     return out
 
 

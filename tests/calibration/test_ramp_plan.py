@@ -155,3 +155,18 @@ def test_a_resume_after_a_hold_ended_goes_on_with_the_next_leg() -> None:
     # the resumed plan commands the next leg first and holds no more at the cold end
     again = _messages(spec, refs, done={(m.step, m.position) for m in saves}, legs_done=1)
     assert [m.setpoint_c for m in again if isinstance(m, SetChamber)] == [26.0, 23.0]
+
+
+def test_a_resumed_prediction_counts_the_stored_sweeps_too() -> None:
+    """Progress says "sweep N of about M" with N the stored sweep index: a prediction made
+    at a resume counts every sweep, the stored ones included, as the dry run counted them."""
+    spec = RampCampaignSpec(setpoints_c=(20.0, 26.0), ramp_c_per_min=2.0)
+    refs = get_schedule("six")
+    stored = {(m.step, m.position) for m in _messages(spec, refs) if isinstance(m, Save)}
+    last_sweep = max(s for s, _ in stored)
+    fresh = rp.predict_ramp(spec, refs, start_c=23.0, end_c=23.0)
+    assert fresh.n_sweeps >= 3
+    # resumed on the last leg with the chamber at its end: nothing left to measure
+    rest = rp.predict_ramp(spec, refs, start_c=23.0, end_c=23.0, done=stored, legs_done=2)
+    assert rest.n_saves == 0
+    assert rest.n_sweeps == last_sweep + 1
