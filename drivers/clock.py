@@ -175,7 +175,11 @@ class VirtualClock:
         quiet = 0
         while quiet < QUIET_TURNS:
             await asyncio.sleep(0)  # one turn: the loop polls its sockets, runs what is ready
-            if not _loop_idle(loop, self._idle_wall_s):
+            idle = _loop_idle(loop, self._idle_wall_s)
+            if idle is None:  # a loop we cannot look into: the wall window instead
+                await asyncio.sleep(self._idle_wall_s)
+                idle, quiet = True, QUIET_TURNS - 1
+            if not idle:
                 quiet = 0
             elif self._calls_quiet():
                 quiet += 1
@@ -260,17 +264,17 @@ class VirtualClock:
 QUIET_TURNS = 2
 
 
-def _loop_idle(loop: asyncio.AbstractEventLoop, within_s: float) -> bool:
+def _loop_idle(loop: asyncio.AbstractEventLoop, within_s: float) -> bool | None:
     """Nothing ready to run on ``loop`` and no timer due within ``within_s``.
 
     Reads the ready queue and timer heap of asyncio's own loop (``_ready``,
-    ``_scheduled``); a loop without them (another implementation) never counts as idle
-    here, and the runner then relies on ``stall_wall_s``.
+    ``_scheduled``); None for a loop without them (another implementation): the runner
+    then waits the wall window of ``"wall"`` mode instead.
     """
     ready = getattr(loop, "_ready", None)
     scheduled = getattr(loop, "_scheduled", None)
     if ready is None or scheduled is None:
-        return False
+        return None
     if ready:
         return False
     return not scheduled or scheduled[0].when() - loop.time() > within_s

@@ -193,3 +193,15 @@ async def test_loop_clock_moves_on_after_a_stalled_unmarked_call() -> None:
 def test_virtual_clock_rejects_an_unknown_idle_rule() -> None:
     with pytest.raises(ValueError, match="idle"):
         VirtualClock(idle="sometimes")  # type: ignore[arg-type]
+
+
+async def test_loop_clock_on_a_loop_it_cannot_look_into_waits_the_wall_window(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another event loop implementation (no ready queue to read): time still moves, after
+    the wall window each jump, as in ``"wall"`` mode."""
+    import drivers.clock as clock_mod
+
+    monkeypatch.setattr(clock_mod, "_loop_idle", lambda loop, within_s: None)
+    clock = VirtualClock(idle="loop")
+    await asyncio.wait_for(asyncio.gather(clock.sleep(60.0), clock.sleep(30.0)), timeout=5.0)
+    assert clock.now() == 60.0
