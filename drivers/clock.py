@@ -181,19 +181,23 @@ class VirtualClock:
                 idle, quiet = True, QUIET_TURNS - 1
             if not idle:
                 quiet = 0
-            elif self._calls_quiet():
+            elif self._calls_quiet(look=quiet == QUIET_TURNS - 1):  # the ports: last turn
                 quiet += 1
             elif await self._wait_for_calls(loop):
                 quiet = 0  # a blocking call changed state: look again
             else:
                 return  # stalled: a call that never says it waits; move on as "wall" would
 
-    def _calls_quiet(self) -> bool:
+    def _calls_quiet(self, look: bool = True) -> bool:
+        """No blocking call running, and (``look``) none with input waiting for its reader
+        (a system call per call: asked on the turn that decides only)."""
         with self._lock:
             calls = list(self._calls)
         for call in calls:
             if call.has_input is None:
                 return False  # running: it may be about to send, or reading a reply
+            if not look:
+                continue
             try:
                 if call.has_input():
                     return False  # its reply has arrived; its thread has yet to read it
