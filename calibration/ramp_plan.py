@@ -55,7 +55,10 @@ none at the end (the range is already covered both ways there).
 **Resume.** Pass the stored (step, position) pairs as ``done`` and the number of legs
 finished (:func:`legs_done_from`, from the stored rows' setpoints in force): stored captures are
 skipped, the sweep count continues, and the current leg is commanded again from
-wherever the chamber now is (a hold restarts: the die may have drifted meanwhile).
+wherever the chamber now is (a hold restarts: the die may have drifted meanwhile). A
+hold whose stored captures already end it (:func:`hold_ended`: the interruption came
+after its end, before the next leg's first capture was stored) counts as finished
+(:func:`resumed_legs_done`): the resume goes on with the next leg.
 """
 
 from __future__ import annotations
@@ -147,6 +150,64 @@ def legs_done_from(stored_setpoints_c: Sequence[float], legs: Sequence[Leg]) -> 
         elif reached and leg + 1 < len(legs):
             leg, reached = leg + 1, abs(float(sp) - legs[leg + 1].target_c) < TARGET_TOL_C
     return leg
+
+
+def hold_rules(spec: Any, n_pos: int) -> tuple[int, int]:
+    """A hold's block (captures per block of :func:`remaining_approach_c`) and its cap in
+    captures (the soak cap over a typical capture's time, at least three blocks)."""
+    settle_s = float(spec.settle_s)
+    capture_s = int(spec.samples_per_position) / float(spec.odr_hz)
+    block = max(MIN_BLOCK, n_pos // 2)
+    cap = max(3 * block, math.ceil(max_hold_s(spec) / (TYPICAL_MOVE_S + settle_s + capture_s)))
+    return block, cap
+
+
+def _waiting_die(since: dict[str, list[float]], block: int, edge_gap_c: float,
+                 first: str | None) -> str | None:
+    """The first die (``first`` asked first) still more than ``edge_gap_c`` from where it
+    settles; None when every die is within it (and there is one)."""
+    if not since:
+        return ""
+    for key in sorted(since, key=lambda k: k != first):
+        if remaining_approach_c(since[key], block) > edge_gap_c:
+            return key
+    return None
+
+
+def hold_ended(dies_c: dict[str, Sequence[float]], spec: Any, n_pos: int,
+               edge_gap_c: float = EDGE_GAP_C) -> bool:
+    """Whether a hold's captures end it, as the plan decides after each: ``dies_c`` each
+    die's readings since the air arrived, in time order. Every die within ``edge_gap_c``
+    of where it settles, or the cap's number of captures."""
+    block, cap = hold_rules(spec, n_pos)
+    if max((len(v) for v in dies_c.values()), default=0) >= cap:
+        return True
+    return _waiting_die({k: list(v) for k, v in dies_c.items() if len(v)}, block,
+                        edge_gap_c, None) is None
+
+
+def resumed_legs_done(stored_setpoints_c: Sequence[float],
+                      stored_dies_c: dict[str, Sequence[float]], legs: Sequence[Leg],
+                      spec: Any, n_pos: int, edge_gap_c: float = EDGE_GAP_C) -> int:
+    """Legs finished before an interruption (:func:`legs_done_from`), a turnaround hold
+    counted finished when its stored captures end it (:func:`hold_ended`): the plan had
+    ended it and moved on when the run stopped, before the next leg's first capture.
+    ``stored_dies_c``: each die's stored readings, in the rows' time order (one per row of
+    ``stored_setpoints_c``)."""
+    done = legs_done_from(stored_setpoints_c, legs)
+    leg = legs[done]
+    if not leg.hold or not len(stored_setpoints_c):
+        return done
+    held = 0  # the trailing rows at the leg's target: the hold's captures
+    for sp in reversed(stored_setpoints_c):
+        if abs(float(sp) - leg.target_c) >= TARGET_TOL_C:
+            break
+        held += 1
+    if not held:
+        return done
+    dies = {k: [float(x) for x in v[len(v) - held:] if math.isfinite(float(x))]
+            for k, v in stored_dies_c.items()}
+    return done + 1 if hold_ended(dies, spec, n_pos, edge_gap_c) else done
 
 
 def setpoint_in_force(status: Any, target_c: float, arrived: bool) -> float:
@@ -263,10 +324,7 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
     arrived_c = float(_get(spec, "tol_c", DEFAULT_ARRIVED_C))
     n = int(spec.samples_per_position)
     settle_s = float(spec.settle_s)
-    capture_s = n / float(spec.odr_hz)
-    block = max(MIN_BLOCK, n_pos // 2)
-    hold_cap = max(3 * block, math.ceil(max_hold_s(spec) / (TYPICAL_MOVE_S + settle_s
-                                                             + capture_s)))
+    block, hold_cap = hold_rules(spec, n_pos)
     base = visit_orders(_OneSweep(spec), refs, angles_deg)[0]
 
     yield Configure(float(spec.range_g), float(spec.odr_hz))
@@ -297,12 +355,9 @@ def ramp_plan(spec: Any, refs: np.ndarray, *, end_c: float = AMBIENT_C,
             if arrived_at is not None:
                 # the die that said "not yet" last is asked first; the first "not yet" ends
                 # the round (the slowest die decides; one estimate per capture, not one per die)
-                settled = bool(since)
-                for key in sorted(since, key=lambda k: k != waiting_on):
-                    if remaining_approach_c(since[key], block) > edge_gap_c:
-                        settled, waiting_on = False, key
-                        break
-                if settled or captures - arrived_at >= hold_cap:
+                waiting = _waiting_die(since, block, edge_gap_c, waiting_on)
+                waiting_on = waiting or waiting_on
+                if waiting is None or captures - arrived_at >= hold_cap:
                     break
             if not queue:
                 sweep += 1
@@ -347,8 +402,8 @@ class RampPrediction:
     """What a ramp campaign will do on a plant with die lag ``die_tau_s``."""
 
     duration_s: float
-    n_sweeps: int
-    n_saves: int
+    n_sweeps: int  # the campaign's sweeps: those stored before a resume, then the plan's
+    n_saves: int  # the captures still to store
     die_tau_s: float
     legs: list[dict[str, float]] = field(default_factory=list)  # target_c, ramp_s, hold_s
     start_c: float = AMBIENT_C
@@ -450,10 +505,13 @@ def predict_ramp(spec: Any, refs: np.ndarray, *, start_c: float = AMBIENT_C,
             _close_leg(out, state, plant)
         return None
 
+    done = set(done)
     interpret(ramp_plan(spec, refs, end_c=end_c, done=done, legs_done=legs_done,
                         angles_deg=angles_deg), handle)
     out.duration_s = plant.t_s
-    out.n_sweeps = len(sweeps)
+    # sweeps are numbered on from the stored ones: the last one's index + 1 is the count a
+    # progress "sweep N of about M" means (not the resumed plan's new sweeps alone)
+    out.n_sweeps = max(sweeps | {s for s, _ in done}, default=-1) + 1
     return out
 
 

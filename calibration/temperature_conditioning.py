@@ -191,19 +191,95 @@ def smooth_over_time(
         ts, ys = t[idx], y[idx]
         lo = np.searchsorted(ts, ts - half, side="left")
         hi = np.searchsorted(ts, ts + half, side="right")
-        for j in range(idx.size):
-            tt, yy = ts[lo[j] : hi[j]], ys[lo[j] : hi[j]]
-            if tt.size < degree + 2 or np.ptp(tt) <= 0:
-                out[idx[j]] = float(np.median(yy))
-                continue
-            coef = np.polyfit(tt - ts[j], yy, degree)
-            res = yy - np.polyval(coef, tt - ts[j])
-            sd = _robust_sd(res)
-            keep = np.abs(res) <= 4.0 * (sd + quantum) if sd > 0 else np.ones(tt.size, bool)
-            if keep.sum() >= degree + 2 and not keep.all():
-                coef = np.polyfit(tt[keep] - ts[j], yy[keep], degree)
-            out[idx[j]] = float(coef[-1])
+        if np.all(np.diff(ts) > 0) and np.all(np.isfinite(ys)):
+            out[idx] = _local_fits(ts, ys, lo, hi, degree, quantum, half)
+        else:  # repeated times or missing readings: window by window
+            out[idx] = [_local_fit(ts[lo[j]:hi[j]], ys[lo[j]:hi[j]], ts[j], degree, quantum)
+                        for j in range(idx.size)]
     return out
+
+
+def _local_fit(tt: np.ndarray, yy: np.ndarray, t0: float, degree: int,
+               quantum: float) -> float:
+    """One row of :func:`smooth_over_time`: the robust local polynomial's value at ``t0``."""
+    if tt.size < degree + 2 or np.ptp(tt) <= 0:
+        return float(np.median(yy))
+    coef = np.polyfit(tt - t0, yy, degree)
+    res = yy - np.polyval(coef, tt - t0)
+    sd = _robust_sd(res)
+    keep = np.abs(res) <= 4.0 * (sd + quantum) if sd > 0 else np.ones(tt.size, bool)
+    if keep.sum() >= degree + 2 and not keep.all():
+        coef = np.polyfit(tt[keep] - t0, yy[keep], degree)
+    return float(coef[-1])
+
+
+# Rows × window entries :func:`_local_fits` takes at once (bounds its memory on long
+# recordings of raw samples).
+_WINDOW_CHUNK = 1 << 18
+
+
+def _local_fits(ts: np.ndarray, ys: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                degree: int, quantum: float, half_s: float) -> np.ndarray:
+    """:func:`_local_fit` of every row of a run with increasing times and finite readings,
+    all windows at once: each window's least squares from its moment sums, the powers of
+    the time offset scaled by ``half_s`` (so the normal equations are well conditioned);
+    the same fits and medians row by row, equal to them to rounding."""
+    out = np.empty(ts.size)
+    width = int(np.max(hi - lo))
+    step = max(1, _WINDOW_CHUNK // max(width, 1))
+    for a in range(0, ts.size, step):
+        rows = np.arange(a, min(a + step, ts.size))
+        out[rows] = _window_values(ts, ys, rows, lo[rows], hi[rows], width, degree, quantum,
+                                   half_s)
+    return out
+
+
+def _window_values(ts: np.ndarray, ys: np.ndarray, rows: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray, width: int, degree: int, quantum: float,
+                   half_s: float) -> np.ndarray:
+    pos = lo[:, None] + np.arange(width)
+    inside = pos < hi[:, None]
+    pos = np.minimum(pos, ts.size - 1)
+    yy = ys[pos]
+    count = hi - lo
+    # too few rows for the polynomial, or no time span: the median (times increase, so
+    # the span is the last minus the first)
+    value = _masked_median(yy, inside)
+    fit = (count >= degree + 2) & (ts[hi - 1] - ts[lo] > 0)
+    if not fit.any():
+        return value
+    inside, yy = inside[fit], yy[fit]
+    V = ((ts[pos[fit]] - ts[rows[fit], None]) / half_s)[..., None] ** np.arange(degree + 1)
+    coef = _weighted_polyfit(V, yy, inside)
+    res = yy - np.einsum("rwi,ri->rw", V, coef)
+    dev = np.abs(res - _masked_median(res, inside)[:, None])
+    sd = 1.4826 * _masked_median(dev, inside)
+    keep = np.where((sd > 0)[:, None], np.abs(res) <= 4.0 * (sd + quantum)[:, None], True)
+    keep &= inside
+    n_keep = keep.sum(axis=1)
+    again = (n_keep >= degree + 2) & (n_keep < inside.sum(axis=1))
+    if again.any():
+        coef[again] = _weighted_polyfit(V[again], yy[again], keep[again])
+    value[fit] = coef[:, 0]
+    return value
+
+
+def _weighted_polyfit(V: np.ndarray, y: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Least-squares coefficients (increasing powers) of each row's window: ``V`` (r, w, k)
+    its powers, ``y`` (r, w) its readings, ``use`` (r, w) the entries that count."""
+    Vw = V * use[..., None]
+    A = np.einsum("rwi,rwj->rij", Vw, V)
+    b = np.einsum("rwi,rw->ri", Vw, y)
+    return np.linalg.solve(A, b[..., None])[..., 0]
+
+
+def _masked_median(x: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Each row's median over its ``use`` entries (``np.median``'s value: the middle one,
+    or the mean of the middle two); at least one entry per row."""
+    s = np.sort(np.where(use, x, np.inf), axis=1)
+    c = use.sum(axis=1)
+    r = np.arange(x.shape[0])
+    return (s[r, (c - 1) // 2] + s[r, c // 2]) / 2.0
 
 
 def temperature_rate_c_per_min(t_s: np.ndarray, temperature_c: np.ndarray,

@@ -17,6 +17,8 @@ anything outside printable 7-bit ASCII is a framing fault naming its column.
 
 from __future__ import annotations
 
+import binascii
+import re
 from dataclasses import dataclass
 from typing import Literal
 
@@ -26,24 +28,13 @@ Framing = Literal["v2", "v1"]
 FRAMINGS: tuple[Framing, ...] = ("v2", "v1")
 
 
-def _crc16_table() -> tuple[int, ...]:
-    table = []
-    for byte in range(256):
-        crc = byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else crc << 1
-        table.append(crc & 0xFFFF)
-    return tuple(table)
-
-
-_CRC16_TABLE = _crc16_table()
-
-
 def crc16_ccitt_false(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, MSB first, no final XOR)."""
-    for b in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC16_TABLE[((crc >> 8) ^ b) & 0xFF]
-    return crc
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, MSB first, no final XOR).
+
+    ``binascii.crc_hqx`` is this CRC (the same polynomial, MSB first, no final XOR) with
+    the initial value given: computed in C, not a byte at a time in Python.
+    """
+    return binascii.crc_hqx(data, crc)
 
 
 def xor_checksum(data: bytes) -> int:
@@ -63,15 +54,22 @@ def encode_frame(*fields: object, framing: Framing = "v2") -> bytes:
     """Fields joined by commas, framed and terminated; ValueError on a field that cannot travel."""
     texts = [str(f) for f in fields]
     for i, text in enumerate(texts):
-        bad = [c for c in text if not " " <= c <= "~" or c in "$*,"]
+        bad = _CANNOT_TRAVEL.search(text)
         if bad:
-            raise ValueError(f"field {i} {text[:40]!r}: {bad[0]!r} cannot travel in a bridge frame")
+            raise ValueError(f"field {i} {text[:40]!r}: {bad.group()!r} cannot travel in a "
+                             "bridge frame")
     body = ",".join(texts).encode("ascii")
     if framing == "v2":
         return b"$" + body + b"*%04X\r\n" % crc16_ccitt_false(body)
     if framing == "v1":
         return b"$" + body + b"*%02X\r\n" % xor_checksum(body)
     raise ValueError(f"unknown bridge framing {framing!r} (expected v2 or v1)")
+
+
+# A field's character that cannot travel (outside printable ASCII, or a delimiter), and a
+# received byte outside printable 7-bit ASCII: the first one found is the one named.
+_CANNOT_TRAVEL = re.compile(r"[^ -~]|[$*,]")
+_NOT_PRINTABLE = re.compile(rb"[^\x20-\x7e]")
 
 
 @dataclass(frozen=True)
@@ -87,10 +85,10 @@ def parse_frame(line: bytes, device: str = "sensor") -> Frame:
     v1); callers that must not accept v1 use :func:`decode_frame`.
     """
     raw = line.rstrip(b"\r\n")
-    for col, b in enumerate(raw, start=1):
-        if not 0x20 <= b <= 0x7E:
-            raise ProtocolError(device, f"byte 0x{b:02X} at column {col} is not printable "
-                                        f"ASCII in {_show(raw)}")
+    bad = _NOT_PRINTABLE.search(raw)
+    if bad:
+        raise ProtocolError(device, f"byte 0x{raw[bad.start()]:02X} at column {bad.start() + 1} "
+                                    f"is not printable ASCII in {_show(raw)}")
     if not raw.startswith(b"$"):
         raise ProtocolError(device, f"frame does not start with '$': {_show(raw)}")
     star = raw.rfind(b"*")

@@ -31,7 +31,7 @@ from drivers.bridge_protocol import (
     encode_frame,
     split_channel,
 )
-from drivers.clock import Clock
+from drivers.clock import Clock, awaiting_device, run_blocking
 from drivers.faults import (
     ConfigurationFault,
     ConnectionLost,
@@ -65,17 +65,18 @@ T = TypeVar("T")
 
 
 class PortThreads:
-    """The blocking serial calls of one port, on that port's own threads."""
+    """The blocking serial calls of one port, on that port's own threads
+    (:func:`drivers.clock.run_blocking`: a virtual clock knows when they are busy)."""
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, clock: Clock) -> None:
         self._name = name
+        self._clock = clock
         self._pool: ThreadPoolExecutor | None = None
 
     async def run(self, fn: Callable[..., T], *args: object) -> T:
         if self._pool is None:
             self._pool = ThreadPoolExecutor(PORT_THREADS, thread_name_prefix=self._name)
-        loop = asyncio.get_running_loop()
-        return await loop.run_in_executor(self._pool, functools.partial(fn, *args))
+        return await run_blocking(self._clock, self._pool, fn, *args)
 
     def shutdown(self) -> None:
         """Free the threads once idle (a read still running ends at its own timeout)."""
@@ -101,7 +102,7 @@ class SerialLine:
         self.baudrate, self.timeout_s, self.attempts = baudrate, timeout_s, attempts
         self._port: serial.SerialBase | None = None
         self._lock = asyncio.Lock()
-        self._threads = PortThreads(name)
+        self._threads = PortThreads(name, clock)
 
     async def call(self, fn: Callable[..., T], *args: object) -> T:
         """``fn(port, *args)`` on the port's thread, with the retries above."""
@@ -660,8 +661,10 @@ def read_line(port: serial.SerialBase, timeout_s: float, pending: bytearray) -> 
     every 90-byte ``AVG`` reply cost ~180 system calls and as many GIL hand-overs. The bytes
     after the line stay in ``pending`` for the exchange's next line; what is left there when
     the exchange ends is what ``reset_input_buffer`` would have discarded before the next
-    command. The wait for the first byte blocks as before (``port.timeout``); the rest is
-    taken with a zero timeout (whatever is there, no waiting).
+    command. The wait for the first byte blocks as before (``port.timeout``), marked as a
+    wait for the device (:func:`drivers.clock.awaiting_device`: a simulated bridge needs
+    simulated time to pass to answer); the rest is taken with a zero timeout (whatever is
+    there, no waiting).
     """
     deadline = time.monotonic() + timeout_s
     while True:
@@ -674,7 +677,8 @@ def read_line(port: serial.SerialBase, timeout_s: float, pending: bytearray) -> 
         if left_s <= 0:
             break
         port.timeout = left_s
-        first = port.read(1)
+        with awaiting_device(functools.partial(_has_input, port)):
+            first = port.read(1)
         if not first:
             break
         pending += first
@@ -686,6 +690,12 @@ def read_line(port: serial.SerialBase, timeout_s: float, pending: bytearray) -> 
 
 
 _CHUNK_BYTES = 4096  # per read of what has arrived (a longer reply: the next round takes the rest)
+
+
+def _has_input(port: serial.SerialBase) -> bool:
+    """Bytes have arrived on ``port`` that its reader has yet to take (a virtual clock's
+    look while the reader waits: :func:`drivers.clock.awaiting_device`)."""
+    return bool(port.in_waiting)
 
 
 def open_serial_port(url: str, baudrate: int, timeout_s: float,

@@ -32,8 +32,8 @@ from service.engine.runner import CampaignRunner
 SETPOINTS_C = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
 FAST_SETPOINTS_C = [-40.0, 10.0, 60.0]
 SENSOR_SERIAL = "SN-DEMO-0001"
-# Loopback round trips take well under 0.1 ms; 0.15 ms of idle loop before a time jump
-# is enough (a late reply would only cost a driver retry, counted in the output).
+# The clock watches the event loop and the bridge's port threads (VirtualClock(idle="loop"):
+# no wall-time window before a jump); a real-time timer due within this is still waited for.
 IDLE_WALL_S = 0.0003
 
 
@@ -132,7 +132,7 @@ async def _demo(out: Path, spec: dict[str, Any],
               f"({entry['reason']}{tau_txt})  [wall {time.monotonic() - wall0:5.1f} s]",
               flush=True)
 
-    clock = VirtualClock(idle_wall_s=IDLE_WALL_S)
+    clock = VirtualClock(idle_wall_s=IDLE_WALL_S, idle="loop")
     serials = list(spec.get("sensors") or [])
     async with open_rig({"name": "sim", "chamber": {"driver": "sim"}}, clock, seed=1,
                         serials=serials, sim_options=sim_options) as devices:

@@ -7,8 +7,9 @@ be away from the setpoint; alarms, the pose and the die checks still apply). Wha
 a ramp's own is here:
 
 * **resume** (after a restart, or a suspension's rewind): the stored (step, position)
-  pairs and the legs already finished, from the stored rows' setpoints in time order
-  (:func:`calibration.ramp_plan.legs_done_from`); the current leg is commanded again
+  pairs and the legs already finished, from the stored rows' setpoints in time order and,
+  for a turnaround hold, its stored dies (:func:`calibration.ramp_plan.resumed_legs_done`:
+  a hold they already end is not held again); the current leg is commanded again
   from wherever the chamber stands;
 * **where the last leg goes**: the campaign's ``safe_c``, else the rig's safe setpoint,
   clamped into the chamber's range (as the park);
@@ -58,12 +59,17 @@ class RampProgress:
         """The ramp plan after what is stored (the runner's plan factory: campaign_plan's
         signature; a fresh prediction at its first publish)."""
         r = self.r
-        cols = store.measurement_columns(r.sf, r.id, r.serials[0] if r.serials else None)
+        serials = [str(s) for s in sensors] or ([r.serials[0]] if r.serials else [None])
+        cols = store.measurement_columns(r.sf, r.id, serials[0])
         self.end_c = end_c(r.dev, r.spec)
         self.legs_done = 0
         if cols["setpoint_c"]:
             legs = rp.ramp_legs(r.spec.setpoints_c, cols["chamber_c"][0], self.end_c)
-            self.legs_done = rp.legs_done_from(cols["setpoint_c"], legs)
+            dies = {str(serial): (cols if i == 0 else
+                                  store.measurement_columns(r.sf, r.id, serial))["sensor_c"]
+                    for i, serial in enumerate(serials)}
+            self.legs_done = rp.resumed_legs_done(cols["setpoint_c"], dies, legs, spec,
+                                                  len(refs))
         self.done, self.angles_deg, self.n_done0 = done, angles_deg, len(done)
         self.predicted_s = None
         return rp.ramp_plan(spec, refs, end_c=self.end_c, done=done,

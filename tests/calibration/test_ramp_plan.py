@@ -130,3 +130,43 @@ def test_the_hold_ends_on_the_slowest_die() -> None:
     slow = 480.0 * math.log(2.0 / 60.0 * 480.0 / rp.EDGE_GAP_C)
     ramp_s = 20.0 / 2.0 * 60.0
     assert hold_s[1] < ramp_s + slow + 6 * (12.0 + 5.0 + 0.32) + 300.0
+
+
+def test_a_resume_after_a_hold_ended_goes_on_with_the_next_leg() -> None:
+    """Stopped after the plan ended the cold-end hold and commanded the next leg, but
+    before that leg's first capture was stored: the stored dies end the hold, so the resume
+    does not hold again. Stopped inside the hold, it holds again (the die may have drifted)."""
+    spec = RampCampaignSpec(setpoints_c=(20.0, 26.0), ramp_c_per_min=2.0)
+    refs = get_schedule("six")
+    msgs = _messages(spec, refs)
+    next_leg = next(i for i, m in enumerate(msgs) if isinstance(m, SetChamber) and m.step == 1)
+    saves = [m for m in msgs[:next_leg] if isinstance(m, Save)]
+    setpoints = [m.setpoint_c for m in saves]
+    dies = {"": [m.acquisition[rp.ANY_SENSOR].sensor_c for m in saves]}
+    legs = rp.ramp_legs(spec.setpoints_c, 23.0, 23.0)
+    assert legs[0].hold and setpoints[-1] == legs[0].target_c  # stopped at the hold's end
+    assert rp.legs_done_from(setpoints, legs) == 0  # the setpoints alone: still holding
+    assert rp.resumed_legs_done(setpoints, dies, legs, spec, len(refs)) == 1
+    # inside the hold: its first captures do not end it
+    held = sum(1 for sp in setpoints if sp == legs[0].target_c)
+    cut = len(setpoints) - held + 2
+    assert rp.resumed_legs_done(setpoints[:cut], {"": dies[""][:cut]}, legs, spec,
+                                len(refs)) == 0
+    # the resumed plan commands the next leg first and holds no more at the cold end
+    again = _messages(spec, refs, done={(m.step, m.position) for m in saves}, legs_done=1)
+    assert [m.setpoint_c for m in again if isinstance(m, SetChamber)] == [26.0, 23.0]
+
+
+def test_a_resumed_prediction_counts_the_stored_sweeps_too() -> None:
+    """Progress says "sweep N of about M" with N the stored sweep index: a prediction made
+    at a resume counts every sweep, the stored ones included, as the dry run counted them."""
+    spec = RampCampaignSpec(setpoints_c=(20.0, 26.0), ramp_c_per_min=2.0)
+    refs = get_schedule("six")
+    stored = {(m.step, m.position) for m in _messages(spec, refs) if isinstance(m, Save)}
+    last_sweep = max(s for s, _ in stored)
+    fresh = rp.predict_ramp(spec, refs, start_c=23.0, end_c=23.0)
+    assert fresh.n_sweeps >= 3
+    # resumed on the last leg with the chamber at its end: nothing left to measure
+    rest = rp.predict_ramp(spec, refs, start_c=23.0, end_c=23.0, done=stored, legs_done=2)
+    assert rest.n_saves == 0
+    assert rest.n_sweeps == last_sweep + 1
