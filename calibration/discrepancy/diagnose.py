@@ -19,6 +19,7 @@ import numpy as np
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy import stats
+from calibration.discrepancy.basis import RowBlockBasis
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
@@ -854,12 +855,20 @@ def _tall_rows(pb: LinearProblem, terms: list[Term]):
     return rows
 
 
-def _basis(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray]:
-    """Orthonormal basis of the whitened design of ``terms``, and the whitened data."""
-    rows = _tall_rows(pb, terms)
-    if rows is not None:
+def _basis(pb: LinearProblem, terms: list[Term]
+           ) -> tuple[np.ndarray | RowBlockBasis, np.ndarray]:
+    """Orthonormal basis of the whitened design of ``terms``, and the whitened data.
+
+    Above ``stats.TALL_BYTES`` the basis is held as its recipe (basis.py, issue 22: at
+    1 M readings the stored (m × r) basis was 1.15 GB, diagnose's largest array).
+    """
+    if _tall_rows(pb, terms) is not None:
         p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
-        return stats.orthonormal_basis_of_blocks(rows, pb.m, p), pb.y * pb.w
+
+        def rows(key: slice | np.ndarray) -> np.ndarray:
+            return np.hstack([pb.X0[key]] + [t.X[key] for t in terms]) * pb.w[key, None]
+
+        return RowBlockBasis.of_rows(rows, pb.m, p), pb.y * pb.w
     Xw, yw = _design(pb, terms)
     return stats.orthonormal_basis(Xw), yw
 

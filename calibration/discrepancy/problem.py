@@ -449,9 +449,9 @@ class AxisBlockDesign:
 
     Rows are readings × axes (reading i, axis a at row 3i + a), as the dense form. What the
     tall code paths use: ``shape``, ``nbytes`` (the dense size, so the same paths are
-    chosen), contiguous row slices ``[i:j]`` (dense blocks: the same values, zeros
-    included), ``@`` a coefficient vector or matrix, and ``np.asarray``/``*`` (the dense
-    array, built on demand: only the rarely taken paths need it).
+    chosen), contiguous row slices ``[i:j]`` and 1-D row indices (dense rows: the same
+    values, zeros included), ``@`` a coefficient vector or matrix, and ``np.asarray``/``*``
+    (the dense array, built on demand: only the rarely taken paths need it).
     """
 
     ndim = 2
@@ -468,6 +468,9 @@ class AxisBlockDesign:
 
     def __getitem__(self, key: object) -> np.ndarray:
         if not isinstance(key, slice):
+            idx = np.asarray(key)
+            if idx.ndim == 1 and idx.dtype.kind in "iu":  # rows by index: those readings only
+                return self._rows_at(idx)
             return np.asarray(self)[key]
         i, j, stride = key.indices(self.shape[0])
         if stride != 1:
@@ -476,6 +479,15 @@ class AxisBlockDesign:
             return np.zeros((0, self.shape[1]))
         r0, r1 = i // 3, -(-j // 3)  # the readings the rows belong to
         return _axis_blocks(self.block[r0:r1])[i - 3 * r0 : j - 3 * r0]
+
+    def _rows_at(self, idx: np.ndarray) -> np.ndarray:
+        idx = np.where(idx < 0, idx + self.shape[0], idx)
+        k = self.block.shape[1]
+        out = np.zeros((idx.size, self.shape[1]))
+        for a in range(3):
+            sel = np.flatnonzero(idx % 3 == a)
+            out[sel, a * k:(a + 1) * k] = self.block[idx[sel] // 3]
+        return out
 
     def __matmul__(self, beta: np.ndarray) -> np.ndarray:
         beta = np.asarray(beta, float)
