@@ -18,15 +18,11 @@ same values as the stored basis up to rounding; anything else gets the dense arr
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from calibration.discrepancy import stats
-
-# rows(key) → dense whitened design rows for a row slice or a 1-D array of row indices
-Rows = Callable[[Any], np.ndarray]
 
 
 def _step(width: int) -> int:
@@ -34,26 +30,64 @@ def _step(width: int) -> int:
     return max(1, stats.CHUNK_BYTES // (8 * max(width, 1)))
 
 
+def _by_rows(w: np.ndarray, a: np.ndarray) -> np.ndarray:
+    return a * (w if a.ndim == 1 else w.reshape((-1,) + (1,) * (a.ndim - 1)))
+
+
+class WhitenedDesign:
+    """The (m × p) whitened design ``[X0, X_1, …]·w`` given by its parts, used by row blocks.
+
+    A part with ``rows_matmul``/``rows_rmatmul`` (problem.AxisBlockDesign) multiplies its
+    rows without forming them (two thirds of the reference base design are zeros).
+    """
+
+    def __init__(self, parts: list[Any], w: np.ndarray) -> None:
+        self.parts, self.w = parts, w
+        self.cuts = np.cumsum([0] + [x.shape[1] for x in parts])
+        self.m, self.p = w.size, int(self.cuts[-1])
+
+    def rows(self, key: Any) -> np.ndarray:
+        """Dense rows for a row slice or a 1-D array of row indices."""
+        return np.hstack([x[key] for x in self.parts]) * self.w[key, None]
+
+    def mul(self, i: int, j: int, C: np.ndarray) -> np.ndarray:
+        """``rows(i:j) @ C``."""
+        out = None
+        for x, a, b in zip(self.parts, self.cuts[:-1], self.cuts[1:], strict=True):
+            part = (x.rows_matmul(i, j, C[a:b]) if hasattr(x, "rows_matmul")
+                    else x[i:j] @ C[a:b])
+            out = part if out is None else out + part
+        return _by_rows(self.w[i:j], out)
+
+    def tmul(self, i: int, j: int, A: np.ndarray) -> np.ndarray:
+        """``rows(i:j).T @ A`` (A: the j − i rows)."""
+        Aw = _by_rows(self.w[i:j], A)
+        return np.concatenate([x.rows_rmatmul(i, j, Aw) if hasattr(x, "rows_rmatmul")
+                               else x[i:j].T @ Aw for x in self.parts])
+
+
 class RowBlockBasis:
-    """(m × r) orthonormal basis ``U = [rows(:)·S, extra]``, formed by row blocks on use."""
+    """(m × r) orthonormal basis ``U = [X_w·S, extra]``, formed by row blocks on use."""
 
     ndim = 2
     dtype = np.dtype(float)
 
-    def __init__(self, rows: Rows, m: int, p: int, S: np.ndarray,
+    def __init__(self, design: WhitenedDesign, S: np.ndarray,
                  extra: np.ndarray | None = None) -> None:
-        self._rows, self._m, self._p, self.S = rows, m, p, S
+        self.design, self.S = design, S
+        m, self._m, self._p = design.m, design.m, design.p
         self.extra = np.zeros((m, 0)) if extra is None else extra
         self.shape = (m, S.shape[1] + self.extra.shape[1])
 
     @classmethod
-    def of_rows(cls, rows: Rows, m: int, p: int) -> RowBlockBasis:
-        """The basis of the (m × p) design given by ``rows``: Gram, eigen-cut, Cholesky-QR2.
+    def of_design(cls, design: WhitenedDesign) -> RowBlockBasis:
+        """The basis of ``design``'s column space: Gram, eigen-cut, Cholesky-QR2.
 
         The same steps and cut (``stats.GRAM_REL_TOL``) as ``stats.orthonormal_basis_tall``;
         the Cholesky factor comes from ``Σ (B·T)ᵀ(B·T)`` over the row blocks B, so no
         (m × r) array is built.
         """
+        rows, m, p = design.rows, design.m, design.p
         step = _step(p)
         gram = np.zeros((p, p))
         for i in range(0, m, step):
@@ -69,7 +103,7 @@ class RowBlockBasis:
             B1 = rows(slice(i, i + step)) @ T
             H += B1.T @ B1
         R = np.linalg.cholesky(H).T  # upper: U₁ = U R
-        return cls(rows, m, p, T @ np.linalg.inv(R))
+        return cls(design, T @ np.linalg.inv(R))
 
     def __len__(self) -> int:
         return self._m
@@ -90,7 +124,8 @@ class RowBlockBasis:
         return np.asarray(self)[key]
 
     def _dense(self, key: Any) -> np.ndarray:
-        out = self._rows(key) @ self.S
+        out = (self.design.mul(key.start, key.stop, self.S) if isinstance(key, slice)
+               else self.design.rows(key) @ self.S)
         if self.extra.shape[1]:
             out = np.hstack([out, self.extra[key]])
         return out
@@ -102,7 +137,7 @@ class RowBlockBasis:
         out = np.empty((self._m,) + B.shape[1:])
         step = _step(self._p)
         for i in range(0, self._m, step):
-            out[i:i + step] = self._rows(slice(i, i + step)) @ C
+            out[i:i + step] = self.design.mul(i, min(i + step, self._m), C)
         if self.extra.shape[1]:
             out += self.extra @ B[r:]
         return out
@@ -113,7 +148,7 @@ class RowBlockBasis:
         acc = np.zeros((self._p,) + A.shape[1:])
         step = _step(self._p)
         for i in range(0, self._m, step):
-            acc += self._rows(slice(i, i + step)).T @ A[i:i + step]
+            acc += self.design.tmul(i, min(i + step, self._m), A[i:i + step])
         out = self.S.T @ acc
         if self.extra.shape[1]:
             out = np.concatenate([out, self.extra.T @ A])
@@ -129,7 +164,7 @@ class RowBlockBasis:
         out = np.empty(self.shape)
         step = _step(self._p + self.shape[1])
         for i in range(0, self._m, step):
-            out[i:i + step] = self._dense(slice(i, i + step))
+            out[i:i + step] = self._dense(slice(i, min(i + step, self._m)))
         return out if dtype is None else out.astype(dtype)
 
     def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
@@ -140,8 +175,7 @@ class RowBlockBasis:
                     and not any(isinstance(q, RowBlockBasis | _ReadingBlocks)
                                 for q in parts[1:])):
                 more = [np.asarray(q, float).reshape(self._m, -1) for q in parts[1:]]
-                return RowBlockBasis(self._rows, self._m, self._p, self.S,
-                                     np.hstack([self.extra] + more))
+                return RowBlockBasis(self.design, self.S, np.hstack([self.extra] + more))
         return func(*_dense_args(args), **_dense_args(kwargs))
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy import stats
-from calibration.discrepancy.basis import RowBlockBasis
+from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
@@ -863,12 +863,8 @@ def _basis(pb: LinearProblem, terms: list[Term]
     1 M readings the stored (m × r) basis was 1.15 GB, diagnose's largest array).
     """
     if _tall_rows(pb, terms) is not None:
-        p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
-
-        def rows(key: slice | np.ndarray) -> np.ndarray:
-            return np.hstack([pb.X0[key]] + [t.X[key] for t in terms]) * pb.w[key, None]
-
-        return RowBlockBasis.of_rows(rows, pb.m, p), pb.y * pb.w
+        design = WhitenedDesign([pb.X0] + [t.X for t in terms], pb.w)
+        return RowBlockBasis.of_design(design), pb.y * pb.w
     Xw, yw = _design(pb, terms)
     return stats.orthonormal_basis(Xw), yw
 

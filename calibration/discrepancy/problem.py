@@ -489,6 +489,20 @@ class AxisBlockDesign:
             out[sel, a * k:(a + 1) * k] = self.block[idx[sel] // 3]
         return out
 
+    def rows_matmul(self, i: int, j: int, C: np.ndarray) -> np.ndarray:
+        """``self[i:j] @ C`` (C: (3k,) or (3k × q)) from the block, without the zeros."""
+        r0, r1, k = i // 3, -(-j // 3), self.block.shape[1]
+        out = np.stack([self.block[r0:r1] @ C[a * k:(a + 1) * k] for a in range(3)], axis=1)
+        return out.reshape((3 * (r1 - r0),) + C.shape[1:])[i - 3 * r0:j - 3 * r0]
+
+    def rows_rmatmul(self, i: int, j: int, A: np.ndarray) -> np.ndarray:
+        """``self[i:j].T @ A`` (A: the j − i rows) from the block, without the zeros."""
+        r0, r1 = i // 3, -(-j // 3)
+        pad = np.zeros((3 * (r1 - r0),) + A.shape[1:])
+        pad[i - 3 * r0:j - 3 * r0] = A
+        pad = pad.reshape((r1 - r0, 3) + A.shape[1:])
+        return np.concatenate([self.block[r0:r1].T @ pad[:, a] for a in range(3)])
+
     def __matmul__(self, beta: np.ndarray) -> np.ndarray:
         beta = np.asarray(beta, float)
         k = self.block.shape[1]

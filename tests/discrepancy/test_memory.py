@@ -256,7 +256,7 @@ def test_axis_block_design_is_the_dense_design_without_its_zeros(monkeypatch):
 def test_basis_held_as_its_recipe_answers_as_the_stored_basis(monkeypatch):
     """Above TALL_BYTES the basis is never stored (issue 22: 1.15 GB at 1 M readings): every
     use the statistics make of it gives the stored basis's values, without its dense form."""
-    from calibration.discrepancy.basis import RowBlockBasis
+    from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
     from calibration.discrepancy.problem import AxisBlockDesign, _axis_blocks
 
     rng = np.random.default_rng(11)
@@ -266,9 +266,15 @@ def test_basis_held_as_its_recipe_answers_as_the_stored_basis(monkeypatch):
     w = rng.uniform(0.5, 2.0, 3 * n)
     idx = np.array([0, 5, 3 * n - 1, 17, 17, 2])
     np.testing.assert_array_equal(X0[idx], dense[idx])  # rows by index, zeros included
+    C, A = rng.standard_normal((3 * k, 4)), rng.standard_normal((3 * n, 4))
+    for i, j in ((0, 3 * n), (1, 8), (4, 5), (7, 3 * n - 2)):  # partial readings at the ends
+        np.testing.assert_allclose(X0.rows_matmul(i, j, C), dense[i:j] @ C, atol=1e-12)
+        np.testing.assert_allclose(X0.rows_rmatmul(i, j, A[i:j]), dense[i:j].T @ A[i:j],
+                                   atol=1e-12)
     monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 3 * k * 37)  # blocks that do not divide m
-    U = RowBlockBasis.of_rows(lambda key: X0[key] * w[key, None], 3 * n, 3 * k)
-    Ud = stats.orthonormal_basis_tall(dense * w[:, None])
+    extra = rng.standard_normal((3 * n, 2))  # a term's columns next to the block design
+    U = RowBlockBasis.of_design(WhitenedDesign([X0, extra], w))
+    Ud = stats.orthonormal_basis_tall(np.hstack([dense, extra]) * w[:, None])
     assert U.shape == Ud.shape
     np.testing.assert_allclose(np.asarray(U), Ud, atol=1e-13)
 
