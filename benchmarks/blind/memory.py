@@ -6,7 +6,8 @@
 Builds one twin campaign (11 steps) of about ``--rows`` readings, writes it to a CSV
 (temporary unless ``--csv`` names one; an existing ``--csv`` is reused as it is), then runs
 ``calibrate`` and ``diagnose`` each in its own process and reports the peak RSS
-(``ru_maxrss``, which includes reading the CSV) and wall time of each, and the diagnose
+(``ru_maxrss``, which includes reading the CSV), wall time and CPU time (user + sys, the
+whole process: the figure to compare on a loaded machine) of each, and the diagnose
 figure per row. Two shapes of a long recording:
 
 * ``positions`` (default): Table 1 repeated to reach the rows, one averaged reading
@@ -60,8 +61,10 @@ else:
         from calibration.discrepancy import diagnose
         diagnose(rec, n_null=n_null)
     extra = {}
-print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                  "after_read_mb": base, "wall_s": time.perf_counter() - t0, **extra}))
+ru = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"peak_rss_mb": ru.ru_maxrss / 1024, "after_read_mb": base,
+                  "wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
+                  **extra}))
 """
 
 SETPOINTS_C = [float(t) for t in range(-40, 61, 10)]

@@ -20,6 +20,11 @@ import numpy as np
 from calibration.discrepancy import by_fit, stats
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
+<<<<<<< HEAD
+=======
+from calibration.discrepancy import stats
+from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
+>>>>>>> mem22
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
@@ -951,12 +956,16 @@ def _tall_rows(pb: LinearProblem, terms: list[Term]):
     return rows
 
 
-def _basis(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray]:
-    """Orthonormal basis of the whitened design of ``terms``, and the whitened data."""
-    rows = _tall_rows(pb, terms)
-    if rows is not None:
-        p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
-        return stats.orthonormal_basis_of_blocks(rows, pb.m, p), pb.y * pb.w
+def _basis(pb: LinearProblem, terms: list[Term]
+           ) -> tuple[np.ndarray | RowBlockBasis, np.ndarray]:
+    """Orthonormal basis of the whitened design of ``terms``, and the whitened data.
+
+    Above ``stats.TALL_BYTES`` the basis is held as its recipe (basis.py, issue 22: at
+    1 M readings the stored (m × r) basis was 1.15 GB, diagnose's largest array).
+    """
+    if _tall_rows(pb, terms) is not None:
+        design = WhitenedDesign([pb.X0] + [t.X for t in terms], pb.w)
+        return RowBlockBasis.of_design(design), pb.y * pb.w
     Xw, yw = _design(pb, terms)
     return stats.orthonormal_basis(Xw), yw
 

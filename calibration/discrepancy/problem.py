@@ -464,9 +464,9 @@ class AxisBlockDesign:
 
     Rows are readings × axes (reading i, axis a at row 3i + a), as the dense form. What the
     tall code paths use: ``shape``, ``nbytes`` (the dense size, so the same paths are
-    chosen), contiguous row slices ``[i:j]`` (dense blocks: the same values, zeros
-    included), ``@`` a coefficient vector or matrix, and ``np.asarray``/``*`` (the dense
-    array, built on demand: only the rarely taken paths need it).
+    chosen), contiguous row slices ``[i:j]`` and 1-D row indices (dense rows: the same
+    values, zeros included), ``@`` a coefficient vector or matrix, and ``np.asarray``/``*``
+    (the dense array, built on demand: only the rarely taken paths need it).
     """
 
     ndim = 2
@@ -483,6 +483,9 @@ class AxisBlockDesign:
 
     def __getitem__(self, key: object) -> np.ndarray:
         if not isinstance(key, slice):
+            idx = np.asarray(key)
+            if idx.ndim == 1 and idx.dtype.kind in "iu":  # rows by index: those readings only
+                return self._rows_at(idx)
             return np.asarray(self)[key]
         i, j, stride = key.indices(self.shape[0])
         if stride != 1:
@@ -491,6 +494,29 @@ class AxisBlockDesign:
             return np.zeros((0, self.shape[1]))
         r0, r1 = i // 3, -(-j // 3)  # the readings the rows belong to
         return _axis_blocks(self.block[r0:r1])[i - 3 * r0 : j - 3 * r0]
+
+    def _rows_at(self, idx: np.ndarray) -> np.ndarray:
+        idx = np.where(idx < 0, idx + self.shape[0], idx)
+        k = self.block.shape[1]
+        out = np.zeros((idx.size, self.shape[1]))
+        for a in range(3):
+            sel = np.flatnonzero(idx % 3 == a)
+            out[sel, a * k:(a + 1) * k] = self.block[idx[sel] // 3]
+        return out
+
+    def rows_matmul(self, i: int, j: int, C: np.ndarray) -> np.ndarray:
+        """``self[i:j] @ C`` (C: (3k,) or (3k × q)) from the block, without the zeros."""
+        r0, r1, k = i // 3, -(-j // 3), self.block.shape[1]
+        out = np.stack([self.block[r0:r1] @ C[a * k:(a + 1) * k] for a in range(3)], axis=1)
+        return out.reshape((3 * (r1 - r0),) + C.shape[1:])[i - 3 * r0:j - 3 * r0]
+
+    def rows_rmatmul(self, i: int, j: int, A: np.ndarray) -> np.ndarray:
+        """``self[i:j].T @ A`` (A: the j − i rows) from the block, without the zeros."""
+        r0, r1 = i // 3, -(-j // 3)
+        pad = np.zeros((3 * (r1 - r0),) + A.shape[1:])
+        pad[i - 3 * r0:j - 3 * r0] = A
+        pad = pad.reshape((r1 - r0, 3) + A.shape[1:])
+        return np.concatenate([self.block[r0:r1].T @ pad[:, a] for a in range(3)])
 
     def __matmul__(self, beta: np.ndarray) -> np.ndarray:
         beta = np.asarray(beta, float)

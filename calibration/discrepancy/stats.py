@@ -230,8 +230,11 @@ def _residual_cov_blocks(
     n, g, p = Ug.shape
     cg = c[idx]  # (N, g)
     Cg = np.eye(g)[None] * (1.0 - cg[:, :, None] ** 2) + cg[:, :, None] * cg[:, None, :]
-    V = np.einsum("ng,ngp->np", cg, Ug)
-    W = np.eye(p) + V.T @ V
+    W = np.eye(p)
+    step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
+    for i in range(0, n, step):  # v by blocks of readings: no (N × p) array (issue 22)
+        V = np.einsum("ng,ngp->np", cg[i : i + step], Ug[i : i + step])
+        W += V.T @ V
     c2 = c**2
     step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
     for i in range(0, U.shape[0], step):

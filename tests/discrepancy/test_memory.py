@@ -251,3 +251,57 @@ def test_axis_block_design_is_the_dense_design_without_its_zeros(monkeypatch):
     assert tall["verdict"] == ref["verdict"]
     assert [f["effect"] for f in tall["findings"]] == [f["effect"] for f in ref["findings"]]
     assert abs(tall["baseline"]["rmse_ug"] - ref["baseline"]["rmse_ug"]) < 0.02
+
+
+def test_basis_held_as_its_recipe_answers_as_the_stored_basis(monkeypatch):
+    """Above TALL_BYTES the basis is never stored (issue 22: 1.15 GB at 1 M readings): every
+    use the statistics make of it gives the stored basis's values, without its dense form."""
+    from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
+    from calibration.discrepancy.problem import AxisBlockDesign, _axis_blocks
+
+    rng = np.random.default_rng(11)
+    n, k = 700, 8
+    block = rng.standard_normal((n, k)) * np.logspace(-2, 2, k)
+    X0, dense = AxisBlockDesign(block), _axis_blocks(block)
+    w = rng.uniform(0.5, 2.0, 3 * n)
+    idx = np.array([0, 5, 3 * n - 1, 17, 17, 2])
+    np.testing.assert_array_equal(X0[idx], dense[idx])  # rows by index, zeros included
+    C, A = rng.standard_normal((3 * k, 4)), rng.standard_normal((3 * n, 4))
+    for i, j in ((0, 3 * n), (1, 8), (4, 5), (7, 3 * n - 2)):  # partial readings at the ends
+        np.testing.assert_allclose(X0.rows_matmul(i, j, C), dense[i:j] @ C, atol=1e-12)
+        np.testing.assert_allclose(X0.rows_rmatmul(i, j, A[i:j]), dense[i:j].T @ A[i:j],
+                                   atol=1e-12)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 3 * k * 37)  # blocks that do not divide m
+    extra = rng.standard_normal((3 * n, 2))  # a term's columns next to the block design
+    U = RowBlockBasis.of_design(WhitenedDesign([X0, extra], w))
+    Ud = stats.orthonormal_basis_tall(np.hstack([dense, extra]) * w[:, None])
+    assert U.shape == Ud.shape
+    np.testing.assert_allclose(np.asarray(U), Ud, atol=1e-13)
+
+    def no_dense(*_a, **_k):
+        raise AssertionError("the basis was built whole")
+
+    monkeypatch.setattr(RowBlockBasis, "__array__", no_dense)
+    E = rng.standard_normal((3 * n, 5))
+    np.testing.assert_allclose(U.T @ E, Ud.T @ E, atol=1e-12)
+    np.testing.assert_allclose(U @ (U.T @ E[:, 0]), Ud @ (Ud.T @ E[:, 0]), atol=1e-12)
+    np.testing.assert_allclose(U[idx], Ud[idx], atol=1e-13)
+    np.testing.assert_allclose(U[40:95], Ud[40:95], atol=1e-13)
+    mask = np.zeros(3 * n, bool)
+    mask[[3, 30, 300]] = True
+    np.testing.assert_allclose(U[mask], Ud[mask], atol=1e-13)
+    np.testing.assert_allclose(stats.project_out_inplace(U, E.copy()),
+                               stats.project_out_inplace(Ud, E.copy()), atol=1e-12)
+    # per-reading statistics: U.reshape(N, 3, r) and its einsums run by blocks of readings
+    row, c = np.repeat(np.arange(n), 3), rng.uniform(-0.9, 0.9, 3 * n)
+    for shared in (None, c):
+        got = stats.row_stats(U, E[:, 0], E, row, n, 1.2, np.ones(5), {4}, shared)
+        want = stats.row_stats(Ud, E[:, 0], E, row, n, 1.2, np.ones(5), {4}, shared)
+        np.testing.assert_allclose(got[0], want[0], rtol=1e-9)
+        np.testing.assert_allclose(got[1], want[1], rtol=1e-9)
+    # np.hstack([U, B]) keeps B as extra columns (the one-sided test's basis)
+    Nb = stats.orthonormal_basis(stats.project_out(Ud, rng.standard_normal((3 * n, 2))))
+    H = np.hstack([U, Nb])
+    assert isinstance(H, RowBlockBasis) and H.shape == (3 * n, Ud.shape[1] + 2)
+    np.testing.assert_allclose(stats.project_out(H, E), stats.project_out(np.hstack([Ud, Nb]), E),
+                               atol=1e-12)
