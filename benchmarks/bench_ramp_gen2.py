@@ -1,14 +1,16 @@
 """Issue 19's ramp fit checked on recordings the project's twin did not make (gen2).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_ramp_gen2.py --realdata DIR
-        [--sensors 8] [--seed 0] [--rates 1,2,3] [--honesty]
+        [--sensors 8] [--seed 0] [--rates 1,2,3] [--program lab|plan] [--honesty]
 
 Recordings: :mod:`benchmarks.blind.gen2.ramp` (gen2's Chebyshev sensor, noise drawn from
 the shared real recordings, gen2's die lag), the chamber −40 → 60 → 25 °C at each rate with
 no hold, the table sweeping gen2's 24-position schedule; per sensor a die time constant of
 300…900 s, 40…120 µg sample noise, 0…0.5 mg bench disturbance, 50/100/200 samples per
 capture, ``temperature_rate`` 20 µg per °C/min and ``thermal_hysteresis`` 15 µg (gen2's
-effects). The same sensors at every rate.
+effects). The same sensors at every rate. ``--program plan``: the chamber runs the legs of
+soakcal's ramp plan instead (25 → −40 → 60 → 25 °C, holding at −40 and 60 °C until the die
+is within 1 °C of the air; :func:`benchmarks.blind.gen2.ramp.air_program`).
 
 Each recording is written to CSV and calibrated by ``soakcal calibrate``
 (``calibration.cli.run_calibrate`` → ``calibration.fitting.fit``, which segments it and
@@ -43,6 +45,7 @@ if str(ROOT) not in sys.path:
 
 from benchmarks.blind.gen2.ramp import (  # noqa: E402
     RampSpec,
+    hold_minutes,
     ramp_record,
     static_readings,
     true_force_g,
@@ -139,6 +142,8 @@ def main() -> int:
     ap.add_argument("--sensors", type=int, default=8)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rates", default="1,2,3", help="ramp rates, °C/min, comma-separated")
+    ap.add_argument("--program", choices=("lab", "plan"), default="lab",
+                    help="chamber program: issue 19's lab ramp or soakcal's plan's legs")
     ap.add_argument("--honesty", action="store_true")
     a = ap.parse_args()
     pools = load_pools(realdata_dir(a.realdata))
@@ -148,12 +153,16 @@ def main() -> int:
     for rate in (float(r) for r in a.rates.split(",")):
         rows = []
         for k, (sensor, spec) in enumerate(cases):
-            rows.append(run_case(sensor, replace(spec, rate_c_per_min=rate), pools,
-                                 a.seed * 1000 + 500 + k))
+            rows.append(run_case(sensor, replace(spec, rate_c_per_min=rate, program=a.program),
+                                 pools, a.seed * 1000 + 500 + k))
         ok = [r for r in rows if r["exit"] == 0]
-        print(f"gen2 ramp {rate:g} °C/min, {a.sensors} sensors: {len(ok)} calibrated (exit 0)")
+        print(f"gen2 ramp ({a.program}) {rate:g} °C/min, {a.sensors} sensors: {len(ok)} "
+              "calibrated (exit 0)")
         for k, r in enumerate(rows):
-            spec = cases[k][1]
+            spec = replace(cases[k][1], rate_c_per_min=rate, program=a.program)
+            if a.program == "plan":
+                print(f"  sensor {k}: holds " + " + ".join(
+                    f"{m:.0f}" for m in hold_minutes(spec)) + " min")
             if r["exit"] != 0:
                 print(f"  sensor {k}: exit {r['exit']}: {r['text'].strip()}")
                 continue
@@ -165,7 +174,10 @@ def main() -> int:
         if ok:
             pooled = np.sqrt(sum(r["sse_model"] for r in ok) / sum(r["sse_oracle"] for r in ok))
             worst = max(np.sqrt(r["sse_model"] / r["sse_oracle"]) for r in ok)
-            print(f"  pooled ratio {pooled:.3f}, worst sensor {worst:.3f}")
+            mt = [r["rms_model_error_ug"] for r in ok]
+            print(f"  pooled ratio {pooled:.3f}, worst sensor {worst:.3f}, model − truth "
+                  f"{min(mt):.0f}–{max(mt):.0f} µg, longest recording "
+                  f"{max(r['hours'] for r in ok):.2f} h")
     return 0
 
 

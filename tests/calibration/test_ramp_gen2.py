@@ -10,7 +10,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.blind.gen2.ramp import RampSpec, ramp_record, static_readings, true_force_g
+from benchmarks.blind.gen2.ramp import (
+    RampSpec,
+    air_program,
+    die_lag,
+    hold_minutes,
+    ramp_record,
+    static_readings,
+    true_force_g,
+)
 from benchmarks.blind.gen2.realnoise import NoisePools
 from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.fitting import fit
@@ -90,3 +98,39 @@ def test_a_leg_too_short_for_the_rate_term_is_said_not_left_out(pools: NoisePool
     long_legs = fit(Recording.from_columns(ramp_record(SPEC, sensor, pools, seed=5)[0]))
     assert not any("a leg is too short" in s
                    for s in long_legs.report["identified"]["not_identified"])
+
+
+def test_the_plan_program_runs_soakcal_legs_with_holds_only_at_the_turnarounds() -> None:
+    spec = RampSpec(**{**SPEC.__dict__, "program": "plan"})
+    air = air_program(spec)
+    assert air[0] == air[-1] == spec.safe_c
+    # the cold end first, then the hot end, then back: every temperature crossed both ways
+    assert np.argmin(air) < np.argmax(air)
+    moving = np.diff(air)
+    standing = np.flatnonzero(moving == 0)
+    assert set(np.unique(air[standing])) == {spec.low_c, spec.high_c}
+    die = die_lag(air, spec.die_tau_s)
+    for end in (spec.low_c, spec.high_c):
+        held = np.flatnonzero(air == end)
+        # the hold ends when the die is within the gap; it was far away when the air arrived
+        assert abs(die[held[-1]] - end) <= spec.edge_gap_c < abs(die[held[0]] - end)
+    holds = hold_minutes(spec)
+    tau_min = spec.die_tau_s / 60.0
+    rate_lag_c = spec.rate_c_per_min * tau_min
+    first_order = tau_min * np.log(rate_lag_c / spec.edge_gap_c)  # ramp-campaigns.md
+    assert all(0.8 * first_order < h <= first_order for h in holds)
+    assert hold_minutes(SPEC) == []
+
+
+def test_a_plan_ramp_fits_continuously_with_both_legs_long_enough(pools: NoisePools) -> None:
+    spec = RampSpec(**{**SPEC.__dict__, "program": "plan"})
+    cols, truth = ramp_record(spec, draw_sensor(np.random.default_rng(1)), pools, seed=5)
+    # while the air holds at the low end the hysteresis state is still "cooling"
+    at_low = np.abs(truth.air_c - spec.low_c) < 1e-9
+    assert at_low.any() and np.all(truth.direction[at_low] < 0)
+    result = fit(Recording.from_columns(cols))
+    assert result.kind == "continuous"
+    assert not any("a leg is too short" in s
+                   for s in result.report["identified"]["not_identified"])
+    assert truth.die_c.min() < spec.low_c + spec.edge_gap_c
+    assert truth.die_c.max() > spec.high_c - spec.edge_gap_c

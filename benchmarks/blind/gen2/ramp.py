@@ -10,8 +10,19 @@ re-seating error and the temperature channels are those of
 rate, ``thermal_hysteresis`` on the chamber's direction). Nothing in gen2's other modules
 is changed.
 
-The rig: the chamber air follows ``start → peak → end`` at ``rate_c_per_min`` with no hold
-(the die starts settled at ``start``); the die follows the air as gen2's first-order lag
+The rig: the chamber air follows one of two programs at ``rate_c_per_min`` (the die starts
+settled where the air starts):
+
+* ``program="lab"`` (default; issue 19's lab ramp): ``start → peak → end`` with no hold.
+* ``program="plan"``: the legs soakcal's ramp plan commands, as docs/ramp-campaigns.md
+  describes them (written here from the docs, not imported): from the rig's safe/ambient
+  temperature ``safe_c`` to the low end, to the high end, back to ``safe_c``; at each of the
+  two turnarounds the air holds until the die is within ``edge_gap_c`` of it (the plan's
+  rule, which it measures on the dies; here the die is known), at least three blocks of
+  half a sweep of captures and at most ``max_hold_min`` (the soak cap, 2 × ``soak_min``);
+  no hold at the start or the end.
+
+The die follows the air as gen2's first-order lag
 (exact exponential per second); the table sweeps the schedule's positions over and over
 (``MOVE_S`` between captures of ``n_samples`` at 100 Hz). Each row is one capture mean
 stamped with its mean die temperature (``sensor_c``, 0.1 °C channel) and/or the chamber air
@@ -48,6 +59,13 @@ class RampSpec:
     rate_ug_per_c_per_min: float = 0.0  # temperature_rate magnitude (die rate)
     hysteresis_ug: float = 0.0  # thermal_hysteresis magnitude (chamber direction)
     columns: tuple[str, ...] = ("chamber_c", "sensor_c")
+    program: str = "lab"  # "lab": start → peak → end, no hold; "plan": soakcal's legs
+    low_c: float = -40.0  # plan: the range's low end (the lowest setpoint)
+    high_c: float = 60.0  # plan: the range's high end (the highest setpoint)
+    safe_c: float = 25.0  # plan: where the chamber starts and ends (the rig's ambient/safe)
+    edge_gap_c: float = 1.0  # plan: a turnaround hold ends with the die this close to the air
+    min_hold_blocks: int = 3  # plan: a hold's captures at least this many blocks of half a sweep
+    max_hold_min: float = 120.0  # plan: the hold cap (the soak cap, 2 × soak_min 60 min)
 
 
 @dataclass
@@ -60,15 +78,58 @@ class RampTruth:
     direction: np.ndarray
 
 
+def _ramp_to(here_c: float, target_c: float, rate_c_per_s: float) -> np.ndarray:
+    """One leg's air on the 1-s grid after ``here_c``, ending at ``target_c``."""
+    n = max(int(np.ceil(abs(target_c - here_c) / rate_c_per_s)), 1)
+    return here_c + (target_c - here_c) * np.arange(1, n + 1) / n
+
+
 def air_program(spec: RampSpec) -> np.ndarray:
-    """Chamber air (°C) on a 1-s grid: start → peak → end at the ramp rate, no hold."""
+    """Chamber air (°C) on a 1-s grid at the ramp rate: ``lab``: start → peak → end, no hold;
+    ``plan``: safe → low → high → safe with the turnaround holds (module docstring)."""
     r = spec.rate_c_per_min / 60.0
-    legs = [(spec.start_c, spec.peak_c), (spec.peak_c, spec.end_c)]
-    parts = [np.array([spec.start_c])]
-    for a, b in legs:
-        n = max(int(np.ceil(abs(b - a) / r)), 1)
-        parts.append(a + (b - a) * np.arange(1, n + 1) / n)
-    return np.concatenate(parts)
+    if spec.program == "lab":
+        parts = [np.array([spec.start_c])]
+        for a, b in [(spec.start_c, spec.peak_c), (spec.peak_c, spec.end_c)]:
+            parts.append(_ramp_to(a, b, r))
+        return np.concatenate(parts)
+    if spec.program != "plan":
+        raise ValueError(f"program {spec.program!r}: 'lab' or 'plan'")
+    a = np.exp(-1.0 / spec.die_tau_s)
+    # the plan's hold cap and shortest hold in s (three blocks of half a sweep, at least 4)
+    n_pos = len(spec.positions) if spec.positions is not None else 24
+    step_s = pr.MOVE_S + spec.n_samples / pr.FS_HZ
+    min_hold_s = int(np.ceil(spec.min_hold_blocks * max(4, n_pos // 2) * step_s))
+    max_hold_s = int(spec.max_hold_min * 60)
+    air = [spec.safe_c]
+    die = spec.safe_c
+    targets = [spec.low_c, spec.high_c, spec.safe_c]
+    for i, target in enumerate(targets):
+        leg = _ramp_to(air[-1], target, r)
+        for x in leg:  # the die as die_lag steps it, to know when a hold may end
+            die = air[-1] + (die - air[-1]) * a
+            air.append(float(x))
+        turning = i + 1 < len(targets)  # low end after leg 1, high end after leg 2
+        if turning:
+            held = 0
+            while held < max_hold_s and (held < min_hold_s
+                                         or abs(die - target) > spec.edge_gap_c):
+                die = air[-1] + (die - air[-1]) * a
+                air.append(float(target))
+                held += 1
+    return np.asarray(air)
+
+
+def hold_minutes(spec: RampSpec) -> list[float]:
+    """The plan's turnaround holds (min): runs of the air standing at the low and high end."""
+    if spec.program != "plan":
+        return []
+    air = air_program(spec)
+    out = []
+    for end in (spec.low_c, spec.high_c):
+        at = np.flatnonzero(air == end)
+        out.append((at.size - 1) / 60.0 if at.size else 0.0)
+    return out
 
 
 def die_lag(air_c: np.ndarray, tau_s: float) -> np.ndarray:
@@ -105,6 +166,11 @@ def ramp_record(spec: RampSpec, sensor: Sensor2, pools: NoisePools, seed: int
     idx = np.clip(np.round(t_mid).astype(int), 1, air.size - 2)
     die_rate = (die[idx + 1] - die[idx - 1]) / 2.0 * 60.0
     direction = np.sign(air[idx + 1] - air[idx - 1])
+    # the air standing (a plan's hold): the last direction it moved in (heating if none)
+    moved = np.flatnonzero(direction != 0)
+    if moved.size:
+        last = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
+        direction = np.where(last >= 0, direction[np.maximum(last, 0)], 1.0)
     direction[direction == 0] = 1.0
     e_z = np.array([0.0, 0.0, 1.0])
     ref = np.array([pr.force_in_sensor(a, b, e_z) for a, b in ang[pos]])
