@@ -20,11 +20,7 @@ import numpy as np
 from calibration.discrepancy import by_fit, stats
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
-<<<<<<< HEAD
-=======
-from calibration.discrepancy import stats
 from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
->>>>>>> mem22
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
