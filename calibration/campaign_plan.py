@@ -216,6 +216,12 @@ Plan = Generator[Msg, Any, None]
 # rate (simulators.campaign_sim.RigPhysics, calibration.thermal_plant.DEFAULT_RAMP_C_PER_MIN,
 # 2 °C/min), on which its recordings and the diagnosis' assumed ramp were measured.
 CAMPAIGN_RAMP_C_PER_MIN = 1.0
+# A ramp-method campaign's default, °C/min: the rate it measures at, not only how it moves
+# between setpoints. At 2 °C/min 16 sensors take 0.243× the seed paper's 13.9 h (dry run),
+# held-out error 1.03× the noise-limited oracle on the twin and 1.007× on the second,
+# independently written generator; at 1 °C/min the same campaign takes 0.339× for no
+# measurable gain (1.005×). docs/benchmarks.md, "gen2 ramps with the plan's legs".
+RAMP_METHOD_C_PER_MIN = 2.0
 # The serial a plan names when its interpreter models no particular sensor.
 ANY_SENSOR = "sensor"
 

@@ -32,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 # The commanded chamber ramp's default, °C/min, is the plan's (the offline twin commands its
 # own rig's rate explicitly).
-from calibration.campaign_plan import CAMPAIGN_RAMP_C_PER_MIN
+from calibration.campaign_plan import CAMPAIGN_RAMP_C_PER_MIN, RAMP_METHOD_C_PER_MIN
 
 DEFAULT_SETPOINTS_C: tuple[float, ...] = (
     -40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0)
@@ -220,7 +220,7 @@ class CampaignSpec(BaseModel):
                                open_lo=False,
                                doc="chamber setpoint ramp, °C/min (≤ the rig's max rate); "
                                    "0: step, the chamber moves at its own rate (method "
-                                   "'soak' only)")
+                                   "'soak' only); default 2 for method 'ramp'")
     soak_poll_s: Float = _f(60.0, 0, MAX_POLL_S, doc="soak poll period, s")
     soak_probe_samples: Int | None = Field(
         default=None, ge=1, le=BRIDGE_MAX_SAMPLES,
@@ -279,6 +279,16 @@ class CampaignSpec(BaseModel):
                 f"{self.max_soak_s / 60.0:g}: a soak cannot end before its earliest end; "
                 "lower min_soak_min or raise max_soak_min")
         return self
+
+    @model_validator(mode="before")
+    @classmethod
+    def _ramp_method_default_rate(cls, data: Any) -> Any:
+        # A ramp campaign measures while the chamber moves, so its rate sets both the
+        # campaign's time and what the legs identify: its own default (campaign_plan).
+        if isinstance(data, dict) and data.get("method") == "ramp" \
+                and data.get("ramp_c_per_min") is None:
+            return {**data, "ramp_c_per_min": RAMP_METHOD_C_PER_MIN}
+        return data
 
     @field_validator("ramp_c_per_min")
     @classmethod

@@ -19,9 +19,17 @@ def test_method_soak_is_the_default_and_ramp_is_accepted_with_a_range(
     assert new_campaign(client, auth["operator"])["spec"]["method"] == "soak"
     ramp = new_campaign(client, auth["operator"], method="ramp", setpoints_c=[-20, 40])
     assert ramp["spec"]["method"] == "ramp"
-    # the stored dry run is the ramp's: 120 °C of legs at 1 °C/min and two holds, < 8 h
-    assert 120 * 60 < ramp["predicted_duration_s"] < 8 * 3600
+    # a ramp's own default rate (it measures while moving); a soak's stays 1 °C/min
+    assert ramp["spec"]["ramp_c_per_min"] == 2.0
+    # the stored dry run is the ramp's: 120 °C of legs at 2 °C/min and two holds, < 8 h
+    assert 60 * 60 < ramp["predicted_duration_s"] < 8 * 3600
+    slow = new_campaign(client, auth["operator"], method="ramp", setpoints_c=[-20, 40],
+                        ramp_c_per_min=1)
+    assert slow["spec"]["ramp_c_per_min"] == 1.0  # a rate given is the rate used
+    # 120 °C of legs take an hour longer at half the rate; the holds are a little shorter
+    assert slow["predicted_duration_s"] > ramp["predicted_duration_s"] + 30 * 60
     soak = new_campaign(client, auth["operator"], setpoints_c=[-20, 40])
+    assert soak["spec"]["ramp_c_per_min"] == 1.0
     assert ramp["predicted_duration_s"] != soak["predicted_duration_s"]
     r = client.post("/api/v1/campaigns", headers=auth["operator"],
                     json={"rig": "sim", "sensor": "SN-0001", "method": "ramp",

@@ -44,6 +44,11 @@ def test_the_method_selector_offers_soak_and_ramp_with_the_ramp_rate(
     # a ramp at 0 °C/min (a step) is no ramp: refused with the field, the reason and the fix
     page.fill("input[name=sensor]", "SN-RAMP-0")
     select.select_option("ramp")
+    # the rate follows the method's default (the API's: ramp 2 °C/min) until it is typed
+    assert page.input_value("#start input[name=ramp_c_per_min]") == "2"
+    select.select_option("soak")
+    assert page.input_value("#start input[name=ramp_c_per_min]") == "1"
+    select.select_option("ramp")
     page.fill("input[name=ramp_c_per_min]", "0")
     page.click("#start button")
     page.wait_for_selector("#error:not([hidden])")

@@ -206,6 +206,13 @@ function startForm() {
     field("positions", "Position schedule", "table1"),
     field("samples_per_position", "Samples per position", "200", { type: "number", min: "1" }),
     h("button", { class: "primary", type: "submit" }, "Start campaign"));
+  // The chamber ramp's default follows the method (soak 1, ramp 2 °C/min: the API's
+  // defaults) until the operator types a rate of their own.
+  const rampRate = form.elements.namedItem("ramp_c_per_min");
+  rampRate.addEventListener("input", () => { rampRate.dataset.edited = "1"; });
+  form.elements.namedItem("method").addEventListener("change", (ev) => {
+    if (!rampRate.dataset.edited) rampRate.value = ev.target.value === "ramp" ? "2" : "1";
+  });
   form.addEventListener("submit", (ev) => { ev.preventDefault(); guarded(async () => {
     const f = new FormData(form);
     const body = { rig: f.get("rig"), sensor: f.get("sensor"), positions: f.get("positions"),
