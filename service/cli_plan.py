@@ -29,7 +29,8 @@ def add_plan_parser(actions: Any) -> None:
                       help="setpoints in °C, e.g. --setpoints=-40,-20,0 (default -40..60)")
     plan.add_argument("--soak-min", type=float, help="soak per step in minutes (default 60)")
     plan.add_argument("--samples-per-position", type=int, help="default 200")
-    plan.add_argument("--ramp-c-per-min", type=float, help="chamber ramp, °C/min (default 1; 2 with --method ramp)")
+    plan.add_argument("--ramp-c-per-min", type=float,
+                      help="chamber ramp, °C/min (default 1; 2 with --method ramp)")
     plan.add_argument("--stability", help="predictive | dwell | fixed (default predictive)")
     plan.add_argument("--method", choices=("soak", "ramp"),
                       help="soak (default) or ramp (legs through the range and back while "
