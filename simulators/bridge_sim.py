@@ -15,7 +15,6 @@ keeps its own part, noise stream, identity and faults, and its group capture
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from drivers.clock import Clock
 from drivers.faults import ProtocolError
 from drivers.geometry import reference_for_angles
 from simulators.faults import SimFaults
+from simulators.line_server import LineServer, start_line_server
 
 FIRMWARE = "soakcal-sim-2.0"
 _NO_FAULTS = SimFaults()
@@ -291,44 +291,31 @@ def _raw_reply(counts: np.ndarray, traw: np.ndarray) -> list[list[object]]:
 @dataclass
 class BridgeServer:
     device: BridgeDevice | MultiplexedBridgeDevice
-    server: asyncio.base_events.Server
-    host: str
-    port: int
-    _tasks: set[asyncio.Task] = field(default_factory=set)
+    listener: LineServer
+
+    @property
+    def host(self) -> str:
+        return self.listener.host
+
+    @property
+    def port(self) -> int:
+        return self.listener.port
 
     @property
     def url(self) -> str:
         return f"socket://{self.host}:{self.port}"
 
     async def stop(self) -> None:
-        self.server.close()
-        for t in list(self._tasks):
-            t.cancel()
-        with contextlib.suppress(Exception):
-            await self.server.wait_closed()
+        await self.listener.stop()
 
 
 async def start_bridge_server(device: BridgeDevice | MultiplexedBridgeDevice, *,
                               host: str = "127.0.0.1",
                               port: int = 0) -> BridgeServer:
     """Listen for bridge clients; each connection is served line by line."""
-    holder: dict[str, BridgeServer] = {}
-
-    async def on_client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        if task is not None:
-            holder["srv"]._tasks.add(task)
-        try:
-            await _serve_client(device, reader, writer)
-        finally:
-            if task is not None:
-                holder["srv"]._tasks.discard(task)
-            writer.close()
-
-    server = await asyncio.start_server(on_client, host, port)
-    bound = server.sockets[0].getsockname()[1]
-    holder["srv"] = BridgeServer(device, server, host, bound)
-    return holder["srv"]
+    listener = await start_line_server(functools.partial(_serve_client, device), host=host,
+                                       port=port)
+    return BridgeServer(device, listener)
 
 
 async def _serve_client(device: BridgeDevice | MultiplexedBridgeDevice,

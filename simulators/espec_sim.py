@@ -12,13 +12,13 @@ or a rig check that trusts a wrong assumption meets it here as it would on the b
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from simulators.chamber_sim import ChamberPhysics
+from simulators.line_server import LineServer, start_line_server
 
 
 @dataclass
@@ -142,21 +142,22 @@ class EspecServer:
     """A listening twin; ``url`` is what a rig config's ``chamber.url`` names."""
 
     controller: EspecController
-    server: asyncio.base_events.Server
-    host: str
-    port: int
-    _tasks: set[asyncio.Task] = field(default_factory=set)
+    listener: LineServer
+
+    @property
+    def host(self) -> str:
+        return self.listener.host
+
+    @property
+    def port(self) -> int:
+        return self.listener.port
 
     @property
     def url(self) -> str:
         return f"tcp://{self.host}:{self.port}"
 
     async def stop(self) -> None:
-        self.server.close()
-        for t in list(self._tasks):
-            t.cancel()
-        with contextlib.suppress(Exception):
-            await self.server.wait_closed()
+        await self.listener.stop()
 
 
 async def start_espec_server(controller: EspecController, *, host: str = "127.0.0.1",
@@ -164,35 +165,22 @@ async def start_espec_server(controller: EspecController, *, host: str = "127.0.
                              rng: np.random.Generator | None = None) -> EspecServer:
     """Serve ``controller`` on TCP, one command line at a time per connection; the
     physics' :class:`~simulators.faults.SimFaults` ``p_no_reply`` / ``p_drop`` apply."""
-    holder: dict[str, EspecServer] = {}
     draw = rng if rng is not None else np.random.default_rng(0)
 
-    async def on_client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        if task is not None:
-            holder["srv"]._tasks.add(task)
-        try:
-            while True:
-                try:
-                    raw = await reader.readuntil(b"\r\n")
-                except (asyncio.IncompleteReadError, asyncio.LimitOverrunError,
-                        ConnectionError):
-                    return
-                faults = controller.physics.faults
-                if faults.p_drop and draw.random() < faults.p_drop:
-                    return
-                if faults.p_no_reply and draw.random() < faults.p_no_reply:
-                    continue
-                reply = controller.answer(raw.decode("ascii", "replace"))
-                if reply is not None:
-                    writer.write(reply.encode("ascii") + b"\r\n")
-                    await writer.drain()
-        finally:
-            if task is not None:
-                holder["srv"]._tasks.discard(task)
-            writer.close()
+    async def serve_client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        while True:
+            try:
+                raw = await reader.readuntil(b"\r\n")
+            except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, ConnectionError):
+                return
+            faults = controller.physics.faults
+            if faults.p_drop and draw.random() < faults.p_drop:
+                return
+            if faults.p_no_reply and draw.random() < faults.p_no_reply:
+                continue
+            reply = controller.answer(raw.decode("ascii", "replace"))
+            if reply is not None:
+                writer.write(reply.encode("ascii") + b"\r\n")
+                await writer.drain()
 
-    server = await asyncio.start_server(on_client, host, port)
-    bound = server.sockets[0].getsockname()[1]
-    holder["srv"] = EspecServer(controller, server, host, bound)
-    return holder["srv"]
+    return EspecServer(controller, await start_line_server(serve_client, host=host, port=port))
