@@ -83,7 +83,7 @@ class RowBlockBasis:
     def of_design(cls, design: WhitenedDesign) -> RowBlockBasis:
         """The basis of ``design``'s column space: Gram, eigen-cut, Cholesky-QR2.
 
-        The same steps and cut (``stats.GRAM_REL_TOL``) as ``stats.orthonormal_basis_tall``;
+        The same eigen-cut (``stats.eigen_cut_map``) as ``stats.orthonormal_basis_tall``;
         the Cholesky factor comes from ``Σ (B·T)ᵀ(B·T)`` over the row blocks B, so no
         (m × r) array is built.
         """
@@ -93,11 +93,7 @@ class RowBlockBasis:
         for i in range(0, m, step):
             B = rows(slice(i, i + step))
             gram += B.T @ B
-        d = np.sqrt(np.diag(gram))
-        inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
-        lam, V = np.linalg.eigh(gram * inv[:, None] * inv[None, :])
-        keep = lam > stats.GRAM_REL_TOL * max(float(lam.max()), 1e-300)
-        T = (inv[:, None] * V[:, keep]) / np.sqrt(lam[keep])
+        T = stats.eigen_cut_map(gram)
         H = np.zeros((T.shape[1], T.shape[1]))
         for i in range(0, m, step):
             B1 = rows(slice(i, i + step)) @ T

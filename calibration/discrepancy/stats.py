@@ -60,6 +60,19 @@ def orthonormal_basis_tall(X: np.ndarray) -> np.ndarray:
     return orthonormal_basis_of_blocks(lambda i, j: X[i:j], X.shape[0], X.shape[1], X.T @ X)
 
 
+def eigen_cut_map(gram: np.ndarray) -> np.ndarray:
+    """(p × r) T such that X·T spans X's column space with near-orthonormal columns, from
+    the Gram matrix ``XᵀX`` alone: its columns scaled to unit norm, eigenvalues below
+    ``GRAM_REL_TOL`` of the largest cut (the rank decision), the rest whitened. The first
+    half of Cholesky-QR2; the caller finishes with the Cholesky factor of ``(X·T)ᵀ(X·T)``.
+    """
+    d = np.sqrt(np.diag(gram))
+    inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
+    lam, V = np.linalg.eigh(gram * inv[:, None] * inv[None, :])
+    keep = lam > GRAM_REL_TOL * max(float(lam.max()), 1e-300)
+    return (inv[:, None] * V[:, keep]) / np.sqrt(lam[keep])
+
+
 def orthonormal_basis_of_blocks(
     rows: Callable[[int, int], np.ndarray], m: int, p: int, gram: np.ndarray | None = None
 ) -> np.ndarray:
@@ -75,13 +88,8 @@ def orthonormal_basis_of_blocks(
         for i in range(0, m, step):
             B = rows(i, i + step)
             gram += B.T @ B
-    G = gram
-    d = np.sqrt(np.diag(G))
-    inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)
-    lam, V = np.linalg.eigh(G * inv[:, None] * inv[None, :])
-    keep = lam > GRAM_REL_TOL * max(float(lam.max()), 1e-300)
-    T = (inv[:, None] * V[:, keep]) / np.sqrt(lam[keep])
-    U = np.empty((m, int(keep.sum())))
+    T = eigen_cut_map(gram)
+    U = np.empty((m, T.shape[1]))
     for i in range(0, m, step):
         U[i : i + step] = rows(i, i + step) @ T
     R = np.linalg.cholesky(U.T @ U).T  # upper: U₁ = U R
