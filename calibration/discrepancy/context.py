@@ -32,7 +32,6 @@ class DesignContext:
     step_temp_c: dict[int, float]  # median temperature per step
     direction: np.ndarray  # (N,) +1 heating, −1 cooling, 0 unknown (last excursion)
     time_since_step_s: np.ndarray  # (N,) time since the step's first reading
-    rate_c_per_min: np.ndarray  # (N,) within-step temperature slope
     input_g: np.ndarray  # (N,3) specific force in the sensor frame (approx.)
     sd_g: np.ndarray | None  # (N,3) within-window sd, when recorded
     draw_dtemp_g_per_c: np.ndarray  # (N,3) ∂raw/∂T of the fitted base model
@@ -73,13 +72,9 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
     step_temp = {int(s): float(np.median(temp[steps == s])) for s in np.unique(steps)}
     direction = _directions(steps, step_temp)
     since = np.zeros(n)
-    rate = np.zeros(n)
     for s in step_temp:
         m = steps == s
         since[m] = t[m] - t[m].min()
-        if m.sum() >= 3 and np.ptp(t[m]) > 0:
-            # why: one slope per step; row-to-row differences are mostly noise
-            rate[m] = np.polyfit(t[m], temp[m], 1)[0] * 60.0
     sd = None
     if all(rec.has(c) for c in ("sd_x", "sd_y", "sd_z")):
         sd = np.column_stack([rec.columns[c] for c in ("sd_x", "sd_y", "sd_z")])
@@ -91,7 +86,7 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
         mode=mode, t_s=t, temp_c=temp, temperature_source=source,
         has_chamber_c=rec.has("chamber_c"), has_sensor_c=rec.has("sensor_c"),
         steps=steps, positions=positions, step_temp_c=step_temp, direction=direction,
-        time_since_step_s=since, rate_c_per_min=rate, input_g=np.asarray(input_g, float),
+        time_since_step_s=since, input_g=np.asarray(input_g, float),
         sd_g=sd, draw_dtemp_g_per_c=np.zeros((n, 3)), session=session,
     )
 

@@ -41,7 +41,7 @@ def ctx_of(step_temps: list[float], order: np.ndarray | None = None, source: str
         temperature_source=source, has_chamber_c=source == "chamber_c",
         has_sensor_c=source == "sensor_c", steps=steps, positions=positions,
         step_temp_c={k: (step_temps[k] if source != "none" else 0.0) for k in range(n_steps)},
-        direction=np.zeros(n), time_since_step_s=np.zeros(n), rate_c_per_min=np.zeros(n),
+        direction=np.zeros(n), time_since_step_s=np.zeros(n),
         input_g=a, sd_g=None, draw_dtemp_g_per_c=np.zeros((n, 3)), session=None)
 
 
