@@ -17,7 +17,7 @@ from __future__ import annotations
 import csv
 import io
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +31,7 @@ from calibration.importers import (
     _number,
     _read_text,
     check_plausible,
+    vet_die_temperature,
 )
 
 ROLES: tuple[str, ...] = ("t", "ax", "ay", "az", "temp")
@@ -145,6 +146,11 @@ def read_table(
     raw = RawImport(p, "csv", t, acc, init_rest_s=None, notes=notes, temp_c=temp_c)
     check_plausible(raw, accel_fix="give the right --accel-unit",
                     temp_fix="give the right --temp-unit")
+    # The range was checked above with the unit's hint; what is left: a 0 or a constant.
+    vetted, why = vet_die_temperature(temp_c, t, f"temperature column {cmap['temp']!r}",
+                                      check_range=False)
+    if why:
+        raw = replace(raw, temp_c=vetted, notes=[*notes, why])
     return raw
 
 

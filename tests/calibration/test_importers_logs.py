@@ -101,6 +101,64 @@ def test_a_file_that_is_not_a_log_is_refused_with_its_kind(tmp_path, fmt):
         importers.read_source(fmt, src)
 
 
+# --- temperatures that are not readings ------------------------------------------
+def _import_text(tmp_path: Path, capsys, fmt: str, writer, t_us, acc, temp) -> tuple[str, Path]:
+    src = writer(tmp_path / f"log.{fmt}", t_us, acc, temp)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args(fmt, src, out)) == 0
+    return capsys.readouterr().out, out
+
+
+@pytest.mark.parametrize("fmt,writer,channel", [("ulog", write_ulog, "sensor_accel temperature"),
+                                                ("dataflash", write_dataflash, "IMU T")])
+def test_a_simulators_zero_temperature_is_written_empty_and_said(tmp_path, capsys, fmt, writer,
+                                                                  channel):
+    """SITL logs carry 0.00 °C in every sample: not a reading, so no sensor_c, and the
+    person reading the summary is told why and what calibrate will make of it."""
+    t_us, acc, temp = warmup_samples(n=200)
+    text, out = _import_text(tmp_path, capsys, fmt, writer, t_us, acc, np.zeros_like(temp))
+    assert f"note: {channel} is exactly 0.00 °C in all 200 samples" in text
+    assert "simulator (SITL)" in text
+    assert "a warm-up calibration needs a measured temperature" in text
+    assert "temperature columns empty" in text
+    assert not read_recording(out).has("sensor_c")
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_a_temperature_outside_a_dies_range_is_written_empty(tmp_path, capsys, fmt, writer):
+    t_us, acc, temp = warmup_samples(n=100)
+    text, out = _import_text(tmp_path, capsys, fmt, writer, t_us, acc, temp + 273.15)
+    assert "outside a die's -60 .. 150 °C: not a die temperature" in text
+    assert "temperature left empty" in text
+    assert not read_recording(out).has("sensor_c")
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_one_value_over_a_long_log_is_a_placeholder_but_a_short_one_is_kept(
+        tmp_path, capsys, fmt, writer):
+    t_us, acc, _ = warmup_samples(n=700, rate_hz=1.0)  # 699 s at 1 Hz
+    text, out = _import_text(tmp_path, capsys, fmt, writer, t_us, acc, np.full(700, 25.0))
+    assert "is 25 °C in all 700 samples over 699 s" in text and "placeholder" in text
+    assert not read_recording(out).has("sensor_c")
+    # The same value over 2 minutes may be a board at equilibrium: kept, nothing said.
+    t_us, acc, _ = warmup_samples(n=120, rate_hz=1.0)
+    (tmp_path / "short").mkdir()
+    text, out = _import_text(tmp_path / "short", capsys, fmt, writer, t_us, acc,
+                             np.full(120, 25.0))
+    assert "placeholder" not in text and "temperature (sensor_c): 25.00 .. 25.00 °C" in text
+    np.testing.assert_allclose(read_recording(out).columns["sensor_c"], 25.0)
+
+
+def test_a_zero_temperature_column_in_a_csv_is_written_empty(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
+                 ["0,0,0,1,0", "0.01,0,0,1,0.0", "0.02,0,0,1,0"])
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("csv", src, out, accel_unit="g")) == 0
+    text = capsys.readouterr().out
+    assert "note: temperature column 'temp_c' is exactly 0.00 °C in all 3 samples" in text
+    assert not read_recording(out).has("sensor_c")
+
+
 # --- csv -------------------------------------------------------------------------
 def _table(path: Path, header: str, rows: list[str]) -> Path:
     path.write_text(header + "\n" + "\n".join(rows) + "\n")
