@@ -182,6 +182,27 @@ def test_csv_with_column_map_and_units_converts_to_g_and_celsius(tmp_path, capsy
     assert "1 of 4 samples have no temperature: dropped" in text
 
 
+def test_csv_without_a_header_row_is_read_by_column_position(tmp_path, capsys):
+    """An inclinometer's log: ``id, ax, ay, az, T`` in mg and °C, 500 Hz, no header."""
+    path = tmp_path / "t.csv"
+    path.write_text("42652,21.9,21.7,1015.3,-18.176\n42652,13.5,16.7,1008.3,-18.236\n"
+                    "42652,12.0,20.3,995.1,-18.236\n")
+    out = tmp_path / "rec.csv"
+    args = _args("csv", path, out, columns="ax=2,ay=3,az=4,temp=5", accel_unit="mg",
+                 rate_hz=500.0)
+    assert run_import(args) == 0
+    rec = read_recording(out)
+    assert len(rec) == 3  # the first line is data, not a header
+    np.testing.assert_allclose(rec.raw_g[0], [0.0219, 0.0217, 1.0153])
+    np.testing.assert_allclose(rec.t_s, [0.0, 0.002, 0.004])
+    np.testing.assert_allclose(rec.columns["sensor_c"], [-18.176, -18.236, -18.236])
+    assert "no header row: columns named by position 1..5" in capsys.readouterr().out
+    # the default names do not exist in such a file: the refusal says to use positions
+    assert run_import(_args("csv", path, tmp_path / "o2.csv", accel_unit="mg")) == 2
+    err = capsys.readouterr().err
+    assert "the file has no header row: name columns by position 1..5" in err
+
+
 def test_csv_counts_and_kelvin(tmp_path):
     src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
                  ["0,100,-50,16484,300.15", "0.01,100,-50,16484,301.15"])
