@@ -315,3 +315,19 @@ def test_warmup_noise_is_not_the_drift(tmp_path, capsys):
     assert "successive differences" in line
     z_ug = float(line.split(" z ")[1])
     assert 85.0 < z_ug < 115.0
+
+
+def test_the_peer_benchmark_reads_a_log_through_the_import_and_says_why_not(tmp_path):
+    """bench_warmup_peers --log: a SITL log is not compared (the import's note says why);
+    a real-looking warm-up comes back with every sample and its temperature."""
+    from benchmarks.bench_warmup_peers import imported_log
+
+    t_us, acc, temp = warmup_samples(n=2500)  # 50 s at 50 Hz: 2 held-out 10-s blocks
+    sitl = write_ulog(tmp_path / "sitl.ulg", t_us, acc, np.zeros_like(temp))
+    log, why = imported_log(sitl, "ulog", [], tmp_path)
+    assert log is None and "exactly 0.00 °C" in why and "measured temperature" in why
+    warm = write_ulog(tmp_path / "warm.ulg", t_us, acc, temp)
+    log, _ = imported_log(warm, "ulog", [], tmp_path)
+    assert log is not None and log.t_s.size == 2500
+    np.testing.assert_allclose(log.temp_c, temp, atol=1e-6)
+    np.testing.assert_allclose(log.acc_g, acc / G, atol=1e-6)
