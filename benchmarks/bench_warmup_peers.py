@@ -3,6 +3,7 @@
 Usage::
 
     .venv/bin/python -m benchmarks.bench_warmup_peers [--out DIR] [--realdata DIR]
+        [--log FILE ... [--log-format ulog|dataflash|csv] [--import-args "..."]] [--no-twin]
 
 Each log is a board at rest at one orientation while its temperature changes: raw
 samples (t, acceleration in g, the sensor's temperature reading). Its 10-s blocks
@@ -35,7 +36,11 @@ Logs: the twin (``simulators``: an ADXL355-class sensor drawn at random, z up, t
 warming from 25 °C toward 45 °C with a 10-min time constant, then after 24 min cooling
 toward 30 °C; 40 min at 50 Hz) as is, with a
 temperature-rate sensitivity, with the temperature channel lagging the die by 60 s,
-and both; plus the BMI270 real logs (``bmi270-ganesh``: one orientation per file).
+and both; plus the BMI270 real logs (``bmi270-ganesh``: one orientation per file); plus
+any ``--log FILE``: read by ``soakcal import --format ulog|dataflash|csv`` (every sample a
+row, the import's own conversions and checks) and compared the same way. A log whose
+import is refused or keeps no measured temperature (a simulator's 0.00 °C) is listed as
+not compared, with the import's reason.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ import argparse
 import csv
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -55,13 +61,18 @@ from pathlib import Path
 import numpy as np
 
 from calibration.discrepancy.effects.temperature_rate import rate_offset_g
+from calibration.recording import read_recording
 from calibration.thermal_plant import lag_series
 from simulators.truth import SensorTruth
 
 BLOCK_S = 10.0
 MEAN_S = 5.0
 ROW_S = 1.0
-SOAKCAL = str(Path(sys.executable).with_name("soakcal"))
+REPO = Path(__file__).resolve().parents[1]
+# soakcal of this tree (``python -m`` from the repository root), not whichever install the
+# interpreter's console script points at.
+SOAKCAL = [sys.executable, "-m", "service.cli"]
+LOG_SUFFIX_FORMAT = {".ulg": "ulog", ".bin": "dataflash"}
 
 
 @dataclass
@@ -120,6 +131,44 @@ def bmi270_logs(folder: Path) -> list[WarmupLog]:
         t = np.arange(data.shape[0]) / 50.0
         out.append(WarmupLog(f"bmi270 {path.stem}", t, data[:, 1:4] * 4.0, data[:, 0]))
     return out
+
+
+def imported_log(path: Path, fmt: str, import_args: list[str],
+                 workdir: Path) -> tuple[WarmupLog | None, str]:
+    """Any log through ``soakcal import --format FMT`` (every sample a row), read back.
+
+    Returns the log, or None and why it cannot be compared: the import's refusal, or a
+    recording without a measured temperature (the import's note says which).
+    """
+    rec_path = workdir / f"{path.stem}.import.csv"
+    run = subprocess.run([*SOAKCAL, "import", "--format", fmt, str(path), "-o", str(rec_path),
+                          *import_args], capture_output=True, text=True, cwd=REPO)
+    if run.returncode != 0:
+        return None, f"import exit {run.returncode}: {_last_line(run.stderr)}"
+    rec = read_recording(rec_path)
+    notes = [ln.strip()[6:] for ln in run.stdout.splitlines() if ln.strip().startswith("note:")]
+    if not rec.has("sensor_c"):
+        said = [n for n in notes if "temperature" in n]
+        return None, "no measured temperature: " + (said[-1] if said else "none in the log")
+    log = WarmupLog(f"{path.name} ({fmt})", np.asarray(rec.t_s, float),
+                    np.asarray(rec.raw_g, float), np.asarray(rec.columns["sensor_c"], float))
+    short = too_few_means(log)
+    return (None, short) if short else (log, "; ".join(notes))
+
+
+def too_few_means(log: WarmupLog, minimum: int = 4) -> str | None:
+    """Why the split cannot score this log (fewer than ``minimum`` full held-out 5-s
+    means, or no fit block), else None."""
+    if log.t_s.size < 2 or log.t_s[-1] <= log.t_s[0]:
+        return f"{log.t_s.size} sample(s): no time series"
+    k, fit = blocks(log.t_s)
+    half = np.floor((log.t_s - log.t_s[0]) / MEAN_S).astype(int)
+    full = [h for h in np.unique(half[~fit]) if np.sum(half == h) > 0.8 * MEAN_S * _rate(log)]
+    if len(full) >= minimum and fit.any():
+        return None
+    return (f"{log.t_s.size} samples over {log.t_s[-1] - log.t_s[0]:.0f} s "
+            f"({_rate(log):.3g} Hz): {len(full)} full held-out 5-s means, "
+            f"{minimum} needed")
 
 
 # --- split and metric -----------------------------------------------------------------
@@ -259,15 +308,15 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     t_lo, t_hi = min(r[1] for r in fit_rows), max(r[1] for r in fit_rows)
     _write_rows(all_csv, [[r[0], min(max(r[1], t_lo), t_hi), *r[2:]] for r in all_rows])
     t0 = time.perf_counter()
-    cal = subprocess.run([SOAKCAL, "calibrate", str(fit_csv), "-o", str(model), "--json"],
-                         capture_output=True, text=True)
+    cal = subprocess.run([*SOAKCAL, "calibrate", str(fit_csv), "-o", str(model), "--json"],
+                         capture_output=True, text=True, cwd=REPO)
     fit_s = time.perf_counter() - t0
     if cal.returncode != 0:
         return None, f"calibrate exit {cal.returncode}: {_last_line(cal.stderr)}"
     # --extrapolate: the rows are clamped to the fit span already; compensate's own
     # conditioning of the temperature may still step a hair past the model's range.
-    c = subprocess.run([SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp),
-                        "--extrapolate"], capture_output=True, text=True)
+    c = subprocess.run([*SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp),
+                        "--extrapolate"], capture_output=True, text=True, cwd=REPO)
     if c.returncode != 0:
         return None, f"compensate exit {c.returncode}: {_last_line(c.stderr)}"
     with comp.open() as f:
@@ -326,6 +375,9 @@ def table(results: list[dict[str, object]]) -> str:
         return "refused (exit 2)" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
 
     for r in results:
+        if "unusable" in r:
+            lines.append(f"| {r['log']} | not compared: {r['unusable']} | | | | | |")
+            continue
         lo, hi = r["temp_span_c"]  # type: ignore[misc]
         lines.append(f"| {r['log']} | {lo:.2f} … {hi:.2f} | {fmt(r['none'])} | {fmt(r['px4'])} "
                      f"| {fmt(r['ardupilot'])} | {fmt(r['soakcal'])} | {fmt(r['floor'])} |")
@@ -348,20 +400,42 @@ def main(argv: list[str] | None = None) -> int:
                     default=Path(os.environ.get("SOAKCAL_REALDATA", Path(__file__).resolve()
                                                 .parents[1] / "tests/data/realdata")),
                     help="folder holding bmi270-ganesh/ (skipped when absent)")
+    ap.add_argument("--log", type=Path, action="append", default=[],
+                    help="a real warm-up log (PX4 .ulg, ArduPilot .bin, a CSV); repeatable")
+    ap.add_argument("--log-format", choices=("ulog", "dataflash", "csv"),
+                    help="soakcal import's --format for every --log (default: .ulg → ulog, "
+                         ".bin → dataflash, otherwise csv)")
+    ap.add_argument("--import-args", default="",
+                    help="more soakcal import flags for every --log, one string (e.g. "
+                         "'--columns ax=2,ay=3,az=4,temp=5 --accel-unit mg --rate-hz 500')")
+    ap.add_argument("--no-twin", action="store_true",
+                    help="skip the twin and BMI270 logs (only the --log files)")
     args = ap.parse_args(argv)
-    logs = [make() for make in LOGS.values()]
-    bmi = args.realdata / "bmi270-ganesh"
-    if bmi.is_dir():
-        logs += bmi270_logs(bmi)
-    results = []
+    logs: list[WarmupLog] = []
+    if not args.no_twin:
+        logs = [make() for make in LOGS.values()]
+        bmi = args.realdata / "bmi270-ganesh"
+        if bmi.is_dir():
+            logs += bmi270_logs(bmi)
+    results: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as tmp:
+        for path in args.log:
+            fmt = args.log_format or LOG_SUFFIX_FORMAT.get(path.suffix.lower(), "csv")
+            log, said = imported_log(path, fmt, shlex.split(args.import_args), Path(tmp))
+            print(f"{path.name}: {said}", flush=True)
+            if log is None:
+                results.append({"log": f"{path.name} ({fmt})", "unusable": said})
+            else:
+                logs.append(log)
         for log in logs:
             results.append(evaluate(log, Path(tmp)))
             print(json.dumps(results[-1]), flush=True)
     text = table(results)
     print(text)
     for r in results:
-        print(f"{r['log']}: ardupilot = {r['ardupilot_source']}; soakcal: {r['soakcal_note']}")
+        if "unusable" not in r:
+            print(f"{r['log']}: ardupilot = {r['ardupilot_source']}; "
+                  f"soakcal: {r['soakcal_note']}")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "results.json").write_text(json.dumps(results, indent=2))

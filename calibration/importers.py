@@ -55,6 +55,15 @@ LOG_FORMATS: tuple[str, ...] = ("ulog", "dataflash", "csv")
 PLAUSIBLE_DIE_C: tuple[float, float] = (-60.0, 150.0)
 # A log at rest reads |a| ≈ 1 g; a median outside this span means a wrong unit.
 PLAUSIBLE_MEDIAN_G: tuple[float, float] = (0.5, 2.0)
+# A die sensor read in every sample of a powered board for this long moves by at least
+# its last digit (self-heating after power-up, the room, the readout's own noise): a
+# value bit-identical over a longer log is a placeholder, not a reading.
+CONSTANT_TEMP_LONG_S = 600.0
+# What an empty temperature means downstream (docs/importers.md, "Temperatures that are
+# not readings"): said once in every note that empties a channel.
+NO_TEMP_CONSEQUENCE = ("calibrate sees one step at an unknown temperature; a warm-up "
+                       "calibration needs a measured temperature")
+NO_TEMP_IN_FORMAT = "{fmt} has no temperature column; temperature left empty"
 
 # imu_tk defaults: the Xsens MTi factory values printed by imu_tk_matlab's calibrate.m
 # (README): 415 counts per m/s² (the x/z entry of diag(415, 413, 415); one nominal
@@ -174,6 +183,44 @@ def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str) -> None:
                 raw.path, None, None,
                 f"temperature spans {t_lo:.4g} .. {t_hi:.4g} °C, outside a die's "
                 f"{PLAUSIBLE_DIE_C[0]:g} .. {PLAUSIBLE_DIE_C[1]:g} °C{hint}: {temp_fix}")
+
+
+def vet_die_temperature(
+    temp_c: np.ndarray | None, t_s: np.ndarray, channel: str, *, check_range: bool = True
+) -> tuple[np.ndarray | None, str | None]:
+    """The temperature channel if it reads like a die, else ``None`` and the one-line note
+    saying why (for the summary a person reads).
+
+    Not a die reading: exactly 0 °C in every sample (what PX4's and ArduPilot's simulators
+    and drivers without a temperature read write), any sample outside
+    :data:`PLAUSIBLE_DIE_C` (when ``check_range``; a reader whose unit the user chose
+    refuses instead, :func:`check_plausible`), or one bit-identical value over a log of
+    :data:`CONSTANT_TEMP_LONG_S` or longer. NaN samples are left to
+    :func:`drop_samples_without_temperature`; a channel with no finite sample is ``None``
+    with its own note.
+    """
+    if temp_c is None:
+        return None, None
+    finite = temp_c[np.isfinite(temp_c)]
+    if finite.size == 0:
+        return None, (f"{channel} is never a number (NaN: the driver has no temperature); "
+                      f"temperature left empty: {NO_TEMP_CONSEQUENCE}")
+    lo, hi = float(finite.min()), float(finite.max())
+    span_s = float(t_s[-1] - t_s[0]) if t_s.size else 0.0
+    why = None
+    if lo == 0.0 and hi == 0.0:
+        why = (f"is exactly 0.00 °C in all {finite.size} samples: what a simulator (SITL) "
+               "or a driver without a temperature read writes, not a die reading")
+    elif check_range and (lo < PLAUSIBLE_DIE_C[0] or hi > PLAUSIBLE_DIE_C[1]):
+        why = (f"spans {lo:.4g} .. {hi:.4g} °C, outside a die's {PLAUSIBLE_DIE_C[0]:g} .. "
+               f"{PLAUSIBLE_DIE_C[1]:g} °C: not a die temperature")
+    elif lo == hi and span_s >= CONSTANT_TEMP_LONG_S:
+        why = (f"is {lo:.6g} °C in all {finite.size} samples over {span_s:.0f} s: a die "
+               "read this long on a powered board moves by at least its last digit, so "
+               "this is a placeholder value, not a reading")
+    if why is None:
+        return temp_c, None
+    return None, f"{channel} {why}; temperature left empty: {NO_TEMP_CONSEQUENCE}"
 
 
 # --- static-interval detection ---------------------------------------------
@@ -387,6 +434,9 @@ def read_openaxes(
     else:
         temp_c = temp_offset_c + data[:, 4] * temp_c_per_count
         notes.append(f"TEMP → sensor_c = {temp_offset_c:g} + count × {temp_c_per_count:g} °C")
+        temp_c, why = vet_die_temperature(temp_c, t, "TEMP")
+        if why:
+            notes.append(why)
     return RawImport(p, "openaxes", t, acc, init_rest_s=40.0, notes=notes, temp_c=temp_c)
 
 
@@ -424,7 +474,8 @@ def read_imu_tk(
     offset = np.broadcast_to(np.asarray(offset_counts, float), (3,))
     acc = (data[:, 1:4] - offset) / scale
     return RawImport(p, "imu_tk", data[:, 0] - data[0, 0], acc, init_rest_s=init_rest_s,
-                     notes=[f"imu_tk counts: (c − {_fmt3(offset)}) / {_fmt3(scale)} → g"])
+                     notes=[f"imu_tk counts: (c − {_fmt3(offset)}) / {_fmt3(scale)} → g",
+                            NO_TEMP_IN_FORMAT.format(fmt="imu_tk")])
 
 
 def read_mpu6050(path: str | Path, *, counts_per_g: float = MPU6050_COUNTS_PER_G) -> RawImport:
@@ -449,7 +500,9 @@ def read_mpu6050(path: str | Path, *, counts_per_g: float = MPU6050_COUNTS_PER_G
     init = meta.get("initialization time", -1.0)
     return RawImport(p, "mpu6050", t, data / counts_per_g,
                      init_rest_s=init if init > 0 else None,
-                     notes=[f"MPU-6050 counts / {counts_per_g:g} → g, t = i / {fs:g} Hz"])
+                     notes=[f"MPU-6050 counts / {counts_per_g:g} → g, t = i / {fs:g} Hz",
+                            "gx, gy, gz (the gyroscope) not read",
+                            NO_TEMP_IN_FORMAT.format(fmt="this MPU-6050 CSV")])
 
 
 def read_ferraris(
@@ -499,7 +552,8 @@ def read_ferraris(
         p, "ferraris", np.arange(data.shape[0]) / fs, data / STANDARD_GRAVITY_M_S2, None,
         sections=[sections[i] for i in order], section_refs=[refs[i] for i in order],
         notes=[f"Ferraris session: m/s² / {STANDARD_GRAVITY_M_S2} → g, t = i / {fs:g} Hz, "
-               f"sections from {list_path.name}"],
+               f"sections from {list_path.name}",
+               NO_TEMP_IN_FORMAT.format(fmt="a Ferraris session")],
     )
 
 
@@ -536,7 +590,8 @@ def _read_ferraris_annotated(p: str, text: str, counts_per_g: float, fs: float) 
         p, "ferraris", np.arange(data.shape[0]) / fs, data, None,
         sections=[sections[i] for i in order], section_refs=[refs[i] for i in order],
         notes=[f"Ferraris annotated: counts / {counts_per_g:g} → g, t = i / {fs:g} Hz "
-               "(parts are concatenated, so t_s is not wall time)"],
+               "(parts are concatenated, so t_s is not wall time)",
+               NO_TEMP_IN_FORMAT.format(fmt="a Ferraris session")],
     )
 
 

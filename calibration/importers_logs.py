@@ -24,7 +24,13 @@ from typing import Any
 import numpy as np
 
 from calibration.errors import RecordingError
-from calibration.importers import STANDARD_GRAVITY_M_S2, RawImport, _check_monotonic
+from calibration.importers import (
+    NO_TEMP_CONSEQUENCE,
+    STANDARD_GRAVITY_M_S2,
+    RawImport,
+    _check_monotonic,
+    vet_die_temperature,
+)
 
 ULOG_TOPIC = "sensor_accel"
 DATAFLASH_MESSAGE = "IMU"
@@ -63,19 +69,17 @@ def read_ulog(path: str | Path, *, instance: int = 0) -> RawImport:
     if "device_id" in data and len(data["device_id"]):
         dev = int(np.median(np.asarray(data["device_id"], float)))
         notes.append(f"device_id {dev} (PX4's TC_A*_ID for this accelerometer)")
+    t_s = (t_us - t_us[0]) * 1e-6
     temp_c = None
     if "temperature" not in data:
-        notes.append("no sensor_accel temperature field; temperature left empty")
+        notes.append("no sensor_accel temperature field; temperature left empty: "
+                     f"{NO_TEMP_CONSEQUENCE}")
     else:
-        temp_c = np.asarray(data["temperature"], float)
-        if not np.any(np.isfinite(temp_c)):
-            notes.append("sensor_accel temperature is never a number (NaN: the driver has "
-                         "no temperature); temperature left empty")
-            temp_c = None
-        else:
-            notes.append("sensor_accel temperature → sensor_c (°C)")
+        temp_c, why = vet_die_temperature(np.asarray(data["temperature"], float), t_s,
+                                          "sensor_accel temperature")
+        notes.append(why or "sensor_accel temperature → sensor_c (°C)")
     _dropouts(ulog, notes)
-    return RawImport(p, "ulog", (t_us - t_us[0]) * 1e-6, acc, init_rest_s=None, notes=notes,
+    return RawImport(p, "ulog", t_s, acc, init_rest_s=None, notes=notes,
                      temp_c=temp_c)
 
 
@@ -140,16 +144,15 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
     if tcal_enabled:
         notes.append(f"{', '.join(sorted(tcal_enabled))} = 1 in this log: the readings "
                      "are already temperature-compensated by the autopilot")
-    temp_c = np.asarray(temp)
+    t_s = (t - t[0]) * 1e-6
+    temp_c: np.ndarray | None = None
     if not has_t:
-        notes.append("no IMU T field (log older than ArduPilot 4.1?); temperature left empty")
-        temp_c = None
-    elif not np.any(np.isfinite(temp_c)):
-        notes.append("IMU T is never a number; temperature left empty")
-        temp_c = None
+        notes.append("no IMU T field (log older than ArduPilot 4.1?); temperature left "
+                     f"empty: {NO_TEMP_CONSEQUENCE}")
     else:
-        notes.append("IMU T → sensor_c (°C)")
-    return RawImport(p, "dataflash", (t - t[0]) * 1e-6,
+        temp_c, why = vet_die_temperature(np.asarray(temp), t_s, "IMU T")
+        notes.append(why or "IMU T → sensor_c (°C)")
+    return RawImport(p, "dataflash", t_s,
                      np.asarray(acc) / STANDARD_GRAVITY_M_S2, init_rest_s=None, notes=notes,
                      temp_c=temp_c)
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import csv
 import io
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +31,7 @@ from calibration.importers import (
     _number,
     _read_text,
     check_plausible,
+    vet_die_temperature,
 )
 
 ROLES: tuple[str, ...] = ("t", "ax", "ay", "az", "temp")
@@ -92,12 +93,21 @@ def read_table(
     reader = csv.reader(io.StringIO(text), delimiter=delim)
     header = [h.strip() for h in next(reader)]
     notes: list[str] = []
+    first_line = 2
+    if _all_numbers(header):
+        # No header row: columns are named by their position, 1 first; the row is data.
+        reader = csv.reader(io.StringIO(text), delimiter=delim)
+        header = [str(i) for i in range(1, len(header) + 1)]
+        first_line = 1
+        notes.append(f"no header row: columns named by position 1..{len(header)}")
+    where = (f"header: {delim.join(header)}" if first_line == 2 else
+             f"the file has no header row: name columns by position 1..{len(header)}")
     wanted = ["ax", "ay", "az"]
     if cmap["t"] in header:
         wanted.insert(0, "t")
     elif u.rate_hz is None:
         raise RecordingError(p, 1, cmap["t"], "time column missing: name it with --columns "
-                             f"t=NAME or give --rate-hz (header: {delim.join(header)})")
+                             f"t=NAME or give --rate-hz ({where})")
     else:
         notes.append(f"no time column: t = i / {u.rate_hz:g} Hz")
     has_temp = cmap["temp"] in header
@@ -109,10 +119,10 @@ def read_table(
     for role in ("ax", "ay", "az"):
         if cmap[role] not in header:
             raise RecordingError(p, 1, cmap[role], f"column missing (--columns {role}=NAME; "
-                                 f"header: {delim.join(header)})")
+                                 f"{where})")
     idx = [header.index(cmap[r]) for r in wanted]
     rows: list[list[float]] = []
-    for line_no, row in enumerate(reader, start=2):
+    for line_no, row in enumerate(reader, start=first_line):
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) != len(header):
@@ -126,11 +136,11 @@ def read_table(
             vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
         rows.append(vals)
     if not rows:
-        raise RecordingError(p, 2, None, "no data rows after the header")
+        raise RecordingError(p, first_line, None, "no data rows after the header")
     data = np.asarray(rows, float)
     col = {r: data[:, k] for k, r in enumerate(wanted)}
     if "t" in col:
-        _check_monotonic(p, col["t"], cmap["t"], first_line=2)
+        _check_monotonic(p, col["t"], cmap["t"], first_line=first_line)
         t = (col["t"] - col["t"][0]) * TIME_UNITS[u.time]
     else:
         assert u.rate_hz is not None
@@ -145,6 +155,11 @@ def read_table(
     raw = RawImport(p, "csv", t, acc, init_rest_s=None, notes=notes, temp_c=temp_c)
     check_plausible(raw, accel_fix="give the right --accel-unit",
                     temp_fix="give the right --temp-unit")
+    # The range was checked above with the unit's hint; what is left: a 0 or a constant.
+    vetted, why = vet_die_temperature(temp_c, t, f"temperature column {cmap['temp']!r}",
+                                      check_range=False)
+    if why:
+        raw = replace(raw, temp_c=vetted, notes=[*notes, why])
     return raw
 
 
@@ -190,6 +205,16 @@ def _to_c(temp: np.ndarray, u: TableUnits) -> tuple[np.ndarray, str]:
     assert u.temp_c_per_count is not None and u.temp_offset_c is not None
     return (u.temp_offset_c + temp * u.temp_c_per_count,
             f"temperature counts → sensor_c = {u.temp_offset_c:g} + c × {u.temp_c_per_count:g}")
+
+
+def _all_numbers(cells: Sequence[str]) -> bool:
+    """A first row of numbers only is data, not a header."""
+    try:
+        for c in cells:
+            float(c)
+    except ValueError:
+        return False
+    return bool(cells)
 
 
 def _sniff(header_line: str) -> str:

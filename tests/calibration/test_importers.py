@@ -264,6 +264,9 @@ def test_run_import_writes_a_readable_recording(tmp_path: Path, capsys) -> None:
     assert len(rec) == 3 and "chamber_c" in rec.header and not rec.has_temperature
     text = capsys.readouterr().out
     assert "static intervals: 3" in text and "µg" in text and "|g|" in text
+    # what the file holds but the import did not read is named, not silently dropped
+    assert "note: gx, gy, gz (the gyroscope) not read" in text
+    assert "note: this MPU-6050 CSV has no temperature column; temperature left empty" in text
 
 
 def test_run_import_raw_writes_one_row_per_sample(tmp_path: Path) -> None:

@@ -101,6 +101,64 @@ def test_a_file_that_is_not_a_log_is_refused_with_its_kind(tmp_path, fmt):
         importers.read_source(fmt, src)
 
 
+# --- temperatures that are not readings ------------------------------------------
+def _import_text(tmp_path: Path, capsys, fmt: str, writer, t_us, acc, temp) -> tuple[str, Path]:
+    src = writer(tmp_path / f"log.{fmt}", t_us, acc, temp)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args(fmt, src, out)) == 0
+    return capsys.readouterr().out, out
+
+
+@pytest.mark.parametrize("fmt,writer,channel", [("ulog", write_ulog, "sensor_accel temperature"),
+                                                ("dataflash", write_dataflash, "IMU T")])
+def test_a_simulators_zero_temperature_is_written_empty_and_said(tmp_path, capsys, fmt, writer,
+                                                                  channel):
+    """SITL logs carry 0.00 °C in every sample: not a reading, so no sensor_c, and the
+    person reading the summary is told why and what calibrate will make of it."""
+    t_us, acc, temp = warmup_samples(n=200)
+    text, out = _import_text(tmp_path, capsys, fmt, writer, t_us, acc, np.zeros_like(temp))
+    assert f"note: {channel} is exactly 0.00 °C in all 200 samples" in text
+    assert "simulator (SITL)" in text
+    assert "a warm-up calibration needs a measured temperature" in text
+    assert "temperature columns empty" in text
+    assert not read_recording(out).has("sensor_c")
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_a_temperature_outside_a_dies_range_is_written_empty(tmp_path, capsys, fmt, writer):
+    t_us, acc, temp = warmup_samples(n=100)
+    text, out = _import_text(tmp_path, capsys, fmt, writer, t_us, acc, temp + 273.15)
+    assert "outside a die's -60 .. 150 °C: not a die temperature" in text
+    assert "temperature left empty" in text
+    assert not read_recording(out).has("sensor_c")
+
+
+@pytest.mark.parametrize("fmt,writer", [("ulog", write_ulog), ("dataflash", write_dataflash)])
+def test_one_value_over_a_long_log_is_a_placeholder_but_a_short_one_is_kept(
+        tmp_path, capsys, fmt, writer):
+    t_us, acc, _ = warmup_samples(n=700, rate_hz=1.0)  # 699 s at 1 Hz
+    text, out = _import_text(tmp_path, capsys, fmt, writer, t_us, acc, np.full(700, 25.0))
+    assert "is 25 °C in all 700 samples over 699 s" in text and "placeholder" in text
+    assert not read_recording(out).has("sensor_c")
+    # The same value over 2 minutes may be a board at equilibrium: kept, nothing said.
+    t_us, acc, _ = warmup_samples(n=120, rate_hz=1.0)
+    (tmp_path / "short").mkdir()
+    text, out = _import_text(tmp_path / "short", capsys, fmt, writer, t_us, acc,
+                             np.full(120, 25.0))
+    assert "placeholder" not in text and "temperature (sensor_c): 25.00 .. 25.00 °C" in text
+    np.testing.assert_allclose(read_recording(out).columns["sensor_c"], 25.0)
+
+
+def test_a_zero_temperature_column_in_a_csv_is_written_empty(tmp_path, capsys):
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
+                 ["0,0,0,1,0", "0.01,0,0,1,0.0", "0.02,0,0,1,0"])
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("csv", src, out, accel_unit="g")) == 0
+    text = capsys.readouterr().out
+    assert "note: temperature column 'temp_c' is exactly 0.00 °C in all 3 samples" in text
+    assert not read_recording(out).has("sensor_c")
+
+
 # --- csv -------------------------------------------------------------------------
 def _table(path: Path, header: str, rows: list[str]) -> Path:
     path.write_text(header + "\n" + "\n".join(rows) + "\n")
@@ -122,6 +180,27 @@ def test_csv_with_column_map_and_units_converts_to_g_and_celsius(tmp_path, capsy
     assert "temperature in °F → sensor_c (°C)" in text
     # the row without a temperature is dropped, not filled in
     assert "1 of 4 samples have no temperature: dropped" in text
+
+
+def test_csv_without_a_header_row_is_read_by_column_position(tmp_path, capsys):
+    """An inclinometer's log: ``id, ax, ay, az, T`` in mg and °C, 500 Hz, no header."""
+    path = tmp_path / "t.csv"
+    path.write_text("42652,21.9,21.7,1015.3,-18.176\n42652,13.5,16.7,1008.3,-18.236\n"
+                    "42652,12.0,20.3,995.1,-18.236\n")
+    out = tmp_path / "rec.csv"
+    args = _args("csv", path, out, columns="ax=2,ay=3,az=4,temp=5", accel_unit="mg",
+                 rate_hz=500.0)
+    assert run_import(args) == 0
+    rec = read_recording(out)
+    assert len(rec) == 3  # the first line is data, not a header
+    np.testing.assert_allclose(rec.raw_g[0], [0.0219, 0.0217, 1.0153])
+    np.testing.assert_allclose(rec.t_s, [0.0, 0.002, 0.004])
+    np.testing.assert_allclose(rec.columns["sensor_c"], [-18.176, -18.236, -18.236])
+    assert "no header row: columns named by position 1..5" in capsys.readouterr().out
+    # the default names do not exist in such a file: the refusal says to use positions
+    assert run_import(_args("csv", path, tmp_path / "o2.csv", accel_unit="mg")) == 2
+    err = capsys.readouterr().err
+    assert "the file has no header row: name columns by position 1..5" in err
 
 
 def test_csv_counts_and_kelvin(tmp_path):
@@ -236,3 +315,19 @@ def test_warmup_noise_is_not_the_drift(tmp_path, capsys):
     assert "successive differences" in line
     z_ug = float(line.split(" z ")[1])
     assert 85.0 < z_ug < 115.0
+
+
+def test_the_peer_benchmark_reads_a_log_through_the_import_and_says_why_not(tmp_path):
+    """bench_warmup_peers --log: a SITL log is not compared (the import's note says why);
+    a real-looking warm-up comes back with every sample and its temperature."""
+    from benchmarks.bench_warmup_peers import imported_log
+
+    t_us, acc, temp = warmup_samples(n=2500)  # 50 s at 50 Hz: 2 held-out 10-s blocks
+    sitl = write_ulog(tmp_path / "sitl.ulg", t_us, acc, np.zeros_like(temp))
+    log, why = imported_log(sitl, "ulog", [], tmp_path)
+    assert log is None and "exactly 0.00 °C" in why and "measured temperature" in why
+    warm = write_ulog(tmp_path / "warm.ulg", t_us, acc, temp)
+    log, _ = imported_log(warm, "ulog", [], tmp_path)
+    assert log is not None and log.t_s.size == 2500
+    np.testing.assert_allclose(log.temp_c, temp, atol=1e-6)
+    np.testing.assert_allclose(log.acc_g, acc / G, atol=1e-6)
