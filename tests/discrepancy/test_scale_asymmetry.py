@@ -10,6 +10,8 @@ noise pools (as test_gen2_power.py).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -81,9 +83,16 @@ def test_no_asymmetry_column_where_abs_a_is_a_squared():
     a = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
     assert asymmetry_axes(a) == []
     assert own_bends(a).shape == (6, 3, 6)
+    assert ScaleNonlinearity().grid(SimpleNamespace(input_g=a)) == [0.0]
     c, s = np.cos(np.deg2rad(30)), np.sin(np.deg2rad(30))
     obl = np.array([[c * np.cos(t), c * np.sin(t), s] for t in np.deg2rad(range(0, 360, 30))])
     assert asymmetry_axes(np.vstack([a, obl])) == [0, 1]  # z: 0, 0.5, ±1 only
+    both = SimpleNamespace(input_g=np.vstack([a, obl]))
+    assert ScaleNonlinearity().grid(both) == [0.0, 1.0]
+    assert ScaleNonlinearity().regressors(both, 0.0).shape[2] == 6
+    assert ScaleNonlinearity().regressors(both, 1.0).shape[2] == 8
+    five = np.column_stack([np.linspace(-1, 1, 5), np.zeros(5), np.zeros(5)])
+    assert asymmetry_axes(five) == []  # 1, a, a², a³, |a| fit any function of 5 levels
 
 
 def test_the_model_file_term_carries_the_asymmetry():

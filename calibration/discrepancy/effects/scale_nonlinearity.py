@@ -1,11 +1,17 @@
 """``scale_nonlinearity``: own-axis a², a³ and scale-asymmetry |a| terms (effects.md).
 
-Regressors per axis: ``a_i²`` and ``a_i³`` with a_i the input on axis i, and ``|a_i|``
-(a scale factor that differs for positive and negative input, ``k̄·a + Δk·|a|``) on the
-axes whose input holds more levels than bias, scale, a² and a³ can fit (on fewer, e.g.
-0 and ±1 g only, |a| *is* a²). ``a·|a|`` needs no column: after the base's scale and a³
-it leaves ≤ 2 % of its norm² on the project's schedules. Axis-aligned positions alias a³
-into scale (a³ = a) and a² partly into bias; the absorbed fraction measures that.
+Regressors per axis: ``a_i²`` and ``a_i³`` with a_i the input on axis i (θ = 0) and, as a
+second candidate shape (θ = 1, profiled with it: the test takes the better at a Šidák
+factor of 2), also ``|a_i|`` — a scale factor that differs for positive and negative input,
+``k̄·a + Δk·|a|`` — on the axes whose input holds more levels than bias, scale, a², a³ and
+|a| can fit (on fewer, e.g. 0 and ±1 g only, |a| *is* a²; on five, the five fit any
+function of the input and no bend could be shown). Why two shapes and not one: the three
+|a| columns cost the common a², a³ bend its power (the along-the-reference check after a
+turn lost it at twice its detectable size), and without them a large asymmetry left 6–11 %
+of its norm² as per-direction structure and the term was withdrawn as "not a bend"
+(issue 22). ``a·|a|`` needs no column: after the base's scale and a³ it leaves ≤ 2 % of
+its norm² on the project's schedules. Axis-aligned positions alias a³ into scale (a³ = a)
+and a² partly into bias; the absorbed fraction measures that.
 """
 
 from __future__ import annotations
@@ -54,10 +60,10 @@ def scale_nonlinearity_g(a: np.ndarray, k2_per_g: np.ndarray, k3_per_g2: np.ndar
 
 
 def asymmetry_axes(a: np.ndarray) -> list[int]:
-    """Axes on which ``|a_i|`` differs from what bias, scale, a² and a³ fit: more than
-    :data:`BEND_FUNCTIONS` signed input levels (on 0 and ±1 g, |a| = a²; on four levels
-    the four functions fit any function of the input)."""
-    return [i for i in range(3) if input_levels(a[:, i]) > BEND_FUNCTIONS]
+    """Axes on which ``|a_i|`` is a shape of its own and a bend stays testable with it: more
+    than ``BEND_FUNCTIONS + 1`` signed input levels (on 0 and ±1 g, |a| = a²; on five
+    levels 1, a, a², a³, |a| fit any function of the input)."""
+    return [i for i in range(3) if input_levels(a[:, i]) > BEND_FUNCTIONS + 1]
 
 
 def own_bends(a: np.ndarray) -> np.ndarray:
@@ -73,6 +79,9 @@ def own_bends(a: np.ndarray) -> np.ndarray:
     return out
 
 
+ASYM_OFF, ASYM_ON = 0.0, 1.0  # θ: without / with the |a| (scale asymmetry) columns
+
+
 @dataclass(frozen=True)
 class ScaleNonlinearity(CatalogueEffect):
     effect_id: str = "scale_nonlinearity"
@@ -85,8 +94,12 @@ class ScaleNonlinearity(CatalogueEffect):
     extension_absorbed: bool = True
     input_only: bool = True
 
+    def grid(self, ctx: DesignContext) -> list[float]:
+        """θ = 0: a², a³; θ = 1: with the asymmetry |a| (only where it is a shape of its own)."""
+        return [ASYM_OFF, ASYM_ON] if asymmetry_axes(ctx.input_g) else [ASYM_OFF]
+
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        return own_bends(ctx.input_g)
+        return own_bends(ctx.input_g) if theta == ASYM_ON else own_powers(ctx.input_g)
 
     def misses(self, pb: Any, U: np.ndarray, e: np.ndarray, theta: float,
                where: Mapping[str, Any], axes: list[str], alpha: float) -> dict[str, Any] | None:
