@@ -226,22 +226,19 @@ class VibrationRectification(_RawOnly):
 # --- input-dependent -------------------------------------------------------
 @dataclass
 class ScaleNonlinearity(_RawOnly):
-    """``scale_nonlinearity``: ``raw_i += K2_i a_i² + K3_i a_i³ + A_i |a_i|``, a_i the true
-    input on axis i (``A_i`` the scale asymmetry, 0 unless given)."""
+    """``scale_nonlinearity``: ``raw_i += K2_i a_i² + K3_i a_i³``, a_i the true input on axis i."""
 
     k2_per_g: np.ndarray = field(default_factory=lambda: np.zeros(3))
     k3_per_g2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     effect_id: str = "scale_nonlinearity"
-    k_abs: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> ScaleNonlinearity:
         return cls(k2_per_g=_axes(p, "k2_{}_ug_per_g2") * 1e-6,
-                   k3_per_g2=_axes(p, "k3_{}_ug_per_g3") * 1e-6,
-                   k_abs=_axes(p, "asym_{}_ppm", 0.0) * 1e-6)
+                   k3_per_g2=_axes(p, "k3_{}_ug_per_g3") * 1e-6)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return scale_nonlinearity_g(ctx.ref_g, self.k2_per_g, self.k3_per_g2, self.k_abs)
+        return scale_nonlinearity_g(ctx.ref_g, self.k2_per_g, self.k3_per_g2)
 
 
 @dataclass

@@ -7,8 +7,7 @@ first order: corrections are µg-scale, so they are applied in output space).
 
 Kinds (JSON object ``{"kind": ..., ...}``, parameters in g-based SI units):
 
-* ``discrepancy.scale_nonlinearity``: ``k2_per_g`` [3], ``k3_per_g2`` [3], ``k_abs`` [3]
-  (scale asymmetry, × |a|; absent = 0)
+* ``discrepancy.scale_nonlinearity``: ``k2_per_g`` [3], ``k3_per_g2`` [3]
 * ``discrepancy.cross_coupling``: ``k_xy_per_g``, ``k_xz_per_g``, ``k_yz_per_g``
 * ``discrepancy.thermal_hysteresis``: ``h_g`` [3], ``direction`` (+1/−1, the leg to correct)
 * ``discrepancy.bias_drift``: ``rate_g_per_h`` [3], ``t0_s`` (needs ``t_s``: not applied

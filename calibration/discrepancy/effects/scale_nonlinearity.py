@@ -1,17 +1,8 @@
-"""``scale_nonlinearity``: own-axis a², a³ and scale-asymmetry |a| terms (effects.md).
+"""``scale_nonlinearity``: own-axis a² and a³ terms (effects.md).
 
-Regressors per axis: ``a_i²`` and ``a_i³`` with a_i the input on axis i (θ = 0) and, as a
-second candidate shape (θ = 1, profiled with it: the test takes the better at a Šidák
-factor of 2), also ``|a_i|`` — a scale factor that differs for positive and negative input,
-``k̄·a + Δk·|a|`` — on the axes whose input holds more levels than bias, scale, a², a³ and
-|a| can fit (on fewer, e.g. 0 and ±1 g only, |a| *is* a²; on five, the five fit any
-function of the input and no bend could be shown). Why two shapes and not one: the three
-|a| columns cost the common a², a³ bend its power (the along-the-reference check after a
-turn lost it at twice its detectable size), and without them a large asymmetry left 6–11 %
-of its norm² as per-direction structure and the term was withdrawn as "not a bend"
-(issue 22). ``a·|a|`` needs no column: after the base's scale and a³ it leaves ≤ 2 % of
-its norm² on the project's schedules. Axis-aligned positions alias a³ into scale (a³ = a)
-and a² partly into bias; the absorbed fraction measures that.
+Regressors per axis: ``a_i²`` and ``a_i³`` with a_i the input on axis i.
+Axis-aligned positions alias a³ into scale (a³ = a) and a² partly into bias;
+the absorbed fraction measures that.
 """
 
 from __future__ import annotations
@@ -43,43 +34,16 @@ def own_powers(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def scale_nonlinearity_g(a: np.ndarray, k2_per_g: np.ndarray, k3_per_g2: np.ndarray,
-                         k_abs: np.ndarray | float = 0.0) -> np.ndarray:
-    """Own-axis nonlinearity output change (N,3) g: ``K2_i a_i² + K3_i a_i³ + A_i |a_i|``
-    (effects.md; ``A_i`` the scale asymmetry, dimensionless: half the difference of the
-    scale factors for positive and negative input).
+def scale_nonlinearity_g(a: np.ndarray, k2_per_g: np.ndarray, k3_per_g2: np.ndarray) -> np.ndarray:
+    """Own-axis nonlinearity output change (N,3) g: ``K2_i a_i² + K3_i a_i³`` (effects.md).
 
-    ``a`` (N,3) g, ``k2_per_g``, ``k3_per_g2`` and ``k_abs`` one value or (3,). The one
-    place of this physics: the twin's truth effect and the model-file term
+    ``a`` (N,3) g, ``k2_per_g`` and ``k3_per_g2`` one value or (3,). The one place
+    of this physics: the twin's truth effect and the model-file term
     (:meth:`ScaleNonlinearity.extension_term_g`) both call it.
     """
     k2 = np.broadcast_to(np.asarray(k2_per_g, float), (3,))
     k3 = np.broadcast_to(np.asarray(k3_per_g2, float), (3,))
-    ka = np.broadcast_to(np.asarray(k_abs, float), (3,))
-    return own_powers(a) @ np.concatenate([k2, k3]) + np.abs(a) * ka
-
-
-def asymmetry_axes(a: np.ndarray) -> list[int]:
-    """Axes on which ``|a_i|`` is a shape of its own and a bend stays testable with it: more
-    than ``BEND_FUNCTIONS + 1`` signed input levels (on 0 and ±1 g, |a| = a²; on five
-    levels 1, a, a², a³, |a| fit any function of the input)."""
-    return [i for i in range(3) if input_levels(a[:, i]) > BEND_FUNCTIONS + 1]
-
-
-def own_bends(a: np.ndarray) -> np.ndarray:
-    """(N,3) inputs → (N,3,6+k): :func:`own_powers` and ``|a_i|`` on the k axes of
-    :func:`asymmetry_axes`, in that order (why: a scale asymmetry — a different scale for
-    positive and negative input, effects.md — left outside a², a³ was read as "not a bend"
-    and withdrawn, issue 22)."""
-    ax = asymmetry_axes(a)
-    out = np.zeros((a.shape[0], 3, 6 + len(ax)))
-    out[:, :, :6] = own_powers(a)
-    for j, i in enumerate(ax):
-        out[:, i, 6 + j] = np.abs(a[:, i])
-    return out
-
-
-ASYM_OFF, ASYM_ON = 0.0, 1.0  # θ: without / with the |a| (scale asymmetry) columns
+    return own_powers(a) @ np.concatenate([k2, k3])
 
 
 @dataclass(frozen=True)
@@ -94,12 +58,8 @@ class ScaleNonlinearity(CatalogueEffect):
     extension_absorbed: bool = True
     input_only: bool = True
 
-    def grid(self, ctx: DesignContext) -> list[float]:
-        """θ = 0: a², a³; θ = 1: with the asymmetry |a| (only where it is a shape of its own)."""
-        return [ASYM_OFF, ASYM_ON] if asymmetry_axes(ctx.input_g) else [ASYM_OFF]
-
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        return own_bends(ctx.input_g) if theta == ASYM_ON else own_powers(ctx.input_g)
+        return own_powers(ctx.input_g)
 
     def misses(self, pb: Any, U: np.ndarray, e: np.ndarray, theta: float,
                where: Mapping[str, Any], axes: list[str], alpha: float) -> dict[str, Any] | None:
@@ -113,46 +73,39 @@ class ScaleNonlinearity(CatalogueEffect):
         for i, ax in enumerate(AXES):
             p[f"k2_{ax}_ug_per_g2"], s[f"k2_{ax}_ug_per_g2"] = coef[i] * UG, se[i] * UG
             p[f"k3_{ax}_ug_per_g3"], s[f"k3_{ax}_ug_per_g3"] = coef[3 + i] * UG, se[3 + i] * UG
-        for j, i in enumerate(asymmetry_axes(ctx.input_g)[:coef.size - 6]):
-            key = f"asym_{AXES[i]}_ppm"  # |a| gain: ½ (scale for a > 0 − scale for a < 0)
-            p[key], s[key] = coef[6 + j] * UG, se[6 + j] * UG
         return ({k: float(v) for k, v in p.items()}, {k: float(v) for k, v in s.items()})
 
     def extension_fields(self, params):
         return {"k2_per_g": [params[f"k2_{a}_ug_per_g2"] * 1e-6 for a in AXES],
-                "k3_per_g2": [params[f"k3_{a}_ug_per_g3"] * 1e-6 for a in AXES],
-                "k_abs": [params.get(f"asym_{a}_ppm", 0.0) * 1e-6 for a in AXES]}
+                "k3_per_g2": [params[f"k3_{a}_ug_per_g3"] * 1e-6 for a in AXES]}
 
     def extension_term_g(self, spec, a):
-        return scale_nonlinearity_g(a, vec3(spec, "k2_per_g"), vec3(spec, "k3_per_g2"),
-                                    vec3(spec, "k_abs"))
+        return scale_nonlinearity_g(a, vec3(spec, "k2_per_g"), vec3(spec, "k3_per_g2"))
 
     def axes(self, coef, se):
-        z = np.abs(coef / np.where(se > 0, se, np.inf))
-        hit = [AXES[a] for a in range(3) if np.max(z[[a, 3 + a]]) >= 3.0]
-        return hit or list(AXES)  # jointly significant, no axis resolved (|a| alone: all)
+        z = np.abs(coef / np.where(se > 0, se, np.inf)).reshape(2, 3)
+        hit = [AXES[a] for a in range(3) if np.max(z[:, a]) >= 3.0]
+        return hit or list(AXES)  # jointly significant, no axis resolved
 
     def sentence(self, params, sd, axes, ctx=None):
         z = {k: abs(v) / max(sd.get(k, 0.0), 1e-12) for k, v in params.items()}
         if max(z.values()) < 3.0:  # jointly significant, no single coefficient resolved
             top = max(z, key=z.__getitem__)
+            unit = "µg/g²" if top.startswith("k2") else "µg/g³"
             return ("the outputs bend with their input (second/third-order terms, significant "
                     "together but not resolved coefficient by coefficient; largest "
-                    f"{top} = {fmt_pm(params[top], sd[top], _UNIT[top[:2]])})")
-        words = {"k2": "grows with the square of its input: K2", "k3": "grows with the cube "
-                 "of its input: K3", "as": "has a different scale for positive and negative "
-                 "input (asymmetry, ½ the difference)"}
+                    f"{top} = {fmt_pm(params[top], sd[top], unit)})")
         parts = []
         for ax in axes:
-            keys = [k for k in (f"k2_{ax}_ug_per_g2", f"k3_{ax}_ug_per_g3", f"asym_{ax}_ppm")
-                    if k in params]
-            top = max(keys, key=z.__getitem__)
-            parts.append(f"{ax} output {words[top[:2]]} = "
-                         f"{fmt_pm(params[top], sd[top], _UNIT[top[:2]])}")
+            k2, s2 = params[f"k2_{ax}_ug_per_g2"], sd[f"k2_{ax}_ug_per_g2"]
+            k3, s3 = params[f"k3_{ax}_ug_per_g3"], sd[f"k3_{ax}_ug_per_g3"]
+            if abs(k2) / max(s2, 1e-12) >= abs(k3) / max(s3, 1e-12):
+                parts.append(f"{ax} output grows with the square of its input: "
+                             f"K2 = {fmt_pm(k2, s2, 'µg/g²')}")
+            else:
+                parts.append(f"{ax} output grows with the cube of its input: "
+                             f"K3 = {fmt_pm(k3, s3, 'µg/g³')}")
         return "; ".join(parts)
-
-
-_UNIT = {"k2": "µg/g²", "k3": "µg/g³", "as": "ppm"}
 
 
 def direction_ids(positions: np.ndarray, input_g: np.ndarray) -> np.ndarray:
