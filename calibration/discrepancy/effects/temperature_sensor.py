@@ -19,8 +19,8 @@ dimensions the cubic leaves per column, and sits next to its boundary: a step fr
 on *is* "plateau 0 differs" (the unshifted side is one plateau, even on an up-down
 campaign), on a 5-temperature campaign every plateau's free block spans it, and on a 7-plateau
 staircase the block of the plateau at the boundary takes 85–100 % of it. The column is the
-step's exact shape there too (a refit on ``T − δ`` changes neither its statistic nor δ
-beyond their noise); what fails is the separation, which ``diagnose``'s one-plateau check
+step's shape there too (a refit on ``T − δ``, the exact f(T − δ) − f(T), moves its z by
+≤ 0.1 and δ̂ by ≤ 1.3 sd); what fails is the separation, which ``diagnose``'s one-plateau check
 decides, not this term.
 """
 
