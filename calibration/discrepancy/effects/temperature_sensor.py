@@ -12,6 +12,16 @@ Two parts, told apart by what one temperature source can show:
   scale terms alike) on the plateaus from k on; one parameter δ (°C), k profiled over the
   plateau boundaries. Its shape is locked to the model's temperature sensitivity, which
   is what tells it from a power-cycle bias jump (free per-axis biases, ``session_offset``).
+
+What it cannot be told from (measured on the second generator, issue 22): a change confined
+to one plateau. After the cubic in T the step's remnant lives in the n_plateaus − 4
+dimensions the cubic leaves per column, and sits next to its boundary: a step from plateau 1
+on *is* "plateau 0 differs" (the unshifted side is one plateau, even on an up-down
+campaign), on a 5-temperature campaign every plateau's free block spans it, and on a 7-plateau
+staircase the block of the plateau at the boundary takes 85–100 % of it. The column is the
+step's shape there too (a refit on ``T − δ``, the exact f(T − δ) − f(T), moves its z by
+≤ 0.1 and δ̂ by ≤ 1.3 sd); what fails is the separation, which ``diagnose``'s one-plateau check
+decides, not this term.
 """
 
 from __future__ import annotations
