@@ -283,13 +283,15 @@ def norm_rmse_meaning(absolute_names: tuple[str, ...]) -> str:
     :func:`calibration.fitting.fit`) measure: Eq. 9's |g| error, which a warm-up's fit
     does not minimise, and which holds whatever it leaves unidentified."""
     unknown = [n for n in ("bx", "by", "bz", "sx", "sy", "sz") if n not in absolute_names]
-    return ("rmse_before_mg / rmse_after_mg: RMS over the capture means of |reading| - "
-            "g_local (Eq. 9), mg, before and after the model. Not a figure of the fit: "
-            "the warm-up does not identify the constant part of "
-            f"{', '.join(unknown) or 'nothing'}, so both contain the sensor's constant "
-            "offset and scale error along gravity, and 'after' also moves with centre_c "
-            "(the bias change is referred to it: a capture at centre_c is not changed). "
-            "The fit's figure is heldout_rms_mg_xyz")
+    what = ("rmse_before_mg / rmse_after_mg: RMS over the capture means of |reading| - "
+            "g_local (Eq. 9), mg, before and after the model.")
+    if not unknown:
+        return what
+    return (f"{what} Not a figure of the fit: the warm-up does not identify the constant "
+            f"part of {', '.join(unknown)}, so both contain the sensor's constant offset "
+            "and scale error along gravity, and 'after' also moves with centre_c (the bias "
+            "change is referred to it: a capture at centre_c is not changed). The fit's "
+            "figure is heldout_rms_mg_xyz")
 
 
 def absolute_summary(absolute: AbsoluteFit, orientations: Orientations,
