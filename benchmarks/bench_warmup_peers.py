@@ -29,6 +29,10 @@ Methods:
   layout: mean, sd, n, mean ``sensor_c``), ``soakcal calibrate``, then ``soakcal
   compensate`` of every 1-s row of the log, its temperature clamped to the fit rows'
   span (as the firmwares clamp); a refusal (exit 2) is reported as such.
+* ``--fixed-degrees``: also each fixed degree 0 … 3 fitted the way soakcal fits a
+  warm-up (least squares on the fit blocks' 1-s rows, each at its own mean temperature;
+  every sample compensated at its 1-s row's temperature, clamped to the fit rows'
+  span): what each degree would score, beside the one soakcal's held-out error chose.
 * ``floor``: the noise floor of a held-out 5-s mean: the RMS difference of the two
   5-s means inside each held-out block, divided by √2 (white noise; slow drift cancels).
 
@@ -270,6 +274,23 @@ def _moving_average_2s(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return out
 
 
+def method_fixed_degree(log: WarmupLog, degree: int) -> np.ndarray:
+    """A polynomial of ``degree`` in T fitted as soakcal fits a warm-up (the fit blocks'
+    1-s rows at their own mean temperatures; x = (T − mid) / max(half span, 1 °C)) and
+    applied at each sample's 1-s row temperature clamped to the fit rows' span."""
+    _, fit = blocks(log.t_s)
+    rows = np.asarray(rows_1s(log, fit))
+    T, acc = rows[:, 1], rows[:, 2:5]
+    lo, hi = float(T.min()), float(T.max())
+    centre, scale = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1.0)
+    beta, *_ = np.linalg.lstsq(np.vander((T - centre) / scale, degree + 1, increasing=True),
+                               acc, rcond=None)
+    sec = np.floor((log.t_s - log.t_s[0]) / ROW_S).astype(int)
+    row_c = np.bincount(sec, weights=log.temp_c) / np.maximum(np.bincount(sec), 1)
+    x = (np.clip(row_c[sec], lo, hi) - centre) / scale
+    return log.acc_g - np.vander(x, degree + 1, increasing=True)[:, 1:] @ beta[1:]
+
+
 def rows_1s(log: WarmupLog, mask: np.ndarray) -> list[list[float]]:
     """1-s mean rows (t_s, sensor_c, ax, ay, az, n, sd_x, sd_y, sd_z) of the masked samples."""
     sec = np.floor((log.t_s - log.t_s[0]) / ROW_S).astype(int)
@@ -344,7 +365,8 @@ def _last_line(text: str) -> str:
 
 
 # --- run ---------------------------------------------------------------------------------
-def evaluate(log: WarmupLog, workdir: Path) -> dict[str, object]:
+def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False
+             ) -> dict[str, object]:
     res: dict[str, object] = {"log": log.name, "n": int(log.t_s.size),
                               "minutes": float((log.t_s[-1] - log.t_s[0]) / 60.0),
                               "temp_span_c": [float(log.temp_c.min()), float(log.temp_c.max())]}
@@ -359,7 +381,21 @@ def evaluate(log: WarmupLog, workdir: Path) -> dict[str, object]:
     else:
         res["soakcal"] = None
     res["floor"] = noise_floor_mg(log).tolist()
+    if fixed_degrees:
+        res["fixed_degree"] = {d: heldout_rms_mg(log, method_fixed_degree(log, d)).tolist()
+                               for d in range(4)}
     return res
+
+
+def fixed_degree_table(results: list[dict[str, object]]) -> str:
+    """Each fixed degree's figures (``--fixed-degrees``), mg x / y / z."""
+    lines = ["| log | degree 0 | degree 1 | degree 2 | degree 3 |", "|---|---|---|---|---|"]
+    for r in results:
+        fixed = r.get("fixed_degree")
+        if isinstance(fixed, dict):
+            cells = " | ".join(" / ".join(f"{v:.4f}" for v in fixed[d]) for d in range(4))
+            lines.append(f"| {r['log']} | {cells} |")
+    return "\n".join(lines)
 
 
 def _subset(log: WarmupLog, mask: np.ndarray) -> WarmupLog:
@@ -410,6 +446,8 @@ def main(argv: list[str] | None = None) -> int:
                          "'--columns ax=2,ay=3,az=4,temp=5 --accel-unit mg --rate-hz 500')")
     ap.add_argument("--no-twin", action="store_true",
                     help="skip the twin and BMI270 logs (only the --log files)")
+    ap.add_argument("--fixed-degrees", action="store_true",
+                    help="also score each fixed degree 0..3 fitted as soakcal fits a warm-up")
     args = ap.parse_args(argv)
     logs: list[WarmupLog] = []
     if not args.no_twin:
@@ -428,9 +466,12 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 logs.append(log)
         for log in logs:
-            results.append(evaluate(log, Path(tmp)))
+            results.append(evaluate(log, Path(tmp), args.fixed_degrees))
             print(json.dumps(results[-1]), flush=True)
     text = table(results)
+    if args.fixed_degrees:
+        text += "\n\nFixed degrees, fitted as soakcal fits a warm-up:\n\n" + \
+            fixed_degree_table(results)
     print(text)
     for r in results:
         if "unusable" not in r:

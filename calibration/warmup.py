@@ -16,10 +16,20 @@ and the model file says so (``fitted``/``held``). With 2 or more orientations, w
 they determine absolutely (±z: the z bias and scale) replaces that:
 :mod:`calibration.warmup_absolute`.
 
-The degree d (0 … 3) is chosen by held-out error: the captures are cut into
-:data:`HOLDOUT_BLOCKS` equal time blocks, alternately fitted and held out (then the
-other way round), and the degree with the lowest RMS error on the held-out captures
-wins. The valid range is the span of the data's temperatures.
+The degree d (0 … 3) is chosen by held-out error (:func:`_folds`): the captures'
+temperature span is cut into equal blocks (:data:`HOLDOUT_BLOCKS`, none narrower than
+:data:`DISTINCT_C`); the interior blocks are alternately fitted and held out (then the
+other way round) and the two end blocks are always fitted, so a held-out capture is
+predicted from fitted ones on both sides of its temperature: an interpolation, as a
+compensation inside the valid range is. (Blocks of *time* left out the hot end of a
+warm-up whole, so every degree above 1 was judged on an extrapolation the
+compensation never makes; and a warm-up that rests, then heats, has its whole
+temperature change in one or two time blocks.) A higher degree is preferred when it
+lowers the held-out squared error, summed over the three axes, by more than
+:data:`MIN_GAIN` and by more than that gain's standard error counted over the
+temperature blocks (:func:`_beats`): a gain within its own standard error is no
+evidence. One degree for the three axes (:func:`_choose_degree`). The valid range is
+the span of the data's temperatures.
 
 A rate term ``k_a(T) · dT/dt`` joins the model when the warm-up heats *and* cools
 (:data:`BOTH_WAYS_FRACTION` of the captures each way, in a log at least
@@ -55,11 +65,16 @@ from calibration.thermal import ThermalModel
 from calibration.warmup_absolute import AbsoluteFit, absolute_part, fitted_note, held_note
 
 MAX_DEGREE = 3
-HOLDOUT_BLOCKS = 10
+# Held-out error is judged on this many equal temperature blocks of the captures' span
+# (fewer where a block would be narrower than DISTINCT_C; at least 4: two ends that are
+# always fitted and one interior block in each fold).
+HOLDOUT_BLOCKS = 20
+MIN_HOLDOUT_BLOCKS = 4
 # Capture temperatures closer than this are one temperature when bounding the degree.
 DISTINCT_C = 0.25
-# A degree must lower the held-out RMS by more than this fraction to be preferred to a
-# lower one: a gain below it is no evidence the extra term predicts unseen captures.
+# A degree must lower the held-out RMS by more than this fraction (and by more than the
+# gain's standard error, _beats) to be preferred to a lower one; the rate term's choice
+# uses this fraction alone.
 MIN_GAIN = 0.005
 # dT/dt is read from a local parabola of the capture temperatures over this window, s:
 # long enough to average a 0.06-°C quantised channel, short against a warm-up's minutes.
@@ -122,20 +137,24 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     scale = max(0.5 * (hi - lo), 1.0)
     x = (T - centre) / scale
     labels = orientations.labels
-    folds = _folds(captures.t_s)
+    folds = _folds(T)
     rate = temperature_rate_c_per_min(captures.t_s, T, RATE_WINDOW_S)
-    heldout = [_heldout_rms_g(x, labels, raw, folds, d) for d in range(top + 1)]
+    errors = [_heldout_errors_g(x, labels, raw, folds, d) for d in range(top + 1)]
+    heldout = [_rms(e) for e, _ in errors]
     totals = [float(np.sqrt(np.mean(h ** 2))) for h in heldout]
     judged = [d for d in range(top + 1) if np.isfinite(totals[d])]
     if len(judged) < 2 or judged != list(range(len(judged))):
         raise GateRefusal(
             f"{len(captures)} capture(s) of {orientations.count} orientation(s) "
             f"({orientations.names()}): too few to judge a bias change by held-out error "
-            f"({HOLDOUT_BLOCKS} alternate time blocks); record a longer warm-up (more "
-            f"captures of {CAPTURE_BLOCK_S:g} s)")
+            f"(alternate temperature blocks); record a longer warm-up (more captures of "
+            f"{CAPTURE_BLOCK_S:g} s over a wider temperature change)")
     top = judged[-1]
     heldout, totals = heldout[: top + 1], totals[: top + 1]
-    degree = _choose(totals)
+    degree = _choose_degree([e for e, _ in errors[: top + 1]], errors[0][1],
+                            _block_index(T))
+    chosen = heldout[degree]
+    without_rate = totals[degree]
     # (d, m) candidates with a rate gain of degree m, simplest first
     candidates = sorted(((d, m) for d in range(top + 1) for m in range(max(d, 1))),
                         key=lambda dm: (dm[0] + dm[1], dm[0]))
@@ -145,11 +164,12 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             _heldout_rms_g(x, labels, raw, folds, d, _rate_columns(rate, x, m)) ** 2)))
             for d, m in candidates]
     best = _choose(with_rate) if with_rate else None
-    use_rate = best is not None and with_rate[best] < totals[degree] * (1.0 - MIN_GAIN)
+    use_rate = best is not None and with_rate[best] < without_rate * (1.0 - MIN_GAIN)
     rate_cols = None
     if use_rate:
         degree, gain_degree = candidates[int(best)]  # type: ignore[arg-type]
         rate_cols = _rate_columns(rate, x, gain_degree)
+        chosen = _heldout_rms_g(x, labels, raw, folds, degree, rate_cols)
     coef, se, k_rate, k_se = _fit(x, labels, raw, degree, rate_cols)
     coeffs = np.tile(sfem.identity_vector()[:, None], (1, degree + 1))
     coeffs[:, 1:] = 0.0
@@ -200,8 +220,10 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     conditioning = (f"{captures.temperature_source}: each capture's mean temperature "
                     "(a warm-up: the model in each reading's own temperature)")
     notes = [f"warm-up: {orientations.count} distinct orientation(s) "
-             f"({orientations.names()}); degree {degree} chosen by held-out error over "
-             f"{HOLDOUT_BLOCKS} alternate time blocks; valid range = the data's span",
+             f"({orientations.names()}); degree {degree} chosen "
+             f"by held-out error over {_block_count(T)} equal temperature blocks (interior "
+             f"blocks alternately held out, the two ends always fitted: an interpolation); "
+             f"valid range = the data's span",
              *notes_absolute]
     temperature_rate = None
     if use_rate:
@@ -217,7 +239,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         }
         notes.append(
             "rate term k·dT/dt fitted (the warm-up heats and cools; held-out RMS "
-            f"{with_rate[int(best)] * 1e3:.4f} mg with it, {totals[_choose(totals)] * 1e3:.4f} "
+            f"{with_rate[int(best)] * 1e3:.4f} mg with it, {without_rate * 1e3:.4f} "
             f"mg without; gain of degree {gain_degree} in T): a rate-sensitive part or a "
             "temperature channel lagging the die")
     elif with_rate:
@@ -246,14 +268,30 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             "mode": absolute.mode, "parameters": list(absolute.names),
             "degree": absolute.degree, "g_local": g_local,
             "residual_rms_ug": round(absolute.residual_rms_g * 1e6, 3)}
-    chosen = heldout[degree] if rate_cols is None else \
-        _heldout_rms_g(x, labels, raw, folds, degree, rate_cols)
     tried = [{"degree": d, "gain_degree": m, "heldout_rms_mg": round(t * 1e3, 4)}
              for (d, m), t in zip(candidates, with_rate, strict=False)]
     report = _report(model, captures, orientations, heldout, totals, degree, chosen, tried)
     if absolute is not None:
         report["absolute"] = absolute_report(model, absolute)
+    report["rmse_meaning"] = norm_rmse_meaning(
+        () if absolute is None else absolute.names)
     return WarmupFit(model, report, notes, absolute)
+
+
+def norm_rmse_meaning(absolute_names: tuple[str, ...]) -> str:
+    """What a warm-up report's ``rmse_before_mg``/``rmse_after_mg`` (added by
+    :func:`calibration.fitting.fit`) measure: Eq. 9's |g| error, which a warm-up's fit
+    does not minimise, and which holds whatever it leaves unidentified."""
+    unknown = [n for n in ("bx", "by", "bz", "sx", "sy", "sz") if n not in absolute_names]
+    what = ("rmse_before_mg / rmse_after_mg: RMS over the capture means of |reading| - "
+            "g_local (Eq. 9), mg, before and after the model.")
+    if not unknown:
+        return what
+    return (f"{what} Not a figure of the fit: the warm-up does not identify the constant "
+            f"part of {', '.join(unknown)}, so both contain the sensor's constant offset "
+            "and scale error along gravity, and 'after' also moves with centre_c (the bias "
+            "change is referred to it: a capture at centre_c is not changed). The fit's "
+            "figure is heldout_rms_mg_xyz")
 
 
 def absolute_summary(absolute: AbsoluteFit, orientations: Orientations,
@@ -328,6 +366,45 @@ def _rate_columns(rate: np.ndarray, x: np.ndarray, gain_degree: int) -> np.ndarr
     return np.asarray(rate, float)[:, None] * np.vander(x, gain_degree + 1, increasing=True)
 
 
+def _choose_degree(errors_g: list[np.ndarray], held: np.ndarray, block: np.ndarray) -> int:
+    """One degree for the three axes: the lowest that no higher one beats (:func:`_beats`)
+    in held-out squared error summed over the axes. ``errors_g[d]``: (n, 3) errors of
+    the held-out captures ``held`` (indices) at degree d; ``block``: each capture's
+    temperature block. One degree, not one per axis: the axes share a die and its
+    temperature history, and a curvature too weak to show above one axis' capture noise
+    (the twin's x: held-out 0.0183 mg at degree 1 and 2) shows in the sum."""
+    sq = [np.sum(e ** 2, axis=1) for e in errors_g]
+    degree = 0
+    for d in range(1, len(sq)):
+        if _beats(sq[degree], sq[d], block[held]):
+            degree = d
+    return degree
+
+
+def _beats(sq_low: np.ndarray, sq_high: np.ndarray, block: np.ndarray) -> bool:
+    """True when the higher degree's held-out squared errors ``sq_high`` are lower than
+    the lower degree's by more than :data:`MIN_GAIN` in RMS *and* by more than the
+    standard error of that gain. The gain is a mean over held-out captures whose errors
+    within one temperature block are correlated (neighbours in time share a slow drift),
+    so its standard error is counted over blocks: s_b = Σ_{i∈b} gain_i, G = Σ s_b / n,
+    se² = B/(B − 1) · Σ_b (s_b − n_b·G)² / n². A higher degree that fits the noise of the
+    fitted captures gains nothing on average, and its chance gains stay within that."""
+    if sq_low.size != sq_high.size or sq_low.size == 0:
+        return False
+    if np.sqrt(np.mean(sq_high)) >= np.sqrt(np.mean(sq_low)) * (1.0 - MIN_GAIN):
+        return False
+    gain = sq_low - sq_high
+    blocks, inverse = np.unique(block, return_inverse=True)
+    if blocks.size < 2:
+        return True
+    sums = np.bincount(inverse, weights=gain)
+    counts = np.bincount(inverse)
+    mean = float(np.sum(sums) / gain.size)
+    se = float(np.sqrt(blocks.size / (blocks.size - 1)
+                       * np.sum((sums - counts * mean) ** 2)) / gain.size)
+    return mean > se
+
+
 def _choose(totals: list[float]) -> int:
     """The lowest degree no higher one beats by more than :data:`MIN_GAIN`."""
     degree = 0
@@ -398,22 +475,62 @@ def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
     return beta[k:e].T, se[:degree].T, beta[e:].T, se[degree:].T
 
 
-def _folds(t_s: np.ndarray) -> np.ndarray:
-    """0/1 per capture: alternate blocks of equal duration."""
-    t0, t1 = float(np.min(t_s)), float(np.max(t_s))
-    width = max(t1 - t0, 1e-9) / HOLDOUT_BLOCKS
-    return (np.minimum(((t_s - t0) // width).astype(int), HOLDOUT_BLOCKS - 1)) % 2
+def _block_count(temperature_c: np.ndarray) -> int:
+    """How many equal temperature blocks :func:`_folds` cuts the span into."""
+    span_c = float(np.ptp(np.asarray(temperature_c, float)))
+    return max(MIN_HOLDOUT_BLOCKS, min(HOLDOUT_BLOCKS, int(span_c // DISTINCT_C)))
+
+
+def _block_index(temperature_c: np.ndarray) -> np.ndarray:
+    """Each capture's temperature block (0 … :func:`_block_count` − 1, equal widths)."""
+    T = np.asarray(temperature_c, float)
+    lo, n_blocks = float(np.min(T)), _block_count(T)
+    width = max(float(np.max(T)) - lo, 1e-9) / n_blocks
+    return np.minimum(((T - lo) // width).astype(int), n_blocks - 1)
+
+
+def _folds(temperature_c: np.ndarray) -> np.ndarray:
+    """0/1 per capture (held out in one fold, fitted in the other), 2 = always fitted.
+
+    The captures' temperature span is cut into equal blocks, :data:`HOLDOUT_BLOCKS` of
+    them or fewer so none is narrower than :data:`DISTINCT_C` (at least
+    :data:`MIN_HOLDOUT_BLOCKS`); interior blocks alternate 0/1, the lowest and highest
+    blocks are 2. Every held-out capture then lies between fitted temperatures: the
+    test is an interpolation, as a compensation inside the valid range (the data's
+    span) is. Blocks of temperature, not time: a warm-up that rests and then heats has
+    its whole temperature change in a small part of its duration.
+    """
+    block = _block_index(temperature_c)
+    folds = block % 2
+    folds[(block == 0) | (block == _block_count(temperature_c) - 1)] = 2
+    return folds
 
 
 def _heldout_rms_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.ndarray,
                    degree: int, rate_cols: np.ndarray | None = None) -> np.ndarray:
-    """(3,) RMS over held-out captures per axis, g, both ways round.
+    """(3,) RMS over held-out captures per axis, g, both ways round (NaN: none judged)."""
+    return _rms(_heldout_errors_g(x, labels, raw, folds, degree, rate_cols)[0])
+
+
+def _rms(errors_g: np.ndarray) -> np.ndarray:
+    """(3,) RMS of (n, 3) errors; NaN without any."""
+    if errors_g.shape[0] == 0:
+        return np.full(3, np.nan)
+    return np.sqrt(np.mean(errors_g ** 2, axis=0))
+
+
+def _heldout_errors_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.ndarray,
+                      degree: int, rate_cols: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) errors of the held-out captures, g, fitted on one fold and judged on the
+    other, both ways round; and those captures' indices.
 
     A held-out capture whose orientation the fitted half never saw cannot be predicted
     (its constant is unknown) and is not counted.
     """
     k = int(labels.max()) + 1
     errs: list[np.ndarray] = []
+    where: list[np.ndarray] = []
     for held in (0, 1):
         fit, test = folds != held, folds == held
         seen = np.isin(labels, np.unique(labels[fit])) & test
@@ -426,10 +543,10 @@ def _heldout_rms_g(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np
         Xs = _design(x[seen], labels[seen], k, degree,
                      None if rate_cols is None else rate_cols[seen])
         errs.append(raw[seen] - Xs @ beta)
+        where.append(np.flatnonzero(seen))
     if not errs:
-        return np.full(3, np.nan)
-    e = np.vstack(errs)
-    return np.sqrt(np.mean(e ** 2, axis=0))
+        return np.zeros((0, 3)), np.zeros(0, int)
+    return np.vstack(errs), np.concatenate(where)
 
 
 def _count_distinct(values: np.ndarray, tol: float) -> int:
@@ -489,8 +606,9 @@ def format_warmup(report: dict[str, Any]) -> str:
         f"{report['orientations']} orientation(s) ({report['orientation_names']})",
         f"temperature {report['temperature_source']} {lo:.2f} .. {hi:.2f} °C "
         f"(valid range: the data's span)",
-        f"degree {report['degree']} chosen by held-out error (RMS of held-out captures, mg): "
-        + ", ".join(f"d={s['degree']}: {s['heldout_rms_mg']:.4f}"
+        f"degree {report['degree']} chosen by held-out error (RMS of held-out captures "
+        "x/y/z, mg): "
+        + ", ".join(f"d={s['degree']}: " + "/".join(f"{v:.4f}" for v in s["heldout_rms_mg_xyz"])
                     for s in report["degree_selection"]),
         "held-out RMS per axis x, y, z (mg): uncompensated "
         + " ".join(f"{v:.4f}" for v in report["heldout_rms_mg_xyz"]["uncompensated"])
@@ -501,10 +619,27 @@ def format_warmup(report: dict[str, Any]) -> str:
         "fitted: " + (", ".join(report["fitted"]) or "nothing (no change with temperature "
                                                        "above the noise)"),
         *_format_absolute(report.get("absolute")),
+        *_format_norm_rmse(report),
         "held: " + "; ".join(f"{k}" for k in report["held"])
         + " (" + "; ".join(sorted(set(report["held"].values()))) + ")",
     ]
     return "\n".join(lines)
+
+
+def _format_norm_rmse(report: dict[str, Any]) -> list[str]:
+    """The |g| error line (Eq. 9) with what it measures (:func:`norm_rmse_meaning`)."""
+    if report.get("rmse_before_mg") is None or report.get("rmse_after_mg") is None:
+        return []
+    unknown = [n for n in ("bx", "by", "bz", "sx", "sy", "sz")
+               if n not in ((report.get("absolute") or {}).get("parameters") or {})]
+    return [f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
+            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}; not a "
+            f"figure of the fit: it contains the constant part of {', '.join(unknown)}, "
+            "which a warm-up does not identify, and 'after' moves with the temperature the "
+            "bias change is referred to (centre_c); the fit's figure is the held-out RMS "
+            "above"] if unknown else [
+            f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
+            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}"]
 
 
 def _format_absolute(absolute: dict[str, Any] | None) -> list[str]:

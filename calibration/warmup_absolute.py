@@ -308,21 +308,26 @@ def heldout_rms_g(raw_g: np.ndarray, x: np.ndarray, base_coeffs: np.ndarray,
                   folds: np.ndarray, g_local: float = 1.0,
                   ref_g: np.ndarray | None = None) -> float:
     """RMS residual of the held-out captures (fit on one fold, judged on the other, both
-    ways round), g; NaN when a fold does not determine ``degree``."""
+    ways round; ``folds`` 2 is always fitted), g; NaN when a fold does not determine
+    ``degree`` or no fold holds a capture out."""
     keep = np.array([n in names for n in free])
     errs = []
     for held in (0, 1):
         fit, test = folds != held, folds == held
+        if not test.any():  # an empty temperature block: nothing to judge this way round
+            continue
         ref_fit = None if ref_g is None else ref_g[fit]
         solved = _gauss_newton(raw_g[fit], x[fit], base_coeffs, free, keep, degree,
                                g_local, ref_fit)
-        if solved is None or not test.any():
+        if solved is None:
             return float("nan")
         idx = np.array([sfem.PARAM_NAMES.index(n) for n in free], int)
         base = np.vander(x[test], base_coeffs.shape[1], increasing=True) @ base_coeffs.T
         _, r = _linearised(raw_g[test], np.vander(x[test], degree + 1, increasing=True), base,
                            idx, solved[0], g_local, None if ref_g is None else ref_g[test])
         errs.append(r)
+    if not errs:
+        return float("nan")
     e = np.concatenate(errs)
     return float(np.sqrt(np.mean(e ** 2)))
 

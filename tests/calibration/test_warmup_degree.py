@@ -1,0 +1,128 @@
+"""A warm-up's degree, chosen by held-out error on interpolated temperatures.
+
+The logs are 1-s mean rows of a board at rest, z up, that rests at 20 °C and then
+heats to 24 °C in a couple of minutes (a log like the one-orientation warm-ups of
+issue 20). z's bias bends: most of its change comes in the first third of the heating
+(a cubic, steepest at the cold end); x and y do not change with temperature.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from calibration import cli, warmup
+from calibration.model_file import load_model
+from calibration.recording import write_recording
+
+NOISE_G = 20e-6  # one 1-s mean's
+BEND_G = 80e-6
+LO_C, HI_C = 20.0, 24.0
+
+
+def _bend_g(T: np.ndarray, bend_g: float) -> np.ndarray:
+    """z's bias change: bend_g · (1 − (1 − u)³), u the position in LO_C … HI_C (70 % of
+    the change over the first third of the span)."""
+    u = (np.asarray(T, float) - LO_C) / (HI_C - LO_C)
+    return bend_g * (1.0 - (1.0 - u) ** 3)
+
+
+def _log(*, seed: int, rest_s: int = 600, heat_s: int = 120, bend_g: float = BEND_G,
+         slope_g_per_c: float = 0.0) -> dict[str, np.ndarray]:
+    """Rest at LO_C, then heat to HI_C (exponential approach over ``heat_s``); z bends
+    by ``bend_g`` (or, with ``slope_g_per_c``, every axis changes linearly instead)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(rest_s + heat_s, dtype=float)
+    rise = (1.0 - np.exp(-(t - rest_s) / (heat_s / 3.0))) / (1.0 - np.exp(-3.0))
+    die = np.where(t < rest_s, LO_C, LO_C + (HI_C - LO_C) * rise)
+    acc = np.tile([0.0, 0.0, 1.0], (t.size, 1))
+    if slope_g_per_c:
+        acc += (die - LO_C)[:, None] * slope_g_per_c * np.array([1.0, -0.5, 0.8])
+    else:
+        acc[:, 2] += _bend_g(die, bend_g)
+    acc += rng.normal(0.0, NOISE_G, acc.shape)
+    sd = np.full(t.size, NOISE_G * 7.0)
+    return {"t_s": t, "sensor_c": die + rng.normal(0.0, 0.005, t.size),
+            "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2],
+            "sd_x": sd, "sd_y": sd, "sd_z": sd, "n": np.full(t.size, 50.0)}
+
+
+def _calibrate(tmp_path: Path, cols: dict[str, np.ndarray], capsys, *, json_out: bool
+               ) -> tuple[str, Path]:
+    src, model = tmp_path / "warmup.csv", tmp_path / "model.json"
+    write_recording(src, cols)
+    args = SimpleNamespace(recording=str(src), output=str(model), json=json_out)
+    assert cli.run_calibrate(args) == 0
+    return capsys.readouterr().out, model
+
+
+def test_held_out_captures_lie_between_fitted_temperatures():
+    # A warm-up that rests at 20 °C and then heats: every held-out capture (fold 0 or 1)
+    # is inside the span of the captures fitted with it (the other fold and the ends):
+    # the test interpolates, as a compensation in the valid range does. (Time blocks held
+    # out the hottest captures whole: an extrapolation.)
+    T = _log(seed=0)["sensor_c"]
+    folds = warmup._folds(T)
+    assert set(np.unique(folds)) == {0, 1, 2}
+    for held in (0, 1):
+        fitted = T[folds != held]
+        assert np.all(T[folds == held] > fitted.min())
+        assert np.all(T[folds == held] < fitted.max())
+
+
+def test_a_bend_at_the_cold_end_gets_a_curve_that_follows_it(tmp_path, capsys):
+    # z bends by 80 µg, four times one capture's noise (the issue's inclinometer: about
+    # 4 mg against 1 mg). Held-out error on the few heating captures is itself noisy, so
+    # this asks for 4 logs of 5, not every one. (Time-block folds, which held out the hot
+    # end whole, chose a line for 2 of these 5.)
+    good = []
+    for seed in range(5):
+        cols = _log(seed=seed, bend_g=BEND_G)
+        out, model_path = _calibrate(tmp_path, cols, capsys, json_out=True)
+        doc = json.loads(out)
+        held = doc["heldout_rms_mg_xyz"]
+        model = load_model(model_path)
+        T = np.linspace(LO_C + 0.1, HI_C - 0.1, 41)
+        change = model.params_vector_at(T)[:, 2] - model.params_vector_at(T[:1])[:, 2]
+        truth = _bend_g(T, BEND_G) - _bend_g(T[:1], BEND_G)
+        good.append(
+            # what a person reads: a curve (degree 2 or 3), not a line
+            doc["degree"] >= 2
+            # z's held-out error at a capture's noise (20 µg), not the bend's (~70 µg)
+            and held["compensated"][2] < 1.5 * NOISE_G * 1e3
+            and held["uncompensated"][2] > 2.0 * held["compensated"][2]
+            # the model follows the bend over the span within one capture's noise
+            and float(np.max(np.abs(change - truth))) < NOISE_G)
+    assert sum(good) >= 4, good
+
+
+def test_the_text_report_names_the_folds_and_what_the_g_error_is(tmp_path, capsys):
+    out, _ = _calibrate(tmp_path, _log(seed=0), capsys, json_out=False)
+    assert "chosen by held-out error (RMS of held-out captures x/y/z, mg): d=0: " in out
+    assert "held-out RMS per axis x, y, z (mg)" in out
+    assert "equal temperature blocks (interior blocks alternately held out, the two ends " \
+           "always fitted" in out
+    # The |g| error is said to be Eq. 9 in mg, and not a figure of the fit: one orientation
+    # does not identify the constant bias or scale it contains.
+    line = next(ln for ln in out.splitlines() if ln.startswith("|g| error"))
+    assert "mg" in line and "not a figure of the fit" in line and "bz, sx, sy, sz" in line
+
+
+def test_a_straight_warmup_gets_degree_1_on_every_axis(tmp_path, capsys):
+    out, _ = _calibrate(tmp_path, _log(seed=3, rest_s=120, heat_s=600, slope_g_per_c=50e-6),
+                        capsys, json_out=True)
+    doc = json.loads(out)
+    assert doc["degree"] == 1, doc["degree_selection"]
+
+
+def test_a_warmup_with_no_change_fits_nothing(tmp_path, capsys):
+    # A gain beyond its standard error by chance is possible: 4 logs of 5 with nothing
+    # fitted, and never more than a line fitted to noise.
+    docs = [json.loads(_calibrate(tmp_path, _log(seed=seed, bend_g=0.0), capsys,
+                                  json_out=True)[0]) for seed in range(10, 15)]
+    assert sum(d["degree"] == 0 and d["fitted"] == {} for d in docs) >= 4, \
+        [d["degree_selection"] for d in docs]
+    assert all(d["degree"] <= 1 for d in docs), [d["degree"] for d in docs]
