@@ -697,19 +697,26 @@ def format_warmup(report: dict[str, Any]) -> str:
 
 
 def _format_norm_rmse(report: dict[str, Any]) -> list[str]:
-    """The |g| error line (Eq. 9) with what it measures (:func:`norm_rmse_meaning`)."""
+    """The |g| error line (Eq. 9) with what it measures (:func:`norm_rmse_caveat`)."""
     if report.get("rmse_before_mg") is None or report.get("rmse_after_mg") is None:
         return []
+    caveat = norm_rmse_caveat(report, "the held-out RMS above")
+    return [f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
+            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}"
+            + (f"; {caveat}" if caveat else "")]
+
+
+def norm_rmse_caveat(report: dict[str, Any], fit_figure: str) -> str | None:
+    """What a warm-up report's |g| error before/after is not, for a person reading it (the
+    CLI's report, the dashboard's calibration page): None when the orientations identify
+    every bias and scale. ``fit_figure`` names where the fit's own figure is shown."""
     unknown = [n for n in ("bx", "by", "bz", "sx", "sy", "sz")
                if n not in ((report.get("absolute") or {}).get("parameters") or {})]
-    return [f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
-            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}; not a "
-            f"figure of the fit: it contains the constant part of {', '.join(unknown)}, "
+    if not unknown:
+        return None
+    return (f"not a figure of the fit: it contains the constant part of {', '.join(unknown)}, "
             "which a warm-up does not identify, and 'after' moves with the temperature the "
-            "bias change is referred to (centre_c); the fit's figure is the held-out RMS "
-            "above"] if unknown else [
-            f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
-            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}"]
+            f"bias change is referred to (centre_c); the fit's figure is {fit_figure}")
 
 
 def _format_absolute(absolute: dict[str, Any] | None) -> list[str]:
