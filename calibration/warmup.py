@@ -31,20 +31,27 @@ temperature blocks (:func:`_beats`): a gain within its own standard error is no
 evidence. One degree for the three axes (:func:`_choose_degree`). The valid range is
 the span of the data's temperatures.
 
-A rate term ``k_a(T) · dT/dt`` joins the model when the warm-up heats *and* cools
-(:data:`BOTH_WAYS_FRACTION` of the captures each way, in a log at least
-:data:`RATE_MIN_LOG_S` long) and held-out error prefers it.
-It stands for two physical things: a part whose bias depends on how fast its die
-changes temperature (the ``temperature_rate`` effect, docs/effects.md: a
-constant k), and a temperature channel that lags the die by τ (a first-order lag:
-die = channel + τ·dT/dt exactly, so b(T_die) ≈ b(T_channel) + b'(T)·τ·dT/dt, a gain
-that follows the bias slope: a polynomial of degree ≤ d − 1 in x). The gain's degree
-m (0 … d − 1) is chosen with d by held-out error, simplest first. In a one-way warm-up
-dT/dt is itself a function of T and the polynomial absorbs both; only a log that goes
-both ways separates them.
-dT/dt is the derivative of a local parabola of the capture temperatures over
-:data:`RATE_WINDOW_S` (:func:`calibration.temperature_conditioning.temperature_rate_c_per_min`),
-the same at calibrate and compensate.
+A rate term ``k_a(T) · dT/dt`` joins the model where the captures identify it and
+held-out error prefers it. It stands for two physical things: a part whose bias
+depends on how fast its die changes temperature (the ``temperature_rate`` effect,
+docs/effects.md: a constant k), and a temperature channel that lags the die by τ (a
+first-order lag: die = channel + τ·dT/dt exactly, so b(T_die) ≈ b(T_channel) +
+b'(T)·τ·dT/dt, a gain that follows the bias slope: a polynomial of degree ≤ d − 1 in
+x). Identified (:func:`_rate_check`) where dT/dt is not a function of T over the
+captures: the part of it left after projecting out the orientations' constants and
+the polynomial in T holds at least :data:`RATE_MIN_SHARE` of its sum of squares and is
+resolved above dT/dt's noise (:data:`RATE_NOISE_SHARE`). A heating and a cooling pass
+the same temperatures at opposite rates; a rest and then a heating (the inclinometer
+log of issue 20) have zero and fast rates at one temperature; a monotone warm-up at a
+steady or exponential rate has dT/dt ≈ f(T), any polynomial absorbs k·dT/dt, and none
+is tried. The gain's degree m (0 … d − 1) is chosen with d by held-out error, simplest
+first, and the term is kept only when it lowers the held-out squared error beyond
+that gain's standard error (:func:`_rate_beats`, as a degree must). dT/dt is the
+derivative of a local parabola of the capture temperatures
+(:func:`calibration.temperature_conditioning.temperature_rate_c_per_min`) over the
+shortest window whose noise, for this channel's noise and quantum, is small against
+the rate it must resolve (:func:`calibration.temperature_conditioning.rate_window_s`);
+the window is stored with the term, the same at calibrate and compensate.
 """
 
 from __future__ import annotations
