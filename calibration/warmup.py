@@ -169,6 +169,8 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     rate = np.zeros(T.size)
     if check.tried:
         rate = temperature_rate_c_per_min(captures.t_s, T, float(check.window_s))  # type: ignore[arg-type]
+        candidates = [(d, m) for d, m in candidates
+                      if m <= _gain_degree_identified(rate, x, labels, d)]
         with_rate = [float(np.sqrt(np.mean(
             _heldout_rms_g(x, labels, raw, folds, d, _rate_columns(rate, x, m)) ** 2)))
             for d, m in candidates]
@@ -410,6 +412,26 @@ def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarra
                                 f"({shown}; {RATE_MIN_SHARE:.0%} needed): the polynomial in "
                                 "T absorbs a rate term", window, share, noise, rms)
     return RateCheck(True, shown, window, share, noise, rms)
+
+
+def _gain_degree_identified(rate: np.ndarray, x: np.ndarray, labels: np.ndarray,
+                            degree: int) -> int:
+    """The highest rate-gain degree m whose columns dT/dt·x^j (j ≤ m) each keep at least
+    :data:`RATE_MIN_SHARE` of their sum of squares after projecting out the degree-d
+    design and the lower rate columns (:func:`_rate_check`'s test, column by column). In
+    a heating, dT/dt·x^j is as much a function of T as dT/dt is, so a gain that changes
+    with T is identified only where the heating and the rest (or the cooling) overlap in
+    temperature; 0 when even the constant gain is not (then no candidate with it)."""
+    k = int(labels.max()) + 1
+    X = _design(x, labels, k, degree)
+    top = -1
+    for j in range(max(degree, 1)):
+        col = rate * x ** j
+        res = col - X @ np.linalg.lstsq(X, col, rcond=None)[0]
+        if float(np.sum(res ** 2)) < RATE_MIN_SHARE * max(float(np.sum(col ** 2)), 1e-30):
+            break
+        top, X = j, np.column_stack([X, col])
+    return top
 
 
 def _rate_beats(without: tuple[np.ndarray, np.ndarray], with_rate: tuple[np.ndarray, np.ndarray],
