@@ -28,7 +28,9 @@ Methods:
 * ``soakcal``: the fit blocks as 1-s mean rows (``soakcal import --block-s 1``'s
   layout: mean, sd, n, mean ``sensor_c``), ``soakcal calibrate``, then ``soakcal
   compensate`` of every 1-s row of the log, its temperature clamped to the fit rows'
-  span (as the firmwares clamp); a refusal (exit 2) is reported as such.
+  span (as the firmwares clamp); a refusal (exit 2) is reported as such. A model with a
+  rate term k·dT/dt has the clamp on its polynomial only: its rate term is compensated
+  from the unclamped temperatures (a clamped column reads dT/dt = 0 beyond the span).
 * ``--fixed-degrees``: also each fixed degree 0 … 3 fitted the way soakcal fits a
   warm-up (least squares on the fit blocks' 1-s rows, each at its own mean temperature;
   every sample compensated at its 1-s row's temperature, clamped to the fit rows'
@@ -334,16 +336,26 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     fit_s = time.perf_counter() - t0
     if cal.returncode != 0:
         return None, f"calibrate exit {cal.returncode}: {_last_line(cal.stderr)}"
-    # --extrapolate: the rows are clamped to the fit span already; compensate's own
-    # conditioning of the temperature may still step a hair past the model's range.
-    c = subprocess.run([*SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp),
-                        "--extrapolate"], capture_output=True, text=True, cwd=REPO)
-    if c.returncode != 0:
-        return None, f"compensate exit {c.returncode}: {_last_line(c.stderr)}"
-    with comp.open() as f:
-        out_rows = list(csv.DictReader(f))
-    delta = np.array([[float(r["cx"]) - float(r["ax"]), float(r["cy"]) - float(r["ay"]),
-                       float(r["cz"]) - float(r["az"])] for r in out_rows])
+    delta, why = _compensate_delta(model, all_csv, comp)
+    if delta is None:
+        return None, why
+    rate = json.loads(model.read_text()).get("temperature", {}).get("rate")
+    if rate:
+        # The clamp is the polynomial's (the firmwares clamp T to TMIN/TMAX); dT/dt is
+        # the channel's own and is not clamped (a clamped column reads dT/dt = 0 beyond
+        # the fit span). Rate term = the model on the unclamped rows less the model
+        # without it on them; polynomial = the model without it on the clamped rows.
+        raw_csv = workdir / "all_unclamped.csv"
+        _write_rows(raw_csv, all_rows)
+        no_rate = workdir / "model_no_rate.json"
+        doc = json.loads(model.read_text())
+        doc["temperature"]["rate"] = None
+        no_rate.write_text(json.dumps(doc))
+        parts = [_compensate_delta(m, f, comp)[0]
+                 for m, f in ((no_rate, all_csv), (model, raw_csv), (no_rate, raw_csv))]
+        if any(p is None for p in parts):
+            return None, "compensate of the rate term's parts failed"
+        delta = parts[0] + (parts[1] - parts[2])  # type: ignore[operator]
     sec = np.floor((log.t_s - log.t_s[0]) / ROW_S).astype(int)
     row_of_sec = {int(np.floor(r[0] - log.t_s[0])): i for i, r in enumerate(all_rows)}
     idx = np.array([row_of_sec.get(int(s), -1) for s in sec])
@@ -357,6 +369,21 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     except ValueError:
         note = f"calibrate {fit_s:.1f} s"
     return out, note
+
+
+def _compensate_delta(model: Path, rows_csv: Path, comp: Path
+                      ) -> tuple[np.ndarray | None, str]:
+    """``soakcal compensate`` of ``rows_csv``: (N,3) compensated minus raw, or None and why.
+    (--extrapolate: the rows are clamped to the fit span already; compensate's own
+    conditioning of the temperature may still step a hair past the model's range.)"""
+    c = subprocess.run([*SOAKCAL, "compensate", str(model), str(rows_csv), "-o", str(comp),
+                        "--extrapolate"], capture_output=True, text=True, cwd=REPO)
+    if c.returncode != 0:
+        return None, f"compensate exit {c.returncode}: {_last_line(c.stderr)}"
+    with comp.open() as f:
+        out_rows = list(csv.DictReader(f))
+    return np.array([[float(r["cx"]) - float(r["ax"]), float(r["cy"]) - float(r["ay"]),
+                      float(r["cz"]) - float(r["az"])] for r in out_rows]), ""
 
 
 def _last_line(text: str) -> str:

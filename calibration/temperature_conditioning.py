@@ -20,6 +20,7 @@ A step with fewer than 3 rows or zero time span gets the median instead.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -292,6 +293,65 @@ def temperature_rate_c_per_min(t_s: np.ndarray, temperature_c: np.ndarray,
         return np.zeros(t.size)
     smooth = smooth_over_time(t, temperature_c, window_s, degree=2)
     return 60.0 * np.gradient(smooth, t)
+
+
+# Windows (s) a warm-up's dT/dt may be read over (:func:`rate_window_s`), shortest first;
+# each must hold at least RATE_MIN_READINGS readings for a robust parabola.
+RATE_WINDOWS_S = (5.0, 10.0, 20.0, 40.0, 80.0, 120.0)
+RATE_MIN_READINGS = 5
+RATE_NOISE_DRAWS = 8
+
+
+def temperature_noise_c(t_s: np.ndarray, temperature_c: np.ndarray) -> float:
+    """Per-reading noise SD (°C) of a temperature series: the robust SD of its second
+    differences over √6 (a smooth trend cancels in them; white noise gives √6·σ), and at
+    least quantum/√12 when the readings are quantised (:func:`channel_quantum_c`)."""
+    y = np.asarray(temperature_c, float)
+    y = y[np.isfinite(y)]
+    if y.size < 3:
+        return 0.0
+    second = y[2:] - 2.0 * y[1:-1] + y[:-2]
+    return max(_robust_sd(second) / math.sqrt(6.0), channel_quantum_c(y) / math.sqrt(12.0))
+
+
+def rate_noise_c_per_min(t_s: np.ndarray, window_s: float, noise_c: float) -> float:
+    """The noise (RMS, °C/min) :func:`temperature_rate_c_per_min` over ``window_s`` gives
+    at these reading times for white temperature noise of SD ``noise_c``: measured by
+    running it on :data:`RATE_NOISE_DRAWS` draws of such noise (a fixed seed), so it is
+    the method's own, gaps and ends included."""
+    t = np.asarray(t_s, float)
+    if noise_c <= 0 or t.size < 3:
+        return 0.0
+    rng = np.random.default_rng(0)
+    sq = [np.mean(temperature_rate_c_per_min(t, rng.normal(0.0, noise_c, t.size),
+                                             window_s) ** 2) for _ in range(RATE_NOISE_DRAWS)]
+    return float(np.sqrt(np.mean(sq)))
+
+
+def rate_window_s(t_s: np.ndarray, temperature_c: np.ndarray,
+                  signal_c_per_min: Callable[[np.ndarray], float], share: float,
+                  ) -> tuple[float, float] | None:
+    """The shortest of :data:`RATE_WINDOWS_S` over which dT/dt's noise
+    (:func:`rate_noise_c_per_min`, the channel's noise from :func:`temperature_noise_c`)
+    is at most ``share`` of what it must resolve: ``signal_c_per_min(rate)`` (°C/min),
+    called with that window's rates. A shorter window follows a warm-up's onset and
+    turns without smearing them; a longer one averages a quantised channel. Returns
+    (window_s, its noise in °C/min), or None when no window is both long enough to hold
+    :data:`RATE_MIN_READINGS` readings, at most half the readings' time span (a rate is
+    local: a window over the whole record is one parabola's slope) and quiet enough."""
+    t = np.asarray(t_s, float)
+    noise_c = temperature_noise_c(t, temperature_c)
+    span_s = float(np.ptp(t)) if t.size else 0.0
+    for window in (w for w in RATE_WINDOWS_S if w <= 0.5 * span_s):
+        counts = (np.searchsorted(t, t + window / 2, side="right")
+                  - np.searchsorted(t, t - window / 2, side="left"))
+        if t.size < RATE_MIN_READINGS or np.median(counts) < RATE_MIN_READINGS:
+            continue
+        noise = rate_noise_c_per_min(t, window, noise_c)
+        rate = temperature_rate_c_per_min(t, temperature_c, window)
+        if noise <= share * float(signal_c_per_min(rate)):
+            return window, noise
+    return None
 
 
 RAMP_WINDOW_S = 600.0

@@ -31,20 +31,27 @@ temperature blocks (:func:`_beats`): a gain within its own standard error is no
 evidence. One degree for the three axes (:func:`_choose_degree`). The valid range is
 the span of the data's temperatures.
 
-A rate term ``k_a(T) · dT/dt`` joins the model when the warm-up heats *and* cools
-(:data:`BOTH_WAYS_FRACTION` of the captures each way, in a log at least
-:data:`RATE_MIN_LOG_S` long) and held-out error prefers it.
-It stands for two physical things: a part whose bias depends on how fast its die
-changes temperature (the ``temperature_rate`` effect, docs/effects.md: a
-constant k), and a temperature channel that lags the die by τ (a first-order lag:
-die = channel + τ·dT/dt exactly, so b(T_die) ≈ b(T_channel) + b'(T)·τ·dT/dt, a gain
-that follows the bias slope: a polynomial of degree ≤ d − 1 in x). The gain's degree
-m (0 … d − 1) is chosen with d by held-out error, simplest first. In a one-way warm-up
-dT/dt is itself a function of T and the polynomial absorbs both; only a log that goes
-both ways separates them.
-dT/dt is the derivative of a local parabola of the capture temperatures over
-:data:`RATE_WINDOW_S` (:func:`calibration.temperature_conditioning.temperature_rate_c_per_min`),
-the same at calibrate and compensate.
+A rate term ``k_a(T) · dT/dt`` joins the model where the captures identify it and
+held-out error prefers it. It stands for two physical things: a part whose bias
+depends on how fast its die changes temperature (the ``temperature_rate`` effect,
+docs/effects.md: a constant k), and a temperature channel that lags the die by τ (a
+first-order lag: die = channel + τ·dT/dt exactly, so b(T_die) ≈ b(T_channel) +
+b'(T)·τ·dT/dt, a gain that follows the bias slope: a polynomial of degree ≤ d − 1 in
+x). Identified (:func:`_rate_check`) where dT/dt is not a function of T over the
+captures: the part of it left after projecting out the orientations' constants and
+the polynomial in T holds at least :data:`RATE_MIN_SHARE` of its sum of squares and is
+resolved above dT/dt's noise (:data:`RATE_NOISE_SHARE`). A heating and a cooling pass
+the same temperatures at opposite rates; a rest and then a heating (the inclinometer
+log of issue 20) have zero and fast rates at one temperature; a monotone warm-up at a
+steady or exponential rate has dT/dt ≈ f(T), any polynomial absorbs k·dT/dt, and none
+is tried. The gain's degree m (0 … d − 1) is chosen with d by held-out error, simplest
+first, and the term is kept only when it lowers the held-out squared error beyond
+that gain's standard error (:func:`_rate_beats`, as a degree must). dT/dt is the
+derivative of a local parabola of the capture temperatures
+(:func:`calibration.temperature_conditioning.temperature_rate_c_per_min`) over the
+shortest window whose noise, for this channel's noise and quantum, is small against
+the rate it must resolve (:func:`calibration.temperature_conditioning.rate_window_s`);
+the window is stored with the term, the same at calibrate and compensate.
 """
 
 from __future__ import annotations
@@ -60,7 +67,7 @@ from calibration import sfem
 from calibration.captures import CAPTURE_BLOCK_S
 from calibration.gate import GateRefusal, Orientations, direction_name
 from calibration.recording import Recording
-from calibration.temperature_conditioning import temperature_rate_c_per_min
+from calibration.temperature_conditioning import rate_window_s, temperature_rate_c_per_min
 from calibration.thermal import ThermalModel
 from calibration.warmup_absolute import AbsoluteFit, absolute_part, fitted_note, held_note
 
@@ -76,18 +83,18 @@ DISTINCT_C = 0.25
 # gain's standard error, _beats) to be preferred to a lower one; the rate term's choice
 # uses this fraction alone.
 MIN_GAIN = 0.005
-# dT/dt is read from a local parabola of the capture temperatures over this window, s:
-# long enough to average a 0.06-°C quantised channel, short against a warm-up's minutes.
-RATE_WINDOW_S = 120.0
-# A rate term is tried only when at least this fraction of the captures heat and as many
-# cool faster than RATE_MIN_C_PER_MIN: otherwise dT/dt is a function of T (see above).
-BOTH_WAYS_FRACTION = 0.1
-RATE_MIN_C_PER_MIN = 0.05
-# ... and only in a log at least this long: dT/dt is resolved over RATE_WINDOW_S, so a
-# shorter log has no heating and cooling stretches, only a channel's jitter (a PX4 log of
-# six 1-s samples, its channel jumping 0.2-0.3 °C, got a rate term "preferred" 4.1 mg
-# against 5.1 mg held out, and a model that compensated x from 3.2 to 4.9 mg).
-RATE_MIN_LOG_S = 2.0 * RATE_WINDOW_S
+# A rate term is tried only where dT/dt is not a function of T over the captures
+# (:func:`_rate_check`): the part of it left after projecting out the orientations'
+# constants and the polynomial in T of the highest degree judged must be resolved
+# (RATE_NOISE_SHARE) and hold at least this share of the rate column's sum of squares.
+# 1/share is the variance inflation of the rate gain against a rate uncorrelated with T:
+# at most 100; whether the gain is then worth having is the held-out test's to say (a
+# rest and then a heating with a lagging channel leaves 2-4 % of it: the onset).
+RATE_MIN_SHARE = 0.01
+# dT/dt is read over the shortest window (temperature_conditioning.RATE_WINDOWS_S) whose
+# noise is at most this share of that residual rate's RMS: errors in dT/dt then shrink the
+# fitted gain by at most 1 % (their variance over the residual's).
+RATE_NOISE_SHARE = 0.1
 HELD_WHY = {
     "scale": "held at 1: one orientation per axis cannot separate scale from gravity's "
              "unknown projection",
@@ -138,7 +145,6 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     x = (T - centre) / scale
     labels = orientations.labels
     folds = _folds(T)
-    rate = temperature_rate_c_per_min(captures.t_s, T, RATE_WINDOW_S)
     errors = [_heldout_errors_g(x, labels, raw, folds, d) for d in range(top + 1)]
     heldout = [_rms(e) for e, _ in errors]
     totals = [float(np.sqrt(np.mean(h ** 2))) for h in heldout]
@@ -159,12 +165,23 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     candidates = sorted(((d, m) for d in range(top + 1) for m in range(max(d, 1))),
                         key=lambda dm: (dm[0] + dm[1], dm[0]))
     with_rate: list[float] = []
-    if goes_both_ways(rate) and float(np.ptp(captures.t_s)) >= RATE_MIN_LOG_S:
+    check = _rate_check(captures.t_s, T, x, labels, top)
+    rate = np.zeros(T.size)
+    if check.tried:
+        rate = temperature_rate_c_per_min(captures.t_s, T, float(check.window_s))  # type: ignore[arg-type]
+        candidates = [(d, m) for d, m in candidates
+                      if m <= _gain_degree_identified(rate, x, labels, d)]
         with_rate = [float(np.sqrt(np.mean(
             _heldout_rms_g(x, labels, raw, folds, d, _rate_columns(rate, x, m)) ** 2)))
             for d, m in candidates]
     best = _choose(with_rate) if with_rate else None
-    use_rate = best is not None and with_rate[best] < without_rate * (1.0 - MIN_GAIN)
+    use_rate = False
+    if best is not None:
+        d_best, m_best = candidates[best]
+        use_rate = _rate_beats(
+            errors[degree],
+            _heldout_errors_g(x, labels, raw, folds, d_best, _rate_columns(rate, x, m_best)),
+            _block_index(T))
     rate_cols = None
     if use_rate:
         degree, gain_degree = candidates[int(best)]  # type: ignore[arg-type]
@@ -231,20 +248,22 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             "gain_ug_per_c_per_min": [[float(v) * 1e6 for v in axis] for axis in k_rate],
             "stderr_ug_per_c_per_min": [[float(v) * 1e6 for v in axis] for axis in k_se],
             "basis": "k(T) = sum_j gain[axis][j] * x**j, x = (T - centre_c) / scale_c",
-            "window_s": RATE_WINDOW_S,
-            "description": RATE_DESCRIPTION.format(window=RATE_WINDOW_S),
+            "window_s": check.window_s,
+            "description": RATE_DESCRIPTION.format(window=check.window_s),
             # the log's own dT/dt: what the term's effect was (export_firmware says it)
             "rate_c_per_min_range": [round(float(np.min(rate)), 4),
                                      round(float(np.max(rate)), 4)],
         }
         notes.append(
-            "rate term k·dT/dt fitted (the warm-up heats and cools; held-out RMS "
+            f"rate term k·dT/dt fitted ({check.why}; held-out RMS "
             f"{with_rate[int(best)] * 1e3:.4f} mg with it, {without_rate * 1e3:.4f} "
-            f"mg without; gain of degree {gain_degree} in T): a rate-sensitive part or a "
-            "temperature channel lagging the die")
+            f"mg without, a gain beyond its standard error; gain of degree {gain_degree} "
+            "in T): a rate-sensitive part or a temperature channel lagging the die")
     elif with_rate:
-        notes.append("rate term k·dT/dt tried (the warm-up heats and cools) and not kept: "
-                     "held-out error does not prefer it")
+        notes.append(f"rate term k·dT/dt tried ({check.why}) and not kept: held-out error "
+                     "does not prefer it beyond its standard error")
+    else:
+        notes.append(f"no rate term tried: {check.why}")
     if absolute is not None:
         notes.append(absolute_summary(absolute, orientations, g_local))
     model = ThermalModel(
@@ -271,6 +290,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     tried = [{"degree": d, "gain_degree": m, "heldout_rms_mg": round(t * 1e3, 4)}
              for (d, m), t in zip(candidates, with_rate, strict=False)]
     report = _report(model, captures, orientations, heldout, totals, degree, chosen, tried)
+    report["rate_identifiability"] = check.to_dict()
     if absolute is not None:
         report["absolute"] = absolute_report(model, absolute)
     report["rmse_meaning"] = norm_rmse_meaning(
@@ -337,13 +357,92 @@ RATE_DESCRIPTION = (
     "+/-{window:g}/2 s (centred: not available to a causal consumer before that much later)")
 
 
-def goes_both_ways(rate_c_per_min: np.ndarray) -> bool:
-    """True when enough captures heat and enough cool (:data:`BOTH_WAYS_FRACTION`)."""
-    r = np.asarray(rate_c_per_min, float)
-    if r.size == 0:
+@dataclass
+class RateCheck:
+    """Whether a warm-up's captures identify a rate term (:func:`_rate_check`)."""
+    tried: bool
+    why: str
+    window_s: float | None = None  # dT/dt read over it
+    share: float = 0.0  # of the rate's sum of squares left after the polynomial in T
+    noise_c_per_min: float = float("nan")  # dT/dt's noise over window_s
+    residual_c_per_min: float = 0.0  # RMS of the rate left after the polynomial in T
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"tried": self.tried, "why": self.why, "window_s": self.window_s,
+                "share_not_a_function_of_t": round(self.share, 4),
+                "noise_c_per_min": (round(self.noise_c_per_min, 4)
+                                    if np.isfinite(self.noise_c_per_min) else None),
+                "residual_rms_c_per_min": round(self.residual_c_per_min, 4)}
+
+
+def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarray,
+                top: int) -> RateCheck:
+    """Whether dT/dt is identifiable beside the polynomial in T, and its window.
+
+    A rate gain k and the bias polynomial are separable only where dT/dt is not itself a
+    function of T over the captures: a monotone warm-up at a steady or an exponential
+    rate has dT/dt ≈ f(T) and any polynomial absorbs k·dT/dt; a rest and then a heating
+    (zero and large rates at the same temperature), or a heating and a cooling, do not.
+    Measured as the share of the rate column's sum of squares left after projecting out
+    the orientations' constants and x¹ … x^top (:data:`RATE_MIN_SHARE`). The window is
+    the shortest whose dT/dt noise, for this channel's noise (quantisation included), is
+    at most :data:`RATE_NOISE_SHARE` of that residual's RMS
+    (:func:`calibration.temperature_conditioning.rate_window_s`)."""
+    k = int(labels.max()) + 1
+    P = _design(x, labels, k, max(top, 1))
+
+    def residual(rate: np.ndarray) -> np.ndarray:
+        return rate - P @ np.linalg.lstsq(P, rate, rcond=None)[0]
+
+    found = rate_window_s(t_s, T, lambda r: float(np.sqrt(np.mean(residual(r) ** 2))),
+                          RATE_NOISE_SHARE)
+    if found is None:
+        return RateCheck(False, "dT/dt not resolved: over every window its noise exceeds "
+                                f"{RATE_NOISE_SHARE:.0%} of the part of it that is not a "
+                                "function of T (a steady warm-up, or a channel's jitter)")
+    window, noise = found
+    rate = temperature_rate_c_per_min(t_s, T, window)
+    res = residual(rate)
+    share = float(np.sum(res ** 2) / max(float(np.sum(rate ** 2)), 1e-30))
+    rms = float(np.sqrt(np.mean(res ** 2)))
+    shown = (f"{share:.0%} of dT/dt (read over {window:g} s, noise {noise:.2g} °C/min) is "
+             f"not a function of T, RMS {rms:.2g} °C/min")
+    if share < RATE_MIN_SHARE:
+        return RateCheck(False, f"dT/dt is nearly a function of T over these captures "
+                                f"({shown}; {RATE_MIN_SHARE:.0%} needed): the polynomial in "
+                                "T absorbs a rate term", window, share, noise, rms)
+    return RateCheck(True, shown, window, share, noise, rms)
+
+
+def _gain_degree_identified(rate: np.ndarray, x: np.ndarray, labels: np.ndarray,
+                            degree: int) -> int:
+    """The highest rate-gain degree m whose columns dT/dt·x^j (j ≤ m) each keep at least
+    :data:`RATE_MIN_SHARE` of their sum of squares after projecting out the degree-d
+    design and the lower rate columns (:func:`_rate_check`'s test, column by column). In
+    a heating, dT/dt·x^j is as much a function of T as dT/dt is, so a gain that changes
+    with T is identified only where the heating and the rest (or the cooling) overlap in
+    temperature; 0 when even the constant gain is not (then no candidate with it)."""
+    k = int(labels.max()) + 1
+    X = _design(x, labels, k, degree)
+    top = -1
+    for j in range(max(degree, 1)):
+        col = rate * x ** j
+        res = col - X @ np.linalg.lstsq(X, col, rcond=None)[0]
+        if float(np.sum(res ** 2)) < RATE_MIN_SHARE * max(float(np.sum(col ** 2)), 1e-30):
+            break
+        top, X = j, np.column_stack([X, col])
+    return top
+
+
+def _rate_beats(without: tuple[np.ndarray, np.ndarray], with_rate: tuple[np.ndarray, np.ndarray],
+                block: np.ndarray) -> bool:
+    """The rate term's own held-out test, as a degree's (:func:`_beats`): on the same
+    held-out captures, its squared errors summed over the axes lower by more than
+    :data:`MIN_GAIN` and by more than the gain's standard error."""
+    (e0, i0), (e1, i1) = without, with_rate
+    if i0.size == 0 or i0.shape != i1.shape or not np.array_equal(i0, i1):
         return False
-    return bool(np.mean(r > RATE_MIN_C_PER_MIN) >= BOTH_WAYS_FRACTION
-                and np.mean(r < -RATE_MIN_C_PER_MIN) >= BOTH_WAYS_FRACTION)
+    return _beats(np.sum(e0 ** 2, axis=1), np.sum(e1 ** 2, axis=1), block[i0])
 
 
 def rate_offset_g(model: ThermalModel, t_s: np.ndarray, temperature_c: np.ndarray
@@ -627,19 +726,26 @@ def format_warmup(report: dict[str, Any]) -> str:
 
 
 def _format_norm_rmse(report: dict[str, Any]) -> list[str]:
-    """The |g| error line (Eq. 9) with what it measures (:func:`norm_rmse_meaning`)."""
+    """The |g| error line (Eq. 9) with what it measures (:func:`norm_rmse_caveat`)."""
     if report.get("rmse_before_mg") is None or report.get("rmse_after_mg") is None:
         return []
+    caveat = norm_rmse_caveat(report, "the held-out RMS above")
+    return [f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
+            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}"
+            + (f"; {caveat}" if caveat else "")]
+
+
+def norm_rmse_caveat(report: dict[str, Any], fit_figure: str) -> str | None:
+    """What a warm-up report's |g| error before/after is not, for a person reading it (the
+    CLI's report, the dashboard's calibration page): None when the orientations identify
+    every bias and scale. ``fit_figure`` names where the fit's own figure is shown."""
     unknown = [n for n in ("bx", "by", "bz", "sx", "sy", "sz")
                if n not in ((report.get("absolute") or {}).get("parameters") or {})]
-    return [f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
-            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}; not a "
-            f"figure of the fit: it contains the constant part of {', '.join(unknown)}, "
+    if not unknown:
+        return None
+    return (f"not a figure of the fit: it contains the constant part of {', '.join(unknown)}, "
             "which a warm-up does not identify, and 'after' moves with the temperature the "
-            "bias change is referred to (centre_c); the fit's figure is the held-out RMS "
-            "above"] if unknown else [
-            f"|g| error (Eq. 9, RMS over the capture means of |reading| - g, mg): before "
-            f"{report['rmse_before_mg']:.4f}, after {report['rmse_after_mg']:.4f}"]
+            f"bias change is referred to (centre_c); the fit's figure is {fit_figure}")
 
 
 def _format_absolute(absolute: dict[str, Any] | None) -> list[str]:

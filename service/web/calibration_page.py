@@ -23,6 +23,7 @@ from typing import Any
 from fastapi import APIRouter, Depends, HTTPException, Request
 from pydantic import BaseModel, Field
 
+from calibration.warmup import norm_rmse_caveat
 from service.api import auth
 from service.api.deps import DbIdPath, SessionDep
 from service.db.models import Calibration
@@ -80,6 +81,10 @@ class CalibrationPage(BaseModel):
                                      "about its orientation's mean after the model")
     heldout_mg_xyz: dict[str, list[float]] | None = Field(
         description="a warm-up's held-out RMS per axis, uncompensated and compensated")
+    rmse_caveat: str | None = Field(
+        default=None, description="a warm-up's |g| RMSE after: what it is not (the CLI's "
+                                  "caveat); None when its orientations identify every bias "
+                                  "and scale, and for other fits")
     fitted: list[str] = Field(description="SFEM parameters fitted")
     held: list[str] = Field(description="SFEM parameters held at nominal: the positions "
                             "cannot identify them")
@@ -121,6 +126,8 @@ def calibration_page(calibration_id: DbIdPath, session: SessionDep) -> Calibrati
         rmse_after_ug=_ug(report.get("rmse_after_mg")) if warmup else row.rmse_ug,
         scatter_ug=row.rmse_ug if warmup else None,
         heldout_mg_xyz=report.get("heldout_rms_mg_xyz") if warmup else None,
+        rmse_caveat=(norm_rmse_caveat(report, "the held-out RMS per axis below")
+                     if warmup else None),
         # a warm-up's report names them itself (it fits only what it identifies)
         fitted=[k for k, ok in identifiable.items() if ok] or list(report.get("fitted") or []),
         held=[k for k, ok in identifiable.items() if not ok] or list(report.get("held") or []),

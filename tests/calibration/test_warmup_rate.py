@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from calibration import cli, export_cli
+from calibration import cli, export_cli, warmup
 from calibration.model_file import load_model, load_model_file
 from calibration.recording import write_recording
 from calibration.thermal_plant import lag_series
@@ -102,8 +102,13 @@ def test_a_rate_sensitive_part_gets_its_gain_back(tmp_path, capsys):
 
 
 def test_a_one_way_warmup_has_no_rate_term(tmp_path, capsys):
-    # Warming only: dT/dt is a function of T there and the polynomial already absorbs it.
-    doc, model_path = _calibrate(tmp_path, _log(lag_s=60.0, both_ways=False), capsys)
+    # Warming only, the channel reading the die: dT/dt = (45 °C − T)/10 min is a function
+    # of T and the polynomial already absorbs it, so no rate term is even tried. (With a
+    # lagging channel the log's first minutes are a rest then a heating for the channel,
+    # its rate rising from 0 while T hardly moves: that onset identifies the lag, see
+    # test_a_rest_then_a_heating_with_a_lagging_channel_gets_a_rate_term.)
+    doc, model_path = _calibrate(tmp_path, _log(both_ways=False), capsys)
+    assert doc["rate_identifiability"]["tried"] is False
     assert doc["rate_term"] is None and doc["rate_selection"] == []
     assert load_model(model_path).temperature_rate is None
 
@@ -176,4 +181,69 @@ def test_a_short_log_with_a_jumping_channel_gets_no_rate_term():
         return  # no model at all: nothing with a rate term either
     assert result.report.get("rate_term") is None
     assert not result.report.get("rate_selection")
-    assert not any("rate term" in note for note in result.report["notes"])
+    assert not any("rate term k·dT/dt" in note for note in result.report["notes"])
+    # and the report says why none was tried
+    assert result.report["rate_identifiability"]["tried"] is False
+    assert any(note.startswith("no rate term tried") for note in result.report["notes"])
+
+
+def _rest_then_heat(*, lag_s: float, rest_s: int = 300, heat_s: int = 300,
+                    seed: int = 2) -> dict[str, np.ndarray]:
+    """1-s rows of a board that rests at 20 °C, then heats toward 30 °C (τ 120 s): the
+    inclinometer log's shape. The channel lags the die by ``lag_s`` (first order)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(rest_s + heat_s, dtype=float)
+    die = 20.0 + 10.0 * (1.0 - np.exp(-np.clip(t - rest_s, 0.0, None) / 120.0))
+    d = die - 25.0
+    acc = np.array([0.0, 0.0, 1.0]) + d[:, None] * TEMPCO_G_PER_C + d[:, None] ** 2 * CURVE_G_PER_C2
+    acc = acc + rng.normal(0.0, NOISE_G, acc.shape)
+    channel = lag_series(die, 1.0, lag_s) if lag_s else die
+    sd = np.full(t.size, NOISE_G * 7.0)
+    return {"t_s": t, "sensor_c": channel + rng.normal(0.0, 0.005, t.size),
+            "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2],
+            "sd_x": sd, "sd_y": sd, "sd_z": sd, "n": np.full(t.size, 50.0)}
+
+
+def test_a_rest_then_a_heating_with_a_lagging_channel_gets_a_rate_term(tmp_path, capsys):
+    # Heating only, but after a rest: zero and fast rates at the same temperature, so
+    # dT/dt is not a function of T and a rate term is identified (it used to be tried
+    # only on logs that heat and cool).
+    cols = _rest_then_heat(lag_s=30.0)
+    doc, model_path = _calibrate(tmp_path, cols, capsys)
+    check = doc["rate_identifiability"]
+    assert check["tried"] is True
+    assert check["share_not_a_function_of_t"] >= warmup.RATE_MIN_SHARE
+    assert check["window_s"] < 120.0  # short against the 300-s heating
+    assert doc["rate_term"] is not None
+    assert any("rate term k·dT/dt fitted" in n for n in doc["notes"])
+    # through `compensate`: the lag leaves tens of µg at the onset of heating (z tempco
+    # 20 µg/°C × 30 s × 5 °C/min); the rate term takes it to near a 5-s mean's noise
+    with_rate = _compensate_residual_ug(tmp_path, cols, model_path, TEMPCO_G_PER_C)
+    doc_file = json.loads(model_path.read_text())
+    doc_file["temperature"]["rate"] = None
+    no_rate = tmp_path / "no_rate.json"
+    no_rate.write_text(json.dumps(doc_file))
+    without = _compensate_residual_ug(tmp_path, cols, no_rate, TEMPCO_G_PER_C)
+    assert with_rate[2] < 0.5 * without[2], (with_rate, without)
+    assert np.all(with_rate < 4.0), with_rate
+
+
+def test_a_steady_ramp_with_a_lagging_channel_gets_no_rate_term(tmp_path, capsys):
+    # Heating at a constant 1 °C/min, the channel 60 s behind: dT/dt is the same at every
+    # temperature (a function of T), the lag is a constant offset of T that the
+    # polynomial absorbs, and no rate term may be fitted.
+    rng = np.random.default_rng(4)
+    t = np.arange(1200, dtype=float)
+    die = 20.0 + t / 60.0
+    d = die - 30.0
+    acc = np.array([0.0, 0.0, 1.0]) + d[:, None] * TEMPCO_G_PER_C + d[:, None] ** 2 * CURVE_G_PER_C2
+    acc = acc + rng.normal(0.0, NOISE_G, acc.shape)
+    sd = np.full(t.size, NOISE_G * 7.0)
+    cols = {"t_s": t, "sensor_c": die - 1.0 + rng.normal(0.0, 0.005, t.size),
+            "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2],
+            "sd_x": sd, "sd_y": sd, "sd_z": sd, "n": np.full(t.size, 50.0)}
+    doc, model_path = _calibrate(tmp_path, cols, capsys)
+    assert doc["rate_identifiability"]["tried"] is False
+    assert doc["rate_term"] is None and doc["rate_selection"] == []
+    assert any(n.startswith("no rate term tried: ") for n in doc["notes"])
+    assert load_model(model_path).temperature_rate is None

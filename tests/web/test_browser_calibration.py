@@ -148,6 +148,11 @@ def test_a_warmup_calibration_shows_its_error_per_band_and_what_it_could_not_fit
     # one orientation: the constant bias is not identified, so |g| stays mg after
     assert before > 1000 and after > 1000, (before, after)
     assert "only what it fitted" in page.inner_text("#cal-facts")
+    # what "after" is not, as the CLI says it (the constant bias and scale are unknown)
+    caveat = page.inner_text("#rmse-caveat")
+    assert caveat == summary["rmse_caveat"]
+    assert caveat.startswith("not a figure of the fit: it contains the constant part of bx, ")
+    assert "the fit's figure is the held-out RMS per axis below" in caveat
     scatter = page.inner_text("#scatter")
     assert re.match(r"\d+\.\d µg after; held out x/y/z: [\d. /]+ → [\d. /]+ mg", scatter)
     assert _ug(" ".join(scatter.split()[:2])) == round(summary["scatter_ug"], 1)

@@ -523,6 +523,7 @@ async function calibrationView(id) {
       h("dt", {}, "|g| RMSE before (raw)"), h("dd", { id: "rmse-before" }, gErr(sum.rmse_before_ug)),
       h("dt", {}, warmup ? "|g| RMSE after (warm-up model: only what it fitted)" : "|g| RMSE after (thermal model)"),
       h("dd", { id: "rmse-after" }, gErr(sum.rmse_after_ug)),
+      sum.rmse_caveat ? h("dd", { id: "rmse-caveat" }, sum.rmse_caveat) : "",
       warmup ? h("dt", {}, "scatter about each orientation's mean (per axis)") : "",
       warmup ? h("dd", { id: "scatter" }, `${gErr(sum.scatter_ug)} after; held out x/y/z: ` +
         `${ho.uncompensated.map((v) => v.toFixed(3)).join(" / ")} → ${ho.compensated.map((v) => v.toFixed(3)).join(" / ")} mg`) : "",
