@@ -75,9 +75,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=None,
                     help="generate only these effects/kinds (see generate --only)")
     ap.add_argument("--results", type=Path, default=None, help="results stem (no suffix)")
+    ap.add_argument("--score-only", action="store_true",
+                    help="score OUT/diagnoses.json of an earlier run again (no diagnosis)")
     a = ap.parse_args(argv)
     mode = "quick" if a.quick else "full"
     out = a.out or HERE / "out" / mode
+    if a.score_only:
+        return _score_again(out, a.results)
     if a.regenerate or not any((out / "cases").glob("*.csv")):
         gen = ["--out", str(out), "--reps", str(a.reps), "--seed", str(a.seed),
                "--jobs", str(a.jobs)]
@@ -109,6 +113,19 @@ def main(argv: list[str] | None = None) -> int:
                                        "results-gen2-quick")
     stem.with_suffix(".md").write_text(md)
     stem.with_suffix(".json").write_text(json.dumps(res, indent=1, default=str))
+    print(md)
+    return 0
+
+
+def _score_again(out: Path, stem: Path | None) -> int:
+    """Score an earlier run's diagnoses again (e.g. after the scorer gained a column)."""
+    diags = json.loads((out / "diagnoses.json").read_text())
+    keys = {p.stem: json.loads(p.read_text()) for p in (out / "keys").glob("*.json")}
+    res = score.score(keys, diags)
+    md = score.markdown(res, f"## Second generator, scored again: {len(diags)} cases")
+    if stem is not None:
+        stem.with_suffix(".md").write_text(md)
+        stem.with_suffix(".json").write_text(json.dumps(res, indent=1, default=str))
     print(md)
     return 0
 
