@@ -442,9 +442,12 @@ def row_stats(
 
     ``reading_dof`` ν finite (with ``rng``): the recording's readings are heavier-tailed
     than Gaussian (:func:`reading_tail_dof`). Each null reading's statistic is multiplied
-    by w·:func:`tail_scale` (ν), w ~ ν/χ²_ν drawn per reading and replicate: the Student-t
-    scale mixture of that reading's noise, against the MAD scale such noise gives. Only the
-    per-reading family sees it; the replicates themselves stay Gaussian for the others.
+    by w / k, w ~ ν/χ²_ν drawn per reading and replicate and k = :func:`tail_scale` (ν): the
+    Student-t scale mixture of that reading's noise (w), divided by the MAD scale² such noise
+    gives (k), since the data's statistic is divided by its own MAD scale² (≈ k under the
+    mixture) and the Gaussian replicates' by theirs (≈ 1). Multiplying by w·k instead (the
+    earlier build) made the null k² too heavy: at ν = 5 the test ran at half its level.
+    Only the per-reading family sees it; the replicates stay Gaussian for the others.
 
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
@@ -475,6 +478,8 @@ def row_stats(
     for i in range(0, n_rows, step):
         q = np.einsum("ngb,ngh,nhb->nb", Eg[i : i + step], Minv[i : i + step], Eg[i : i + step])
         if mix:
-            q *= k_mix * reading_dof / rng.chisquare(reading_dof, q.shape)
+            # w·q/k: the mixture's reading against the MAD scale k the mixture gives; the
+            # replicates' own MAD scale (s_null) is the Gaussian's, 1.
+            q *= reading_dof / rng.chisquare(reading_dof, q.shape) / k_mix
         tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
     return t, tn_max, g
