@@ -33,6 +33,10 @@ from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.recording import Recording
 
 MAX_STAGES = 8
+# The null of the families with columns and of the scan: sign flips of the recording's own
+# residual, one per reading (stats.wild_replicates), not Gaussian replicates of the noise
+# model (issue 22). The outlier family keeps its parametric null either way.
+WILD_NULL = True
 EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
 BASE_MODEL = "sfem-cubic"
 
@@ -267,8 +271,16 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         s_null = stats.robust_scale(E, dof)
         nu = _reading_dof(pb, U, e, s, terms)
         tail_nu = min(tail_nu, nu)
-        tests = _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
+        # The outlier family against the Gaussian (or Student-t) replicates, the others
+        # against sign flips of this residual, in the same buffer (stats.wild_replicates).
+        rows = [f for f in live if f.per_reading]
+        tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                           (nu, rng))
+        if WILD_NULL:
+            stats.wild_replicates(rng, e, U, pb.row, E)
+        tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
+                               e, E, s, s_null, lifted, not_ident, (nu, rng)))
+        tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
         if not tests:
             break
         lmin_null = np.min(np.vstack([t.logp_adj_null for t in tests.values()]), axis=0)
@@ -531,8 +543,11 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     """The localised scan (scan.py) on the residual of the final model."""
     U, yw = _basis(pb, terms)  # the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
-    E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
-    stats.project_out_inplace(U, E)
+    if WILD_NULL:  # sign flips of this residual (stats.wild_replicates)
+        E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null)))
+    else:
+        E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
+        stats.project_out_inplace(U, E)
     return scan_mod.scan(pb, U, e, E, alpha)
 
 

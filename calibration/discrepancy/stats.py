@@ -142,6 +142,46 @@ def null_replicates(
     return E
 
 
+LEVERAGE_MAX = 0.95  # a residual entry with leverage above this is rescaled as if at it
+
+
+def leverage(U: np.ndarray) -> np.ndarray:
+    """(m,) leverage h = ‖U_i‖² of each whitened entry (U orthonormal), by row blocks."""
+    h = np.empty(U.shape[0])
+    step = max(1, CHUNK_BYTES // (8 * max(U.shape[1], 1)))
+    for i in range(0, U.shape[0], step):
+        b = np.asarray(U[i : i + step])
+        h[i : i + step] = np.einsum("ij,ij->i", b, b)
+    return h
+
+
+def wild_replicates(
+    rng: np.random.Generator, e: np.ndarray, U: np.ndarray, row: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
+    written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
+
+    Why (issue 22): the Gaussian replicates have the noise *model*'s covariance, unit and
+    white apart from the temperature loading. A real recording's whitened noise is not: a
+    re-seating error is a small rotation per visit (scatter across the reference, none
+    along it), slow vibration scales a capture's three axes together, a plateau's σ is
+    estimated from a few readings. The F tests of smooth columns (a drift, a hysteresis,
+    the pose turns) and the scan's local blocks then ran above their level on the second
+    generator's nulls (per-candidate p ≤ 0.01 in 3–5 % of them). A sign per reading keeps
+    each reading's own residual vector, so its size, its direction and the correlation of
+    its axes are the recording's; the signs make it a null (no structure shared between
+    readings). ``1/√(1 − h)`` undoes the shrinkage of a fitted residual (HC2). Not for the
+    outlier family: its statistic is a reading's own size, which a sign does not change.
+    """
+    scale = e / np.sqrt(1.0 - np.minimum(leverage(U), LEVERAGE_MAX))
+    signs = rng.integers(0, 2, (int(row.max()) + 1, out.shape[1])).astype(float) * 2.0 - 1.0
+    step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
+    for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
+        sl = slice(i, i + step)
+        np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
+    return project_out_inplace(U, out)
+
+
 # Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
 # and near TAIL_P_HI, their levels counted as if the TAIL_OUTLIERS largest readings were
 # outliers (not noise) and never above them, compared with χ²_g's; a finite ν only when the

@@ -37,3 +37,71 @@ def test_student_t_null_of_the_outlier_test_is_at_its_level(nu):
     # binomial sd at 1000 draws: 0.7 % at 5 %, 0.95 % at 10 %
     assert np.mean(p <= 0.05) == pytest.approx(0.05, abs=0.02)
     assert np.mean(p <= 0.10) == pytest.approx(0.10, abs=0.025)
+
+
+def _rotated_readings(rng, n, B):
+    """B null recordings of n readings (3 axes) whose noise, besides a white part, is a small
+    rotation per reading (a re-seating): scatter across the reference, none along it. The
+    references cycle through six directions. Whitened by a unit σ, as a noise model that does
+    not know the rotation would."""
+    ref = np.tile(np.eye(3)[[0, 1, 2, 0, 1, 2]] * np.array([1, 1, 1, -1, -1, -1])[:, None],
+                  (n // 6 + 1, 1))[:n]
+    white = rng.standard_normal((n, 3, B)) * 0.6
+    rot = np.cross(rng.standard_normal((n, B, 3)) * 1.6, ref[:, None, :]).transpose(0, 2, 1)
+    return ref, (white + rot).reshape(3 * n, B)
+
+
+def _turn_columns(ref):
+    """Per direction class, a field across the reference (what a pose turn fits)."""
+    n = ref.shape[0]
+    cls = np.argmax(np.abs(ref), axis=1) + 3 * (ref.sum(1) < 0)
+    cols = []
+    for c in range(6):
+        for a in range(3):
+            x = np.zeros((n, 3))
+            on = cls == c
+            if np.any(np.abs(ref[on, a]) > 0.5):
+                continue  # along the reference: not a turn
+            x[on, a] = 1.0
+            cols.append(x.ravel())
+    return np.column_stack(cols)
+
+
+def test_sign_flip_null_holds_the_level_of_a_turn_under_reseating_noise():
+    """A re-seating error (a rotation per visit) makes the across-reference scatter larger
+    than the white noise model says. The F test of fields across the reference against
+    Gaussian replicates then runs far above its level; against sign flips of the
+    recording's own residual, one per reading (stats.wild_replicates), at it."""
+    rng = np.random.default_rng(21)
+    n, B, R = 120, 200, 300
+    ref, Y = _rotated_readings(rng, n, R)
+    row = np.repeat(np.arange(n), 3)
+    X0 = np.kron(np.ones((n, 1)), np.eye(3))  # a bias per axis: the "base model"
+    U = stats.orthonormal_basis(X0)
+    Xt = _turn_columns(ref)
+    p_gauss, p_wild = [], []
+    for r in range(R):
+        e = stats.project_out(U, Y[:, r])
+        lp, _, _, _, _ = stats.linear_stats(U, Xt, e, np.zeros((3 * n, 1)))
+        G = stats.project_out_inplace(U, rng.standard_normal((3 * n, B)))
+        W = stats.wild_replicates(rng, e, U, row, np.empty((3 * n, B)))
+        for E, out in ((G, p_gauss), (W, p_wild)):
+            lpn = stats.linear_stats(U, Xt, e, E)[1]
+            out.append((1 + np.sum(lpn <= lp)) / (B + 1))
+    p_gauss, p_wild = np.array(p_gauss), np.array(p_wild)
+    assert np.mean(p_gauss <= 0.05) > 0.1  # measured 0.15: three times the level
+    assert np.mean(p_wild <= 0.05) == pytest.approx(0.05, abs=0.03)
+    assert np.mean(p_wild <= 0.20) == pytest.approx(0.20, abs=0.06)
+
+
+def test_sign_flips_keep_each_readings_residual_up_to_its_sign():
+    rng = np.random.default_rng(3)
+    n = 40
+    row = np.repeat(np.arange(n), 3)
+    U = np.zeros((3 * n, 0))
+    e = rng.standard_normal(3 * n)
+    W = stats.wild_replicates(rng, e, U, row, np.empty((3 * n, 50)))
+    ratio = (W / e[:, None]).reshape(n, 3, 50)
+    assert np.allclose(np.abs(ratio), 1.0)
+    assert np.allclose(ratio, ratio[:, :1, :])  # one sign per reading, all three axes
+    assert 0.3 < np.mean(ratio > 0) < 0.7
