@@ -277,7 +277,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                           (nu, rng))
         if WILD_NULL:
-            stats.wild_replicates(rng, e, U, pb.row, E)
+            stats.wild_replicates(rng, e, U, pb.row, E,
+                                  tuple(int(t.theta) for t in tests.values()))
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
                                e, E, s, s_null, lifted, not_ident, (nu, rng)))
         tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}

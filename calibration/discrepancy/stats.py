@@ -156,7 +156,8 @@ def leverage(U: np.ndarray) -> np.ndarray:
 
 
 def wild_replicates(
-    rng: np.random.Generator, e: np.ndarray, U: np.ndarray, row: np.ndarray, out: np.ndarray
+    rng: np.random.Generator, e: np.ndarray, U: np.ndarray, row: np.ndarray, out: np.ndarray,
+    leave_out: tuple[int, ...] = (),
 ) -> np.ndarray:
     """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
     written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
@@ -172,8 +173,14 @@ def wild_replicates(
     its axes are the recording's; the signs make it a null (no structure shared between
     readings). ``1/√(1 − h)`` undoes the shrinkage of a fitted residual (HC2). Not for the
     outlier family: its statistic is a reading's own size, which a sign does not change.
+    ``leave_out``: readings drawn as zero, the outlier family's candidate reading: one
+    reading far out is that family's question, and with random signs it would make every
+    other family's null heavier by its size (a true outlier then lost its own test to
+    them in the min over families).
     """
     scale = e / np.sqrt(1.0 - np.minimum(leverage(U), LEVERAGE_MAX))
+    if leave_out:
+        scale[np.isin(row, leave_out)] = 0.0
     signs = rng.integers(0, 2, (int(row.max()) + 1, out.shape[1])).astype(float) * 2.0 - 1.0
     step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
     for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
