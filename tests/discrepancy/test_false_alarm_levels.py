@@ -7,6 +7,7 @@ level of the pieces whose null is not a plain Gaussian bootstrap.
 
 import numpy as np
 import pytest
+from scipy import stats as sps
 
 from calibration.discrepancy import stats
 
@@ -99,9 +100,26 @@ def test_sign_flips_keep_each_readings_residual_up_to_its_sign():
     n = 40
     row = np.repeat(np.arange(n), 3)
     U = np.zeros((3 * n, 0))
-    e = rng.standard_normal(3 * n)
+    e = rng.choice([-1.0, 1.0], 3 * n) * rng.uniform(0.5, 1.5, 3 * n)  # none beyond the cap
     W = stats.wild_replicates(rng, e, U, row, np.empty((3 * n, 50)))
     ratio = (W / e[:, None]).reshape(n, 3, 50)
     assert np.allclose(np.abs(ratio), 1.0)
     assert np.allclose(ratio, ratio[:, :1, :])  # one sign per reading, all three axes
     assert 0.3 < np.mean(ratio > 0) < 0.7
+
+
+def test_a_reading_far_out_is_capped_in_the_sign_flips_with_its_direction():
+    """A reading carrying a strong localised effect counts in the replicates as the largest
+    Gaussian reading would (stats.reading_cap), in its own direction; the others unchanged."""
+    rng = np.random.default_rng(4)
+    n = 200
+    row = np.repeat(np.arange(n), 3)
+    e = rng.standard_normal(3 * n)
+    e[30:33] = [40.0, -30.0, 0.0]
+    cap = stats.reading_cap(e, row)
+    assert cap[10] < 0.2 and np.sum(cap < 1.0) <= 3
+    W = stats.wild_replicates(rng, e, np.zeros((3 * n, 0)), row, np.empty((3 * n, 20)))
+    v = W[30:33, 0]
+    assert np.allclose(np.abs(v / np.linalg.norm(v)), [0.8, 0.6, 0.0])
+    size2 = np.sum(v**2) / stats.robust_scale(e[:, None], 1.0)[0] ** 2
+    assert size2 == pytest.approx(sps.chi2.isf(1 / (2 * n), 3), rel=1e-6)
