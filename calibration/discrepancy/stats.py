@@ -514,8 +514,8 @@ def row_stats(
     by w / k, w ~ ν/χ²_ν drawn per reading and replicate and k = :func:`tail_scale` (ν): the
     Student-t scale mixture of that reading's noise (w), divided by the MAD scale² such noise
     gives (k), since the data's statistic is divided by its own MAD scale² (≈ k under the
-    mixture) and the Gaussian replicates' by theirs (≈ 1). Multiplying by w·k instead (the
-    earlier build) made the null k² too heavy: at ν = 5 the test ran at half its level.
+    mixture) and the Gaussian replicates' by theirs (≈ 1); w·k would make the null k² too
+    heavy (at ν = 5 the test at half its level).
     Only the per-reading family sees it; the replicates stay Gaussian for the others.
 
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
