@@ -2,9 +2,10 @@
 
 Forward selection (docs/diagnosis.md §5): at each stage every identifiable
 candidate effect is scored after projecting out the current model; the
-smallest multiplicity-adjusted p-value is compared with its parametric-
-bootstrap null (min over candidates → family-wise p). The winner is added
-only if it is significant at α *and* improves the held-out RMS (whole
+smallest multiplicity-adjusted p-value is compared with its bootstrap null
+(min over candidates → family-wise p; sign flips of the recording's own residual for the
+families with columns, a parametric bootstrap for outliers: docs/diagnosis.md §2). The
+winner is added only if it is significant at α/2 *and* improves the held-out RMS (whole
 plateaus held out); then the rest are re-tested against a new null.
 """
 
@@ -132,7 +133,10 @@ class Diagnosis:
             **({"protocol": self.protocol} if self.protocol else {}),
             "final_rmse_ug": _r(self.final_rmse_ug),
             "heldout": self.heldout_scheme,
-            "null": {"method": "parametric bootstrap of the fitted model", "n_null": self.n_null,
+            "null": {"method": ("sign flips of the residual, one per reading (families with "
+                                "columns, scan); parametric bootstrap (outliers)"
+                                if WILD_NULL else "parametric bootstrap of the fitted model"),
+                     "n_null": self.n_null,
                      "alpha": self.alpha},
             "unexplained": self.unexplained,
             "located": self.located,

@@ -5,7 +5,9 @@ statistic is a function of the residual ``e = (I − P_X) y``. Under the null
 (base model + Gaussian noise, the parametric bootstrap of docs/diagnosis.md §2)
 ``e = (I − P_X) ε`` for any β, so a null replicate is one projection of
 white noise: the projections are data-independent given the design, and B
-replicates cost a few matrix products.
+replicates cost a few matrix products. The families with columns and the scan take sign
+flips of the recording's own residual instead (:func:`wild_replicates`): its noise is not
+the model's white noise (re-seating, vibration).
 
 Statistics are normalised by a noise scale of the same residual (F-type: the
 residual after the candidate; outliers: a robust MAD scale), so they are
