@@ -2,6 +2,8 @@
 
     python -m benchmarks.blind.gen2.run --realdata DIR [--quick] [--reps R] [--nulls N]
                                         [--n-null B] [--jobs 2] [--regenerate] [--only E,..]
+                                        [--alpha A] [--out OUT] [--results STEM]
+    python -m benchmarks.blind.gen2.run --out OUT --score-only [--results STEM]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
 the given recording (``calibration.thermal.fit_campaign``, what ``calibrate`` fits) and the
