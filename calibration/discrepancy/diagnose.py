@@ -2,9 +2,10 @@
 
 Forward selection (docs/diagnosis.md §5): at each stage every identifiable
 candidate effect is scored after projecting out the current model; the
-smallest multiplicity-adjusted p-value is compared with its parametric-
-bootstrap null (min over candidates → family-wise p). The winner is added
-only if it is significant at α *and* improves the held-out RMS (whole
+smallest multiplicity-adjusted p-value is compared with its bootstrap null
+(min over candidates → family-wise p; sign flips of the recording's own residual for the
+families with columns, a parametric bootstrap for outliers: docs/diagnosis.md §2). The
+winner is added only if it is significant at α/2 *and* improves the held-out RMS (whole
 plateaus held out); then the rest are re-tested against a new null.
 """
 
@@ -33,6 +34,10 @@ from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.recording import Recording
 
 MAX_STAGES = 8
+# The null of the families with columns and of the scan: sign flips of the recording's own
+# residual, one per reading (stats.wild_replicates), not Gaussian replicates of the noise
+# model (issue 22). The outlier family keeps its parametric null either way.
+WILD_NULL = True
 EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
 BASE_MODEL = "sfem-cubic"
 
@@ -128,7 +133,10 @@ class Diagnosis:
             **({"protocol": self.protocol} if self.protocol else {}),
             "final_rmse_ug": _r(self.final_rmse_ug),
             "heldout": self.heldout_scheme,
-            "null": {"method": "parametric bootstrap of the fitted model", "n_null": self.n_null,
+            "null": {"method": ("sign flips of the residual, one per reading (families with "
+                                "columns, scan); parametric bootstrap (outliers)"
+                                if WILD_NULL else "parametric bootstrap of the fitted model"),
+                     "n_null": self.n_null,
                      "alpha": self.alpha},
             "unexplained": self.unexplained,
             "located": self.located,
@@ -267,8 +275,17 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         s_null = stats.robust_scale(E, dof)
         nu = _reading_dof(pb, U, e, s, terms)
         tail_nu = min(tail_nu, nu)
-        tests = _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
+        # The outlier family against the Gaussian (or Student-t) replicates, the others
+        # against sign flips of this residual, in the same buffer (stats.wild_replicates).
+        rows = [f for f in live if f.per_reading]
+        tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                           (nu, rng))
+        if WILD_NULL:
+            stats.wild_replicates(rng, e, U, pb.row, E,
+                                  tuple(int(t.theta) for t in tests.values()))
+        tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
+                               e, E, s, s_null, lifted, not_ident, (nu, rng)))
+        tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
         if not tests:
             break
         lmin_null = np.min(np.vstack([t.logp_adj_null for t in tests.values()]), axis=0)
@@ -531,8 +548,11 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     """The localised scan (scan.py) on the residual of the final model."""
     U, yw = _basis(pb, terms)  # the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
-    E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
-    stats.project_out_inplace(U, E)
+    if WILD_NULL:  # sign flips of this residual (stats.wild_replicates)
+        E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null)))
+    else:
+        E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
+        stats.project_out_inplace(U, E)
     return scan_mod.scan(pb, U, e, E, alpha)
 
 

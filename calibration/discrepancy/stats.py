@@ -5,7 +5,9 @@ statistic is a function of the residual ``e = (I − P_X) y``. Under the null
 (base model + Gaussian noise, the parametric bootstrap of docs/diagnosis.md §2)
 ``e = (I − P_X) ε`` for any β, so a null replicate is one projection of
 white noise: the projections are data-independent given the design, and B
-replicates cost a few matrix products.
+replicates cost a few matrix products. The families with columns and the scan take sign
+flips of the recording's own residual instead (:func:`wild_replicates`): its noise is not
+the model's white noise (re-seating, vibration).
 
 Statistics are normalised by a noise scale of the same residual (F-type: the
 residual after the candidate; outliers: a robust MAD scale), so they are
@@ -140,6 +142,75 @@ def null_replicates(
         E[sl] *= own[sl, None]
         E[sl] += c[sl, None] * xi[row[sl]]
     return E
+
+
+LEVERAGE_MAX = 0.95  # a residual entry with leverage above this is rescaled as if at it
+
+
+def leverage(U: np.ndarray) -> np.ndarray:
+    """(m,) leverage h = ‖U_i‖² of each whitened entry (U orthonormal), by row blocks."""
+    h = np.empty(U.shape[0])
+    step = max(1, CHUNK_BYTES // (8 * max(U.shape[1], 1)))
+    for i in range(0, U.shape[0], step):
+        b = np.asarray(U[i : i + step])
+        h[i : i + step] = np.einsum("ij,ij->i", b, b)
+    return h
+
+
+def reading_cap(r: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """(N,) factor ≤ 1 per reading that caps its residual vector's size at the largest a
+    Gaussian reading of this recording reaches: ‖r_g‖²/s² ≤ χ²_g's 1 − 1/(2N) quantile,
+    s the MAD scale of all entries.
+
+    Why: under an effect the residual holds its structure, and sign flips of a reading
+    that carries a strong localised part (a jump after one plateau, a rate on the first
+    ones) put that reading's size into every replicate: the F tests' null became as heavy
+    as the data (a jump at p = 1e-17 scored p_family = 0.01). Capped, such a reading keeps
+    its direction and counts as the largest noise reading would; under the null the cap
+    touches about one reading in 2N.
+    """
+    n = int(row.max()) + 1
+    g = max(int(np.bincount(row).max()), 1)
+    s = float(robust_scale(r[:, None], 1.0)[0])
+    size2 = np.bincount(row, r**2, minlength=n) / max(s, 1e-300) ** 2
+    cap2 = float(sps.chi2.isf(1.0 / (2 * n), g))
+    with np.errstate(divide="ignore"):
+        return np.where(size2 > cap2, np.sqrt(cap2 / np.maximum(size2, 1e-300)), 1.0)
+
+
+def wild_replicates(
+    rng: np.random.Generator, e: np.ndarray, U: np.ndarray, row: np.ndarray, out: np.ndarray,
+    leave_out: tuple[int, ...] = (),
+) -> np.ndarray:
+    """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
+    written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
+
+    Why (issue 22): the Gaussian replicates have the noise *model*'s covariance, unit and
+    white apart from the temperature loading. A real recording's whitened noise is not: a
+    re-seating error is a small rotation per visit (scatter across the reference, none
+    along it), slow vibration scales a capture's three axes together, a plateau's σ is
+    estimated from a few readings. The F tests of smooth columns (a drift, a hysteresis,
+    the pose turns) and the scan's local blocks then ran above their level on the second
+    generator's nulls (per-candidate p ≤ 0.01 in 3–5 % of them). A sign per reading keeps
+    each reading's own residual vector, so its size, its direction and the correlation of
+    its axes are the recording's; the signs make it a null (no structure shared between
+    readings). ``1/√(1 − h)`` undoes the shrinkage of a fitted residual (HC2). Not for the
+    outlier family: its statistic is a reading's own size, which a sign does not change.
+    ``leave_out``: readings drawn as zero, the outlier family's candidate reading: one
+    reading far out is that family's question, and with random signs it would make every
+    other family's null heavier by its size (a true outlier then lost its own test to
+    them in the min over families).
+    """
+    scale = e / np.sqrt(1.0 - np.minimum(leverage(U), LEVERAGE_MAX))
+    if leave_out:
+        scale[np.isin(row, leave_out)] = 0.0
+    scale *= reading_cap(scale, row)[row]
+    signs = rng.integers(0, 2, (int(row.max()) + 1, out.shape[1])).astype(float) * 2.0 - 1.0
+    step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
+    for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
+        sl = slice(i, i + step)
+        np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
+    return project_out_inplace(U, out)
 
 
 # Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
@@ -442,9 +513,12 @@ def row_stats(
 
     ``reading_dof`` ν finite (with ``rng``): the recording's readings are heavier-tailed
     than Gaussian (:func:`reading_tail_dof`). Each null reading's statistic is multiplied
-    by w·:func:`tail_scale` (ν), w ~ ν/χ²_ν drawn per reading and replicate: the Student-t
-    scale mixture of that reading's noise, against the MAD scale such noise gives. Only the
-    per-reading family sees it; the replicates themselves stay Gaussian for the others.
+    by w / k, w ~ ν/χ²_ν drawn per reading and replicate and k = :func:`tail_scale` (ν): the
+    Student-t scale mixture of that reading's noise (w), divided by the MAD scale² such noise
+    gives (k), since the data's statistic is divided by its own MAD scale² (≈ k under the
+    mixture) and the Gaussian replicates' by theirs (≈ 1); w·k would make the null k² too
+    heavy (at ν = 5 the test at half its level).
+    Only the per-reading family sees it; the replicates stay Gaussian for the others.
 
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
@@ -475,6 +549,8 @@ def row_stats(
     for i in range(0, n_rows, step):
         q = np.einsum("ngb,ngh,nhb->nb", Eg[i : i + step], Minv[i : i + step], Eg[i : i + step])
         if mix:
-            q *= k_mix * reading_dof / rng.chisquare(reading_dof, q.shape)
+            # w·q/k: the mixture's reading against the MAD scale k the mixture gives; the
+            # replicates' own MAD scale (s_null) is the Gaussian's, 1.
+            q *= reading_dof / rng.chisquare(reading_dof, q.shape) / k_mix
         tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
     return t, tn_max, g

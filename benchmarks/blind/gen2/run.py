@@ -2,6 +2,8 @@
 
     python -m benchmarks.blind.gen2.run --realdata DIR [--quick] [--reps R] [--nulls N]
                                         [--n-null B] [--jobs 2] [--regenerate] [--only E,..]
+                                        [--alpha A] [--out OUT] [--results STEM]
+    python -m benchmarks.blind.gen2.run --out OUT --score-only [--results STEM]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
 the given recording (``calibration.thermal.fit_campaign``, what ``calibrate`` fits) and the
@@ -30,8 +32,8 @@ HERE = Path(__file__).resolve().parent
 _CFG: dict = {}
 
 
-def _init(n_null: int) -> None:
-    _CFG["n_null"] = n_null
+def _init(n_null: int, alpha: float = 0.01) -> None:
+    _CFG["n_null"], _CFG["alpha"] = n_null, alpha
 
 
 def diagnose_case(csv_path: str) -> tuple[str, dict]:
@@ -42,9 +44,10 @@ def diagnose_case(csv_path: str) -> tuple[str, dict]:
         rec = read_recording(csv_path)
         if given.is_file():
             model = fit_campaign(read_recording(given)).model
-            d = diagnose_against(rec, Twin(model), n_null=_CFG["n_null"], seed=int(case))
+            d = diagnose_against(rec, Twin(model), n_null=_CFG["n_null"], seed=int(case),
+                                 alpha=_CFG["alpha"])
         else:
-            d = diagnose(rec, seed=int(case), n_null=_CFG["n_null"])
+            d = diagnose(rec, seed=int(case), n_null=_CFG["n_null"], alpha=_CFG["alpha"])
         out = json.loads(d.to_json())
     except Exception as exc:  # a crash is a result too
         out = {"error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(3)}
@@ -72,12 +75,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--regenerate", action="store_true")
     ap.add_argument("--n-null", type=int, default=None, help="diagnose's n_null (quick: 100)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--alpha", type=float, default=0.01,
+                    help="diagnose's alpha (the verdict's level; 2/alpha - 1 replicates at least "
+                         "for the bootstrap to resolve alpha/2)")
     ap.add_argument("--only", default=None,
                     help="generate only these effects/kinds (see generate --only)")
     ap.add_argument("--results", type=Path, default=None, help="results stem (no suffix)")
+    ap.add_argument("--score-only", action="store_true",
+                    help="score OUT/diagnoses.json of an earlier run again (no diagnosis)")
     a = ap.parse_args(argv)
     mode = "quick" if a.quick else "full"
     out = a.out or HERE / "out" / mode
+    if a.score_only:
+        return _score_again(out, a.results)
     if a.regenerate or not any((out / "cases").glob("*.csv")):
         gen = ["--out", str(out), "--reps", str(a.reps), "--seed", str(a.seed),
                "--jobs", str(a.jobs)]
@@ -91,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     csvs = sorted(str(p) for p in (out / "cases").glob("*.csv"))
     t0 = time.perf_counter()
     diags = {}
-    with Pool(a.jobs, initializer=_init, initargs=(n_null,)) as pool:
+    with Pool(a.jobs, initializer=_init, initargs=(n_null, a.alpha)) as pool:
         for i, (case, d) in enumerate(pool.imap_unordered(diagnose_case, csvs), 1):
             diags[case] = d
             if i % 25 == 0 or i == len(csvs):
@@ -109,6 +119,19 @@ def main(argv: list[str] | None = None) -> int:
                                        "results-gen2-quick")
     stem.with_suffix(".md").write_text(md)
     stem.with_suffix(".json").write_text(json.dumps(res, indent=1, default=str))
+    print(md)
+    return 0
+
+
+def _score_again(out: Path, stem: Path | None) -> int:
+    """Score an earlier run's diagnoses again (e.g. after the scorer gained a column)."""
+    diags = json.loads((out / "diagnoses.json").read_text())
+    keys = {p.stem: json.loads(p.read_text()) for p in (out / "keys").glob("*.json")}
+    res = score.score(keys, diags)
+    md = score.markdown(res, f"## Second generator, scored again: {len(diags)} cases")
+    if stem is not None:
+        stem.with_suffix(".md").write_text(md)
+        stem.with_suffix(".json").write_text(json.dumps(res, indent=1, default=str))
     print(md)
     return 0
 

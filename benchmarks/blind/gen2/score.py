@@ -32,6 +32,39 @@ def _flagged(d: dict) -> bool:
     return bool(d.get("mismatch")) or bool(d.get("findings"))
 
 
+def fired_tests(d: dict) -> list[dict[str, Any]]:
+    """Which of ``diagnose``'s tests made this recording a "mismatch", with p and level.
+
+    The verdict is the union of two tests, each at α/2 (docs/diagnosis.md §8): the forward
+    selection's family test (every named finding, ``not_identifiable`` and ``outlier``
+    included, and an ``unexplained`` finding whose term a physics check withdrew) and the
+    localised scan (an ``unexplained`` finding). The χ² excess test is reported beside
+    them; it does not enter the verdict (``excess_chi2`` says whether it was significant).
+    """
+    alpha = float((d.get("null") or {}).get("alpha") or 0.01)
+    out: list[dict[str, Any]] = []
+    stage = 0
+    for f in d.get("findings") or []:
+        ev = f.get("evidence") or {}
+        test = str(ev.get("test") or "")
+        if f.get("effect") == "unexplained" and test.startswith("localised scan"):
+            kind, at = "scan", None
+        else:
+            stage += 1
+            kind = ("family test, withdrawn by a physics check" if "physics check" in test
+                    else "family test")
+            at = stage
+        where = f.get("where") or {}
+        out.append({"test": kind, "effect": f.get("effect"), "stage": at,
+                    "candidates": where.get("candidates"), "p": ev.get("p_value"),
+                    "level": alpha / 2})
+    chi = (d.get("unexplained") or {}).get("chi_square") or {}
+    if chi.get("significant"):
+        out.append({"test": "excess chi2 (reported, not in the verdict)", "effect": None,
+                    "stage": None, "p": chi.get("p_value"), "level": alpha})
+    return out
+
+
 def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
     res: dict[str, Any] = {"errors": sorted(c for c, d in diags.items() if "error" in d)}
     nulls = [c for c, k in keys.items() if k["kind"] == "null"]
@@ -43,7 +76,10 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
         by_kind[kind][0] += _flagged(diags[c])
     res["false_alarms"] = {**_rate(len(fa), len(nulls)), "by_protocol": dict(by_kind),
                            "named": sorted({e for c in fa for e in _named(diags[c])}),
-                           "cases": sorted(fa)}
+                           "cases": sorted(fa),
+                           "fired": {c: {"protocol": keys[c]["protocol"],
+                                         "tests": fired_tests(diags[c])} for c in sorted(fa)},
+                           "by_test": _by_test(fa, diags)}
     attrib: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for c, k in keys.items():
         if k["kind"] != "catalogue":
@@ -99,6 +135,17 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
     return res
 
 
+def _by_test(cases: list[str], diags: dict[str, dict]) -> dict[str, int]:
+    """Flagged cases per test that fired (a case counts once per test kind)."""
+    out: dict[str, int] = defaultdict(int)
+    for c in cases:
+        kinds = {t["test"] + (f" ({t['effect']})" if t["test"].startswith("family") else "")
+                 for t in fired_tests(diags[c]) if "verdict" not in t["test"]}
+        for k in kinds:
+            out[k] += 1
+    return dict(sorted(out.items()))
+
+
 def _pct(r: dict) -> str:
     if not r["n"]:
         return "–"
@@ -131,6 +178,18 @@ def markdown(res: dict, header: str) -> str:
     out += ["", "| null protocol | flagged / n |", "|---|---|"]
     for k, (f, n) in sorted(res["false_alarms"]["by_protocol"].items()):
         out.append(f"| {k} | {f}/{n} |")
+    fa = res["false_alarms"]
+    if fa.get("fired"):
+        out += ["", "| flagged null | protocol | test fired (stage, effect): p at level |",
+                "|---|---|---|"]
+        for c, v in fa["fired"].items():
+            tests = "; ".join(
+                f"{t['test']}" + (f" (stage {t['stage']}, {t['effect']})" if t["stage"] else "")
+                + (f" {t['candidates']}" if t.get("candidates") else "")
+                + f": p = {t['p']} at {t['level']:g}" for t in v["tests"])
+            out.append(f"| {c} | {v['protocol']} | {tests} |")
+        out += ["", "flagged nulls per test: " + ", ".join(
+            f"{k} {n}" for k, n in fa["by_test"].items())]
     out += ["", "| outside effect | findings per case |", "|---|---|"]
     for e, v in res["outside_given_catalogue_name"]["by_effect"].items():
         out.append(f"| {e} | {v[0]} |")
