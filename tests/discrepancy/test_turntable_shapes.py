@@ -117,9 +117,10 @@ def test_the_grid_has_the_shapes_only_where_the_references_show_sweeps():
 @pytest.mark.parametrize(("eid", "shape"), [("turntable_tilt", tc.SHAPE_TILT),
                                             ("turntable_encoder", tc.SHAPE_ENCODER)])
 def test_twice_the_detectable_size_is_named_with_its_shape(eid, shape):
-    """At 2× the size the exact 2-parameter shape detects at 50 % (gen2's detect.py), the
-    free turn of each pose (46 dof) gave p ≈ 1e-3–1e-4 on such cases, below the family's
-    bar once 14 other candidates are counted; the sweep shape (6 or 12 dof) names it."""
+    """At 2× the size the exact 2-parameter shape detects at 50 % (gen2's detect.py) the
+    sweep shape (6 or 12 dof) names it, and says which. The free turn of each pose alone
+    (46 dof, before) missed this encoder error (family p 0.02) and named the tilt without
+    its shape."""
     d = diagnose(_case(2, eid, 2.0), seed=2, n_null=100)
     assert [f.effect for f in d.findings] == ["turntable_geometry"]
     p = d.findings[0].parameters
