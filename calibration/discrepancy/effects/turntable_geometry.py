@@ -9,6 +9,7 @@ import numpy as np
 
 from calibration import sfem
 from calibration.discrepancy.context import DesignContext
+from calibration.discrepancy.effects import turntable_circles as tc
 from calibration.discrepancy.effects.base import CatalogueEffect
 from calibration.discrepancy.protocol_order import time_and_position_confounded
 
@@ -137,6 +138,34 @@ def pose_along_columns(ctx: DesignContext, pose: np.ndarray) -> np.ndarray:
     return out
 
 
+def pose_directions(ctx: DesignContext, pose: np.ndarray) -> np.ndarray:
+    """(P,3) unit reference of each pose (mean over its readings)."""
+    n_pose = int(pose.max()) + 1 if pose.size and pose.max() >= 0 else 0
+    mag = np.linalg.norm(ctx.input_g, axis=1)
+    u = np.array([np.mean(ctx.input_g[pose == p] / mag[pose == p, None], axis=0)
+                  for p in range(n_pose)]).reshape(-1, 3)
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+_LAYOUT: list = []  # (ctx, pose, axes, circle per reading): one recording at a time
+
+
+def sweep_layout(ctx: DesignContext) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Poses, sweep circles (turntable_circles) and the circle of each reading (−1: none).
+
+    Only counted poses (``pose_ids``) enter: a circle is a sweep the table repeats.
+    """
+    if _LAYOUT and _LAYOUT[0][0] is ctx:
+        return _LAYOUT[0][1:]
+    pose = pose_ids(ctx.positions, ctx.input_g, ctx.steps)
+    u_pose = pose_directions(ctx, pose)
+    axes = tc.sweep_circles(u_pose)
+    on = tc.circle_of_pose(u_pose, axes)
+    circle = np.where(pose >= 0, on[np.maximum(pose, 0)] if on.size else -1, -1)
+    _LAYOUT[:] = [(ctx, pose, axes, circle)]
+    return pose, axes, circle
+
+
 MIN_ACROSS_DOF = 10  # readings' across-reference scatter left to scale the pose turns by
 
 
@@ -165,6 +194,14 @@ class TurntableGeometry(CatalogueEffect):
     What makes it the rig's: it repeats at every temperature and visit of the pose, it has
     no part along the reference (a rotation keeps |f|), and poses with the same reference
     may turn differently (a sensor nonlinearity is one function of the direction).
+
+    Where the references show the table's sweeps (great circles, ``turntable_circles``),
+    two shapes with far fewer parameters are tested beside the free turn, as grid values
+    (Šidák over the grid within the effect, the family's bootstrap null takes the minimum
+    over it as over candidates): a tilted axis (2 per circle) and an encoder error (its
+    first two harmonics in the commanded angle, 4 per circle). Why (issue 22): the free
+    turn spends 28–64 dof on a structure of a few, and missed half the tilts and encoder
+    errors at twice their detectable size on the second generator.
     """
 
     effect_id: str = "turntable_geometry"
@@ -186,8 +223,20 @@ class TurntableGeometry(CatalogueEffect):
     def _poses(self, ctx: DesignContext) -> np.ndarray:
         return pose_ids(ctx.positions, ctx.input_g, ctx.steps)
 
+    def grid(self, ctx: DesignContext) -> list[float]:
+        """nan: the free turn of each pose; ``SHAPE_TILT``, ``SHAPE_ENCODER``: the sweep
+        shapes, when ≥ ``MIN_POSES`` poses lie on exactly one sweep circle."""
+        _, axes, circle = sweep_layout(ctx)
+        pose = self._poses(ctx)
+        on = np.unique(pose[circle >= 0]).size if axes else 0
+        return [float("nan")] + ([tc.SHAPE_TILT, tc.SHAPE_ENCODER] if on >= MIN_POSES else [])
+
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
-        return pose_turn_columns(ctx, self._poses(ctx))
+        if np.isnan(theta):
+            return pose_turn_columns(ctx, self._poses(ctx))
+        _, axes, circle = sweep_layout(ctx)
+        mag = np.linalg.norm(ctx.input_g, axis=1)
+        return tc.shape_columns(ctx.input_g / mag[:, None], mag, circle, axes, theta)
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         if ctx.mode != "reference":
@@ -267,17 +316,32 @@ class TurntableGeometry(CatalogueEffect):
                         "it also changes the output along the reference, which a rotation "
                         "of the specific force cannot")}
 
+    def _pose_turns(self, coef, se, theta, ctx) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(P',3) unit reference, (P',3) turn (displacement across it, rad) and (P',) its sd
+        of each pose the grid value's columns reach (all poses for the free turn)."""
+        pose = self._poses(ctx)
+        u = pose_directions(ctx, pose)
+        if np.isnan(theta):
+            basis = [np.column_stack(across_basis(v)) for v in u]  # (3,2) per pose
+            turn = np.array([b @ c for b, c in zip(basis, coef.reshape(-1, 2), strict=True)])
+            return u, turn, np.linalg.norm(se.reshape(-1, 2), axis=1)
+        X = self.regressors(ctx, theta)
+        mag = np.linalg.norm(ctx.input_g, axis=1)[:, None]
+        disp = np.einsum("nak,k->na", X, coef) / mag
+        sd = np.sqrt(np.einsum("nak,k->n", X**2, se**2)) / mag[:, 0]
+        _, _, circle = sweep_layout(ctx)
+        ps = np.unique(pose[(circle >= 0) & (pose >= 0)])
+        turn = np.array([disp[pose == p].mean(axis=0) for p in ps])
+        return u[ps], turn, np.array([sd[pose == p].mean() for p in ps])
+
     def parameters(self, coef, se, theta, ctx):
         """The turn of each pose beyond what a constant misalignment of the sensor (the base
         model's) makes: per pose the turn vector, less the least-squares across-reference
-        part of a 3×3 map ``M·u`` over all poses; its rms and largest, in µrad."""
-        pose = self._poses(ctx)
-        n_pose = int(pose.max()) + 1
-        u = np.array([np.mean(ctx.input_g[pose == p], axis=0) for p in range(n_pose)])
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        basis = [np.column_stack(across_basis(v)) for v in u]  # (3,2) per pose
-        turn = np.array([b @ c for b, c in zip(basis, coef.reshape(-1, 2), strict=True)])
-        sd_pose = np.linalg.norm(se.reshape(-1, 2), axis=1)
+        part of a 3×3 map ``M·u`` over all poses; its rms and largest, in µrad. For a sweep
+        shape (a grid value) the poses are those on one sweep circle, ``shape`` 1 (tilt) or
+        2 (encoder), 0 for the free turn, and ``n_circles`` the sweeps found."""
+        u, turn, sd_pose = self._pose_turns(coef, se, theta, ctx)
+        n_pose = len(u)
         maps = np.zeros((n_pose, 3, 9))
         for j in range(9):
             m = np.zeros(9)
@@ -297,16 +361,32 @@ class TurntableGeometry(CatalogueEffect):
         rms = float(np.sqrt(np.mean(rest**2)))
         d_rms = float(np.sqrt(np.sum((rest * sd_pose) ** 2)) / max(n_pose * rms, 1e-300))
         top = int(np.argmax(rest))
+        shape = 0.0 if np.isnan(theta) else float(theta)
+        n_circles = float(len(sweep_layout(ctx)[1])) if shape else 0.0
         return ({"turn_rms_urad": rms * 1e6, "turn_largest_urad": float(rest[top] * 1e6),
                  "n_poses": float(n_pose), "tilt_x_urad": float(tilt[0] * 1e6),
-                 "tilt_y_urad": float(tilt[1] * 1e6)},
+                 "tilt_y_urad": float(tilt[1] * 1e6), "shape": shape,
+                 "n_circles": n_circles},
                 {"turn_rms_urad": d_rms * 1e6, "turn_largest_urad": float(sd_pose[top] * 1e6),
-                 "n_poses": 0.0, "tilt_x_urad": float("nan"), "tilt_y_urad": float("nan")})
+                 "n_poses": 0.0, "tilt_x_urad": float("nan"), "tilt_y_urad": float("nan"),
+                 "shape": 0.0, "n_circles": 0.0})
 
     def axes(self, coef, se):
         return ["x", "y", "z"]
 
     def sentence(self, params, sd, axes, ctx=None):
+        shape = params.get("shape", 0.0)
+        if shape:
+            what = ("a constant turn about and across each sweep axis, as a tilted table "
+                    "axis makes" if shape == tc.SHAPE_TILT else
+                    "a turn about each sweep axis periodic in the commanded angle (its "
+                    "first two harmonics), as an encoder error makes")
+            return (f"the table turns the specific force by {params['turn_rms_urad']:.1f} ± "
+                    f"{sd['turn_rms_urad']:.1f} µrad rms over {int(params['n_poses'])} poses "
+                    f"on {int(params['n_circles'])} sweep circle(s) (largest "
+                    f"{params['turn_largest_urad']:.1f} µrad), the same at every visit and "
+                    f"with no change of its length: {what} (the sweeps are found from the "
+                    "references; the recording has no table angles)")
         return (f"the table turns the specific force by {params['turn_rms_urad']:.1f} ± "
                 f"{sd['turn_rms_urad']:.1f} µrad rms over {int(params['n_poses'])} poses "
                 f"(largest {params['turn_largest_urad']:.1f} µrad), the same at every visit "
