@@ -125,14 +125,14 @@ def _finding(pb: Any, keep: list[OneStep], effects: list[str], steps: list[int],
     rows = np.isin(ctx.steps, steps)
     span = [float(ctx.t_s[rows].min()), float(ctx.t_s[rows].max())]
     axes = sorted({a for r in keep for a in r.axes}, key=lambda a: (a not in AXES, a))
-    by_step = "; ".join(
-        f"{', '.join(r.effect_id for r in keep if r.step == s)} at step {s} "
-        f"(p_family = {min(r.p_family for r in keep if r.step == s):.2g})" for s in steps)
+    found = ", ".join(f"{r.effect_id} at step {r.step} (p_family = {r.p_family:.2g})"
+                      for r in keep)
     own = "; ".join(dict.fromkeys(BY_ID[e].experiment for e in effects if BY_ID[e].experiment))
     plateaus = "that plateau" if len(steps) == 1 else "those plateaus"
     text = (f"Structure beyond noise at {', '.join(f'step {s} ({temps[s]:.0f} °C)' for s in steps)}"
-            f" on axis {'/'.join(axes)}: the family test found it ({by_step}), and "
-            f"{' or '.join(effects)} explain it, but so does {' or '.join(local)} — a warm-up, "
+            f" on axis {'/'.join(axes)}: the family test found it ({found}); "
+            f"{' or '.join(effects)} {'explains' if len(effects) == 1 else 'explain'} it, "
+            f"but so does {' or '.join(local)} — a warm-up, "
             f"self-heating, a re-seat or an event on {plateaus} — and this protocol cannot "
             f"tell them apart (a free offset and gains of {plateaus} take the effect's "
             "evidence). It is neither named nor modelled. To separate them: "
