@@ -145,10 +145,12 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
     with_finding = [c for c in ok if ok[c].get("findings")]
 
     def improved(c: str) -> bool:
-        # ``unexplained`` models nothing, so it has no held-out figures (None) to compare.
+        # ``unexplained`` and a structure withheld as one plateau's (one_step.py) model
+        # nothing, so they have no held-out figures (None) to compare.
         return all(f.get("heldout_rmse_after_ug", math.inf) < f.get("heldout_rmse_before_ug",
                                                                        -math.inf)
-                   for f in ok[c]["findings"] if f.get("effect") != "unexplained")
+                   for f in ok[c]["findings"] if f.get("effect") != "unexplained"
+                   and f.get("heldout_rmse_after_ug", 0.0) is not None)
     res["heldout_improved"] = rate(with_finding, improved)
 
     def hidden_ok(c: str) -> bool:

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from calibration.discrepancy import by_fit, stats
+from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
@@ -256,6 +257,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     findings: list[Finding] = []
     rejected: set[str] = set()
     one_step: dict[str, dict[str, str]] = {}
+    one_step_seen: list[one_step_report.OneStep] = []  # found, not named (one_step.py)
     stage_log: list[dict[str, Any]] = []
     base_res = _residual(pb, [])
     prev_tests: dict[str, stats.CandidateTest] = {}
@@ -327,6 +329,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                         f"{p_family:.2g}), which a local change of that plateau explains "
                         "as well"),
                 "experiment": eff.experiment})
+            one_step_seen.append(one_step_report.rejected(
+                pb, eff.effect_id, term.X, _fit(pb, terms + [term])[0][-term.X.shape[1]:],
+                local, p_family))
             continue
         excl_before = _flagged(pb, terms)
         excl_after = _flagged(pb, terms + [term])
@@ -432,6 +437,16 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     unexplained = {**scanned.to_dict(), "chi_square": unexplained}
     if scanned.significant or not_named:
         findings.append(_unexplained_finding(pb, scanned, final_res, not_named))
+    # Found by the family test, withheld as one plateau's: reported, not dropped (issue 22).
+    findings, shown = one_step_report.report(
+        pb, findings, one_step_seen, Finding,
+        lambda r: one_step_report.still_seen(pb, _design, terms, r, alpha),
+        _rms(final_res, flagged))
+    if shown:  # the protocol block must not call them separable beside that finding
+        for k in shown:
+            not_ident.setdefault(k, one_step[k])
+        protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
+                                           for e in effects})
     base_rmse = _rms(base_res, np.zeros(n, bool)) if given_rmse is None else given_rmse
     return Diagnosis(
         unexplained=unexplained,

@@ -27,7 +27,8 @@ def text_report(diag: Any) -> str:
             f"   where: steps {w.get('steps')}, positions {w.get('positions')}, "
             f"t = {w['time_s'][0]:.0f}–{w['time_s'][1]:.0f} s",
         ]
-        if f.effect != "unexplained":  # nothing is modelled for it: no before/after
+        # Nothing modelled (unexplained, one plateau's structure): no before/after.
+        if f.effect != "unexplained" and np.isfinite(f.heldout_rmse_before_ug):
             lines.append(f"   RMS {f.rmse_before_ug:.1f} → {f.rmse_after_ug:.1f} µg; held out "
                          f"{f.heldout_rmse_before_ug:.1f} → {f.heldout_rmse_after_ug:.1f} µg")
         alike: dict[str, list[str]] = {}  # alternatives the protocol cannot rule out, by why

@@ -11,9 +11,8 @@ follows the die, so the output departs from the model by f(T_rec − δ) − f(T
 * on a one-way staircase of seven plateaus the cubic in T leaves a step near either end
   little room: a free change of one plateau next to it explains most of its remnant. The
   step is found by the family test at twice its detectable size, and it must then be
-  reported — named, or as not separable — never a "consistent" verdict (strict xfail:
-  ``diagnose._concentrated_on_one_step`` drops the structure today; docs/benchmarks.md,
-  *Temperature-channel steps on the second generator*).
+  reported — named, or as not separable — never a "consistent" verdict (a rejection by
+  ``diagnose._concentrated_on_one_step`` is reported by ``one_step.py``).
 
 Noise pools are synthetic (as test_gen2_power.py): the benchmark's come from real recordings
 outside the repository.
@@ -128,11 +127,6 @@ def test_the_statistic_at_the_true_plateau_is_the_exact_shape_lambda():
     assert abs(z) >= 4.0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "diagnose._concentrated_on_one_step rejects the step (a free change of the plateau at "
-    "the step explains most of its remnant on a 7-plateau staircase) and the structure is "
-    "then dropped: verdict 'consistent' although the family test found it (issue 22, "
-    "docs/benchmarks.md)"))
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_found_step_is_reported_named_or_not_separable_never_consistent(seed):
     """From plateau 2 of 7 the unstepped side is two plateaus: to the cubic in T the step is
