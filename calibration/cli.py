@@ -149,8 +149,9 @@ def run_diagnose(args: argparse.Namespace) -> int:
         rec = placed_samples(rec, capture_means(rec))
         return int(discrepancy_cli.run_diagnose(args, rec))  # read once (issue 22)
     from calibration.discrepancy.diagnose import _cannot_judge
+    from calibration.discrepancy.level import ALPHA, N_NULL
 
-    diag = _cannot_judge(rec, why, int(getattr(args, "n_null", None) or 200), 0.01, [])
+    diag = _cannot_judge(rec, why, int(getattr(args, "n_null", None) or N_NULL), ALPHA, [])
     print(diag.to_json() if getattr(args, "json", False) else diag.report())
     return EXIT_OK
 

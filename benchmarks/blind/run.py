@@ -19,6 +19,7 @@ from multiprocessing import Pool
 from pathlib import Path
 
 from benchmarks.blind import generate, score
+from calibration.discrepancy.level import N_NULL
 from calibration.recording import read_recording
 
 HERE = Path(__file__).resolve().parent
@@ -74,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ImportError, AttributeError) as exc:
         print(f"cannot import {spec}: {exc}", file=sys.stderr)
         return 2
-    n_null = a.n_null if a.n_null is not None else (50 if a.quick else 200)
+    n_null = a.n_null if a.n_null is not None else (50 if a.quick else N_NULL)
     csvs = sorted(str(p) for p in (out / "cases").glob("*.csv"))
     t0 = time.perf_counter()
     with Pool(a.jobs, initializer=_init, initargs=(spec, n_null)) as pool:

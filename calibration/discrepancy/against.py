@@ -30,6 +30,7 @@ from scipy import stats as sps
 
 from calibration import sfem
 from calibration.discrepancy.context import AXES
+from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import _group_rms as locate_group_rms
 from calibration.discrepancy.problem import pooled_sigma_g
 from calibration.discrepancy.twin_file import Twin
@@ -125,7 +126,7 @@ def _r(v: float) -> float | None:
 
 # --- the pipeline ------------------------------------------------------------
 def diagnose_against(recording: Recording, given: Twin, *, against: str = "", seed: int = 0,
-                     n_null: int = 200, alpha: float = 0.01,
+                     n_null: int = N_NULL, alpha: float = ALPHA,
                      refit: bool = True) -> AgainstDiagnosis:
     """Compare ``recording`` with the given model/twin held fixed (docs/diagnosis.md §9)."""
     model = given.model

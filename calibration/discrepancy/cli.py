@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from calibration.discrepancy.level import N_NULL
 from calibration.errors import CalibrationError, RecordingError
 
 
@@ -36,7 +37,7 @@ def run_diagnose(args: Any, rec: Any = None) -> int:
         except (CalibrationError, OSError, ValueError) as exc:
             print(f"{model_path}: {exc}", file=sys.stderr)
             return 2
-    n_null = int(getattr(args, "n_null", 200) or 200)
+    n_null = int(getattr(args, "n_null", N_NULL) or N_NULL)
     if n_null < 10:
         print(f"--n-null must be at least 10, got {n_null}", file=sys.stderr)
         return 2

@@ -28,6 +28,7 @@ from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
 from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
+from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.problem import LinearProblem, build_problem
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
@@ -169,7 +170,7 @@ def heldout_improved(before_ug: float, after_ug: float) -> bool:
 
 # --- the pipeline ------------------------------------------------------------
 def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0,
-             n_null: int = 200, alpha: float = 0.01,
+             n_null: int = N_NULL, alpha: float = ALPHA,
              effects: tuple[CatalogueEffect, ...] = ALL_EFFECTS) -> Diagnosis:
     """Diagnose ``recording`` against the base model (docs/diagnosis.md).
 

@@ -24,6 +24,7 @@ from pathlib import Path
 from benchmarks.blind.gen2 import generate, score
 from calibration.discrepancy import diagnose
 from calibration.discrepancy.against import diagnose_against
+from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.twin_file import Twin
 from calibration.recording import read_recording
 from calibration.thermal import fit_campaign
@@ -32,7 +33,7 @@ HERE = Path(__file__).resolve().parent
 _CFG: dict = {}
 
 
-def _init(n_null: int, alpha: float = 0.01) -> None:
+def _init(n_null: int, alpha: float = ALPHA) -> None:
     _CFG["n_null"], _CFG["alpha"] = n_null, alpha
 
 
@@ -75,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--regenerate", action="store_true")
     ap.add_argument("--n-null", type=int, default=None, help="diagnose's n_null (quick: 100)")
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--alpha", type=float, default=0.01,
+    ap.add_argument("--alpha", type=float, default=ALPHA,
                     help="diagnose's alpha (the verdict's level; 2/alpha - 1 replicates at least "
                          "for the bootstrap to resolve alpha/2)")
     ap.add_argument("--only", default=None,
@@ -97,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         gen += ["--only", a.only] if a.only else []
         if generate.main(gen):
             return 2
-    n_null = a.n_null if a.n_null is not None else (100 if a.quick else 200)
+    n_null = a.n_null if a.n_null is not None else (100 if a.quick else N_NULL)
     csvs = sorted(str(p) for p in (out / "cases").glob("*.csv"))
     t0 = time.perf_counter()
     diags = {}
