@@ -473,15 +473,16 @@ def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray
 def tempco_refusal(name: str, slope_g_per_c: float, stderr_g_per_c: float,
                    temperature_c: float, rate_c_per_min: float | None) -> str:
     """The refusal's line: the slope, and every cause that fits the data with its fix."""
-    rate = (f" (this log heats at up to {rate_c_per_min:.1f} °C/min)"
+    rate = (f" (here up to {rate_c_per_min:.1f} °C/min)"
             if rate_c_per_min is not None and np.isfinite(rate_c_per_min) else "")
     return (f"the fitted bias {name} changes by {slope_g_per_c * 1e3:+.2f} ± "
             f"{stderr_g_per_c * 1e3:.2f} mg/°C at {temperature_c:.2f} °C, beyond any MEMS "
             f"accelerometer's offset drift ({BIAS_TEMPCO_MAX_G_PER_C * 1e3:g} mg/°C) by more "
             f"than {BIAS_TEMPCO_SIGMAS:g} standard errors: something else changed with the "
-            f"temperature. Causes that fit: a temperature channel lagging the die while it "
-            f"heats fast{rate} (fix: heat more slowly, or record a rest and a heating, or a "
-            f"heating and a cooling, so that a rate term k·dT/dt can take the lag), or the "
+            f"temperature. Causes that fit: a temperature channel lagging the die while the "
+            f"temperature changes fast{rate} (fix: heat more slowly, or record a rest and a "
+            f"heating, or a heating and a cooling, so that a rate term k·dT/dt can take the "
+            f"lag), or the "
             f"board tilting or settling as it warms, 1 mrad reads 1 mg (fix: keep the board "
             f"still), or a temperature channel that is not this sensor's; no model written")
 
