@@ -98,3 +98,45 @@ def test_the_slope_standard_error_is_the_fits_own():
     spread = float(np.std(slopes, ddof=1))
     tol = 3.0 / np.sqrt(2.0 * (n - 1))  # three sampling SDs of a SD from n draws
     assert abs(spread / float(np.mean(stated)) - 1.0) < tol
+
+
+def test_the_benchmarks_whole_mode_writes_the_imports_layout_and_calibrates_it(tmp_path):
+    # bench_warmup_peers --whole runs calibrate/compensate on raw rows in the layout
+    # `soakcal import` writes: the same header, read back as raw samples, and the
+    # user's path (calibrate, compensate) goes through on a rest-then-heat warm-up.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from benchmarks.bench_warmup_peers import (
+        REPO,
+        WarmupLog,
+        _write_raw,
+        insample_rms_mg,
+        method_soakcal_raw,
+    )
+    from calibration.captures import is_raw_samples
+    from calibration.recording import read_recording
+
+    src = tmp_path / "warm.csv"
+    _rest_then_heat(src, lag_s=20.0, seed=5, channel_noise_c=0.05)
+    rec = read_recording(src)
+    headerless = tmp_path / "log.csv"
+    np.savetxt(headerless, np.column_stack([rec.raw_g * 1e3, rec.columns["sensor_c"]]),
+               delimiter=",", fmt="%.6f")
+    imported = tmp_path / "imported.csv"
+    run = subprocess.run([sys.executable, "-m", "service.cli", "import", "--format", "csv",
+                          str(headerless), "-o", str(imported), "--columns",
+                          "ax=1,ay=2,az=3,temp=4", "--accel-unit", "mg", "--rate-hz",
+                          str(RATE_HZ)], capture_output=True, text=True, cwd=REPO)
+    assert run.returncode == 0, run.stderr
+    log = WarmupLog("warm", np.asarray(rec.t_s), np.asarray(rec.raw_g),
+                    np.asarray(rec.columns["sensor_c"]))
+    mine = tmp_path / "mine.csv"
+    _write_raw(mine, log, np.ones(log.t_s.size, bool))
+    assert mine.read_text().splitlines()[0] == imported.read_text().splitlines()[0]
+    assert is_raw_samples(read_recording(mine))
+    out, why = method_soakcal_raw(log, Path(tmp_path), np.ones(log.t_s.size, bool))
+    assert out is not None, why
+    assert out.shape == log.acc_g.shape
+    assert insample_rms_mg(log, out)[2] < insample_rms_mg(log, log.acc_g)[2]
