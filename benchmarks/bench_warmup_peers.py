@@ -35,6 +35,14 @@ Methods:
   warm-up (least squares on the fit blocks' 1-s rows, each at its own mean temperature;
   every sample compensated at its 1-s row's temperature, clamped to the fit rows'
   span): what each degree would score, beside the one soakcal's held-out error chose.
+* ``--whole``: soakcal also as a user runs it on a raw log, every sample a row in the
+  layout ``soakcal import`` writes (``t_s, sensor_c, ax, ay, az, n``), read by
+  ``calibrate`` and ``compensate`` through their own capture reader (5-s capture means):
+  (a) held out: ``calibrate`` on the fit blocks' samples, ``compensate`` of every sample
+  (``--extrapolate``, no clamp: the user's command), scored as above; (b) the whole log:
+  ``calibrate`` and ``compensate`` on every sample, scored in-sample as the RMS of all
+  full 5-s means about their mean (beside the same figure uncompensated). A refusal
+  (exit 2) is reported with its line.
 * ``floor``: the noise floor of a held-out 5-s mean: the RMS difference of the two
   5-s means inside each held-out block, divided by √2 (white noise; slow drift cancels).
 
@@ -215,9 +223,11 @@ def method_none(log: WarmupLog) -> np.ndarray:
     return log.acc_g
 
 
-def method_px4(log: WarmupLog) -> np.ndarray:
-    """process_sensor_caldata.py's accel fit, applied as calc_thermal_offsets_3D does."""
-    _, fit = blocks(log.t_s)
+def method_px4(log: WarmupLog, fit: np.ndarray | None = None) -> np.ndarray:
+    """process_sensor_caldata.py's accel fit, applied as calc_thermal_offsets_3D does
+    (fitted to the ``fit`` samples: default the fit blocks)."""
+    if fit is None:
+        _, fit = blocks(log.t_s)
     T = log.temp_c[fit]
     t_min, t_max = float(T.min()), float(T.max())
     t_ref = 0.5 * (t_min + t_max)
@@ -230,9 +240,12 @@ def method_px4(log: WarmupLog) -> np.ndarray:
     return out
 
 
-def method_ardupilot(log: WarmupLog) -> tuple[np.ndarray, str]:
-    """tempcal_IMU.py: 2-s moving average of X, Y, Z, T and time, order-3 fit vs T − 35."""
-    _, fit = blocks(log.t_s)
+def method_ardupilot(log: WarmupLog, fit: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, str]:
+    """tempcal_IMU.py: 2-s moving average of X, Y, Z, T and time, order-3 fit vs T − 35
+    (fitted to the ``fit`` samples: default the fit blocks)."""
+    if fit is None:
+        _, fit = blocks(log.t_s)
     try:
         from ardupilot_methodic_configurator import tempcal_imu as tc
         source = "ardupilot-methodic-configurator tempcal_imu"
@@ -371,6 +384,83 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     return out, note
 
 
+def _write_raw(path: Path, log: WarmupLog, mask: np.ndarray) -> None:
+    """The masked samples as ``soakcal import`` writes a raw log: one row per sample."""
+    cols = np.column_stack([log.t_s[mask], log.temp_c[mask], log.acc_g[mask],
+                            np.ones(int(mask.sum()))])
+    np.savetxt(path, cols, delimiter=",", fmt=["%.6f", "%.6g", "%.9g", "%.9g", "%.9g", "%d"],
+               header="t_s,sensor_c,ax,ay,az,n", comments="")
+
+
+def method_soakcal_raw(log: WarmupLog, workdir: Path, fit: np.ndarray
+                       ) -> tuple[np.ndarray | None, str]:
+    """``soakcal calibrate`` on the ``fit`` samples and ``compensate`` of every sample, both
+    raw rows in the import's layout (``--whole``): (N,3) compensated, or None and why."""
+    fit_csv, all_csv = workdir / "raw_fit.csv", workdir / "raw_all.csv"
+    model, comp = workdir / "raw_model.json", workdir / "raw_comp.csv"
+    _write_raw(fit_csv, log, fit)
+    _write_raw(all_csv, log, np.ones(log.t_s.size, bool))
+    t0 = time.perf_counter()
+    cal = subprocess.run([*SOAKCAL, "calibrate", str(fit_csv), "-o", str(model)],
+                         capture_output=True, text=True, cwd=REPO)
+    fit_s = time.perf_counter() - t0
+    if cal.returncode != 0:
+        return None, f"calibrate exit {cal.returncode}: {_last_line(cal.stderr)}"
+    c = subprocess.run([*SOAKCAL, "compensate", str(model), str(all_csv), "-o", str(comp),
+                        "--extrapolate"], capture_output=True, text=True, cwd=REPO)
+    if c.returncode != 0:
+        return None, f"compensate exit {c.returncode}: {_last_line(c.stderr)}"
+    with comp.open() as f:
+        head = f.readline().strip().split(",")
+    data = np.loadtxt(comp, delimiter=",", skiprows=1)
+    out = data[:, [head.index("cx"), head.index("cy"), head.index("cz")]]
+    doc = json.loads(model.read_text())
+    rate = (doc.get("temperature") or {}).get("rate")
+    note = f"calibrate {fit_s:.1f} s; degree {(doc.get('polynomial') or {}).get('degree')}"
+    return out, note + (f"; rate term over {rate['window_s']:g} s" if rate else "; no rate term")
+
+
+def insample_rms_mg(log: WarmupLog, compensated_g: np.ndarray) -> np.ndarray:
+    """Per axis: RMS of every full 5-s mean about their mean (mg): the whole-log figure,
+    in-sample (the model saw every sample)."""
+    half = np.floor((log.t_s - log.t_s[0]) / MEAN_S).astype(int)
+    means = np.asarray([compensated_g[half == h].mean(axis=0) for h in np.unique(half)
+                        if np.sum(half == h) > 0.8 * MEAN_S * _rate(log)])
+    return np.sqrt(np.mean((means - means.mean(axis=0)) ** 2, axis=0)) * 1e3
+
+
+def evaluate_whole(log: WarmupLog, workdir: Path) -> dict[str, object]:
+    """``--whole``: soakcal on raw rows as a user runs it (module docstring)."""
+    _, fit = blocks(log.t_s)
+    res: dict[str, object] = {}
+    held, res["whole_heldout_note"] = method_soakcal_raw(log, workdir, fit)
+    res["whole_heldout"] = None if held is None else heldout_rms_mg(log, held).tolist()
+    every, res["whole_log_note"] = method_soakcal_raw(log, workdir, np.ones(log.t_s.size, bool))
+    res["whole_log_none"] = insample_rms_mg(log, log.acc_g).tolist()
+    res["whole_log"] = None if every is None else insample_rms_mg(log, every).tolist()
+    every_row = np.ones(log.t_s.size, bool)
+    res["whole_log_px4"] = insample_rms_mg(log, method_px4(log, every_row)).tolist()
+    res["whole_log_ardupilot"] = insample_rms_mg(
+        log, method_ardupilot(log, every_row)[0]).tolist()
+    return res
+
+
+def whole_table(results: list[dict[str, object]]) -> str:
+    """The ``--whole`` figures, mg x / y / z."""
+    lines = ["| log | held out: 1-s rows (above) | held out: raw rows | whole log in-sample: "
+             "none | PX4 method | ArduPilot tempcal | soakcal |", "|---|---|---|---|---|---|---|"]
+
+    def fmt(v: object) -> str:
+        return "refused (exit 2)" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+
+    for r in results:
+        if "whole_log_none" in r:
+            lines.append(f"| {r['log']} | {fmt(r['soakcal'])} | {fmt(r['whole_heldout'])} | "
+                         f"{fmt(r['whole_log_none'])} | {fmt(r['whole_log_px4'])} | "
+                         f"{fmt(r['whole_log_ardupilot'])} | {fmt(r['whole_log'])} |")
+    return "\n".join(lines)
+
+
 def _compensate_delta(model: Path, rows_csv: Path, comp: Path
                       ) -> tuple[np.ndarray | None, str]:
     """``soakcal compensate`` of ``rows_csv``: (N,3) compensated minus raw, or None and why.
@@ -392,8 +482,8 @@ def _last_line(text: str) -> str:
 
 
 # --- run ---------------------------------------------------------------------------------
-def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False
-             ) -> dict[str, object]:
+def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False,
+             whole: bool = False) -> dict[str, object]:
     res: dict[str, object] = {"log": log.name, "n": int(log.t_s.size),
                               "minutes": float((log.t_s[-1] - log.t_s[0]) / 60.0),
                               "temp_span_c": [float(log.temp_c.min()), float(log.temp_c.max())]}
@@ -408,6 +498,8 @@ def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False
     else:
         res["soakcal"] = None
     res["floor"] = noise_floor_mg(log).tolist()
+    if whole:
+        res.update(evaluate_whole(log, workdir))
     if fixed_degrees:
         res["fixed_degree"] = {d: heldout_rms_mg(log, method_fixed_degree(log, d)).tolist()
                                for d in range(4)}
@@ -475,6 +567,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="skip the twin and BMI270 logs (only the --log files)")
     ap.add_argument("--fixed-degrees", action="store_true",
                     help="also score each fixed degree 0..3 fitted as soakcal fits a warm-up")
+    ap.add_argument("--whole", action="store_true",
+                    help="also soakcal on raw rows as a user runs it: the fit blocks' "
+                         "samples (held out) and the whole log (in-sample)")
     args = ap.parse_args(argv)
     logs: list[WarmupLog] = []
     if not args.no_twin:
@@ -493,17 +588,23 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 logs.append(log)
         for log in logs:
-            results.append(evaluate(log, Path(tmp), args.fixed_degrees))
+            results.append(evaluate(log, Path(tmp), args.fixed_degrees, args.whole))
             print(json.dumps(results[-1]), flush=True)
     text = table(results)
     if args.fixed_degrees:
         text += "\n\nFixed degrees, fitted as soakcal fits a warm-up:\n\n" + \
             fixed_degree_table(results)
+    if args.whole:
+        text += "\n\nsoakcal on raw rows as `soakcal import` writes them (--whole):\n\n" + \
+            whole_table(results)
     print(text)
     for r in results:
         if "unusable" not in r:
             print(f"{r['log']}: ardupilot = {r['ardupilot_source']}; "
                   f"soakcal: {r['soakcal_note']}")
+            for key in ("whole_heldout_note", "whole_log_note"):
+                if key in r:
+                    print(f"{r['log']}: {key}: {r[key]}")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "results.json").write_text(json.dumps(results, indent=2))

@@ -89,6 +89,13 @@ ANGLE_MAX_RAD = 0.35
 # above this is something else that changed with the temperature: a board tilting as it
 # warms (1 mrad reads 1 mg), a channel that is not the sensor's.
 BIAS_TEMPCO_MAX_G_PER_C = 5e-3
+# A slope is judged beyond that limit only when it exceeds it by more than this many of
+# its standard errors (where the fit gives its covariance): the derivative of a cubic at
+# a warm-up's cold end is set by the few captures at the start of a heating.
+BIAS_TEMPCO_SIGMAS = 2.0
+# dT/dt (°C/min) the refusal reports is read over this window when the model has no rate
+# term of its own (calibration.temperature_conditioning.RATE_WINDOWS_S).
+TEMPCO_RATE_WINDOW_S = 40.0
 # |compensated| − g on the captures the model was fitted to: a calibrated sensor is
 # within a few mg; 50 mg off on its own data is not a calibration.
 NORM_MAX_DEV_G = 0.05
@@ -377,7 +384,7 @@ def check_model(model: ThermalModel, captures: Recording,
             raise GateRefusal(
                 f"the fitted angle {names[6 + k]} = {a[k]:+.3g} rad{at} is not physical; "
                 f"no model written: {_fix(model)}")
-    _check_bias_tempco(model)
+    _check_bias_tempco(model, captures, temperature_c)
     if model.mode == "warmup" or temperature_c is None:
         return
     used = np.isfinite(temperature_c) | (not model.temperature_dependent)
@@ -415,24 +422,97 @@ def check_warmup_residuals(residual_g: np.ndarray, orientations: Orientations,
                 f"keep the board still on each face and check --gravity-g and ref_*")
 
 
-def _check_bias_tempco(model: ThermalModel, n_temps: int = 21) -> None:
-    """Refuse a bias slope over the valid range beyond :data:`BIAS_TEMPCO_MAX_G_PER_C`."""
+def _check_bias_tempco(model: ThermalModel, captures: Recording | None = None,
+                       temperature_c: np.ndarray | None = None, n_temps: int = 21) -> None:
+    """Refuse a bias slope confidently beyond :data:`BIAS_TEMPCO_MAX_G_PER_C`.
+
+    The slope d b/dT of the fitted bias polynomial (Eq. 8) is judged where the data pin
+    it: over the span of the temperatures the model was fitted at (``temperature_c``,
+    else the captures' own; the valid range without either), not out to the raw rows'
+    extremes a capture mean never reached. It is refused only when it is beyond the limit
+    by more than :data:`BIAS_TEMPCO_SIGMAS` of its standard error (from the model's
+    ``coeff_cov`` where the fit gives it; the point estimate elsewhere). It is the model as
+    fitted: a warm-up's rate term k·dT/dt, when fitted, carries a lagging channel's steep
+    onset, and its covariance is marginalised out of the slope's.
+    """
     if not model.temperature_dependent or model.degree == 0:
         return
-    lo, hi = model.valid_c  # type: ignore[misc]
+    lo, hi = _pinned_span_c(model, captures, temperature_c)
     temps = np.linspace(lo, hi, n_temps)
-    bias = model.physical_coeffs()[sfem.BIAS]  # (3, d+1) in (T − centre_c)^j
-    slope = np.array([np.polyval(np.polyder(c[::-1]), temps - model.t_centre_c)
-                      for c in bias])  # (3, n) g/°C
-    k, i = np.unravel_index(int(np.argmax(np.abs(slope))), slope.shape)
-    if abs(slope[k, i]) > BIAS_TEMPCO_MAX_G_PER_C:
-        raise GateRefusal(
-            f"the fitted bias {sfem.PARAM_NAMES[k]} changes by {slope[k, i] * 1e3:+.2f} "
-            f"mg/°C at {temps[i]:.2f} °C, beyond any MEMS accelerometer's offset drift "
-            f"({BIAS_TEMPCO_MAX_G_PER_C * 1e3:g} mg/°C): something else changed with the "
-            f"temperature (the board tilting or settling: 1 mrad reads 1 mg; a temperature "
-            f"channel that is not this sensor's); no model written: keep the board still "
-            f"and record over a wider temperature change")
+    slope, se = bias_slope_g_per_c(model, temps)
+    excess = np.abs(slope) - BIAS_TEMPCO_SIGMAS * se
+    k, i = np.unravel_index(int(np.argmax(excess)), excess.shape)
+    if excess[k, i] <= BIAS_TEMPCO_MAX_G_PER_C:
+        return
+    raise GateRefusal(tempco_refusal(
+        sfem.PARAM_NAMES[k], float(slope[k, i]), float(se[k, i]), float(temps[i]),
+        _fastest_rate_c_per_min(model, captures)))
+
+
+def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(3, n) slope of each axis' bias polynomial (Eq. 8) at ``temperature_c``, g/°C, and
+    its standard error (0 where the model carries no covariance of its coefficients)."""
+    d = model.degree
+    x = model.x_of(np.asarray(temperature_c, float))
+    # d/dT Σ_j c_j x^j = Σ_j j c_j x^(j−1) / scale
+    D = np.zeros((x.size, d + 1))
+    for j in range(1, d + 1):
+        D[:, j] = j * x ** (j - 1) / model.t_scale_c
+    slope = model.coeffs[sfem.BIAS] @ D.T
+    se = np.zeros_like(slope)
+    cov = model.coeff_cov
+    if cov is not None and cov.shape[1:] == (d + 1, d + 1):
+        for k in range(3):
+            if np.all(np.isfinite(cov[k])):
+                var = np.einsum("ti,ij,tj->t", D, cov[k], D)
+                se[k] = np.sqrt(np.clip(var, 0.0, None))
+    return slope, se
+
+
+def tempco_refusal(name: str, slope_g_per_c: float, stderr_g_per_c: float,
+                   temperature_c: float, rate_c_per_min: float | None) -> str:
+    """The refusal's line: the slope, and every cause that fits the data with its fix."""
+    rate = (f" (here up to {rate_c_per_min:.1f} °C/min)"
+            if rate_c_per_min is not None and np.isfinite(rate_c_per_min) else "")
+    return (f"the fitted bias {name} changes by {slope_g_per_c * 1e3:+.2f} ± "
+            f"{stderr_g_per_c * 1e3:.2f} mg/°C at {temperature_c:.2f} °C, beyond any MEMS "
+            f"accelerometer's offset drift ({BIAS_TEMPCO_MAX_G_PER_C * 1e3:g} mg/°C) by more "
+            f"than {BIAS_TEMPCO_SIGMAS:g} standard errors: something else changed with the "
+            f"temperature. Causes that fit: a temperature channel lagging the die while the "
+            f"temperature changes fast{rate} (fix: heat more slowly, or record a rest and a "
+            f"heating, or a heating and a cooling, so that a rate term k·dT/dt can take the "
+            f"lag), or the "
+            f"board tilting or settling as it warms, 1 mrad reads 1 mg (fix: keep the board "
+            f"still), or a temperature channel that is not this sensor's; no model written")
+
+
+def _pinned_span_c(model: ThermalModel, captures: Recording | None,
+                   temperature_c: np.ndarray | None) -> tuple[float, float]:
+    """The span of the temperatures the model was fitted at (the valid range without)."""
+    T = temperature_c
+    if T is None and captures is not None and captures.has_temperature:
+        T = captures.temperature_c()
+    T = np.asarray(T, float)[np.isfinite(np.asarray(T, float))] if T is not None else None
+    if T is None or T.size < 2 or np.ptp(T) <= 0:
+        return model.valid_c  # type: ignore[return-value]
+    return float(np.min(T)), float(np.max(T))
+
+
+def _fastest_rate_c_per_min(model: ThermalModel, captures: Recording | None) -> float | None:
+    """The largest |dT/dt| (°C/min) of the captures' temperatures, read over the model's
+    rate window (or :data:`TEMPCO_RATE_WINDOW_S`); None without a temperature."""
+    from calibration.temperature_conditioning import temperature_rate_c_per_min
+
+    if captures is None or not captures.has_temperature or len(captures) < 3:
+        return None
+    T = captures.temperature_c()
+    ok = np.isfinite(T)
+    if ok.sum() < 3:
+        return None
+    window = float((model.temperature_rate or {}).get("window_s") or TEMPCO_RATE_WINDOW_S)
+    rate = temperature_rate_c_per_min(captures.t_s[ok], T[ok], window)
+    return float(np.max(np.abs(rate)))
 
 
 def _fix(model: ThermalModel) -> str:

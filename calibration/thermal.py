@@ -92,6 +92,10 @@ class ThermalModel:
     # A warm-up's rate term k·dT/dt (calibration/warmup.py), or None: applied by
     # ``compensate`` (it needs the rows' times), not by :meth:`compensate` here.
     temperature_rate: dict[str, Any] | None = None
+    # (12, degree+1, degree+1) covariance of each parameter's coefficients where the fit
+    # gives it (a warm-up's bias), NaN elsewhere; not saved: the gate's slope check
+    # (calibration.gate) reads it at fit time.
+    coeff_cov: np.ndarray | None = None
 
     @property
     def degree(self) -> int:

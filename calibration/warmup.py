@@ -187,13 +187,16 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         degree, gain_degree = candidates[int(best)]  # type: ignore[arg-type]
         rate_cols = _rate_columns(rate, x, gain_degree)
         chosen = _heldout_rms_g(x, labels, raw, folds, degree, rate_cols)
-    coef, se, k_rate, k_se = _fit(x, labels, raw, degree, rate_cols)
+    coef, se, k_rate, k_se, cov = _fit(x, labels, raw, degree, rate_cols)
     coeffs = np.tile(sfem.identity_vector()[:, None], (1, degree + 1))
     coeffs[:, 1:] = 0.0
     coeffs[sfem.BIAS, 0] = 0.0
     coeffs[sfem.BIAS, 1:] = coef
     coeff_se = np.full_like(coeffs, np.nan)
     coeff_se[sfem.BIAS, 1:] = se
+    coeff_cov = np.full((sfem.N_PARAMS, degree + 1, degree + 1), np.nan)
+    coeff_cov[sfem.BIAS] = 0.0  # the constant (x⁰) is referred to centre_c: no error
+    coeff_cov[sfem.BIAS, 1:, 1:] = cov
     identifiable = np.zeros(sfem.N_PARAMS, bool)
     identifiable[sfem.BIAS] = degree > 0
     fitted = {n: BIAS_NOTE for n in sfem.PARAM_NAMES[:3]} if degree > 0 else {}
@@ -221,11 +224,14 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             pad = absolute.degree - degree
             coeffs = np.hstack([coeffs, np.zeros((sfem.N_PARAMS, pad))])
             coeff_se = np.hstack([coeff_se, np.full((sfem.N_PARAMS, pad), np.nan)])
+            coeff_cov = np.pad(coeff_cov, ((0, 0), (0, pad), (0, pad)),
+                               constant_values=np.nan)
         rows = [sfem.PARAM_NAMES.index(n) for n in absolute.names]
         coeffs[rows] = 0.0
         coeffs[rows, : absolute.degree + 1] = absolute.coeffs
         coeff_se[rows] = np.nan
         coeff_se[rows, : absolute.degree + 1] = absolute.stderr
+        coeff_cov[rows] = np.nan  # the absolute fit gives standard errors only
         identifiable[rows] = True
         for n in absolute.names:
             fitted[n] = fitted_note(absolute, orientations)
@@ -269,7 +275,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     model = ThermalModel(
         coeffs=coeffs, t_centre_c=centre, t_scale_c=scale, valid_c=(lo, hi), mode="warmup",
         identifiable=identifiable, coeff_stderr=coeff_se, method="warmup",
-        temperature_rate=temperature_rate,
+        temperature_rate=temperature_rate, coeff_cov=coeff_cov,
         temperature_source=captures.temperature_source, temperature_conditioning=conditioning,
         notes=list(notes), fitted=fitted, held=held,
         provenance={
@@ -560,9 +566,11 @@ def _design(x: np.ndarray, labels: np.ndarray, k: int, degree: int,
 
 def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
          rate_cols: np.ndarray | None = None
-         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(3, d) drift coefficients and their standard errors; (3, m+1) rate gains (g per
-    °C/min, polynomial in x) and theirs ((3, 0) without ``rate_cols``)."""
+    °C/min, polynomial in x) and theirs ((3, 0) without ``rate_cols``); (3, d, d) each
+    axis' covariance of its drift coefficients, g² (the rate term's columns marginalised:
+    with a rate term fitted, a lag's steep onset is the term's, not the slope's)."""
     k = int(labels.max()) + 1
     X = _design(x, labels, k, degree, rate_cols)
     beta, *_ = np.linalg.lstsq(X, raw, rcond=None)
@@ -571,7 +579,8 @@ def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
     cov = np.linalg.pinv(X.T @ X)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))[k:, None] * np.sqrt(s2)[None, :]
     e = k + degree
-    return beta[k:e].T, se[:degree].T, beta[e:].T, se[degree:].T
+    drift_cov = cov[k:e, k:e][None, :, :] * s2[:, None, None]
+    return beta[k:e].T, se[:degree].T, beta[e:].T, se[degree:].T, drift_cov
 
 
 def _block_count(temperature_c: np.ndarray) -> int:
