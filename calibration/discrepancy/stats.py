@@ -463,7 +463,9 @@ def linear_stats(
     q = float(np.sum((B.T @ e) ** 2))
     f = q / k / max((ee - q) / dof, 1e-300)
     qn = np.sum((B.T @ E) ** 2, axis=0)
-    fn = qn / k / ((EE - qn) / dof)
+    # the same floor as the data's F: a replicate whose residual lies wholly in B (EE = qn)
+    # gave 0/0 = nan, which no comparison counts
+    fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
     return float(f_logsf(f, k, dof)), f_logsf(fn, k, dof), k, absorbed, q
 
 
