@@ -72,6 +72,17 @@ def _compensate_residual_ug(tmp_path: Path, cols: dict[str, np.ndarray], model: 
     return np.sqrt(np.mean((means - means.mean(axis=0)) ** 2, axis=0)) * 1e6
 
 
+
+def _residual_with_and_without_rate_ug(tmp_path, cols, model_path):
+    """compensate's residual (µg per axis) with the model as written and with its rate term
+    removed from the model file."""
+    with_rate = _compensate_residual_ug(tmp_path, cols, model_path, TEMPCO_G_PER_C)
+    doc_file = json.loads(model_path.read_text())
+    doc_file["temperature"]["rate"] = None
+    no_rate = tmp_path / "no_rate.json"
+    no_rate.write_text(json.dumps(doc_file))
+    return with_rate, _compensate_residual_ug(tmp_path, cols, no_rate, TEMPCO_G_PER_C)
+
 def test_a_lagging_channel_on_a_warmup_and_cooldown_gets_a_rate_term(tmp_path, capsys):
     # (also: 1500 densely spaced temperatures over 15 °C are many temperatures, not one)
     cols = _log(lag_s=60.0)
@@ -84,12 +95,7 @@ def test_a_lagging_channel_on_a_warmup_and_cooldown_gets_a_rate_term(tmp_path, c
     # What the rate term buys, through `compensate` itself: the same model without it
     # leaves the lag's error (tempco × 60 s × dT/dt: tens of µg); with it, about the
     # noise of a 5-s mean (4 µg / √5 ≈ 1.8 µg).
-    with_rate = _compensate_residual_ug(tmp_path, cols, model_path, TEMPCO_G_PER_C)
-    doc_file = json.loads(model_path.read_text())
-    doc_file["temperature"]["rate"] = None
-    no_rate = tmp_path / "no_rate.json"
-    no_rate.write_text(json.dumps(doc_file))
-    without = _compensate_residual_ug(tmp_path, cols, no_rate, TEMPCO_G_PER_C)
+    with_rate, without = _residual_with_and_without_rate_ug(tmp_path, cols, model_path)
     assert np.all(with_rate < 4.0), with_rate
     assert without[2] > 3.0 * with_rate[2], (without, with_rate)
 
@@ -218,12 +224,7 @@ def test_a_rest_then_a_heating_with_a_lagging_channel_gets_a_rate_term(tmp_path,
     assert any("rate term k·dT/dt fitted" in n for n in doc["notes"])
     # through `compensate`: the lag leaves tens of µg at the onset of heating (z tempco
     # 20 µg/°C × 30 s × 5 °C/min); the rate term takes it to near a 5-s mean's noise
-    with_rate = _compensate_residual_ug(tmp_path, cols, model_path, TEMPCO_G_PER_C)
-    doc_file = json.loads(model_path.read_text())
-    doc_file["temperature"]["rate"] = None
-    no_rate = tmp_path / "no_rate.json"
-    no_rate.write_text(json.dumps(doc_file))
-    without = _compensate_residual_ug(tmp_path, cols, no_rate, TEMPCO_G_PER_C)
+    with_rate, without = _residual_with_and_without_rate_ug(tmp_path, cols, model_path)
     assert with_rate[2] < 0.5 * without[2], (with_rate, without)
     assert np.all(with_rate < 4.0), with_rate
 
