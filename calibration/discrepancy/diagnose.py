@@ -26,6 +26,7 @@ from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
+from calibration.discrepancy.effects.temperature_rate import lag_alike
 from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.level import ALPHA, N_NULL
@@ -385,6 +386,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # structure it was fitted to is reported as ``unexplained`` where it is.
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
     findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
+    # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22).
+    findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
