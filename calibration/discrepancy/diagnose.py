@@ -386,8 +386,6 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # structure it was fitted to is reported as ``unexplained`` where it is.
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
     findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
-    # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22).
-    findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -423,6 +421,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                                                      alpha) for f in findings]
     findings = [by_fit.as_not_separable(f, unresolved[f.effect], not_ident)
                 if f.effect in unresolved else f for f in findings]
+    # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22);
+    # here, after the demotions above, which go by the findings' effect names.
+    findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
     # Once more, after the two demotions above added to not_ident: candidates the fit
     # could not tell apart are not "separable" in this recording, and the protocol block
     # must not say so beside a finding that says the opposite.
