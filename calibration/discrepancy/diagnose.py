@@ -26,6 +26,7 @@ from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
 from calibration.discrepancy.effects.base import how_told_apart
+from calibration.discrepancy.effects.temperature_rate import lag_alike
 from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.level import ALPHA, N_NULL
@@ -420,6 +421,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                                                      alpha) for f in findings]
     findings = [by_fit.as_not_separable(f, unresolved[f.effect], not_ident)
                 if f.effect in unresolved else f for f in findings]
+    # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22);
+    # here, after the demotions above, which go by the findings' effect names.
+    findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
     # Once more, after the two demotions above added to not_ident: candidates the fit
     # could not tell apart are not "separable" in this recording, and the protocol block
     # must not say so beside a finding that says the opposite.

@@ -7,7 +7,9 @@ measures at dT/dt ≈ 0, so it is often not identifiable.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -96,3 +98,104 @@ def reading_rate_c_per_min(ctx: DesignContext) -> np.ndarray:
 
 
 MIN_READINGS_PARABOLA = 6
+
+
+# --- lag check (issue 22) -----------------------------------------------------------------
+# A temperature channel lagging the die by τ (or a die lagging the chamber channel) reads
+# T − τ·dT/dt, so the base model misses ∂f/∂T·τ·dT/dt on each axis: a rate term whose three
+# gains are locked to the model's own temperature slope (effects.md: the confuser "lag, gain
+# locked to ∂output/∂T"). The free per-axis gains are named only when they depart from that
+# locked pattern beyond noise.
+LAG_EXPERIMENT = ("record a die temperature independent of the channel (an external probe on "
+                  "the package) and compare, or run rates at temperatures where ∂output/∂T "
+                  "differs in sign between axes, so that a lag's locked gains and free gains "
+                  "part")
+
+
+def locked_lag_columns(ctx: DesignContext) -> np.ndarray:
+    """(N,3,1) raw output change per minute of lag: ``∂raw/∂T × dT/dt`` on each axis.
+
+    Its coefficient is τ in minutes (> 0: the temperature regressor lags the die).
+    """
+    return (ctx.draw_dtemp_g_per_c * reading_rate_c_per_min(ctx)[:, None])[:, :, None]
+
+
+@dataclass(frozen=True)
+class LagCheck:
+    """The free rate against the locked one: F test of the free gains after the lag."""
+
+    log_p_free: float  # log p of the free per-axis gains once the locked lag is in the model
+    dof: int
+    tau_s: float
+    tau_sd_s: float
+
+
+def lag_check(pb: Any, U_others: np.ndarray, e_others: np.ndarray) -> LagCheck:
+    """Test the free rate columns after the locked lag column (whitened, F at the data).
+
+    ``U_others``/``e_others``: orthonormal basis and residual of the model without the rate
+    term (base plus every other accepted term). The lag's τ is its least-squares fit there.
+    """
+    from calibration.discrepancy import stats
+
+    ctx = pb.ctx
+    xw = pb.whiten(pb.lift(locked_lag_columns(ctx)))
+    z = stats.project_out(U_others, xw)[:, 0]
+    zz = float(z @ z)
+    if zz <= 0.0:
+        return LagCheck(0.0, 0, float("nan"), float("nan"))
+    tau_min = float(z @ e_others) / zz
+    e_lag = e_others - tau_min * z
+    dof_res = max(e_lag.size - U_others.shape[1] - 1, 1)
+    tau_sd_min = float(np.sqrt(float(e_lag @ e_lag) / dof_res / zz))
+    U = stats.orthonormal_basis(np.hstack([U_others, z[:, None] / np.sqrt(zz)]))
+    free = pb.whiten(pb.lift(per_axis(ctx, reading_rate_c_per_min(ctx))))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lp, _, k, _, _ = stats.linear_stats(U, free, e_lag, e_lag[:, None])
+    return LagCheck(float(lp), int(k), 60.0 * tau_min, 60.0 * tau_sd_min)
+
+
+def lag_alike(pb: Any, terms: list, f: Any, alpha: float, not_ident: dict[str, dict[str, str]],
+              notes: list[str], design: Callable[..., tuple[np.ndarray, np.ndarray]]) -> Any:
+    """A ``temperature_rate`` finding named only if its gains are not a lag's (issue 22).
+
+    ``terms`` the accepted terms (``effect_id``, ``X``, ``rows``), ``design(pb, terms)`` the
+    whitened design and data. When the free per-axis gains add nothing beyond the locked
+    lag (p > α), the finding is reported ``not_identifiable`` with both candidates and the
+    lag's τ; the rate term stays in the model (either removes the structure).
+    """
+    if f.effect != "temperature_rate" or f.rows:
+        return f
+    from calibration.discrepancy import stats
+
+    others = [t for t in terms if t.effect_id != "temperature_rate"]
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in others) + 1
+    if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
+        notes.append("temperature_rate: not checked against a lagging temperature channel "
+                     "(gains locked to ∂output/∂T): the recording is too long for that design")
+        return f
+    Xw, yw = design(pb, others)
+    U = stats.orthonormal_basis(Xw)
+    del Xw
+    check = lag_check(pb, U, yw - U @ (U.T @ yw))
+    if check.dof == 0 or check.log_p_free <= np.log(alpha) or not np.isfinite(check.tau_s):
+        return f
+    if check.tau_s + 2.0 * check.tau_sd_s < 0.0:  # a channel cannot lead the die
+        return f
+    lag = (f"a temperature channel (or die) lagging by τ ≈ {check.tau_s:.0f} s (± "
+           f"{check.tau_sd_s:.0f} s from noise alone)")
+    why = (f"its per-axis gains are those of a lag, locked to the model's own ∂output/∂T "
+           f"(the free gains add nothing beyond one τ: p = {np.exp(check.log_p_free):.2g} > "
+           f"α, {check.dof} dof): a recorded temperature that lags the die by τ makes "
+           "exactly that rate term")
+    not_ident.setdefault("temperature_rate", {
+        "effect": "temperature_rate", "why": f"not separable from {lag}: {why}",
+        "experiment": LAG_EXPERIMENT})
+    return replace(
+        f, effect="not_identifiable", where={**f.where, "candidates": ["temperature_rate", lag],
+                                             "lag_tau_s": check.tau_s,
+                                             "lag_tau_sd_s": check.tau_sd_s},
+        explanation=(f"Structure beyond noise that temperature_rate or {lag} explain alike: "
+                     f"{why}. It is modelled (with the temperature_rate term) but not named; "
+                     f"to separate them: {LAG_EXPERIMENT}."),
+        parameters={}, parameter_sd={}, confusers=[])
