@@ -29,8 +29,7 @@ from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES
 from calibration.discrepancy.effects import BY_ID
 
-TEST = ("forward-selection family test (parametric bootstrap); not named: its evidence is "
-        "one plateau")
+TEST = "forward-selection family test; not named: its evidence is one plateau"
 # Why these plateaus tell a one-plateau change from an effect: the change is free on one
 # plateau only, so an effect is separated by what it predicts on the others.
 SEPARATE = ("more plateaus, so that the effect's shape on the other plateaus is seen beside the "
@@ -69,16 +68,25 @@ def _axes(pb: Any, contrib_g: np.ndarray, step: int) -> tuple[str, ...]:
 
 
 def still_seen(pb: Any, design: Callable[..., tuple[np.ndarray, np.ndarray]], terms: list,
-               rec: OneStep, alpha: float) -> bool:
-    """Does the rejected term still explain structure (single F test at α) after the final
-    model? Used only where other findings stand: one of them may have taken the structure."""
-    Xw, yw = design(pb, terms)
-    U = stats.orthonormal_basis(Xw)
-    del Xw
-    e = yw - U @ (U.T @ yw)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lp, _, k, _, _ = stats.linear_stats(U, pb.whiten(rec.X), e, np.zeros((pb.m, 1)))
-    return k > 0 and lp <= np.log(alpha)
+               alpha: float) -> Callable[[OneStep], bool]:
+    """Does a rejected term still explain structure (single F test at α) after the final
+    model? Used only where other findings stand: one of them may have taken the structure.
+    The final model's basis and residual are built once, on the first record asked about,
+    and shared by the others."""
+    final: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def seen(rec: OneStep) -> bool:
+        if not final:
+            Xw, yw = design(pb, terms)
+            U = stats.orthonormal_basis(Xw)
+            del Xw
+            final.append((U, yw - U @ (U.T @ yw)))
+        U, e = final[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lp, _, k, _, _ = stats.linear_stats(U, pb.whiten(rec.X), e, np.zeros((pb.m, 1)))
+        return k > 0 and lp <= np.log(alpha)
+
+    return seen
 
 
 def report(pb: Any, findings: list, records: list[OneStep], finding_cls: type,
