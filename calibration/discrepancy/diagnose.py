@@ -136,10 +136,7 @@ class Diagnosis:
             **({"protocol": self.protocol} if self.protocol else {}),
             "final_rmse_ug": _r(self.final_rmse_ug),
             "heldout": self.heldout_scheme,
-            "null": {"method": ("sign flips of the residual, one per reading (families with "
-                                "columns, scan); parametric bootstrap (outliers)"
-                                if WILD_NULL else "parametric bootstrap of the fitted model"),
-                     "n_null": self.n_null,
+            "null": {"method": null_method(), "n_null": self.n_null,
                      "alpha": self.alpha},
             "unexplained": self.unexplained,
             "located": self.located,
@@ -167,6 +164,13 @@ def heldout_improved(before_ug: float, after_ug: float) -> bool:
     remaining candidates are tried.
     """
     return _r(after_ug) < _r(before_ug)
+
+
+def null_method() -> str:
+    """What the verdict's replicates are, as the JSON and the text report say it."""
+    return ("sign flips of the residual, one per reading (families with columns, scan); "
+            "parametric bootstrap (outliers)" if WILD_NULL
+            else "parametric bootstrap of the fitted model")
 
 
 # --- the pipeline ------------------------------------------------------------
@@ -445,7 +449,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # Found by the family test, withheld as one plateau's: reported, not dropped (issue 22).
     findings, shown = one_step_report.report(
         pb, findings, one_step_seen, Finding,
-        lambda r: one_step_report.still_seen(pb, _design, terms, r, alpha),
+        one_step_report.still_seen(pb, _design, terms, alpha),
         _rms(final_res, flagged))
     if shown:  # the protocol block must not call them separable beside that finding
         for k in shown:

@@ -7,12 +7,14 @@ from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy.diagnose import null_method
+
 
 def text_report(diag: Any) -> str:
     lines = [f"Mismatch diagnosis of {diag.recording} ({diag.mode} mode)",
              f"  base model sfem-cubic: residual RMS {diag.rmse_ug:.1f} µg, "
              f"noise {diag.noise_ug:.1f} µg ({diag.noise_source})",
-             f"  null: parametric bootstrap, {diag.n_null} replicates, "
+             f"  null: {null_method()}, {diag.n_null} replicates, "
              f"family-wise α = {diag.alpha}",
              f"  held out: {diag.heldout_scheme}"]
     if getattr(diag, "cannot_judge", ""):

@@ -158,11 +158,13 @@ class CatalogueEffect:
         """The statistic named in a finding's ``evidence``."""
         if self.per_reading:
             return "leave-one-reading-out statistic, max over readings, min-p over candidates"
+        # The replicates are said once, in the diagnosis' "null" (diagnose.null_method):
+        # sign flips of the residual for these families, not a parametric bootstrap.
         if self.continuous:
             return (f"score test profiled over {self.theta_name} (grid, then refined), "
-                    "min-p over candidates (parametric bootstrap)")
+                    "min-p over candidates (bootstrap)")
         return ("score test after projecting out the model, min-p over candidates "
-                "(parametric bootstrap)")
+                "(bootstrap)")
 
     # --- model-file extension ----------------------------------------------
     def extension_fields(self, params: Mapping[str, float]) -> dict[str, Any]:
