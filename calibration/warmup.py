@@ -52,6 +52,14 @@ derivative of a local parabola of the capture temperatures
 shortest window whose noise, for this channel's noise and quantum, is small against
 the rate it must resolve (:func:`calibration.temperature_conditioning.rate_window_s`);
 the window is stored with the term, the same at calibrate and compensate.
+
+Held-out error chooses among functions of temperature; it cannot say that none of them
+explains the data. A board that tilts or settles, or a bias that drifts with time, leaves
+the capture means scattered far beyond a capture mean's own noise whatever the degree
+(:func:`_scatter_check`). At degree 0 (no rate term) that is refused: "no change with
+temperature above the noise" would be a confident wrong answer. At a higher degree the
+model is kept and its notes and the report say how much wander it leaves
+(``unexplained_mg``).
 """
 
 from __future__ import annotations
