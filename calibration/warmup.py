@@ -274,9 +274,10 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             f"{scatter.shown()}; no function of temperature reduces it on held-out "
             f"temperatures (degree 0 chosen by held-out error over {_block_count(T)} "
             f"temperature blocks), so the bias change with temperature cannot be "
-            f"determined from this log (a board that tilts or settles, or a bias drifting "
-            f"with time); clamp the board, let it settle before recording, and record a "
-            f"wider temperature change or a longer warm-up")
+            f"determined from this log (a board that tilts or settles, a bias drifting "
+            f"with time, or one following dT/dt that no rate term here fits); clamp the "
+            f"board, let it settle before recording, and record a wider temperature "
+            f"change or a longer warm-up")
     if absolute is not None:  # why each scale and angle is held, with these orientations
         for n in held:
             if n in sfem.PARAM_NAMES[3:]:
@@ -313,7 +314,9 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         notes.append(f"no rate term tried: {check.why}")
     if absolute is not None:
         notes.append(absolute_summary(absolute, orientations, g_local))
-    scatter_note = scatter.note(degree, rate_cols is not None)
+    no_rate_why = None if use_rate else (
+        "tried and not kept by held-out error" if with_rate else check.why)
+    scatter_note = scatter.note(degree, no_rate_why)
     if scatter_note:
         notes.append(scatter_note)
     model = ThermalModel(
@@ -440,18 +443,22 @@ class ScatterCheck:
         return {AXIS_NAMES[a]: round(float(self.unexplained_g[a]) * 1e3, 4)
                 for a in np.flatnonzero(self.beyond)}
 
-    def note(self, degree: int, with_rate: bool) -> str | None:
-        """The model's note: the scatter the kept model leaves (or that none was judged)."""
+    def note(self, degree: int, no_rate_why: str | None) -> str | None:
+        """The model's note: the scatter the kept model leaves (or that none was judged).
+        ``no_rate_why``: why no rate term was fitted (None: one was)."""
         if self.not_judged:
             return f"the capture means' scatter about the model is not judged: {self.not_judged}"
         if not self.beyond.any():
             return None
-        model = f"degree {degree}" + (" with a rate term" if with_rate else "")
+        model = f"degree {degree}" + (" with a rate term" if no_rate_why is None else "")
+        rate = ("" if no_rate_why is None else
+                f", or a bias following dT/dt (a rate effect, a lagging channel) that no "
+                f"rate term fits here: {no_rate_why}")
         return (f"the compensated capture means still wander beyond their noise, not as a "
                 f"function of temperature: {self.shown()}; the {model} model is kept "
                 f"(held-out error prefers it), but compensated readings keep this scatter "
-                f"(a board that tilts or settles, or a bias drifting with time): clamp the "
-                f"board and let it settle before recording")
+                f"(a board that tilts or settles, a bias drifting with time{rate}); clamp "
+                f"the board and let it settle before recording")
 
     def to_dict(self) -> dict[str, Any]:
         def mg(v: np.ndarray) -> list[float | None]:
