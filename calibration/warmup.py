@@ -432,10 +432,11 @@ class ScatterCheck:
         return np.sqrt(np.clip(self.residual_rms_g ** 2 - self.noise_g ** 2, 0.0, None))
 
     def shown(self) -> str:
-        """The axes beyond the noise, e.g. "y 5.07 mg RMS beyond a noise of 0.59 mg"."""
+        """The axes beyond the noise, e.g. "y 5.14 mg RMS beyond a noise of 0.192 mg per
+        capture mean" (3 significant digits: a twin's noise is 0.008 mg, a BMI270's 0.2)."""
         return ", ".join(
-            f"{AXIS_NAMES[a]} {self.unexplained_g[a] * 1e3:.2f} mg RMS beyond a noise of "
-            f"{self.noise_g[a] * 1e3:.2f} mg per capture mean"
+            f"{AXIS_NAMES[a]} {self.unexplained_g[a] * 1e3:.3g} mg RMS beyond a noise of "
+            f"{self.noise_g[a] * 1e3:.3g} mg per capture mean"
             for a in np.flatnonzero(self.beyond))
 
     def unexplained_mg(self) -> dict[str, float]:
