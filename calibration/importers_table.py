@@ -41,6 +41,12 @@ DEFAULT_COLUMNS: dict[str, str] = {
 ACCEL_UNITS: dict[str, float] = {"g": 1.0, "mg": 1e-3, "m/s2": 1.0 / STANDARD_GRAVITY_M_S2}
 TEMP_UNITS: tuple[str, ...] = ("C", "F", "K", "counts")
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+# Leading lines searched for the start of the table (a logger's banner, a row cut short:
+# :func:`_leading_banner`), the lines after a start that must line up with it, and how many
+# characters of each skipped line the import notes show.
+BANNER_MAX_LINES = 20
+BANNER_CONFIRM_LINES = 3
+BANNER_SHOWN_CHARS = 24
 
 
 @dataclass(frozen=True)
@@ -89,18 +95,24 @@ def read_table(
     lines = text.splitlines()
     if not lines:
         raise RecordingError(p, 1, None, "empty file: expected a header row")
-    delim = delimiter or _sniff(lines[0])
+    notes: list[str] = []
+    skip = _leading_banner(lines, delimiter)
+    if skip:
+        shown = ", ".join(repr(line[:BANNER_SHOWN_CHARS]) for line in lines[:skip])
+        notes.append(f"{skip} leading line(s) skipped before the table (not rows of it: a "
+                     f"banner, or a row cut short; they begin {shown})")
+        text = "".join(text.splitlines(keepends=True)[skip:])
+    delim = delimiter or _sniff(lines[skip])
     reader = csv.reader(io.StringIO(text), delimiter=delim)
     header = [h.strip() for h in next(reader)]
-    notes: list[str] = []
-    first_line = 2
+    first_line = skip + 2
     if _all_numbers(header):
         # No header row: columns are named by their position, 1 first; the row is data.
         reader = csv.reader(io.StringIO(text), delimiter=delim)
         header = [str(i) for i in range(1, len(header) + 1)]
-        first_line = 1
+        first_line = skip + 1
         notes.append(f"no header row: columns named by position 1..{len(header)}")
-    where = (f"header: {delim.join(header)}" if first_line == 2 else
+    where = (f"header: {delim.join(header)}" if first_line == skip + 2 else
              f"the file has no header row: name columns by position 1..{len(header)}")
     wanted = ["ax", "ay", "az"]
     if cmap["t"] in header:
@@ -215,6 +227,40 @@ def _all_numbers(cells: Sequence[str]) -> bool:
     except ValueError:
         return False
     return bool(cells)
+
+
+def _leading_banner(lines: Sequence[str], delimiter: str | None) -> int:
+    """How many leading lines are not rows of the table, 0 … :data:`BANNER_MAX_LINES`.
+
+    A terminal logger (PuTTY: "=~=~=~ PuTTY log 2026.05.08 15:24:01 =~=~=~") writes a
+    banner before the data, and a serial capture that starts mid-line begins with a row
+    cut short. The table starts at the first line with more than one cell whose next
+    :data:`BANNER_CONFIRM_LINES` non-blank lines have as many cells (its delimiter
+    sniffed from it, as a header's is). A line before it is skipped only if it cannot be
+    a header: blank, without any delimiter (a banner), or numbers only and fewer cells
+    than the line after it (a row cut short). Any other line stops the search and
+    nothing is skipped, so a table that does not line up is refused by the row checks
+    with its line number, as before."""
+    for start in range(min(BANNER_MAX_LINES, len(lines))):
+        line = lines[start]
+        delim = delimiter or _sniff(line)
+        width = _cell_count(line, delim)
+        after = [_cell_count(x, delim) for x in lines[start + 1:] if x.strip()]
+        if width > 1 and all(n == width for n in after[:BANNER_CONFIRM_LINES]):
+            return start
+        if not line.strip() or not any(d in line for d in (delimiter or ",;\t")):
+            continue  # blank, or a banner with no delimiter
+        nxt = next((x for x in lines[start + 1:] if x.strip()), "")
+        cells = next(csv.reader([line], delimiter=delim))
+        if _all_numbers([c.strip() for c in cells]) and width < _cell_count(
+                nxt, delimiter or _sniff(nxt)):
+            continue  # a row cut short
+        return 0
+    return 0
+
+
+def _cell_count(line: str, delimiter: str) -> int:
+    return len(next(csv.reader([line], delimiter=delimiter), []))
 
 
 def _sniff(header_line: str) -> str:

@@ -14,6 +14,7 @@ from calibration.errors import RecordingError
 from calibration.importers_cli import run_import
 from calibration.recording import read_recording
 from tests.calibration.log_writers import warmup_samples, write_dataflash, write_ulog
+from tests.realdata import need_realdata
 
 G = 9.80665
 
@@ -201,6 +202,66 @@ def test_csv_without_a_header_row_is_read_by_column_position(tmp_path, capsys):
     assert run_import(_args("csv", path, tmp_path / "o2.csv", accel_unit="mg")) == 2
     err = capsys.readouterr().err
     assert "the file has no header row: name columns by position 1..5" in err
+
+
+PUTTY_BANNER = "=~=~=~=~=~=~=~=~=~=~=~= PuTTY log 2026.05.08 15:24:01 =~=~=~=~=~=~=~=~=~=~=~="
+
+
+def test_csv_skips_a_loggers_banner_and_a_row_cut_short(tmp_path, capsys):
+    """A serial log saved by PuTTY: its banner line, then a row the capture caught
+    mid-line (6 cells of 7), then ``temp_C, ax, ay, az, gx, gy, gz`` without a header."""
+    path = tmp_path / "putty.csv"
+    rows = [f"{49.35 - 0.01 * i:.6f},0.250,0.003,-0.032,0.31,-0.31,0.00" for i in range(5)]
+    path.write_text("\n".join([PUTTY_BANNER, "0,0.003,-0.032,0.73,0.12,-1.10", *rows]) + "\n")
+    out = tmp_path / "rec.csv"
+    args = _args("csv", path, out, columns="ax=2,ay=3,az=4,temp=1", accel_unit="counts",
+                 counts_per_g=0.25, rate_hz=50.0)
+    assert run_import(args) == 0, capsys.readouterr().err
+    rec = read_recording(out)
+    assert len(rec) == 5  # the five full rows; neither skipped line is data
+    np.testing.assert_allclose(rec.raw_g[0], [1.0, 0.012, -0.128])
+    np.testing.assert_allclose(rec.columns["sensor_c"][[0, -1]], [49.35, 49.31])
+    text = capsys.readouterr().out
+    assert ("2 leading line(s) skipped before the table (not rows of it: a banner, or a row "
+            "cut short; they begin '=~=~=~=~=~=~=~=~=~=~=~= ', '0,0.003,-0.032,0.73,0.12')"
+            in text)
+    assert "no header row: columns named by position 1..7" in text
+    # a bad cell further down is named by its line in the file, banner counted
+    bad = tmp_path / "bad.csv"
+    bad.write_text(path.read_text().replace(rows[2], rows[2].replace("0.250", "0.2x0")))
+    assert run_import(_args("csv", bad, tmp_path / "o2.csv", columns="ax=2,ay=3,az=4,temp=1",
+                            accel_unit="counts", counts_per_g=0.25, rate_hz=50.0)) == 2
+    assert "bad.csv:5:" in capsys.readouterr().err
+
+
+def test_csv_a_header_that_does_not_line_up_is_not_skipped(tmp_path, capsys):
+    # a header with text cells is never taken for a banner, even when the rows below it
+    # have more cells: the row check refuses, naming the line, as for any such table
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az",
+                 ["0,0,0,1,25", "0.01,0,0,1,25", "0.02,0,0,1,25"])
+    assert run_import(_args("csv", src, tmp_path / "o.csv", accel_unit="g")) == 2
+    err = capsys.readouterr().err
+    assert "t.csv:2: has 5 cells, header has 4" in err
+
+
+def test_csv_the_bmi270_putty_log_reads_past_its_banner(tmp_path, capsys):
+    # The real BMI270 hot log (PuTTY; accel printed as g/4). Its banner and the row cut
+    # short below it no longer stop the import: its first ten full rows are read...
+    src = need_realdata("bmi270-ganesh/BMI_270_hot_test.csv")
+    head = tmp_path / "head.csv"
+    head.write_text("\n".join(src.read_text().splitlines()[:12]) + "\n")
+    opts = dict(columns="ax=2,ay=3,az=4,temp=1", accel_unit="counts", counts_per_g=0.25,
+                rate_hz=50.0)
+    assert run_import(_args("csv", head, tmp_path / "head_rec.csv", **opts)) == 0
+    rec = read_recording(tmp_path / "head_rec.csv")
+    assert len(rec) == 10
+    assert np.all(np.abs(np.linalg.norm(rec.raw_g, axis=1) - 1.0) < 0.02)
+    assert "2 leading line(s) skipped before the table" in capsys.readouterr().out
+    # ...and the whole file stops where its table breaks: line 13 holds two rows run
+    # together (8 cells), said with its line number, not at the banner
+    assert run_import(_args("csv", src, tmp_path / "rec.csv", **opts)) == 2
+    err = capsys.readouterr().err
+    assert "BMI_270_hot_test.csv:13: has 8 cells" in err
 
 
 def test_csv_counts_and_kelvin(tmp_path):
