@@ -79,20 +79,35 @@ class Outlier(CatalogueEffect):
         structure, no longer stands off. Both: its deviation is what the others predict,
         and it is part of that structure, not a transient. A true spike passes (1) only by
         chance (α) and keeps (2) but for its small leverage on the structure's fit.
+        Companions that stand off alone (at most half of them) are left out of both tests,
+        each by its own indicator: another outlier is no witness of a structure.
         """
         ctx = pb.ctx
         i = int(theta)
-        ind = whitened(pb, self.regressors(ctx, theta))
-        if reading_log_p(pb, U, e, i) > np.log(alpha):
+        off = readings_log_p(pb, U, e) <= np.log(alpha)
+        if not off[i]:
             return None  # not an outlier by this test either: nothing to re-judge
-        Ub, eb = extend(U, e, ind)
         best: dict[str, Any] | None = None
         for kind, rows, X in companions(ctx, i):
+            # The companions that stand off alone are candidates of this test too, not
+            # witnesses of a structure: two outliers at one position (or close in time)
+            # would otherwise each make the other's "structure" (issue 22: two disturbed
+            # readings at two of the four visits of a position, both withdrawn). Left out
+            # while they are at most half the companions: a structure most show stays one.
+            others = rows[rows != i]
+            held = others[off[others]]
+            if held.size > others.size // 2:
+                held = held[:0]
+            if kind != "direction" and others.size - held.size < MIN_COMPANIONS:
+                continue  # too few quiet companions left to predict anything
+            Uh, eh = (U, e) if held.size == 0 else extend(U, e, whitened(pb, np.concatenate(
+                [self.regressors(ctx, float(j)) for j in held], axis=2)))
+            Ub, eb = extend(Uh, eh, whitened(pb, self.regressors(ctx, theta)))
             Xw = whitened(pb, X)
             lp_struct, k = log_p(Ub, eb, Xw)  # (1) the others alone
             if k == 0 or lp_struct > np.log(alpha):
                 continue
-            Ua, ea = extend(U, e, Xw)
+            Ua, ea = extend(Uh, eh, Xw)
             if reading_log_p(pb, Ua, ea, i) <= np.log(alpha):  # (2) after the structure
                 continue
             if best is None or lp_struct < best["log10_p"] * np.log(10):
@@ -115,6 +130,15 @@ class Outlier(CatalogueEffect):
                 f"{int(params['position'])}: {sizes}); they are excluded")
 
 
+def readings_log_p(pb: Any, U: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """(N,) Šidák-adjusted log p of every reading's statistic after ``U`` (reading_log_p)."""
+    dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
+    s = float(stats.robust_scale(e[:, None], dof)[0])
+    t, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
+                              set(), pb.shared_t_loading)
+    return stats.sidak_log(stats.chi2_logsf(t, g), pb.ctx.n)
+
+
 def reading_log_p(pb: Any, U: np.ndarray, e: np.ndarray, row: int) -> float:
     """Šidák-adjusted log p of one reading's leave-one-reading-out statistic after ``U``.
 
@@ -123,11 +147,7 @@ def reading_log_p(pb: Any, U: np.ndarray, e: np.ndarray, row: int) -> float:
     p adjusted for the number of readings searched; without the bootstrap, which calibrates
     the max over readings in selection, not this one reading's re-test.
     """
-    dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
-    s = float(stats.robust_scale(e[:, None], dof)[0])
-    t, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
-                              set(), pb.shared_t_loading)
-    return float(stats.sidak_log(stats.chi2_logsf(t[row], g), pb.ctx.n))
+    return float(readings_log_p(pb, U, e)[row])
 
 
 def _where_large(pb: Any, U: np.ndarray, e: np.ndarray, Xw: np.ndarray,
