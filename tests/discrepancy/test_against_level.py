@@ -7,11 +7,15 @@ unchanged sensor with probability up to 3α. Each runs at α / (tests run).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
 import pytest
 
 from calibration.discrepancy.against import diagnose_against, verdict_level
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.twin_file import Twin
+from calibration.recording import Recording
 from calibration.thermal import fit_campaign
 from simulators.campaign_sim import simulate_campaign
 from simulators.truth import SensorTruth
@@ -47,3 +51,19 @@ def test_the_refit_diagnosis_and_the_shift_run_at_half_the_level_and_say_so():
     assert out["level"]["n_null_refit"] > 40
     assert d.reason.endswith(f"each test at α/2 = {ALPHA / 2:.3g}")
     assert f"each test at α/2 = {ALPHA / 2:.3g}" in d.report()
+
+
+def test_the_recorded_noise_is_a_floor_of_the_shift_sigma():
+    """σ_δ is scaled up by χ²/dof above 1, never down: a recording whose sd columns say
+    its noise is twice as large gets twice the σ (scaled by χ²/dof it came out the same,
+    and a pessimistic sd/√n then tightened the temperature coefficients' σ)."""
+    truth = SensorTruth.adxl355_typical(seed=21)
+    model = fit_campaign(simulate_campaign(truth, ONE_WAY, seed=101, soak_min=30)).model
+    twin = Twin(replace(model, coeff_stderr=None))  # σ of δ from the recording alone
+    rec = simulate_campaign(truth, ONE_WAY, seed=102, soak_min=30)
+    loud = Recording.from_columns({k: v * 2.0 if k.startswith("sd_") else v
+                                   for k, v in rec.columns.items()})
+    sd = [{(c["parameter"], c["power"]): c["sd"] for c in
+           diagnose_against(r, twin, refit=False).shift["coefficients"]} for r in (rec, loud)]
+    ratio = np.array([sd[1][k] / sd[0][k] for k in sd[0]])
+    assert np.all(ratio > 1.7) and np.all(ratio < 2.3)
