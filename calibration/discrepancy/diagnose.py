@@ -44,6 +44,10 @@ WILD_NULL = True
 EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
 BASE_MODEL = "sfem-cubic"
 
+# A model term as findings link to it: (effect id, rows) — rows () for all but a
+# per-reading term, which is one term per reading.
+TermKey = tuple[str, tuple[int, ...]]
+
 
 @dataclass
 class Term:
@@ -54,6 +58,11 @@ class Term:
     X: np.ndarray  # (m,k) unweighted columns in residual space
     rows: tuple[int, ...] = ()  # outlier rows
     theta_sd: float = float("nan")  # profile sd of a continuous theta (lag τ)
+
+    @property
+    def key(self) -> TermKey:
+        """What a finding links to (:attr:`Finding.term_keys`): its effect id and rows."""
+        return (self.effect_id, tuple(self.rows))
 
 
 @dataclass
@@ -73,6 +82,25 @@ class Finding:
     confusers: list[dict[str, Any]] = field(default_factory=list)
     theta: float = float("nan")
     rows: list[int] = field(default_factory=list)
+    # The effect id of the model term(s) this finding reports; "" when nothing is modelled
+    # (``unexplained``, one plateau's structure). With ``rows`` it is the finding's link to
+    # its terms (:attr:`term_keys`): a finding re-labelled ``not_identifiable`` keeps it,
+    # so every filter keeps or removes a finding and its term together. Not shown.
+    term_effect: str = ""
+
+    @property
+    def term_keys(self) -> set[TermKey]:
+        """The keys (:attr:`Term.key`) of the terms this finding reports (none if unmodelled)."""
+        if not self.term_effect:
+            return set()
+        if self.rows:
+            return {(self.term_effect, (int(r),)) for r in self.rows}
+        return {(self.term_effect, ())}
+
+    @property
+    def named_as_modelled(self) -> bool:
+        """Reported under its term's own effect name (not re-labelled not identifiable)."""
+        return bool(self.term_effect) and self.effect == self.term_effect
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -112,6 +140,8 @@ class Diagnosis:
     problem: LinearProblem | None = field(default=None, repr=False)  # for model extensions
     cannot_judge: str = ""  # why the recording is too small to test (then mismatch is None)
     protocol: dict[str, Any] = field(default_factory=dict)  # what it separates (protocol.py)
+    # The final model's terms; each is reported by exactly one finding (Finding.term_keys).
+    terms: list[Term] = field(default_factory=list, repr=False)
 
     @property
     def mismatch(self) -> bool | None:
@@ -396,37 +426,40 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # inside a step or position where the scan still finds structure is part of that
         # structure, not an outlier: its term is withdrawn and the place is reported.
         inside = _rows_in_places(pb, scanned.places)
-        withdrawn = {r for t in terms if t.rows and inside[list(t.rows)].any() for r in t.rows}
+        withdrawn = {t.key for t in terms if t.rows and inside[list(t.rows)].any()}
         if withdrawn:
-            terms = [t for t in terms if not set(t.rows) & withdrawn]
-            findings = [f for f in findings if not set(f.rows) & withdrawn]
-            notes.append(f"reading(s) {sorted(withdrawn)} not named outlier: they lie where "
-                         "the local scan finds structure beyond them (not isolated)")
+            terms, findings, gone = withdraw(terms, findings, withdrawn)
+            notes.append(f"reading(s) {sorted(r for k in gone for r in k[1])} not named "
+                         "outlier: they lie where the local scan finds structure beyond them "
+                         "(not isolated)")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # "A named finding must explain most of the located structure" (issue 10): when
         # structure remains exactly where a named term acts (its own steps or positions,
         # not all of them), the term took a share of something it does not describe
         # (orientation history named a nonlinearity under the fixed Table 1 order).
+        # By the findings' links to their terms, not their names: a finding already
+        # re-labelled ``not_identifiable`` (a turn of the reference) goes with its term.
         demoted = _leaves_its_own_places(pb, findings, scanned.places)
         if demoted:
-            terms = [t for t in terms if t.effect_id not in demoted]
-            findings = [f for f in findings if f.effect not in demoted]
-            notes.append(f"{', '.join(sorted(demoted))} not named: after it, structure "
-                         "remains at the steps/positions where it acts, so it does not "
-                         "explain the located structure")
+            terms, findings, gone = withdraw(terms, findings, demoted)
+            notes.append(f"{', '.join(sorted({k[0] for k in gone}))} not named or modelled: "
+                         "after it, structure remains at the steps/positions where it acts, "
+                         "so it does not explain the located structure")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     # What the protocol separates: the effects still testable after the absorbed fractions.
     protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                        for e in effects})
     # A name the data chose over its significant rivals by a clear margin (by_fit) stands
     # even where the protocol alone would withhold it: the fit, not the protocol, told them.
-    findings = [f if f.effect in told_apart else _as_protocol_allows(f, protocol, not_ident,
-                                                                     alpha) for f in findings]
-    findings = [by_fit.as_not_separable(f, unresolved[f.effect], not_ident)
-                if f.effect in unresolved else f for f in findings]
+    # Both apply to a finding still named as its term (one re-labelled already is not named).
+    findings = [f if not f.named_as_modelled or f.term_effect in told_apart
+                else _as_protocol_allows(f, protocol, not_ident, alpha) for f in findings]
+    findings = [by_fit.as_not_separable(f, unresolved[f.term_effect], not_ident)
+                if f.named_as_modelled and f.term_effect in unresolved else f
+                for f in findings]
     # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22);
-    # here, after the demotions above, which go by the findings' effect names.
+    # here, after the demotions above (its term stays in the model either way).
     findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
     # Once more, after the two demotions above added to not_ident: candidates the fit
     # could not tell apart are not "separable" in this recording, and the protocol block
@@ -473,7 +506,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         residuals_before_ug=(base_res * 1e6).reshape(shape),
         residuals_after_ug=(final_res * 1e6).reshape(shape),
         t_s=ctx.t_s, steps=ctx.steps, positions=ctx.positions, stage_log=stage_log, problem=pb,
-        protocol=protocol.to_json(),
+        protocol=protocol.to_json(), terms=terms,
     )
 
 
@@ -599,19 +632,45 @@ def _reading_dof(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
 
 
 def _leaves_its_own_places(pb: LinearProblem, findings: list[Finding],
-                           places: list[dict[str, Any]]) -> set[str]:
+                           places: list[dict[str, Any]]) -> set[TermKey]:
+    """The terms (keys) of findings with a scan place at their own steps or positions.
+
+    Only a modelled finding (named or re-labelled ``not_identifiable``) that acts at some,
+    not all, steps or positions; per-reading terms are judged by the outlier check above.
+    """
     ctx = pb.ctx
     n_steps, n_pos = len(ctx.step_ids), len(np.unique(ctx.positions))
-    out: set[str] = set()
+    out: set[TermKey] = set()
     for f in findings:
-        if f.rows or f.effect == "unexplained":
+        if f.rows or not f.term_keys:
             continue
         steps, pos = set(f.where.get("steps") or []), set(f.where.get("positions") or [])
         for p in places:
             if ("step" in p and p["step"] in steps and len(steps) < n_steps) or (
                     "position" in p and p["position"] in pos and len(pos) < n_pos):
-                out.add(f.effect)
+                out |= f.term_keys
     return out
+
+
+def withdraw(terms: list[Term], findings: list[Finding], keys: set[TermKey]
+             ) -> tuple[list[Term], list[Finding], set[TermKey]]:
+    """Remove the terms ``keys`` and the findings that report them, always together.
+
+    A finding reporting several terms (merged readings) takes all of them along, so no term
+    is left in the model without the finding that says so. Returns the kept terms and
+    findings and the keys removed.
+    """
+    gone = set(keys)
+    for f in findings:
+        if f.term_keys & gone:
+            gone |= f.term_keys
+    return ([t for t in terms if t.key not in gone],
+            [f for f in findings if not f.term_keys & gone], gone)
+
+
+def _finding_of(findings: list[Finding], term: Term) -> Finding:
+    """The finding that reports ``term`` (by its link, whatever its label)."""
+    return next(f for f in findings if term.key in f.term_keys)
 
 
 def _rows_in_places(pb: LinearProblem, places: list[dict[str, Any]]) -> np.ndarray:
@@ -636,6 +695,7 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
     structure is (``CatalogueEffect.misses``) with the term's family p.
     """
     not_named: list[dict[str, Any]] = []
+    gone: set[TermKey] = set()
     for row_terms in (True, False):
         chosen = [t for t in terms if bool(t.rows) == row_terms]
         if not chosen:
@@ -645,17 +705,18 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
         del Xw
         e = yw - U @ (U.T @ yw)
         for t in chosen:
-            f = next(f for f in findings if f.effect == t.effect_id and f.rows == list(t.rows))
+            f = _finding_of(findings, t)
             miss = BY_ID[t.effect_id].misses(pb, U, e, t.theta, f.where, f.axes, alpha)
             if miss is not None:
                 not_named.append({"effect": t.effect_id, **miss, "p_value": f.p_value,
                                   "test": f.test})
+                gone.add(t.key)
         U = e = None
-    not_named += _inside_withdrawn_runs(pb, terms, findings, not_named)
+    runs = _inside_withdrawn_runs(pb, terms, findings, not_named)
+    gone |= {(n["effect"], (int(n["row"]),)) for n in runs}
+    not_named += runs
     if not_named:
-        gone = {(n["effect"], n.get("row")) for n in not_named}
-        terms = [t for t in terms if (t.effect_id, t.rows[0] if t.rows else None) not in gone]
-        findings = [f for f in findings if (f.effect, f.rows[0] if f.rows else None) not in gone]
+        terms, findings, _ = withdraw(terms, findings, gone)
         for n in not_named:
             at = (f"reading {n['row']}" if "row" in n else
                   "position(s) " + ", ".join(str(p) for p in n["positions"]))
@@ -685,7 +746,7 @@ def _inside_withdrawn_runs(pb: LinearProblem, terms: list[Term], findings: list[
                     and n["time_s"][0] <= ctx.t_s[i] <= n["time_s"][1]), None)
         if run is None:
             continue
-        f = next(f for f in findings if f.effect == t.effect_id and f.rows == list(t.rows))
+        f = _finding_of(findings, t)
         out.append({**run, "effect": t.effect_id, "row": i, "p_value": f.p_value,
                     "test": f.test, "why": (f"it lies in the run of readings withdrawn at "
                                             f"reading {run['row']} ({run['why']})")})
@@ -711,7 +772,7 @@ def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: flo
     eff = BY_ID.get(f.effect)
     if eff is None or not eff.input_only or pb.mode != "reference" or f.rows:
         return f
-    term = next((t for t in terms if t.effect_id == f.effect and not t.rows), None)
+    term = next((t for t in terms if t.key in f.term_keys), None)
     if term is None:
         return f
     ctx = pb.ctx
@@ -1101,6 +1162,7 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
         parameter_sd=_round(sd), rmse_before_ug=rms_b, rmse_after_ug=rms_a,
         heldout_rmse_before_ug=ho_b, heldout_rmse_after_ug=ho_a, p_value=p_family,
         test=eff.test_name(), confusers=conf, theta=term.theta, rows=list(term.rows),
+        term_effect=term.effect_id,
     )
 
 
@@ -1182,7 +1244,8 @@ def _merge_rows(findings: list[Finding], eid: str) -> list[Finding]:
         rmse_after_ug=outs[-1].rmse_after_ug,
         heldout_rmse_before_ug=first.heldout_rmse_before_ug,
         heldout_rmse_after_ug=outs[-1].heldout_rmse_after_ug,
-        p_value=first.p_value, test=first.test, confusers=first.confusers, rows=rows)
+        p_value=first.p_value, test=first.test, confusers=first.confusers, rows=rows,
+        term_effect=first.term_effect)
     out, placed = [], False
     for f in findings:
         if f.effect == eid:
