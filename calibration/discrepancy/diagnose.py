@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy import by_fit, stats
+from calibration.discrepancy import by_fit, not_confirmed, stats
 from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
@@ -294,6 +294,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     rejected: set[str] = set()
     one_step: dict[str, dict[str, str]] = {}
     one_step_seen: list[one_step_report.OneStep] = []  # found, not named (one_step.py)
+    unconfirmed: list[not_confirmed.NotConfirmed] = []  # found, held out did not confirm
     stage_log: list[dict[str, Any]] = []
     base_res = _residual(pb, [])
     prev_tests: dict[str, stats.CandidateTest] = {}
@@ -398,6 +399,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         if not ok:
             rejected.add(eff.effect_id)
             stage_log[-1]["rejected_heldout"] = [ho_before, ho_after]
+            unconfirmed.append(_not_confirmed(pb, eff, term, terms, p_family, ho_before,
+                                              ho_after))
             continue
         res_before = _residual(pb, terms)
         terms.append(term)
@@ -484,6 +487,10 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         pb, findings, one_step_seen, Finding,
         one_step_report.still_seen(pb, _design, terms, alpha),
         _rms(final_res, flagged))
+    # Found by the family test, not confirmed on held-out data: reported (not_confirmed.py).
+    findings = not_confirmed.report(findings, unconfirmed, Finding,
+                                    one_step_report.still_seen(pb, _design, terms, alpha),
+                                    _rms(final_res, flagged))
     if shown:  # the protocol block must not call them separable beside that finding
         for k in shown:
             not_ident.setdefault(k, one_step[k])
@@ -1132,6 +1139,19 @@ def _flagged(pb: LinearProblem, terms: list[Term]) -> np.ndarray:
 
 def _rms(res_g: np.ndarray, flagged_rows: np.ndarray) -> float:
     return float(np.sqrt(np.mean(res_g**2)) * 1e6) if res_g.size else 0.0
+
+
+def _not_confirmed(pb: LinearProblem, eff: CatalogueEffect, term: Term, terms: list[Term],
+                   p_family: float, ho_b: float, ho_a: float) -> not_confirmed.NotConfirmed:
+    """The record of a term held-out data did not confirm: where its fit acts."""
+    beta, cov, _ = _fit(pb, terms + [term])
+    k = term.X.shape[1]
+    coef = beta[-k:]
+    se = np.sqrt(np.clip(np.diag(cov)[-k:], 0, None))
+    axes = ["norm"] if pb.mode == "norm" else list(eff.axes(coef, se))
+    return not_confirmed.NotConfirmed(
+        eff.effect_id, float(p_family), float(ho_b), float(ho_a), tuple(axes),
+        where_of(pb, term.X @ coef, term.rows), term.X)
 
 
 def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a) -> Finding:
