@@ -548,9 +548,8 @@ LOGS: dict[str, Callable[[], WarmupLog]] = {
 }
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", type=Path, help="write results.json and table.md here")
+def add_log_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options that choose the logs (this benchmark's and bench_warmup_scatter's)."""
     ap.add_argument("--realdata", type=Path,
                     default=Path(os.environ.get("SOAKCAL_REALDATA", Path(__file__).resolve()
                                                 .parents[1] / "tests/data/realdata")),
@@ -565,28 +564,42 @@ def main(argv: list[str] | None = None) -> int:
                          "'--columns ax=2,ay=3,az=4,temp=5 --accel-unit mg --rate-hz 500')")
     ap.add_argument("--no-twin", action="store_true",
                     help="skip the twin and BMI270 logs (only the --log files)")
+
+
+def gather_logs(args: argparse.Namespace, workdir: Path
+                ) -> tuple[list[WarmupLog], list[dict[str, object]]]:
+    """The twin and BMI270 logs (unless ``--no-twin``) and every ``--log`` through ``soakcal
+    import``; and a result row for each log that could not be used, with why."""
+    logs: list[WarmupLog] = []
+    unusable: list[dict[str, object]] = []
+    if not args.no_twin:
+        logs = [make() for make in LOGS.values()]
+        bmi = args.realdata / "bmi270-ganesh"
+        if bmi.is_dir():
+            logs += bmi270_logs(bmi)
+    for path in args.log:
+        fmt = args.log_format or LOG_SUFFIX_FORMAT.get(path.suffix.lower(), "csv")
+        log, said = imported_log(path, fmt, shlex.split(args.import_args), workdir)
+        print(f"{path.name}: {said}", flush=True)
+        if log is None:
+            unusable.append({"log": f"{path.name} ({fmt})", "unusable": said})
+        else:
+            logs.append(log)
+    return logs, unusable
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, help="write results.json and table.md here")
+    add_log_arguments(ap)
     ap.add_argument("--fixed-degrees", action="store_true",
                     help="also score each fixed degree 0..3 fitted as soakcal fits a warm-up")
     ap.add_argument("--whole", action="store_true",
                     help="also soakcal on raw rows as a user runs it: the fit blocks' "
                          "samples (held out) and the whole log (in-sample)")
     args = ap.parse_args(argv)
-    logs: list[WarmupLog] = []
-    if not args.no_twin:
-        logs = [make() for make in LOGS.values()]
-        bmi = args.realdata / "bmi270-ganesh"
-        if bmi.is_dir():
-            logs += bmi270_logs(bmi)
-    results: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        for path in args.log:
-            fmt = args.log_format or LOG_SUFFIX_FORMAT.get(path.suffix.lower(), "csv")
-            log, said = imported_log(path, fmt, shlex.split(args.import_args), Path(tmp))
-            print(f"{path.name}: {said}", flush=True)
-            if log is None:
-                results.append({"log": f"{path.name} ({fmt})", "unusable": said})
-            else:
-                logs.append(log)
+        logs, results = gather_logs(args, Path(tmp))
         for log in logs:
             results.append(evaluate(log, Path(tmp), args.fixed_degrees, args.whole))
             print(json.dumps(results[-1]), flush=True)

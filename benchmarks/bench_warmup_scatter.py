@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shlex
 import subprocess
 import tempfile
 from pathlib import Path
@@ -28,16 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.bench_warmup_peers import (
-    LOG_SUFFIX_FORMAT,
-    LOGS,
     REPO,
     SOAKCAL,
     WarmupLog,
     _write_raw,
     _write_rows,
+    add_log_arguments,
     blocks,
-    bmi270_logs,
-    imported_log,
+    gather_logs,
     rows_1s,
 )
 
@@ -100,29 +96,11 @@ def table(results: list[dict[str, object]]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, help="write scatter.json and scatter.md here")
-    ap.add_argument("--realdata", type=Path,
-                    default=Path(os.environ.get("SOAKCAL_REALDATA", Path(__file__).resolve()
-                                                .parents[1] / "tests/data/realdata")),
-                    help="folder holding bmi270-ganesh/ (skipped when absent)")
-    ap.add_argument("--log", type=Path, action="append", default=[])
-    ap.add_argument("--log-format", choices=("ulog", "dataflash", "csv"))
-    ap.add_argument("--import-args", default="")
-    ap.add_argument("--no-twin", action="store_true",
-                    help="skip the twin and BMI270 logs (only the --log files)")
+    add_log_arguments(ap)
     args = ap.parse_args(argv)
-    logs: list[WarmupLog] = []
-    if not args.no_twin:
-        logs = [make() for make in LOGS.values()]
-        if (args.realdata / "bmi270-ganesh").is_dir():
-            logs += bmi270_logs(args.realdata / "bmi270-ganesh")
-    results: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        for path in args.log:
-            fmt = args.log_format or LOG_SUFFIX_FORMAT.get(path.suffix.lower(), "csv")
-            log, said = imported_log(path, fmt, shlex.split(args.import_args), Path(tmp))
-            print(f"{path.name}: {said}", flush=True)
-            if log is not None:
-                logs.append(log)
+        logs, _ = gather_logs(args, Path(tmp))  # an unusable --log is said while importing
+        results: list[dict[str, object]] = []
         for log in logs:
             results.append(evaluate(log, Path(tmp)))
             print(json.dumps(results[-1]), flush=True)
