@@ -17,13 +17,14 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/soakcal demo
 
-# Three worker processes on the CI machine's 2 cores: a third of the suite waits on the
-# wall clock (lease periods, worker subprocesses, the browser), so two workers leave the
-# cores half idle (measured: 341 s with 2, 253 s with 3; docs/benchmarks.md). A test file
+# Four worker processes on the CI machine's 2 cores: a third of the suite waits on the
+# wall clock (lease periods, worker subprocesses, the browser), so fewer workers leave the
+# cores partly idle (measured: 341 s with 2, 253-328 s with 3, 263 s with 4 right after a
+# 328-s run with 3; docs/benchmarks.md). A test file
 # stays on one worker so its module fixtures (a fitted twin, a simulated campaign) are
 # built once. Each worker has its own PostgreSQL schemas and temp dirs (tests/conftest.py).
 # PYTEST_WORKERS=0 runs in one process.
-PYTEST_WORKERS ?= 3
+PYTEST_WORKERS ?= 4
 
 test: $(STAMP)
 	$(BIN)/ruff check .
