@@ -9,6 +9,7 @@ the reference: every stored reading must match it within noise.
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,11 @@ async def _run(sf: Any, faults: RigFaults | None) -> tuple[str, dict[tuple[int, 
                # the twin reached by URL reports its own serial: bind any (as the sim rig does)
                "sensors": [{"url": sim.sensor_url, "serial_binding": "any"}]}
         async with open_rig(cfg, clock) as devices:
+            # A swallowed reply costs the link's wall-time timeout (1 s shipped: a socket
+            # guard, not physics); loopback replies take milliseconds, so 0.3 s keeps the
+            # faults' handling the same at a third of the test's wall time.
+            for link in (devices.chamber.link, devices.turntable.link):
+                link.policy = replace(link.policy, timeout_s=0.3)
             runner = CampaignRunner(sf, cid, devices, clock, calibrate=fake_calibrate)
             state = await asyncio.wait_for(runner.run(), 90.0)
             stats = {"chamber": dict(devices.chamber.link.stats),
