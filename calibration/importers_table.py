@@ -18,6 +18,7 @@ import csv
 import io
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -245,12 +246,14 @@ def _leading_banner(lines: Sequence[str], delimiter: str | None) -> int:
         line = lines[start]
         delim = delimiter or _sniff(line)
         width = _cell_count(line, delim)
-        after = [_cell_count(x, delim) for x in lines[start + 1:] if x.strip()]
-        if width > 1 and all(n == width for n in after[:BANNER_CONFIRM_LINES]):
+        # only the next few non-blank lines: the file may hold 100,000 rows
+        following = (x for x in islice(lines, start + 1, None) if x.strip())
+        after = [_cell_count(x, delim) for x in islice(following, BANNER_CONFIRM_LINES)]
+        if width > 1 and all(n == width for n in after):
             return start
         if not line.strip() or not any(d in line for d in (delimiter or ",;\t")):
             continue  # blank, or a banner with no delimiter
-        nxt = next((x for x in lines[start + 1:] if x.strip()), "")
+        nxt = next((x for x in islice(lines, start + 1, None) if x.strip()), "")
         cells = next(csv.reader([line], delimiter=delim))
         if _all_numbers([c.strip() for c in cells]) and width < _cell_count(
                 nxt, delimiter or _sniff(nxt)):
