@@ -483,14 +483,13 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     if scanned.significant or not_named:
         findings.append(_unexplained_finding(pb, scanned, final_res, not_named))
     # Found by the family test, withheld as one plateau's: reported, not dropped (issue 22).
-    findings, shown = one_step_report.report(
-        pb, findings, one_step_seen, Finding,
-        one_step_report.still_seen(pb, _design, terms, alpha),
-        _rms(final_res, flagged))
+    # One still_seen for both reports: it builds the final model's basis once, when asked.
+    seen = one_step_report.still_seen(pb, _design, terms, alpha)
+    final_rms = _rms(final_res, flagged)
+    findings, shown = one_step_report.report(pb, findings, one_step_seen, Finding, seen,
+                                             final_rms)
     # Found by the family test, not confirmed on held-out data: reported (not_confirmed.py).
-    findings = not_confirmed.report(findings, unconfirmed, Finding,
-                                    one_step_report.still_seen(pb, _design, terms, alpha),
-                                    _rms(final_res, flagged))
+    findings = not_confirmed.report(findings, unconfirmed, Finding, seen, final_rms)
     if shown:  # the protocol block must not call them separable beside that finding
         for k in shown:
             not_ident.setdefault(k, one_step[k])
@@ -1144,17 +1143,17 @@ def _rms(res_g: np.ndarray, flagged_rows: np.ndarray) -> float:
 def _not_confirmed(pb: LinearProblem, eff: CatalogueEffect, term: Term, terms: list[Term],
                    p_family: float, ho_b: float, ho_a: float) -> not_confirmed.NotConfirmed:
     """The record of a term held-out data did not confirm: where its fit acts."""
-    beta, cov, _ = _fit(pb, terms + [term])
-    k = term.X.shape[1]
-    coef = beta[-k:]
-    se = np.sqrt(np.clip(np.diag(cov)[-k:], 0, None))
+    coef, se = _term_coefficients(pb, terms + [term], term)
     axes = ["norm"] if pb.mode == "norm" else list(eff.axes(coef, se))
     return not_confirmed.NotConfirmed(
         eff.effect_id, float(p_family), float(ho_b), float(ho_a), tuple(axes),
         where_of(pb, term.X @ coef, term.rows), term.X)
 
 
-def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a) -> Finding:
+def _term_coefficients(pb: LinearProblem, terms: list[Term], term: Term
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """``term``'s fitted coefficients and standard errors in the model of ``terms`` (which
+    holds it)."""
     beta, cov, _ = _fit(pb, terms)
     offset = pb.X0.shape[1]
     for t in terms:
@@ -1162,8 +1161,12 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
             break
         offset += t.X.shape[1]
     k = term.X.shape[1]
-    coef = beta[offset:offset + k]
-    se = np.sqrt(np.clip(np.diag(cov)[offset:offset + k], 0, None))
+    return (beta[offset:offset + k],
+            np.sqrt(np.clip(np.diag(cov)[offset:offset + k], 0, None)))
+
+
+def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a) -> Finding:
+    coef, se = _term_coefficients(pb, terms, term)
     contrib = term.X @ coef
     params, sd = eff.parameters(coef, se, term.theta, pb.ctx)
     if eff.continuous and eff.theta_name:
