@@ -28,6 +28,20 @@ def _not_separable(d: dict, key_id: str) -> bool:
         (first.get("where") or {}).get("candidates") or [])
 
 
+def _not_confirmed(d: dict, key_id: str) -> bool:
+    """The top finding is ``unexplained`` and names the key where it is: among the
+    candidates (structure the family test found and held-out data did not confirm), or as
+    a term withheld at one of its places with the reason (too few input levels, say). The
+    effect was seen and reported as not established, with the reason: no wrong name."""
+    first = (d.get("findings") or [{}])[0]
+    if first.get("effect") != "unexplained":
+        return False
+    where = first.get("where") or {}
+    named = set(where.get("candidates") or [])
+    named |= {p.get("not_named") for p in where.get("places") or [] if isinstance(p, dict)}
+    return key_id in named
+
+
 def _flagged(d: dict) -> bool:
     return bool(d.get("mismatch")) or bool(d.get("findings"))
 
@@ -92,6 +106,7 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
              # an honest miss: nothing wrong named and the effect listed as not separable
              "listed": top is None and k["catalogue_id"] in listed,
              "not_separable": _not_separable(diags[c], k["catalogue_id"]),
+             "not_confirmed": _not_confirmed(diags[c], k["catalogue_id"]),
              "wrong": top is not None and top != k["catalogue_id"] and top not in BEYOND})
     res["attribution"] = {
         eid: {m: {**_rate(sum(r["right"] for r in rs), len(rs)),
@@ -99,10 +114,16 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
                   "missed_but_listed_not_identifiable": sum(r["listed"] for r in rs),
                   "wrong_catalogue_name": sum(r["wrong"] for r in rs),
                   "not_separable_key_among_candidates": sum(r["not_separable"] for r in rs),
+                  "unexplained_key_named_where": sum(r["not_confirmed"] for r in rs),
                   "named": [r["top"] for r in rs]} for m, rs in sorted(ms.items())}
         for eid, ms in sorted(attrib.items())}
     two = [r for ms in attrib.values() for r in ms.get("2x", [])]
     res["attribution_2x_all"] = _rate(sum(r["right"] for r in two), len(two))
+    # Right, or the key reported as not established with its reason (not separable, listed
+    # not identifiable, unexplained with the key named where it is) and no wrong name: the
+    # answers a lab engineer would not have to correct. The rest: a wrong name or a miss.
+    res["honest_2x_all"] = _rate(sum(r["right"] or r["not_separable"] or r["listed"]
+                                     or r["not_confirmed"] for r in two), len(two))
     hidden = [c for c, k in keys.items() if k["kind"] == "hidden"]
     res["hidden_named"] = _rate(sum(keys[c]["catalogue_id"] in _named(diags[c])
                                     for c in hidden), len(hidden))
@@ -157,7 +178,8 @@ def markdown(res: dict, header: str) -> str:
     out = [header, "", f"* false alarms on nulls: {_pct(res['false_alarms'])}; named: "
            f"{', '.join(res['false_alarms']['named']) or '–'}",
            f"* attribution at 2× (top finding = key), all effects: "
-           f"{_pct(res['attribution_2x_all'])}",
+           f"{_pct(res['attribution_2x_all'])}; right or the key reported not established "
+           f"with its reason: {_pct(res['honest_2x_all'])}",
            f"* outside-catalogue effects given a catalogue name: "
            f"{_pct(res['outside_given_catalogue_name'])}",
            f"* twin against recording right: {_pct(res['against'])} "
@@ -165,8 +187,9 @@ def markdown(res: dict, header: str) -> str:
            f"* hidden (undetectable under the drawn protocol) named anyway: "
            f"{_pct(res['hidden_named'])}", f"* crashes: {len(res['errors'])}", "",
            "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed, listed "
-           "not identifiable | 2× not separable, key among the candidates |",
-           "|---|---|---|---|---|---|---|"]
+           "not identifiable | 2× not separable, key among the candidates | 2× unexplained, "
+           "key named where it is |",
+           "|---|---|---|---|---|---|---|---|"]
     for eid, ms in res["attribution"].items():
         one, two = ms.get("1x"), ms.get("2x")
         out.append(f"| {eid} | {one['k'] if one else 0}/{one['n'] if one else 0} | "
@@ -174,7 +197,8 @@ def markdown(res: dict, header: str) -> str:
                    f"{', '.join(str(x) for x in two['named']) if two else ''} | "
                    f"{two['wrong_catalogue_name'] if two else ''} | "
                    f"{two['missed_but_listed_not_identifiable'] if two else ''} | "
-                   f"{two.get('not_separable_key_among_candidates', '') if two else ''} |")
+                   f"{two.get('not_separable_key_among_candidates', '') if two else ''} | "
+                   f"{two.get('unexplained_key_named_where', '') if two else ''} |")
     out += ["", "| null protocol | flagged / n |", "|---|---|"]
     for k, (f, n) in sorted(res["false_alarms"]["by_protocol"].items()):
         out.append(f"| {k} | {f}/{n} |")
