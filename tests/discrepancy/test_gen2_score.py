@@ -34,3 +34,12 @@ def test_unexplained_without_the_key_or_another_name_is_not() -> None:
                    )["honest_2x_all"]["k"] == 0
     assert _scored(_case("bias_drift"))["honest_2x_all"]["k"] == 0
     assert _scored({"mismatch": False, "findings": []})["honest_2x_all"]["k"] == 0
+
+
+def test_unexplained_with_the_key_listed_not_identifiable_is_honest() -> None:
+    diag = _case("unexplained", {"places": [{"step": 3, "axis": "x"}]})
+    assert _scored(diag)["honest_2x_all"]["k"] == 0
+    diag["not_identifiable"] = [{"effect": "temperature_rate", "why": "same order"}]
+    res = _scored(diag)
+    assert res["honest_2x_all"]["k"] == 1
+    assert res["attribution"]["temperature_rate"]["2x"]["missed_but_listed_not_identifiable"] == 1

@@ -103,8 +103,9 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
         attrib[k["effect"]][f"{k['multiple']:g}x"].append(
             {"case": c, "top": top, "right": top == k["catalogue_id"],
              "among": k["catalogue_id"] in _named(diags[c]),
-             # an honest miss: nothing wrong named and the effect listed as not separable
-             "listed": top is None and k["catalogue_id"] in listed,
+             # an honest miss: nothing named, or only structure left unexplained, and the
+             # effect listed as not identifiable under this protocol (with the experiment)
+             "listed": top in (None, "unexplained") and k["catalogue_id"] in listed,
              "not_separable": _not_separable(diags[c], k["catalogue_id"]),
              "not_confirmed": _not_confirmed(diags[c], k["catalogue_id"]),
              "wrong": top is not None and top != k["catalogue_id"] and top not in BEYOND})
@@ -186,7 +187,7 @@ def markdown(res: dict, header: str) -> str:
            f"(unchanged sensor given a parameter_shift: {res['against']['unchanged_with_shift']})",
            f"* hidden (undetectable under the drawn protocol) named anyway: "
            f"{_pct(res['hidden_named'])}", f"* crashes: {len(res['errors'])}", "",
-           "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed, listed "
+           "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed or unexplained, listed "
            "not identifiable | 2× not separable, key among the candidates | 2× unexplained, "
            "key named where it is |",
            "|---|---|---|---|---|---|---|---|"]
