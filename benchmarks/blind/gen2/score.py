@@ -187,9 +187,9 @@ def markdown(res: dict, header: str) -> str:
            f"(unchanged sensor given a parameter_shift: {res['against']['unchanged_with_shift']})",
            f"* hidden (undetectable under the drawn protocol) named anyway: "
            f"{_pct(res['hidden_named'])}", f"* crashes: {len(res['errors'])}", "",
-           "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed or unexplained, listed "
-           "not identifiable | 2× not separable, key among the candidates | 2× unexplained, "
-           "key named where it is |",
+           "| effect | 1× right | 2× right | 2× named | 2× wrong name | 2× missed or "
+           "unexplained, listed not identifiable | 2× not separable, key among the "
+           "candidates | 2× unexplained, key named where it is |",
            "|---|---|---|---|---|---|---|---|"]
     for eid, ms in res["attribution"].items():
         one, two = ms.get("1x"), ms.get("2x")
