@@ -436,6 +436,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                          "outlier: they lie where the local scan finds structure beyond them "
                          "(not isolated)")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
+    left_structure: list[str] = []  # effects fitted here whose terms left their places
     if scanned.significant:
         # "A named finding must explain most of the located structure" (issue 10): when
         # structure remains exactly where a named term acts (its own steps or positions,
@@ -446,7 +447,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         demoted = _leaves_its_own_places(pb, findings, scanned.places)
         if demoted:
             terms, findings, gone = withdraw(terms, findings, demoted)
-            notes.append(f"{', '.join(sorted({k[0] for k in gone}))} not named or modelled: "
+            left_structure = sorted({k[0] for k in gone})
+            notes.append(f"{', '.join(left_structure)} not named or modelled: "
                          "after it, structure remains at the steps/positions where it acts, "
                          "so it does not explain the located structure")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
@@ -481,7 +483,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     unexplained = _excess_test(pb, final_res, flagged, terms, alpha)
     unexplained = {**scanned.to_dict(), "chi_square": unexplained}
     if scanned.significant or not_named:
-        findings.append(_unexplained_finding(pb, scanned, final_res, not_named))
+        findings.append(_unexplained_finding(pb, scanned, final_res, not_named,
+                                             left_structure if scanned.significant else []))
     # Found by the family test, withheld as one plateau's: reported, not dropped (issue 22).
     # One still_seen for both reports: it builds the final model's basis once, when asked.
     seen = one_step_report.still_seen(pb, _design, terms, alpha)
@@ -820,13 +823,16 @@ def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: flo
 
 
 def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
-                         final_res: np.ndarray, not_named: list[dict[str, Any]] | None = None
-                         ) -> Finding:
+                         final_res: np.ndarray, not_named: list[dict[str, Any]] | None = None,
+                         left_structure: list[str] | None = None) -> Finding:
     """``unexplained``: where structure was found, not what it is (effects.md).
 
     ``not_named``: the places of terms withdrawn by their physics checks; their family
     p is the evidence when the scan alone is not significant (the structure was found,
-    only the name failed).
+    only the name failed). ``left_structure``: effects the family test found whose terms
+    were withdrawn because the scan still finds structure at their own places; they are
+    the finding's ``candidates`` (seen here, not established), as for structure that
+    held-out data did not confirm (not_confirmed.py).
     """
     ctx = pb.ctx
     not_named = not_named or []
@@ -859,9 +865,13 @@ def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
         first = min(not_named, key=lambda n: n["p_value"])
         p_value, test = first["p_value"], f"{first['test']} (found; not named: physics check)"
     rms = _rms(final_res, np.zeros(ctx.n, bool))
+    where: dict[str, Any] = {"steps": steps, "positions": pos, "time_s": span, "places": places}
+    if left_structure:
+        where["candidates"] = list(left_structure)
+        why += (f" Found by the family test, not named: {', '.join(left_structure)} (with "
+                "its term fitted, structure remains at the steps/positions where it acts).")
     return Finding(
-        effect="unexplained", axes=axes,
-        where={"steps": steps, "positions": pos, "time_s": span, "places": places},
+        effect="unexplained", axes=axes, where=where,
         explanation=(f"Structure beyond noise at {' and '.join(parts)} on axis "
                      f"{'/'.join(axes)} that no catalogue term explains; the data show where, "
                      f"not what.{why}"),

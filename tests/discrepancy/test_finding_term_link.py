@@ -50,6 +50,11 @@ def test_a_relabelled_finding_leaves_the_model_with_its_term():
     assert not any(n.startswith("not_identifiable") for n in d.notes)
     demoted = [n for n in d.notes if "after it, structure remains" in n]
     assert demoted and demoted[0].startswith("cross_coupling not named or modelled")
+    # The structure the demoted term was fitted to is reported where it is, with the
+    # demoted effect as a candidate: seen, not established.
+    unexplained = [f for f in d.findings if f.effect == "unexplained"]
+    assert unexplained and unexplained[0].where["candidates"] == ["cross_coupling"]
+    assert "not named: cross_coupling" in unexplained[0].explanation
     if not any(_modelled(f) for f in d.findings):
         # nothing listed as modelled: the residuals "with findings" are the base model's
         np.testing.assert_allclose(d.residuals_after_ug, d.residuals_before_ug, atol=1e-6)
