@@ -452,6 +452,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                          "after it, structure remains at the steps/positions where it acts, "
                          "so it does not explain the located structure")
             scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
+    # A finding's numbers were fitted at its stage, in the model of that moment; a term
+    # withdrawn since (a turn of the table beside a bend, say) may have shared its columns,
+    # and the stale coefficients then cancel across the two (K3 = −3·10⁵ µg/g³ "± 49").
+    # The named findings are stated in the model that is kept.
+    findings = [_restated(pb, terms, f) for f in findings]
     # What the protocol separates: the effects still testable after the absorbed fractions.
     protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                        for e in effects})
@@ -1197,6 +1202,26 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
         test=eff.test_name(), confusers=conf, theta=term.theta, rows=list(term.rows),
         term_effect=term.effect_id,
     )
+
+
+def _restated(pb: LinearProblem, terms: list[Term], f: Finding) -> Finding:
+    """A named finding's parameters, axes and sentence in the model of ``terms`` (which
+    holds its term); any other finding as it is."""
+    if not f.named_as_modelled or f.effect not in BY_ID:
+        return f
+    term = next((t for t in terms if t.key in f.term_keys), None)
+    if term is None:
+        return f
+    eff = BY_ID[f.effect]
+    coef, se = _term_coefficients(pb, terms, term)
+    params, sd = eff.parameters(coef, se, term.theta, pb.ctx)
+    if eff.continuous and eff.theta_name:
+        sd[eff.theta_name] = term.theta_sd
+    axes = eff.axes(coef, se)
+    if pb.mode == "norm" and eff.per_reading:
+        axes = ["norm"]
+    return replace(f, axes=axes, parameters=_round(params), parameter_sd=_round(sd),
+                   explanation=_sentence(eff, params, sd, axes, pb.ctx))
 
 
 def _sentence(eff: CatalogueEffect, params, sd, axes, ctx) -> str:
