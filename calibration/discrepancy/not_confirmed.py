@@ -40,6 +40,11 @@ class NotConfirmed:
     axes: tuple[str, ...]
     where: dict[str, Any]  # the term's places (locate.where_of)
     X: np.ndarray  # (m, k) the rejected term's unweighted columns (for one_step.still_seen)
+    # Set when the term was not added because its fit, beyond the base model, lies within
+    # an earlier term's columns (diagnose._outside_earlier_terms): that term, and the share
+    # of the fit outside it.
+    within: str | None = None
+    share_outside: float = 1.0
 
 
 def report(findings: list, records: list[NotConfirmed], finding_cls: type,
@@ -81,6 +86,12 @@ def report(findings: list, records: list[NotConfirmed], finding_cls: type,
 
 
 def _sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
+    within = [r for r in keep if r.within]
+    if within:
+        return _within_sentence(within, effects) + (
+            " " + _sentence([r for r in keep if not r.within],
+                            [e for e in effects if e not in {r.effect_id for r in within}])
+            if len(within) < len(keep) else "")
     found = "; ".join(
         f"{r.effect_id} (p_family = {r.p_family:.2g}; held-out RMS {r.heldout_before_ug:.4g} "
         f"→ {r.heldout_after_ug:.4g} µg with its term)" for r in keep)
@@ -92,3 +103,16 @@ def _sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
             "structure is real at the verdict's level; what it is, this recording does not "
             "say" + (f". To test {'the candidate' if len(effects) == 1 else 'the candidates'}: "
                      f"{own}" if own else "") + ".")
+
+
+def _within_sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
+    found = "; ".join(
+        f"{r.effect_id} (p_family = {r.p_family:.2g}; {100 * (1 - r.share_outside):.1f} % of "
+        f"its fit beyond the base model lies within the {r.within} term's columns)"
+        for r in keep)
+    return (f"Structure beyond noise that the family test found with the shape of {found}: "
+            "fitted together, the terms cancel each other with coefficients far beyond the "
+            "structure, so this recording cannot tell "
+            f"{' or '.join(effects)} from "
+            f"{' or '.join(dict.fromkeys(str(r.within) for r in keep))}, and "
+            f"{'it is' if len(effects) == 1 else 'they are'} neither named nor modelled.")
