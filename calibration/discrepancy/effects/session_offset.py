@@ -6,12 +6,16 @@ profiled over the plateau boundary where it occurred (one power cycle).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy.context import DesignContext
+from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, CatalogueEffect, axis_params, fmt_pm, per_axis
+
+MIN_SIDE_READINGS = 3  # a jump inside a plateau leaves at least this many readings each side
 
 
 def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
@@ -66,6 +70,13 @@ class SessionOffset(CatalogueEffect):
                 self.experiment
         return True, "", self.experiment
 
+    def misses(self, pb: Any, U: np.ndarray, e: np.ndarray, theta: float,
+               where: Mapping[str, Any], axes: list[str], alpha: float) -> dict[str, Any] | None:
+        """A jump inside a plateau, not between two: :func:`jump_inside_plateau`."""
+        if pb.ctx.session is not None or not np.isfinite(theta):
+            return None
+        return jump_inside_plateau(pb, U, e, int(theta), axes, alpha)
+
     def parameters(self, coef, se, theta, ctx):
         p, s = axis_params("offset", "ug", coef[:3], se[:3], UG)
         if np.isfinite(theta):
@@ -81,3 +92,73 @@ class SessionOffset(CatalogueEffect):
                     "recording has no session column, so its cause is not recorded)")
         return (f"{'/'.join(axes)} bias jumps by {', '.join(parts)} in the later power "
                 "session(s) of the session column and stays there")
+
+
+def jump_inside_plateau(pb: Any, U: np.ndarray, e: np.ndarray, from_step: int,
+                        axes: list[str], alpha: float) -> dict[str, Any] | None:
+    """Where the data put the jump inside plateau ``from_step`` − 1 or ``from_step``, or
+    None (issue 22).
+
+    Without a session column the jump is profiled over plateau boundaries: a power cycle
+    between two plateaus. A change of the sensor during a plateau (a crack, a shift of the
+    mount) fits that jump at the nearest boundary and leaves the readings between the change
+    and the boundary off. Tested after the model (``U``, ``e``: the model with the jump):
+    for each reading of the two plateaus with at least :data:`MIN_SIDE_READINGS` readings
+    of its plateau before and after it, a per-axis offset of the readings between it and
+    the boundary (F test on the term's axes, after a trend in time on each of the two
+    plateaus), the smallest p Šidák-adjusted over those readings. A jump at the boundary
+    leaves nothing there but noise (rejected with probability α). Returns the place (the
+    two plateaus, the readings moved, log10 p).
+    """
+    from calibration.discrepancy.effects.structure import (
+        extend,
+        log_p,
+        per_axis_indicator,
+        whitened,
+    )
+
+    ctx = pb.ctx
+    ids = list(ctx.step_ids)
+    if from_step not in ids or ids.index(from_step) == 0:
+        return None
+    before = ids[ids.index(from_step) - 1]
+    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
+    segments: list[np.ndarray] = []
+    for step, later in ((before, False), (from_step, True)):
+        rows = np.flatnonzero(ctx.steps == step)
+        rows = rows[np.argsort(ctx.t_s[rows], kind="stable")]
+        for i in range(MIN_SIDE_READINGS, rows.size - MIN_SIDE_READINGS + 1):
+            # jump earlier (inside ``before``): its readings from i on are off;
+            # jump later (inside ``from_step``): its readings before i are off
+            segments.append(rows[:i] if later else rows[i:])
+    if not segments:
+        return None
+    # A trend in time on either plateau (a settling die, a channel that ramps while the
+    # output does not) is in the model first: what is tested is a step beyond it.
+    trend = np.zeros((ctx.n, 3, 2 * len(ax)))
+    for i, step in enumerate((before, from_step)):
+        rows = ctx.steps == step
+        dt = np.where(rows, ctx.t_s - ctx.t_s[rows].mean(), 0.0)
+        trend[:, :, i * len(ax):(i + 1) * len(ax)] = per_axis_indicator(
+            ctx.n, np.flatnonzero(rows), ax) * dt[:, None, None]
+    U, e = extend(U, e, whitened(pb, trend))
+    lps = np.array([log_p(U, e, whitened(pb, per_axis_indicator(ctx.n, seg, ax)))[0]
+                    for seg in segments])
+    j = int(np.argmin(lps))
+    # Šidák over the readings tried: 1 − (1 − p)^k, in logs (p may be far below 1e-16)
+    lp_adj = float(np.log(-np.expm1(len(segments) * np.log1p(-min(np.exp(lps[j]), 1 - 1e-16))))
+                   if lps[j] > -30 else lps[j] + np.log(len(segments)))
+    if lp_adj > np.log(alpha):
+        return None
+    seg = segments[j]
+    step = int(ctx.steps[seg[0]])
+    t0, t1 = float(ctx.t_s[seg].min()), float(ctx.t_s[seg].max())
+    return {"kind": "time", "steps": sorted({before, from_step}),
+            "positions": sorted({int(p) for p in ctx.positions[seg]}),
+            "time_s": [t0, t1], "axes": [AXES[a] for a in ax],
+            "log10_p": round(lp_adj / np.log(10), 1),
+            "why": (f"the data put the jump inside plateau {step}, between t = {t0:.0f} and "
+                    f"{t1:.0f} s (its readings there are off by the jump), not between two "
+                    "plateaus as a power cycle would: a change of the sensor during a "
+                    "plateau (a mechanical shift, a crack) is not a catalogue effect; if the "
+                    "sensor was power-cycled then, a session column would say so")}
