@@ -127,3 +127,17 @@ def test_an_offset_sensor_channel_is_offset_and_on_its_own_grid():
     plain = dataclasses.replace(p, sensor_c_offset_c=0.0)
     off, ref = _record(p)["sensor_c"], _record(plain)["sensor_c"]
     assert np.median(off - ref) == pytest.approx(p.sensor_c_offset_c, abs=0.05)
+
+
+def test_a_slow_die_on_chamber_air_is_drawn_by_name_only_and_keyed_as_a_lag():
+    drawn = {protocol.draw_protocol(np.random.default_rng(s), family="unseen").name.split("/")[0]
+             for s in range(400)}
+    assert "slowdie" not in drawn and len(drawn) == len(unseen.UNSEEN_KINDS) - 1
+    slow = protocol.draw_protocol(np.random.default_rng(0), kind="slowdie", family="unseen")
+    assert unseen.lagging_die(slow)
+    assert not unseen.lagging_die(dataclasses.replace(slow, die_tau_s=20.0))
+    assert not unseen.lagging_die(dataclasses.replace(slow, columns=("chamber_c", "sensor_c")))
+    # 6 τ of soak still leave the die behind the air by more than the chamber channel's LSB
+    rng = np.random.default_rng(1)
+    sc = sim.scene(slow, None, 0.0, fx.pattern(rng, len(slow.setpoints_c), 10), 1)
+    assert np.median(np.abs(sc.air_c - sc.die_c)) > 0.01

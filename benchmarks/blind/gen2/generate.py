@@ -27,7 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from multiprocessing import Pool
 from pathlib import Path
 
@@ -39,7 +39,7 @@ from benchmarks.blind.gen2 import simulate as sim
 from benchmarks.blind.gen2.protocol import KINDS, draw_protocol
 from benchmarks.blind.gen2.realnoise import RealDataMissing, load_pools, realdata_dir
 from benchmarks.blind.gen2.sensor import draw_sensor
-from benchmarks.blind.gen2.unseen import UNSEEN_KINDS
+from benchmarks.blind.gen2.unseen import UNSEEN_KINDS, lagging_die
 from calibration.recording import write_recording
 
 REMOUNT_RAD = 2e-3
@@ -119,12 +119,25 @@ def build(spec: dict, out: Path) -> dict:
     elif spec["kind"] == "outside":
         m = OUTSIDE_SIZE_UG[eid]
         key.update(magnitude=m, unit=fx.UNIT[eid])
+    elif spec["kind"] == "null" and lagging_die(proto):
+        key.update(_slow_die_key(proto, sensor, pools, pat, spec["seed"]))
     cols = sim.record(proto, sensor, pools, eid, m, pat, spec["seed"])
     write_recording(out / "cases" / f"{spec['case']}.csv", cols)
     key.update(protocol=proto.name, protocol_detail=asdict(proto), pattern=pat)
     (out / "keys" / f"{spec['case']}.json").write_text(
         json.dumps(key, indent=1, default=_json_default))
     return key
+
+
+def _slow_die_key(proto, sensor, pools, pat: dict, seed: int) -> dict:
+    """A chamber_c-only null on a slow die is a ``thermal_lag`` case (τ = the die's): its
+    size against the lag's minimum detectable one under this protocol (detect.py, with the
+    die otherwise settled, τ = 20 s), so the scorer does not count it as a null."""
+    settled = replace(proto, die_tau_s=20.0)
+    mds = detect.minimum_detectable(settled, sensor, pools, "thermal_lag", pat, seed)
+    return {"kind": "slow_die", "effect": "thermal_lag", "catalogue_id": "thermal_lag",
+            "magnitude": proto.die_tau_s, "unit": "s", "mds": mds,
+            "multiple": proto.die_tau_s / mds if np.isfinite(mds) else 0.0}
 
 
 def _build_against(spec: dict, sensor, rng: np.random.Generator, out: Path) -> dict:
@@ -194,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     with Pool(a.jobs, initializer=_init, initargs=(str(rd),)) as pool:
         keys = pool.map(_build_star, [(s, a.out) for s in specs], chunksize=2)
     kinds = {k: sum(x["kind"] == k for x in keys) for k in
-             ("null", "catalogue", "hidden", "outside", "against")}
+             ("null", "catalogue", "hidden", "outside", "against", "slow_die")}
     print(f"wrote {len(keys)} cases to {a.out}/cases (keys apart in {a.out}/keys): {kinds}")
     return 0
 
