@@ -27,7 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from multiprocessing import Pool
 from pathlib import Path
 
@@ -39,6 +39,7 @@ from benchmarks.blind.gen2 import simulate as sim
 from benchmarks.blind.gen2.protocol import KINDS, draw_protocol
 from benchmarks.blind.gen2.realnoise import RealDataMissing, load_pools, realdata_dir
 from benchmarks.blind.gen2.sensor import draw_sensor
+from benchmarks.blind.gen2.unseen import UNSEEN_KINDS, lagging_die
 from calibration.recording import write_recording
 
 REMOUNT_RAD = 2e-3
@@ -57,14 +58,19 @@ def _need(eid: str) -> dict:
             "cross_coupling": {"schedule": "oblique36"}}.get(eid, {})
 
 
-def plan(quick: bool, reps: int, n_null: int, seed0: int) -> list[dict]:
+def plan(quick: bool, reps: int, n_null: int, seed0: int,
+         protocols: str = "default") -> list[dict]:
+    """The cases. ``protocols="unseen"`` draws every protocol from the unseen family
+    (unseen.py; nulls cycle through its variants); the default plan is unchanged."""
     specs: list[dict] = []
+    extra = {} if protocols == "default" else {"family": protocols}
+    kinds = KINDS if protocols == "default" else UNSEEN_KINDS
 
     def add(**kw) -> None:
-        specs.append({"seed": seed0 * 100_000 + len(specs), **kw})
+        specs.append({"seed": seed0 * 100_000 + len(specs), **kw, **extra})
 
     for i in range(n_null):
-        add(kind="null", proto_kind=KINDS[i % len(KINDS)])
+        add(kind="null", proto_kind=kinds[i % len(kinds)])
     for eid in fx.DOF:
         for mult in (1.0, 2.0):
             for _ in range(reps):
@@ -91,7 +97,7 @@ def build(spec: dict, out: Path) -> dict:
         return _build_against(spec, sensor, rng, out)
     for _attempt in range(6):
         need = {"kind": spec.get("proto_kind"), **(_need(eid) if eid else {})}
-        proto = draw_protocol(rng, **need)
+        proto = draw_protocol(rng, **need, family=spec.get("family", "default"))
         pat = fx.pattern(rng, len(proto.setpoints_c), 10_000)
         n_read = len(sim.scene(proto, None, 0.0, pat, spec["seed"]).t_s)
         pat["rows"] = sorted(rng.choice(n_read, 2, replace=False).tolist())
@@ -113,12 +119,25 @@ def build(spec: dict, out: Path) -> dict:
     elif spec["kind"] == "outside":
         m = OUTSIDE_SIZE_UG[eid]
         key.update(magnitude=m, unit=fx.UNIT[eid])
+    elif spec["kind"] == "null" and lagging_die(proto):
+        key.update(_slow_die_key(proto, sensor, pools, pat, spec["seed"]))
     cols = sim.record(proto, sensor, pools, eid, m, pat, spec["seed"])
     write_recording(out / "cases" / f"{spec['case']}.csv", cols)
     key.update(protocol=proto.name, protocol_detail=asdict(proto), pattern=pat)
     (out / "keys" / f"{spec['case']}.json").write_text(
         json.dumps(key, indent=1, default=_json_default))
     return key
+
+
+def _slow_die_key(proto, sensor, pools, pat: dict, seed: int) -> dict:
+    """A chamber_c-only null on a slow die is a ``thermal_lag`` case (τ = the die's): its
+    size against the lag's minimum detectable one under this protocol (detect.py, with the
+    die otherwise settled, τ = 20 s), so the scorer does not count it as a null."""
+    settled = replace(proto, die_tau_s=20.0)
+    mds = detect.minimum_detectable(settled, sensor, pools, "thermal_lag", pat, seed)
+    return {"kind": "slow_die", "effect": "thermal_lag", "catalogue_id": "thermal_lag",
+            "magnitude": proto.die_tau_s, "unit": "s", "mds": mds,
+            "multiple": proto.die_tau_s / mds if np.isfinite(mds) else 0.0}
 
 
 def _build_against(spec: dict, sensor, rng: np.random.Generator, out: Path) -> dict:
@@ -163,6 +182,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--nulls", type=int, default=None, help="null cases (quick 15, full 300)")
     ap.add_argument("--seed", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--protocols", choices=("default", "unseen"), default="default",
+                    help="protocol family: the default draws, or variants they never draw "
+                         "(unseen.py; null, catalogue and outside cases)")
     ap.add_argument("--only", default=None,
                     help="comma list of effects, kinds (null, outside, against) or changes "
                          "to keep; the others are planned (so seeds stay) but not written")
@@ -173,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
         print(exc, file=sys.stderr)
         return 2
     n_null = a.nulls if a.nulls is not None else (15 if a.quick else 300)
-    specs = plan(a.quick, a.reps, n_null, a.seed)
+    specs = plan(a.quick, a.reps, n_null, a.seed, a.protocols)
     if a.only:
         keep = set(a.only.split(","))
         specs = [s for s in specs if keep & {s["kind"], s.get("effect"), s.get("change")}]
@@ -185,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     with Pool(a.jobs, initializer=_init, initargs=(str(rd),)) as pool:
         keys = pool.map(_build_star, [(s, a.out) for s in specs], chunksize=2)
     kinds = {k: sum(x["kind"] == k for x in keys) for k in
-             ("null", "catalogue", "hidden", "outside", "against")}
+             ("null", "catalogue", "hidden", "outside", "against", "slow_die")}
     print(f"wrote {len(keys)} cases to {a.out}/cases (keys apart in {a.out}/keys): {kinds}")
     return 0
 

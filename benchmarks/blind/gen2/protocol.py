@@ -16,6 +16,21 @@ SCHEDULES_DEG: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {  # (β
     "sparse18": (tuple(range(0, 360, 60)), (0.0, 90.0, 210.0)),
     "oblique36": (tuple(range(0, 360, 30)), (0.0, 45.0, 135.0)),
 }
+# Schedules of the "unseen" family (draw_protocol(..., family="unseen")): never drawn by the
+# default family, so the blind benchmark can measure the diagnosis on positions it was not
+# developed on. Product schedules (β list, α list) as above ...
+UNSEEN_SCHEDULES_DEG: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
+    # the seed paper's 24 positions in another parametrisation: β offset by 22.5°, α at 120°
+    "tri24": (tuple(22.5 + 45.0 * k for k in range(8)), (30.0, 150.0, 270.0)),
+    "ring30": (tuple(range(0, 360, 36)), (0.0, 90.0, 200.0)),
+    "dense48": (tuple(range(0, 360, 30)), (0.0, 60.0, 120.0, 240.0)),
+    "min12": ((0.0, 90.0, 180.0, 270.0), (0.0, 45.0, 90.0)),
+}
+# ... and explicit (α, β) pairs: the six faces ±x ±y ±z (ref = (sinα·sinβ, cosα·sinβ, cosβ)).
+UNSEEN_PAIRS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
+    "faces6": ((0.0, 0.0), (0.0, 180.0), (0.0, 90.0), (0.0, 270.0), (90.0, 90.0),
+               (90.0, 270.0)),
+}
 RAMP_C_PER_MIN = 2.0
 MOVE_S = 8.0
 FS_HZ = 100.0
@@ -34,9 +49,15 @@ class Protocol2:
     irregular: bool  # positions shuffled per plateau, some skipped
     power_cycle_at: int | None
     sensor_noise_g: float  # per-sample sd of the sensor's own noise
+    # Defaults are the default family's rig; the "unseen" family varies them.
+    placement_rad: float = 5e-6  # re-seating scatter per visit and axis (rms); mrad by hand
+    sensor_c_offset_c: float = 0.0  # constant offset of the sensor_c channel
+    sensor_c_lsb_c: float = 0.1  # quantisation of the sensor_c channel
 
     def angles_deg(self) -> np.ndarray:
-        betas, alphas = SCHEDULES_DEG[self.schedule]
+        if self.schedule in UNSEEN_PAIRS_DEG:
+            return np.array(UNSEEN_PAIRS_DEG[self.schedule], float)
+        betas, alphas = (SCHEDULES_DEG | UNSEEN_SCHEDULES_DEG)[self.schedule]
         return np.array([(a, b) for b in betas for a in alphas], float)
 
 
@@ -60,7 +81,14 @@ KINDS = ("oneway", "updown", "irregular", "sparse", "staircase_down")
 
 def draw_protocol(rng: np.random.Generator, kind: str | None = None,
                   schedule: str | None = None, columns: tuple[str, ...] | None = None,
-                  soak_min: float | None = None) -> Protocol2:
+                  soak_min: float | None = None, family: str = "default") -> Protocol2:
+    """A random protocol. ``family="unseen"`` draws the variants of ``unseen.py`` (which
+    the default family never draws); the default family's draws are unchanged by it."""
+    if family == "unseen":
+        from benchmarks.blind.gen2.unseen import draw_unseen
+        return draw_unseen(rng, kind, schedule, columns, soak_min)
+    if family != "default":
+        raise ValueError(f"unknown protocol family {family!r} (default, unseen)")
     kind = kind or str(rng.choice(KINDS))
     lo = float(rng.choice([-40.0, -30.0, -20.0]))
     hi = float(rng.choice([50.0, 60.0, 70.0]))

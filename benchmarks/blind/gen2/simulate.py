@@ -20,7 +20,8 @@ from benchmarks.blind.gen2.realnoise import NoisePools
 from benchmarks.blind.gen2.sensor import Sensor2
 
 LSB_G = 3.9e-6  # ADXL355 ±2 g code
-PLACEMENT_RAD = 5e-6  # re-seating repeatability per visit and axis (rms)
+PLACEMENT_RAD = 5e-6  # re-seating repeatability per visit and axis (rms): Protocol2's default
+HAND_PLACED_RAD = 1e-4  # above this re-seating scatter the recording declares ref_tol_deg
 SENSOR_CH_LSB_C, SENSOR_CH_SD_C = 0.1, 0.04
 CHAMBER_LSB_C, CHAMBER_SD_C = 0.01, 0.02
 START_C = 25.0
@@ -122,6 +123,8 @@ def recorded_temperature_c(sc: Scene, proto: pr.Protocol2, eid: str | None, m: f
     if "sensor_c" in proto.columns:
         out["sensor_c"] = sc.die_c + fx.temperature_channel_shift_c(eid or "", m, pat,
                                                                     sc.steps)
+        if proto.sensor_c_offset_c:  # the channel's own constant offset from the die
+            out["sensor_c"] = out["sensor_c"] + proto.sensor_c_offset_c
     return out
 
 
@@ -132,7 +135,7 @@ def record(proto: pr.Protocol2, sensor: Sensor2, pools: NoisePools, eid: str | N
     sc = scene(proto, eid, m, pat, seed, die_tau_s)
     n = proto.n_samples
     # Each visit re-seats the sensor: a small rotation of the true force (real shape).
-    ang = rng.choice(pools.placement, (len(sc.t_s), 3)) * PLACEMENT_RAD
+    ang = rng.choice(pools.placement, (len(sc.t_s), 3)) * proto.placement_rad
     force_seated = sc.force_g + np.cross(ang, sc.force_g)
     sc_seated = Scene(**{**sc.__dict__, "force_g": force_seated})
     mean_true = noise_free_output(sensor, sc_seated, eid, m, pat)
@@ -153,10 +156,15 @@ def record(proto: pr.Protocol2, sensor: Sensor2, pools: NoisePools, eid: str | N
         "ax": means[:, 0], "ay": means[:, 1], "az": means[:, 2], "n": np.full(len(sc.t_s), n),
         "sd_x": sds[:, 0], "sd_y": sds[:, 1], "sd_z": sds[:, 2]}
     for name, val in recorded_temperature_c(sc, proto, eid, m, pat).items():
-        lsb, sd = ((SENSOR_CH_LSB_C, SENSOR_CH_SD_C) if name == "sensor_c"
+        lsb, sd = ((proto.sensor_c_lsb_c, SENSOR_CH_SD_C) if name == "sensor_c"
                    else (CHAMBER_LSB_C, CHAMBER_SD_C))
         draws = val[:, None] + sd * rng.standard_normal((len(val), n))
         cols[name] = np.round(np.mean(np.round(draws / lsb) * lsb, axis=1), 3)
+    if proto.placement_rad > HAND_PLACED_RAD:
+        # A hand-placed fixture, declared as the format lets a lab do: the rms tilt of the
+        # gravity direction (two axes across it) in degrees.
+        tol = float(np.round(np.rad2deg(np.sqrt(2.0) * proto.placement_rad), 3))
+        cols["ref_tol_deg"] = np.full(len(sc.t_s), tol)
     return cols
 
 
@@ -166,5 +174,5 @@ def reading_sigma_g(proto: pr.Protocol2, pools: NoisePools, sc: Scene) -> np.nda
     n = proto.n_samples
     v = (proto.sensor_noise_g**2 * pools.mean_variance("sensor", n)
          + sc.vib_sd_g**2 * pools.mean_variance("vibration", n) + LSB_G**2 / 12 / n)
-    place = PLACEMENT_RAD**2 * (1.0 - sc.ref_g**2) * 2.0
+    place = proto.placement_rad**2 * (1.0 - sc.ref_g**2) * 2.0
     return np.sqrt(v[:, None] + place)

@@ -57,7 +57,12 @@ def channel_step_c(steps: np.ndarray, from_step: float, step_c: float) -> np.nda
 @dataclass(frozen=True)
 class TemperatureSensor(CatalogueEffect):
     effect_id: str = "temperature_sensor"
-    confusers: tuple[str, ...] = ("session_offset", "thermal_hysteresis", "self_heating")
+    # Why thermal_lag: a die soaked for several τ still lags the air by a remnant that is
+    # nearly constant through each plateau and takes the sign of the last step; on an
+    # up-down campaign that is a step of the channel at the turn (issue 22: a chamber-only
+    # column on a 15 min die, soaked 6 τ, was named a channel step 6 times in 14).
+    confusers: tuple[str, ...] = ("session_offset", "thermal_hysteresis", "self_heating",
+                                  "thermal_lag")
     experiment: str = ("log a calibrated reference thermometer on the fixture next to the "
                        "temperature channel, or record chamber_c beside sensor_c")
     told_apart: tuple[tuple[str, str], ...] = (
@@ -71,8 +76,15 @@ class TemperatureSensor(CatalogueEffect):
         ("self_heating",
          "a steady die offset shifts every plateau alike (absorbed by the cubic); a channel "
          "step shifts only the plateaus after it"),
+        ("thermal_lag",
+         "a die lag's remnant scales with each step's size, takes each step's sign and decays "
+         "through the plateau; a channel step is one constant on every plateau after it"),
     )
     absorbed_max: float = ABSORBED_MAX_STEP
+    # Named by fit among its declared confusers (by_fit.py): its one column is the model's
+    # own ∂raw/∂T times a step in time, comparable column for column with a lag's
+    # (∂raw/∂T times the die–air difference) and the other thermal/time terms.
+    named_by_fit: bool = True
 
     def grid(self, ctx: DesignContext) -> list[float]:
         return [float(s) for s in ctx.step_ids[1:]]
