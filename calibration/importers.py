@@ -228,20 +228,34 @@ def moving_variance(acc: np.ndarray, window_n: int) -> np.ndarray:
     """Per-axis variance over a centred window of ``window_n`` samples, (N,3).
 
     Cumulative sums (of data minus its first sample, to avoid cancellation); the
-    window shrinks at the ends instead of padding.
+    window shrinks at the ends instead of padding. One axis at a time, in place: the
+    same numbers as whole-array arithmetic (a cumulative sum runs down each column
+    alone), a third of the temporaries (a 2.4 M-sample log: 400 MB less, issue 20).
     """
-    x = np.asarray(acc, float) - np.asarray(acc, float)[0]
-    n = x.shape[0]
+    a = np.asarray(acc, float)
+    n = a.shape[0]
     half = max(int(window_n) // 2, 1)
-    c1 = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
-    c2 = np.vstack([np.zeros((1, 3)), np.cumsum(x * x, axis=0)])
     idx = np.arange(n)
     lo = np.clip(idx - half, 0, n)
     hi = np.clip(idx + half + 1, 0, n)
-    cnt = (hi - lo)[:, None].astype(float)
-    mean = (c1[hi] - c1[lo]) / cnt
-    var = (c2[hi] - c2[lo]) / cnt - mean**2
-    return np.clip(var, 0.0, None)
+    del idx
+    cnt = (hi - lo).astype(float)
+    out = np.empty((n, 3))
+    csum = np.zeros(n + 1)
+    for k in range(3):
+        x = a[:, k] - a[0, k]
+        np.cumsum(x, out=csum[1:])
+        mean = csum[hi]
+        mean -= csum[lo]
+        mean /= cnt
+        np.multiply(x, x, out=x)
+        np.cumsum(x, out=csum[1:])
+        var = csum[hi]
+        var -= csum[lo]
+        var /= cnt
+        var -= np.square(mean, out=mean)
+        np.clip(var, 0.0, None, out=out[:, k])
+    return out
 
 
 def detect_static_intervals(
