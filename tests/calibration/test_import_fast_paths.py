@@ -296,3 +296,94 @@ def test_the_leading_lines_are_enough_for_the_banner_search(text):
     full = text.splitlines()
     assert lines == full[:len(lines)] and text.startswith(head)
     assert _leading_banner(lines, None) == _leading_banner(full, None)
+
+
+# --- DataFlash: the IMU messages at once against DFReader's message loop -------------------
+def _old_style_dataflash(path: Path, n: int, *, temp_format: str = "f") -> Path:
+    """IMU and IMU2 without an ``I`` field (logs before ArduPilot 4.0), ``T`` as
+    ``temp_format`` (``c``: centi-degrees, DFReader divides by 100)."""
+    import struct
+
+    from tests.calibration.log_writers import DF_HEAD, FMT_ID, PARM_ID, _df_fmt
+
+    fmt = "QffffffII" + temp_format + "BBHH"
+    cols = "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"
+    body = "<" + fmt.replace("c", "h")
+    length = 3 + struct.calcsize(body)
+    out = bytearray(_df_fmt(FMT_ID, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", 89))
+    out += _df_fmt(130, "IMU", fmt, cols, length) + _df_fmt(132, "IMU2", fmt, cols, length)
+    out += _df_fmt(PARM_ID, "PARM", "QNf", "TimeUS,Name,Value", 3 + struct.calcsize("<Q16sf"))
+    out += DF_HEAD + struct.pack("<BQ16sf", PARM_ID, 1, b"INS_TCAL2_ENABLE", 1.0)
+    rng = np.random.default_rng(12)
+    for k in range(n):
+        for type_id, dx in ((130, 0.0), (132, 1.0)):
+            t = 35.0 + 0.01 * k
+            temp = round(t * 100) if temp_format == "c" else t
+            out += DF_HEAD + struct.pack("<B", type_id) + struct.pack(
+                body, 1_000_000 + 2500 * k, 0.0, 0.0, 0.0, dx + rng.normal(0, 0.01),
+                rng.normal(0, 0.01), 9.80665 + rng.normal(0, 0.01), 0, 0, temp, 1, 1, 1000, 1000)
+    path.write_bytes(bytes(out))
+    return path
+
+
+def _dataflash_both(path: Path, instance: int = 0) -> tuple:
+    from calibration import importers_logs
+
+    taken: list[bool] = []
+    real = importers_logs.dataflash_imu_columns
+
+    def spy(*a: object) -> object:
+        out = real(*a)
+        taken.append(out is not None)
+        return out
+
+    results = []
+    for fast in (spy, lambda *a: None):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(importers_logs, "dataflash_imu_columns", fast)
+            try:
+                raw = importers_logs.read_dataflash(path, instance=instance)
+            except RecordingError as exc:
+                results.append(("error", str(exc)))
+                continue
+        results.append(("ok", raw.t_s.tobytes(), raw.acc_g.tobytes(),
+                        None if raw.temp_c is None else raw.temp_c.tobytes(), raw.notes))
+    assert results[0] == results[1]
+    return results[0], taken[0]
+
+
+@pytest.mark.parametrize("case", ["with T", "without T", "instance 1 of 2", "instance 3 of 2",
+                                  "TCAL on"])
+def test_dataflash_fast_path_reads_what_the_message_loop_reads(tmp_path, case):
+    from tests.calibration.log_writers import warmup_samples, write_dataflash
+
+    t_us, acc, temp = warmup_samples(n=300)
+    kw: dict[str, object] = {}
+    if case == "without T":
+        temp = None
+    if case.startswith("instance"):
+        kw["instances"] = 2
+    if case == "TCAL on":
+        kw["params"] = {"INS_TCAL1_ENABLE": 1.0}
+    path = write_dataflash(tmp_path / "log.bin", t_us, acc, temp, **kw)
+    instance = int(case.split()[1]) if case.startswith("instance") else 0
+    out, taken = _dataflash_both(path, instance)
+    assert taken
+    assert out[0] == ("error" if case == "instance 3 of 2" else "ok")
+
+
+@pytest.mark.parametrize("instance,temp_format", [(0, "f"), (1, "f"), (1, "c")])
+def test_dataflash_fast_path_old_message_names_and_multipliers(tmp_path, instance, temp_format):
+    path = _old_style_dataflash(tmp_path / "old.bin", 200, temp_format=temp_format)
+    out, taken = _dataflash_both(path, instance)
+    assert taken and out[0] == "ok"
+    assert (any("INS_TCAL2_ENABLE" in n for n in out[4])) == (instance == 1)
+
+
+def test_dataflash_a_log_cut_off_mid_message_is_left_to_the_loop(tmp_path):
+    from tests.calibration.log_writers import warmup_samples, write_dataflash
+
+    path = write_dataflash(tmp_path / "cut.bin", *warmup_samples(n=200))
+    path.write_bytes(path.read_bytes()[:-20])
+    out, taken = _dataflash_both(path)
+    assert not taken and out[0] == "ok"
