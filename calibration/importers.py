@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import RecordingError
+from calibration.importers_plain import is_plain, parse_plain_rows
 from calibration.placement import HAND_HELD_TOL_DEG, REF_TOL_COLUMN
 from calibration.recording import Recording
 
@@ -664,9 +665,17 @@ def _read_delimited(
     p: str, delimiter: str, columns: Sequence[str], *, text: str | None = None,
     line_offset: int = 0,
 ) -> np.ndarray:
-    """Numeric columns by header name from a delimited text; errors name line and column."""
+    """Numeric columns by header name from a delimited text; errors name line and column.
+
+    A plain body is parsed by numpy's C reader (:mod:`calibration.importers_plain`: the
+    same numbers); anything else, and every row to refuse, by the csv module row by row.
+    """
     body = _read_text(p) if text is None else text
-    reader = csv.reader(io.StringIO(body), delimiter=delimiter)
+    plain = bool(body) and is_plain(body)
+    cut = body.find("\n") + 1
+    # a plain first line alone reads as it does from the whole text (no copy of it all)
+    reader = csv.reader([body[:cut] if cut else body] if plain else io.StringIO(body),
+                        delimiter=delimiter)
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
@@ -677,6 +686,12 @@ def _read_delimited(
             raise RecordingError(p, line_offset + 1, c,
                                  f"required column missing (header: {delimiter.join(header)})")
     idx = [header.index(c) for c in columns]
+    if plain:
+        values = parse_plain_rows(body, cut or len(body), delimiter, len(header), idx)
+        if values is not None:
+            return values
+        reader = csv.reader(io.StringIO(body), delimiter=delimiter)
+        next(reader)
     rows: list[list[float]] = []
     for k, row in enumerate(reader, start=2):
         if not row or all(not c.strip() for c in row):
