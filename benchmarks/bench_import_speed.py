@@ -14,8 +14,8 @@ process, with the code of ``REV`` (``git archive``) and of this tree:
         --accel-unit m/s2 --temp-unit C --time-unit s
     soakcal calibrate REC -o MODEL
 
-and prints wall time, user + system CPU time, peak RSS and exit code of each
-(``os.wait4``; a log too short to warm refuses ``calibrate`` with exit 2), and
+and prints wall time, user + system CPU time, peak RSS (GNU ``/usr/bin/time``) and exit
+code of each (a log too short to warm refuses ``calibrate`` with exit 2), and
 whether the two trees wrote the same bytes: the recording, the import's summary (its
 output path aside), the calibrate report and the model (its ``created_utc`` aside).
 One process at a time (``--jobs`` is accepted for uniformity and must be 1).
@@ -30,12 +30,12 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+TIME = "/usr/bin/time"  # GNU time: -f "%e %U %S %M"
 FS_HZ = 1000.0
 G_M_S2 = 9.80665
 
@@ -56,21 +56,20 @@ def write_log(path: Path, n: int) -> None:
 
 
 def timed(code: Path, argv: list[str], cwd: Path) -> dict[str, object]:
-    """Run ``argv`` under ``code`` and measure it with ``os.wait4`` (CPU time, peak RSS)."""
+    """Run ``argv`` under ``code``, measured by GNU time (wall, user + system CPU, peak RSS).
+
+    Not ``os.wait4`` from here: a child's peak RSS starts at this process's own (the
+    kernel keeps the high-water mark across fork and exec), which is the size of the
+    2.4 M-row log's arrays after writing it."""
     env = {**os.environ, "PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
-    t0 = time.perf_counter()
-    with tempfile.TemporaryFile("w+") as fout, tempfile.TemporaryFile("w+") as ferr:
-        proc = subprocess.Popen([sys.executable, "-m", "service.cli", *argv], cwd=cwd,
-                                env=env, stdout=fout, stderr=ferr)
-        _, status, usage = os.wait4(proc.pid, 0)
-        wall = time.perf_counter() - t0
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        fout.seek(0)
-        ferr.seek(0)
-        out, err = fout.read(), ferr.read()
-    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
-            "peak_mb": usage.ru_maxrss / 1024.0, "rc": proc.returncode, "stdout": out,
-            "stderr": err}
+    with tempfile.NamedTemporaryFile("r", suffix=".time") as tfile:
+        proc = subprocess.run([TIME, "-f", "%e %U %S %M", "-o", tfile.name, sys.executable,
+                               "-m", "service.cli", *argv], cwd=cwd, env=env,
+                              capture_output=True, text=True)
+        wall, user, system, peak_kb = tfile.read().split()[-4:]
+    return {"wall_s": float(wall), "cpu_s": float(user) + float(system),
+            "peak_mb": int(peak_kb) / 1024.0, "rc": proc.returncode, "stdout": proc.stdout,
+            "stderr": proc.stderr}
 
 
 def checkout(rev: str, dest: Path) -> Path:
