@@ -1,7 +1,7 @@
 """``soakcal import`` and ``soakcal calibrate`` of a real-size thermal log: time and memory.
 
     python benchmarks/bench_import_speed.py --before-rev REV [--rows 2400000,100000]
-        [--work DIR] [--jobs 1]
+        [--dataflash-rows N] [--work DIR] [--jobs 1]
 
 Issue 20 ("Speed"): a PX4/ArduPilot thermal-calibration log is a board warmed for
 30–60 min with the accelerometer logged at 0.4–1 kHz. For each row count this writes
@@ -18,6 +18,8 @@ and prints wall time, user + system CPU time, peak RSS (GNU ``/usr/bin/time``) a
 code of each (a log too short to warm refuses ``calibrate`` with exit 2), and
 whether the two trees wrote the same bytes: the recording, the import's summary (its
 output path aside), the calibrate report and the model (its ``created_utc`` aside).
+With ``--dataflash-rows N``, also ``soakcal import --format dataflash`` of an N-message
+``IMU`` log (1 kHz, written by ``tests/calibration/log_writers.py``) before and after.
 One process at a time (``--jobs`` is accepted for uniformity and must be 1).
 """
 
@@ -100,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rows", default="2400000,100000", help="row counts, comma-separated")
     ap.add_argument("--work", type=Path, default=None, help="scratch folder (default: temp)")
     ap.add_argument("--jobs", type=int, default=1, help="must be 1: one process at a time")
+    ap.add_argument("--dataflash-rows", type=int, default=0,
+                    help="also import an ArduPilot DataFlash log of this many IMU messages")
     args = ap.parse_args(argv)
     if args.jobs != 1:
         ap.error("--jobs must be 1: the figures are of one process at a time")
@@ -109,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"before = {args.before_rev}, after = this tree; work folder {work}")
     print("| rows | command | code | wall s | CPU s | peak RSS MB | exit |")
     print("|---|---|---|---|---|---|---|")
-    for n in (int(x) for x in args.rows.split(",")):
+    for n in (int(x) for x in args.rows.split(",") if x):
         log = work / f"log_{n}.csv"
         if not log.exists():
             write_log(log, n)
@@ -141,7 +145,32 @@ def main(argv: list[str] | None = None) -> int:
         differ = [k for k in outputs["before"] if k not in same]
         print(f"\n{n:,} rows: identical before/after: {', '.join(same) or 'nothing'}"
               + (f"; DIFFERENT: {', '.join(differ)}" if differ else "") + "\n")
+    if args.dataflash_rows:
+        dataflash(trees, work, args.dataflash_rows)
     return 0
+
+
+def dataflash(trees: dict[str, Path], work: Path, n: int) -> None:
+    """``soakcal import --format dataflash`` of an ``n``-message IMU log (1 kHz, ArduPilot
+    4.x layout, written by the importer tests' own writer) before and after."""
+    sys.path.insert(0, str(ROOT))
+    from tests.calibration.log_writers import warmup_samples, write_dataflash
+
+    log = work / f"log_{n}.bin"
+    if not log.exists():
+        write_dataflash(log, *warmup_samples(n=n, rate_hz=1000.0))
+    outputs = {}
+    print("| messages | command | code | wall s | CPU s | peak RSS MB | exit |")
+    print("|---|---|---|---|---|---|---|")
+    for name, code in trees.items():
+        rec = work / f"rec_df_{n}_{name}.csv"
+        r = timed(code, ["import", "--format", "dataflash", str(log), "-o", str(rec)], work)
+        print(f"| {n:,} | import --format dataflash | {name} | {r['wall_s']:.1f} | "
+              f"{r['cpu_s']:.1f} | {r['peak_mb']:.0f} | {r['rc']} |", flush=True)
+        outputs[name] = (hashlib.sha256(rec.read_bytes()).hexdigest(),
+                         str(r["stdout"]).replace(rec.name, "REC"))
+    print(f"\n{n:,} DataFlash messages: recording and summary identical before/after: "
+          f"{outputs['before'] == outputs['after']}")
 
 
 if __name__ == "__main__":
