@@ -62,39 +62,73 @@ def head_lines(text: str, max_lines: int, confirm_lines: int) -> tuple[str, list
 
 
 def parse_plain_rows(
-    text: str, start: int, delimiter: str, n_cells: int, usecols: Sequence[int]
+    text: str, start: int, delimiter: str, n_cells: int, usecols: Sequence[int],
+    *, empty_is_nan: int | None = None,
 ) -> np.ndarray | None:
     """The ``usecols`` cells of the data rows ``text[start:]`` as a (rows, len(usecols))
     float array, or ``None`` when the per-cell reader must decide (see the module
     docstring). ``text`` must be :func:`is_plain`; trailing blank lines are ignored, as
-    the per-cell reader skips them."""
-    end = len(text.rstrip("\n"))
+    the per-cell reader skips them.
+
+    ``empty_is_nan`` (an index into ``usecols``): that column's empty cells are NaN ("not
+    recorded", as a temperature logged at a lower rate than the acceleration leaves
+    them), as the per-cell reader reads them. Then the rows' empty cells are written
+    ``nan`` before numpy reads them, provided the text has no letter n anywhere (so no
+    ``nan`` or ``inf`` of its own, which the per-cell reader refuses), and a NaN in
+    any other column (an empty cell there) leaves the table to the per-cell reader."""
+    end = len(text)
+    while end > start and text[end - 1] == "\n":  # not text.rstrip(): a copy of it all
+        end -= 1
     if n_cells < 2 or end <= start or len(delimiter) != 1:
+        return None
+    fill = empty_is_nan is not None and _has_empty_cell(text, start, end, delimiter)
+    if fill and (text.find("n", start, end) >= 0 or text.find("N", start, end) >= 0):
         return None
     try:
         values = np.loadtxt(
-            _checked_lines(text, start, end, delimiter, n_cells - 1), delimiter=delimiter,
-            comments=None, quotechar=None, usecols=list(usecols), dtype=float, ndmin=2)
+            _checked_lines(text, start, end, delimiter, n_cells - 1, fill=fill),
+            delimiter=delimiter, comments=None, quotechar=None, usecols=list(usecols),
+            dtype=float, ndmin=2)
     except (_Decline, ValueError):
         return None
-    if not np.isfinite(values).all():
+    finite = np.isfinite(values)
+    if fill:
+        finite[:, empty_is_nan] |= np.isnan(values[:, empty_is_nan])
+    if not finite.all():
         return None  # "nan", "inf", "1e999": the per-cell reader names line and column
     return values
 
 
+def _has_empty_cell(text: str, start: int, end: int, delimiter: str) -> bool:
+    d = delimiter
+    return (text.startswith(d, start) or text.endswith(d, start, end)
+            or any(text.find(p, start, end) >= 0 for p in (d + d, "\n" + d, d + "\n")))
+
+
+def _fill_empty(block: str, delimiter: str) -> str:
+    """Each empty cell of the rows of ``block`` written ``nan``."""
+    d = delimiter
+    b = ("\n" + block + "\n").replace("\n" + d, "\nnan" + d).replace(d + "\n", d + "nan\n")
+    while d + d in b:
+        b = b.replace(d + d, d + "nan" + d)
+    return b[1:-1]
+
+
 def _checked_lines(
-    text: str, start: int, end: int, delimiter: str, n_delimiters: int
+    text: str, start: int, end: int, delimiter: str, n_delimiters: int, *, fill: bool
 ) -> Iterator[str]:
-    """The lines of ``text[start:end]``, a block at a time; raises :class:`_Decline` on a
-    blank line or a line with another number of cells (the per-cell reader skips the
-    first and refuses the second, naming its line)."""
+    """The lines of ``text[start:end]``, a block at a time (empty cells written ``nan``
+    when ``fill``); raises :class:`_Decline` on a blank line or a line with another
+    number of cells (the per-cell reader skips the first and refuses the second, naming
+    its line)."""
     count = operator.methodcaller("count", delimiter)
     pos = start
     while pos < end:
         cut = text.find("\n", min(pos + BLOCK_CHARS, end), end)
         cut = end if cut < 0 else cut
-        lines = text[pos:cut].split("\n")
+        block = text[pos:cut]
+        lines = block.split("\n")
         if not all(lines) or set(map(count, lines)) != {n_delimiters}:
             raise _Decline
-        yield from lines
+        yield from (_fill_empty(block, delimiter).split("\n") if fill else lines)
         pos = cut + 1

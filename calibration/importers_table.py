@@ -145,7 +145,8 @@ def read_table(
     data = None
     if plain:  # numpy's C reader; None where the per-cell reader must decide
         data = parse_plain_rows(text, (cut or len(text)) if has_header else 0, delim,
-                                len(header), idx)
+                                len(header), idx,
+                                empty_is_nan=wanted.index("temp") if has_temp else None)
     if data is None:
         data = _parse_cells(p, text, delim, header, wanted, idx, first_line=first_line,
                             has_header=has_header)

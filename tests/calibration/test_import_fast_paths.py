@@ -99,7 +99,7 @@ def test_banner_and_no_header_take_the_fast_path_and_match(tmp_path):
 
 
 @pytest.mark.parametrize("cell,line_error", [
-    ("nan", True), ("inf", True), ("1e999", True), ("2_5", False), ("", False),
+    ("nan", True), ("inf", True), ("1e999", True), ("2_5", False), (" ", False),
     ("x", True), ('"1.5"', False), ("\u0661", False), ("1 2", True), ("\x0c1", False),
 ])
 def test_what_the_fast_path_declines_is_read_or_refused_by_the_per_cell_reader(
@@ -111,6 +111,40 @@ def test_what_the_fast_path_declines_is_read_or_refused_by_the_per_cell_reader(
     assert (out[0] == "error") == line_error
     if line_error:
         assert "d.csv:9:" in out[1] and "temp_c" in out[1]
+
+
+def test_empty_temperature_cells_take_the_fast_path_and_match(tmp_path):
+    """A temperature logged at a tenth of the acceleration's rate: its other cells empty."""
+    rows = _rows(200, np.random.default_rng(13))
+    for i, row in enumerate(rows):
+        if i % 10:
+            row[4] = ""
+    rows[0][0], rows[5][5] = "0", ""  # an empty text cell too (not read)
+    out, answered = _both(_table(tmp_path / "e.csv", rows))
+    assert answered and out[0] == "ok"
+    temp = np.frombuffer(out[1][2], float)
+    assert np.isnan(temp).sum() == 180 and np.isfinite(temp[::10]).all()
+    # the last column: a trailing empty cell
+    last = [[r[0], r[1], r[2], r[3], r[5], r[4]] for r in rows]
+    out, answered = _both(_table(tmp_path / "f.csv", last, header="t_s,ax,ay,az,label,temp_c"))
+    assert answered and out[0] == "ok"
+
+
+@pytest.mark.parametrize("where", ["ax", "label with n"])
+def test_empty_cells_the_fast_path_leaves_to_the_per_cell_reader(tmp_path, where):
+    rows = _rows(50, np.random.default_rng(14))
+    for row in rows[::3]:
+        row[4] = ""
+    if where == "ax":
+        rows[31][1] = ""  # an empty acceleration cell: refused, naming its line
+    else:
+        rows[2][5] = "nan"  # a letter n in the text: its own "nan" could not be told apart
+    out, answered = _both(_table(tmp_path / "g.csv", rows))
+    assert not answered
+    if where == "ax":
+        assert out[0] == "error" and "g.csv:33:" in out[1] and "'ax'" in out[1]
+    else:
+        assert out[0] == "ok"
 
 
 @pytest.mark.parametrize("edit", ["blank line", "short row", "long row", "non-ascii label",
