@@ -231,7 +231,7 @@ def moving_variance(acc: np.ndarray, window_n: int) -> np.ndarray:
     Cumulative sums (of data minus its first sample, to avoid cancellation); the
     window shrinks at the ends instead of padding. One axis at a time, in place: the
     same numbers as whole-array arithmetic (a cumulative sum runs down each column
-    alone), a third of the temporaries (a 2.4 M-sample log: 400 MB less, issue 20).
+    alone), with a third of the temporaries (issue 20: a 2.4 M-sample log).
     """
     a = np.asarray(acc, float)
     n = a.shape[0]
