@@ -33,7 +33,7 @@ from typing import TextIO
 
 import numpy as np
 
-from calibration import importers, static_choice
+from calibration import importers
 from calibration.errors import CalibrationError
 from calibration.recording import Recording, write_recording
 
@@ -61,6 +61,9 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if raw_rows or block_s is not None:  # the intervals only feed the summary
             intervals = importers.find_intervals(raw, settings)
         else:
+            # Imported here: it brings the fit and scipy (1 s), which a log import never uses.
+            from calibration import static_choice
+
             # Threshold and trim by leave-one-interval-out error unless the flags fix them.
             fixed = frozenset(f for a, f in (("threshold", "threshold"), ("trim_s", "trim_s"))
                               if getattr(args, a, None) is not None)

@@ -34,6 +34,7 @@ from calibration.importers import (
     check_plausible,
     vet_die_temperature,
 )
+from calibration.importers_plain import head_lines, is_plain, parse_plain_rows
 
 ROLES: tuple[str, ...] = ("t", "ax", "ay", "az", "temp")
 DEFAULT_COLUMNS: dict[str, str] = {
@@ -93,7 +94,8 @@ def read_table(
         **DEFAULT_COLUMNS, **dict(columns)}
     _check_units(p, u)
     text = _read_text(p)
-    lines = text.splitlines()
+    # Only the leading lines: splitting a log of millions of rows cost 230 MB here.
+    head, lines = head_lines(text, BANNER_MAX_LINES, BANNER_CONFIRM_LINES)
     if not lines:
         raise RecordingError(p, 1, None, "empty file: expected a header row")
     notes: list[str] = []
@@ -102,14 +104,19 @@ def read_table(
         shown = ", ".join(repr(line[:BANNER_SHOWN_CHARS]) for line in lines[:skip])
         notes.append(f"{skip} leading line(s) skipped before the table (not rows of it: a "
                      f"banner, or a row cut short; they begin {shown})")
-        text = "".join(text.splitlines(keepends=True)[skip:])
+        text = text[sum(map(len, head.splitlines(keepends=True)[:skip])):]
+    del head
     delim = delimiter or _sniff(lines[skip])
-    reader = csv.reader(io.StringIO(text), delimiter=delim)
-    header = [h.strip() for h in next(reader)]
+    plain = is_plain(text)
+    if plain:  # the first line alone: csv reads it as it would read it from the whole text
+        cut = text.find("\n") + 1
+        header_row = next(csv.reader([text[:cut] if cut else text], delimiter=delim))
+    else:
+        header_row = next(csv.reader(io.StringIO(text), delimiter=delim))
+    header = [h.strip() for h in header_row]
     first_line = skip + 2
     if _all_numbers(header):
         # No header row: columns are named by their position, 1 first; the row is data.
-        reader = csv.reader(io.StringIO(text), delimiter=delim)
         header = [str(i) for i in range(1, len(header) + 1)]
         first_line = skip + 1
         notes.append(f"no header row: columns named by position 1..{len(header)}")
@@ -134,30 +141,26 @@ def read_table(
             raise RecordingError(p, 1, cmap[role], f"column missing (--columns {role}=NAME; "
                                  f"{where})")
     idx = [header.index(cmap[r]) for r in wanted]
-    rows: list[list[float]] = []
-    for line_no, row in enumerate(reader, start=first_line):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            raise RecordingError(p, line_no, None,
-                                 f"has {len(row)} cells, header has {len(header)}")
-        vals = []
-        for r, i in zip(wanted, idx, strict=True):
-            cell = row[i].strip()
-            # An empty temperature cell is "not recorded" (recording format), not an error.
-            empty_temp = r == "temp" and not cell
-            vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
-        rows.append(vals)
-    if not rows:
-        raise RecordingError(p, first_line, None, "no data rows after the header")
-    data = np.asarray(rows, float)
-    col = {r: data[:, k] for k, r in enumerate(wanted)}
+    has_header = first_line == skip + 2
+    data = None
+    if plain:  # numpy's C reader; None where the per-cell reader must decide
+        data = parse_plain_rows(text, (cut or len(text)) if has_header else 0, delim,
+                                len(header), idx,
+                                empty_is_nan=wanted.index("temp") if has_temp else None)
+    if data is None:
+        data = _parse_cells(p, text, delim, header, wanted, idx, first_line=first_line,
+                            has_header=has_header)
+    del text
+    # each column its own array: a view would keep the whole table alive with the temperature
+    col = {r: data[:, k].copy() for k, r in enumerate(wanted)}
+    n_rows = data.shape[0]
+    del data
     if "t" in col:
         _check_monotonic(p, col["t"], cmap["t"], first_line=first_line)
         t = (col["t"] - col["t"][0]) * TIME_UNITS[u.time]
     else:
         assert u.rate_hz is not None
-        t = np.arange(data.shape[0]) / u.rate_hz
+        t = np.arange(n_rows) / u.rate_hz
     acc_raw = np.column_stack([col["ax"], col["ay"], col["az"]])
     acc, acc_note = _to_g(acc_raw, u)
     notes.insert(0, acc_note)
@@ -174,6 +177,35 @@ def read_table(
     if why:
         raw = replace(raw, temp_c=vetted, notes=[*notes, why])
     return raw
+
+
+def _parse_cells(
+    p: str, text: str, delim: str, header: Sequence[str], wanted: Sequence[str],
+    idx: Sequence[int], *, first_line: int, has_header: bool,
+) -> np.ndarray:
+    """The per-cell reader: any table the csv module reads, and the error naming the line
+    and column for a row that is not one (cell count, a cell that is not a finite number;
+    an empty temperature cell is "not recorded", NaN)."""
+    reader = csv.reader(io.StringIO(text), delimiter=delim)
+    if has_header:
+        next(reader)
+    rows: list[list[float]] = []
+    for line_no, row in enumerate(reader, start=first_line):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise RecordingError(p, line_no, None,
+                                 f"has {len(row)} cells, header has {len(header)}")
+        vals = []
+        for r, i in zip(wanted, idx, strict=True):
+            cell = row[i].strip()
+            # An empty temperature cell is "not recorded" (recording format), not an error.
+            empty_temp = r == "temp" and not cell
+            vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
+        rows.append(vals)
+    if not rows:
+        raise RecordingError(p, first_line, None, "no data rows after the header")
+    return np.asarray(rows, float)
 
 
 def _check_units(p: str, u: TableUnits) -> None:
