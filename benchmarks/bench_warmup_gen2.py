@@ -16,9 +16,9 @@ within the floor** when on every axis it is at or below the better peer plus 10 
 noise floor (the difference is then not measurable on this log). The floor here is the
 **oracle**: the log's noise alone (the logged samples less the generator's true output)
 scored the same way, what a perfect compensation would score; ``bench_warmup_peers``'
-own ``floor`` (two 5-s means of a held-out block, ÷ √2) is listed too, but the real
-vibration pool's slow part (it is a recording less its 10-s moving mean) makes
-neighbouring 5-s means anti-correlated, and that floor then reads high. A refusal (exit 2) is a
+own ``floor`` (two 5-s means of a held-out block, ÷ √2) is in the results too, but on
+these logs it also holds the uncompensated change of the bias over 5 s (a fast warm-up
+moves a 1 mg/°C part by a tenth of a mg in 5 s), so it reads high. A refusal (exit 2) is a
 **loss** when a peer compensates the log (the better peer halves the uncompensated
 error on some axis where it is at least twice the floor), otherwise *neutral* (nothing
 compensates it). Win rates come with a 95 % Wilson interval.
