@@ -159,3 +159,21 @@ def test_soakcal_import_reads_the_log_back_in_g(tmp_path, unit: str) -> None:
     np.testing.assert_allclose(rec.raw_g, d.acc_g, atol=1e-8)
     np.testing.assert_allclose(rec.columns["sensor_c"], d.temp_c, atol=1e-5)
     np.testing.assert_allclose(rec.t_s, d.t_s, atol=1e-5)
+
+
+def test_the_benchmark_verdicts_and_the_wilson_interval() -> None:
+    from benchmarks.bench_warmup_gen2 import verdict, wilson
+
+    lo, hi = wilson(0, 30)
+    assert lo == 0.0 and 0.10 < hi < 0.12  # the rule of three's neighbour
+    lo, hi = wilson(15, 30)
+    assert lo < 0.5 < hi and abs((lo + hi) / 2 - 0.5) < 1e-12
+    base = {"none": [1.0, 1.0, 1.0], "px4": [0.10, 0.2, 0.3], "ardupilot": [0.2, 0.1, 0.3],
+            "oracle": [0.1, 0.1, 0.1]}
+    assert verdict(base | {"soakcal": [0.1, 0.1, 0.3]})["outcome"] == "win"
+    assert verdict(base | {"soakcal": [0.105, 0.1, 0.3]})["outcome"] == "win-within-floor"
+    assert verdict(base | {"soakcal": [0.12, 0.1, 0.3]})["outcome"] == "loss"
+    assert verdict(base | {"soakcal": None})["outcome"] == "refused-loss"
+    # nothing compensates it: the better peer does not halve the uncompensated error
+    bad = base | {"px4": [0.9, 0.9, 0.9], "ardupilot": [0.8, 0.8, 0.8], "soakcal": None}
+    assert verdict(bad)["outcome"] == "refused-neutral"
