@@ -74,6 +74,7 @@ import numpy as np
 from calibration import sfem
 from calibration.captures import CAPTURE_BLOCK_S
 from calibration.gate import (
+    BIAS_TEMPCO_MAX_G_PER_C,
     GateRefusal,
     Orientations,
     check_warmup_residuals,
@@ -153,6 +154,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             f"{np.max(T):.2f} °C): too little to see a change of bias with temperature; "
             f"record while the temperature changes by a few °C, or at least 10 distinct "
             f"orientations per step for an SFEM fit")
+    orientations, joined_note = _joined_by_drift(captures.t_s, T, raw, orientations)
     _check_connected(T, orientations)
     centre = 0.5 * (lo + hi)
     scale = max(0.5 * (hi - lo), 1.0)
@@ -279,7 +281,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
              f"by held-out error over {_block_count(T)} equal temperature blocks (interior "
              f"blocks alternately held out, the two ends always fitted: an interpolation); "
              f"valid range = the data's span",
-             *notes_absolute]
+             *([joined_note] if joined_note else []), *notes_absolute]
     temperature_rate = None
     if use_rate:
         temperature_rate = {
@@ -566,6 +568,72 @@ def _common_span_c(T: np.ndarray, orientations: Orientations) -> float:
     lows = [float(np.min(T[orientations.labels == o])) for o in range(k)]
     highs = [float(np.max(T[orientations.labels == o])) for o in range(k)]
     return min(highs) - max(lows)
+
+
+def _joined_by_drift(t_s: np.ndarray, T: np.ndarray, raw_g: np.ndarray,
+                     orientations: Orientations) -> tuple[Orientations, str | None]:
+    """One placement whose direction drifts with temperature, split by the clustering,
+    joined back; and a note saying so (None when nothing was joined).
+
+    The gate clusters directions by leader clustering within a fixed angle (2° or the
+    noise's): a board resting at one orientation while its bias changes by tens of mg
+    (a consumer part at 1-2 mg/°C over a 30 °C warm-up: 30-60 mg, 2-3.5°) drifts out of
+    its first cluster and is counted as several orientations, each with its own unknown
+    gravity constant, which takes the bias change between them away from the fit (or
+    refuses the log as orientations at separate temperatures). A re-placement of the
+    board is a jump between the captures before and after it; a bias drift is not.
+    Clusters are joined where two captures consecutive in time fall in different
+    clusters with directions within the clustering angle of each other (no jump), and
+    only when the clusters' directions differ by no more than the clustering angle plus
+    what a bias tempco of :data:`~calibration.gate.BIAS_TEMPCO_MAX_G_PER_C` on two axes
+    could turn the reading through over the two clusters' temperature span (a slow
+    tilt beyond that is not a bias change, and stays split).
+    """
+    k = orientations.count
+    if k < 2:
+        return orientations, None
+    labels = orientations.labels
+    norm = np.linalg.norm(raw_g, axis=1)
+    u = raw_g / np.where(norm > 0, norm, 1.0)[:, None]
+    order = np.argsort(t_s, kind="stable")
+    la, uo = labels[order], u[order]
+    thr = np.radians(orientations.threshold_deg)
+    g = float(np.median(norm))
+    parent = list(range(k))
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    step = np.arccos(np.clip(np.sum(uo[1:] * uo[:-1], axis=1), -1.0, 1.0))
+    for i in np.flatnonzero((la[1:] != la[:-1]) & (step <= thr)):
+        a, b = root(int(la[i])), root(int(la[i + 1]))
+        if a == b:
+            continue
+        members = np.flatnonzero(np.isin([root(j) for j in range(k)], [a, b]))
+        span_c = float(np.ptp(T[np.isin(labels, members)]))
+        allowed = thr + np.sqrt(2.0) * BIAS_TEMPCO_MAX_G_PER_C * span_c / max(g, 1e-9)
+        dirs = orientations.directions[members]
+        if np.arccos(np.clip(np.min(dirs @ dirs.T), -1.0, 1.0)) <= allowed:
+            parent[b] = a
+    roots = np.array([root(j) for j in range(k)])
+    if np.unique(roots).size == k:
+        return orientations, None
+    new_id = {r: i for i, r in enumerate(np.unique(roots))}
+    joined = np.array([new_id[r] for r in roots])[labels]
+    m = len(new_id)
+    sums = np.zeros((m, 3))
+    np.add.at(sums, joined, u)
+    dirs = sums / np.linalg.norm(sums, axis=1, keepdims=True)
+    merged = Orientations(joined, dirs, np.bincount(joined, minlength=m),
+                          orientations.threshold_deg)
+    note = (f"{k} direction clusters ({orientations.names()}) joined into {m} "
+            f"orientation(s) ({merged.names()}): the direction drifts continuously with "
+            f"the temperature, with no jump between consecutive captures (a bias change "
+            f"of the resting board, not a re-placement)")
+    return merged, note
 
 
 def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
