@@ -244,24 +244,28 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
     gate.check_model(wf.model, captures)
+    # the orientations the fit used: a drifting board's clusters joined (warmup.py)
+    orientations = wf.orientations or decided.orientations
+    reason = decided.reason if wf.joined_note is None else (
+        f"{decided.reason}; the fit joins them: {wf.joined_note}")
     if wf.absolute is not None and wf.absolute.capture_residual_g.size:
-        gate.check_warmup_residuals(wf.absolute.capture_residual_g, decided.orientations,
+        gate.check_warmup_residuals(wf.absolute.capture_residual_g, orientations,
                                     wf.absolute.names + tuple(wf.absolute.loose))
     wf.model.notes[:0] = capture_notes
-    wf.report["notes"][:0] = capture_notes + [decided.reason]
+    wf.report["notes"][:0] = capture_notes + [reason]
     model = wf.model
     T = captures.temperature_c()
     comp = captures.raw_g - model.params_vector_at(T, extrapolate=True)[:, sfem.BIAS]
-    labels = decided.orientations.labels
-    means = np.zeros((decided.orientations.count, 3))
+    labels = orientations.labels
+    means = np.zeros((orientations.count, 3))
     np.add.at(means, labels, comp)
     means /= np.bincount(labels, minlength=means.shape[0])[:, None]
     residuals = (comp - means[labels]) * 1e6
     _add_norm_figures(wf.report, captures.raw_g, model.compensate(captures.raw_g, T, True), T,
                       g_local, labels)
     return CalibrationFit(
-        kind="warmup", mode="warmup", method="warmup", reason=decided.reason,
-        orientations=decided.orientations.count, model=model, parameters=parameters(model),
+        kind="warmup", mode="warmup", method="warmup", reason=reason,
+        orientations=orientations.count, model=model, parameters=parameters(model),
         fitted=dict(model.fitted), held=dict(model.held), valid_c=model.valid_c,
         rmse_ug=float(np.sqrt(np.mean(residuals**2))), residuals_ug=residuals,
         converged=True, message="linear least squares (closed form)", nfev=0,

@@ -127,6 +127,9 @@ class WarmupFit:
     report: dict[str, Any]
     notes: list[str] = field(default_factory=list)
     absolute: AbsoluteFit | None = None  # what 2+ orientations determine absolutely
+    # the orientations fitted: the gate's clusters, those a drift connects joined
+    orientations: Orientations | None = None
+    joined_note: str | None = None  # how they were joined (None: as the gate found them)
 
 
 def fit_warmup(captures: Recording, orientations: Orientations,
@@ -343,7 +346,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     report["unexplained_note"] = scatter_note if scatter.beyond.any() else None
     report["rmse_meaning"] = norm_rmse_meaning(
         () if absolute is None else absolute.names)
-    return WarmupFit(model, report, notes, absolute)
+    return WarmupFit(model, report, notes, absolute, orientations, joined_note)
 
 
 def norm_rmse_meaning(absolute_names: tuple[str, ...]) -> str:

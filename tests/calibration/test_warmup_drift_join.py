@@ -49,6 +49,9 @@ def test_a_drifting_bias_is_one_orientation_and_its_change_is_fitted() -> None:
     result = fit(rec)
     assert result.kind == "warmup"
     assert result.report["orientations"] == 1
+    # what a person reads says the same: one orientation, joined from the clusters
+    assert result.orientations == 1
+    assert "the fit joins them" in result.reason and "joined into 1 orientation" in result.reason
     assert any("joined into 1 orientation" in n for n in result.report["notes"])
     change = result.report["bias_change_mg"]
     expected = (die.max() - die.min()) * TEMPCO_G_PER_C * 1e3
