@@ -435,6 +435,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # structure it was fitted to is reported as ``unexplained`` where it is.
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
     findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
+    terms, findings, after_turn = _shape_after_turn(pb, terms, findings, alpha, notes)
+    not_named += after_turn
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -753,6 +755,33 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
                   "position(s) " + ", ".join(str(p) for p in n["positions"]))
             notes.append(f"{n['effect']} not named at {at}: {n['why']}")
     return terms, findings, not_named
+
+
+def _shape_after_turn(pb: LinearProblem, terms: list[Term], findings: list[Finding],
+                      alpha: float, notes: list[str]
+                      ) -> tuple[list[Term], list[Finding], list[dict[str, Any]]]:
+    """Withdraw the named terms whose shape the data do not follow, judged after the turn
+    check (``CatalogueEffect.shape_after_turn``); as :func:`_physics_checks` returns."""
+    named = [f for f in findings if f.named_as_modelled and not f.rows
+             and BY_ID[f.effect].checks_shape_after_turn]
+    if not named:
+        return terms, findings, []
+    Xw, yw = _design(pb, terms)
+    U = stats.orthonormal_basis(Xw)
+    del Xw
+    e = yw - U @ (U.T @ yw)
+    out: list[dict[str, Any]] = []
+    gone: set[TermKey] = set()
+    for f in named:
+        place = BY_ID[f.effect].shape_after_turn(pb, U, e, f.axes, alpha)
+        if place is not None:
+            out.append({"effect": f.effect, **place, "p_value": f.p_value, "test": f.test})
+            gone |= f.term_keys
+            notes.append(f"{f.effect} not named at position(s) "
+                         f"{', '.join(str(p) for p in place['positions'])}: {place['why']}")
+    if gone:
+        terms, findings, _ = withdraw(terms, findings, gone)
+    return terms, findings, out
 
 
 def _inside_withdrawn_runs(pb: LinearProblem, terms: list[Term], findings: list[Finding],

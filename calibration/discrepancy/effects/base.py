@@ -68,6 +68,7 @@ class CatalogueEffect:
     # axes' inputs). It must then leave the same residual at every visit of the same
     # reference direction: :meth:`misses` tests that after selection (issue 10).
     input_only: bool = False
+    checks_shape_after_turn: bool = False  # True where shape_after_turn is implemented
     # Largest fraction of the term's norm² the base model may absorb before the term is
     # declared not identifiable here (stats.ABSORBED_MAX). A term that is by construction
     # mostly a re-map of the base's own terms (a temperature-channel step) is judged by the
@@ -134,6 +135,14 @@ class CatalogueEffect:
                                  "the residual differs between visits of the same reference "
                                  "direction (it depends on something else, e.g. the previous "
                                  "position)")}
+
+    def shape_after_turn(self, pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
+                         alpha: float) -> dict[str, Any] | None:
+        """Structure at this named finding's places that its shape does not follow, judged
+        after the turn check (``diagnose._turned_or_bent``: a finding that only turns the
+        reference is reported as a table turn first), with ``U``, ``e`` the model with the
+        term. Returns where (as :meth:`misses`) or None. Default: None."""
+        return None
 
     # --- words ------------------------------------------------------------
     def parameters(self, coef: np.ndarray, se: np.ndarray, theta: float,

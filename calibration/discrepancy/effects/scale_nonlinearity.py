@@ -166,8 +166,6 @@ def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
     """
     if pb.mode != "reference":
         return None
-    from calibration.discrepancy.effects.turntable_geometry import turn_columns
-
     ctx = pb.ctx
     ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
     levels = {a: input_levels(ctx.input_g[:, a]) for a in ax}
@@ -182,6 +180,24 @@ def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
                         "bend cannot be told from any other input dependence there, e.g. a "
                         "converter error confined to a band of codes (positions with more "
                         "input levels on those axes, such as oblique ones, tell them apart)")}
+    return direction_offsets_needed(pb, U, e, ax, alpha, "own-axis a² and a³ terms")
+
+
+def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[int, ...],
+                             alpha: float, term_words: str) -> dict[str, Any] | None:
+    """The place where a free offset per reference direction on axes ``ax`` is still
+    needed after the model (``U``, ``e``) and a turn of the reference, or None.
+
+    An input-only term (``term_words``: what its columns are) that describes the input
+    dependence leaves nothing there but noise (rejected with probability α); a converter
+    error confined to a band of codes, which such a term takes only a share of, does.
+    Reference mode only; at least 8 distinct directions.
+    """
+    if pb.mode != "reference":
+        return None
+    from calibration.discrepancy.effects.turntable_geometry import turn_columns
+
+    ctx = pb.ctx
     dirs = direction_ids(ctx.positions, ctx.input_g)
     n_dir = int(dirs.max()) + 1
     if n_dir < 8:  # the base's 4 columns and the bend's 2 per axis leave nothing to test
@@ -202,7 +218,7 @@ def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
     big = np.flatnonzero(per_dir >= 0.5 * per_dir.max())
     return {"positions": sorted({int(p) for p in ctx.positions[np.isin(dirs, big)]}),
             "axes": [AXES[a] for a in ax], "log10_p": round(float(lp / np.log(10)), 1),
-            "why": ("the output depends on the reference direction in a way own-axis a² and "
-                    "a³ terms do not follow (a free offset per direction is still needed "
+            "why": (f"the output depends on the reference direction in a way {term_words} "
+                    "do not follow (a free offset per direction is still needed "
                     "after them and a turn of the reference): e.g. a converter error "
                     "confined to a band of codes")}
