@@ -12,27 +12,17 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
-
 from calibration.discrepancy.diagnose import diagnose
 from calibration.discrepancy.report import text_report
-from simulators import effects as E  # noqa: N812 (as the other discrepancy tests)
-from simulators.campaign_sim import simulate_campaign
-from simulators.truth import SensorTruth
 
 ONE_WAY = [float(t) for t in range(-40, 61, 10)]
 # the module (the package re-exports its function under the same name)
 diagnose_mod = sys.modules["calibration.discrepancy.diagnose"]
 
 
-def _nonlinear():
-    truth = SensorTruth.adxl355_typical(
-        seed=1, effects=[E.ScaleNonlinearity(k2_per_g=np.array([0.0, 0.0, 80e-6]))])
-    return simulate_campaign(truth, setpoints_c=ONE_WAY, seed=11)
-
-
-def test_a_term_held_out_data_reject_leaves_a_mismatch_naming_its_candidate(monkeypatch):
-    rec = _nonlinear()
+def test_a_term_held_out_data_reject_leaves_a_mismatch_naming_its_candidate(monkeypatch,
+                                                                          nonlinear_recording):
+    rec = nonlinear_recording
     named = diagnose(rec, n_null=30, seed=1)
     assert named.findings[0].effect == "scale_nonlinearity"
     monkeypatch.setattr(diagnose_mod, "heldout_improved", lambda before, after: False)

@@ -16,18 +16,9 @@ import numpy as np
 from calibration.discrepancy.diagnose import Term, _outside_earlier_terms, diagnose
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.problem import build_problem
-from simulators import effects as E  # noqa: N812 (as the other discrepancy tests)
-from simulators.campaign_sim import simulate_campaign
-from simulators.truth import SensorTruth
 
 ONE_WAY = [float(t) for t in range(-40, 61, 10)]
 diagnose_mod = sys.modules["calibration.discrepancy.diagnose"]
-
-
-def _nonlinear():
-    truth = SensorTruth.adxl355_typical(
-        seed=1, effects=[E.ScaleNonlinearity(k2_per_g=np.array([0.0, 0.0, 80e-6]))])
-    return simulate_campaign(truth, setpoints_c=ONE_WAY, seed=11)
 
 
 def _term(pb, effect_id: str) -> Term:
@@ -36,8 +27,8 @@ def _term(pb, effect_id: str) -> Term:
     return Term(effect_id, theta, eff.regressors(pb.ctx, theta).reshape(pb.m, -1))
 
 
-def test_the_share_outside_earlier_terms_tells_a_copy_from_another_shape():
-    pb = build_problem(_nonlinear())
+def test_the_share_outside_earlier_terms_tells_a_copy_from_another_shape(nonlinear_recording):
+    pb = build_problem(nonlinear_recording)
     bend = _term(pb, "scale_nonlinearity")
     rng = np.random.default_rng(0)
     mix = rng.standard_normal((bend.X.shape[1], 3))
@@ -50,8 +41,9 @@ def test_the_share_outside_earlier_terms_tells_a_copy_from_another_shape():
     assert _outside_earlier_terms(pb, [], bend) == (1.0, None)
 
 
-def test_a_candidate_within_an_earlier_term_is_reported_not_added(monkeypatch):
-    rec = _nonlinear()
+def test_a_candidate_within_an_earlier_term_is_reported_not_added(monkeypatch,
+                                                                 nonlinear_recording):
+    rec = nonlinear_recording
     assert diagnose(rec, n_null=30, seed=1).findings[0].effect == "scale_nonlinearity"
     # the first candidate stands for "an earlier term"; every later one is within it
     calls = []
