@@ -15,7 +15,6 @@ import sys
 from calibration.discrepancy.diagnose import diagnose
 from calibration.discrepancy.report import text_report
 
-ONE_WAY = [float(t) for t in range(-40, 61, 10)]
 # the module (the package re-exports its function under the same name)
 diagnose_mod = sys.modules["calibration.discrepancy.diagnose"]
 

@@ -17,7 +17,6 @@ from calibration.discrepancy.diagnose import Term, _outside_earlier_terms, diagn
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.problem import build_problem
 
-ONE_WAY = [float(t) for t in range(-40, 61, 10)]
 diagnose_mod = sys.modules["calibration.discrepancy.diagnose"]
 
 
