@@ -105,10 +105,10 @@ def jump_inside_plateau(pb: Any, U: np.ndarray, e: np.ndarray, from_step: int,
     and the boundary off. Tested after the model (``U``, ``e``: the model with the jump):
     for each reading of the two plateaus with at least :data:`MIN_SIDE_READINGS` readings
     of its plateau before and after it, a per-axis offset of the readings between it and
-    the boundary (F test on the term's axes, after a trend in time on each of the two
-    plateaus), the smallest p Šidák-adjusted over those readings. A jump at the boundary
-    leaves nothing there but noise (rejected with probability α). Returns the place (the
-    two plateaus, the readings moved, log10 p).
+    the boundary (F test on the term's axes, after a per-axis slope in the plateau's own
+    temperature on each of the two plateaus), the smallest p Šidák-adjusted over those
+    readings. A jump at the boundary leaves nothing there but noise (rejected with
+    probability α). Returns the place (the two plateaus, the readings moved, log10 p).
     """
     from calibration.discrepancy.effects.structure import (
         extend,
@@ -133,15 +133,16 @@ def jump_inside_plateau(pb: Any, U: np.ndarray, e: np.ndarray, from_step: int,
             segments.append(rows[:i] if later else rows[i:])
     if not segments:
         return None
-    # A trend in time on either plateau (a settling die, a channel that ramps while the
-    # output does not) is in the model first: what is tested is a step beyond it.
-    trend = np.zeros((ctx.n, 3, 2 * len(ax)))
+    # What a temperature that moves within a plateau leaves (a settling die, a rate
+    # effect, a channel that ramps while the output does not) is in the model first: a
+    # per-axis slope in each plateau's own temperature. What is tested is a step beyond it.
+    within_t = np.zeros((ctx.n, 3, 2 * len(ax)))
     for i, step in enumerate((before, from_step)):
         rows = ctx.steps == step
-        dt = np.where(rows, ctx.t_s - ctx.t_s[rows].mean(), 0.0)
-        trend[:, :, i * len(ax):(i + 1) * len(ax)] = per_axis_indicator(
-            ctx.n, np.flatnonzero(rows), ax) * dt[:, None, None]
-    U, e = extend(U, e, whitened(pb, trend))
+        dT = np.where(rows, ctx.temp_c - ctx.temp_c[rows].mean(), 0.0)
+        within_t[:, :, i * len(ax):(i + 1) * len(ax)] = per_axis_indicator(
+            ctx.n, np.flatnonzero(rows), ax) * dT[:, None, None]
+    U, e = extend(U, e, whitened(pb, within_t))
     lps = np.array([log_p(U, e, whitened(pb, per_axis_indicator(ctx.n, seg, ax)))[0]
                     for seg in segments])
     j = int(np.argmin(lps))
