@@ -106,9 +106,10 @@ def jump_inside_plateau(pb: Any, U: np.ndarray, e: np.ndarray, from_step: int,
     for each reading of the two plateaus with at least :data:`MIN_SIDE_READINGS` readings
     of its plateau before and after it, a per-axis offset of the readings between it and
     the boundary (F test on the term's axes, after a per-axis slope in the plateau's own
-    temperature on each of the two plateaus), the smallest p Šidák-adjusted over those
-    readings. A jump at the boundary leaves nothing there but noise (rejected with
-    probability α). Returns the place (the two plateaus, the readings moved, log10 p).
+    temperature and one in time on each of the two plateaus), the smallest p
+    Šidák-adjusted over those readings. A jump at the boundary leaves nothing there but
+    noise (rejected with probability α). Returns the place (the two plateaus, the
+    readings moved, log10 p).
     """
     from calibration.discrepancy.effects.structure import (
         extend,
@@ -134,15 +135,18 @@ def jump_inside_plateau(pb: Any, U: np.ndarray, e: np.ndarray, from_step: int,
     if not segments:
         return None
     # What a temperature that moves within a plateau leaves (a settling die, a rate
-    # effect, a channel that ramps while the output does not) is in the model first: a
-    # per-axis slope in each plateau's own temperature. What is tested is a step beyond it.
-    within_t = np.zeros((ctx.n, 3, 2 * len(ax)))
+    # effect, a channel that ramps while the output does not), and a slow trend in time
+    # on it, are in the model first: per axis, a slope in each plateau's own temperature
+    # and one in time. What is tested is a step beyond both (a crack, not a settling).
+    k = len(ax)
+    within = np.zeros((ctx.n, 3, 4 * k))
     for i, step in enumerate((before, from_step)):
         rows = ctx.steps == step
-        dT = np.where(rows, ctx.temp_c - ctx.temp_c[rows].mean(), 0.0)
-        within_t[:, :, i * len(ax):(i + 1) * len(ax)] = per_axis_indicator(
-            ctx.n, np.flatnonzero(rows), ax) * dT[:, None, None]
-    U, e = extend(U, e, whitened(pb, within_t))
+        on = per_axis_indicator(ctx.n, np.flatnonzero(rows), ax)
+        for j, v in enumerate((ctx.temp_c, ctx.t_s)):
+            dv = np.where(rows, v - v[rows].mean(), 0.0)
+            within[:, :, (2 * i + j) * k:(2 * i + j + 1) * k] = on * dv[:, None, None]
+    U, e = extend(U, e, whitened(pb, within))
     lps = np.array([log_p(U, e, whitened(pb, per_axis_indicator(ctx.n, seg, ax)))[0]
                     for seg in segments])
     j = int(np.argmin(lps))
