@@ -220,7 +220,8 @@ def die_track_of(dies: Mapping[str, list[rate_gain.Probe]]) -> DieTrack | None:
 
 
 def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[float],
-                        process_c: float) -> tuple[DieTrack | None, str | None]:
+                        process_c: float, pv_rate_c_per_s: float = 0.0
+                        ) -> tuple[DieTrack | None, str | None]:
     """Do the dies (``dies_c``, °C, one per live sensor) agree with the chamber's PV?
     Returns the new track and None, or why not (DESIGN: plausibility at the boundaries).
 
@@ -232,6 +233,12 @@ def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[
     :data:`DIE_LAG_TAU_MAX_S` is a lag. Sensors without a temperature channel (non-finite
     ``dies_c``) say nothing and keep ``before``; the first reading with nothing before it
     only starts the track.
+
+    ``pv_rate_c_per_s``: how fast the PV itself moves (a ramp campaign's chamber never
+    stops). A die lags a moving air by up to that rate times its time constant, and at a
+    turn of the ramp a die behind a fixture still moves the old way while the gap grows:
+    a gap within :data:`DIE_PV_TOLERANCE_C` plus |rate| × :data:`DIE_LAG_TAU_MAX_S` is
+    lag. A ×10 scale or a unit error on a steady PV is still refused.
     """
     dies = [float(c) for c in dies_c if math.isfinite(float(c))]
     if not dies or not math.isfinite(process_c):
@@ -239,7 +246,8 @@ def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[
     die_c = float(np.median(dies))
     track = (now_s, die_c)
     gap_c = process_c - die_c
-    if abs(gap_c) <= DIE_PV_TOLERANCE_C or before is None or now_s <= before[0]:
+    lag_c = abs(pv_rate_c_per_s) * DIE_LAG_TAU_MAX_S if math.isfinite(pv_rate_c_per_s) else 0.0
+    if abs(gap_c) <= DIE_PV_TOLERANCE_C + lag_c or before is None or now_s <= before[0]:
         return track, None
     rate_c_per_s = (die_c - before[1]) / (now_s - before[0])
     if gap_c * rate_c_per_s > 0 and abs(rate_c_per_s) * DIE_LAG_TAU_MAX_S >= abs(gap_c):

@@ -143,6 +143,8 @@ class CampaignRunner:
         # The last die reading (clock s, median die °C): a die still approaching the air
         # explains a gap to the PV, a settled one does not (_check_die_against_chamber).
         self._die_track: tuple[float, float] | None = None
+        # The chamber's last PV at a capture (clock s, °C): how fast the air itself moves.
+        self._pv_track: tuple[float, float] | None = None
         # Clock time the campaign stood still (paused or suspended): never soak time, never
         # a ramp's, never in the ETA's measured durations (:meth:`_held_total_s`).
         self._held_s = 0.0
@@ -533,9 +535,16 @@ class CampaignRunner:
         """Refuse to store a capture whose dies disagree with the chamber's PV where no lag
         explains it (:func:`polls.die_against_chamber`): it would label every capture of
         the step with a wrong temperature, so the campaign fails before it is stored."""
+        now = self.clock.now()
+        pv_rate = 0.0
+        if self._pv_track is not None and now > self._pv_track[0]:
+            pv_rate = (status.process_c - self._pv_track[1]) / (now - self._pv_track[0])
+        if math.isfinite(status.process_c):
+            self._pv_track = (now, status.process_c)
         self._die_track, problem = polls.die_against_chamber(
-            self._die_track, self.clock.now(),
-            [r[0].sensor_c for r in readings.values() if r is not None], status.process_c)
+            self._die_track, now,
+            [r[0].sensor_c for r in readings.values() if r is not None], status.process_c,
+            pv_rate_c_per_s=pv_rate)
         if problem is not None:
             raise CampaignFailed(f"step {msg.step} ({msg.setpoint_c:g} °C) position "
                                  f"{msg.position}: {problem}")
@@ -642,6 +651,7 @@ class CampaignRunner:
         await self._run_plan(soak_until_stable(msg))
         self.rate_book.keep(self._pose, soak.dies)
         self._die_track = polls.die_track_of(soak.dies) or self._die_track
+        self._pv_track = None  # the air stood at its setpoint: its rate is nought, as before
         held_s = self._held_total_s() - soak.held0_s
         soak_s = polls.active_s(self.clock.now(), soak.start_s, self._held_total_s(),
                                 soak.held0_s)

@@ -23,6 +23,23 @@ def test_a_settled_die_far_from_the_pv_is_a_misread_chamber_an_approaching_one_a
     assert polls.die_against_chamber(track, 120.0, [float("nan")], 2.0) == (track, None)
 
 
+def test_a_die_behind_a_moving_air_is_a_lag_a_misread_steady_chamber_is_not() -> None:
+    """A ramp campaign's chamber never stops. At a turn of the ramp a die behind a fixture
+    still rises while the air falls away (7.8 °C apart, the die at −0.12 °C/min, as a
+    loaded 3000× run of the browser test saw): with the air moving at 1 °C/min that gap is
+    lag. The same gap with the air standing still is a chamber read wrong; a ×10 scale is
+    refused even on a moving air."""
+    before = (0.0, 38.0)
+    _, why = polls.die_against_chamber(before, 60.0, [37.88], 30.1)
+    assert why is not None and "the chamber reads 30.1 °C" in why
+    _, why = polls.die_against_chamber(before, 60.0, [37.88], 30.1,
+                                       pv_rate_c_per_s=-1.0 / 60.0)
+    assert why is None
+    _, why = polls.die_against_chamber(before, 60.0, [37.88], 301.0,
+                                       pv_rate_c_per_s=-1.0 / 60.0)
+    assert why is not None and "the chamber reads 301.0 °C" in why
+
+
 def test_a_ramp_arrives_with_setpoints_and_pv_and_is_bounded_by_twice_its_nominal_time() -> None:
     at = ChamberStatus(39.9, 40.0, 40.0, 1.0, True)
     assert polls.chamber_arrived(at, 40.0, tol_c=0.2)
