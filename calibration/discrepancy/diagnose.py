@@ -396,22 +396,25 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             # noise's units, as its test is: in µg the noisiest plateaus' own scatter decides
             # (issue 22: a turn at p = 1e-7 "worsened" a 50 µg held-out RMS by 0.07 µg).
             ok = _heldout_in_noise_units(pb, terms, term, fold_masks, excl_after)
+        # The model with the term, fitted once: the records and the finding below read it.
+        fitted = _fit(pb, terms + [term])[:2]
         if not ok:
             rejected.add(eff.effect_id)
             stage_log[-1]["rejected_heldout"] = [ho_before, ho_after]
             unconfirmed.append(_not_confirmed(pb, eff, term, terms, p_family, ho_before,
-                                              ho_after))
+                                              ho_after, fitted))
             continue
         # A term whose fit, beyond the base model, an earlier term almost wholly carries
         # cannot be told from it: fitted together the two cancel (issue 22: an ADC band
         # error read as a cube of each input "K3 = −364,500 µg/g³" beside a turn of each
         # table pose of 11,420 µrad). Not added; reported with the reason.
-        share, most = _outside_earlier_terms(pb, terms, term)
+        share, most = _outside_earlier_terms(
+            pb, terms, term, _term_coefficients(pb, terms + [term], term, fitted)[0])
         if share < MIN_SHARE_OUTSIDE_TERMS:
             rejected.add(eff.effect_id)
             stage_log[-1]["rejected_within"] = [most, share]
             unconfirmed.append(replace(
-                _not_confirmed(pb, eff, term, terms, p_family, ho_before, ho_after),
+                _not_confirmed(pb, eff, term, terms, p_family, ho_before, ho_after, fitted),
                 within=most, share_outside=share))
             continue
         res_before = _residual(pb, terms)
@@ -419,7 +422,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         res_after = _residual(pb, terms)
         findings.append(_finding(pb, eff, best, term, terms, tests, p_family,
                                  _rms(res_before, excl_before), _rms(res_after, excl_after),
-                                 ho_before, ho_after))
+                                 ho_before, ho_after, fitted))
         if close:
             unresolved[eff.effect_id] = close
         elif by_fit.rivals(best, tests, alpha):
@@ -470,7 +473,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # withdrawn since (a turn of the table beside a bend, say) may have shared its columns,
     # and the stale coefficients then cancel across the two (K3 = −3·10⁵ µg/g³ "± 49").
     # The named findings are stated in the model that is kept.
-    findings = [_restated(pb, terms, f) for f in findings]
+    findings = _restated(pb, terms, findings)
     # What the protocol separates: the effects still testable after the absorbed fractions.
     protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                        for e in effects})
@@ -750,11 +753,16 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
     not_named += runs
     if not_named:
         terms, findings, _ = withdraw(terms, findings, gone)
-        for n in not_named:
-            at = (f"reading {n['row']}" if "row" in n else
-                  "position(s) " + ", ".join(str(p) for p in n["positions"]))
-            notes.append(f"{n['effect']} not named at {at}: {n['why']}")
+        _note_not_named(not_named, notes)
     return terms, findings, not_named
+
+
+def _note_not_named(not_named: list[dict[str, Any]], notes: list[str]) -> None:
+    """A note per withdrawn term: where, and why its physics does not fit there."""
+    for n in not_named:
+        at = (f"reading {n['row']}" if "row" in n else
+              "position(s) " + ", ".join(str(p) for p in n["positions"]))
+        notes.append(f"{n['effect']} not named at {at}: {n['why']}")
 
 
 def _shape_after_turn(pb: LinearProblem, terms: list[Term], findings: list[Finding],
@@ -777,10 +785,9 @@ def _shape_after_turn(pb: LinearProblem, terms: list[Term], findings: list[Findi
         if place is not None:
             out.append({"effect": f.effect, **place, "p_value": f.p_value, "test": f.test})
             gone |= f.term_keys
-            notes.append(f"{f.effect} not named at position(s) "
-                         f"{', '.join(str(p) for p in place['positions'])}: {place['why']}")
     if gone:
         terms, findings, _ = withdraw(terms, findings, gone)
+        _note_not_named(out, notes)
     return terms, findings, out
 
 
@@ -1202,19 +1209,23 @@ def _rms(res_g: np.ndarray, flagged_rows: np.ndarray) -> float:
 
 
 def _not_confirmed(pb: LinearProblem, eff: CatalogueEffect, term: Term, terms: list[Term],
-                   p_family: float, ho_b: float, ho_a: float) -> not_confirmed.NotConfirmed:
-    """The record of a term held-out data did not confirm: where its fit acts."""
-    coef, se = _term_coefficients(pb, terms + [term], term)
+                   p_family: float, ho_b: float, ho_a: float,
+                   fitted: tuple[np.ndarray, np.ndarray]) -> not_confirmed.NotConfirmed:
+    """The record of a term held-out data did not confirm: where its fit acts
+    (``fitted``: the model ``terms + [term]``'s coefficients and covariance)."""
+    coef, se = _term_coefficients(pb, terms + [term], term, fitted)
     axes = ["norm"] if pb.mode == "norm" else list(eff.axes(coef, se))
     return not_confirmed.NotConfirmed(
         eff.effect_id, float(p_family), float(ho_b), float(ho_a), tuple(axes),
         where_of(pb, term.X @ coef, term.rows), term.X)
 
 
-def _outside_earlier_terms(pb: LinearProblem, terms: list[Term], term: Term
-                           ) -> tuple[float, str | None]:
-    """The share of ``term``'s fitted contribution (whitened, after the base model) that
-    the earlier ``terms`` cannot carry, and the earlier term that carries most of it.
+def _outside_earlier_terms(pb: LinearProblem, terms: list[Term], term: Term,
+                           coef: np.ndarray) -> tuple[float, str | None]:
+    """The share of ``term``'s fitted contribution (``coef``: its coefficients with the
+    earlier ``terms``; whitened, after the base model) that the earlier terms cannot carry,
+    and, when that share is below :data:`MIN_SHARE_OUTSIDE_TERMS`, the earlier term that
+    carries most of it.
 
     1 when the term is orthogonal to them; near 0 when its columns, beyond the base, lie
     within theirs: fitted together the two then cancel, each with coefficients far beyond
@@ -1223,8 +1234,7 @@ def _outside_earlier_terms(pb: LinearProblem, terms: list[Term], term: Term
     or on the row-block path (a tall recording)."""
     if not terms or _tall_rows(pb, terms + [term]) is not None:
         return 1.0, None
-    beta, _, _ = _fit(pb, terms + [term])
-    v = (term.X @ beta[-term.X.shape[1]:]) * pb.w
+    v = (term.X @ coef) * pb.w
 
     def left(X: np.ndarray) -> float:
         X = X * pb.w[:, None]
@@ -1236,15 +1246,18 @@ def _outside_earlier_terms(pb: LinearProblem, terms: list[Term], term: Term
     if base <= 0.0:
         return 1.0, None
     share = left(np.hstack([pb.X0] + [t.X for t in terms])) / base
+    if share >= MIN_SHARE_OUTSIDE_TERMS:
+        return share, None
     by_term = {t.effect_id: left(np.hstack([pb.X0, t.X])) for t in terms}
     return share, min(by_term, key=by_term.__getitem__)
 
 
-def _term_coefficients(pb: LinearProblem, terms: list[Term], term: Term
+def _term_coefficients(pb: LinearProblem, terms: list[Term], term: Term,
+                       fitted: tuple[np.ndarray, np.ndarray] | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
     """``term``'s fitted coefficients and standard errors in the model of ``terms`` (which
-    holds it)."""
-    beta, cov, _ = _fit(pb, terms)
+    holds it); ``fitted``: that model's (coefficients, covariance) when already fitted."""
+    beta, cov = fitted if fitted is not None else _fit(pb, terms)[:2]
     offset = pb.X0.shape[1]
     for t in terms:
         if t is term:
@@ -1255,15 +1268,23 @@ def _term_coefficients(pb: LinearProblem, terms: list[Term], term: Term
             np.sqrt(np.clip(np.diag(cov)[offset:offset + k], 0, None)))
 
 
-def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a) -> Finding:
-    coef, se = _term_coefficients(pb, terms, term)
-    contrib = term.X @ coef
+def _stated(pb: LinearProblem, eff: CatalogueEffect, term: Term, coef: np.ndarray,
+            se: np.ndarray) -> tuple[dict[str, float], dict[str, float], list[str]]:
+    """What a finding states of its term's fit: parameters, their sd, the axes."""
     params, sd = eff.parameters(coef, se, term.theta, pb.ctx)
     if eff.continuous and eff.theta_name:
         sd[eff.theta_name] = term.theta_sd
     axes = eff.axes(coef, se)
     if pb.mode == "norm" and eff.per_reading:
         axes = ["norm"]  # a |g| residual has no axis
+    return params, sd, axes
+
+
+def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a,
+             fitted=None) -> Finding:
+    coef, se = _term_coefficients(pb, terms, term, fitted)
+    contrib = term.X @ coef
+    params, sd, axes = _stated(pb, eff, term, coef, se)
     conf = []
     for c in eff.confusers:
         if c in tests:
@@ -1279,24 +1300,26 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
     )
 
 
-def _restated(pb: LinearProblem, terms: list[Term], f: Finding) -> Finding:
-    """A named finding's parameters, axes and sentence in the model of ``terms`` (which
-    holds its term); any other finding as it is."""
-    if not f.named_as_modelled or f.effect not in BY_ID:
-        return f
-    term = next((t for t in terms if t.key in f.term_keys), None)
-    if term is None:
-        return f
-    eff = BY_ID[f.effect]
-    coef, se = _term_coefficients(pb, terms, term)
-    params, sd = eff.parameters(coef, se, term.theta, pb.ctx)
-    if eff.continuous and eff.theta_name:
-        sd[eff.theta_name] = term.theta_sd
-    axes = eff.axes(coef, se)
-    if pb.mode == "norm" and eff.per_reading:
-        axes = ["norm"]
-    return replace(f, axes=axes, parameters=_round(params), parameter_sd=_round(sd),
-                   explanation=_sentence(eff, params, sd, axes, pb.ctx))
+def _restated(pb: LinearProblem, terms: list[Term], findings: list[Finding]
+              ) -> list[Finding]:
+    """The named findings' parameters, axes and sentences in the model of ``terms`` (one
+    fit of it); any other finding, or one whose term is not there, as it is."""
+    fitted: tuple[np.ndarray, np.ndarray] | None = None
+    out = []
+    for f in findings:
+        term = (next((t for t in terms if t.key in f.term_keys), None)
+                if f.named_as_modelled and f.effect in BY_ID else None)
+        if term is None:
+            out.append(f)
+            continue
+        if fitted is None:
+            fitted = _fit(pb, terms)[:2]
+        eff = BY_ID[f.effect]
+        coef, se = _term_coefficients(pb, terms, term, fitted)
+        params, sd, axes = _stated(pb, eff, term, coef, se)
+        out.append(replace(f, axes=axes, parameters=_round(params), parameter_sd=_round(sd),
+                           explanation=_sentence(eff, params, sd, axes, pb.ctx)))
+    return out
 
 
 def _sentence(eff: CatalogueEffect, params, sd, axes, ctx) -> str:

@@ -34,7 +34,7 @@ def test_a_named_finding_is_restated_after_a_term_that_shared_its_columns_is_wit
     rng = np.random.default_rng(0)
     rival = Term("cross_coupling", float("nan"), X + 1e-3 * rng.standard_normal(X.shape) * X.std())
     stale = _finding(pb, eff, None, term, [term, rival], {}, 1e-9, 1.0, 1.0, 1.0, 1.0)
-    kept = _restated(pb, [term], stale)
+    (kept,) = _restated(pb, [term], [stale])
     coef, _ = _term_coefficients(pb, [term], term)
     k2_z = coef[2] * 1e6
     assert abs(kept.parameters["k2_z_ug_per_g2"] - k2_z) <= 1e-3 * abs(k2_z)
@@ -42,4 +42,4 @@ def test_a_named_finding_is_restated_after_a_term_that_shared_its_columns_is_wit
     assert abs(stale.parameters["k2_z_ug_per_g2"] - k2_z) > 5.0
     assert f"{kept.parameters['k2_z_ug_per_g2']:.0f}" in kept.explanation.replace(" ", "")
     # a finding whose term is not in the model, or not named as its term, is left as it is
-    assert _restated(pb, [rival], stale) is stale
+    assert _restated(pb, [rival], [stale])[0] is stale

@@ -13,11 +13,22 @@ import sys
 
 import numpy as np
 
-from calibration.discrepancy.diagnose import Term, _outside_earlier_terms, diagnose
+from calibration.discrepancy.diagnose import (
+    Term,
+    _outside_earlier_terms,
+    _term_coefficients,
+    diagnose,
+)
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.problem import build_problem
 
 diagnose_mod = sys.modules["calibration.discrepancy.diagnose"]
+
+
+def _share(pb, earlier: list[Term], term: Term):
+    """The share outside ``earlier``, with ``term``'s coefficients fitted beside them."""
+    return _outside_earlier_terms(pb, earlier, term,
+                                  _term_coefficients(pb, earlier + [term], term)[0])
 
 
 def _term(pb, effect_id: str) -> Term:
@@ -33,11 +44,11 @@ def test_the_share_outside_earlier_terms_tells_a_copy_from_another_shape(nonline
     mix = rng.standard_normal((bend.X.shape[1], 3))
     copy = Term("cross_coupling", float("nan"),
                 bend.X @ mix + 1e-4 * bend.X.std() * rng.standard_normal((pb.m, 3)))
-    share, most = _outside_earlier_terms(pb, [bend], copy)
+    share, most = _share(pb, [bend], copy)
     assert share < 0.01 and most == "scale_nonlinearity"
-    share, most = _outside_earlier_terms(pb, [bend], _term(pb, "bias_drift"))
+    share, most = _share(pb, [bend], _term(pb, "bias_drift"))
     assert share > 0.5
-    assert _outside_earlier_terms(pb, [], bend) == (1.0, None)
+    assert _share(pb, [], bend) == (1.0, None)
 
 
 def test_a_candidate_within_an_earlier_term_is_reported_not_added(monkeypatch,
@@ -47,7 +58,7 @@ def test_a_candidate_within_an_earlier_term_is_reported_not_added(monkeypatch,
     # the first candidate stands for "an earlier term"; every later one is within it
     calls = []
 
-    def within(pb, terms, term):
+    def within(pb, terms, term, coef):
         calls.append(term.effect_id)
         return 0.0, "turntable_geometry"
 

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, CatalogueEffect, axis_params, fmt_pm, per_axis
 
@@ -150,9 +151,7 @@ def jump_inside_plateau(pb: Any, U: np.ndarray, e: np.ndarray, from_step: int,
     lps = np.array([log_p(U, e, whitened(pb, per_axis_indicator(ctx.n, seg, ax)))[0]
                     for seg in segments])
     j = int(np.argmin(lps))
-    # Šidák over the readings tried: 1 − (1 − p)^k, in logs (p may be far below 1e-16)
-    lp_adj = float(np.log(-np.expm1(len(segments) * np.log1p(-min(np.exp(lps[j]), 1 - 1e-16))))
-                   if lps[j] > -30 else lps[j] + np.log(len(segments)))
+    lp_adj = float(stats.sidak_log(lps[j], len(segments)))  # over the readings tried
     if lp_adj > np.log(alpha):
         return None
     seg = segments[j]
