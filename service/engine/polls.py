@@ -220,7 +220,7 @@ def die_track_of(dies: Mapping[str, list[rate_gain.Probe]]) -> DieTrack | None:
 
 
 def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[float],
-                        process_c: float, pv_rate_c_per_s: float = 0.0
+                        process_c: float, pv_before: DieTrack | None = None
                         ) -> tuple[DieTrack | None, str | None]:
     """Do the dies (``dies_c``, °C, one per live sensor) agree with the chamber's PV?
     Returns the new track and None, or why not (DESIGN: plausibility at the boundaries).
@@ -234,9 +234,11 @@ def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[
     ``dies_c``) say nothing and keep ``before``; the first reading with nothing before it
     only starts the track.
 
-    ``pv_rate_c_per_s``: how fast the PV itself moves (a ramp campaign's chamber never
-    stops). A die lags a moving air by up to that rate times its time constant, and at a
-    turn of the ramp a die behind a fixture still moves the old way while the gap grows:
+    ``pv_before``: the PV at the previous capture (clock s, °C; None after a soak, where
+    the air stood at its setpoint), for how fast the PV itself moves (a ramp campaign's
+    chamber never stops). A die lags a moving air by up to that rate times its time
+    constant, and at a turn of the ramp a die behind a fixture still moves the old way
+    while the gap grows:
     a gap within :data:`DIE_PV_TOLERANCE_C` plus |rate| × :data:`DIE_LAG_TAU_MAX_S` is
     lag. A ×10 scale or a unit error on a steady PV is still refused.
     """
@@ -246,10 +248,12 @@ def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[
     die_c = float(np.median(dies))
     track = (now_s, die_c)
     gap_c = process_c - die_c
-    lag_c = abs(pv_rate_c_per_s) * DIE_LAG_TAU_MAX_S if math.isfinite(pv_rate_c_per_s) else 0.0
+    lag_c = 0.0
+    if pv_before is not None and now_s > pv_before[0] and math.isfinite(pv_before[1]):
+        lag_c = abs(_rate_c_per_s(pv_before, now_s, process_c)) * DIE_LAG_TAU_MAX_S
     if abs(gap_c) <= DIE_PV_TOLERANCE_C + lag_c or before is None or now_s <= before[0]:
         return track, None
-    rate_c_per_s = (die_c - before[1]) / (now_s - before[0])
+    rate_c_per_s = _rate_c_per_s(before, now_s, die_c)
     if gap_c * rate_c_per_s > 0 and abs(rate_c_per_s) * DIE_LAG_TAU_MAX_S >= abs(gap_c):
         return track, None  # still approaching the air: a lag, not a mis-read chamber
     return track, (
@@ -258,3 +262,8 @@ def die_against_chamber(before: DieTrack | None, now_s: float, dies_c: Sequence[
         "not stored: the chamber's temperature is likely read with a wrong scale (decimal "
         "places), unit (°F, K) or offset in its register map — `soakcal rig check RIG` "
         "names the map key to fix")
+
+
+def _rate_c_per_s(before: DieTrack, now_s: float, now_c: float) -> float:
+    """°C/s from the reading ``before`` (clock s, °C) to ``now_c`` at ``now_s``."""
+    return (now_c - before[1]) / (now_s - before[0])

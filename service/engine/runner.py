@@ -536,15 +536,12 @@ class CampaignRunner:
         explains it (:func:`polls.die_against_chamber`): it would label every capture of
         the step with a wrong temperature, so the campaign fails before it is stored."""
         now = self.clock.now()
-        pv_rate = 0.0
-        if self._pv_track is not None and now > self._pv_track[0]:
-            pv_rate = (status.process_c - self._pv_track[1]) / (now - self._pv_track[0])
-        if math.isfinite(status.process_c):
-            self._pv_track = (now, status.process_c)
         self._die_track, problem = polls.die_against_chamber(
             self._die_track, now,
             [r[0].sensor_c for r in readings.values() if r is not None], status.process_c,
-            pv_rate_c_per_s=pv_rate)
+            pv_before=self._pv_track)
+        if math.isfinite(status.process_c):
+            self._pv_track = (now, status.process_c)
         if problem is not None:
             raise CampaignFailed(f"step {msg.step} ({msg.setpoint_c:g} °C) position "
                                  f"{msg.position}: {problem}")

@@ -32,11 +32,9 @@ def test_a_die_behind_a_moving_air_is_a_lag_a_misread_steady_chamber_is_not() ->
     before = (0.0, 38.0)
     _, why = polls.die_against_chamber(before, 60.0, [37.88], 30.1)
     assert why is not None and "the chamber reads 30.1 °C" in why
-    _, why = polls.die_against_chamber(before, 60.0, [37.88], 30.1,
-                                       pv_rate_c_per_s=-1.0 / 60.0)
+    _, why = polls.die_against_chamber(before, 60.0, [37.88], 30.1, pv_before=(0.0, 31.1))
     assert why is None
-    _, why = polls.die_against_chamber(before, 60.0, [37.88], 301.0,
-                                       pv_rate_c_per_s=-1.0 / 60.0)
+    _, why = polls.die_against_chamber(before, 60.0, [37.88], 301.0, pv_before=(0.0, 302.0))
     assert why is not None and "the chamber reads 301.0 °C" in why
 
 
