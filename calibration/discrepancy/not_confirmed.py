@@ -86,12 +86,18 @@ def report(findings: list, records: list[NotConfirmed], finding_cls: type,
 
 
 def _sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
-    within = [r for r in keep if r.within]
-    if within:
-        return _within_sentence(within, effects) + (
-            " " + _sentence([r for r in keep if not r.within],
-                            [e for e in effects if e not in {r.effect_id for r in within}])
-            if len(within) < len(keep) else "")
+    """The finding's text: the records whose fit lay within an earlier term, then those
+    held-out data did not confirm, each group naming only its own effects."""
+    parts = []
+    for group, say in (([r for r in keep if r.within], _within_sentence),
+                       ([r for r in keep if not r.within], _heldout_sentence)):
+        if group:
+            ids = {r.effect_id for r in group}
+            parts.append(say(group, [e for e in effects if e in ids]))
+    return " ".join(parts)
+
+
+def _heldout_sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
     found = "; ".join(
         f"{r.effect_id} (p_family = {r.p_family:.2g}; held-out RMS {r.heldout_before_ug:.4g} "
         f"→ {r.heldout_after_ug:.4g} µg with its term)" for r in keep)

@@ -72,3 +72,19 @@ def test_a_candidate_within_an_earlier_term_is_reported_not_added(monkeypatch,
     assert "from turntable_geometry" in f.explanation
     assert "100.0 % of its fit beyond the base model" in f.explanation
     assert d.mismatch is True
+
+
+def test_each_reason_names_only_its_own_effects():
+    """One candidate within an earlier term and one held-out data did not confirm: the
+    'cannot tell … from' sentence names the first only, the held-out one the second."""
+    from calibration.discrepancy import not_confirmed as nc
+
+    X = np.zeros((3, 1))
+    held = nc.NotConfirmed("bias_drift", 1e-4, 10.0, 10.5, ("x",), {}, X)
+    inside = nc.NotConfirmed("scale_nonlinearity", 1e-6, 10.0, 9.0, ("z",), {}, X,
+                             within="turntable_geometry", share_outside=0.02)
+    text = nc._sentence([inside, held], ["scale_nonlinearity", "bias_drift"])
+    within_part, heldout_part = text.split("neither named nor modelled.", 1)
+    assert "cannot tell scale_nonlinearity from turntable_geometry" in within_part
+    assert "bias_drift" not in within_part
+    assert "bias_drift (p_family" in heldout_part and "scale_nonlinearity" not in heldout_part
