@@ -52,7 +52,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     options = FitOptions(method=getattr(args, "method", None), gravity=gravity,
                          rate_gain_ug_per_c_per_min=rate_gain)
     try:
-        rec = read_recording(args.recording)
+        rec = read_recording(args.recording, raw_cells=False)  # no copy-through
         fit = fitting.fit(rec, options)
     except RecordingError as exc:
         return _fail(str(exc))
@@ -139,7 +139,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
     from calibration.discrepancy import cli as discrepancy_cli
 
     try:
-        rec = read_recording(args.recording)
+        rec = read_recording(args.recording, raw_cells=False)  # no copy-through
     except RecordingError as exc:
         return _fail(str(exc))
     why = gate.cannot_judge(rec)

@@ -34,7 +34,7 @@ import csv
 import io
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -225,38 +225,78 @@ def vet_die_temperature(
 
 
 # --- static-interval detection ---------------------------------------------
+def _window_sums(csum: np.ndarray, half: int) -> np.ndarray:
+    """``csum[hi] − csum[lo]`` for every row, the centred window ``[i − half, i + half]``
+    clipped to the data: slices for the interior, indices only at the two ends (the same
+    subtraction per row as whole-array indexing, without three index arrays of N)."""
+    n = csum.size - 1
+    out = np.empty(n)
+    width = 2 * half + 1
+    if n > width:
+        np.subtract(csum[width:], csum[: n + 1 - width], out=out[half: n - half])
+        ends = np.r_[0:half, n - half:n]
+    else:
+        ends = np.arange(n)
+    out[ends] = csum[np.minimum(ends + half + 1, n)] - csum[np.maximum(ends - half, 0)]
+    return out
+
+
+def _window_counts(n: int, half: int) -> np.ndarray:
+    """Rows inside each row's clipped window (float, as the divisor of the sums)."""
+    idx = np.arange(n)
+    return (np.minimum(idx + half + 1, n) - np.maximum(idx - half, 0)).astype(float)
+
+
+def _moving_variance_axes(acc: np.ndarray, window_n: int) -> Iterator[np.ndarray]:
+    """Each axis' moving variance in turn, (N,), one axis alive at a time."""
+    a = np.asarray(acc, float)
+    n = a.shape[0]
+    half = max(int(window_n) // 2, 1)
+    cnt = _window_counts(n, half)
+    csum = np.zeros(n + 1)
+    for k in range(a.shape[1]):
+        x = a[:, k] - a[0, k]
+        np.cumsum(x, out=csum[1:])
+        mean = _window_sums(csum, half)
+        mean /= cnt
+        np.multiply(x, x, out=x)
+        np.cumsum(x, out=csum[1:])
+        del x
+        var = _window_sums(csum, half)
+        var /= cnt
+        var -= np.square(mean, out=mean)
+        del mean
+        yield np.clip(var, 0.0, None, out=var)
+
+
 def moving_variance(acc: np.ndarray, window_n: int) -> np.ndarray:
     """Per-axis variance over a centred window of ``window_n`` samples, (N,3).
 
     Cumulative sums (of data minus its first sample, to avoid cancellation); the
     window shrinks at the ends instead of padding. One axis at a time, in place: the
     same numbers as whole-array arithmetic (a cumulative sum runs down each column
-    alone), with a third of the temporaries (issue 20: a 2.4 M-sample log).
+    alone), with a fraction of the temporaries (issue 20: a 2.4 M-sample log).
     """
     a = np.asarray(acc, float)
-    n = a.shape[0]
-    half = max(int(window_n) // 2, 1)
-    idx = np.arange(n)
-    lo = np.clip(idx - half, 0, n)
-    hi = np.clip(idx + half + 1, 0, n)
-    del idx
-    cnt = (hi - lo).astype(float)
-    out = np.empty((n, 3))
-    csum = np.zeros(n + 1)
-    for k in range(3):
-        x = a[:, k] - a[0, k]
-        np.cumsum(x, out=csum[1:])
-        mean = csum[hi]
-        mean -= csum[lo]
-        mean /= cnt
-        np.multiply(x, x, out=x)
-        np.cumsum(x, out=csum[1:])
-        var = csum[hi]
-        var -= csum[lo]
-        var /= cnt
-        var -= np.square(mean, out=mean)
-        np.clip(var, 0.0, None, out=out[:, k])
+    out = np.empty(a.shape)
+    for k, var in enumerate(_moving_variance_axes(a, window_n)):
+        out[:, k] = var
     return out
+
+
+def moving_variance_norm(acc: np.ndarray, window_n: int) -> np.ndarray:
+    """‖moving variance‖ over the axes, (N,): the numbers of ``norm(moving_variance(acc),
+    axis=1)`` (the squares added in axis order, as numpy's norm does for three), without
+    the (N,3) array."""
+    total: np.ndarray | None = None
+    for var in _moving_variance_axes(acc, window_n):
+        np.multiply(var, var, out=var)
+        if total is None:
+            total = var
+        else:
+            total += var
+    assert total is not None
+    return np.sqrt(total, out=total)
 
 
 def detect_static_intervals(
@@ -290,7 +330,7 @@ def detect_static_intervals(
     if not dt > 0:
         raise ValueError("t_s must increase (median sample spacing is not positive)")
     window_n = max(int(round(window_s / dt)), 3)
-    var_mag = np.linalg.norm(moving_variance(a, window_n), axis=1)
+    var_mag = moving_variance_norm(a, window_n)
     if init_rest_s is not None and init_rest_s > 0:
         rest = t < t[0] + init_rest_s
         ref = float(np.linalg.norm(np.var(a[rest], axis=0))) if rest.sum() >= 3 else 0.0

@@ -193,8 +193,17 @@ class Recording:
 
 
 # --- reading --------------------------------------------------------------
-def read_recording(path: str | os.PathLike, *, range_g: float = DEFAULT_RANGE_G) -> Recording:
-    """Read and validate a v1 CSV. Raises :class:`RecordingError` naming file, line, column."""
+def read_recording(
+    path: str | os.PathLike, *, range_g: float = DEFAULT_RANGE_G, raw_cells: bool = True
+) -> Recording:
+    """Read and validate a v1 CSV. Raises :class:`RecordingError` naming file, line, column.
+
+    ``raw_cells=False``: the caller never copies rows through (``calibrate``, ``diagnose``),
+    so a file of numeric columns only does not keep its text (:attr:`Recording.cells` is
+    None): the text is as large as the file, 195 MB of a 2.4 M-row log held through the
+    whole fit (issue 20). A text column (``ref_tol_deg``) is read from the cells, which are
+    then kept.
+    """
     p = Path(path)
     try:
         mode = p.stat().st_mode
@@ -216,11 +225,12 @@ def read_recording(path: str | os.PathLike, *, range_g: float = DEFAULT_RANGE_G)
         raise RecordingError(str(p), None, None, f"not UTF-8 text ({exc.reason})") from None
     except OSError as exc:
         raise RecordingError(str(p), None, None, f"cannot be read ({exc.strerror})") from None
-    return parse_recording(text, str(p), range_g=range_g)
+    return parse_recording(text, str(p), range_g=range_g, raw_cells=raw_cells)
 
 
 def parse_recording(
-    text: str, path: str = "<memory>", *, range_g: float = DEFAULT_RANGE_G
+    text: str, path: str = "<memory>", *, range_g: float = DEFAULT_RANGE_G,
+    raw_cells: bool = True,
 ) -> Recording:
     """Parse and validate a v1 CSV text (see :func:`read_recording`).
 
@@ -230,11 +240,14 @@ def parse_recording(
     below, which names the line and column. Both give the same columns, bit for bit.
     """
     text = text.lstrip("\ufeff")
-    fast = _parse_plain(text, path)
-    if fast is not None:
-        validate(fast, range_g=range_g, first_line=2)
-        return fast
-    return _parse_rows(text, path, range_g=range_g)
+    rec = _parse_plain(text, path)
+    if rec is not None:
+        validate(rec, range_g=range_g, first_line=2)
+    else:
+        rec = _parse_rows(text, path, range_g=range_g)
+    if not raw_cells and all(h in NUMERIC for h in rec.header):
+        rec.cells = None  # every value is in ``columns``; nobody will copy a row through
+    return rec
 
 
 def _parse_rows(text: str, path: str, *, range_g: float) -> Recording:
@@ -332,22 +345,28 @@ def _parse_plain(text: str, path: str) -> Recording | None:
         if empty_cells is None:
             return None
 
-    def lines() -> Iterator[str]:
+    # One block of text at a time into the columns, preallocated: a whole-file parse held
+    # the table twice (rows-first, then columns-first), 230 MB of a 2.4 M-row log beside
+    # its text (issue 20). The same C conversion, so the same numbers.
+    n_rows = text.count("\n", start, end) + 1
+    columns_first = np.empty((len(numeric), n_rows))
+    row = 0
+    try:
         for block in _blocks(text, start, end):
             if empty_cells:  # "not recorded" → NaN, which the row reader also gives
                 block = _fill_empty(block)
-            yield from block.split("\n")
-
-    try:
-        values = np.loadtxt(
-            lines(), delimiter=",", dtype=float, comments=None, usecols=numeric, ndmin=2
-        )
+            part = np.loadtxt(block.split("\n"), delimiter=",", dtype=float, comments=None,
+                              usecols=numeric, ndmin=2)
+            if row + part.shape[0] > n_rows:
+                return None
+            columns_first[:, row:row + part.shape[0]] = part.T
+            row += part.shape[0]
     except ValueError:
         return None  # a cell of digits, signs, dots and e's that is not a number: "1e", "+-1"
-    if np.isinf(values).any():
+    if row != n_rows:
+        return None  # a row numpy skipped: the row reader decides
+    if np.isinf(columns_first).any():
         return None  # "1e999": the row reader names its line and column
-    columns_first = np.ascontiguousarray(values.T)
-    del values
     cols = {header[i]: columns_first[j] for j, i in enumerate(numeric)}
     return Recording(columns=cols, header=header, path=path, cells=TextRows(text, start, end))
 

@@ -23,7 +23,7 @@ def run_diagnose(args: Any, rec: Any = None) -> int:
 
     if rec is None:
         try:
-            rec = read_recording(args.recording)
+            rec = read_recording(args.recording, raw_cells=False)
         except RecordingError as exc:
             print(str(exc), file=sys.stderr)
             return 2

@@ -20,7 +20,7 @@ def run_twin_fit(args: Any) -> int:
     from calibration.recording import read_recording
 
     try:
-        rec = read_recording(args.recording)
+        rec = read_recording(args.recording, raw_cells=False)
     except RecordingError as exc:
         print(str(exc), file=sys.stderr)
         return 2

@@ -310,12 +310,16 @@ def _moving_variance_before(acc: np.ndarray, window_n: int) -> np.ndarray:
     return np.clip(var, 0.0, None)
 
 
-@pytest.mark.parametrize("n,window", [(5000, 100), (7, 3), (50, 200), (3, 1)])
+@pytest.mark.parametrize("n,window", [(5000, 100), (7, 3), (50, 200), (3, 1), (1, 3),
+                                      (10, 9), (11, 9), (12, 9)])
 def test_moving_variance_is_the_same_numbers(n, window):
+    """Slices in the interior, indices at the ends (every split of n against the window)."""
     rng = np.random.default_rng(n)
     acc = np.array([0.3, -0.2, 9.8]) + rng.normal(0, 1e-3, (n, 3)) + np.linspace(0, 1, n)[:, None]
-    got = importers.moving_variance(acc, window)
-    assert got.tobytes() == _moving_variance_before(acc, window).tobytes()
+    before = _moving_variance_before(acc, window)
+    assert importers.moving_variance(acc, window).tobytes() == before.tobytes()
+    norm = importers.moving_variance_norm(acc, window)
+    assert norm.tobytes() == np.linalg.norm(before, axis=1).tobytes()
 
 
 @pytest.mark.parametrize("text", [

@@ -154,3 +154,20 @@ def test_missing_file_and_empty_file(tmp_path: Path) -> None:
     (tmp_path / "empty.csv").write_text("")
     with pytest.raises(RecordingError, match="header"):
         read_recording(tmp_path / "empty.csv")
+
+
+@pytest.mark.parametrize("slow_path", [False, True])
+def test_without_copy_through_a_numeric_file_keeps_no_text(tmp_path: Path, slow_path: bool) -> None:
+    """calibrate and diagnose read with raw_cells=False: the numbers stay, the text goes;
+    a text column (ref_tol_deg is read from the cells) keeps the cells."""
+    rows = ["t_s,sensor_c,ax,ay,az", "0,20.0,0.0,0.0,1.0", "1,20.1,0.0,0.0,1.0"]
+    if slow_path:  # a quoted cell sends the file to the row-by-row reader
+        rows[2] = '1,"20.1",0.0,0.0,1.0'
+    path = tmp_path / "r.csv"
+    path.write_text("\n".join(rows) + "\n")
+    kept = read_recording(path)
+    lean = read_recording(path, raw_cells=False)
+    assert kept.cells is not None and lean.cells is None
+    assert lean.columns["sensor_c"].tolist() == [20.0, 20.1]
+    path.write_text("\n".join([rows[0] + ",ref_tol_deg"] + [r + ",2" for r in rows[1:]]) + "\n")
+    assert read_recording(path, raw_cells=False).cells is not None
