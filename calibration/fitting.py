@@ -245,7 +245,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
     gate.check_model(wf.model, captures)
     # the orientations the fit used: a drifting board's clusters joined (warmup.py)
-    orientations = wf.orientations or decided.orientations
+    orientations = wf.orientations
     reason = decided.reason if wf.joined_note is None else (
         f"{decided.reason}; the fit joins them: {wf.joined_note}")
     if wf.absolute is not None and wf.absolute.capture_residual_g.size:

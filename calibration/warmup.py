@@ -125,10 +125,10 @@ BIAS_NOTE = ("fitted: its change with temperature, referred to centre_c (the con
 class WarmupFit:
     model: ThermalModel
     report: dict[str, Any]
+    # the orientations fitted: the gate's clusters, those a drift connects joined
+    orientations: Orientations
     notes: list[str] = field(default_factory=list)
     absolute: AbsoluteFit | None = None  # what 2+ orientations determine absolutely
-    # the orientations fitted: the gate's clusters, those a drift connects joined
-    orientations: Orientations | None = None
     joined_note: str | None = None  # how they were joined (None: as the gate found them)
 
 
@@ -346,7 +346,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     report["unexplained_note"] = scatter_note if scatter.beyond.any() else None
     report["rmse_meaning"] = norm_rmse_meaning(
         () if absolute is None else absolute.names)
-    return WarmupFit(model, report, notes, absolute, orientations, joined_note)
+    return WarmupFit(model, report, orientations, notes, absolute, joined_note)
 
 
 def norm_rmse_meaning(absolute_names: tuple[str, ...]) -> str:
