@@ -126,3 +126,38 @@ def test_a_warmup_with_no_change_fits_nothing(tmp_path, capsys):
     assert sum(d["degree"] == 0 and d["fitted"] == {} for d in docs) >= 4, \
         [d["degree_selection"] for d in docs]
     assert all(d["degree"] <= 1 for d in docs), [d["degree"] for d in docs]
+
+
+def test_an_axis_that_does_not_change_is_not_compensated(tmp_path, capsys):
+    # z bends; x and y are flat. The degree is chosen on the three axes together, but an
+    # axis whose own held-out error is no lower with it keeps no change: its report line
+    # never shows "compensated" above "uncompensated", and its bias is held, with why.
+    flat_held = 0
+    for seed in range(5):
+        out, model_path = _calibrate(tmp_path, _log(seed=seed), capsys, json_out=True)
+        doc = json.loads(out)
+        held = doc["heldout_rms_mg_xyz"]
+        assert all(c <= u for c, u in zip(held["compensated"], held["uncompensated"],
+                                          strict=True)), held
+        assert "bz" in doc["fitted"]
+        choice = doc["axis_choice"]
+        assert choice["bz"]["degree"] == doc["degree"] >= 1
+        model = load_model(model_path)
+        T = np.linspace(LO_C + 0.1, HI_C - 0.1, 9)
+        for k, name in enumerate(("bx", "by")):
+            if choice[name]["degree"] == 0:
+                flat_held += 1
+                assert name not in doc["fitted"]
+                assert "no change with temperature above the noise on this axis" \
+                    in doc["held"][name]
+                assert np.ptp(model.params_vector_at(T)[:, k]) == 0.0
+                assert any(n.startswith(f"{name}: degree 0") for n in doc["notes"])
+    assert flat_held >= 6, flat_held  # of the 10 flat axes
+
+
+def test_axes_that_all_change_keep_the_joint_model(tmp_path, capsys):
+    out, _ = _calibrate(tmp_path, _log(seed=3, rest_s=120, heat_s=600, slope_g_per_c=50e-6),
+                        capsys, json_out=True)
+    doc = json.loads(out)
+    assert [c["degree"] for c in doc["axis_choice"].values()] == [doc["degree"]] * 3
+    assert set(doc["fitted"]) == {"bx", "by", "bz"}
