@@ -227,6 +227,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     """Too few orientations for the SFEM: each axis' bias change with temperature, and
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
     with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
+    from calibration.captures import warmup_captures
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -241,6 +242,11 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         g_local = float(np.median(np.linalg.norm(captures.ref_g, axis=1)))
     else:
         g_local = 1.0
+    # a coarsely quantised channel: the die temperature rebuilt from its steps' transitions,
+    # for the fit, its held-out and rate checks, and the figures below alike
+    captures, rebuilt = warmup_captures(captures)
+    if rebuilt:
+        capture_notes = [*capture_notes, rebuilt]
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
     gate.check_model(wf.model, captures)
