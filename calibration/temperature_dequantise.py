@@ -13,14 +13,16 @@ decision threshold between them, and those instants carry what the step values l
    on the levels (a dithered channel averaged into capture means carries its sub-LSB
    information already), is rebuilt; any other is returned exactly as read;
 2. *settled runs* are at least :data:`SETTLED_ROWS` consecutive readings on one level
-   (a run at the first or last row counts from one); between two settled runs at levels
-   a ≠ b the die crossed each threshold between them once. The crossing instant is the
-   balance point of the readings between the runs: a mean over a row's duration ``d``
-   with a fraction ``u`` of its samples beyond the threshold puts the crossing ``u·d``
-   before the row's end, and a reading that flickers between the two levels puts it
-   at the flicker's centre (the time the readings beyond it would fill as one block).
-   Two runs at one level with readings of a neighbouring level between them are a
-   *touch*: the die reached the threshold there;
+   (the first and last readings count as one where they are another level); between
+   two settled runs at levels a ≠ b the die crossed each threshold between them once.
+   The crossing instant is the balance point of the readings between the runs: a mean
+   over a row's duration ``d`` with a fraction ``u`` of its samples beyond the
+   threshold puts the crossing ``u·d`` before the row's end, and readings that flicker
+   between the two levels put it at the flicker's centre (the time the readings beyond
+   it would fill as one block). Two runs at one level with readings of a neighbouring
+   level between them are a *touch*: the die reached the threshold there. A longer
+   flicker, with settled runs inside it, is a row of crossings and touches at the
+   threshold, and the trace holds the threshold through it;
 3. the thresholds are midway between levels: the rebuilt temperature is on the channel's
    own scale (a channel that truncates instead of rounding is off by half an LSB, a
    constant the bias polynomial's constant absorbs: a warm-up fits the bias *change*);
@@ -32,8 +34,9 @@ decision threshold between them, and those instants carry what the step values l
    an LSB (the step's value): never beyond the step the channel read. A flicker between
    two levels has slope 0 on both sides and stays at the threshold;
 5. before the first crossing and after the last, the die moves on at the first (last)
-   interval's slope until it reaches its step's value, and holds it there (a rest
-   before a warm-up is somewhere in its step: its value is the unbiased guess).
+   interval's slope (at least fast enough to get there by the middle of the end run)
+   until it reaches its step's value, and holds it there (a rest before a warm-up is
+   somewhere in its step: its value is the unbiased guess).
 
 A reading settled on a level is never given a temperature outside that level's band.
 """
@@ -167,7 +170,9 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray) -> Dequantised:
 
 
 def _settled_runs(z: np.ndarray) -> list[tuple[int, int, int]]:
-    """(first row, one past the last, level) of each settled run, in time order."""
+    """(first row, one past the last, level) of each settled run, in time order; the first
+    and last rows open and close a run of their own (rounded) level where the first or last
+    settled run is another level (a warm-up that leaves its first step within a capture)."""
     level = np.round(z)
     on = np.abs(z - level) <= ON_LEVEL_TOL
     runs: list[tuple[int, int, int]] = []
@@ -179,50 +184,60 @@ def _settled_runs(z: np.ndarray) -> list[tuple[int, int, int]]:
         j = i + 1
         while j < n and on[j] and level[j] == level[i]:
             j += 1
-        if j - i >= SETTLED_ROWS or i == 0 or j == n:
-            if runs and runs[-1][2] == int(level[i]) and runs[-1][1] == i:
-                runs[-1] = (runs[-1][0], j, int(level[i]))
-            else:
-                runs.append((i, j, int(level[i])))
+        if j - i >= SETTLED_ROWS:
+            runs.append((i, j, int(level[i])))
         i = j
+    if runs and runs[0][0] > 0 and int(level[0]) != runs[0][2]:
+        runs.insert(0, (0, 1, int(level[0])))
+    if runs and runs[-1][1] < n and int(level[-1]) != runs[-1][2]:
+        runs.append((n - 1, n, int(level[-1])))
     return runs
 
 
 def _crossings(t: np.ndarray, z: np.ndarray, runs: list[tuple[int, int, int]],
                d: float) -> tuple[list[tuple[float, float]], list[str]]:
     """Knots (time, level units) at the thresholds crossed or touched between consecutive
-    settled runs, and each knot's kind: "up", "down" or "touch"."""
+    settled runs, and each knot's kind: "up", "down" or "touch". A flicker between two
+    levels is a row of knots at their threshold: the trace holds the threshold through it
+    (the die is within the channel's noise of it there)."""
     knots: list[tuple[float, float]] = []
     kinds: list[str] = []
     for (_, a_end, a), (b_start, _, b) in zip(runs[:-1], runs[1:], strict=True):
-        t_a, t_b = float(t[a_end - 1]), float(t[b_start])
-        between = slice(a_end, b_start)
-        if b != a:
-            sgn = 1 if b > a else -1
-            n = abs(b - a)
-            for j in range(1, n + 1):
-                theta = a + sgn * (j - 0.5)
-                if b_start > a_end:
-                    # balance point: the fraction of each row beyond the threshold
-                    u = np.clip(sgn * (z[between] - (theta - 0.5 * sgn)), 0.0, 1.0)
-                    tc = t_a + 0.5 * d + float(np.sum(1.0 - u)) * d
-                    tc = min(max(tc, t_a), t_b)
-                else:  # no reading between the runs: evenly spread over the gap
-                    tc = t_a + (t_b - t_a) * j / (n + 1)
-                knots.append((tc, theta))
-                kinds.append("up" if sgn > 0 else "down")
-        else:
-            zz = z[between]
-            for sgn in (1, -1):
-                beyond = sgn * (zz - a) > 0.5
-                if not beyond.any():
-                    continue
-                idx = np.flatnonzero(beyond) + a_end
-                w = np.clip(sgn * (z[idx] - a) - 0.5, 0.0, 1.0) + 1e-12
-                knots.append((float(np.sum(t[idx] * w) / np.sum(w)), a + 0.5 * sgn))
-                kinds.append("touch")
+        for tc, value, kind in _region_crossings(t, z, a_end, b_start, a, b, d):
+            knots.append((tc, value))
+            kinds.append(kind)
     order = np.argsort([k[0] for k in knots], kind="stable")
     return [knots[i] for i in order], [kinds[i] for i in order]
+
+
+def _region_crossings(t: np.ndarray, z: np.ndarray, a_end: int, b_start: int, a: int, b: int,
+                      d: float) -> list[tuple[float, float, str]]:
+    """The knots between a run at level ``a`` ending before row ``a_end`` and one at ``b``
+    starting at row ``b_start``: (time, level units, kind)."""
+    t_a, t_b = float(t[a_end - 1]), float(t[b_start])
+    between = slice(a_end, b_start)
+    out: list[tuple[float, float, str]] = []
+    if b != a:
+        sgn = 1 if b > a else -1
+        n = abs(b - a)
+        for j in range(1, n + 1):
+            theta = a + sgn * (j - 0.5)
+            if b_start > a_end:
+                # balance point: the fraction of each row beyond the threshold
+                u = np.clip(sgn * (z[between] - (theta - 0.5 * sgn)), 0.0, 1.0)
+                tc = min(max(t_a + 0.5 * d + float(np.sum(1.0 - u)) * d, t_a), t_b)
+            else:  # no reading between the runs: evenly spread over the gap
+                tc = t_a + (t_b - t_a) * j / (n + 1)
+            out.append((tc, theta, "up" if sgn > 0 else "down"))
+        return out
+    zz = z[between]
+    for sgn in (1, -1):
+        beyond = sgn * (zz - a) > 0.5
+        if beyond.any():
+            idx = np.flatnonzero(beyond) + a_end
+            w = np.clip(sgn * (z[idx] - a) - 0.5, 0.0, 1.0) + 1e-12
+            out.append((float(np.sum(t[idx] * w) / np.sum(w)), a + 0.5 * sgn, "touch"))
+    return out
 
 
 def _with_turning_points(knots: list[tuple[float, float]], kinds: list[str]
@@ -258,19 +273,28 @@ def _evaluate(t: np.ndarray, knots: list[tuple[float, float]],
     kt, inv = np.unique(kt, return_inverse=True)
     kv = np.bincount(inv, weights=kv) / np.bincount(inv)
     z = np.empty(t.size)
-    first_level, last_level = runs[0][2], runs[-1][2]
     if kt.size >= 2:
         inside = (t >= kt[0]) & (t <= kt[-1])
         z[inside] = PchipInterpolator(kt, kv)(t[inside])
-        s0 = abs(kv[1] - kv[0]) / (kt[1] - kt[0])
-        s1 = abs(kv[-1] - kv[-2]) / (kt[-1] - kt[-2])
-    else:
-        s0 = abs(kv[0] - first_level) / max(kt[0] - float(t[runs[0][0]]), 1e-9)
-        s1 = abs(last_level - kv[-1]) / max(float(t[runs[-1][1] - 1]) - kt[-1], 1e-9)
+    (a0, a1, first_level), (b0, b1, last_level) = runs[0], runs[-1]
+    # the end interval's slope; at least enough to reach the step's value by the middle of
+    # the end run (a flicker's knots all at one threshold have no slope between them)
+    s0 = max(_secant(kt, kv), 0.5 / max(kt[0] - 0.5 * float(t[a0] + t[a1 - 1]), 1e-9))
+    s1 = max(_secant(kt[::-1], kv[::-1]),
+             0.5 / max(0.5 * float(t[b0] + t[b1 - 1]) - kt[-1], 1e-9))
     before, after = t < kt[0], t > kt[-1]
     z[before] = _toward(kv[0], first_level, s0 * (kt[0] - t[before]))
     z[after] = _toward(kv[-1], last_level, s1 * (t[after] - kt[-1]))
     return z
+
+
+def _secant(kt: np.ndarray, kv: np.ndarray) -> float:
+    """|slope| from the first knot to the nearest one at another value (0: none)."""
+    other = np.flatnonzero(kv != kv[0])
+    if other.size == 0:
+        return 0.0
+    j = int(other[0])
+    return abs(float(kv[j] - kv[0]) / float(kt[j] - kt[0]))
 
 
 def _toward(start: float, level: float, moved: np.ndarray) -> np.ndarray:
