@@ -154,3 +154,35 @@ def test_warmup_captures_rebuild_and_say_so() -> None:
                                    "ay": np.zeros(n), "az": np.ones(n)})
     same, said = warmup_captures(fine)
     assert same is fine and said is None
+
+
+def _warmup_rows(lsb_c: float) -> tuple[Recording, np.ndarray]:
+    """5-s capture means of a board at rest (z up) warming 20 -> 35 °C, its z bias 1 mg/°C
+    + 0.02 mg/°C², read by a channel quantised at ``lsb_c``; and the true die temperature."""
+    rng = np.random.default_rng(5)
+    t, read, die = _captures(_heat_cool, 0.01, 5.0, seed=5, lsb_c=lsb_c)
+    n = t.size
+    bias = 1e-3 * (die - 27.0) + 2e-5 * (die - 27.0) ** 2
+    cols = {"t_s": t, "sensor_c": read, "ax": rng.normal(0, 2e-6, n),
+            "ay": rng.normal(0, 2e-6, n), "az": 1.0 + bias + rng.normal(0, 2e-6, n),
+            "n": np.full(n, 250.0), "sd_x": np.full(n, 3e-5), "sd_y": np.full(n, 3e-5),
+            "sd_z": np.full(n, 3e-5)}
+    return Recording.from_columns(cols), die
+
+
+def test_calibrate_fits_a_warmup_in_the_rebuilt_temperature_and_says_so() -> None:
+    from calibration.fitting import fit
+
+    rec, die = _warmup_rows(1.0)
+    res = fit(rec)
+    assert res.kind == "warmup"
+    said = [n for n in res.report["notes"] if "quantised at 1 °C" in n]
+    assert said and "transitions in time" in said[0]
+    assert any("quantised at 1 °C" in n for n in res.model.notes)
+    # the fit's own temperatures are the rebuilt ones, and its residuals are far below
+    # what the step values leave (1 mg/°C × 0.29 °C RMS)
+    assert _rms(res.row_temperature_c - die) < 0.06
+    assert float(np.sqrt(np.mean(res.residuals_ug[:, 2] ** 2))) < 100.0
+    # a fine channel: nothing rebuilt, nothing said
+    fine, _ = _warmup_rows(0.0078125)
+    assert not [n for n in fit(fine).report["notes"] if "quantised at" in n]
