@@ -257,6 +257,14 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     if wf.absolute is not None and wf.absolute.capture_residual_g.size:
         gate.check_warmup_residuals(wf.absolute.capture_residual_g, orientations,
                                     wf.absolute.names + tuple(wf.absolute.loose))
+    if rebuilt and wf.model.temperature_rate:
+        # the rebuilt temperature's error is largest where the die turns, where dT/dt
+        # changes sign: a rate term can hold some of it as well as the part's physics
+        said = ("the rate term was fitted on the rebuilt temperature of a quantised channel: "
+                "besides a rate-sensitive part or a lagging channel it may hold part of the "
+                "rebuild's error where the die turns (kept because held-out error prefers it)")
+        wf.model.notes.append(said)
+        wf.report["notes"].append(said)
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [reason]
     model = wf.model
