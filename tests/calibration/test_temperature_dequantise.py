@@ -58,9 +58,10 @@ def _rms(x: np.ndarray) -> float:
 @pytest.mark.parametrize("block_s", [1.0, 5.0])
 def test_rebuilt_die_temperature_beats_the_step_values(profile, bound_c, noise_c,
                                                        block_s) -> None:
-    # Achieved, RMS against the truth (the step values: 0.20-0.29 °C): exponential 0.084,
-    # heat-cool 0.048, overshoot (a peak and a trough inside a step) 0.14, a rest inside a
-    # step for a quarter of the log 0.15 (the rest's own 0.3 °C is not in the data).
+    # Achieved, RMS against the truth (the step values: 0.17-0.29 °C; the table of
+    # benchmarks/bench_temperature_dequantise.py): exponential 0.07, heat-cool 0.05,
+    # overshoot (a peak and a trough inside a step) 0.14, a rest inside a step for a
+    # quarter of the log 0.15 (the rest's own 0.3 °C offset is not in the data).
     t, read, truth = _captures(profile, noise_c, block_s)
     dq = dequantise(t, read)
     assert dq.lsb_c == pytest.approx(1.0, abs=1e-9)
