@@ -273,9 +273,8 @@ def _evaluate(t: np.ndarray, knots: list[tuple[float, float]],
     kt, inv = np.unique(kt, return_inverse=True)
     kv = np.bincount(inv, weights=kv) / np.bincount(inv)
     z = np.empty(t.size)
-    if kt.size >= 2:
-        inside = (t >= kt[0]) & (t <= kt[-1])
-        z[inside] = PchipInterpolator(kt, kv)(t[inside])
+    inside = (t >= kt[0]) & (t <= kt[-1])
+    z[inside] = PchipInterpolator(kt, kv)(t[inside]) if kt.size >= 2 else kv[0]
     (a0, a1, first_level), (b0, b1, last_level) = runs[0], runs[-1]
     # the end interval's slope; at least enough to reach the step's value by the middle of
     # the end run (a flicker's knots all at one threshold have no slope between them)

@@ -213,3 +213,18 @@ def test_compensate_rebuilds_the_same_channel_and_says_so(tmp_path, capsys) -> N
     # the bias change (15 mg over the log) compensated to the rebuild's error: at the step
     # values it would be 1 mg/°C × 0.29 °C ≈ 0.29 mg RMS
     assert _rms(cz) < 1e-4
+
+
+def test_one_crossing_on_a_reading_time_is_finite_and_in_band() -> None:
+    # 25 for 10 readings, 26 for 10: one crossing, halfway between two reading times
+    t = np.arange(20.0)
+    read = np.r_[np.full(10, 25.0), np.full(10, 26.0)]
+    dq = dequantise(t, read)
+    assert dq.rebuilt and dq.transitions == 1
+    assert np.all(np.isfinite(dq.temperature_c))
+    assert np.all(np.abs(dq.temperature_c - read) <= 0.5)
+    assert np.all(np.diff(dq.temperature_c) >= 0)
+    # a crossing on a reading's own time (a capture mean exactly half at each level)
+    read_half = np.r_[np.full(10, 25.0), [25.5], np.full(9, 26.0)]
+    dq = dequantise(t, read_half)
+    assert np.all(np.isfinite(dq.temperature_c)) and dq.temperature_c[10] == pytest.approx(25.5)
