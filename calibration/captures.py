@@ -181,13 +181,38 @@ def placed_samples(rec: Recording, caps: Captures) -> Recording:
     return out
 
 
-def capture_temperature_c(rec: Recording, caps: Captures) -> np.ndarray:
-    """Each raw row's temperature read from the capture means: linear in time between
-    capture centres (a quantised or noisy channel averaged over each capture)."""
-    temp = rec.temperature_c()
-    if not caps.is_raw or not caps.recording.has_temperature:
-        return temp
-    means = caps.recording
+def warmup_captures(means: Recording) -> tuple[Recording, str | None]:
+    """The capture means a warm-up is fitted and compensated in: their temperature rebuilt
+    from the steps' transitions in time where the channel is coarsely quantised
+    (:func:`calibration.temperature_dequantise.dequantise`), with the line that says so;
+    otherwise ``means`` itself and None. The one place the warm-up's fit, its held-out and
+    rate checks (:mod:`calibration.warmup`) and ``compensate`` read their temperature."""
+    from calibration.temperature_dequantise import dequantise
+
+    if not means.has_temperature or len(means) < 4:
+        return means, None
+    dq = dequantise(means.t_s, means.temperature_c())
+    if not dq.rebuilt:
+        return means, None
+    cols = dict(means.columns)
+    cols[means.temperature_source] = dq.temperature_c
+    out = Recording.from_columns(cols, path=means.path)
+    note = dq.note()
+    out.notes.extend(list(means.notes) + ([note] if note else []))
+    return out, note
+
+
+def capture_temperature_c(rec: Recording, caps: Captures,
+                          means: Recording | None = None) -> np.ndarray:
+    """Each raw row's temperature read from the capture means (``means``: default
+    ``caps.recording``; a warm-up's :func:`warmup_captures`): linear in time between capture
+    centres (a quantised or noisy channel averaged over each capture). Rows that are not
+    raw samples are their own captures: ``means``' temperature where given, else their own."""
+    means = caps.recording if means is None else means
+    if not caps.is_raw:
+        return means.temperature_c() if means is not caps.recording else rec.temperature_c()
+    if not means.has_temperature:
+        return rec.temperature_c()
     return np.interp(rec.t_s, means.t_s, means.temperature_c())
 
 

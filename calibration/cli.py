@@ -18,7 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from calibration import fitting, gate
-from calibration.captures import capture_means, capture_temperature_c, placed_samples
+from calibration.captures import (
+    capture_means,
+    capture_temperature_c,
+    placed_samples,
+    warmup_captures,
+)
 from calibration.errors import CalibrationError, RecordingError
 from calibration.fitting import CalibrationFit, FitOptions, OptionNotApplicable
 from calibration.gravity import GravityError, LocalGravity, from_arguments
@@ -244,11 +249,15 @@ def _temperatures(
         # samples of a continuous log: each row gets its capture's (linear in time
         # between captures); an averaged reading is its own capture.
         caps = capture_means(rec)
-        temp_c = capture_temperature_c(rec, caps)
+        means, rebuilt = (warmup_captures(caps.recording) if model.mode == "warmup"
+                          else (caps.recording, None))
+        temp_c = capture_temperature_c(rec, caps, means)
         how = ("temperature: raw samples read as capture means (calibrate's reader); each "
                "row at its capture's mean temperature, linear in time between captures "
                "(--raw-temperature: use each row's own reading)" if caps.is_raw else
                "temperature: each reading's own, as the warm-up model was fitted")
+        if rebuilt:
+            how += f"; {rebuilt}"
     else:
         temp_c, how = compensation_temperature(
             rec.t_s, temp_c,
@@ -278,7 +287,7 @@ def _rate_offset_rows(model: ThermalModel, rec: Recording) -> np.ndarray:
     as calibrate read it, linear in time between captures."""
     from calibration.warmup import rate_offset_g
 
-    means = capture_means(rec).recording
+    means, _ = warmup_captures(capture_means(rec).recording)
     off = rate_offset_g(model, means.t_s, means.temperature_c())
     return np.column_stack([np.interp(rec.t_s, means.t_s, off[:, i]) for i in range(3)])
 

@@ -227,6 +227,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     """Too few orientations for the SFEM: each axis' bias change with temperature, and
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
     with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
+    from calibration.captures import warmup_captures
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -241,6 +242,11 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         g_local = float(np.median(np.linalg.norm(captures.ref_g, axis=1)))
     else:
         g_local = 1.0
+    # a coarsely quantised channel: the die temperature rebuilt from its steps' transitions,
+    # for the fit, its held-out and rate checks, and the figures below alike
+    captures, rebuilt = warmup_captures(captures)
+    if rebuilt:
+        capture_notes = [*capture_notes, rebuilt]
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
     gate.check_model(wf.model, captures)
@@ -251,6 +257,14 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     if wf.absolute is not None and wf.absolute.capture_residual_g.size:
         gate.check_warmup_residuals(wf.absolute.capture_residual_g, orientations,
                                     wf.absolute.names + tuple(wf.absolute.loose))
+    if rebuilt and wf.model.temperature_rate:
+        # the rebuilt temperature's error is largest where the die turns, where dT/dt
+        # changes sign: a rate term can hold some of it as well as the part's physics
+        said = ("the rate term was fitted on the rebuilt temperature of a quantised channel: "
+                "besides a rate-sensitive part or a lagging channel it may hold part of the "
+                "rebuild's error where the die turns (kept because held-out error prefers it)")
+        wf.model.notes.append(said)
+        wf.report["notes"].append(said)
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [reason]
     model = wf.model

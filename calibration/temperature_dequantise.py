@@ -1,0 +1,302 @@
+"""A coarsely quantised temperature channel: the die temperature rebuilt from its steps in time.
+
+A channel that prints whole degrees (1 °C LSB) says only which 1 °C band the die is in:
+within a step the temperature is unknown to ±0.5 °C (RMS LSB/√12 = 0.29 °C), and a bias
+of 1 mg/°C fitted or compensated at the step values is wrong by up to 0.5 mg whatever
+the thermal model (Eq. 8). The die temperature changes continuously and slowly, so the
+*instant* a reading flips from level k to k+1 is the instant the die crossed the
+decision threshold between them, and those instants carry what the step values lose:
+
+1. the channel's LSB ``q`` is read from the data (:func:`coarse_lsb_c`): the spacing of
+   the levels that hold many readings; only a channel quantised at
+   :data:`MIN_LSB_C` or coarser, with at least :data:`MIN_ON_LEVEL_SHARE` of its readings
+   on the levels (a dithered channel averaged into capture means carries its sub-LSB
+   information already), is rebuilt; any other is returned exactly as read;
+2. *settled runs* are at least :data:`SETTLED_ROWS` consecutive readings on one level
+   (the first and last readings count as one where they are another level); between
+   two settled runs at levels a ≠ b the die crossed each threshold between them once.
+   The crossing instant is the balance point of the readings between the runs: a mean
+   over a row's duration ``d`` with a fraction ``u`` of its samples beyond the
+   threshold puts the crossing ``u·d`` before the row's end, and readings that flicker
+   between the two levels put it at the flicker's centre (the time the readings beyond
+   it would fill as one block). Two runs at one level with readings of a neighbouring
+   level between them are a *touch*: the die reached the threshold there. A longer
+   flicker, with settled runs inside it, is a row of crossings and touches at the
+   threshold, and the trace holds the threshold through it;
+3. the thresholds are midway between levels: the rebuilt temperature is on the channel's
+   own scale (a channel that truncates instead of rounding is off by half an LSB, a
+   constant the bias polynomial's constant absorbs: a warm-up fits the bias *change*);
+4. the die temperature is the monotone PCHIP through (crossing instant, threshold): it
+   never leaves a band between two crossings. Where the die crosses a threshold and
+   comes back (a turning point: k → k+1 → k) its extremum lies inside the step: a knot
+   between the two crossings at the threshold plus h = s·D/4 (the parabola entering and
+   leaving at the neighbouring crossings' mean slope s over the stay D), at most half
+   an LSB (the step's value): never beyond the step the channel read. A flicker between
+   two levels has slope 0 on both sides and stays at the threshold;
+5. before the first crossing and after the last, the die moves on at the first (last)
+   interval's slope (at least fast enough to get there by the middle of the end run)
+   until it reaches its step's value, and holds it there (a rest before a warm-up is
+   somewhere in its step: its value is the unbiased guess).
+
+A reading settled on a level is never given a temperature outside that level's band.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+# A channel quantised this coarsely (°C per LSB) or coarser is rebuilt: against the change
+# of a warm-up over a capture (< 0.1 °C in 5 s, captures.CAPTURE_BLOCK_S) such a step is
+# many captures wide, and its ±LSB/2 dominates a bias of 1 mg/°C. A finer channel's
+# capture means (conditioning as before) are left exactly as read.
+MIN_LSB_C = 0.25
+# A reading within this fraction of an LSB of a level is on that level.
+ON_LEVEL_TOL = 0.02
+# At least this share of the readings must lie on the levels: a staircase, not a channel
+# whose noise dithers it (whose capture means already resolve below the LSB).
+MIN_ON_LEVEL_SHARE = 0.5
+# Share of a candidate lattice's levels between the extremes that must hold readings
+# (coarse_lsb_c); at most MAX_CANDIDATES spacings are tried, finest first.
+MIN_LEVELS_READ = 0.8
+MAX_CANDIDATES = 64
+# Consecutive readings on one level that make a settled run (between two flickers).
+SETTLED_ROWS = 2
+
+
+@dataclass(frozen=True)
+class Dequantised:
+    """The temperature as rebuilt (or as read, when ``lsb_c`` is 0) and what was done."""
+
+    temperature_c: np.ndarray
+    lsb_c: float = 0.0  # the channel's coarse LSB; 0: not rebuilt
+    transitions: int = 0  # threshold crossings the rebuild went through
+    turning_points: int = 0  # k -> k+1 -> k returns, held inside their step
+
+    @property
+    def rebuilt(self) -> bool:
+        return self.lsb_c > 0
+
+    def note(self) -> str | None:
+        """The one line a report says about it (None: the channel was used as read)."""
+        if not self.rebuilt:
+            return None
+        turns = (f"; {self.turning_points} turning point(s) kept inside their step"
+                 if self.turning_points else "")
+        return (f"temperature channel quantised at {self.lsb_c:g} °C: die temperature rebuilt "
+                f"from the {self.transitions} transitions in time (monotone interpolation "
+                f"through the instants the readings cross midway between levels{turns}; "
+                f"calibrate and compensate rebuild it alike)")
+
+
+def coarse_lsb_c(temperature_c: np.ndarray) -> float:
+    """The channel's LSB (°C) when it reads a staircase of levels at least
+    :data:`MIN_LSB_C` apart (module docstring, 1), else 0."""
+    lattice = _lattice(np.asarray(temperature_c, float))
+    return 0.0 if lattice is None else lattice[0]
+
+
+def _lattice(y: np.ndarray) -> tuple[float, float] | None:
+    """(LSB, a level) of a coarse staircase, or None (:func:`coarse_lsb_c`).
+
+    Anchored at the most filled value, each spacing from it to another repeated value (at
+    least :data:`MIN_LSB_C`) is a candidate LSB, finest first. The LSB is the first whose
+    lattice holds at least :data:`MIN_ON_LEVEL_SHARE` of the readings and whose levels
+    between the lowest and highest reading are nearly all read (:data:`MIN_LEVELS_READ`:
+    a die temperature moves continuously, so it passes through every level between its
+    extremes; half the LSB leaves every other level empty, twice it drops half the
+    readings). LSB and level are then the median spacing of the levels' most frequent
+    values and their median offset (the most filled value may be a capture mean a sample
+    off its level, and so may a level's most frequent one where it was only crossed).
+    """
+    y = y[np.isfinite(y)]
+    if y.size < 4:
+        return None
+    levels, counts = np.unique(np.round(y, 9), return_counts=True)
+    base = float(levels[np.argmax(counts)])
+    gaps = np.abs(levels[counts >= 2] - base)
+    for q in np.unique(np.round(gaps[gaps >= MIN_LSB_C], 9))[:MAX_CANDIDATES]:
+        z = (y - base) / q
+        on = np.abs(z - np.round(z)) <= ON_LEVEL_TOL
+        read = np.unique(np.round(z[on]))
+        span = np.floor(z.max() + ON_LEVEL_TOL) - np.ceil(z.min() - ON_LEVEL_TOL) + 1
+        if (read.size >= 2 and np.mean(on) >= MIN_ON_LEVEL_SHARE
+                and read.size >= MIN_LEVELS_READ * span):
+            # each level's most frequent value (a reading, not a capture mean off it)
+            zl = (levels - base) / q
+            slot = np.round(zl)
+            near = np.abs(zl - slot) <= ON_LEVEL_TOL
+            modes = [(n, levels[near & (slot == n)][np.argmax(counts[near & (slot == n)])])
+                     for n in read]
+            n, v = np.array(modes).T
+            q_fit = float(np.median(np.diff(v) / np.diff(n)))
+            return q_fit, float(np.median(v - q_fit * n))
+    return None
+
+
+def dequantise(t_s: np.ndarray, temperature_c: np.ndarray) -> Dequantised:
+    """The die temperature rebuilt from a coarsely quantised channel's transitions in time
+    (module docstring); the readings unchanged when the channel is not coarse or never
+    changes level. ``t_s`` increasing; each reading covers the median spacing of the times
+    (a capture mean: the fraction of its samples beyond a threshold places the crossing)."""
+    t = np.asarray(t_s, float)
+    y = np.asarray(temperature_c, float)
+    unchanged = Dequantised(y.copy())
+    lattice = _lattice(y)
+    ok = np.isfinite(y) & np.isfinite(t)
+    if lattice is None or ok.sum() < 4 or np.any(np.diff(t[ok]) < 0):
+        return unchanged
+    q, base = lattice
+    tt, yy = t[ok], y[ok]
+    z = (yy - base) / q
+    runs = _settled_runs(z)
+    if len(runs) < 2:
+        return unchanged
+    d = float(np.median(np.diff(tt))) if tt.size > 1 else 0.0
+    knots, kinds = _crossings(tt, z, runs, d)
+    if not any(k != "touch" for k in kinds):
+        return unchanged
+    knots, turns = _with_turning_points(knots, kinds)
+    z_rec = _evaluate(tt, knots, runs)
+    # a reading settled on a level keeps a temperature inside that level's band
+    for lo, hi, level in runs:
+        z_rec[lo:hi] = np.clip(z_rec[lo:hi], level - 0.5, level + 0.5)
+    out = y.copy()
+    out[ok] = base + q * z_rec
+    n_cross = sum(k != "touch" for k in kinds)
+    return Dequantised(out, q, n_cross, turns)
+
+
+def _settled_runs(z: np.ndarray) -> list[tuple[int, int, int]]:
+    """(first row, one past the last, level) of each settled run, in time order; the first
+    and last rows open and close a run of their own (rounded) level where the first or last
+    settled run is another level (a warm-up that leaves its first step within a capture)."""
+    level = np.round(z)
+    on = np.abs(z - level) <= ON_LEVEL_TOL
+    runs: list[tuple[int, int, int]] = []
+    i, n = 0, z.size
+    while i < n:
+        if not on[i]:
+            i += 1
+            continue
+        j = i + 1
+        while j < n and on[j] and level[j] == level[i]:
+            j += 1
+        if j - i >= SETTLED_ROWS:
+            runs.append((i, j, int(level[i])))
+        i = j
+    if runs and runs[0][0] > 0 and int(level[0]) != runs[0][2]:
+        runs.insert(0, (0, 1, int(level[0])))
+    if runs and runs[-1][1] < n and int(level[-1]) != runs[-1][2]:
+        runs.append((n - 1, n, int(level[-1])))
+    return runs
+
+
+def _crossings(t: np.ndarray, z: np.ndarray, runs: list[tuple[int, int, int]],
+               d: float) -> tuple[list[tuple[float, float]], list[str]]:
+    """Knots (time, level units) at the thresholds crossed or touched between consecutive
+    settled runs, and each knot's kind: "up", "down" or "touch". A flicker between two
+    levels is a row of knots at their threshold: the trace holds the threshold through it
+    (the die is within the channel's noise of it there)."""
+    knots: list[tuple[float, float]] = []
+    kinds: list[str] = []
+    for (_, a_end, a), (b_start, _, b) in zip(runs[:-1], runs[1:], strict=True):
+        for tc, value, kind in _region_crossings(t, z, a_end, b_start, a, b, d):
+            knots.append((tc, value))
+            kinds.append(kind)
+    order = np.argsort([k[0] for k in knots], kind="stable")
+    return [knots[i] for i in order], [kinds[i] for i in order]
+
+
+def _region_crossings(t: np.ndarray, z: np.ndarray, a_end: int, b_start: int, a: int, b: int,
+                      d: float) -> list[tuple[float, float, str]]:
+    """The knots between a run at level ``a`` ending before row ``a_end`` and one at ``b``
+    starting at row ``b_start``: (time, level units, kind)."""
+    t_a, t_b = float(t[a_end - 1]), float(t[b_start])
+    between = slice(a_end, b_start)
+    out: list[tuple[float, float, str]] = []
+    if b != a:
+        sgn = 1 if b > a else -1
+        n = abs(b - a)
+        for j in range(1, n + 1):
+            theta = a + sgn * (j - 0.5)
+            if b_start > a_end:
+                # balance point: the fraction of each row beyond the threshold
+                u = np.clip(sgn * (z[between] - (theta - 0.5 * sgn)), 0.0, 1.0)
+                tc = min(max(t_a + 0.5 * d + float(np.sum(1.0 - u)) * d, t_a), t_b)
+            else:  # no reading between the runs: evenly spread over the gap
+                tc = t_a + (t_b - t_a) * j / (n + 1)
+            out.append((tc, theta, "up" if sgn > 0 else "down"))
+        return out
+    zz = z[between]
+    for sgn in (1, -1):
+        beyond = sgn * (zz - a) > 0.5
+        if beyond.any():
+            idx = np.flatnonzero(beyond) + a_end
+            w = np.clip(sgn * (z[idx] - a) - 0.5, 0.0, 1.0) + 1e-12
+            out.append((float(np.sum(t[idx] * w) / np.sum(w)), a + 0.5 * sgn, "touch"))
+    return out
+
+
+def _with_turning_points(knots: list[tuple[float, float]], kinds: list[str]
+                         ) -> tuple[list[tuple[float, float]], int]:
+    """The knots with one inserted between each pair of crossings of one threshold in
+    opposite directions (module docstring, 4); and how many were inserted."""
+    out = [knots[0]]
+    turns = 0
+    for i in range(1, len(knots)):
+        (t0, v0), (t1, v1) = knots[i - 1], knots[i]
+        if v0 == v1 and {kinds[i - 1], kinds[i]} == {"up", "down"} and t1 > t0:
+            slopes = []
+            if i >= 2 and knots[i - 2][0] < t0:
+                slopes.append(abs(v0 - knots[i - 2][1]) / (t0 - knots[i - 2][0]))
+            if i + 1 < len(knots) and knots[i + 1][0] > t1:
+                slopes.append(abs(knots[i + 1][1] - v1) / (knots[i + 1][0] - t1))
+            h = min(0.5, float(np.mean(slopes)) * (t1 - t0) / 4.0) if slopes else 0.5
+            sgn = 1.0 if kinds[i - 1] == "up" else -1.0
+            if h > 0:
+                out.append((0.5 * (t0 + t1), v0 + sgn * h))
+                turns += 1
+        out.append(knots[i])
+    return out, turns
+
+
+def _evaluate(t: np.ndarray, knots: list[tuple[float, float]],
+              runs: list[tuple[int, int, int]]) -> np.ndarray:
+    """Level units at every time: PCHIP through the knots, the ends moving on at the end
+    intervals' slopes to their step's value and holding it (module docstring, 5)."""
+    kt = np.array([k[0] for k in knots])
+    kv = np.array([k[1] for k in knots])
+    # strictly increasing knot times (coincident crossings: averaged into one knot)
+    kt, inv = np.unique(kt, return_inverse=True)
+    kv = np.bincount(inv, weights=kv) / np.bincount(inv)
+    z = np.empty(t.size)
+    inside = (t >= kt[0]) & (t <= kt[-1])
+    z[inside] = PchipInterpolator(kt, kv)(t[inside]) if kt.size >= 2 else kv[0]
+    (a0, a1, first_level), (b0, b1, last_level) = runs[0], runs[-1]
+    # the end interval's slope; at least enough to reach the step's value by the middle of
+    # the end run (a flicker's knots all at one threshold have no slope between them)
+    s0 = max(_secant(kt, kv), 0.5 / max(kt[0] - 0.5 * float(t[a0] + t[a1 - 1]), 1e-9))
+    s1 = max(_secant(kt[::-1], kv[::-1]),
+             0.5 / max(0.5 * float(t[b0] + t[b1 - 1]) - kt[-1], 1e-9))
+    before, after = t < kt[0], t > kt[-1]
+    z[before] = _toward(kv[0], first_level, s0 * (kt[0] - t[before]))
+    z[after] = _toward(kv[-1], last_level, s1 * (t[after] - kt[-1]))
+    return z
+
+
+def _secant(kt: np.ndarray, kv: np.ndarray) -> float:
+    """|slope| from the first knot to the nearest one at another value (0: none)."""
+    other = np.flatnonzero(kv != kv[0])
+    if other.size == 0:
+        return 0.0
+    j = int(other[0])
+    return abs(float(kv[j] - kv[0]) / float(kt[j] - kt[0]))
+
+
+def _toward(start: float, level: float, moved: np.ndarray) -> np.ndarray:
+    """From ``start`` toward ``level`` by ``moved`` (level units), stopping at ``level``."""
+    step = np.minimum(moved, abs(level - start))
+    return start + np.sign(level - start) * step
