@@ -44,6 +44,8 @@ def test_a_glitch_of_the_channel_is_named_temperature_sensor_with_its_size():
         f.parameter_sd["channel_departure_c"], 0.01)
     assert "excluded from the kept model" in f.explanation
     assert {"outlier"} == {c["effect"] for c in f.confusers}
+    (twin,) = fx.to_truth_effects(d.to_dict()["findings"])  # a twin holds the glitch
+    assert (twin.glitch_rows, twin.glitch_c) == ((ROW,), delta)
 
 
 def test_a_shock_at_a_normal_temperature_stays_outlier():
