@@ -1381,7 +1381,7 @@ def _channel_glitches(pb: LinearProblem, terms: list[Term], findings: list[Findi
                       alpha: float, not_ident: dict[str, dict[str, str]]) -> list[Finding]:
     """The ``outlier`` findings restated by their readings' glitch checks (channel_glitch.py),
     each judged against the model without any flagged reading's term."""
-    rows = [r for f in findings if f.effect == "outlier" and f.named_as_modelled
+    rows = [r for f in findings if f.effect == channel_glitch.OUTLIER and f.named_as_modelled
             for r in f.rows]
     if not rows or pb.ctx.temperature_source == "none":
         return findings
