@@ -145,11 +145,27 @@ def temperature_departure(ctx: Any, row: int, skip: set[int],
     return Departure(departure, sd * float(np.sqrt(1.0 + lev)), sd * float(np.sqrt(lev)), k)
 
 
-def glitch_column(ctx: Any, row: int) -> np.ndarray:
-    """(N,3,1) raw-output column of a glitch δ = 1 °C of the channel on ``row``: −∂raw/∂T there
-    (the coefficient is δ, read − die, as for the channel step)."""
+# Below this recorded departure (°C) the tangent is the glitch's shape to rounding.
+SECANT_MIN_C = 1e-3
+
+
+def glitch_column(ctx: Any, row: int, departure_c: float | None = None) -> np.ndarray:
+    """(N,3,1) raw-output column of a glitch δ = 1 °C of the channel on ``row`` (the
+    coefficient is δ, read − die, as for the channel step): −∂raw/∂T there.
+
+    With the recorded departure ``d`` (reference mode), the secant instead: the base refitted
+    with that reading at ``T − d`` (``ctx.refit_shift``), its output change there over ``d``.
+    Why: a glitch of several °C on a cubic is not linear in δ to the output's noise (a 6 °C
+    glitch left 1 mg at one reading, and its direction turned by the axes' curvatures).
+    """
     out = np.zeros((ctx.n, 3, 1))
     out[row, :, 0] = -ctx.draw_dtemp_g_per_c[row]
+    if (departure_c is not None and abs(departure_c) > SECANT_MIN_C
+            and ctx.refit_shift is not None):
+        dT = np.zeros(ctx.n)
+        dT[row] = -departure_c
+        shift, _ = ctx.refit_shift(dT)
+        out[row, :, 0] = shift[row] / departure_c
     return out
 
 
@@ -163,7 +179,8 @@ def check_reading(pb: Any, U: np.ndarray, e: np.ndarray, row: int, skip: set[int
     ctx = pb.ctx
     if ctx.temperature_source == "none" or not np.any(ctx.draw_dtemp_g_per_c[row]):
         return None
-    xw = whitened(pb, glitch_column(ctx, row))
+    dep = temperature_departure(ctx, row, skip)
+    xw = whitened(pb, glitch_column(ctx, row, None if dep is None else dep.departure_c))
     z = stats.project_out(U, xw)[:, 0]
     zz = float(z @ z)
     dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
@@ -172,7 +189,6 @@ def check_reading(pb: Any, U: np.ndarray, e: np.ndarray, row: int, skip: set[int
     Ug, eg = extend(U, e, xw)
     lp, k = log_p(Ug, eg, whitened(pb, per_axis_indicator(ctx.n, np.array([row]))))
     rem = float(lp / np.log(10)) if k else None
-    dep = temperature_departure(ctx, row, skip)
     verdict, why = decide(dep, delta, delta_sd, rem, alpha)
     return GlitchCheck(row, verdict, why, delta, delta_sd, rem, dep)
 
