@@ -108,3 +108,24 @@ def test_the_departure_is_read_against_the_plateau_neighbours():
     Ctx.steps = np.repeat(np.arange(6), 4)
     Ctx.step_ids = list(range(6))
     assert cg.temperature_departure(Ctx, 5, set()) is None
+
+
+def test_in_norm_mode_a_large_glitch_is_named_by_the_secant():
+    """Without references only |f| is seen: no dof beside δ, and a 10 °C glitch on the cubic
+    is far from the tangent's linearisation (the tangent called it ``outlier``)."""
+    from dataclasses import replace
+
+    for effect, named in ((fx.TemperatureSensor(glitch_c=10.0, glitch_rows=(ROW,)),
+                           "temperature_sensor"),
+                          (fx.Outlier(size_g=np.array([60e-6, -40e-6, 50e-6]), rows=(ROW,)),
+                           "outlier")):
+        rec = simulate_campaign(SensorTruth.adxl355_typical(seed=SEED, effects=[effect]),
+                                seed=100 + SEED)
+        rec = replace(rec, columns={k: v for k, v in rec.columns.items()
+                                    if not k.startswith("ref_")})
+        d = diagnose(rec, n_null=200, seed=SEED)
+        assert d.mode == "norm"
+        assert [(f.effect, f.rows) for f in d.findings] == [(named, [ROW])]
+        if named == "temperature_sensor":
+            f = d.findings[0]
+            assert abs(f.parameters["glitch_c"] - 10.0) <= 3 * f.parameter_sd["glitch_c"]

@@ -153,19 +153,22 @@ def glitch_column(ctx: Any, row: int, departure_c: float | None = None) -> np.nd
     """(N,3,1) raw-output column of a glitch δ = 1 °C of the channel on ``row`` (the
     coefficient is δ, read − die, as for the channel step): −∂raw/∂T there.
 
-    With the recorded departure ``d`` (reference mode), the secant instead: the base refitted
-    with that reading at ``T − d`` (``ctx.refit_shift``), its output change there over ``d``.
+    With the recorded departure ``d``, the secant instead: the base with that reading at
+    ``T − d``, its output change there over ``d`` (reference mode: the base refitted so,
+    ``ctx.refit_shift``; norm mode: the fitted base evaluated there, ``ctx.temperature_shift``).
     Why: a glitch of several °C on a cubic is not linear in δ to the output's noise (a 6 °C
     glitch left 1 mg at one reading, and its direction turned by the axes' curvatures).
     """
     out = np.zeros((ctx.n, 3, 1))
     out[row, :, 0] = -ctx.draw_dtemp_g_per_c[row]
-    if (departure_c is not None and abs(departure_c) > SECANT_MIN_C
-            and ctx.refit_shift is not None):
-        dT = np.zeros(ctx.n)
-        dT[row] = -departure_c
-        shift, _ = ctx.refit_shift(dT)
-        out[row, :, 0] = shift[row] / departure_c
+    if departure_c is None or abs(departure_c) <= SECANT_MIN_C:
+        return out
+    dT = np.zeros(ctx.n)
+    dT[row] = -departure_c
+    if ctx.refit_shift is not None:
+        out[row, :, 0] = ctx.refit_shift(dT)[0][row] / departure_c
+    elif ctx.temperature_shift is not None:
+        out[row, :, 0] = ctx.temperature_shift(dT)[row] / departure_c
     return out
 
 
