@@ -187,7 +187,9 @@ class TemperatureSensor:
 
     @classmethod
     def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> TemperatureSensor:
-        """The twin counterpart of a channel-step finding."""
+        """The twin counterpart of a channel-step finding, or of a glitch on ``rows``."""
+        if "glitch_c" in p:
+            return cls(glitch_c=float(p["glitch_c"]), glitch_rows=tuple(int(r) for r in rows))
         return cls(step_c=float(p["step_c"]), from_step=int(p["from_step"]))
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:

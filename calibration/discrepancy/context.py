@@ -39,6 +39,9 @@ class DesignContext:
     # Reference mode: ``refit_shift(dT) -> (Δraw, ∂raw/∂T at T + dT)``, both (N,3) g, of the
     # base model refitted with its temperature moved by dT (see problem.py); None in norm mode.
     refit_shift: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+    # Norm mode: ``temperature_shift(dT) -> Δraw`` (N,3) g, the fitted base's raw output at
+    # T + dT minus at T for the same calibrated output (no refit); None in reference mode.
+    temperature_shift: Callable[[np.ndarray], np.ndarray] | None = None
 
     @property
     def n(self) -> int:

@@ -24,7 +24,7 @@ from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
 from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
 from calibration.discrepancy.context import AXES
-from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect
+from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect, channel_glitch
 from calibration.discrepancy.effects.base import how_told_apart
 from calibration.discrepancy.effects.temperature_rate import lag_alike
 from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
@@ -488,6 +488,10 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22);
     # here, after the demotions above (its term stays in the model either way).
     findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
+    # A flagged reading whose recorded temperature jumped off its neighbours and whose
+    # residual is the model's own ∂output/∂T is a glitch of the channel, not an outlier;
+    # where the data cannot tell, not separable (channel_glitch.py, issue 22).
+    findings = _channel_glitches(pb, terms, findings, alpha, not_ident)
     # Once more, after the two demotions above added to not_ident: candidates the fit
     # could not tell apart are not "separable" in this recording, and the protocol block
     # must not say so beside a finding that says the opposite.
@@ -1371,6 +1375,23 @@ def _as_protocol_allows(f: Finding, protocol: Protocol, not_ident: dict[str, dic
                      f"(each significant here): {conf.why}. It is modelled (with the "
                      f"{f.effect} term) but not named."),
         parameters={}, parameter_sd={}, confusers=[])
+
+
+def _channel_glitches(pb: LinearProblem, terms: list[Term], findings: list[Finding],
+                      alpha: float, not_ident: dict[str, dict[str, str]]) -> list[Finding]:
+    """The ``outlier`` findings restated by their readings' glitch checks (channel_glitch.py),
+    each judged against the model without any flagged reading's term."""
+    rows = [r for f in findings if f.effect == channel_glitch.OUTLIER and f.named_as_modelled
+            for r in f.rows]
+    if not rows or pb.ctx.temperature_source == "none":
+        return findings
+    Xw, yw = _design(pb, [t for t in terms if not t.rows])
+    U = stats.orthonormal_basis(Xw)
+    del Xw
+    e = yw - U @ (U.T @ yw)
+    skip = {r for t in terms for r in t.rows}
+    checks = {r: channel_glitch.check_reading(pb, U, e, r, skip - {r}, alpha) for r in rows}
+    return channel_glitch.restate(findings, checks, pb.ctx, not_ident)
 
 
 def _merge_outliers(findings: list[Finding]) -> list[Finding]:

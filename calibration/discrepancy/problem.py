@@ -654,6 +654,15 @@ def _norm_problem(rec: Recording, capture_means: bool = False) -> LinearProblem:
         raw_h = sfem.inverse(Pm_h, f)
         raw_0 = sfem.inverse(Pm, f)
         ctx.draw_dtemp_g_per_c = (raw_h - raw_0) / h
+
+        def temperature_shift(dT_c: np.ndarray) -> np.ndarray:
+            """The base's raw output at T + dT minus at T, for the same calibrated output."""
+            Pm_d = np.tile(fixed, (n, 1))
+            td = (ctx0.temp_c + dT_c - mid) / half
+            Pm_d[:, free] = np.column_stack([td**p for p in range(npow)]) @ q.T
+            return sfem.inverse(Pm_d, f) - raw_0
+
+        ctx.temperature_shift = temperature_shift
         sig_T = temperature_noise_c(ctx)
         if from_sd and np.any(sig_T > 0):
             # As in reference mode: the recorded temperature's noise moves |f| along

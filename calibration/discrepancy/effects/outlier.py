@@ -3,7 +3,9 @@
 Tested per reading (an indicator on each axis, i.e. leave-the-row-out), the
 max over readings calibrated by the null. Flagged readings are excluded.
 A flagged reading keeps the name only if it is isolated (:meth:`Outlier.misses`):
-the other readings must not predict its deviation.
+the other readings must not predict its deviation. A flagged reading whose recorded
+temperature jumped off its neighbours and whose residual is the model's own ∂output/∂T is a
+glitch of the temperature channel, not an outlier (:mod:`.channel_glitch`, issue 22).
 """
 
 from __future__ import annotations

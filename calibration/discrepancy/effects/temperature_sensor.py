@@ -13,6 +13,11 @@ Two parts, told apart by what one temperature source can show:
   plateau boundaries. Its shape is locked to the model's temperature sensitivity, which
   is what tells it from a power-cycle bias jump (free per-axis biases, ``session_offset``).
 
+A **glitch** of the channel on single readings (effects.md: "spikes in T") is the same
+linearisation on one reading; the per-reading test finds it, and :mod:`.channel_glitch`
+names it (the recorded temperature off its plateau neighbours, the residual along −∂f/∂T
+with one δ), so it is not a grid value of this term.
+
 What it cannot be told from (measured on the second generator, issue 22): a change confined
 to one plateau. After the cubic in T the step's remnant lives in the n_plateaus − 4
 dimensions the cubic leaves per column, and sits next to its boundary: a step from plateau 1
