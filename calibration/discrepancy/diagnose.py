@@ -346,7 +346,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             break
         # The name among confusers that explain the same structure: the clear best fit.
         best, close = by_fit.name_by_fit(best, tests, e, U.shape[1],
-                                         partial(_explained, pb, U, e, lifted), alpha)
+                                         partial(_explained, pb, U, e, lifted), alpha,
+                                         ctx)
         eff = BY_ID[best.effect_id]
         X_refined = None
         if eff.continuous:

@@ -37,7 +37,8 @@ def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class SessionOffset(CatalogueEffect):
     effect_id: str = "session_offset"
-    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate")
+    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate",
+                                  "vibration_rectification")
     experiment: str = ("power-cycle the sensor at one plateau and take the same positions "
                        "before and after the cycle")
     told_apart: tuple[tuple[str, str], ...] = (
@@ -46,6 +47,10 @@ class SessionOffset(CatalogueEffect):
         ("bias_drift", "a session offset is a step in time; drift is a ramp"),
         ("temperature_rate", "a rate term flips sign with the direction of the temperature "
                              "change; a session jump does not"),
+        ("vibration_rectification",
+         "a rectified offset follows the vibration power recorded in sd_* on every plateau; a "
+         "power cycle is a step with no recorded cause. Where the vibration power changes at "
+         "the jump's boundary and nowhere else, the two are one step and not separable"),
     )
     writes_extension: bool = True
     named_by_fit: bool = True
