@@ -138,12 +138,13 @@ def _best_anywhere(eff: Any, q: dict[float, float],
     return best
 
 
-def as_not_separable(f: Any, candidates: list[str], not_ident: dict[str, dict[str, str]]
-                     ) -> Any:
-    """A finding whose structure ``candidates`` fit alike, reported as not identifiable."""
-    why = ("they fit this recording alike (explained variance within "
-           f"{MARGIN:g} noise variances of each other): the protocol holds too little of "
-           "what tells them apart")
+def as_not_separable(f: Any, candidates: list[str], not_ident: dict[str, dict[str, str]],
+                     why: str = "") -> Any:
+    """A finding whose structure ``candidates`` fit alike, reported as not identifiable
+    (``why``: the reason, when not the fits' closeness)."""
+    why = why or ("they fit this recording alike (explained variance within "
+                  f"{MARGIN:g} noise variances of each other): the protocol holds too little "
+                  "of what tells them apart")
     for c in candidates:
         others = ", ".join(x for x in candidates if x != c)
         not_ident.setdefault(c, {"effect": c, "why": f"not separable from {others} here: "

@@ -144,6 +144,18 @@ class CatalogueEffect:
         term. Returns where (as :meth:`misses`) or None. Default: None."""
         return None
 
+    def alike_unobserved(self, pb: Any, U: np.ndarray, e: np.ndarray, X: np.ndarray,
+                         theta: float, alpha: float) -> tuple[list[str], str]:
+        """Declared confusers with no regressor of their own (``observable`` False) whose
+        physics explains this accepted term's evidence as well, and why (issue 22).
+
+        Called at the term's stage with ``U``, ``e`` the model without it and ``X`` its
+        lifted, unweighted columns. Non-empty: the term stays in the model (it removes the
+        structure) but is reported not separable from them (by_fit.as_not_separable).
+        Default: none.
+        """
+        return [], ""
+
     # --- words ------------------------------------------------------------
     def parameters(self, coef: np.ndarray, se: np.ndarray, theta: float,
                    ctx: DesignContext) -> tuple[dict[str, float], dict[str, float]]:
