@@ -429,7 +429,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             unresolved[eff.effect_id] = close
         elif by_fit.rivals(best, tests, alpha):
             told_apart.add(eff.effect_id)
-        alike, why_alike[eff.effect_id] = eff.alike_unobserved(pb, U, e, term.X, term.theta,
+        alike, why_alike[eff.effect_id] = eff.not_told_from(pb, U, e, term.X, term.theta,
                                                                alpha)
         if alike:  # a confuser with no regressor explains it as well (effects/base.py)
             unresolved[eff.effect_id] = list(dict.fromkeys(

@@ -144,10 +144,13 @@ class CatalogueEffect:
         term. Returns where (as :meth:`misses`) or None. Default: None."""
         return None
 
-    def alike_unobserved(self, pb: Any, U: np.ndarray, e: np.ndarray, X: np.ndarray,
+    def not_told_from(self, pb: Any, U: np.ndarray, e: np.ndarray, X: np.ndarray,
                          theta: float, alpha: float) -> tuple[list[str], str]:
-        """Declared confusers with no regressor of their own (``observable`` False) whose
-        physics explains this accepted term's evidence as well, and why (issue 22).
+        """Declared confusers this accepted term cannot be told from here whatever the fits
+        say, and why (issue 22): one with no regressor of its own (``observable`` False)
+        whose physics explains the term's evidence as well, or one whose regressor is, by
+        this recording's design, the term's own at ``theta`` (where the better fit of one
+        says nothing of the cause).
 
         Called at the term's stage with ``U``, ``e`` the model without it and ``X`` its
         lifted, unweighted columns. Non-empty: the term stays in the model (it removes the

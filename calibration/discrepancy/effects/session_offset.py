@@ -83,6 +83,27 @@ class SessionOffset(CatalogueEffect):
             return None
         return jump_inside_plateau(pb, U, e, int(theta), axes, alpha)
 
+    def not_told_from(self, pb, U, e, X, theta, alpha):
+        """``vibration_rectification`` when the jump's plateau is where the recorded
+        vibration power steps, and the vibration does nothing else (issue 22).
+
+        Without a session column the jump's cause is not recorded; the vibration's is. A
+        rectified offset then is the same step, and the step fits a little better only
+        because each reading's ``sd²`` carries its own sampling error (a rectified offset on
+        the project's blind set was named a power cycle 5 times in 9). The jump is not
+        named alone there, whatever the fits.
+        """
+        from calibration.discrepancy.effects.vibration_rectification import power_step
+
+        if pb.ctx.session is not None or not np.isfinite(theta):
+            return [], ""
+        if power_step(pb.ctx) != int(theta):
+            return [], ""
+        return ["vibration_rectification"], (
+            f"the recorded vibration power (sd_*) steps at the same plateau ({int(theta)}) "
+            "and nowhere else: a rectified offset and a power cycle there are one step, and "
+            "the recording holds no session column to say a power cycle happened")
+
     def parameters(self, coef, se, theta, ctx):
         p, s = axis_params("offset", "ug", coef[:3], se[:3], UG)
         if np.isfinite(theta):

@@ -116,7 +116,7 @@ class ThermalLag(CatalogueEffect):
                     self.experiment)
         return True, "", self.experiment
 
-    def alike_unobserved(self, pb, U, e, X, theta, alpha):
+    def not_told_from(self, pb, U, e, X, theta, alpha):
         """``self_heating`` when a warm-up after power-on explains the lag's evidence.
 
         A die heating itself settles δ above the chamber with ``1 − exp(−age/τw)`` after

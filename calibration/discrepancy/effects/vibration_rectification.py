@@ -67,6 +67,53 @@ def vibration_power_g2(ctx: DesignContext) -> np.ndarray:
     return out
 
 
+# A vibration power that changes beyond its one step by less than this share of the step
+# (between plateau means) cannot tell a rectified offset from a jump at that step.
+STEP_ONLY_SHARE = 0.1
+STEP_MIN_Z = 5.0  # the step of the plateau means, in their standard errors, to count
+
+
+def power_step(ctx: DesignContext) -> int | None:
+    """The plateau from which the recorded vibration power steps, when that one step is all
+    it does; else None (no ``sd_*``, no clear step, or changes at other plateaus too).
+
+    From the plateau means of ``sd²`` per axis, each with its standard error (the scatter
+    within the plateau over √k): the best split into two levels (before/after one plateau
+    boundary) must move some axis by ≥ :data:`STEP_MIN_Z` standard errors, and no plateau
+    may then depart from its level by more than 3 standard errors and
+    :data:`STEP_ONLY_SHARE` of that axis' step. This is a fact of the design (what the
+    vibration did), not a test of the output.
+    """
+    if ctx.sd_g is None or len(ctx.step_ids) < 3:
+        return None
+    ids = list(ctx.step_ids)
+    x = ctx.sd_g**2
+    m = np.array([x[ctx.steps == s].mean(axis=0) for s in ids])
+    k = np.array([np.sum(ctx.steps == s) for s in ids], float)
+    se = np.array([x[ctx.steps == s].std(axis=0, ddof=1) if c > 1 else np.full(3, np.inf)
+                   for s, c in zip(ids, k, strict=True)]) / np.sqrt(k)[:, None]
+    se = np.where(np.isfinite(se) & (se > 0), se, np.nanmax(np.where(np.isfinite(se), se, 0)))
+    best, best_ss, fit_best = None, np.inf, None
+    for j in range(1, len(ids)):
+        fit = np.vstack([np.broadcast_to(np.average(m[:j], axis=0, weights=k[:j]), (j, 3)),
+                         np.broadcast_to(np.average(m[j:], axis=0, weights=k[j:]),
+                                         (len(ids) - j, 3))])
+        ss = float(np.sum(((m - fit) / se) ** 2))
+        if ss < best_ss:
+            best, best_ss, fit_best = j, ss, fit
+    if best is None or fit_best is None:
+        return None
+    step = fit_best[-1] - fit_best[0]
+    se_step = np.sqrt(np.mean(se[:best] ** 2, axis=0) / best
+                      + np.mean(se[best:] ** 2, axis=0) / (len(ids) - best))
+    if np.max(np.abs(step) / se_step) < STEP_MIN_Z:
+        return None
+    off = np.abs(m - fit_best)
+    if np.any((off > 3.0 * se) & (off > STEP_ONLY_SHARE * np.max(np.abs(step)))):
+        return None
+    return int(ids[best])
+
+
 @dataclass(frozen=True)
 class VibrationRectification(CatalogueEffect):
     effect_id: str = "vibration_rectification"
