@@ -42,6 +42,9 @@ class DesignContext:
     # Norm mode: ``temperature_shift(dT) -> Δraw`` (N,3) g, the fitted base's raw output at
     # T + dT minus at T for the same calibrated output (no refit); None in reference mode.
     temperature_shift: Callable[[np.ndarray], np.ndarray] | None = None
+    # (N,) samples averaged per reading (the ``n`` column), when recorded: how noisy each
+    # reading's own ``sd_*`` is as an estimate of its window's variance.
+    n_samples: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -85,12 +88,17 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
     session = None
     if "session" in rec.columns and rec.has("session"):
         session = np.nan_to_num(rec.columns["session"], nan=0).astype(int)
+    n_samples = None
+    if rec.has("n"):
+        n_samples = np.asarray(rec.columns["n"], float)
+        n_samples = np.where(np.isfinite(n_samples) & (n_samples > 1), n_samples, np.nan)
+        n_samples = None if np.all(np.isnan(n_samples)) else n_samples
     return DesignContext(
         mode=mode, t_s=t, temp_c=temp, temperature_source=source,
         has_chamber_c=rec.has("chamber_c"), has_sensor_c=rec.has("sensor_c"),
         steps=steps, positions=positions, step_temp_c=step_temp, direction=direction,
         time_since_step_s=since, input_g=np.asarray(input_g, float),
-        sd_g=sd, draw_dtemp_g_per_c=np.zeros((n, 3)), session=session,
+        sd_g=sd, draw_dtemp_g_per_c=np.zeros((n, 3)), session=session, n_samples=n_samples,
     )
 
 

@@ -300,6 +300,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     prev_tests: dict[str, stats.CandidateTest] = {}
     unresolved: dict[str, list[str]] = {}  # named term → candidates it fits alike (by_fit)
     told_apart: set[str] = set()  # named over significant rivals by a clear margin (by_fit)
+    why_alike: dict[str, str] = {}  # named term → why an unobservable confuser fits alike
     tail_nu = np.inf
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
@@ -346,7 +347,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             break
         # The name among confusers that explain the same structure: the clear best fit.
         best, close = by_fit.name_by_fit(best, tests, e, U.shape[1],
-                                         partial(_explained, pb, U, e, lifted), alpha)
+                                         partial(_explained, pb, U, e, lifted), alpha,
+                                         ctx)
         eff = BY_ID[best.effect_id]
         X_refined = None
         if eff.continuous:
@@ -427,6 +429,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             unresolved[eff.effect_id] = close
         elif by_fit.rivals(best, tests, alpha):
             told_apart.add(eff.effect_id)
+        alike, why_alike[eff.effect_id] = eff.not_told_from(pb, U, e, term.X, term.theta,
+                                                               alpha)
+        if alike:  # a confuser with no regressor explains it as well (effects/base.py)
+            unresolved[eff.effect_id] = list(dict.fromkeys(
+                (close or [eff.effect_id]) + alike))
+            told_apart.discard(eff.effect_id)
         prev_tests = tests
     U = E = None  # the last stage's basis and replicates: the scan builds its own
     if np.isfinite(tail_nu):
@@ -482,7 +490,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # Both apply to a finding still named as its term (one re-labelled already is not named).
     findings = [f if not f.named_as_modelled or f.term_effect in told_apart
                 else _as_protocol_allows(f, protocol, not_ident, alpha) for f in findings]
-    findings = [by_fit.as_not_separable(f, unresolved[f.term_effect], not_ident)
+    findings = [by_fit.as_not_separable(f, unresolved[f.term_effect], not_ident,
+                                        why_alike.get(f.term_effect, ""))
                 if f.named_as_modelled and f.term_effect in unresolved else f
                 for f in findings]
     # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22);

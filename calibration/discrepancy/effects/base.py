@@ -144,6 +144,21 @@ class CatalogueEffect:
         term. Returns where (as :meth:`misses`) or None. Default: None."""
         return None
 
+    def not_told_from(self, pb: Any, U: np.ndarray, e: np.ndarray, X: np.ndarray,
+                         theta: float, alpha: float) -> tuple[list[str], str]:
+        """Declared confusers this accepted term cannot be told from here whatever the fits
+        say, and why (issue 22): one with no regressor of its own (``observable`` False)
+        whose physics explains the term's evidence as well, or one whose regressor is, by
+        this recording's design, the term's own at ``theta`` (where the better fit of one
+        says nothing of the cause).
+
+        Called at the term's stage with ``U``, ``e`` the model without it and ``X`` its
+        lifted, unweighted columns. Non-empty: the term stays in the model (it removes the
+        structure) but is reported not separable from them (by_fit.as_not_separable).
+        Default: none.
+        """
+        return [], ""
+
     # --- words ------------------------------------------------------------
     def parameters(self, coef: np.ndarray, se: np.ndarray, theta: float,
                    ctx: DesignContext) -> tuple[dict[str, float], dict[str, float]]:

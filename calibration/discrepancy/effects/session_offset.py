@@ -37,7 +37,8 @@ def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class SessionOffset(CatalogueEffect):
     effect_id: str = "session_offset"
-    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate")
+    confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate",
+                                  "vibration_rectification")
     experiment: str = ("power-cycle the sensor at one plateau and take the same positions "
                        "before and after the cycle")
     told_apart: tuple[tuple[str, str], ...] = (
@@ -46,6 +47,10 @@ class SessionOffset(CatalogueEffect):
         ("bias_drift", "a session offset is a step in time; drift is a ramp"),
         ("temperature_rate", "a rate term flips sign with the direction of the temperature "
                              "change; a session jump does not"),
+        ("vibration_rectification",
+         "a rectified offset follows the vibration power recorded in sd_* on every plateau; a "
+         "power cycle is a step with no recorded cause. Where the vibration power changes at "
+         "the jump's boundary and nowhere else, the two are one step and not separable"),
     )
     writes_extension: bool = True
     named_by_fit: bool = True
@@ -77,6 +82,27 @@ class SessionOffset(CatalogueEffect):
         if pb.ctx.session is not None or not np.isfinite(theta):
             return None
         return jump_inside_plateau(pb, U, e, int(theta), axes, alpha)
+
+    def not_told_from(self, pb, U, e, X, theta, alpha):
+        """``vibration_rectification`` when the jump's plateau is where the recorded
+        vibration power steps, and the vibration does nothing else (issue 22).
+
+        Without a session column the jump's cause is not recorded; the vibration's is. A
+        rectified offset then is the same step, and the step fits a little better only
+        because each reading's ``sd²`` carries its own sampling error (a rectified offset on
+        the project's blind set was named a power cycle 5 times in 9). The jump is not
+        named alone there, whatever the fits.
+        """
+        from calibration.discrepancy.effects.vibration_rectification import power_step
+
+        if pb.ctx.session is not None or not np.isfinite(theta):
+            return [], ""
+        if power_step(pb.ctx) != int(theta):
+            return [], ""
+        return ["vibration_rectification"], (
+            f"the recorded vibration power (sd_*) steps at the same plateau ({int(theta)}) "
+            "and nowhere else: a rectified offset and a power cycle there are one step, and "
+            "the recording holds no session column to say a power cycle happened")
 
     def parameters(self, coef, se, theta, ctx):
         p, s = axis_params("offset", "ug", coef[:3], se[:3], UG)
