@@ -397,7 +397,10 @@ def chi2_logsf(stat: np.ndarray | float, k: int) -> np.ndarray:
     with np.errstate(divide="ignore"):
         v = sps.chi2.logsf(x, k)
     a, z = k / 2.0, np.maximum(x / 2.0, 1e-300)
-    asym = (a - 1) * np.log(z) - z - gammaln(a) + np.log1p((a - 1) / z)
+    # Evaluated everywhere, used only where scipy underflowed (large stat): at stat ≈ 0 it is
+    # meaningless and its log of 0 must not print a warning onto the user's terminal.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        asym = (a - 1) * np.log(z) - z - gammaln(a) + np.log1p((a - 1) / z)
     return np.where(np.isfinite(v), v, asym)
 
 
@@ -408,7 +411,8 @@ def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
         v = sps.f.logsf(f, k, dof)
     a, b = dof / 2.0, k / 2.0
     x = dof / (dof + k * np.maximum(f, 1e-300))  # sf = I_x(a, b)
-    asym = a * np.log(x) + b * np.log1p(-x) - np.log(a) - betaln(a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):  # as in chi2_logsf: unused there
+        asym = a * np.log(x) + b * np.log1p(-x) - np.log(a) - betaln(a, b)
     return np.where(np.isfinite(v), v, asym)
 
 

@@ -81,3 +81,11 @@ def test_outlier_mds_pays_for_the_search_over_readings():
     assert 1.7 < m_star / old < 2.2
     # ... and it grows with the number of readings to search.
     assert detectability.minimum_detectable_rows(lam1, 3, 4000) > m_star
+
+
+def test_the_tail_probabilities_print_no_warning_at_zero(recwarn):
+    # A statistic of 0 (nothing explained) is an ordinary value: its log p is 0, and the
+    # asymptotic branch, unused there, must not put "divide by zero" on the user's terminal.
+    assert stats.f_logsf(np.array([0.0, 1.0]), 3, 50)[0] == 0.0
+    assert stats.chi2_logsf(np.array([0.0, 2.0]), 3)[0] == 0.0
+    assert [str(w.message) for w in recwarn] == []
