@@ -191,7 +191,7 @@ def warmup_captures(means: Recording) -> tuple[Recording, str | None]:
 
     if not means.has_temperature or len(means) < 4:
         return means, None
-    dq = dequantise(means.t_s, means.temperature_c())
+    dq = dequantise(means.t_s, means.temperature_c(), means.columns.get("n"))
     if not dq.rebuilt:
         return means, None
     cols = dict(means.columns)
