@@ -1,7 +1,7 @@
 """One-orientation warm-ups from the second generator: soakcal beside PX4 and ArduPilot.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.bench_warmup_gen2 \\
-        --realdata DIR [--cases 40] [--seed 1000] [--out DIR] [--keep DIR]
+        --realdata DIR [--cases 40] [--seed 1000] [--out DIR] [--keep DIR] [--coarse-dither]
 
 Each case is drawn by :func:`benchmarks.blind.gen2.warmup.draw_case` (seed ``--seed + i``):
 a thermal profile, a sensor, a temperature channel and noise, written as the CSV a
@@ -102,6 +102,7 @@ def run_case(case: WarmupCase, pools: NoisePools, workdir: Path, keep: Path | No
                                "profile": case.profile, "minutes": case.duration_s / 60.0,
                                "out_hz": case.out_hz, "lag_s": case.channel_lag_s,
                                "lsb_c": case.channel_lsb_c, "order": case.bias_order,
+                               "channel_noise_c": case.channel_noise_c,
                                "true_change_mg": (np.ptp(data.true_g, 0) * 1e3).tolist()}
     if log is None:
         return base | {"unusable": said, "outcome": "not-compared"}
@@ -175,6 +176,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", help="comma-separated case seeds to run instead")
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
     ap.add_argument("--keep", type=Path, help="keep the generated CSV and truth files here")
+    ap.add_argument("--coarse-dither", action="store_true",
+                    help="each case with a 1 °C channel dithered by 0.1-0.6 LSB of noise "
+                         "(draw_case(seed, coarse_dither=True))")
     args = ap.parse_args(argv)
     pools = load_pools(realdata_dir(args.realdata))
     seeds = ([int(s) for s in args.only.split(",")] if args.only
@@ -183,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
-            r = run_case(draw_case(s), pools, Path(tmp), args.keep)
+            r = run_case(draw_case(s, args.coarse_dither), pools, Path(tmp), args.keep)
             results.append(r)
             print(json.dumps(r), flush=True)
     text = (f"{len(seeds)} cases in {time.perf_counter() - t0:.0f} s\n\n" + summary(results)

@@ -29,10 +29,14 @@ pass through unchanged.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from calibration.recording import Recording
+
+if TYPE_CHECKING:
+    from calibration.temperature_dequantise import Dequantised
 
 AXES = ("ax", "ay", "az")
 SD_COLUMNS = ("sd_x", "sd_y", "sd_z")
@@ -182,6 +186,12 @@ def placed_samples(rec: Recording, caps: Captures) -> Recording:
 
 
 def warmup_captures(means: Recording) -> tuple[Recording, str | None]:
+    """:func:`warmup_rebuild` with the line that says what was done (None: nothing)."""
+    out, dq = warmup_rebuild(means)
+    return out, (None if dq is None else dq.note())
+
+
+def warmup_rebuild(means: Recording) -> tuple[Recording, Dequantised | None]:
     """The capture means a warm-up is fitted and compensated in: their temperature rebuilt
     from the steps' transitions in time where the channel is coarsely quantised
     (:func:`calibration.temperature_dequantise.dequantise`), with the line that says so;
@@ -191,7 +201,7 @@ def warmup_captures(means: Recording) -> tuple[Recording, str | None]:
 
     if not means.has_temperature or len(means) < 4:
         return means, None
-    dq = dequantise(means.t_s, means.temperature_c())
+    dq = dequantise(means.t_s, means.temperature_c(), means.columns.get("n"))
     if not dq.rebuilt:
         return means, None
     cols = dict(means.columns)
@@ -199,7 +209,7 @@ def warmup_captures(means: Recording) -> tuple[Recording, str | None]:
     out = Recording.from_columns(cols, path=means.path)
     note = dq.note()
     out.notes.extend(list(means.notes) + ([note] if note else []))
-    return out, note
+    return out, dq
 
 
 def capture_temperature_c(rec: Recording, caps: Captures,

@@ -227,7 +227,8 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     """Too few orientations for the SFEM: each axis' bias change with temperature, and
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
     with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
-    from calibration.captures import warmup_captures
+    from calibration.captures import warmup_rebuild
+    from calibration.rebuild_rate_noise import rebuild_rate_noise
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -244,11 +245,16 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         g_local = 1.0
     # a coarsely quantised channel: the die temperature rebuilt from its steps' transitions,
     # for the fit, its held-out and rate checks, and the figures below alike
-    captures, rebuilt = warmup_captures(captures)
+    means = captures
+    captures, dq = warmup_rebuild(captures)
+    rebuilt = None if dq is None else dq.note()
     if rebuilt:
         capture_notes = [*capture_notes, rebuilt]
+    # dT/dt's noise on a rebuilt temperature includes the rebuild's own error
+    noise = None if dq is None else rebuild_rate_noise(captures.t_s, dq, means.columns.get("n"))
     wf = fit_warmup(captures, decided.orientations,
-                    span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local)
+                    span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local,
+                    rebuild_noise=noise)
     gate.check_model(wf.model, captures)
     # the orientations the fit used: a drifting board's clusters joined (warmup.py)
     orientations = wf.orientations

@@ -330,6 +330,7 @@ def rate_noise_c_per_min(t_s: np.ndarray, window_s: float, noise_c: float) -> fl
 
 def rate_window_s(t_s: np.ndarray, temperature_c: np.ndarray,
                   signal_c_per_min: Callable[[np.ndarray], float], share: float,
+                  other_noise_c_per_min: Callable[[float], float] | None = None,
                   ) -> tuple[float, float] | None:
     """The shortest of :data:`RATE_WINDOWS_S` over which dT/dt's noise
     (:func:`rate_noise_c_per_min`, the channel's noise from :func:`temperature_noise_c`)
@@ -338,7 +339,10 @@ def rate_window_s(t_s: np.ndarray, temperature_c: np.ndarray,
     turns without smearing them; a longer one averages a quantised channel. Returns
     (window_s, its noise in °C/min), or None when no window is both long enough to hold
     :data:`RATE_MIN_READINGS` readings, at most half the readings' time span (a rate is
-    local: a window over the whole record is one parabola's slope) and quiet enough."""
+    local: a window over the whole record is one parabola's slope) and quiet enough.
+    ``other_noise_c_per_min``: window ↦ an error of dT/dt independent of the white noise
+    (a rebuilt temperature's own, :mod:`calibration.rebuild_rate_noise`), added in
+    quadrature."""
     t = np.asarray(t_s, float)
     noise_c = temperature_noise_c(t, temperature_c)
     span_s = float(np.ptp(t)) if t.size else 0.0
@@ -348,6 +352,8 @@ def rate_window_s(t_s: np.ndarray, temperature_c: np.ndarray,
         if t.size < RATE_MIN_READINGS or np.median(counts) < RATE_MIN_READINGS:
             continue
         noise = rate_noise_c_per_min(t, window, noise_c)
+        if other_noise_c_per_min is not None:
+            noise = math.hypot(noise, other_noise_c_per_min(window))
         rate = temperature_rate_c_per_min(t, temperature_c, window)
         if noise <= share * float(signal_c_per_min(rate)):
             return window, noise

@@ -39,6 +39,15 @@ decision threshold between them, and those instants carry what the step values l
    somewhere in its step: its value is the unbiased guess).
 
 A reading settled on a level is never given a temperature outside that level's band.
+
+A channel whose noise *dithers* it (σ ≥ 0.1 LSB before quantisation: it flickers between
+two levels for a long stretch around each crossing, and its capture means sit off the
+levels most of the time) is rebuilt instead from the share of its readings one level up
+(:mod:`calibration.temperature_dither`: the capture means smoothed over a window chosen by
+leave-one-out error, σ read from the data, the expected-reading curve inverted); its LSB
+is then read from the capture means' sums (n × mean is a sum of readings on the lattice,
+:func:`summed_lattice`) where too few capture means sit on a level. The note says which
+regime was used. A channel that never dithers is rebuilt from its crossings as above.
 """
 
 from __future__ import annotations
@@ -47,6 +56,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
+
+from calibration.temperature_dither import rebuild_dithered
 
 # A channel quantised this coarsely (°C per LSB) or coarser is rebuilt: against the change
 # of a warm-up over a capture (< 0.1 °C in 5 s, captures.CAPTURE_BLOCK_S) such a step is
@@ -62,6 +73,8 @@ MIN_ON_LEVEL_SHARE = 0.5
 # (coarse_lsb_c); at most MAX_CANDIDATES spacings are tried, finest first.
 MIN_LEVELS_READ = 0.8
 MAX_CANDIDATES = 64
+# A dithered channel's capture sums (n × mean) must lie on the lattice this often.
+MIN_SUMMED_SHARE = 0.95
 # Consecutive readings on one level that make a settled run (between two flickers).
 SETTLED_ROWS = 2
 
@@ -74,15 +87,29 @@ class Dequantised:
     lsb_c: float = 0.0  # the channel's coarse LSB; 0: not rebuilt
     transitions: int = 0  # threshold crossings the rebuild went through
     turning_points: int = 0  # k -> k+1 -> k returns, held inside their step
+    dither_lsb: float = 0.0  # > 0: the dithered regime, the channel's noise SD (LSB)
+    window_s: float = 0.0  # the dithered regime's smoothing window
 
     @property
     def rebuilt(self) -> bool:
         return self.lsb_c > 0
 
+    @property
+    def regime(self) -> str:
+        """"dither" (the share of upper readings), "crossings" or "as read"."""
+        return "as read" if not self.rebuilt else ("dither" if self.dither_lsb > 0
+                                                   else "crossings")
+
     def note(self) -> str | None:
         """The one line a report says about it (None: the channel was used as read)."""
         if not self.rebuilt:
             return None
+        if self.dither_lsb > 0:
+            return (f"temperature channel quantised at {self.lsb_c:g} °C and dithered by its "
+                    f"noise (about {self.dither_lsb:.2f} LSB): die temperature rebuilt from "
+                    f"the share of readings one level up (capture means smoothed over "
+                    f"{self.window_s:g} s, the expected reading of a noisy quantiser "
+                    f"inverted; calibrate and compensate rebuild it alike)")
         turns = (f"; {self.turning_points} turning point(s) kept inside their step"
                  if self.turning_points else "")
         return (f"temperature channel quantised at {self.lsb_c:g} °C: die temperature rebuilt "
@@ -136,21 +163,31 @@ def _lattice(y: np.ndarray) -> tuple[float, float] | None:
     return None
 
 
-def dequantise(t_s: np.ndarray, temperature_c: np.ndarray) -> Dequantised:
+def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
+               samples: np.ndarray | None = None) -> Dequantised:
     """The die temperature rebuilt from a coarsely quantised channel's transitions in time
     (module docstring); the readings unchanged when the channel is not coarse or never
     changes level. ``t_s`` increasing; each reading covers the median spacing of the times
-    (a capture mean: the fraction of its samples beyond a threshold places the crossing)."""
+    (a capture mean: the fraction of its samples beyond a threshold places the crossing).
+    ``samples``: each reading's number of samples (a capture mean's ``n``), which finds the
+    lattice of a dithered channel whose means are off its levels."""
     t = np.asarray(t_s, float)
     y = np.asarray(temperature_c, float)
     unchanged = Dequantised(y.copy())
     lattice = _lattice(y)
+    if lattice is None and samples is not None:
+        lattice = summed_lattice(y, np.asarray(samples, float))
     ok = np.isfinite(y) & np.isfinite(t)
     if lattice is None or ok.sum() < 4 or np.any(np.diff(t[ok]) < 0):
         return unchanged
     q, base = lattice
     tt, yy = t[ok], y[ok]
     z = (yy - base) / q
+    dith = rebuild_dithered(tt, z)
+    if dith is not None:
+        out = y.copy()
+        out[ok] = base + q * dith.z
+        return Dequantised(out, q, dither_lsb=dith.sigma_lsb, window_s=dith.window_s)
     runs = _settled_runs(z)
     if len(runs) < 2:
         return unchanged
@@ -167,6 +204,39 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray) -> Dequantised:
     out[ok] = base + q * z_rec
     n_cross = sum(k != "touch" for k in kinds)
     return Dequantised(out, q, n_cross, turns)
+
+
+def summed_lattice(y: np.ndarray, samples: np.ndarray) -> tuple[float, float] | None:
+    """(LSB, a level) of a channel whose capture means are off its levels (a dithered one):
+    n × mean is a sum of n readings on the lattice, so among the captures of the most
+    common n those sums differ by whole LSBs. The LSB is the most common spacing of the
+    distinct sums (at least :data:`MIN_LSB_C`, and repeated: a continuous channel's sums
+    are all spaced differently), accepted when nearly all the sums
+    (:data:`MIN_SUMMED_SHARE`) are on its lattice. A level: the most
+    repeated mean where one repeats (a capture all on one level), else the first capture's
+    sum ÷ n (a level up to q/n; the channel then dithers by ≳ ½ LSB and the rebuild does
+    not depend on it)."""
+    ok = np.isfinite(y) & np.isfinite(samples) & (samples >= 1)
+    if ok.sum() < 8:
+        return None
+    n_vals, n_counts = np.unique(samples[ok], return_counts=True)
+    n0 = float(n_vals[np.argmax(n_counts)])
+    s = y[ok][samples[ok] == n0] * n0
+    if s.size < 8:
+        return None
+    distinct = np.unique(np.round(s, 6))
+    if distinct.size < 3:
+        return None
+    gaps, gap_counts = np.unique(np.round(np.diff(distinct), 6), return_counts=True)
+    q = float(gaps[np.argmax(gap_counts)])
+    if q < MIN_LSB_C or gap_counts.max() < 3:
+        return None
+    k = (s - s[0]) / q
+    if np.mean(np.abs(k - np.round(k)) <= ON_LEVEL_TOL) < MIN_SUMMED_SHARE:
+        return None
+    values, counts = np.unique(np.round(y[ok], 9), return_counts=True)
+    base = float(values[np.argmax(counts)]) if counts.max() >= 3 else float(s[0] / n0)
+    return q, base
 
 
 def _settled_runs(z: np.ndarray) -> list[tuple[int, int, int]]:

@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -134,7 +135,8 @@ class WarmupFit:
 
 def fit_warmup(captures: Recording, orientations: Orientations,
                span_c: tuple[float, float] | None = None,
-               max_degree: int = MAX_DEGREE, g_local: float = 1.0) -> WarmupFit:
+               max_degree: int = MAX_DEGREE, g_local: float = 1.0,
+               rebuild_noise: Callable[[float], float] | None = None) -> WarmupFit:
     """Fit each axis' bias change with temperature (module docstring) to capture means.
 
     The warm-up solver behind :func:`calibration.fitting.fit`: to calibrate a
@@ -184,7 +186,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     candidates = sorted(((d, m) for d in range(top + 1) for m in range(max(d, 1))),
                         key=lambda dm: (dm[0] + dm[1], dm[0]))
     with_rate: list[float] = []
-    check = _rate_check(captures.t_s, T, x, labels, top)
+    check = _rate_check(captures.t_s, T, x, labels, top, rebuild_noise)
     rate = np.zeros(T.size)
     if check.tried:
         rate = temperature_rate_c_per_min(captures.t_s, T, float(check.window_s))  # type: ignore[arg-type]
@@ -435,7 +437,8 @@ class RateCheck:
 
 
 def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarray,
-                top: int) -> RateCheck:
+                top: int, rebuild_noise: Callable[[float], float] | None = None
+                ) -> RateCheck:
     """Whether dT/dt is identifiable beside the polynomial in T, and its window.
 
     A rate gain k and the bias polynomial are separable only where dT/dt is not itself a
@@ -446,7 +449,10 @@ def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarra
     the orientations' constants and x¹ … x^top (:data:`RATE_MIN_SHARE`). The window is
     the shortest whose dT/dt noise, for this channel's noise (quantisation included), is
     at most :data:`RATE_NOISE_SHARE` of that residual's RMS
-    (:func:`calibration.temperature_conditioning.rate_window_s`)."""
+    (:func:`calibration.temperature_conditioning.rate_window_s`); on a temperature rebuilt
+    from a coarse channel that noise includes the rebuild's own error in dT/dt
+    (``rebuild_noise``, :mod:`calibration.rebuild_rate_noise`): slow, largest where the die
+    turns inside a step, and invisible in the rebuilt trace's second differences."""
     k = int(labels.max()) + 1
     P = _design(x, labels, k, max(top, 1))
 
@@ -454,7 +460,7 @@ def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarra
         return rate - P @ np.linalg.lstsq(P, rate, rcond=None)[0]
 
     found = rate_window_s(t_s, T, lambda r: float(np.sqrt(np.mean(residual(r) ** 2))),
-                          RATE_NOISE_SHARE)
+                          RATE_NOISE_SHARE, rebuild_noise)
     if found is None:
         return RateCheck(False, "dT/dt not resolved: over every window its noise exceeds "
                                 f"{RATE_NOISE_SHARE:.0%} of the part of it that is not a "

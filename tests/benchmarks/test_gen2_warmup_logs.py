@@ -69,6 +69,34 @@ def test_the_channel_is_quantised_to_its_lsb(lsb: float) -> None:
     assert np.max(np.abs(d.temp_c - d.die_c - 0.37)) <= lsb / 2 + 0.06
 
 
+def test_a_dithered_coarse_channel_is_the_same_case_with_a_noisy_whole_degree_channel() -> None:
+    for seed in (1000, 1003, 1009):
+        plain, dith = draw_case(seed), draw_case(seed, coarse_dither=True)
+        # every draw but the channel's LSB and noise is the plain case's
+        same = dataclasses.replace(dith, name=plain.name, channel_lsb_c=plain.channel_lsb_c,
+                                   channel_noise_c=plain.channel_noise_c, kinds=plain.kinds)
+        assert same == plain
+        assert dith.channel_lsb_c == 1.0 and 0.1 <= dith.channel_noise_c <= 0.6
+        assert "dither" in dith.kinds and "quant1C" in dith.kinds
+    # its physics: whole degrees, and the share of readings one level up tracks where the
+    # die sits inside its LSB (noise of half an LSB: the fraction's mean is the die's)
+    c = dataclasses.replace(_case(channel_lsb_c=1.0, channel_noise_c=0.5), profile="heater",
+                            duration_s=1800.0, span_c=6.0, tau_s=2000.0, out_hz=50.0,
+                            native_hz=50.0)
+    d = simulate(c)
+    np.testing.assert_allclose(d.temp_c, np.round(d.temp_c), atol=1e-9)
+    flips = int(np.sum(np.diff(d.temp_c) != 0))
+    assert flips > 20 * 6  # many transitions per crossing, not one
+    block = np.arange(d.t_s.size) // 1500  # 30-s means
+    mean_read = np.bincount(block, d.temp_c) / np.bincount(block)
+    mean_die = np.bincount(block, d.die_c) / np.bincount(block)
+    assert np.max(np.abs(mean_read - mean_die)) < 0.08
+    # the same channel without the noise: a staircase, wrong by up to half an LSB
+    quiet = simulate(dataclasses.replace(c, channel_noise_c=0.0))
+    assert int(np.sum(np.diff(quiet.temp_c) != 0)) <= 7
+    assert np.max(np.abs(np.bincount(block, quiet.temp_c) / np.bincount(block) - mean_die)) > 0.3
+
+
 def test_the_logged_csv_is_the_true_output_and_nothing_else_when_quiet(tmp_path) -> None:
     case = _case(accel_unit="mg", rate_ug_per_c_per_min=(40.0, -20.0, 10.0),
                  drift_ug_per_h=(30.0, 0.0, -30.0))

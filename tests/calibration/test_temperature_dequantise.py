@@ -65,13 +65,43 @@ def test_rebuilt_die_temperature_beats_the_step_values(profile, bound_c, noise_c
     t, read, truth = _captures(profile, noise_c, block_s)
     dq = dequantise(t, read)
     assert dq.lsb_c == pytest.approx(1.0, abs=1e-9)
-    assert dq.transitions >= 8
+    # up to 0.1 °C of noise (a flicker ±0.2 °C around each threshold): the crossings
+    assert dq.regime == "crossings" and dq.transitions >= 8
     assert _rms(dq.temperature_c - truth) < bound_c < STEP_RMS_C
     assert _rms(dq.temperature_c - truth) < 0.85 * _rms(read - truth)
     # never outside the band of the levels read, never beyond a level's neighbour
     assert dq.temperature_c.min() >= read.min() - 0.5 and dq.temperature_c.max() <= \
         read.max() + 0.5
     assert np.max(np.abs(dq.temperature_c - truth)) < 0.5
+
+
+@pytest.mark.parametrize("profile", [_exponential, _heat_cool, _overshoot, _rest_heat_rest])
+@pytest.mark.parametrize("noise_c", [0.2, 0.35, 0.6])
+def test_a_dithered_channel_is_read_from_its_share_of_upper_readings(profile, noise_c) -> None:
+    # noise of 0.2-0.6 LSB before rounding: the readings flicker between levels for most
+    # of the log; the capture means' fraction at the upper level is where the die sits
+    t, read, truth = _captures(profile, noise_c, 1.0)
+    assert np.mean(np.abs(read - np.round(read)) > 0.02) > 0.5  # mostly off the levels
+    dq = dequantise(t, read, np.full(t.size, RATE_HZ))
+    assert dq.regime == "dither" and dq.lsb_c == pytest.approx(1.0)
+    assert dq.dither_lsb == pytest.approx(noise_c, abs=0.1 + 0.25 * noise_c)
+    assert "dithered" in (dq.note() or "") and "share of readings one level up" in dq.note()
+    rebuilt, as_read = _rms(dq.temperature_c - truth), _rms(read - truth)
+    # the crossing instants alone (the regime this replaces) on the same readings
+    crossings = _rms(dequantise_crossings(t, read).temperature_c - truth)
+    assert rebuilt < 0.05 and rebuilt < 0.6 * as_read and rebuilt < crossings
+
+
+def dequantise_crossings(t: np.ndarray, read: np.ndarray):
+    """The crossing-instant rebuild alone (the dithered regime switched off)."""
+    import calibration.temperature_dequantise as tdq
+
+    saved = tdq.rebuild_dithered
+    tdq.rebuild_dithered = lambda *a: None
+    try:
+        return tdq.dequantise(t, read, np.full(t.size, RATE_HZ))
+    finally:
+        tdq.rebuild_dithered = saved
 
 
 def test_a_turning_point_stays_inside_its_step() -> None:

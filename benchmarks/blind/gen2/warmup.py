@@ -20,7 +20,11 @@ twin (``simulators/``) and nothing of ``calibration/``:
 * **temperature channel**: the die itself or the die through a first-order lag
   (τ 5–120 s, exact exponential per sample), plus an offset and a little noise, then
   quantised to its LSB (0.0078–0.06 °C, or 1 °C for the channels that print whole
-  degrees). It is read once per output sample (not averaged).
+  degrees). It is read once per output sample (not averaged). ``draw_case(seed,
+  coarse_dither=True)`` gives the same case with a whole-degree channel whose noise
+  before quantisation is 0.1–0.6 LSB (:data:`DITHER_LSB`): a board's MCU sensor or a
+  thermistor read to 1 °C that flickers between k and k+1 around each crossing (the
+  default draws, and their logs, are unchanged).
 * **noise**: white at the sensor's density at the native rate, the acceleration quantised
   to the sensor's LSB at the native rate, then averaged down to the output rate (a
   boxcar decimation, as a logger that averages does); plus a bench disturbance drawn in
@@ -35,7 +39,7 @@ twin (``simulators/``) and nothing of ``calibration/``:
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +50,8 @@ from benchmarks.blind.gen2.sensor import Sensor2, draw_sensor
 PROFILES = ("heater", "selfheat", "rest_heat_rest", "heat_cool", "overshoot", "ramp")
 G_MS2 = 9.80665
 MAX_OUT_HZ = 200.0
+# coarse_dither=True: a 1 °C channel with this range of noise before quantisation (LSB)
+DITHER_LSB = (0.1, 0.6)
 MAX_ROWS = 200_000
 CHUNK_ROWS = 20_000  # output rows generated at the native rate at a time (memory)
 
@@ -271,8 +277,23 @@ SENSOR_CLASSES = {
 }
 
 
-def draw_case(seed: int) -> WarmupCase:
-    """A random case spanning what real one-orientation thermal logs look like."""
+def draw_case(seed: int, coarse_dither: bool = False) -> WarmupCase:
+    """A random case spanning what real one-orientation thermal logs look like.
+
+    ``coarse_dither``: the same case (every other draw as without it) with a 1 °C channel
+    whose noise before quantisation is drawn from :data:`DITHER_LSB` (a second generator
+    seeded from ``seed``, so the main draws are untouched); its kinds say ``quant1C`` and
+    ``dither``."""
+    case = _draw_case(seed)
+    if not coarse_dither:
+        return case
+    noise_lsb = float(np.random.default_rng([seed, 20]).uniform(*DITHER_LSB))
+    kinds = tuple(k for k in case.kinds if k not in ("quant", "quant1C"))
+    return replace(case, name=f"w{seed:04d}d", channel_lsb_c=1.0, channel_noise_c=noise_lsb,
+                   kinds=(*kinds, "quant1C", "dither"))
+
+
+def _draw_case(seed: int) -> WarmupCase:
     rng = np.random.default_rng(seed)
     kinds: list[str] = []
     profile = PROFILES[int(rng.integers(len(PROFILES)))]
