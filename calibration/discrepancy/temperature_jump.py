@@ -13,6 +13,11 @@ plateaus on the two sides of T* makes the same per-plateau offset:
 * a direction of the last excursion that happens to split the plateaus by temperature
   (``thermal_hysteresis`` on a random order), frost that forms on the cold plateaus.
 
+A vibration step is no exception: the compressor's duty follows the temperature
+(docs/effects.md), so its step and a jump at a temperature coincide by design, not by
+chance. A power cycle logged in a ``session`` column is (``CatalogueEffect.cause_recorded``):
+the operator's act has nothing to do with the temperature.
+
 So a name of the family whose per-axis offsets are all per plateau or per history
 (``CatalogueEffect.named_by_fit``) is kept only when its fit beats the best such jump
 (per-axis offset of the plateaus whose median temperature is above T*, T* profiled over
@@ -68,6 +73,8 @@ def temperature_jump_alike(pb: Any, terms: list, f: Any, alpha: float,
     the whitened design and data."""
     eff = BY_ID.get(f.effect)
     if eff is None or not f.named_as_modelled or f.rows or not eff.named_by_fit:
+        return f
+    if eff.cause_recorded(pb.ctx):  # a logged power cycle at the jump is the operator's act
         return f
     term = next((t for t in terms if t.effect_id == f.term_effect and not t.rows), None)
     ctx = pb.ctx
