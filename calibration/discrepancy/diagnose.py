@@ -34,6 +34,7 @@ from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.problem import LinearProblem, build_problem
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
 from calibration.discrepancy.protocol_order import time_and_position_confounded
+from calibration.discrepancy.temperature_jump import temperature_jump_alike
 from calibration.recording import Recording
 
 MAX_STAGES = 8
@@ -497,6 +498,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # A rate term whose gains are a lag's (locked to ∂output/∂T) is not named (issue 22);
     # here, after the demotions above (its term stays in the model either way).
     findings = [lag_alike(pb, terms, f, alpha, not_ident, notes, _design) for f in findings]
+    # A per-plateau offset of the thermal/time family that a jump of the output at a
+    # temperature fits as well is not named (temperature_jump.py, issue 22: a bias jump at
+    # a die temperature was named a power cycle on one-way staircases, a rectified
+    # vibration where the compressor runs on the cold plateaus only).
+    findings = [temperature_jump_alike(pb, terms, f, alpha, not_ident, notes, _design)
+                for f in findings]
     # A flagged reading whose recorded temperature jumped off its neighbours and whose
     # residual is the model's own ∂output/∂T is a glitch of the channel, not an outlier;
     # where the data cannot tell, not separable (channel_glitch.py, issue 22).

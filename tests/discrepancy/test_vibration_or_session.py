@@ -87,16 +87,24 @@ def test_a_power_cycle_under_constant_vibration_stays_a_session_offset():
     steady = _SteadyVibration(**{f.name: getattr(PROTOCOLS["oneway"], f.name)
                                  for f in fields(Protocol)})
     d = _session_step(steady, 4, 100194)
-    f = _top(d)
-    assert f["effect"] == "session_offset", d["findings"]
-    assert f["parameters"]["from_step"] == 4
+    _session_or_temperature_jump(_top(d), 4, d)
 
 
 def test_a_power_cycle_away_from_the_vibration_step_stays_a_session_offset():
     d = _session_step(PROTOCOLS["oneway"], 7, 100195)
-    f = _top(d)
-    assert f["effect"] == "session_offset", d["findings"]
-    assert f["parameters"]["from_step"] == 7
+    _session_or_temperature_jump(_top(d), 7, d)
+
+
+def _session_or_temperature_jump(f: dict, from_step: int, d: dict) -> None:
+    """Not the vibration. On a one-way staircase without a session column the plateaus
+    from ``from_step`` on are the hot ones: a power cycle there and a jump of the output at
+    a temperature (outside the catalogue) are the same step (temperature_jump.py), so the
+    finding is not separable, led by session_offset, and modelled from that plateau."""
+    assert f["effect"] == "not_identifiable", d["findings"]
+    cands = f["where"]["candidates"]
+    assert cands[0] == "session_offset" and "jump of the output" in cands[1], cands
+    assert "vibration_rectification" not in cands
+    assert min(f["where"]["steps"]) == from_step
 
 
 def test_vibration_power_keeps_real_variation_and_drops_sampling_noise():

@@ -21,6 +21,7 @@ from scipy import stats as sps
 
 from benchmarks.blind.gen2 import effects as fx
 from benchmarks.blind.gen2 import simulate as sim
+from benchmarks.blind.gen2 import unseen_effects as ux
 
 ALPHA = 0.01 / 15
 START = {"thermal_lag": 60.0, "temperature_sensor": 0.01, "turntable_tilt": 1.0,
@@ -74,7 +75,7 @@ def minimum_detectable(proto, sensor, pools, eid: str, pat: dict, seed: int) -> 
         def f(m: float) -> float:
             return float(np.max(lam(m, per_row=True)[rows]))
     else:
-        target = lambda_star(fx.DOF[eid])
+        target = lambda_star({**fx.DOF, **ux.DOF}[eid])
         f = lam
     lo = START.get(eid, 0.1)
     if f(lo) >= target:

@@ -2,6 +2,7 @@
 
     python -m benchmarks.blind.gen2.generate --realdata DIR --out OUT [--quick] [--reps R]
                                              [--nulls N] [--seed S]
+                                             [--outside-set default|unseen]
 
 Writes ``OUT/cases/NNNN.csv`` (and ``OUT/given/NNNN.csv`` for twin-against-recording
 pairs: the recording a model is calibrated on) and, apart, ``OUT/keys/NNNN.json``. Nothing
@@ -16,7 +17,10 @@ sensor (sensor.py), the protocols (protocol.py), the effects (effects.py) and th
 * ``catalogue`` — one catalogue effect at 1× and 2× its minimum detectable size (detect.py)
   under a protocol that shows it; a case where it stays undetectable is ``hidden``;
 * ``outside`` — an ADC error confined to a band of codes; a crack that appears in the middle
-  of a plateau (a bias and scale change of one axis from then on);
+  of a plateau (a bias and scale change of one axis from then on). With ``--outside-set
+  unseen``, five others instead (unseen_effects.py: fixture creep after each turn, a bias
+  jump at a die temperature, a periodic chamber disturbance, frost below the dew point, a
+  cable pulling by table angle), each at twice its minimum detectable size;
 * ``against`` — a model calibrated on one recording held against another of the same
   sensor: unchanged on another protocol (a one-way staircase, sparse positions), or
   re-mounted 2 mrad about its z axis.
@@ -36,6 +40,7 @@ import numpy as np
 from benchmarks.blind.gen2 import detect
 from benchmarks.blind.gen2 import effects as fx
 from benchmarks.blind.gen2 import simulate as sim
+from benchmarks.blind.gen2 import unseen_effects as ux
 from benchmarks.blind.gen2.protocol import KINDS, draw_protocol
 from benchmarks.blind.gen2.realnoise import RealDataMissing, load_pools, realdata_dir
 from benchmarks.blind.gen2.sensor import draw_sensor
@@ -59,9 +64,11 @@ def _need(eid: str) -> dict:
 
 
 def plan(quick: bool, reps: int, n_null: int, seed0: int,
-         protocols: str = "default") -> list[dict]:
+         protocols: str = "default", outside_set: str = "default") -> list[dict]:
     """The cases. ``protocols="unseen"`` draws every protocol from the unseen family
-    (unseen.py; nulls cycle through its variants); the default plan is unchanged."""
+    (unseen.py; nulls cycle through its variants); ``outside_set="unseen"`` plans the
+    outside effects of unseen_effects.py instead of ``adc_band`` and ``crack``. The default
+    plan is unchanged."""
     specs: list[dict] = []
     extra = {} if protocols == "default" else {"family": protocols}
     kinds = KINDS if protocols == "default" else UNSEEN_KINDS
@@ -75,7 +82,7 @@ def plan(quick: bool, reps: int, n_null: int, seed0: int,
         for mult in (1.0, 2.0):
             for _ in range(reps):
                 add(kind="catalogue", effect=eid, multiple=mult)
-    for eid in fx.OUTSIDE:
+    for eid in fx.OUTSIDE if outside_set == "default" else ux.UNSEEN_OUTSIDE:
         for _ in range(2 * reps):
             add(kind="outside", effect=eid)
     for change in ("unchanged", "remount_z"):
@@ -99,6 +106,8 @@ def build(spec: dict, out: Path) -> dict:
         need = {"kind": spec.get("proto_kind"), **(_need(eid) if eid else {})}
         proto = draw_protocol(rng, **need, family=spec.get("family", "default"))
         pat = fx.pattern(rng, len(proto.setpoints_c), 10_000)
+        if eid in ux.UNSEEN_OUTSIDE:  # its own draws: the default cases' stay as they were
+            pat.update(ux.unseen_pattern(spec["seed"], proto.setpoints_c))
         n_read = len(sim.scene(proto, None, 0.0, pat, spec["seed"]).t_s)
         pat["rows"] = sorted(rng.choice(n_read, 2, replace=False).tolist())
         if spec["kind"] != "catalogue":
@@ -116,6 +125,12 @@ def build(spec: dict, out: Path) -> dict:
             key["kind"] = "hidden"
             m = {"thermal_lag": 1800.0}.get(eid, 50.0)
         key["magnitude"] = m
+    elif spec["kind"] == "outside" and eid in ux.UNSEEN_OUTSIDE:
+        # twice the minimum detectable size under this protocol (detect.py's λ), so no case
+        # is invisible; a size the protocol cannot show at all falls back to 50 µg
+        mds = detect.minimum_detectable(proto, sensor, pools, eid, pat, spec["seed"])
+        m = ux.SIZE_MULTIPLE * mds if np.isfinite(mds) else 50.0
+        key.update(magnitude=m, unit=ux.UNIT[eid], mds=mds, multiple=ux.SIZE_MULTIPLE)
     elif spec["kind"] == "outside":
         m = OUTSIDE_SIZE_UG[eid]
         key.update(magnitude=m, unit=fx.UNIT[eid])
@@ -188,6 +203,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=None,
                     help="comma list of effects, kinds (null, outside, against) or changes "
                          "to keep; the others are planned (so seeds stay) but not written")
+    ap.add_argument("--outside-set", choices=("default", "unseen"), default="default",
+                    help="outside-catalogue effects: adc_band and crack, or the five of "
+                         "unseen_effects.py the diagnosis was never developed on")
     a = ap.parse_args(argv)
     try:
         rd = realdata_dir(a.realdata)
@@ -195,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         print(exc, file=sys.stderr)
         return 2
     n_null = a.nulls if a.nulls is not None else (15 if a.quick else 300)
-    specs = plan(a.quick, a.reps, n_null, a.seed, a.protocols)
+    specs = plan(a.quick, a.reps, n_null, a.seed, a.protocols, a.outside_set)
     if a.only:
         keep = set(a.only.split(","))
         specs = [s for s in specs if keep & {s["kind"], s.get("effect"), s.get("change")}]

@@ -4,6 +4,7 @@
                                         [--n-null B] [--jobs 2] [--regenerate] [--only E,..]
                                         [--alpha A] [--out OUT] [--results STEM]
                                         [--protocols default|unseen]
+                                        [--outside-set default|unseen]
     python -m benchmarks.blind.gen2.run --out OUT --score-only [--results STEM]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
@@ -84,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="generate only these effects/kinds (see generate --only)")
     ap.add_argument("--protocols", choices=("default", "unseen"), default="default",
                     help="protocol family of generated cases (see generate --protocols)")
+    ap.add_argument("--outside-set", choices=("default", "unseen"), default="default",
+                    help="outside effects of generated cases (see generate --outside-set)")
     ap.add_argument("--results", type=Path, default=None, help="results stem (no suffix)")
     ap.add_argument("--score-only", action="store_true",
                     help="score OUT/diagnoses.json of an earlier run again (no diagnosis)")
@@ -100,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         gen += ["--nulls", str(a.nulls)] if a.nulls is not None else []
         gen += ["--only", a.only] if a.only else []
         gen += ["--protocols", a.protocols] if a.protocols != "default" else []
+        gen += ["--outside-set", a.outside_set] if a.outside_set != "default" else []
         if generate.main(gen):
             return 2
     n_null = a.n_null if a.n_null is not None else (100 if a.quick else N_NULL)

@@ -133,7 +133,12 @@ def score(keys: dict[str, dict], diags: dict[str, dict]) -> dict[str, Any]:
     res["outside_given_catalogue_name"] = {
         **_rate(len(cat), len(outs)),
         "by_effect": {e: [[_named(diags[c]) for c in outs if keys[c]["effect"] == e]]
-                      for e in sorted({keys[c]["effect"] for c in outs})}}
+                      for e in sorted({keys[c]["effect"] for c in outs})},
+        "rate_by_effect": {e: _rate(sum(c in cat for c in outs if keys[c]["effect"] == e),
+                                    sum(keys[c]["effect"] == e for c in outs))
+                           for e in sorted({keys[c]["effect"] for c in outs})},
+        "cases": {c: {"effect": keys[c]["effect"], "protocol": keys[c].get("protocol"),
+                      "named": _named(diags[c])} for c in sorted(cat)}}
     tw = [c for c, k in keys.items() if k["kind"] == "against"]
     rows = []
     for c in tw:
@@ -215,7 +220,8 @@ def markdown(res: dict, header: str) -> str:
             out.append(f"| {c} | {v['protocol']} | {tests} |")
         out += ["", "flagged nulls per test: " + ", ".join(
             f"{k} {n}" for k, n in fa["by_test"].items())]
-    out += ["", "| outside effect | findings per case |", "|---|---|"]
+    out += ["", "| outside effect | given a catalogue name | findings per case |", "|---|---|---|"]
+    rates = res["outside_given_catalogue_name"].get("rate_by_effect", {})
     for e, v in res["outside_given_catalogue_name"]["by_effect"].items():
-        out.append(f"| {e} | {v[0]} |")
+        out.append(f"| {e} | {_pct(rates[e]) if e in rates else ''} | {v[0]} |")
     return "\n".join(out) + "\n"

@@ -16,6 +16,7 @@ import numpy as np
 
 from benchmarks.blind.gen2 import effects as fx
 from benchmarks.blind.gen2 import protocol as pr
+from benchmarks.blind.gen2 import unseen_effects as ux
 from benchmarks.blind.gen2.realnoise import NoisePools
 from benchmarks.blind.gen2.sensor import Sensor2
 
@@ -44,6 +45,8 @@ class Scene:
     vib_sd_g: np.ndarray
     angles_rad: np.ndarray  # (N,2) α, β commanded
     crack_t_s: float
+    die_trace_c: np.ndarray | None = None  # the die on the 1 s grid from t = 0 (frost)
+    capture_s: float = 0.0  # one capture's length (fixture creep: the move ends before it)
 
 
 def scene(proto: pr.Protocol2, eid: str | None, m: float, pat: dict, seed: int,
@@ -103,15 +106,18 @@ def scene(proto: pr.Protocol2, eid: str | None, m: float, pat: dict, seed: int,
     crack_t = float(on_k.min() + pat["crack_frac"] * (on_k.max() - on_k.min()))
     return Scene(steps, pos, t_mid, air[idx], die[idx], rate, direction, session,
                  ref, force, np.array(proto.vib_sd_g)[steps], np.column_stack([alpha, beta]),
-                 crack_t)
+                 crack_t, die, cap_s)
 
 
 def noise_free_output(sensor: Sensor2, sc: Scene, eid: str | None, m: float,
                       pat: dict) -> np.ndarray:
     state = {"force_g": sc.force_g, "direction": sc.direction, "t_h": sc.t_s / 3600.0,
              "session": sc.session, "die_rate_c_per_min": sc.die_rate_c_per_min,
-             "vib_sd_g": sc.vib_sd_g, "t_s": sc.t_s, "crack_t_s": sc.crack_t_s}
-    return sensor.output_g(sc.force_g, sc.die_c) + fx.output_offset_g(eid or "", m, pat, state)
+             "vib_sd_g": sc.vib_sd_g, "t_s": sc.t_s, "crack_t_s": sc.crack_t_s,
+             "ref_g": sc.ref_g, "die_c": sc.die_c, "die_trace_c": sc.die_trace_c,
+             "angles_rad": sc.angles_rad, "capture_s": sc.capture_s}
+    return (sensor.output_g(sc.force_g, sc.die_c) + fx.output_offset_g(eid or "", m, pat, state)
+            + ux.unseen_offset_g(eid or "", m, pat, state))
 
 
 def recorded_temperature_c(sc: Scene, proto: pr.Protocol2, eid: str | None, m: float,

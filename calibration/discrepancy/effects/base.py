@@ -106,6 +106,13 @@ class CatalogueEffect:
         when the effect scales it by a noise of its own; None: ``stats.linear_stats``."""
         return None
 
+    def cause_recorded(self, ctx: DesignContext) -> bool:
+        """The recording itself logs the event this effect follows, unrelated to the
+        temperature (a power cycle in a ``session`` column): a jump of the output at a
+        temperature that coincides with it is then no rival (temperature_jump.py).
+        Default: False."""
+        return False
+
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         """Protocol-level check: (can this recording show it, why not, experiment that would)."""
         if self.needs_motion:

@@ -68,6 +68,11 @@ class SessionOffset(CatalogueEffect):
             return np.concatenate(cols, axis=2) if cols else np.zeros((ctx.n, 3, 0))
         return per_axis(ctx, (ctx.steps >= theta).astype(float))
 
+    def cause_recorded(self, ctx: DesignContext) -> bool:
+        """A ``session`` column logs the power cycles: the operator's act, not the
+        temperature's."""
+        return ctx.session is not None
+
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
         if ctx.session is not None and len(np.unique(ctx.session)) < 2:
             return False, "one continuous power session", self.experiment
