@@ -181,6 +181,7 @@ def reading_cap(r: np.ndarray, row: np.ndarray) -> np.ndarray:
 def wild_replicates(
     rng: np.random.Generator, e: np.ndarray, U: np.ndarray, row: np.ndarray, out: np.ndarray,
     leave_out: tuple[int, ...] = (),
+    shared: tuple[SharedGroups, np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
     written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
@@ -200,7 +201,15 @@ def wild_replicates(
     reading far out is that family's question, and with random signs it would make every
     other family's null heavier by its size (a true outlier then lost its own test to
     them in the min over families).
+    ``shared`` (groups, θ, s²) from :func:`shared_variance`: the noise the readings of a
+    plateau share, which the per-reading signs remove, is drawn back in as Gaussian
+    offsets per group (:func:`add_shared`) before the projection, and the signs flip each
+    entry's deviation from its group's mean (:func:`within_groups`): flipped with them, the
+    data's group offsets came back as extra white noise, the F tests' denominators grew and
+    the null ran light (at a 5 % level 12 % with the true θ).
     """
+    if shared is not None:
+        e = within_groups(e, shared[0])
     scale = e / np.sqrt(1.0 - np.minimum(leverage(U), LEVERAGE_MAX))
     if leave_out:
         scale[np.isin(row, leave_out)] = 0.0
@@ -210,6 +219,8 @@ def wild_replicates(
     for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
         sl = slice(i, i + step)
         np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
+    if shared is not None:
+        add_shared(rng, shared[0], shared[1], shared[2], out)
     return project_out_inplace(U, out)
 
 
@@ -560,3 +571,167 @@ def row_stats(
             q *= reading_dof / rng.chisquare(reading_dof, q.shape) / k_mix
         tn_max = np.maximum(tn_max, (q / s_null[None, :] ** 2).max(axis=0))
     return t, tn_max, g
+
+
+# --- noise shared by the readings of one plateau ------------------------------------------
+@dataclass
+class SharedGroups:
+    """Components of the noise that every entry of a group shares (docs/diagnosis.md §2,
+    *Noise shared by a plateau*): component j adds ``loading[j][i] · b_j[group[j][i]]`` to
+    whitened entry i, b_j ~ N(0, θ_j·s²) one draw per group.
+
+    Why (issue 22): on a rig the readings of one plateau share errors — the die's
+    temperature error of that plateau through ∂output/∂T, a quantised channel's offset, the
+    chamber's state — and the base model, smooth in T, cannot absorb a random offset per
+    plateau. Sign flips per reading destroy that shared part, so columns (nearly) constant
+    within a plateau (a one-plateau change, hysteresis, a session step, a channel step) were
+    tested against a null without it.
+    """
+
+    loading: list[np.ndarray]  # (m,) each
+    group: list[np.ndarray]  # (m,) int each, 0..K_j − 1
+    names: list[str]
+    plateau: list[np.ndarray] | None = None  # (K_j,) each: the plateau of each group
+
+    @property
+    def sizes(self) -> list[int]:
+        return [int(g.max()) + 1 if g.size else 0 for g in self.group]
+
+
+SHARED_THETA_MAX = 1e3  # θ's upper bound (σ_b²/s²): far beyond any plateau's noise
+
+
+def _group_columns(sg: SharedGroups, i: int, j: int) -> np.ndarray:
+    """Rows i:j of Z = [Z_1, Z_2, …] (m × ΣK), Z_j[n, group_j[n]] = loading_j[n]."""
+    sizes = sg.sizes
+    Z = np.zeros((j - i, sum(sizes)))
+    off = 0
+    r = np.arange(j - i)
+    for L, g, k in zip(sg.loading, sg.group, sizes, strict=True):
+        Z[r, off + g[i:j]] = L[i:j]
+        off += k
+    return Z
+
+
+def shared_variance(e: np.ndarray, U: np.ndarray, sg: SharedGroups
+                    ) -> tuple[np.ndarray, float]:
+    """Maximum-likelihood θ_j = σ_j²/s² of each shared component in e = (I − P)(ε + Σ Z_j b_j).
+
+    ``c = Zᵀe`` is the only part of e the groups see: Cov(c) = s²(G + Σ_j θ_j G_{·j}G_{j·}),
+    G = Zᵀ(I − P)Z (small: plateaus × axes + plateaus), s² the scatter outside
+    span((I − P)Z), what no group explains (the within-plateau scatter). Directions the base
+    model absorbs (G's eigenvalues below 1e-9 of the largest) are dropped. All in the groups'
+    space: Z is formed by row blocks, never (m × ΣK) at once. Returns θ (one per component,
+    0 where the likelihood does not rise above θ = 0) and s².
+    """
+    from scipy.optimize import minimize
+
+    m = e.size
+    nk = sum(sg.sizes)
+    G = np.zeros((nk, nk))
+    c = np.zeros(nk)
+    UZ = np.zeros((U.shape[1], nk))
+    step = max(1, CHUNK_BYTES // (8 * max(nk, U.shape[1], 1)))
+    for i in range(0, m, step):
+        j = min(i + step, m)
+        Z = _group_columns(sg, i, j)
+        G += Z.T @ Z
+        c += Z.T @ e[i:j]
+        UZ += np.asarray(U[i:j]).T @ Z
+    G -= UZ.T @ UZ
+    sizes = sg.sizes
+    if sg.plateau is not None and LEAVE_OUT_PLATEAU:
+        G, c, sizes = _without_the_most_deviant_plateau(G, c, sg, e @ e, m - U.shape[1])
+    lam, V = np.linalg.eigh(G)
+    keep = lam > 1e-9 * max(float(lam.max()), 1e-300)
+    if not keep.any():
+        return np.zeros(len(sg.sizes)), 1.0
+    lam, V = lam[keep], V[:, keep]
+    d = (V.T @ c) / np.sqrt(lam)  # Cov(d) = s²(I + Σ θ_j M_j)
+    r = d.size
+    s2 = float(max(e @ e - d @ d, 1e-300) / max(m - U.shape[1] - r, 1))
+    T = V / np.sqrt(lam)  # (nk × r)
+    Ms, off = [], 0
+    for k in sizes:
+        A = T.T @ G[:, off:off + k]  # (r × k)
+        Ms.append(A @ A.T)
+        off += k
+    dd = d / np.sqrt(s2)
+
+    def nll(th: np.ndarray) -> float:
+        C = np.eye(r) + sum(t * M for t, M in zip(th, Ms, strict=True))
+        sign, logdet = np.linalg.slogdet(C)
+        return 0.5 * (logdet + float(dd @ np.linalg.solve(C, dd)))
+
+    best, f_best = np.zeros(len(Ms)), nll(np.zeros(len(Ms)))
+    for start in (0.01, 0.1, 1.0):
+        res = minimize(nll, np.full(len(Ms), start), method="L-BFGS-B",
+                       bounds=[(0.0, SHARED_THETA_MAX)] * len(Ms))
+        if res.fun < f_best:
+            best, f_best = res.x, float(res.fun)
+    return best, s2
+
+
+def within_groups(e: np.ndarray, sg: SharedGroups) -> np.ndarray:
+    """``e`` minus each group's fitted offset (the first component: plateau × axis), each
+    entry rescaled by 1/√(1 − L²/ΣL²) for the offset's own fit (the share of the entry's
+    variance the group's mean took)."""
+    L, g = sg.loading[0], sg.group[0]
+    k = sg.sizes[0]
+    ll = np.bincount(g, L * L, minlength=k)
+    coef = np.bincount(g, L * e, minlength=k) / np.maximum(ll, 1e-300)
+    h = L * L / np.maximum(ll[g], 1e-300)
+    return (e - L * coef[g]) / np.sqrt(np.maximum(1.0 - h, 1.0 - LEVERAGE_MAX))
+
+
+LEAVE_OUT_PLATEAU = False  # measured: θ halved, the null light again (see docs)
+
+
+def _without_the_most_deviant_plateau(G: np.ndarray, c: np.ndarray, sg: SharedGroups,
+                                      ee: float, dof: int
+                                      ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """G and c of the groups once the plateau whose groups score highest (c_uᵀG_uu⁺c_u) is
+    taken as a fixed effect (Schur complement: its groups join the projected model).
+
+    Why: a change on one plateau is, to the likelihood, a plateau-level variance; counted
+    in θ it made the null as heavy as the change (a one-plateau change at 5 σ of its mean
+    was found 11 times in 30 instead of 22). Left out, it is judged against the other
+    plateaus' scatter, as the cap does for one reading (:func:`reading_cap`).
+    """
+    pl = np.concatenate(sg.plateau)
+    s2 = max(ee - float(c @ np.linalg.pinv(G, rcond=1e-9, hermitian=True) @ c), 1e-300) \
+        / max(dof - np.linalg.matrix_rank(G), 1)
+    best, worst = None, -np.inf
+    for u in np.unique(pl):
+        J = np.flatnonzero(pl == u)
+        sc = float(c[J] @ np.linalg.pinv(G[np.ix_(J, J)], rcond=1e-9, hermitian=True) @ c[J])
+        if sc / s2 - J.size > worst:
+            best, worst = u, sc / s2 - J.size
+    if best is None or np.unique(pl).size < 3:
+        return G, c, sg.sizes
+    J, R = np.flatnonzero(pl == best), np.flatnonzero(pl != best)
+    Guu = np.linalg.pinv(G[np.ix_(J, J)], rcond=1e-9, hermitian=True)
+    Gru = G[np.ix_(R, J)]
+    G2 = G[np.ix_(R, R)] - Gru @ Guu @ Gru.T
+    c2 = c[R] - Gru @ Guu @ c[J]
+    off, sizes = 0, []
+    for k in sg.sizes:
+        sizes.append(int(np.sum((off <= R) & (off + k > R))))
+        off += k
+    return G2, c2, sizes
+
+
+def add_shared(rng: np.random.Generator, sg: SharedGroups, theta: np.ndarray, s2: float,
+               out: np.ndarray) -> np.ndarray:
+    """``out[i] += Σ_j loading_j[i]·b_j[group_j[i]]``, b_j ~ N(0, θ_j·s²) per group and
+    replicate (in place, by row blocks; not projected)."""
+    draws = [rng.standard_normal((k, out.shape[1])) * np.sqrt(max(t, 0.0) * s2)
+             for k, t in zip(sg.sizes, theta, strict=True)]
+    step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
+    for L, g, b, t in zip(sg.loading, sg.group, draws, theta, strict=True):
+        if t <= 0:
+            continue
+        for i in range(0, out.shape[0], step):
+            sl = slice(i, i + step)
+            out[sl] += L[sl, None] * b[g[sl]]
+    return out
