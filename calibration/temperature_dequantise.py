@@ -75,6 +75,9 @@ MIN_LEVELS_READ = 0.8
 MAX_CANDIDATES = 64
 # A dithered channel's capture sums (n × mean) must lie on the lattice this often.
 MIN_SUMMED_SHARE = 0.95
+# At least this share of the readings must be exactly a level's value (_lattice): what a
+# quantised channel prints, again and again.
+MIN_PRINTED_SHARE = 0.25
 # Consecutive readings on one level that make a settled run (between two flickers).
 SETTLED_ROWS = 2
 
@@ -149,17 +152,25 @@ def _lattice(y: np.ndarray) -> tuple[float, float] | None:
         on = np.abs(z - np.round(z)) <= ON_LEVEL_TOL
         read = np.unique(np.round(z[on]))
         span = np.floor(z.max() + ON_LEVEL_TOL) - np.ceil(z.min() - ON_LEVEL_TOL) + 1
-        if (read.size >= 2 and np.mean(on) >= MIN_ON_LEVEL_SHARE
+        if not (read.size >= 2 and np.mean(on) >= MIN_ON_LEVEL_SHARE
                 and read.size >= MIN_LEVELS_READ * span):
-            # each level's most frequent value (a reading, not a capture mean off it)
-            zl = (levels - base) / q
-            slot = np.round(zl)
-            near = np.abs(zl - slot) <= ON_LEVEL_TOL
-            modes = [(n, levels[near & (slot == n)][np.argmax(counts[near & (slot == n)])])
-                     for n in read]
-            n, v = np.array(modes).T
-            q_fit = float(np.median(np.diff(v) / np.diff(n)))
-            return q_fit, float(np.median(v - q_fit * n))
+            continue
+        # each level's most frequent value (a reading, not a capture mean off it)
+        zl = (levels - base) / q
+        slot = np.round(zl)
+        near = np.abs(zl - slot) <= ON_LEVEL_TOL
+        modes = [(n, levels[near & (slot == n)][np.argmax(counts[near & (slot == n)])])
+                 for n in read]
+        n, v = np.array(modes).T
+        # A staircase prints its levels: many readings are exactly a level's value. Near a
+        # level (within ON_LEVEL_TOL·q) is not enough: a warm-up with a fine channel that
+        # rested at −8.4 °C and settled at 25.8 °C after an overshoot put most capture means
+        # within 0.02 of a "34.2 °C LSB" of those two rests, each a cloud of nearby values.
+        printed = np.isin(np.round(y, 9), v)
+        if np.mean(printed) < MIN_PRINTED_SHARE:
+            continue
+        q_fit = float(np.median(np.diff(v) / np.diff(n)))
+        return q_fit, float(np.median(v - q_fit * n))
     return None
 
 

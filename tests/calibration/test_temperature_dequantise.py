@@ -258,3 +258,20 @@ def test_one_crossing_on_a_reading_time_is_finite_and_in_band() -> None:
     read_half = np.r_[np.full(10, 25.0), [25.5], np.full(9, 26.0)]
     dq = dequantise(t, read_half)
     assert np.all(np.isfinite(dq.temperature_c)) and dq.temperature_c[10] == pytest.approx(25.5)
+
+
+def test_a_fine_channel_that_rests_at_two_temperatures_is_not_a_staircase() -> None:
+    # A fine channel (1/64 °C, 0.004 °C of noise), 1-s means of 50 samples: a rest at −8.4 °C,
+    # a heating with an overshoot, then 25 min settled at 25.8 °C. Most means sit within
+    # 2 % of a "34.2 °C LSB" of the two rests, but they are not values a channel prints
+    # again and again: the temperature is used as read.
+    rng = np.random.default_rng(8)
+    t = np.arange(0.0, 2500.0, 1.0)
+    heat = np.clip(t - 300.0, 0.0, None)
+    truth = -8.4 + 34.2 * (1.0 - np.exp(-heat / 131.0)) + 3.0 * np.sin(heat / 90.0) * np.exp(
+        -heat / 200.0)
+    samples = truth[:, None] + rng.normal(0.0, 0.004, (t.size, 50))
+    means = (np.round(samples * 64.0) / 64.0).mean(axis=1)
+    dq = dequantise(t, means, np.full(t.size, 50.0))
+    assert not dq.rebuilt and dq.lsb_c == 0.0
+    assert np.array_equal(dq.temperature_c, means)
