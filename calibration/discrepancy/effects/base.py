@@ -135,7 +135,7 @@ class CatalogueEffect:
             return None
         from calibration.discrepancy.effects.structure import visits_differ
 
-        found = visits_differ(pb, U, e, alpha)
+        found = visits_differ(pb, U, e, list(where.get("positions") or []), axes, alpha)
         if found is None:
             return None
         return {**found, "why": (f"{self.effect_id} is a function of the specific force, but "

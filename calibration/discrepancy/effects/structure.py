@@ -8,10 +8,9 @@ carry such a check (docs/diagnosis.md §7, *Physics checks after selection*):
   orientation class (a smooth function of the reference direction), its neighbours in
   time on the same plateau.
 * input-only terms (``scale_nonlinearity``, ``cross_coupling``: a function of the specific
-  force alone, :meth:`CatalogueEffect.misses`): every reference direction the schedule
-  revisits must leave the same residual at every visit, on every axis; a term that leaves
-  the visits of a direction different (a memory of the previous position, an offset that
-  follows the table's pose) did not describe what it was fitted to.
+  force alone, :meth:`CatalogueEffect.misses`): the same reference direction must leave the
+  same residual at every visit; a term that leaves the visits of one direction different
+  (a memory of the previous position) did not describe what it was fitted to.
 
 Every test here is an F-type score test after projecting out an orthonormal basis ``U``
 of the whitened model (:func:`calibration.discrepancy.stats.linear_stats`, noise from the
@@ -73,25 +72,23 @@ def direction_groups(positions: np.ndarray, input_g: np.ndarray) -> list[list[in
     return [g for g in groups if len(g) >= 2]
 
 
-def visits_differ(pb: Any, U: np.ndarray, e: np.ndarray, alpha: float) -> dict[str, Any] | None:
-    """Residuals that differ between visits of the same reference direction (issues 10, 22).
+def visits_differ(
+    pb: Any, U: np.ndarray, e: np.ndarray, positions: list[int], axes: list[str], alpha: float
+) -> dict[str, Any] | None:
+    """Residuals that differ between visits of the same reference direction (issue 10).
 
-    ``U``, ``e``: the model *with* the input-only term. Every direction the schedule
-    revisits, on all three axes: per group and axis, an offset per position is tested after
-    an offset per direction (the contrast between visits). A function of the specific force
-    predicts no contrast anywhere, so under it the test rejects with probability α; an
-    orientation history (the previous position) or an offset that follows the table's pose
-    rather than the force (a cable wound round the inner axis: several table angles give
-    +z) makes it. Why everywhere (issue 22): such a pose offset leaves its contrast where
-    the term's own columns are zero (at ±z for products of inputs), so a check confined to
-    the term's places never saw it. Returns the place (positions, axes, log10 p) when
-    significant at α.
+    ``U``, ``e``: the model *with* the input-only term. Restricted to the term's own
+    places (the direction groups holding its ``where`` positions) and axes: per group and
+    axis, an offset per position is tested after an offset per direction (the contrast
+    between visits). A function of the specific force predicts no contrast, so under it
+    the test rejects with probability α; an orientation history (the previous position)
+    makes it. Returns the place (positions, axes, log10 p) when significant at α.
     """
     ctx = pb.ctx
-    groups = direction_groups(ctx.positions, ctx.input_g)
+    groups = [g for g in direction_groups(ctx.positions, ctx.input_g) if set(g) & set(positions)]
+    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
     if not groups:
         return None
-    ax = (0, 1, 2)
     common, visit = [], []
     for g in groups:
         common.append(per_axis_indicator(ctx.n, np.isin(ctx.positions, g), ax))
