@@ -30,25 +30,37 @@ RATE_HZ = 50.0
 DURATION_S = 1800.0
 
 
-def _overshoot(t: np.ndarray) -> np.ndarray:
+def exponential(t: np.ndarray) -> np.ndarray:
+    """An exponential warm-up, 20.3 → 35.3 °C with τ 400 s."""
+    return 20.3 + 15.0 * (1.0 - np.exp(-t / 400.0))
+
+
+def overshoot(t: np.ndarray) -> np.ndarray:
+    """An under-damped heater (ζ 0.35): a peak and a trough inside one level each."""
     wn, zeta = 2.5 / 300.0, 0.35
     wd = wn * np.sqrt(1 - zeta**2)
     return 20.0 + 8.0 * (1 - np.exp(-zeta * wn * t) * (
         np.cos(wd * t) + zeta / np.sqrt(1 - zeta**2) * np.sin(wd * t)))
 
 
-def _heat_cool(t: np.ndarray) -> np.ndarray:
+def rest_heat_rest(t: np.ndarray) -> np.ndarray:
+    """A flat stretch inside a step (20.3 °C for 450 s), a heating, a flat end."""
+    return 20.3 + 10.0 * (1.0 - np.exp(-np.clip(t - 450.0, 0.0, None) / 300.0))
+
+
+def heat_cool(t: np.ndarray) -> np.ndarray:
+    """Heating for 1000 s (τ 400 s), then a natural cooling (τ 600 s)."""
     top = 20.0 + 15.0 * (1.0 - np.exp(-1000.0 / 400.0))
     return np.where(t < 1000.0, 20.0 + 15.0 * (1.0 - np.exp(-t / 400.0)),
                     20.0 + (top - 20.0) * np.exp(-(t - 1000.0) / 600.0))
 
 
+# the die traces of this benchmark and of tests/calibration/test_temperature_dequantise.py
 PROFILES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "exponential warm-up": lambda t: 20.3 + 15.0 * (1.0 - np.exp(-t / 400.0)),
-    "overshoot (2 turns)": _overshoot,
-    "rest, heat, rest": lambda t: 20.3 + 10.0 * (1.0 - np.exp(-np.clip(t - 450.0, 0, None)
-                                                               / 300.0)),
-    "heat, then cool": _heat_cool,
+    "exponential warm-up": exponential,
+    "overshoot (2 turns)": overshoot,
+    "rest, heat, rest": rest_heat_rest,
+    "heat, then cool": heat_cool,
 }
 
 

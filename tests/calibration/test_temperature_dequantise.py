@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks import bench_temperature_dequantise as bench
 from calibration.captures import warmup_captures
 from calibration.recording import Recording
 from calibration.temperature_dequantise import coarse_lsb_c, dequantise
@@ -13,27 +14,9 @@ RATE_HZ = 50.0
 STEP_RMS_C = 1.0 / np.sqrt(12.0)  # what a step value is wrong by, RMS (0.29 °C)
 
 
-def _exponential(t: np.ndarray) -> np.ndarray:
-    return 20.3 + 15.0 * (1.0 - np.exp(-t / 400.0))
-
-
-def _overshoot(t: np.ndarray) -> np.ndarray:
-    """An under-damped heater (ζ 0.35): a peak and a trough inside one level each."""
-    wn, zeta = 2.5 / 300.0, 0.35
-    wd = wn * np.sqrt(1 - zeta**2)
-    return 20.0 + 8.0 * (1 - np.exp(-zeta * wn * t) * (
-        np.cos(wd * t) + zeta / np.sqrt(1 - zeta**2) * np.sin(wd * t)))
-
-
-def _rest_heat_rest(t: np.ndarray) -> np.ndarray:
-    """A flat stretch inside a step (20.3 °C for 450 s), a heating, a flat end."""
-    return 20.3 + 10.0 * (1.0 - np.exp(-np.clip(t - 450.0, 0.0, None) / 300.0))
-
-
-def _heat_cool(t: np.ndarray) -> np.ndarray:
-    hot = 20.0 + 15.0 * (1.0 - np.exp(-t / 400.0))
-    top = 20.0 + 15.0 * (1.0 - np.exp(-1000.0 / 400.0))
-    return np.where(t < 1000.0, hot, 20.0 + (top - 20.0) * np.exp(-(t - 1000.0) / 600.0))
+# The die traces are the benchmark's (benchmarks/bench_temperature_dequantise.py).
+_exponential, _overshoot = bench.exponential, bench.overshoot
+_rest_heat_rest, _heat_cool = bench.rest_heat_rest, bench.heat_cool
 
 
 def _captures(profile, noise_c: float, block_s: float, seed: int = 0, lsb_c: float = 1.0):
