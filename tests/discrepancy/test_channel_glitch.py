@@ -99,6 +99,7 @@ def test_the_departure_is_read_against_the_plateau_neighbours():
         step_ids = [0, 1]
         temp_c = 20.0 + 0.002 * t_s + 0.01 * rng.standard_normal(n)
 
+    Ctx.n = n
     Ctx.temp_c[5] += 0.8
     glitched = cg.temperature_departure(Ctx, 5, set())
     normal = cg.temperature_departure(Ctx, 7, set())

@@ -88,19 +88,14 @@ def channel_scatter_c(ctx: Any) -> float:
     """Reading-to-reading scatter of the recorded temperature (°C), floored by its quantum.
 
     The robust sd of first differences within each plateau / √2, the median over plateaus
-    (as ``problem.temperature_noise_c``), but never below a quantised channel's rounding
+    (``problem.temperature_noise_c``), but never below a quantised channel's rounding
     error quantum/√12 (``temperature_conditioning.channel_quantum_c``): a channel read in
     0.11 °C steps can show no difference at all between most neighbours.
     """
+    from calibration.discrepancy.problem import temperature_noise_c
     from calibration.temperature_conditioning import channel_quantum_c
 
-    per_step = []
-    for s in ctx.step_ids:
-        m = np.flatnonzero(ctx.steps == s)
-        if m.size >= 3:
-            d = np.diff(ctx.temp_c[m[np.argsort(ctx.t_s[m], kind="stable")]])
-            per_step.append(1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2))
-    pooled = float(np.median(per_step)) if per_step else 0.0
+    pooled = float(temperature_noise_c(ctx)[0]) if ctx.n else 0.0
     return max(pooled, channel_quantum_c(ctx.temp_c) / np.sqrt(12.0))
 
 
