@@ -197,21 +197,22 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             for d, m in candidates]
     best = _choose(with_rate) if with_rate else None
     use_rate = False
+    joint_errors = errors[degree]  # the held-out errors of the model kept for all axes
     if best is not None:
         d_best, m_best = candidates[best]
-        use_rate = _rate_beats(
-            errors[degree],
-            _heldout_errors_g(x, labels, raw, folds, d_best, _rate_columns(rate, x, m_best)),
-            _block_index(T))
+        with_best = _heldout_errors_g(x, labels, raw, folds, d_best,
+                                      _rate_columns(rate, x, m_best))
+        use_rate = _rate_beats(errors[degree], with_best, _block_index(T))
     rate_cols = None
     if use_rate:
         degree, gain_degree = candidates[int(best)]  # type: ignore[arg-type]
         rate_cols = _rate_columns(rate, x, gain_degree)
-        chosen = _heldout_rms_g(x, labels, raw, folds, degree, rate_cols)
+        joint_errors = with_best
+        chosen = _rms(with_best[0])
     scatter = scatter_check(captures.t_s, raw, _design(x, labels, int(labels.max()) + 1,
                                                         degree, rate_cols),
                             x, labels, degree, captures.sigma_g)
-    axes = _axis_choices(x, labels, raw, folds, degree, rate_cols)
+    axes = _axis_choices(errors, joint_errors, degree, rate_cols is not None)
     if axes.reduced:
         chosen = axes.heldout_rms_g
     coef, se, k_rate, k_se, cov = _fit_axes(x, labels, raw, degree, rate_cols, axes.choice)
@@ -712,8 +713,9 @@ class AxisChoices:
                                            self.heldout_rms_g, self.joint_rms_g, strict=True)}
 
 
-def _axis_choices(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.ndarray,
-                  degree: int, rate_cols: np.ndarray | None) -> AxisChoices:
+def _axis_choices(errors: list[tuple[np.ndarray, np.ndarray]],
+                  joint_errors: tuple[np.ndarray, np.ndarray], degree: int,
+                  with_rate: bool) -> AxisChoices:
     """Each axis takes the simplest model below the joint choice whose held-out error on
     that axis is no higher than the joint choice's.
 
@@ -726,15 +728,19 @@ def _axis_choices(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.
     rate term, whose x shows no change with temperature beyond its noise at any degree.
     Such an axis is fitted with the simpler model; the others keep the joint one. The
     candidates are judged on the same held-out captures (else the axis keeps the joint).
+
+    ``errors[d]``: the held-out (errors, captures) at degree d without the rate term, as
+    :func:`fit_warmup` computed them to choose the degree; ``joint_errors``: those of the
+    joint model (``errors[degree]``, or with the rate term ``with_rate``).
     """
-    joint = (degree, rate_cols is not None)
-    joint_e, joint_idx = _heldout_errors_g(x, labels, raw, folds, degree, rate_cols)
+    joint = (degree, with_rate)
+    joint_e, joint_idx = joint_errors
     joint_rms = _rms(joint_e)
-    simpler = [(d, False) for d in range(degree + (rate_cols is not None))]
+    simpler = [(d, False) for d in range(degree + with_rate)]
     choice = [joint, joint, joint]
     rms = joint_rms.copy()
     for d, _ in simpler:  # simplest first: the first no worse wins
-        e, idx = _heldout_errors_g(x, labels, raw, folds, d)
+        e, idx = errors[d]
         if not np.array_equal(idx, joint_idx) or idx.size == 0:
             continue
         for a, v in enumerate(_rms(e)):
