@@ -6,7 +6,10 @@
   before the ``CAL_ACC*`` offsets and scales.
 * ``dataflash`` -- ArduPilot DataFlash ``.bin`` (read with ``pymavlink``'s DFReader):
   message ``IMU`` (``AccX, AccY, AccZ`` in m/s², ``T`` in °C, ``TimeUS`` in µs), one
-  instance (field ``I``, or the older message names ``IMU2``/``IMU3``). ArduPilot logs
+  instance (field ``I``, or the older message names ``IMU2``/``IMU3``). Older layouts
+  are read too (:data:`DATAFLASH_TIME_FIELDS`, :data:`DATAFLASH_TEMP_FIELDS`): the
+  temperature was ``Temp`` in ArduPilot 3.3-3.4 and 3DR Solo, and the time ``TimeMS``
+  (ms) before 3.3 and in Solo; logs before 3.3 keep no IMU temperature. ArduPilot logs
   these *after* its own corrections (``INS_ACCOFFS``/``INS_ACCSCAL`` and, when
   ``INS_TCALn_ENABLE`` = 1, its temperature calibration); the notes say when the log's
   parameters show a temperature calibration already applied.
@@ -34,6 +37,11 @@ from calibration.importers import (
 
 ULOG_TOPIC = "sensor_accel"
 DATAFLASH_MESSAGE = "IMU"
+# The IMU message's time field and its factor to µs, newest layout first: ``TimeUS``
+# since ArduPilot 3.3; ``TimeMS`` before (ArduCopter 3.2, 3DR Solo's firmware).
+DATAFLASH_TIME_FIELDS = (("TimeUS", 1.0), ("TimeMS", 1000.0))
+# Its temperature field (°C): ``T`` since ArduPilot 3.5; ``Temp`` in 3.3-3.4 and Solo.
+DATAFLASH_TEMP_FIELDS = ("T", "Temp")
 
 
 def read_ulog(path: str | Path, *, instance: int = 0) -> RawImport:
@@ -107,6 +115,8 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
     acc: list[tuple[float, float, float]] = []
     temp: list[float] = []
     has_t = True
+    time_fields: set[str] = set()
+    temp_fields: set[str] = set()
     tcal_enabled: set[str] = set()
     try:
         fast = dataflash_imu_columns(log, instance, old_name)
@@ -133,35 +143,48 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
                 continue
         elif mtype != old_name:  # older logs: IMU, IMU2, IMU3
             continue
-        t_us.append(float(m.TimeUS))
+        time_field, to_us, temp_field = dataflash_imu_fields(m.get_fieldnames())
+        if time_field is None:
+            raise RecordingError(p, None, mtype, "no time field (TimeUS or TimeMS) in this "
+                                 "log's IMU messages: not an ArduPilot layout this reads")
+        time_fields.add(time_field)
+        t_us.append(float(getattr(m, time_field)) * to_us)
         acc.append((float(m.AccX), float(m.AccY), float(m.AccZ)))
-        if hasattr(m, "T"):
-            temp.append(float(m.T))
+        if temp_field is not None:
+            temp_fields.add(temp_field)
+            temp.append(float(getattr(m, temp_field)))
         else:
             has_t = False
             temp.append(math.nan)
     if fast is not None:
-        t, acc_m_s2, temp_arr, has_t = fast
+        t, acc_m_s2, temp_arr, has_t, fast_time, fast_temp = fast
+        time_fields.update(fast_time)
+        temp_fields.update(fast_temp)
     else:
         t, acc_m_s2, temp_arr = np.asarray(t_us), np.asarray(acc), np.asarray(temp)
     if not t.size:
         raise RecordingError(p, None, DATAFLASH_MESSAGE,
                              f"no IMU messages for instance {instance} (--instance N; "
                              "0 is the first IMU)")
-    _check_monotonic(p, t, "IMU.TimeUS", first_line=1)
+    time_name = "/".join(sorted(time_fields, reverse=True)) or "TimeUS"
+    _check_monotonic(p, t, f"IMU.{time_name}", first_line=1)
     notes = [f"ArduPilot IMU instance {instance}: m/s² / {STANDARD_GRAVITY_M_S2} → g "
              "(ArduPilot's corrected output: INS_ACCOFFS/INS_ACCSCAL applied)"]
+    if "TimeMS" in time_fields:
+        notes.append("IMU time read from TimeMS (whole milliseconds: a log from before "
+                     "ArduPilot 3.3, or 3DR Solo)")
     if tcal_enabled:
         notes.append(f"{', '.join(sorted(tcal_enabled))} = 1 in this log: the readings "
                      "are already temperature-compensated by the autopilot")
     t_s = (t - t[0]) * 1e-6
     temp_c: np.ndarray | None = None
     if not has_t:
-        notes.append("no IMU T field (log older than ArduPilot 4.1?); temperature left "
-                     f"empty: {NO_TEMP_CONSEQUENCE}")
+        notes.append("no IMU T field (nor Temp: ArduPilot logs the IMU temperature from "
+                     f"3.3 on); temperature left empty: {NO_TEMP_CONSEQUENCE}")
     else:
-        temp_c, why = vet_die_temperature(temp_arr, t_s, "IMU T")
-        notes.append(why or "IMU T → sensor_c (°C)")
+        name = "IMU " + "/".join(sorted(temp_fields, key=DATAFLASH_TEMP_FIELDS.index))
+        temp_c, why = vet_die_temperature(temp_arr, t_s, name)
+        notes.append(why or f"{name} → sensor_c (°C)")
     return RawImport(p, "dataflash", t_s, acc_m_s2 / STANDARD_GRAVITY_M_S2, init_rest_s=None,
                      notes=notes, temp_c=temp_c)
 
@@ -177,10 +200,22 @@ _DFREADER_ALWAYS = ("MODE", "MSG", "PARM", "STAT", "ORGN", "VER")
 _GATHER_ROWS = 1 << 18  # messages gathered at a time: a bounded index array
 
 
+def dataflash_imu_fields(columns: Any) -> tuple[str | None, float, str | None]:
+    """(time field, its factor to µs, temperature field or ``None``) of an IMU message
+    with these column names, by :data:`DATAFLASH_TIME_FIELDS` and
+    :data:`DATAFLASH_TEMP_FIELDS`; the time field is ``None`` when it has neither."""
+    names = set(columns)
+    time_field, to_us = next(((f, k) for f, k in DATAFLASH_TIME_FIELDS if f in names),
+                             (None, 1.0))
+    temp_field = next((f for f in DATAFLASH_TEMP_FIELDS if f in names), None)
+    return time_field, to_us, temp_field
+
+
 def dataflash_imu_columns(
     log: Any, instance: int, old_name: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool] | None:
-    """(TimeUS, AccX/Y/Z, T, whether every message has T) of the ``IMU`` messages that the
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, set[str], set[str]] | None:
+    """(time in µs, AccX/Y/Z, temperature, whether every message has one, the time and
+    temperature field names read) of the ``IMU`` messages that the
     message loop of :func:`read_dataflash` takes, read at once from DFReader's own index
     (``offsets``: where each message of each type starts) and formats; ``None`` when that
     is not sure to give the same numbers, and the loop reads them.
@@ -215,24 +250,29 @@ def dataflash_imu_columns(
         has_i = "I" in fmt.colhash
         if (has_i and name != DATAFLASH_MESSAGE) or (not has_i and name != old_name):
             continue  # the loop's rule: I names the instance; without it, the old name does
-        fields = ["TimeUS", "AccX", "AccY", "AccZ", *(["I"] if has_i else []),
-                  *(["T"] if "T" in fmt.colhash else [])]
+        time_field, to_us, temp_field = dataflash_imu_fields(fmt.colhash)
+        if time_field is None:
+            return None  # the loop says why
+        fields = [time_field, "AccX", "AccY", "AccZ", *(["I"] if has_i else []),
+                  *([temp_field] if temp_field else [])]
         starts = np.asarray(offsets[mtype], np.int64)
         cols = _gather_fields(buf, starts, fmt, fields)
         if cols is None:
             return None
         keep = cols["I"] == instance if has_i else np.ones(starts.size, bool)
-        temp = cols["T"][keep] if "T" in cols else np.full(int(keep.sum()), np.nan)
-        picks.append((starts[keep], cols, keep, temp, "T" in cols))
+        temp = cols[temp_field][keep] if temp_field else np.full(int(keep.sum()), np.nan)
+        picks.append((starts[keep], cols[time_field][keep] * to_us, cols, keep, temp,
+                      time_field, temp_field))
     picks = [pk for pk in picks if pk[0].size]
     if not picks:
-        return np.zeros(0), np.zeros((0, 3)), np.zeros(0), True
+        return np.zeros(0), np.zeros((0, 3)), np.zeros(0), True, set(), set()
     order = np.argsort(np.concatenate([pk[0] for pk in picks]), kind="stable")
-    t_us = np.concatenate([pk[1]["TimeUS"][pk[2]] for pk in picks])[order]
-    acc = np.column_stack([np.concatenate([pk[1][c][pk[2]] for pk in picks])[order]
+    t_us = np.concatenate([pk[1] for pk in picks])[order]
+    acc = np.column_stack([np.concatenate([pk[2][c][pk[3]] for pk in picks])[order]
                            for c in ("AccX", "AccY", "AccZ")])
-    temp = np.concatenate([pk[3] for pk in picks])[order]
-    return t_us, acc, temp, all(pk[4] for pk in picks)
+    temp = np.concatenate([pk[4] for pk in picks])[order]
+    return (t_us, acc, temp, all(pk[6] for pk in picks), {pk[5] for pk in picks},
+            {pk[6] for pk in picks if pk[6]})
 
 
 def _gather_fields(

@@ -102,6 +102,46 @@ def write_dataflash(
     return path
 
 
+# Older ArduPilot IMU layouts (FMT format, columns), as their FMT messages read in real
+# logs: ArduCopter 3.2 (time in ms, no temperature), 3DR Solo (time in ms, ``Temp``),
+# ArduCopter 3.3 (time in µs, ``Temp``). Each logs IMU2 for the second sensor.
+LEGACY_IMU_LAYOUTS = {
+    "copter-3.2": ("Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+    "solo": ("IffffffIIf", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,ErrG,ErrA,Temp"),
+    "copter-3.3": ("QffffffIIfBB",
+                   "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,ErrG,ErrA,Temp,GyHlt,AcHlt"),
+}
+
+
+def write_dataflash_legacy(
+    path: Path, t_us: np.ndarray, acc_ms2: np.ndarray, temp_c: np.ndarray | None, *,
+    layout: str,
+) -> Path:
+    """A DataFlash .bin in one of :data:`LEGACY_IMU_LAYOUTS`, messages ``IMU`` and ``IMU2``
+    (x + 1 m/s²; 1 °C warmer). ``temp_c`` is ignored by a layout with no temperature.
+    Times in ms are ``t_us`` // 1000."""
+    imu_fmt, imu_cols = LEGACY_IMU_LAYOUTS[layout]
+    body_fmt = "<" + imu_fmt
+    imu_len = 3 + struct.calcsize(body_fmt)
+    in_ms = imu_cols.startswith("TimeMS")
+    out = bytearray()
+    out += _df_fmt(FMT_ID, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", 89)
+    out += _df_fmt(IMU_ID, "IMU", imu_fmt, imu_cols, imu_len)
+    out += _df_fmt(IMU_ID + 5, "IMU2", imu_fmt, imu_cols, imu_len)
+    for k in range(len(t_us)):
+        for type_id, inst in ((IMU_ID, 0), (IMU_ID + 5, 1)):
+            x, y, z = acc_ms2[k]
+            t = int(t_us[k]) // 1000 if in_ms else int(t_us[k])
+            vals: list[float | int] = [t, 0.0, 0.0, 0.0, x + inst, y, z]
+            if "ErrG" in imu_cols:
+                vals += [0, 0, float(temp_c[k]) + inst if temp_c is not None else 0.0]
+            if "GyHlt" in imu_cols:
+                vals += [1, 1]
+            out += DF_HEAD + struct.pack("<B", type_id) + struct.pack(body_fmt, *vals)
+    path.write_bytes(bytes(out))
+    return path
+
+
 def warmup_samples(n: int = 400, rate_hz: float = 50.0, seed: int = 0):
     """A board at rest, z up, warming 30 → 40 °C; z bias drifts +2 mg/°C. (t_us, m/s², °C)."""
     rng = np.random.default_rng(seed)

@@ -418,6 +418,16 @@ def test_dataflash_fast_path_old_message_names_and_multipliers(tmp_path, instanc
     assert (any("INS_TCAL2_ENABLE" in n for n in out[4])) == (instance == 1)
 
 
+@pytest.mark.parametrize("layout", ["copter-3.2", "solo", "copter-3.3"])
+@pytest.mark.parametrize("instance", [0, 1])
+def test_dataflash_fast_path_older_time_and_temperature_fields(tmp_path, layout, instance):
+    from tests.calibration.log_writers import warmup_samples, write_dataflash_legacy
+
+    path = write_dataflash_legacy(tmp_path / "old.bin", *warmup_samples(n=200), layout=layout)
+    out, taken = _dataflash_both(path, instance)
+    assert taken and out[0] == "ok"
+
+
 def test_dataflash_a_log_cut_off_mid_message_is_left_to_the_loop(tmp_path):
     from tests.calibration.log_writers import warmup_samples, write_dataflash
 

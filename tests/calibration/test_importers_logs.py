@@ -13,7 +13,12 @@ from calibration import importers
 from calibration.errors import RecordingError
 from calibration.importers_cli import run_import
 from calibration.recording import read_recording
-from tests.calibration.log_writers import warmup_samples, write_dataflash, write_ulog
+from tests.calibration.log_writers import (
+    warmup_samples,
+    write_dataflash,
+    write_dataflash_legacy,
+    write_ulog,
+)
 from tests.realdata import need_realdata
 
 G = 9.80665
@@ -69,6 +74,35 @@ def test_flight_log_instance_is_chosen_and_a_missing_one_is_refused(tmp_path, ca
     assert "instance" in err and "--instance N" in err
     assert err.count(str(src)) <= 1
     assert not out.exists()
+
+
+@pytest.mark.parametrize("layout,temp_field,in_ms", [
+    ("copter-3.3", "Temp", False), ("solo", "Temp", True), ("copter-3.2", None, True)])
+def test_dataflash_older_imu_layouts_keep_time_and_temperature(tmp_path, capsys, layout,
+                                                                temp_field, in_ms):
+    # Real logs read this way: ArduCopter 3.3 and 3DR Solo call the temperature "Temp",
+    # and logs before 3.3 (and Solo's) time IMU in ms; a 2014 ArduCopter 3.2 log ended
+    # in a traceback (AttributeError: TimeUS) before.
+    t_us, acc, temp = warmup_samples(n=200)
+    src = write_dataflash_legacy(tmp_path / "old.bin", t_us, acc, temp, layout=layout)
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("dataflash", src, out)) == 0
+    rec = read_recording(out)
+    assert len(rec) == 200
+    np.testing.assert_allclose(rec.raw_g, acc / G, atol=1e-6)
+    np.testing.assert_allclose(rec.t_s[:3], [0.0, 0.02, 0.04], atol=1e-9)
+    text = capsys.readouterr().out
+    assert ("IMU time read from TimeMS" in text) == in_ms
+    if temp_field is None:
+        assert "no IMU T field (nor Temp" in text
+        assert not rec.has("sensor_c")
+    else:
+        assert f"IMU {temp_field} → sensor_c (°C)" in text
+        np.testing.assert_allclose(rec.columns["sensor_c"], temp, atol=1e-5)
+    second = importers.read_source("dataflash", src, instance=1)  # IMU2
+    np.testing.assert_allclose(second.acc_g[:, 0], (acc[:, 0] + 1.0) / G, atol=1e-6)
+    if temp_field is not None:
+        np.testing.assert_allclose(second.temp_c, temp + 1.0, atol=1e-5)
 
 
 def test_block_rows_average_samples_and_their_temperature(tmp_path, capsys):
