@@ -193,9 +193,12 @@ def test_calibrate_fits_a_warmup_in_the_rebuilt_temperature_and_says_so() -> Non
     said = [n for n in res.report["notes"] if "quantised at 1 °C" in n]
     assert said and "transitions in time" in said[0]
     assert any("quantised at 1 °C" in n for n in res.model.notes)
-    # the fit's own temperatures are the rebuilt ones, and its residuals are far below
+    # the fit's own temperatures are the rebuilt ones (on the captures it kept: the peak
+    # and the final rest inside a step are left out), and its residuals are far below
     # what the step values leave (1 mg/°C × 0.29 °C RMS)
-    assert _rms(res.row_temperature_c - die) < 0.06
+    kept = np.isin(rec.t_s, res.recording.t_s)
+    assert 0 < np.sum(~kept) == res.report["unresolved_temperature"]["excluded_readings"]
+    assert _rms(res.row_temperature_c - die[kept]) < 0.06
     assert float(np.sqrt(np.mean(res.residuals_ug[:, 2] ** 2))) < 100.0
     # a fine channel: nothing rebuilt, nothing said
     fine, _ = _warmup_rows(0.0078125)
@@ -258,3 +261,85 @@ def test_a_fine_channel_that_rests_at_two_temperatures_is_not_a_staircase() -> N
     dq = dequantise(t, means, np.full(t.size, 50.0))
     assert not dq.rebuilt and dq.lsb_c == 0.0
     assert np.array_equal(dq.temperature_c, means)
+
+
+def _linear_ramp(t: np.ndarray) -> np.ndarray:
+    """A steady heating, 20.3 °C + 1 °C every 2 min: never stops, never turns."""
+    return 20.3 + t / 120.0
+
+
+def _cut_exponential(t: np.ndarray) -> np.ndarray:
+    """The exponential warm-up's first 1000 s spread over the log: still moving at its end."""
+    return _exponential(t * 1000.0 / 1800.0)
+
+
+@pytest.mark.parametrize("profile, kinds", [
+    (_overshoot, ["rest", "peak", "trough", "rest"]),  # a slow start, 2 turns, its plateau
+    (_rest_heat_rest, ["rest", "rest"]),
+    (_heat_cool, ["peak", "rest"]),  # the top, and the cooling slowing inside a step
+    (_exponential, ["rest"]),  # the plateau it settles towards
+    (_linear_ramp, []), (_cut_exponential, [])])
+@pytest.mark.parametrize("noise_c", [0.0, 0.02])
+def test_spans_the_crossings_cannot_resolve_are_found_and_bounded(profile, kinds,
+                                                                  noise_c) -> None:
+    t, read, truth = _captures(profile, noise_c, 5.0)
+    dq = dequantise(t, read, np.full(t.size, 250.0))
+    assert dq.regime == "crossings"
+    assert [s.kind for s in dq.unresolved] == kinds
+    inside = dq.unresolved_mask(t)
+    assert int(np.sum(inside)) == sum(s.readings for s in dq.unresolved)
+    for s in dq.unresolved:
+        here = (t >= s.t_start_s) & (t <= s.t_end_s)
+        assert s.readings == int(np.sum(here)) and s.samples == 250 * s.readings
+        assert s.high_c - s.low_c == pytest.approx(1.0) and s.low_c < s.level_c < s.high_c
+        # the bound holds the truth (a capture straddling the crossing: within its share)
+        assert truth[here].min() >= s.low_c - 0.05 and truth[here].max() <= s.high_c + 0.05
+    if kinds:
+        # where the rebuild is worst: its error inside the spans is larger than outside
+        err = np.abs(dq.temperature_c - truth - np.mean(dq.temperature_c - truth))
+        assert np.sqrt(np.mean(err[inside] ** 2)) > 1.5 * np.sqrt(np.mean(err[~inside] ** 2))
+        assert "NOT RESOLVED" in (dq.note() or "") and kinds[0] in (dq.note() or "")
+    else:
+        assert "NOT RESOLVED" not in (dq.note() or "")
+
+
+def test_the_fit_leaves_the_unresolved_spans_out_counts_them_and_says_so(tmp_path,
+                                                                        capsys) -> None:
+    import json
+    from types import SimpleNamespace
+
+    from calibration import cli
+    from calibration.recording import write_recording
+
+    rec, die = _warmup_rows(1.0)
+    src, model = tmp_path / "w.csv", tmp_path / "model.json"
+    write_recording(src, rec.columns)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model),
+                                             json=True)) == 0
+    doc = json.loads(capsys.readouterr().out)
+    got = doc["unresolved_temperature"]
+    assert [s["kind"] for s in got["spans"]] == ["peak", "rest"]
+    assert got["excluded_readings"] == sum(s["readings"] for s in got["spans"]) > 0
+    assert got["excluded_readings"] + got["kept_readings"] == len(rec)
+    assert got["excluded_samples"] == 250 * got["excluded_readings"]
+    assert doc["captures"] == got["kept_readings"]
+    peak = got["spans"][0]
+    assert (peak["low_c"], peak["level_c"], peak["high_c"]) == (33.5, 34.0, 34.5)
+    left_out = [n for n in doc["notes"] if "LEFT OUT of the fit" in n]
+    assert left_out and f"{got['excluded_readings']} of {len(rec)} capture means" in left_out[0]
+    # the text report says the same, with the span's times, step and bound
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model),
+                                             json=False)) == 0
+    text = capsys.readouterr().out
+    assert "NOT RESOLVED" in text and "peak at 921..1012 s in the 34 °C step" in text
+    assert "between 33.5 and 34.5 °C" in text
+    # a log without a rest or a turn inside a step: nothing left out
+    t, read, truth = _captures(_linear_ramp, 0.01, 5.0, seed=5)
+    n = t.size
+    cols = dict(rec.columns)
+    cols.update({"t_s": t, "sensor_c": read, "az": 1.0 + 1e-3 * (truth - 27.0)})
+    from calibration.fitting import fit
+
+    res = fit(Recording.from_columns({k: v[:n] for k, v in cols.items()}))
+    assert res.report["unresolved_temperature"] is None
+    assert not [x for x in res.report["notes"] if "LEFT OUT" in x or "NOT RESOLVED" in x]
