@@ -231,7 +231,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     from calibration.export_firmware import quantised_reading_error, quantised_reading_lines
     from calibration.rebuild_rate_noise import rebuild_rate_noise
     from calibration.unresolved_temperature import note as unresolved_note
-    from calibration.unresolved_temperature import resolved_only
+    from calibration.unresolved_temperature import unresolved_record
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -255,22 +255,14 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         capture_notes = [*capture_notes, rebuilt]
     # dT/dt's noise on a rebuilt temperature includes the rebuild's own error
     noise = None if dq is None else rebuild_rate_noise(captures.t_s, dq, means.columns.get("n"))
-    # where the die rested or turned inside a step the rebuilt temperature is invented:
-    # those readings are left out of the fit, counted and said (unresolved_temperature.py)
-    all_captures = captures
-    captures, orientations_fit, unresolved = resolved_only(captures, decided.orientations, dq)
+    # where the die rested or turned inside a step the rebuilt temperature is a guess: said,
+    # with the bound (unresolved_temperature.py says why the readings stay in the fit)
+    unresolved = unresolved_record(captures, dq)
     if unresolved:
         capture_notes = [*capture_notes, unresolved_note(unresolved)]
-    try:
-        wf = fit_warmup(captures, orientations_fit,
-                        span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local,
-                        rebuild_noise=noise)
-    except gate.GateRefusal as exc:
-        if not unresolved:
-            raise
-        raise gate.GateRefusal(f"{unresolved_note(unresolved)}; on what is left: {exc}; "
-                               "record the warm-up while the temperature keeps moving, or "
-                               "with a finer temperature channel") from exc
+    wf = fit_warmup(captures, decided.orientations,
+                    span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local,
+                    rebuild_noise=noise)
     gate.check_model(wf.model, captures)
     # the orientations the fit used: a drifting board's clusters joined (warmup.py)
     orientations = wf.orientations
@@ -295,7 +287,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         # what a firmware that reads the raw channel makes of a model fitted in the rebuilt
         # temperature, on this log (the exports say it: export_firmware.py)
         firmware = quantised_reading_error(
-            model, dq.read_c, all_captures.temperature_c(), dq.lsb_c,
+            model, dq.read_c, captures.temperature_c(), dq.lsb_c,
             wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"))
         model.provenance["quantised_temperature"] = firmware
         wf.report["quantised_temperature"] = firmware

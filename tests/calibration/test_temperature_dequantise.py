@@ -193,12 +193,9 @@ def test_calibrate_fits_a_warmup_in_the_rebuilt_temperature_and_says_so() -> Non
     said = [n for n in res.report["notes"] if "quantised at 1 °C" in n]
     assert said and "transitions in time" in said[0]
     assert any("quantised at 1 °C" in n for n in res.model.notes)
-    # the fit's own temperatures are the rebuilt ones (on the captures it kept: the peak
-    # and the final rest inside a step are left out), and its residuals are far below
+    # the fit's own temperatures are the rebuilt ones, and its residuals are far below
     # what the step values leave (1 mg/°C × 0.29 °C RMS)
-    kept = np.isin(rec.t_s, res.recording.t_s)
-    assert 0 < np.sum(~kept) == res.report["unresolved_temperature"]["excluded_readings"]
-    assert _rms(res.row_temperature_c - die[kept]) < 0.06
+    assert _rms(res.row_temperature_c - die) < 0.06
     assert float(np.sqrt(np.mean(res.residuals_ug[:, 2] ** 2))) < 100.0
     # a fine channel: nothing rebuilt, nothing said
     fine, _ = _warmup_rows(0.0078125)
@@ -263,14 +260,7 @@ def test_a_fine_channel_that_rests_at_two_temperatures_is_not_a_staircase() -> N
     assert np.array_equal(dq.temperature_c, means)
 
 
-def _linear_ramp(t: np.ndarray) -> np.ndarray:
-    """A steady heating, 20.3 °C + 1 °C every 2 min: never stops, never turns."""
-    return 20.3 + t / 120.0
-
-
-def _cut_exponential(t: np.ndarray) -> np.ndarray:
-    """The exponential warm-up's first 1000 s spread over the log: still moving at its end."""
-    return _exponential(t * 1000.0 / 1800.0)
+_linear_ramp, _cut_exponential = bench.linear_ramp, bench.cut_exponential
 
 
 @pytest.mark.parametrize("profile, kinds", [
@@ -303,8 +293,8 @@ def test_spans_the_crossings_cannot_resolve_are_found_and_bounded(profile, kinds
         assert "NOT RESOLVED" not in (dq.note() or "")
 
 
-def test_the_fit_leaves_the_unresolved_spans_out_counts_them_and_says_so(tmp_path,
-                                                                        capsys) -> None:
+def test_the_report_names_the_unresolved_spans_and_what_the_fit_took_there(tmp_path,
+                                                                         capsys) -> None:
     import json
     from types import SimpleNamespace
 
@@ -319,21 +309,25 @@ def test_the_fit_leaves_the_unresolved_spans_out_counts_them_and_says_so(tmp_pat
     doc = json.loads(capsys.readouterr().out)
     got = doc["unresolved_temperature"]
     assert [s["kind"] for s in got["spans"]] == ["peak", "rest"]
-    assert got["excluded_readings"] == sum(s["readings"] for s in got["spans"]) > 0
-    assert got["excluded_readings"] + got["kept_readings"] == len(rec)
-    assert got["excluded_samples"] == 250 * got["excluded_readings"]
-    assert doc["captures"] == got["kept_readings"]
+    assert got["readings_inside"] == sum(s["readings"] for s in got["spans"]) > 0
+    assert got["readings"] == len(rec) == doc["captures"]  # nothing silently dropped
+    assert got["samples_inside"] == 250 * got["readings_inside"]
+    assert got["treatment"].startswith("kept in the fit at the rebuilt value")
     peak = got["spans"][0]
     assert (peak["low_c"], peak["level_c"], peak["high_c"]) == (33.5, 34.0, 34.5)
-    left_out = [n for n in doc["notes"] if "LEFT OUT of the fit" in n]
-    assert left_out and f"{got['excluded_readings']} of {len(rec)} capture means" in left_out[0]
+    # the truth inside each span is within its stated bound
+    for s in got["spans"]:
+        here = (rec.t_s >= s["t_start_s"]) & (rec.t_s <= s["t_end_s"])
+        assert s["low_c"] - 0.05 <= die[here].min() and die[here].max() <= s["high_c"] + 0.05
+    said = [n for n in doc["notes"] if "NOT RESOLVED below the step's band" in n]
+    assert said and f"{got['readings_inside']} of {len(rec)} capture means" in said[0]
     # the text report says the same, with the span's times, step and bound
     assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model),
                                              json=False)) == 0
     text = capsys.readouterr().out
-    assert "NOT RESOLVED" in text and "peak at 921..1012 s in the 34 °C step" in text
-    assert "between 33.5 and 34.5 °C" in text
-    # a log without a rest or a turn inside a step: nothing left out
+    assert "peak at 921..1012 s in the 34 °C step (18 readings): between 33.5 and 34.5 °C" \
+        in text
+    # a log without a rest or a turn inside a step: nothing said
     t, read, truth = _captures(_linear_ramp, 0.01, 5.0, seed=5)
     n = t.size
     cols = dict(rec.columns)
@@ -342,4 +336,4 @@ def test_the_fit_leaves_the_unresolved_spans_out_counts_them_and_says_so(tmp_pat
 
     res = fit(Recording.from_columns({k: v[:n] for k, v in cols.items()}))
     assert res.report["unresolved_temperature"] is None
-    assert not [x for x in res.report["notes"] if "LEFT OUT" in x or "NOT RESOLVED" in x]
+    assert not [x for x in res.report["notes"] if "NOT RESOLVED" in x]
