@@ -135,10 +135,11 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
     versus = f"the fit's own held-out RMS is {xyz(fit)} mg"
     if ratio >= LOUD_FACTOR:
         return [f"WARNING: the firmware's {q:g} degC temperature reading will cost up to "
-                f"{ratio:.1f} x the fit's own error: {main}; {versus}. No parameters can do "
-                f"better with that reading (the offset is a function of it only); a finer "
-                f"temperature channel in the firmware would, or `soakcal compensate`, which "
-                f"rebuilds the temperature"]
+                f"{ratio:.1f} x the fit's own error: {main}; {versus}. No parameter file removes "
+                f"it (the firmware's offset is a function of that reading only; a fit on the "
+                f"step values, as PX4's and ArduPilot's scripts make, does about as well); "
+                f"a finer temperature channel in the firmware would, or `soakcal "
+                f"compensate`, which rebuilds the temperature"]
     return [f"{main}; {versus}"]
 
 

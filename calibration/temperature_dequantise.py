@@ -43,8 +43,9 @@ A reading settled on a level is never given a temperature outside that level's b
 Where the die stops or turns round inside one step the crossing instants say nothing about
 its temperature beyond that step's band: such a stretch is an *unresolved span*
 (:class:`UnresolvedSpan`, :func:`unresolved_spans`), reported with its times, its step,
-its readings and the bound (the band between the step's two thresholds), so that a fit
-can leave it out and a report can say it could not be resolved:
+its readings and the bound (the band between the step's two thresholds), so that a
+report can say it could not be resolved (:mod:`calibration.unresolved_temperature`: why
+the warm-up fit keeps those readings at the rebuilt value):
 
 * a *peak* or *trough*: the step entered and left through the same threshold, where the
   rebuild's own estimate of the excursion (h = s·D/4, item 4, before its cap) is at least
