@@ -10,6 +10,10 @@ Per case: the RMS error against the true capture-mean die temperature of the ste
 values as read and of :func:`calibration.temperature_dequantise.dequantise`'s rebuild,
 each less its mean (a constant offset is harmless to a warm-up's bias change), and the
 rebuild's largest error. The step values' RMS is LSB/√12 = 0.29 °C for a clean channel.
+``--spans``: per case instead, the spans the rebuild reports as unresolved (a rest or a
+turn inside one step: kind and step), the share of the readings inside them, and the
+rebuild's RMS error inside and outside them (two more traces that have none: a steady
+ramp and the exponential warm-up cut before it slows).
 """
 
 from __future__ import annotations
@@ -81,7 +85,51 @@ def case(profile: Callable[[np.ndarray], np.ndarray], noise_c: float, block_s: f
             float(np.max(np.abs(e1))), dq.transitions, dq.turning_points)
 
 
+def linear_ramp(t: np.ndarray) -> np.ndarray:
+    """A steady heating, 20.3 °C + 1 °C every 2 min: never stops, never turns."""
+    return 20.3 + t / 120.0
+
+
+def cut_exponential(t: np.ndarray) -> np.ndarray:
+    """The exponential warm-up's first 1000 s spread over 30 min: still moving at its end."""
+    return exponential(t * 1000.0 / DURATION_S)
+
+
+def spans_case(profile: Callable[[np.ndarray], np.ndarray], noise_c: float, block_s: float,
+               seed: int = 0) -> tuple[str, float, float, float]:
+    """(spans "kind step; …", share of readings inside, rebuilt RMS inside, outside), °C."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, DURATION_S, 1.0 / RATE_HZ)
+    die = profile(t)
+    read = np.round(die + rng.normal(0.0, noise_c, t.size))
+    k = np.floor(t / block_s).astype(int)
+    n = np.bincount(k)
+    tc, rc, dc = np.bincount(k, t) / n, np.bincount(k, read) / n, np.bincount(k, die) / n
+    dq = dequantise(tc, rc, n)
+    inside = dq.unresolved_mask(tc)
+    e = dq.temperature_c - dc
+    e = e - e.mean()
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+    said = "; ".join(f"{s.kind} {s.level_c:g}" for s in dq.unresolved) or "none"
+    return said, float(np.mean(inside)), rms(e[inside]), rms(e[~inside])
+
+
 def main() -> int:
+    if "--spans" in sys.argv[1:]:
+        print("| die trace | channel noise °C | capture s | unresolved spans (kind, step °C) | "
+              "share of readings | rebuilt RMS inside | rebuilt RMS outside |")
+        print("|---|---|---|---|---|---|---|")
+        traces = {**PROFILES, "steady ramp": linear_ramp, "exponential, cut": cut_exponential}
+        for name, profile in traces.items():
+            for noise in (0.0, 0.02, 0.1):
+                for block in (1.0, 5.0):
+                    said, share, r_in, r_out = spans_case(profile, noise, block)
+                    print(f"| {name} | {noise:g} | {block:g} | {said} | {share:.2f} | "
+                          f"{r_in:.3f} | {r_out:.3f} |")
+        return 0
     print("| die trace | channel noise °C | capture s | step values RMS | rebuilt RMS | "
           "rebuilt max | transitions | turning points |")
     print("|---|---|---|---|---|---|---|---|")

@@ -35,11 +35,12 @@ def run_export(args: argparse.Namespace) -> int:
     try:
         model, conditioning = load_model_file(model_path)
         limitations: list[str] = []
+        reading: list[str] = []
         if fmt in ("px4", "ardupilot"):
             fw = firmware_export(model, fmt, source_name=model_path.name,
                                  instance=getattr(args, "instance", None),
                                  device_id=int(getattr(args, "device_id", None) or 0))
-            text, limitations = fw.text, fw.limitations
+            text, limitations, reading = fw.text, fw.limitations, fw.reading
         else:
             text = export_text(model, fmt, source_name=model_path.name,
                                conditioning=conditioning)
@@ -49,6 +50,10 @@ def run_export(args: argparse.Namespace) -> int:
         atomic_write_text(out_path, text)
     except OSError as exc:
         return _fail(f"{out_path}: cannot write ({exc.strerror or exc})")
+    for line in reading:
+        # a model fitted in a rebuilt temperature, applied at the firmware's own reading
+        print(line if line.startswith("WARNING") else f"note: {fmt} at its own temperature "
+              f"reading: {line}", file=sys.stderr)
     for line in limitations:
         print(f"warning: {fmt} cannot express: {line}", file=sys.stderr)
     print(f"exported {model_path} as {fmt} -> {out_path}")

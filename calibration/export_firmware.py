@@ -24,7 +24,7 @@ largest error that costs at |a| ≤ 1 g over the valid range.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.polynomial import Polynomial
@@ -41,12 +41,22 @@ ARDUPILOT_TEMP_LIMITS_C = (-70.0, 80.0)  # INS_TCALn_TMIN/TMAX @Range
 PX4_PARAM_INT32, PX4_PARAM_REAL32 = 6, 9  # MAV_PARAM_TYPE in QGroundControl .params files
 
 
+# The firmware's error from reading its own quantised channel is said LOUDLY (first in the
+# header, "WARNING" on stderr) when its RMS on the fit log exceeds the fit's own held-out
+# RMS on some axis by this factor: the firmware then does several times worse than the
+# model soakcal fitted, and a lab engineer must know before flying it.
+LOUD_FACTOR = 3.0
+
+
 @dataclass
 class FirmwareExport:
     """The parameter file text and the one-line limitations for stderr."""
 
     text: str
     limitations: list[str]
+    # what the firmware does with its own (quantised) temperature reading, for a model
+    # fitted in a rebuilt temperature (quantised_reading_lines); "WARNING: ..." when loud
+    reading: list[str] = field(default_factory=list)
 
 
 def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float) -> np.ndarray:
@@ -58,6 +68,79 @@ def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float) -> np.ndarray:
         c = poly.coef * STANDARD_GRAVITY_M_S2
         out[i, : c.size] = c
     return out
+
+
+def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
+                            lsb_c: float, fit_heldout_mg: list[float] | None
+                            ) -> dict[str, object]:
+    """What a firmware that reads the raw quantised channel makes of this model on its fit
+    log: both firmwares subtract b(clamp(T)) (module docstring) with T their own reading,
+    while the model was fitted in the die temperature rebuilt from that channel
+    (:mod:`calibration.temperature_dequantise`). Per axis, over the log's capture means:
+    the RMS and largest |b(T_read) − b(T_rebuilt)| (mg), each clamped to the valid range as
+    the firmwares clamp to TMIN/TMAX; ``tempco_lsb_mg``, the largest |db/dT| over the valid
+    range times the LSB (the step the firmware's offset takes at each change of its
+    reading); and the fit's own held-out RMS (mg) with the ratio of the two RMS. The
+    constant part (X0, INS_ACCOFFS) cancels in the difference, so the figure is the same
+    for PX4 and ArduPilot. A capture's raw mean stands for its samples' readings: b is
+    smooth, so the mean of b over a capture's samples and b at their mean differ by
+    second-order terms only."""
+    lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
+    ok = np.isfinite(read_c) & np.isfinite(rebuilt_c)
+
+    def bias_mg(t: np.ndarray) -> np.ndarray:
+        P = model.params_vector_at(np.clip(t, lo, hi), extrapolate=True)
+        return P[:, sfem.BIAS] * 1e3
+
+    diff = bias_mg(np.asarray(read_c, float)[ok]) - bias_mg(np.asarray(rebuilt_c, float)[ok])
+    grid = np.linspace(lo, hi, 201)
+    slope = np.abs(np.gradient(bias_mg(grid), grid, axis=0)) if hi > lo else np.zeros((1, 3))
+    rms = np.sqrt(np.mean(diff**2, axis=0)) if diff.size else np.zeros(3)
+    out: dict[str, object] = {
+        "lsb_c": float(lsb_c),
+        "readings": int(np.sum(ok)),
+        "rms_mg": [float(v) for v in rms],
+        "peak_mg": [float(v) for v in (np.max(np.abs(diff), axis=0) if diff.size
+                                       else np.zeros(3))],
+        "tempco_lsb_mg": [float(v) * float(lsb_c) for v in np.max(slope, axis=0)],
+        "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
+    }
+    if fit_heldout_mg is not None:
+        out["ratio_to_fit"] = float(np.max(rms / np.maximum(np.asarray(fit_heldout_mg), 1e-9)))
+    return out
+
+
+def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
+    """The lines an export says about a model fitted in a rebuilt temperature (none for a
+    model without the record): what the firmware will do with its own quantised reading."""
+    if not record:
+        return []
+    rms, peak = record["rms_mg"], record["peak_mg"]
+    step = record["tempco_lsb_mg"]
+    q = float(record["lsb_c"])  # type: ignore[arg-type]
+    fit = record.get("fit_heldout_mg")
+
+    def xyz(v: object) -> str:
+        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
+
+    main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC channel, "
+            f"but the firmware evaluates it at its own {q:g} degC reading: on the fit log "
+            f"({record['readings']} capture means) that differs from the offset at the "
+            f"rebuilt temperature by RMS {xyz(rms)} mg, peak {xyz(peak)} mg (x / y / z); "
+            f"the offset steps by up to {xyz(step)} mg at each change of the reading "
+            f"(tempco x LSB)")
+    if fit is None:
+        return [main]
+    ratio = float(record.get("ratio_to_fit", 0.0))  # type: ignore[arg-type]
+    versus = f"the fit's own held-out RMS is {xyz(fit)} mg"
+    if ratio >= LOUD_FACTOR:
+        return [f"WARNING: the firmware's {q:g} degC temperature reading will cost up to "
+                f"{ratio:.1f} x the fit's own error: {main}; {versus}. No parameter file removes "
+                f"it (the firmware's offset is a function of that reading only; a fit on the "
+                f"step values, as PX4's and ArduPilot's scripts make, does about as well); "
+                f"a finer temperature channel in the firmware would, or `soakcal "
+                f"compensate`, which rebuilds the temperature"]
+    return [f"{main}; {versus}"]
 
 
 def _check(model: ThermalModel, firmware: str) -> tuple[float, float]:
@@ -151,6 +234,7 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
     t_ref = 0.5 * (lo + hi)  # as PX4's process_sensor_caldata.py: mid-range reference
     c = bias_polynomials_m_s2(model, t_ref)
     limits = left_out(model)
+    reading = quantised_reading_lines(model.provenance.get("quantised_temperature"))
     # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
     # is then 0, as PX4's own script leaves it (~0, readings minus their median), and the
     # constant stays with the ordinary calibration's CAL_ACCn_xOFF.
@@ -185,10 +269,10 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
          "T is the accelerometer's own temperature reading (sensor_accel.temperature)",
          "outside TMIN..TMAX the firmware holds the offset at the edge value (clamp)",
          x0_note],
-        limits)
+        limits, reading)
     body = "\n".join(f"1\t1\t{n}\t{_num(v, t)}\t{t}" for n, v, t in rows)
     text = head + "# Vehicle-Id Component-Id Name Value Type\n" + body + "\n"
-    return FirmwareExport(text, limits)
+    return FirmwareExport(text, limits, reading)
 
 
 def export_ardupilot(model: ThermalModel, *, instance: int = 1,
@@ -203,6 +287,7 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
                              f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
     c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C) * ARDUPILOT_SCALE_FACTOR
     limits = left_out(model)
+    reading = quantised_reading_lines(model.provenance.get("quantised_temperature"))
     limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
                   f"INS_ACC{'' if instance == 1 else instance}OFFS, measured by the ordinary "
                   "accelerometer calibration at INS_ACC"
@@ -219,13 +304,20 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
          "35 degC is fixed in the firmware (TEMP_REFERENCE; there is no parameter for it)",
          "T is the IMU's own temperature; T_cal is INS_ACCn_CALTEMP; clamp to TMIN..TMAX",
          "the gyro coefficients (INS_TCALn_GYR*) are not touched"],
-        limits)
+        limits, reading)
     text = head + "\n".join(f"{n},{_num(v, 0)}" for n, v in rows) + "\n"
-    return FirmwareExport(text, limits)
+    return FirmwareExport(text, limits, reading)
 
 
-def _header(title: str, formula: list[str], limits: list[str]) -> str:
-    lines = [title, *formula]
+def _header(title: str, formula: list[str], limits: list[str],
+            reading: list[str] | None = None) -> str:
+    reading = reading or []
+    loud = [x for x in reading if x.startswith("WARNING")]
+    lines = [title, *loud, *formula]
+    quiet = [x for x in reading if not x.startswith("WARNING")]
+    if quiet:
+        lines.append("AT THE FIRMWARE'S OWN TEMPERATURE READING:")
+        lines += [f"  - {x}" for x in quiet]
     if limits:
         lines.append("NOT EXPRESSED by this firmware's parameters:")
         lines += [f"  - {x}" for x in limits]

@@ -228,7 +228,10 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
     with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
     from calibration.captures import warmup_rebuild
+    from calibration.export_firmware import quantised_reading_error, quantised_reading_lines
     from calibration.rebuild_rate_noise import rebuild_rate_noise
+    from calibration.unresolved_temperature import note as unresolved_note
+    from calibration.unresolved_temperature import unresolved_record
     from calibration.warmup import fit_warmup
 
     if rate_gain is not None:
@@ -252,6 +255,11 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         capture_notes = [*capture_notes, rebuilt]
     # dT/dt's noise on a rebuilt temperature includes the rebuild's own error
     noise = None if dq is None else rebuild_rate_noise(captures.t_s, dq, means.columns.get("n"))
+    # where the die rested or turned inside a step the rebuilt temperature is a guess: said,
+    # with the bound (unresolved_temperature.py says why the readings stay in the fit)
+    unresolved = unresolved_record(captures, dq)
+    if unresolved:
+        capture_notes = [*capture_notes, unresolved_note(unresolved)]
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local,
                     rebuild_noise=noise)
@@ -274,6 +282,17 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     wf.model.notes[:0] = capture_notes
     wf.report["notes"][:0] = capture_notes + [reason]
     model = wf.model
+    wf.report["unresolved_temperature"] = unresolved
+    if dq is not None and dq.read_c is not None:
+        # what a firmware that reads the raw channel makes of a model fitted in the rebuilt
+        # temperature, on this log (the exports say it: export_firmware.py)
+        firmware = quantised_reading_error(
+            model, dq.read_c, captures.temperature_c(), dq.lsb_c,
+            wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"))
+        model.provenance["quantised_temperature"] = firmware
+        wf.report["quantised_temperature"] = firmware
+        wf.report["notes"] += [f"firmware export: {line}"
+                               for line in quantised_reading_lines(firmware)]
     T = captures.temperature_c()
     comp = captures.raw_g - model.params_vector_at(T, extrapolate=True)[:, sfem.BIAS]
     labels = orientations.labels

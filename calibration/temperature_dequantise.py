@@ -40,6 +40,23 @@ decision threshold between them, and those instants carry what the step values l
 
 A reading settled on a level is never given a temperature outside that level's band.
 
+Where the die stops or turns round inside one step the crossing instants say nothing about
+its temperature beyond that step's band: such a stretch is an *unresolved span*
+(:class:`UnresolvedSpan`, :func:`unresolved_spans`), reported with its times, its step,
+its readings and the bound (the band between the step's two thresholds), so that a
+report can say it could not be resolved (:mod:`calibration.unresolved_temperature`: why
+the warm-up fit keeps those readings at the rebuilt value):
+
+* a *peak* or *trough*: the step entered and left through the same threshold, where the
+  rebuild's own estimate of the excursion (h = s·D/4, item 4, before its cap) is at least
+  :data:`TURN_MIN_LSB` (a flicker at a threshold, slope 0 on both sides, is the die
+  sitting at the threshold: resolved to the channel's noise);
+* a *rest*: the step entered and left through different thresholds, but held
+  :data:`REST_FACTOR` times longer than the neighbouring steps took to cross (a die that
+  stopped in the middle of a warm-up); or the first (last) step of the log held longer
+  than the first (last) crossing's slope takes to cross a whole step (the die slowed down
+  or rested inside it: a rest before the heating, the plateau a warm-up settles at).
+
 A channel whose noise *dithers* it (σ ≥ 0.1 LSB before quantisation: it flickers between
 two levels for a long stretch around each crossing, and its capture means sit off the
 levels most of the time) is rebuilt instead from the share of its readings one level up
@@ -52,6 +69,7 @@ regime was used. A channel that never dithers is rebuilt from its crossings as a
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +98,43 @@ MIN_SUMMED_SHARE = 0.95
 MIN_PRINTED_SHARE = 0.25
 # Consecutive readings on one level that make a settled run (between two flickers).
 SETTLED_ROWS = 2
+# A turn inside a step is unresolved when its estimated excursion into the step (LSB)
+# reaches this: half the distance from the threshold to the step's value, where the
+# rebuild's guess (the parabola of the neighbouring slopes) is no better than the bound.
+TURN_MIN_LSB = 0.25
+# A step crossed (entered and left through different thresholds) is a rest when held this
+# many times longer than the longer of its neighbouring steps took: an exponential warm-up
+# takes about twice as long for each step as for the one before (ln 3 / ln 1.67 near its
+# plateau), a die that stopped much longer.
+REST_FACTOR = 3.0
+
+
+@dataclass(frozen=True)
+class UnresolvedSpan:
+    """A stretch where the rebuild cannot resolve the die temperature below its step's
+    band (module docstring): the die was within ``[low_c, high_c]`` (the step's
+    thresholds, on the channel's own scale: a channel that truncates reads ``level_c``
+    for ``[level_c, level_c + LSB)`` instead), where exactly is not known."""
+
+    kind: str  # "peak", "trough" or "rest"
+    t_start_s: float  # the crossing that entered the step (or the log's first reading)
+    t_end_s: float  # the crossing that left it (or the log's last reading)
+    level_c: float  # the step's value as the channel reads it
+    low_c: float
+    high_c: float
+    readings: int  # capture means (readings) inside the span
+    samples: int  # the samples they average (readings where no ``n`` was given)
+
+    def to_dict(self) -> dict[str, float | int | str]:
+        return {"kind": self.kind, "t_start_s": self.t_start_s, "t_end_s": self.t_end_s,
+                "level_c": self.level_c, "low_c": self.low_c, "high_c": self.high_c,
+                "readings": self.readings, "samples": self.samples}
+
+    def describe(self) -> str:
+        """One phrase: what, when, which step, how many readings, the bound."""
+        return (f"{self.kind} at {self.t_start_s:.0f}..{self.t_end_s:.0f} s in the "
+                f"{self.level_c:g} °C step ({self.readings} readings): between "
+                f"{self.low_c:g} and {self.high_c:g} °C")
 
 
 @dataclass(frozen=True)
@@ -92,6 +147,20 @@ class Dequantised:
     turning_points: int = 0  # k -> k+1 -> k returns, held inside their step
     dither_lsb: float = 0.0  # > 0: the dithered regime, the channel's noise SD (LSB)
     window_s: float = 0.0  # the dithered regime's smoothing window
+    # where the crossings leave the temperature unknown inside a step (module docstring)
+    unresolved: tuple[UnresolvedSpan, ...] = ()
+    # each reading's temperature as the channel read it (the firmware's input); None when
+    # not rebuilt
+    read_c: np.ndarray | None = None
+
+    def unresolved_mask(self, t_s: np.ndarray) -> np.ndarray:
+        """Readings at ``t_s`` inside an unresolved span (True: the temperature is known
+        only to the step's band there)."""
+        t = np.asarray(t_s, float)
+        mask = np.zeros(t.size, bool)
+        for span in self.unresolved:
+            mask |= (t >= span.t_start_s) & (t <= span.t_end_s)
+        return mask
 
     @property
     def rebuilt(self) -> bool:
@@ -118,7 +187,17 @@ class Dequantised:
         return (f"temperature channel quantised at {self.lsb_c:g} °C: die temperature rebuilt "
                 f"from the {self.transitions} transitions in time (monotone interpolation "
                 f"through the instants the readings cross midway between levels{turns}; "
-                f"calibrate and compensate rebuild it alike)")
+                f"calibrate and compensate rebuild it alike){self.unresolved_note()}")
+
+    def unresolved_note(self) -> str:
+        """The clause on the spans the crossings do not resolve ("" when none)."""
+        if not self.unresolved:
+            return ""
+        shown = "; ".join(s.describe() for s in self.unresolved[:3])
+        more = len(self.unresolved) - 3
+        return (f"; NOT RESOLVED where the die rested or turned inside a step, its temperature "
+                f"known only to that step's band: {shown}"
+                + (f"; and {more} more" if more > 0 else ""))
 
 
 def coarse_lsb_c(temperature_c: np.ndarray) -> float:
@@ -198,7 +277,8 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
     if dith is not None:
         out = y.copy()
         out[ok] = base + q * dith.z
-        return Dequantised(out, q, dither_lsb=dith.sigma_lsb, window_s=dith.window_s)
+        return Dequantised(out, q, dither_lsb=dith.sigma_lsb, window_s=dith.window_s,
+                           read_c=y.copy())
     runs = _settled_runs(z)
     if len(runs) < 2:
         return unchanged
@@ -206,6 +286,13 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
     knots, kinds = _crossings(tt, z, runs, d)
     if not any(k != "touch" for k in kinds):
         return unchanged
+    n_per = (np.ones(tt.size) if samples is None
+             else np.nan_to_num(np.asarray(samples, float)[ok], nan=1.0))
+    spans = tuple(
+        UnresolvedSpan(kind, t0, t1, base + q * level, base + q * (level - 0.5),
+                       base + q * (level + 0.5), int(np.sum(inside)), int(np.sum(n_per[inside])))
+        for kind, t0, t1, level in unresolved_spans(tt, knots, kinds)
+        for inside in [(tt >= t0) & (tt <= t1)])
     knots, turns = _with_turning_points(knots, kinds)
     z_rec = _evaluate(tt, knots, runs)
     # a reading settled on a level keeps a temperature inside that level's band
@@ -214,7 +301,7 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
     out = y.copy()
     out[ok] = base + q * z_rec
     n_cross = sum(k != "touch" for k in kinds)
-    return Dequantised(out, q, n_cross, turns)
+    return Dequantised(out, q, n_cross, turns, unresolved=spans, read_c=y.copy())
 
 
 def summed_lattice(y: np.ndarray, samples: np.ndarray) -> tuple[float, float] | None:
@@ -319,6 +406,69 @@ def _region_crossings(t: np.ndarray, z: np.ndarray, a_end: int, b_start: int, a:
             w = np.clip(sgn * (z[idx] - a) - 0.5, 0.0, 1.0) + 1e-12
             out.append((float(np.sum(t[idx] * w) / np.sum(w)), a + 0.5 * sgn, "touch"))
     return out
+
+
+def unresolved_spans(t: np.ndarray, knots: list[tuple[float, float]], kinds: list[str]
+                     ) -> list[tuple[str, float, float, float]]:
+    """(kind, start s, end s, step in level units) of each stretch whose temperature the
+    crossings do not resolve below its step's band (module docstring). ``knots`` and
+    ``kinds`` as :func:`_crossings` gives them; touches pin the die at a threshold for an
+    instant and are not crossings. The log's first and last readings bound its end steps."""
+    cross = [(tc, v, 1 if kind == "up" else -1)
+             for (tc, v), kind in zip(knots, kinds, strict=True) if kind != "touch"]
+    if not cross:
+        return []
+    t_first, t_last = float(t[0]), float(t[-1])
+    n = len(cross)
+
+    def slope(i: int, j: int) -> float | None:
+        """|Δθ|/Δt between crossings i and j (level units per s); None off the ends."""
+        if not (0 <= i < n and 0 <= j < n) or cross[j][0] <= cross[i][0]:
+            return None
+        return abs(cross[j][1] - cross[i][1]) / (cross[j][0] - cross[i][0])
+
+    # each step held between two crossings of different thresholds: how long it took
+    passes = [cross[i + 1][0] - cross[i][0] if cross[i + 1][1] != cross[i][1] else None
+              for i in range(n - 1)]
+    typical = [p for p in passes if p is not None and p > 0]
+    out: list[tuple[str, float, float, float]] = []
+    for i in range(n + 1):
+        b = cross[i - 1] if i > 0 else None
+        e = cross[i] if i < n else None
+        if b is not None and e is not None:
+            level = e[1] - 0.5 * e[2]
+            held = e[0] - b[0]
+            if b[1] == e[1]:  # entered and left through one threshold: a turn
+                slopes = [s for s in (slope(i - 2, i - 1), slope(i, i + 1)) if s is not None]
+                h = float(np.mean(slopes)) * held / 4.0 if slopes else math.inf
+                if h >= TURN_MIN_LSB:
+                    out.append(("peak" if b[2] > 0 else "trough", b[0], e[0], level))
+                continue
+            near = [p for p in (passes[i - 2] if i >= 2 else None,
+                                passes[i] if i < n - 1 else None) if p is not None]
+            expected = max(near) if near else (float(np.median(typical)) if typical else None)
+            if expected is not None and held > REST_FACTOR * expected:
+                out.append(("rest", b[0], e[0], level))
+        elif e is not None:  # the log's first step, left at crossing 0
+            s = _end_slope(cross, 0, 1)
+            if s is None or s * (e[0] - t_first) > 1.0:
+                out.append(("rest", t_first, e[0], e[1] - 0.5 * e[2]))
+        elif b is not None:  # the log's last step, entered at the last crossing
+            s = _end_slope(cross, n - 1, -1)
+            if s is None or s * (t_last - b[0]) > 1.0:
+                out.append(("rest", b[0], t_last, b[1] + 0.5 * b[2]))
+    return out
+
+
+def _end_slope(cross: list[tuple[float, float, int]], i: int, step: int) -> float | None:
+    """|slope| from crossing ``i`` to the nearest one (going by ``step``) at another
+    threshold: the die's pace as it left (entered) the log's first (last) step."""
+    j = i + step
+    while 0 <= j < len(cross):
+        if cross[j][1] != cross[i][1] and cross[j][0] != cross[i][0]:
+            return abs(cross[j][1] - cross[i][1]) / abs(cross[j][0] - cross[i][0])
+        j += step
+    return None
 
 
 def _with_turning_points(knots: list[tuple[float, float]], kinds: list[str]

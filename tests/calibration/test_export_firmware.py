@@ -189,3 +189,74 @@ def test_models_the_firmware_would_apply_wrongly_are_refused(tmp_path, capsys, k
     assert code == 2 and text == ""
     err = capsys.readouterr().err.strip()
     assert words in err and len(err.splitlines()) == 1
+
+
+def _figures(line: str, what: str) -> np.ndarray:
+    """The three x / y / z numbers after ``what`` in an export's line (mg)."""
+    return np.array([float(v) for v in line.split(what)[1].split(" mg")[0].split(" / ")])
+
+
+@pytest.mark.parametrize("fmt", ["px4", "ardupilot"])
+def test_a_model_fitted_in_a_rebuilt_temperature_says_what_the_firmware_will_do(
+        tmp_path, capsys, fmt):
+    """A warm-up read by a 1 °C channel: the model is fitted in the die temperature rebuilt
+    from the channel's crossings, but the firmware evaluates its offset at its own 1 °C
+    reading. The export's figure is checked here with each firmware's own formula applied
+    at the raw reading against the same formula at the rebuilt temperature."""
+    import sys
+    from types import SimpleNamespace
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_temperature_dequantise import _warmup_rows
+
+    from calibration import cli
+    from calibration.captures import warmup_rebuild
+    from calibration.recording import write_recording
+
+    rec, _ = _warmup_rows(1.0)
+    src, model = tmp_path / "w.csv", tmp_path / "model.json"
+    write_recording(src, rec.columns)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model),
+                                             json=True)) == 0
+    capsys.readouterr()
+    out = tmp_path / f"out.{fmt}"
+    assert main(["export", str(model), "--format", fmt, "-o", str(out)]) == 0
+    text, err = out.read_text(), capsys.readouterr().err
+    read_c = rec.temperature_c()
+    rebuilt_c = warmup_rebuild(rec)[0].temperature_c()
+    raw = np.zeros((len(rec), 3))  # the offset alone: raw cancels in the difference
+    if fmt == "px4":
+        p = _px4_params(text)
+        at_read, at_rebuilt = (_px4_correct(p, raw, t) for t in (read_c, rebuilt_c))
+    else:
+        p = _ap_params(text)
+        at_read, at_rebuilt = (_ap_correct(p, raw, t, 27.0) for t in (read_c, rebuilt_c))
+    diff_mg = (at_read - at_rebuilt) / G * 1e3
+    rms, peak = np.sqrt(np.mean(diff_mg**2, axis=0)), np.max(np.abs(diff_mg), axis=0)
+    # z warms by 1 mg/°C: the firmware's step values leave about 1 mg/°C × 0.29 °C RMS
+    assert 0.2 < rms[2] < 0.4 and 0.4 < peak[2] <= 0.7
+    said = [x for x in err.splitlines() if "at its own 1 degC reading" in x]
+    assert len(said) == 1
+    np.testing.assert_allclose(_figures(said[0], "by RMS "), rms, atol=0.0015)
+    np.testing.assert_allclose(_figures(said[0], ", peak "), peak, atol=0.0015)
+    # several times the fit's own error: said loudly, first in the header and on stderr
+    assert said[0].startswith("WARNING: the firmware's 1 degC temperature reading")
+    fit_mg = _figures(said[0], "the fit's own held-out RMS is ")
+    ratio = float(said[0].split("cost up to ")[1].split(" x")[0])
+    assert ratio == pytest.approx(np.max(rms / fit_mg), rel=0.05) and ratio > 3
+    first = [x for x in text.splitlines() if x.startswith("#")][1]
+    assert first.startswith("# WARNING: the firmware's 1 degC temperature reading")
+    assert "soakcal compensate" in said[0]
+
+
+def test_the_firmware_reading_is_said_quietly_when_it_costs_little() -> None:
+    from calibration.export_firmware import LOUD_FACTOR, quantised_reading_lines
+
+    record = {"lsb_c": 1.0, "readings": 100, "rms_mg": [0.01, 0.02, 0.03],
+              "peak_mg": [0.02, 0.04, 0.06], "tempco_lsb_mg": [0.03, 0.07, 0.1],
+              "fit_heldout_mg": [0.05, 0.05, 0.05], "ratio_to_fit": 0.6}
+    (line,) = quantised_reading_lines(record)
+    assert not line.startswith("WARNING") and "RMS 0.010 / 0.020 / 0.030 mg" in line
+    (loud,) = quantised_reading_lines({**record, "ratio_to_fit": LOUD_FACTOR})
+    assert loud.startswith("WARNING")
+    assert quantised_reading_lines(None) == []

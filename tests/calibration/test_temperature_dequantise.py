@@ -258,3 +258,82 @@ def test_a_fine_channel_that_rests_at_two_temperatures_is_not_a_staircase() -> N
     dq = dequantise(t, means, np.full(t.size, 50.0))
     assert not dq.rebuilt and dq.lsb_c == 0.0
     assert np.array_equal(dq.temperature_c, means)
+
+
+_linear_ramp, _cut_exponential = bench.linear_ramp, bench.cut_exponential
+
+
+@pytest.mark.parametrize("profile, kinds", [
+    (_overshoot, ["rest", "peak", "trough", "rest"]),  # a slow start, 2 turns, its plateau
+    (_rest_heat_rest, ["rest", "rest"]),
+    (_heat_cool, ["peak", "rest"]),  # the top, and the cooling slowing inside a step
+    (_exponential, ["rest"]),  # the plateau it settles towards
+    (_linear_ramp, []), (_cut_exponential, [])])
+@pytest.mark.parametrize("noise_c", [0.0, 0.02])
+def test_spans_the_crossings_cannot_resolve_are_found_and_bounded(profile, kinds,
+                                                                  noise_c) -> None:
+    t, read, truth = _captures(profile, noise_c, 5.0)
+    dq = dequantise(t, read, np.full(t.size, 250.0))
+    assert dq.regime == "crossings"
+    assert [s.kind for s in dq.unresolved] == kinds
+    inside = dq.unresolved_mask(t)
+    assert int(np.sum(inside)) == sum(s.readings for s in dq.unresolved)
+    for s in dq.unresolved:
+        here = (t >= s.t_start_s) & (t <= s.t_end_s)
+        assert s.readings == int(np.sum(here)) and s.samples == 250 * s.readings
+        assert s.high_c - s.low_c == pytest.approx(1.0) and s.low_c < s.level_c < s.high_c
+        # the bound holds the truth (a capture straddling the crossing: within its share)
+        assert truth[here].min() >= s.low_c - 0.05 and truth[here].max() <= s.high_c + 0.05
+    if kinds:
+        # where the rebuild is worst: its error inside the spans is larger than outside
+        err = np.abs(dq.temperature_c - truth - np.mean(dq.temperature_c - truth))
+        assert np.sqrt(np.mean(err[inside] ** 2)) > 1.5 * np.sqrt(np.mean(err[~inside] ** 2))
+        assert "NOT RESOLVED" in (dq.note() or "") and kinds[0] in (dq.note() or "")
+    else:
+        assert "NOT RESOLVED" not in (dq.note() or "")
+
+
+def test_the_report_names_the_unresolved_spans_and_what_the_fit_took_there(tmp_path,
+                                                                         capsys) -> None:
+    import json
+    from types import SimpleNamespace
+
+    from calibration import cli
+    from calibration.recording import write_recording
+
+    rec, die = _warmup_rows(1.0)
+    src, model = tmp_path / "w.csv", tmp_path / "model.json"
+    write_recording(src, rec.columns)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model),
+                                             json=True)) == 0
+    doc = json.loads(capsys.readouterr().out)
+    got = doc["unresolved_temperature"]
+    assert [s["kind"] for s in got["spans"]] == ["peak", "rest"]
+    assert got["readings_inside"] == sum(s["readings"] for s in got["spans"]) > 0
+    assert got["readings"] == len(rec) == doc["captures"]  # nothing silently dropped
+    assert got["samples_inside"] == 250 * got["readings_inside"]
+    assert got["treatment"].startswith("kept in the fit at the rebuilt value")
+    peak = got["spans"][0]
+    assert (peak["low_c"], peak["level_c"], peak["high_c"]) == (33.5, 34.0, 34.5)
+    # the truth inside each span is within its stated bound
+    for s in got["spans"]:
+        here = (rec.t_s >= s["t_start_s"]) & (rec.t_s <= s["t_end_s"])
+        assert s["low_c"] - 0.05 <= die[here].min() and die[here].max() <= s["high_c"] + 0.05
+    said = [n for n in doc["notes"] if "NOT RESOLVED below the step's band" in n]
+    assert said and f"{got['readings_inside']} of {len(rec)} capture means" in said[0]
+    # the text report says the same, with the span's times, step and bound
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model),
+                                             json=False)) == 0
+    text = capsys.readouterr().out
+    assert "peak at 921..1012 s in the 34 °C step (18 readings): between 33.5 and 34.5 °C" \
+        in text
+    # a log without a rest or a turn inside a step: nothing said
+    t, read, truth = _captures(_linear_ramp, 0.01, 5.0, seed=5)
+    n = t.size
+    cols = dict(rec.columns)
+    cols.update({"t_s": t, "sensor_c": read, "az": 1.0 + 1e-3 * (truth - 27.0)})
+    from calibration.fitting import fit
+
+    res = fit(Recording.from_columns({k: v[:n] for k, v in cols.items()}))
+    assert res.report["unresolved_temperature"] is None
+    assert not [x for x in res.report["notes"] if "NOT RESOLVED" in x]
