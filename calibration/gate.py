@@ -105,6 +105,15 @@ MORE_ORIENTATIONS = (
     f"(or {REFERENCE_MIN_ORIENTATIONS} with reference vectors ref_x/ref_y/ref_z)"
 )
 
+# Every raw row left out as taken while the sensor moved (calibration.captures): a flight,
+# a vehicle, a hand; what a still accelerometer scatters is
+# calibration.importers.STILL_NOISE_CEILING_G.
+NO_STILL_READING = (
+    "no still reading: every row was left out as taken while the sensor moved or vibrated "
+    "(its 1-s scatter is above what a still accelerometer shows, or many times the log's "
+    "quietest); nothing can be calibrated: record with the sensor held still in each "
+    "orientation (a flight log has no still part)")
+
 
 class GateRefusal(CalibrationError):
     """The data cannot give a calibration that is not wrong; the message says what would."""
@@ -124,18 +133,55 @@ class Orientations:
         return int(self.directions.shape[0])
 
     def names(self, limit: int = 4) -> str:
-        """'z up', 'x down', or a direction vector, for the first ``limit`` orientations."""
-        shown = [direction_name(d) for d in self.directions[:limit]]
+        """The first ``limit`` orientations' names (:func:`direction_names`: 'z up',
+        'x down', a direction vector, or a face with its tilt where the face repeats)."""
+        shown = direction_names(self.directions)[:limit]
         more = self.count - len(shown)
         return ", ".join(shown) + (f" and {more} more" if more > 0 else "")
 
+    def name(self, o: int) -> str:
+        """Orientation ``o``'s name, told apart from the others' (:func:`direction_names`)."""
+        return direction_names(self.directions)[o]
+
+
+# A direction within this angle of an axis is named by that axis ('z up').
+AXIS_NAME_TOL_DEG = 10.0
+
 
 def direction_name(u: np.ndarray) -> str:
-    """The axis pointing up (gravity's reaction reads +1 g on it) within 10°, else the vector."""
+    """The axis pointing up (gravity's reaction reads +1 g on it) within
+    :data:`AXIS_NAME_TOL_DEG`, else the vector."""
     k = int(np.argmax(np.abs(u)))
-    if abs(u[k]) >= math.cos(math.radians(10.0)):
+    if abs(u[k]) >= math.cos(math.radians(AXIS_NAME_TOL_DEG)):
         return f"{'xyz'[k]} {'up' if u[k] > 0 else 'down'}"
     return "(" + ", ".join(f"{v:+.2f}" for v in u) + ")"
+
+
+def tilted_name(u: np.ndarray) -> str:
+    """The nearest axis face and the direction's tilt from it toward each other axis, in
+    degrees: 'z down tilted x +3.1° y -2.0°' (tilt toward x = atan(u_x / |u_z|), as an
+    inclinometer's two angles). Distinct orientations are at least
+    :data:`MIN_SEPARATION_DEG` apart, so at least one of the two angles differs by more
+    than a degree: the names tell them apart at 0.1°."""
+    k = int(np.argmax(np.abs(u)))
+    face = f"{'xyz'[k]} {'up' if u[k] > 0 else 'down'}"
+    tilts = []
+    for j in (j for j in range(3) if j != k):
+        deg = math.degrees(math.atan2(float(u[j]), abs(float(u[k]))))
+        tilts.append(f"{'xyz'[j]} {round(deg, 1) + 0.0:+.1f}°")  # + 0.0: never "-0.0°"
+    return f"{face} tilted {' '.join(tilts)}"
+
+
+def direction_names(directions: np.ndarray) -> list[str]:
+    """One name per direction, told apart: the simple :func:`direction_name` where it is
+    unique, the face and its tilt (:func:`tilted_name`) where two or more directions would
+    share it (orientations distinct at 2° but all within 10° of one face)."""
+    dirs = np.atleast_2d(np.asarray(directions, float))
+    simple = [direction_name(d) for d in dirs]
+    seen: dict[str, int] = {}
+    for n in simple:
+        seen[n] = seen.get(n, 0) + 1
+    return [tilted_name(d) if seen[n] > 1 else n for d, n in zip(dirs, simple, strict=True)]
 
 
 def distinct_orientations(raw_g: np.ndarray, sigma_g: np.ndarray | None = None) -> Orientations:
@@ -273,6 +319,9 @@ def plan(captures: Recording, *, continuous: bool = False,
     captures' :func:`distinct_orientations`, when the caller has them. Raises
     :class:`GateRefusal` when nothing can be calibrated.
     """
+    if len(captures) == 0:
+        # capture_means leaves out only rows taken while the sensor moved: none was still
+        raise GateRefusal(NO_STILL_READING)
     raw = captures.raw_g
     ori = orientations or distinct_orientations(raw, captures.sigma_g)
     mode = "reference" if captures.has_reference else "norm"
@@ -416,7 +465,7 @@ def check_warmup_residuals(residual_g: np.ndarray, orientations: Orientations,
         if rms > NORM_MAX_DEV_G:
             raise GateRefusal(
                 f"after fitting {', '.join(names)} the readings at "
-                f"{direction_name(orientations.directions[o])} are still {rms * 1e3:.1f} mg "
+                f"{orientations.name(o)} are still {rms * 1e3:.1f} mg "
                 f"off (RMS; a calibration is within a few mg): the orientations were not "
                 f"held still, or the references or gravity are wrong; no model written: "
                 f"keep the board still on each face and check --gravity-g and ref_*")

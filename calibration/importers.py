@@ -22,10 +22,14 @@ Static-interval rule (:func:`detect_static_intervals`, after Tedaldi et al. ICRA
 and imu_tk): for every sample, the variance of each axis over a centred window of
 ``window_s`` seconds; the sample is *static* when the magnitude of that variance
 vector, ‖(σx², σy², σz²)‖, is below ``threshold`` × the same magnitude measured
-over the initial rest (the first ``init_rest_s`` seconds). Runs of static samples
-lasting at least ``min_duration_s`` are intervals; ``trim_s`` is then cut from both
-ends of each, because the hand placement still rings and settles there (the
-moving window only notices motion half a window late).
+over the initial rest (the first ``init_rest_s`` seconds; without one, the quietest
+10 % of the log's windows). Runs of static samples lasting at least ``min_duration_s``
+are intervals; ``trim_s`` is then cut from both ends of each, because the hand
+placement still rings and settles there (the moving window only notices motion half
+a window late). A reference noisier than a still accelerometer ever is
+(:data:`STILL_NOISE_CEILING_G`) is not a rest: a log that moves or vibrates from its
+first sample (a flight) would be "static" against its own quietest part, so such a
+log is static only where its scatter is under that ceiling (:func:`still_reference`).
 """
 
 from __future__ import annotations
@@ -81,6 +85,16 @@ FERRARIS_STATIC_PARTS: dict[str, tuple[float, float, float]] = {
     "y_p": (0.0, 1.0, 0.0), "y_a": (0.0, -1.0, 0.0),
     "z_p": (0.0, 0.0, 1.0), "z_a": (0.0, 0.0, -1.0),
 }
+# The most sample scatter (per axis, g rms, over the detector's window) a MEMS
+# accelerometer shows while it is still. Its noise is the noise density times the root of
+# its noise bandwidth: the noisiest parts in common use, MPU-6000/6050 at 400 µg/√Hz with
+# their widest 260 Hz low-pass (noise bandwidth ≈ π/2 × 260 Hz), reach 400 µg × √410 ≈
+# 8 mg; ADXL355 at 25 µg/√Hz, BMI088/BMI160 at 150-190 µg/√Hz, ICM-42688 at 70 µg/√Hz
+# stay well below. Generous on purpose (a sensor on a table also picks up the building),
+# and not derived from a datasheet per log: the real recordings' rests (docs/realdata.md)
+# read 0.8-3.9 mg, up to 5x above their parts' density × √bandwidth. A vehicle in flight
+# reads 40-130 mg.
+STILL_NOISE_CEILING_G = 10e-3
 
 
 @dataclass
@@ -299,6 +313,74 @@ def moving_variance_norm(acc: np.ndarray, window_n: int) -> np.ndarray:
     return np.sqrt(total, out=total)
 
 
+@dataclass
+class StillReference:
+    """What the static-interval detector compares each window's scatter with."""
+
+    var_mag: np.ndarray  # (N,) ‖moving variance‖ of each sample's window, g²
+    ref: float  # the reference ‖variance‖, g² (initial rest, or the quietest decile)
+    source: str  # "initial rest" | "quietest 10 %"
+    ceiling_g: float | None  # the still ceiling applied, g rms per axis (None: none)
+
+    @property
+    def ref_rms_g(self) -> float:
+        """The reference as a per-axis rms, g: √(‖(σ², σ², σ²)‖/√3) for equal axes."""
+        return per_axis_rms_g(self.ref)
+
+    @property
+    def is_rest(self) -> bool:
+        """The reference is quiet enough to be a sensor at rest (under the ceiling)."""
+        return self.ceiling_g is None or self.ref_rms_g <= self.ceiling_g
+
+    def static(self, threshold: float) -> np.ndarray:
+        """(N,) samples whose window is static: under ``threshold`` × the reference, or,
+        when the reference is no rest, under the ceiling itself (a still sensor's most)."""
+        if self.is_rest:
+            return self.var_mag < threshold * self.ref
+        assert self.ceiling_g is not None
+        return self.var_mag < math.sqrt(3.0) * self.ceiling_g ** 2
+
+
+def per_axis_rms_g(var_mag: float) -> float:
+    """A ‖(σx², σy², σz²)‖ as the per-axis sd σ it has when the three axes are equal."""
+    return math.sqrt(max(var_mag, 0.0) / math.sqrt(3.0))
+
+
+def still_reference(
+    t_s: np.ndarray,
+    acc: np.ndarray,
+    *,
+    window_s: float,
+    init_rest_s: float | None = None,
+    ceiling_g: float | None = STILL_NOISE_CEILING_G,
+) -> StillReference:
+    """Each sample's window scatter and the reference the detector compares it with.
+
+    The reference is the variance magnitude over the initial rest (the first
+    ``init_rest_s`` seconds), else the 10th percentile of the moving variance (a
+    recording that starts moving at once has no better one). ``ceiling_g``: the most a
+    still sensor scatters (:data:`STILL_NOISE_CEILING_G`); a reference above it is not
+    a rest (:attr:`StillReference.is_rest`).
+    """
+    t = np.asarray(t_s, float)
+    a = np.asarray(acc, float)
+    dt = float(np.median(np.diff(t)))
+    if not dt > 0:
+        raise ValueError("t_s must increase (median sample spacing is not positive)")
+    window_n = max(int(round(window_s / dt)), 3)
+    var_mag = moving_variance_norm(a, window_n)
+    if init_rest_s is not None and init_rest_s > 0:
+        rest = t < t[0] + init_rest_s
+        ref = float(np.linalg.norm(np.var(a[rest], axis=0))) if rest.sum() >= 3 else 0.0
+        source = "initial rest"
+    else:
+        ref = float(np.percentile(var_mag, 10))
+        source = "quietest 10 %"
+    if not ref > 0:
+        ref = float(np.percentile(var_mag[var_mag > 0], 10)) if np.any(var_mag > 0) else 1e-30
+    return StillReference(var_mag, ref, source, ceiling_g)
+
+
 def detect_static_intervals(
     t_s: np.ndarray,
     acc: np.ndarray,
@@ -308,15 +390,19 @@ def detect_static_intervals(
     min_duration_s: float,
     init_rest_s: float | None = None,
     trim_s: float = 0.0,
+    ceiling_g: float | None = STILL_NOISE_CEILING_G,
 ) -> list[tuple[int, int]]:
     """Static intervals as ``(start_idx, end_idx)`` pairs, ``end_idx`` exclusive.
 
     Rule (Tedaldi/imu_tk): sample i is static when ‖moving variance‖ (window
     ``window_s``, per axis, centred) < ``threshold`` × ‖variance of the initial
     rest‖. The initial rest is the first ``init_rest_s`` seconds; without it, the
-    lowest-variance decile of windows stands in (a recording that starts moving
-    at once has no better reference). Runs shorter than ``min_duration_s`` are
-    dropped; ``trim_s`` is removed from each end of the survivors.
+    lowest-variance decile of windows stands in. A reference above ``ceiling_g``
+    (per axis rms; :data:`STILL_NOISE_CEILING_G`) is no rest, and then only windows
+    under the ceiling are static (:func:`still_reference`): a log that moves from its
+    first sample has no still part, not one relative to itself. Runs shorter than
+    ``min_duration_s`` are dropped; ``trim_s`` is removed from each end of the
+    survivors.
     """
     t = np.asarray(t_s, float)
     a = np.asarray(acc, float)
@@ -326,19 +412,8 @@ def detect_static_intervals(
         return []
     if window_s <= 0 or threshold <= 0 or min_duration_s < 0 or trim_s < 0:
         raise ValueError("window_s, threshold must be > 0; min_duration_s, trim_s >= 0")
-    dt = float(np.median(np.diff(t)))
-    if not dt > 0:
-        raise ValueError("t_s must increase (median sample spacing is not positive)")
-    window_n = max(int(round(window_s / dt)), 3)
-    var_mag = moving_variance_norm(a, window_n)
-    if init_rest_s is not None and init_rest_s > 0:
-        rest = t < t[0] + init_rest_s
-        ref = float(np.linalg.norm(np.var(a[rest], axis=0))) if rest.sum() >= 3 else 0.0
-    else:
-        ref = float(np.percentile(var_mag, 10))
-    if not ref > 0:
-        ref = float(np.percentile(var_mag[var_mag > 0], 10)) if np.any(var_mag > 0) else 1e-30
-    static = var_mag < threshold * ref
+    static = still_reference(t, a, window_s=window_s, init_rest_s=init_rest_s,
+                             ceiling_g=ceiling_g).static(threshold)
     edges = np.flatnonzero(np.diff(np.r_[0, static.astype(np.int8), 0]))
     out: list[tuple[int, int]] = []
     for start, end in zip(edges[::2], edges[1::2], strict=True):
@@ -348,6 +423,30 @@ def detect_static_intervals(
         if e - s >= 3:
             out.append((s, e))
     return out
+
+
+def no_still_part(raw: RawImport, settings: DetectorSettings,
+                  intervals: Sequence[tuple[int, int]]) -> str | None:
+    """Why the detector found no still part in ``raw``, in a person's words, or None.
+
+    Said when ``intervals`` (the detector's) is empty because the reference is no rest
+    (above :data:`STILL_NOISE_CEILING_G`): the log was recorded while the sensor moved
+    or vibrated. None when there are intervals, for given sections (Ferraris), and for
+    a log whose reference is a rest (then a stricter threshold finds something).
+    """
+    if intervals or raw.sections is not None or raw.t_s.size < 3:
+        return None
+    ref = still_reference(raw.t_s, raw.acc_g, window_s=settings.window_s,
+                          init_rest_s=raw.init_rest_s)
+    if ref.is_rest:
+        return None
+    assert ref.ceiling_g is not None
+    return (f"no still part: the {ref.source} of the log scatters by "
+            f"{ref.ref_rms_g * 1e3:.1f} mg rms per axis over {settings.window_s:g}-s windows, "
+            f"above the {ref.ceiling_g * 1e3:g} mg a still accelerometer's noise reaches, and "
+            f"no {settings.min_duration_s:g}-s stretch stays under {ref.ceiling_g * 1e3:g} mg: "
+            f"the log was recorded while the sensor moved or vibrated (a flight, "
+            f"a running motor, a hand); a calibration needs the sensor held still")
 
 
 def _trim(t: np.ndarray, start: int, end: int, trim_s: float) -> tuple[int, int]:

@@ -34,7 +34,7 @@ from typing import TextIO
 import numpy as np
 
 from calibration import importers
-from calibration.errors import CalibrationError
+from calibration.errors import CalibrationError, RecordingError
 from calibration.recording import Recording, write_recording
 
 # An interval longer than this is a log at rest while something drifts (a warm-up), not
@@ -69,6 +69,10 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
                               if getattr(args, a, None) is not None)
             choice = static_choice.choose_detector(raw, settings, fixed=fixed)
             intervals = choice.intervals
+        still_why = importers.no_still_part(
+            raw, choice.settings if choice is not None else settings, intervals)
+        if still_why is not None and not (raw_rows or block_s is not None):
+            raise RecordingError(raw.path, None, None, f"no static interval found: {still_why}")
         if block_s is not None:
             rec = importers.blocks_to_recording(raw, float(block_s), path=str(args.output))
         elif raw_rows:
@@ -81,7 +85,8 @@ def run_import(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return 2
     kind = ("rows (one per block)" if block_s is not None
             else "raw sample rows" if raw_rows else "rows (one per static interval)")
-    print(summary(raw, intervals, rec, str(args.output), kind=kind), file=out)
+    print(summary(raw, intervals, rec, str(args.output), kind=kind, no_still=still_why),
+          file=out)
     if choice is not None:
         print(choice.summary(), file=out)
     return 0
@@ -110,13 +115,16 @@ def summary(
     output: str,
     *,
     kind: str = "rows (one per static interval)",
+    no_still: str | None = None,
 ) -> str:
     """Human summary: intervals, durations, per-axis noise (µg), |g| range of the means,
-    the temperature kept (or why none), what was written."""
+    the temperature kept (or why none), what was written. ``no_still``: why no interval
+    is still (:func:`calibration.importers.no_still_part`), said on the intervals line."""
     lines = [f"{raw.path} ({raw.fmt}): {raw.t_s.size} samples over {raw.t_s[-1]:.1f} s"]
     lines += [f"  note: {n}" for n in raw.notes]
     dur = np.array([raw.t_s[e - 1] - raw.t_s[s] for s, e in intervals])
-    lines.append(f"static intervals: {len(intervals)}")
+    lines.append(f"static intervals: {len(intervals)}"
+                 + (f": {no_still}" if no_still else ""))
     if dur.size:
         lines.append(f"  duration s: min {dur.min():.2f}  median {np.median(dur):.2f}  "
                      f"max {dur.max():.2f}")

@@ -152,3 +152,25 @@ def warmup_samples(n: int = 400, rate_hz: float = 50.0, seed: int = 0):
         np.full(n, 0.01 * g), np.full(n, -0.02 * g), (1.0 + 0.002 * (temp - 30.0)) * g])
     acc = acc + rng.normal(0, 1e-4 * g, acc.shape)
     return t_us, acc.astype(np.float32).astype(float), temp.astype(np.float32).astype(float)
+
+
+def flight_samples(seconds: float = 120.0, rate_hz: float = 50.0, *, vibration_g: float = 0.04,
+                   still_s: float = 0.0, seed: int = 0):
+    """A multicopter's IMU in flight (t_us, m/s²): gravity on -z (ArduPilot's body frame,
+    z down) swaying by a few degrees with the attitude, plus ``vibration_g`` rms per axis
+    of motor vibration (a 2014 ArduCopter flight read 41-128 mg rms per axis); the first
+    ``still_s`` seconds on the ground, disarmed (1 mg of noise)."""
+    rng = np.random.default_rng(seed)
+    n = int(round(seconds * rate_hz))
+    t = np.arange(n) / rate_hz
+    roll = np.radians(4.0) * np.sin(2 * np.pi * t / 7.0)
+    pitch = np.radians(6.0) * np.sin(2 * np.pi * t / 11.0 + 1.0)
+    g = 9.80665
+    acc = g * np.column_stack([np.sin(pitch), -np.sin(roll) * np.cos(pitch),
+                               -np.cos(roll) * np.cos(pitch)])
+    noise = np.full(n, vibration_g)
+    ground = t < still_s
+    acc[ground] = [0.0, 0.0, -g]
+    noise[ground] = 1e-3
+    acc = acc + rng.normal(0.0, 1.0, acc.shape) * noise[:, None] * g
+    return 1_000_000 + np.round(t * 1e6), acc.astype(np.float32).astype(float)

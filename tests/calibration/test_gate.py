@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,7 @@ from calibration.model_file import load_model
 from calibration.recording import write_recording
 from calibration.thermal import ThermalModel, fit_campaign
 from simulators.warmup_log import warmup_log
+from tests.calibration.log_writers import flight_samples
 
 
 def _args(recording: Path, output: Path, **kw: object) -> object:
@@ -301,4 +303,67 @@ def test_a_warmup_too_short_to_judge_is_refused_not_a_json_crash(tmp_path: Path,
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
     assert "3 capture(s) of 1 orientation(s) (z up): too few to judge a bias change" in err
+    assert not out.exists()
+
+
+def _tilted(face: np.ndarray, toward_x_deg: float, toward_y_deg: float) -> np.ndarray:
+    """A unit direction near ``face`` (±z) tilted by the two inclinometer angles."""
+    u = np.array([math.tan(math.radians(toward_x_deg)), math.tan(math.radians(toward_y_deg)),
+                  1.0]) * np.array([1.0, 1.0, face[2]])
+    return u / np.linalg.norm(u)
+
+
+def test_orientations_near_one_face_are_named_apart_and_unique_ones_simply() -> None:
+    tilts = [(0.0, 0.0), (3.0, 0.0), (-3.0, 0.0), (0.0, 3.0), (0.0, -3.0), (6.0, 6.0)]
+    dirs = np.vstack([_tilted(np.array([0, 0, -1.0]), *a) for a in tilts]
+                     + [[1.0, 0, 0], [0, 0, 1.0]])
+    names = gate.direction_names(dirs)
+    assert len(set(names)) == len(names)
+    assert names[1] == "z down tilted x +3.0° y +0.0°"
+    assert names[2] == "z down tilted x -3.0° y +0.0°"
+    assert names[5] == "z down tilted x +6.0° y +6.0°"
+    assert names[6:] == ["x up", "z up"]  # unique faces keep their simple names
+    ori = gate.distinct_orientations(dirs)
+    assert ori.count == 8 and ori.name(6) == "x up"
+    assert ori.names() == ", ".join(names[:4]) + " and 4 more"
+
+
+def test_a_refusal_tells_apart_orientations_that_share_a_face(tmp_path: Path) -> None:
+    # A board re-placed 8 times within 10° of z down, no temperature: the refusal once named
+    # them "z down, z down, z down, z down and 4 more".
+    tilts = [(0, 0), (3, 0), (-3, 0), (0, 3), (0, -3), (6, 0), (0, 6), (-6, -6)]
+    raw = np.vstack([_tilted(np.array([0, 0, -1.0]), *a) for a in tilts])
+    n = len(tilts)
+    src, out = tmp_path / "tilts.csv", tmp_path / "model.json"
+    write_recording(src, {"t_s": np.arange(n) * 10.0, "chamber_c": np.full(n, np.nan),
+                          "ax": raw[:, 0], "ay": raw[:, 1], "az": raw[:, 2],
+                          "n": np.full(n, 500.0), "sd_x": np.full(n, 1e-3),
+                          "sd_y": np.full(n, 1e-3), "sd_z": np.full(n, 1e-3)})
+    r = subprocess.run([sys.executable, "-m", "service.cli", "calibrate", str(src), "-o",
+                        str(out)], capture_output=True, text=True, cwd=Path(__file__).parents[2])
+    assert r.returncode == 2, r.stderr
+    line = r.stderr.strip()
+    assert "8 distinct orientation(s) (z down tilted x +0.0° y +0.0°, z down tilted x +3.0° " \
+           "y +0.0°, z down tilted x -3.0° y +0.0°, z down tilted x +0.0° y +3.0° and 4 more)" \
+           in line
+    assert not out.exists()
+
+
+def test_a_log_with_no_still_row_is_refused_for_that(tmp_path: Path) -> None:
+    # Raw rows of a flight (40 mg of vibration throughout): no row is a still reading, and
+    # the refusal says so rather than counting orientations in the vibration.
+    t_us, acc = flight_samples(vibration_g=0.04)
+    g = acc / 9.80665
+    n = t_us.size
+    src, out = tmp_path / "flight.csv", tmp_path / "model.json"
+    write_recording(src, {"t_s": (t_us - t_us[0]) * 1e-6, "chamber_c": np.full(n, np.nan),
+                          "ax": g[:, 0], "ay": g[:, 1], "az": g[:, 2], "n": np.ones(n)})
+    r = subprocess.run([sys.executable, "-m", "service.cli", "calibrate", str(src), "-o",
+                        str(out)], capture_output=True, text=True, cwd=Path(__file__).parents[2])
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1
+    assert "no still reading: every row was left out as taken while the sensor moved or " \
+           "vibrated" in lines[0]
+    assert "distinct orientation" not in lines[0]
     assert not out.exists()

@@ -12,6 +12,7 @@ from calibration.errors import RecordingError
 from calibration.fit import fit_norm
 from calibration.importers_cli import run_import
 from calibration.recording import read_recording
+from tests.calibration.log_writers import flight_samples
 from tests.realdata import need_realdata
 
 OPENAXES = "openaxes-adxl355/log_imu9_2022-06-22_22-13-55.csv"
@@ -74,13 +75,39 @@ def test_trim_cuts_both_edges() -> None:
 def test_threshold_is_relative_to_the_initial_rest() -> None:
     t, acc, _ = _synthetic()
     kw = dict(window_s=0.5, min_duration_s=2.0, init_rest_s=8.0)
-    # The same record, 10× noisier everywhere: the same intervals (relative threshold).
-    loud = acc + np.random.default_rng(3).normal(0, 10e-3, acc.shape)
+    # The same record, 5× noisier everywhere (still under what a still accelerometer
+    # scatters, importers.STILL_NOISE_CEILING_G): the same intervals (relative threshold).
+    loud = acc + np.random.default_rng(3).normal(0, 5e-3, acc.shape)
     a = importers.detect_static_intervals(t, acc, threshold=6.0, **kw)
     b = importers.detect_static_intervals(t, loud, threshold=6.0, **kw)
     assert len(a) == len(b) == 3
     # A threshold below 1 × rest variance finds (almost) nothing static.
     assert len(importers.detect_static_intervals(t, acc, threshold=0.3, **kw)) == 0
+
+
+def test_a_log_vibrating_from_its_first_sample_has_no_static_interval() -> None:
+    # A flight: 40 mg rms of motor vibration from the first sample. Against its own
+    # quietest decile it once read as one 118-s "static interval".
+    t_us, acc = flight_samples(vibration_g=0.04)
+    t, a = (t_us - t_us[0]) * 1e-6, acc / 9.80665
+    kw = dict(window_s=1.0, threshold=6.0, min_duration_s=5.0, trim_s=0.5)
+    assert importers.detect_static_intervals(t, a, **kw) == []
+    assert len(importers.detect_static_intervals(t, a, ceiling_g=None, **kw)) >= 1
+    # A board lying still for as long (1 mg: the quietest decile is a rest) is one interval.
+    still = np.array([0.0, 0.0, -1.0]) + np.random.default_rng(4).normal(0, 1e-3, a.shape)
+    iv = importers.detect_static_intervals(t, still, **kw)
+    assert len(iv) == 1 and t[iv[0][1] - 1] - t[iv[0][0]] > 110.0
+
+
+def test_a_short_still_stretch_before_a_flight_is_found() -> None:
+    # 8 s on the ground (7 % of the log, under the quietest decile) and then flying.
+    t_us, acc = flight_samples(vibration_g=0.04, still_s=8.0)
+    t, a = (t_us - t_us[0]) * 1e-6, acc / 9.80665
+    iv = importers.detect_static_intervals(t, a, window_s=1.0, threshold=6.0,
+                                           min_duration_s=5.0, trim_s=0.5)
+    assert len(iv) == 1
+    s, e = iv[0]
+    assert t[s] < 1.0 and 6.5 < t[e - 1] < 8.0
 
 
 def test_detector_rejects_bad_arguments() -> None:
@@ -267,6 +294,24 @@ def test_run_import_writes_a_readable_recording(tmp_path: Path, capsys) -> None:
     # what the file holds but the import did not read is named, not silently dropped
     assert "note: gx, gy, gz (the gyroscope) not read" in text
     assert "note: this MPU-6050 CSV has no temperature column; temperature left empty" in text
+
+
+def test_run_import_of_a_position_file_that_never_holds_still_is_refused_with_why(
+        tmp_path: Path, capsys) -> None:
+    # An MPU-6050 file shaken throughout (30 mg rms per axis): there is no position to
+    # average, and the line says why instead of "no static interval found" alone.
+    t_us, acc = flight_samples(seconds=60.0, rate_hz=100.0, vibration_g=0.03)
+    counts = np.round(acc / 9.80665 * 16384).astype(int)
+    f = tmp_path / "shaken.csv"
+    f.write_text("Fs,100\nLogging Type,0\nInitialization time,8\nWaiting time,3\n"
+                 "ax,ay,az,gx,gy,gz\n"
+                 + "\n".join(f"{a},{b},{c},0,0,0" for a, b, c in counts) + "\n")
+    out = tmp_path / "rec.csv"
+    assert run_import(_ns("mpu6050", f, out)) == 2
+    err = capsys.readouterr().err
+    assert "no static interval found: no still part: the initial rest of the log" in err
+    assert "above the 10 mg a still accelerometer's noise reaches" in err
+    assert not out.exists()
 
 
 def test_run_import_raw_writes_one_row_per_sample(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from calibration.errors import RecordingError
 from calibration.importers_cli import run_import
 from calibration.recording import read_recording
 from tests.calibration.log_writers import (
+    flight_samples,
     warmup_samples,
     write_dataflash,
     write_dataflash_legacy,
@@ -103,6 +104,30 @@ def test_dataflash_older_imu_layouts_keep_time_and_temperature(tmp_path, capsys,
     np.testing.assert_allclose(second.acc_g[:, 0], (acc[:, 0] + 1.0) / G, atol=1e-6)
     if temp_field is not None:
         np.testing.assert_allclose(second.temp_c, temp + 1.0, atol=1e-5)
+
+
+def test_a_flight_log_is_said_to_have_no_still_part(tmp_path, capsys):
+    # An ArduCopter 3.2 flight (TimeMS, no temperature) vibrating 40 mg rms per axis from
+    # its first sample once read "static intervals: 1" against its own quietest decile.
+    t_us, acc = flight_samples(vibration_g=0.04)
+    src = write_dataflash_legacy(tmp_path / "flight.bin", t_us, acc, None, layout="copter-3.2")
+    out = tmp_path / "rec.csv"
+    assert run_import(_args("dataflash", src, out)) == 0
+    assert len(read_recording(out)) == t_us.size  # the rows are written raw either way
+    line = next(x for x in capsys.readouterr().out.splitlines()
+                if x.startswith("static intervals"))
+    assert line.startswith("static intervals: 0: no still part: the quietest 10 % of the log "
+                           "scatters by ")
+    mg = float(line.split("scatters by ")[1].split(" mg")[0])
+    assert 30.0 < mg < 50.0  # the 40 mg of vibration, not a still sensor's noise
+    assert "the log was recorded while the sensor moved or vibrated" in line
+
+
+def test_a_still_log_imported_is_one_static_interval(tmp_path, capsys):
+    t_us, acc, temp = warmup_samples(n=1000)
+    src = write_dataflash(tmp_path / "bench.bin", t_us, acc, temp)
+    assert run_import(_args("dataflash", src, tmp_path / "rec.csv")) == 0
+    assert "static intervals: 1\n" in capsys.readouterr().out
 
 
 def test_block_rows_average_samples_and_their_temperature(tmp_path, capsys):
