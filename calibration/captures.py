@@ -23,7 +23,10 @@ and ``diagnose`` all read raw rows through :func:`capture_means`:
   the notes.
 
 Averaged recordings (``n`` > 1 or ``sd_*`` given, or one row every few seconds)
-pass through unchanged.
+pass through unchanged, except rows whose recorded sample scatter is above what a still
+accelerometer shows (:data:`calibration.importers.STILL_NOISE_CEILING_G`): a block mean
+of a flight (``soakcal import --block-s``) is the mean of a moving sensor, not an
+orientation, and is left out with a note, as a raw row taken while moving is.
 """
 
 from __future__ import annotations
@@ -95,7 +98,7 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     """The capture means of ``rec`` (see the module docstring)."""
     n_rows = len(rec)
     if not is_raw_samples(rec):
-        return Captures(rec, n_rows, False, np.arange(n_rows))
+        return _still_averaged(rec)
     still = _still_rows(rec)
     keys = _segment_keys(rec)
     # a new run where the label changes or the sensor starts or stops moving
@@ -174,8 +177,11 @@ def placed_samples(rec: Recording, caps: Captures) -> Recording:
     """The raw rows ``caps`` kept, each labelled with its capture's ``position`` (the
     still stretch it belongs to): for a reader that averages per (step, position) itself
     (``diagnose``'s capture model), the same placements ``calibrate`` fits. Recordings
-    that are not raw, or that label their positions, are returned unchanged."""
-    if not caps.is_raw or rec.has("position"):
+    that label their positions are returned unchanged; an averaged recording as
+    :func:`capture_means` kept it."""
+    if not caps.is_raw:  # itself, or less the rows averaged while moving
+        return caps.recording
+    if rec.has("position"):
         return rec
     kept = caps.row_capture >= 0
     cols = {k: v[kept] for k, v in rec.columns.items()}
@@ -224,6 +230,28 @@ def capture_temperature_c(rec: Recording, caps: Captures,
     if not means.has_temperature:
         return rec.temperature_c()
     return np.interp(rec.t_s, means.t_s, means.temperature_c())
+
+
+def _still_averaged(rec: Recording) -> Captures:
+    """An averaged recording as its own captures, less the rows whose recorded sample sd
+    on some axis is above :data:`calibration.importers.STILL_NOISE_CEILING_G` (the
+    sensor moved or vibrated while they were averaged; module docstring)."""
+    from calibration.importers import STILL_NOISE_CEILING_G  # importers read recordings
+
+    n_rows = len(rec)
+    if not all(rec.has(c) for c in SD_COLUMNS):
+        return Captures(rec, n_rows, False, np.arange(n_rows))
+    sd = np.column_stack([rec.columns[c] for c in SD_COLUMNS])
+    moving = (np.isfinite(sd) & (sd > STILL_NOISE_CEILING_G)).any(axis=1)
+    if not moving.any():
+        return Captures(rec, n_rows, False, np.arange(n_rows))
+    keep = ~moving
+    note = (f"{int(moving.sum())} of {n_rows} row(s) left out: their sample scatter "
+            f"(up to {1e3 * float(np.nanmax(sd[moving])):.0f} mg) is above the "
+            f"{1e3 * STILL_NOISE_CEILING_G:g} mg a still accelerometer stays under: the "
+            f"sensor moved or vibrated while they were averaged")
+    return Captures(rec.subset(keep), n_rows, False,
+                    np.where(keep, np.cumsum(keep) - 1, -1), [note])
 
 
 def _still_rows(rec: Recording) -> np.ndarray:

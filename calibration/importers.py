@@ -511,8 +511,8 @@ def samples_to_recording(raw: RawImport, *, path: str = "<memory>") -> Recording
 def blocks_to_recording(raw: RawImport, block_s: float, *, path: str = "<memory>") -> Recording:
     """Consecutive ``block_s``-second blocks of a time series: one row per block with the
     block's mean, sample sd, ``n`` and mean temperature (a smaller file than every
-    sample, for a log that is one orientation throughout; the blocks are not checked
-    for stillness)."""
+    sample, for a log that is one orientation throughout). Every block is written; the
+    readers leave out a block averaged while moving (:mod:`calibration.captures`)."""
     if not (math.isfinite(block_s) and block_s > 0):
         raise RecordingError(raw.path, None, None, f"block length must be > 0 s, got {block_s}")
     k = np.floor((raw.t_s - raw.t_s[0]) / block_s).astype(np.int64)

@@ -172,27 +172,68 @@ def test_labels_are_kept_whole_not_averaged() -> None:
     np.testing.assert_array_equal(means.columns["position"], 0)
 
 
-def test_a_model_calibrate_refuses_is_not_diagnosed(tmp_path: Path, capsys) -> None:
-    # 1-s block means of the hand-turned log (`soakcal import --block-s 1`: blocks not
-    # checked for stillness): the blocks across the turns read directions the sensor
-    # never rested in. calibrate refuses the fit, naming the reading; diagnose must say
-    # "cannot judge" with the same line, not report "effects" of the fit's misfit.
+def _args(recording: Path, output: Path) -> object:
+    class A:
+        pass
+
+    a = A()
+    a.recording, a.output, a.json, a.model = str(recording), str(output), True, None
+    a.n_null, a.against, a.write_twin, a.report_dir, a.seed = None, None, None, None, None
+    return a
+
+
+def test_block_means_averaged_across_a_turn_are_left_out_and_said(tmp_path: Path,
+                                                                   capsys) -> None:
+    # 1-s block means of the hand-turned log (`soakcal import --block-s 1`): the blocks
+    # across the turns scatter by tenths of a g and read directions the sensor never
+    # rested in. They are left out (a still accelerometer stays under 10 mg), the note
+    # says how many, and the still blocks give the simulated biases.
     rec = _hand_turned(seed=2)
     block = np.floor(rec.t_s).astype(int)
     from calibration.captures import group_means
 
     src = tmp_path / "blocks.csv"
-    write_recording(src, Recording.from_columns(group_means(rec, block)))
+    blocks = Recording.from_columns(group_means(rec, block))
+    write_recording(src, blocks)
+    turning = int(np.sum(np.max([blocks.columns[c] for c in ("sd_x", "sd_y", "sd_z")],
+                                axis=0) > 10e-3))
+    assert turning >= 11  # every one of the 11 sweeps spoils at least one block
+    a = _args(src, tmp_path / "m.json")
+    assert cli.run_calibrate(a) == 0
+    doc = json.loads(capsys.readouterr().out)
+    note = next(n for n in doc["notes"] if "left out" in n)
+    assert note.startswith(f"{turning} of {len(blocks)} row(s) left out: their sample "
+                           f"scatter (up to ")
+    assert "the sensor moved or vibrated while they were averaged" in note
+    from calibration.model_file import load_model
 
-    class A:
-        pass
+    vec = load_model(a.output).params_vector_at(25.0, extrapolate=True)
+    np.testing.assert_allclose(vec[:3], [5e-3, -3e-3, 8e-3], atol=1e-3)
 
-    a = A()
-    a.recording, a.output, a.json, a.model = str(src), str(tmp_path / "m.json"), True, None
-    a.n_null, a.against, a.write_twin, a.report_dir, a.seed = None, None, None, None, None
+
+def test_a_flight_as_block_means_is_refused_and_not_diagnosed(tmp_path: Path,
+                                                              capsys) -> None:
+    # A newer ArduPilot flight (IMU with T) imported as 5-s blocks: every block is the
+    # mean of a vibrating, swaying vehicle. calibrate refuses "no still reading" (not a
+    # warm-up fitted to the attitude's wander); diagnose says "cannot judge", same reason.
+    import argparse
+
+    from calibration.importers_cli import run_import
+    from tests.calibration.log_writers import flight_samples, write_dataflash
+
+    t_us, acc = flight_samples(seconds=120.0, vibration_g=0.04)
+    temp = np.linspace(30.0, 45.0, t_us.size)
+    log = write_dataflash(tmp_path / "flight.bin", t_us, acc, temp)
+    src = tmp_path / "blocks.csv"
+    assert run_import(argparse.Namespace(
+        format="dataflash", raw=str(log), output=str(src), raw_samples=False,
+        min_static_s=None, threshold=None, window_s=None, trim_s=None, block_s=5.0)) == 0
+    capsys.readouterr()
+    a = _args(src, tmp_path / "m.json")
     assert cli.run_calibrate(a) == 2
     refusal = capsys.readouterr().err.strip()
-    assert "no model written" in refusal and "sensor still" in refusal
+    assert "no still reading" in refusal and "held still" in refusal
+    assert not Path(a.output).exists()
     assert cli.run_diagnose(a) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["verdict"] == "cannot judge" and doc["mismatch"] is None
