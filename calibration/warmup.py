@@ -79,7 +79,6 @@ from calibration.gate import (
     GateRefusal,
     Orientations,
     check_warmup_residuals,
-    direction_name,
 )
 from calibration.recording import Recording
 from calibration.temperature_conditioning import rate_window_s, temperature_rate_c_per_min
@@ -672,7 +671,7 @@ def _check_connected(T: np.ndarray, orientations: Orientations) -> None:
     for lo, hi, _ in spans[1:]:
         if lo > reach + DISTINCT_C:
             shown = "; ".join(
-                f"{direction_name(orientations.directions[o])} {a:.2f} .. {b:.2f} °C"
+                f"{orientations.name(o)} {a:.2f} .. {b:.2f} °C"
                 for a, b, o in spans[:4])
             raise GateRefusal(
                 f"{k} orientations recorded at separate temperatures ({shown}): a change of "
