@@ -9,8 +9,8 @@ model's whitened residual is split into plateau × axis means and the scatter wi
 variance of a random offset per plateau and axis, beyond what the within scatter predicts,
 is fitted by maximum likelihood (:func:`plateau_variance`) and reported as θ = σ_b²/s²
 (s² the within scatter) with the likelihood-ratio p of θ = 0. With the run's
-``OUT/diagnoses.json`` the cases are split into flagged and unflagged and which family fired
-is listed.
+``OUT/diagnoses.json`` the cases are split into flagged and unflagged, and what fired (the
+findings, the scan) is listed.
 
 ``inject``: the first ``--cases`` recordings get one die-temperature error per plateau,
 N(0, sd_c²), the same for every reading of the plateau (the recorded temperature columns
@@ -79,14 +79,12 @@ def residual_share(rec: Recording) -> dict[str, float]:
     return out
 
 
-def _fired(d: dict, alpha: float = 0.005) -> str:
-    """Which test made ``d`` a mismatch: the family test's stage (best candidate, p) and/or
-    the scan."""
-    parts = [f"{s['best']}@{s['p_family']:.4f}" for s in (d.get("stage_log") or [])
-             if s.get("p_family", 1.0) <= alpha / 2][:1]
-    if "localised scan" in json.dumps(d.get("unexplained", "")) and any(
-            f.get("effect") == "unexplained" for f in d.get("findings", [])):
-        parts.append("scan/unexplained")
+def _fired(d: dict) -> str:
+    """What made ``d`` a mismatch, as its JSON says: the findings' effects and, where the
+    localised scan was significant, "scan"."""
+    parts = [str(f.get("effect")) for f in d.get("findings", [])]
+    if (d.get("unexplained") or {}).get("significant"):
+        parts.append("scan")
     return "+".join(parts) or "other"
 
 
