@@ -3,10 +3,12 @@ wherever that direction is (issue 22, docs/diagnosis.md §7).
 
 With a reference column, ``structure.visits_differ`` judges an input-only name
 (``scale_nonlinearity``, ``cross_coupling``) on every direction the schedule revisits, on
-all three axes, not only at the term's own positions and axes: an offset that depends on the table's pose rather
-than on the force (a cable wound round the inner axis: several table angles give +z, each
-its own offset) leaves its evidence where the products or powers are zero, and the name
-fitted elsewhere did not describe it.
+all three axes, not only at the term's own positions and axes: an offset that depends on
+the table's pose rather than on the force (a cable wound round the inner axis: several
+table angles give +z, each its own offset) leaves its evidence where the products or
+powers are zero, and the name fitted elsewhere did not describe it. In norm mode (no
+reference) the directions are read from the output and the check stays at the term's own
+places: the real OpenAXES test (test_diagnose.py) holds that.
 """
 
 from __future__ import annotations
