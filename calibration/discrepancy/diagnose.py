@@ -32,6 +32,7 @@ from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import plateau_groups
+from calibration.discrepancy.plateau_settling import settling_alike
 from calibration.discrepancy.problem import LinearProblem, build_problem
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
 from calibration.discrepancy.protocol_order import time_and_position_confounded
@@ -516,6 +517,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # vibration where the compressor runs on the cold plateaus only).
     findings = [temperature_jump_alike(pb, terms, f, alpha, not_ident, notes, _design)
                 for f in findings]
+    # A rate or lag term that a settling after each plateau's start, the same on every
+    # plateau, fits as well is not named (plateau_settling.py, issue 22: a fixture relaxing
+    # after the moves of each plateau was named a temperature rate).
+    findings = [settling_alike(pb, terms, f, alpha, not_ident, notes, _design)
+                for f in findings]
     # A flagged reading whose recorded temperature jumped off its neighbours and whose
     # residual is the model's own ∂output/∂T is a glitch of the channel, not an outlier;
     # where the data cannot tell, not separable (channel_glitch.py, issue 22).
@@ -804,7 +810,8 @@ def _note_not_named(not_named: list[dict[str, Any]], notes: list[str]) -> None:
     """A note per withdrawn term: where, and why its physics does not fit there."""
     for n in not_named:
         at = (f"reading {n['row']}" if "row" in n else
-              "position(s) " + ", ".join(str(p) for p in n["positions"]))
+              "step(s) " + ", ".join(str(s) for s in n["steps"]) if n.get("kind") == "time"
+              else "position(s) " + ", ".join(str(p) for p in n["positions"]))
         notes.append(f"{n['effect']} not named at {at}: {n['why']}")
 
 

@@ -81,28 +81,15 @@ def temperature_jump_alike(pb: Any, terms: list, f: Any, alpha: float,
     grid = thresholds_c(ctx.step_temp_c)
     if term is None or not grid:
         return f
-    others = [t for t in terms if t is not term]
-    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in others) + 3
-    if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
+    cols = {t_c: per_axis(ctx, jump_column(ctx, t_c)) for t_c in grid}
+    found = lead_over_rivals(pb, terms, term, eff.one_sided, cols, design)
+    if found is None:
         notes.append(f"{f.effect}: not checked against a jump of the output at a "
                      "temperature: the recording is too long for that design")
         return f
-    Xw, yw = design(pb, others)
-    U = stats.orthonormal_basis(Xw)
-    del Xw
-    e = yw - U @ (U.T @ yw)
-    q_term, k_term = stats.explained_ss(U, pb.whiten(term.X), e, eff.one_sided)
-    jumps = {}
-    for t_c in grid:
-        col = pb.lift(per_axis(ctx, jump_column(ctx, t_c)))
-        jumps[t_c] = stats.explained_ss(U, pb.whiten(col), e)
-    t_best, (q_jump, k_jump) = max(jumps.items(), key=lambda kv: kv[1][0])
-    if k_term == 0 or k_jump == 0:
+    lead, t_best = found
+    if not np.isfinite(lead):
         return f
-    k_max = max(k_term, k_jump)
-    s2 = max((float(e @ e) - max(q_term, q_jump)) / max(e.size - U.shape[1] - k_max, 1),
-             1e-300)
-    lead = (q_term / s2 - 2.0 * k_term) - (q_jump / s2 - 2.0 * k_jump)
     if lead >= MARGIN:
         return f
     below = sorted(s for s, t in ctx.step_temp_c.items() if t < t_best)
@@ -123,3 +110,31 @@ def temperature_jump_alike(pb: Any, terms: list, f: Any, alpha: float,
                      f"{why}. It is modelled (with the {f.effect} term) but not named; to "
                      f"separate them: {how}."),
         parameters={}, parameter_sd={}, confusers=[])
+
+
+def lead_over_rivals(pb: Any, terms: list, term: Any, one_sided: bool,
+                     rivals: dict[Any, np.ndarray],
+                     design: Callable[..., tuple[np.ndarray, np.ndarray]]
+                     ) -> tuple[float, Any] | None:
+    """How far ``term``'s fit beats the best of ``rivals`` (label → raw (N,3,k) columns),
+    in noise variances after 2 per column (AIC), each fitted after the other ``terms``; and
+    that rival's label. ``inf`` when a side has no column left; None when the recording is
+    too long for the design (the caller says so)."""
+    others = [t for t in terms if t is not term]
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in others) + max(
+        (c.shape[2] for c in rivals.values()), default=0)
+    if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
+        return None
+    Xw, yw = design(pb, others)
+    U = stats.orthonormal_basis(Xw)
+    del Xw
+    e = yw - U @ (U.T @ yw)
+    q_term, k_term = stats.explained_ss(U, pb.whiten(term.X), e, one_sided)
+    fits = {lab: stats.explained_ss(U, pb.whiten(pb.lift(c)), e) for lab, c in rivals.items()}
+    best, (q_riv, k_riv) = max(fits.items(), key=lambda kv: kv[1][0])
+    if k_term == 0 or k_riv == 0:
+        return float("inf"), best
+    k_max = max(k_term, k_riv)
+    s2 = max((float(e @ e) - max(q_term, q_riv)) / max(e.size - U.shape[1] - k_max, 1),
+             1e-300)
+    return (q_term / s2 - 2.0 * k_term) - (q_riv / s2 - 2.0 * k_riv), best

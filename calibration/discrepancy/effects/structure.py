@@ -77,16 +77,28 @@ def visits_differ(
 ) -> dict[str, Any] | None:
     """Residuals that differ between visits of the same reference direction (issue 10).
 
-    ``U``, ``e``: the model *with* the input-only term. Restricted to the term's own
-    places (the direction groups holding its ``where`` positions) and axes: per group and
-    axis, an offset per position is tested after an offset per direction (the contrast
-    between visits). A function of the specific force predicts no contrast, so under it
+    ``U``, ``e``: the model *with* the input-only term. With a reference, every direction
+    the schedule revisits on all three axes; in norm mode only the term's own places (the
+    direction groups holding its ``where`` positions) and axes. Per group and axis, an
+    offset per position is tested after an offset per direction (the contrast between
+    visits). A function of the specific force predicts no contrast, so under it
     the test rejects with probability α; an orientation history (the previous position)
     makes it. Returns the place (positions, axes, log10 p) when significant at α.
     """
     ctx = pb.ctx
-    groups = [g for g in direction_groups(ctx.positions, ctx.input_g) if set(g) & set(positions)]
-    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
+    groups = direction_groups(ctx.positions, ctx.input_g)
+    if pb.mode == "reference":
+        # Every revisited direction, every axis (issue 22): an offset that follows the table's
+        # pose rather than the force (a cable wound round the inner axis: several table
+        # angles give +z) leaves its contrast where the term's own columns are zero (at ±z for
+        # products of inputs), so a check confined to the term's places never saw it. Only
+        # with a reference: there a revisit is the commanded direction again; in norm mode
+        # the directions are read from the output, and a group is hand placements up to
+        # SAME_DIRECTION_G apart, whose contrast a function of the force makes too.
+        ax: tuple[int, ...] = (0, 1, 2)
+    else:
+        groups = [g for g in groups if set(g) & set(positions)]
+        ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
     if not groups:
         return None
     common, visit = [], []

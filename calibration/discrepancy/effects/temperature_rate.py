@@ -7,7 +7,7 @@ measures at dT/dt ≈ 0, so it is often not identifiable.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -62,6 +62,11 @@ class TemperatureRate(CatalogueEffect):
             return (False, f"readings are taken at dT/dt ≈ 0 (largest plateau slope "
                     f"{top:.3f} °C/min)", self.experiment)
         return True, "", self.experiment
+
+    def misses(self, pb: Any, U: np.ndarray, e: np.ndarray, theta: float,
+               where: Mapping[str, Any], axes: list[str], alpha: float) -> dict[str, Any] | None:
+        """One gain on every plateau: :func:`gain_differs_between_plateaus`."""
+        return gain_differs_between_plateaus(pb, U, e, axes, alpha)
 
     def parameters(self, coef, se, theta, ctx):
         return axis_params("k_rate", "ug_per_c_per_min", coef, se, UG)
@@ -199,3 +204,55 @@ def lag_alike(pb: Any, terms: list, f: Any, alpha: float, not_ident: dict[str, d
                      f"{why}. It is modelled (with the temperature_rate term) but not named; "
                      f"to separate them: {LAG_EXPERIMENT}."),
         parameters={}, parameter_sd={}, confusers=[])
+
+
+# --- one gain on every plateau (issue 22) -------------------------------------------------
+MIN_PLATEAUS_GAIN = 3  # two plateaus' gains are one contrast: the common gain and one more
+
+
+def gain_differs_between_plateaus(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
+                                  alpha: float) -> dict[str, Any] | None:
+    """The place where the rate term's gain differs between plateaus beyond noise, or None.
+
+    The physics (effects.md): the output moves by ``k·dT/dt`` with one gain per axis for the
+    whole recording; the die's rate on every plateau where it is still settling predicts the
+    output there. ``U``, ``e``: the model with the rate term. A gain free per plateau (the
+    rate column of each plateau on its own, per axis) is tested after it (F, at α): under the
+    effect it is noise. Structure in time confined to some plateaus (a fixture settling after
+    the moves of one plateau, a chamber cycle in phase with a few plateaus' warm-ups) takes
+    the common gain only where it happens to look like the die's settling and leaves the
+    per-plateau gains apart.
+    """
+    from calibration.discrepancy import stats
+    from calibration.discrepancy.context import AXES
+    from calibration.discrepancy.effects.structure import log_p, whitened
+
+    ctx = pb.ctx
+    rate = reading_rate_c_per_min(ctx)
+    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
+    steps = [int(s) for s in ctx.step_ids if np.any(np.abs(rate[ctx.steps == s]) > 0)]
+    if len(steps) < MIN_PLATEAUS_GAIN:
+        return None
+    cols = np.zeros((ctx.n, 3, len(steps) * len(ax)))
+    for i, s in enumerate(steps):
+        on = ctx.steps == s
+        for j, a in enumerate(ax):
+            cols[on, a, i * len(ax) + j] = rate[on]
+    Xw = whitened(pb, cols)
+    lp, k = log_p(U, e, Xw)
+    if k == 0 or lp > np.log(alpha):
+        return None
+    # Where: the plateaus whose own gain departs by at least half the largest departure.
+    Z = stats.project_out(U, Xw)
+    fit = Z @ np.linalg.lstsq(Z, e, rcond=None)[0]
+    on = ctx.steps[pb.row]
+    per_step = np.array([np.sqrt(np.mean(fit[on == s] ** 2)) for s in steps])
+    big = [s for s, v in zip(steps, per_step, strict=True) if v >= 0.5 * per_step.max()]
+    rows = np.isin(ctx.steps, big)
+    return {"kind": "time", "steps": big,
+            "positions": sorted({int(p) for p in ctx.positions[rows]}),
+            "time_s": [float(ctx.t_s[rows].min()), float(ctx.t_s[rows].max())],
+            "axes": [AXES[a] for a in ax], "log10_p": round(float(lp / np.log(10)), 1),
+            "why": ("temperature_rate is one gain per axis on every plateau, but the gain "
+                    "fitted plateau by plateau differs beyond noise (the structure follows "
+                    "the die's rate on some plateaus only: something else in time)")}
