@@ -31,7 +31,11 @@ from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETR
 from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
-from calibration.discrepancy.plateau_noise import plateau_groups
+from calibration.discrepancy.plateau_noise import (
+    one_code_per_plateau,
+    plateau_groups,
+    quantised_channel,
+)
 from calibration.discrepancy.plateau_settling import settling_alike
 from calibration.discrepancy.problem import LinearProblem, build_problem
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
@@ -313,6 +317,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     why_alike: dict[str, str] = {}  # named term → why an unobservable confuser fits alike
     tail_nu = np.inf
     groups = plateau_groups(pb) if WILD_NULL and PLATEAU_NULL else None
+    known = _quantised_channel(pb, notes) if WILD_NULL else None
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
@@ -334,7 +339,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         shared = _shared(groups, e, U)
         if WILD_NULL:
             stats.wild_replicates(rng, e, U, pb.row, E,
-                                  tuple(int(t.theta) for t in tests.values()), shared)
+                                  tuple(int(t.theta) for t in tests.values()), shared, known)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
                                e, E, s, s_null, lifted, not_ident, (nu, rng)))
         tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
@@ -682,11 +687,39 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     if WILD_NULL:  # sign flips of this residual (stats.wild_replicates)
         groups = plateau_groups(pb) if PLATEAU_NULL else None
         E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null)),
-                                  shared=_shared(groups, e, U))
+                                  shared=_shared(groups, e, U),
+                                  known=_quantised_channel(pb, None))
     else:
         E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
         stats.project_out_inplace(U, E)
     return scan_mod.scan(pb, U, e, E, alpha)
+
+
+def _quantised_channel(pb: LinearProblem, notes: list[str] | None
+                       ) -> tuple[stats.SharedGroups, np.ndarray] | None:
+    """The known shared noise of a non-dithering quantised temperature channel
+    (plateau_noise.quantised_channel) for the replicates, said in ``notes``; or None."""
+    found = quantised_channel(pb)
+    if found is None:
+        ctx = pb.ctx
+        if notes is not None and ctx.temperature_source != "none" \
+                and one_code_per_plateau(ctx.temp_c, ctx.steps):
+            notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "
+                         "through each plateau: quantised without dither, at an LSB the "
+                         "recording does not show (no plateau moves by one code); each "
+                         "plateau's temperature may be off by up to half that LSB, which the "
+                         "null does not include (a channel step, rate or hysteresis of that "
+                         "size is not told from it)")
+        return None
+    sg, var, grid = found
+    if notes is not None:
+        notes.append(f"temperature channel ({pb.ctx.temperature_source}) quantised at "
+                     f"{grid.q_c:.4g} °C without dither ({100 * grid.fraction:.0f} % of the "
+                     f"readings on its codes): the readings of a plateau on one code share "
+                     f"its temperature, known to ±{grid.q_c / 2:.3g} °C; the null includes "
+                     f"that error (sd {grid.q_c / np.sqrt(12):.2g} °C) through the base "
+                     "model's ∂output/∂T")
+    return sg, var
 
 
 def _shared(groups: stats.SharedGroups | None, e: np.ndarray, U: np.ndarray

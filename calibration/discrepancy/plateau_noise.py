@@ -11,9 +11,16 @@ variances fitted to the recording's own residual (:func:`stats.shared_variance`)
   axes together in the base's own proportions).
 
 Norm mode has one entry per reading: its first component is one offset per plateau.
+
+One more component has a variance that is *known*, not fitted (:func:`quantised_channel`):
+a temperature channel quantised to an LSB q whose own noise is far below q does not dither,
+so the readings of a plateau that sit on one code share that code's rounding error,
+uniform in ±q/2 (variance q²/12), through the same ∂output/∂T.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,6 +28,27 @@ from calibration.discrepancy import stats
 from calibration.discrepancy.problem import LinearProblem
 
 MIN_PLATEAUS = 2  # one plateau has no between-plateau variance to speak of
+# A quantised channel (temperature_grid): its codes are values recorded on at least
+# GRID_CODE_READINGS readings of one plateau (a dithered capture mean rarely repeats
+# exactly; a mean across a code change, two codes mixed, may twice); q, from the
+# spacings between codes, at least GRID_MIN_TOL_RATIO recorded resolutions and GRID_MIN_C
+# (below it the rounding's sd, under 0.006 °C, is nothing against a tempco; a dithered
+# channel's capture means sit on a grid of q/n) and at most GRID_MAX_C (the coarsest channel
+# read: a whole degree), the GRID_CANDIDATES largest spacings tried; the readings within
+# GRID_TOL_LSB resolutions of its grid at least GRID_ON_FRACTION of all (by chance a
+# continuous value is within it in at most 3/10 of cases, at the smallest q; a die that
+# lingers at a code's edge mixes two codes in many captures); of the spacings between codes,
+# at least GRID_MIN_FRACTION on it (on twice the LSB, half the adjacent codes are off); at
+# least GRID_MIN_READINGS readings.
+GRID_CODE_READINGS = 3
+GRID_ON_FRACTION = 0.6
+GRID_MIN_FRACTION = 0.8
+GRID_MIN_TOL_RATIO = 10.0
+GRID_TOL_LSB = 3.0
+GRID_MIN_C, GRID_MAX_C = 0.02, 1.0
+GRID_MIN_READINGS = 10
+GRID_MAX_DECIMALS = 6
+GRID_CANDIDATES = 64
 
 
 def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
@@ -36,12 +64,143 @@ def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
     loads, groups, names = [np.asarray(pb.w, float).copy()], [step_e * n_ax + axis], \
         ["plateau x axis"]
     plateau = [np.repeat(np.arange(n_k), n_ax)]
-    dT = np.asarray(pb.ctx.draw_dtemp_g_per_c, float)
-    if np.any(dT != 0):
-        lt = np.asarray(pb.lift(dT[:, :, None]), float)[:, 0] * pb.w
-        if np.any(np.isfinite(lt) & (lt != 0)):
-            loads.append(np.where(np.isfinite(lt), lt, 0.0))
-            groups.append(step_e)
-            names.append("plateau temperature")
-            plateau.append(np.arange(n_k))
+    lt = temperature_loading(pb)
+    if lt is not None:
+        loads.append(lt)
+        groups.append(step_e)
+        names.append("plateau temperature")
+        plateau.append(np.arange(n_k))
     return stats.SharedGroups(loads, groups, names, plateau)
+
+
+def temperature_loading(pb: LinearProblem) -> np.ndarray | None:
+    """(m,) whitened ∂output/∂T of each entry (per °C of the reading's temperature error),
+    from the base model's derivative; None where the base has no temperature dependence."""
+    dT = np.asarray(pb.ctx.draw_dtemp_g_per_c, float)
+    if not np.any(dT != 0):
+        return None
+    lt = np.asarray(pb.lift(dT[:, :, None]), float)[:, 0] * pb.w
+    if not np.any(np.isfinite(lt) & (lt != 0)):
+        return None
+    return np.where(np.isfinite(lt), lt, 0.0)
+
+
+@dataclass(frozen=True)
+class ChannelGrid:
+    """A recorded temperature that sits on a grid: the readings of a plateau (``on_grid``)
+    are its most recorded value + ``code``·``q_c`` — a quantised channel that does not
+    dither."""
+
+    q_c: float  # the grid's spacing (the channel's LSB), °C
+    code: np.ndarray  # (N,) int: the reading's code within its plateau (0 off the grid)
+    on_grid: np.ndarray  # (N,) bool: the reading's value is a code
+    fraction: float  # share of the readings on the grid
+
+
+def _decimals(x: np.ndarray) -> int:
+    """The fewest decimals that write every value of ``x`` (its recorded resolution)."""
+    for d in range(GRID_MAX_DECIMALS + 1):
+        y = x * 10.0**d
+        if np.all(np.abs(y - np.round(y)) < 1e-6 * np.maximum(1.0, np.abs(y)) + 1e-9):
+            return d
+    return GRID_MAX_DECIMALS
+
+
+def temperature_grid(temp_c: np.ndarray, steps: np.ndarray) -> ChannelGrid | None:
+    """The grid a non-dithering quantised temperature channel puts its readings on, or None.
+
+    Why (issue 22): a channel quantised to q whose own noise is far below q (a 0.1 °C chamber
+    display, the ADXL355's ~0.11 °C temperature code, a 0.0625 °C part, each read as it is)
+    records one code for every reading of a settled plateau, so all of them carry the same
+    rounding error — shared by the plateau, which sign flips per reading cannot reproduce.
+    A dithered channel's capture means fall between codes and rarely repeat.
+
+    The codes are the values recorded :data:`GRID_CODE_READINGS` times within a plateau.
+    Two codes within :data:`GRID_MAX_C` of each other differ by a multiple of q. Each such
+    spacing is tried, the largest first; one that holds :data:`GRID_MIN_FRACTION` of those
+    spacings is refitted by least squares to them, and the first whose grid through each
+    plateau's most recorded code holds :data:`GRID_ON_FRACTION` of the readings is q (a
+    repeated mean half-way between two codes suggests q/2, which holds them too: hence the
+    largest). A grid per plateau, not one through all: a code written to fewer decimals
+    than q has (0.0625 °C as 0.062) drifts off one grid across 100 °C. None when no two
+    codes are that near (a channel whose codes are the setpoints alone: q not determined by
+    the recording, :func:`one_code_per_plateau`), or no spacing of at least
+    :data:`GRID_MIN_TOL_RATIO` recorded resolutions and :data:`GRID_MIN_C` holds the
+    readings (a dithered or continuous channel).
+    """
+    t = np.asarray(temp_c, float)
+    ok = np.isfinite(t)
+    if int(ok.sum()) < GRID_MIN_READINGS:
+        return None
+    x, st = t[ok], np.asarray(steps)[ok]
+    res = 10.0 ** -_decimals(x)
+    tol = GRID_TOL_LSB * 0.51 * res
+    codes: list[np.ndarray] = []
+    top = np.empty(t.size)  # each reading's plateau's most recorded value
+    for s_ in np.unique(st):
+        u, c = np.unique(x[st == s_], return_counts=True)
+        top[np.asarray(steps) == s_] = u[np.argmax(c)]
+        codes.append(u[c >= GRID_CODE_READINGS])
+    code = np.unique(np.concatenate(codes))
+    pairs = [code[i + 1:np.searchsorted(code, v + GRID_MAX_C + res / 2, side="right")] - v
+             for i, v in enumerate(code)]
+    d = np.concatenate(pairs) if pairs else np.zeros(0)
+    d = d[d >= max(GRID_MIN_TOL_RATIO * res, GRID_MIN_C) - res / 2]
+    for q0 in np.unique(np.round(d / res) * res)[::-1][:GRID_CANDIDATES]:
+        k = np.round(d / q0)
+        held = (k >= 1) & (np.abs(d - k * q0) <= tol)
+        if held.sum() < GRID_MIN_FRACTION * d.size:  # 2q: half the adjacent codes off it
+            continue
+        q = float(np.dot(d[held], k[held]) / np.dot(k[held], k[held]))
+        idx = np.round((t - top) / q)
+        on = ok & (np.abs(t - top - idx * q) <= tol)
+        frac = float(on.sum()) / x.size
+        if frac >= GRID_ON_FRACTION:
+            return ChannelGrid(q, np.where(on, idx, 0).astype(np.int64), on, frac)
+    return None
+
+
+def one_code_per_plateau(temp_c: np.ndarray, steps: np.ndarray) -> bool:
+    """True when the recorded temperature holds one value through each plateau (on at least
+    :data:`GRID_MIN_FRACTION` of its readings, two plateaus or more of
+    :data:`GRID_MIN_READINGS` readings each): a channel that does not dither, but whose LSB
+    the recording does not show (no plateau moves by one code; :func:`temperature_grid`
+    finds none), so each plateau's temperature is known only to half an unknown LSB."""
+    t = np.asarray(temp_c, float)
+    st = np.asarray(steps)
+    seen = 0
+    for s_ in np.unique(st):
+        x = t[(st == s_) & np.isfinite(t)]
+        if x.size < GRID_MIN_READINGS:
+            continue
+        if np.unique(x, return_counts=True)[1].max() < GRID_MIN_FRACTION * x.size:
+            return False
+        seen += 1
+    return seen >= MIN_PLATEAUS
+
+
+def quantised_channel(pb: LinearProblem) -> tuple[stats.SharedGroups, np.ndarray,
+                                                   ChannelGrid] | None:
+    """The known-variance shared noise of a non-dithering quantised temperature channel:
+    ``(groups, variance, grid)`` for :func:`stats.add_shared` (variance in °C², drawn on the
+    whitened ∂output/∂T loading), or None (no grid, or no temperature dependence).
+
+    The groups: the readings of one plateau that record the same code share one draw
+    (a settled plateau is one group); a reading between codes (a capture mean across a
+    code change) is its own group. The variance q²/12 is the uniform rounding error's: it
+    is known, so an effect in the data does not raise it (the fitted variances of
+    :func:`plateau_groups` did, and lost the effects; docs/diagnosis.md §2).
+    """
+    ctx = pb.ctx
+    if ctx.temperature_source == "none":
+        return None
+    grid = temperature_grid(ctx.temp_c, ctx.steps)
+    lt = temperature_loading(pb) if grid is not None else None
+    if grid is None or lt is None:
+        return None
+    n = ctx.n
+    key = np.where(grid.on_grid, grid.code, np.iinfo(np.int64).min + np.arange(n))
+    _, g_read = np.unique(np.column_stack([ctx.steps, key]), axis=0, return_inverse=True)
+    g_read = np.asarray(g_read).ravel()
+    sg = stats.SharedGroups([lt], [g_read[pb.row]], ["quantised temperature channel"])
+    return sg, np.array([grid.q_c**2 / 12.0]), grid

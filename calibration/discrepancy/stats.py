@@ -182,6 +182,7 @@ def wild_replicates(
     rng: np.random.Generator, e: np.ndarray, U: np.ndarray, row: np.ndarray, out: np.ndarray,
     leave_out: tuple[int, ...] = (),
     shared: tuple[SharedGroups, np.ndarray, float] | None = None,
+    known: tuple[SharedGroups, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
     written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
@@ -207,6 +208,10 @@ def wild_replicates(
     entry's deviation from its group's mean (:func:`within_groups`): flipped with them, the
     data's group offsets came back as extra white noise, the F tests' denominators grew and
     the null ran light (at a 5 % level 12 % with the true θ).
+    ``known`` (groups, variances): shared noise whose variance is known rather than fitted
+    (a non-dithering quantised temperature channel, plateau_noise.quantised_channel), drawn
+    in the same way (variances in the loadings' units); the data's residual is flipped as
+    it is, since no variance is read from it.
     """
     if shared is not None:
         e = within_groups(e, shared[0])
@@ -221,6 +226,8 @@ def wild_replicates(
         np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
     if shared is not None:
         add_shared(rng, shared[0], shared[1], shared[2], out)
+    if known is not None:
+        add_shared(rng, known[0], known[1], 1.0, out)
     return project_out_inplace(U, out)
 
 

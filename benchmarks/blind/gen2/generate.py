@@ -3,6 +3,7 @@
     python -m benchmarks.blind.gen2.generate --realdata DIR --out OUT [--quick] [--reps R]
                                              [--nulls N] [--seed S]
                                              [--outside-set default|unseen]
+                                             [--temperature-channel dithered|clean]
 
 Writes ``OUT/cases/NNNN.csv`` (and ``OUT/given/NNNN.csv`` for twin-against-recording
 pairs: the recording a model is calibrated on) and, apart, ``OUT/keys/NNNN.json``. Nothing
@@ -24,6 +25,11 @@ sensor (sensor.py), the protocols (protocol.py), the effects (effects.py) and th
 * ``against`` — a model calibrated on one recording held against another of the same
   sensor: unchanged on another protocol (a one-way staircase, sparse positions), or
   re-mounted 2 mrad about its z axis.
+
+``--temperature-channel clean``: the sensor_c channel's own per-sample noise is 0.003 °C
+(simulate.CLEAN_CH_SD_C) instead of 0.04 °C, at the protocol's LSB: it does not dither, so
+the readings of a settled plateau share one rounding error, uniform in ±LSB/2. Same draws
+otherwise (the default cases with only that channel's noise changed).
 """
 
 from __future__ import annotations
@@ -64,13 +70,16 @@ def _need(eid: str) -> dict:
 
 
 def plan(quick: bool, reps: int, n_null: int, seed0: int,
-         protocols: str = "default", outside_set: str = "default") -> list[dict]:
+         protocols: str = "default", outside_set: str = "default",
+         temperature_channel: str = "dithered") -> list[dict]:
     """The cases. ``protocols="unseen"`` draws every protocol from the unseen family
     (unseen.py; nulls cycle through its variants); ``outside_set="unseen"`` plans the
     outside effects of unseen_effects.py instead of ``adc_band`` and ``crack``. The default
     plan is unchanged."""
     specs: list[dict] = []
     extra = {} if protocols == "default" else {"family": protocols}
+    if temperature_channel != "dithered":
+        extra["temperature_channel"] = temperature_channel
     kinds = KINDS if protocols == "default" else UNSEEN_KINDS
 
     def add(**kw) -> None:
@@ -104,7 +113,8 @@ def build(spec: dict, out: Path) -> dict:
         return _build_against(spec, sensor, rng, out)
     for _attempt in range(6):
         need = {"kind": spec.get("proto_kind"), **(_need(eid) if eid else {})}
-        proto = draw_protocol(rng, **need, family=spec.get("family", "default"))
+        proto = _channel(draw_protocol(rng, **need, family=spec.get("family", "default")),
+                         spec)
         pat = fx.pattern(rng, len(proto.setpoints_c), 10_000)
         if eid in ux.UNSEEN_OUTSIDE:  # its own draws: the default cases' stay as they were
             pat.update(ux.unseen_pattern(spec["seed"], proto.setpoints_c))
@@ -144,6 +154,14 @@ def build(spec: dict, out: Path) -> dict:
     return key
 
 
+def _channel(proto, spec: dict):
+    """The protocol with the spec's temperature channel (clean: no dither; see the module
+    docstring); the default spec's protocol unchanged."""
+    if spec.get("temperature_channel") == "clean":
+        return replace(proto, sensor_c_sd_c=sim.CLEAN_CH_SD_C)
+    return proto
+
+
 def _slow_die_key(proto, sensor, pools, pat: dict, seed: int) -> dict:
     """A chamber_c-only null on a slow die is a ``thermal_lag`` case (τ = the die's): its
     size against the lag's minimum detectable one under this protocol (detect.py, with the
@@ -157,10 +175,11 @@ def _slow_die_key(proto, sensor, pools, pat: dict, seed: int) -> dict:
 
 def _build_against(spec: dict, sensor, rng: np.random.Generator, out: Path) -> dict:
     pools = _POOLS["pools"]
-    cal = draw_protocol(rng, kind="updown", schedule="dense24", columns=("sensor_c",),
-                        soak_min=20.0)
-    again = draw_protocol(rng, kind=str(rng.choice(["oneway", "staircase_down", "sparse"])),
-                          columns=("sensor_c",))
+    cal = _channel(draw_protocol(rng, kind="updown", schedule="dense24",
+                                 columns=("sensor_c",), soak_min=20.0), spec)
+    again = _channel(draw_protocol(rng, kind=str(rng.choice(["oneway", "staircase_down",
+                                                              "sparse"])),
+                                   columns=("sensor_c",)), spec)
     pat = fx.pattern(rng, 3, 10)
     write_recording(out / "given" / f"{spec['case']}.csv",
                     sim.record(cal, sensor, pools, None, 0.0, pat, spec["seed"]))
@@ -206,6 +225,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--outside-set", choices=("default", "unseen"), default="default",
                     help="outside-catalogue effects: adc_band and crack, or the five of "
                          "unseen_effects.py the diagnosis was never developed on")
+    ap.add_argument("--temperature-channel", choices=("dithered", "clean"), default="dithered",
+                    help="the sensor_c channel's per-sample noise: 0.04 °C (dithers its LSB) or "
+                         "0.003 °C (clean: a settled plateau's readings share one rounding "
+                         "error)")
     a = ap.parse_args(argv)
     try:
         rd = realdata_dir(a.realdata)
@@ -213,7 +236,8 @@ def main(argv: list[str] | None = None) -> int:
         print(exc, file=sys.stderr)
         return 2
     n_null = a.nulls if a.nulls is not None else (15 if a.quick else 300)
-    specs = plan(a.quick, a.reps, n_null, a.seed, a.protocols, a.outside_set)
+    specs = plan(a.quick, a.reps, n_null, a.seed, a.protocols, a.outside_set,
+                 a.temperature_channel)
     if a.only:
         keep = set(a.only.split(","))
         specs = [s for s in specs if keep & {s["kind"], s.get("effect"), s.get("change")}]

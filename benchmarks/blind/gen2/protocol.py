@@ -53,6 +53,11 @@ class Protocol2:
     placement_rad: float = 5e-6  # re-seating scatter per visit and axis (rms); mrad by hand
     sensor_c_offset_c: float = 0.0  # constant offset of the sensor_c channel
     sensor_c_lsb_c: float = 0.1  # quantisation of the sensor_c channel
+    # per-sample noise of the sensor_c channel before quantisation: 0.04 °C dithers a
+    # 0.1 °C LSB (capture means between codes); far below the LSB (a clean channel,
+    # generate --temperature-channel clean) every reading of a settled plateau sits on one
+    # code and the plateau shares that code's rounding error
+    sensor_c_sd_c: float = 0.04
 
     def angles_deg(self) -> np.ndarray:
         if self.schedule in UNSEEN_PAIRS_DEG:

@@ -5,6 +5,7 @@
                                         [--alpha A] [--out OUT] [--results STEM]
                                         [--protocols default|unseen]
                                         [--outside-set default|unseen]
+                                        [--temperature-channel dithered|clean]
     python -m benchmarks.blind.gen2.run --out OUT --score-only [--results STEM]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
@@ -87,6 +88,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="protocol family of generated cases (see generate --protocols)")
     ap.add_argument("--outside-set", choices=("default", "unseen"), default="default",
                     help="outside effects of generated cases (see generate --outside-set)")
+    ap.add_argument("--temperature-channel", choices=("dithered", "clean"),
+                    default="dithered",
+                    help="sensor_c channel of generated cases (see generate "
+                         "--temperature-channel)")
     ap.add_argument("--results", type=Path, default=None, help="results stem (no suffix)")
     ap.add_argument("--score-only", action="store_true",
                     help="score OUT/diagnoses.json of an earlier run again (no diagnosis)")
@@ -104,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         gen += ["--only", a.only] if a.only else []
         gen += ["--protocols", a.protocols] if a.protocols != "default" else []
         gen += ["--outside-set", a.outside_set] if a.outside_set != "default" else []
+        gen += (["--temperature-channel", a.temperature_channel]
+                if a.temperature_channel != "dithered" else [])
         if generate.main(gen):
             return 2
     n_null = a.n_null if a.n_null is not None else (100 if a.quick else N_NULL)

@@ -5,7 +5,8 @@ air as a first-order lag (τ of the protocol, exact exponential per second); eve
 is n consecutive samples of the sensor's own real noise plus the bench's real disturbance
 (zero mean), quantised to the ADXL355's 3.9 µg code, then averaged. Each visit re-seats the
 sensor with a small random error (the real placement shape). The temperature channel is
-quantised per sample (0.1 °C sensor channel, 0.01 °C chamber PV) and averaged per capture.
+quantised per sample (0.1 °C sensor channel, 0.01 °C chamber PV) and averaged per capture;
+the sensor channel's own per-sample noise is the protocol's (0.04 °C by default: dithered).
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from benchmarks.blind.gen2.sensor import Sensor2
 LSB_G = 3.9e-6  # ADXL355 ±2 g code
 PLACEMENT_RAD = 5e-6  # re-seating repeatability per visit and axis (rms): Protocol2's default
 HAND_PLACED_RAD = 1e-4  # above this re-seating scatter the recording declares ref_tol_deg
-SENSOR_CH_LSB_C, SENSOR_CH_SD_C = 0.1, 0.04
+SENSOR_CH_LSB_C, SENSOR_CH_SD_C = 0.1, pr.Protocol2.sensor_c_sd_c
+CLEAN_CH_SD_C = 0.003  # a channel whose own noise is far below its LSB: it does not dither
 CHAMBER_LSB_C, CHAMBER_SD_C = 0.01, 0.02
 START_C = 25.0
 
@@ -162,7 +164,7 @@ def record(proto: pr.Protocol2, sensor: Sensor2, pools: NoisePools, eid: str | N
         "ax": means[:, 0], "ay": means[:, 1], "az": means[:, 2], "n": np.full(len(sc.t_s), n),
         "sd_x": sds[:, 0], "sd_y": sds[:, 1], "sd_z": sds[:, 2]}
     for name, val in recorded_temperature_c(sc, proto, eid, m, pat).items():
-        lsb, sd = ((proto.sensor_c_lsb_c, SENSOR_CH_SD_C) if name == "sensor_c"
+        lsb, sd = ((proto.sensor_c_lsb_c, proto.sensor_c_sd_c) if name == "sensor_c"
                    else (CHAMBER_LSB_C, CHAMBER_SD_C))
         draws = val[:, None] + sd * rng.standard_normal((len(val), n))
         cols[name] = np.round(np.mean(np.round(draws / lsb) * lsb, axis=1), 3)
