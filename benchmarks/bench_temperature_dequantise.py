@@ -68,16 +68,23 @@ PROFILES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 }
 
 
-def case(profile: Callable[[np.ndarray], np.ndarray], noise_c: float, block_s: float,
-         seed: int = 0) -> tuple[float, float, float, int, int]:
-    """(step RMS, rebuilt RMS, rebuilt max |error|, transitions, turning points), °C."""
+def _captures(profile: Callable[[np.ndarray], np.ndarray], noise_c: float, block_s: float,
+              seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A whole-degree channel reading ``profile`` with ``noise_c``, as ``block_s`` capture
+    means: (time s, reading °C, die °C, samples)."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, DURATION_S, 1.0 / RATE_HZ)
     die = profile(t)
     read = np.round(die + rng.normal(0.0, noise_c, t.size))
     k = np.floor(t / block_s).astype(int)
     n = np.bincount(k)
-    tc, rc, dc = np.bincount(k, t) / n, np.bincount(k, read) / n, np.bincount(k, die) / n
+    return np.bincount(k, t) / n, np.bincount(k, read) / n, np.bincount(k, die) / n, n
+
+
+def case(profile: Callable[[np.ndarray], np.ndarray], noise_c: float, block_s: float,
+         seed: int = 0) -> tuple[float, float, float, int, int]:
+    """(step RMS, rebuilt RMS, rebuilt max |error|, transitions, turning points), °C."""
+    tc, rc, dc, n = _captures(profile, noise_c, block_s, seed)
     dq = dequantise(tc, rc)
     e0, e1 = rc - dc, dq.temperature_c - dc
     e0, e1 = e0 - e0.mean(), e1 - e1.mean()
@@ -98,13 +105,7 @@ def cut_exponential(t: np.ndarray) -> np.ndarray:
 def spans_case(profile: Callable[[np.ndarray], np.ndarray], noise_c: float, block_s: float,
                seed: int = 0) -> tuple[str, float, float, float]:
     """(spans "kind step; …", share of readings inside, rebuilt RMS inside, outside), °C."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, DURATION_S, 1.0 / RATE_HZ)
-    die = profile(t)
-    read = np.round(die + rng.normal(0.0, noise_c, t.size))
-    k = np.floor(t / block_s).astype(int)
-    n = np.bincount(k)
-    tc, rc, dc = np.bincount(k, t) / n, np.bincount(k, read) / n, np.bincount(k, die) / n
+    tc, rc, dc, n = _captures(profile, noise_c, block_s, seed)
     dq = dequantise(tc, rc, n)
     inside = dq.unresolved_mask(tc)
     e = dq.temperature_c - dc

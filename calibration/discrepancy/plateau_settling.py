@@ -27,7 +27,6 @@ are the same regressor and the finding says so. Steps of different sizes or both
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -35,7 +34,7 @@ import numpy as np
 from calibration.discrepancy.by_fit import MARGIN
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.base import per_axis
-from calibration.discrepancy.temperature_jump import lead_over_rivals
+from calibration.discrepancy.temperature_jump import lead_over_rivals, withheld
 
 # The effects whose remnant after the base model fades within each plateau as the die
 # settles: their structure is judged against a common settling after each plateau's start.
@@ -88,13 +87,4 @@ def settling_alike(pb: Any, terms: list, f: Any, alpha: float,
            f"amplitude for all plateaus, fits the structure as well (the {f.effect} term "
            f"leads it by {lead:.1f} noise variances after 2 per column, under {MARGIN:g}): "
            "the die's rate differs too little between the plateaus to tell them")
-    not_ident.setdefault(f.effect, {"effect": f.effect, "why": f"not separable from "
-                                    f"{settle}: {why}", "experiment": EXPERIMENT})
-    how = "; ".join(x for x in (BY_ID[f.effect].experiment, EXPERIMENT) if x)
-    return replace(
-        f, effect="not_identifiable",
-        where={**f.where, "candidates": [f.effect, settle], "settling_tau_s": tau},
-        explanation=(f"Structure beyond noise that {f.effect} or {settle} explain alike: "
-                     f"{why}. It is modelled (with the {f.effect} term) but not named; to "
-                     f"separate them: {how}."),
-        parameters={}, parameter_sd={}, confusers=[])
+    return withheld(f, settle, why, EXPERIMENT, not_ident, settling_tau_s=tau)

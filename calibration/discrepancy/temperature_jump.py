@@ -100,13 +100,21 @@ def temperature_jump_alike(pb: Any, terms: list, f: Any, alpha: float,
            f"those below (steps {below}) fits the structure as well (the {f.effect} term "
            f"leads it by {lead:.1f} noise variances after 2 per column, under {MARGIN:g}): "
            "the recording holds too little of what the term does beyond that jump")
-    not_ident.setdefault(f.effect, {"effect": f.effect, "why": f"not separable from {jump}: "
-                                    f"{why}", "experiment": EXPERIMENT})
-    how = "; ".join(x for x in (eff.experiment, EXPERIMENT) if x)
+    return withheld(f, jump, why, EXPERIMENT, not_ident, jump_at_c=t_best)
+
+
+def withheld(f: Any, rival: str, why: str, experiment: str, not_ident: dict[str, dict],
+             **where: Any) -> Any:
+    """Finding ``f`` as ``not_identifiable`` between its name and ``rival`` (a phrase),
+    ``why`` they fit alike and ``experiment`` that separates them; its name is listed in
+    ``not_ident`` with the same reason. ``where`` adds to the finding's location."""
+    not_ident.setdefault(f.effect, {"effect": f.effect, "why": f"not separable from "
+                                    f"{rival}: {why}", "experiment": experiment})
+    how = "; ".join(x for x in (BY_ID[f.effect].experiment, experiment) if x)
     return replace(
         f, effect="not_identifiable",
-        where={**f.where, "candidates": [f.effect, jump], "jump_at_c": t_best},
-        explanation=(f"Structure beyond noise that {f.effect} or {jump} explain alike: "
+        where={**f.where, "candidates": [f.effect, rival], **where},
+        explanation=(f"Structure beyond noise that {f.effect} or {rival} explain alike: "
                      f"{why}. It is modelled (with the {f.effect} term) but not named; to "
                      f"separate them: {how}."),
         parameters={}, parameter_sd={}, confusers=[])

@@ -13,22 +13,16 @@ import numpy as np
 import pytest
 
 from calibration.discrepancy import stats
+from tests.discrepancy.plateau_layout import plateau_layout
 
 K, PER = 8, 18  # plateaus, readings per plateau
 
 
 def _layout():
-    n = K * PER
-    step = np.repeat(np.arange(K), PER)
-    t = np.linspace(-1.0, 1.0, K)[step] + 0.01 * np.tile(np.linspace(-1, 1, PER), K)
-    row = np.repeat(np.arange(n), 3)
-    axis = np.tile(np.arange(3), n)
-    X0 = np.zeros((3 * n, 12))  # per axis a cubic in t: the base model
-    for a in range(3):
-        X0[axis == a, 4 * a:4 * a + 4] = np.vander(t, 4, increasing=True)
+    n, step, row, axis, U = plateau_layout(K, PER)
     groups = stats.SharedGroups([np.ones(3 * n)], [step[row] * 3 + axis], ["plateau x axis"],
                                 [np.repeat(np.arange(K), 3)])
-    return n, step, row, axis, stats.orthonormal_basis(X0), groups
+    return n, step, row, axis, U, groups
 
 
 def _p(lp, lpn):

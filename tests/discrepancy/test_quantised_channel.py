@@ -20,6 +20,7 @@ from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.discrepancy import diagnose, stats
 from calibration.discrepancy.plateau_noise import one_code_per_plateau, temperature_grid
 from calibration.recording import Recording
+from tests.discrepancy.plateau_layout import plateau_layout
 
 K, PER, N_SAMPLES = 8, 18, 50
 
@@ -64,15 +65,7 @@ def test_codes_that_are_the_setpoints_alone_do_not_give_a_spacing():
 
 
 def _layout():
-    n = K * PER
-    step = np.repeat(np.arange(K), PER)
-    t = np.linspace(-1.0, 1.0, K)[step] + 0.01 * np.tile(np.linspace(-1, 1, PER), K)
-    row = np.repeat(np.arange(n), 3)
-    axis = np.tile(np.arange(3), n)
-    X0 = np.zeros((3 * n, 12))
-    for a in range(3):
-        X0[axis == a, 4 * a:4 * a + 4] = np.vander(t, 4, increasing=True)
-    return n, step, row, axis, stats.orthonormal_basis(X0)
+    return plateau_layout(K, PER)
 
 
 def test_the_known_rounding_error_restores_the_level_of_a_channel_step():
