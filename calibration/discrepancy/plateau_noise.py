@@ -63,14 +63,12 @@ def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
     n_ax = int(axis.max()) + 1
     loads, groups, names = [np.asarray(pb.w, float).copy()], [step_e * n_ax + axis], \
         ["plateau x axis"]
-    plateau = [np.repeat(np.arange(n_k), n_ax)]
     lt = temperature_loading(pb)
     if lt is not None:
         loads.append(lt)
         groups.append(step_e)
         names.append("plateau temperature")
-        plateau.append(np.arange(n_k))
-    return stats.SharedGroups(loads, groups, names, plateau)
+    return stats.SharedGroups(loads, groups, names)
 
 
 def temperature_loading(pb: LinearProblem) -> np.ndarray | None:

@@ -598,7 +598,6 @@ class SharedGroups:
     loading: list[np.ndarray]  # (m,) each
     group: list[np.ndarray]  # (m,) int each, 0..K_j − 1
     names: list[str]
-    plateau: list[np.ndarray] | None = None  # (K_j,) each: the plateau of each group
 
     @property
     def sizes(self) -> list[int]:
@@ -647,8 +646,6 @@ def shared_variance(e: np.ndarray, U: np.ndarray, sg: SharedGroups
         UZ += np.asarray(U[i:j]).T @ Z
     G -= UZ.T @ UZ
     sizes = sg.sizes
-    if sg.plateau is not None and LEAVE_OUT_PLATEAU:
-        G, c, sizes = _without_the_most_deviant_plateau(G, c, sg, e @ e, m - U.shape[1])
     lam, V = np.linalg.eigh(G)
     keep = lam > 1e-9 * max(float(lam.max()), 1e-300)
     if not keep.any():
@@ -689,43 +686,6 @@ def within_groups(e: np.ndarray, sg: SharedGroups) -> np.ndarray:
     coef = np.bincount(g, L * e, minlength=k) / np.maximum(ll, 1e-300)
     h = L * L / np.maximum(ll[g], 1e-300)
     return (e - L * coef[g]) / np.sqrt(np.maximum(1.0 - h, 1.0 - LEVERAGE_MAX))
-
-
-LEAVE_OUT_PLATEAU = False  # measured: θ halved, the null light again (see docs)
-
-
-def _without_the_most_deviant_plateau(G: np.ndarray, c: np.ndarray, sg: SharedGroups,
-                                      ee: float, dof: int
-                                      ) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """G and c of the groups once the plateau whose groups score highest (c_uᵀG_uu⁺c_u) is
-    taken as a fixed effect (Schur complement: its groups join the projected model).
-
-    Why: a change on one plateau is, to the likelihood, a plateau-level variance; counted
-    in θ it made the null as heavy as the change (a one-plateau change at 5 σ of its mean
-    was found 11 times in 30 instead of 22). Left out, it is judged against the other
-    plateaus' scatter, as the cap does for one reading (:func:`reading_cap`).
-    """
-    pl = np.concatenate(sg.plateau)
-    s2 = max(ee - float(c @ np.linalg.pinv(G, rcond=1e-9, hermitian=True) @ c), 1e-300) \
-        / max(dof - np.linalg.matrix_rank(G), 1)
-    best, worst = None, -np.inf
-    for u in np.unique(pl):
-        J = np.flatnonzero(pl == u)
-        sc = float(c[J] @ np.linalg.pinv(G[np.ix_(J, J)], rcond=1e-9, hermitian=True) @ c[J])
-        if sc / s2 - J.size > worst:
-            best, worst = u, sc / s2 - J.size
-    if best is None or np.unique(pl).size < 3:
-        return G, c, sg.sizes
-    J, R = np.flatnonzero(pl == best), np.flatnonzero(pl != best)
-    Guu = np.linalg.pinv(G[np.ix_(J, J)], rcond=1e-9, hermitian=True)
-    Gru = G[np.ix_(R, J)]
-    G2 = G[np.ix_(R, R)] - Gru @ Guu @ Gru.T
-    c2 = c[R] - Gru @ Guu @ c[J]
-    off, sizes = 0, []
-    for k in sg.sizes:
-        sizes.append(int(np.sum((off <= R) & (off + k > R))))
-        off += k
-    return G2, c2, sizes
 
 
 def add_shared(rng: np.random.Generator, sg: SharedGroups, theta: np.ndarray, s2: float,

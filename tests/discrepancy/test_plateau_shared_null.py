@@ -20,8 +20,7 @@ K, PER = 8, 18  # plateaus, readings per plateau
 
 def _layout():
     n, step, row, axis, U = plateau_layout(K, PER)
-    groups = stats.SharedGroups([np.ones(3 * n)], [step[row] * 3 + axis], ["plateau x axis"],
-                                [np.repeat(np.arange(K), 3)])
+    groups = stats.SharedGroups([np.ones(3 * n)], [step[row] * 3 + axis], ["plateau x axis"])
     return n, step, row, axis, U, groups
 
 
