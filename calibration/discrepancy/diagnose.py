@@ -467,7 +467,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
     terms, findings, after_turn = _shape_after_turn(pb, terms, findings, alpha, notes)
     not_named += after_turn
-    scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
+    scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
         # inside a step or position where the scan still finds structure is part of that
@@ -479,7 +479,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             notes.append(f"reading(s) {sorted(r for k in gone for r in k[1])} not named "
                          "outlier: they lie where the local scan finds structure beyond them "
                          "(not isolated)")
-            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
+            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
     left_structure: list[str] = []  # effects fitted here whose terms left their places
     if scanned.significant:
         # "A named finding must explain most of the located structure" (issue 10): when
@@ -495,7 +495,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             notes.append(f"{', '.join(left_structure)} not named or modelled: "
                          "after it, structure remains at the steps/positions where it acts, "
                          "so it does not explain the located structure")
-            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan)
+            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
     # A finding's numbers were fitted at its stage, in the model of that moment; a term
     # withdrawn since (a turn of the table beside a bend, say) may have shared its columns,
     # and the stale coefficients then cancel across the two (K3 = −3·10⁵ µg/g³ "± 49").
@@ -680,30 +680,30 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
 
 
 def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, n_null: int,
-                alpha: float) -> scan_mod.ScanResult:
-    """The localised scan (scan.py) on the residual of the final model."""
+                alpha: float, known: tuple[stats.SharedGroups, np.ndarray] | None
+                ) -> scan_mod.ScanResult:
+    """The localised scan (scan.py) on the residual of the final model; ``known``, the
+    quantised channel's shared noise (:func:`_quantised_channel`), read once per diagnosis."""
     U, yw = _basis(pb, terms)  # the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
     if WILD_NULL:  # sign flips of this residual (stats.wild_replicates)
         groups = plateau_groups(pb) if PLATEAU_NULL else None
         E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null)),
-                                  shared=_shared(groups, e, U),
-                                  known=_quantised_channel(pb, None))
+                                  shared=_shared(groups, e, U), known=known)
     else:
         E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
         stats.project_out_inplace(U, E)
     return scan_mod.scan(pb, U, e, E, alpha)
 
 
-def _quantised_channel(pb: LinearProblem, notes: list[str] | None
+def _quantised_channel(pb: LinearProblem, notes: list[str]
                        ) -> tuple[stats.SharedGroups, np.ndarray] | None:
     """The known shared noise of a non-dithering quantised temperature channel
     (plateau_noise.quantised_channel) for the replicates, said in ``notes``; or None."""
     found = quantised_channel(pb)
     if found is None:
         ctx = pb.ctx
-        if notes is not None and ctx.temperature_source != "none" \
-                and one_code_per_plateau(ctx.temp_c, ctx.steps):
+        if ctx.temperature_source != "none" and one_code_per_plateau(ctx.temp_c, ctx.steps):
             notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "
                          "through each plateau: quantised without dither, at an LSB the "
                          "recording does not show (no plateau moves by one code); each "
@@ -712,13 +712,12 @@ def _quantised_channel(pb: LinearProblem, notes: list[str] | None
                          "size is not told from it)")
         return None
     sg, var, grid = found
-    if notes is not None:
-        notes.append(f"temperature channel ({pb.ctx.temperature_source}) quantised at "
-                     f"{grid.q_c:.4g} °C without dither ({100 * grid.fraction:.0f} % of the "
-                     f"readings on its codes): the readings of a plateau on one code share "
-                     f"its temperature, known to ±{grid.q_c / 2:.3g} °C; the null includes "
-                     f"that error (sd {grid.q_c / np.sqrt(12):.2g} °C) through the base "
-                     "model's ∂output/∂T")
+    notes.append(f"temperature channel ({pb.ctx.temperature_source}) quantised at "
+                 f"{grid.q_c:.4g} °C without dither ({100 * grid.fraction:.0f} % of the "
+                 f"readings on its codes): the readings of a plateau on one code share its "
+                 f"temperature, known to ±{grid.q_c / 2:.3g} °C; the null includes that "
+                 f"error (sd {grid.q_c / np.sqrt(12):.2g} °C) through the base model's "
+                 "∂output/∂T")
     return sg, var
 
 
