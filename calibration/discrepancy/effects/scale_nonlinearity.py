@@ -19,6 +19,7 @@ from calibration.discrepancy.effects.base import UG, CatalogueEffect, fmt_pm, ve
 from calibration.discrepancy.effects.structure import (
     SAME_DIRECTION_G,
     extend,
+    fitted_after,
     log_p,
     per_axis_indicator,
     whitened,
@@ -211,8 +212,7 @@ def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[in
     if k == 0 or lp > np.log(alpha):
         return None
     # Where: the directions whose fitted offset is at least half the largest.
-    Z = stats.project_out(Ut, Xw)
-    fit = Z @ np.linalg.lstsq(Z, et, rcond=None)[0]
+    fit = fitted_after(Ut, et, Xw)
     per_dir = np.sqrt(np.bincount(dirs[pb.row], fit**2, minlength=n_dir)
                       / np.maximum(np.bincount(dirs, minlength=n_dir), 1))
     big = np.flatnonzero(per_dir >= 0.5 * per_dir.max())

@@ -42,6 +42,14 @@ def extend(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> tuple[np.ndarray, np
     return np.hstack([U, B]), e - B @ (B.T @ e)
 
 
+def fitted_after(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> np.ndarray:
+    """The part of residual ``e`` that the whitened columns ``Xw`` fit after ``U`` (their
+    least-squares fit with ``U`` projected out): where a structure found by :func:`log_p` is
+    large."""
+    Z = stats.project_out(U, Xw)
+    return Z @ np.linalg.lstsq(Z, e, rcond=None)[0]
+
+
 def log_p(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> tuple[float, int]:
     """log p of the F score test of ``Xw`` after ``U`` (single test), and its dof (0: none)."""
     with np.errstate(divide="ignore", invalid="ignore"):

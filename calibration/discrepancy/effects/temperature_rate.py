@@ -223,9 +223,8 @@ def gain_differs_between_plateaus(pb: Any, U: np.ndarray, e: np.ndarray, axes: l
     the common gain only where it happens to look like the die's settling and leaves the
     per-plateau gains apart.
     """
-    from calibration.discrepancy import stats
     from calibration.discrepancy.context import AXES
-    from calibration.discrepancy.effects.structure import log_p, whitened
+    from calibration.discrepancy.effects.structure import fitted_after, log_p, whitened
 
     ctx = pb.ctx
     rate = reading_rate_c_per_min(ctx)
@@ -243,8 +242,7 @@ def gain_differs_between_plateaus(pb: Any, U: np.ndarray, e: np.ndarray, axes: l
     if k == 0 or lp > np.log(alpha):
         return None
     # Where: the plateaus whose own gain departs by at least half the largest departure.
-    Z = stats.project_out(U, Xw)
-    fit = Z @ np.linalg.lstsq(Z, e, rcond=None)[0]
+    fit = fitted_after(U, e, Xw)
     on = ctx.steps[pb.row]
     per_step = np.array([np.sqrt(np.mean(fit[on == s] ** 2)) for s in steps])
     big = [s for s, v in zip(steps, per_step, strict=True) if v >= 0.5 * per_step.max()]
