@@ -186,6 +186,8 @@ def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str) -> None:
             if lo <= g / factor <= hi:
                 hint = f"; it looks like {name}"
                 break
+        else:
+            hint = _range_scale_hint(g, counts="--accel-unit" in accel_fix)
         raise RecordingError(raw.path, None, None,
                              f"median |a| is {g:.4g} g, not about 1 g{hint}: {accel_fix}")
     if raw.has_temperature:
@@ -198,6 +200,25 @@ def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str) -> None:
                 raw.path, None, None,
                 f"temperature spans {t_lo:.4g} .. {t_hi:.4g} °C, outside a die's "
                 f"{PLAUSIBLE_DIE_C[0]:g} .. {PLAUSIBLE_DIE_C[1]:g} °C{hint}: {temp_fix}")
+
+
+# A median |a| within this of 1 g after a power-of-two factor names a range mix-up.
+RANGE_SCALE_TOLERANCE_G = 0.05
+
+
+def _range_scale_hint(g: float, *, counts: bool) -> str:
+    """A median |a| a power of two (2…16) away from 1 g: a reading divided by the
+    sensitivity of another full-scale range (a firmware that sets ±8 g and divides by the
+    ±2 g 16384 LSB/g prints a quarter of the acceleration)."""
+    if g <= 0.0:
+        return ""
+    k = int(round(-np.log2(g)))
+    factor = 2.0**k
+    if k == 0 or abs(k) > 4 or abs(g * factor - 1.0) > RANGE_SCALE_TOLERANCE_G:
+        return ""
+    how = f" (as --accel-unit counts: --counts-per-g {1 / factor:g})" if counts else ""
+    return (f"; ×{factor:g} it is {g * factor:.4g} g: read with the sensitivity of another "
+            f"full-scale range?{how}")
 
 
 def vet_die_temperature(

@@ -214,6 +214,7 @@ def _table_options(args: argparse.Namespace) -> dict[str, object]:
         temp_offset_c=opt("temp_offset_c"),  # type: ignore[arg-type]
         time=str(opt("time_unit", "s")),
         rate_hz=opt("rate_hz"),  # type: ignore[arg-type]
+        bad_lines=str(opt("bad_lines", "refuse")),
     )
     delim = opt("delimiter")
     if delim == "tab":

@@ -7,6 +7,9 @@ is required (``g``, ``mg``, ``m/s2``, or ``counts`` with ``--counts-per-g`` and
 optionally ``--offset``), the temperature unit defaults to ``C`` (``C``, ``F``, ``K``,
 or ``counts`` with ``--temp-c-per-count`` and ``--temp-offset-c``), the time unit to
 ``s`` (``s``, ``ms``, ``us``). Without a time column, ``--rate-hz`` gives t = i / rate.
+A line that is not a row of the table (a serial log's garbled line: two records run
+together, a record cut short) is refused, naming it; ``--bad-lines skip`` leaves such lines
+out instead, each named in the notes, as long as they are a few (:data:`MAX_BAD_FRACTION`).
 A result a lab engineer would catch by eye is refused
 (:func:`calibration.importers.check_plausible`): a median |a| far from 1 g names the
 unit it looks like.
@@ -49,6 +52,11 @@ TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 BANNER_MAX_LINES = 20
 BANNER_CONFIRM_LINES = 3
 BANNER_SHOWN_CHARS = 24
+# ``--bad-lines skip`` is for a garbled line here and there: beyond this fraction of the
+# lines the table itself is misread (a delimiter, a column map), and skipping would hide it.
+MAX_BAD_FRACTION = 0.01
+BAD_LINES_SHOWN = 5
+BAD_LINES = ("refuse", "skip")
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,7 @@ class TableUnits:
     temp_offset_c: float | None = None
     time: str = "s"
     rate_hz: float | None = None
+    bad_lines: str = "refuse"  # or "skip": garbled lines left out, each named
 
 
 def parse_column_map(text: str | None) -> dict[str, str]:
@@ -148,8 +157,10 @@ def read_table(
                                 len(header), idx,
                                 empty_is_nan=wanted.index("temp") if has_temp else None)
     if data is None:
-        data = _parse_cells(p, text, delim, header, wanted, idx, first_line=first_line,
-                            has_header=has_header)
+        data, bad = _parse_cells(p, text, delim, header, wanted, idx, first_line=first_line,
+                                 has_header=has_header, skip_bad=u.bad_lines == "skip")
+        if bad:
+            notes.append(_bad_lines_note(bad, data.shape[0], timed="t" in wanted))
     del text
     # each column its own array: a view would keep the whole table alive with the temperature
     col = {r: data[:, k].copy() for k, r in enumerate(wanted)}
@@ -179,36 +190,74 @@ def read_table(
     return raw
 
 
+SKIP_HINT = ("a garbled line of a serial log? --bad-lines skip leaves such lines out, "
+             "each named")
+
+
 def _parse_cells(
     p: str, text: str, delim: str, header: Sequence[str], wanted: Sequence[str],
-    idx: Sequence[int], *, first_line: int, has_header: bool,
-) -> np.ndarray:
+    idx: Sequence[int], *, first_line: int, has_header: bool, skip_bad: bool = False,
+) -> tuple[np.ndarray, list[RecordingError]]:
     """The per-cell reader: any table the csv module reads, and the error naming the line
     and column for a row that is not one (cell count, a cell that is not a finite number;
-    an empty temperature cell is "not recorded", NaN)."""
+    an empty temperature cell is "not recorded", NaN). With ``skip_bad`` such lines are left
+    out and returned, unless they are more than :data:`MAX_BAD_FRACTION` of the lines."""
     reader = csv.reader(io.StringIO(text), delimiter=delim)
     if has_header:
         next(reader)
     rows: list[list[float]] = []
+    bad: list[RecordingError] = []
     for line_no, row in enumerate(reader, start=first_line):
         if not row or all(not c.strip() for c in row):
             continue
-        if len(row) != len(header):
-            raise RecordingError(p, line_no, None,
-                                 f"has {len(row)} cells, header has {len(header)}")
-        vals = []
-        for r, i in zip(wanted, idx, strict=True):
-            cell = row[i].strip()
-            # An empty temperature cell is "not recorded" (recording format), not an error.
-            empty_temp = r == "temp" and not cell
-            vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
-        rows.append(vals)
+        try:
+            rows.append(_row_values(p, line_no, row, header, wanted, idx))
+        except RecordingError as exc:
+            if not skip_bad:
+                raise RecordingError(exc.path, exc.line, exc.column,
+                                     f"{exc.message} ({SKIP_HINT})") from None
+            bad.append(exc)
     if not rows:
         raise RecordingError(p, first_line, None, "no data rows after the header")
-    return np.asarray(rows, float)
+    if len(bad) > MAX_BAD_FRACTION * (len(rows) + len(bad)):
+        first = bad[0]
+        raise RecordingError(
+            p, first.line, first.column,
+            f"{first.message}; {len(bad)} of {len(rows) + len(bad)} lines are not rows of the "
+            f"table, more than the {MAX_BAD_FRACTION:.0%} --bad-lines skip leaves out: check "
+            "--delimiter and --columns")
+    return np.asarray(rows, float), bad
+
+
+def _row_values(p: str, line_no: int, row: Sequence[str], header: Sequence[str],
+                wanted: Sequence[str], idx: Sequence[int]) -> list[float]:
+    if len(row) != len(header):
+        raise RecordingError(p, line_no, None, f"has {len(row)} cells, header has {len(header)}")
+    vals = []
+    for r, i in zip(wanted, idx, strict=True):
+        cell = row[i].strip()
+        # An empty temperature cell is "not recorded" (recording format), not an error.
+        empty_temp = r == "temp" and not cell
+        vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
+    return vals
+
+
+def _bad_lines_note(bad: Sequence[RecordingError], n_rows: int, *, timed: bool) -> str:
+    """What ``--bad-lines skip`` left out, line by line (the first few)."""
+    shown = "; ".join(f"line {e.line}" + (f" column '{e.column}'" if e.column else "")
+                      + f": {e.message}" for e in bad[:BAD_LINES_SHOWN])
+    more = f"; and {len(bad) - BAD_LINES_SHOWN} more" if len(bad) > BAD_LINES_SHOWN else ""
+    clock = ("" if timed else
+             " (without a time column, t = i / rate counts the rows kept: a line that held "
+             "samples shifts the later times by one period each)")
+    return (f"{len(bad)} line(s) not rows of the table left out (--bad-lines skip), "
+            f"{n_rows} rows kept{clock}: {shown}{more}")
 
 
 def _check_units(p: str, u: TableUnits) -> None:
+    if u.bad_lines not in BAD_LINES:
+        raise RecordingError(p, None, None, f"--bad-lines is one of {', '.join(BAD_LINES)}, "
+                             f"got {u.bad_lines!r}")
     if u.accel is None:
         raise RecordingError(p, None, None, "the acceleration unit is not guessed: give "
                              f"--accel-unit ({', '.join([*ACCEL_UNITS, 'counts'])})")

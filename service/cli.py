@@ -245,6 +245,9 @@ def _add_calibration_commands(sub: Any) -> None:
     imp.add_argument("--time-unit", choices=("s", "ms", "us"), help="csv: time unit (default s)")
     imp.add_argument("--rate-hz", type=float, metavar="HZ",
                      help="csv without a time column: t = i / HZ")
+    imp.add_argument("--bad-lines", choices=("refuse", "skip"),
+                     help="csv: a line that is not a row of the table (a garbled serial-log "
+                     "line) is refused (default), or skipped and named (at most 1 %% of lines)")
     imp.set_defaults(handler=_delegate("calibration.importers_cli", "run_import", "import"))
 
 

@@ -321,6 +321,38 @@ def test_csv_the_bmi270_putty_log_reads_past_its_banner(tmp_path, capsys):
     assert run_import(_args("csv", src, tmp_path / "rec.csv", **opts)) == 2
     err = capsys.readouterr().err
     assert "BMI_270_hot_test.csv:13: has 8 cells" in err
+    assert "--bad-lines skip leaves such lines out" in err
+    # --bad-lines skip: the garbled line and the one cut short at the end are left out,
+    # each named; every other row is kept
+    assert run_import(_args("csv", src, tmp_path / "rec.csv", bad_lines="skip", **opts)) == 0
+    out = capsys.readouterr().out
+    assert ("2 line(s) not rows of the table left out (--bad-lines skip), 6533 rows kept "
+            "(without a time column" in out)
+    assert "line 13: has 8 cells, header has 7; line 6537: has 1 cells, header has 7" in out
+    assert len(read_recording(tmp_path / "rec.csv")) == 6533
+
+
+def test_csv_bad_lines_skip_is_for_a_few_lines_not_a_misread_table(tmp_path, capsys):
+    rows = [f"{0.01 * i:.2f},0,0,1,25" for i in range(300)]
+    rows[7] = "0.07,0,0x,1,25"  # a cell that is not a number, left out and named
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c", rows)
+    out = tmp_path / "o.csv"
+    assert run_import(_args("csv", src, out, accel_unit="g", bad_lines="skip")) == 0
+    text = capsys.readouterr().out
+    assert ("1 line(s) not rows of the table left out (--bad-lines skip), 299 rows kept: "
+            "line 9 column 'ay': not a number: '0x'") in text
+    assert len(read_recording(out)) == 299
+    # four bad lines of 300 (> 1 %): the table itself is misread, refused with the fix
+    for i in (20, 40, 60):
+        rows[i] = rows[i] + ",9"
+    src = _table(tmp_path / "t2.csv", "t_s,ax,ay,az,temp_c", rows)
+    assert run_import(_args("csv", src, tmp_path / "o2.csv", accel_unit="g",
+                            bad_lines="skip")) == 2
+    err = capsys.readouterr().err
+    assert ("t2.csv:9: column 'ay': not a number: '0x'; 4 of 300 lines are not rows of the "
+            "table, more than the 1% --bad-lines skip leaves out: check --delimiter and "
+            "--columns") in err
+    assert not (tmp_path / "o2.csv").exists()
 
 
 def test_csv_counts_and_kelvin(tmp_path):
@@ -343,6 +375,22 @@ def test_csv_refuses_a_wrong_unit_and_names_the_likely_one(tmp_path, capsys):
     assert "median |a| is 9.805 g, not about 1 g; it looks like m/s²" in err
     assert "--accel-unit" in err and len(err.splitlines()) == 1
     assert not out.exists()
+
+
+def test_csv_a_reading_scaled_for_another_range_is_named(tmp_path, capsys):
+    # A firmware that sets ±8 g and divides counts by the ±2 g 16384 LSB/g prints a quarter
+    # of the acceleration (the BMI270 log's case); the refusal says how to read it.
+    src = _table(tmp_path / "t.csv", "t_s,ax,ay,az,temp_c",
+                 ["0,0,0.003,0.2505,25", "0.01,0,0.003,0.2502,25"])
+    assert run_import(_args("csv", src, tmp_path / "o.csv", accel_unit="g")) == 2
+    err = capsys.readouterr().err
+    assert ("median |a| is 0.2504 g, not about 1 g; ×4 it is 1.001 g: read with the "
+            "sensitivity of another full-scale range? (as --accel-unit counts: "
+            "--counts-per-g 0.25)") in err
+    # 0.7 g is no power of two from 1 g within 5 %: no such guess
+    src = _table(tmp_path / "t3.csv", "t_s,ax,ay,az,temp_c", ["0,0,0,0.35,25", "0.01,0,0,0.35,25"])
+    assert run_import(_args("csv", src, tmp_path / "o3.csv", accel_unit="g")) == 2
+    assert "full-scale range" not in capsys.readouterr().err
 
 
 def test_csv_refuses_kelvin_read_as_celsius(tmp_path, capsys):
