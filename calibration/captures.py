@@ -24,9 +24,11 @@ and ``diagnose`` all read raw rows through :func:`capture_means`:
 
 Averaged recordings (``n`` > 1 or ``sd_*`` given, or one row every few seconds)
 pass through unchanged, except rows whose recorded sample scatter is above what a still
-accelerometer shows (:data:`calibration.importers.STILL_NOISE_CEILING_G`): a block mean
-of a flight (``soakcal import --block-s``) is the mean of a moving sensor, not an
-orientation, and is left out with a note, as a raw row taken while moving is.
+accelerometer shows (:data:`calibration.importers.STILL_NOISE_CEILING_G`) and whose mean
+agrees with neither neighbour's within their standard errors (:func:`_still_averaged`): a
+block mean of a flight (``soakcal import --block-s``) is the mean of a moving sensor, not
+an orientation, and is left out with a note, as a raw row taken while moving is; a noisy
+part's blocks scatter as much sample by sample but their means stay put.
 """
 
 from __future__ import annotations
@@ -232,26 +234,99 @@ def capture_temperature_c(rec: Recording, caps: Captures,
     return np.interp(rec.t_s, means.t_s, means.temperature_c())
 
 
+# Two neighbouring averaged rows of a still sensor agree within this many standard errors
+# per axis (plus what the steepest plausible bias tempco turns between their temperatures).
+NEIGHBOUR_AGREE_SE = 4.0
+
+
 def _still_averaged(rec: Recording) -> Captures:
-    """An averaged recording as its own captures, less the rows whose recorded sample sd
-    on some axis is above :data:`calibration.importers.STILL_NOISE_CEILING_G` (the
-    sensor moved or vibrated while they were averaged; module docstring)."""
-    from calibration.importers import STILL_NOISE_CEILING_G  # importers read recordings
+    """An averaged recording as its own captures, less the rows taken while the sensor
+    moved or vibrated (module docstring): a recorded sample sd on some axis above
+    :data:`calibration.importers.STILL_NOISE_CEILING_G`, and a mean that agrees with
+    neither neighbour's (:func:`_agrees_with_a_neighbour`). The second condition is the
+    block-scale form of the importers' low-pass (:data:`calibration.importers.
+    STILL_LOWPASS_S`): white noise of a noisy part scatters the samples, not the means."""
+    from calibration.importers import (  # importers read recordings
+        STILL_LOWPASS_S,
+        STILL_NOISE_CEILING_G,
+    )
 
     n_rows = len(rec)
     if not all(rec.has(c) for c in SD_COLUMNS):
         return Captures(rec, n_rows, False, np.arange(n_rows))
     sd = np.column_stack([rec.columns[c] for c in SD_COLUMNS])
-    moving = (np.isfinite(sd) & (sd > STILL_NOISE_CEILING_G)).any(axis=1)
+    noisy = (np.isfinite(sd) & (sd > STILL_NOISE_CEILING_G)).any(axis=1)
+    moving = noisy & ~(_white_means_under_ceiling(rec, sd) & _agrees_with_a_neighbour(rec, sd))
+    notes = []
+    if (noisy & ~moving).any():
+        notes.append(
+            f"{int(np.sum(noisy & ~moving))} row(s) scatter sample by sample above the "
+            f"{1e3 * STILL_NOISE_CEILING_G:g} mg a still accelerometer's noise usually stays "
+            f"under (up to {1e3 * float(np.nanmax(sd[noisy & ~moving])):.0f} mg), but as white "
+            f"noise their {STILL_LOWPASS_S:g}-s means would stay under it and their means agree "
+            f"with a neighbour's within {NEIGHBOUR_AGREE_SE:g} standard errors: kept as still "
+            f"(a noisy part)")
     if not moving.any():
-        return Captures(rec, n_rows, False, np.arange(n_rows))
+        return Captures(rec, n_rows, False, np.arange(n_rows), notes)
     keep = ~moving
-    note = (f"{int(moving.sum())} of {n_rows} row(s) left out: their sample scatter "
-            f"(up to {1e3 * float(np.nanmax(sd[moving])):.0f} mg) is above the "
-            f"{1e3 * STILL_NOISE_CEILING_G:g} mg a still accelerometer stays under: the "
-            f"sensor moved or vibrated while they were averaged")
+    notes.append(f"{int(moving.sum())} of {n_rows} row(s) left out: their sample scatter "
+                 f"(up to {1e3 * float(np.nanmax(sd[moving])):.0f} mg) is above the "
+                 f"{1e3 * STILL_NOISE_CEILING_G:g} mg a still accelerometer stays under and "
+                 f"their means agree with neither neighbour's: the sensor moved or vibrated "
+                 f"while they were averaged")
     return Captures(rec.subset(keep), n_rows, False,
-                    np.where(keep, np.cumsum(keep) - 1, -1), [note])
+                    np.where(keep, np.cumsum(keep) - 1, -1), notes)
+
+
+def _white_means_under_ceiling(rec: Recording, sd: np.ndarray) -> np.ndarray:
+    """(N,) rows whose sample sd, were it white noise, would scatter the importers'
+    :data:`calibration.importers.STILL_LOWPASS_S` means under the still ceiling:
+    sd / √(rate · span) on every axis, the rate no higher than ``n`` over the row's
+    spacing from its nearest neighbour in time (a row spans at most that; a lower rate is
+    the cautious side). A flight's 40-130 mg at 50 Hz stays above (27 mg); a noisy
+    inclinometer's 18 mg at 500 Hz is 2.5 mg."""
+    from calibration.importers import STILL_LOWPASS_S, STILL_NOISE_CEILING_G
+
+    n = len(rec)
+    if n < 2 or not rec.has("n"):
+        return np.zeros(n, bool)
+    t = rec.t_s
+    order = np.argsort(t, kind="stable")
+    gap = np.diff(t[order])
+    span = np.full(n, np.inf)
+    span[:-1] = gap
+    span[1:] = np.minimum(span[1:], gap)
+    spacing = np.empty(n)
+    spacing[order] = span
+    rate_hz = rec.columns["n"] / np.where(spacing > 0, spacing, np.inf)
+    per_mean = np.sqrt(np.maximum(rate_hz * STILL_LOWPASS_S, 1.0))
+    return np.all(sd / per_mean[:, None] <= STILL_NOISE_CEILING_G, axis=1)
+
+
+def _agrees_with_a_neighbour(rec: Recording, sd: np.ndarray) -> np.ndarray:
+    """(N,) rows whose mean agrees, on every axis, with the previous or the next row's
+    (in time) within :data:`NEIGHBOUR_AGREE_SE` standard errors of their difference plus
+    the bias change a tempco of :data:`calibration.gate.BIAS_TEMPCO_MAX_G_PER_C` makes
+    between their temperatures. Rows without ``n`` never agree (no standard error)."""
+    from calibration.gate import BIAS_TEMPCO_MAX_G_PER_C
+
+    n = len(rec)
+    out = np.zeros(n, bool)
+    if n < 2 or not rec.has("n"):
+        return out
+    order = np.argsort(rec.t_s, kind="stable")
+    a = rec.raw_g[order]
+    se2 = (sd[order] ** 2) / np.maximum(rec.columns["n"][order], 1.0)[:, None]
+    temp = rec.temperature_c()[order] if rec.has_temperature else np.zeros(n)
+    d_temp = np.nan_to_num(np.abs(np.diff(temp)), nan=0.0)
+    bound = (NEIGHBOUR_AGREE_SE * np.sqrt(se2[1:] + se2[:-1])
+             + BIAS_TEMPCO_MAX_G_PER_C * d_temp[:, None])
+    pair = np.all(np.abs(np.diff(a, axis=0)) <= bound, axis=1)  # row i with row i+1
+    agree = np.zeros(n, bool)
+    agree[1:] |= pair
+    agree[:-1] |= pair
+    out[order] = agree
+    return out
 
 
 def _still_rows(rec: Recording) -> np.ndarray:

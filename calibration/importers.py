@@ -27,9 +27,11 @@ over the initial rest (the first ``init_rest_s`` seconds; without one, the quiet
 are intervals; ``trim_s`` is then cut from both ends of each, because the hand
 placement still rings and settles there (the moving window only notices motion half
 a window late). A reference noisier than a still accelerometer ever is
-(:data:`STILL_NOISE_CEILING_G`) is not a rest: a log that moves or vibrates from its
-first sample (a flight) would be "static" against its own quietest part, so such a
-log is static only where its scatter is under that ceiling (:func:`still_reference`).
+(:data:`STILL_NOISE_CEILING_G`, judged on :data:`STILL_LOWPASS_S` means, so that a
+noisy part's white noise is not taken for motion) is not a rest: a log that moves or
+vibrates from its first sample (a flight) would be "static" against its own quietest
+part, so such a log is static only where its scatter is under that ceiling
+(:func:`still_reference`).
 """
 
 from __future__ import annotations
@@ -95,6 +97,12 @@ FERRARIS_STATIC_PARTS: dict[str, tuple[float, float, float]] = {
 # read 0.8-3.9 mg, up to 5x above their parts' density × √bandwidth. A vehicle in flight
 # reads 40-130 mg.
 STILL_NOISE_CEILING_G = 10e-3
+# The ceiling is applied to the scatter of means over this span (a 10-Hz boxcar), not of
+# single samples: a still part's white noise shrinks as 1/√n there (a real inclinometer's
+# 7-18 mg per sample at 500 Hz is 1.2 mg), motion does not (a flight's 0.1-s means scatter
+# by 31 mg in its quietest tenth). Above the sample spacing this only relaxes the ceiling:
+# what was a rest stays one.
+STILL_LOWPASS_S = 0.1
 
 
 @dataclass
@@ -342,6 +350,10 @@ class StillReference:
     ref: float  # the reference ‖variance‖, g² (initial rest, or the quietest decile)
     source: str  # "initial rest" | "quietest 10 %"
     ceiling_g: float | None  # the still ceiling applied, g rms per axis (None: none)
+    # The same of the STILL_LOWPASS_S means, which the ceiling is compared with (None:
+    # no ceiling, not computed).
+    lowpass_var_mag: np.ndarray | None = None
+    lowpass_ref: float = 0.0
 
     @property
     def ref_rms_g(self) -> float:
@@ -349,17 +361,24 @@ class StillReference:
         return per_axis_rms_g(self.ref)
 
     @property
+    def lowpass_ref_rms_g(self) -> float:
+        """The reference of the :data:`STILL_LOWPASS_S` means as a per-axis rms, g."""
+        return per_axis_rms_g(self.lowpass_ref)
+
+    @property
     def is_rest(self) -> bool:
-        """The reference is quiet enough to be a sensor at rest (under the ceiling)."""
-        return self.ceiling_g is None or self.ref_rms_g <= self.ceiling_g
+        """The reference is quiet enough to be a sensor at rest: its
+        :data:`STILL_LOWPASS_S` means scatter under the ceiling."""
+        return self.ceiling_g is None or self.lowpass_ref_rms_g <= self.ceiling_g
 
     def static(self, threshold: float) -> np.ndarray:
         """(N,) samples whose window is static: under ``threshold`` × the reference, or,
-        when the reference is no rest, under the ceiling itself (a still sensor's most)."""
+        when the reference is no rest, whose means scatter under the ceiling itself (a
+        still sensor's most)."""
         if self.is_rest:
             return self.var_mag < threshold * self.ref
-        assert self.ceiling_g is not None
-        return self.var_mag < math.sqrt(3.0) * self.ceiling_g ** 2
+        assert self.ceiling_g is not None and self.lowpass_var_mag is not None
+        return self.lowpass_var_mag < math.sqrt(3.0) * self.ceiling_g ** 2
 
 
 def per_axis_rms_g(var_mag: float) -> float:
@@ -389,17 +408,40 @@ def still_reference(
     if not dt > 0:
         raise ValueError("t_s must increase (median sample spacing is not positive)")
     window_n = max(int(round(window_s / dt)), 3)
+    rest = (t < t[0] + init_rest_s) if init_rest_s is not None and init_rest_s > 0 else None
+    source = "quietest 10 %" if rest is None else "initial rest"
     var_mag = moving_variance_norm(a, window_n)
-    if init_rest_s is not None and init_rest_s > 0:
-        rest = t < t[0] + init_rest_s
+    ref = _reference_variance(var_mag, a, rest)
+    if ceiling_g is None:
+        return StillReference(var_mag, ref, source, None)
+    lowpass_n = int(round(STILL_LOWPASS_S / dt))
+    low = _boxcar(a, lowpass_n) if lowpass_n > 1 else a
+    low_var = moving_variance_norm(low, window_n) if lowpass_n > 1 else var_mag
+    low_ref = _reference_variance(low_var, low, rest) if lowpass_n > 1 else ref
+    return StillReference(var_mag, ref, source, ceiling_g, low_var, low_ref)
+
+
+def _reference_variance(var_mag: np.ndarray, a: np.ndarray, rest: np.ndarray | None) -> float:
+    """‖variance‖ over the initial rest (``rest``), else the quietest decile of windows."""
+    if rest is not None:
         ref = float(np.linalg.norm(np.var(a[rest], axis=0))) if rest.sum() >= 3 else 0.0
-        source = "initial rest"
     else:
         ref = float(np.percentile(var_mag, 10))
-        source = "quietest 10 %"
     if not ref > 0:
         ref = float(np.percentile(var_mag[var_mag > 0], 10)) if np.any(var_mag > 0) else 1e-30
-    return StillReference(var_mag, ref, source, ceiling_g)
+    return ref
+
+
+def _boxcar(a: np.ndarray, n: int) -> np.ndarray:
+    """Centred ``n``-sample moving means of each column (shorter at the ends)."""
+    half = n // 2
+    out = np.empty_like(a, dtype=float)
+    cnt = _window_counts(a.shape[0], half)
+    csum = np.zeros(a.shape[0] + 1)
+    for k in range(a.shape[1]):
+        np.cumsum(a[:, k] - a[0, k], out=csum[1:])
+        out[:, k] = _window_sums(csum, half) / cnt + a[0, k]
+    return out
 
 
 def detect_static_intervals(
@@ -463,7 +505,9 @@ def no_still_part(raw: RawImport, settings: DetectorSettings,
         return None
     assert ref.ceiling_g is not None
     return (f"no still part: the {ref.source} of the log scatters by "
-            f"{ref.ref_rms_g * 1e3:.1f} mg rms per axis over {settings.window_s:g}-s windows, "
+            f"{ref.lowpass_ref_rms_g * 1e3:.1f} mg rms per axis in {STILL_LOWPASS_S:g}-s means "
+            f"over {settings.window_s:g}-s windows ({ref.ref_rms_g * 1e3:.1f} mg sample by "
+            f"sample), "
             f"above the {ref.ceiling_g * 1e3:g} mg a still accelerometer's noise reaches, and "
             f"no {settings.min_duration_s:g}-s stretch stays under {ref.ceiling_g * 1e3:g} mg: "
             f"the log was recorded while the sensor moved or vibrated (a flight, "

@@ -158,7 +158,8 @@ class Recording:
 
     def temperature_c(self) -> np.ndarray:
         """Thermal-model temperature: ``sensor_c`` where filled, else ``chamber_c`` (spec rule)."""
-        if self.has("sensor_c"):
+        # (a recording left with no rows keeps its sensor_c column, and nothing to fill)
+        if self.has("sensor_c") or "chamber_c" not in self.columns:
             t = self.columns["sensor_c"].copy()
             if "chamber_c" in self.columns:
                 gaps = ~np.isfinite(t)

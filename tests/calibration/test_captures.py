@@ -238,3 +238,70 @@ def test_a_flight_as_block_means_is_refused_and_not_diagnosed(tmp_path: Path,
     doc = json.loads(capsys.readouterr().out)
     assert doc["verdict"] == "cannot judge" and doc["mismatch"] is None
     assert doc["reason"] in refusal
+
+
+def _noisy_still_warmup() -> tuple[Recording, object]:
+    # A noisy part held still while it warms (as the real inclinometer log: 500 Hz, 7-18 mg
+    # of white noise per sample, -18.7 -> -13.3 °C): above the 10 mg a still part's samples
+    # usually stay under, yet its 0.1-s means scatter by 0.7 mg.
+    return warmup_log(seconds=120, rate_hz=500, noise_g=15e-3, quantum_c=None, seed=4)
+
+
+def _bias_change_mg(model_path: str, truth: object, lo: float, hi: float) -> tuple[float, float]:
+    from calibration.model_file import load_model
+
+    model = load_model(model_path)
+    fitted = (model.params_vector_at(hi, extrapolate=True)[2]
+              - model.params_vector_at(lo, extrapolate=True)[2])
+    true = truth.bias_g(np.array([hi]))[0, 2] - truth.bias_g(np.array([lo]))[0, 2]
+    return 1e3 * fitted, 1e3 * true
+
+
+def test_a_noisy_part_held_still_is_still_as_raw_rows_and_as_block_means(
+        tmp_path: Path, capsys) -> None:
+    rec, truth = _noisy_still_warmup()
+    lo, hi = float(rec.temperature_c().min()), float(rec.temperature_c().max())
+    raw = tmp_path / "raw.csv"
+    write_recording(raw, rec)
+    a = _args(raw, tmp_path / "raw.json")
+    assert cli.run_calibrate(a) == 0, capsys.readouterr().err
+    doc = json.loads(capsys.readouterr().out)
+    assert not any("left out" in n for n in doc["notes"]), doc["notes"]
+    fitted, true = _bias_change_mg(a.output, truth, lo, hi)
+    assert abs(fitted - true) < 0.5, (fitted, true)
+    # the same log as 1-s block means (`soakcal import --block-s 1`): every block's sample
+    # sd is 15 mg, but their means agree with their neighbours': kept, and said
+    from calibration.captures import group_means
+
+    blocks = Recording.from_columns(group_means(rec, np.floor(rec.t_s).astype(int)))
+    src = tmp_path / "blocks.csv"
+    write_recording(src, blocks)
+    a = _args(src, tmp_path / "blocks.json")
+    assert cli.run_calibrate(a) == 0, capsys.readouterr().err
+    doc = json.loads(capsys.readouterr().out)
+    note = next(n for n in doc["notes"] if "kept as still" in n)
+    assert note.startswith(f"{len(blocks)} row(s) scatter sample by sample above the 10 mg")
+    fitted, true = _bias_change_mg(a.output, truth, lo, hi)
+    assert abs(fitted - true) < 0.5, (fitted, true)
+
+
+def test_a_flight_as_raw_rows_with_a_temperature_is_refused_not_a_traceback(
+        tmp_path: Path, capsys) -> None:
+    # Every raw row of a flight is left out as moving: calibrate refuses "no still
+    # reading" (an empty set of captures with a sensor_c column ended in a KeyError).
+    import argparse
+
+    from calibration.importers_cli import run_import
+    from tests.calibration.log_writers import flight_samples, write_dataflash
+
+    t_us, acc = flight_samples(seconds=60.0, vibration_g=0.04)
+    log = write_dataflash(tmp_path / "flight.bin", t_us, acc, np.linspace(30.0, 40.0, t_us.size))
+    src = tmp_path / "rows.csv"
+    assert run_import(argparse.Namespace(
+        format="dataflash", raw=str(log), output=str(src), raw_samples=False,
+        min_static_s=None, threshold=None, window_s=None, trim_s=None)) == 0
+    capsys.readouterr()
+    a = _args(src, tmp_path / "m.json")
+    assert cli.run_calibrate(a) == 2
+    assert capsys.readouterr().err.startswith("error: ")
+    assert not Path(a.output).exists()

@@ -119,7 +119,11 @@ def test_a_flight_log_is_said_to_have_no_still_part(tmp_path, capsys):
     assert line.startswith("static intervals: 0: no still part: the quietest 10 % of the log "
                            "scatters by ")
     mg = float(line.split("scatters by ")[1].split(" mg")[0])
-    assert 30.0 < mg < 50.0  # the 40 mg of vibration, not a still sensor's noise
+    # 40 mg of white vibration at 50 Hz: its 0.1-s means scatter by 40/√5 ≈ 18 mg, the
+    # sway by a few mg more; above the 10 mg ceiling either way
+    assert 12.0 < mg < 25.0, line
+    sample_mg = float(line.split("over 1-s windows (")[1].split(" mg")[0])
+    assert 30.0 < sample_mg < 50.0  # the 40 mg of vibration, not a still sensor's noise
     assert "the log was recorded while the sensor moved or vibrated" in line
 
 
