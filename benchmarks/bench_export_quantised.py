@@ -10,9 +10,14 @@ apply the exported offset polynomial at their own raw 1 °C reading. Per gen2 ca
 it: 10-s blocks alternately fit and held out, RMS of held-out 5-s means, mg x / y / z):
 
 * ``soakcal``: ``soakcal compensate`` (the rebuilt temperature);
-* ``soakcal at raw``: soakcal's model, bias polynomial only, evaluated at the raw reading
-  clamped to its valid range, as both firmwares evaluate their ``TC_A*``/``INS_TCAL*``
-  (:mod:`calibration.export_firmware`): what the exported file does in flight;
+* ``export at raw``: the file ``soakcal export --format px4`` writes, applied by PX4's
+  formula (``calc_thermal_offsets_3D``: the offset at the raw reading clamped to
+  TMIN/TMAX, :mod:`calibration.export_firmware`) to every sample: what the exported file
+  does in flight. For a rebuilt fit that file carries the raw-reading polynomial (the
+  least-squares fit of the model's offset against the reading);
+* ``model at raw``: soakcal's model, bias polynomial b(T) only, evaluated at the raw
+  reading clamped to its valid range: what the export wrote before the raw-reading
+  polynomial;
 * ``px4``, ``ardupilot``: the peers' own fits, applied at the raw reading;
 * ``stated``: the RMS the export states (``provenance.quantised_temperature.rms_mg``:
   b(raw) − b(rebuilt) over the fit log's capture means), against ``extra``: what the
@@ -37,6 +42,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.bench_warmup_peers import (  # noqa: E402
+    MEAN_S,
+    blocks,
     heldout_rms_mg,
     imported_log,
     method_ardupilot,
@@ -46,7 +53,13 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import draw_case, import_args, simulate, write_log  # noqa: E402
 from calibration import sfem  # noqa: E402
+from calibration.export_firmware import STANDARD_GRAVITY_M_S2, export_px4  # noqa: E402
 from calibration.model_file import load_model  # noqa: E402
+
+# the paired bootstrap of export ÷ peer resamples windows of this length (5-s means within
+# one are not independent: a 1 °C level lasts tens of seconds and its within-step error is
+# shared by its means), with this many draws
+WINDOW_S, DRAWS = 60.0, 2000
 
 # the default draws of seeds 1000-1059 and 2000-2029 with a 1 °C channel (kind quant1C)
 QUANT1C = "1004,1009,1011,1016,1023,1039,2001,2012,2019,2028"
@@ -71,17 +84,63 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path) -> dict[
         return model.params_vector_at(np.clip(t, lo, hi), extrapolate=True)[:, sfem.BIAS]
 
     at_raw = log.acc_g - bias_g(log.temp_c)
+    exported = log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
+    px4, ardupilot = method_px4(log), method_ardupilot(log)[0]
     ok = np.all(np.isfinite(sc), axis=1)
     record = model.provenance.get("quantised_temperature") or {}
-    own, raw = heldout_rms_mg(log, sc), heldout_rms_mg(log, at_raw)
+    own, raw = heldout_rms_mg(log, sc), heldout_rms_mg(log, exported)
     return out | {
         "soakcal": own.tolist() if ok.all() else None,
-        "soakcal_at_raw": raw.tolist(),
-        "px4": heldout_rms_mg(log, method_px4(log)).tolist(),
-        "ardupilot": heldout_rms_mg(log, method_ardupilot(log)[0]).tolist(),
+        "export_at_raw": raw.tolist(),
+        "model_at_raw": heldout_rms_mg(log, at_raw).tolist(),
+        "rate_term": bool(model.temperature_rate),
+        "px4": heldout_rms_mg(log, px4).tolist(),
+        "ardupilot": heldout_rms_mg(log, ardupilot).tolist(),
+        "export_over_peer_95": ratio_interval(log.t_s, exported, (px4, ardupilot)),
         "stated_rms_mg": record.get("rms_mg"), "ratio_to_fit": record.get("ratio_to_fit"),
         "extra_rms_mg": np.sqrt(np.maximum(raw**2 - own**2, 0.0)).tolist(),
     }
+
+
+def ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...]
+                   ) -> list[list[float]]:
+    """Per axis, a 95 % interval of held-out RMS(ours) ÷ RMS(better peer) (as
+    :func:`heldout_rms_mg`: held-out 5-s means less the fit samples' mean): a paired
+    bootstrap over :data:`WINDOW_S` windows of the held-out means, the better peer chosen
+    on each draw."""
+    _, fit = blocks(t_s)
+    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
+    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
+    hs = [h for h in np.unique(half[~fit]) if np.sum(half == h) > 0.8 * MEAN_S * rate]
+
+    def errors(c: np.ndarray) -> np.ndarray:
+        ref = c[fit].mean(axis=0)
+        return np.array([c[half == h].mean(axis=0) - ref for h in hs])  # (m, 3)
+
+    sq = np.stack([errors(c) ** 2 for c in (ours_g, *peers_g)])  # (methods, m, 3)
+    window = (np.asarray(hs) * MEAN_S // WINDOW_S).astype(int)
+    groups = [np.flatnonzero(window == w) for w in np.unique(window)]
+    rng = np.random.default_rng(0)
+    ratios = []
+    for _ in range(DRAWS):
+        pick = np.concatenate([groups[i] for i in rng.integers(0, len(groups), len(groups))])
+        ms = sq[:, pick].mean(axis=1)  # (methods, 3)
+        ratios.append(np.sqrt(ms[0] / np.min(ms[1:], axis=0)))
+    lo, hi = np.percentile(np.asarray(ratios), [2.5, 97.5], axis=0)
+    return [[float(a), float(b)] for a, b in zip(lo, hi, strict=True)]
+
+
+def px4_offset_g(params_text: str, temp_c: np.ndarray) -> np.ndarray:
+    """(N, 3) g: PX4's offset X0 + X1 d + X2 d² + X3 d³, d = clamp(T, TMIN, TMAX) − TREF
+    (``TemperatureCompensation::calc_thermal_offsets_3D``), from a ``TC_A0_*`` file."""
+    p = {}
+    for line in params_text.splitlines():
+        if line and not line.startswith("#"):
+            _veh, _comp, name, value, _type = line.split("\t")
+            p[name] = float(value)
+    d = np.clip(temp_c, p["TC_A0_TMIN"], p["TC_A0_TMAX"]) - p["TC_A0_TREF"]
+    return np.column_stack([sum(p[f"TC_A0_X{j}_{i}"] * d**j for j in range(4))
+                            for i in range(3)]) / STANDARD_GRAVITY_M_S2
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,13 +160,21 @@ def main(argv: list[str] | None = None) -> int:
     def f(v: object) -> str:
         return "—" if v is None else " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
 
-    print("| case | soakcal (rebuilt) | soakcal at the raw reading | PX4 fit at raw | "
-          "ArduPilot at raw | stated RMS | extra at raw | ratio to fit |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| case | soakcal (rebuilt) | export at raw | model b(T) at raw | PX4 fit at raw | "
+          "ArduPilot at raw | export ÷ better peer (95 %) | stated RMS | extra at raw | "
+          "ratio to fit |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         ratio = r.get("ratio_to_fit")
-        print(f"| {r['case']} | {f(r.get('soakcal'))} | {f(r.get('soakcal_at_raw'))} | "
-              f"{f(r.get('px4'))} | {f(r.get('ardupilot'))} | {f(r.get('stated_rms_mg'))} | "
+        vs = "—"
+        if r.get("export_at_raw") is not None:
+            peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+            ci = r["export_over_peer_95"]
+            vs = " / ".join(f"{v:.3f} ({a:.2f}–{b:.2f})" for v, (a, b) in zip(
+                np.asarray(r["export_at_raw"]) / peer, ci, strict=True))  # type: ignore[arg-type]
+        print(f"| {r['case']} | {f(r.get('soakcal'))} | {f(r.get('export_at_raw'))} | "
+              f"{f(r.get('model_at_raw'))} | {f(r.get('px4'))} | {f(r.get('ardupilot'))} | "
+              f"{vs} | {f(r.get('stated_rms_mg'))} | "
               f"{f(r.get('extra_rms_mg'))} | "
               f"{'—' if ratio is None else f'{ratio:.1f}'} |")
     return 0

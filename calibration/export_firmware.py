@@ -59,76 +59,152 @@ class FirmwareExport:
     reading: list[str] = field(default_factory=list)
 
 
-def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float) -> np.ndarray:
-    """(3, 4): bias b_i(T) in m/s² as Σ_j c_ij (T − t_ref)^j (exact re-expansion of Eq. 8)."""
+def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float,
+                          bias_x_g: np.ndarray | None = None) -> np.ndarray:
+    """(3, 4): bias b_i(T) in m/s² as Σ_j c_ij (T − t_ref)^j: an exact re-expansion of the
+    model's Eq. 8 bias, or of ``bias_x_g`` ((3, m+1), g, in the model's x = (T − centre) /
+    scale: the raw-reading polynomial of :func:`raw_reading_polynomial_x_g`)."""
     shift = Polynomial([(t_ref_c - model.t_centre_c) / model.t_scale_c, 1.0 / model.t_scale_c])
+    coeffs = model.coeffs[sfem.BIAS] if bias_x_g is None else np.asarray(bias_x_g, float)
     out = np.zeros((3, FIRMWARE_DEGREE + 1))
     for i in range(3):
-        poly = Polynomial(model.coeffs[sfem.BIAS][i])(shift)
+        poly = Polynomial(coeffs[i])(shift)
         c = poly.coef * STANDARD_GRAVITY_M_S2
         out[i, : c.size] = c
     return out
+
+
+def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
+                               lsb_c: float) -> np.ndarray:
+    """(3, m+1) g in x: the offset polynomial in the firmware's own reading that is closest
+    to the model on the fit log. Both firmwares subtract p(clamp(T_read)) (module
+    docstring); the best any p can do at a reading is the log's mean bias there,
+    E[b(T_rebuilt) | T_read], which differs from b(T_read) where the die's time inside a
+    step is not centred on the step (a warm-up that settles at 35.3 °C reads 35 for its
+    whole rest) and where a lagging channel reads behind the die. So p minimises
+    Σ_i (b(T_rebuilt,i) − p(clamp(T_read,i)))² over the log's capture means: a least-squares
+    polynomial of the firmware's degree (cubic), fewer terms when the reading takes fewer
+    levels than that needs. Its target is the model's bias, not the readings: the fit
+    smooths out the capture noise that PX4's and ArduPilot's scripts fit on the step
+    values themselves. Same clamp and same capture-mean reading as
+    :func:`quantised_reading_error`."""
+    lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
+    read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
+    ok = np.isfinite(read) & np.isfinite(rebuilt)
+    x = model.x_of(np.clip(read[ok], lo, hi))
+    target = model.params_vector_at(np.clip(rebuilt[ok], lo, hi), extrapolate=True)[:, sfem.BIAS]
+    levels = np.unique(np.round(np.clip(read[ok], lo, hi) / max(float(lsb_c), 1e-9))).size
+    degree = max(0, min(FIRMWARE_DEGREE, levels - 1))
+    V = np.vander(x, degree + 1, increasing=True)
+    coef = np.linalg.lstsq(V, target, rcond=None)[0].T  # (3, degree+1)
+    return coef
 
 
 def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
                             lsb_c: float, fit_heldout_mg: list[float] | None
                             ) -> dict[str, object]:
     """What a firmware that reads the raw quantised channel makes of this model on its fit
-    log: both firmwares subtract b(clamp(T)) (module docstring) with T their own reading,
-    while the model was fitted in the die temperature rebuilt from that channel
-    (:mod:`calibration.temperature_dequantise`). Per axis, over the log's capture means:
-    the RMS and largest |b(T_read) − b(T_rebuilt)| (mg), each clamped to the valid range as
-    the firmwares clamp to TMIN/TMAX; ``tempco_lsb_mg``, the largest |db/dT| over the valid
-    range times the LSB (the step the firmware's offset takes at each change of its
-    reading); and the fit's own held-out RMS (mg) with the ratio of the two RMS. The
-    constant part (X0, INS_ACCOFFS) cancels in the difference, so the figure is the same
-    for PX4 and ArduPilot. A capture's raw mean stands for its samples' readings: b is
-    smooth, so the mean of b over a capture's samples and b at their mean differ by
-    second-order terms only."""
+    log, and the polynomial the export writes for it (``raw_reading_bias_x_g``:
+    :func:`raw_reading_polynomial_x_g`). Both firmwares subtract p(clamp(T)) (module
+    docstring) with T their own reading, while the model was fitted in the die
+    temperature rebuilt from that channel (:mod:`calibration.temperature_dequantise`).
+    Per axis, over the log's capture means: the RMS and largest |p(T_read) − b(T_rebuilt)|
+    (mg) of the exported p, each clamped to the valid range as the firmwares clamp to
+    TMIN/TMAX, and the same RMS for the model's own b at the reading
+    (``model_at_raw_rms_mg``: what exporting b(T) itself would cost); ``tempco_lsb_mg``,
+    the largest |dp/dT| over the valid range times the LSB (the step the firmware's offset
+    takes at each change of its reading); and the fit's own held-out RMS (mg) with the
+    ratio of the exported p's RMS to it. The constant part (X0, INS_ACCOFFS) cancels in
+    the difference, so the figure is the same for PX4 and ArduPilot. A capture's raw mean
+    stands for its samples' readings: p is smooth, so the mean of p over a capture's
+    samples and p at their mean differ by second-order terms only."""
     lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
-    ok = np.isfinite(read_c) & np.isfinite(rebuilt_c)
+    read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
+    ok = np.isfinite(read) & np.isfinite(rebuilt)
+    coef = raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c)
 
     def bias_mg(t: np.ndarray) -> np.ndarray:
         P = model.params_vector_at(np.clip(t, lo, hi), extrapolate=True)
         return P[:, sfem.BIAS] * 1e3
 
-    diff = bias_mg(np.asarray(read_c, float)[ok]) - bias_mg(np.asarray(rebuilt_c, float)[ok])
+    def exported_mg(t: np.ndarray) -> np.ndarray:
+        V = np.vander(model.x_of(np.clip(t, lo, hi)), coef.shape[1], increasing=True)
+        return V @ coef.T * 1e3
+
+    at_rebuilt = bias_mg(rebuilt[ok])
+    diff = exported_mg(read[ok]) - at_rebuilt
+    model_diff = bias_mg(read[ok]) - at_rebuilt
     grid = np.linspace(lo, hi, 201)
-    slope = np.abs(np.gradient(bias_mg(grid), grid, axis=0)) if hi > lo else np.zeros((1, 3))
-    rms = np.sqrt(np.mean(diff**2, axis=0)) if diff.size else np.zeros(3)
+    slope = (np.abs(np.gradient(exported_mg(grid), grid, axis=0)) if hi > lo
+             else np.zeros((1, 3)))
+
+    def rms_of(d: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.mean(d**2, axis=0)) if d.size else np.zeros(3)
+
+    rms = rms_of(diff)
     out: dict[str, object] = {
         "lsb_c": float(lsb_c),
         "readings": int(np.sum(ok)),
         "rms_mg": [float(v) for v in rms],
         "peak_mg": [float(v) for v in (np.max(np.abs(diff), axis=0) if diff.size
                                        else np.zeros(3))],
+        "model_at_raw_rms_mg": [float(v) for v in rms_of(model_diff)],
         "tempco_lsb_mg": [float(v) * float(lsb_c) for v in np.max(slope, axis=0)],
         "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
+        "raw_reading_bias_x_g": [[float(v) for v in axis] for axis in coef],
+        "raw_reading_basis": ("p(T) = sum_j c[axis][j] * x**j in g, x = (clamp(T, valid) - "
+                              "centre_c) / scale_c, T the channel's raw reading"),
     }
     if fit_heldout_mg is not None:
         out["ratio_to_fit"] = float(np.max(rms / np.maximum(np.asarray(fit_heldout_mg), 1e-9)))
     return out
 
 
+def raw_reading_bias_x_g(model: ThermalModel) -> np.ndarray | None:
+    """The raw-reading polynomial a model fitted in a rebuilt temperature carries
+    (:func:`quantised_reading_error`), or None: then the export writes the model's b(T)
+    (a model read by a fine channel, or a model file from before the polynomial)."""
+    record = model.provenance.get("quantised_temperature") or {}
+    coef = record.get("raw_reading_bias_x_g")
+    return None if coef is None else np.asarray(coef, float)
+
+
 def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
     """The lines an export says about a model fitted in a rebuilt temperature (none for a
-    model without the record): what the firmware will do with its own quantised reading."""
+    model without the record): which temperature the file's polynomial is in, and what it
+    costs at the firmware's own quantised reading."""
     if not record:
         return []
     rms, peak = record["rms_mg"], record["peak_mg"]
     step = record["tempco_lsb_mg"]
     q = float(record["lsb_c"])  # type: ignore[arg-type]
     fit = record.get("fit_heldout_mg")
+    in_reading = record.get("raw_reading_bias_x_g") is not None
 
     def xyz(v: object) -> str:
         return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
 
-    main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC channel, "
-            f"but the firmware evaluates it at its own {q:g} degC reading: on the fit log "
-            f"({record['readings']} capture means) that differs from the offset at the "
-            f"rebuilt temperature by RMS {xyz(rms)} mg, peak {xyz(peak)} mg (x / y / z); "
-            f"the offset steps by up to {xyz(step)} mg at each change of the reading "
-            f"(tempco x LSB)")
+    if in_reading:
+        main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
+                f"channel, and the firmware evaluates its offset at its own {q:g} degC "
+                f"reading: this file's polynomial is in that reading, the least-squares fit "
+                f"over the fit log's {record['readings']} capture means of the model's offset "
+                f"at the rebuilt temperature against the reading clamped to TMIN..TMAX (the "
+                f"model's own b(T) evaluated at the reading instead: RMS "
+                f"{xyz(record['model_at_raw_rms_mg'])} mg); on the fit log it differs from "
+                f"the offset at the rebuilt temperature by RMS {xyz(rms)} mg, peak "
+                f"{xyz(peak)} mg (x / y / z); the offset steps by up to {xyz(step)} mg at "
+                f"each change of the reading (tempco x LSB)")
+        why = "and this file's polynomial is already the least-squares one in it"
+    else:
+        main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
+                f"channel, but the firmware evaluates it at its own {q:g} degC reading: on "
+                f"the fit log ({record['readings']} capture means) that differs from the "
+                f"offset at the rebuilt temperature by RMS {xyz(rms)} mg, peak {xyz(peak)} "
+                f"mg (x / y / z); the offset steps by up to {xyz(step)} mg at each change "
+                f"of the reading (tempco x LSB)")
+        why = ("a fit on the step values, as PX4's and ArduPilot's scripts make, does about "
+               "as well")
     if fit is None:
         return [main]
     ratio = float(record.get("ratio_to_fit", 0.0))  # type: ignore[arg-type]
@@ -136,8 +212,7 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
     if ratio >= LOUD_FACTOR:
         return [f"WARNING: the firmware's {q:g} degC temperature reading will cost up to "
                 f"{ratio:.1f} x the fit's own error: {main}; {versus}. No parameter file removes "
-                f"it (the firmware's offset is a function of that reading only; a fit on the "
-                f"step values, as PX4's and ArduPilot's scripts make, does about as well); "
+                f"it (the firmware's offset is a function of that reading only; {why}); "
                 f"a finer temperature channel in the firmware would, or `soakcal "
                 f"compensate`, which rebuilds the temperature"]
     return [f"{main}; {versus}"]
@@ -232,7 +307,7 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
         raise ModelFileError(f"PX4 has TC_A0..TC_A3; --instance {instance} is out of range")
     lo, hi = _check(model, "PX4")
     t_ref = 0.5 * (lo + hi)  # as PX4's process_sensor_caldata.py: mid-range reference
-    c = bias_polynomials_m_s2(model, t_ref)
+    c = bias_polynomials_m_s2(model, t_ref, raw_reading_bias_x_g(model))
     limits = left_out(model)
     reading = quantised_reading_lines(model.provenance.get("quantised_temperature"))
     # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
@@ -285,7 +360,8 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
     if lo < a_lo or hi > a_hi:
         raise ModelFileError(f"valid range {lo:.2f} .. {hi:.2f} degC is outside ArduPilot's "
                              f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
-    c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C) * ARDUPILOT_SCALE_FACTOR
+    c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
+                              raw_reading_bias_x_g(model)) * ARDUPILOT_SCALE_FACTOR
     limits = left_out(model)
     reading = quantised_reading_lines(model.provenance.get("quantised_temperature"))
     limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
