@@ -142,3 +142,46 @@ def shape_columns(u: np.ndarray, mag: np.ndarray, circle: np.ndarray,
             out[rows, :, per * c + 2 * h] = tangent * np.cos(k * phi)[:, None]
             out[rows, :, per * c + 2 * h + 1] = tangent * np.sin(k * phi)[:, None]
     return out
+
+
+def offset_columns(n_rows: int, circle: np.ndarray, n_circles: int) -> np.ndarray:
+    """(N,3,3C) g: a constant offset vector on each sweep circle's readings (others zero).
+
+    The simplest force that moves with the table rather than with the specific force: one
+    the table's other axis sets (a cable or connector wound round it) is the same all
+    along a sweep of this axis and differs between sweeps. Unlike a rotation, it has a part
+    along the reference, and unlike a product of inputs, it does not follow the reference
+    along the sweep (issue 22, the unseen ``cable_strain``).
+    """
+    out = np.zeros((n_rows, 3, 3 * n_circles))
+    for c in range(n_circles):
+        rows = circle == c
+        for a in range(3):
+            out[rows, a, 3 * c + a] = 1.0
+    return out
+
+
+def same_tilt_chi2(t: np.ndarray, cov: np.ndarray) -> tuple[float, int]:
+    """χ² and dof of "one tilt turns every sweep by the same angle" from per-circle fits.
+
+    ``t`` (C,2): each circle's (t∥, t⊥) of :func:`shape_columns`' tilt, ``cov`` (2C,2C)
+    their covariance. Why this is the tilt's physics: a base tilted by the horizontal
+    vector t turns a sweep about any horizontal axis a by t∥ = t·a and t⊥ = t·(up × a), so
+    √(t∥² + t⊥²) = |t| on every sweep whatever its axis, the sense of that axis or how the
+    sensor was mounted (none of which the references give). The magnitudes' spread is
+    judged with their delta-method covariance (generalised least squares about their
+    common value); C − 1 dof. With fewer than two circles there is nothing to compare.
+    """
+    n = len(t)
+    m = np.linalg.norm(t, axis=1)
+    if n < 2 or np.any(m <= 0):
+        return 0.0, 0
+    J = np.zeros((n, 2 * n))
+    for c in range(n):
+        J[c, 2 * c:2 * c + 2] = t[c] / m[c]
+    V = J @ cov @ J.T
+    Vi = np.linalg.pinv(V)
+    one = np.ones(n)
+    r = float(one @ Vi @ m) / float(one @ Vi @ one)
+    d = m - r
+    return float(d @ Vi @ d), n - 1
