@@ -74,66 +74,135 @@ def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float,
     return out
 
 
+def reading_spread(read_c: np.ndarray, rebuilt_c: np.ndarray, lsb_c: float, level_c: float,
+                   dither_lsb: float) -> tuple[np.ndarray, np.ndarray]:
+    """(levels_c (L,), weights (n, L)): the share of each capture's samples the channel read
+    at each of its levels, the readings the firmware evaluates its offset at one sample at a
+    time (a capture mean of the reading is none of them). A dithered channel
+    (``dither_lsb`` > 0, :mod:`calibration.temperature_dither`): the die at z (level units,
+    the rebuilt temperature) is read at level j with probability Φ((z − j + ½)/σ) −
+    Φ((z − j − ½)/σ), σ the channel's noise in LSB, as the rebuild's own model reads it. A
+    channel that steps cleanly: a capture mean m between levels k and k + 1 is a share
+    m − k of its samples at k + 1, the rest at k (one crossing inside a capture)."""
+    from scipy.special import ndtr
+
+    q = max(float(lsb_c), 1e-9)
+    if dither_lsb > 0:
+        z = (np.asarray(rebuilt_c, float) - level_c) / q
+        j = np.arange(np.floor(np.min(z)) - 4, np.ceil(np.max(z)) + 5)
+        upper = ndtr((z[:, None] - (j - 0.5)[None, :]) / dither_lsb)
+        lower = ndtr((z[:, None] - (j + 0.5)[None, :]) / dither_lsb)
+        return level_c + q * j, upper - lower
+    m = (np.asarray(read_c, float) - level_c) / q
+    k = np.floor(m + 1e-9)
+    share_up = np.clip(m - k, 0.0, 1.0)
+    j = np.arange(np.min(k), np.max(k) + 2)
+    w = np.zeros((m.size, j.size))
+    rows = np.arange(m.size)
+    col = (k - j[0]).astype(int)
+    w[rows, col] = 1.0 - share_up
+    w[rows, col + 1] += share_up
+    return level_c + q * j, w
+
+
+def _firmware_design(model: ThermalModel, read_c: np.ndarray, lo: float, hi: float,
+                     terms: int, spread: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """(n, terms): each capture's mean of the powers of x at the firmware's clamped reading:
+    over its samples' readings (``spread``: :func:`reading_spread`), or at the capture
+    mean of the reading itself (None: a firmware that low-pass filters its reading)."""
+    if spread is None:
+        return np.vander(model.x_of(np.clip(read_c, lo, hi)), terms, increasing=True)
+    levels_c, weights = spread
+    return weights @ np.vander(model.x_of(np.clip(levels_c, lo, hi)), terms, increasing=True)
+
+
 def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
-                               lsb_c: float) -> np.ndarray:
+                               lsb_c: float,
+                               spread: tuple[np.ndarray, np.ndarray] | None = None
+                               ) -> np.ndarray:
     """(3, m+1) g in x: the offset polynomial in the firmware's own reading that is closest
     to the model on the fit log. Both firmwares subtract p(clamp(T_read)) (module
     docstring); the best any p can do at a reading is the log's mean bias there,
     E[b(T_rebuilt) | T_read], which differs from b(T_read) where the die's time inside a
     step is not centred on the step (a warm-up that settles at 35.3 °C reads 35 for its
     whole rest) and where a lagging channel reads behind the die. So p minimises
-    Σ_i (b(T_rebuilt,i) − p(clamp(T_read,i)))² over the log's capture means: a least-squares
-    polynomial of the firmware's degree (cubic), fewer terms when the reading takes fewer
-    levels than that needs. Its target is the model's bias, not the readings: the fit
-    smooths out the capture noise that PX4's and ArduPilot's scripts fit on the step
-    values themselves. Same clamp and same capture-mean reading as
-    :func:`quantised_reading_error`."""
+    Σ_i (b(T_rebuilt,i) − mean over capture i's samples of p(clamp(T_read)))² over the log's
+    capture means: a least-squares polynomial of the firmware's degree (cubic), fewer
+    terms when the reading takes fewer levels than that needs. The mean is over the
+    readings the firmware evaluates p at, sample by sample (``spread``,
+    :func:`reading_spread`; None: at the capture mean of the reading): a dithered
+    channel's samples flicker over several levels, and p's clamp at TMIN/TMAX (where a
+    warm-up rests) and its curvature make their mean p differ from p at their mean. Its
+    target is the model's bias, not the readings: the fit smooths out the capture noise
+    that PX4's and ArduPilot's scripts fit on the step values themselves. Same clamp and
+    same readings as :func:`quantised_reading_error`."""
     lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
     read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
     ok = np.isfinite(read) & np.isfinite(rebuilt)
-    x = model.x_of(np.clip(read[ok], lo, hi))
+    if spread is not None:
+        spread = (spread[0], spread[1][ok])
     target = model.params_vector_at(np.clip(rebuilt[ok], lo, hi), extrapolate=True)[:, sfem.BIAS]
     levels = np.unique(np.round(np.clip(read[ok], lo, hi) / max(float(lsb_c), 1e-9))).size
     degree = max(0, min(FIRMWARE_DEGREE, levels - 1))
-    V = np.vander(x, degree + 1, increasing=True)
+    V = _firmware_design(model, read[ok], lo, hi, degree + 1, spread)
     coef = np.linalg.lstsq(V, target, rcond=None)[0].T  # (3, degree+1)
     return coef
 
 
 def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
-                            lsb_c: float, fit_heldout_mg: list[float] | None
-                            ) -> dict[str, object]:
+                            lsb_c: float, fit_heldout_mg: list[float] | None, *,
+                            t_s: np.ndarray | None = None, level_c: float | None = None,
+                            dither_lsb: float = 0.0) -> dict[str, object]:
     """What a firmware that reads the raw quantised channel makes of this model on its fit
     log, and the polynomial the export writes for it (``raw_reading_bias_x_g``:
     :func:`raw_reading_polynomial_x_g`). Both firmwares subtract p(clamp(T)) (module
     docstring) with T their own reading, while the model was fitted in the die
     temperature rebuilt from that channel (:mod:`calibration.temperature_dequantise`).
-    Per axis, over the log's capture means: the RMS and largest |p(T_read) − b(T_rebuilt)|
-    (mg) of the exported p, each clamped to the valid range as the firmwares clamp to
-    TMIN/TMAX, and the same RMS for the model's own b at the reading
-    (``model_at_raw_rms_mg``: what exporting b(T) itself would cost); ``tempco_lsb_mg``,
-    the largest |dp/dT| over the valid range times the LSB (the step the firmware's offset
-    takes at each change of its reading); and the fit's own held-out RMS (mg) with the
-    ratio of the exported p's RMS to it. The constant part (X0, INS_ACCOFFS) cancels in
-    the difference, so the figure is the same for PX4 and ArduPilot. A capture's raw mean
-    stands for its samples' readings: p is smooth, so the mean of p over a capture's
-    samples and p at their mean differ by second-order terms only."""
+
+    Per axis, over the log's capture means: the RMS and largest difference (mg) between
+    the offset the firmware subtracts and the model's whole offset, b(T_rebuilt) plus its
+    rate term k(T)·dT/dt (``t_s`` given; the firmware's offset is a function of T only,
+    so the rate term is part of what the file leaves undone on this log, said apart as
+    ``rate_term_rms_mg``). The firmware's offset is the mean over each capture's samples
+    of p(clamp(T_read)) at each sample's own reading (``level_c`` given:
+    :func:`reading_spread`; PX4's ``calc_thermal_offsets_3D`` takes one reading, not an
+    average), with ``smoothed_rms_mg`` the same figure with p at the capture mean of the
+    reading (a firmware that low-pass filters its temperature, as ArduPilot's InvenSense
+    drivers do at 1 Hz, evaluates p about there). Without ``level_c`` both are at the
+    capture mean (a model file's record from before). Also the same RMS for the model's
+    own b at the reading (``model_at_raw_rms_mg``: what exporting b(T) itself would cost);
+    ``tempco_lsb_mg``, the largest |dp/dT| over the valid range times the LSB (the step the
+    firmware's offset takes at each change of its reading); and the fit's own held-out RMS
+    (mg) with the ratio of the stated RMS to it. The constant part (X0, INS_ACCOFFS)
+    cancels in the difference, so the figure is the same for PX4 and ArduPilot."""
     lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
     read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
     ok = np.isfinite(read) & np.isfinite(rebuilt)
-    coef = raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c)
+    spread = (None if level_c is None else
+              reading_spread(np.where(ok, read, np.nanmean(read[ok])),
+                             np.where(ok, rebuilt, np.nanmean(rebuilt[ok])), lsb_c,
+                             float(level_c), float(dither_lsb)))
+    coef = raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread)
+    if spread is not None:
+        spread = (spread[0], spread[1][ok])
 
     def bias_mg(t: np.ndarray) -> np.ndarray:
         P = model.params_vector_at(np.clip(t, lo, hi), extrapolate=True)
         return P[:, sfem.BIAS] * 1e3
 
-    def exported_mg(t: np.ndarray) -> np.ndarray:
-        V = np.vander(model.x_of(np.clip(t, lo, hi)), coef.shape[1], increasing=True)
-        return V @ coef.T * 1e3
+    def exported_mg(t: np.ndarray, sp: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> np.ndarray:
+        return _firmware_design(model, t, lo, hi, coef.shape[1], sp) @ coef.T * 1e3
 
-    at_rebuilt = bias_mg(rebuilt[ok])
-    diff = exported_mg(read[ok]) - at_rebuilt
-    model_diff = bias_mg(read[ok]) - at_rebuilt
+    rate_mg = np.zeros((int(np.sum(ok)), 3))
+    if t_s is not None and model.temperature_rate:
+        from calibration.warmup import rate_offset_g
+
+        rate_mg = rate_offset_g(model, np.asarray(t_s, float)[ok], rebuilt[ok]) * 1e3
+    whole = bias_mg(rebuilt[ok]) + rate_mg  # what `compensate` subtracts
+    diff = exported_mg(read[ok], spread) - whole
+    smoothed = exported_mg(read[ok]) - whole
+    model_diff = bias_mg(read[ok]) - whole
     grid = np.linspace(lo, hi, 201)
     slope = (np.abs(np.gradient(exported_mg(grid), grid, axis=0)) if hi > lo
              else np.zeros((1, 3)))
@@ -145,9 +214,12 @@ def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: 
     out: dict[str, object] = {
         "lsb_c": float(lsb_c),
         "readings": int(np.sum(ok)),
+        "per_sample": spread is not None,
         "rms_mg": [float(v) for v in rms],
         "peak_mg": [float(v) for v in (np.max(np.abs(diff), axis=0) if diff.size
                                        else np.zeros(3))],
+        "smoothed_rms_mg": [float(v) for v in rms_of(smoothed)],
+        "rate_term_rms_mg": [float(v) for v in rms_of(rate_mg)],
         "model_at_raw_rms_mg": [float(v) for v in rms_of(model_diff)],
         "tempco_lsb_mg": [float(v) * float(lsb_c) for v in np.max(slope, axis=0)],
         "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
@@ -184,6 +256,19 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
     def xyz(v: object) -> str:
         return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
 
+    per_sample = bool(record.get("per_sample"))
+    rate = record.get("rate_term_rms_mg")
+    whose = ("the model's whole offset at the rebuilt temperature" if rate is not None
+             else "the offset at the rebuilt temperature")
+    how = ""
+    if per_sample:
+        how = (f", p evaluated at each sample's own reading as PX4 does (at the capture mean "
+               f"of the reading instead, as a firmware that low-pass filters its reading "
+               f"evaluates it: RMS {xyz(record['smoothed_rms_mg'])} mg)")
+    dropped = ""
+    if rate is not None and max(rate) > 0:  # type: ignore[arg-type]
+        dropped = (f"; this includes the model's rate term k(T)*dT/dt, which the firmware "
+                   f"cannot apply (alone RMS {xyz(rate)} mg on the fit log)")
     if in_reading:
         main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
                 f"channel, and the firmware evaluates its offset at its own {q:g} degC "
@@ -192,23 +277,25 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
                 f"at the rebuilt temperature against the reading clamped to TMIN..TMAX (the "
                 f"model's own b(T) evaluated at the reading instead: RMS "
                 f"{xyz(record['model_at_raw_rms_mg'])} mg); on the fit log it differs from "
-                f"the offset at the rebuilt temperature by RMS {xyz(rms)} mg, peak "
-                f"{xyz(peak)} mg (x / y / z); the offset steps by up to {xyz(step)} mg at "
-                f"each change of the reading (tempco x LSB)")
+                f"{whose} by RMS {xyz(rms)} mg, peak {xyz(peak)} mg (x / y / z){how}"
+                f"{dropped}; the offset steps by up to {xyz(step)} mg at each change of the "
+                f"reading (tempco x LSB)")
         why = "and this file's polynomial is already the least-squares one in it"
     else:
         main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
                 f"channel, but the firmware evaluates it at its own {q:g} degC reading: on "
-                f"the fit log ({record['readings']} capture means) that differs from the "
-                f"offset at the rebuilt temperature by RMS {xyz(rms)} mg, peak {xyz(peak)} "
-                f"mg (x / y / z); the offset steps by up to {xyz(step)} mg at each change "
-                f"of the reading (tempco x LSB)")
+                f"the fit log ({record['readings']} capture means) that differs from "
+                f"{whose} by RMS {xyz(rms)} mg, peak {xyz(peak)} "
+                f"mg (x / y / z){how}{dropped}; the offset steps by up to {xyz(step)} mg at "
+                f"each change of the reading (tempco x LSB)")
         why = ("a fit on the step values, as PX4's and ArduPilot's scripts make, does about "
                "as well")
     if fit is None:
         return [main]
     ratio = float(record.get("ratio_to_fit", 0.0))  # type: ignore[arg-type]
-    versus = f"the fit's own held-out RMS is {xyz(fit)} mg"
+    versus = (f"the fit's own held-out RMS is {xyz(fit)} mg (the file's error on such data "
+              f"is then at most the sum of the two, about their root-sum-square when they "
+              f"are unrelated)")
     if ratio >= LOUD_FACTOR:
         return [f"WARNING: the firmware's {q:g} degC temperature reading will cost up to "
                 f"{ratio:.1f} x the fit's own error: {main}; {versus}. No parameter file removes "
@@ -343,11 +430,35 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
          "d = clamp(T, TMIN, TMAX) - TREF; subtracted from sensor_accel x/y/z (i = 0, 1, 2)",
          "T is the accelerometer's own temperature reading (sensor_accel.temperature)",
          "outside TMIN..TMAX the firmware holds the offset at the edge value (clamp)",
-         x0_note],
+         px4_update_gate(c, lo, hi, t_ref), x0_note],
         limits, reading)
     body = "\n".join(f"1\t1\t{n}\t{_num(v, t)}\t{t}" for n, v, t in rows)
     text = head + "# Vehicle-Id Component-Id Name Value Type\n" + body + "\n"
     return FirmwareExport(text, limits, reading)
+
+
+# PX4 publishes a new thermal offset only when the temperature it polls (once a second) has
+# moved by more than this since the offset it last published (TemperatureCompensation::
+# update_offsets_accel, TemperatureCompensationModule::Run at 1 Hz).
+PX4_UPDATE_GATE_C = 1.0
+
+
+def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float) -> str:
+    """What PX4's update gate costs: the offset in use may be that of a reading up to
+    :data:`PX4_UPDATE_GATE_C` away from the current one (a ``> 1.0`` test: with a 1 °C
+    channel, one level either side), so up to the polynomial's largest |dp/dT| over
+    TMIN..TMAX times that, per axis (mg). Not part of the figures at the firmware's reading,
+    which evaluate the offset at every sample's reading."""
+    d = np.linspace(lo, hi, 201) - t_ref
+    slope = np.array([np.max(np.abs(np.polynomial.polynomial.polyval(
+        d, np.polynomial.polynomial.polyder(c_m_s2[i])))) if hi > lo else 0.0
+        for i in range(3)])
+    cost_mg = slope * PX4_UPDATE_GATE_C / STANDARD_GRAVITY_M_S2 * 1e3
+    return (f"PX4 publishes a new offset only when its temperature reading (polled once a "
+            f"second) has moved by more than {PX4_UPDATE_GATE_C:g} degC since the last one "
+            f"it published: the offset in use may be that of a reading up to "
+            f"{PX4_UPDATE_GATE_C:g} degC away, up to "
+            + " / ".join(f"{v:.3f}" for v in cost_mg) + " mg (x / y / z)")
 
 
 def export_ardupilot(model: ThermalModel, *, instance: int = 1,

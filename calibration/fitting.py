@@ -288,7 +288,8 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         # temperature, on this log (the exports say it: export_firmware.py)
         firmware = quantised_reading_error(
             model, dq.read_c, captures.temperature_c(), dq.lsb_c,
-            wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"))
+            wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"),
+            t_s=captures.t_s, level_c=dq.level_c, dither_lsb=dq.dither_lsb)
         model.provenance["quantised_temperature"] = firmware
         wf.report["quantised_temperature"] = firmware
         wf.report["notes"] += [f"firmware export: {line}"

@@ -152,6 +152,9 @@ class Dequantised:
     # each reading's temperature as the channel read it (the firmware's input); None when
     # not rebuilt
     read_c: np.ndarray | None = None
+    # a level of the channel's lattice (°C): its readings are level_c + k · lsb_c, what the
+    # firmware sees sample by sample (export_firmware.reading_weights)
+    level_c: float = 0.0
 
     def unresolved_mask(self, t_s: np.ndarray) -> np.ndarray:
         """Readings at ``t_s`` inside an unresolved span (True: the temperature is known
@@ -278,7 +281,7 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
         out = y.copy()
         out[ok] = base + q * dith.z
         return Dequantised(out, q, dither_lsb=dith.sigma_lsb, window_s=dith.window_s,
-                           read_c=y.copy())
+                           read_c=y.copy(), level_c=base)
     runs = _settled_runs(z)
     if len(runs) < 2:
         return unchanged
@@ -301,7 +304,8 @@ def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
     out = y.copy()
     out[ok] = base + q * z_rec
     n_cross = sum(k != "touch" for k in kinds)
-    return Dequantised(out, q, n_cross, turns, unresolved=spans, read_c=y.copy())
+    return Dequantised(out, q, n_cross, turns, unresolved=spans, read_c=y.copy(),
+                       level_c=base)
 
 
 def summed_lattice(y: np.ndarray, samples: np.ndarray) -> tuple[float, float] | None:
