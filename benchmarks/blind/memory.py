@@ -2,6 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m benchmarks.blind.memory [--rows 100000]
         [--shape positions|samples] [--cli] [--csv PATH] [--only calibrate|diagnose]
+        [--effect scale_nonlinearity --size 10]
 
 Builds one twin campaign (11 steps) of about ``--rows`` readings, writes it to a CSV
 (temporary unless ``--csv`` names one; an existing ``--csv`` is reused as it is), then runs
@@ -15,6 +16,14 @@ figure per row. Two shapes of a long recording:
 * ``samples``: Table 1 once per step (24 positions), each position's capture written as
   raw samples (one row per sample at the sensor's 62.5 Hz, ``n`` = 1, no ``sd_*``): a
   streamed recording, many rows per position.
+
+``--effect``/``--size`` conceal a catalogue effect in the sensor
+(``benchmarks.blind.catalogue.make``, size in its unit, the pattern of signs drawn with seed
+0): a recording ``diagnose`` finds a mismatch in, so its accepted terms and checks run at
+that length (issue 22).
+
+``--answer PATH`` writes ``diagnose``'s JSON there (after its peak is read), so that two
+versions' answers on the same recording can be compared.
 
 ``--cli`` runs the commands a user runs (``soakcal calibrate --json`` with its held-out
 refits and report, ``soakcal diagnose --json``) instead of the library calls
@@ -34,6 +43,8 @@ from pathlib import Path
 CHILD = r"""
 import contextlib, io, json, os, resource, sys, tempfile, time
 what, path, n_null, cli = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1"
+answer = sys.argv[5] if len(sys.argv) > 5 else ""
+doc = None
 t0 = time.perf_counter()
 if cli:
     from service.cli import main
@@ -59,9 +70,12 @@ else:
         fit_campaign(rec)
     else:
         from calibration.discrepancy import diagnose
-        diagnose(rec, n_null=n_null)
+        doc = diagnose(rec, n_null=n_null).to_dict()
     extra = {}
 ru = resource.getrusage(resource.RUSAGE_SELF)
+if answer and doc is not None:  # after the peak was read: the answer, to compare runs
+    with open(answer, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1, sort_keys=True, ensure_ascii=False)
 print(json.dumps({"peak_rss_mb": ru.ru_maxrss / 1024, "after_read_mb": base,
                   "wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
                   **extra}))
@@ -70,8 +84,10 @@ print(json.dumps({"peak_rss_mb": ru.ru_maxrss / 1024, "after_read_mb": base,
 SETPOINTS_C = [float(t) for t in range(-40, 61, 10)]
 
 
-def long_recording(rows: int, shape: str):  # -> Recording
-    """About ``rows`` readings of one 11-step twin campaign in the given shape."""
+def long_recording(rows: int, shape: str, effect: str | None = None,
+                   size: float = 0.0):  # -> Recording
+    """About ``rows`` readings of one 11-step twin campaign in the given shape, with the
+    catalogue ``effect`` of ``size`` (its unit) concealed when given."""
     import numpy as np
 
     from calibration.schedules import table1
@@ -79,6 +95,13 @@ def long_recording(rows: int, shape: str):  # -> Recording
     from simulators.truth import SensorTruth
 
     truth = SensorTruth.adxl355_typical(seed=1)
+    if effect:
+        from benchmarks.blind.catalogue import draw_pattern, make
+        from benchmarks.blind.protocols import PROTOCOLS
+
+        protocol = PROTOCOLS["short_soak"]
+        pattern = draw_pattern(np.random.default_rng(0), protocol, 0)
+        truth.effects = [make(effect, size, pattern, protocol).effect]
     per_step = len(SETPOINTS_C) * 24
     if shape == "positions":
         reps = max(1, rows // per_step)
@@ -103,6 +126,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cli", action="store_true", help="run the soakcal commands")
     ap.add_argument("--csv", type=Path, help="keep (or reuse) the recording here")
     ap.add_argument("--only", choices=("calibrate", "diagnose"))
+    ap.add_argument("--answer", type=Path, help="write diagnose's JSON here")
+    ap.add_argument("--effect", help="a catalogue effect id concealed in the sensor")
+    ap.add_argument("--size", type=float, default=0.0, help="its size, in its unit")
     a = ap.parse_args(argv)
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -110,13 +136,14 @@ def main(argv: list[str] | None = None) -> int:
         if not path.exists():
             from calibration.recording import write_recording
 
-            rec = long_recording(a.rows, a.shape)
+            rec = long_recording(a.rows, a.shape, a.effect, a.size)
             write_recording(path, rec)
             del rec  # the children read the CSV; the parent must not hold a copy
             gc.collect()
         with open(path, encoding="utf-8") as fh:
             n_rows = sum(1 for _ in fh) - 1
-        out = {"rows": n_rows, "shape": a.shape, "n_null": a.n_null, "cli": a.cli}
+        out = {"rows": n_rows, "shape": a.shape, "n_null": a.n_null, "cli": a.cli,
+               "effect": a.effect, "size": a.size}
         whats = (a.only,) if a.only else ("calibrate", "diagnose")
         for what in whats:
             r = subprocess.run(
@@ -128,6 +155,7 @@ def main(argv: list[str] | None = None) -> int:
                     str(path),
                     str(a.n_null),
                     "1" if a.cli else "0",
+                    str(a.answer) if a.answer and what == "diagnose" else "",
                 ],
                 capture_output=True,
                 text=True,

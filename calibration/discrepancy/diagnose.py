@@ -28,7 +28,12 @@ from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID, CatalogueEffect,
 from calibration.discrepancy.effects.base import how_told_apart
 from calibration.discrepancy.effects.temperature_rate import lag_alike
 from calibration.discrepancy.effects.turntable_geometry import TURNTABLE_GEOMETRY, turn_columns
-from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
+from calibration.discrepancy.heldout import (
+    column_scale,
+    folds,
+    heldout_rms_ug,
+    heldout_rms_ug_by_blocks,
+)
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import (
@@ -37,7 +42,12 @@ from calibration.discrepancy.plateau_noise import (
     quantised_channel,
 )
 from calibration.discrepancy.plateau_settling import settling_alike
-from calibration.discrepancy.problem import LinearProblem, build_problem
+from calibration.discrepancy.problem import (
+    AxisBlockDesign,
+    LinearProblem,
+    _axis_block_design,
+    build_problem,
+)
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
 from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.discrepancy.temperature_jump import temperature_jump_alike
@@ -393,18 +403,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             continue
         excl_before = _flagged(pb, terms)
         excl_after = _flagged(pb, terms + [term])
-        X_before, y_before = _design(pb, terms, whiten=False)
         # Both sides are scored on the same rows (issue 10): a newly flagged reading leaves
         # the "before" figure too, else dropping it alone counts as the term's gain (the
         # circular 44.02 → 40.03 µg of the issue). Its gain is then only its influence on
         # the predictions of the other plateaus.
-        ho_before = heldout_rms_ug(y_before, X_before, pb.w, pb.row, fold_masks, excl_after,
-                                   _shrunk_columns(pb, terms))
-        del X_before  # one (m × p) design at a time
-        X_after, y_after = _design(pb, terms + [term], whiten=False)
-        ho_after = heldout_rms_ug(y_after, X_after, pb.w, pb.row, fold_masks, excl_after,
-                                  _shrunk_columns(pb, terms + [term]))
-        del X_after
+        ho_before = _heldout_ug(pb, terms, fold_masks, excl_after)
+        ho_after = _heldout_ug(pb, terms + [term], fold_masks, excl_after)
         # A flagged reading is evidenced by its own test, which is a held-out test already:
         # the reading left out and predicted by all the others. Scored on the same rows, its
         # gain on the other plateaus is only its pull on their fit, far below their noise,
@@ -552,7 +556,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                              left_structure if scanned.significant else []))
     # Found by the family test, withheld as one plateau's: reported, not dropped (issue 22).
     # One still_seen for both reports: it builds the final model's basis once, when asked.
-    seen = one_step_report.still_seen(pb, _design, terms, alpha)
+    seen = one_step_report.still_seen(pb, _basis, terms, alpha)
     final_rms = _rms(final_res, flagged)
     findings, shown = one_step_report.report(pb, findings, one_step_seen, Finding, seen,
                                              final_rms)
@@ -656,16 +660,14 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
                 for s_ in ctx.step_ids}
     if len(per_step) < 3:
         return None
-    Xw, yw = _design(pb, terms)
     Tw = pb.whiten(term.X)
     # Every plateau in turn, the largest contributions first: a jump "from step 1 on" is
     # as well "step 0 differs" (its complement), which carries none of the contribution.
     for step in sorted(per_step, key=per_step.get, reverse=True):
-        u = np.column_stack([np.ones(ctx.n), ctx.input_g]) * (ctx.steps == step)[:, None]
-        block = np.zeros((ctx.n, 3, 12))
-        for a in range(3):
-            block[:, a, 4 * a:4 * a + 4] = u
-        U = stats.orthonormal_basis(np.hstack([Xw, pb.whiten(pb.lift(block))]))
+        # The model and the plateau's block, as a basis held as its recipe on a long
+        # recording (issue 22: the whole design, its copy with the block and their basis
+        # were 2.5 GB at 300 k readings).
+        U, yw = _basis(pb, terms + [Term("one_step", float(step), _one_step_block(pb, step))])
         e = yw - U @ (U.T @ yw)
         with np.errstate(divide="ignore", invalid="ignore"):
             lp, _, k, absorbed, _ = stats.linear_stats(U, Tw, e, np.zeros((pb.m, 1)))
@@ -677,6 +679,21 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
         if k == 0 or lp > np.log(alpha) or gone:
             return step
     return None
+
+
+def _one_step_block(pb: LinearProblem, step: int) -> np.ndarray | AxisBlockDesign:
+    """"Plateau ``step`` differs", lifted (m × 12): per axis 1, a_x, a_y, a_z on its readings.
+
+    In reference mode these are the axis blocks of an (N × 4) block (problem.AxisBlockDesign
+    above the size: not an (m × 12) array that is zero off the plateau)."""
+    ctx = pb.ctx
+    u = np.column_stack([np.ones(ctx.n), ctx.input_g]) * (ctx.steps == step)[:, None]
+    if pb.mode == "reference":
+        return _axis_block_design(u)
+    block = np.zeros((ctx.n, 3, 12))
+    for a in range(3):
+        block[:, a, 4 * a:4 * a + 4] = u
+    return pb.lift(block)
 
 
 def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, n_null: int,
@@ -817,9 +834,7 @@ def _physics_checks(pb: LinearProblem, terms: list[Term], findings: list[Finding
         chosen = [t for t in terms if bool(t.rows) == row_terms]
         if not chosen:
             continue
-        Xw, yw = _design(pb, [t for t in terms if not t.rows] if row_terms else terms)
-        U = stats.orthonormal_basis(Xw)
-        del Xw
+        U, yw = _basis(pb, [t for t in terms if not t.rows] if row_terms else terms)
         e = yw - U @ (U.T @ yw)
         for t in chosen:
             f = _finding_of(findings, t)
@@ -856,9 +871,7 @@ def _shape_after_turn(pb: LinearProblem, terms: list[Term], findings: list[Findi
              and BY_ID[f.effect].checks_shape_after_turn]
     if not named:
         return terms, findings, []
-    Xw, yw = _design(pb, terms)
-    U = stats.orthonormal_basis(Xw)
-    del Xw
+    U, yw = _basis(pb, terms)
     e = yw - U @ (U.T @ yw)
     out: list[dict[str, Any]] = []
     gone: set[TermKey] = set()
@@ -1178,13 +1191,21 @@ def _design(pb: LinearProblem, terms: list[Term], whiten: bool = True):
 def _heldout_in_noise_units(pb: LinearProblem, terms: list[Term], term: Term,
                             fold_masks: list[np.ndarray], excl: np.ndarray) -> bool:
     """Held-out prediction error in units of the noise, without and with ``term``: improved?"""
-    rms = []
-    for ts in (terms, terms + [term]):
-        X, y = _design(pb, ts, whiten=False)
-        rms.append(heldout_rms_ug(y, X, pb.w, pb.row, fold_masks, excl, _shrunk_columns(pb, ts),
-                                  in_noise_units=True))
-        del X
+    rms = [_heldout_ug(pb, ts, fold_masks, excl, in_noise_units=True)
+           for ts in (terms, terms + [term])]
     return rms[1] < rms[0]
+
+
+def _heldout_ug(pb: LinearProblem, terms: list[Term], fold_masks: list[np.ndarray],
+                excl: np.ndarray, in_noise_units: bool = False) -> float:
+    """Held-out RMS of the model of ``terms`` (heldout.py); by row blocks of the whitened
+    design above ``stats.TALL_BYTES`` (see :func:`_tall_rows`), else on the whole design."""
+    shrunk = _shrunk_columns(pb, terms)
+    if _tall_rows(pb, terms) is not None:
+        return heldout_rms_ug_by_blocks(WhitenedDesign([pb.X0] + [t.X for t in terms], pb.w),
+                                        pb.y, pb.row, fold_masks, excl, shrunk, in_noise_units)
+    X, y = _design(pb, terms, whiten=False)
+    return heldout_rms_ug(y, X, pb.w, pb.row, fold_masks, excl, shrunk, in_noise_units)
 
 
 def _shrunk_columns(pb: LinearProblem, terms: list[Term]) -> np.ndarray | None:
@@ -1463,9 +1484,7 @@ def _channel_glitches(pb: LinearProblem, terms: list[Term], findings: list[Findi
             for r in f.rows]
     if not rows or pb.ctx.temperature_source == "none":
         return findings
-    Xw, yw = _design(pb, [t for t in terms if not t.rows])
-    U = stats.orthonormal_basis(Xw)
-    del Xw
+    U, yw = _basis(pb, [t for t in terms if not t.rows])
     e = yw - U @ (U.T @ yw)
     skip = {r for t in terms for r in t.rows}
     checks = {r: channel_glitch.check_reading(pb, U, e, r, skip - {r}, alpha) for r in rows}

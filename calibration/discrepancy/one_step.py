@@ -67,19 +67,19 @@ def _axes(pb: Any, contrib_g: np.ndarray, step: int) -> tuple[str, ...]:
     return tuple(AXES[a] for a in range(3) if per[a] >= 0.5 * per.max())
 
 
-def still_seen(pb: Any, design: Callable[..., tuple[np.ndarray, np.ndarray]], terms: list,
+def still_seen(pb: Any, basis: Callable[..., tuple[np.ndarray, np.ndarray]], terms: list,
                alpha: float) -> Callable[[OneStep], bool]:
     """Does a rejected term still explain structure (single F test at α) after the final
     model? Used only where other findings stand: one of them may have taken the structure.
-    The final model's basis and residual are built once, on the first record asked about,
-    and shared by the others."""
+    ``basis(pb, terms)``: the orthonormal basis of the whitened design and the whitened data
+    (``diagnose._basis``: held as its recipe on a long recording). The final model's basis
+    and residual are built once, on the first record asked about, and shared by the
+    others."""
     final: list[tuple[np.ndarray, np.ndarray]] = []
 
     def seen(rec: OneStep) -> bool:
         if not final:
-            Xw, yw = design(pb, terms)
-            U = stats.orthonormal_basis(Xw)
-            del Xw
+            U, yw = basis(pb, terms)
             final.append((U, yw - U @ (U.T @ yw)))
         U, e = final[0]
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -305,3 +305,102 @@ def test_basis_held_as_its_recipe_answers_as_the_stored_basis(monkeypatch):
     assert isinstance(H, RowBlockBasis) and H.shape == (3 * n, Ud.shape[1] + 2)
     np.testing.assert_allclose(stats.project_out(H, E), stats.project_out(np.hstack([Ud, Nb]), E),
                                atol=1e-12)
+
+
+def test_visit_contrast_by_labels_equals_the_dense_columns(monkeypatch):
+    """visits_differ on a long repeated schedule: every visit is a position of its own, and
+    its dense columns (3 × positions × m) do not fit (issue 22: 196 TB at 300 k readings).
+    The test in the offsets' own space gives the dense test's log p and dof."""
+    from calibration.discrepancy.effects import structure
+
+    rec = _six_tables_one_way()
+    pb = build_problem(rec)
+    rng = np.random.default_rng(12)
+    # a contrast between visits on top of the noise, so that log p is far from 0
+    pos = pb.ctx.positions[pb.row]
+    yw = pb.y * pb.w + 0.5 * rng.standard_normal(int(pos.max()) + 1)[pos]  # 0.5 σ per visit
+    U = stats.orthonormal_basis(pb.whiten(np.asarray(pb.X0)))
+    e = yw - U @ (U.T @ yw)
+    groups = structure.direction_groups(pb.ctx.positions, pb.ctx.input_g)
+    assert len(groups) >= 8 and max(len(g) for g in groups) >= 6
+    common, visit = [], []
+    for g in groups:
+        common.append(structure.per_axis_indicator(pb.ctx.n, np.isin(pb.ctx.positions, g)))
+        visit += [structure.per_axis_indicator(pb.ctx.n, pb.ctx.positions == p) for p in g]
+    Uc, ec = structure.extend(U, e, structure.whitened(pb, np.concatenate(common, axis=2)))
+    lp, k = structure.log_p(Uc, ec, structure.whitened(pb, np.concatenate(visit, axis=2)))
+    assert k > 0 and lp < -5.0
+    lp_l, k_l = structure._visits_log_p_by_labels(pb, U, e, groups)
+    assert k_l == k
+    np.testing.assert_allclose(lp_l, lp, rtol=1e-7)
+    # visits_differ takes it above the size, with the dense columns forbidden
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 48 * 101)
+    monkeypatch.setattr(structure, "per_axis_indicator", None)
+    got = structure.visits_differ(pb, U, e, [], ["x", "y", "z"], 0.01)
+    assert got is not None and got["log10_p"] == round(lp / np.log(10), 1)
+
+
+@pytest.mark.parametrize("shrunk_last", [False, True])
+@pytest.mark.parametrize("in_noise_units", [False, True])
+def test_heldout_by_row_blocks_equals_the_whole_design(monkeypatch, shrunk_last,
+                                                       in_noise_units):
+    """The held-out RMS of a long recording's model from row blocks of its whitened design
+    (issue 22: four (m × p) copies, 4.6 GB at 1 M readings) equals the whole-array form."""
+    from calibration.discrepancy.basis import WhitenedDesign
+    from calibration.discrepancy.heldout import heldout_rms_ug, heldout_rms_ug_by_blocks
+    from calibration.discrepancy.problem import AxisBlockDesign, _axis_blocks
+
+    rng = np.random.default_rng(13)
+    n, k = 900, 4
+    block = rng.standard_normal((n, k)) * np.array([1.0, 1e2, 1e-3, 5.0])
+    extra = rng.standard_normal((3 * n, 3)) * 1e-6  # an effect's columns, 10⁶ smaller
+    dense = np.hstack([_axis_blocks(block), extra])
+    w = rng.uniform(5e3, 2e4, 3 * n)
+    y = dense @ rng.standard_normal(dense.shape[1]) + rng.standard_normal(3 * n) / w
+    row = np.repeat(np.arange(n), 3)
+    steps = np.arange(n) // 100  # nine "plateaus"
+    folds = [steps == s for s in range(1, 8)]
+    excl = np.zeros(n, bool)
+    excl[[5, 150, 420]] = True
+    shrunk = np.r_[np.zeros(3 * k, bool), np.ones(3, bool)] if shrunk_last else None
+    want = heldout_rms_ug(y, dense, w, row, folds, excl, shrunk, in_noise_units)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 15 * 97)  # blocks that do not divide m
+    design = WhitenedDesign([AxisBlockDesign(block), extra], w)
+    got = heldout_rms_ug_by_blocks(design, y, row, folds, excl, shrunk, in_noise_units)
+    assert want > 0
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_accepted_term_checks_run_without_the_whole_design(monkeypatch):
+    """With a term accepted, the one-plateau check, the held-out scores, the physics checks
+    and the final reports use the row-block forms above TALL_BYTES (issue 22: at 1 M
+    readings they built the whole design and its basis again and again): the same diagnosis,
+    with the whole design and the dense basis forbidden."""
+    from calibration.discrepancy.basis import RowBlockBasis
+    from calibration.schedules import table1
+    from simulators.effects import ScaleNonlinearity
+
+    dg = importlib.import_module("calibration.discrepancy.diagnose")
+    truth = SensorTruth.adxl355_typical(seed=4)
+    truth.effects = [ScaleNonlinearity(k2_per_g=np.array([20e-6, -10e-6, 5e-6]),
+                                       k3_per_g2=np.array([0.0, 8e-6, 0.0]))]
+    rec = simulate_campaign(truth, ONE_WAY, np.tile(table1(), (6, 1)), seed=54, soak_min=20)
+    ref = diagnose(rec, n_null=30, seed=2).to_dict()
+    assert [f["effect"] for f in ref["findings"]][:1] == ["scale_nonlinearity"]
+
+    def forbidden(*_a, **_k):
+        raise AssertionError("the whole design or its dense basis was built")
+
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 80 * 101)  # blocks that do not divide m
+    monkeypatch.setattr(dg, "_design", forbidden)
+    monkeypatch.setattr(RowBlockBasis, "__array__", forbidden)
+    tall = diagnose(rec, n_null=30, seed=2).to_dict()
+    assert tall["verdict"] == ref["verdict"]
+    assert [f["effect"] for f in tall["findings"]] == [f["effect"] for f in ref["findings"]]
+    for f_tall, f_ref in zip(tall["findings"], ref["findings"], strict=True):
+        assert f_tall["parameters"].keys() == f_ref["parameters"].keys()
+        for key, v in f_ref["parameters"].items():
+            assert abs(f_tall["parameters"][key] - v) <= 1e-3 * max(abs(v), 1.0)
+        assert abs(f_tall["heldout_rmse_after_ug"] - f_ref["heldout_rmse_after_ug"]) <= 0.02

@@ -109,12 +109,16 @@ def visits_differ(
         ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
     if not groups:
         return None
-    common, visit = [], []
-    for g in groups:
-        common.append(per_axis_indicator(ctx.n, np.isin(ctx.positions, g), ax))
-        visit += [per_axis_indicator(ctx.n, ctx.positions == p, ax) for p in g]
-    Uc, ec = extend(U, e, whitened(pb, np.concatenate(common, axis=2)))
-    lp, k = log_p(Uc, ec, whitened(pb, np.concatenate(visit, axis=2)))
+    n_visits = sum(len(g) for g in groups)
+    if pb.mode == "reference" and 8 * pb.m * 3 * n_visits > stats.TALL_BYTES:
+        lp, k = _visits_log_p_by_labels(pb, U, e, groups)
+    else:
+        common, visit = [], []
+        for g in groups:
+            common.append(per_axis_indicator(ctx.n, np.isin(ctx.positions, g), ax))
+            visit += [per_axis_indicator(ctx.n, ctx.positions == p, ax) for p in g]
+        Uc, ec = extend(U, e, whitened(pb, np.concatenate(common, axis=2)))
+        lp, k = log_p(Uc, ec, whitened(pb, np.concatenate(visit, axis=2)))
     if k == 0 or lp > np.log(alpha):
         return None
     return {
@@ -122,3 +126,74 @@ def visits_differ(
         "axes": [AXES[a] for a in ax],
         "log10_p": round(float(lp / np.log(10)), 1),
     }
+
+
+def _visits_log_p_by_labels(pb: Any, U: Any, e: np.ndarray, groups: list[list[int]]
+                            ) -> tuple[float, int]:
+    """:func:`log_p` of the per-visit offsets after ``U`` and the per-direction offsets, as
+    :func:`visits_differ` computes it densely, in the offsets' own space (reference mode).
+
+    Why (issue 22, memory): on a long recording of a repeated schedule every visit is a
+    position of its own, and the dense columns (one per position and axis, m entries each)
+    would be 3 × positions × m floats (27,000 positions at 300 k readings: 196 TB). Both
+    sets of columns are indicators of disjoint entries, and the per-direction ones lie in
+    the span of the per-visit ones, so the test needs only ``‖P_[U,X] e‖²`` and the rank
+    each adds (:func:`_explained_by_labels`): F = (q_visit − q_dir)/k over the residual
+    after both, with the dense form's dof.
+    """
+    ctx = pb.ctx
+    axis = pb.axis
+    visit_of = {p: i for i, p in enumerate(p for g in groups for p in g)}
+    group_of = {p: i for i, g in enumerate(groups) for p in g}
+    visit = np.array([visit_of.get(int(p), -1) for p in ctx.positions])[pb.row]
+    group = np.array([group_of.get(int(p), -1) for p in ctx.positions])[pb.row]
+    q_dir, k_dir = _explained_by_labels(pb, U, e, np.where(group >= 0, 3 * group + axis, -1),
+                                        3 * len(groups))
+    q_vis, k_vis = _explained_by_labels(pb, U, e, np.where(visit >= 0, 3 * visit + axis, -1),
+                                        3 * len(visit_of))
+    k = k_vis - k_dir
+    if k <= 0:
+        return 0.0, 0
+    q = q_vis - q_dir
+    dof = max(e.size - (U.shape[1] + k_dir) - k, 1)
+    ee = float(e @ e) - q_dir
+    f = q / k / max((ee - q) / dof, 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(stats.f_logsf(f, k, dof)), k
+
+
+LABEL_RANK_TOL = 1e-10  # eigenvalue cut of I − AᵀA (singular values of (I − P_X)U, ≤ 1)
+
+
+def _explained_by_labels(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_labels: int
+                         ) -> tuple[float, int]:
+    """``‖P_[U,X] e‖²`` and ``rank([U, X]) − rank(U)`` for X the whitened indicators of
+    ``labels`` (entry i in column ``labels[i]``, none where −1), ``U`` orthonormal and ``e``
+    orthogonal to it.
+
+    X's columns have disjoint supports, so Q = X·D^-½ is orthonormal and
+    ``P_[U,X] = P_Q + P_W`` with W = (I − P_Q)U: ``‖P_Q e‖² = ‖c‖²``, c = Qᵀe, and, as
+    Uᵀe = 0, ``Wᵀe = −Aᵀc``, ``WᵀW = I − AᵀA`` with A = QᵀU (n_labels × r, summed over
+    row blocks of U). No (m × n_labels) array.
+    """
+    from scipy import sparse
+
+    on = labels >= 0
+    w = pb.w
+    norm = np.sqrt(np.bincount(labels[on], w[on] ** 2, minlength=n_labels))
+    used = norm > 0
+    inv = np.where(used, 1.0 / np.where(used, norm, 1.0), 0.0)
+    c = np.bincount(labels[on], (w * e)[on], minlength=n_labels) * inv
+    r = U.shape[1]
+    A = np.zeros((n_labels, r))
+    step = max(1, stats.CHUNK_BYTES // (8 * max(r, 1)))
+    for i in range(0, e.size, step):
+        j = min(i + step, e.size)
+        sel = np.flatnonzero(on[i:j])
+        S = sparse.csr_matrix((w[i:j][sel], (labels[i:j][sel], sel)), shape=(n_labels, j - i))
+        A += S @ np.asarray(U[i:j])
+    A *= inv[:, None]
+    lam, V = np.linalg.eigh(np.eye(r) - A.T @ A)
+    keep = lam > LABEL_RANK_TOL
+    b = V[:, keep].T @ (A.T @ c)
+    return float(c @ c + np.sum(b**2 / lam[keep])), int(used.sum()) + int(keep.sum()) - r
