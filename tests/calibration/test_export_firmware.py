@@ -454,7 +454,7 @@ def test_the_rate_term_is_folded_into_the_file_as_the_warm_up_saw_it(tmp_path, c
                                              json=True)) == 0
     fitted = load_model(folded)
     assert fitted.temperature_rate  # the premise: the model keeps its rate term
-    fitted.provenance.pop("rate_fold")
+    fitted.provenance.pop("rate_fold", None)
     dropped = tmp_path / "dropped.json"  # as a model file without the fold
     save_model(dropped, fitted)
     lo, hi = fitted.valid_c
