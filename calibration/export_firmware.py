@@ -355,7 +355,10 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
         "at_rest_rms_mg": [float(v) for v in _rms_of((at_rest - mean) * 1e3)],
         "at_rest_peak_mg": [float(v) for v in np.max(np.abs(at_rest - mean), axis=0) * 1e3],
         "at_rest_mean_mg": [float(v) for v in mean * 1e3],
+        "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
     }
+    if fit_heldout_mg is not None:
+        out["ratio_to_fit"] = file_fig["ratio_to_fit"]
     if rebuilt_channel:
         out["reading_figures"] = file_fig
     return out
@@ -568,6 +571,28 @@ def rate_term_folded(fold: dict[str, object]) -> str:
             f"compensate` applies the rate term itself")
 
 
+def rate_fold_warning(model: ThermalModel) -> list[str]:
+    """The loud line for a model read by a fine channel whose folded file is, on its fit
+    log, :data:`LOUD_FACTOR` × the fit's own held-out RMS or more from the model's whole
+    offset on some axis (a rebuilt channel's is said by :func:`quantised_reading_lines`
+    with the folded figures); else none."""
+    fold = model.provenance.get("rate_fold") or {}
+    ratio = fold.get("ratio_to_fit")
+    if (fold.get("folded_rate_x_g") is None or fold.get("reading") != "temperature"
+            or ratio is None or float(ratio) < LOUD_FACTOR):
+        return []
+
+    def xyz(v: object) -> str:
+        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
+
+    return [f"WARNING: the firmware cannot apply this warm-up's rate term k(T)*dT/dt: on the "
+            f"fit log the file (the term's mean at each temperature folded in) differs from "
+            f"the model's whole offset by up to {float(ratio):.1f} x the fit's own held-out "
+            f"RMS {xyz(fold['fit_heldout_mg'])} mg: RMS {xyz(fold['rms_mg'])} mg (x / y / z; "
+            f"see FOLDED below). No parameter file removes it (the firmware's offset is a "
+            f"function of T only); `soakcal compensate` applies the rate term"]
+
+
 def firmware_reading_record(model: ThermalModel) -> dict[str, object] | None:
     """The record :func:`quantised_reading_lines` states: the model's
     ``quantised_temperature`` record, with the figures of the file that folds the rate term
@@ -589,7 +614,8 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
     t_ref = 0.5 * (lo + hi)  # as PX4's process_sensor_caldata.py: mid-range reference
     c = bias_polynomials_m_s2(model, t_ref, file_bias_x_g(model))
     limits = left_out(model)
-    reading = quantised_reading_lines(firmware_reading_record(model))
+    reading = quantised_reading_lines(firmware_reading_record(model)) + \
+        rate_fold_warning(model)
     # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
     # is then 0, as PX4's own script leaves it (~0, readings minus their median), and the
     # constant stays with the ordinary calibration's CAL_ACCn_xOFF.
@@ -667,7 +693,8 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
     c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
                               file_bias_x_g(model)) * ARDUPILOT_SCALE_FACTOR
     limits = left_out(model)
-    reading = quantised_reading_lines(firmware_reading_record(model))
+    reading = quantised_reading_lines(firmware_reading_record(model)) + \
+        rate_fold_warning(model)
     limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
                   f"INS_ACC{'' if instance == 1 else instance}OFFS, measured by the ordinary "
                   "accelerometer calibration at INS_ACC"
