@@ -60,7 +60,11 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import draw_case, import_args, simulate, write_log  # noqa: E402
 from calibration import sfem  # noqa: E402
-from calibration.export_firmware import STANDARD_GRAVITY_M_S2, export_px4  # noqa: E402
+from calibration.export_firmware import (  # noqa: E402
+    STANDARD_GRAVITY_M_S2,
+    export_px4,
+    firmware_reading_record,
+)
 from calibration.model_file import load_model  # noqa: E402
 
 # the paired bootstrap of export ÷ peer resamples windows of this length (5-s means within
@@ -93,11 +97,12 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path,
 
     at_raw = log.acc_g - bias_g(log.temp_c)
     exported = log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
+    # the figures the export states (a folded rate term's file: rate_fold's)
+    record = firmware_reading_record(model) or {}
     model.provenance.pop("rate_fold", None)
     dropped = log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
     px4, ardupilot = method_px4(log), method_ardupilot(log)[0]
     ok = np.all(np.isfinite(sc), axis=1)
-    record = model.provenance.get("quantised_temperature") or {}
     own, raw = heldout_rms_mg(log, sc), heldout_rms_mg(log, exported)
     return out | {
         "soakcal": own.tolist() if ok.all() else None,
