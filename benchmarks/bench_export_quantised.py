@@ -18,6 +18,10 @@ it: 10-s blocks alternately fit and held out, RMS of held-out 5-s means, mg x / 
 * ``model at raw``: soakcal's model, bias polynomial b(T) only, evaluated at the raw
   reading clamped to its valid range: what the export wrote before the raw-reading
   polynomial;
+* ``export drop``: the same export of the model with its ``rate_fold`` record removed
+  (a model with a rate term k(T)·dT/dt: the static polynomial, the rate term dropped, as
+  the export wrote before :func:`calibration.export_firmware.rate_fold_record`; the same
+  file as ``export at raw`` for a model without a rate term);
 * ``px4``, ``ardupilot``: the peers' own fits, applied at the raw reading;
 * ``stated``: the RMS the export states (``provenance.quantised_temperature.rms_mg``:
   the file's offset at each sample's reading less the model's whole offset, rate term
@@ -56,7 +60,11 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import draw_case, import_args, simulate, write_log  # noqa: E402
 from calibration import sfem  # noqa: E402
-from calibration.export_firmware import STANDARD_GRAVITY_M_S2, export_px4  # noqa: E402
+from calibration.export_firmware import (  # noqa: E402
+    STANDARD_GRAVITY_M_S2,
+    export_px4,
+    firmware_reading_record,
+)
 from calibration.model_file import load_model  # noqa: E402
 
 # the paired bootstrap of export ÷ peer resamples windows of this length (5-s means within
@@ -68,7 +76,8 @@ WINDOW_S, DRAWS = 60.0, 2000
 QUANT1C = "1004,1009,1011,1016,1023,1039,2001,2012,2019,2028"
 
 
-def run_case(seed: int, coarse_dither: bool, pools: object, work: Path) -> dict[str, object]:
+def run_case(seed: int, coarse_dither: bool, pools: object, work: Path,
+             window_s: float = WINDOW_S) -> dict[str, object]:
     case = draw_case(seed, coarse_dither)
     data = simulate(case, pools)  # type: ignore[arg-type]
     csv_path, _ = write_log(case, data, work)
@@ -88,9 +97,12 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path) -> dict[
 
     at_raw = log.acc_g - bias_g(log.temp_c)
     exported = log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
+    # the figures the export states (a folded rate term's file: rate_fold's)
+    record = firmware_reading_record(model) or {}
+    model.provenance.pop("rate_fold", None)
+    dropped = log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
     px4, ardupilot = method_px4(log), method_ardupilot(log)[0]
     ok = np.all(np.isfinite(sc), axis=1)
-    record = model.provenance.get("quantised_temperature") or {}
     own, raw = heldout_rms_mg(log, sc), heldout_rms_mg(log, exported)
     return out | {
         "soakcal": own.tolist() if ok.all() else None,
@@ -99,7 +111,11 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path) -> dict[
         "rate_term": bool(model.temperature_rate),
         "px4": heldout_rms_mg(log, px4).tolist(),
         "ardupilot": heldout_rms_mg(log, ardupilot).tolist(),
-        "export_over_peer_95": ratio_interval(log.t_s, exported, (px4, ardupilot)),
+        "export_over_peer_95": ratio_interval(log.t_s, exported, (px4, ardupilot), window_s),
+        "export_drop": heldout_rms_mg(log, dropped).tolist(),
+        "export_drop_over_peer_95": ratio_interval(log.t_s, dropped, (px4, ardupilot),
+                                                   window_s),
+        "export_over_drop_95": ratio_interval(log.t_s, exported, (dropped,), window_s),
         "stated_rms_mg": record.get("rms_mg"), "ratio_to_fit": record.get("ratio_to_fit"),
         "extra_rms_mg": np.sqrt(np.maximum(raw**2 - own**2, 0.0)).tolist(),
         # what the stated figure claims, measured directly: the file's offset at each
@@ -108,11 +124,11 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path) -> dict[
     }
 
 
-def ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...]
-                   ) -> list[list[float]]:
+def ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...],
+                   window_s: float = WINDOW_S) -> list[list[float]]:
     """Per axis, a 95 % interval of held-out RMS(ours) ÷ RMS(better peer) (as
     :func:`heldout_rms_mg`: held-out 5-s means less the fit samples' mean): a paired
-    bootstrap over :data:`WINDOW_S` windows of the held-out means, the better peer chosen
+    bootstrap over ``window_s`` windows of the held-out means, the better peer chosen
     on each draw."""
     _, fit = blocks(t_s)
     half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
@@ -124,7 +140,7 @@ def ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarra
         return np.array([c[half == h].mean(axis=0) - ref for h in hs])  # (m, 3)
 
     sq = np.stack([errors(c) ** 2 for c in (ours_g, *peers_g)])  # (methods, m, 3)
-    window = (np.asarray(hs) * MEAN_S // WINDOW_S).astype(int)
+    window = (np.asarray(hs) * MEAN_S // window_s).astype(int)
     groups = [np.flatnonzero(window == w) for w in np.unique(window)]
     rng = np.random.default_rng(0)
     ratios = []
@@ -154,12 +170,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--realdata", help="the shared real recordings (noise pools)")
     ap.add_argument("--only", default=QUANT1C, help="comma-separated case seeds")
     ap.add_argument("--coarse-dither", action="store_true")
+    ap.add_argument("--window-s", type=float, default=WINDOW_S,
+                    help="the bootstrap's window of held-out means (s)")
     args = ap.parse_args(argv)
     pools = load_pools(realdata_dir(args.realdata))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in (int(x) for x in args.only.split(",")):
-            r = run_case(s, args.coarse_dither, pools, Path(tmp))
+            r = run_case(s, args.coarse_dither, pools, Path(tmp), args.window_s)
             rows.append(r)
             print(json.dumps(r), flush=True)
 
@@ -168,21 +186,31 @@ def main(argv: list[str] | None = None) -> int:
 
     print("| case | soakcal (rebuilt) | export at raw | model b(T) at raw | PX4 fit at raw | "
           "ArduPilot at raw | export ÷ better peer (95 %) | stated RMS | file − model | "
-          "extra at raw | ratio to fit |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "extra at raw | ratio to fit | rate term | export drop | drop ÷ better peer (95 %) "
+          "| export ÷ drop (95 %) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         ratio = r.get("ratio_to_fit")
-        vs = "—"
+        vs = drop_vs = fold_vs = "—"
+
+        def with_ci(values: np.ndarray, ci: object) -> str:
+            return " / ".join(f"{v:.3f} ({a:.2f}–{b:.2f})" for v, (a, b) in zip(
+                values, ci, strict=True))  # type: ignore[call-overload]
+
         if r.get("export_at_raw") is not None:
             peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
-            ci = r["export_over_peer_95"]
-            vs = " / ".join(f"{v:.3f} ({a:.2f}–{b:.2f})" for v, (a, b) in zip(
-                np.asarray(r["export_at_raw"]) / peer, ci, strict=True))  # type: ignore[arg-type]
+            vs = with_ci(np.asarray(r["export_at_raw"]) / peer, r["export_over_peer_95"])
+            drop_vs = with_ci(np.asarray(r["export_drop"]) / peer,
+                              r["export_drop_over_peer_95"])
+            fold_vs = with_ci(np.asarray(r["export_at_raw"]) / np.asarray(r["export_drop"]),
+                              r["export_over_drop_95"])
         print(f"| {r['case']} | {f(r.get('soakcal'))} | {f(r.get('export_at_raw'))} | "
               f"{f(r.get('model_at_raw'))} | {f(r.get('px4'))} | {f(r.get('ardupilot'))} | "
               f"{vs} | {f(r.get('stated_rms_mg'))} | {f(r.get('file_vs_model_mg'))} | "
               f"{f(r.get('extra_rms_mg'))} | "
-              f"{'—' if ratio is None else f'{ratio:.1f}'} |")
+              f"{'—' if ratio is None else f'{ratio:.1f}'} | "
+              f"{'yes' if r.get('rate_term') else 'no'} | {f(r.get('export_drop'))} | "
+              f"{drop_vs} | {fold_vs} |")
     return 0
 
 

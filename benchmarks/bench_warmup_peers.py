@@ -43,6 +43,13 @@ Methods:
   ``calibrate`` and ``compensate`` on every sample, scored in-sample as the RMS of all
   full 5-s means about their mean (beside the same figure uncompensated). A refusal
   (exit 2) is reported with its line.
+* ``--export``: also the file ``soakcal export --format px4`` writes from soakcal's model,
+  applied as PX4 applies it (``calc_thermal_offsets_3D``: the offset at each sample's own
+  reading clamped to TMIN/TMAX): ``export`` as written (a model with a rate term: the
+  term's mean at each reading folded into the polynomial, ``export_firmware.rate_fold_record``)
+  and ``export drop`` (the model's ``rate_fold`` record removed: the static polynomial,
+  the rate term dropped, as the export wrote before the fold). ArduPilot's file is the same
+  polynomial less a constant, so its held-out figure is the same.
 * ``floor``: the noise floor of a held-out 5-s mean: the RMS difference of the two
   5-s means inside each held-out block, divided by √2 (white noise; slow drift cancels).
 
@@ -384,6 +391,20 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     return out, note
 
 
+def method_export(log: WarmupLog, model_path: Path, fold: bool = True) -> np.ndarray:
+    """(N,3) compensated by the PX4 file soakcal exports from ``model_path``, applied at each
+    sample's own reading (``--export``); ``fold`` False: the model's ``rate_fold`` record
+    removed first (the static polynomial)."""
+    from benchmarks.bench_export_quantised import px4_offset_g
+    from calibration.export_firmware import export_px4
+    from calibration.model_file import load_model
+
+    model = load_model(model_path)
+    if not fold:
+        model.provenance.pop("rate_fold", None)
+    return log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
+
+
 def _write_raw(path: Path, log: WarmupLog, mask: np.ndarray) -> None:
     """The masked samples as ``soakcal import`` writes a raw log: one row per sample."""
     cols = np.column_stack([log.t_s[mask], log.temp_c[mask], log.acc_g[mask],
@@ -483,7 +504,7 @@ def _last_line(text: str) -> str:
 
 # --- run ---------------------------------------------------------------------------------
 def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False,
-             whole: bool = False) -> dict[str, object]:
+             whole: bool = False, export: bool = False) -> dict[str, object]:
     res: dict[str, object] = {"log": log.name, "n": int(log.t_s.size),
                               "minutes": float((log.t_s[-1] - log.t_s[0]) / 60.0),
                               "temp_span_c": [float(log.temp_c.min()), float(log.temp_c.max())]}
@@ -498,6 +519,20 @@ def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False,
     else:
         res["soakcal"] = None
     res["floor"] = noise_floor_mg(log).tolist()
+    if export and sc is not None:
+        model_path = workdir / "model.json"
+        res["rate_term"] = bool(json.loads(model_path.read_text())
+                                .get("temperature", {}).get("rate"))
+        from benchmarks.bench_export_quantised import ratio_interval
+
+        folded, dropped = method_export(log, model_path), method_export(log, model_path, False)
+        res["export"] = heldout_rms_mg(log, folded).tolist()
+        res["export_drop"] = heldout_rms_mg(log, dropped).tolist()
+        # 95 % paired bootstrap over windows of one fit and one held-out block
+        peers = (method_px4(log), ap)
+        res["export_over_peer_95"] = ratio_interval(log.t_s, folded, peers, 2 * BLOCK_S)
+        res["export_drop_over_peer_95"] = ratio_interval(log.t_s, dropped, peers, 2 * BLOCK_S)
+        res["export_over_drop_95"] = ratio_interval(log.t_s, folded, (dropped,), 2 * BLOCK_S)
     if whole:
         res.update(evaluate_whole(log, workdir))
     if fixed_degrees:
@@ -514,6 +549,33 @@ def fixed_degree_table(results: list[dict[str, object]]) -> str:
         if isinstance(fixed, dict):
             cells = " | ".join(" / ".join(f"{v:.4f}" for v in fixed[d]) for d in range(4))
             lines.append(f"| {r['log']} | {cells} |")
+    return "\n".join(lines)
+
+
+def export_table(results: list[dict[str, object]]) -> str:
+    """The exported file's figures (``--export``), mg x / y / z, and each over the better
+    peer."""
+    lines = ["| log | rate term | export (rate term folded) | export drop (static) | "
+             "better peer | folded ÷ peer (95 %) | static ÷ peer (95 %) | folded ÷ static "
+             "(95 %) |", "|---|---|---|---|---|---|---|---|"]
+
+    def fmt(v: object) -> str:
+        return " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+
+    def ci(v: np.ndarray, bounds: object) -> str:
+        return " / ".join(f"{x:.3f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
+            v, bounds, strict=True))  # type: ignore[call-overload]
+
+    for r in results:
+        if "export" in r:
+            peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+            folded_over_static = np.asarray(r["export"]) / np.asarray(r["export_drop"])
+            lines.append(
+                f"| {r['log']} | {'yes' if r['rate_term'] else 'no'} | {fmt(r['export'])} | "
+                f"{fmt(r['export_drop'])} | {fmt(peer)} | "
+                f"{ci(np.asarray(r['export']) / peer, r['export_over_peer_95'])} | "
+                f"{ci(np.asarray(r['export_drop']) / peer, r['export_drop_over_peer_95'])} | "
+                f"{ci(folded_over_static, r['export_over_drop_95'])} |")
     return "\n".join(lines)
 
 
@@ -597,16 +659,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--whole", action="store_true",
                     help="also soakcal on raw rows as a user runs it: the fit blocks' "
                          "samples (held out) and the whole log (in-sample)")
+    ap.add_argument("--export", action="store_true",
+                    help="also the PX4 file soakcal exports, applied at each sample's reading "
+                         "(the rate term folded, and dropped)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         logs, results = gather_logs(args, Path(tmp))
         for log in logs:
-            results.append(evaluate(log, Path(tmp), args.fixed_degrees, args.whole))
+            results.append(evaluate(log, Path(tmp), args.fixed_degrees, args.whole,
+                                    args.export))
             print(json.dumps(results[-1]), flush=True)
     text = table(results)
     if args.fixed_degrees:
         text += "\n\nFixed degrees, fitted as soakcal fits a warm-up:\n\n" + \
             fixed_degree_table(results)
+    if args.export:
+        text += "\n\nThe exported PX4 file at each sample's reading (--export):\n\n" + \
+            export_table(results)
     if args.whole:
         text += "\n\nsoakcal on raw rows as `soakcal import` writes them (--whole):\n\n" + \
             whole_table(results)

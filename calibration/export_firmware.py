@@ -118,8 +118,8 @@ def _firmware_design(model: ThermalModel, read_c: np.ndarray, lo: float, hi: flo
 
 def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
                                lsb_c: float,
-                               spread: tuple[np.ndarray, np.ndarray] | None = None
-                               ) -> np.ndarray:
+                               spread: tuple[np.ndarray, np.ndarray] | None = None,
+                               rate_g: np.ndarray | None = None) -> np.ndarray:
     """(3, m+1) g in x: the offset polynomial in the firmware's own reading that is closest
     to the model on the fit log. Both firmwares subtract p(clamp(T_read)) (module
     docstring); the best any p can do at a reading is the log's mean bias there,
@@ -135,13 +135,21 @@ def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_
     warm-up rests) and its curvature make their mean p differ from p at their mean. Its
     target is the model's bias, not the readings: the fit smooths out the capture noise
     that PX4's and ArduPilot's scripts fit on the step values themselves. Same clamp and
-    same readings as :func:`quantised_reading_error`."""
+    same readings as :func:`quantised_reading_error`.
+
+    ``rate_g`` ((n, 3) g, each capture's rate term k(T)·dT/dt as ``compensate`` computes
+    it): the target is then the model's whole offset b + k·dT/dt, and p is the
+    least-squares polynomial in the reading of what the model says the offset is on the
+    log (:func:`rate_fold_record`); the fit is linear in its target, so p is the
+    polynomial of b plus that of the rate term alone."""
     lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
     read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
     ok = np.isfinite(read) & np.isfinite(rebuilt)
     if spread is not None:
         spread = (spread[0], spread[1][ok])
     target = model.params_vector_at(np.clip(rebuilt[ok], lo, hi), extrapolate=True)[:, sfem.BIAS]
+    if rate_g is not None:
+        target = target + np.asarray(rate_g, float)[ok]
     levels = np.unique(np.round(np.clip(read[ok], lo, hi) / max(float(lsb_c), 1e-9))).size
     degree = max(0, min(FIRMWARE_DEGREE, levels - 1))
     V = _firmware_design(model, read[ok], lo, hi, degree + 1, spread)
@@ -149,15 +157,67 @@ def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_
     return coef
 
 
+def _spread_of(read: np.ndarray, rebuilt: np.ndarray, ok: np.ndarray, lsb_c: float,
+               level_c: float | None, dither_lsb: float
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`reading_spread` of every capture (a missing value read at the mean), or None
+    without ``level_c`` (the firmware's reading taken at the capture mean)."""
+    if level_c is None:
+        return None
+    return reading_spread(np.where(ok, read, np.nanmean(read[ok])),
+                          np.where(ok, rebuilt, np.nanmean(rebuilt[ok])), lsb_c,
+                          float(level_c), float(dither_lsb))
+
+
+def _rms_of(d: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(d**2, axis=0)) if d.size else np.zeros(3)
+
+
+def _reading_figures(model: ThermalModel, coef: np.ndarray, read_ok: np.ndarray,
+                     whole_mg: np.ndarray, spread_ok: tuple[np.ndarray, np.ndarray] | None,
+                     lsb_c: float, fit_heldout_mg: list[float] | None,
+                     valid: tuple[float, float]) -> dict[str, object]:
+    """The figures of the file polynomial ``coef`` ((3, m+1) g in x) at the firmware's
+    reading against the model's whole offset ``whole_mg`` ((n, 3), mg) on the fit log's
+    captures: RMS and peak per sample (``spread_ok``) and at the capture mean of the
+    reading (``smoothed_rms_mg``), the offset's step per change of the reading
+    (``tempco_lsb_mg``) and the RMS over the fit's own held-out RMS (``ratio_to_fit``)."""
+    lo, hi = valid
+
+    def exported_mg(t: np.ndarray, sp: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> np.ndarray:
+        return _firmware_design(model, t, lo, hi, coef.shape[1], sp) @ coef.T * 1e3
+
+    diff = exported_mg(read_ok, spread_ok) - whole_mg
+    smoothed = exported_mg(read_ok) - whole_mg
+    grid = np.linspace(lo, hi, 201)
+    slope = (np.abs(np.gradient(exported_mg(grid), grid, axis=0)) if hi > lo
+             else np.zeros((1, 3)))
+    rms = _rms_of(diff)
+    out: dict[str, object] = {
+        "rms_mg": [float(v) for v in rms],
+        "peak_mg": [float(v) for v in (np.max(np.abs(diff), axis=0) if diff.size
+                                       else np.zeros(3))],
+        "smoothed_rms_mg": [float(v) for v in _rms_of(smoothed)],
+        "tempco_lsb_mg": [float(v) * float(lsb_c) for v in np.max(slope, axis=0)],
+    }
+    if fit_heldout_mg is not None:
+        out["ratio_to_fit"] = float(np.max(rms / np.maximum(np.asarray(fit_heldout_mg), 1e-9)))
+    return out
+
+
 def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
                             lsb_c: float, fit_heldout_mg: list[float] | None, *,
                             t_s: np.ndarray | None = None, level_c: float | None = None,
                             dither_lsb: float = 0.0) -> dict[str, object]:
     """What a firmware that reads the raw quantised channel makes of this model on its fit
-    log, and the polynomial the export writes for it (``raw_reading_bias_x_g``:
-    :func:`raw_reading_polynomial_x_g`). Both firmwares subtract p(clamp(T)) (module
-    docstring) with T their own reading, while the model was fitted in the die
-    temperature rebuilt from that channel (:mod:`calibration.temperature_dequantise`).
+    log, and the static polynomial in that reading (``raw_reading_bias_x_g``:
+    :func:`raw_reading_polynomial_x_g` of the model's b alone). Both firmwares subtract
+    p(clamp(T)) (module docstring) with T their own reading, while the model was fitted in
+    the die temperature rebuilt from that channel (:mod:`calibration.temperature_dequantise`).
+    The figures are of the file that polynomial makes; a model with a rate term is exported
+    with the rate term folded in (:func:`rate_fold_record`), whose record carries the same
+    figures for that file.
 
     Per axis, over the log's capture means: the RMS and largest difference (mg) between
     the offset the firmware subtracts and the model's whole offset, b(T_rebuilt) plus its
@@ -178,10 +238,7 @@ def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: 
     lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
     read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
     ok = np.isfinite(read) & np.isfinite(rebuilt)
-    spread = (None if level_c is None else
-              reading_spread(np.where(ok, read, np.nanmean(read[ok])),
-                             np.where(ok, rebuilt, np.nanmean(rebuilt[ok])), lsb_c,
-                             float(level_c), float(dither_lsb)))
+    spread = _spread_of(read, rebuilt, ok, lsb_c, level_c, dither_lsb)
     coef = raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread)
     if spread is not None:
         spread = (spread[0], spread[1][ok])
@@ -190,46 +247,139 @@ def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: 
         P = model.params_vector_at(np.clip(t, lo, hi), extrapolate=True)
         return P[:, sfem.BIAS] * 1e3
 
-    def exported_mg(t: np.ndarray, sp: tuple[np.ndarray, np.ndarray] | None = None
-                    ) -> np.ndarray:
-        return _firmware_design(model, t, lo, hi, coef.shape[1], sp) @ coef.T * 1e3
-
     rate_mg = np.zeros((int(np.sum(ok)), 3))
     if t_s is not None and model.temperature_rate:
         from calibration.warmup import rate_offset_g
 
         rate_mg = rate_offset_g(model, np.asarray(t_s, float)[ok], rebuilt[ok]) * 1e3
     whole = bias_mg(rebuilt[ok]) + rate_mg  # what `compensate` subtracts
-    diff = exported_mg(read[ok], spread) - whole
-    smoothed = exported_mg(read[ok]) - whole
+    figures = _reading_figures(model, coef, read[ok], whole, spread, lsb_c, fit_heldout_mg,
+                               (lo, hi))
     model_diff = bias_mg(read[ok]) - whole
-    grid = np.linspace(lo, hi, 201)
-    slope = (np.abs(np.gradient(exported_mg(grid), grid, axis=0)) if hi > lo
-             else np.zeros((1, 3)))
-
-    def rms_of(d: np.ndarray) -> np.ndarray:
-        return np.sqrt(np.mean(d**2, axis=0)) if d.size else np.zeros(3)
-
-    rms = rms_of(diff)
     out: dict[str, object] = {
         "lsb_c": float(lsb_c),
         "readings": int(np.sum(ok)),
         "per_sample": spread is not None,
-        "rms_mg": [float(v) for v in rms],
-        "peak_mg": [float(v) for v in (np.max(np.abs(diff), axis=0) if diff.size
-                                       else np.zeros(3))],
-        "smoothed_rms_mg": [float(v) for v in rms_of(smoothed)],
-        "rate_term_rms_mg": [float(v) for v in rms_of(rate_mg)],
-        "model_at_raw_rms_mg": [float(v) for v in rms_of(model_diff)],
-        "tempco_lsb_mg": [float(v) * float(lsb_c) for v in np.max(slope, axis=0)],
+        "rms_mg": figures["rms_mg"],
+        "peak_mg": figures["peak_mg"],
+        "smoothed_rms_mg": figures["smoothed_rms_mg"],
+        "rate_term_rms_mg": [float(v) for v in _rms_of(rate_mg)],
+        "model_at_raw_rms_mg": [float(v) for v in _rms_of(model_diff)],
+        "tempco_lsb_mg": figures["tempco_lsb_mg"],
         "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
         "raw_reading_bias_x_g": [[float(v) for v in axis] for axis in coef],
         "raw_reading_basis": ("p(T) = sum_j c[axis][j] * x**j in g, x = (clamp(T, valid) - "
                               "centre_c) / scale_c, T the channel's raw reading"),
     }
     if fit_heldout_mg is not None:
-        out["ratio_to_fit"] = float(np.max(rms / np.maximum(np.asarray(fit_heldout_mg), 1e-9)))
+        out["ratio_to_fit"] = figures["ratio_to_fit"]
     return out
+
+
+def _padded(coef: np.ndarray) -> np.ndarray:
+    """(3, FIRMWARE_DEGREE + 1): ``coef`` with its missing higher powers as zeros."""
+    out = np.zeros((3, FIRMWARE_DEGREE + 1))
+    c = np.asarray(coef, float)
+    out[:, : c.shape[1]] = c
+    return out
+
+
+def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
+                     rebuilt_c: np.ndarray, fit_heldout_mg: list[float] | None, *,
+                     lsb_c: float = 0.0, level_c: float | None = None,
+                     dither_lsb: float = 0.0) -> dict[str, object] | None:
+    """The rate term k(T)·dT/dt of a warm-up model folded into the firmware's polynomial,
+    or None for a model without one.
+
+    Neither firmware can apply a rate term (its offset is a function of its temperature
+    reading only). The file's polynomial is then the least-squares polynomial in the
+    firmware's reading of what the model says the offset is on the fit log, b(T) plus
+    k(T)·dT/dt at each capture as ``compensate`` computes it
+    (:func:`raw_reading_polynomial_x_g` with ``rate_g``), the reading being the raw channel
+    (``lsb_c`` > 0: a model fitted in the temperature rebuilt from it, evaluated per sample
+    with ``level_c``, :func:`reading_spread`) or the temperature itself (a fine channel:
+    ``read_c`` = ``rebuilt_c``). During a warm-up dT/dt is largely a function of T, and a
+    polynomial in T fitted jointly with a rate term leaves part of the T dependence in the
+    term: dropping it undoes that part, folding its mean at each reading restores it. This
+    is what PX4's and ArduPilot's own fits on a warm-up's samples do implicitly.
+
+    The fit is linear in its target, so the file is the static polynomial (the model's
+    b(T), or for a rebuilt channel its least-squares polynomial in the reading) plus
+    ``folded_rate_x_g``, the least-squares polynomial of the rate term alone (g in x). At a
+    constant temperature, where dT/dt = 0, the file differs from the static offset by that
+    folded part: ``at_rest_rms_mg`` / ``at_rest_peak_mg`` over the valid range about its mean
+    (``at_rest_mean_mg``: the constant part, which the firmware's ordinary calibration
+    measures when X0 is 0 and INS_TCAL has none). On the fit log: ``rms_mg`` / ``peak_mg``,
+    the folded file at the firmware's reading less the model's whole offset, and
+    ``dropped_rms_mg`` / ``dropped_peak_mg``, the static file's (the rate term dropped);
+    ``reading``, for a rebuilt channel, the figures of :func:`quantised_reading_error` for
+    the folded file (the export states those)."""
+    if not model.temperature_rate:
+        return None
+    from calibration.warmup import rate_offset_g
+
+    read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
+    ok = np.isfinite(read) & np.isfinite(rebuilt)
+    lo, hi = model.valid_c or (float(np.min(rebuilt[ok])), float(np.max(rebuilt[ok])))
+    rebuilt_channel = lsb_c > 0
+    spread = _spread_of(read, rebuilt, ok, lsb_c, level_c, dither_lsb) if rebuilt_channel \
+        else None
+    rate_g = np.zeros((read.size, 3))
+    rate_g[ok] = rate_offset_g(model, np.asarray(t_s, float)[ok], rebuilt[ok])
+    static_ls = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread))
+    whole_ls = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread,
+                                                  rate_g=rate_g))
+    folded = whole_ls - static_ls
+    # the static file: the raw-reading polynomial for a rebuilt channel, b(T) itself else
+    static = static_ls if rebuilt_channel else _padded(model.coeffs[sfem.BIAS])
+    spread_ok = None if spread is None else (spread[0], spread[1][ok])
+    whole_mg = (model.params_vector_at(np.clip(rebuilt[ok], lo, hi),
+                                       extrapolate=True)[:, sfem.BIAS] + rate_g[ok]) * 1e3
+    lsb = float(lsb_c)
+    file_fig = _reading_figures(model, static + folded, read[ok], whole_mg, spread_ok, lsb,
+                                fit_heldout_mg, (lo, hi))
+    static_fig = _reading_figures(model, static, read[ok], whole_mg, spread_ok, lsb,
+                                  fit_heldout_mg, (lo, hi))
+    grid = np.linspace(lo, hi, 201)
+    at_rest = np.vander(model.x_of(grid), FIRMWARE_DEGREE + 1, increasing=True) @ folded.T
+    mean = at_rest.mean(axis=0)
+    out: dict[str, object] = {
+        "folded_rate_x_g": [[float(v) for v in axis] for axis in folded],
+        "basis": ("p(T) = sum_j c[axis][j] * x**j in g, x = (clamp(T, valid) - centre_c) / "
+                  "scale_c, T the firmware's reading; added to the static polynomial"),
+        "reading": "raw" if rebuilt_channel else "temperature",
+        "captures": int(np.sum(ok)),
+        "rms_mg": file_fig["rms_mg"], "peak_mg": file_fig["peak_mg"],
+        "dropped_rms_mg": static_fig["rms_mg"], "dropped_peak_mg": static_fig["peak_mg"],
+        "rate_term_rms_mg": [float(v) for v in _rms_of(rate_g[ok] * 1e3)],
+        "at_rest_rms_mg": [float(v) for v in _rms_of((at_rest - mean) * 1e3)],
+        "at_rest_peak_mg": [float(v) for v in np.max(np.abs(at_rest - mean), axis=0) * 1e3],
+        "at_rest_mean_mg": [float(v) for v in mean * 1e3],
+        "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
+    }
+    if fit_heldout_mg is not None:
+        out["ratio_to_fit"] = file_fig["ratio_to_fit"]
+    if rebuilt_channel:
+        out["reading_figures"] = file_fig
+    return out
+
+
+def rate_fold_x_g(model: ThermalModel) -> np.ndarray | None:
+    """The folded rate polynomial a warm-up model with a rate term carries
+    (:func:`rate_fold_record`), or None (no rate term, or a model file from before)."""
+    coef = (model.provenance.get("rate_fold") or {}).get("folded_rate_x_g")
+    return None if coef is None else np.asarray(coef, float)
+
+
+def file_bias_x_g(model: ThermalModel) -> np.ndarray | None:
+    """The offset polynomial the export writes, in g in the model's x, or None for the
+    model's own b(T): the static polynomial (:func:`raw_reading_bias_x_g` or b) plus the
+    folded rate term (:func:`rate_fold_x_g`) where the model carries one."""
+    static = raw_reading_bias_x_g(model)
+    folded = rate_fold_x_g(model)
+    if folded is None:
+        return static
+    return _padded(model.coeffs[sfem.BIAS] if static is None else static) + folded
 
 
 def raw_reading_bias_x_g(model: ThermalModel) -> np.ndarray | None:
@@ -266,14 +416,21 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
                f"of the reading instead, as a firmware that low-pass filters its reading "
                f"evaluates it: RMS {xyz(record['smoothed_rms_mg'])} mg)")
     dropped = ""
-    if rate is not None and max(rate) > 0:  # type: ignore[arg-type]
+    folded = bool(record.get("rate_folded"))
+    if folded:
+        whose = "the model's whole offset (rate term included) at the rebuilt temperature"
+        dropped = (f"; this includes what the polynomial cannot follow of the model's rate "
+                   f"term k(T)*dT/dt, whose mean at each reading it folds in (the term alone: "
+                   f"RMS {xyz(rate)} mg on the fit log; see FOLDED below)")
+    elif rate is not None and max(rate) > 0:  # type: ignore[arg-type]
         dropped = (f"; this includes the model's rate term k(T)*dT/dt, which the firmware "
                    f"cannot apply (alone RMS {xyz(rate)} mg on the fit log)")
+    of = ("the model's whole offset b + k*dT/dt" if folded else "the model's offset")
     if in_reading:
         main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
                 f"channel, and the firmware evaluates its offset at its own {q:g} degC "
                 f"reading: this file's polynomial is in that reading, the least-squares fit "
-                f"over the fit log's {record['readings']} capture means of the model's offset "
+                f"over the fit log's {record['readings']} capture means of {of} "
                 f"at the rebuilt temperature against the reading clamped to TMIN..TMAX (the "
                 f"model's own b(T) evaluated at the reading instead: RMS "
                 f"{xyz(record['model_at_raw_rms_mg'])} mg); on the fit log it differs from "
@@ -350,7 +507,9 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
         out.append(f"leaving them out costs up to {err_mg:.3f} mg at |a| <= 1 g "
                    f"over {lo:.2f} .. {hi:.2f} degC")
     if model.temperature_rate:
-        out.append(rate_term_dropped(model))
+        fold = model.provenance.get("rate_fold")
+        out.append(rate_term_folded(fold) if fold and fold.get("folded_rate_x_g") is not None
+                   else rate_term_dropped(model))
     held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
             if not ok]
     if held:
@@ -387,6 +546,65 @@ def rate_term_dropped(model: ThermalModel, n_temps: int = 41) -> str:
             f"firmware while the temperature changes that fast (none at rest)")
 
 
+def rate_term_folded(fold: dict[str, object]) -> str:
+    """What folding a warm-up's rate term into the polynomial does (:func:`rate_fold_record`):
+    right on average for warm-ups like the fit log, off at rest by the folded part."""
+
+    def xyz(v: object) -> str:
+        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
+
+    where = ("at the firmware's raw reading" if fold.get("reading") == "raw"
+             else "in T")
+    return (f"FOLDED: the warm-up's rate term k(T)*dT/dt (the firmware's offset is a function "
+            f"of T only): this file's polynomial is the least-squares fit {where} of the "
+            f"model's whole offset b(T) + k(T)*dT/dt over the fit log's {fold['captures']} "
+            f"capture means, as PX4's and ArduPilot's own fits on a warm-up's samples fold the "
+            f"log's mean rate effect into T; on the fit log it differs from that whole offset "
+            f"by RMS {xyz(fold['rms_mg'])} mg, peak {xyz(fold['peak_mg'])} mg (x / y / z; "
+            f"with the rate term dropped: RMS {xyz(fold['dropped_rms_mg'])} mg). It is right "
+            f"on average for warm-ups like the fit log (the same rates at the same "
+            f"temperatures); at a constant temperature (dT/dt = 0) it differs from the "
+            f"model's static offset by the folded part: RMS {xyz(fold['at_rest_rms_mg'])} mg, "
+            f"peak {xyz(fold['at_rest_peak_mg'])} mg over TMIN..TMAX about its mean (the mean, "
+            f"{xyz(fold['at_rest_mean_mg'])} mg, is a constant: the ordinary accelerometer "
+            f"calibration measures it where the file writes no constant); `soakcal "
+            f"compensate` applies the rate term itself")
+
+
+def rate_fold_warning(model: ThermalModel) -> list[str]:
+    """The loud line for a model read by a fine channel whose folded file is, on its fit
+    log, :data:`LOUD_FACTOR` × the fit's own held-out RMS or more from the model's whole
+    offset on some axis (a rebuilt channel's is said by :func:`quantised_reading_lines`
+    with the folded figures); else none."""
+    fold = model.provenance.get("rate_fold") or {}
+    ratio = fold.get("ratio_to_fit")
+    if (fold.get("folded_rate_x_g") is None or fold.get("reading") != "temperature"
+            or ratio is None or float(ratio) < LOUD_FACTOR):
+        return []
+
+    def xyz(v: object) -> str:
+        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
+
+    return [f"WARNING: the firmware cannot apply this warm-up's rate term k(T)*dT/dt: on the "
+            f"fit log the file (the term's mean at each temperature folded in) differs from "
+            f"the model's whole offset by up to {float(ratio):.1f} x the fit's own held-out "
+            f"RMS {xyz(fold['fit_heldout_mg'])} mg: RMS {xyz(fold['rms_mg'])} mg (x / y / z; "
+            f"see FOLDED below). No parameter file removes it (the firmware's offset is a "
+            f"function of T only); `soakcal compensate` applies the rate term"]
+
+
+def firmware_reading_record(model: ThermalModel) -> dict[str, object] | None:
+    """The record :func:`quantised_reading_lines` states: the model's
+    ``quantised_temperature`` record, with the figures of the file that folds the rate term
+    (:func:`rate_fold_record`) where the model carries that fold."""
+    record = model.provenance.get("quantised_temperature")
+    fold = model.provenance.get("rate_fold") or {}
+    figures = fold.get("reading_figures")
+    if not record or not figures or fold.get("folded_rate_x_g") is None:
+        return record
+    return {**record, **figures, "rate_folded": True}
+
+
 def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
                source_name: str = "model") -> FirmwareExport:
     """A QGroundControl parameter file of ``TC_A{instance}_*`` (see module docstring)."""
@@ -394,9 +612,10 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
         raise ModelFileError(f"PX4 has TC_A0..TC_A3; --instance {instance} is out of range")
     lo, hi = _check(model, "PX4")
     t_ref = 0.5 * (lo + hi)  # as PX4's process_sensor_caldata.py: mid-range reference
-    c = bias_polynomials_m_s2(model, t_ref, raw_reading_bias_x_g(model))
+    c = bias_polynomials_m_s2(model, t_ref, file_bias_x_g(model))
     limits = left_out(model)
-    reading = quantised_reading_lines(model.provenance.get("quantised_temperature"))
+    reading = quantised_reading_lines(firmware_reading_record(model)) + \
+        rate_fold_warning(model)
     # A warm-up identifies only the bias *change* (gravity's projection is unknown): X0
     # is then 0, as PX4's own script leaves it (~0, readings minus their median), and the
     # constant stays with the ordinary calibration's CAL_ACCn_xOFF.
@@ -472,9 +691,10 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
         raise ModelFileError(f"valid range {lo:.2f} .. {hi:.2f} degC is outside ArduPilot's "
                              f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
     c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
-                              raw_reading_bias_x_g(model)) * ARDUPILOT_SCALE_FACTOR
+                              file_bias_x_g(model)) * ARDUPILOT_SCALE_FACTOR
     limits = left_out(model)
-    reading = quantised_reading_lines(model.provenance.get("quantised_temperature"))
+    reading = quantised_reading_lines(firmware_reading_record(model)) + \
+        rate_fold_warning(model)
     limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
                   f"INS_ACC{'' if instance == 1 else instance}OFFS, measured by the ordinary "
                   "accelerometer calibration at INS_ACC"

@@ -228,7 +228,12 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
     with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
     from calibration.captures import warmup_rebuild
-    from calibration.export_firmware import quantised_reading_error, quantised_reading_lines
+    from calibration.export_firmware import (
+        firmware_reading_record,
+        quantised_reading_error,
+        quantised_reading_lines,
+        rate_fold_record,
+    )
     from calibration.rebuild_rate_noise import rebuild_rate_noise
     from calibration.unresolved_temperature import note as unresolved_note
     from calibration.unresolved_temperature import unresolved_record
@@ -292,8 +297,22 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
             t_s=captures.t_s, level_c=dq.level_c, dither_lsb=dq.dither_lsb)
         model.provenance["quantised_temperature"] = firmware
         wf.report["quantised_temperature"] = firmware
-        wf.report["notes"] += [f"firmware export: {line}"
-                               for line in quantised_reading_lines(firmware)]
+    if model.temperature_rate:
+        # neither firmware applies a rate term: the export folds its mean at each reading
+        # into the polynomial (export_firmware.rate_fold_record), fitted here on this log
+        rebuilt_read = dq is not None and dq.read_c is not None
+        fold = rate_fold_record(
+            model, captures.t_s, dq.read_c if rebuilt_read else captures.temperature_c(),
+            captures.temperature_c(),
+            wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"),
+            lsb_c=dq.lsb_c if rebuilt_read else 0.0,
+            level_c=dq.level_c if rebuilt_read else None,
+            dither_lsb=dq.dither_lsb if rebuilt_read else 0.0)
+        model.provenance["rate_fold"] = fold
+        wf.report["rate_fold"] = fold
+    if dq is not None and dq.read_c is not None:
+        said = quantised_reading_lines(firmware_reading_record(model))
+        wf.report["notes"] += [f"firmware export: {line}" for line in said]
     T = captures.temperature_c()
     comp = captures.raw_g - model.params_vector_at(T, extrapolate=True)[:, sfem.BIAS]
     labels = orientations.labels

@@ -402,3 +402,90 @@ def test_the_stated_figure_of_a_dithered_channel_is_what_the_firmware_does(tmp_p
     stated = _figures(said[0], "by RMS ")[2]
     assert measured > 0.2  # the firmware is far from the model here: worth stating right
     assert stated == pytest.approx(measured, rel=0.2)
+
+
+def _rate_warmup(seed: int, rate_mg_per_c_per_min: float):
+    """A board at rest (z up) through ``rest_heat_rest`` (450 s at 20.3 °C, then a heating
+    toward 30.3 °C, τ 300 s) at 50 Hz, read by a fine channel (0.01 °C of noise, 0.0078 °C
+    LSB); its z bias 1 mg/°C of the die temperature plus ``rate_mg_per_c_per_min`` × dT/dt
+    (a rate-sensitive part). Returns the 5-s capture means, each sample's reading and
+    capture index, and each capture's true z offset (g)."""
+    from benchmarks.bench_temperature_dequantise import rest_heat_rest
+    from calibration.recording import Recording
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 1500.0, 1.0 / 50.0)
+    die = rest_heat_rest(t)
+    reading = np.round((die + rng.normal(0.0, 0.01, t.size)) / 0.0078) * 0.0078
+    rate = np.gradient(die, t) * 60.0
+    offset = 1e-3 * (die - 27.0) + 1e-3 * rate_mg_per_c_per_min * rate
+    k = np.floor(t / 5.0).astype(int)
+    n = np.bincount(k)
+
+    def mean(x: np.ndarray) -> np.ndarray:
+        return np.bincount(k, x) / n
+
+    noise = rng.normal(0.0, 2e-4, (t.size, 3))
+    cols = {"t_s": mean(t), "sensor_c": mean(reading), "ax": mean(noise[:, 0]),
+            "ay": mean(noise[:, 1]), "az": mean(1.0 + offset + noise[:, 2]),
+            "n": n.astype(float), "sd_x": np.full(n.size, 2e-4),
+            "sd_y": np.full(n.size, 2e-4), "sd_z": np.full(n.size, 2e-4)}
+    return Recording.from_columns(cols), reading, k, mean(offset)
+
+
+def test_the_rate_term_is_folded_into_the_file_as_the_warm_up_saw_it(tmp_path, capsys):
+    """A warm-up whose model keeps a rate term k(T)·dT/dt, which neither firmware can apply.
+    The file's polynomial is the least-squares fit in T of the model's whole offset on the
+    fit log (the term's mean at each temperature folded in) instead of the model's b(T)
+    alone (the term dropped, as a model file without the ``rate_fold`` record exports).
+    Applied by each firmware's formula at every sample's reading of a second warm-up with
+    the same thermal profile and fresh noise, averaged per capture, against the true
+    offset: the folded file is closer. At rest it differs from b(T) by the folded part,
+    which the header states: checked against the two files' own difference."""
+    from types import SimpleNamespace
+
+    from calibration import cli
+    from calibration.recording import write_recording
+
+    rec, _, _, _ = _rate_warmup(5, 0.5)
+    src, folded = tmp_path / "w.csv", tmp_path / "folded.json"
+    write_recording(src, rec.columns)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(folded),
+                                             json=True)) == 0
+    fitted = load_model(folded)
+    assert fitted.temperature_rate  # the premise: the model keeps its rate term
+    fitted.provenance.pop("rate_fold", None)
+    dropped = tmp_path / "dropped.json"  # as a model file without the fold
+    save_model(dropped, fitted)
+    lo, hi = fitted.valid_c
+    grid = np.linspace(lo, hi, 201)
+    _, reading, capture, truth_g = _rate_warmup(11, 0.5)
+    capsys.readouterr()
+    for fmt in ("px4", "ardupilot"):
+        files = {}
+        for name, model in (("folded", folded), ("dropped", dropped)):
+            out = tmp_path / f"{name}.{fmt}"
+            assert main(["export", str(model), "--format", fmt, "-o", str(out)]) == 0
+            files[name] = (out.read_text(), capsys.readouterr().err)
+        rms = {}
+        for name, (text, _) in files.items():
+            per_sample = _firmware_offset_g(fmt, text, reading)[:, 2]
+            err = (np.bincount(capture, per_sample) / np.bincount(capture) - truth_g) * 1e3
+            rms[name] = float(np.sqrt(np.mean((err - err.mean()) ** 2)))  # X0: a constant
+        assert rms["folded"] < 0.8 * rms["dropped"]
+        # the stated difference at rest: the two files over TMIN..TMAX, about their mean
+        text, err = files["folded"]
+        said = [x for x in err.splitlines() if "FOLDED:" in x]
+        assert len(said) == 1 and "DROPPED" not in err and "DROPPED" in files["dropped"][1]
+        # what the folded file leaves of the rate term on the fit log is several times the
+        # fit's own held-out error here: said loudly, first in the header
+        first = [x for x in text.splitlines() if x.startswith("#")][1]
+        assert first.startswith("# WARNING: the firmware cannot apply this warm-up's rate")
+        diff = (_firmware_offset_g(fmt, text, grid)
+                - _firmware_offset_g(fmt, files["dropped"][0], grid)) * 1e3
+        diff -= diff.mean(axis=0)
+        at_rest = said[0].split("by the folded part: ")[1]
+        np.testing.assert_allclose(_figures(at_rest, "RMS "),
+                                   np.sqrt(np.mean(diff**2, axis=0)), atol=0.0015)
+        np.testing.assert_allclose(_figures(at_rest, "peak "), np.max(np.abs(diff), axis=0),
+                                   atol=0.0015)
