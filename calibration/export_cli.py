@@ -37,6 +37,13 @@ def run_export(args: argparse.Namespace) -> int:
         limitations: list[str] = []
         reading: list[str] = []
         if fmt in ("px4", "ardupilot"):
+            rate_term = getattr(args, "rate_term", None) or "fold"
+            if rate_term not in ("fold", "drop"):
+                return _fail(f"--rate-term: expected fold or drop, got {rate_term!r}")
+            if rate_term == "drop":
+                # the model's own b(T), as a model file without the fold exports it: the
+                # header's DROPPED line says what the rate term did on the fit log
+                model.provenance.pop("rate_fold", None)
             fw = firmware_export(model, fmt, source_name=model_path.name,
                                  instance=getattr(args, "instance", None),
                                  device_id=int(getattr(args, "device_id", None) or 0))

@@ -261,6 +261,10 @@ def _add_export(sub: Any) -> None:
                      help="px4: TC_A<N> (0-3, default 0); ardupilot: INS_TCAL<N> (1-3, default 1)")
     exp.add_argument("--device-id", type=int, metavar="ID",
                      help="px4: TC_A<N>_ID, the accelerometer's device id (CAL_ACCn_ID)")
+    exp.add_argument("--rate-term", choices=("fold", "drop"), default="fold",
+                     help="px4/ardupilot, a warm-up model with a rate term: fold its average "
+                     "over the fit log into the polynomial (default: right for warm-ups like "
+                     "it) or drop it (right at constant temperature)")
     exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
     exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
 

@@ -17,7 +17,7 @@ import pytest
 from calibration import cli, export_cli, sfem
 from calibration.fitting import fit
 from calibration.gate import GateRefusal
-from calibration.model_file import load_model, save_model
+from calibration.model_file import load_model
 from calibration.recording import Recording, write_recording
 from simulators.truth import SensorTruth
 from simulators.warmup_log import cycled, warmup_log
@@ -185,16 +185,20 @@ def test_px4_export_says_what_the_dropped_rate_term_did_at_the_logs_rates(tmp_pa
     write_recording(src, cols)
     assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model))) == 0
     capsys.readouterr()
-    fitted = load_model(model)
-    assert fitted.temperature_rate is not None
-    # the export folds the term into the polynomial (test_export_firmware.py); a model
-    # file without the fold (written before it) drops it and says what it did
-    fitted.provenance.pop("rate_fold")
-    save_model(model, fitted)
+    assert load_model(model).temperature_rate is not None
+    # by default the export folds the term into the polynomial (test_export_firmware.py)
+    # and says so; --rate-term drop writes b(T) and says what the term did
     out = tmp_path / "tc.params"
     assert export_cli.run_export(SimpleNamespace(model=str(model), output=str(out),
                                                  format="px4", instance=None,
                                                  device_id=None)) == 0
+    assert "FOLDED" in out.read_text() and "DROPPED" not in out.read_text()
+    folded = out.read_text()
+    capsys.readouterr()
+    assert export_cli.run_export(SimpleNamespace(model=str(model), output=str(out),
+                                                 format="px4", instance=None, device_id=None,
+                                                 rate_term="drop")) == 0
+    assert out.read_text() != folded
     err = capsys.readouterr().err
     line = next(x for x in err.splitlines() if "DROPPED: the warm-up's rate term" in x)
     assert "at the log's rates" in line and "(axis x)" in line
