@@ -55,7 +55,10 @@ from calibration.discrepancy.effects.turntable_geometry import turn_columns
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.plateau_settling import since_plateau_start_s
 from calibration.discrepancy.problem import build_problem
-from calibration.discrepancy.protocol_order import time_and_position_confounded
+from calibration.discrepancy.protocol_order import (
+    slot_offset_columns,
+    time_and_position_confounded,
+)
 from calibration.discrepancy.temperature_jump import jump_column, thresholds_c
 from calibration.recording import read_recording
 
@@ -134,13 +137,9 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
         return [o.w(block)]
     if rival == SLOT:
         # a free per-axis offset at each slot of the (repeated) visiting order: a settling
-        # after each move that repeats on every plateau, whatever its shape
-        slot = np.zeros(ctx.n, int)
-        for s in ctx.step_ids:
-            idx = np.flatnonzero(ctx.steps == s)
-            slot[idx[np.argsort(ctx.t_s[idx], kind="stable")]] = np.arange(idx.size)
-        cols = [per_axis(ctx, (slot == k).astype(float)) for k in np.unique(slot)]
-        return [o.w(np.concatenate(cols, axis=2))]
+        # after each move that repeats on every plateau, whatever its shape (the columns
+        # the diagnosis' slot_settling check uses)
+        return [o.w(slot_offset_columns(ctx.steps, ctx.positions, ctx.t_s))]
     m = re.match(r"a settling after each plateau's start.*?τ ≈ ([\d.]+) s", rival)
     if m:  # plateau_settling.py's rival: one per-axis decay after each plateau's start
         t = since_plateau_start_s(ctx)
