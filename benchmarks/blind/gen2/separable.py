@@ -59,6 +59,7 @@ from calibration.discrepancy.protocol_order import (
     slot_offset_columns,
     time_and_position_confounded,
 )
+from calibration.discrepancy.slot_settling import SLOT_SETTLING
 from calibration.discrepancy.temperature_jump import jump_column, thresholds_c
 from calibration.recording import read_recording
 
@@ -227,13 +228,15 @@ def outcome(d: dict, key: dict) -> tuple[str, list[str]]:
         m = re.match(r"not separable from (.*?)(?: here)?:", why)
         if m:
             rivals += [x.strip() for x in m.group(1).split(",") if x.strip() in BY_ID]
-        if "same order on every plateau" in why or (
+        if "same order on every plateau" in why or SLOT_SETTLING in why or (
                 kid == "turntable_geometry" and time_and_position_confounded(
                     *(np.asarray(d["_order"][k]) for k in ("steps", "positions", "t_s")))):
             # the protocol-level reason turntable_geometry is withheld (its identifiable()),
             # even where another check's reason was recorded over it
             rivals.append(SLOT)
-        return "not_established", list(dict.fromkeys(rivals))
+        # slot_settling's candidate is this oracle's SLOT (the same columns)
+        return "not_established", list(dict.fromkeys(SLOT if r == SLOT_SETTLING else r
+                                                     for r in rivals))
     if top is None or top == "unexplained":
         return "missed", []
     return "wrong", []
