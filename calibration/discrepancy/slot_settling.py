@@ -14,8 +14,8 @@ protocol level (its ``identifiable``).
 
 Measured on the second generator (docs/benchmarks.md, "Input-only names on a repeated
 visiting order"): on every repeated-order case the oracle's λ of the true nonlinearity's
-own columns after the base and the slot columns is 0 (to rounding), against 50–110 after
-the base alone; on varied orders the slots leave most of it (power ≥ 0.9 at 2×).
+own columns after the base and the slot columns is 0 (to rounding), against 56–107 after
+the base alone at 2×; on varied orders the slots take 11–61 % of it (power ≥ 0.75 at 2×).
 
 The rule, one F test (as ``_turned_or_bent``'s against a turn of the reference): the named
 term's columns after the model's other terms and the slot columns, at α. When nothing of
