@@ -36,6 +36,7 @@ def raw_sample_recording(
     soak_min: float = 20.0,
     vibration_mg: float = 0.0,
     placement_ug: float = 0.0,
+    **order: object,
 ) -> Recording:
     """Table 1 per step, each capture written back as ``samples`` raw rows.
 
@@ -44,6 +45,7 @@ def raw_sample_recording(
     ``vibration_mg``: compressor vibration (rms) on the steps below 0 °C, which widens
     those steps' sample scatter; ``placement_ug``: an error per capture and axis (rms,
     the same at every step) shared by its samples, as a box re-seated on the table.
+    ``order``: ``simulate_campaign``'s ``position_order`` / ``position_order_seed``.
     """
     from calibration.schedules import table1
     from simulators.campaign_sim import RigPhysics, compressor_vibration, simulate_campaign
@@ -57,6 +59,7 @@ def raw_sample_recording(
         samples_per_position=samples,
         seed=seed,
         physics=physics,
+        **order,  # type: ignore[arg-type]
     )
     rng = np.random.default_rng(seed + 1)
     placed = 1e-6 * placement_ug * rng.standard_normal((len(rec), 3))

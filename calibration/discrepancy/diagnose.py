@@ -50,6 +50,7 @@ from calibration.discrepancy.problem import (
 )
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
 from calibration.discrepancy.protocol_order import time_and_position_confounded
+from calibration.discrepancy.slot_settling import slot_settling_alike
 from calibration.discrepancy.temperature_jump import temperature_jump_alike
 from calibration.recording import Recording
 
@@ -530,6 +531,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # plateau, fits as well is not named (plateau_settling.py, issue 22: a fixture relaxing
     # after the moves of each plateau was named a temperature rate).
     findings = [settling_alike(pb, terms, f, alpha, not_ident, notes, _design)
+                for f in findings]
+    # A function of the specific force that a settling at each slot of the visiting order
+    # fits as well is not named (slot_settling.py, issue 22: when the order repeats on every
+    # plateau the slots span every function of the position, as for turntable_geometry).
+    findings = [slot_settling_alike(pb, terms, f, alpha, not_ident, notes, _design)
                 for f in findings]
     # A flagged reading whose recorded temperature jumped off its neighbours and whose
     # residual is the model's own ∂output/∂T is a glitch of the channel, not an outlier;

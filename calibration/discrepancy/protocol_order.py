@@ -15,7 +15,11 @@ This module is the one place those orders are drawn: the engine's
 order) calls :func:`position_order` and visits ``order[step]`` on each step; the
 recording carries ``position`` and ``visit`` (the row's index within its step), and the
 campaign's spec the scheme and seed, so a diagnosis can rebuild the order.
-:func:`time_and_position_confounded` is what the diagnosis checks today.
+:func:`time_and_position_confounded` is what the diagnosis checks at the protocol level
+(``turntable_geometry`` is withheld on it), :func:`slot_offset_columns` the rival it stands
+for: a settling after each move that repeats at each slot of the visiting order
+(``slot_settling.py`` judges an input-only name against it; the separability oracle of
+``benchmarks/blind/gen2/separable.py`` uses the same columns).
 """
 
 from __future__ import annotations
@@ -71,3 +75,34 @@ def time_and_position_confounded(steps: np.ndarray, positions: np.ndarray,
         m = steps == s
         orders.append(tuple(positions[m][np.argsort(t_s[m], kind="stable")].tolist()))
     return len(orders) > 1 and len(set(orders)) == 1
+
+
+def visit_slots(steps: np.ndarray, positions: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """(N,) index of each reading's visit within its plateau: 0 for the first position
+    visited on that plateau, 1 for the next, … (a visit is a run of readings at one position
+    in time order, so several readings of one capture share their slot)."""
+    steps, positions, t_s = (np.asarray(x) for x in (steps, positions, t_s))
+    out = np.zeros(steps.size, np.int64)
+    for s in np.unique(steps):
+        idx = np.flatnonzero(steps == s)
+        idx = idx[np.argsort(t_s[idx], kind="stable")]
+        pos = positions[idx]
+        out[idx] = np.concatenate([[0], np.cumsum(pos[1:] != pos[:-1])]) if idx.size else []
+    return out
+
+
+def slot_offset_columns(steps: np.ndarray, positions: np.ndarray,
+                        t_s: np.ndarray) -> np.ndarray:
+    """(N,3,3S): a free offset per axis at each of the S visit slots, the same on every
+    plateau — a settling after each move (of the die, of the mount) whose shape depends on
+    the move and on the time since the plateau began, both fixed by the slot when the
+    order repeats. When every plateau visits the positions in the same order
+    (:func:`time_and_position_confounded`) these columns span every function of the
+    position, so any per-position effect (a turn of each pose, any function of the specific
+    force) lies inside them."""
+    slot = visit_slots(steps, positions, t_s)
+    n_slot = int(slot.max()) + 1 if slot.size else 0
+    out = np.zeros((slot.size, 3, 3 * n_slot))
+    for a in range(3):
+        out[np.arange(slot.size), a, 3 * slot + a] = 1.0
+    return out

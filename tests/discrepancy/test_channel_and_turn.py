@@ -119,7 +119,8 @@ def test_the_heldout_ridge_gives_a_block_without_evidence_no_weight():
 def test_a_real_nonlinearity_keeps_its_name():
     nl = E.ScaleNonlinearity(k2_per_g=np.array([0.0, 0.0, 80e-6]))
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=1, effects=[nl]),
-                            setpoints_c=ONE_WAY, seed=11)
+                            setpoints_c=ONE_WAY, seed=11, position_order="random",
+                            position_order_seed=3)
     d = diagnose(rec, n_null=30, seed=1)
     assert d.findings[0].effect == "scale_nonlinearity"
 

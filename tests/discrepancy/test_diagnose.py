@@ -16,6 +16,9 @@ from simulators.truth import SensorTruth
 N_NULL = 30
 ONE_WAY = [float(t) for t in range(-40, 61, 10)]
 UP_DOWN = [-40.0, -20.0, 0.0, 20.0, 40.0, 60.0, 50.0, 30.0, 10.0, -10.0, -30.0]
+# A seeded order per plateau: a function of the specific force is then told from a settling
+# at each slot of the visiting order (in one order on every plateau it is not named).
+VARIED = {"position_order": "random", "position_order_seed": 3}
 
 
 def run(effects=(), *, setpoints=ONE_WAY, seed=1, **kw):
@@ -63,7 +66,7 @@ def test_static_protocol_hides_motion_and_gravity(null_one_way):
 
 
 def test_scale_nonlinearity_found_with_parameter():
-    d = run([E.ScaleNonlinearity(k2_per_g=np.array([0.0, 0.0, 80e-6]))])
+    d = run([E.ScaleNonlinearity(k2_per_g=np.array([0.0, 0.0, 80e-6]))], **VARIED)
     assert found(d)[0] == "scale_nonlinearity"
     f = d.findings[0]
     assert f.axes == ["z"]
@@ -111,9 +114,9 @@ def test_outlier_found_and_located():
 
 
 def test_cross_coupling_found_and_hidden_axis_aligned():
-    d = run([E.CrossCoupling(k_xy_per_g=60e-6)], seed=9)
+    d = run([E.CrossCoupling(k_xy_per_g=60e-6)], seed=9, **VARIED)
     assert found(d)[0] == "cross_coupling"
-    d1 = run([E.CrossCoupling(k_xy_per_g=60e-6)], seed=9, schedule=six_position())
+    d1 = run([E.CrossCoupling(k_xy_per_g=60e-6)], seed=9, schedule=six_position(), **VARIED)
     assert "cross_coupling" not in found(d1) and "cross_coupling" in hidden(d1)
 
 
@@ -162,7 +165,7 @@ def test_cli_json_contract(tmp_path, capsys):
     truth = SensorTruth.adxl355_typical(seed=12, effects=[
         E.ScaleNonlinearity(k2_per_g=np.array([70e-6, 0.0, 0.0]))])
     path = tmp_path / "run.csv"
-    write_recording(path, simulate_campaign(truth, seed=13))
+    write_recording(path, simulate_campaign(truth, seed=13, **VARIED))
     rep = tmp_path / "rep"
     args = SimpleNamespace(recording=str(path), model=None, json=True, report_dir=str(rep),
                            seed=0, n_null=N_NULL)
@@ -201,7 +204,7 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
 def test_twin_reproduces_finding():
     from simulators.effects import to_truth_effects
 
-    d = run([E.ScaleNonlinearity(k2_per_g=np.array([0.0, 90e-6, 0.0]))], seed=14)
+    d = run([E.ScaleNonlinearity(k2_per_g=np.array([0.0, 90e-6, 0.0]))], seed=14, **VARIED)
     effs = to_truth_effects(d)
     assert [e.effect_id for e in effs] == ["scale_nonlinearity"]
     assert effs[0].k2_per_g[1] == pytest.approx(90e-6, abs=10e-6)
@@ -225,7 +228,7 @@ def test_extended_model_compensates_better():
 
     truth = SensorTruth.adxl355_typical(seed=21, effects=[
         E.ScaleNonlinearity(k2_per_g=np.array([0.0, 0.0, 150e-6]))])
-    rec = simulate_campaign(truth, seed=22)
+    rec = simulate_campaign(truth, seed=22, **VARIED)
     d = diagnose(rec, n_null=N_NULL, seed=0)
     model = fit_campaign(rec).model
     T = rec.temperature_c()

@@ -43,8 +43,8 @@ def test_capture_means_keep_mean_scatter_and_count():
 SHAPE = {"samples": 200, "soak_min": 20.0, "vibration_mg": 0.5, "placement_ug": 20.0}
 
 
-def _raw(k: int, nonlinearity_ug: float = 0.0):
-    return raw_sample_recording(_truth(k, nonlinearity_ug), seed=17000 + k, **SHAPE)
+def _raw(k: int, nonlinearity_ug: float = 0.0, **order):
+    return raw_sample_recording(_truth(k, nonlinearity_ug), seed=17000 + k, **SHAPE, **order)
 
 
 def test_null_raw_sample_recording_is_consistent():
@@ -63,7 +63,9 @@ def test_null_raw_sample_recording_is_consistent():
 def test_effect_at_twice_its_detectable_size_is_found_in_raw_samples():
     # scale_nonlinearity: ~14 µg/g² just detectable on these capture means
     # (benchmarks/blind/detectability, σ = √(κ·sd²/n + τ²)); 28 µg/g² is 2×.
-    d = diagnose(_raw(15, 28.0), n_null=200, seed=15)
+    # a seeded order per plateau: in one order a settling at each slot fits it as well
+    d = diagnose(_raw(15, 28.0, position_order="random", position_order_seed=3), n_null=200,
+                 seed=15)
     assert d.mismatch is True
     assert "scale_nonlinearity" in [f.effect for f in d.findings]
 

@@ -55,7 +55,11 @@ from calibration.discrepancy.effects.turntable_geometry import turn_columns
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.plateau_settling import since_plateau_start_s
 from calibration.discrepancy.problem import build_problem
-from calibration.discrepancy.protocol_order import time_and_position_confounded
+from calibration.discrepancy.protocol_order import (
+    slot_offset_columns,
+    time_and_position_confounded,
+)
+from calibration.discrepancy.slot_settling import SLOT_SETTLING
 from calibration.discrepancy.temperature_jump import jump_column, thresholds_c
 from calibration.recording import read_recording
 
@@ -134,13 +138,9 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
         return [o.w(block)]
     if rival == SLOT:
         # a free per-axis offset at each slot of the (repeated) visiting order: a settling
-        # after each move that repeats on every plateau, whatever its shape
-        slot = np.zeros(ctx.n, int)
-        for s in ctx.step_ids:
-            idx = np.flatnonzero(ctx.steps == s)
-            slot[idx[np.argsort(ctx.t_s[idx], kind="stable")]] = np.arange(idx.size)
-        cols = [per_axis(ctx, (slot == k).astype(float)) for k in np.unique(slot)]
-        return [o.w(np.concatenate(cols, axis=2))]
+        # after each move that repeats on every plateau, whatever its shape (the columns
+        # the diagnosis' slot_settling check uses)
+        return [o.w(slot_offset_columns(ctx.steps, ctx.positions, ctx.t_s))]
     m = re.match(r"a settling after each plateau's start.*?τ ≈ ([\d.]+) s", rival)
     if m:  # plateau_settling.py's rival: one per-axis decay after each plateau's start
         t = since_plateau_start_s(ctx)
@@ -228,13 +228,15 @@ def outcome(d: dict, key: dict) -> tuple[str, list[str]]:
         m = re.match(r"not separable from (.*?)(?: here)?:", why)
         if m:
             rivals += [x.strip() for x in m.group(1).split(",") if x.strip() in BY_ID]
-        if "same order on every plateau" in why or (
+        if "same order on every plateau" in why or SLOT_SETTLING in why or (
                 kid == "turntable_geometry" and time_and_position_confounded(
                     *(np.asarray(d["_order"][k]) for k in ("steps", "positions", "t_s")))):
             # the protocol-level reason turntable_geometry is withheld (its identifiable()),
             # even where another check's reason was recorded over it
             rivals.append(SLOT)
-        return "not_established", list(dict.fromkeys(rivals))
+        # slot_settling's candidate is this oracle's SLOT (the same columns)
+        return "not_established", list(dict.fromkeys(SLOT if r == SLOT_SETTLING else r
+                                                     for r in rivals))
     if top is None or top == "unexplained":
         return "missed", []
     return "wrong", []
