@@ -32,6 +32,7 @@ from calibration.discrepancy.heldout import column_scale, folds, heldout_rms_ug
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import (
+    QuantisedChannel,
     one_code_per_plateau,
     plateau_groups,
     quantised_channel,
@@ -42,6 +43,7 @@ from calibration.discrepancy.protocol import Protocol, assess, visit_column
 from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.discrepancy.temperature_jump import temperature_jump_alike
 from calibration.recording import Recording
+from calibration.temperature_lsb import LSB_COLUMNS, declared_lsb_c
 
 MAX_STAGES = 8
 # The null of the families with columns and of the scan: sign flips of the recording's own
@@ -233,6 +235,10 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # placement, vibration and temperature error, so they are not independent readings;
     # counted as such, a null twin was a "mismatch" (issue 10). Diagnose the capture means,
     # with σ = sd/√n plus the shared component estimated from the data (samples.py).
+    # The LSB the recording declares for its temperature channel (temperature_lsb.py), read
+    # before raw samples become capture means.
+    lsb_c = (declared_lsb_c(recording, recording.temperature_source)
+             if recording.has_temperature else None)
     capture_means = samples_mod.is_raw_samples(recording)
     if capture_means:
         n_rows = len(recording)
@@ -317,7 +323,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     why_alike: dict[str, str] = {}  # named term → why an unobservable confuser fits alike
     tail_nu = np.inf
     groups = plateau_groups(pb) if WILD_NULL and PLATEAU_NULL else None
-    known = _quantised_channel(pb, notes) if WILD_NULL else None
+    channel = _quantised_channel(pb, notes, lsb_c) if WILD_NULL else None
+    known = channel.known if channel is not None else None  # the scan's
+    bounded = channel.bounded if channel is not None else None  # the families'
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
@@ -339,9 +347,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         shared = _shared(groups, e, U)
         if WILD_NULL:
             stats.wild_replicates(rng, e, U, pb.row, E,
-                                  tuple(int(t.theta) for t in tests.values()), shared, known)
+                                  tuple(int(t.theta) for t in tests.values()), shared)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
-                               e, E, s, s_null, lifted, not_ident, (nu, rng)))
+                               e, E, s, s_null, lifted, not_ident, (nu, rng), bounded))
         tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
         if not tests:
             break
@@ -696,29 +704,31 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     return scan_mod.scan(pb, U, e, E, alpha)
 
 
-def _quantised_channel(pb: LinearProblem, notes: list[str]
-                       ) -> tuple[stats.SharedGroups, np.ndarray] | None:
-    """The known shared noise of a non-dithering quantised temperature channel
-    (plateau_noise.quantised_channel) for the replicates, said in ``notes``; or None."""
-    found = quantised_channel(pb)
+def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float | None
+                       ) -> QuantisedChannel | None:
+    """The rounding error of a non-dithering quantised temperature channel
+    (plateau_noise.quantised_channel), said in ``notes``; or None. ``declared_q_c``: the LSB
+    the recording declares (temperature_lsb.py)."""
+    found = quantised_channel(pb, declared_q_c)
+    ctx = pb.ctx
     if found is None:
-        ctx = pb.ctx
         if ctx.temperature_source != "none" and one_code_per_plateau(ctx.temp_c, ctx.steps):
             notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "
                          "through each plateau: quantised without dither, at an LSB the "
-                         "recording does not show (no plateau moves by one code); each "
-                         "plateau's temperature may be off by up to half that LSB, which the "
-                         "null does not include (a channel step, rate or hysteresis of that "
-                         "size is not told from it)")
+                         "recording does not show (no plateau moves by one code) nor declare "
+                         f"({LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}); "
+                         "each plateau's temperature may be off by up to half that LSB, which "
+                         "the null does not include (a channel step, rate or hysteresis of "
+                         "that size is not told from it)")
         return None
-    sg, var, grid = found
-    notes.append(f"temperature channel ({pb.ctx.temperature_source}) quantised at "
-                 f"{grid.q_c:.4g} °C without dither ({100 * grid.fraction:.0f} % of the "
-                 f"readings on its codes): the readings of a plateau on one code share its "
-                 f"temperature, known to ±{grid.q_c / 2:.3g} °C; the null includes that "
-                 f"error (sd {grid.q_c / np.sqrt(12):.2g} °C) through the base model's "
-                 "∂output/∂T")
-    return sg, var
+    how = ("declared by the recording" if found.declared else
+           f"without dither ({100 * found.fraction:.0f} % of the readings on its codes)")
+    notes.append(f"temperature channel ({ctx.temperature_source}) quantised at "
+                 f"{found.q_c:.4g} °C {how}: the readings of a plateau on one code share its "
+                 f"temperature, known to ±{found.q_c / 2:.3g} °C; the tests allow any such "
+                 "error through the base model's ∂output/∂T (a channel step, rate or "
+                 "hysteresis within it is not established)")
+    return found
 
 
 def _shared(groups: stats.SharedGroups | None, e: np.ndarray, U: np.ndarray
@@ -1050,7 +1060,9 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
 
 
 def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
-              tail=(np.inf, None)):
+              tail=(np.inf, None), bounded: stats.BoundedShared | None = None):
+    """Each live effect's test at this stage. ``bounded``: a quantised channel's rounding
+    error, which each F test's data score is taken net of (stats.linear_stats)."""
     tests: dict[str, stats.CandidateTest] = {}
     # A per-reading effect may be accepted again at another reading; any other once.
     chosen = {t.effect_id for t in terms if not BY_ID[t.effect_id].per_reading}
@@ -1082,7 +1094,8 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                 continue
             own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
             lp, lpn, k, absorbed, q = (own if own is not None else
-                                       stats.linear_stats(U, Xw, e, E, eff.one_sided, EE))
+                                       stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
+                                                          bounded))
             absorbed_min = min(absorbed_min, absorbed)
             if k == 0 or absorbed > eff.absorbed_max:
                 continue

@@ -434,6 +434,41 @@ def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
     return np.where(np.isfinite(v), v, asym)
 
 
+@dataclass(frozen=True)
+class BoundedShared:
+    """Errors shared by groups of whitened entries and *bounded*, not random: entry i moves
+    by ``loading[i]·δ[group[i]]`` with every |δ_g| ≤ ``half`` (docs/diagnosis.md §2).
+
+    Why (issue 22): a temperature channel quantised to q without dither records one code
+    for the readings of a settled plateau, and its error is code − die, within ±q/2 — but
+    not drawn at random per plateau: a die still settling towards a setpoint on a code has
+    an error of the approach's sign on every plateau of a leg (a channel step of up to q
+    between the legs), and one crossing a code's edge an error that follows its rate. A
+    Gaussian draw of variance q²/12 per plateau left such nulls at 1.5 % at a 1 % level;
+    the bound holds whatever the pattern.
+    """
+
+    group: np.ndarray  # (m,) int, 0..G − 1
+    loading: np.ndarray  # (m,) the whitened effect of a unit error
+    half: float  # the bound on each group's error, in the loading's units
+
+    def reach(self, B: np.ndarray) -> float:
+        """An upper bound of ‖Bᵀ Z δ‖ over the box (Z the groups' loading columns):
+        Σ_g ‖Bᵀz_g‖·half (exact for one column: the worst δ_g is ±half by the sign of
+        bᵀz_g; the triangle inequality for more)."""
+        g = np.asarray(self.group)
+        n_g = int(g.max()) + 1 if g.size else 0
+        BL = np.asarray(B) * self.loading[:, None]
+        M = np.stack([np.bincount(g, BL[:, j], minlength=n_g) for j in range(B.shape[1])],
+                     axis=1) if B.shape[1] else np.zeros((n_g, 0))
+        return float(self.half * np.sum(np.linalg.norm(M, axis=1)))
+
+
+def _shrunk(norm: float, reach: float) -> float:
+    """A score's norm less what a bounded shared error can reach (never below 0)."""
+    return max(norm - reach, 0.0)
+
+
 def linear_stats(
     U: np.ndarray,
     Xw: np.ndarray,
@@ -441,6 +476,7 @@ def linear_stats(
     E: np.ndarray,
     one_sided: bool = False,
     EE: np.ndarray | None = None,
+    bounded: BoundedShared | None = None,
 ) -> tuple[float, np.ndarray, int, float, float]:
     """F-type score test of free-gain columns after projecting out U.
 
@@ -455,6 +491,14 @@ def linear_stats(
     recordings, e.g. 33 rows; and strong effects, whose own signal would otherwise hide
     them): χ²_k tails become F(k, dof) tails. ``EE``: Σ E² per replicate, when the caller
     has it (it is the same for every candidate of a stage).
+
+    ``bounded`` (:class:`BoundedShared`): the data may hold an error the null does not, known
+    only to lie in a box. The data's score is taken as the least the box allows: its norm
+    less the most the box can put into it (:meth:`BoundedShared.reach`), so that, whatever
+    error in the box the data hold, its score is no larger than the noise alone would give
+    (‖Bᵀ(ε + Zδ)‖ − reach ≤ ‖Bᵀε‖); the replicates are the noise's. One-sided: the signed
+    score less its own reach, no evidence unless still > 0. The denominator (the residual
+    after the candidate) and the explained sum of squares returned are the data's own.
     """
     absorbed = absorbed_fraction(U, Xw)
     m = e.size
@@ -475,6 +519,12 @@ def linear_stats(
 
             qn_d, t_d = float(np.sum((Nb.T @ e) ** 2)), float(b1 @ e)
             lp = float(stat(np.asarray(qn_d), np.asarray(t_d), np.asarray(ee)))
+            if bounded is not None:  # the data's evidence at the least the box allows
+                t_b = t_d - bounded.reach(b1[:, None])
+                qn_b = _shrunk(np.sqrt(qn_d), bounded.reach(Nb)) ** 2
+                c = (qn_b + t_b**2) / max((ee - qn_d - t_d**2) / dof, 1e-300)
+                lp = (float(np.log(0.5) + f_logsf(c / (j + 1), j + 1, dof)) if t_b > 0
+                      else 0.0)
             lpn = stat(np.sum((Nb.T @ E) ** 2, axis=0), b1 @ E, EE)
             return lp, lpn, j + 1, absorbed, (qn_d + t_d**2) if t_d > 0 else 0.0
     B = orthonormal_basis(project_out(U, Xw), 1e-6)
@@ -483,7 +533,8 @@ def linear_stats(
         return 0.0, np.zeros(E.shape[1]), 0, 1.0, 0.0
     dof = max(m - U.shape[1] - k, 1)
     q = float(np.sum((B.T @ e) ** 2))
-    f = q / k / max((ee - q) / dof, 1e-300)
+    q_score = q if bounded is None else _shrunk(np.sqrt(q), bounded.reach(B)) ** 2
+    f = q_score / k / max((ee - q) / dof, 1e-300)
     qn = np.sum((B.T @ E) ** 2, axis=0)
     # the same floor as the data's F: a replicate whose residual lies wholly in B (EE = qn)
     # gave 0/0 = nan, which no comparison counts
