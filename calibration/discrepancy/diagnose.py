@@ -343,7 +343,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # against sign flips of this residual, in the same buffer (stats.wild_replicates).
         rows = [f for f in live if f.per_reading]
         tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
-                          (nu, rng))
+                          (nu, rng), bounded)
         shared = _shared(groups, e, U)
         if WILD_NULL:
             stats.wild_replicates(rng, e, U, pb.row, E,
@@ -1062,7 +1062,7 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
 def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
               tail=(np.inf, None), bounded: stats.BoundedShared | None = None):
     """Each live effect's test at this stage. ``bounded``: a quantised channel's rounding
-    error, which each F test's data score is taken net of (stats.linear_stats)."""
+    error, which each data score is taken net of (stats.linear_stats, stats.row_stats)."""
     tests: dict[str, stats.CandidateTest] = {}
     # A per-reading effect may be accepted again at another reading; any other once.
     chosen = {t.effect_id for t in terms if not BY_ID[t.effect_id].per_reading}
@@ -1074,7 +1074,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             skip = {r for t in terms for r in t.rows}
             nu, rng = tail  # the readings' own tail (ν = ∞: Gaussian), see _reading_dof
             t_row, tn, g = stats.row_stats(U, e, E, pb.row, pb.ctx.n, s, s_null, skip,
-                                           pb.shared_t_loading, nu, rng)
+                                           pb.shared_t_loading, nu, rng, bounded)
             i = int(np.argmax(t_row))
             mult = pb.ctx.n - len(skip)
             lp = float(stats.reading_logsf(t_row[i], g, nu))

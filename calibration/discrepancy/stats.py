@@ -463,6 +463,41 @@ class BoundedShared:
                      axis=1) if B.shape[1] else np.zeros((n_g, 0))
         return float(self.half * np.sum(np.linalg.norm(M, axis=1)))
 
+    def reading_reach(self, U: np.ndarray, idx: np.ndarray, Minv: np.ndarray) -> np.ndarray:
+        """(N,) an upper bound of each reading's ‖((I − P)Zδ)_n‖ in the metric ``Minv``
+        (its residual covariance's inverse, :func:`row_stats`) over the box:
+        Σ_h ‖((I − P)z_h)_n‖·half — its own group's loading less the base model's share
+        of every group's (a fit through the plateaus' errors moves the others too).
+        ``idx`` (N, g): each reading's entries. Exact per group by blocks of readings; past
+        :data:`REACH_BUDGET` elements the others' share is bounded through the reading's
+        own ‖U_n‖ (Frobenius, in the metric) times Σ_h ‖Uᵀz_h‖."""
+        grp = np.asarray(self.group)
+        n_g = int(grp.max()) + 1 if grp.size else 0
+        n, g = idx.shape
+        C = np.stack([np.bincount(grp, U[:, j] * self.loading, minlength=n_g)
+                      for j in range(U.shape[1])]) if U.shape[1] else np.zeros((0, n_g))
+        own_g = grp[idx[:, 0]]  # a reading's entries are in one group
+        z_own = self.loading[idx]  # (N, g)
+        out = np.empty(n)
+        if n * g * n_g > REACH_BUDGET:
+            UC = np.einsum("ngp,nhp->ngh", U[idx], U[idx])  # U_n U_nᵀ, (N, g, g)
+            u_norm = np.sqrt(np.maximum(np.einsum("ngh,nhg->n", Minv, UC), 0.0))
+            own = z_own - np.einsum("ngp,pn->ng", U[idx], C[:, own_g])
+            own_norm = np.sqrt(np.maximum(np.einsum("ng,ngh,nh->n", own, Minv, own), 0.0))
+            c_norm = np.linalg.norm(C, axis=0)
+            return self.half * (own_norm + u_norm * (c_norm.sum() - c_norm[own_g]))
+        step = max(1, CHUNK_BYTES // (8 * g * max(n_g, 1)))
+        for i in range(0, n, step):
+            sl = slice(i, i + step)
+            R = -np.einsum("ngp,pk->ngk", U[idx[sl]], C)  # (c, g, G): −(U Uᵀ z_h)_n
+            R[np.arange(R.shape[0]), :, own_g[sl]] += z_own[sl]
+            out[sl] = np.sqrt(np.maximum(np.einsum("ngk,ngh,nhk->nk", R, Minv[sl], R),
+                                         0.0)).sum(axis=1)
+        return self.half * out
+
+
+REACH_BUDGET = 50_000_000  # readings × entries × groups of the exact reading_reach
+
 
 def _shrunk(norm: float, reach: float) -> float:
     """A score's norm less what a bounded shared error can reach (never below 0)."""
@@ -572,6 +607,7 @@ def row_stats(
     shared: np.ndarray | None = None,
     reading_dof: float = np.inf,
     rng: np.random.Generator | None = None,
+    bounded: BoundedShared | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
 
@@ -595,6 +631,11 @@ def row_stats(
     heavy (at ν = 5 the test at half its level).
     Only the per-reading family sees it; the replicates stay Gaussian for the others.
 
+    ``bounded`` (:class:`BoundedShared`): each reading's data statistic is taken net of the
+    most the box can put into it (:meth:`BoundedShared.reading_reach`), as the F tests'
+    scores are (:func:`linear_stats`): a reading on a quantised channel's code, or a
+    capture across a code change, whose rounding error alone sets it off is no outlier.
+
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
     """
@@ -617,6 +658,9 @@ def row_stats(
     Minv[ok] = np.linalg.inv(M[ok])
     eg = e[idx]
     t = np.einsum("ng,ngh,nh->n", eg, Minv, eg) / s**2
+    if bounded is not None:  # net of what the box can put into the reading (linear_stats)
+        reach = bounded.reading_reach(U, idx, Minv) / s
+        t = np.where(ok, np.maximum(np.sqrt(np.maximum(t, 0.0)) - reach, 0.0) ** 2, t)
     # The max over readings by blocks of readings: no (N × B) array. s_null is one scale per
     # replicate, so max(q / s²) = max(q) / s².
     tn_max = np.full(E.shape[1], -np.inf)

@@ -166,3 +166,29 @@ def test_the_declared_lsb_column_is_read_from_a_file_and_checked(tmp_path):
         with pytest.raises(RecordingError) as err:
             declared_lsb_c(read_recording(path), "sensor_c")
         assert err.value.line == line and err.value.column == "sensor_lsb_c"
+
+
+def test_a_reading_s_reach_bounds_every_corner_of_the_box(monkeypatch):
+    """row_stats' per-reading reach: no error in the box moves a reading's residual (after
+    the base model's projection, in its covariance's metric) further; the cheap bound of
+    long recordings is larger still."""
+    rng = np.random.default_rng(8)
+    n, g, k = 12, 3, 4
+    row = np.repeat(np.arange(n), g)
+    group = np.repeat(np.arange(n) // (n // k), g)  # four plateaus of three readings
+    load = rng.standard_normal(n * g)
+    U = np.linalg.qr(rng.standard_normal((n * g, 5)))[0]
+    idx = np.arange(n * g).reshape(n, g)
+    A = rng.standard_normal((n, g, g))
+    Minv = A @ np.transpose(A, (0, 2, 1)) + np.eye(g)[None]
+    box = stats.BoundedShared(group, load, 0.5)
+    reach = box.reading_reach(U, idx, Minv)
+    Z = np.zeros((n * g, k))
+    Z[np.arange(n * g), group] = load
+    R = stats.project_out(U, Z)
+    corners = np.array(np.meshgrid(*[[-0.5, 0.5]] * k)).reshape(k, -1).T
+    moved = (R @ corners.T)[idx]  # (n, g, corners)
+    worst = np.sqrt(np.einsum("ngc,ngh,nhc->nc", moved, Minv, moved)).max(axis=1)
+    assert np.all(worst <= reach + 1e-12) and np.all(reach < 4 * worst)
+    monkeypatch.setattr(stats, "REACH_BUDGET", 0)
+    assert np.all(box.reading_reach(U, idx, Minv) >= reach - 1e-12)
