@@ -1093,6 +1093,14 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             if Xw.shape[1] == 0 or not np.any(Xw):
                 continue
             own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
+            if own is not None and bounded is not None:
+                # With a quantised channel its data score is taken on the residual whose
+                # part along its columns is shortened by the box's reach, as linear_stats
+                # takes the others' (else it escaped the bound and won the name over those
+                # that did not: cross_coupling named turntable_geometry on the clean channel)
+                e_net = bounded.shortened(
+                    stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6), e)
+                own = (eff.test_stats(pb, U, Xw, e_net, E[:, :1])[0], *own[1:])
             lp, lpn, k, absorbed, q = (own if own is not None else
                                        stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
                                                           bounded))

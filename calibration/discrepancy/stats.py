@@ -453,15 +453,31 @@ class BoundedShared:
     half: float  # the bound on each group's error, in the loading's units
 
     def reach(self, B: np.ndarray) -> float:
-        """An upper bound of ‖Bᵀ Z δ‖ over the box (Z the groups' loading columns):
-        Σ_g ‖Bᵀz_g‖·half (exact for one column: the worst δ_g is ±half by the sign of
-        bᵀz_g; the triangle inequality for more)."""
+        """An upper bound of ‖Bᵀ Z δ‖ over the box (Z the groups' loading columns, M = BᵀZ):
+        the smaller of Σ_g ‖m_g‖·half (exact for one column: the worst δ_g is ±half by
+        the sign of bᵀz_g; the triangle inequality for more) and ‖M‖₂·half·√G (the
+        box's corners are half·√G from its centre; tighter where M spreads over several
+        columns)."""
         g = np.asarray(self.group)
         n_g = int(g.max()) + 1 if g.size else 0
+        if B.shape[1] == 0 or n_g == 0:
+            return 0.0
         BL = np.asarray(B) * self.loading[:, None]
         M = np.stack([np.bincount(g, BL[:, j], minlength=n_g) for j in range(B.shape[1])],
-                     axis=1) if B.shape[1] else np.zeros((n_g, 0))
-        return float(self.half * np.sum(np.linalg.norm(M, axis=1)))
+                     axis=1)
+        by_group = float(np.sum(np.linalg.norm(M, axis=1)))
+        spectral = float(np.linalg.norm(M, 2)) * np.sqrt(n_g)
+        return self.half * min(by_group, spectral)
+
+    def shortened(self, B: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """``e`` with its part along B's span shortened by :meth:`reach` (never past 0): any
+        statistic of ``(Bᵀe, (I − BBᵀ)e)`` that grows with ‖Bᵀe‖ is then the one
+        :func:`linear_stats` takes net of the box (an effect's own test, its columns B)."""
+        sc = B.T @ e
+        norm = float(np.linalg.norm(sc))
+        if norm <= 0:
+            return e
+        return e - B @ sc * min(1.0, self.reach(B) / norm)
 
     def reading_reach(self, U: np.ndarray, idx: np.ndarray, Minv: np.ndarray) -> np.ndarray:
         """(N,) an upper bound of each reading's ‖((I − P)Zδ)_n‖ in the metric ``Minv``

@@ -192,3 +192,21 @@ def test_a_reading_s_reach_bounds_every_corner_of_the_box(monkeypatch):
     assert np.all(worst <= reach + 1e-12) and np.all(reach < 4 * worst)
     monkeypatch.setattr(stats, "REACH_BUDGET", 0)
     assert np.all(box.reading_reach(U, idx, Minv) >= reach - 1e-12)
+
+
+def test_an_own_test_sees_the_box_through_the_shortened_residual():
+    """An effect with its own F (turntable_geometry's) is handed the residual whose part
+    along its columns is shortened by the reach: for a statistic of (Bᵀe, (I − BBᵀ)e) that
+    is the score linear_stats takes net of the box."""
+    rng = np.random.default_rng(9)
+    n, step, row, axis, U = _updown_layout(K, PER)
+    load = np.array([1.0, -0.6, 0.4])[axis] * 30.0
+    group = step[row]
+    box = stats.BoundedShared(group, load, 0.05)
+    X = np.column_stack([load * (group >= K // 2), rng.standard_normal(3 * n)])
+    e = stats.project_out(U, rng.standard_normal(3 * n) + 0.5 * X[:, 0])
+    E = rng.standard_normal((3 * n, 4))
+    B = stats.orthonormal_basis(stats.project_out(U, X), 1e-6)
+    net = stats.linear_stats(U, X, e, E, bounded=box)[0]
+    assert stats.linear_stats(U, X, box.shortened(B, e), E)[0] == pytest.approx(net)
+    assert net > stats.linear_stats(U, X, e, E)[0]
