@@ -174,7 +174,6 @@ def test_a_reading_s_reach_bounds_every_corner_of_the_box(monkeypatch):
     long recordings is larger still."""
     rng = np.random.default_rng(8)
     n, g, k = 12, 3, 4
-    row = np.repeat(np.arange(n), g)
     group = np.repeat(np.arange(n) // (n // k), g)  # four plateaus of three readings
     load = rng.standard_normal(n * g)
     U = np.linalg.qr(rng.standard_normal((n * g, 5)))[0]
