@@ -726,8 +726,9 @@ def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float 
     notes.append(f"temperature channel ({ctx.temperature_source}) quantised at "
                  f"{found.q_c:.4g} °C {how}: the readings of a plateau on one code share its "
                  f"temperature, known to ±{found.q_c / 2:.3g} °C; the tests allow any such "
-                 "error through the base model's ∂output/∂T (a channel step, rate or "
-                 "hysteresis within it is not established)")
+                 "error through the base model's ∂output/∂T (an effect no larger than such "
+                 "errors can make — a channel step, rate or hysteresis of that size, a drift "
+                 "or a nonlinearity they mimic — is not established)")
     return found
 
 
