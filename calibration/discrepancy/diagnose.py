@@ -37,6 +37,7 @@ from calibration.discrepancy.heldout import (
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import (
+    QuantisedChannel,
     one_code_per_plateau,
     plateau_groups,
     quantised_channel,
@@ -53,6 +54,7 @@ from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.discrepancy.slot_settling import slot_settling_alike
 from calibration.discrepancy.temperature_jump import temperature_jump_alike
 from calibration.recording import Recording
+from calibration.temperature_lsb import LSB_COLUMNS, declared_lsb_c
 
 MAX_STAGES = 8
 # The null of the families with columns and of the scan: sign flips of the recording's own
@@ -244,6 +246,10 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # placement, vibration and temperature error, so they are not independent readings;
     # counted as such, a null twin was a "mismatch" (issue 10). Diagnose the capture means,
     # with σ = sd/√n plus the shared component estimated from the data (samples.py).
+    # The LSB the recording declares for its temperature channel (temperature_lsb.py), read
+    # before raw samples become capture means.
+    lsb_c = (declared_lsb_c(recording, recording.temperature_source)
+             if recording.has_temperature else None)
     capture_means = samples_mod.is_raw_samples(recording)
     if capture_means:
         n_rows = len(recording)
@@ -328,7 +334,16 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     why_alike: dict[str, str] = {}  # named term → why an unobservable confuser fits alike
     tail_nu = np.inf
     groups = plateau_groups(pb) if WILD_NULL and PLATEAU_NULL else None
-    known = _quantised_channel(pb, notes) if WILD_NULL else None
+    channel = _quantised_channel(pb, notes, lsb_c) if WILD_NULL else None
+    known = channel.known if channel is not None else None  # the scan's
+    # The families: with the LSB declared (a channel the recording says is quantised
+    # without dither), any rounding error within ±q/2 per plateau and value (the bound);
+    # with q only read from the readings' grid (a dithered channel's codes sit on one too)
+    # a draw per group at q²/12 in the replicates, as the scan's. The bound costs much
+    # power (docs/benchmarks.md: right or not established 104 -> 70 of 120 at 2x).
+    declared = channel is not None and channel.declared
+    bounded = channel.bounded if declared else None
+    wild_known = known if channel is not None and not declared else None
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
@@ -346,13 +361,14 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # against sign flips of this residual, in the same buffer (stats.wild_replicates).
         rows = [f for f in live if f.per_reading]
         tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
-                          (nu, rng))
+                          (nu, rng), bounded)
         shared = _shared(groups, e, U)
         if WILD_NULL:
             stats.wild_replicates(rng, e, U, pb.row, E,
-                                  tuple(int(t.theta) for t in tests.values()), shared, known)
+                                  tuple(int(t.theta) for t in tests.values()), shared,
+                                  wild_known)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
-                               e, E, s, s_null, lifted, not_ident, (nu, rng)))
+                               e, E, s, s_null, lifted, not_ident, (nu, rng), bounded))
         tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
         if not tests:
             break
@@ -719,29 +735,41 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     return scan_mod.scan(pb, U, e, E, alpha)
 
 
-def _quantised_channel(pb: LinearProblem, notes: list[str]
-                       ) -> tuple[stats.SharedGroups, np.ndarray] | None:
-    """The known shared noise of a non-dithering quantised temperature channel
-    (plateau_noise.quantised_channel) for the replicates, said in ``notes``; or None."""
-    found = quantised_channel(pb)
+def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float | None
+                       ) -> QuantisedChannel | None:
+    """The rounding error of a non-dithering quantised temperature channel
+    (plateau_noise.quantised_channel), said in ``notes``; or None. ``declared_q_c``: the LSB
+    the recording declares (temperature_lsb.py)."""
+    found = quantised_channel(pb, declared_q_c)
+    ctx = pb.ctx
     if found is None:
-        ctx = pb.ctx
         if ctx.temperature_source != "none" and one_code_per_plateau(ctx.temp_c, ctx.steps):
             notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "
                          "through each plateau: quantised without dither, at an LSB the "
-                         "recording does not show (no plateau moves by one code); each "
-                         "plateau's temperature may be off by up to half that LSB, which the "
-                         "null does not include (a channel step, rate or hysteresis of that "
-                         "size is not told from it)")
+                         "recording does not show (no plateau moves by one code) nor declare "
+                         f"({LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}); "
+                         "each plateau's temperature may be off by up to half that LSB, which "
+                         "the null does not include (a channel step, rate or hysteresis of "
+                         "that size is not told from it)")
         return None
-    sg, var, grid = found
-    notes.append(f"temperature channel ({pb.ctx.temperature_source}) quantised at "
-                 f"{grid.q_c:.4g} °C without dither ({100 * grid.fraction:.0f} % of the "
-                 f"readings on its codes): the readings of a plateau on one code share its "
-                 f"temperature, known to ±{grid.q_c / 2:.3g} °C; the null includes that "
-                 f"error (sd {grid.q_c / np.sqrt(12):.2g} °C) through the base model's "
-                 "∂output/∂T")
-    return sg, var
+    how = ("declared by the recording" if found.declared else
+           f"without dither ({100 * found.fraction:.0f} % of the readings on its codes)")
+    if found.declared:
+        notes.append(f"temperature channel ({ctx.temperature_source}) quantised at "
+                     f"{found.q_c:.4g} °C {how}: the readings of a plateau on one code share "
+                     f"its temperature, known to ±{found.q_c / 2:.3g} °C; the tests allow any "
+                     "such error through the base model's ∂output/∂T (an effect no larger "
+                     "than such errors can make — a channel step, rate or hysteresis of that "
+                     "size, a drift or a nonlinearity they mimic — is not established)")
+    else:
+        notes.append(f"temperature channel ({ctx.temperature_source}) quantised at "
+                     f"{found.q_c:.4g} °C {how}: the readings of a plateau on one code share "
+                     f"its temperature, known to ±{found.q_c / 2:.3g} °C; the null includes "
+                     f"that error as a draw per plateau and code at its variance q²/12 (a "
+                     f"channel that does not dither: declare its LSB, "
+                     f"{LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}, and "
+                     "the tests allow any error within ±q/2 instead)")
+    return found
 
 
 def _shared(groups: stats.SharedGroups | None, e: np.ndarray, U: np.ndarray
@@ -1069,7 +1097,9 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
 
 
 def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
-              tail=(np.inf, None)):
+              tail=(np.inf, None), bounded: stats.BoundedShared | None = None):
+    """Each live effect's test at this stage. ``bounded``: a quantised channel's rounding
+    error, which each data score is taken net of (stats.linear_stats, stats.row_stats)."""
     tests: dict[str, stats.CandidateTest] = {}
     # A per-reading effect may be accepted again at another reading; any other once.
     chosen = {t.effect_id for t in terms if not BY_ID[t.effect_id].per_reading}
@@ -1081,7 +1111,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             skip = {r for t in terms for r in t.rows}
             nu, rng = tail  # the readings' own tail (ν = ∞: Gaussian), see _reading_dof
             t_row, tn, g = stats.row_stats(U, e, E, pb.row, pb.ctx.n, s, s_null, skip,
-                                           pb.shared_t_loading, nu, rng)
+                                           pb.shared_t_loading, nu, rng, bounded)
             i = int(np.argmax(t_row))
             mult = pb.ctx.n - len(skip)
             lp = float(stats.reading_logsf(t_row[i], g, nu))
@@ -1100,8 +1130,17 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             if Xw.shape[1] == 0 or not np.any(Xw):
                 continue
             own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
+            if own is not None and bounded is not None:
+                # With a quantised channel its data score is taken on the residual whose
+                # part along its columns is shortened by the box's reach, as linear_stats
+                # takes the others' (else it escaped the bound and won the name over those
+                # that did not: cross_coupling named turntable_geometry on the clean channel)
+                e_net = bounded.shortened(
+                    stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6), e)
+                own = (eff.test_stats(pb, U, Xw, e_net, E[:, :1])[0], *own[1:])
             lp, lpn, k, absorbed, q = (own if own is not None else
-                                       stats.linear_stats(U, Xw, e, E, eff.one_sided, EE))
+                                       stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
+                                                          bounded))
             absorbed_min = min(absorbed_min, absorbed)
             if k == 0 or absorbed > eff.absorbed_max:
                 continue

@@ -12,10 +12,11 @@ variances fitted to the recording's own residual (:func:`stats.shared_variance`)
 
 Norm mode has one entry per reading: its first component is one offset per plateau.
 
-One more component has a variance that is *known*, not fitted (:func:`quantised_channel`):
-a temperature channel quantised to an LSB q whose own noise is far below q does not dither,
-so the readings of a plateau that sit on one code share that code's rounding error,
-uniform in ±q/2 (variance q²/12), through the same ∂output/∂T.
+One more component is *known*, not fitted (:func:`quantised_channel`): a temperature
+channel quantised to an LSB q whose own noise is far below q does not dither, so the
+readings of a plateau that sit on one code share that code's rounding error, within ±q/2,
+through the same ∂output/∂T — bounded, and by the die's approach to its setpoint not
+random (stats.BoundedShared).
 """
 
 from __future__ import annotations
@@ -177,28 +178,55 @@ def one_code_per_plateau(temp_c: np.ndarray, steps: np.ndarray) -> bool:
     return seen >= MIN_PLATEAUS
 
 
-def quantised_channel(pb: LinearProblem) -> tuple[stats.SharedGroups, np.ndarray,
-                                                   ChannelGrid] | None:
-    """The known-variance shared noise of a non-dithering quantised temperature channel:
-    ``(groups, variance, grid)`` for :func:`stats.add_shared` (variance in °C², drawn on the
-    whitened ∂output/∂T loading), or None (no grid, or no temperature dependence).
+@dataclass(frozen=True)
+class QuantisedChannel:
+    """A temperature channel quantised to ``q_c`` without dither, and what the null makes of
+    its rounding error (:func:`quantised_channel`)."""
 
-    The groups: the readings of one plateau that record the same code share one draw
-    (a settled plateau is one group); a reading between codes (a capture mean across a
-    code change) is its own group. The variance q²/12 is the uniform rounding error's: it
-    is known, so an effect in the data does not raise it (the fitted variances of
-    :func:`plateau_groups` did, and lost the effects; docs/diagnosis.md §2).
+    q_c: float  # the channel's LSB, °C
+    declared: bool  # q from the recording's own column (temperature_lsb), not its grid
+    fraction: float  # share of the readings on the grid (1.0 when declared)
+    known: tuple[stats.SharedGroups, np.ndarray]  # the scan's: a draw per group at q²/12
+    bounded: stats.BoundedShared  # the families': any error within ±q/2 per group
+
+
+def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
+                      ) -> QuantisedChannel | None:
+    """The rounding error of a non-dithering quantised temperature channel, or None (no LSB
+    declared and no grid found, or no temperature dependence).
+
+    q: ``declared_q_c`` (the recording's ``<channel>_lsb_c`` column, temperature_lsb.py),
+    else the grid the readings sit on (:func:`temperature_grid`). The groups: the readings
+    of one plateau that record the same value share one error (a settled plateau on one
+    code is one group; a capture mean across a code change is its own, or shares it with
+    an equal one); each error is code − die, within ±q/2, through the base model's
+    whitened ∂output/∂T.
+
+    Two uses. The families with columns (a channel step, a hysteresis, a rate or lag — each
+    a pattern over many plateaus) take the bound (``bounded``, stats.linear_stats): a die
+    that settles towards setpoints on codes has an error of the approach's sign on every
+    plateau of a leg, a pattern a random draw per plateau does not make (issue 22: 11 of
+    the 15 clean-channel nulls that fired). The scan's local blocks (one plateau, one
+    position) take a draw per group at the uniform error's variance q²/12 (``known``):
+    for one group's error a Gaussian of that variance has the heavier tail. Known, not
+    fitted: an effect in the data does not raise it (docs/diagnosis.md §2).
     """
     ctx = pb.ctx
     if ctx.temperature_source == "none":
         return None
-    grid = temperature_grid(ctx.temp_c, ctx.steps)
-    lt = temperature_loading(pb) if grid is not None else None
-    if grid is None or lt is None:
+    grid = None if declared_q_c is not None else temperature_grid(ctx.temp_c, ctx.steps)
+    if declared_q_c is None and grid is None:
         return None
-    n = ctx.n
-    key = np.where(grid.on_grid, grid.code, np.iinfo(np.int64).min + np.arange(n))
+    lt = temperature_loading(pb)
+    if lt is None:
+        return None
+    q = float(declared_q_c) if declared_q_c is not None else grid.q_c
+    t = np.asarray(ctx.temp_c, float)
+    key = np.where(np.isfinite(t), t, np.arange(ctx.n) + 1e9)
     _, g_read = np.unique(np.column_stack([ctx.steps, key]), axis=0, return_inverse=True)
-    g_read = np.asarray(g_read).ravel()
-    sg = stats.SharedGroups([lt], [g_read[pb.row]], ["quantised temperature channel"])
-    return sg, np.array([grid.q_c**2 / 12.0]), grid
+    group = np.asarray(g_read).ravel()[pb.row]
+    sg = stats.SharedGroups([lt], [group], ["quantised temperature channel"])
+    return QuantisedChannel(q, declared_q_c is not None,
+                            1.0 if grid is None else grid.fraction,
+                            (sg, np.array([q**2 / 12.0])),
+                            stats.BoundedShared(group, lt, q / 2.0))

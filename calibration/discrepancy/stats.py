@@ -434,6 +434,92 @@ def f_logsf(f: np.ndarray | float, k: int, dof: int) -> np.ndarray:
     return np.where(np.isfinite(v), v, asym)
 
 
+@dataclass(frozen=True)
+class BoundedShared:
+    """Errors shared by groups of whitened entries and *bounded*, not random: entry i moves
+    by ``loading[i]·δ[group[i]]`` with every |δ_g| ≤ ``half`` (docs/diagnosis.md §2).
+
+    Why (issue 22): a temperature channel quantised to q without dither records one code
+    for the readings of a settled plateau, and its error is code − die, within ±q/2 — but
+    not drawn at random per plateau: a die still settling towards a setpoint on a code has
+    an error of the approach's sign on every plateau of a leg (a channel step of up to q
+    between the legs), and one crossing a code's edge an error that follows its rate. A
+    Gaussian draw of variance q²/12 per plateau left such nulls at 1.5 % at a 1 % level;
+    the bound holds whatever the pattern.
+    """
+
+    group: np.ndarray  # (m,) int, 0..G − 1
+    loading: np.ndarray  # (m,) the whitened effect of a unit error
+    half: float  # the bound on each group's error, in the loading's units
+
+    def reach(self, B: np.ndarray) -> float:
+        """An upper bound of ‖Bᵀ Z δ‖ over the box (Z the groups' loading columns, M = BᵀZ):
+        the smaller of Σ_g ‖m_g‖·half (exact for one column: the worst δ_g is ±half by
+        the sign of bᵀz_g; the triangle inequality for more) and ‖M‖₂·half·√G (the
+        box's corners are half·√G from its centre; tighter where M spreads over several
+        columns)."""
+        g = np.asarray(self.group)
+        n_g = int(g.max()) + 1 if g.size else 0
+        if B.shape[1] == 0 or n_g == 0:
+            return 0.0
+        BL = np.asarray(B) * self.loading[:, None]
+        M = np.stack([np.bincount(g, BL[:, j], minlength=n_g) for j in range(B.shape[1])],
+                     axis=1)
+        by_group = float(np.sum(np.linalg.norm(M, axis=1)))
+        spectral = float(np.linalg.norm(M, 2)) * np.sqrt(n_g)
+        return self.half * min(by_group, spectral)
+
+    def shortened(self, B: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """``e`` with its part along B's span shortened by :meth:`reach` (never past 0): any
+        statistic of ``(Bᵀe, (I − BBᵀ)e)`` that grows with ‖Bᵀe‖ is then the one
+        :func:`linear_stats` takes net of the box (an effect's own test, its columns B)."""
+        sc = B.T @ e
+        norm = float(np.linalg.norm(sc))
+        if norm <= 0:
+            return e
+        return e - B @ sc * min(1.0, self.reach(B) / norm)
+
+    def reading_reach(self, U: np.ndarray, idx: np.ndarray, Minv: np.ndarray) -> np.ndarray:
+        """(N,) an upper bound of each reading's ‖((I − P)Zδ)_n‖ in the metric ``Minv``
+        (its residual covariance's inverse, :func:`row_stats`) over the box:
+        Σ_h ‖((I − P)z_h)_n‖·half — its own group's loading less the base model's share
+        of every group's (a fit through the plateaus' errors moves the others too).
+        ``idx`` (N, g): each reading's entries. Exact per group by blocks of readings; past
+        :data:`REACH_BUDGET` elements the others' share is bounded through the reading's
+        own ‖U_n‖ (Frobenius, in the metric) times Σ_h ‖Uᵀz_h‖."""
+        grp = np.asarray(self.group)
+        n_g = int(grp.max()) + 1 if grp.size else 0
+        n, g = idx.shape
+        C = np.stack([np.bincount(grp, U[:, j] * self.loading, minlength=n_g)
+                      for j in range(U.shape[1])]) if U.shape[1] else np.zeros((0, n_g))
+        own_g = grp[idx[:, 0]]  # a reading's entries are in one group
+        z_own = self.loading[idx]  # (N, g)
+        out = np.empty(n)
+        if n * g * n_g > REACH_BUDGET:
+            UC = np.einsum("ngp,nhp->ngh", U[idx], U[idx])  # U_n U_nᵀ, (N, g, g)
+            u_norm = np.sqrt(np.maximum(np.einsum("ngh,nhg->n", Minv, UC), 0.0))
+            own = z_own - np.einsum("ngp,pn->ng", U[idx], C[:, own_g])
+            own_norm = np.sqrt(np.maximum(np.einsum("ng,ngh,nh->n", own, Minv, own), 0.0))
+            c_norm = np.linalg.norm(C, axis=0)
+            return self.half * (own_norm + u_norm * (c_norm.sum() - c_norm[own_g]))
+        step = max(1, CHUNK_BYTES // (8 * g * max(n_g, 1)))
+        for i in range(0, n, step):
+            sl = slice(i, i + step)
+            R = -np.einsum("ngp,pk->ngk", U[idx[sl]], C)  # (c, g, G): −(U Uᵀ z_h)_n
+            R[np.arange(R.shape[0]), :, own_g[sl]] += z_own[sl]
+            out[sl] = np.sqrt(np.maximum(np.einsum("ngk,ngh,nhk->nk", R, Minv[sl], R),
+                                         0.0)).sum(axis=1)
+        return self.half * out
+
+
+REACH_BUDGET = 50_000_000  # readings × entries × groups of the exact reading_reach
+
+
+def _shrunk(norm: float, reach: float) -> float:
+    """A score's norm less what a bounded shared error can reach (never below 0)."""
+    return max(norm - reach, 0.0)
+
+
 def linear_stats(
     U: np.ndarray,
     Xw: np.ndarray,
@@ -441,6 +527,7 @@ def linear_stats(
     E: np.ndarray,
     one_sided: bool = False,
     EE: np.ndarray | None = None,
+    bounded: BoundedShared | None = None,
 ) -> tuple[float, np.ndarray, int, float, float]:
     """F-type score test of free-gain columns after projecting out U.
 
@@ -455,6 +542,14 @@ def linear_stats(
     recordings, e.g. 33 rows; and strong effects, whose own signal would otherwise hide
     them): χ²_k tails become F(k, dof) tails. ``EE``: Σ E² per replicate, when the caller
     has it (it is the same for every candidate of a stage).
+
+    ``bounded`` (:class:`BoundedShared`): the data may hold an error the null does not, known
+    only to lie in a box. The data's score is taken as the least the box allows: its norm
+    less the most the box can put into it (:meth:`BoundedShared.reach`), so that, whatever
+    error in the box the data hold, its score is no larger than the noise alone would give
+    (‖Bᵀ(ε + Zδ)‖ − reach ≤ ‖Bᵀε‖); the replicates are the noise's. One-sided: the signed
+    score less its own reach, no evidence unless still > 0. The denominator (the residual
+    after the candidate) and the explained sum of squares returned are the data's own.
     """
     absorbed = absorbed_fraction(U, Xw)
     m = e.size
@@ -475,6 +570,12 @@ def linear_stats(
 
             qn_d, t_d = float(np.sum((Nb.T @ e) ** 2)), float(b1 @ e)
             lp = float(stat(np.asarray(qn_d), np.asarray(t_d), np.asarray(ee)))
+            if bounded is not None:  # the data's evidence at the least the box allows
+                t_b = t_d - bounded.reach(b1[:, None])
+                qn_b = _shrunk(np.sqrt(qn_d), bounded.reach(Nb)) ** 2
+                c = (qn_b + t_b**2) / max((ee - qn_d - t_d**2) / dof, 1e-300)
+                lp = (float(np.log(0.5) + f_logsf(c / (j + 1), j + 1, dof)) if t_b > 0
+                      else 0.0)
             lpn = stat(np.sum((Nb.T @ E) ** 2, axis=0), b1 @ E, EE)
             return lp, lpn, j + 1, absorbed, (qn_d + t_d**2) if t_d > 0 else 0.0
     B = orthonormal_basis(project_out(U, Xw), 1e-6)
@@ -483,7 +584,8 @@ def linear_stats(
         return 0.0, np.zeros(E.shape[1]), 0, 1.0, 0.0
     dof = max(m - U.shape[1] - k, 1)
     q = float(np.sum((B.T @ e) ** 2))
-    f = q / k / max((ee - q) / dof, 1e-300)
+    q_score = q if bounded is None else _shrunk(np.sqrt(q), bounded.reach(B)) ** 2
+    f = q_score / k / max((ee - q) / dof, 1e-300)
     qn = np.sum((B.T @ E) ** 2, axis=0)
     # the same floor as the data's F: a replicate whose residual lies wholly in B (EE = qn)
     # gave 0/0 = nan, which no comparison counts
@@ -521,6 +623,7 @@ def row_stats(
     shared: np.ndarray | None = None,
     reading_dof: float = np.inf,
     rng: np.random.Generator | None = None,
+    bounded: BoundedShared | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Leave-one-reading-out statistic per reading: e_gᵀ(C_g − U_g U_gᵀ)⁻¹ e_g / s².
 
@@ -544,6 +647,11 @@ def row_stats(
     heavy (at ν = 5 the test at half its level).
     Only the per-reading family sees it; the replicates stay Gaussian for the others.
 
+    ``bounded`` (:class:`BoundedShared`): each reading's data statistic is taken net of the
+    most the box can put into it (:meth:`BoundedShared.reading_reach`), as the F tests'
+    scores are (:func:`linear_stats`): a reading on a quantised channel's code, or a
+    capture across a code change, whose rounding error alone sets it off is no outlier.
+
     Returns per-row stats on the data (N,), their max on each null replicate (B,),
     and the number of entries per reading (the dof).
     """
@@ -566,6 +674,9 @@ def row_stats(
     Minv[ok] = np.linalg.inv(M[ok])
     eg = e[idx]
     t = np.einsum("ng,ngh,nh->n", eg, Minv, eg) / s**2
+    if bounded is not None:  # net of what the box can put into the reading (linear_stats)
+        reach = bounded.reading_reach(U, idx, Minv) / s
+        t = np.where(ok, np.maximum(np.sqrt(np.maximum(t, 0.0)) - reach, 0.0) ** 2, t)
     # The max over readings by blocks of readings: no (N × B) array. s_null is one scale per
     # replicate, so max(q / s²) = max(q) / s².
     tn_max = np.full(E.shape[1], -np.inf)

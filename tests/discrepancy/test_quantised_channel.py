@@ -124,5 +124,6 @@ def test_the_generator_s_clean_channel_and_what_diagnose_says_of_it():
     assert np.mean(np.abs(t / 0.1 - np.round(t / 0.1)) < 0.02) > 0.8
     note = [x for x in diagnose(clean, n_null=50).notes if "quantised" in x]
     assert len(note) == 1 and "0.1 °C without dither" in note[0] \
-        and "known to ±0.05 °C" in note[0] and "the null includes" in note[0]
+        and "known to ±0.05 °C" in note[0] and "the null includes" in note[0] \
+        and "declare its LSB, sensor_lsb_c" in note[0]
     assert not [x for x in diagnose(dithered, n_null=50).notes if "quantised" in x]

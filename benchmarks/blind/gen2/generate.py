@@ -3,7 +3,7 @@
     python -m benchmarks.blind.gen2.generate --realdata DIR --out OUT [--quick] [--reps R]
                                              [--nulls N] [--seed S]
                                              [--outside-set default|unseen]
-                                             [--temperature-channel dithered|clean]
+                                             [--temperature-channel dithered|clean|clean-declared]
 
 Writes ``OUT/cases/NNNN.csv`` (and ``OUT/given/NNNN.csv`` for twin-against-recording
 pairs: the recording a model is calibrated on) and, apart, ``OUT/keys/NNNN.json``. Nothing
@@ -30,6 +30,8 @@ sensor (sensor.py), the protocols (protocol.py), the effects (effects.py) and th
 (simulate.CLEAN_CH_SD_C) instead of 0.04 °C, at the protocol's LSB: it does not dither, so
 the readings of a settled plateau share one rounding error, uniform in ±LSB/2. Same draws
 otherwise (the default cases with only that channel's noise changed).
+``--temperature-channel clean-declared``: the same cases, each recording declaring its
+sensor_c LSB in the optional ``sensor_lsb_c`` column (calibration/temperature_lsb.py).
 """
 
 from __future__ import annotations
@@ -146,7 +148,7 @@ def build(spec: dict, out: Path) -> dict:
         key.update(magnitude=m, unit=fx.UNIT[eid])
     elif spec["kind"] == "null" and lagging_die(proto):
         key.update(_slow_die_key(proto, sensor, pools, pat, spec["seed"]))
-    cols = sim.record(proto, sensor, pools, eid, m, pat, spec["seed"])
+    cols = _declared(sim.record(proto, sensor, pools, eid, m, pat, spec["seed"]), proto, spec)
     write_recording(out / "cases" / f"{spec['case']}.csv", cols)
     key.update(protocol=proto.name, protocol_detail=asdict(proto), pattern=pat)
     (out / "keys" / f"{spec['case']}.json").write_text(
@@ -157,9 +159,17 @@ def build(spec: dict, out: Path) -> dict:
 def _channel(proto, spec: dict):
     """The protocol with the spec's temperature channel (clean: no dither; see the module
     docstring); the default spec's protocol unchanged."""
-    if spec.get("temperature_channel") == "clean":
+    if spec.get("temperature_channel") in ("clean", "clean-declared"):
         return replace(proto, sensor_c_sd_c=sim.CLEAN_CH_SD_C)
     return proto
+
+
+def _declared(cols: dict, proto, spec: dict) -> dict:
+    """The recording's columns with its sensor_c LSB declared (``sensor_lsb_c``) when the
+    spec's channel is ``clean-declared``; else as they are."""
+    if spec.get("temperature_channel") == "clean-declared" and "sensor_c" in cols:
+        return {**cols, "sensor_lsb_c": np.full(len(cols["t_s"]), proto.sensor_c_lsb_c)}
+    return cols
 
 
 def _slow_die_key(proto, sensor, pools, pat: dict, seed: int) -> dict:
@@ -182,10 +192,12 @@ def _build_against(spec: dict, sensor, rng: np.random.Generator, out: Path) -> d
                                    columns=("sensor_c",)), spec)
     pat = fx.pattern(rng, 3, 10)
     write_recording(out / "given" / f"{spec['case']}.csv",
-                    sim.record(cal, sensor, pools, None, 0.0, pat, spec["seed"]))
+                    _declared(sim.record(cal, sensor, pools, None, 0.0, pat, spec["seed"]),
+                              cal, spec))
     moved = sensor.rotated_z(REMOUNT_RAD) if spec["change"] == "remount_z" else sensor
     write_recording(out / "cases" / f"{spec['case']}.csv",
-                    sim.record(again, moved, pools, None, 0.0, pat, spec["seed"] + 7))
+                    _declared(sim.record(again, moved, pools, None, 0.0, pat, spec["seed"] + 7),
+                              again, spec))
     key = {**spec, "protocol": again.name, "given_protocol": cal.name,
            "remount_rad": REMOUNT_RAD if spec["change"] == "remount_z" else 0.0}
     (out / "keys" / f"{spec['case']}.json").write_text(
@@ -225,10 +237,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--outside-set", choices=("default", "unseen"), default="default",
                     help="outside-catalogue effects: adc_band and crack, or the five of "
                          "unseen_effects.py the diagnosis was never developed on")
-    ap.add_argument("--temperature-channel", choices=("dithered", "clean"), default="dithered",
+    ap.add_argument("--temperature-channel", choices=("dithered", "clean", "clean-declared"),
+                    default="dithered",
                     help="the sensor_c channel's per-sample noise: 0.04 °C (dithers its LSB) or "
                          "0.003 °C (clean: a settled plateau's readings share one rounding "
-                         "error)")
+                         "error; clean-declared: the same, its LSB in a sensor_lsb_c column)")
     a = ap.parse_args(argv)
     try:
         rd = realdata_dir(a.realdata)

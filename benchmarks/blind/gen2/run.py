@@ -5,7 +5,7 @@
                                         [--alpha A] [--out OUT] [--results STEM]
                                         [--protocols default|unseen]
                                         [--outside-set default|unseen]
-                                        [--temperature-channel dithered|clean]
+                                        [--temperature-channel dithered|clean|clean-declared]
     python -m benchmarks.blind.gen2.run --out OUT --score-only [--results STEM]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="protocol family of generated cases (see generate --protocols)")
     ap.add_argument("--outside-set", choices=("default", "unseen"), default="default",
                     help="outside effects of generated cases (see generate --outside-set)")
-    ap.add_argument("--temperature-channel", choices=("dithered", "clean"),
+    ap.add_argument("--temperature-channel", choices=("dithered", "clean", "clean-declared"),
                     default="dithered",
                     help="sensor_c channel of generated cases (see generate "
                          "--temperature-channel)")
