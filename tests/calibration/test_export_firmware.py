@@ -213,15 +213,12 @@ def test_a_model_fitted_in_a_rebuilt_temperature_says_what_the_firmware_will_do(
     from the channel's crossings, but the firmware evaluates its offset at its own 1 °C
     reading. The export's figure is checked here with each firmware's own formula applied
     at the raw reading against the same formula at the rebuilt temperature."""
-    import sys
     from types import SimpleNamespace
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_temperature_dequantise import _warmup_rows
 
     from calibration import cli
     from calibration.captures import warmup_rebuild
     from calibration.recording import write_recording
+    from tests.calibration.dequantise_cases import warmup_rows as _warmup_rows
 
     rec, _ = _warmup_rows(1.0)
     src, model = tmp_path / "w.csv", tmp_path / "model.json"
@@ -274,22 +271,10 @@ def test_the_firmware_reading_is_said_quietly_when_it_costs_little() -> None:
 def _quantised_warmup(profile, seed: int):
     """5-s capture means of a board at rest (z up) whose z bias is 1 mg/°C + 0.02 mg/°C² of
     its die temperature, read by a 1 °C channel; and that true bias (g)."""
-    import sys
+    from tests.calibration.dequantise_cases import warmup_rows, z_bias_g
 
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_temperature_dequantise import _captures
-
-    from calibration.recording import Recording
-
-    rng = np.random.default_rng(seed)
-    t, read, die = _captures(profile, 0.01, 5.0, seed=seed, lsb_c=1.0)
-    n = t.size
-    bias = 1e-3 * (die - 27.0) + 2e-5 * (die - 27.0) ** 2
-    cols = {"t_s": t, "sensor_c": read, "ax": rng.normal(0, 2e-6, n),
-            "ay": rng.normal(0, 2e-6, n), "az": 1.0 + bias + rng.normal(0, 2e-6, n),
-            "n": np.full(n, 250.0), "sd_x": np.full(n, 3e-5), "sd_y": np.full(n, 3e-5),
-            "sd_z": np.full(n, 3e-5)}
-    return Recording.from_columns(cols), bias
+    rec, die = warmup_rows(1.0, profile, seed)
+    return rec, z_bias_g(die)
 
 
 @pytest.mark.parametrize("fmt", ["px4", "ardupilot"])

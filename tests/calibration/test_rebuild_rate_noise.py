@@ -2,22 +2,20 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from test_temperature_dequantise import RATE_HZ, _captures, _heat_cool, _overshoot  # noqa: E402
-
-from calibration.rebuild_rate_noise import rebuild_rate_noise  # noqa: E402
-from calibration.temperature_conditioning import (  # noqa: E402
+from calibration.rebuild_rate_noise import rebuild_rate_noise
+from calibration.temperature_conditioning import (
     rate_noise_c_per_min,
     temperature_noise_c,
     temperature_rate_c_per_min,
 )
-from calibration.temperature_dequantise import dequantise  # noqa: E402
+from calibration.temperature_dequantise import dequantise
+from tests.calibration.dequantise_cases import RATE_HZ
+from tests.calibration.dequantise_cases import captures as _captures
+from tests.calibration.dequantise_cases import heat_cool as _heat_cool
+from tests.calibration.dequantise_cases import overshoot as _overshoot
 
 
 @pytest.mark.parametrize("profile, noise_c", [(_overshoot, 0.0), (_heat_cool, 0.01),

@@ -9,26 +9,16 @@ from benchmarks import bench_temperature_dequantise as bench
 from calibration.captures import warmup_captures
 from calibration.recording import Recording
 from calibration.temperature_dequantise import coarse_lsb_c, dequantise
+from tests.calibration import dequantise_cases as cases
 
-RATE_HZ = 50.0
 STEP_RMS_C = 1.0 / np.sqrt(12.0)  # what a step value is wrong by, RMS (0.29 °C)
 
 
 # The die traces are the benchmark's (benchmarks/bench_temperature_dequantise.py).
-_exponential, _overshoot = bench.exponential, bench.overshoot
-_rest_heat_rest, _heat_cool = bench.rest_heat_rest, bench.heat_cool
-
-
-def _captures(profile, noise_c: float, block_s: float, seed: int = 0, lsb_c: float = 1.0):
-    """(capture times, capture-mean readings, capture-mean truth) of a channel read at
-    50 Hz with ``noise_c`` of noise, rounded to ``lsb_c`` and averaged over ``block_s``."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, 1800.0, 1.0 / RATE_HZ)
-    truth = profile(t)
-    read = np.round((truth + rng.normal(0.0, noise_c, t.size)) / lsb_c) * lsb_c
-    k = np.floor(t / block_s).astype(int)
-    n = np.bincount(k)
-    return (np.bincount(k, t) / n, np.bincount(k, read) / n, np.bincount(k, truth) / n)
+_exponential, _overshoot = cases.exponential, cases.overshoot
+_rest_heat_rest, _heat_cool = cases.rest_heat_rest, cases.heat_cool
+_captures, _warmup_rows = cases.captures, cases.warmup_rows
+RATE_HZ = cases.RATE_HZ
 
 
 def _rms(x: np.ndarray) -> float:
@@ -168,20 +158,6 @@ def test_warmup_captures_rebuild_and_say_so() -> None:
                                    "ay": np.zeros(n), "az": np.ones(n)})
     same, said = warmup_captures(fine)
     assert same is fine and said is None
-
-
-def _warmup_rows(lsb_c: float) -> tuple[Recording, np.ndarray]:
-    """5-s capture means of a board at rest (z up) warming 20 -> 35 °C, its z bias 1 mg/°C
-    + 0.02 mg/°C², read by a channel quantised at ``lsb_c``; and the true die temperature."""
-    rng = np.random.default_rng(5)
-    t, read, die = _captures(_heat_cool, 0.01, 5.0, seed=5, lsb_c=lsb_c)
-    n = t.size
-    bias = 1e-3 * (die - 27.0) + 2e-5 * (die - 27.0) ** 2
-    cols = {"t_s": t, "sensor_c": read, "ax": rng.normal(0, 2e-6, n),
-            "ay": rng.normal(0, 2e-6, n), "az": 1.0 + bias + rng.normal(0, 2e-6, n),
-            "n": np.full(n, 250.0), "sd_x": np.full(n, 3e-5), "sd_y": np.full(n, 3e-5),
-            "sd_z": np.full(n, 3e-5)}
-    return Recording.from_columns(cols), die
 
 
 def test_calibrate_fits_a_warmup_in_the_rebuilt_temperature_and_says_so() -> None:
