@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibration.errors import RecordingError
-from calibration.recording import Recording
+from calibration.recording import Recording, optional_number_column
 
 REF_TOL_COLUMN = "ref_tol_deg"
 # A box held against a table edge or a printed cube face: placement within ~1-2°.
@@ -42,7 +42,7 @@ def reference_tolerance_rad(rec: Recording) -> np.ndarray | None:
     Raises :class:`RecordingError` (file, line, column) for a cell that is not a
     positive number, or an empty cell while others are filled.
     """
-    values = _column(rec)
+    values = optional_number_column(rec, REF_TOL_COLUMN, "degrees")
     if values is None:
         return None
     filled = np.isfinite(values)
@@ -57,29 +57,6 @@ def reference_tolerance_rad(rec: Recording) -> np.ndarray | None:
             f"{what}: the placement uncertainty must be a number of degrees in (0, 90) on "
             "every row once the column is used")
     return np.radians(values)
-
-
-def _column(rec: Recording) -> np.ndarray | None:
-    """The column as floats (NaN = empty) from parsed columns or the raw cells."""
-    if REF_TOL_COLUMN in rec.columns:
-        return np.asarray(rec.columns[REF_TOL_COLUMN], float)
-    if rec.cells is None or REF_TOL_COLUMN not in rec.header:
-        return None
-    j = rec.header.index(REF_TOL_COLUMN)
-    out = np.full(len(rec.cells), math.nan)
-    for i, row in enumerate(rec.cells):
-        cell = row[j].strip() if j < len(row) else ""
-        if not cell:
-            continue
-        try:
-            out[i] = float(cell)
-        except ValueError:
-            raise RecordingError(rec.path, i + 2, REF_TOL_COLUMN,
-                                 f"{cell!r} is not a number of degrees") from None
-        if not math.isfinite(out[i]):
-            raise RecordingError(rec.path, i + 2, REF_TOL_COLUMN,
-                                 f"{cell!r} is not a finite number of degrees")
-    return out
 
 
 # --- pose geometry: where gravity is, against where it was asked -----------------------

@@ -844,3 +844,29 @@ def _plateaus(temp_c: np.ndarray, jump_c: float = 2.0) -> np.ndarray:
         total += values[i]
         steps[i] = k
     return steps
+
+
+def optional_number_column(rec: Recording, name: str, unit: str) -> np.ndarray | None:
+    """An optional numeric column the reader does not parse (``placement``'s ``ref_tol_deg``,
+    ``temperature_lsb``'s ``*_lsb_c``) as floats, NaN where empty, from the parsed columns or
+    the raw cells; None when absent. A cell that is not a finite number is an error naming
+    the line and column (``unit``: what the number is of, for the message)."""
+    if name in rec.columns:
+        return np.asarray(rec.columns[name], float)
+    if rec.cells is None or name not in rec.header:
+        return None
+    j = rec.header.index(name)
+    out = np.full(len(rec.cells), math.nan)
+    for i, row in enumerate(rec.cells):
+        cell = row[j].strip() if j < len(row) else ""
+        if not cell:
+            continue
+        try:
+            out[i] = float(cell)
+        except ValueError:
+            raise RecordingError(rec.path, i + 2, name,
+                                 f"{cell!r} is not a number of {unit}") from None
+        if not math.isfinite(out[i]):
+            raise RecordingError(rec.path, i + 2, name,
+                                 f"{cell!r} is not a finite number of {unit}")
+    return out

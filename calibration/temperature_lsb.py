@@ -15,12 +15,10 @@ it read as before.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from calibration.errors import RecordingError
-from calibration.recording import Recording
+from calibration.recording import Recording, optional_number_column
 
 LSB_COLUMNS = {"sensor_c": "sensor_lsb_c", "chamber_c": "chamber_lsb_c"}
 MAX_LSB_C = 10.0  # a coarser "LSB" is not a temperature channel's resolution
@@ -36,7 +34,7 @@ def declared_lsb_c(rec: Recording, channel: str) -> float | None:
     name = LSB_COLUMNS.get(channel)
     if name is None:
         return None
-    values = _column(rec, name)
+    values = optional_number_column(rec, name, "°C")
     if values is None or not np.isfinite(values).any():
         return None
     bad = np.flatnonzero(~np.isfinite(values) | (values <= 0) | (values > MAX_LSB_C))
@@ -54,23 +52,3 @@ def declared_lsb_c(rec: Recording, channel: str) -> float | None:
     return float(values[0])
 
 
-def _column(rec: Recording, name: str) -> np.ndarray | None:
-    """The column as floats (NaN = empty) from parsed columns or the raw cells."""
-    if name in rec.columns:
-        return np.asarray(rec.columns[name], float)
-    if rec.cells is None or name not in rec.header:
-        return None
-    j = rec.header.index(name)
-    out = np.full(len(rec.cells), math.nan)
-    for i, row in enumerate(rec.cells):
-        cell = row[j].strip() if j < len(row) else ""
-        if not cell:
-            continue
-        try:
-            out[i] = float(cell)
-        except ValueError:
-            raise RecordingError(rec.path, i + 2, name,
-                                 f"{cell!r} is not a number of °C") from None
-        if not math.isfinite(out[i]):
-            raise RecordingError(rec.path, i + 2, name, f"{cell!r} is not a finite number")
-    return out
