@@ -327,26 +327,13 @@ def _dithered_warmup(seed: int, rate_mg_per_c_per_min: float, noise_lsb: float =
     the 5-s capture means (``soakcal import --block-s 5``'s layout) and each sample's
     reading and capture index: what the firmware sees one sample at a time."""
     from benchmarks.bench_temperature_dequantise import heat_cool
-    from calibration.recording import Recording
 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, 1800.0, 1.0 / 50.0)
     die = heat_cool(t)
     reading = np.round(die + rng.normal(0.0, noise_lsb, t.size))
-    rate = np.gradient(die, t) * 60.0
-    az = 1.0 + 1e-3 * (die - 27.0) + 1e-3 * rate_mg_per_c_per_min * rate
-    k = np.floor(t / 5.0).astype(int)
-    n = np.bincount(k)
-
-    def mean(x: np.ndarray) -> np.ndarray:
-        return np.bincount(k, x) / n
-
-    noise = rng.normal(0.0, 2e-4, (t.size, 3))
-    cols = {"t_s": mean(t), "sensor_c": mean(reading), "ax": mean(noise[:, 0]),
-            "ay": mean(noise[:, 1]), "az": mean(az + noise[:, 2]), "n": n.astype(float),
-            "sd_x": np.full(n.size, 2e-4), "sd_y": np.full(n.size, 2e-4),
-            "sd_z": np.full(n.size, 2e-4)}
-    return Recording.from_columns(cols), reading, k
+    rec, k, _ = _five_second_means(t, die, reading, rate_mg_per_c_per_min, rng)
+    return rec, reading, k
 
 
 @pytest.mark.parametrize("fmt", ["px4", "ardupilot"])
@@ -396,26 +383,13 @@ def _rate_warmup(seed: int, rate_mg_per_c_per_min: float):
     (a rate-sensitive part). Returns the 5-s capture means, each sample's reading and
     capture index, and each capture's true z offset (g)."""
     from benchmarks.bench_temperature_dequantise import rest_heat_rest
-    from calibration.recording import Recording
 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, 1500.0, 1.0 / 50.0)
     die = rest_heat_rest(t)
     reading = np.round((die + rng.normal(0.0, 0.01, t.size)) / 0.0078) * 0.0078
-    rate = np.gradient(die, t) * 60.0
-    offset = 1e-3 * (die - 27.0) + 1e-3 * rate_mg_per_c_per_min * rate
-    k = np.floor(t / 5.0).astype(int)
-    n = np.bincount(k)
-
-    def mean(x: np.ndarray) -> np.ndarray:
-        return np.bincount(k, x) / n
-
-    noise = rng.normal(0.0, 2e-4, (t.size, 3))
-    cols = {"t_s": mean(t), "sensor_c": mean(reading), "ax": mean(noise[:, 0]),
-            "ay": mean(noise[:, 1]), "az": mean(1.0 + offset + noise[:, 2]),
-            "n": n.astype(float), "sd_x": np.full(n.size, 2e-4),
-            "sd_y": np.full(n.size, 2e-4), "sd_z": np.full(n.size, 2e-4)}
-    return Recording.from_columns(cols), reading, k, mean(offset)
+    rec, k, offset = _five_second_means(t, die, reading, rate_mg_per_c_per_min, rng)
+    return rec, reading, k, offset
 
 
 def test_the_rate_term_is_folded_into_the_file_as_the_warm_up_saw_it(tmp_path, capsys):
@@ -474,3 +448,27 @@ def test_the_rate_term_is_folded_into_the_file_as_the_warm_up_saw_it(tmp_path, c
                                    np.sqrt(np.mean(diff**2, axis=0)), atol=0.0015)
         np.testing.assert_allclose(_figures(at_rest, "peak "), np.max(np.abs(diff), axis=0),
                                    atol=0.0015)
+
+
+def _five_second_means(t: np.ndarray, die: np.ndarray, reading: np.ndarray,
+                       rate_mg_per_c_per_min: float, rng: np.random.Generator):
+    """A board at rest (z up) sampled at ``t``, its z offset 1 mg/°C of ``die`` about 27 °C
+    plus ``rate_mg_per_c_per_min`` × dT/dt, 0.2 mg of noise per sample: its 5-s capture means
+    (``soakcal import --block-s 5``'s layout) with ``reading`` as the temperature, each
+    sample's capture index, and each capture's true z offset (g)."""
+    from calibration.recording import Recording
+
+    rate = np.gradient(die, t) * 60.0
+    offset = 1e-3 * (die - 27.0) + 1e-3 * rate_mg_per_c_per_min * rate
+    k = np.floor(t / 5.0).astype(int)
+    n = np.bincount(k)
+
+    def mean(x: np.ndarray) -> np.ndarray:
+        return np.bincount(k, x) / n
+
+    noise = rng.normal(0.0, 2e-4, (t.size, 3))
+    cols = {"t_s": mean(t), "sensor_c": mean(reading), "ax": mean(noise[:, 0]),
+            "ay": mean(noise[:, 1]), "az": mean(1.0 + offset + noise[:, 2]),
+            "n": n.astype(float), "sd_x": np.full(n.size, 2e-4),
+            "sd_y": np.full(n.size, 2e-4), "sd_z": np.full(n.size, 2e-4)}
+    return Recording.from_columns(cols), k, mean(offset)
