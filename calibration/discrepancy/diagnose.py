@@ -338,9 +338,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     known = channel.known if channel is not None else None  # the scan's
     # The families: with the LSB declared (a channel the recording says is quantised
     # without dither), any rounding error within ±q/2 per plateau and value (the bound);
-    # with q only read from the readings' grid (a dithered channel's codes sit on one too)
-    # a draw per group at q²/12 in the replicates, as the scan's. The bound costs much
-    # power (docs/benchmarks.md: right or not established 104 -> 70 of 120 at 2x).
+    # with q only read from the readings' grid, a draw per group at q²/12 in the
+    # replicates, as the scan's. Measured on the second generator (docs/benchmarks.md): the
+    # bound takes clean-channel nulls to 0.4 % with the LSB declared; without it they stay
+    # at 1.5 % (the channel's alarms come from recordings that show no grid), while it
+    # costs much power (right or not established 104 -> 78 of 120 at 2x).
     declared = channel is not None and channel.declared
     bounded = channel.bounded if declared else None
     wild_known = known if channel is not None and not declared else None
