@@ -512,8 +512,12 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
                    else rate_term_dropped(model))
     held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
             if not ok]
-    if held:
-        out.append(f"{', '.join(held)} held, not fitted: that axis' offset is not a calibration")
+    reasons = getattr(model, "held", {}) or {}
+    for name in held:
+        # the file writes 0 for that axis' polynomial: the firmware leaves it uncompensated
+        why = reasons.get(name, "not identifiable from these data")
+        out.append(f"{name} not fitted, its polynomial written as 0 (that axis left "
+                   f"uncompensated): {why}")
     held_nominal = [n for n in getattr(model, "held", {}) if n not in sfem.PARAM_NAMES[:3]]
     if held_nominal:
         out.append(f"not calibrated by this model (held at nominal): {', '.join(held_nominal)}; "
