@@ -20,7 +20,7 @@ it: 10-s blocks alternately fit and held out, RMS of held-out 5-s means, mg x / 
   polynomial;
 * ``export drop``: the same export of the model with its ``rate_fold`` record removed
   (a model with a rate term k(T)·dT/dt: the static polynomial, the rate term dropped, as
-  the export wrote before :func:`calibration.export_firmware.rate_fold_record`; the same
+  the export wrote before :func:`calibration.firmware_polynomial.rate_fold_record`; the same
   file as ``export at raw`` for a model without a rate term);
 * ``px4``, ``ardupilot``: the peers' own fits, applied at the raw reading;
 * ``stated``: the RMS the export states (``provenance.quantised_temperature.rms_mg``:

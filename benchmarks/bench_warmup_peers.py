@@ -46,7 +46,7 @@ Methods:
 * ``--export``: also the file ``soakcal export --format px4`` writes from soakcal's model,
   applied as PX4 applies it (``calc_thermal_offsets_3D``: the offset at each sample's own
   reading clamped to TMIN/TMAX): ``export`` as written (a model with a rate term: the
-  term's mean at each reading folded into the polynomial, ``export_firmware.rate_fold_record``)
+  term's mean at each reading folded into the polynomial, ``firmware_polynomial.rate_fold_record``)
   and ``export drop`` (the model's ``rate_fold`` record removed: the static polynomial,
   the rate term dropped, as the export wrote before the fold). ArduPilot's file is the same
   polynomial less a constant, so its held-out figure is the same.

@@ -228,12 +228,8 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
     with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
     from calibration.captures import warmup_rebuild
-    from calibration.export_firmware import (
-        firmware_reading_record,
-        quantised_reading_error,
-        quantised_reading_lines,
-        rate_fold_record,
-    )
+    from calibration.export_firmware import firmware_reading_record, quantised_reading_lines
+    from calibration.firmware_polynomial import quantised_reading_error, rate_fold_record
     from calibration.rebuild_rate_noise import rebuild_rate_noise
     from calibration.unresolved_temperature import note as unresolved_note
     from calibration.unresolved_temperature import unresolved_record
@@ -290,7 +286,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     wf.report["unresolved_temperature"] = unresolved
     if dq is not None and dq.read_c is not None:
         # what a firmware that reads the raw channel makes of a model fitted in the rebuilt
-        # temperature, on this log (the exports say it: export_firmware.py)
+        # temperature, on this log (fitted in firmware_polynomial.py; the exports say it)
         firmware = quantised_reading_error(
             model, dq.read_c, captures.temperature_c(), dq.lsb_c,
             wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"),
@@ -299,7 +295,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
         wf.report["quantised_temperature"] = firmware
     if model.temperature_rate:
         # neither firmware applies a rate term: the export folds its mean at each reading
-        # into the polynomial (export_firmware.rate_fold_record), fitted here on this log
+        # into the polynomial (firmware_polynomial.rate_fold_record), fitted here on this log
         rebuilt_read = dq is not None and dq.read_c is not None
         fold = rate_fold_record(
             model, captures.t_s, dq.read_c if rebuilt_read else captures.temperature_c(),

@@ -153,7 +153,7 @@ class Dequantised:
     # not rebuilt
     read_c: np.ndarray | None = None
     # a level of the channel's lattice (°C): its readings are level_c + k · lsb_c, what the
-    # firmware sees sample by sample (export_firmware.reading_weights)
+    # firmware sees sample by sample (firmware_polynomial.reading_spread)
     level_c: float = 0.0
 
     def unresolved_mask(self, t_s: np.ndarray) -> np.ndarray:
