@@ -40,6 +40,7 @@ from calibration.discrepancy.effects.structure import extend
 from calibration.discrepancy.protocol_order import (
     slot_offset_columns,
     time_and_position_confounded,
+    visit_slots,
 )
 from calibration.discrepancy.temperature_jump import withheld
 
@@ -88,14 +89,18 @@ def slot_settling_alike(pb: Any, terms: list, f: Any, alpha: float,
     term = next((t for t in terms if t.key in f.term_keys), None)
     if term is None or len(ctx.step_ids) < MIN_STEPS:
         return f
-    slots = slot_offset_columns(ctx.steps, ctx.positions, ctx.t_s)
     others = [t for t in terms if t is not term]
-    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in others) + slots.shape[2]
+    # the size first: a long repeated schedule has a slot per visit (27,264 at 300 k
+    # readings), and its (N, 3, 3·slots) columns alone would not fit in memory
+    slot = visit_slots(ctx.steps, ctx.positions, ctx.t_s)
+    n_columns = 3 * (int(slot.max()) + 1 if slot.size else 0)
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in others) + n_columns
     if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
         notes.append(f"{f.effect}: not checked against a settling at each slot of the "
                      "visiting order: the recording is too long (or too short) for that "
                      "design")
         return f
+    slots = slot_offset_columns(ctx.steps, ctx.positions, ctx.t_s)
     Xw, yw = design(pb, others)
     U0 = stats.orthonormal_basis(Xw)
     del Xw

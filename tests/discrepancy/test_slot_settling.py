@@ -96,3 +96,20 @@ def test_true_cross_coupling_on_the_repeated_order_is_not_separable():
     d = diagnose(_campaign("table", [E.CrossCoupling(k_xy_per_g=K_XY)]), n_null=30, seed=1)
     assert d.findings[0].effect == "not_identifiable"
     assert "cross_coupling" in d.findings[0].where["candidates"]
+
+
+def test_a_recording_too_long_for_the_slot_columns_is_said_before_they_are_built(monkeypatch):
+    """The size is judged from the slot count before the (N, 3, 3·slots) columns exist: a
+    long repeated schedule has a slot per visit, and a 300 k-reading recording asked for
+    548 GiB there."""
+    import calibration.discrepancy.slot_settling as ss
+    from calibration.discrepancy import stats
+
+    def forbidden(*_a, **_k):
+        raise AssertionError("the slot columns were built")
+
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    monkeypatch.setattr(ss, "slot_offset_columns", forbidden)
+    d = diagnose(_campaign("table", [E.CrossCoupling(k_xy_per_g=K_XY)]), n_null=30, seed=1)
+    assert any("not checked against a settling at each slot of the visiting order: the "
+               "recording is too long" in n for n in d.notes), d.notes
