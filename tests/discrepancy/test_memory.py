@@ -406,3 +406,55 @@ def test_accepted_term_checks_run_without_the_whole_design(monkeypatch):
         for key, v in f_ref["parameters"].items():
             assert abs(f_tall["parameters"][key] - v) <= 1e-3 * max(abs(v), 1.0)
         assert abs(f_tall["heldout_rmse_after_ug"] - f_ref["heldout_rmse_after_ug"]) <= 0.02
+
+
+def test_direction_offsets_by_row_blocks_equal_the_dense_columns(monkeypatch):
+    """direction_offsets_needed on a long recording (issue 22: at 300 k readings its dense
+    turn columns, their basis and the (m × 72) direction indicators took memory from 1.3 to
+    2.3 GB): the turn's basis by row blocks and the direction offsets in their own space give
+    the dense test's residual, log p, dof and fit, and the same answer with the dense forms
+    forbidden."""
+    from calibration.discrepancy.effects import scale_nonlinearity as sn
+    from calibration.discrepancy.effects import structure
+    from calibration.discrepancy.effects.turntable_geometry import turn_columns
+
+    pb = build_problem(_six_tables_one_way())
+    ctx = pb.ctx
+    rng = np.random.default_rng(14)
+    dirs = sn.direction_ids(ctx.positions, ctx.input_g)
+    n_dir = int(dirs.max()) + 1
+    assert n_dir >= 8
+    # an offset at a few directions only (a band of codes), 1 σ on x and z
+    band = np.zeros(n_dir)
+    band[rng.choice(n_dir, 3, replace=False)] = 1.0
+    yw = pb.y * pb.w + band[dirs[pb.row]] * (pb.axis != 1) + 0.1 * rng.standard_normal(pb.m)
+    U = stats.orthonormal_basis(pb.whiten(np.asarray(pb.X0)))
+    e = yw - U @ (U.T @ yw)
+    ax = (0, 2)
+    u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
+    X = np.concatenate([structure.per_axis_indicator(ctx.n, np.flatnonzero(dirs == j), ax)
+                        for j in range(n_dir)], axis=2)
+    Xw = structure.whitened(pb, X)
+    Ut_d, et_d = structure.extend(U, e, structure.whitened(pb, turn_columns(u)))
+    lp_d, k_d = structure.log_p(Ut_d, et_d, Xw)
+    fit_d = structure.fitted_after(Ut_d, et_d, Xw)
+    assert k_d > 0 and lp_d < -20.0
+
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 80 * 101)  # blocks that do not divide m
+    n_turn = turn_columns(u[:1]).shape[2]
+    Ut_b, et_b = structure.extend_by_rows(U, e, sn._turn_rows(pb, u), n_turn)
+    assert Ut_b.shape == Ut_d.shape
+    np.testing.assert_allclose(et_b, et_d, atol=1e-9 * np.linalg.norm(e))
+    labels = np.where(pb.axis == 1, -1, 2 * dirs[pb.row] + (pb.axis == 2))
+    lp_b, k_b = structure.log_p_by_labels(pb, Ut_b, et_b, labels, 2 * n_dir)
+    assert k_b == k_d
+    np.testing.assert_allclose(lp_b, lp_d, rtol=1e-7)
+    fit_b = structure.fitted_by_labels(pb, Ut_b, et_b, labels, 2 * n_dir)
+    np.testing.assert_allclose(fit_b, fit_d, atol=1e-8 * np.linalg.norm(fit_d))
+
+    want = sn.direction_offsets_needed(pb, U, e, ax, 0.01, "terms")  # dense: below the size
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)
+    for name in ("per_axis_indicator", "extend", "log_p", "fitted_after"):
+        monkeypatch.setattr(sn, name, None)
+    got = sn.direction_offsets_needed(pb, U, e, ax, 0.01, "terms")
+    assert want is not None and got == want

@@ -19,8 +19,11 @@ from calibration.discrepancy.effects.base import UG, CatalogueEffect, fmt_pm, ve
 from calibration.discrepancy.effects.structure import (
     SAME_DIRECTION_G,
     extend,
+    extend_by_rows,
     fitted_after,
+    fitted_by_labels,
     log_p,
+    log_p_by_labels,
     per_axis_indicator,
     whitened,
 )
@@ -203,16 +206,31 @@ def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[in
     n_dir = int(dirs.max()) + 1
     if n_dir < 8:  # the base's 4 columns and the bend's 2 per axis leave nothing to test
         return None
-    X = np.concatenate([per_axis_indicator(ctx.n, np.flatnonzero(dirs == j), ax)
-                        for j in range(n_dir)], axis=2)
     u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
-    Ut, et = extend(U, e, whitened(pb, turn_columns(u)))
-    Xw = whitened(pb, X)
-    lp, k = log_p(Ut, et, Xw)
-    if k == 0 or lp > np.log(alpha):
-        return None
+    n_turn = turn_columns(u[:1]).shape[2]
+    if 8 * pb.m * n_turn > stats.TALL_BYTES and pb.m > 20 * n_turn:
+        # A long recording (issue 22, memory): the turn's columns by row blocks and the
+        # direction offsets in their own space, the same test as the dense form below.
+        Ut, et = extend_by_rows(U, e, _turn_rows(pb, u), n_turn)
+        labels = np.full(pb.m, -1)
+        on = np.isin(pb.axis, ax)
+        slot = np.full(3, -1)
+        slot[list(ax)] = np.arange(len(ax))  # the dense columns' order: direction, then axis
+        labels[on] = len(ax) * dirs[pb.row[on]] + slot[pb.axis[on]]
+        lp, k = log_p_by_labels(pb, Ut, et, labels, len(ax) * n_dir)
+        if k == 0 or lp > np.log(alpha):
+            return None
+        fit = fitted_by_labels(pb, Ut, et, labels, len(ax) * n_dir)
+    else:
+        X = np.concatenate([per_axis_indicator(ctx.n, np.flatnonzero(dirs == j), ax)
+                            for j in range(n_dir)], axis=2)
+        Ut, et = extend(U, e, whitened(pb, turn_columns(u)))
+        Xw = whitened(pb, X)
+        lp, k = log_p(Ut, et, Xw)
+        if k == 0 or lp > np.log(alpha):
+            return None
+        fit = fitted_after(Ut, et, Xw)
     # Where: the directions whose fitted offset is at least half the largest.
-    fit = fitted_after(Ut, et, Xw)
     per_dir = np.sqrt(np.bincount(dirs[pb.row], fit**2, minlength=n_dir)
                       / np.maximum(np.bincount(dirs, minlength=n_dir), 1))
     big = np.flatnonzero(per_dir >= 0.5 * per_dir.max())
@@ -222,3 +240,16 @@ def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[in
                     "do not follow (a free offset per direction is still needed "
                     "after them and a turn of the reference): e.g. a converter error "
                     "confined to a band of codes")}
+
+
+def _turn_rows(pb: Any, u: np.ndarray) -> Any:
+    """Rows i:j of the whitened, lifted turn columns (``turn_columns(u)``, reference mode:
+    residual row 3·reading + axis), built for those readings only."""
+    from calibration.discrepancy.effects.turntable_geometry import turn_columns
+
+    def rows(i: int, j: int) -> np.ndarray:
+        a, b = i // 3, -(-j // 3)
+        x = turn_columns(u[a:b]).reshape(3 * (b - a), -1)[i - 3 * a : j - 3 * a]
+        return x * pb.w[i:j, None]
+
+    return rows

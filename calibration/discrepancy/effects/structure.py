@@ -176,6 +176,16 @@ def _explained_by_labels(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_l
     Uᵀe = 0, ``Wᵀe = −Aᵀc``, ``WᵀW = I − AᵀA`` with A = QᵀU (n_labels × r, summed over
     row blocks of U). No (m × n_labels) array.
     """
+    c, _, A, lam, V, keep, n_used = _label_parts(pb, U, e, labels, n_labels)
+    b = V[:, keep].T @ (A.T @ c)
+    return float(c @ c + np.sum(b**2 / lam[keep])), n_used + int(keep.sum()) - U.shape[1]
+
+
+def _label_parts(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_labels: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                            np.ndarray, int]:
+    """The pieces of :func:`_explained_by_labels`: c = Qᵀe, Q's column scale ``inv``,
+    A = QᵀU, the eigenpairs (λ, V) of I − AᵀA, the kept ones, and the labels used."""
     from scipy import sparse
 
     on = labels >= 0
@@ -195,5 +205,97 @@ def _explained_by_labels(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_l
     A *= inv[:, None]
     lam, V = np.linalg.eigh(np.eye(r) - A.T @ A)
     keep = lam > LABEL_RANK_TOL
-    b = V[:, keep].T @ (A.T @ c)
-    return float(c @ c + np.sum(b**2 / lam[keep])), int(used.sum()) + int(keep.sum()) - r
+    return c, inv, A, lam, V, keep, int(used.sum())
+
+
+def fitted_by_labels(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_labels: int
+                     ) -> np.ndarray:
+    """:func:`fitted_after` for X the whitened indicators of ``labels`` (as
+    :func:`_explained_by_labels`), ``e`` orthogonal to ``U``: ``P_[U,X] e`` without an
+    (m × n_labels) array.
+
+    With W = (I − P_Q)U, ``P_W e = W·g``, g = −V Λ⁺ Vᵀ Aᵀc, and ``W·g = U·g − Q·(A·g)``,
+    so the fit is ``Q·(c − A·g) + U·g`` (Q's entry on row i: w_i / ‖X's column l_i‖).
+    """
+    c, inv, A, lam, V, keep, _ = _label_parts(pb, U, e, labels, n_labels)
+    g = -V[:, keep] @ ((V[:, keep].T @ (A.T @ c)) / lam[keep])
+    coef = c - A @ g
+    on = labels >= 0
+    fit = np.zeros(e.size)
+    fit[on] = pb.w[on] * inv[labels[on]] * coef[labels[on]]
+    step = max(1, stats.CHUNK_BYTES // (8 * max(U.shape[1], 1)))
+    for i in range(0, e.size, step):
+        j = min(i + step, e.size)
+        fit[i:j] += np.asarray(U[i:j]) @ g
+    return fit
+
+
+def log_p_by_labels(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_labels: int
+                    ) -> tuple[float, int]:
+    """:func:`log_p` of the whitened indicators of ``labels`` after ``U`` (``e`` orthogonal
+    to it), in the indicators' own space: F = (q/k) / ((‖e‖² − q)/dof), q = ‖P_[U,X]e‖²,
+    k the rank X adds, dof = m − rank(U) − k (``stats.linear_stats``'s)."""
+    q, k = _explained_by_labels(pb, U, e, labels, n_labels)
+    if k <= 0:
+        return 0.0, 0
+    dof = max(e.size - U.shape[1] - k, 1)
+    f = q / k / max((float(e @ e) - q) / dof, 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(stats.f_logsf(f, k, dof)), k
+
+
+class StackedRows:
+    """(m × (r + s)) ``[U, Z·M]`` given by row slices: ``U`` (array or row-block basis) and
+    the extra columns' whitened rows ``rows(i, j)`` ((j − i) × p) times M (p × s)."""
+
+    ndim = 2
+
+    def __init__(self, U: Any, rows: Any, M: np.ndarray) -> None:
+        self.U, self.rows, self.M = U, rows, M
+        self.shape = (U.shape[0], U.shape[1] + M.shape[1])
+
+    def extra(self, i: int, j: int) -> np.ndarray:
+        """Rows i:j of the added columns (Z·M, Z = X − U·C projected: see extend_by_rows)."""
+        return self.rows(i, j) @ self.M
+
+    def __getitem__(self, key: slice) -> np.ndarray:
+        i, j, _ = key.indices(self.shape[0])
+        return np.hstack([np.asarray(self.U[i:j]), self.extra(i, j)])
+
+
+def extend_by_rows(U: Any, e: np.ndarray, rows: Any, p: int
+                   ) -> tuple[StackedRows, np.ndarray]:
+    """:func:`extend` for whitened columns given by row blocks ``rows(i, j)`` (m × p), the
+    tall route of ``stats.orthonormal_basis`` (Gram, eigen-cut, Cholesky-QR2) on
+    Z = (I − P_U)X, with no (m × p) array: Z's rows are ``rows(i, j) − U[i:j]·C``,
+    C = UᵀX, and the basis is Z·M (issue 22, memory: at 1 M readings the turn of the
+    reference's 60 columns are 1.4 GB each as raw, lifted, projected and basis arrays).
+    """
+    m, r = e.size, U.shape[1]
+    step = max(1, stats.CHUNK_BYTES // (8 * max(p + r, 1)))
+    C = np.zeros((r, p))
+    for i in range(0, m, step):
+        C += np.asarray(U[i : i + step]).T @ rows(i, min(i + step, m))
+
+    def z_rows(i: int, j: int) -> np.ndarray:
+        return rows(i, j) - np.asarray(U[i:j]) @ C
+
+    gram = np.zeros((p, p))
+    for i in range(0, m, step):
+        Z = z_rows(i, min(i + step, m))
+        gram += Z.T @ Z
+    T = stats.eigen_cut_map(gram)
+    H = np.zeros((T.shape[1], T.shape[1]))
+    for i in range(0, m, step):
+        B1 = z_rows(i, min(i + step, m)) @ T
+        H += B1.T @ B1
+    M = T @ np.linalg.inv(np.linalg.cholesky(H).T)
+    Ut = StackedRows(U, z_rows, M)
+    be = np.zeros(M.shape[1])
+    for i in range(0, m, step):
+        be += Ut.extra(i, min(i + step, m)).T @ e[i : i + step]
+    et = e.copy()
+    for i in range(0, m, step):
+        j = min(i + step, m)
+        et[i:j] -= Ut.extra(i, j) @ be
+    return Ut, et
