@@ -38,6 +38,7 @@ from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import (
     QuantisedChannel,
+    held_code_resolution_c,
     one_code_per_plateau,
     plateau_groups,
     quantised_channel,
@@ -745,18 +746,31 @@ def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float 
     found = quantised_channel(pb, declared_q_c)
     ctx = pb.ctx
     if found is None:
-        if ctx.temperature_source != "none" and one_code_per_plateau(ctx.temp_c, ctx.steps):
+        if ctx.temperature_source != "none" and one_code_per_plateau(ctx.temp_c, ctx.steps) \
+                and held_code_resolution_c(ctx.temp_c, ctx.steps) is None:
             notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "
                          "through each plateau: quantised without dither, at an LSB the "
                          "recording does not show (no plateau moves by one code) nor declare "
-                         f"({LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}); "
+                         f"({LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}), "
+                         "and its codes, whole degrees, bound nothing (a die settled on "
+                         "setpoints writes them whatever the LSB); "
                          "each plateau's temperature may be off by up to half that LSB, which "
                          "the null does not include (a channel step, rate or hysteresis of "
                          "that size is not told from it)")
         return None
     how = ("declared by the recording" if found.declared else
            f"without dither ({100 * found.fraction:.0f} % of the readings on its codes)")
-    if found.declared:
+    if found.lower_bound:
+        notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "
+                     "through each plateau: quantised without dither, at an LSB the "
+                     "recording does not show (no plateau moves by one code) nor declare "
+                     f"({LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}); its "
+                     f"codes are written to {found.q_c:.4g} °C, so each plateau's temperature "
+                     f"is known to ±{found.q_c / 2:.3g} °C at best; the null includes that "
+                     "least error as a draw per plateau and code at its variance q²/12 (a "
+                     "coarser LSB, or a channel step, rate or hysteresis the rounding makes "
+                     "beyond it, is not included: declare the LSB)")
+    elif found.declared:
         notes.append(f"temperature channel ({ctx.temperature_source}) quantised at "
                      f"{found.q_c:.4g} °C {how}: the readings of a plateau on one code share "
                      f"its temperature, known to ±{found.q_c / 2:.3g} °C; the tests allow any "

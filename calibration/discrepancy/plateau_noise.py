@@ -178,6 +178,34 @@ def one_code_per_plateau(temp_c: np.ndarray, steps: np.ndarray) -> bool:
     return seen >= MIN_PLATEAUS
 
 
+def held_code_resolution_c(temp_c: np.ndarray, steps: np.ndarray) -> float | None:
+    """A lower bound of the LSB of a channel that holds one value through each plateau
+    (:func:`one_code_per_plateau`) but shows no grid: the resolution its codes are written
+    to, or None.
+
+    Why (issue 22): such a channel does not show its LSB, yet its codes do. Codes written to
+    d decimals, not all whole degrees, lie on a 10⁻ᵈ °C grid: a finer channel would put k
+    plateaus' codes all on that grid with a chance near 10⁻ᵏ, so the channel rounds at least
+    that coarsely (q ≥ 10⁻ᵈ; a value recorded as 25.1 is known to ±0.05 °C at best). Codes
+    that are all whole degrees say nothing: a die settled on setpoints that lie on codes
+    writes the setpoints, whatever the LSB (on the second generator, 52 of the 69 such
+    recordings, a 0.1 °C channel; docs/benchmarks.md). The resolution of all the readings is
+    no bound either: an approach plateau's capture means, written to 3 decimals, set it.
+    """
+    t = np.asarray(temp_c, float)
+    st = np.asarray(steps)
+    if not one_code_per_plateau(t, st):
+        return None
+    codes = []  # each plateau's most recorded value: its code, where the plateau holds one
+    for s_ in np.unique(st):
+        x = t[(st == s_) & np.isfinite(t)]
+        if x.size:
+            u, c = np.unique(x, return_counts=True)
+            codes.append(u[np.argmax(c)])
+    d = _decimals(np.asarray(codes))
+    return None if d == 0 else 10.0**-d
+
+
 @dataclass(frozen=True)
 class QuantisedChannel:
     """A temperature channel quantised to ``q_c`` without dither, and what the null makes of
@@ -185,7 +213,8 @@ class QuantisedChannel:
 
     q_c: float  # the channel's LSB, °C
     declared: bool  # q from the recording's own column (temperature_lsb), not its grid
-    fraction: float  # share of the readings on the grid (1.0 when declared)
+    fraction: float  # share of the readings on the grid (1.0 when declared or a lower bound)
+    lower_bound: bool  # q only the resolution its held codes are written to (no grid shown)
     known: tuple[stats.SharedGroups, np.ndarray]  # the scan's: a draw per group at q²/12
     bounded: stats.BoundedShared  # the families': any error within ±q/2 per group
 
@@ -193,14 +222,16 @@ class QuantisedChannel:
 def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
                       ) -> QuantisedChannel | None:
     """The rounding error of a non-dithering quantised temperature channel, or None (no LSB
-    declared and no grid found, or no temperature dependence).
+    declared, no grid found and no held codes' resolution, or no temperature dependence).
 
     q: ``declared_q_c`` (the recording's ``<channel>_lsb_c`` column, temperature_lsb.py),
-    else the grid the readings sit on (:func:`temperature_grid`). The groups: the readings
-    of one plateau that record the same value share one error (a settled plateau on one
-    code is one group; a capture mean across a code change is its own, or shares it with
-    an equal one); each error is code − die, within ±q/2, through the base model's
-    whitened ∂output/∂T.
+    else the grid the readings sit on (:func:`temperature_grid`), else, for a channel that
+    holds one value per plateau, the resolution its codes are written to — a lower bound of
+    q (:func:`held_code_resolution_c`), so the draw below is the least the rounding adds.
+    The groups: the readings of one plateau that record the same value share one error (a
+    settled plateau on one code is one group; a capture mean across a code change is its
+    own, or shares it with an equal one); each error is code − die, within ±q/2, through
+    the base model's whitened ∂output/∂T.
 
     Two uses. The families with columns (a channel step, a hysteresis, a rate or lag — each
     a pattern over many plateaus) take the bound (``bounded``, stats.linear_stats): a die
@@ -215,18 +246,21 @@ def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
     if ctx.temperature_source == "none":
         return None
     grid = None if declared_q_c is not None else temperature_grid(ctx.temp_c, ctx.steps)
-    if declared_q_c is None and grid is None:
+    held_q_c = None if declared_q_c is not None or grid is not None else \
+        held_code_resolution_c(ctx.temp_c, ctx.steps)
+    if declared_q_c is None and grid is None and held_q_c is None:
         return None
     lt = temperature_loading(pb)
     if lt is None:
         return None
-    q = float(declared_q_c) if declared_q_c is not None else grid.q_c
+    q = float(declared_q_c) if declared_q_c is not None else \
+        grid.q_c if grid is not None else float(held_q_c)
     t = np.asarray(ctx.temp_c, float)
     key = np.where(np.isfinite(t), t, np.arange(ctx.n) + 1e9)
     _, g_read = np.unique(np.column_stack([ctx.steps, key]), axis=0, return_inverse=True)
     group = np.asarray(g_read).ravel()[pb.row]
     sg = stats.SharedGroups([lt], [group], ["quantised temperature channel"])
     return QuantisedChannel(q, declared_q_c is not None,
-                            1.0 if grid is None else grid.fraction,
+                            1.0 if grid is None else grid.fraction, held_q_c is not None,
                             (sg, np.array([q**2 / 12.0])),
                             stats.BoundedShared(group, lt, q / 2.0))

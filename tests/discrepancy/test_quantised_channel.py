@@ -18,7 +18,12 @@ from benchmarks.blind.gen2.generate import _channel
 from benchmarks.blind.gen2.realnoise import NoisePools
 from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.discrepancy import diagnose, stats
-from calibration.discrepancy.plateau_noise import one_code_per_plateau, temperature_grid
+from calibration.discrepancy.plateau_noise import (
+    _decimals,
+    held_code_resolution_c,
+    one_code_per_plateau,
+    temperature_grid,
+)
 from calibration.recording import Recording
 from tests.discrepancy.plateau_layout import plateau_layout
 
@@ -127,3 +132,43 @@ def test_the_generator_s_clean_channel_and_what_diagnose_says_of_it():
         and "known to ±0.05 °C" in note[0] and "the null includes" in note[0] \
         and "declare its LSB, sensor_lsb_c" in note[0]
     assert not [x for x in diagnose(dithered, n_null=50).notes if "quantised" in x]
+
+
+def _held(codes_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A channel that holds one code per plateau (``codes_c``), its first plateau an
+    approach whose capture means are written to 3 decimals."""
+    step = np.repeat(np.arange(K), PER)
+    t = np.asarray(codes_c, float)[step]
+    t[:3] = np.round(codes_c[0] + 0.3 * np.exp(-np.arange(3) / 1.5), 3)
+    return t, step
+
+
+def test_codes_off_whole_degrees_bound_the_lsb_from_below_and_setpoints_do_not():
+    """A channel that holds one value per plateau shows no grid; its codes written to 0.1 °C
+    and not all whole degrees put q at 0.1 °C at least (the approach's 3-decimal means say
+    nothing of it); codes that are the whole-degree setpoints bound nothing."""
+    sp = np.linspace(-30.0, 60.0, K).round()
+    t, step = _held(sp - 0.1)
+    assert temperature_grid(t, step) is None and one_code_per_plateau(t, step)
+    assert _decimals(t) == 3  # all the readings' resolution: the approach's, no bound
+    assert held_code_resolution_c(t, step) == 0.1
+    t, step = _held(sp)
+    assert one_code_per_plateau(t, step) and held_code_resolution_c(t, step) is None
+    rng = np.random.default_rng(5)
+    t, step = _channel_values(rng, 0.1, 0.04)  # dithered: no code held
+    assert held_code_resolution_c(t, step) is None
+
+
+def test_diagnose_draws_the_held_codes_resolution_and_says_it_is_a_least_error():
+    """The generator's clean channel held on one code per plateau: written to 0.1 °C off the
+    setpoints, the null draws that rounding and the note says it is the least; on the
+    setpoints themselves, the note says the LSB is unknown and nothing is drawn."""
+    clean = _record("clean")
+    held = np.asarray(clean.columns["setpoint_c"], float)  # whole degrees here
+    assert np.all(held == np.round(held))
+    for codes, says in ((held - 0.1, ("codes are written to 0.1 °C", "±0.05 °C at best",
+                                       "the null includes that least error")),
+                        (held, ("whole degrees, bound nothing", "the null does not include"))):
+        rec = Recording.from_columns({**clean.columns, "sensor_c": codes})
+        note = [x for x in diagnose(rec, n_null=50).notes if "holds one value" in x]
+        assert len(note) == 1 and all(w in note[0] for w in says), note
