@@ -283,11 +283,15 @@ def main(argv: list[str] | None = None) -> int:
                      "noise_s": o.s, "readings": int(o.ctx.n), "sep": sep,
                      "check_noise_rms": float(np.sqrt(np.mean(chk ** 2)))})
         print(_line(rows[-1]), file=sys.stderr)
-    md = markdown(rows)
+    return emit(markdown(rows), rows, a.results)
+
+
+def emit(md: str, rows: list[dict], results: Path | None) -> int:
+    """Print the table; with ``results``, write it as STEM.md and the rows as STEM.json."""
     print(md)
-    if a.results:
-        a.results.with_suffix(".md").write_text(md)
-        a.results.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    if results:
+        results.with_suffix(".md").write_text(md)
+        results.with_suffix(".json").write_text(json.dumps(rows, indent=1))
     return 0
 
 

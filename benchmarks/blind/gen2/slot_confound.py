@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir
-from benchmarks.blind.gen2.separable import SLOT, Oracle, separability, true_signal_g
+from benchmarks.blind.gen2.separable import SLOT, Oracle, emit, separability, true_signal_g
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.protocol_order import (
@@ -99,12 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                              for n in ("base", SLOT)}
         rows.append(row)
         print(_line(row), file=sys.stderr)
-    md = markdown(rows)
-    print(md)
-    if a.results:
-        a.results.with_suffix(".md").write_text(md)
-        a.results.with_suffix(".json").write_text(json.dumps(rows, indent=1))
-    return 0
+    return emit(markdown(rows), rows, a.results)
 
 
 def _line(r: dict) -> str:
