@@ -199,11 +199,15 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
     held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
             if not ok]
     reasons = getattr(model, "held", {}) or {}
+    written = file_bias_x_g(model)
+    coef = np.asarray(model.coeffs[sfem.BIAS] if written is None else written, float)
     for name in held:
-        # the file writes 0 for that axis' polynomial: the firmware leaves it uncompensated
         why = reasons.get(name, "not identifiable from these data")
-        out.append(f"{name} not fitted, its polynomial written as 0 (that axis left "
-                   f"uncompensated): {why}")
+        # said as what the file then does on that axis, read off the file's own polynomial
+        flat = not np.any(coef[sfem.PARAM_NAMES.index(name), 1:])
+        what = (": the file's offset on that axis does not change with temperature (no "
+                "thermal compensation there)" if flat else "")
+        out.append(f"{name} not fitted{what}; {why}")
     held_nominal = [n for n in getattr(model, "held", {}) if n not in sfem.PARAM_NAMES[:3]]
     if held_nominal:
         out.append(f"not calibrated by this model (held at nominal): {', '.join(held_nominal)}; "

@@ -179,6 +179,28 @@ def test_px4_warmup_model_leaves_the_constant_to_the_ordinary_calibration() -> N
     np.testing.assert_allclose(fw_g, model.compensate(raw, temp), atol=2e-6)
 
 
+def test_a_bias_not_fitted_is_said_as_what_the_file_does_on_that_axis() -> None:
+    """A warm-up that saw no change of x's bias beyond the noise holds bx: the file's x
+    offset is then flat in temperature, and the line says so with the model's reason."""
+    from calibration import sfem
+    from calibration.export_firmware import export_px4
+
+    model = _model()
+    model.mode = "warmup"
+    model.coeffs[sfem.BIAS][0, :] = 0.0
+    ident = list(model.identifiable)
+    ident[0] = False
+    model.identifiable = ident
+    model.held = {"bx": "held at 0: no change with temperature above the noise on this axis"}
+    fw = export_px4(model, device_id=1)
+    line = next(x for x in fw.limitations if x.startswith("bx not fitted"))
+    assert line == ("bx not fitted: the file's offset on that axis does not change with "
+                    "temperature (no thermal compensation there); held at 0: no change with "
+                    "temperature above the noise on this axis")
+    p = _px4_params(fw.text)
+    assert [p[f"TC_A0_X{j}_0"] for j in range(4)] == [0.0, 0.0, 0.0, 0.0]
+
+
 @pytest.mark.parametrize("kw,words", [
     ({"degree": 4}, "offset polynomial is cubic"),
     ({"source": "chamber_c"}, "fitted on chamber_c"),
