@@ -31,10 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy.by_fit import MARGIN
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.base import per_axis
-from calibration.discrepancy.temperature_jump import lead_over_rivals, withheld
+from calibration.discrepancy.temperature_jump import (
+    fits_as_well,
+    lead_over_rivals,
+    rival_fits_as_well,
+    withheld,
+)
 
 # The effects whose remnant after the base model fades within each plateau as the die
 # settles: their structure is judged against a common settling after each plateau's start.
@@ -78,13 +82,12 @@ def settling_alike(pb: Any, terms: list, f: Any, alpha: float,
                      "start: the recording is too long for that design")
         return f
     lead, tau = found
-    if not np.isfinite(lead) or lead >= MARGIN:
+    if not rival_fits_as_well(lead):
         return f
     settle = (f"a settling after each plateau's start, the same on every plateau (τ ≈ "
               f"{tau:.0f} s: a fixture relaxing after the moves, a warm-up of the rig; "
               "outside the catalogue)")
     why = (f"a per-axis decay exp(−t/{tau:.0f} s) from each plateau's first reading, one "
-           f"amplitude for all plateaus, fits the structure as well (the {f.effect} term "
-           f"leads it by {lead:.1f} noise variances after 2 per column, under {MARGIN:g}): "
-           "the die's rate differs too little between the plateaus to tell them")
+           f"amplitude for all plateaus, {fits_as_well(f.effect, lead)}: the die's rate "
+           "differs too little between the plateaus to tell them")
     return withheld(f, settle, why, EXPERIMENT, not_ident, settling_tau_s=tau)

@@ -88,19 +88,28 @@ def temperature_jump_alike(pb: Any, terms: list, f: Any, alpha: float,
                      "temperature: the recording is too long for that design")
         return f
     lead, t_best = found
-    if not np.isfinite(lead):
-        return f
-    if lead >= MARGIN:
+    if not rival_fits_as_well(lead):
         return f
     below = sorted(s for s, t in ctx.step_temp_c.items() if t < t_best)
     above = sorted(s for s, t in ctx.step_temp_c.items() if t > t_best)
     jump = (f"a jump of the output where the temperature crosses ≈ {t_best:.1f} °C (a "
             "package or solder change at a temperature; outside the catalogue)")
     why = (f"a per-axis jump of the plateaus above {t_best:.1f} °C (steps {above}) against "
-           f"those below (steps {below}) fits the structure as well (the {f.effect} term "
-           f"leads it by {lead:.1f} noise variances after 2 per column, under {MARGIN:g}): "
-           "the recording holds too little of what the term does beyond that jump")
+           f"those below (steps {below}) {fits_as_well(f.effect, lead)}: the recording "
+           "holds too little of what the term does beyond that jump")
     return withheld(f, jump, why, EXPERIMENT, not_ident, jump_at_c=t_best)
+
+
+def rival_fits_as_well(lead: float) -> bool:
+    """The named term leads a rival outside the catalogue by less than by_fit's
+    :data:`MARGIN` noise variances (:func:`lead_over_rivals`): the name is withheld."""
+    return bool(np.isfinite(lead) and lead < MARGIN)
+
+
+def fits_as_well(effect: str, lead: float) -> str:
+    """The clause that says so, for the reason of :func:`withheld`."""
+    return (f"fits the structure as well (the {effect} term leads it by {lead:.1f} noise "
+            f"variances after 2 per column, under {MARGIN:g})")
 
 
 def withheld(f: Any, rival: str, why: str, experiment: str, not_ident: dict[str, dict],
