@@ -287,17 +287,10 @@ def _white_means_under_ceiling(rec: Recording, sd: np.ndarray) -> np.ndarray:
     inclinometer's 18 mg at 500 Hz is 2.5 mg."""
     from calibration.importers import STILL_LOWPASS_S, STILL_NOISE_CEILING_G
 
-    n = len(rec)
-    if n < 2 or not rec.has("n"):
-        return np.zeros(n, bool)
-    t = rec.t_s
-    order = np.argsort(t, kind="stable")
-    gap = np.diff(t[order])
-    span = np.full(n, np.inf)
-    span[:-1] = gap
-    span[1:] = np.minimum(span[1:], gap)
-    spacing = np.empty(n)
-    spacing[order] = span
+    if len(rec) < 2 or not rec.has("n"):
+        return np.zeros(len(rec), bool)
+    gap = np.diff(rec.t_s)  # rows are in time order (recording.validate)
+    spacing = np.minimum(np.r_[np.inf, gap], np.r_[gap, np.inf])
     rate_hz = rec.columns["n"] / np.where(spacing > 0, spacing, np.inf)
     per_mean = np.sqrt(np.maximum(rate_hz * STILL_LOWPASS_S, 1.0))
     return np.all(sd / per_mean[:, None] <= STILL_NOISE_CEILING_G, axis=1)
@@ -311,22 +304,16 @@ def _agrees_with_a_neighbour(rec: Recording, sd: np.ndarray) -> np.ndarray:
     from calibration.gate import BIAS_TEMPCO_MAX_G_PER_C
 
     n = len(rec)
-    out = np.zeros(n, bool)
     if n < 2 or not rec.has("n"):
-        return out
-    order = np.argsort(rec.t_s, kind="stable")
-    a = rec.raw_g[order]
-    se2 = (sd[order] ** 2) / np.maximum(rec.columns["n"][order], 1.0)[:, None]
-    temp = rec.temperature_c()[order] if rec.has_temperature else np.zeros(n)
+        return np.zeros(n, bool)
+    # rows are in time order (recording.validate): neighbours are adjacent rows
+    se2 = sd**2 / np.maximum(rec.columns["n"], 1.0)[:, None]
+    temp = rec.temperature_c() if rec.has_temperature else np.zeros(n)
     d_temp = np.nan_to_num(np.abs(np.diff(temp)), nan=0.0)
     bound = (NEIGHBOUR_AGREE_SE * np.sqrt(se2[1:] + se2[:-1])
              + BIAS_TEMPCO_MAX_G_PER_C * d_temp[:, None])
-    pair = np.all(np.abs(np.diff(a, axis=0)) <= bound, axis=1)  # row i with row i+1
-    agree = np.zeros(n, bool)
-    agree[1:] |= pair
-    agree[:-1] |= pair
-    out[order] = agree
-    return out
+    pair = np.all(np.abs(np.diff(rec.raw_g, axis=0)) <= bound, axis=1)  # row i with i+1
+    return np.r_[False, pair] | np.r_[pair, False]
 
 
 def _still_rows(rec: Recording) -> np.ndarray:
