@@ -284,32 +284,30 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     wf.report["notes"][:0] = capture_notes + [reason]
     model = wf.model
     wf.report["unresolved_temperature"] = unresolved
-    if dq is not None and dq.read_c is not None:
+    T = captures.temperature_c()
+    heldout_mg = wf.report.get("heldout_rms_mg_xyz", {}).get("compensated")
+    rebuilt_read = dq is not None and dq.read_c is not None
+    if rebuilt_read:
         # what a firmware that reads the raw channel makes of a model fitted in the rebuilt
         # temperature, on this log (fitted in firmware_polynomial.py; the exports say it)
         firmware = quantised_reading_error(
-            model, dq.read_c, captures.temperature_c(), dq.lsb_c,
-            wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"),
+            model, dq.read_c, T, dq.lsb_c, heldout_mg,
             t_s=captures.t_s, level_c=dq.level_c, dither_lsb=dq.dither_lsb)
         model.provenance["quantised_temperature"] = firmware
         wf.report["quantised_temperature"] = firmware
     if model.temperature_rate:
         # neither firmware applies a rate term: the export folds its mean at each reading
         # into the polynomial (firmware_polynomial.rate_fold_record), fitted here on this log
-        rebuilt_read = dq is not None and dq.read_c is not None
         fold = rate_fold_record(
-            model, captures.t_s, dq.read_c if rebuilt_read else captures.temperature_c(),
-            captures.temperature_c(),
-            wf.report.get("heldout_rms_mg_xyz", {}).get("compensated"),
+            model, captures.t_s, dq.read_c if rebuilt_read else T, T, heldout_mg,
             lsb_c=dq.lsb_c if rebuilt_read else 0.0,
             level_c=dq.level_c if rebuilt_read else None,
             dither_lsb=dq.dither_lsb if rebuilt_read else 0.0)
         model.provenance["rate_fold"] = fold
         wf.report["rate_fold"] = fold
-    if dq is not None and dq.read_c is not None:
+    if rebuilt_read:
         said = quantised_reading_lines(firmware_reading_record(model))
         wf.report["notes"] += [f"firmware export: {line}" for line in said]
-    T = captures.temperature_c()
     comp = captures.raw_g - model.params_vector_at(T, extrapolate=True)[:, sfem.BIAS]
     labels = orientations.labels
     means = np.zeros((orientations.count, 3))
