@@ -47,7 +47,7 @@ from calibration.discrepancy.plateau_settling import settling_alike
 from calibration.discrepancy.problem import (
     AxisBlockDesign,
     LinearProblem,
-    _axis_block_design,
+    axis_block_design,
     build_problem,
 )
 from calibration.discrepancy.protocol import Protocol, assess, visit_column
@@ -714,7 +714,7 @@ def _one_step_block(pb: LinearProblem, step: int) -> np.ndarray | AxisBlockDesig
     ctx = pb.ctx
     u = np.column_stack([np.ones(ctx.n), ctx.input_g]) * (ctx.steps == step)[:, None]
     if pb.mode == "reference":
-        return _axis_block_design(u)
+        return axis_block_design(u)
     block = np.zeros((ctx.n, 3, 12))
     for a in range(3):
         block[:, a, 4 * a:4 * a + 4] = u

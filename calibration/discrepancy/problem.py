@@ -305,7 +305,7 @@ def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearPro
     u = np.column_stack([np.ones(n), ref])  # (N,4)
     block = (u[:, :, None] * P[:, None, :]).reshape(n, -1)  # (N, 4·(d+1))
     k = block.shape[1]
-    X0 = _axis_block_design(block)
+    X0 = axis_block_design(block)
     y = raw.ravel()
     sig = pooled_sigma_g(rec, ctx.steps)
     from_sd = sig is not None and bool(np.all(np.isfinite(sig) & (sig > 0)))
@@ -435,7 +435,7 @@ def _wls(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
     return beta / d
 
 
-def _axis_block_design(block: np.ndarray) -> np.ndarray | AxisBlockDesign:
+def axis_block_design(block: np.ndarray) -> np.ndarray | AxisBlockDesign:
     """The reference-mode base design: entry (i, a) holds ``block[i]`` in axis a's columns.
 
     Dense as before up to ``stats.TALL_BYTES``; above, :class:`AxisBlockDesign` keeps the
