@@ -108,10 +108,17 @@ def completed_campaign(live_engine_service: LiveService) -> dict:
 
 @pytest.fixture(scope="session")
 def ramp_campaign(live_engine_service: LiveService) -> dict:
-    """A ramp campaign (docs/ramp-campaigns.md) 20 → 40 °C and back at 1 °C/min, run to its
-    continuous calibration (about 3 s at 3000×)."""
+    """A ramp campaign (docs/ramp-campaigns.md) 20 → 60 °C and back to the rig's ambient at
+    0.5 °C/min, run to its continuous calibration (about 5 s at 3000×).
+
+    The last leg has no hold and the die lags the air, so the die's cooling leg covers only
+    the top of the span; and the engine takes fewer readings per simulated minute when the
+    machine is loaded (it lags the 3000× clock). 40 °C of span at 0.5 °C/min leave several
+    10-°C bands crossed both ways with ≥ 3 readings each; 20 → 40 °C at 1 °C/min left one at
+    most, and none under load. A die rate well above ``LEG_RATE_C_PER_MIN`` (0.2 °C/min)
+    keeps the legs' rows from being read as standing."""
     created = live_engine_service.start_campaign(
-        "SN-RAMP", method="ramp", setpoints_c=[20, 40], ramp_c_per_min=1)
+        "SN-RAMP", method="ramp", setpoints_c=[20, 60], ramp_c_per_min=0.5)
     return live_engine_service.wait_campaign(created["id"], "completed", "failed", "aborted")
 
 
