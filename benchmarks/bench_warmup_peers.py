@@ -427,12 +427,13 @@ def flown_readings(log: WarmupLog) -> dict[str, np.ndarray]:
             "ardupilot": ardupilot_reading_in_use(log.t_s, log.temp_c)}
 
 
-def evaluate_flown(log: WarmupLog, model_path: Path | None) -> dict[str, object]:
+def evaluate_flown(log: WarmupLog, model_path: Path | None,
+                   window_s: float = 2 * BLOCK_S) -> dict[str, object]:
     """(``--as-flown``) the held-out error of each firmware's file as the firmware applies
     it (:func:`flown_readings`): the peers' own files (PX4's script's through PX4's gate,
     ArduPilot's tempcal through ArduPilot's filter) and, with a model, soakcal's exported
     file through each (ArduPilot's file is PX4's polynomial less a constant); soakcal's
-    over the same firmware's peer with a 95 % paired bootstrap over 20-s windows."""
+    over the same firmware's peer with a 95 % paired bootstrap over ``window_s`` windows."""
     from benchmarks.bench_export_quantised import ratio_interval
 
     at = flown_readings(log)
@@ -446,7 +447,7 @@ def evaluate_flown(log: WarmupLog, model_path: Path | None) -> dict[str, object]
             ours = method_export(log, model_path, applied_at_c=at[fw])
             res[f"export_flown_{fw}"] = heldout_rms_mg(log, ours).tolist()
             res[f"export_flown_{fw}_over_peer_95"] = ratio_interval(log.t_s, ours, (peer,),
-                                                                    2 * BLOCK_S)
+                                                                    window_s)
     return res
 
 
