@@ -443,12 +443,34 @@ def evaluate_flown(log: WarmupLog, model_path: Path | None,
                               "ardupilot_flown": heldout_rms_mg(log, ardupilot).tolist(),
                               "px4_publications": int(np.unique(at["px4"]).size)}
     if model_path is not None:
+        res |= gate_departure(log, model_path, at["px4"])
         for fw, peer in (("px4", px4), ("ardupilot", ardupilot)):
             ours = method_export(log, model_path, applied_at_c=at[fw])
             res[f"export_flown_{fw}"] = heldout_rms_mg(log, ours).tolist()
             res[f"export_flown_{fw}_over_peer_95"] = ratio_interval(log.t_s, ours, (peer,),
                                                                     window_s)
     return res
+
+
+def gate_departure(log: WarmupLog, model_path: Path, in_use_c: np.ndarray
+                   ) -> dict[str, object]:
+    """The PX4 header's stated figure for its gate (``export_firmware.px4_update_gate``, per
+    axis mg) beside the largest departure, on this log, of the offset in use (the file at
+    ``in_use_c``) from the file's offset at each sample's reading."""
+    import re
+
+    from benchmarks.bench_export_quantised import px4_offset_g
+    from calibration.export_firmware import export_px4
+    from calibration.model_file import load_model
+
+    text = export_px4(load_model(model_path)).text
+    (line,) = [x for x in text.splitlines() if "update_offsets_accel" in x]
+    m = re.search(r"up to ([-0-9.]+) / ([-0-9.]+) / ([-0-9.]+) mg \(x / y / z\)", line)
+    departure = np.abs(px4_offset_g(text, in_use_c) - px4_offset_g(text, log.temp_c))
+    moved = np.abs(in_use_c - log.temp_c)
+    return {"gate_stated_mg": None if m is None else [float(v) for v in m.groups()],
+            "gate_departure_max_mg": (departure.max(axis=0) * 1e3).tolist(),
+            "gate_reading_max_c": float(moved.max())}
 
 
 def flown_table(results: list[dict[str, object]]) -> str:
@@ -476,6 +498,13 @@ def flown_table(results: list[dict[str, object]]) -> str:
                 f"{fmt(r.get('export'))} | {fmt(r.get('export_flown_px4'))} | {ci(r, 'px4')} | "
                 f"{fmt(r['ardupilot'])} | {fmt(r['ardupilot_flown'])} | "
                 f"{fmt(r.get('export_flown_ardupilot'))} | {ci(r, 'ardupilot')} |")
+    gated = [r for r in results if "gate_departure_max_mg" in r]
+    if gated:
+        lines += ["", "| log | PX4 header: gate figure | largest departure on the log | "
+                  "largest distance of the reading in use (°C) |", "|---|---|---|---|"]
+        lines += [f"| {r['log']} | {fmt(r['gate_stated_mg'])} | "
+                  f"{fmt(r['gate_departure_max_mg'])} | {r['gate_reading_max_c']:.3f} |"
+                  for r in gated]
     return "\n".join(lines)
 
 

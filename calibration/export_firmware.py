@@ -404,8 +404,9 @@ def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float,
     file's offset at the current reading by up to the polynomial's largest |dp/dT| over
     TMIN..TMAX times (the gate + the reading's change since the last poll): for a channel
     quantised at ``lsb_c``, one level (its reading steps by one level between polls at a
-    warm-up's rates; a dithered channel's flicker takes some samples a level further: 3 %
-    of a 1 °C/min ramp's samples with 0.4 LSB of noise, said in words); for a fine one,
+    warm-up's rates; a dithered channel's flicker takes some samples one or two levels
+    further, said in words: the record does not say whether the channel was dithered);
+    for a fine one,
     what the temperature moves in a second, said in words.
     Per axis, mg. Not part of the figures at the firmware's reading, which evaluate the
     offset at every sample's reading."""
@@ -419,8 +420,9 @@ def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float,
                 f"{float(lsb_c):g} degC channel's one step since that poll: up to {span:g} degC "
                 f"from the current reading, so up to "
                 + xyz(f"{v * span:.3f}" for v in slope) + " mg (x / y / z) for a channel "
-                "that steps cleanly (a dithered channel's flicker takes a few per cent of "
-                "samples one step further)")
+                "that steps cleanly; NOT a bound for a dithered channel, whose flicker takes "
+                "some samples one or two steps further (up to 1.7 x this on simulated "
+                "dithered warm-ups)")
     else:
         then = (f"up to {gate:g} degC from the reading at the last poll, plus what the reading "
                 f"moved since that poll (under {PX4_POLL_PERIOD_S:g} s): up to "
