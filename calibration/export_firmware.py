@@ -104,9 +104,11 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
              else "the offset at the rebuilt temperature")
     how = ""
     if per_sample:
-        how = (f", p evaluated at each sample's own reading as PX4 does (at the capture mean "
-               f"of the reading instead, as a firmware that low-pass filters its reading "
-               f"evaluates it: RMS {xyz(record['smoothed_rms_mg'])} mg)")
+        how = (f", p evaluated at each sample's own reading as a firmware that reads it per "
+               f"sample does (ArduPilot's unfiltered IMU drivers; PX4 holds the offset of "
+               f"one poll's reading: see its update gate) (at the capture mean of the reading "
+               f"instead, as a firmware that low-pass filters its reading evaluates it: RMS "
+               f"{xyz(record['smoothed_rms_mg'])} mg)")
     dropped = ""
     folded = bool(record.get("rate_folded"))
     if folded:
