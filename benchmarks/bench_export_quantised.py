@@ -23,6 +23,9 @@ it: 10-s blocks alternately fit and held out, RMS of held-out 5-s means, mg x / 
   the export wrote before :func:`calibration.firmware_polynomial.rate_fold_record`; the same
   file as ``export at raw`` for a model without a rate term);
 * ``px4``, ``ardupilot``: the peers' own fits, applied at the raw reading;
+* ``--as-flown``: also each file as its firmware flies it
+  (:func:`benchmarks.bench_warmup_peers.evaluate_flown`: PX4's 1-s poll and 1 °C
+  publication gate, ArduPilot's 1-Hz temperature filter), the peers' and the export's;
 * ``stated``: the RMS the export states (``provenance.quantised_temperature.rms_mg``:
   the file's offset at each sample's reading less the model's whole offset, rate term
   included, over the fit log's capture means), against ``file − model``: the same
@@ -51,6 +54,8 @@ if str(ROOT) not in sys.path:
 from benchmarks.bench_warmup_peers import (  # noqa: E402
     MEAN_S,
     blocks,
+    evaluate_flown,
+    flown_table,
     heldout_rms_mg,
     imported_log,
     method_ardupilot,
@@ -77,7 +82,7 @@ QUANT1C = "1004,1009,1011,1016,1023,1039,2001,2012,2019,2028"
 
 
 def run_case(seed: int, coarse_dither: bool, pools: object, work: Path,
-             window_s: float = WINDOW_S) -> dict[str, object]:
+             window_s: float = WINDOW_S, as_flown: bool = False) -> dict[str, object]:
     case = draw_case(seed, coarse_dither)
     data = simulate(case, pools)  # type: ignore[arg-type]
     csv_path, _ = write_log(case, data, work)
@@ -104,6 +109,8 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path,
     px4, ardupilot = method_px4(log), method_ardupilot(log)[0]
     ok = np.all(np.isfinite(sc), axis=1)
     own, raw = heldout_rms_mg(log, sc), heldout_rms_mg(log, exported)
+    if as_flown:
+        out |= evaluate_flown(log, work / "model.json", window_s)
     return out | {
         "soakcal": own.tolist() if ok.all() else None,
         "export_at_raw": raw.tolist(),
@@ -170,6 +177,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--realdata", help="the shared real recordings (noise pools)")
     ap.add_argument("--only", default=QUANT1C, help="comma-separated case seeds")
     ap.add_argument("--coarse-dither", action="store_true")
+    ap.add_argument("--as-flown", action="store_true",
+                    help="also each file as its firmware flies it (PX4's 1-s poll and 1 degC "
+                         "gate, ArduPilot's 1-Hz temperature filter)")
     ap.add_argument("--window-s", type=float, default=WINDOW_S,
                     help="the bootstrap's window of held-out means (s)")
     args = ap.parse_args(argv)
@@ -177,7 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in (int(x) for x in args.only.split(",")):
-            r = run_case(s, args.coarse_dither, pools, Path(tmp), args.window_s)
+            r = run_case(s, args.coarse_dither, pools, Path(tmp), args.window_s,
+                         args.as_flown)
             rows.append(r)
             print(json.dumps(r), flush=True)
 
@@ -211,6 +222,11 @@ def main(argv: list[str] | None = None) -> int:
               f"{'—' if ratio is None else f'{ratio:.1f}'} | "
               f"{'yes' if r.get('rate_term') else 'no'} | {f(r.get('export_drop'))} | "
               f"{drop_vs} | {fold_vs} |")
+    if args.as_flown:
+        print("\nEach file as its firmware flies it (--as-flown; export per sample = export at "
+              "raw):\n")
+        print(flown_table([r | {"log": r["case"], "export": r.get("export_at_raw")}
+                           for r in rows if "px4_flown" in r]))
     return 0
 
 

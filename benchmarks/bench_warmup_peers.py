@@ -50,6 +50,13 @@ Methods:
   and ``export drop`` (the model's ``rate_fold`` record removed: the static polynomial,
   the rate term dropped, as the export wrote before the fold). ArduPilot's file is the same
   polynomial less a constant, so its held-out figure is the same.
+* ``--as-flown``: also each firmware's file as the firmware applies it in flight
+  (:mod:`calibration.firmware_flight`, read from their source): PX4 evaluates its offset
+  at the reading of a 1-s poll and publishes it only when the reading moved by more than
+  1 °C since the last publication; ArduPilot's InvenSense backends hand ``correct_accel``
+  the reading through a 2-pole 1-Hz low-pass. The peers' own files (PX4's script's
+  through the gate, ArduPilot's tempcal through the filter) and, with ``--export``,
+  soakcal's exported file through each, with soakcal's over the same firmware's peer.
 * ``floor``: the noise floor of a held-out 5-s mean: the RMS difference of the two
   5-s means inside each held-out block, divided by √2 (white noise; slow drift cancels).
 
@@ -230,16 +237,18 @@ def method_none(log: WarmupLog) -> np.ndarray:
     return log.acc_g
 
 
-def method_px4(log: WarmupLog, fit: np.ndarray | None = None) -> np.ndarray:
+def method_px4(log: WarmupLog, fit: np.ndarray | None = None,
+               applied_at_c: np.ndarray | None = None) -> np.ndarray:
     """process_sensor_caldata.py's accel fit, applied as calc_thermal_offsets_3D does
-    (fitted to the ``fit`` samples: default the fit blocks)."""
+    (fitted to the ``fit`` samples: default the fit blocks), at each sample's reading or
+    at ``applied_at_c`` (``--as-flown``: :func:`flown_readings`)."""
     if fit is None:
         _, fit = blocks(log.t_s)
     T = log.temp_c[fit]
     t_min, t_max = float(T.min()), float(T.max())
     t_ref = 0.5 * (t_min + t_max)
     out = np.empty_like(log.acc_g)
-    d = np.clip(log.temp_c, t_min, t_max) - t_ref
+    d = np.clip(log.temp_c if applied_at_c is None else applied_at_c, t_min, t_max) - t_ref
     for i in range(3):
         a = log.acc_g[fit, i]
         coef = np.polyfit(T - t_ref, a - np.median(a), 3)
@@ -247,10 +256,11 @@ def method_px4(log: WarmupLog, fit: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def method_ardupilot(log: WarmupLog, fit: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, str]:
+def method_ardupilot(log: WarmupLog, fit: np.ndarray | None = None,
+                     applied_at_c: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """tempcal_IMU.py: 2-s moving average of X, Y, Z, T and time, order-3 fit vs T − 35
-    (fitted to the ``fit`` samples: default the fit blocks)."""
+    (fitted to the ``fit`` samples: default the fit blocks), applied at each sample's
+    reading or at ``applied_at_c`` (``--as-flown``: :func:`flown_readings`)."""
     if fit is None:
         _, fit = blocks(log.t_s)
     try:
@@ -276,10 +286,10 @@ def method_ardupilot(log: WarmupLog, fit: np.ndarray | None = None
     order = tc.POLY_ORDER if tc is not None else 3
     t_min, t_max = float(T.min()), float(T.max())
     out = np.empty_like(log.acc_g)
+    at = log.temp_c if applied_at_c is None else applied_at_c
     for i in range(3):
         coef = np.polyfit(T - temp_ref, X[:, i] - X[:, i].mean(), order)
-        out[:, i] = log.acc_g[:, i] - np.polyval(coef, np.clip(log.temp_c, t_min, t_max)
-                                                  - temp_ref)
+        out[:, i] = log.acc_g[:, i] - np.polyval(coef, np.clip(at, t_min, t_max) - temp_ref)
     return out, source
 
 
@@ -391,10 +401,11 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
     return out, note
 
 
-def method_export(log: WarmupLog, model_path: Path, fold: bool = True) -> np.ndarray:
+def method_export(log: WarmupLog, model_path: Path, fold: bool = True,
+                  applied_at_c: np.ndarray | None = None) -> np.ndarray:
     """(N,3) compensated by the PX4 file soakcal exports from ``model_path``, applied at each
-    sample's own reading (``--export``); ``fold`` False: the model's ``rate_fold`` record
-    removed first (the static polynomial)."""
+    sample's own reading (``--export``) or at ``applied_at_c`` (``--as-flown``); ``fold``
+    False: the model's ``rate_fold`` record removed first (the static polynomial)."""
     from benchmarks.bench_export_quantised import px4_offset_g
     from calibration.export_firmware import export_px4
     from calibration.model_file import load_model
@@ -402,7 +413,99 @@ def method_export(log: WarmupLog, model_path: Path, fold: bool = True) -> np.nda
     model = load_model(model_path)
     if not fold:
         model.provenance.pop("rate_fold", None)
-    return log.acc_g - px4_offset_g(export_px4(model).text, log.temp_c)
+    at = log.temp_c if applied_at_c is None else applied_at_c
+    return log.acc_g - px4_offset_g(export_px4(model).text, at)
+
+
+def flown_readings(log: WarmupLog) -> dict[str, np.ndarray]:
+    """(``--as-flown``) the temperature each firmware evaluates its offset at, per sample:
+    PX4's 1-s poll and 1 °C publication gate, ArduPilot's InvenSense 1-Hz low-pass
+    (:mod:`calibration.firmware_flight`, read from their source)."""
+    from calibration.firmware_flight import ardupilot_reading_in_use, px4_reading_in_use
+
+    return {"px4": px4_reading_in_use(log.t_s, log.temp_c),
+            "ardupilot": ardupilot_reading_in_use(log.t_s, log.temp_c)}
+
+
+def evaluate_flown(log: WarmupLog, model_path: Path | None,
+                   window_s: float = 2 * BLOCK_S) -> dict[str, object]:
+    """(``--as-flown``) the held-out error of each firmware's file as the firmware applies
+    it (:func:`flown_readings`): the peers' own files (PX4's script's through PX4's gate,
+    ArduPilot's tempcal through ArduPilot's filter) and, with a model, soakcal's exported
+    file through each (ArduPilot's file is PX4's polynomial less a constant); soakcal's
+    over the same firmware's peer with a 95 % paired bootstrap over ``window_s`` windows."""
+    from benchmarks.bench_export_quantised import ratio_interval
+
+    at = flown_readings(log)
+    px4 = method_px4(log, applied_at_c=at["px4"])
+    ardupilot = method_ardupilot(log, applied_at_c=at["ardupilot"])[0]
+    res: dict[str, object] = {"px4_flown": heldout_rms_mg(log, px4).tolist(),
+                              "ardupilot_flown": heldout_rms_mg(log, ardupilot).tolist(),
+                              "px4_publications": int(np.unique(at["px4"]).size)}
+    if model_path is not None:
+        res |= gate_departure(log, model_path, at["px4"])
+        for fw, peer in (("px4", px4), ("ardupilot", ardupilot)):
+            ours = method_export(log, model_path, applied_at_c=at[fw])
+            res[f"export_flown_{fw}"] = heldout_rms_mg(log, ours).tolist()
+            res[f"export_flown_{fw}_over_peer_95"] = ratio_interval(log.t_s, ours, (peer,),
+                                                                    window_s)
+    return res
+
+
+def gate_departure(log: WarmupLog, model_path: Path, in_use_c: np.ndarray
+                   ) -> dict[str, object]:
+    """The PX4 header's stated figure for its gate (``export_firmware.px4_update_gate``, per
+    axis mg) beside the largest departure, on this log, of the offset in use (the file at
+    ``in_use_c``) from the file's offset at each sample's reading."""
+    import re
+
+    from benchmarks.bench_export_quantised import px4_offset_g
+    from calibration.export_firmware import export_px4
+    from calibration.model_file import load_model
+
+    text = export_px4(load_model(model_path)).text
+    (line,) = [x for x in text.splitlines() if "update_offsets_accel" in x]
+    m = re.search(r"up to ([-0-9.]+) / ([-0-9.]+) / ([-0-9.]+) mg \(x / y / z\)", line)
+    departure = np.abs(px4_offset_g(text, in_use_c) - px4_offset_g(text, log.temp_c))
+    moved = np.abs(in_use_c - log.temp_c)
+    return {"gate_stated_mg": None if m is None else [float(v) for v in m.groups()],
+            "gate_departure_max_mg": (departure.max(axis=0) * 1e3).tolist(),
+            "gate_reading_max_c": float(moved.max())}
+
+
+def flown_table(results: list[dict[str, object]]) -> str:
+    """(``--as-flown``) mg x / y / z: each file per sample and as its firmware flies it."""
+    lines = ["| log | PX4 script per sample | PX4 script flown | export per sample | export "
+             "flown PX4 | ÷ PX4 script flown (95 %) | ArduPilot tempcal per sample | "
+             "ArduPilot flown | export flown ArduPilot | ÷ ArduPilot flown (95 %) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+
+    def fmt(v: object) -> str:
+        return "—" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+
+    def ci(r: dict[str, object], fw: str) -> str:
+        ours = r.get(f"export_flown_{fw}")
+        if ours is None:
+            return "—"
+        ratio = np.asarray(ours) / np.asarray(r[f"{fw}_flown"])
+        return " / ".join(f"{x:.3f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
+            ratio, r[f"export_flown_{fw}_over_peer_95"], strict=True))  # type: ignore[call-overload]
+
+    for r in results:
+        if "px4_flown" in r:
+            lines.append(
+                f"| {r['log']} | {fmt(r['px4'])} | {fmt(r['px4_flown'])} | "
+                f"{fmt(r.get('export'))} | {fmt(r.get('export_flown_px4'))} | {ci(r, 'px4')} | "
+                f"{fmt(r['ardupilot'])} | {fmt(r['ardupilot_flown'])} | "
+                f"{fmt(r.get('export_flown_ardupilot'))} | {ci(r, 'ardupilot')} |")
+    gated = [r for r in results if "gate_departure_max_mg" in r]
+    if gated:
+        lines += ["", "| log | PX4 header: gate figure | largest departure on the log | "
+                  "largest distance of the reading in use (°C) |", "|---|---|---|---|"]
+        lines += [f"| {r['log']} | {fmt(r['gate_stated_mg'])} | "
+                  f"{fmt(r['gate_departure_max_mg'])} | {r['gate_reading_max_c']:.3f} |"
+                  for r in gated]
+    return "\n".join(lines)
 
 
 def _write_raw(path: Path, log: WarmupLog, mask: np.ndarray) -> None:
@@ -504,7 +607,8 @@ def _last_line(text: str) -> str:
 
 # --- run ---------------------------------------------------------------------------------
 def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False,
-             whole: bool = False, export: bool = False) -> dict[str, object]:
+             whole: bool = False, export: bool = False,
+             as_flown: bool = False) -> dict[str, object]:
     res: dict[str, object] = {"log": log.name, "n": int(log.t_s.size),
                               "minutes": float((log.t_s[-1] - log.t_s[0]) / 60.0),
                               "temp_span_c": [float(log.temp_c.min()), float(log.temp_c.max())]}
@@ -533,6 +637,9 @@ def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False,
         res["export_over_peer_95"] = ratio_interval(log.t_s, folded, peers, 2 * BLOCK_S)
         res["export_drop_over_peer_95"] = ratio_interval(log.t_s, dropped, peers, 2 * BLOCK_S)
         res["export_over_drop_95"] = ratio_interval(log.t_s, folded, (dropped,), 2 * BLOCK_S)
+    if as_flown:
+        res.update(evaluate_flown(log, workdir / "model.json" if export and sc is not None
+                                  else None))
     if whole:
         res.update(evaluate_whole(log, workdir))
     if fixed_degrees:
@@ -662,12 +769,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--export", action="store_true",
                     help="also the PX4 file soakcal exports, applied at each sample's reading "
                          "(the rate term folded, and dropped)")
+    ap.add_argument("--as-flown", action="store_true",
+                    help="also each file as its firmware flies it: PX4's 1-s poll and 1 degC "
+                         "gate, ArduPilot's 1-Hz temperature filter (soakcal's with --export)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         logs, results = gather_logs(args, Path(tmp))
         for log in logs:
             results.append(evaluate(log, Path(tmp), args.fixed_degrees, args.whole,
-                                    args.export))
+                                    args.export, args.as_flown))
             print(json.dumps(results[-1]), flush=True)
     text = table(results)
     if args.fixed_degrees:
@@ -676,6 +786,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.export:
         text += "\n\nThe exported PX4 file at each sample's reading (--export):\n\n" + \
             export_table(results)
+    if args.as_flown:
+        text += "\n\nEach file as its firmware flies it (--as-flown):\n\n" + \
+            flown_table(results)
     if args.whole:
         text += "\n\nsoakcal on raw rows as `soakcal import` writes them (--whole):\n\n" + \
             whole_table(results)

@@ -31,6 +31,12 @@ from numpy.polynomial import Polynomial
 
 from calibration import sfem
 from calibration.errors import ModelFileError
+from calibration.firmware_flight import (
+    ARDUPILOT_TEMP_CUTOFF_HZ,
+    PX4_POLL_PERIOD_S,
+    PX4_UPDATE_GATE_C,
+    ardupilot_filter_delay_s,
+)
 from calibration.firmware_polynomial import (
     FIRMWARE_DEGREE,
     file_bias_x_g,
@@ -98,9 +104,11 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
              else "the offset at the rebuilt temperature")
     how = ""
     if per_sample:
-        how = (f", p evaluated at each sample's own reading as PX4 does (at the capture mean "
-               f"of the reading instead, as a firmware that low-pass filters its reading "
-               f"evaluates it: RMS {xyz(record['smoothed_rms_mg'])} mg)")
+        how = (f", p evaluated at each sample's own reading as a firmware that reads it per "
+               f"sample does (ArduPilot's unfiltered IMU drivers; PX4 holds the offset of "
+               f"one poll's reading: see its update gate) (at the capture mean of the reading "
+               f"instead, as a firmware that low-pass filters its reading evaluates it: RMS "
+               f"{xyz(record['smoothed_rms_mg'])} mg)")
     dropped = ""
     folded = bool(record.get("rate_folded"))
     if folded:
@@ -300,6 +308,14 @@ def firmware_reading_record(model: ThermalModel) -> dict[str, object] | None:
     return {**record, **figures, "rate_folded": True}
 
 
+def _channel_lsb_c(model: ThermalModel) -> float | None:
+    """The step of the temperature channel the model was calibrated from, where the model
+    records one (a rebuilt coarse channel's ``quantised_temperature`` record); else None."""
+    record = model.provenance.get("quantised_temperature") or {}
+    lsb = record.get("lsb_c")
+    return float(lsb) if lsb else None
+
+
 def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
                source_name: str = "model") -> FirmwareExport:
     """A QGroundControl parameter file of ``TC_A{instance}_*`` (see module docstring)."""
@@ -344,35 +360,82 @@ def export_px4(model: ThermalModel, *, instance: int = 0, device_id: int = 0,
          "d = clamp(T, TMIN, TMAX) - TREF; subtracted from sensor_accel x/y/z (i = 0, 1, 2)",
          "T is the accelerometer's own temperature reading (sensor_accel.temperature)",
          "outside TMIN..TMAX the firmware holds the offset at the edge value (clamp)",
-         px4_update_gate(c, lo, hi, t_ref), x0_note],
+         px4_update_gate(c, lo, hi, t_ref, _channel_lsb_c(model)), x0_note],
         limits, reading)
     body = "\n".join(f"1\t1\t{n}\t{_num(v, t)}\t{t}" for n, v, t in rows)
     text = head + "# Vehicle-Id Component-Id Name Value Type\n" + body + "\n"
     return FirmwareExport(text, limits, reading)
 
 
-# PX4 publishes a new thermal offset only when the temperature it polls (once a second) has
-# moved by more than this since the offset it last published (TemperatureCompensation::
-# update_offsets_accel, TemperatureCompensationModule::Run at 1 Hz).
-PX4_UPDATE_GATE_C = 1.0
-
-
-def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float) -> str:
-    """What PX4's update gate costs: the offset in use may be that of a reading up to
-    :data:`PX4_UPDATE_GATE_C` away from the current one (a ``> 1.0`` test: with a 1 °C
-    channel, one level either side), so up to the polynomial's largest |dp/dT| over
-    TMIN..TMAX times that, per axis (mg). Not part of the figures at the firmware's reading,
-    which evaluate the offset at every sample's reading."""
+def _largest_slope_mg_per_c(c_m_s2: np.ndarray, lo: float, hi: float,
+                            t_ref: float) -> np.ndarray:
+    """(3,) the file polynomial's largest |dp/dT| over TMIN..TMAX per axis, mg per °C
+    (``c_m_s2``: (3, 4) in m/s² per °C^j about ``t_ref``)."""
     d = np.linspace(lo, hi, 201) - t_ref
-    slope = np.array([np.max(np.abs(np.polynomial.polynomial.polyval(
+    return np.array([np.max(np.abs(np.polynomial.polynomial.polyval(
         d, np.polynomial.polynomial.polyder(c_m_s2[i])))) if hi > lo else 0.0
-        for i in range(3)])
-    cost_mg = slope * PX4_UPDATE_GATE_C / STANDARD_GRAVITY_M_S2 * 1e3
-    return (f"PX4 publishes a new offset only when its temperature reading (polled once a "
-            f"second) has moved by more than {PX4_UPDATE_GATE_C:g} degC since the last one "
-            f"it published: the offset in use may be that of a reading up to "
-            f"{PX4_UPDATE_GATE_C:g} degC away, up to "
-            + " / ".join(f"{v:.3f}" for v in cost_mg) + " mg (x / y / z)")
+        for i in range(3)]) / STANDARD_GRAVITY_M_S2 * 1e3
+
+
+def ardupilot_temperature_filter(c_m_s2: np.ndarray, lo: float, hi: float,
+                                 t_ref: float) -> str:
+    """What ArduPilot's temperature filter costs (:mod:`calibration.firmware_flight`): its
+    InvenSense backends hand ``correct_accel`` the reading through a 2-pole 1-Hz low-pass,
+    which follows a changing reading :func:`~calibration.firmware_flight.ardupilot_filter_delay_s`
+    behind, so the offset in use lags the file's offset at the current reading by up to the
+    polynomial's largest |dp/dT| × that delay × dT/dt: per axis, mg per °C/min."""
+    slope = _largest_slope_mg_per_c(c_m_s2, lo, hi, t_ref)
+    delay_s = ardupilot_filter_delay_s()
+    per_c_per_min = slope * delay_s / 60.0
+    return ("ArduPilot's InvenSense IMU drivers (AP_InertialSensor_Invensense) low-pass filter "
+            f"the temperature at {ARDUPILOT_TEMP_CUTOFF_HZ:g} Hz (2-pole) before applying "
+            f"these, {delay_s:.3f} s behind a changing reading: the offset in use then lags "
+            "the file's offset at the current reading by up to "
+            + " / ".join(f"{v:.4f}" for v in per_c_per_min)
+            + " mg per degC/min of the temperature's change (x / y / z); the ICM-42xxx "
+            "(Invensensev3) and BMI088 drivers do not filter it")
+
+
+def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float,
+                    lsb_c: float | None = None) -> str:
+    """What PX4's poll and update gate cost (:mod:`calibration.firmware_flight`): the offset
+    in use is that of the reading at the last publishing poll, within
+    :data:`~calibration.firmware_flight.PX4_UPDATE_GATE_C` (a strict ``> 1.0f`` test) of
+    the reading at the last poll, which is up to one poll period
+    (:data:`~calibration.firmware_flight.PX4_POLL_PERIOD_S`) old. So it differs from the
+    file's offset at the current reading by up to the polynomial's largest |dp/dT| over
+    TMIN..TMAX times (the gate + the reading's change since the last poll): for a channel
+    quantised at ``lsb_c``, one level (its reading steps by one level between polls at a
+    warm-up's rates; a dithered channel's flicker takes some samples one or two levels
+    further, said in words: the record does not say whether the channel was dithered);
+    for a fine one,
+    what the temperature moves in a second, said in words.
+    Per axis, mg. Not part of the figures at the firmware's reading, which evaluate the
+    offset at every sample's reading."""
+    slope = _largest_slope_mg_per_c(c_m_s2, lo, hi, t_ref)
+    gate = PX4_UPDATE_GATE_C
+    xyz = " / ".join
+
+    if lsb_c:
+        span = gate + float(lsb_c)
+        then = (f"up to {gate:g} degC from the reading at the last poll, plus this model's "
+                f"{float(lsb_c):g} degC channel's one step since that poll: up to {span:g} degC "
+                f"from the current reading, so up to "
+                + xyz(f"{v * span:.3f}" for v in slope) + " mg (x / y / z) for a channel "
+                "that steps cleanly; NOT a bound for a dithered channel, whose flicker takes "
+                "some samples one or two steps further (up to 1.7 x this on simulated "
+                "dithered warm-ups)")
+    else:
+        then = (f"up to {gate:g} degC from the reading at the last poll, plus what the reading "
+                f"moved since that poll (under {PX4_POLL_PERIOD_S:g} s): up to "
+                + xyz(f"{v * gate:.3f}" for v in slope) + f" mg (x / y / z) for the {gate:g} "
+                f"degC gate, plus as much again per degC the reading moves in a second")
+    return (f"PX4 computes the offset at the temperature reading of its {PX4_POLL_PERIOD_S:g}-s "
+            f"poll and publishes it only when that reading has moved by more than {gate:g} "
+            f"degC since the last one it published (TemperatureCompensation::"
+            f"update_offsets_accel); a vehicle held at one temperature keeps that offset. The "
+            f"offset in use is that of a reading {then}, beside the file's offset at the "
+            f"current reading (its largest slope over TMIN..TMAX times that distance)")
 
 
 def export_ardupilot(model: ThermalModel, *, instance: int = 1,
@@ -385,8 +448,8 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
     if lo < a_lo or hi > a_hi:
         raise ModelFileError(f"valid range {lo:.2f} .. {hi:.2f} degC is outside ArduPilot's "
                              f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
-    c = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
-                              file_bias_x_g(model)) * ARDUPILOT_SCALE_FACTOR
+    c_m_s2 = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C, file_bias_x_g(model))
+    c = c_m_s2 * ARDUPILOT_SCALE_FACTOR
     limits = left_out(model)
     reading = quantised_reading_lines(firmware_reading_record(model)) + \
         rate_fold_warning(model)
@@ -405,7 +468,8 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
          "P(d) = (ACC1*d + ACC2*d^2 + ACC3*d^3) * 1e-6 m/s^2, per axis X, Y, Z",
          "35 degC is fixed in the firmware (TEMP_REFERENCE; there is no parameter for it)",
          "T is the IMU's own temperature; T_cal is INS_ACCn_CALTEMP; clamp to TMIN..TMAX",
-         "the gyro coefficients (INS_TCALn_GYR*) are not touched"],
+         "the gyro coefficients (INS_TCALn_GYR*) are not touched",
+         ardupilot_temperature_filter(c_m_s2, lo, hi, ARDUPILOT_TEMP_REFERENCE_C)],
         limits, reading)
     text = head + "\n".join(f"{n},{_num(v, 0)}" for n, v in rows) + "\n"
     return FirmwareExport(text, limits, reading)
