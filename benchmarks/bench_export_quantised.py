@@ -172,6 +172,20 @@ def px4_offset_g(params_text: str, temp_c: np.ndarray) -> np.ndarray:
                             for i in range(3)]) / STANDARD_GRAVITY_M_S2
 
 
+def ardupilot_offset_g(params_text: str, temp_c: np.ndarray) -> np.ndarray:
+    """(N, 3) g: ArduPilot's offset P(clamp(T) − 35), P(d) = (ACC1 d + ACC2 d² + ACC3 d³)
+    × 1e−6 m/s² (``AP_InertialSensor::TCal::correct_sensor``), from an ``INS_TCAL1_*``
+    file; the constant P(clamp(T_cal) − 35) is left out (a constant: INS_ACCOFFS's)."""
+    p = {}
+    for line in params_text.splitlines():
+        if line and not line.startswith("#"):
+            name, value = line.split(",")
+            p[name] = float(value)
+    d = np.clip(temp_c, p["INS_TCAL1_TMIN"], p["INS_TCAL1_TMAX"]) - 35.0
+    return np.column_stack([sum(p[f"INS_TCAL1_ACC{j}_{axis}"] * d**j for j in (1, 2, 3))
+                            for axis in "XYZ"]) * 1e-6 / STANDARD_GRAVITY_M_S2
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--realdata", help="the shared real recordings (noise pools)")

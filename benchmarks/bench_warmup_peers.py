@@ -402,18 +402,22 @@ def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, st
 
 
 def method_export(log: WarmupLog, model_path: Path, fold: bool = True,
-                  applied_at_c: np.ndarray | None = None) -> np.ndarray:
-    """(N,3) compensated by the PX4 file soakcal exports from ``model_path``, applied at each
+                  applied_at_c: np.ndarray | None = None,
+                  firmware: str = "px4") -> np.ndarray:
+    """(N,3) compensated by the PX4 file soakcal exports from ``model_path`` (``firmware``
+    "ardupilot": the ArduPilot file, its constant left to INS_ACCOFFS), applied at each
     sample's own reading (``--export``) or at ``applied_at_c`` (``--as-flown``); ``fold``
     False: the model's ``rate_fold`` record removed first (the static polynomial)."""
-    from benchmarks.bench_export_quantised import px4_offset_g
-    from calibration.export_firmware import export_px4
+    from benchmarks.bench_export_quantised import ardupilot_offset_g, px4_offset_g
+    from calibration.export_firmware import export_ardupilot, export_px4
     from calibration.model_file import load_model
 
     model = load_model(model_path)
     if not fold:
         model.provenance.pop("rate_fold", None)
     at = log.temp_c if applied_at_c is None else applied_at_c
+    if firmware == "ardupilot":
+        return log.acc_g - ardupilot_offset_g(export_ardupilot(model).text, at)
     return log.acc_g - px4_offset_g(export_px4(model).text, at)
 
 
@@ -432,7 +436,7 @@ def evaluate_flown(log: WarmupLog, model_path: Path | None,
     """(``--as-flown``) the held-out error of each firmware's file as the firmware applies
     it (:func:`flown_readings`): the peers' own files (PX4's script's through PX4's gate,
     ArduPilot's tempcal through ArduPilot's filter) and, with a model, soakcal's exported
-    file through each (ArduPilot's file is PX4's polynomial less a constant); soakcal's
+    file through each (its ``--format px4`` and ``--format ardupilot`` files); soakcal's
     over the same firmware's peer with a 95 % paired bootstrap over ``window_s`` windows."""
     from benchmarks.bench_export_quantised import ratio_interval
 
@@ -445,7 +449,7 @@ def evaluate_flown(log: WarmupLog, model_path: Path | None,
     if model_path is not None:
         res |= gate_departure(log, model_path, at["px4"])
         for fw, peer in (("px4", px4), ("ardupilot", ardupilot)):
-            ours = method_export(log, model_path, applied_at_c=at[fw])
+            ours = method_export(log, model_path, applied_at_c=at[fw], firmware=fw)
             res[f"export_flown_{fw}"] = heldout_rms_mg(log, ours).tolist()
             res[f"export_flown_{fw}_over_peer_95"] = ratio_interval(log.t_s, ours, (peer,),
                                                                     window_s)

@@ -296,16 +296,44 @@ def rate_fold_warning(model: ThermalModel) -> list[str]:
             f"function of T only); `soakcal compensate` applies the rate term"]
 
 
-def firmware_reading_record(model: ThermalModel) -> dict[str, object] | None:
+def firmware_reading_record(model: ThermalModel,
+                            filtered: bool = False) -> dict[str, object] | None:
     """The record :func:`quantised_reading_lines` states: the model's
     ``quantised_temperature`` record, with the figures of the file that folds the rate term
-    (:func:`calibration.firmware_polynomial.rate_fold_record`) where the model carries that fold."""
+    (:func:`calibration.firmware_polynomial.rate_fold_record`) where the model carries that
+    fold; ``filtered``: the figures of the file fitted at the capture mean of the reading
+    (:func:`calibration.firmware_polynomial.file_bias_x_g`), where the model carries it."""
     record = model.provenance.get("quantised_temperature")
+    if not record:
+        return record
+    key = "filtered_reading_figures" if filtered else "reading_figures"
+    own = record.get("filtered_reading_figures") if filtered else None
+    if own:
+        record = {**record, **own, "fitted_filtered": True}
     fold = model.provenance.get("rate_fold") or {}
-    figures = fold.get("reading_figures")
-    if not record or not figures or fold.get("folded_rate_x_g") is None:
+    figures = fold.get(key)
+    if not figures or fold.get("folded_rate_x_g") is None:
         return record
     return {**record, **figures, "rate_folded": True}
+
+
+def ardupilot_fitted_reading(record: dict[str, object] | None) -> list[str]:
+    """The line saying which reading the ArduPilot file's polynomial is fitted at, for a
+    model whose record carries the polynomial fitted at the capture mean of a dithered
+    channel's reading (``firmware_reading_record(model, filtered=True)``); else none."""
+    if not record or not record.get("fitted_filtered"):
+        return []
+
+    def xyz(v: object) -> str:
+        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
+
+    return [f"this file is fitted for ArduPilot's InvenSense drivers (MPU-6000/9250, "
+            f"ICM-2060x/20689), which low-pass filter the flickering reading at "
+            f"{ARDUPILOT_TEMP_CUTOFF_HZ:g} Hz: its polynomial is the least-squares fit at the "
+            f"capture mean of the reading, RMS {xyz(record['smoothed_rms_mg'])} mg there "
+            f"from the model's offset on the fit log (x / y / z); the ICM-42xxx "
+            f"(Invensensev3) and BMI088 drivers evaluate it at each sample's reading: RMS "
+            f"{xyz(record['rms_mg'])} mg (`--format px4`'s polynomial is fitted at that)"]
 
 
 def _channel_lsb_c(model: ThermalModel) -> float | None:
@@ -448,10 +476,14 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
     if lo < a_lo or hi > a_hi:
         raise ModelFileError(f"valid range {lo:.2f} .. {hi:.2f} degC is outside ArduPilot's "
                              f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
-    c_m_s2 = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C, file_bias_x_g(model))
+    # the polynomial fitted at the filtered reading, where the model carries one (a dithered
+    # channel): the InvenSense drivers' 1-Hz filter (calibration.firmware_flight)
+    c_m_s2 = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
+                                   file_bias_x_g(model, filtered=True))
     c = c_m_s2 * ARDUPILOT_SCALE_FACTOR
     limits = left_out(model)
-    reading = quantised_reading_lines(firmware_reading_record(model)) + \
+    record = firmware_reading_record(model, filtered=True)
+    reading = ardupilot_fitted_reading(record) + quantised_reading_lines(record) + \
         rate_fold_warning(model)
     limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
                   f"INS_ACC{'' if instance == 1 else instance}OFFS, measured by the ordinary "

@@ -221,6 +221,15 @@ def quantised_reading_error(model: ThermalModel, read_c: np.ndarray, rebuilt_c: 
     }
     if fit_heldout_mg is not None:
         out["ratio_to_fit"] = figures["ratio_to_fit"]
+    if spread is not None and dither_lsb > 0:
+        # a firmware that low-pass filters a flickering (dithered) reading (ArduPilot's
+        # InvenSense drivers, 1 Hz) evaluates p about the capture mean of the reading, not
+        # at each sample's level: the polynomial fitted there (a channel that steps cleanly
+        # holds each level for longer than the filter averages: the per-sample one is it)
+        filtered = raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, None)
+        out["filtered_reading_bias_x_g"] = [[float(v) for v in axis] for axis in filtered]
+        out["filtered_reading_figures"] = _reading_figures(
+            model, filtered, read[ok], whole, spread, lsb_c, fit_heldout_mg, (lo, hi))
     return out
 
 
@@ -309,31 +318,50 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
         out["ratio_to_fit"] = file_fig["ratio_to_fit"]
     if rebuilt_channel:
         out["reading_figures"] = file_fig
+    if spread is not None and dither_lsb > 0:
+        # the same fold for a firmware that low-pass filters its reading (at the capture
+        # mean of the reading: quantised_reading_error's filtered polynomial)
+        static_f = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, None))
+        whole_f = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, None,
+                                                     rate_g=rate_g))
+        out["filtered_folded_rate_x_g"] = [[float(v) for v in axis]
+                                           for axis in whole_f - static_f]
+        out["filtered_reading_figures"] = _reading_figures(
+            model, whole_f, read[ok], whole_mg, spread_ok, lsb, fit_heldout_mg, (lo, hi))
     return out
 
 
-def rate_fold_x_g(model: ThermalModel) -> np.ndarray | None:
+def rate_fold_x_g(model: ThermalModel, filtered: bool = False) -> np.ndarray | None:
     """The folded rate polynomial a warm-up model with a rate term carries
-    (:func:`rate_fold_record`), or None (no rate term, or a model file from before)."""
-    coef = (model.provenance.get("rate_fold") or {}).get("folded_rate_x_g")
+    (:func:`rate_fold_record`), or None (no rate term, or a model file from before);
+    ``filtered``: the one fitted at the filtered reading where the model carries it."""
+    fold = model.provenance.get("rate_fold") or {}
+    coef = (fold.get("filtered_folded_rate_x_g") if filtered else None) or \
+        fold.get("folded_rate_x_g")
     return None if coef is None else np.asarray(coef, float)
 
 
-def file_bias_x_g(model: ThermalModel) -> np.ndarray | None:
+def file_bias_x_g(model: ThermalModel, filtered: bool = False) -> np.ndarray | None:
     """The offset polynomial the export writes, in g in the model's x, or None for the
     model's own b(T): the static polynomial (:func:`raw_reading_bias_x_g` or b) plus the
-    folded rate term (:func:`rate_fold_x_g`) where the model carries one."""
-    static = raw_reading_bias_x_g(model)
-    folded = rate_fold_x_g(model)
+    folded rate term (:func:`rate_fold_x_g`) where the model carries one. ``filtered``: the
+    file for a firmware that low-pass filters its reading (ArduPilot's InvenSense drivers,
+    :mod:`calibration.firmware_flight`), fitted at the capture mean of the reading of a
+    dithered channel instead of at each sample's reading (the same polynomial where the
+    model carries no such fit)."""
+    static = raw_reading_bias_x_g(model, filtered)
+    folded = rate_fold_x_g(model, filtered)
     if folded is None:
         return static
     return _padded(model.coeffs[sfem.BIAS] if static is None else static) + folded
 
 
-def raw_reading_bias_x_g(model: ThermalModel) -> np.ndarray | None:
+def raw_reading_bias_x_g(model: ThermalModel, filtered: bool = False) -> np.ndarray | None:
     """The raw-reading polynomial a model fitted in a rebuilt temperature carries
     (:func:`quantised_reading_error`), or None: then the export writes the model's b(T)
-    (a model read by a fine channel, or a model file from before the polynomial)."""
+    (a model read by a fine channel, or a model file from before the polynomial);
+    ``filtered``: the one fitted at the capture mean of the reading where it carries it."""
     record = model.provenance.get("quantised_temperature") or {}
-    coef = record.get("raw_reading_bias_x_g")
+    coef = (record.get("filtered_reading_bias_x_g") if filtered else None) or \
+        record.get("raw_reading_bias_x_g")
     return None if coef is None else np.asarray(coef, float)
