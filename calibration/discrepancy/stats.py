@@ -235,7 +235,7 @@ def reading_signs(rng: np.random.Generator, n: int, b: int) -> np.ndarray:
     """(n × b) signs ±1.0, one per reading and replicate: ``rng.integers(0, 2, (n, b))``
     mapped to ±1, drawn by blocks of readings in the same order (the generator's stream is
     consumed as by the one draw). Why (issue 22, memory): the one draw and its float copies
-    were three (n × b) arrays at once, 480 MB at 1 M readings and 20 replicates."""
+    were two (n × b) arrays at once (320 MB at 1 M readings and 20 replicates)."""
     out = np.empty((n, b))
     step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
     for i in range(0, n, step):
