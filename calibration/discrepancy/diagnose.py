@@ -372,6 +372,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                   wild_known)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
                                e, E, s, s_null, lifted, not_ident, (nu, rng), bounded))
+        # The replicates are read: the term's checks below must not hold them too (issue 22,
+        # memory: 480 MB at 1 M readings beside the one-plateau check's arrays).
+        E = None
         tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
         if not tests:
             break
@@ -989,12 +992,15 @@ def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: flo
         return f
     ctx = pb.ctx
     u = ctx.input_g / np.linalg.norm(ctx.input_g, axis=1, keepdims=True)
-    turn = turn_columns(u)
-    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms) + turn.shape[2]
+    # The design's size from the turn's column count (one reading's columns), before the
+    # (N, 3, k) columns are built: on a long recording they were the peak (issue 22, memory:
+    # 1.4 GB with their stacking copy at 1 M readings, for a check that is then skipped).
+    p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms) + turn_columns(u[:1]).shape[2]
     if 8 * pb.m * p > stats.TALL_BYTES or pb.m <= p + 10:
         notes.append(f"{f.effect}: not checked against a turn of the reference (a table "
                      "tilt or encoder error): the recording is too long for that design")
         return f
+    turn = turn_columns(u)
     X = eff.regressors(ctx, term.theta)
     along = np.einsum("nak,na->nk", X, u)[:, None, :] * u[:, :, None]
     turned = Term("turn", float("nan"), pb.lift(turn))

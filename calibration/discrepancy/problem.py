@@ -179,20 +179,34 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     e2 = (np.asarray(e, float) * dof_corr) ** 2
     ac_all = np.zeros_like(sig2) if across is None else np.asarray(across, float)
     ok = np.isfinite(e2) & np.isfinite(sig2) & (sig2 > 0)
-    w, e2, kv, fl, ac = sig2[ok], e2[ok], known[ok], fl_all[ok], ac_all[ok]
+    # Every entry usable (the rule): the arrays themselves, not copies (issue 22, memory:
+    # each is 24 MB at 1 M readings, and the likelihood below took more copies per call).
+    w, e2, kv, fl, ac = ((a.ravel() for a in (sig2, e2, known, fl_all, ac_all)) if ok.all()
+                         else (a[ok] for a in (sig2, e2, known, fl_all, ac_all)))
     w0 = float(np.median(w))
 
     def var(q: np.ndarray, w_: np.ndarray, fl_: np.ndarray, kv_: np.ndarray,
             ac_: np.ndarray) -> np.ndarray:
         # κ = 1 + q0 on the scatter above the floor, κ₀ = q2 on the floor, τ² = q1·w0,
-        # ρ² = q3·w0 across the reference
-        return (1.0 + q[0]) * (w_ - fl_) + q[2] * fl_ + q[1] * w0 + q[3] * w0 * ac_ + kv_
+        # ρ² = q3·w0 across the reference; in place, in the order of
+        # (1 + q0)·(w − fl) + q2·fl + q1·w0 + (q3·w0)·ac + kv
+        v = w_ - fl_
+        v *= 1.0 + q[0]
+        v += q[2] * fl_
+        v += q[1] * w0
+        v += q[3] * w0 * ac_
+        v += kv_
+        return v
 
     keep = np.ones(w.size, bool)
+    kept = (w, e2, kv, fl, ac)  # the entries the likelihood reads: all, until some are far
 
     def nll(q: np.ndarray) -> float:
-        v = var(q, w[keep], fl[keep], kv[keep], ac[keep])
-        return float(np.sum(np.log(v) + e2[keep] / v)) / int(keep.sum())
+        w_, e2_, kv_, fl_, ac_ = kept
+        v = var(q, w_, fl_, kv_, ac_)
+        lv = np.log(v)
+        lv += np.divide(e2_, v, out=v)  # log v + e²/v
+        return float(np.sum(lv)) / int(keep.sum())
 
     start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0), 1.0, 0.0])
     q0_bounds = (0.0, 1e6) if floor is None else (1e-3, 1e4)
@@ -205,6 +219,7 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     far = e2 / var(q, w, fl, kv, ac) > chi2.isf(FAR_ALPHA / max(w.size, 1), 1)
     if far.any() and int((~far).sum()) >= w.size // 2:
         keep = ~far
+        kept = tuple(a[keep] for a in (w, e2, kv, fl, ac))
         q = minimize(nll, q, method="L-BFGS-B", bounds=bounds, options=opts).x
     kappa, tau2 = 1.0 + float(q[0]), float(q[1]) * w0
     return np.sqrt(var(q, sig2, fl_all, known, ac_all)), kappa, float(np.sqrt(tau2))

@@ -39,7 +39,7 @@ def orthonormal_basis(X: np.ndarray, rel_tol: float = 1e-9) -> np.ndarray:
     """
     if X.shape[1] == 0:
         return np.zeros((X.shape[0], 0))
-    if X.nbytes > TALL_BYTES and X.shape[0] > 20 * X.shape[1]:
+    if is_tall(*X.shape):
         return orthonormal_basis_tall(X)
     U, s, _ = np.linalg.svd(X, full_matrices=False)
     keep = s > rel_tol * max(float(s[0]), 1e-300)
@@ -219,7 +219,7 @@ def wild_replicates(
     if leave_out:
         scale[np.isin(row, leave_out)] = 0.0
     scale *= reading_cap(scale, row)[row]
-    signs = rng.integers(0, 2, (int(row.max()) + 1, out.shape[1])).astype(float) * 2.0 - 1.0
+    signs = reading_signs(rng, int(row.max()) + 1, out.shape[1])
     step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
     for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
         sl = slice(i, i + step)
@@ -229,6 +229,20 @@ def wild_replicates(
     if known is not None:
         add_shared(rng, known[0], known[1], 1.0, out)
     return project_out_inplace(U, out)
+
+
+def reading_signs(rng: np.random.Generator, n: int, b: int) -> np.ndarray:
+    """(n × b) signs ±1.0, one per reading and replicate: ``rng.integers(0, 2, (n, b))``
+    mapped to ±1, drawn by blocks of readings in the same order (the generator's stream is
+    consumed as by the one draw). Why (issue 22, memory): the one draw and its float copies
+    were two (n × b) arrays at once (320 MB at 1 M readings and 20 replicates)."""
+    out = np.empty((n, b))
+    step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
+    for i in range(0, n, step):
+        block = out[i : i + step]
+        np.multiply(rng.integers(0, 2, block.shape), 2.0, out=block)
+        block -= 1.0
+    return out
 
 
 # Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
@@ -326,7 +340,11 @@ def _residual_cov_blocks(
     """
     n, g, p = Ug.shape
     cg = c[idx]  # (N, g)
-    Cg = np.eye(g)[None] * (1.0 - cg[:, :, None] ** 2) + cg[:, :, None] * cg[:, None, :]
+
+    def c_blocks(sl: slice) -> np.ndarray:  # C_g of the readings sl (not all N at once)
+        cb = cg[sl]
+        return np.eye(g)[None] * (1.0 - cb[:, :, None] ** 2) + cb[:, :, None] * cb[:, None, :]
+
     W = np.eye(p)
     step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
     for i in range(0, n, step):  # v by blocks of readings: no (N × p) array (issue 22)
@@ -337,10 +355,10 @@ def _residual_cov_blocks(
     for i in range(0, U.shape[0], step):
         Ub = U[i : i + step]
         W -= (Ub * c2[i : i + step, None]).T @ Ub
-    out = np.empty_like(Cg)
+    out = np.empty((n, g, g))
     step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
     for i in range(0, n, step):  # by blocks of readings: U_g W is an (m × p) array at once
-        Ub, Cb = Ug[i : i + step], Cg[i : i + step]
+        Ub, Cb = Ug[i : i + step], c_blocks(slice(i, i + step))
         UUtC = np.einsum("ngp,nhp->ngh", Ub, Ub) @ Cb
         UWU = np.einsum("ngq,nhq->ngh", Ub @ W, Ub)
         out[i : i + step] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
@@ -551,6 +569,8 @@ def linear_stats(
     score less its own reach, no evidence unless still > 0. The denominator (the residual
     after the candidate) and the explained sum of squares returned are the data's own.
     """
+    if not one_sided and bounded is None and is_tall(*Xw.shape):
+        return _linear_stats_by_rows(U, Xw, e, E, EE)
     absorbed = absorbed_fraction(U, Xw)
     m = e.size
     ee = float(e @ e)
@@ -593,6 +613,83 @@ def linear_stats(
     return float(f_logsf(f, k, dof)), f_logsf(fn, k, dof), k, absorbed, q
 
 
+def _linear_stats_by_rows(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray,
+                          EE: np.ndarray | None) -> tuple[float, np.ndarray, int, float, float]:
+    """:func:`linear_stats` (two-sided, no bound) for a tall ``Xw``, by row blocks.
+
+    Why (issue 22, memory): the dense form holds the projected columns Z = (I − UUᵀ)Xw,
+    their basis B and the temporaries of both, each (m × k): at 1 M readings ~150 MB apiece
+    for a 6-column candidate, on top of the null replicates. Here only ``B``'s products
+    are formed (:func:`scores_after`), with the tall route's steps of
+    :func:`orthonormal_basis_tall`, so the statistics are the dense ones up to rounding.
+    """
+    m = e.size
+    Be, BE, zz, tot, k = scores_after(U, Xw, e, E)
+    absorbed = 1.0 if tot <= 0 else 1.0 - zz / tot
+    if k == 0:
+        return 0.0, np.zeros(E.shape[1]), 0, 1.0, 0.0
+    ee = float(e @ e)
+    EE = sum_sq_columns(E) if EE is None else EE
+    dof = max(m - U.shape[1] - k, 1)
+    q = float(np.sum(Be**2))
+    f = q / k / max((ee - q) / dof, 1e-300)
+    qn = np.sum(BE**2, axis=0)
+    fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
+    return float(f_logsf(f, k, dof)), f_logsf(fn, k, dof), k, absorbed, q
+
+
+def is_tall(m: int, p: int) -> bool:
+    """Whether an (m × p) float array takes the tall (Gram) route of
+    :func:`orthonormal_basis`: larger than :data:`TALL_BYTES` and m > 20 p."""
+    return 8 * m * p > TALL_BYTES and m > 20 * p
+
+
+def scores_after(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray | None, float, float, int]:
+    """``Bᵀe``, ``BᵀE``, ‖Z‖², ‖Xw‖² and k, for B the orthonormal basis that
+    ``orthonormal_basis_tall`` gives of Z = (I − UUᵀ)Xw, without an (m × k) array.
+
+    The same steps by row blocks: C = UᵀXw; the Gram ZᵀZ of the rows
+    ``Xw[i:j] − U[i:j]·C``; its eigen-cut T (:func:`eigen_cut_map`); H = (ZT)ᵀ(ZT) and
+    (ZT)ᵀe, (ZT)ᵀE in one more pass; then B = ZT·R⁻¹ with RᵀR = H (Cholesky-QR2), so
+    Bᵀe = R⁻ᵀ(ZT)ᵀe.
+    """
+    m, p = Xw.shape
+    C = U.T @ Xw
+    n_e = 0 if E is None else E.shape[1]
+    step = max(1, CHUNK_BYTES // (8 * max(p + U.shape[1] + n_e, 1)))
+
+    def z_rows(i: int, j: int) -> np.ndarray:
+        return Xw[i:j] - np.asarray(U[i:j]) @ C
+
+    gram = np.zeros((p, p))
+    tot = 0.0
+    for i in range(0, m, step):
+        j = min(i + step, m)
+        Z = z_rows(i, j)
+        gram += Z.T @ Z
+        tot += float(np.einsum("ij,ij->", Xw[i:j], Xw[i:j]))
+    zz = float(np.trace(gram))
+    T = eigen_cut_map(gram)
+    k = T.shape[1]
+    if k == 0:
+        return np.zeros(0), None if E is None else np.zeros((0, n_e)), zz, tot, 0
+    H = np.zeros((k, k))
+    Ze = np.zeros(k)
+    ZE = None if E is None else np.zeros((k, n_e))
+    for i in range(0, m, step):
+        j = min(i + step, m)
+        B1 = z_rows(i, j) @ T
+        H += B1.T @ B1
+        Ze += B1.T @ e[i:j]
+        if E is not None:
+            ZE += B1.T @ E[i:j]
+    Rt = np.linalg.cholesky(H)  # Rᵀ (lower): B = B1·R⁻¹, so Bᵀx = R⁻ᵀ·B1ᵀx
+    Be = np.linalg.solve(Rt, Ze)
+    BE = None if ZE is None else np.linalg.solve(Rt, ZE)
+    return Be, BE, zz, tot, k
+
+
 def explained_ss(
     U: np.ndarray, Xw: np.ndarray, e: np.ndarray, one_sided: bool = False
 ) -> tuple[float, int]:
@@ -600,7 +697,11 @@ def explained_ss(
 
     ``one_sided`` as in :func:`linear_stats`: 0 when the first column's coefficient
     would be ≤ 0, so a refined θ never trades the physical sign for a better fit.
+    A tall ``Xw`` two-sided: by row blocks (:func:`scores_after`).
     """
+    if not one_sided and is_tall(*Xw.shape):
+        Be, _, _, _, k = scores_after(U, Xw, e)
+        return float(np.sum(Be**2)), k
     B = orthonormal_basis(project_out(U, Xw), 1e-6)
     q = float(np.sum((B.T @ e) ** 2))
     if one_sided and Xw.shape[1] > 0:
@@ -609,6 +710,20 @@ def explained_ss(
         if float(z1 @ e) <= 0:
             q = 0.0
     return q, B.shape[1]
+
+
+def inverse_where(M: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(N, g, g): the inverse of each block ``M[i]`` where ``ok[i]``, zeros elsewhere, by
+    blocks of readings (each block inverted on its own, as in one batch). Why (issue 22,
+    memory): ``M[ok]`` and its inverse were two more (N, g, g) arrays at once."""
+    Minv = np.zeros_like(M)
+    step = max(1, CHUNK_BYTES // (8 * M[0].size if M.shape[0] else 8))
+    for i in range(0, M.shape[0], step):
+        sl = slice(i, i + step)
+        keep = ok[sl]
+        if keep.any():
+            Minv[sl][keep] = np.linalg.inv(M[sl][keep])
+    return Minv
 
 
 def row_stats(
@@ -670,8 +785,7 @@ def row_stats(
     else:
         M = _residual_cov_blocks(U, Ug, np.clip(shared, -1.0, 1.0), idx)
     ok = np.array([i not in skip for i in range(n_rows)]) & (np.linalg.det(M) > 1e-6)
-    Minv = np.zeros_like(M)
-    Minv[ok] = np.linalg.inv(M[ok])
+    Minv = inverse_where(M, ok)
     eg = e[idx]
     t = np.einsum("ng,ngh,nh->n", eg, Minv, eg) / s**2
     if bounded is not None:  # net of what the box can put into the reading (linear_stats)

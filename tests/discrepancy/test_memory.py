@@ -376,7 +376,8 @@ def test_accepted_term_checks_run_without_the_whole_design(monkeypatch):
     """With a term accepted, the one-plateau check, the held-out scores, the physics checks
     and the final reports use the row-block forms above TALL_BYTES (issue 22: at 1 M
     readings they built the whole design and its basis again and again): the same diagnosis,
-    with the whole design and the dense basis forbidden."""
+    with the whole design and the dense basis forbidden. The turn check, skipped above the
+    size, does not build its (N, 3, k) columns first (1.4 GB at 1 M readings)."""
     from calibration.discrepancy.basis import RowBlockBasis
     from calibration.schedules import table1
     from simulators.effects import ScaleNonlinearity
@@ -398,7 +399,16 @@ def test_accepted_term_checks_run_without_the_whole_design(monkeypatch):
     monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 80 * 101)  # blocks that do not divide m
     monkeypatch.setattr(dg, "_design", forbidden)
     monkeypatch.setattr(RowBlockBasis, "__array__", forbidden)
+    whole_turn = dg.turn_columns
+
+    def turn_of_a_few_readings(u, *a, **k):  # the turn check's size is judged first
+        if len(u) >= len(rec):
+            raise AssertionError("the turn's columns of every reading were built")
+        return whole_turn(u, *a, **k)
+
+    monkeypatch.setattr(dg, "turn_columns", turn_of_a_few_readings)
     tall = diagnose(rec, n_null=30, seed=2).to_dict()
+    assert any("not checked against a turn of the reference" in n for n in tall["notes"])
     assert tall["verdict"] == ref["verdict"]
     assert [f["effect"] for f in tall["findings"]] == [f["effect"] for f in ref["findings"]]
     for f_tall, f_ref in zip(tall["findings"], ref["findings"], strict=True):
@@ -458,3 +468,133 @@ def test_direction_offsets_by_row_blocks_equal_the_dense_columns(monkeypatch):
         monkeypatch.setattr(sn, name, None)
     got = sn.direction_offsets_needed(pb, U, e, ax, 0.01, "terms")
     assert want is not None and got == want
+
+
+@pytest.mark.parametrize("basis_kind", ["stored", "recipe"])
+def test_candidate_scores_by_row_blocks_equal_the_dense_forms(monkeypatch, basis_kind):
+    """A tall candidate's F test and explained sum of squares (issue 22: at 1 M readings the
+    projected columns, their basis and the temporaries were (m × k) copies each, beside the
+    null replicates): by row blocks, the dense statistics, with the dense forms forbidden."""
+    from calibration.discrepancy.basis import RowBlockBasis, WhitenedDesign
+
+    pb = build_problem(_six_tables_one_way())
+    rng = np.random.default_rng(21)
+    U = stats.orthonormal_basis(pb.whiten(np.asarray(pb.X0)))
+    yw = pb.y * pb.w
+    X = np.column_stack([pb.ctx.input_g[pb.row, pb.axis] ** 2,
+                         pb.ctx.input_g[pb.row, pb.axis] ** 3,
+                         rng.standard_normal(pb.m)])
+    X = np.column_stack([X, X[:, 0] + X[:, 1]])  # a dependent column: k = 3 of 4
+    Xw = pb.whiten(X)
+    e = yw - U @ (U.T @ yw) + 0.02 * Xw[:, 0]
+    E = rng.standard_normal((pb.m, 7))
+    stats.project_out_inplace(U, E)
+    monkeypatch.setattr(stats, "TALL_BYTES", 1024)  # the tall route, dense: the reference
+    assert 8 * Xw.size > stats.TALL_BYTES and pb.m > 20 * Xw.shape[1]  # the tall route
+    lp, lpn, k, absorbed, q = stats.linear_stats(U, Xw, e, E)
+    q_x, k_x = stats.explained_ss(U, Xw, e)
+    assert k == k_x == 3
+
+    if basis_kind == "recipe":
+        U = RowBlockBasis.of_design(WhitenedDesign([pb.X0], pb.w))
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 20 * 97)  # blocks that do not divide m
+
+    def forbidden(*_a, **_k):
+        raise AssertionError("an (m × k) candidate array was built")
+
+    for name in ("orthonormal_basis", "project_out", "absorbed_fraction"):
+        monkeypatch.setattr(stats, name, forbidden)
+    lp_b, lpn_b, k_b, absorbed_b, q_b = stats.linear_stats(U, Xw, e, E)
+    assert k_b == k
+    np.testing.assert_allclose(lp_b, lp, rtol=1e-8)
+    np.testing.assert_allclose(lpn_b, lpn, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose([absorbed_b, q_b], [absorbed, q], rtol=1e-8)
+    q_xb, k_xb = stats.explained_ss(U, Xw, e)
+    assert k_xb == k_x
+    np.testing.assert_allclose(q_xb, q_x, rtol=1e-8)
+
+
+class _BlockDrawsOnly:
+    """A generator that refuses an integer draw of more than ``limit`` rows at once."""
+
+    def __init__(self, rng: np.random.Generator, limit: int) -> None:
+        self.rng, self.limit = rng, limit
+
+    def integers(self, *a, **k):
+        size = k.get("size", a[2] if len(a) > 2 else None)
+        if size is not None and np.atleast_1d(size)[0] > self.limit:
+            raise AssertionError("one (N × B) draw of integers")
+        return self.rng.integers(*a, **k)
+
+    def __getattr__(self, name):
+        return getattr(self.rng, name)
+
+
+def test_reading_signs_by_blocks_are_the_one_draw(monkeypatch):
+    """The sign-flip replicates' signs drawn by blocks of readings (issue 22: the one draw and
+    its float copies were 480 MB at 1 M readings): the same signs, the same replicates and
+    the generator left in the same state as one (N × B) draw, which is forbidden."""
+    pb = build_problem(_six_tables_one_way())
+    U = stats.orthonormal_basis(pb.whiten(np.asarray(pb.X0)))
+    yw = pb.y * pb.w
+    e = yw - U @ (U.T @ yw)
+    n, b = pb.ctx.n, 9
+    rng = np.random.default_rng(31)
+    want = rng.integers(0, 2, (n, b)).astype(float) * 2.0 - 1.0  # the one draw, as before
+    after = rng.standard_normal(3)
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * b * 37)  # blocks of 37 readings
+    # the replicates built from them: the dense form (signs of one draw) against the blocked
+    scale = e / np.sqrt(1.0 - np.minimum(stats.leverage(U), stats.LEVERAGE_MAX))
+    scale *= stats.reading_cap(scale, pb.row)[pb.row]
+    dense = stats.project_out(U, scale[:, None] * want[pb.row])
+    blocked = stats.wild_replicates(_BlockDrawsOnly(np.random.default_rng(31), 37), e, U,
+                                    pb.row, np.empty((pb.m, b)))
+    np.testing.assert_allclose(blocked, dense, rtol=0, atol=1e-12 * np.abs(dense).max())
+    rng = np.random.default_rng(31)
+    got = stats.reading_signs(_BlockDrawsOnly(rng, 37), n, b)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(rng.standard_normal(3), after)
+
+
+def test_per_reading_inverse_by_blocks_equals_the_one_batch(monkeypatch):
+    """The per-reading statistic's block inverses by blocks of readings, and the residual
+    covariance blocks with C_g formed per block (issue 22: M[ok], its inverse and C_g were
+    (N, g, g) arrays each at once): the statistic of one batch, with one batch forbidden."""
+    pb = build_problem(_six_tables_one_way())
+    U = stats.orthonormal_basis(pb.whiten(np.asarray(pb.X0)))
+    yw = pb.y * pb.w
+    e = yw - U @ (U.T @ yw)
+    rng = np.random.default_rng(8)
+    E = rng.standard_normal((pb.m, 5))
+    stats.project_out_inplace(U, E)
+    c = np.clip(rng.normal(0.0, 0.5, pb.m), -0.95, 0.95)
+    n, skip = pb.ctx.n, {3, 17}
+    monkeypatch.setattr(stats, "CHUNK_BYTES", 8 * 9 * 41)  # blocks of 41 readings
+    # the dense reference: every reading's C_g and the inverses in one batch
+    Ug, cg = U.reshape(n, 3, -1), c.reshape(n, 3)
+    Cg = np.eye(3)[None] * (1.0 - cg[:, :, None] ** 2) + cg[:, :, None] * cg[:, None, :]
+    UUtC = np.einsum("ngp,nhp->ngh", Ug, Ug) @ Cg
+    V = np.einsum("ng,ngp->np", cg, Ug)
+    W = np.eye(U.shape[1]) + V.T @ V - (U * (c**2)[:, None]).T @ U
+    M = Cg - UUtC - np.transpose(UUtC, (0, 2, 1)) + np.einsum("ngq,nhq->ngh", Ug @ W, Ug)
+    ok = np.array([i not in skip for i in range(n)]) & (np.linalg.det(M) > 1e-6)
+    Minv = np.zeros_like(M)
+    Minv[ok] = np.linalg.inv(M[ok])
+    eg = e.reshape(n, 3)
+    t = np.einsum("ng,ngh,nh->n", eg, Minv, eg)
+    tn = np.einsum("ngb,ngh,nhb->nb", E.reshape(n, 3, -1), Minv, E.reshape(n, 3, -1)).max(axis=0)
+
+    inv = np.linalg.inv
+
+    def inv_of_a_block(a):
+        if a.ndim == 3 and a.shape[0] > 41:
+            raise AssertionError("every reading's block inverted at once")
+        return inv(a)
+
+    monkeypatch.setattr(np.linalg, "inv", inv_of_a_block)
+    M_b = stats._residual_cov_blocks(U, Ug, c, np.arange(pb.m).reshape(n, 3))
+    np.testing.assert_allclose(M_b, M, rtol=0, atol=1e-12)
+    t_b, tn_b, g = stats.row_stats(U, e, E, pb.row, n, 1.0, np.ones(5), skip, c)
+    assert g == 3
+    np.testing.assert_allclose(t_b, t, rtol=1e-9)
+    np.testing.assert_allclose(tn_b, tn, rtol=1e-9)
