@@ -439,18 +439,21 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # detectable size were rejected by it). Its held-out figures are reported, not
         # required. Every other term must improve them.
         ok = bool(term.rows) or heldout_improved(ho_before, ho_after)
+        in_noise: tuple[float, float] | None = None
         if eff.shrunk_heldout:
             # A term spread thinly over many places (a turn per table pose) is judged in the
             # noise's units, as its test is: in µg the noisiest plateaus' own scatter decides
             # (issue 22: a turn at p = 1e-7 "worsened" a 50 µg held-out RMS by 0.07 µg).
-            ok = _heldout_in_noise_units(pb, terms, term, fold_masks, excl_after)
+            in_noise = _heldout_in_noise_units(pb, terms, term, fold_masks, excl_after)
+            ok = in_noise[1] < in_noise[0]
         # The model with the term, fitted once: the records and the finding below read it.
         fitted = _fit(pb, terms + [term])[:2]
         if not ok:
             rejected.add(eff.effect_id)
             stage_log[-1]["rejected_heldout"] = [ho_before, ho_after]
-            unconfirmed.append(_not_confirmed(pb, eff, term, terms, p_family, ho_before,
-                                              ho_after, fitted))
+            unconfirmed.append(replace(
+                _not_confirmed(pb, eff, term, terms, p_family, ho_before, ho_after, fitted),
+                heldout_noise_units=in_noise))
             continue
         # A term whose fit, beyond the base model, an earlier term almost wholly carries
         # cannot be told from it: fitted together the two cancel (issue 22: an ADC band
@@ -1256,11 +1259,12 @@ def _design(pb: LinearProblem, terms: list[Term], whiten: bool = True):
 
 
 def _heldout_in_noise_units(pb: LinearProblem, terms: list[Term], term: Term,
-                            fold_masks: list[np.ndarray], excl: np.ndarray) -> bool:
-    """Held-out prediction error in units of the noise, without and with ``term``: improved?"""
-    rms = [_heldout_ug(pb, ts, fold_masks, excl, in_noise_units=True)
-           for ts in (terms, terms + [term])]
-    return rms[1] < rms[0]
+                            fold_masks: list[np.ndarray], excl: np.ndarray
+                            ) -> tuple[float, float]:
+    """Held-out prediction error in units of the noise, without and with ``term``."""
+    before, after = (_heldout_ug(pb, ts, fold_masks, excl, in_noise_units=True)
+                     for ts in (terms, terms + [term]))
+    return before, after
 
 
 def _heldout_ug(pb: LinearProblem, terms: list[Term], fold_masks: list[np.ndarray],

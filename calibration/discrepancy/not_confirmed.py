@@ -45,6 +45,10 @@ class NotConfirmed:
     # of the fit outside it.
     within: str | None = None
     share_outside: float = 1.0
+    # Set when the held-out error was judged in units of the readings' noise, as the term's
+    # test is (``CatalogueEffect.shrunk_heldout``): (without, with) the term. The µg figures
+    # above can then fall while this rises; the sentence says which decided.
+    heldout_noise_units: tuple[float, float] | None = None
 
 
 def report(findings: list, records: list[NotConfirmed], finding_cls: type,
@@ -98,9 +102,8 @@ def _sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
 
 
 def _heldout_sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
-    found = "; ".join(
-        f"{r.effect_id} (p_family = {r.p_family:.2g}; held-out RMS {r.heldout_before_ug:.4g} "
-        f"→ {r.heldout_after_ug:.4g} µg with its term)" for r in keep)
+    found = "; ".join(f"{r.effect_id} (p_family = {r.p_family:.2g}; {_heldout_figures(r)})"
+                      for r in keep)
     own = "; ".join(dict.fromkeys(BY_ID[e].experiment for e in effects if BY_ID[e].experiment))
     return (f"Structure beyond noise that the family test found with the shape of {found}: "
             f"{'its term does' if len(keep) == 1 else 'none of their terms does'} not lower "
@@ -109,6 +112,16 @@ def _heldout_sentence(keep: list[NotConfirmed], effects: list[str]) -> str:
             "structure is real at the verdict's level; what it is, this recording does not "
             "say" + (f". To test {'the candidate' if len(effects) == 1 else 'the candidates'}: "
                      f"{own}" if own else "") + ".")
+
+
+def _heldout_figures(r: NotConfirmed) -> str:
+    """The held-out figures that decided, in the units they were judged in."""
+    ug = f"{r.heldout_before_ug:.4g} → {r.heldout_after_ug:.4g} µg"
+    if r.heldout_noise_units is None:
+        return f"held-out RMS {ug} with its term"
+    before, after = r.heldout_noise_units
+    return (f"held-out RMS in units of the readings' noise, as its test judges it, "
+            f"{before:.4f} → {after:.4f} with its term; in µg {ug}")
 
 
 def _within_sentence(keep: list[NotConfirmed], effects: list[str]) -> str:

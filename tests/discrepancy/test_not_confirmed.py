@@ -25,7 +25,7 @@ def test_a_term_held_out_data_reject_leaves_a_mismatch_naming_its_candidate(monk
     named = diagnose(rec, n_null=30, seed=1)
     assert named.findings[0].effect == "scale_nonlinearity"
     monkeypatch.setattr(diagnose_mod, "heldout_improved", lambda before, after: False)
-    monkeypatch.setattr(diagnose_mod, "_heldout_in_noise_units", lambda *a, **k: False)
+    monkeypatch.setattr(diagnose_mod, "_heldout_in_noise_units", lambda *a, **k: (1.0, 1.01))
     d = diagnose(rec, n_null=30, seed=1)
     assert any("rejected_heldout" in s for s in d.stage_log)
     assert d.mismatch is True

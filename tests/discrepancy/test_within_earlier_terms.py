@@ -88,3 +88,23 @@ def test_each_reason_names_only_its_own_effects():
     assert "cannot tell scale_nonlinearity from turntable_geometry" in within_part
     assert "bias_drift" not in within_part
     assert "bias_drift (p_family" in heldout_part and "scale_nonlinearity" not in heldout_part
+
+
+def test_a_term_judged_in_noise_units_is_reported_in_the_units_that_decided():
+    """A turn or cross-coupling term is judged held out in units of the readings' noise
+    (``shrunk_heldout``): its µg figures can fall while that rises. The sentence says the
+    figures that decided, not "9.894 → 9.891 µg: does not lower the error" (issue 22, a
+    300 k-reading cross_coupling recording)."""
+    from calibration.discrepancy import not_confirmed as nc
+
+    X = np.zeros((3, 1))
+    turn = nc.NotConfirmed("cross_coupling", 2e-136, 9.894, 9.891, ("x",), {}, X,
+                           heldout_noise_units=(1.0012, 1.0019))
+    text = nc._sentence([turn], ["cross_coupling"])
+    assert ("held-out RMS in units of the readings' noise, as its test judges it, "
+            "1.0012 → 1.0019 with its term; in µg 9.894 → 9.891 µg") in text
+    assert "does not lower the error" in text
+    plain = nc._sentence([nc.NotConfirmed("bias_drift", 1e-4, 10.0, 10.5, ("x",), {}, X)],
+                         ["bias_drift"])
+    assert "held-out RMS 10 → 10.5 µg with its term" in plain
+    assert "units of the readings' noise" not in plain
