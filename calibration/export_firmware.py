@@ -269,13 +269,20 @@ def rate_term_folded(fold: dict[str, object]) -> str:
     per_sample = (f"; at each sample's own reading, as the ICM-42xxx and BMI088 drivers "
                   f"evaluate it: RMS {xyz(fold['per_sample_rms_mg'])} mg"
                   if fold.get("per_sample_rms_mg") is not None else "")
+    fit = fold.get("fit_heldout_mg")
+    model_own = (f"; the model's own held-out RMS (blocks of the fit log held out in turn, "
+                 f"as calibrate chose its degree) is {xyz(fit)} mg: the file's error on new "
+                 f"data holds both (the RMS above is the file's distance from the model, "
+                 f"not from the data)"
+                 if fit is not None and fold.get("reading") == "temperature" else "")
     return (f"FOLDED: the warm-up's rate term k(T)*dT/dt (the firmware's offset is a function "
             f"of T only): this file's polynomial is the least-squares fit {where} of the "
             f"model's whole offset b(T) + k(T)*dT/dt over the fit log's {fold['captures']} "
             f"capture means, as PX4's and ArduPilot's own fits on a warm-up's samples fold the "
             f"log's mean rate effect into T; on the fit log (in-sample) it differs from that "
             f"whole offset by RMS {xyz(fold['rms_mg'])} mg{peak} (x / y / z; with the rate "
-            f"term dropped: RMS {xyz(fold['dropped_rms_mg'])} mg{per_sample}). It is right "
+            f"term dropped: RMS {xyz(fold['dropped_rms_mg'])} mg{per_sample}){model_own}. "
+            f"It is right "
             f"on average for warm-ups like the fit log (the same rates at the same "
             f"temperatures); at a constant temperature (dT/dt = 0) it differs from the "
             f"model's static offset by the folded part: RMS {xyz(fold['at_rest_rms_mg'])} mg, "

@@ -457,6 +457,12 @@ def test_the_rate_term_is_folded_into_the_file_as_the_warm_up_saw_it(tmp_path, c
         # the stated difference at rest: the two files over TMIN..TMAX, about their mean
         text, err = files["folded"]
         said = [x for x in err.splitlines() if "FOLDED:" in x]
+        # the file's error on the second warm-up, against the truth, is within what the
+        # line states: its distance from the model on the fit log plus the model's own
+        # held-out error (a fine channel: the line states both)
+        in_sample = _figures(said[0], "from that whole offset by RMS ")[2]
+        model_own = _figures(said[0], "as calibrate chose its degree) is ")[2]
+        assert rms["folded"] <= in_sample + model_own
         assert len(said) == 1 and "DROPPED" not in err and "DROPPED" in files["dropped"][1]
         # what the folded file leaves of the rate term on the fit log is several times the
         # fit's own held-out error here: said loudly, first in the header
