@@ -53,20 +53,25 @@ if str(ROOT) not in sys.path:
 
 from benchmarks.bench_warmup_peers import (  # noqa: E402
     MEAN_S,
+    WarmupLog,
     blocks,
     evaluate_flown,
+    fit_blocks_rms_mg,
     flown_table,
     heldout_rms_mg,
     imported_log,
     method_ardupilot,
     method_px4,
     method_soakcal,
+    stated_table,
+    stated_vs_measured,
 )
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import draw_case, import_args, simulate, write_log  # noqa: E402
 from calibration import sfem  # noqa: E402
 from calibration.export_firmware import (  # noqa: E402
     STANDARD_GRAVITY_M_S2,
+    export_ardupilot,
     export_px4,
     firmware_reading_record,
 )
@@ -111,7 +116,7 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path,
     own, raw = heldout_rms_mg(log, sc), heldout_rms_mg(log, exported)
     if as_flown:
         out |= evaluate_flown(log, work / "model.json", window_s)
-    return out | {
+    res = out | {
         "soakcal": own.tolist() if ok.all() else None,
         "export_at_raw": raw.tolist(),
         "model_at_raw": heldout_rms_mg(log, at_raw).tolist(),
@@ -129,6 +134,43 @@ def run_case(seed: int, coarse_dither: bool, pools: object, work: Path,
         # sample's raw reading against the model's whole offset (compensate's), held out
         "file_vs_model_mg": heldout_rms_mg(log, exported - sc).tolist(),
     }
+    # the header's stated RMS (a fine channel's: the FOLDED line's) against the measured,
+    # in-sample and held out; and the file against the generator's truth, held out
+    res |= stated_vs_measured(log, work / "model.json", sc)
+    if data.t_s.size == log.t_s.size:
+        truth = WarmupLog(log.name, log.t_s, data.true_g - (log.acc_g - exported),
+                          log.temp_c)
+        res["file_vs_truth_heldout_mg"] = heldout_rms_mg(truth, truth.acc_g).tolist()
+    res |= ardupilot_stated(log, work / "model.json", sc)
+    return res
+
+
+def ardupilot_stated(log: WarmupLog, model_path: Path, soakcal_g: np.ndarray
+                     ) -> dict[str, object]:
+    """The ArduPilot file's stated RMS (file − model) at the reading its InvenSense drivers'
+    filter hands it (the record of a dithered channel's filtered fit; else per sample)
+    against the measured: the ``--format ardupilot`` file at
+    :func:`calibration.firmware_flight.ardupilot_reading_in_use` less ``compensate``'s
+    offset, held out and on the fit blocks."""
+    from calibration.firmware_flight import ardupilot_reading_in_use
+
+    model = load_model(model_path)
+    record = firmware_reading_record(model, filtered=True) or {}
+    fold = model.provenance.get("rate_fold") or {}
+    if record.get("fitted_filtered"):
+        stated = record.get("smoothed_rms_mg")
+    else:
+        stated = record.get("rms_mg") or fold.get("rms_mg")
+    ok = np.all(np.isfinite(soakcal_g), axis=1)
+    at = ardupilot_reading_in_use(log.t_s, log.temp_c)
+    flown = log.acc_g - ardupilot_offset_g(export_ardupilot(model).text, at)
+    sub = WarmupLog(log.name, log.t_s[ok], log.acc_g[ok], log.temp_c[ok])
+    diff = flown[ok] - soakcal_g[ok]
+    return {"ardupilot_stated_rms_mg": stated,
+            # the per-sample fold's figure, which the ArduPilot FOLDED line stated before
+            "per_sample_fold_rms_mg": fold.get("rms_mg"),
+            "ardupilot_file_vs_model_fit_mg": fit_blocks_rms_mg(sub, diff).tolist(),
+            "ardupilot_file_vs_model_heldout_mg": heldout_rms_mg(sub, diff).tolist()}
 
 
 def ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...],
@@ -236,6 +278,17 @@ def main(argv: list[str] | None = None) -> int:
               f"{'—' if ratio is None else f'{ratio:.1f}'} | "
               f"{'yes' if r.get('rate_term') else 'no'} | {f(r.get('export_drop'))} | "
               f"{drop_vs} | {fold_vs} |")
+    print("\nThe stated RMS (file − model) against the measured; the file against the "
+          "generator's truth, held out; the ArduPilot file through its 1-Hz filter:\n")
+    print(stated_table([r | {"log": r["case"]} for r in rows if "stated_what" in r]))
+    print("\n| case | file − truth held out | ArduPilot stated | ArduPilot fit blocks | "
+          "ArduPilot held out |\n|---|---|---|---|---|")
+    for r in rows:
+        if "stated_what" in r:
+            print(f"| {r['case']} | {f(r.get('file_vs_truth_heldout_mg'))} | "
+                  f"{f(r.get('ardupilot_stated_rms_mg'))} | "
+                  f"{f(r.get('ardupilot_file_vs_model_fit_mg'))} | "
+                  f"{f(r.get('ardupilot_file_vs_model_heldout_mg'))} |")
     if args.as_flown:
         print("\nEach file as its firmware flies it (--as-flown; export per sample = export at "
               "raw):\n")

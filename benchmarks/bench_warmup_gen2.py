@@ -46,6 +46,8 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     evaluate,
     heldout_rms_mg,
     imported_log,
+    method_export,
+    stated_table,
 )
 from benchmarks.blind.gen2.realnoise import NoisePools, load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import (  # noqa: E402
@@ -93,8 +95,8 @@ def verdict(res: dict[str, object]) -> dict[str, object]:
     return out
 
 
-def run_case(case: WarmupCase, pools: NoisePools, workdir: Path, keep: Path | None
-             ) -> dict[str, object]:
+def run_case(case: WarmupCase, pools: NoisePools, workdir: Path, keep: Path | None,
+             export: bool = False) -> dict[str, object]:
     data = simulate(case, pools)
     csv_path, truth_path = write_log(case, data, keep or workdir)
     log, said = imported_log(csv_path, "csv", import_args(case), workdir)
@@ -106,8 +108,13 @@ def run_case(case: WarmupCase, pools: NoisePools, workdir: Path, keep: Path | No
                                "true_change_mg": (np.ptp(data.true_g, 0) * 1e3).tolist()}
     if log is None:
         return base | {"unusable": said, "outcome": "not-compared"}
-    res = evaluate(log, workdir)
+    res = evaluate(log, workdir, export=export)
     res["log"] = case.name
+    if export and "export" in res and data.t_s.size == log.t_s.size:
+        # the exported file against the generator's truth, held out
+        offset = log.acc_g - method_export(log, workdir / "model.json")
+        truth = WarmupLog(case.name, log.t_s, data.true_g - offset, log.temp_c)
+        res["file_vs_truth_heldout_mg"] = heldout_rms_mg(truth, truth.acc_g).tolist()
     # the oracle: the noise alone (the log less its true output) scored the same way
     noise = WarmupLog(case.name, data.t_s, data.acc_g - data.true_g, data.temp_c)
     res["oracle"] = heldout_rms_mg(noise, noise.acc_g).tolist()
@@ -179,6 +186,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--coarse-dither", action="store_true",
                     help="each case with a 1 °C channel dithered by 0.1-0.6 LSB of noise "
                          "(draw_case(seed, coarse_dither=True))")
+    ap.add_argument("--export", action="store_true",
+                    help="also the PX4 file soakcal exports: its header's stated RMS (file − "
+                         "model) against the measured, and the file against the truth")
     args = ap.parse_args(argv)
     pools = load_pools(realdata_dir(args.realdata))
     seeds = ([int(s) for s in args.only.split(",")] if args.only
@@ -187,11 +197,15 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
-            r = run_case(draw_case(s, args.coarse_dither), pools, Path(tmp), args.keep)
+            r = run_case(draw_case(s, args.coarse_dither), pools, Path(tmp), args.keep,
+                         args.export)
             results.append(r)
             print(json.dumps(r), flush=True)
     text = (f"{len(seeds)} cases in {time.perf_counter() - t0:.0f} s\n\n" + summary(results)
             + "\n\n" + case_table(results))
+    if args.export:
+        text += ("\n\nThe stated RMS (file − model) against the measured (--export):\n\n"
+                 + stated_table(results))
     print(text)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)

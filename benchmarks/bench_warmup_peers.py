@@ -421,6 +421,65 @@ def method_export(log: WarmupLog, model_path: Path, fold: bool = True,
     return log.acc_g - px4_offset_g(export_px4(model).text, at)
 
 
+def fit_blocks_rms_mg(log: WarmupLog, compensated_g: np.ndarray) -> np.ndarray:
+    """Per axis: RMS of the fit blocks' 5-s means minus the mean over the fit samples (mg):
+    :func:`heldout_rms_mg` on the blocks the model was fitted on (in-sample)."""
+    _, fit = blocks(log.t_s)
+    ref = compensated_g[fit].mean(axis=0)
+    half = np.floor((log.t_s - log.t_s[0]) / MEAN_S).astype(int)
+    means = [compensated_g[half == h].mean(axis=0) for h in np.unique(half[fit])
+             if np.sum(half == h) > 0.8 * MEAN_S * _rate(log)]
+    return np.sqrt(np.mean((np.asarray(means) - ref) ** 2, axis=0)) * 1e3
+
+
+def stated_vs_measured(log: WarmupLog, model_path: Path, soakcal_g: np.ndarray
+                       ) -> dict[str, object]:
+    """The RMS (file − model) the PX4 header states for its file, and what it measures:
+    the file applied at each sample's reading less ``soakcal compensate``'s offset, over
+    the fit blocks' 5-s means (in-sample, as stated) and the held-out ones. The stated
+    figure is the reading record's (a rebuilt coarse channel) or the FOLDED line's (a
+    fine channel with a rate term); a fine channel without one writes the model's b(T)
+    and states none. With the fit's own held-out RMS, which the header states beside it."""
+    from calibration.export_firmware import firmware_reading_record
+    from calibration.model_file import load_model
+
+    model = load_model(model_path)
+    record = firmware_reading_record(model) or {}
+    fold = model.provenance.get("rate_fold") or {}
+    if record:
+        what, stated, fit = "reading", record.get("rms_mg"), record.get("fit_heldout_mg")
+    elif fold.get("folded_rate_x_g") is not None:
+        what, stated, fit = "folded", fold.get("rms_mg"), fold.get("fit_heldout_mg")
+    else:
+        what, stated, fit = "b(T)", None, None
+    ok = np.all(np.isfinite(soakcal_g), axis=1)
+    sub = WarmupLog(log.name, log.t_s[ok], log.acc_g[ok], log.temp_c[ok])
+    diff = method_export(log, model_path)[ok] - soakcal_g[ok]
+    return {"stated_what": what, "stated_rms_mg": stated, "stated_fit_heldout_mg": fit,
+            "file_vs_model_fit_mg": fit_blocks_rms_mg(sub, diff).tolist(),
+            "file_vs_model_heldout_mg": heldout_rms_mg(sub, diff).tolist()}
+
+
+def stated_table(results: list[dict[str, object]]) -> str:
+    """The header's stated RMS (file − model) against the measured, in-sample and held
+    out, and the file's and the fit's own held-out error, mg x / y / z."""
+    lines = ["| log | stated of | stated RMS (file − model) | fit blocks file − model | "
+             "held-out file − model | file held out | fit's own held-out (stated) |",
+             "|---|---|---|---|---|---|---|"]
+
+    def fmt(v: object) -> str:
+        return "—" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+
+    for r in results:
+        if "stated_what" in r:
+            lines.append(f"| {r['log']} | {r['stated_what']} | {fmt(r['stated_rms_mg'])} | "
+                         f"{fmt(r['file_vs_model_fit_mg'])} | "
+                         f"{fmt(r['file_vs_model_heldout_mg'])} | "
+                         f"{fmt(r.get('export', r.get('export_at_raw')))} | "
+                         f"{fmt(r['stated_fit_heldout_mg'])} |")
+    return "\n".join(lines)
+
+
 def flown_readings(log: WarmupLog) -> dict[str, np.ndarray]:
     """(``--as-flown``) the temperature each firmware evaluates its offset at, per sample:
     PX4's 1-s poll and 1 °C publication gate, ArduPilot's InvenSense 1-Hz low-pass
@@ -641,6 +700,7 @@ def evaluate(log: WarmupLog, workdir: Path, fixed_degrees: bool = False,
         res["export_over_peer_95"] = ratio_interval(log.t_s, folded, peers, 2 * BLOCK_S)
         res["export_drop_over_peer_95"] = ratio_interval(log.t_s, dropped, peers, 2 * BLOCK_S)
         res["export_over_drop_95"] = ratio_interval(log.t_s, folded, (dropped,), 2 * BLOCK_S)
+        res.update(stated_vs_measured(log, model_path, sc))
     if as_flown:
         res.update(evaluate_flown(log, workdir / "model.json" if export and sc is not None
                                   else None))
@@ -790,6 +850,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.export:
         text += "\n\nThe exported PX4 file at each sample's reading (--export):\n\n" + \
             export_table(results)
+    if args.export:
+        text += "\n\nThe stated RMS (file − model) against the measured (--export):\n\n" + \
+            stated_table(results)
     if args.as_flown:
         text += "\n\nEach file as its firmware flies it (--as-flown):\n\n" + \
             flown_table(results)

@@ -39,6 +39,7 @@ from calibration.firmware_flight import (
 )
 from calibration.firmware_polynomial import (
     FIRMWARE_DEGREE,
+    at_rest_figures,
     file_bias_x_g,
 )
 from calibration.thermal import ThermalModel
@@ -176,8 +177,12 @@ def _check(model: ThermalModel, firmware: str) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
-    """What an offset-only export cannot express, each with the error it costs (mg at 1 g)."""
+def left_out(model: ThermalModel, n_temps: int = 41,
+             fold: dict[str, object] | None = None) -> list[str]:
+    """What an offset-only export cannot express, each with the error it costs (mg at 1 g);
+    ``fold``: the figures of the file's folded rate term (default: the model's
+    ``rate_fold`` record, the per-sample file; :func:`filtered_fold_record` for the
+    ArduPilot file fitted at the filtered reading)."""
     lo, hi = model.valid_c or (0.0, 0.0)
     temps = np.linspace(lo, hi, n_temps)
     P = model.params_vector_at(temps, extrapolate=True)
@@ -201,7 +206,7 @@ def left_out(model: ThermalModel, n_temps: int = 41) -> list[str]:
         out.append(f"leaving them out costs up to {err_mg:.3f} mg at |a| <= 1 g "
                    f"over {lo:.2f} .. {hi:.2f} degC")
     if model.temperature_rate:
-        fold = model.provenance.get("rate_fold")
+        fold = fold or model.provenance.get("rate_fold")
         out.append(rate_term_folded(fold) if fold and fold.get("folded_rate_x_g") is not None
                    else rate_term_dropped(model))
     held = [n for n, ok in zip(sfem.PARAM_NAMES[:3], model.identifiable[:3], strict=True)
@@ -256,15 +261,28 @@ def rate_term_folded(fold: dict[str, object]) -> str:
     def xyz(v: object) -> str:
         return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
 
-    where = ("at the firmware's raw reading" if fold.get("reading") == "raw"
-             else "in T")
+    where = {"raw": "at the firmware's raw reading",
+             "filtered": ("at the capture mean of the firmware's raw reading (where the "
+                          "InvenSense drivers' 1-Hz filter evaluates it)")
+             }.get(str(fold.get("reading")), "in T")
+    peak = f", peak {xyz(fold['peak_mg'])} mg" if fold.get("peak_mg") is not None else ""
+    per_sample = (f"; at each sample's own reading, as the ICM-42xxx and BMI088 drivers "
+                  f"evaluate it: RMS {xyz(fold['per_sample_rms_mg'])} mg"
+                  if fold.get("per_sample_rms_mg") is not None else "")
+    fit = fold.get("fit_heldout_mg")
+    model_own = (f"; the model's own held-out RMS (blocks of the fit log held out in turn, "
+                 f"as calibrate chose its degree) is {xyz(fit)} mg: the file's error on new "
+                 f"data holds both (the RMS above is the file's distance from the model, "
+                 f"not from the data)"
+                 if fit is not None and fold.get("reading") == "temperature" else "")
     return (f"FOLDED: the warm-up's rate term k(T)*dT/dt (the firmware's offset is a function "
             f"of T only): this file's polynomial is the least-squares fit {where} of the "
             f"model's whole offset b(T) + k(T)*dT/dt over the fit log's {fold['captures']} "
             f"capture means, as PX4's and ArduPilot's own fits on a warm-up's samples fold the "
-            f"log's mean rate effect into T; on the fit log it differs from that whole offset "
-            f"by RMS {xyz(fold['rms_mg'])} mg, peak {xyz(fold['peak_mg'])} mg (x / y / z; "
-            f"with the rate term dropped: RMS {xyz(fold['dropped_rms_mg'])} mg). It is right "
+            f"log's mean rate effect into T; on the fit log (in-sample) it differs from that "
+            f"whole offset by RMS {xyz(fold['rms_mg'])} mg{peak} (x / y / z; with the rate "
+            f"term dropped: RMS {xyz(fold['dropped_rms_mg'])} mg{per_sample}){model_own}. "
+            f"It is right "
             f"on average for warm-ups like the fit log (the same rates at the same "
             f"temperatures); at a constant temperature (dT/dt = 0) it differs from the "
             f"model's static offset by the folded part: RMS {xyz(fold['at_rest_rms_mg'])} mg, "
@@ -315,6 +333,29 @@ def firmware_reading_record(model: ThermalModel,
     if not figures or fold.get("folded_rate_x_g") is None:
         return record
     return {**record, **figures, "rate_folded": True}
+
+
+def filtered_fold_record(model: ThermalModel) -> dict[str, object] | None:
+    """The FOLDED line's figures for the ArduPilot file fitted at the capture mean of a
+    dithered channel's reading (:func:`calibration.firmware_polynomial.file_bias_x_g` with
+    ``filtered``), or None where the model carries no such fold (the file is then the
+    per-sample one and ``rate_fold``'s own figures are its figures). On the fit log at the
+    capture mean of the reading, where the InvenSense drivers' filter evaluates it: the
+    folded file's RMS and peak (``rate_fold.filtered_reading_figures``), the static
+    filtered file's RMS (``quantised_temperature.filtered_reading_figures``: the rate term
+    dropped), the folded file's RMS per sample; and at rest, the filtered folded part's
+    figures over TMIN..TMAX (:func:`calibration.firmware_polynomial.at_rest_figures`)."""
+    fold = model.provenance.get("rate_fold") or {}
+    figures = fold.get("filtered_reading_figures")
+    coef = fold.get("filtered_folded_rate_x_g")
+    if not figures or coef is None:
+        return None
+    static = (model.provenance.get("quantised_temperature") or {}).get(
+        "filtered_reading_figures") or {}
+    return {**fold, **at_rest_figures(model, np.asarray(coef, float)), "reading": "filtered",
+            "rms_mg": figures["smoothed_rms_mg"], "peak_mg": figures.get("smoothed_peak_mg"),
+            "dropped_rms_mg": static.get("smoothed_rms_mg", fold["dropped_rms_mg"]),
+            "per_sample_rms_mg": figures["rms_mg"]}
 
 
 def ardupilot_fitted_reading(record: dict[str, object] | None) -> list[str]:
@@ -481,7 +522,7 @@ def export_ardupilot(model: ThermalModel, *, instance: int = 1,
     c_m_s2 = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
                                    file_bias_x_g(model, filtered=True))
     c = c_m_s2 * ARDUPILOT_SCALE_FACTOR
-    limits = left_out(model)
+    limits = left_out(model, fold=filtered_fold_record(model))
     record = firmware_reading_record(model, filtered=True)
     reading = ardupilot_fitted_reading(record) + quantised_reading_lines(record) + \
         rate_fold_warning(model)

@@ -128,7 +128,7 @@ def _reading_figures(model: ThermalModel, coef: np.ndarray, read_ok: np.ndarray,
     """The figures of the file polynomial ``coef`` ((3, m+1) g in x) at the firmware's
     reading against the model's whole offset ``whole_mg`` ((n, 3), mg) on the fit log's
     captures: RMS and peak per sample (``spread_ok``) and at the capture mean of the
-    reading (``smoothed_rms_mg``), the offset's step per change of the reading
+    reading (``smoothed_rms_mg``, ``smoothed_peak_mg``), the offset's step per change of the reading
     (``tempco_lsb_mg``) and the RMS over the fit's own held-out RMS (``ratio_to_fit``)."""
     lo, hi = valid
 
@@ -147,6 +147,8 @@ def _reading_figures(model: ThermalModel, coef: np.ndarray, read_ok: np.ndarray,
         "peak_mg": [float(v) for v in (np.max(np.abs(diff), axis=0) if diff.size
                                        else np.zeros(3))],
         "smoothed_rms_mg": [float(v) for v in _rms_of(smoothed)],
+        "smoothed_peak_mg": [float(v) for v in (np.max(np.abs(smoothed), axis=0)
+                                                if smoothed.size else np.zeros(3))],
         "tempco_lsb_mg": [float(v) * float(lsb_c) for v in np.max(slope, axis=0)],
     }
     if fit_heldout_mg is not None:
@@ -297,9 +299,6 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
                                 fit_heldout_mg, (lo, hi))
     static_fig = _reading_figures(model, static, read[ok], whole_mg, spread_ok, lsb,
                                   fit_heldout_mg, (lo, hi))
-    grid = np.linspace(lo, hi, 201)
-    at_rest = np.vander(model.x_of(grid), FIRMWARE_DEGREE + 1, increasing=True) @ folded.T
-    mean = at_rest.mean(axis=0)
     out: dict[str, object] = {
         "folded_rate_x_g": [[float(v) for v in axis] for axis in folded],
         "basis": ("p(T) = sum_j c[axis][j] * x**j in g, x = (clamp(T, valid) - centre_c) / "
@@ -309,9 +308,7 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
         "rms_mg": file_fig["rms_mg"], "peak_mg": file_fig["peak_mg"],
         "dropped_rms_mg": static_fig["rms_mg"], "dropped_peak_mg": static_fig["peak_mg"],
         "rate_term_rms_mg": [float(v) for v in _rms_of(rate_g[ok] * 1e3)],
-        "at_rest_rms_mg": [float(v) for v in _rms_of((at_rest - mean) * 1e3)],
-        "at_rest_peak_mg": [float(v) for v in np.max(np.abs(at_rest - mean), axis=0) * 1e3],
-        "at_rest_mean_mg": [float(v) for v in mean * 1e3],
+        **at_rest_figures(model, folded),
         "fit_heldout_mg": None if fit_heldout_mg is None else [float(v) for v in fit_heldout_mg],
     }
     if fit_heldout_mg is not None:
@@ -329,6 +326,22 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
         out["filtered_reading_figures"] = _reading_figures(
             model, whole_f, read[ok], whole_mg, spread_ok, lsb, fit_heldout_mg, (lo, hi))
     return out
+
+
+def at_rest_figures(model: ThermalModel, folded_x_g: np.ndarray) -> dict[str, list[float]]:
+    """What a folded rate polynomial ``folded_x_g`` ((3, m+1) g in x) adds to the file at a
+    constant temperature (dT/dt = 0, no rate effect to fold): its RMS and peak over the
+    valid range (201 points) about its mean (``at_rest_rms_mg``, ``at_rest_peak_mg``) and
+    the mean (``at_rest_mean_mg``, a constant the firmware's ordinary calibration
+    measures), mg per axis."""
+    lo, hi = model.valid_c or (model.t_centre_c, model.t_centre_c)
+    folded = np.asarray(folded_x_g, float)
+    grid = np.linspace(lo, hi, 201)
+    at_rest = np.vander(model.x_of(grid), folded.shape[1], increasing=True) @ folded.T
+    mean = at_rest.mean(axis=0)
+    return {"at_rest_rms_mg": [float(v) for v in _rms_of((at_rest - mean) * 1e3)],
+            "at_rest_peak_mg": [float(v) for v in np.max(np.abs(at_rest - mean), axis=0) * 1e3],
+            "at_rest_mean_mg": [float(v) for v in mean * 1e3]}
 
 
 def rate_fold_x_g(model: ThermalModel, filtered: bool = False) -> np.ndarray | None:

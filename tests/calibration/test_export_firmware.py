@@ -457,6 +457,12 @@ def test_the_rate_term_is_folded_into_the_file_as_the_warm_up_saw_it(tmp_path, c
         # the stated difference at rest: the two files over TMIN..TMAX, about their mean
         text, err = files["folded"]
         said = [x for x in err.splitlines() if "FOLDED:" in x]
+        # the file's error on the second warm-up, against the truth, is within what the
+        # line states: its distance from the model on the fit log plus the model's own
+        # held-out error (a fine channel: the line states both)
+        in_sample = _figures(said[0], "from that whole offset by RMS ")[2]
+        model_own = _figures(said[0], "as calibrate chose its degree) is ")[2]
+        assert rms["folded"] <= in_sample + model_own
         assert len(said) == 1 and "DROPPED" not in err and "DROPPED" in files["dropped"][1]
         # what the folded file leaves of the rate term on the fit log is several times the
         # fit's own held-out error here: said loudly, first in the header
@@ -540,4 +546,64 @@ def test_the_ardupilot_file_is_fitted_at_the_reading_its_filter_hands_it(tmp_pat
     said = [x for x in text.splitlines() if "InvenSense drivers (MPU" in x]
     assert len(said) == 1
     stated = _figures(said[0], "the reading, RMS ")[2]
+    assert stated == pytest.approx(measured, rel=0.2)
+
+
+def test_the_ardupilot_files_folded_figures_are_its_own(tmp_path, capsys):
+    """A dithered 1 °C channel and a model that keeps a rate term k(T)·dT/dt: the ArduPilot
+    file is fitted at the capture mean of the reading (where the InvenSense drivers' 1-Hz
+    filter evaluates it) with the term's mean folded in. Its FOLDED line states that file's
+    figures, read as a user reads them: at rest, the difference from the same model's file
+    with the term dropped (the two files over TMIN..TMAX, about their mean); on the fit
+    log, the file flown through the filter sample by sample, averaged per capture, against
+    ``soakcal compensate``'s offset. Before, the line gave the per-sample (PX4) fold's
+    figures in the ArduPilot file."""
+    from types import SimpleNamespace
+
+    from calibration import cli
+    from calibration.firmware_flight import ardupilot_reading_in_use
+    from calibration.recording import write_recording
+
+    rec, reading, capture = _dithered_warmup(5, 0.5)
+    t_s = np.arange(0.0, 1800.0, 1.0 / 50.0)  # _dithered_warmup's samples
+    src, path = tmp_path / "w.csv", tmp_path / "model.json"
+    write_recording(src, rec.columns)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(path),
+                                             json=True)) == 0
+    fitted = load_model(path)
+    # the premises: a rate term, folded at the filtered reading too
+    assert fitted.temperature_rate
+    assert fitted.provenance["rate_fold"].get("filtered_folded_rate_x_g") is not None
+    fitted.provenance.pop("rate_fold")
+    dropped = tmp_path / "dropped.json"
+    save_model(dropped, fitted)
+    lo, hi = fitted.valid_c
+    capsys.readouterr()
+    texts = {}
+    for name, model in (("folded", path), ("dropped", dropped)):
+        out = tmp_path / f"{name}.ardupilot"
+        assert main(["export", str(model), "--format", "ardupilot", "-o", str(out)]) == 0
+        texts[name] = out.read_text()
+    said = [x for x in texts["folded"].splitlines() if "FOLDED:" in x]
+    assert len(said) == 1
+    grid = np.linspace(lo, hi, 201)
+    diff = (_firmware_offset_g("ardupilot", texts["folded"], grid)
+            - _firmware_offset_g("ardupilot", texts["dropped"], grid)) * 1e3
+    diff -= diff.mean(axis=0)
+    at_rest = said[0].split("by the folded part: ")[1]
+    np.testing.assert_allclose(_figures(at_rest, "RMS "), np.sqrt(np.mean(diff**2, axis=0)),
+                               atol=0.0015)
+    np.testing.assert_allclose(_figures(at_rest, "peak "), np.max(np.abs(diff), axis=0),
+                               atol=0.0015)
+    comp = tmp_path / "comp.csv"
+    assert main(["compensate", str(path), str(src), "-o", str(comp), "--extrapolate"]) == 0
+    with comp.open() as f:
+        model_mg = np.array([float(r["az"]) - float(r["cz"]) for r in csv.DictReader(f)]) * 1e3
+    filtered = ardupilot_reading_in_use(t_s, reading)
+    flown_mg = np.bincount(capture, _firmware_offset_g("ardupilot", texts["folded"],
+                                                       filtered)[:, 2]) \
+        / np.bincount(capture) * 1e3
+    off = flown_mg - model_mg
+    measured = float(np.sqrt(np.mean((off - off.mean()) ** 2)))  # a constant: INS_ACCOFFS
+    stated = _figures(said[0], "from that whole offset by RMS ")[2]
     assert stated == pytest.approx(measured, rel=0.2)
