@@ -69,6 +69,11 @@ class FirmwareExport:
     reading: list[str] = field(default_factory=list)
 
 
+
+def _xyz(v: object) -> str:
+    """Three figures x / y / z, mg to the µg, as every header line writes them."""
+    return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
+
 def bias_polynomials_m_s2(model: ThermalModel, t_ref_c: float,
                           bias_x_g: np.ndarray | None = None) -> np.ndarray:
     """(3, 4): bias b_i(T) in m/s² as Σ_j c_ij (T − t_ref)^j: an exact re-expansion of the
@@ -96,9 +101,6 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
     fit = record.get("fit_heldout_mg")
     in_reading = record.get("raw_reading_bias_x_g") is not None
 
-    def xyz(v: object) -> str:
-        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
-
     per_sample = bool(record.get("per_sample"))
     rate = record.get("rate_term_rms_mg")
     whose = ("the model's whole offset at the rebuilt temperature" if rate is not None
@@ -109,17 +111,17 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
                f"sample does (ArduPilot's unfiltered IMU drivers; PX4 holds the offset of "
                f"one poll's reading: see its update gate) (at the capture mean of the reading "
                f"instead, as a firmware that low-pass filters its reading evaluates it: RMS "
-               f"{xyz(record['smoothed_rms_mg'])} mg)")
+               f"{_xyz(record['smoothed_rms_mg'])} mg)")
     dropped = ""
     folded = bool(record.get("rate_folded"))
     if folded:
         whose = "the model's whole offset (rate term included) at the rebuilt temperature"
         dropped = (f"; this includes what the polynomial cannot follow of the model's rate "
                    f"term k(T)*dT/dt, whose mean at each reading it folds in (the term alone: "
-                   f"RMS {xyz(rate)} mg on the fit log; see FOLDED below)")
+                   f"RMS {_xyz(rate)} mg on the fit log; see FOLDED below)")
     elif rate is not None and max(rate) > 0:  # type: ignore[arg-type]
         dropped = (f"; this includes the model's rate term k(T)*dT/dt, which the firmware "
-                   f"cannot apply (alone RMS {xyz(rate)} mg on the fit log)")
+                   f"cannot apply (alone RMS {_xyz(rate)} mg on the fit log)")
     of = ("the model's whole offset b + k*dT/dt" if folded else "the model's offset")
     if in_reading:
         main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
@@ -128,24 +130,24 @@ def quantised_reading_lines(record: dict[str, object] | None) -> list[str]:
                 f"over the fit log's {record['readings']} capture means of {of} "
                 f"at the rebuilt temperature against the reading clamped to TMIN..TMAX (the "
                 f"model's own b(T) evaluated at the reading instead: RMS "
-                f"{xyz(record['model_at_raw_rms_mg'])} mg); on the fit log it differs from "
-                f"{whose} by RMS {xyz(rms)} mg, peak {xyz(peak)} mg (x / y / z){how}"
-                f"{dropped}; the offset steps by up to {xyz(step)} mg at each change of the "
+                f"{_xyz(record['model_at_raw_rms_mg'])} mg); on the fit log it differs from "
+                f"{whose} by RMS {_xyz(rms)} mg, peak {_xyz(peak)} mg (x / y / z){how}"
+                f"{dropped}; the offset steps by up to {_xyz(step)} mg at each change of the "
                 f"reading (tempco x LSB)")
         why = "and this file's polynomial is already the least-squares one in it"
     else:
         main = (f"the model was fitted in the die temperature rebuilt from a {q:g} degC "
                 f"channel, but the firmware evaluates it at its own {q:g} degC reading: on "
                 f"the fit log ({record['readings']} capture means) that differs from "
-                f"{whose} by RMS {xyz(rms)} mg, peak {xyz(peak)} "
-                f"mg (x / y / z){how}{dropped}; the offset steps by up to {xyz(step)} mg at "
+                f"{whose} by RMS {_xyz(rms)} mg, peak {_xyz(peak)} "
+                f"mg (x / y / z){how}{dropped}; the offset steps by up to {_xyz(step)} mg at "
                 f"each change of the reading (tempco x LSB)")
         why = ("a fit on the step values, as PX4's and ArduPilot's scripts make, does about "
                "as well")
     if fit is None:
         return [main]
     ratio = float(record.get("ratio_to_fit", 0.0))  # type: ignore[arg-type]
-    versus = (f"the fit's own held-out RMS is {xyz(fit)} mg (the file's error on such data "
+    versus = (f"the fit's own held-out RMS is {_xyz(fit)} mg (the file's error on such data "
               f"is then at most the sum of the two, about their root-sum-square when they "
               f"are unrelated)")
     if ratio >= LOUD_FACTOR:
@@ -258,20 +260,17 @@ def rate_term_folded(fold: dict[str, object]) -> str:
     (:func:`calibration.firmware_polynomial.rate_fold_record`): right on average for
     warm-ups like the fit log, off at rest by the folded part."""
 
-    def xyz(v: object) -> str:
-        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
-
     where = {"raw": "at the firmware's raw reading",
              "filtered": ("at the capture mean of the firmware's raw reading (where the "
                           "InvenSense drivers' 1-Hz filter evaluates it)")
              }.get(str(fold.get("reading")), "in T")
-    peak = f", peak {xyz(fold['peak_mg'])} mg" if fold.get("peak_mg") is not None else ""
+    peak = f", peak {_xyz(fold['peak_mg'])} mg" if fold.get("peak_mg") is not None else ""
     per_sample = (f"; at each sample's own reading, as the ICM-42xxx and BMI088 drivers "
-                  f"evaluate it: RMS {xyz(fold['per_sample_rms_mg'])} mg"
+                  f"evaluate it: RMS {_xyz(fold['per_sample_rms_mg'])} mg"
                   if fold.get("per_sample_rms_mg") is not None else "")
     fit = fold.get("fit_heldout_mg")
     model_own = (f"; the model's own held-out RMS (blocks of the fit log held out in turn, "
-                 f"as calibrate chose its degree) is {xyz(fit)} mg: the file's error on new "
+                 f"as calibrate chose its degree) is {_xyz(fit)} mg: the file's error on new "
                  f"data holds both (the RMS above is the file's distance from the model, "
                  f"not from the data)"
                  if fit is not None and fold.get("reading") == "temperature" else "")
@@ -280,14 +279,14 @@ def rate_term_folded(fold: dict[str, object]) -> str:
             f"model's whole offset b(T) + k(T)*dT/dt over the fit log's {fold['captures']} "
             f"capture means, as PX4's and ArduPilot's own fits on a warm-up's samples fold the "
             f"log's mean rate effect into T; on the fit log (in-sample) it differs from that "
-            f"whole offset by RMS {xyz(fold['rms_mg'])} mg{peak} (x / y / z; with the rate "
-            f"term dropped: RMS {xyz(fold['dropped_rms_mg'])} mg{per_sample}){model_own}. "
+            f"whole offset by RMS {_xyz(fold['rms_mg'])} mg{peak} (x / y / z; with the rate "
+            f"term dropped: RMS {_xyz(fold['dropped_rms_mg'])} mg{per_sample}){model_own}. "
             f"It is right "
             f"on average for warm-ups like the fit log (the same rates at the same "
             f"temperatures); at a constant temperature (dT/dt = 0) it differs from the "
-            f"model's static offset by the folded part: RMS {xyz(fold['at_rest_rms_mg'])} mg, "
-            f"peak {xyz(fold['at_rest_peak_mg'])} mg over TMIN..TMAX about its mean (the mean, "
-            f"{xyz(fold['at_rest_mean_mg'])} mg, is a constant: the ordinary accelerometer "
+            f"model's static offset by the folded part: RMS {_xyz(fold['at_rest_rms_mg'])} mg, "
+            f"peak {_xyz(fold['at_rest_peak_mg'])} mg over TMIN..TMAX about its mean (the mean, "
+            f"{_xyz(fold['at_rest_mean_mg'])} mg, is a constant: the ordinary accelerometer "
             f"calibration measures it where the file writes no constant); `soakcal "
             f"compensate` applies the rate term itself")
 
@@ -303,13 +302,10 @@ def rate_fold_warning(model: ThermalModel) -> list[str]:
             or ratio is None or float(ratio) < LOUD_FACTOR):
         return []
 
-    def xyz(v: object) -> str:
-        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
-
     return [f"WARNING: the firmware cannot apply this warm-up's rate term k(T)*dT/dt: on the "
             f"fit log the file (the term's mean at each temperature folded in) differs from "
             f"the model's whole offset by up to {float(ratio):.1f} x the fit's own held-out "
-            f"RMS {xyz(fold['fit_heldout_mg'])} mg: RMS {xyz(fold['rms_mg'])} mg (x / y / z; "
+            f"RMS {_xyz(fold['fit_heldout_mg'])} mg: RMS {_xyz(fold['rms_mg'])} mg (x / y / z; "
             f"see FOLDED below). No parameter file removes it (the firmware's offset is a "
             f"function of T only); `soakcal compensate` applies the rate term"]
 
@@ -365,16 +361,13 @@ def ardupilot_fitted_reading(record: dict[str, object] | None) -> list[str]:
     if not record or not record.get("fitted_filtered"):
         return []
 
-    def xyz(v: object) -> str:
-        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[attr-defined]
-
     return [f"this file is fitted for ArduPilot's InvenSense drivers (MPU-6000/9250, "
             f"ICM-2060x/20689), which low-pass filter the flickering reading at "
             f"{ARDUPILOT_TEMP_CUTOFF_HZ:g} Hz: its polynomial is the least-squares fit at the "
-            f"capture mean of the reading, RMS {xyz(record['smoothed_rms_mg'])} mg there "
+            f"capture mean of the reading, RMS {_xyz(record['smoothed_rms_mg'])} mg there "
             f"from the model's offset on the fit log (x / y / z); the ICM-42xxx "
             f"(Invensensev3) and BMI088 drivers evaluate it at each sample's reading: RMS "
-            f"{xyz(record['rms_mg'])} mg (`--format px4`'s polynomial is fitted at that)"]
+            f"{_xyz(record['rms_mg'])} mg (`--format px4`'s polynomial is fitted at that)"]
 
 
 def _channel_lsb_c(model: ThermalModel) -> float | None:
@@ -483,21 +476,19 @@ def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float,
     offset at every sample's reading."""
     slope = _largest_slope_mg_per_c(c_m_s2, lo, hi, t_ref)
     gate = PX4_UPDATE_GATE_C
-    xyz = " / ".join
-
     if lsb_c:
         span = gate + float(lsb_c)
         then = (f"up to {gate:g} degC from the reading at the last poll, plus this model's "
                 f"{float(lsb_c):g} degC channel's one step since that poll: up to {span:g} degC "
                 f"from the current reading, so up to "
-                + xyz(f"{v * span:.3f}" for v in slope) + " mg (x / y / z) for a channel "
+                + _xyz([v * span for v in slope]) + " mg (x / y / z) for a channel "
                 "that steps cleanly; NOT a bound for a dithered channel, whose flicker takes "
                 "some samples one or two steps further (up to 1.7 x this on simulated "
                 "dithered warm-ups)")
     else:
         then = (f"up to {gate:g} degC from the reading at the last poll, plus what the reading "
                 f"moved since that poll (under {PX4_POLL_PERIOD_S:g} s): up to "
-                + xyz(f"{v * gate:.3f}" for v in slope) + f" mg (x / y / z) for the {gate:g} "
+                + _xyz([v * gate for v in slope]) + f" mg (x / y / z) for the {gate:g} "
                 f"degC gate, plus as much again per degC the reading moves in a second")
     return (f"PX4 computes the offset at the temperature reading of its {PX4_POLL_PERIOD_S:g}-s "
             f"poll and publishes it only when that reading has moved by more than {gate:g} "
