@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from calibration.model_file import load_model, save_model
+from calibration.recording import Recording
 from calibration.thermal import ThermalModel
 from service.cli import main
 
@@ -114,6 +115,21 @@ def _ap_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray,
         out[n] = v
     return out.astype(float)
 
+
+
+def _calibrated(tmp_path: Path, rec: Recording) -> tuple[Path, Path]:
+    """``rec`` written as a recording and calibrated by the CLI's own calibrate: (the
+    recording's path, the model file's path)."""
+    from types import SimpleNamespace
+
+    from calibration import cli
+    from calibration.recording import write_recording
+
+    src, path = tmp_path / "w.csv", tmp_path / "model.json"
+    write_recording(src, rec.columns)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(path),
+                                             json=True)) == 0
+    return src, path
 
 def test_px4_firmware_formula_reproduces_compensate(tmp_path, capsys):
     model = _model()
@@ -310,17 +326,11 @@ def test_the_exported_polynomial_is_the_best_one_at_the_firmware_reading(tmp_pat
     second warm-up of the same die trace with fresh noise. Both leave the within-step
     error that no polynomial in the reading removes (1 mg/°C × 0.29 °C RMS); the gain is
     where the log's mean bias at a reading is not b at that reading (measured 2-3 %)."""
-    from types import SimpleNamespace
 
     from benchmarks import bench_temperature_dequantise as traces
-    from calibration import cli
-    from calibration.recording import write_recording
 
     rec, _ = _quantised_warmup(getattr(traces, profile), 5)
-    src, path = tmp_path / "w.csv", tmp_path / "model.json"
-    write_recording(src, rec.columns)
-    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(path),
-                                             json=True)) == 0
+    src, path = _calibrated(tmp_path, rec)
     fitted = load_model(path)
     record = fitted.provenance["quantised_temperature"]
     capsys.readouterr()
@@ -368,16 +378,10 @@ def test_the_stated_figure_of_a_dithered_channel_is_what_the_firmware_does(tmp_p
     model's whole offset (``soakcal compensate`` of the same captures): the RMS the export
     states is within 20 % of it. Before, the stated figure was the bias alone at the
     capture-mean reading: 0.028 mg against 0.44 mg measured (now 0.451 against 0.449)."""
-    from types import SimpleNamespace
 
-    from calibration import cli
-    from calibration.recording import write_recording
 
     rec, reading, capture = _dithered_warmup(5, 0.5)
-    src, path = tmp_path / "w.csv", tmp_path / "model.json"
-    write_recording(src, rec.columns)
-    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(path),
-                                             json=True)) == 0
+    src, path = _calibrated(tmp_path, rec)
     assert load_model(path).temperature_rate  # the premise: the model keeps its rate term
     capsys.readouterr()
     out = tmp_path / f"out.{fmt}"
@@ -511,18 +515,12 @@ def test_the_ardupilot_file_is_fitted_at_the_reading_its_filter_hands_it(tmp_pat
     filtered reading, fitted here on the same log. A file fitted at each sample's own
     flickering reading (the PX4 file's polynomial, and the ArduPilot file before) is
     1.7 × that best on this log."""
-    from types import SimpleNamespace
 
-    from calibration import cli
     from calibration.firmware_flight import ardupilot_reading_in_use
-    from calibration.recording import write_recording
 
     rec, reading, capture = _dithered_warmup(5, 0.0)
     t_s = np.arange(0.0, 1800.0, 1.0 / 50.0)  # _dithered_warmup's samples
-    src, path = tmp_path / "w.csv", tmp_path / "model.json"
-    write_recording(src, rec.columns)
-    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(path),
-                                             json=True)) == 0
+    src, path = _calibrated(tmp_path, rec)
     capsys.readouterr()
     out = tmp_path / "out.ardupilot"
     assert main(["export", str(path), "--format", "ardupilot", "-o", str(out)]) == 0
@@ -558,18 +556,12 @@ def test_the_ardupilot_files_folded_figures_are_its_own(tmp_path, capsys):
     log, the file flown through the filter sample by sample, averaged per capture, against
     ``soakcal compensate``'s offset. Before, the line gave the per-sample (PX4) fold's
     figures in the ArduPilot file."""
-    from types import SimpleNamespace
 
-    from calibration import cli
     from calibration.firmware_flight import ardupilot_reading_in_use
-    from calibration.recording import write_recording
 
     rec, reading, capture = _dithered_warmup(5, 0.5)
     t_s = np.arange(0.0, 1800.0, 1.0 / 50.0)  # _dithered_warmup's samples
-    src, path = tmp_path / "w.csv", tmp_path / "model.json"
-    write_recording(src, rec.columns)
-    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(path),
-                                             json=True)) == 0
+    src, path = _calibrated(tmp_path, rec)
     fitted = load_model(path)
     # the premises: a rate term, folded at the filtered reading too
     assert fitted.temperature_rate
