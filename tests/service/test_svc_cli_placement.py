@@ -8,6 +8,7 @@ import time
 import numpy as np
 from test_svc_cli import live_service  # noqa: F401  (the fixture: uvicorn in a thread)
 
+from service import cli_placement
 from service.cli import main
 from service.db.models import Campaign, PlacementRequest, Rig
 from service.db.session import session_scope
@@ -51,9 +52,22 @@ def test_watch_prints_the_pending_instruction(live_service, capsys, monkeypatch)
         s.get(Campaign, cid).progress = {"phase": "positions", "fraction": 0.1, "step": 0,
                                          "steps": 1, "eta_s": 60.0}
     PlacementBoard(sf, "bench").publish(np.array([1.0, 0.0, 0.0]))
+    # The campaign completes once watch has described the request (a fixed 1-s sleep lost
+    # the race on a loaded machine: watch's first poll came after the completion). If it
+    # never does, the campaign completes after 30 s and the assertions below fail.
+    described = threading.Event()
+    describe = cli_placement.describe_request
+
+    def describe_and_signal(request: dict) -> str:
+        text = describe(request)
+        described.set()
+        return text
+
+    monkeypatch.setattr(cli_placement, "describe_request", describe_and_signal)
 
     def finish() -> None:
-        time.sleep(1.0)
+        described.wait(timeout=30.0)
+        time.sleep(0.2)  # watch prints what it described before it polls again
         with session_scope(sf) as s:
             c = s.get(Campaign, cid)
             c.state = "completed"
