@@ -113,26 +113,33 @@ class WarmupLog:
 
 # --- logs --------------------------------------------------------------------------
 def twin_log(name: str, *, rate_ug_per_c_per_min: float = 0.0, channel_lag_s: float = 0.0,
-             seed: int = 7, minutes: float = 40.0, rate_hz: float = 50.0) -> WarmupLog:
-    """The twin's sensor at rest (z up): its die warms from 25 °C toward 45 °C (τ 10 min)
-    for the first 60 % of the log, then cools toward 30 °C (a heater switched off).
+             seed: int = 7, minutes: float = 40.0, rate_hz: float = 50.0,
+             tau_s: float = 600.0, noise_seed: int | None = None,
+             noiseless: bool = False) -> WarmupLog:
+    """The twin's sensor at rest (z up): its die warms from 25 °C toward 45 °C (τ
+    ``tau_s``, 10 min) for the first 60 % of the log, then cools toward 30 °C (a heater
+    switched off).
 
     Warming and cooling both: in a monotonic warm-up a rate effect or a lagging channel
-    is itself a function of the temperature and any polynomial in T absorbs it."""
-    rng = np.random.default_rng(seed)
+    is itself a function of the temperature and any polynomial in T absorbs it.
+    ``noise_seed`` (default ``seed``): the noise's seed; the sensor is drawn from ``seed``,
+    so another noise seed (and ``tau_s``) is the same sensor's other warm-up.
+    ``noiseless``: the acceleration without its noise (the log's truth)."""
+    rng = np.random.default_rng(seed if noise_seed is None else noise_seed)
     truth = SensorTruth.adxl355_typical(seed=seed, odr_hz=rate_hz)
     n = int(minutes * 60 * rate_hz)
     t = np.arange(n) / rate_hz
     t_off = 0.6 * t[-1]
-    hot = 25.0 + 20.0 * (1.0 - np.exp(-t / 600.0))
-    at_off = 25.0 + 20.0 * (1.0 - np.exp(-t_off / 600.0))
-    die = np.where(t <= t_off, hot, 30.0 + (at_off - 30.0) * np.exp(-(t - t_off) / 600.0))
+    hot = 25.0 + 20.0 * (1.0 - np.exp(-t / tau_s))
+    at_off = 25.0 + 20.0 * (1.0 - np.exp(-t_off / tau_s))
+    die = np.where(t <= t_off, hot, 30.0 + (at_off - 30.0) * np.exp(-(t - t_off) / tau_s))
     ref = np.tile([0.0, 0.0, 1.0], (n, 1))
     acc = truth.ideal_raw_g(ref, die)
     if rate_ug_per_c_per_min:
         k = np.array([1.0, -0.6, 0.8]) * rate_ug_per_c_per_min * 1e-6 * 60.0  # per °C/s
         acc = acc + rate_offset_g(np.gradient(die, t), k)
-    acc = acc + rng.normal(0.0, truth.sample_sd_g(), acc.shape)
+    if not noiseless:
+        acc = acc + rng.normal(0.0, truth.sample_sd_g(), acc.shape)
     channel = lag_series(die, 1.0 / rate_hz, channel_lag_s) if channel_lag_s else die
     temp = channel + truth.temp_offset_c + rng.normal(0.0, truth.temp_noise_c, n)
     return WarmupLog(name, t, acc, temp)
@@ -268,11 +275,10 @@ def method_ardupilot(log: WarmupLog, fit: np.ndarray | None = None,
         source = "ardupilot-methodic-configurator tempcal_imu"
     except ImportError:
         tc, source = None, "re-implemented (package not installed)"
-    # each fit block separately: the moving average must not run across held-out gaps
-    k, _ = blocks(log.t_s)
+    # each contiguous run of fit samples separately (the split's fit blocks): the moving
+    # average must not run across held-out gaps
     xs, ts = [], []
-    for b in np.unique(k[fit]):
-        m = k == b
+    for m in fit_runs(fit, log.t_s):
         cols = {"X": log.acc_g[m, 0], "Y": log.acc_g[m, 1], "Z": log.acc_g[m, 2],
                 "T": log.temp_c[m], "time": log.t_s[m]}
         if tc is not None:
@@ -291,6 +297,23 @@ def method_ardupilot(log: WarmupLog, fit: np.ndarray | None = None,
         coef = np.polyfit(T - temp_ref, X[:, i] - X[:, i].mean(), order)
         out[:, i] = log.acc_g[:, i] - np.polyval(coef, np.clip(at, t_min, t_max) - temp_ref)
     return out, source
+
+
+def fit_runs(fit: np.ndarray, t_s: np.ndarray | None = None) -> list[np.ndarray]:
+    """Boolean masks of the contiguous runs of True in ``fit`` (the split's fit blocks;
+    one run for a whole log), a run also broken where ``t_s`` skips more than a block
+    (a dropout)."""
+    idx = np.flatnonzero(fit)
+    cut = np.diff(idx) > 1
+    if t_s is not None:
+        cut |= np.diff(t_s[idx]) > BLOCK_S
+    runs = np.split(idx, np.flatnonzero(cut) + 1) if idx.size else []
+    out = []
+    for r in runs:
+        m = np.zeros(fit.size, bool)
+        m[r] = True
+        out.append(m)
+    return out
 
 
 def _moving_average_2s(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -344,17 +367,22 @@ def _write_rows(path: Path, rows: list[list[float]]) -> None:
         w.writerows([[repr(float(v)) for v in r] for r in rows])
 
 
-def method_soakcal(log: WarmupLog, workdir: Path) -> tuple[np.ndarray | None, str]:
-    """``soakcal calibrate`` on the fit blocks' 1-s rows, ``compensate`` on all 1-s rows.
+def method_soakcal(log: WarmupLog, workdir: Path, fit: np.ndarray | None = None,
+                   apply_to: WarmupLog | None = None) -> tuple[np.ndarray | None, str]:
+    """``soakcal calibrate`` on the ``fit`` samples' 1-s rows (default the fit blocks),
+    ``compensate`` on all 1-s rows of ``apply_to`` (default ``log``: another log of the
+    same sensor is compensated by the model of this one).
 
     Returns the compensated value of every sample (its 1-s row's output minus that row's
     raw mean, added to the sample: the model is smooth over 1 s) or None and the reason.
     """
-    _, fit = blocks(log.t_s)
+    if fit is None:
+        _, fit = blocks(log.t_s)
     fit_csv, all_csv = workdir / "fit.csv", workdir / "all.csv"
     model, comp = workdir / "model.json", workdir / "comp.csv"
     fit_rows = rows_1s(log, fit)
     _write_rows(fit_csv, fit_rows)
+    log = apply_to or log
     all_rows = rows_1s(log, np.ones(log.t_s.size, bool))
     # Temperatures clamped to the fit rows' span, as both firmwares clamp to TMIN/TMAX:
     # a held-out row a little beyond the fitted span is compensated at its edge.

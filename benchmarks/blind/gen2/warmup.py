@@ -200,11 +200,15 @@ def gain_only_sensor(sensor: Sensor2) -> Sensor2:
 
 
 # --- the log ------------------------------------------------------------------------------
-def simulate(case: WarmupCase, pools: NoisePools | None = None) -> WarmupLogData:
+def simulate(case: WarmupCase, pools: NoisePools | None = None,
+             noise_seed: int | None = None) -> WarmupLogData:
     """The log's output-rate samples: white noise and the acceleration LSB applied at the
     native rate and boxcar-averaged to ``out_hz``; the channel read once per output
-    sample; the bench disturbance (when ``pools``) added at the output rate."""
-    rng = np.random.default_rng(case.seed)
+    sample; the bench disturbance (when ``pools``) added at the output rate.
+
+    ``noise_seed``: the noise's own seed (default ``case.seed``); the sensor is always
+    drawn from ``case.seed + 1``, so another noise seed is the same sensor's other log."""
+    rng = np.random.default_rng(case.seed if noise_seed is None else noise_seed)
     sensor = gain_only_sensor(draw_sensor(np.random.default_rng(case.seed + 1)))
     k = int(round(case.native_hz / case.out_hz))
     n = int(case.duration_s * case.out_hz)

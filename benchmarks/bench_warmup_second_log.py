@@ -1,0 +1,365 @@
+"""Calibrated on one whole warm-up, flown on another: soakcal beside PX4 and ArduPilot.
+
+    OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.bench_warmup_second_log \\
+        --realdata DIR [--cases 30] [--seed 1000] [--only 1026,...] [--no-twin] [--out DIR]
+
+``bench_warmup_peers`` and ``bench_warmup_gen2`` fit on alternate 10-s blocks of one log
+and score the held-out blocks; the fit log then has gaps, and a rate term's dT/dt is
+lower at them. A user calibrates on one whole warm-up and flies others. Here each case is
+**two warm-ups of the same sensor** (:func:`second_case`: the same truth, another noise
+seed and another temperature profile), every method is fitted on the whole first log and
+scored on the whole second:
+
+* ``px4``, ``ardupilot``: the peers' fits (:func:`benchmarks.bench_warmup_peers.method_px4`,
+  ``method_ardupilot``) on every sample of the first log, applied at each sample's reading
+  of the second, clamped to the first log's span as the firmwares clamp;
+* ``soakcal``: ``soakcal calibrate`` on the first log's 1-s rows, ``soakcal compensate``
+  of the second's (:func:`benchmarks.bench_warmup_peers.method_soakcal` with
+  ``apply_to``: temperatures clamped to the fit span, a rate term from the unclamped ones);
+* ``export px4`` / ``export ardupilot``: the files ``soakcal export --format px4|ardupilot``
+  writes from that model, applied at each sample's reading by the firmware's formula
+  (:func:`benchmarks.bench_warmup_peers.method_export`).
+
+The figure per axis is the RMS of every full 5-s mean of the second log about their mean
+(each method's constant removed: the gravity projection is an unknown constant), in mg:
+against the logged data (as the benches score) and against the generator's truth (the
+compensated truth, no noise). ``oracle``: the second log's noise alone scored the same way.
+Per case soakcal ÷ the better peer, per axis, with a 95 % paired bootstrap over 60-s
+windows of 5-s means (:func:`whole_ratio_interval`); the outcome is
+``bench_warmup_gen2.verdict``'s (won: ≤ the better peer on every axis; within: ≤ peer +
+10 % of the oracle). Beside it, for the same first log, the split's figure
+(``split``: soakcal ÷ better peer held out on the first log's alternate blocks, as the
+other benches score it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from benchmarks.bench_warmup_gen2 import verdict, wilson  # noqa: E402
+from benchmarks.bench_warmup_peers import (  # noqa: E402
+    MEAN_S,
+    WarmupLog,
+    heldout_rms_mg,
+    imported_log,
+    insample_rms_mg,
+    method_ardupilot,
+    method_export,
+    method_px4,
+    method_soakcal,
+    twin_log,
+)
+from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir  # noqa: E402
+from benchmarks.blind.gen2.warmup import (  # noqa: E402
+    WarmupCase,
+    draw_case,
+    import_args,
+    simulate,
+    write_log,
+)
+from calibration.model_file import load_model  # noqa: E402
+
+WINDOW_S, DRAWS = 60.0, 2000
+# the second log's profile: the same end temperature from a start 10 % of the rise higher,
+# the time constant times a factor drawn from this range (a warmer day, another airflow)
+START_SHIFT = 0.1
+TAU_FACTOR = (0.7, 1.4)
+NOISE_SEED_OFFSET = 500_000  # the second log's noise seed: the case's seed plus this
+# the twin's second warm-up: τ 800 s instead of 600 s (a slower warm-up, inside the first
+# log's span), another noise seed
+TWIN_SECOND_TAU_S, TWIN_SEED = 800.0, 7
+TWINS: dict[str, dict[str, float]] = {
+    "twin": {},
+    "twin + rate 40 µg/(°C/min)": {"rate_ug_per_c_per_min": 40.0},
+    "twin + channel lag 60 s": {"channel_lag_s": 60.0},
+    "twin + rate + lag": {"rate_ug_per_c_per_min": 40.0, "channel_lag_s": 60.0},
+}
+
+
+def second_case(case: WarmupCase) -> WarmupCase:
+    """The same sensor's other warm-up: every truth field of ``case`` kept (sensor, bias
+    polynomial and its reference, rate, hysteresis, drift, channel lag, offset, LSB and
+    noise, rates, orientation), the profile changed: start ``START_SHIFT`` of the rise
+    higher to the same end temperature, the time constant × a factor in ``TAU_FACTOR``
+    drawn from the case's seed. Its noise is :func:`second_noise_seed`'s."""
+    factor = float(np.random.default_rng([case.seed, 30]).uniform(*TAU_FACTOR))
+    return replace(case, name=f"{case.name}b", start_c=case.start_c + START_SHIFT * case.span_c,
+                   span_c=(1.0 - START_SHIFT) * case.span_c, tau_s=case.tau_s * factor)
+
+
+def second_noise_seed(case: WarmupCase) -> int:
+    return case.seed + NOISE_SEED_OFFSET
+
+
+def whole_ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...],
+                         window_s: float = WINDOW_S, draws: int = DRAWS) -> list[list[float]]:
+    """Per axis, a 95 % interval of RMS(ours) ÷ RMS(better peer) over every full 5-s mean
+    of a log about their mean (:func:`benchmarks.bench_warmup_peers.insample_rms_mg`): a
+    paired bootstrap over ``window_s`` windows of the means, each method's constant and
+    the better peer taken again on each draw."""
+    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
+    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
+    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
+    means = np.stack([np.array([c[half == h].mean(axis=0) for h in hs])
+                      for c in (ours_g, *peers_g)])  # (methods, m, 3)
+    window = (hs * MEAN_S // window_s).astype(int)
+    groups = [np.flatnonzero(window == w) for w in np.unique(window)]
+    rng = np.random.default_rng(0)
+    ratios = []
+    for _ in range(draws):
+        pick = np.concatenate([groups[i] for i in rng.integers(0, len(groups), len(groups))])
+        ms = means[:, pick].var(axis=1)  # (methods, 3): about the draw's own mean
+        ratios.append(np.sqrt(ms[0] / np.min(ms[1:], axis=0)))
+    lo, hi = np.percentile(np.asarray(ratios), [2.5, 97.5], axis=0)
+    return [[float(a), float(b)] for a, b in zip(lo, hi, strict=True)]
+
+
+def compare(first: WarmupLog, second: WarmupLog, true2_g: np.ndarray | None,
+            work: Path) -> dict[str, object]:
+    """Every method fitted on the whole ``first`` log, scored on the whole ``second``
+    (module docstring); and the split's soakcal ÷ better peer on ``first``."""
+    n1 = first.t_s.size
+    fit = np.zeros(n1 + second.t_s.size, bool)
+    fit[:n1] = True
+    # the peers fit the first log's samples and apply at the second's readings (they are
+    # per-sample, so one joined log serves; ArduPilot's filter runs on the first log only)
+    joined = WarmupLog(first.name, np.concatenate([first.t_s, second.t_s + first.t_s[-1] + 1e4]),
+                       np.vstack([first.acc_g, second.acc_g]),
+                       np.concatenate([first.temp_c, second.temp_c]))
+    px4 = method_px4(joined, fit)[n1:]
+    ardupilot = method_ardupilot(joined, fit)[0][n1:]
+    res: dict[str, object] = {
+        "minutes": [float(first.t_s[-1] / 60.0), float(second.t_s[-1] / 60.0)],
+        "span_c": [[float(x.temp_c.min()), float(x.temp_c.max())] for x in (first, second)],
+        "outside_share": float(np.mean((second.temp_c < first.temp_c.min())
+                                       | (second.temp_c > first.temp_c.max()))),
+    }
+    methods: dict[str, np.ndarray | None] = {"none": second.acc_g, "px4": px4,
+                                             "ardupilot": ardupilot}
+    (work / "whole").mkdir(exist_ok=True)
+    sc, res["soakcal_note"] = method_soakcal(first, work / "whole", np.ones(n1, bool), second)
+    methods["soakcal"] = sc
+    if sc is not None:
+        model = work / "whole" / "model.json"
+        res["rate_term"] = bool((json.loads(model.read_text()).get("temperature") or {})
+                                .get("rate"))
+        methods["export_px4"] = method_export(second, model)
+        methods["export_ardupilot"] = method_export(second, model, firmware="ardupilot")
+        # the PX4 header's FOLDED figure (file − model, stated from the first log) against
+        # the file less the model on the second log
+        fold = load_model(model).provenance.get("rate_fold") or {}
+        res["stated_folded_mg"] = fold.get("rms_mg")
+    ok = np.ones(second.t_s.size, bool) if sc is None else np.all(np.isfinite(sc), axis=1)
+    sub = WarmupLog(second.name, second.t_s[ok], second.acc_g[ok], second.temp_c[ok])
+    for key, comp in methods.items():
+        res[key] = None if comp is None else insample_rms_mg(sub, comp[ok]).tolist()
+        if true2_g is not None:
+            res[f"{key}_truth"] = (None if comp is None else insample_rms_mg(
+                sub, (true2_g - (second.acc_g - comp))[ok]).tolist())
+        if key.startswith(("soakcal", "export")) and comp is not None:
+            res[f"{key}_over_peer_95"] = whole_ratio_interval(
+                sub.t_s, comp[ok], (px4[ok], ardupilot[ok]))
+    if res.get("stated_folded_mg") is not None:
+        res["file_vs_model_mg"] = insample_rms_mg(
+            sub, (methods["export_px4"] - sc)[ok]).tolist()  # type: ignore[operator]
+    if true2_g is not None:
+        res["oracle"] = insample_rms_mg(sub, (second.acc_g - true2_g)[ok]).tolist()
+    else:  # no truth: the floor is unknown, "within" is then "at or below the peer"
+        res["oracle"] = [0.0, 0.0, 0.0]
+    for key in ("soakcal", "export_px4", "export_ardupilot"):
+        if key in methods:
+            res[f"{key}_verdict"] = verdict({**res, "soakcal": res[key]})
+    res["split"] = split_ratio(first, work)
+    return res
+
+
+def split_ratio(log: WarmupLog, work: Path) -> list[float] | None:
+    """soakcal ÷ better peer on ``log``'s own alternate-block split (the other benches'
+    figure), per axis; None when soakcal refuses."""
+    (work / "split").mkdir(exist_ok=True)
+    sc, _ = method_soakcal(log, work / "split")
+    if sc is None:
+        return None
+    ok = np.all(np.isfinite(sc), axis=1)
+    sub = WarmupLog(log.name, log.t_s[ok], log.acc_g[ok], log.temp_c[ok])
+    ours = heldout_rms_mg(sub, sc[ok])
+    peer = np.minimum(heldout_rms_mg(log, method_px4(log)),
+                      heldout_rms_mg(log, method_ardupilot(log)[0]))
+    return (ours / peer).tolist()
+
+
+def run_gen2(seed: int, pools: object, work: Path) -> dict[str, object]:
+    case = draw_case(seed)
+    case2 = second_case(case)
+    base: dict[str, object] = {"case": case.name, "kinds": list(case.kinds),
+                               "profile": case.profile,
+                               "tau_factor": case2.tau_s / case.tau_s}
+    logs, truths = [], []
+    for c, noise in ((case, None), (case2, second_noise_seed(case))):
+        data = simulate(c, pools, noise_seed=noise)  # type: ignore[arg-type]
+        csv_path, _ = write_log(c, data, work)
+        log, said = imported_log(csv_path, "csv", import_args(c), work)
+        if log is None:
+            return base | {"unusable": f"{c.name}: {said}"}
+        logs.append(log)
+        truths.append(data.true_g if data.t_s.size == log.t_s.size else None)
+    return base | compare(logs[0], logs[1], truths[1], work)
+
+
+def run_twin(label: str, kw: dict[str, float], work: Path) -> dict[str, object]:
+    first = twin_log(label, seed=TWIN_SEED, **kw)  # type: ignore[arg-type]
+    second = twin_log(label, seed=TWIN_SEED, tau_s=TWIN_SECOND_TAU_S,
+                      noise_seed=TWIN_SEED + NOISE_SEED_OFFSET, **kw)  # type: ignore[arg-type]
+    truth = twin_log(label, seed=TWIN_SEED, tau_s=TWIN_SECOND_TAU_S, noiseless=True,
+                     **kw).acc_g  # type: ignore[arg-type]
+    return {"case": label, "kinds": ["twin"], "profile": "heat_cool",
+            "tau_factor": TWIN_SECOND_TAU_S / 600.0} | compare(first, second, truth, work)
+
+
+# --- report ---------------------------------------------------------------------------------
+VARIANTS = (("soakcal", "compensate"), ("export_px4", "PX4 file"),
+            ("export_ardupilot", "ArduPilot file"))
+
+
+def _ratio_ci(r: dict[str, object], key: str) -> str:
+    if r.get(key) is None:
+        return "refused"
+    ratio = np.asarray(r[key]) / np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+    return " / ".join(f"{x:.2f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
+        ratio, r[f"{key}_over_peer_95"], strict=True))  # type: ignore[call-overload]
+
+
+def case_table(results: list[dict[str, object]]) -> str:
+    def f3(v: object) -> str:
+        return "—" if v is None else " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+
+    lines = ["| case | kinds | τ₂/τ₁ | outside % | better peer | soakcal | soakcal ÷ peer (95 %) "
+             "| PX4 file ÷ peer (95 %) | ArduPilot file ÷ peer (95 %) | oracle | outcome "
+             "(compensate / PX4 / ArduPilot) | split: soakcal ÷ peer |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        if "unusable" in r:
+            lines.append(f"| {r['case']} | not compared: {r['unusable']} |"
+                         + " |" * 10)
+            continue
+        peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+        outs = " / ".join(str(r[f"{k}_verdict"]["outcome"])  # type: ignore[index]
+                          if f"{k}_verdict" in r else "—" for k, _ in VARIANTS)
+        lines.append(
+            f"| {r['case']} | {', '.join(r['kinds'])} | {r['tau_factor']:.2f} | "  # type: ignore[arg-type]
+            f"{100 * r['outside_share']:.0f} | {f3(peer)} | {f3(r['soakcal'])} | "  # type: ignore[operator]
+            f"{_ratio_ci(r, 'soakcal')} | {_ratio_ci(r, 'export_px4')} | "
+            f"{_ratio_ci(r, 'export_ardupilot')} | {f3(r['oracle'])} | {outs} | "
+            f"{f3(r['split'])} |")
+    return "\n".join(lines)
+
+
+def summary(results: list[dict[str, object]], label: str) -> str:
+    used = [r for r in results if "unusable" not in r]
+    lines = [f"{label}: {len(results)} cases, {len(used)} compared",
+             "", "| soakcal as | won | within 10 % of the oracle | lost | refused | axes: CI "
+             "below 1 / straddles 1 / above 1 | ratio median, max |",
+             "|---|---|---|---|---|---|---|"]
+    for key, name in VARIANTS:
+        outs = [str(r[f"{key}_verdict"]["outcome"]) if f"{key}_verdict" in r  # type: ignore[index]
+                else "refused" for r in used]
+        cis = [b for r in used if r.get(f"{key}_over_peer_95")
+               for b in r[f"{key}_over_peer_95"]]  # type: ignore[union-attr]
+        below = sum(hi < 1.0 for _, hi in cis)
+        above = sum(lo > 1.0 for lo, _ in cis)
+        ratios = [x for r in used if r.get(key) is not None for x in
+                  np.asarray(r[key]) / np.minimum(r["px4"], r["ardupilot"])]  # type: ignore[arg-type]
+        n = len(outs)
+        won = outs.count("win")
+        within = outs.count("win-within-floor")
+        lo, hi = wilson(won + within, n)
+        stats = (f"{np.median(ratios):.3f}, {np.max(ratios):.3f}" if ratios else "—")
+        lines.append(f"| {name} | {won} | {within} (won or within {won + within}/{n}, 95 % "
+                     f"{lo:.0%}–{hi:.0%}) | {outs.count('loss')} | "
+                     f"{sum(o.startswith('refused') for o in outs)} | {below} / "
+                     f"{len(cis) - below - above} / {above} | {stats} |")
+    truth = [x for r in used if r.get("soakcal_truth") is not None for x in
+             np.asarray(r["soakcal_truth"]) / np.minimum(r["px4_truth"], r["ardupilot_truth"])]  # type: ignore[arg-type]
+    if truth:
+        lines.append("")
+        lines.append(f"Against the truth (compensate ÷ better peer, per axis): median "
+                     f"{np.median(truth):.3f}, max {np.max(truth):.3f}, "
+                     f"{sum(x <= 1.0 for x in truth)}/{len(truth)} axes at or below.")
+    pairs = [(a, b) for r in used if r.get("split") and r.get("soakcal") is not None
+             for a, b in zip(r["split"], np.asarray(r["soakcal"])  # type: ignore[arg-type]
+                             / np.minimum(r["px4"], r["ardupilot"]), strict=True)]  # type: ignore[arg-type]
+    if pairs:
+        sp, sec = np.asarray(pairs).T
+        lines.append("")
+        lines.append(f"The split (alternate blocks of the first log) beside the second log, "
+                     f"compensate ÷ better peer per axis: second ÷ split median "
+                     f"{np.median(sec / sp):.3f} (range {np.min(sec / sp):.3f} … "
+                     f"{np.max(sec / sp):.3f}); axes at or below 1 in the split and above "
+                     f"in the second log: {int(np.sum((sp <= 1) & (sec > 1)))}, the reverse: "
+                     f"{int(np.sum((sp > 1) & (sec <= 1)))}, of {sp.size}.")
+    return "\n".join(lines)
+
+
+def stated_table(results: list[dict[str, object]]) -> str:
+    """The PX4 header's FOLDED figure (stated from the first log) against the file less
+    the model on the second log, mg x / y / z (models with a folded rate term)."""
+    def f3(v: object) -> str:
+        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+
+    lines = ["| case | stated FOLDED RMS (file − model) | second log: file − model |",
+             "|---|---|---|"]
+    lines += [f"| {r['case']} | {f3(r['stated_folded_mg'])} | {f3(r['file_vs_model_mg'])} |"
+              for r in results if r.get("file_vs_model_mg") is not None]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--realdata", help="the shared real recordings (noise pools)")
+    ap.add_argument("--cases", type=int, default=30)
+    ap.add_argument("--seed", type=int, default=1000, help="first gen2 case's seed")
+    ap.add_argument("--only", help="comma-separated gen2 case seeds to run instead")
+    ap.add_argument("--no-twin", action="store_true", help="skip the twin's four pairs")
+    ap.add_argument("--out", type=Path, help="write results.json and table.md here")
+    args = ap.parse_args(argv)
+    seeds = ([int(s) for s in args.only.split(",")] if args.only
+             else list(range(args.seed, args.seed + args.cases)))
+    pools = load_pools(realdata_dir(args.realdata)) if seeds else None
+    gen2, twins = [], []
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for s in seeds:
+            gen2.append(run_gen2(s, pools, Path(tmp)))
+            print(json.dumps(gen2[-1]), flush=True)
+        if not args.no_twin:
+            for label, kw in TWINS.items():
+                twins.append(run_twin(label, kw, Path(tmp)))
+                print(json.dumps(twins[-1]), flush=True)
+    text = f"{len(seeds)} gen2 cases and {len(twins)} twin pairs in " \
+           f"{time.perf_counter() - t0:.0f} s\n"
+    for label, res in (("gen2", gen2), ("twin", twins)):
+        if res:
+            text += ("\n" + summary(res, label) + "\n\n" + case_table(res) + "\n\n"
+                     + stated_table(res) + "\n")
+    print(text)
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "results.json").write_text(json.dumps(gen2 + twins, indent=1))
+        (args.out / "table.md").write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
