@@ -48,6 +48,7 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     imported_log,
     method_export,
     stated_table,
+    xyz_mg,
 )
 from benchmarks.blind.gen2.realnoise import NoisePools, load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import (  # noqa: E402
@@ -158,7 +159,7 @@ def summary(results: list[dict[str, object]]) -> str:
 
 def case_table(results: list[dict[str, object]]) -> str:
     def f3(v: object) -> str:
-        return "—" if v is None else " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+        return xyz_mg(v, digits=3)
 
     lines = ["| case | kinds | min | better peer | soakcal | ratio | oracle | outcome |",
              "|---|---|---|---|---|---|---|---|"]

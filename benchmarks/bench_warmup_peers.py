@@ -112,6 +112,13 @@ class WarmupLog:
 
 
 # --- logs --------------------------------------------------------------------------
+
+def xyz_mg(v: object, digits: int = 4, missing: str = "—") -> str:
+    """Three figures x / y / z (mg) as the tables print them; ``missing`` for None."""
+    if v is None:
+        return missing
+    return " / ".join(f"{x:.{digits}f}" for x in v)  # type: ignore[attr-defined]
+
 def twin_log(name: str, *, rate_ug_per_c_per_min: float = 0.0, channel_lag_s: float = 0.0,
              seed: int = 7, minutes: float = 40.0, rate_hz: float = 50.0,
              tau_s: float = 600.0, noise_seed: int | None = None,
@@ -495,8 +502,7 @@ def stated_table(results: list[dict[str, object]]) -> str:
              "held-out file − model | file held out | fit's own held-out (stated) |",
              "|---|---|---|---|---|---|---|"]
 
-    def fmt(v: object) -> str:
-        return "—" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+    fmt = xyz_mg
 
     for r in results:
         if "stated_what" in r:
@@ -571,8 +577,7 @@ def flown_table(results: list[dict[str, object]]) -> str:
              "ArduPilot flown | export flown ArduPilot | ÷ ArduPilot flown (95 %) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
 
-    def fmt(v: object) -> str:
-        return "—" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+    fmt = xyz_mg
 
     def ci(r: dict[str, object], fw: str) -> str:
         ours = r.get(f"export_flown_{fw}")
@@ -666,7 +671,7 @@ def whole_table(results: list[dict[str, object]]) -> str:
              "none | PX4 method | ArduPilot tempcal | soakcal |", "|---|---|---|---|---|---|---|"]
 
     def fmt(v: object) -> str:
-        return "refused (exit 2)" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+        return xyz_mg(v, missing="refused (exit 2)")
 
     for r in results:
         if "whole_log_none" in r:
@@ -758,8 +763,7 @@ def export_table(results: list[dict[str, object]]) -> str:
              "better peer | folded ÷ peer (95 %) | static ÷ peer (95 %) | folded ÷ static "
              "(95 %) |", "|---|---|---|---|---|---|---|---|"]
 
-    def fmt(v: object) -> str:
-        return " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+    fmt = xyz_mg
 
     def ci(v: np.ndarray, bounds: object) -> str:
         return " / ".join(f"{x:.3f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
@@ -788,7 +792,7 @@ def table(results: list[dict[str, object]]) -> str:
     lines = [head]
 
     def fmt(v: object) -> str:
-        return "refused (exit 2)" if v is None else " / ".join(f"{x:.4f}" for x in v)  # type: ignore[union-attr]
+        return xyz_mg(v, missing="refused (exit 2)")
 
     for r in results:
         if "unusable" in r:

@@ -60,6 +60,7 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     method_px4,
     method_soakcal,
     twin_log,
+    xyz_mg,
 )
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir  # noqa: E402
 from benchmarks.blind.gen2.warmup import (  # noqa: E402
@@ -243,7 +244,7 @@ def _ratio_ci(r: dict[str, object], key: str) -> str:
 
 def case_table(results: list[dict[str, object]]) -> str:
     def f3(v: object) -> str:
-        return "—" if v is None else " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+        return xyz_mg(v, digits=3)
 
     lines = ["| case | kinds | τ₂/τ₁ | outside % | better peer | soakcal | soakcal ÷ peer (95 %) "
              "| PX4 file ÷ peer (95 %) | ArduPilot file ÷ peer (95 %) | oracle | outcome "
@@ -316,7 +317,7 @@ def stated_table(results: list[dict[str, object]]) -> str:
     """The PX4 header's FOLDED figure (stated from the first log) against the file less
     the model on the second log, mg x / y / z (models with a folded rate term)."""
     def f3(v: object) -> str:
-        return " / ".join(f"{x:.3f}" for x in v)  # type: ignore[union-attr]
+        return xyz_mg(v, digits=3)
 
     lines = ["| case | stated FOLDED RMS (file − model) | second log: file − model |",
              "|---|---|---|"]
