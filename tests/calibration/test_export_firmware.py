@@ -15,6 +15,7 @@ from calibration.model_file import load_model, save_model
 from calibration.recording import Recording
 from calibration.thermal import ThermalModel
 from service.cli import main
+from tests.calibration.firmware_files import ardupilot_params, px4_params
 
 G = 9.80665
 F32 = np.float32
@@ -65,16 +66,6 @@ def _export(tmp: Path, model: ThermalModel, fmt: str, *extra: str) -> tuple[Path
     return path, out.read_text() if out.exists() else "", code
 
 
-def _px4_params(text: str) -> dict[str, float]:
-    out = {}
-    for line in text.splitlines():
-        if line.startswith("#"):
-            continue
-        _veh, _comp, name, value, _type = line.split("\t")
-        out[name] = float(value)
-    return out
-
-
 def _px4_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray) -> np.ndarray:
     """PX4: offset = X0 + X1 d + X2 d² + X3 d³, d = clamp(T) − TREF; data − offset (float)."""
     out = np.empty_like(raw_ms2, dtype=F32)
@@ -92,11 +83,6 @@ def _px4_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray) -
                    + F32(p[f"TC_A0_X2_{i}"]) * d2 + F32(p[f"TC_A0_X3_{i}"]) * d3)
             out[n, i] = F32(r[i]) - off
     return out.astype(float)
-
-
-def _ap_params(text: str) -> dict[str, float]:
-    return {n: float(v) for n, v in (line.split(",") for line in text.splitlines()
-                                      if line and not line.startswith("#"))}
 
 
 def _ap_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray,
@@ -135,7 +121,7 @@ def test_px4_firmware_formula_reproduces_compensate(tmp_path, capsys):
     model = _model()
     path, text, code = _export(tmp_path, model, "px4", "--device-id", "1310988")
     assert code == 0
-    p = _px4_params(text)
+    p = px4_params(text)
     assert p["TC_A_ENABLE"] == 1 and p["TC_A0_ID"] == 1310988
     assert (p["TC_A0_TMIN"], p["TC_A0_TMAX"], p["TC_A0_TREF"]) == (-10.0, 50.0, 20.0)
     raw, temp = _readings()
@@ -149,7 +135,7 @@ def test_ardupilot_firmware_formula_reproduces_compensate(tmp_path, capsys):
     model = _model()
     path, text, code = _export(tmp_path, model, "ardupilot")
     assert code == 0
-    p = _ap_params(text)
+    p = ardupilot_params(text)
     assert (p["INS_TCAL1_ENABLE"], p["INS_TCAL1_TMIN"], p["INS_TCAL1_TMAX"]) == (1, -10, 50)
     raw, temp = _readings()
     cal_temp = 27.0  # INS_ACC1_CALTEMP of the ordinary calibration...
@@ -171,7 +157,7 @@ def test_what_the_firmware_cannot_express_is_said_and_bounded(tmp_path, capsys):
         assert words in err and words in text
     bound_mg = float(err.split("costs up to ")[1].split(" mg")[0])
     raw, temp = _readings()
-    fw_g = _px4_correct(_px4_params(text), raw * G, temp) / G
+    fw_g = _px4_correct(px4_params(text), raw * G, temp) / G
     ours = _compensate(tmp_path, path, raw, temp)
     worst_mg = np.max(np.linalg.norm(fw_g - ours, axis=1)) * 1e3
     # the stated bound holds and is not vacuous (the readings reach 60 % of it at least)
@@ -186,7 +172,7 @@ def test_px4_warmup_model_leaves_the_constant_to_the_ordinary_calibration() -> N
     model = _model()
     model.mode = "warmup"
     fw = export_px4(model, device_id=1)
-    p = _px4_params(fw.text)
+    p = px4_params(fw.text)
     assert [p[f"TC_A0_X0_{i}"] for i in range(3)] == [0.0, 0.0, 0.0]
     assert "X0 = 0: this model does not identify the constant offset" in fw.text
     raw, temp = _readings()
@@ -213,7 +199,7 @@ def test_a_bias_not_fitted_is_said_as_what_the_file_does_on_that_axis() -> None:
     assert line == ("bx not fitted: the file's offset on that axis does not change with "
                     "temperature (no thermal compensation there); held at 0: no change with "
                     "temperature above the noise on this axis")
-    p = _px4_params(fw.text)
+    p = px4_params(fw.text)
     assert [p[f"TC_A0_X{j}_0"] for j in range(4)] == [0.0, 0.0, 0.0, 0.0]
 
 
@@ -235,8 +221,8 @@ def _firmware_offset_g(fmt: str, text: str, temp_c: np.ndarray,
     less its value at ``cal_temp_c``, INS_ACCn_CALTEMP)."""
     zero = np.zeros((np.size(temp_c), 3))
     if fmt == "px4":
-        return -_px4_correct(_px4_params(text), zero, temp_c) / G
-    return -_ap_correct(_ap_params(text), zero, temp_c, cal_temp_c) / G
+        return -_px4_correct(px4_params(text), zero, temp_c) / G
+    return -_ap_correct(ardupilot_params(text), zero, temp_c, cal_temp_c) / G
 
 
 def _figures(line: str, what: str) -> np.ndarray:
@@ -535,7 +521,7 @@ def test_the_ardupilot_file_is_fitted_at_the_reading_its_filter_hands_it(tmp_pat
         / n * 1e3
     diff = flown_mg - model_mg
     measured = float(np.sqrt(np.mean((diff - diff.mean()) ** 2)))  # a constant: INS_ACCOFFS
-    p = _ap_params(text)
+    p = ardupilot_params(text)
     clamped = np.clip(filtered, p["INS_TCAL1_TMIN"], p["INS_TCAL1_TMAX"])
     V = np.column_stack([np.bincount(capture, clamped**j) / n for j in range(4)])
     best = V @ np.linalg.lstsq(V, model_mg, rcond=None)[0] - model_mg

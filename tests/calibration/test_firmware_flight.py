@@ -21,6 +21,7 @@ from calibration.firmware_flight import (
     px4_reading_in_use,
 )
 from calibration.thermal import ThermalModel
+from tests.calibration.firmware_files import px4_params
 
 RATE_HZ = 50.0
 
@@ -47,11 +48,7 @@ def _ramp(seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _offset_mg(text: str, temp_c: np.ndarray) -> np.ndarray:
     """(N, 3) PX4's offset (calc_thermal_offsets_3D) at ``temp_c``, mg."""
-    p = {}
-    for line in text.splitlines():
-        if line and not line.startswith("#"):
-            _veh, _comp, name, value, _type = line.split("\t")
-            p[name] = float(value)
+    p = px4_params(text)
     d = np.clip(temp_c, p["TC_A0_TMIN"], p["TC_A0_TMAX"]) - p["TC_A0_TREF"]
     return np.column_stack([sum(p[f"TC_A0_X{j}_{i}"] * d**j for j in range(4))
                             for i in range(3)]) / STANDARD_GRAVITY_M_S2 * 1e3
