@@ -381,15 +381,24 @@ def export_text(
 
 def firmware_export(
     model: ThermalModel, fmt: str, *, source_name: str = "model", instance: int | None = None,
-    device_id: int = 0,
+    device_id: int = 0, temperature_reading: str | None = None,
 ) -> export_firmware.FirmwareExport:
-    """The autopilot parameter file (``px4`` or ``ardupilot``) and what it cannot express."""
+    """The autopilot parameter file (``px4`` or ``ardupilot``) and what it cannot express;
+    ``temperature_reading``: the reading the firmware evaluates the file at
+    (:data:`calibration.export_firmware.TEMPERATURE_READINGS`; default: PX4's per-sample
+    poll, ArduPilot's filtered InvenSense drivers)."""
     if fmt == "px4":
+        if temperature_reading not in (None, "per-sample"):
+            raise ModelFileError(
+                f"--temperature-reading {temperature_reading}: PX4 evaluates TC_A* at the "
+                "unfiltered reading of its 1-s poll (per-sample); a filtered reading is "
+                "ArduPilot's InvenSense drivers' (--format ardupilot)")
         return export_firmware.export_px4(model, instance=0 if instance is None else instance,
                                           device_id=device_id, source_name=source_name)
     if fmt == "ardupilot":
         return export_firmware.export_ardupilot(
-            model, instance=1 if instance is None else instance, source_name=source_name)
+            model, instance=1 if instance is None else instance, source_name=source_name,
+            temperature_reading=temperature_reading or "filtered")
     raise ValueError(f"not a firmware format: {fmt!r}")
 
 

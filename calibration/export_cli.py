@@ -1,7 +1,8 @@
 """``soakcal export MODEL.json --format c|json-flat|px4|ardupilot -o OUT``.
 
 Contract: ``docs/model-file.md`` (c, json-flat) and ``docs/firmware-export.md`` (px4,
-ardupilot: ``--instance N``, ``--device-id ID``); what a firmware cannot express is
+ardupilot: ``--instance N``, ``--device-id ID``, ``--rate-term fold|drop``,
+``--temperature-reading filtered|per-sample``); what a firmware cannot express is
 written in the file's header and, one line each, on stderr.
 
 Exit 0 on success; exit 2 with one line on stderr for a bad model file, an
@@ -46,7 +47,9 @@ def run_export(args: argparse.Namespace) -> int:
                 model.provenance.pop("rate_fold", None)
             fw = firmware_export(model, fmt, source_name=model_path.name,
                                  instance=getattr(args, "instance", None),
-                                 device_id=int(getattr(args, "device_id", None) or 0))
+                                 device_id=int(getattr(args, "device_id", None) or 0),
+                                 temperature_reading=getattr(args, "temperature_reading",
+                                                             None))
             text, limitations, reading = fw.text, fw.limitations, fw.reading
         else:
             text = export_text(model, fmt, source_name=model_path.name,

@@ -354,20 +354,39 @@ def filtered_fold_record(model: ThermalModel) -> dict[str, object] | None:
             "per_sample_rms_mg": figures["rms_mg"]}
 
 
-def ardupilot_fitted_reading(record: dict[str, object] | None) -> list[str]:
-    """The line saying which reading the ArduPilot file's polynomial is fitted at, for a
-    model whose record carries the polynomial fitted at the capture mean of a dithered
-    channel's reading (``firmware_reading_record(model, filtered=True)``); else none."""
+# ``--temperature-reading``: the reading an ArduPilot driver hands INS_TCAL. "filtered": the
+# InvenSense drivers' 1-Hz low-pass (AP_InertialSensor_Invensense); "per-sample": the
+# drivers that publish the reading unfiltered (Invensensev3's default-constructed filter,
+# BMI088). PX4 polls the unfiltered reading (calibration.firmware_flight).
+TEMPERATURE_READINGS = ("filtered", "per-sample")
+FILTERED_DRIVERS = "ArduPilot's InvenSense drivers (MPU-6000/9250, ICM-2060x/20689)"
+UNFILTERED_DRIVERS = "ArduPilot's ICM-42xxx (Invensensev3) and BMI088 drivers"
+
+
+def ardupilot_fitted_reading(record: dict[str, object] | None,
+                             temperature_reading: str = "filtered") -> list[str]:
+    """The line saying which reading the ArduPilot file's polynomial is fitted at and which
+    drivers it is for, for a model that carries a polynomial fitted at the capture mean of
+    a dithered channel's reading (``record``: ``firmware_reading_record(model,
+    filtered=True)``, whose figures are that file's); else none (both readings then give
+    the same file). ``temperature_reading``: the file written (:data:`TEMPERATURE_READINGS`)."""
     if not record or not record.get("fitted_filtered"):
         return []
-
-    return [f"this file is fitted for ArduPilot's InvenSense drivers (MPU-6000/9250, "
-            f"ICM-2060x/20689), which low-pass filter the flickering reading at "
-            f"{ARDUPILOT_TEMP_CUTOFF_HZ:g} Hz: its polynomial is the least-squares fit at the "
-            f"capture mean of the reading, RMS {_xyz(record['smoothed_rms_mg'])} mg there "
-            f"from the model's offset on the fit log (x / y / z); the ICM-42xxx "
-            f"(Invensensev3) and BMI088 drivers evaluate it at each sample's reading: RMS "
-            f"{_xyz(record['rms_mg'])} mg (`--format px4`'s polynomial is fitted at that)"]
+    if temperature_reading == "per-sample":
+        return [f"this file is fitted for {UNFILTERED_DRIVERS}, which evaluate it at each "
+                f"sample's reading (`--format px4`'s polynomial, re-expanded about 35 degC); "
+                f"{FILTERED_DRIVERS} low-pass filter the flickering reading at "
+                f"{ARDUPILOT_TEMP_CUTOFF_HZ:g} Hz: for them `--temperature-reading filtered` "
+                f"writes the polynomial fitted at the capture mean of the reading (RMS "
+                f"{_xyz(record['smoothed_rms_mg'])} mg there from the model's offset on the "
+                f"fit log, x / y / z)"]
+    return [f"this file is fitted for {FILTERED_DRIVERS}, which low-pass filter the "
+            f"flickering reading at {ARDUPILOT_TEMP_CUTOFF_HZ:g} Hz: its polynomial is the "
+            f"least-squares fit at the capture mean of the reading, RMS "
+            f"{_xyz(record['smoothed_rms_mg'])} mg there from the model's offset on the fit "
+            f"log (x / y / z); {UNFILTERED_DRIVERS} evaluate it at each sample's reading: "
+            f"RMS {_xyz(record['rms_mg'])} mg; for them `--temperature-reading per-sample` "
+            f"writes the polynomial fitted at that (as `--format px4`'s)"]
 
 
 def _channel_lsb_c(model: ThermalModel) -> float | None:
@@ -498,25 +517,33 @@ def px4_update_gate(c_m_s2: np.ndarray, lo: float, hi: float, t_ref: float,
             f"current reading (its largest slope over TMIN..TMAX times that distance)")
 
 
-def export_ardupilot(model: ThermalModel, *, instance: int = 1,
-                     source_name: str = "model") -> FirmwareExport:
-    """A Mission Planner / MAVProxy parameter file of ``INS_TCAL{instance}_*``."""
+def export_ardupilot(model: ThermalModel, *, instance: int = 1, source_name: str = "model",
+                     temperature_reading: str = "filtered") -> FirmwareExport:
+    """A Mission Planner / MAVProxy parameter file of ``INS_TCAL{instance}_*``;
+    ``temperature_reading`` (:data:`TEMPERATURE_READINGS`): the reading the board's driver
+    hands ``INS_TCAL``, which decides the polynomial written for a dithered channel."""
     if not 1 <= instance <= 3:
         raise ModelFileError(f"ArduPilot has INS_TCAL1..3; --instance {instance} is out of range")
+    if temperature_reading not in TEMPERATURE_READINGS:
+        raise ModelFileError(f"--temperature-reading: expected one of "
+                             f"{', '.join(TEMPERATURE_READINGS)}, got {temperature_reading!r}")
+    filtered = temperature_reading == "filtered"
     lo, hi = _check(model, "ArduPilot")
     a_lo, a_hi = ARDUPILOT_TEMP_LIMITS_C
     if lo < a_lo or hi > a_hi:
         raise ModelFileError(f"valid range {lo:.2f} .. {hi:.2f} degC is outside ArduPilot's "
                              f"INS_TCAL TMIN/TMAX range {a_lo:g} .. {a_hi:g} degC")
-    # the polynomial fitted at the filtered reading, where the model carries one (a dithered
-    # channel): the InvenSense drivers' 1-Hz filter (calibration.firmware_flight)
+    # for the filtered drivers, the polynomial fitted at the filtered reading where the model
+    # carries one (a dithered channel): the InvenSense drivers' 1-Hz filter
+    # (calibration.firmware_flight); for the unfiltered ones, the per-sample polynomial
     c_m_s2 = bias_polynomials_m_s2(model, ARDUPILOT_TEMP_REFERENCE_C,
-                                   file_bias_x_g(model, filtered=True))
+                                   file_bias_x_g(model, filtered=filtered))
     c = c_m_s2 * ARDUPILOT_SCALE_FACTOR
-    limits = left_out(model, fold=filtered_fold_record(model))
-    record = firmware_reading_record(model, filtered=True)
-    reading = ardupilot_fitted_reading(record) + quantised_reading_lines(record) + \
-        rate_fold_warning(model)
+    limits = left_out(model, fold=filtered_fold_record(model) if filtered else None)
+    filtered_record = firmware_reading_record(model, filtered=True)
+    record = filtered_record if filtered else firmware_reading_record(model)
+    reading = ardupilot_fitted_reading(filtered_record, temperature_reading) + \
+        quantised_reading_lines(record) + rate_fold_warning(model)
     limits.append("the constant offset is not in INS_TCAL (no constant term): it is "
                   f"INS_ACC{'' if instance == 1 else instance}OFFS, measured by the ordinary "
                   "accelerometer calibration at INS_ACC"

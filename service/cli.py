@@ -265,6 +265,11 @@ def _add_export(sub: Any) -> None:
                      help="px4/ardupilot, a warm-up model with a rate term: fold its average "
                      "over the fit log into the polynomial (default: right for warm-ups like "
                      "it) or drop it (right at constant temperature)")
+    exp.add_argument("--temperature-reading", choices=("filtered", "per-sample"),
+                     help="ardupilot, a dithered coarse temperature channel: the reading the "
+                     "board's IMU driver hands INS_TCAL: filtered (InvenSense MPU-6000/9250, "
+                     "ICM-2060x/20689: 1-Hz low-pass; the default) or per-sample (ICM-42xxx, "
+                     "BMI088); px4: per-sample only")
     exp.add_argument("-o", "--output", required=True, metavar="OUT", help="file to write")
     exp.set_defaults(handler=_delegate("calibration.export_cli", "run_export", "export"))
 

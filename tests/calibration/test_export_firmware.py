@@ -585,3 +585,58 @@ def test_the_ardupilot_files_folded_figures_are_its_own(tmp_path, capsys):
     measured = float(np.sqrt(np.mean((off - off.mean()) ** 2)))  # a constant: INS_ACCOFFS
     stated = _figures(said[0], "from that whole offset by RMS ")[2]
     assert stated == pytest.approx(measured, rel=0.2)
+
+
+def test_the_ardupilot_file_is_written_for_the_boards_driver(tmp_path, capsys):
+    """A dithered 1 °C channel: ArduPilot's InvenSense drivers filter the reading at 1 Hz,
+    its ICM-42xxx and BMI088 drivers hand ``INS_TCAL`` each sample's reading. Each driver's
+    file (``--temperature-reading filtered|per-sample``), flown by the firmware's own
+    formula at the reading that driver hands it and averaged per capture, is nearer
+    ``soakcal compensate``'s offset than the other driver's file flown the same way; the
+    per-sample file is the PX4 file's polynomial (the same offset up to a constant), and
+    each header names the drivers it is for. PX4 reads no filtered temperature: asking it
+    for one is refused with the reason."""
+
+    from calibration.firmware_flight import ardupilot_reading_in_use
+
+    rec, reading, capture = _dithered_warmup(5, 0.0)
+    t_s = np.arange(0.0, 1800.0, 1.0 / 50.0)  # _dithered_warmup's samples
+    src, path = _calibrated(tmp_path, rec)
+    comp = tmp_path / "comp.csv"
+    assert main(["compensate", str(path), str(src), "-o", str(comp), "--extrapolate"]) == 0
+    with comp.open() as f:
+        model_mg = np.array([float(r["az"]) - float(r["cz"]) for r in csv.DictReader(f)]) * 1e3
+    capsys.readouterr()
+    texts = {}
+    for how in ("filtered", "per-sample"):
+        out = tmp_path / f"{how}.ardupilot"
+        assert main(["export", str(path), "--format", "ardupilot", "--temperature-reading",
+                     how, "-o", str(out)]) == 0
+        texts[how] = out.read_text()
+    hands = {"filtered": ardupilot_reading_in_use(t_s, reading), "per-sample": reading}
+    n = np.bincount(capture)
+
+    def flown_rms_mg(file: str, driver: str) -> float:
+        off = np.bincount(capture, _firmware_offset_g("ardupilot", texts[file],
+                                                      hands[driver])[:, 2]) / n * 1e3
+        diff = off - model_mg
+        return float(np.sqrt(np.mean((diff - diff.mean()) ** 2)))  # constant: INS_ACCOFFS
+
+    for driver, other in (("filtered", "per-sample"), ("per-sample", "filtered")):
+        assert flown_rms_mg(driver, driver) < flown_rms_mg(other, driver)
+    assert "fitted for ArduPilot's InvenSense drivers" in texts["filtered"]
+    assert "fitted for ArduPilot's ICM-42xxx (Invensensev3) and BMI088" in \
+        texts["per-sample"]
+    px4 = tmp_path / "out.params"
+    assert main(["export", str(path), "--format", "px4", "-o", str(px4)]) == 0
+    grid = np.linspace(*load_model(path).valid_c, 101)
+    gap = _firmware_offset_g("ardupilot", texts["per-sample"], grid) \
+        - _firmware_offset_g("px4", px4.read_text(), grid)
+    assert np.ptp(gap, axis=0).max() < 1e-7  # g: float32 parameters
+    capsys.readouterr()
+    refused = tmp_path / "refused.params"
+    assert main(["export", str(path), "--format", "px4", "--temperature-reading", "filtered",
+                 "-o", str(refused)]) == 2
+    err = capsys.readouterr().err
+    assert "PX4 evaluates TC_A* at the unfiltered reading" in err
+    assert not refused.exists()
