@@ -120,3 +120,36 @@ def ardupilot_filter_delay_s(cutoff_hz: float = ARDUPILOT_TEMP_CUTOFF_HZ) -> flo
     √2 / (2π·f_c), 0.225 s at 1 Hz; a reading changing at r °C/s is followed r × that
     behind."""
     return math.sqrt(2.0) / (2.0 * math.pi * cutoff_hz)
+
+
+# ArduPilot's accelerometer device ids (INS_ACC_ID, INS_ACC2_ID, INS_ACC3_ID) carry the
+# driver's DevTypes value (AP_InertialSensor_Backend.h) in bits 16-23 (AP_HAL::Device's
+# bus id: bus type, bus, address, devtype). The types AP_InertialSensor_Invensense
+# registers (its start(): the MPU-6000/6500 and ICM-20608 share 0x13), whose temperature
+# goes through the 1-Hz filter above; and the types of drivers that publish it unfiltered
+# (AP_InertialSensor_Invensensev3's default-constructed temp_filter; BMI088's raw
+# register reading). Other types: not read here, so not known.
+ARDUPILOT_FILTERED_DEVTYPES = {0x13: "MPU-6000/6500 or ICM-20608", 0x16: "MPU-9250",
+                               0x27: "ICM-20789", 0x28: "ICM-20689", 0x2F: "ICM-20602",
+                               0x30: "ICM-20601"}
+ARDUPILOT_UNFILTERED_DEVTYPES = {0x2B: "BMI088", 0x33: "ICM-40609", 0x34: "ICM-42688",
+                                 0x35: "ICM-42605", 0x36: "ICM-40605", 0x37: "IIM-42652",
+                                 0x3A: "ICM-42670"}
+
+
+def ardupilot_accel_reading(accel_id: int) -> tuple[str | None, str]:
+    """(the temperature reading the accelerometer's driver hands ``INS_TCAL``: "filtered",
+    "per-sample" or None when not known, and a description of the device) for an
+    ArduPilot accelerometer device id (``INS_ACCn_ID``)."""
+    devtype = (int(accel_id) >> 16) & 0xFF
+    if devtype in ARDUPILOT_FILTERED_DEVTYPES:
+        return "filtered", (f"an {ARDUPILOT_FILTERED_DEVTYPES[devtype]} "
+                            f"(AP_InertialSensor_Invensense: its temperature through a 2-pole "
+                            f"{ARDUPILOT_TEMP_CUTOFF_HZ:g}-Hz low-pass)")
+    if devtype in ARDUPILOT_UNFILTERED_DEVTYPES:
+        chip = ARDUPILOT_UNFILTERED_DEVTYPES[devtype]
+        driver = "BMI088" if chip == "BMI088" else "Invensensev3"
+        article = "an" if chip[0] in "AEIOU" else "a"
+        return "per-sample", (f"{article} {chip} (AP_InertialSensor_{driver}: its "
+                              f"temperature unfiltered)")
+    return None, f"device type 0x{devtype:02X}"

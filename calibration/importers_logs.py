@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from calibration.errors import RecordingError
+from calibration.firmware_flight import ardupilot_accel_reading
 from calibration.importers import (
     NO_TEMP_CONSEQUENCE,
     STANDARD_GRAVITY_M_S2,
@@ -118,6 +119,8 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
     time_fields: set[str] = set()
     temp_fields: set[str] = set()
     tcal_enabled: set[str] = set()
+    id_name = "INS_ACC_ID" if instance == 0 else f"INS_ACC{instance + 1}_ID"
+    accel_id: int | None = None
     try:
         fast = dataflash_imu_columns(log, instance, old_name)
     except Exception:  # a format this does not foresee: the loop, DFReader's own reading
@@ -137,6 +140,8 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
             name = str(getattr(m, "Name", ""))
             if name == f"INS_TCAL{instance + 1}_ENABLE" and m.Value == 1:
                 tcal_enabled.add(name)
+            elif name == id_name and m.Value:
+                accel_id = int(m.Value)
             continue
         if hasattr(m, "I"):  # ArduPilot >= 4.0: one IMU message, instance in field I
             if mtype != DATAFLASH_MESSAGE or int(m.I) != instance:
@@ -176,6 +181,8 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
     if tcal_enabled:
         notes.append(f"{', '.join(sorted(tcal_enabled))} = 1 in this log: the readings "
                      "are already temperature-compensated by the autopilot")
+    if accel_id is not None:
+        notes.append(_driver_note(id_name, accel_id))
     t_s = (t - t[0]) * 1e-6
     temp_c: np.ndarray | None = None
     if not has_t:
@@ -187,6 +194,19 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
         notes.append(why or f"{name} → sensor_c (°C)")
     return RawImport(p, "dataflash", t_s, acc_m_s2 / STANDARD_GRAVITY_M_S2, init_rest_s=None,
                      notes=notes, temp_c=temp_c)
+
+
+def _driver_note(id_name: str, accel_id: int) -> str:
+    """What the log's accelerometer device id says about the temperature reading its
+    ArduPilot driver hands ``INS_TCAL`` (:func:`calibration.firmware_flight.
+    ardupilot_accel_reading`), and so which ``soakcal export --format ardupilot`` file."""
+    reading, device = ardupilot_accel_reading(accel_id)
+    head = f"{id_name} {accel_id} is {device}"
+    if reading is None:
+        return (f"{head}: soakcal does not know whether its ArduPilot driver filters the "
+                "temperature; read the driver before choosing `soakcal export --format "
+                "ardupilot --temperature-reading filtered|per-sample`")
+    return f"{head}: export its ArduPilot file with --temperature-reading {reading}"
 
 
 # struct character → numpy type, for the numeric fields DFReader's formats use

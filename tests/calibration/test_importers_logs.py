@@ -503,3 +503,31 @@ def test_the_peer_benchmark_reads_a_log_through_the_import_and_says_why_not(tmp_
     assert log is not None and log.t_s.size == 2500
     np.testing.assert_allclose(log.temp_c, temp, atol=1e-6)
     np.testing.assert_allclose(log.acc_g, acc / G, atol=1e-6)
+
+
+@pytest.mark.parametrize(("accel_id", "says"), [
+    # bus ids as ArduPilot builds them: devtype << 16 | address << 8 | bus << 3 | bus type
+    ((0x34 << 16) | (0x00 << 8) | (1 << 3) | 2,
+     "INS_ACC_ID 3407882 is an ICM-42688 (AP_InertialSensor_Invensensev3: its temperature "
+     "unfiltered): export its ArduPilot file with --temperature-reading per-sample"),
+    ((0x13 << 16) | (0x00 << 8) | (4 << 3) | 2,
+     "is an MPU-6000/6500 or ICM-20608 (AP_InertialSensor_Invensense: its temperature "
+     "through a 2-pole 1-Hz low-pass): export its ArduPilot file with "
+     "--temperature-reading filtered"),
+    ((0x38 << 16) | (0x00 << 8) | (1 << 3) | 2,
+     "is device type 0x38: soakcal does not know whether its ArduPilot driver filters"),
+])
+def test_dataflash_names_the_reading_the_boards_driver_hands_the_compensation(
+        tmp_path, accel_id, says):
+    t_us, acc, temp = warmup_samples(n=20)
+    src = write_dataflash(tmp_path / "log.bin", t_us, acc, temp,
+                          params={"INS_ACC_ID": float(accel_id), "INS_ACC2_ID": 0.0})
+    raw = importers.read_source("dataflash", src)
+    assert sum(says in n for n in raw.notes) == 1, raw.notes
+
+
+def test_dataflash_without_a_device_id_says_nothing_of_the_driver(tmp_path):
+    t_us, acc, temp = warmup_samples(n=20)
+    src = write_dataflash(tmp_path / "log.bin", t_us, acc, temp, params={"INS_ACC2_ID": 5.0})
+    raw = importers.read_source("dataflash", src)
+    assert not any("_ID" in n or "--temperature-reading" in n for n in raw.notes)
