@@ -67,7 +67,8 @@ def _firmware_design(model: ThermalModel, read_c: np.ndarray, lo: float, hi: flo
 def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_c: np.ndarray,
                                lsb_c: float,
                                spread: tuple[np.ndarray, np.ndarray] | None = None,
-                               rate_g: np.ndarray | None = None) -> np.ndarray:
+                               rate_g: np.ndarray | None = None, *,
+                               with_bias: bool = True) -> np.ndarray:
     """(3, m+1) g in x: the offset polynomial in the firmware's own reading that is closest
     to the model on the fit log. Both firmwares subtract p(clamp(T_read)) (module
     docstring); the best any p can do at a reading is the log's mean bias there,
@@ -89,13 +90,14 @@ def raw_reading_polynomial_x_g(model: ThermalModel, read_c: np.ndarray, rebuilt_
     it): the target is then the model's whole offset b + k·dT/dt, and p is the
     least-squares polynomial in the reading of what the model says the offset is on the
     log (:func:`rate_fold_record`); the fit is linear in its target, so p is the
-    polynomial of b plus that of the rate term alone."""
+    polynomial of b plus that of the rate term alone (``with_bias=False``: that alone)."""
     lo, hi = model.valid_c or (float(np.min(rebuilt_c)), float(np.max(rebuilt_c)))
     read, rebuilt = np.asarray(read_c, float), np.asarray(rebuilt_c, float)
     ok = np.isfinite(read) & np.isfinite(rebuilt)
     if spread is not None:
         spread = (spread[0], spread[1][ok])
-    target = model.params_vector_at(np.clip(rebuilt[ok], lo, hi), extrapolate=True)[:, sfem.BIAS]
+    target = (model.params_vector_at(np.clip(rebuilt[ok], lo, hi), extrapolate=True)[:, sfem.BIAS]
+              if with_bias else np.zeros((int(np.sum(ok)), 3)))
     if rate_g is not None:
         target = target + np.asarray(rate_g, float)[ok]
     levels = np.unique(np.round(np.clip(read[ok], lo, hi) / max(float(lsb_c), 1e-9))).size
@@ -246,7 +248,9 @@ def _padded(coef: np.ndarray) -> np.ndarray:
 def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
                      rebuilt_c: np.ndarray, fit_heldout_mg: list[float] | None, *,
                      lsb_c: float = 0.0, level_c: float | None = None,
-                     dither_lsb: float = 0.0) -> dict[str, object] | None:
+                     dither_lsb: float = 0.0,
+                     reading_record: dict[str, object] | None = None
+                     ) -> dict[str, object] | None:
     """The rate term k(T)·dT/dt of a warm-up model folded into the firmware's polynomial,
     or None for a model without one.
 
@@ -272,7 +276,9 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
     the folded file at the firmware's reading less the model's whole offset, and
     ``dropped_rms_mg`` / ``dropped_peak_mg``, the static file's (the rate term dropped);
     ``reading``, for a rebuilt channel, the figures of :func:`quantised_reading_error` for
-    the folded file (the export states those)."""
+    the folded file (the export states those). ``reading_record``: the output of
+    :func:`quantised_reading_error` on the same log, whose static polynomials are used
+    instead of fitting them again."""
     if not model.temperature_rate:
         return None
     from calibration.warmup import rate_offset_g
@@ -285,12 +291,12 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
         else None
     rate_g = np.zeros((read.size, 3))
     rate_g[ok] = rate_offset_g(model, np.asarray(t_s, float)[ok], rebuilt[ok])
-    static_ls = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread))
-    whole_ls = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread,
-                                                  rate_g=rate_g))
-    folded = whole_ls - static_ls
+    # the fit is linear in its target: the folded part is the rate term's own polynomial
+    folded = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread,
+                                                rate_g=rate_g, with_bias=False))
     # the static file: the raw-reading polynomial for a rebuilt channel, b(T) itself else
-    static = static_ls if rebuilt_channel else _padded(model.coeffs[sfem.BIAS])
+    static = _padded(_static_reading_x_g(model, read, rebuilt, lsb_c, spread, reading_record)
+                     if rebuilt_channel else model.coeffs[sfem.BIAS])
     spread_ok = None if spread is None else (spread[0], spread[1][ok])
     whole_mg = (model.params_vector_at(np.clip(rebuilt[ok], lo, hi),
                                        extrapolate=True)[:, sfem.BIAS] + rate_g[ok]) * 1e3
@@ -318,14 +324,28 @@ def rate_fold_record(model: ThermalModel, t_s: np.ndarray, read_c: np.ndarray,
     if spread is not None and dither_lsb > 0:
         # the same fold for a firmware that low-pass filters its reading (at the capture
         # mean of the reading: quantised_reading_error's filtered polynomial)
-        static_f = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, None))
-        whole_f = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, None,
-                                                     rate_g=rate_g))
-        out["filtered_folded_rate_x_g"] = [[float(v) for v in axis]
-                                           for axis in whole_f - static_f]
+        static_f = _padded(_static_reading_x_g(model, read, rebuilt, lsb_c, None,
+                                               reading_record))
+        folded_f = _padded(raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, None,
+                                                      rate_g=rate_g, with_bias=False))
+        out["filtered_folded_rate_x_g"] = [[float(v) for v in axis] for axis in folded_f]
         out["filtered_reading_figures"] = _reading_figures(
-            model, whole_f, read[ok], whole_mg, spread_ok, lsb, fit_heldout_mg, (lo, hi))
+            model, static_f + folded_f, read[ok], whole_mg, spread_ok, lsb, fit_heldout_mg,
+            (lo, hi))
     return out
+
+
+def _static_reading_x_g(model: ThermalModel, read: np.ndarray, rebuilt: np.ndarray,
+                        lsb_c: float, spread: tuple[np.ndarray, np.ndarray] | None,
+                        reading_record: dict[str, object] | None) -> np.ndarray:
+    """The static raw-reading polynomial, per sample with ``spread``, else at the capture
+    mean of the reading: the one :func:`quantised_reading_error` fitted on the same log
+    (``reading_record``, its output), or fitted here without it."""
+    key = "raw_reading_bias_x_g" if spread is not None else "filtered_reading_bias_x_g"
+    carried = (reading_record or {}).get(key)
+    if carried is not None:
+        return np.asarray(carried, float)
+    return raw_reading_polynomial_x_g(model, read, rebuilt, lsb_c, spread)
 
 
 def at_rest_figures(model: ThermalModel, folded_x_g: np.ndarray) -> dict[str, list[float]]:

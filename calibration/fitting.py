@@ -302,7 +302,8 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
             model, captures.t_s, dq.read_c if rebuilt_read else T, T, heldout_mg,
             lsb_c=dq.lsb_c if rebuilt_read else 0.0,
             level_c=dq.level_c if rebuilt_read else None,
-            dither_lsb=dq.dither_lsb if rebuilt_read else 0.0)
+            dither_lsb=dq.dither_lsb if rebuilt_read else 0.0,
+            reading_record=firmware if rebuilt_read else None)
         model.provenance["rate_fold"] = fold
         wf.report["rate_fold"] = fold
     if rebuilt_read:
