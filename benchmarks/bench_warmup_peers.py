@@ -17,9 +17,11 @@ Methods:
 
 * ``none``: no compensation (the constant only).
 * ``px4``: the method of PX4's ``Tools/process_sensor_caldata.py``, re-implemented here
-  from its public source: per axis, ``numpy.polyfit`` of order 3 of (reading − median)
-  against (T − TREF) on the raw samples, TREF the middle of the temperature span; the
-  offset is subtracted with T clamped to the fit span (``calc_thermal_offsets_3D``).
+  from its public source (:func:`px4_script_fit`): per axis a 31-sample median filter,
+  the reading less its median, averaged in 2000 equal temperature bins
+  (``resampleWithDeltaX``), and ``numpy.polyfit`` of order 3 against (T − TREF), TREF the
+  middle of the temperature span; the offset is subtracted with T clamped to the fit
+  span (``calc_thermal_offsets_3D``).
 * ``ardupilot``: ArduPilot's ``tempcal_IMU.py`` as shipped in the
   ``ardupilot-methodic-configurator`` package (used when it is installed: its
   ``IMUData`` 2-s moving-average filter and its order-3 fit vs T − 35 °C); otherwise
@@ -251,22 +253,65 @@ def method_none(log: WarmupLog) -> np.ndarray:
     return log.acc_g
 
 
-def method_px4(log: WarmupLog, fit: np.ndarray | None = None,
-               applied_at_c: np.ndarray | None = None) -> np.ndarray:
-    """process_sensor_caldata.py's accel fit, applied as calc_thermal_offsets_3D does
-    (fitted to the ``fit`` samples: default the fit blocks), at each sample's reading or
-    at ``applied_at_c`` (``--as-flown``: :func:`flown_readings`)."""
-    if fit is None:
-        _, fit = blocks(log.t_s)
+PX4_MEDIAN_KERNEL = 31  # process_sensor_caldata.py: median_filter = medfilt(data, 31)
+PX4_RESAMPLE_BINS = 2000  # resampleWithDeltaX: nbInterval
+
+
+def px4_script_fit(log: WarmupLog, fit: np.ndarray, *, resample: bool = True
+                   ) -> tuple[np.ndarray, float, float, float]:
+    """PX4's ``Tools/process_sensor_caldata.py`` accelerometer fit (its accel 0–2 branch),
+    written from its public source: each axis through a 31-sample median filter
+    (``scipy.signal.medfilt``: zero-padded ends; here each contiguous run of ``fit``
+    samples separately, as a log with the held-out blocks cut out), less its median; then,
+    by default, ``resampleWithDeltaX``: 2000 equal bins over the temperature span, each
+    non-empty bin's mean temperature and mean correction; a cubic ``polyfit`` against
+    T − TREF, TREF the middle of TMIN..TMAX (the raw temperature's extremes). Without
+    ``resample`` (the script's ``--no_resample``) the cubic is fitted to every sample.
+
+    Returns ((3, 4) highest power first, as ``np.polyfit``; TMIN, TMAX, TREF)."""
+    from scipy.signal import medfilt
+
     T = log.temp_c[fit]
     t_min, t_max = float(T.min()), float(T.max())
     t_ref = 0.5 * (t_min + t_max)
+    rel = T - t_ref
+    filtered = np.vstack([np.column_stack([medfilt(log.acc_g[m, i], PX4_MEDIAN_KERNEL)
+                                           for i in range(3)])
+                          for m in fit_runs(fit, log.t_s)])
+    # fit_runs keeps file order, so the runs' rows line up with log.temp_c[fit]
+    coef = np.empty((3, 4))
+    for i in range(3):
+        corr = filtered[:, i] - np.median(filtered[:, i])
+        x, y = _resample_with_delta_x(rel, corr) if resample else (rel, corr)
+        coef[i] = np.polyfit(x, y, 3)
+    return coef, t_min, t_max, t_ref
+
+
+def _resample_with_delta_x(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``resampleWithDeltaX``: the mean x and y of each non-empty one of 2000 equal bins
+    over x's span (a value at the top in the last bin), in bin order."""
+    lo, hi = float(np.min(x)), float(np.max(x))
+    width = (hi - lo) / PX4_RESAMPLE_BINS
+    idx = np.where(x < hi, ((x - lo) / width if width > 0 else 0 * x), PX4_RESAMPLE_BINS - 1)
+    idx = np.minimum(idx.astype(int), PX4_RESAMPLE_BINS - 1)
+    count = np.bincount(idx, minlength=PX4_RESAMPLE_BINS)
+    keep = count > 0
+    return ((np.bincount(idx, x, PX4_RESAMPLE_BINS) / np.maximum(count, 1))[keep],
+            (np.bincount(idx, y, PX4_RESAMPLE_BINS) / np.maximum(count, 1))[keep])
+
+
+def method_px4(log: WarmupLog, fit: np.ndarray | None = None,
+               applied_at_c: np.ndarray | None = None) -> np.ndarray:
+    """process_sensor_caldata.py's accel fit (:func:`px4_script_fit`), applied as
+    calc_thermal_offsets_3D does (fitted to the ``fit`` samples: default the fit blocks),
+    at each sample's reading or at ``applied_at_c`` (``--as-flown``: :func:`flown_readings`)."""
+    if fit is None:
+        _, fit = blocks(log.t_s)
+    coef, t_min, t_max, t_ref = px4_script_fit(log, fit)
     out = np.empty_like(log.acc_g)
     d = np.clip(log.temp_c if applied_at_c is None else applied_at_c, t_min, t_max) - t_ref
     for i in range(3):
-        a = log.acc_g[fit, i]
-        coef = np.polyfit(T - t_ref, a - np.median(a), 3)
-        out[:, i] = log.acc_g[:, i] - np.polyval(coef, d)
+        out[:, i] = log.acc_g[:, i] - np.polyval(coef[i], d)
     return out
 
 
