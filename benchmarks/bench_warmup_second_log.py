@@ -1,7 +1,8 @@
 """Calibrated on one whole warm-up, flown on another: soakcal beside PX4 and ArduPilot.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.bench_warmup_second_log \\
-        --realdata DIR [--cases 30] [--seed 1000] [--only 1026,...] [--no-twin] [--out DIR]
+        --realdata DIR [--cases 30] [--seed 1000] [--only 1026,...] [--no-twin] [--as-flown]
+        [--out DIR]
 
 ``bench_warmup_peers`` and ``bench_warmup_gen2`` fit on alternate 10-s blocks of one log
 and score the held-out blocks; the fit log then has gaps, and a rate term's dT/dt is
@@ -30,6 +31,16 @@ windows of 5-s means (:func:`whole_ratio_interval`); the outcome is
 10 % of the oracle). Beside it, for the same first log, the split's figure
 (``split``: soakcal ÷ better peer held out on the first log's alternate blocks, as the
 other benches score it).
+
+``--as-flown``: also each firmware's file as that firmware applies it in flight on the
+second log (:func:`benchmarks.bench_warmup_peers.flown_readings`, from
+:mod:`calibration.firmware_flight`: PX4's 1-s poll and 1 °C publication gate, ArduPilot's
+InvenSense 1-Hz low-pass, both run over the second log from its first sample): PX4's
+script's file and soakcal's ``--format px4`` file through PX4's gate, ArduPilot's
+tempcal's file and soakcal's ``--format ardupilot`` file through ArduPilot's filter.
+Each soakcal file is compared with **the same firmware's** peer file, per sample and
+flown (a PX4 user flies a PX4 file), with the same bootstrap and verdict
+(:func:`flown_compare`).
 """
 
 from __future__ import annotations
@@ -52,6 +63,7 @@ from benchmarks.bench_warmup_gen2 import verdict, wilson  # noqa: E402
 from benchmarks.bench_warmup_peers import (  # noqa: E402
     MEAN_S,
     WarmupLog,
+    flown_readings,
     heldout_rms_mg,
     imported_log,
     insample_rms_mg,
@@ -128,9 +140,10 @@ def whole_ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.
 
 
 def compare(first: WarmupLog, second: WarmupLog, true2_g: np.ndarray | None,
-            work: Path) -> dict[str, object]:
+            work: Path, as_flown: bool = False) -> dict[str, object]:
     """Every method fitted on the whole ``first`` log, scored on the whole ``second``
-    (module docstring); and the split's soakcal ÷ better peer on ``first``."""
+    (module docstring); and the split's soakcal ÷ better peer on ``first``; with
+    ``as_flown``, :func:`flown_compare` too."""
     n1 = first.t_s.size
     fit = np.zeros(n1 + second.t_s.size, bool)
     fit[:n1] = True
@@ -182,8 +195,58 @@ def compare(first: WarmupLog, second: WarmupLog, true2_g: np.ndarray | None,
     for key in ("soakcal", "export_px4", "export_ardupilot"):
         if key in methods:
             res[f"{key}_verdict"] = verdict({**res, "soakcal": res[key]})
+    if as_flown:
+        res["flown"] = flown_compare(joined, fit, second, methods, ok, res["oracle"],
+                                     work / "whole" / "model.json" if sc is not None else None)
     res["split"] = split_ratio(first, work)
     return res
+
+
+FIRMWARES = ("px4", "ardupilot")
+
+
+def flown_compare(joined: WarmupLog, fit: np.ndarray, second: WarmupLog,
+                  methods: dict[str, np.ndarray | None], ok: np.ndarray,
+                  oracle: object, model: Path | None) -> dict[str, object]:
+    """(``--as-flown``) each firmware's files on the second log, per sample and as that
+    firmware flies them: the peer's file (PX4's script's, ArduPilot's tempcal's, fitted on
+    the first log: ``joined``'s ``fit`` samples) and soakcal's exported file (``model``),
+    each at the reading the firmware evaluates its offset at on the second log
+    (:func:`benchmarks.bench_warmup_peers.flown_readings`). Per firmware and application:
+    RMS of every full 5-s mean about their mean (mg), soakcal's file ÷ the same firmware's
+    peer file with a 95 % paired bootstrap (:func:`whole_ratio_interval`), and the verdict
+    against that peer (``bench_warmup_gen2.verdict``: won, within 10 % of the oracle, lost)."""
+    at = flown_readings(second)
+    n1 = joined.t_s.size - second.t_s.size
+    first_c = joined.temp_c[:n1]
+    peers = {"px4": method_px4(joined, fit, np.concatenate([first_c, at["px4"]]))[n1:],
+             "ardupilot": method_ardupilot(joined, fit, np.concatenate(
+                 [first_c, at["ardupilot"]]))[0][n1:]}
+    sub = WarmupLog(second.name, second.t_s[ok], second.acc_g[ok], second.temp_c[ok])
+    none = insample_rms_mg(sub, second.acc_g[ok]).tolist()
+    out: dict[str, object] = {"px4_publications": int(np.unique(at["px4"]).size),
+                              "ardupilot_lag_max_c": float(np.max(np.abs(
+                                  at["ardupilot"] - second.temp_c)))}
+    for fw in FIRMWARES:
+        ours = {"per_sample": methods.get(f"export_{fw}"),
+                "flown": None if model is None else method_export(
+                    second, model, applied_at_c=at[fw], firmware=fw)}
+        theirs = {"per_sample": methods[fw], "flown": peers[fw]}
+        for how in ("per_sample", "flown"):
+            peer_mg = insample_rms_mg(sub, theirs[how][ok]).tolist()  # type: ignore[index]
+            key = f"{fw}_{how}"
+            out[f"{key}_peer"] = peer_mg
+            if ours[how] is None:
+                out[key] = None
+                continue
+            comp = ours[how][ok]  # type: ignore[index]
+            out[key] = insample_rms_mg(sub, comp).tolist()
+            out[f"{key}_over_peer_95"] = whole_ratio_interval(
+                sub.t_s, comp, (theirs[how][ok],))  # type: ignore[index]
+            out[f"{key}_verdict"] = verdict({"none": none, "px4": peer_mg,
+                                             "ardupilot": peer_mg, "oracle": oracle,
+                                             "soakcal": out[key]})
+    return out
 
 
 def split_ratio(log: WarmupLog, work: Path) -> list[float] | None:
@@ -201,7 +264,8 @@ def split_ratio(log: WarmupLog, work: Path) -> list[float] | None:
     return (ours / peer).tolist()
 
 
-def run_gen2(seed: int, pools: object, work: Path) -> dict[str, object]:
+def run_gen2(seed: int, pools: object, work: Path, as_flown: bool = False
+             ) -> dict[str, object]:
     case = draw_case(seed)
     case2 = second_case(case)
     base: dict[str, object] = {"case": case.name, "kinds": list(case.kinds),
@@ -216,17 +280,19 @@ def run_gen2(seed: int, pools: object, work: Path) -> dict[str, object]:
             return base | {"unusable": f"{c.name}: {said}"}
         logs.append(log)
         truths.append(data.true_g if data.t_s.size == log.t_s.size else None)
-    return base | compare(logs[0], logs[1], truths[1], work)
+    return base | compare(logs[0], logs[1], truths[1], work, as_flown)
 
 
-def run_twin(label: str, kw: dict[str, float], work: Path) -> dict[str, object]:
+def run_twin(label: str, kw: dict[str, float], work: Path, as_flown: bool = False
+             ) -> dict[str, object]:
     first = twin_log(label, seed=TWIN_SEED, **kw)  # type: ignore[arg-type]
     second = twin_log(label, seed=TWIN_SEED, tau_s=TWIN_SECOND_TAU_S,
                       noise_seed=TWIN_SEED + NOISE_SEED_OFFSET, **kw)  # type: ignore[arg-type]
     truth = twin_log(label, seed=TWIN_SEED, tau_s=TWIN_SECOND_TAU_S, noiseless=True,
                      **kw).acc_g  # type: ignore[arg-type]
     return {"case": label, "kinds": ["twin"], "profile": "heat_cool",
-            "tau_factor": TWIN_SECOND_TAU_S / 600.0} | compare(first, second, truth, work)
+            "tau_factor": TWIN_SECOND_TAU_S / 600.0} | compare(first, second, truth, work,
+                                                               as_flown)
 
 
 # --- report ---------------------------------------------------------------------------------
@@ -326,6 +392,73 @@ def stated_table(results: list[dict[str, object]]) -> str:
     return "\n".join(lines)
 
 
+FLOWN_NAMES = {"px4": "PX4", "ardupilot": "ArduPilot"}
+HOW_NAMES = {"per_sample": "per sample", "flown": "flown"}
+
+
+def flown_summary(results: list[dict[str, object]], label: str) -> str:
+    """(``--as-flown``) per firmware, per sample and flown: soakcal's file against the same
+    firmware's peer file, counted as :func:`summary` counts (won / within / lost)."""
+    used = [r["flown"] for r in results if "flown" in r]
+    lines = [f"{label}, each soakcal file ÷ the same firmware's peer file on the second log "
+             f"({len(used)} cases)", "",
+             "| file | applied | won | within 10 % of the oracle | lost | refused | axes: CI "
+             "below 1 / straddles 1 / above 1 | ratio median, max |",
+             "|---|---|---|---|---|---|---|---|"]
+    for fw in FIRMWARES:
+        for how in ("per_sample", "flown"):
+            key = f"{fw}_{how}"
+            outs = [str(f[f"{key}_verdict"]["outcome"]) if f.get(key) is not None  # type: ignore[index, union-attr]
+                    else "refused" for f in used]
+            cis = [b for f in used if f.get(key) is not None  # type: ignore[union-attr]
+                   for b in f[f"{key}_over_peer_95"]]  # type: ignore[index]
+            below = sum(hi < 1.0 for _, hi in cis)
+            above = sum(lo > 1.0 for lo, _ in cis)
+            ratios = [x for f in used if f.get(key) is not None  # type: ignore[union-attr]
+                      for x in np.asarray(f[key]) / np.asarray(f[f"{key}_peer"])]  # type: ignore[index]
+            won, within, n = outs.count("win"), outs.count("win-within-floor"), len(outs)
+            lo, hi = wilson(won + within, n)
+            stats = f"{np.median(ratios):.3f}, {np.max(ratios):.3f}" if ratios else "—"
+            lines.append(f"| {FLOWN_NAMES[fw]} | {HOW_NAMES[how]} | {won} | {within} (won or "
+                         f"within {won + within}/{n}, 95 % {lo:.0%}–{hi:.0%}) | "
+                         f"{outs.count('loss')} | {outs.count('refused')} | {below} / "
+                         f"{len(cis) - below - above} / {above} | {stats} |")
+    return "\n".join(lines)
+
+
+def flown_case_table(results: list[dict[str, object]]) -> str:
+    """(``--as-flown``) per case, mg x / y / z: each firmware's peer file and soakcal's file,
+    per sample and flown, and soakcal's ÷ the peer's as flown (95 %)."""
+    def f3(v: object) -> str:
+        return xyz_mg(v, digits=3)
+
+    def ci(f: dict[str, object], key: str) -> str:
+        if f.get(key) is None:
+            return "refused"
+        ratio = np.asarray(f[key]) / np.asarray(f[f"{key}_peer"])
+        return " / ".join(f"{x:.2f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
+            ratio, f[f"{key}_over_peer_95"], strict=True))  # type: ignore[call-overload]
+
+    lines = ["| case | PX4 script: per sample → flown | soakcal PX4 file: per sample → flown "
+             "| ÷ PX4 script, flown (95 %) | ArduPilot tempcal: per sample → flown | soakcal "
+             "ArduPilot file: per sample → flown | ÷ tempcal, flown (95 %) | outcome flown "
+             "(PX4 / ArduPilot) |", "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        f = r.get("flown")
+        if not isinstance(f, dict):
+            continue
+        outs = " / ".join(str(f[f"{fw}_flown_verdict"]["outcome"])  # type: ignore[index]
+                          if f.get(f"{fw}_flown") is not None else "refused"
+                          for fw in FIRMWARES)
+        cells = []
+        for fw in FIRMWARES:
+            cells += [f"{f3(f[f'{fw}_per_sample_peer'])} → {f3(f[f'{fw}_flown_peer'])}",
+                      f"{f3(f.get(f'{fw}_per_sample'))} → {f3(f.get(f'{fw}_flown'))}",
+                      ci(f, f"{fw}_flown")]
+        lines.append(f"| {r['case']} | " + " | ".join(cells) + f" | {outs} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--realdata", help="the shared real recordings (noise pools)")
@@ -333,6 +466,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1000, help="first gen2 case's seed")
     ap.add_argument("--only", help="comma-separated gen2 case seeds to run instead")
     ap.add_argument("--no-twin", action="store_true", help="skip the twin's four pairs")
+    ap.add_argument("--as-flown", action="store_true",
+                    help="also each firmware's file as the firmware flies it (module docstring)")
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
     args = ap.parse_args(argv)
     seeds = ([int(s) for s in args.only.split(",")] if args.only
@@ -342,11 +477,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
-            gen2.append(run_gen2(s, pools, Path(tmp)))
+            gen2.append(run_gen2(s, pools, Path(tmp), args.as_flown))
             print(json.dumps(gen2[-1]), flush=True)
         if not args.no_twin:
             for label, kw in TWINS.items():
-                twins.append(run_twin(label, kw, Path(tmp)))
+                twins.append(run_twin(label, kw, Path(tmp), args.as_flown))
                 print(json.dumps(twins[-1]), flush=True)
     text = f"{len(seeds)} gen2 cases and {len(twins)} twin pairs in " \
            f"{time.perf_counter() - t0:.0f} s\n"
@@ -354,6 +489,9 @@ def main(argv: list[str] | None = None) -> int:
         if res:
             text += ("\n" + summary(res, label) + "\n\n" + case_table(res) + "\n\n"
                      + stated_table(res) + "\n")
+            if args.as_flown:
+                text += ("\n" + flown_summary(res, label) + "\n\n" + flown_case_table(res)
+                         + "\n")
     print(text)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
