@@ -30,7 +30,9 @@ windows of 5-s means (:func:`whole_ratio_interval`); the outcome is
 ``bench_warmup_gen2.verdict``'s (won: ≤ the better peer on every axis; within: ≤ peer +
 10 % of the oracle). Beside it, for the same first log, the split's figure
 (``split``: soakcal ÷ better peer held out on the first log's alternate blocks, as the
-other benches score it).
+other benches score it). Where the second log goes beyond the first log's span, where
+each method clamps at its own edge, the figure again on the 5-s means inside soakcal's
+edges (:func:`beyond_span`).
 
 ``--as-flown``: also each firmware's file as that firmware applies it in flight on the
 second log (:func:`benchmarks.bench_warmup_peers.flown_readings`, from
@@ -71,6 +73,7 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     method_export,
     method_px4,
     method_soakcal,
+    rows_1s,
     twin_log,
     xyz_mg,
 )
@@ -116,17 +119,24 @@ def second_noise_seed(case: WarmupCase) -> int:
     return case.seed + NOISE_SEED_OFFSET
 
 
+def five_s_means(t_s: np.ndarray, series: tuple[np.ndarray, ...]
+                 ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The full 5-s means of a log (:func:`benchmarks.bench_warmup_peers.insample_rms_mg`'s):
+    their indices from the log's start, and each series' (m, k) means."""
+    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
+    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
+    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
+    return hs, [np.array([c[half == h].mean(axis=0) for h in hs]) for c in series]
+
+
 def whole_ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...],
                          window_s: float = WINDOW_S, draws: int = DRAWS) -> list[list[float]]:
     """Per axis, a 95 % interval of RMS(ours) ÷ RMS(better peer) over every full 5-s mean
     of a log about their mean (:func:`benchmarks.bench_warmup_peers.insample_rms_mg`): a
     paired bootstrap over ``window_s`` windows of the means, each method's constant and
     the better peer taken again on each draw."""
-    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
-    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
-    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
-    means = np.stack([np.array([c[half == h].mean(axis=0) for h in hs])
-                      for c in (ours_g, *peers_g)])  # (methods, m, 3)
+    hs, per_method = five_s_means(t_s, (ours_g, *peers_g))
+    means = np.stack(per_method)  # (methods, m, 3)
     window = (hs * MEAN_S // window_s).astype(int)
     groups = [np.flatnonzero(window == w) for w in np.unique(window)]
     rng = np.random.default_rng(0)
@@ -195,11 +205,48 @@ def compare(first: WarmupLog, second: WarmupLog, true2_g: np.ndarray | None,
     for key in ("soakcal", "export_px4", "export_ardupilot"):
         if key in methods:
             res[f"{key}_verdict"] = verdict({**res, "soakcal": res[key]})
+    res["beyond"] = beyond_span(first, second, methods, ok, true2_g)
     if as_flown:
         res["flown"] = flown_compare(joined, fit, second, methods, ok, res["oracle"],
                                      work / "whole" / "model.json" if sc is not None else None)
     res["split"] = split_ratio(first, work)
     return res
+
+
+def beyond_span(first: WarmupLog, second: WarmupLog, methods: dict[str, np.ndarray | None],
+                ok: np.ndarray, true2_g: np.ndarray | None) -> dict[str, object] | None:
+    """Where the second log goes beyond the first log's span, every method clamps, each at
+    its own edge: soakcal at its fit rows' span (the 1-s rows' mean temperatures), PX4's
+    and ArduPilot's scripts at their fit samples' extremes (the raw readings', noise and
+    all; ArduPilot's after its 2-s average). The figure again (mg, per axis) on the 5-s
+    means of the second log whose mean temperature lies inside soakcal's edges (about
+    their own mean), beside the edges and the count of means outside; None when no 5-s
+    mean lies outside."""
+    rows = np.asarray(rows_1s(first, np.ones(first.t_s.size, bool)))
+    lo_c, hi_c = float(rows[:, 1].min()), float(rows[:, 1].max())
+    keys = [k for k in ("px4", "ardupilot", "soakcal") if methods.get(k) is not None]
+    series = [second.temp_c[ok, None], *(methods[k][ok] for k in keys)]  # type: ignore[index]
+    if true2_g is not None:
+        series += [(true2_g - (second.acc_g - methods[k]))[ok] for k in keys]  # type: ignore[operator]
+    _, means = five_s_means(second.t_s[ok], tuple(series))
+    t_mean = means[0][:, 0]
+    inside = (t_mean >= lo_c) & (t_mean <= hi_c)
+    if inside.all():
+        return None
+
+    def rms_mg(m: np.ndarray) -> list[float]:
+        return (np.sqrt(np.mean((m - m.mean(axis=0)) ** 2, axis=0)) * 1e3).tolist()
+
+    out: dict[str, object] = {
+        "rows_edges_c": [lo_c, hi_c],
+        "sample_edges_c": [float(first.temp_c.min()), float(first.temp_c.max())],
+        "means_outside": int(np.sum(~inside)), "means": int(inside.size),
+        "second_max_mean_c": float(t_mean.max()), "second_min_mean_c": float(t_mean.min())}
+    for i, k in enumerate(keys):
+        out[k] = rms_mg(means[1 + i][inside])
+        if true2_g is not None:
+            out[f"{k}_truth"] = rms_mg(means[1 + len(keys) + i][inside])
+    return out
 
 
 FIRMWARES = ("px4", "ardupilot")
@@ -379,6 +426,35 @@ def summary(results: list[dict[str, object]], label: str) -> str:
     return "\n".join(lines)
 
 
+def beyond_table(results: list[dict[str, object]]) -> str:
+    """The cases whose second log goes beyond the first log's span (:func:`beyond_span`):
+    compensate ÷ better peer over every 5-s mean and over those inside soakcal's edges."""
+    def f3(v: object) -> str:
+        return xyz_mg(v, digits=3)
+
+    lines = ["| case | 5-s means outside | soakcal's edges (1-s rows) | the peers' (PX4: samples) "
+             "| second log's 5-s means reach | all means: compensate ÷ better peer | inside: "
+             "better peer | inside: compensate | inside: ÷ better peer | inside, truth: "
+             "compensate ÷ better peer |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        b = r.get("beyond")
+        if not isinstance(b, dict) or r.get("soakcal") is None:
+            continue
+        peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+        peer_in = np.minimum(b["px4"], b["ardupilot"])
+        truth = (f3(np.asarray(b["soakcal_truth"]) / np.minimum(b["px4_truth"],
+                                                                 b["ardupilot_truth"]))
+                 if "soakcal_truth" in b else "—")
+        lines.append(
+            f"| {r['case']} | {b['means_outside']} of {b['means']} | "
+            f"{b['rows_edges_c'][0]:.3f} … {b['rows_edges_c'][1]:.3f} | "
+            f"{b['sample_edges_c'][0]:.3f} … {b['sample_edges_c'][1]:.3f} | "
+            f"{b['second_min_mean_c']:.3f} … {b['second_max_mean_c']:.3f} | "
+            f"{f3(np.asarray(r['soakcal']) / peer)} | {f3(peer_in)} | {f3(b['soakcal'])} | "
+            f"{f3(np.asarray(b['soakcal']) / peer_in)} | {truth} |")
+    return "\n".join(lines)
+
+
 def stated_table(results: list[dict[str, object]]) -> str:
     """The PX4 header's FOLDED figure (stated from the first log) against the file less
     the model on the second log, mg x / y / z (models with a folded rate term)."""
@@ -488,7 +564,7 @@ def main(argv: list[str] | None = None) -> int:
     for label, res in (("gen2", gen2), ("twin", twins)):
         if res:
             text += ("\n" + summary(res, label) + "\n\n" + case_table(res) + "\n\n"
-                     + stated_table(res) + "\n")
+                     + stated_table(res) + "\n\n" + beyond_table(res) + "\n")
             if args.as_flown:
                 text += ("\n" + flown_summary(res, label) + "\n\n" + flown_case_table(res)
                          + "\n")

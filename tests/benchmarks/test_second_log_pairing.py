@@ -2,7 +2,8 @@
 second log is the same sensor (every truth field kept, the same noiseless output for the
 same profile) with another profile and other noise; the ArduPilot driver's filter runs
 over contiguous fit runs; the bootstrap's ratio interval of two known series; the
-second log flown from its own first poll (``--as-flown``).
+second log flown from its own first poll (``--as-flown``); the part of the second log
+beyond the first's span scored apart.
 No real recordings needed (no vibration pool)."""
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from benchmarks.bench_warmup_peers import (
 )
 from benchmarks.bench_warmup_second_log import (
     TAU_FACTOR,
+    beyond_span,
     flown_compare,
     second_case,
     second_noise_seed,
@@ -117,3 +119,30 @@ def test_the_second_log_is_flown_from_its_own_first_poll() -> None:
     assert f["ardupilot_lag_max_c"] < 1e-3
     assert f["px4_flown"] is None and f["ardupilot_flown"] is None
     assert "px4_flown_verdict" not in f
+
+
+def test_the_part_beyond_the_first_logs_span_is_scored_apart() -> None:
+    """A second warm-up that ends 1 °C above the first's span: every method clamps there, so
+    the whole-log figure holds the uncompensated change beyond the edge; over the 5-s means
+    inside soakcal's edges (the first log's 1-s rows) an exact compensation scores ~0. A
+    second log inside the span has nothing beyond."""
+    t = np.arange(0.0, 600.0, 0.1)
+    slope_g_per_c = np.array([1e-3, 0.0, -1e-3])
+    first = WarmupLog("a", t, np.zeros((t.size, 3)), np.linspace(20.0, 30.0, t.size))
+    first.acc_g = first.temp_c[:, None] * slope_g_per_c
+    temp2 = np.linspace(22.0, 31.0, t.size)
+    second = WarmupLog("b", t, temp2[:, None] * slope_g_per_c, temp2)
+    rows_lo, rows_hi = 20.0 + 0.45 / 60.0, 30.0 - 0.45 / 60.0  # 1-s rows: means 0.45 s in
+    exact = second.acc_g - np.clip(temp2, rows_lo, rows_hi)[:, None] * slope_g_per_c
+    methods = {"px4": exact, "ardupilot": exact, "soakcal": exact}
+    b = beyond_span(first, second, methods, np.ones(t.size, bool), None)
+    assert b is not None
+    assert b["rows_edges_c"] == pytest.approx([rows_lo, rows_hi], abs=1e-3)
+    assert b["sample_edges_c"] == pytest.approx([20.0, 30.0])
+    assert b["means_outside"] == pytest.approx(120 / 9, abs=1.5)  # the last 1 °C of 9
+    whole_mg = insample_rms_mg(second, exact)  # clamped beyond the edge: about 0.1 mg
+    assert whole_mg[0] > 0.05
+    # inside: ~0 (the last mean inside straddles the edge by < 5 s of samples)
+    assert np.max(b["soakcal"]) < 0.02 * whole_mg[0]
+    inside = WarmupLog("c", t, second.acc_g, np.linspace(22.0, 29.0, t.size))
+    assert beyond_span(first, inside, methods, np.ones(t.size, bool), None) is None
