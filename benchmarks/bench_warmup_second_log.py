@@ -452,6 +452,8 @@ def beyond_table(results: list[dict[str, object]]) -> str:
             f"{b['second_min_mean_c']:.3f} … {b['second_max_mean_c']:.3f} | "
             f"{f3(np.asarray(r['soakcal']) / peer)} | {f3(peer_in)} | {f3(b['soakcal'])} | "
             f"{f3(np.asarray(b['soakcal']) / peer_in)} | {truth} |")
+    if len(lines) == 2:
+        return "No 5-s mean of a second log lies beyond its first log's span."
     return "\n".join(lines)
 
 
