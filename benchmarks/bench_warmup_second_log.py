@@ -1,7 +1,8 @@
 """Calibrated on one whole warm-up, flown on another: soakcal beside PX4 and ArduPilot.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.bench_warmup_second_log \\
-        --realdata DIR [--cases 30] [--seed 1000] [--only 1026,...] [--no-twin] [--out DIR]
+        --realdata DIR [--cases 30] [--seed 1000] [--only 1026,...] [--no-twin] [--as-flown]
+        [--out DIR]
 
 ``bench_warmup_peers`` and ``bench_warmup_gen2`` fit on alternate 10-s blocks of one log
 and score the held-out blocks; the fit log then has gaps, and a rate term's dT/dt is
@@ -29,7 +30,19 @@ windows of 5-s means (:func:`whole_ratio_interval`); the outcome is
 ``bench_warmup_gen2.verdict``'s (won: ≤ the better peer on every axis; within: ≤ peer +
 10 % of the oracle). Beside it, for the same first log, the split's figure
 (``split``: soakcal ÷ better peer held out on the first log's alternate blocks, as the
-other benches score it).
+other benches score it). Where the second log goes beyond the first log's span, where
+each method clamps at its own edge, the figure again on the 5-s means inside soakcal's
+edges (:func:`beyond_span`).
+
+``--as-flown``: also each firmware's file as that firmware applies it in flight on the
+second log (:func:`benchmarks.bench_warmup_peers.flown_readings`, from
+:mod:`calibration.firmware_flight`: PX4's 1-s poll and 1 °C publication gate, ArduPilot's
+InvenSense 1-Hz low-pass, both run over the second log from its first sample): PX4's
+script's file and soakcal's ``--format px4`` file through PX4's gate, ArduPilot's
+tempcal's file and soakcal's ``--format ardupilot`` file through ArduPilot's filter.
+Each soakcal file is compared with **the same firmware's** peer file, per sample and
+flown (a PX4 user flies a PX4 file), with the same bootstrap and verdict
+(:func:`flown_compare`).
 """
 
 from __future__ import annotations
@@ -52,6 +65,7 @@ from benchmarks.bench_warmup_gen2 import verdict, wilson  # noqa: E402
 from benchmarks.bench_warmup_peers import (  # noqa: E402
     MEAN_S,
     WarmupLog,
+    flown_readings,
     heldout_rms_mg,
     imported_log,
     insample_rms_mg,
@@ -59,6 +73,7 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     method_export,
     method_px4,
     method_soakcal,
+    rows_1s,
     twin_log,
     xyz_mg,
 )
@@ -104,17 +119,24 @@ def second_noise_seed(case: WarmupCase) -> int:
     return case.seed + NOISE_SEED_OFFSET
 
 
+def five_s_means(t_s: np.ndarray, series: tuple[np.ndarray, ...]
+                 ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The full 5-s means of a log (:func:`benchmarks.bench_warmup_peers.insample_rms_mg`'s):
+    their indices from the log's start, and each series' (m, k) means."""
+    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
+    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
+    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
+    return hs, [np.array([c[half == h].mean(axis=0) for h in hs]) for c in series]
+
+
 def whole_ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...],
                          window_s: float = WINDOW_S, draws: int = DRAWS) -> list[list[float]]:
     """Per axis, a 95 % interval of RMS(ours) ÷ RMS(better peer) over every full 5-s mean
     of a log about their mean (:func:`benchmarks.bench_warmup_peers.insample_rms_mg`): a
     paired bootstrap over ``window_s`` windows of the means, each method's constant and
     the better peer taken again on each draw."""
-    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
-    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
-    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
-    means = np.stack([np.array([c[half == h].mean(axis=0) for h in hs])
-                      for c in (ours_g, *peers_g)])  # (methods, m, 3)
+    hs, per_method = five_s_means(t_s, (ours_g, *peers_g))
+    means = np.stack(per_method)  # (methods, m, 3)
     window = (hs * MEAN_S // window_s).astype(int)
     groups = [np.flatnonzero(window == w) for w in np.unique(window)]
     rng = np.random.default_rng(0)
@@ -128,9 +150,10 @@ def whole_ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.
 
 
 def compare(first: WarmupLog, second: WarmupLog, true2_g: np.ndarray | None,
-            work: Path) -> dict[str, object]:
+            work: Path, as_flown: bool = False) -> dict[str, object]:
     """Every method fitted on the whole ``first`` log, scored on the whole ``second``
-    (module docstring); and the split's soakcal ÷ better peer on ``first``."""
+    (module docstring); and the split's soakcal ÷ better peer on ``first``; with
+    ``as_flown``, :func:`flown_compare` too."""
     n1 = first.t_s.size
     fit = np.zeros(n1 + second.t_s.size, bool)
     fit[:n1] = True
@@ -182,8 +205,95 @@ def compare(first: WarmupLog, second: WarmupLog, true2_g: np.ndarray | None,
     for key in ("soakcal", "export_px4", "export_ardupilot"):
         if key in methods:
             res[f"{key}_verdict"] = verdict({**res, "soakcal": res[key]})
+    res["beyond"] = beyond_span(first, second, methods, ok, true2_g)
+    if as_flown:
+        res["flown"] = flown_compare(joined, fit, second, methods, ok, res["oracle"],
+                                     work / "whole" / "model.json" if sc is not None else None)
     res["split"] = split_ratio(first, work)
     return res
+
+
+def beyond_span(first: WarmupLog, second: WarmupLog, methods: dict[str, np.ndarray | None],
+                ok: np.ndarray, true2_g: np.ndarray | None) -> dict[str, object] | None:
+    """Where the second log goes beyond the first log's span, every method clamps, each at
+    its own edge: soakcal at its fit rows' span (the 1-s rows' mean temperatures), PX4's
+    and ArduPilot's scripts at their fit samples' extremes (the raw readings', noise and
+    all; ArduPilot's after its 2-s average). The figure again (mg, per axis) on the 5-s
+    means of the second log whose mean temperature lies inside soakcal's edges (about
+    their own mean), beside the edges and the count of means outside; None when no 5-s
+    mean lies outside."""
+    rows = np.asarray(rows_1s(first, np.ones(first.t_s.size, bool)))
+    lo_c, hi_c = float(rows[:, 1].min()), float(rows[:, 1].max())
+    keys = [k for k in ("px4", "ardupilot", "soakcal") if methods.get(k) is not None]
+    series = [second.temp_c[ok, None], *(methods[k][ok] for k in keys)]  # type: ignore[index]
+    if true2_g is not None:
+        series += [(true2_g - (second.acc_g - methods[k]))[ok] for k in keys]  # type: ignore[operator]
+    _, means = five_s_means(second.t_s[ok], tuple(series))
+    t_mean = means[0][:, 0]
+    inside = (t_mean >= lo_c) & (t_mean <= hi_c)
+    if inside.all():
+        return None
+
+    def rms_mg(m: np.ndarray) -> list[float]:
+        return (np.sqrt(np.mean((m - m.mean(axis=0)) ** 2, axis=0)) * 1e3).tolist()
+
+    out: dict[str, object] = {
+        "rows_edges_c": [lo_c, hi_c],
+        "sample_edges_c": [float(first.temp_c.min()), float(first.temp_c.max())],
+        "means_outside": int(np.sum(~inside)), "means": int(inside.size),
+        "second_max_mean_c": float(t_mean.max()), "second_min_mean_c": float(t_mean.min())}
+    for i, k in enumerate(keys):
+        out[k] = rms_mg(means[1 + i][inside])
+        if true2_g is not None:
+            out[f"{k}_truth"] = rms_mg(means[1 + len(keys) + i][inside])
+    return out
+
+
+FIRMWARES = ("px4", "ardupilot")
+
+
+def flown_compare(joined: WarmupLog, fit: np.ndarray, second: WarmupLog,
+                  methods: dict[str, np.ndarray | None], ok: np.ndarray,
+                  oracle: object, model: Path | None) -> dict[str, object]:
+    """(``--as-flown``) each firmware's files on the second log, per sample and as that
+    firmware flies them: the peer's file (PX4's script's, ArduPilot's tempcal's, fitted on
+    the first log: ``joined``'s ``fit`` samples) and soakcal's exported file (``model``),
+    each at the reading the firmware evaluates its offset at on the second log
+    (:func:`benchmarks.bench_warmup_peers.flown_readings`). Per firmware and application:
+    RMS of every full 5-s mean about their mean (mg), soakcal's file ÷ the same firmware's
+    peer file with a 95 % paired bootstrap (:func:`whole_ratio_interval`), and the verdict
+    against that peer (``bench_warmup_gen2.verdict``: won, within 10 % of the oracle, lost)."""
+    at = flown_readings(second)
+    n1 = joined.t_s.size - second.t_s.size
+    first_c = joined.temp_c[:n1]
+    peers = {"px4": method_px4(joined, fit, np.concatenate([first_c, at["px4"]]))[n1:],
+             "ardupilot": method_ardupilot(joined, fit, np.concatenate(
+                 [first_c, at["ardupilot"]]))[0][n1:]}
+    sub = WarmupLog(second.name, second.t_s[ok], second.acc_g[ok], second.temp_c[ok])
+    none = insample_rms_mg(sub, second.acc_g[ok]).tolist()
+    out: dict[str, object] = {"px4_publications": int(np.unique(at["px4"]).size),
+                              "ardupilot_lag_max_c": float(np.max(np.abs(
+                                  at["ardupilot"] - second.temp_c)))}
+    for fw in FIRMWARES:
+        ours = {"per_sample": methods.get(f"export_{fw}"),
+                "flown": None if model is None else method_export(
+                    second, model, applied_at_c=at[fw], firmware=fw)}
+        theirs = {"per_sample": methods[fw], "flown": peers[fw]}
+        for how in ("per_sample", "flown"):
+            peer_mg = insample_rms_mg(sub, theirs[how][ok]).tolist()  # type: ignore[index]
+            key = f"{fw}_{how}"
+            out[f"{key}_peer"] = peer_mg
+            if ours[how] is None:
+                out[key] = None
+                continue
+            comp = ours[how][ok]  # type: ignore[index]
+            out[key] = insample_rms_mg(sub, comp).tolist()
+            out[f"{key}_over_peer_95"] = whole_ratio_interval(
+                sub.t_s, comp, (theirs[how][ok],))  # type: ignore[index]
+            out[f"{key}_verdict"] = verdict({"none": none, "px4": peer_mg,
+                                             "ardupilot": peer_mg, "oracle": oracle,
+                                             "soakcal": out[key]})
+    return out
 
 
 def split_ratio(log: WarmupLog, work: Path) -> list[float] | None:
@@ -201,7 +311,8 @@ def split_ratio(log: WarmupLog, work: Path) -> list[float] | None:
     return (ours / peer).tolist()
 
 
-def run_gen2(seed: int, pools: object, work: Path) -> dict[str, object]:
+def run_gen2(seed: int, pools: object, work: Path, as_flown: bool = False
+             ) -> dict[str, object]:
     case = draw_case(seed)
     case2 = second_case(case)
     base: dict[str, object] = {"case": case.name, "kinds": list(case.kinds),
@@ -216,17 +327,19 @@ def run_gen2(seed: int, pools: object, work: Path) -> dict[str, object]:
             return base | {"unusable": f"{c.name}: {said}"}
         logs.append(log)
         truths.append(data.true_g if data.t_s.size == log.t_s.size else None)
-    return base | compare(logs[0], logs[1], truths[1], work)
+    return base | compare(logs[0], logs[1], truths[1], work, as_flown)
 
 
-def run_twin(label: str, kw: dict[str, float], work: Path) -> dict[str, object]:
+def run_twin(label: str, kw: dict[str, float], work: Path, as_flown: bool = False
+             ) -> dict[str, object]:
     first = twin_log(label, seed=TWIN_SEED, **kw)  # type: ignore[arg-type]
     second = twin_log(label, seed=TWIN_SEED, tau_s=TWIN_SECOND_TAU_S,
                       noise_seed=TWIN_SEED + NOISE_SEED_OFFSET, **kw)  # type: ignore[arg-type]
     truth = twin_log(label, seed=TWIN_SEED, tau_s=TWIN_SECOND_TAU_S, noiseless=True,
                      **kw).acc_g  # type: ignore[arg-type]
     return {"case": label, "kinds": ["twin"], "profile": "heat_cool",
-            "tau_factor": TWIN_SECOND_TAU_S / 600.0} | compare(first, second, truth, work)
+            "tau_factor": TWIN_SECOND_TAU_S / 600.0} | compare(first, second, truth, work,
+                                                               as_flown)
 
 
 # --- report ---------------------------------------------------------------------------------
@@ -313,6 +426,37 @@ def summary(results: list[dict[str, object]], label: str) -> str:
     return "\n".join(lines)
 
 
+def beyond_table(results: list[dict[str, object]]) -> str:
+    """The cases whose second log goes beyond the first log's span (:func:`beyond_span`):
+    compensate ÷ better peer over every 5-s mean and over those inside soakcal's edges."""
+    def f3(v: object) -> str:
+        return xyz_mg(v, digits=3)
+
+    lines = ["| case | 5-s means outside | soakcal's edges (1-s rows) | the peers' (PX4: samples) "
+             "| second log's 5-s means reach | all means: compensate ÷ better peer | inside: "
+             "better peer | inside: compensate | inside: ÷ better peer | inside, truth: "
+             "compensate ÷ better peer |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        b = r.get("beyond")
+        if not isinstance(b, dict) or r.get("soakcal") is None:
+            continue
+        peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+        peer_in = np.minimum(b["px4"], b["ardupilot"])
+        truth = (f3(np.asarray(b["soakcal_truth"]) / np.minimum(b["px4_truth"],
+                                                                 b["ardupilot_truth"]))
+                 if "soakcal_truth" in b else "—")
+        lines.append(
+            f"| {r['case']} | {b['means_outside']} of {b['means']} | "
+            f"{b['rows_edges_c'][0]:.3f} … {b['rows_edges_c'][1]:.3f} | "
+            f"{b['sample_edges_c'][0]:.3f} … {b['sample_edges_c'][1]:.3f} | "
+            f"{b['second_min_mean_c']:.3f} … {b['second_max_mean_c']:.3f} | "
+            f"{f3(np.asarray(r['soakcal']) / peer)} | {f3(peer_in)} | {f3(b['soakcal'])} | "
+            f"{f3(np.asarray(b['soakcal']) / peer_in)} | {truth} |")
+    if len(lines) == 2:
+        return "No 5-s mean of a second log lies beyond its first log's span."
+    return "\n".join(lines)
+
+
 def stated_table(results: list[dict[str, object]]) -> str:
     """The PX4 header's FOLDED figure (stated from the first log) against the file less
     the model on the second log, mg x / y / z (models with a folded rate term)."""
@@ -326,6 +470,73 @@ def stated_table(results: list[dict[str, object]]) -> str:
     return "\n".join(lines)
 
 
+FLOWN_NAMES = {"px4": "PX4", "ardupilot": "ArduPilot"}
+HOW_NAMES = {"per_sample": "per sample", "flown": "flown"}
+
+
+def flown_summary(results: list[dict[str, object]], label: str) -> str:
+    """(``--as-flown``) per firmware, per sample and flown: soakcal's file against the same
+    firmware's peer file, counted as :func:`summary` counts (won / within / lost)."""
+    used = [r["flown"] for r in results if "flown" in r]
+    lines = [f"{label}, each soakcal file ÷ the same firmware's peer file on the second log "
+             f"({len(used)} cases)", "",
+             "| file | applied | won | within 10 % of the oracle | lost | refused | axes: CI "
+             "below 1 / straddles 1 / above 1 | ratio median, max |",
+             "|---|---|---|---|---|---|---|---|"]
+    for fw in FIRMWARES:
+        for how in ("per_sample", "flown"):
+            key = f"{fw}_{how}"
+            outs = [str(f[f"{key}_verdict"]["outcome"]) if f.get(key) is not None  # type: ignore[index, union-attr]
+                    else "refused" for f in used]
+            cis = [b for f in used if f.get(key) is not None  # type: ignore[union-attr]
+                   for b in f[f"{key}_over_peer_95"]]  # type: ignore[index]
+            below = sum(hi < 1.0 for _, hi in cis)
+            above = sum(lo > 1.0 for lo, _ in cis)
+            ratios = [x for f in used if f.get(key) is not None  # type: ignore[union-attr]
+                      for x in np.asarray(f[key]) / np.asarray(f[f"{key}_peer"])]  # type: ignore[index]
+            won, within, n = outs.count("win"), outs.count("win-within-floor"), len(outs)
+            lo, hi = wilson(won + within, n)
+            stats = f"{np.median(ratios):.3f}, {np.max(ratios):.3f}" if ratios else "—"
+            lines.append(f"| {FLOWN_NAMES[fw]} | {HOW_NAMES[how]} | {won} | {within} (won or "
+                         f"within {won + within}/{n}, 95 % {lo:.0%}–{hi:.0%}) | "
+                         f"{outs.count('loss')} | {outs.count('refused')} | {below} / "
+                         f"{len(cis) - below - above} / {above} | {stats} |")
+    return "\n".join(lines)
+
+
+def flown_case_table(results: list[dict[str, object]]) -> str:
+    """(``--as-flown``) per case, mg x / y / z: each firmware's peer file and soakcal's file,
+    per sample and flown, and soakcal's ÷ the peer's as flown (95 %)."""
+    def f3(v: object) -> str:
+        return xyz_mg(v, digits=3)
+
+    def ci(f: dict[str, object], key: str) -> str:
+        if f.get(key) is None:
+            return "refused"
+        ratio = np.asarray(f[key]) / np.asarray(f[f"{key}_peer"])
+        return " / ".join(f"{x:.2f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
+            ratio, f[f"{key}_over_peer_95"], strict=True))  # type: ignore[call-overload]
+
+    lines = ["| case | PX4 script: per sample → flown | soakcal PX4 file: per sample → flown "
+             "| ÷ PX4 script, flown (95 %) | ArduPilot tempcal: per sample → flown | soakcal "
+             "ArduPilot file: per sample → flown | ÷ tempcal, flown (95 %) | outcome flown "
+             "(PX4 / ArduPilot) |", "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        f = r.get("flown")
+        if not isinstance(f, dict):
+            continue
+        outs = " / ".join(str(f[f"{fw}_flown_verdict"]["outcome"])  # type: ignore[index]
+                          if f.get(f"{fw}_flown") is not None else "refused"
+                          for fw in FIRMWARES)
+        cells = []
+        for fw in FIRMWARES:
+            cells += [f"{f3(f[f'{fw}_per_sample_peer'])} → {f3(f[f'{fw}_flown_peer'])}",
+                      f"{f3(f.get(f'{fw}_per_sample'))} → {f3(f.get(f'{fw}_flown'))}",
+                      ci(f, f"{fw}_flown")]
+        lines.append(f"| {r['case']} | " + " | ".join(cells) + f" | {outs} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--realdata", help="the shared real recordings (noise pools)")
@@ -333,6 +544,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1000, help="first gen2 case's seed")
     ap.add_argument("--only", help="comma-separated gen2 case seeds to run instead")
     ap.add_argument("--no-twin", action="store_true", help="skip the twin's four pairs")
+    ap.add_argument("--as-flown", action="store_true",
+                    help="also each firmware's file as the firmware flies it (module docstring)")
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
     args = ap.parse_args(argv)
     seeds = ([int(s) for s in args.only.split(",")] if args.only
@@ -342,18 +555,21 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
-            gen2.append(run_gen2(s, pools, Path(tmp)))
+            gen2.append(run_gen2(s, pools, Path(tmp), args.as_flown))
             print(json.dumps(gen2[-1]), flush=True)
         if not args.no_twin:
             for label, kw in TWINS.items():
-                twins.append(run_twin(label, kw, Path(tmp)))
+                twins.append(run_twin(label, kw, Path(tmp), args.as_flown))
                 print(json.dumps(twins[-1]), flush=True)
     text = f"{len(seeds)} gen2 cases and {len(twins)} twin pairs in " \
            f"{time.perf_counter() - t0:.0f} s\n"
     for label, res in (("gen2", gen2), ("twin", twins)):
         if res:
             text += ("\n" + summary(res, label) + "\n\n" + case_table(res) + "\n\n"
-                     + stated_table(res) + "\n")
+                     + stated_table(res) + "\n\n" + beyond_table(res) + "\n")
+            if args.as_flown:
+                text += ("\n" + flown_summary(res, label) + "\n\n" + flown_case_table(res)
+                         + "\n")
     print(text)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
