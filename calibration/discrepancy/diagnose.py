@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy import by_fit, heap, not_confirmed, stats
+from calibration.discrepancy import by_fit, not_confirmed, stats
 from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
@@ -351,7 +351,6 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
         U = E = None
-        heap.release_freed_memory()  # and the previous stage's freed vectors (heap.py)
         U, yw = _basis(pb, terms)
         e = yw - U @ (U.T @ yw)
         dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
@@ -487,7 +486,6 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             told_apart.discard(eff.effect_id)
         prev_tests = tests
     U = E = None  # the last stage's basis and replicates: the scan builds its own
-    heap.release_freed_memory()
     if np.isfinite(tail_nu):
         notes.append(f"the readings are heavier-tailed than Gaussian (Student-t, nu = "
                      f"{tail_nu:.1f}, from their own scatter): the null draws them so")

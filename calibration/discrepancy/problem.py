@@ -29,7 +29,6 @@ import numpy as np
 
 from calibration import fit as sfem_fit
 from calibration import sfem
-from calibration.discrepancy import heap
 from calibration.discrepancy.context import DesignContext, base_context
 from calibration.recording import Recording
 
@@ -94,7 +93,7 @@ def pooled_sigma_g(rec: Recording, steps: np.ndarray) -> np.ndarray | None:
     by it gives heavier-than-Gaussian tails and false outliers. Pooling per step
     keeps real changes of the noise (vibration, temperature) and drops the χ noise.
     """
-    if not all(rec.has(c) for c in ("sd_x", "sd_y", "sd_z")):  # rec.sigma_g is None
+    if rec.sigma_g is None:
         return None
     sd = np.column_stack([rec.columns[c] for c in ("sd_x", "sd_y", "sd_z")])
     n = rec.columns.get("n")
@@ -298,12 +297,9 @@ def build_problem(rec: Recording, *, capture_means: bool = False) -> LinearProbl
     ``capture_means``: the readings are means of raw-sample captures
     (:mod:`calibration.discrepancy.samples`): σ gains the between-capture sd τ.
     """
-    pb = (_reference_problem(rec, capture_means) if rec.has_reference
-          else _norm_problem(rec, capture_means))
-    # The build's freed (3N) temporaries would stay resident in the C heap under everything
-    # that follows (heap.py): 0.1–0.3 GB at 1 M readings.
-    heap.release_freed_memory()
-    return pb
+    if rec.has_reference:
+        return _reference_problem(rec, capture_means)
+    return _norm_problem(rec, capture_means)
 
 
 def _powers(temp: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, float, float]:
@@ -383,18 +379,15 @@ def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearPro
         beta = _wls(X0, w, y)
     ydata = y.reshape(n, 3)
 
-    def value_block(temp: np.ndarray) -> np.ndarray:
+    def blocks(temp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         t = (temp - mid) / half
         Pt = np.column_stack([t**p for p in range(degree + 1)])
-        return (u[:, :, None] * Pt[:, None, :]).reshape(n, -1)
-
-    def slope_block(temp: np.ndarray) -> np.ndarray:
-        t = (temp - mid) / half
         dP = np.column_stack([np.zeros(n)] + [p * t ** (p - 1) for p in range(1, degree + 1)])
-        return (u[:, :, None] * (dP / half)[:, None, :]).reshape(n, -1)
+        return ((u[:, :, None] * Pt[:, None, :]).reshape(n, -1),
+                (u[:, :, None] * (dP / half)[:, None, :]).reshape(n, -1))
 
     # ∂raw/∂T of the fitted base (norm-mode-compatible fallback for temperature effects).
-    dblock = slope_block(ctx.temp_c)
+    dblock = blocks(ctx.temp_c)[1]
     ctx.draw_dtemp_g_per_c = np.column_stack([dblock @ beta[a * k:(a + 1) * k] for a in range(3)])
     wn = w.reshape(n, 3)
 
@@ -405,9 +398,8 @@ def _reference_problem(rec: Recording, capture_means: bool = False) -> LinearPro
         lag and is linear only near T; refitting it on the candidate die temperature
         and differencing the cubic is exact for any lag size (docs/diagnosis.md §4).
         """
-        die_c = ctx.temp_c + dT_c
-        b1, d1 = value_block(die_c), slope_block(die_c)
-        b0 = value_block(ctx.temp_c)
+        b1, d1 = blocks(ctx.temp_c + dT_c)
+        b0 = blocks(ctx.temp_c)[0]
         shift = np.empty((n, 3))
         deriv = np.empty((n, 3))
         for a in range(3):

@@ -11,7 +11,7 @@ import importlib
 import numpy as np
 import pytest
 
-from calibration.discrepancy import diagnose, heap, stats
+from calibration.discrepancy import diagnose, stats
 from calibration.discrepancy.problem import build_problem
 from calibration.discrepancy.scan import _blocks
 from calibration.recording import Recording
@@ -598,39 +598,3 @@ def test_per_reading_inverse_by_blocks_equals_the_one_batch(monkeypatch):
     assert g == 3
     np.testing.assert_allclose(t_b, t, rtol=1e-9)
     np.testing.assert_allclose(tn_b, tn, rtol=1e-9)
-
-
-def _rss_mb() -> float:
-    import os
-
-    with open("/proc/self/statm") as fh:
-        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
-
-
-@pytest.mark.skipif(heap._malloc_trim() is None, reason="needs glibc's malloc_trim")
-def test_freed_heap_arrays_are_returned_to_the_system():
-    """Freed arrays the heap kept resident between live ones leave RSS (issue 22).
-
-    A freed 24 MB mmapped array raises glibc's mmap threshold to its size, so the 20 MB
-    arrays below come from the heap; each is pinned there by a small live array allocated after
-    it. Freed, their pages stay resident until ``release_freed_memory``.
-    """
-    np.ones(3_000_000)  # 24 MB: mmapped, freed at once, the threshold raised to it
-    big, keep = [], []
-    for _ in range(10):
-        big.append(np.ones(2_500_000))  # 20 MB each, pages touched
-        keep.append(np.ones(8192))  # 64 kB after it
-    del big
-    held_mb = _rss_mb()
-    heap.release_freed_memory()
-    assert held_mb - _rss_mb() > 120.0  # of the 200 MB freed
-    assert all(float(k.sum()) == 8192.0 for k in keep)  # the live arrays untouched
-
-
-def test_base_problem_returns_its_freed_temporaries(monkeypatch):
-    """build_problem hands the heap its build freed back once the problem is built."""
-    calls = []
-    monkeypatch.setattr(heap, "release_freed_memory", lambda: calls.append(1))
-    for norm in (False, True):
-        build_problem(_rec(norm))
-    assert calls == [1, 1]
