@@ -598,3 +598,20 @@ def test_per_reading_inverse_by_blocks_equals_the_one_batch(monkeypatch):
     assert g == 3
     np.testing.assert_allclose(t_b, t, rtol=1e-9)
     np.testing.assert_allclose(tn_b, tn, rtol=1e-9)
+
+
+def test_memory_benchmark_reports_the_same_read_on_a_new_csv_as_on_a_reused_one(tmp_path):
+    """benchmarks.blind.memory: the recording is written by a process of its own, so the
+    measured child's peak does not carry the writer's (Linux keeps a parent's peak RSS in
+    its children's ru_maxrss across exec)."""
+    import json
+    import subprocess
+    import sys
+
+    csv = tmp_path / "rec.csv"
+    cmd = [sys.executable, "-m", "benchmarks.blind.memory", "--rows", "5000",
+           "--csv", str(csv), "--only", "calibrate"]
+    new, reused = (json.loads(subprocess.run(cmd, capture_output=True, text=True,
+                                             check=True).stdout)["calibrate"]
+                   for _ in range(2))
+    assert abs(new["after_read_mb"] - reused["after_read_mb"]) < 15.0
