@@ -2,7 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m benchmarks.blind.memory [--rows 100000]
         [--shape positions|samples] [--cli] [--csv PATH] [--only calibrate|diagnose]
-        [--effect scale_nonlinearity --size 10]
+        [--effect scale_nonlinearity --size 10] [--raw-cells] [--answer PATH]
 
 Builds one twin campaign (11 steps) of about ``--rows`` readings, writes it to a CSV
 (temporary unless ``--csv`` names one; an existing ``--csv`` is reused as it is), then runs
@@ -25,9 +25,13 @@ that length (issue 22).
 ``--answer PATH`` writes ``diagnose``'s JSON there (after its peak is read), so that two
 versions' answers on the same recording can be compared.
 
-``--cli`` runs the commands a user runs (``soakcal calibrate --json`` with its held-out
-refits and report, ``soakcal diagnose --json``) instead of the library calls
-(``fit_campaign``, ``diagnose``).
+By default the CSV is read as the CLI reads it (``read_recording(path, raw_cells=False)``:
+the text is not kept) and each child runs what ``calibration/cli.py`` runs after that:
+``fitting.fit`` for ``calibrate``; the gate, ``placed_samples`` and ``diagnose`` for
+``diagnose`` (issue 22: the ratio users see). ``--raw-cells`` gives the figure of the
+sections before: the text kept (``read_recording(path)``), ``fit_campaign`` and
+``diagnose``. ``--cli`` runs the commands a user runs (``soakcal calibrate --json`` with
+its held-out refits and report, ``soakcal diagnose --json``) instead of the library calls.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from pathlib import Path
 CHILD = r"""
 import contextlib, io, json, os, resource, sys, tempfile, time
 what, path, n_null, cli = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1"
-answer = sys.argv[5] if len(sys.argv) > 5 else ""
+answer, raw_cells = sys.argv[5], sys.argv[6] == "1"
 doc = None
 t0 = time.perf_counter()
 if cli:
@@ -59,7 +63,7 @@ if cli:
     base = float("nan")
     extra = ({k: doc.get(k) for k in ("rmse_ug", "loo_rmse_ug", "loo_notes")}
              if what == "calibrate" else {"verdict": doc.get("verdict")})
-else:
+elif raw_cells:  # the library calls on the CSV read with its text kept (before issue 22)
     from calibration.recording import read_recording
     rec = read_recording(path)
     base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -69,6 +73,23 @@ else:
         fit_campaign(rec)
     else:
         from calibration.discrepancy import diagnose
+        doc = diagnose(rec, n_null=n_null).to_dict()
+    extra = {}
+else:  # what the CLI runs (calibration/cli.py), without its report and model file
+    from calibration.recording import read_recording
+    rec = read_recording(path, raw_cells=False)
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    t0 = time.perf_counter()
+    if what == "calibrate":
+        from calibration import fitting
+        fitting.fit(rec)
+    else:
+        from calibration import gate
+        from calibration.captures import capture_means, placed_samples
+        from calibration.discrepancy import diagnose
+        if gate.cannot_judge(rec) is not None:
+            raise SystemExit("the gate refuses this recording")
+        rec = placed_samples(rec, capture_means(rec))
         doc = diagnose(rec, n_null=n_null).to_dict()
     extra = {}
 ru = resource.getrusage(resource.RUSAGE_SELF)
@@ -136,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--answer", type=Path, help="write diagnose's JSON here")
     ap.add_argument("--effect", help="a catalogue effect id concealed in the sensor")
     ap.add_argument("--size", type=float, default=0.0, help="its size, in its unit")
+    ap.add_argument("--raw-cells", action="store_true",
+                    help="library calls on the CSV read with its text kept (the old figure)")
     a = ap.parse_args(argv)
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -150,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         with open(path, encoding="utf-8") as fh:
             n_rows = sum(1 for _ in fh) - 1
         out = {"rows": n_rows, "shape": a.shape, "n_null": a.n_null, "cli": a.cli,
+               "raw_cells": a.raw_cells,
                "effect": a.effect, "size": a.size}
         whats = (a.only,) if a.only else ("calibrate", "diagnose")
         for what in whats:
@@ -163,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
                     str(a.n_null),
                     "1" if a.cli else "0",
                     str(a.answer) if a.answer and what == "diagnose" else "",
+                    "1" if a.raw_cells else "0",
                 ],
                 capture_output=True,
                 text=True,
