@@ -18,7 +18,7 @@ far below 1e-300).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -219,11 +219,22 @@ def wild_replicates(
     if leave_out:
         scale[np.isin(row, leave_out)] = 0.0
     scale *= reading_cap(scale, row)[row]
-    signs = reading_signs(rng, int(row.max()) + 1, out.shape[1])
-    step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
-    for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
-        sl = slice(i, i + step)
-        np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
+    n, b = int(row.max()) + 1, out.shape[1]
+    step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
+    if np.all(row[1:] >= row[:-1]):  # entries by reading (every problem's layout)
+        # Each block of readings' signs drawn as it is used: the (N × B) signs were 160 MB
+        # beside the replicates at 1 M readings (issue 22, memory); the same draws in the
+        # same order (reading_signs), so the same replicates and the generator's state.
+        for r0, signs in sign_blocks(rng, n, b):
+            i, j = np.searchsorted(row, [r0, r0 + signs.shape[0]])
+            for k in range(i, j, step):  # by row blocks: no second (m × B) array
+                sl = slice(k, min(k + step, j))
+                np.multiply(scale[sl, None], signs[row[sl] - r0], out=out[sl])
+    else:
+        signs = reading_signs(rng, n, b)
+        for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
+            sl = slice(i, i + step)
+            np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
     if shared is not None:
         add_shared(rng, shared[0], shared[1], shared[2], out)
     if known is not None:
@@ -237,12 +248,20 @@ def reading_signs(rng: np.random.Generator, n: int, b: int) -> np.ndarray:
     consumed as by the one draw). Why (issue 22, memory): the one draw and its float copies
     were two (n × b) arrays at once (320 MB at 1 M readings and 20 replicates)."""
     out = np.empty((n, b))
+    for i, block in sign_blocks(rng, n, b):
+        out[i : i + block.shape[0]] = block
+    return out
+
+
+def sign_blocks(rng: np.random.Generator, n: int, b: int) -> Iterator[tuple[int, np.ndarray]]:
+    """The signs of :func:`reading_signs` block by block: (first reading, (r × b) signs),
+    about CHUNK_BYTES each, in reading order; the generator consumed as by the one draw."""
     step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
     for i in range(0, n, step):
-        block = out[i : i + step]
+        block = np.empty((min(step, n - i), b))
         np.multiply(rng.integers(0, 2, block.shape), 2.0, out=block)
         block -= 1.0
-    return out
+        yield i, block
 
 
 # Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
