@@ -314,31 +314,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         key = (eff.effect_id, theta)
         if key in raw_cache:
             return raw_cache[key]
-        return lifted_raw(key, eff.regressors(ctx, theta))
-
-    def lifted_raw(key: tuple[str, float], raw: np.ndarray) -> np.ndarray:
-        X = pb.lift(raw)
+        X = pb.lift(eff.regressors(ctx, theta))
         # Cached across stages only within a budget: every grid value of every effect is an
         # (m × k) array (~1 kB per reading in all), rebuilt cheaply on a long recording.
         if sum(a.nbytes for a in raw_cache.values()) + X.nbytes <= CACHE_BUDGET_BYTES:
             raw_cache[key] = X
-        return X
-
-    def whitened(eff: CatalogueEffect, theta: float) -> np.ndarray:
-        """``pb.whiten(lifted(eff, theta))``, in place where nothing else holds the lifted
-        array: not cached, and regressors the effect allocated itself (not a view of the
-        context). Why (issue 22, memory): the lifted columns and their whitened copy were
-        two (m × k) arrays at once, 144 MB each for scale_nonlinearity at 1 M readings."""
-        key = (eff.effect_id, theta)
-        if key in raw_cache:
-            return pb.whiten(raw_cache[key])
-        raw = eff.regressors(ctx, theta)
-        X = lifted_raw(key, raw)
-        own = raw.flags.owndata or (X.flags.owndata and not np.may_share_memory(X, raw))
-        if key in raw_cache or not own or X.ndim != 2 or X.dtype != pb.w.dtype \
-                or not X.flags.writeable:
-            return pb.whiten(X)
-        X *= pb.w[:, None]  # the same products as pb.whiten's
         return X
 
     terms: list[Term] = []
@@ -383,7 +363,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # The outlier family against the Gaussian (or Student-t) replicates, the others
         # against sign flips of this residual, in the same buffer (stats.wild_replicates).
         rows = [f for f in live if f.per_reading]
-        tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, whitened, not_ident,
+        tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                           (nu, rng), bounded)
         shared = _shared(groups, e, U)
         if WILD_NULL:
@@ -391,7 +371,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                   tuple(int(t.theta) for t in tests.values()), shared,
                                   wild_known)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
-                               e, E, s, s_null, whitened, not_ident, (nu, rng), bounded))
+                               e, E, s, s_null, lifted, not_ident, (nu, rng), bounded))
         # The replicates are read: the term's checks below must not hold them too (issue 22,
         # memory: 480 MB at 1 M readings beside the one-plateau check's arrays).
         E = None
@@ -1141,11 +1121,10 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
             "rms_over_noise": round(float(np.sqrt(red)), 3)}
 
 
-def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, whitened, not_ident,
+def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
               tail=(np.inf, None), bounded: stats.BoundedShared | None = None):
-    """Each live effect's test at this stage. ``whitened(eff, θ)``: its lifted, whitened
-    columns. ``bounded``: a quantised channel's rounding error, which each data score is
-    taken net of (stats.linear_stats, stats.row_stats)."""
+    """Each live effect's test at this stage. ``bounded``: a quantised channel's rounding
+    error, which each data score is taken net of (stats.linear_stats, stats.row_stats)."""
     tests: dict[str, stats.CandidateTest] = {}
     # A per-reading effect may be accepted again at another reading; any other once.
     chosen = {t.effect_id for t in terms if not BY_ID[t.effect_id].per_reading}
@@ -1172,7 +1151,7 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, whitened, not_ident
         null_lp = np.zeros(E.shape[1])
         usable = 0
         for theta in grid:
-            Xw = whitened(eff, theta)
+            Xw = pb.whiten(lifted(eff, theta))
             if Xw.shape[1] == 0 or not np.any(Xw):
                 continue
             own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale

@@ -648,35 +648,3 @@ def test_wild_replicates_draw_their_signs_block_by_block(monkeypatch):
     np.testing.assert_allclose(out, dense, rtol=0, atol=1e-12 * np.abs(dense).max())
     np.testing.assert_array_equal(rng.standard_normal(3), after)
 
-
-@pytest.mark.parametrize("norm", [False, True])
-def test_candidate_columns_whitened_in_place_when_not_cached(monkeypatch, norm):
-    """Each candidate's lifted columns, cached by no one, whitened in place (issue 22: the
-    lifted (m × k) array beside its whitened copy, 144 MB each for scale_nonlinearity at
-    1 M readings): with the cache off no copy of columns the effect allocated is made while
-    the candidates are tested, and the diagnosis is the one with every candidate cached
-    (whitened as a copy)."""
-    import sys
-
-    from calibration.discrepancy.problem import LinearProblem
-
-    dm = importlib.import_module("calibration.discrepancy.diagnose")
-    rec = _rec(norm)
-    monkeypatch.setattr(dm, "CACHE_BUDGET_BYTES", 2**40)  # all cached: whitened as copies
-    copied = dm.diagnose(rec, n_null=20, seed=3).to_dict()
-    whiten = LinearProblem.whiten
-
-    def no_copy(self, a):
-        # a copy only of columns lifted from a view (which may be of the context's arrays)
-        caller = sys._getframe(1)
-        assert caller.f_code.co_name != "_evaluate", "a candidate's columns copied"
-        if caller.f_code.co_name == "whitened":
-            assert not caller.f_locals["raw"].flags.owndata, "a candidate's columns copied"
-        return whiten(self, a)
-
-    monkeypatch.setattr(dm, "CACHE_BUDGET_BYTES", 0)
-    monkeypatch.setattr(LinearProblem, "whiten", no_copy)
-    in_place = dm.diagnose(rec, n_null=20, seed=3).to_dict()
-    for d in (copied, in_place):
-        d.pop("elapsed_s", None)
-    assert in_place == copied
