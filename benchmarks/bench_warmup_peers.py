@@ -688,10 +688,23 @@ def method_soakcal_raw(log: WarmupLog, workdir: Path, fit: np.ndarray
 def insample_rms_mg(log: WarmupLog, compensated_g: np.ndarray) -> np.ndarray:
     """Per axis: RMS of every full 5-s mean about their mean (mg): the whole-log figure,
     in-sample (the model saw every sample)."""
-    half = np.floor((log.t_s - log.t_s[0]) / MEAN_S).astype(int)
-    means = np.asarray([compensated_g[half == h].mean(axis=0) for h in np.unique(half)
-                        if np.sum(half == h) > 0.8 * MEAN_S * _rate(log)])
-    return np.sqrt(np.mean((means - means.mean(axis=0)) ** 2, axis=0)) * 1e3
+    return rms_about_mean_mg(five_s_means(log.t_s, (compensated_g,))[1][0])
+
+
+def five_s_means(t_s: np.ndarray, series: tuple[np.ndarray, ...]
+                 ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The full 5-s means of a log (a 5-s stretch with more than 80 % of its samples): their
+    indices from the log's start, and each series' (m, k) means."""
+    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
+    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
+    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
+    return hs, [np.array([c[half == h].mean(axis=0) for h in hs]) for c in series]
+
+
+def rms_about_mean_mg(means_g: np.ndarray) -> np.ndarray:
+    """Per axis: the RMS of (m, 3) means about their own mean, mg (the constant is each
+    method's: gravity's projection, the firmware's ordinary offset)."""
+    return np.sqrt(np.mean((means_g - means_g.mean(axis=0)) ** 2, axis=0)) * 1e3
 
 
 def evaluate_whole(log: WarmupLog, workdir: Path) -> dict[str, object]:
@@ -925,11 +938,10 @@ def main(argv: list[str] | None = None) -> int:
         text += "\n\nFixed degrees, fitted as soakcal fits a warm-up:\n\n" + \
             fixed_degree_table(results)
     if args.export:
-        text += "\n\nThe exported PX4 file at each sample's reading (--export):\n\n" + \
-            export_table(results)
-    if args.export:
-        text += "\n\nThe stated RMS (file − model) against the measured (--export):\n\n" + \
-            stated_table(results)
+        text += ("\n\nThe exported PX4 file at each sample's reading (--export):\n\n"
+                 + export_table(results)
+                 + "\n\nThe stated RMS (file − model) against the measured (--export):\n\n"
+                 + stated_table(results))
     if args.as_flown:
         text += "\n\nEach file as its firmware flies it (--as-flown):\n\n" + \
             flown_table(results)

@@ -65,6 +65,7 @@ from benchmarks.bench_warmup_gen2 import verdict, wilson  # noqa: E402
 from benchmarks.bench_warmup_peers import (  # noqa: E402
     MEAN_S,
     WarmupLog,
+    five_s_means,
     flown_readings,
     heldout_rms_mg,
     imported_log,
@@ -73,6 +74,7 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     method_export,
     method_px4,
     method_soakcal,
+    rms_about_mean_mg,
     rows_1s,
     twin_log,
     xyz_mg,
@@ -117,16 +119,6 @@ def second_case(case: WarmupCase) -> WarmupCase:
 
 def second_noise_seed(case: WarmupCase) -> int:
     return case.seed + NOISE_SEED_OFFSET
-
-
-def five_s_means(t_s: np.ndarray, series: tuple[np.ndarray, ...]
-                 ) -> tuple[np.ndarray, list[np.ndarray]]:
-    """The full 5-s means of a log (:func:`benchmarks.bench_warmup_peers.insample_rms_mg`'s):
-    their indices from the log's start, and each series' (m, k) means."""
-    half = np.floor((t_s - t_s[0]) / MEAN_S).astype(int)
-    rate = (t_s.size - 1) / (t_s[-1] - t_s[0])
-    hs = np.array([h for h in np.unique(half) if np.sum(half == h) > 0.8 * MEAN_S * rate])
-    return hs, [np.array([c[half == h].mean(axis=0) for h in hs]) for c in series]
 
 
 def whole_ratio_interval(t_s: np.ndarray, ours_g: np.ndarray, peers_g: tuple[np.ndarray, ...],
@@ -234,18 +226,16 @@ def beyond_span(first: WarmupLog, second: WarmupLog, methods: dict[str, np.ndarr
     if inside.all():
         return None
 
-    def rms_mg(m: np.ndarray) -> list[float]:
-        return (np.sqrt(np.mean((m - m.mean(axis=0)) ** 2, axis=0)) * 1e3).tolist()
-
     out: dict[str, object] = {
         "rows_edges_c": [lo_c, hi_c],
         "sample_edges_c": [float(first.temp_c.min()), float(first.temp_c.max())],
         "means_outside": int(np.sum(~inside)), "means": int(inside.size),
         "second_max_mean_c": float(t_mean.max()), "second_min_mean_c": float(t_mean.min())}
     for i, k in enumerate(keys):
-        out[k] = rms_mg(means[1 + i][inside])
+        out[k] = rms_about_mean_mg(means[1 + i][inside]).tolist()
         if true2_g is not None:
-            out[f"{k}_truth"] = rms_mg(means[1 + len(keys) + i][inside])
+            out[f"{k}_truth"] = rms_about_mean_mg(
+                means[1 + len(keys) + i][inside]).tolist()
     return out
 
 
@@ -347,18 +337,24 @@ VARIANTS = (("soakcal", "compensate"), ("export_px4", "PX4 file"),
             ("export_ardupilot", "ArduPilot file"))
 
 
-def _ratio_ci(r: dict[str, object], key: str) -> str:
+def _f3(v: object) -> str:
+    """x / y / z to the µg, as every table of this benchmark prints mg."""
+    return xyz_mg(v, digits=3)
+
+
+def _ratio_ci(r: dict[str, object], key: str, peer: object = None) -> str:
+    """``r[key]`` ÷ ``peer`` per axis with its 95 % interval (``r[key + "_over_peer_95"]``);
+    ``peer`` defaults to the better of the two scripts, ``min(r["px4"], r["ardupilot"])``."""
     if r.get(key) is None:
         return "refused"
-    ratio = np.asarray(r[key]) / np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+    if peer is None:
+        peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
+    ratio = np.asarray(r[key]) / np.asarray(peer)
     return " / ".join(f"{x:.2f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
         ratio, r[f"{key}_over_peer_95"], strict=True))  # type: ignore[call-overload]
 
 
 def case_table(results: list[dict[str, object]]) -> str:
-    def f3(v: object) -> str:
-        return xyz_mg(v, digits=3)
-
     lines = ["| case | kinds | τ₂/τ₁ | outside % | better peer | soakcal | soakcal ÷ peer (95 %) "
              "| PX4 file ÷ peer (95 %) | ArduPilot file ÷ peer (95 %) | oracle | outcome "
              "(compensate / PX4 / ArduPilot) | split: soakcal ÷ peer |",
@@ -373,10 +369,10 @@ def case_table(results: list[dict[str, object]]) -> str:
                           if f"{k}_verdict" in r else "—" for k, _ in VARIANTS)
         lines.append(
             f"| {r['case']} | {', '.join(r['kinds'])} | {r['tau_factor']:.2f} | "  # type: ignore[arg-type]
-            f"{100 * r['outside_share']:.0f} | {f3(peer)} | {f3(r['soakcal'])} | "  # type: ignore[operator]
+            f"{100 * r['outside_share']:.0f} | {_f3(peer)} | {_f3(r['soakcal'])} | "  # type: ignore[operator]
             f"{_ratio_ci(r, 'soakcal')} | {_ratio_ci(r, 'export_px4')} | "
-            f"{_ratio_ci(r, 'export_ardupilot')} | {f3(r['oracle'])} | {outs} | "
-            f"{f3(r['split'])} |")
+            f"{_ratio_ci(r, 'export_ardupilot')} | {_f3(r['oracle'])} | {outs} | "
+            f"{_f3(r['split'])} |")
     return "\n".join(lines)
 
 
@@ -429,9 +425,6 @@ def summary(results: list[dict[str, object]], label: str) -> str:
 def beyond_table(results: list[dict[str, object]]) -> str:
     """The cases whose second log goes beyond the first log's span (:func:`beyond_span`):
     compensate ÷ better peer over every 5-s mean and over those inside soakcal's edges."""
-    def f3(v: object) -> str:
-        return xyz_mg(v, digits=3)
-
     lines = ["| case | 5-s means outside | soakcal's edges (1-s rows) | the peers' (PX4: samples) "
              "| second log's 5-s means reach | all means: compensate ÷ better peer | inside: "
              "better peer | inside: compensate | inside: ÷ better peer | inside, truth: "
@@ -442,7 +435,7 @@ def beyond_table(results: list[dict[str, object]]) -> str:
             continue
         peer = np.minimum(r["px4"], r["ardupilot"])  # type: ignore[arg-type]
         peer_in = np.minimum(b["px4"], b["ardupilot"])
-        truth = (f3(np.asarray(b["soakcal_truth"]) / np.minimum(b["px4_truth"],
+        truth = (_f3(np.asarray(b["soakcal_truth"]) / np.minimum(b["px4_truth"],
                                                                  b["ardupilot_truth"]))
                  if "soakcal_truth" in b else "—")
         lines.append(
@@ -450,8 +443,8 @@ def beyond_table(results: list[dict[str, object]]) -> str:
             f"{b['rows_edges_c'][0]:.3f} … {b['rows_edges_c'][1]:.3f} | "
             f"{b['sample_edges_c'][0]:.3f} … {b['sample_edges_c'][1]:.3f} | "
             f"{b['second_min_mean_c']:.3f} … {b['second_max_mean_c']:.3f} | "
-            f"{f3(np.asarray(r['soakcal']) / peer)} | {f3(peer_in)} | {f3(b['soakcal'])} | "
-            f"{f3(np.asarray(b['soakcal']) / peer_in)} | {truth} |")
+            f"{_f3(np.asarray(r['soakcal']) / peer)} | {_f3(peer_in)} | {_f3(b['soakcal'])} | "
+            f"{_f3(np.asarray(b['soakcal']) / peer_in)} | {truth} |")
     if len(lines) == 2:
         return "No 5-s mean of a second log lies beyond its first log's span."
     return "\n".join(lines)
@@ -460,12 +453,9 @@ def beyond_table(results: list[dict[str, object]]) -> str:
 def stated_table(results: list[dict[str, object]]) -> str:
     """The PX4 header's FOLDED figure (stated from the first log) against the file less
     the model on the second log, mg x / y / z (models with a folded rate term)."""
-    def f3(v: object) -> str:
-        return xyz_mg(v, digits=3)
-
     lines = ["| case | stated FOLDED RMS (file − model) | second log: file − model |",
              "|---|---|---|"]
-    lines += [f"| {r['case']} | {f3(r['stated_folded_mg'])} | {f3(r['file_vs_model_mg'])} |"
+    lines += [f"| {r['case']} | {_f3(r['stated_folded_mg'])} | {_f3(r['file_vs_model_mg'])} |"
               for r in results if r.get("file_vs_model_mg") is not None]
     return "\n".join(lines)
 
@@ -507,16 +497,6 @@ def flown_summary(results: list[dict[str, object]], label: str) -> str:
 def flown_case_table(results: list[dict[str, object]]) -> str:
     """(``--as-flown``) per case, mg x / y / z: each firmware's peer file and soakcal's file,
     per sample and flown, and soakcal's ÷ the peer's as flown (95 %)."""
-    def f3(v: object) -> str:
-        return xyz_mg(v, digits=3)
-
-    def ci(f: dict[str, object], key: str) -> str:
-        if f.get(key) is None:
-            return "refused"
-        ratio = np.asarray(f[key]) / np.asarray(f[f"{key}_peer"])
-        return " / ".join(f"{x:.2f} ({a:.2f}–{b:.2f})" for x, (a, b) in zip(
-            ratio, f[f"{key}_over_peer_95"], strict=True))  # type: ignore[call-overload]
-
     lines = ["| case | PX4 script: per sample → flown | soakcal PX4 file: per sample → flown "
              "| ÷ PX4 script, flown (95 %) | ArduPilot tempcal: per sample → flown | soakcal "
              "ArduPilot file: per sample → flown | ÷ tempcal, flown (95 %) | outcome flown "
@@ -530,9 +510,9 @@ def flown_case_table(results: list[dict[str, object]]) -> str:
                           for fw in FIRMWARES)
         cells = []
         for fw in FIRMWARES:
-            cells += [f"{f3(f[f'{fw}_per_sample_peer'])} → {f3(f[f'{fw}_flown_peer'])}",
-                      f"{f3(f.get(f'{fw}_per_sample'))} → {f3(f.get(f'{fw}_flown'))}",
-                      ci(f, f"{fw}_flown")]
+            cells += [f"{_f3(f[f'{fw}_per_sample_peer'])} → {_f3(f[f'{fw}_flown_peer'])}",
+                      f"{_f3(f.get(f'{fw}_per_sample'))} → {_f3(f.get(f'{fw}_flown'))}",
+                      _ratio_ci(f, f"{fw}_flown", f.get(f"{fw}_flown_peer"))]
         lines.append(f"| {r['case']} | " + " | ".join(cells) + f" | {outs} |")
     return "\n".join(lines)
 
