@@ -139,15 +139,25 @@ class RowBlockBasis:
         return out
 
     def rmatmul_t(self, A: np.ndarray) -> np.ndarray:
-        """``Uᵀ·A`` for A (m,) or (m × k): ``Sᵀ·Σ_blocks Bᵀ·A_block``."""
-        A = np.asarray(A, float)
+        """``Uᵀ·A`` for A (m,) or (m × k): ``Sᵀ·Σ_blocks Bᵀ·A_block``, in double precision.
+
+        A single-precision A (replicates beyond the null budget, stats.replicate_dtype) is
+        cast one row block at a time, never whole (issue 22, memory)."""
+        A = np.asarray(A)
+        single = A.dtype == np.float32
+        if not single:
+            A = np.asarray(A, float)
         acc = np.zeros((self._p,) + A.shape[1:])
+        more = np.zeros((self.extra.shape[1],) + A.shape[1:])
         step = _step(self._p)
         for i in range(0, self._m, step):
-            acc += self.design.tmul(i, min(i + step, self._m), A[i:i + step])
+            block = np.asarray(A[i:i + step], float)
+            acc += self.design.tmul(i, min(i + step, self._m), block)
+            if single and self.extra.shape[1]:
+                more += self.extra[i:i + step].T @ block
         out = self.S.T @ acc
         if self.extra.shape[1]:
-            out = np.concatenate([out, self.extra.T @ A])
+            out = np.concatenate([out, more if single else self.extra.T @ A])
         return out
 
     def reshape(self, *shape: Any) -> np.ndarray | _ReadingBlocks:

@@ -285,6 +285,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         notes.append(f"n_null reduced from {n_null} to {n_fit} for memory "
                      f"({pb.m} residuals; budget {NULL_BUDGET_BYTES // 2**20} MiB per copy)")
         n_null = n_fit
+    # Beyond the budget even at its floor (a long recording) the replicates are stored in
+    # single precision (stats.replicate_dtype): half the largest array of the diagnosis.
+    rep_dtype = stats.replicate_dtype(pb.m, n_null, NULL_BUDGET_BYTES)
+    if rep_dtype != np.float64:
+        notes.append(f"null replicates stored in single precision for memory ({pb.m} "
+                     f"residuals × {n_null}; their statistics are formed in double)")
     if not pb.noise_from_sd:
         notes.append("no sd_* columns: noise estimated from the residuals (MAD)")
     if ctx.temperature_source == "none":
@@ -355,7 +361,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         e = yw - U @ (U.T @ yw)
         dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
         s = float(stats.robust_scale(e[:, None], dof)[0])
-        E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
+        E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading, rep_dtype)
         stats.project_out_inplace(U, E)
         s_null = stats.robust_scale(E, dof)
         nu = _reading_dof(pb, U, e, s, terms)
@@ -734,12 +740,13 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     quantised channel's shared noise (:func:`_quantised_channel`), read once per diagnosis."""
     U, yw = _basis(pb, terms)  # the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
+    dtype = stats.replicate_dtype(pb.m, n_null, NULL_BUDGET_BYTES)
     if WILD_NULL:  # sign flips of this residual (stats.wild_replicates)
         groups = plateau_groups(pb) if PLATEAU_NULL else None
-        E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null)),
+        E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null), dtype),
                                   shared=_shared(groups, e, U), known=known)
     else:
-        E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading)
+        E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading, dtype)
         stats.project_out_inplace(U, E)
     return scan_mod.scan(pb, U, e, E, alpha)
 

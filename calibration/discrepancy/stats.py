@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import stats as sps
@@ -108,12 +109,44 @@ def project_out(U: np.ndarray, X: np.ndarray) -> np.ndarray:
 CHUNK_BYTES = 16 * 2**20  # working block of the null replicates' row/column loops
 
 
+def t_matmul(A: Any, E: np.ndarray) -> np.ndarray:
+    """``Aᵀ·E`` for an (m × k) or (m,) ``A`` (an array or a basis.RowBlockBasis) and
+    replicates ``E`` (m × B) of either float width, in double precision.
+
+    Why (issue 22, memory): replicates beyond the null budget are stored in single precision
+    (:func:`replicate_dtype`); numpy's product of a double and a single array first casts the
+    whole single one, a double (m × B) copy (480 MB at 1 M readings). Here a single ``E`` is
+    cast one row block at a time; a double one takes numpy's product as before.
+    """
+    if E.dtype == np.float64 or not isinstance(A, np.ndarray):
+        return A.T @ E  # a RowBlockBasis casts by its own row blocks (basis.rmatmul_t)
+    out = np.zeros(A.shape[1:] + E.shape[1:])
+    step = max(1, CHUNK_BYTES // (8 * max(int(np.prod(A.shape[1:])) + E.shape[1], 1)))
+    for i in range(0, E.shape[0], step):
+        out += A[i : i + step].T @ E[i : i + step].astype(np.float64)
+    return out
+
+
+def replicate_dtype(m: int, n_null: int, budget_bytes: int) -> type[np.floating]:
+    """The width the (m × n_null) replicates are stored in: double within ``budget_bytes``,
+    single beyond it.
+
+    Why (issue 22, memory): at 1 M readings the null is cut to its 20-replicate floor and
+    is still 480 MB in double, the largest array of ``diagnose`` (its peak 2.1× calibrate's).
+    A replicate is unit-variance noise; single precision rounds it at 6e-8, which moves no
+    F statistic nor reading statistic beyond the 7th digit (they are formed and summed in
+    double: :func:`t_matmul`, :func:`sum_sq_columns`). Recordings within the budget keep
+    double replicates, so their diagnoses are unchanged to the bit.
+    """
+    return np.float64 if 8 * m * n_null <= budget_bytes else np.float32
+
+
 def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
     """``E ← (I − UUᵀ)E`` by blocks of rows: no second (m × B) array (issue 10, memory).
 
     ``UᵀE`` is (p × B), small; the product ``U·(UᵀE)`` is formed one row block at a time.
     """
-    UtE = U.T @ E
+    UtE = t_matmul(U, E)
     step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
     for i in range(0, E.shape[0], step):
         E[i : i + step] -= U[i : i + step] @ UtE
@@ -121,16 +154,25 @@ def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
 
 
 def null_replicates(
-    rng: np.random.Generator, m: int, n_null: int, row: np.ndarray, shared: np.ndarray | None = None
+    rng: np.random.Generator, m: int, n_null: int, row: np.ndarray,
+    shared: np.ndarray | None = None, dtype: type[np.floating] = np.float64,
 ) -> np.ndarray:
     """(m × B) whitened noise of the parametric bootstrap (docs/diagnosis.md §2).
 
     Entries are unit-variance. ``shared`` (m,): each entry's loading c on one N(0,1) draw
     per reading (``row``), the recorded temperature's error that moves a reading's three
     axes together: entry = √(1 − c²)·z + c·ξ_row, so the null has the data's within-reading
-    correlation. Without ``shared`` it is white noise, drawn exactly as before.
+    correlation. Without ``shared`` it is white noise, drawn exactly as before. ``dtype``
+    (:func:`replicate_dtype`): single precision is filled by row blocks of double draws,
+    the same numbers in the same order as the one draw, rounded.
     """
-    E = rng.standard_normal((m, n_null))
+    if dtype == np.float64:
+        E = rng.standard_normal((m, n_null))
+    else:
+        E = np.empty((m, n_null), dtype)
+        step = max(1, CHUNK_BYTES // (8 * max(n_null, 1)))
+        for i in range(0, m, step):  # the generator's stream consumed as by the one draw
+            E[i : i + step] = rng.standard_normal((min(step, m - i), n_null))
     if shared is None:
         return E
     xi = rng.standard_normal((int(row.max()) + 1, n_null))
@@ -385,8 +427,16 @@ def _residual_cov_blocks(
 
 
 def sum_sq_columns(E: np.ndarray) -> np.ndarray:
-    """Σ E² of each column without the (m × B) temporary of ``np.sum(E**2, axis=0)``."""
-    return np.einsum("ij,ij->j", E, E)
+    """Σ E² of each column without the (m × B) temporary of ``np.sum(E**2, axis=0)``;
+    single-precision replicates summed in double, by row blocks."""
+    if E.dtype == np.float64:
+        return np.einsum("ij,ij->j", E, E)
+    out = np.zeros(E.shape[1])
+    step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
+    for i in range(0, E.shape[0], step):
+        b = E[i : i + step].astype(np.float64)
+        out += np.einsum("ij,ij->j", b, b)
+    return out
 
 
 def robust_scale(E: np.ndarray, dof_corr: float) -> np.ndarray:
@@ -402,7 +452,7 @@ def robust_scale(E: np.ndarray, dof_corr: float) -> np.ndarray:
         if E.shape[1]
         else np.zeros(0)
     )
-    return 1.4826 * med * dof_corr
+    return 1.4826 * med.astype(np.float64) * dof_corr
 
 
 def absorbed_fraction(U: np.ndarray, X: np.ndarray) -> float:
@@ -615,7 +665,7 @@ def linear_stats(
                 c = (qn_b + t_b**2) / max((ee - qn_d - t_d**2) / dof, 1e-300)
                 lp = (float(np.log(0.5) + f_logsf(c / (j + 1), j + 1, dof)) if t_b > 0
                       else 0.0)
-            lpn = stat(np.sum((Nb.T @ E) ** 2, axis=0), b1 @ E, EE)
+            lpn = stat(np.sum(t_matmul(Nb, E) ** 2, axis=0), t_matmul(b1, E), EE)
             return lp, lpn, j + 1, absorbed, (qn_d + t_d**2) if t_d > 0 else 0.0
     B = orthonormal_basis(project_out(U, Xw), 1e-6)
     k = B.shape[1]
@@ -625,7 +675,7 @@ def linear_stats(
     q = float(np.sum((B.T @ e) ** 2))
     q_score = q if bounded is None else _shrunk(np.sqrt(q), bounded.reach(B)) ** 2
     f = q_score / k / max((ee - q) / dof, 1e-300)
-    qn = np.sum((B.T @ E) ** 2, axis=0)
+    qn = np.sum(t_matmul(B, E) ** 2, axis=0)
     # the same floor as the data's F: a replicate whose residual lies wholly in B (EE = qn)
     # gave 0/0 = nan, which no comparison counts
     fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)

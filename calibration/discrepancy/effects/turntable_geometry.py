@@ -291,9 +291,10 @@ class TurntableGeometry(CatalogueEffect):
         if dof < MIN_ACROSS_DOF:
             return 0.0, np.zeros(E.shape[1]), 0, absorbed, 0.0
         q = float(np.sum((B.T @ e) ** 2))
-        qn = np.sum((B.T @ E) ** 2, axis=0)
+        BtE = stats.t_matmul(B, E)  # single-precision replicates cast by row blocks
+        qn = np.sum(BtE ** 2, axis=0)
         den = across_ss(e - B @ (B.T @ e))[0] / dof
-        den_n = across_ss(E - B @ (B.T @ E)) / dof
+        den_n = across_ss(E - B @ BtE) / dof
         lp = float(stats.f_logsf(q / k / max(den, 1e-300), k, dof))
         lpn = stats.f_logsf(qn / k / np.maximum(den_n, 1e-300), k, dof)
         return lp, lpn, k, absorbed, q
