@@ -8,6 +8,8 @@ stderr, exit 2, nothing written.
 from __future__ import annotations
 
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +50,8 @@ def run_diagnose(args: Any, rec: Any = None) -> int:
     if against:
         return _run_against(args, rec, against, n_null)
     try:
-        diag = diagnose(rec, model, seed=int(getattr(args, "seed", 0) or 0), n_null=n_null)
+        diag = diagnose(rec, model, seed=int(getattr(args, "seed", 0) or 0), n_null=n_null,
+                        progress=progress_printer(len(rec)))
     except (CalibrationError, ValueError, np_linalg_error()) as exc:
         print(f"{args.recording}: cannot diagnose: {exc}", file=sys.stderr)
         return 2
@@ -69,6 +72,24 @@ def run_diagnose(args: Any, rec: Any = None) -> int:
 
             write_extended_model(diag, model_path, str(out / "model_extended.json"))
     return 0
+
+
+# From this many readings a diagnosis takes long enough (~10 s and up; ~10 min at 1 M) that
+# its steps are shown on stderr as it works (stdout keeps the report or the JSON alone).
+PROGRESS_MIN_READINGS = 20_000
+
+
+def progress_printer(n_readings: int) -> Callable[[str], None] | None:
+    """One stderr line per step of a long diagnosis, with the time since it began; None
+    (nothing shown) below :data:`PROGRESS_MIN_READINGS` readings."""
+    if n_readings < PROGRESS_MIN_READINGS:
+        return None
+    t0 = time.monotonic()  # elapsed time shown, nothing waited on
+
+    def show(line: str) -> None:
+        print(f"diagnose [{time.monotonic() - t0:6.0f} s] {line}", file=sys.stderr, flush=True)
+
+    return show
 
 
 def _run_against(args: Any, rec: Any, against: str, n_null: int) -> int:

@@ -12,6 +12,7 @@ plateaus held out); then the rest are re-tested against a new null.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
@@ -234,13 +235,18 @@ def null_method() -> str:
 # --- the pipeline ------------------------------------------------------------
 def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0,
              n_null: int = N_NULL, alpha: float = ALPHA,
-             effects: tuple[CatalogueEffect, ...] = ALL_EFFECTS) -> Diagnosis:
+             effects: tuple[CatalogueEffect, ...] = ALL_EFFECTS,
+             progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Diagnose ``recording`` against the base model (docs/diagnosis.md).
 
     ``model`` (a ThermalModel) is accepted for the contract; the statistics
     always refit the base on the recording, because the effects must be tested
-    after projecting out everything the base could absorb.
+    after projecting out everything the base could absorb. ``progress``: called with one
+    line at each step of the work (the base fit, each stage of the forward selection and
+    its outcome, the checks, the final scan), for a caller that shows long work (the CLI
+    on a long recording: ~10 min at 1 M readings).
     """
+    say = progress if progress is not None else _silent
     notes: list[str] = []
     given_rmse = _given_model_rmse_ug(model, recording, notes)
     # Raw samples (many n = 1 rows per position): the samples of a capture share its
@@ -261,6 +267,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     why_not = _too_few(recording)
     if why_not:
         return _cannot_judge(recording, why_not, n_null, alpha, notes)
+    say(f"fitting the base model to {len(recording)} readings")
     pb = build_problem(recording, capture_means=capture_means)
     # A long recording cannot be short of dof: skip the rank's SVD (an (m × p) copy).
     p0 = pb.X0.shape[1]
@@ -357,6 +364,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
         U = E = None
+        say(f"stage {_stage + 1}: testing the catalogue's effects against {n_null} null "
+            "replicates")
         U, yw = _basis(pb, terms)
         e = yw - U @ (U.T @ yw)
         dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
@@ -402,7 +411,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                     if c["effect"] == k:
                         c["p_after"] = float(f"{tests[k].p_adj:.3g}")
         if p_family > alpha_sel:
+            say(f"stage {_stage + 1}: no further effect (best {best.effect_id}, "
+                f"p_family {_p_text(p_family)} > {alpha_sel:.2g})")
             break
+        say(f"stage {_stage + 1}: {best.effect_id} stands out (p_family {_p_text(p_family)}); "
+            "checking it")
         # The name among confusers that explain the same structure: the clear best fit.
         best, close = by_fit.name_by_fit(best, tests, e, U.shape[1],
                                          partial(_explained, pb, U, e, lifted), alpha,
@@ -499,10 +512,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # shape (CatalogueEffect.misses: an outlier is isolated, a function of the specific force
     # is the same at every visit of a direction). One that is not is withdrawn, and the
     # structure it was fitted to is reported as ``unexplained`` where it is.
+    say(f"physics checks of {len(findings)} finding(s)")
     terms, findings, not_named = _physics_checks(pb, terms, findings, alpha, notes)
     findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
     terms, findings, after_turn = _shape_after_turn(pb, terms, findings, alpha, notes)
     not_named += after_turn
+    say("localised scan of the final residual")
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
@@ -605,6 +620,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                            for e in effects})
     base_rmse = _rms(base_res, np.zeros(n, bool)) if given_rmse is None else given_rmse
+    say(f"done: {len(findings)} finding(s)")
     return Diagnosis(
         unexplained=unexplained,
         recording=str(recording.path), mode=pb.mode,
@@ -623,6 +639,15 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         t_s=ctx.t_s, steps=ctx.steps, positions=ctx.positions, stage_log=stage_log, problem=pb,
         protocol=protocol.to_json(), terms=terms,
     )
+
+
+def _silent(_line: str) -> None:
+    """No progress shown (the library default)."""
+
+
+def _p_text(p: float) -> str:
+    """"= 0.013" or "< 1e-300" (a p beyond double precision)."""
+    return f"= {p:.2g}" if p >= 1e-300 else "< 1e-300"
 
 
 MIN_RESIDUAL_DOF = 10
