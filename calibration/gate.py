@@ -168,6 +168,21 @@ def gravity_problem(median_g: float, unit: str = "g",
     return head
 
 
+def check_gravity(raw_g: np.ndarray, outcome: str = "no model written") -> None:
+    """Refuse readings in g whose median |a| is not about 1 g (:func:`gravity_problem`):
+    a recording's ax, ay, az in another unit, or read with another range's sensitivity.
+    ``calibrate`` (through :func:`plan`), ``diagnose`` and ``compensate`` ask it."""
+    raw = np.atleast_2d(np.asarray(raw_g, float))
+    norm = np.linalg.norm(raw, axis=1)
+    norm = norm[np.isfinite(norm)]
+    problem = gravity_problem(float(np.median(norm))) if norm.size else None
+    if problem:
+        raise GateRefusal(
+            f"{problem}: a still accelerometer reads local gravity, and the recording's "
+            f"ax, ay, az are in g (docs/recording.md); {outcome}: convert them "
+            f"(soakcal import --format csv --accel-unit …)")
+
+
 def _power_of_two(median_g: float) -> int:
     """k (±1…4) with median_g × 2^k within :data:`RANGE_SCALE_TOLERANCE_G` of 1 g, else 0."""
     if median_g <= 0.0:
@@ -382,12 +397,7 @@ def plan(captures: Recording, *, continuous: bool = False,
         # capture_means leaves out only rows taken while the sensor moved: none was still
         raise GateRefusal(NO_STILL_READING)
     raw = captures.raw_g
-    problem = gravity_problem(float(np.median(np.linalg.norm(raw, axis=1))))
-    if problem:
-        raise GateRefusal(
-            f"{problem}: a still accelerometer reads local gravity, and the recording's "
-            f"ax, ay, az are in g (docs/recording.md); no model written: convert them "
-            f"(soakcal import --format csv --accel-unit …)")
+    check_gravity(raw)
     ori = orientations or distinct_orientations(raw, captures.sigma_g)
     mode = "reference" if captures.has_reference else "norm"
     summary = (f"{ori.count} distinct orientation(s) ({ori.names()}) in {len(captures)} "

@@ -187,3 +187,26 @@ def test_a_temperature_that_is_not_the_sensors_gets_no_steep_model(tmp_path, cap
     assert "(-14.1 mg/°C on average), beyond any MEMS accelerometer's offset drift" in err
     assert "--columns temp=NAME --temp-unit" in err and len(err.splitlines()) == 1
     assert not model.exists()
+
+
+def test_compensate_refuses_readings_that_are_not_in_g(tmp_path, capsys):
+    # a model calibrated on a warm-up in g, applied to the same board's log written by a
+    # firmware that divides by the ±2 g sensitivity at ±8 g (a quarter of the acceleration)
+    n = 60
+    t = np.arange(n) * 5.0
+    temp = 20.0 + 6.0 * t / t[-1]
+    rec = {"t_s": t, "sensor_c": temp, "ax": np.full(n, 0.004), "ay": np.full(n, 0.005),
+           "az": 1.002 + 0.0007 * (temp - 20.0), "n": np.full(n, 2500.0),
+           "sd_x": np.full(n, 0.002), "sd_y": np.full(n, 0.002), "sd_z": np.full(n, 0.004)}
+    src, model = tmp_path / "rec.csv", tmp_path / "model.json"
+    write_recording(src, rec)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model))) == 0
+    capsys.readouterr()
+    quarter = {k: (v / 4.0 if k in ("ax", "ay", "az") else v) for k, v in rec.items()}
+    other, out = tmp_path / "quarter.csv", tmp_path / "out.csv"
+    write_recording(other, quarter)
+    assert cli.run_compensate(SimpleNamespace(model=str(model), recording=str(other),
+                                              output=str(out))) == 2
+    err = capsys.readouterr().err.strip()
+    assert "median |a| is 0.251 g, not about 1 g; ×4 it is 1.004 g" in err
+    assert "nothing written" in err and len(err.splitlines()) == 1 and not out.exists()
