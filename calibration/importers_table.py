@@ -315,8 +315,8 @@ def _check_no_repeated_block(p: str, values: np.ndarray) -> None:
     raise RecordingError(
         p, None, None, f"data rows {again + 1}..{again + length} repeat rows {first + 1}.."
         f"{first + length} value for value ({length} rows): a block written twice (a "
-        f"logger re-sending its buffer, a file joined to a copy of itself); a time series "
-        f"read with --rate-hz would hold it as later samples: remove the repeated rows")
+        f"logger re-sending its buffer, a file joined to a copy of itself), which a "
+        f"calibration would count as more data: remove the repeated rows")
 
 
 def repeated_block(values: np.ndarray, window: int = REPEAT_MIN_ROWS

@@ -210,3 +210,24 @@ def test_compensate_refuses_readings_that_are_not_in_g(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "median |a| is 0.251 g, not about 1 g; ×4 it is 1.004 g" in err
     assert "nothing written" in err and len(err.splitlines()) == 1 and not out.exists()
+
+
+def test_a_steep_tempco_refusal_names_a_temperature_in_another_unit(tmp_path, capsys):
+    # °C declared as °F shrinks the span 1.8× and steepens every slope as much: the
+    # refusal of a slope beyond any part's names the unit among its causes
+    rng = np.random.default_rng(5)
+    t = np.arange(120, dtype=float)
+    temp = (20.0 + 0.5 * t / t[-1] - 32.0) * 5.0 / 9.0 + rng.normal(0, 0.005, t.size)
+    bz = 0.012 * (t / t[-1])  # 12 mg over 0.28 "°C": 43 mg/°C
+    rec = {"t_s": t, "sensor_c": temp, "ax": np.full(t.size, 0.01),
+           "ay": np.full(t.size, 0.02) + rng.normal(0, 1e-5, t.size),
+           "az": 0.9995 + bz + rng.normal(0, 1e-5, t.size),
+           "sd_x": np.full(t.size, 1e-4), "sd_y": np.full(t.size, 1e-4),
+           "sd_z": np.full(t.size, 1e-4), "n": np.full(t.size, 50.0)}
+    src, model = tmp_path / "rec.csv", tmp_path / "model.json"
+    write_recording(src, rec)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model))) == 2
+    err = capsys.readouterr().err.strip()
+    assert "beyond any MEMS accelerometer's offset drift (5 mg/°C)" in err
+    assert "is not this sensor's die or is in another unit" in err
+    assert "--temp-unit C|F|K" in err and len(err.splitlines()) == 1
