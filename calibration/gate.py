@@ -96,15 +96,16 @@ BIAS_TEMPCO_SIGMAS = 2.0
 # dT/dt (°C/min) the refusal reports is read over this window when the model has no rate
 # term of its own (calibration.temperature_conditioning.RATE_WINDOWS_S).
 TEMPCO_RATE_WINDOW_S = 40.0
-# A still accelerometer on the Earth's surface reads local gravity, 0.997 g at the poles
-# to 0.9974 … 1.0026 g wherever a lab is: a median |a| outside this is no calibration's
-# concern but a unit or a sensitivity read wrong (mg as g, counts with another range's
-# sensitivity), and every model fitted to it is wrong.
+# A still accelerometer on the Earth's surface reads local gravity, 0.9973 g at the
+# equator to 1.0026 g at the poles (a part's bias and scale error add a few %): a median
+# |a| outside this span is no calibration's concern but a unit or a sensitivity read wrong
+# (mg as g, counts with another range's sensitivity), and every model fitted to it is
+# wrong (Eq. 1 holds the scale near 1; a warm-up holds it at 1).
 PLAUSIBLE_MEDIAN_G: tuple[float, float] = (0.5, 2.0)
 # A median |a| within this of 1 g after a power-of-two factor names a range mix-up.
 RANGE_SCALE_TOLERANCE_G = 0.05
 # g per unit of the acceleration units a log may be written in (the importers' names).
-STANDARD_GRAVITY_M_S2 = 9.80665
+STANDARD_GRAVITY_M_S2 = 9.80665  # m/s² per g (CGPM 1901), converts m/s² files to g
 G_PER_UNIT: dict[str, float] = {"g": 1.0, "mg": 1e-3, "m/s2": 1.0 / STANDARD_GRAVITY_M_S2}
 UNIT_SHOWN = {"g": "g", "mg": "mg", "m/s2": "m/s²"}
 # |compensated| − g on the captures the model was fitted to: a calibrated sensor is

@@ -41,7 +41,7 @@ import io
 import json
 import math
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -200,7 +200,7 @@ def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str, unit: str 
 
 # Conversions a die temperature outside PLAUSIBLE_DIE_C is tried with, to name the mistake:
 # (what the numbers would be, °C from the °C read, the --temp-unit fix).
-TEMPERATURE_LOOKS: tuple[tuple[str, object, str], ...] = (
+TEMPERATURE_LOOKS: tuple[tuple[str, Callable[[float], float], str], ...] = (
     ("kelvin", lambda c: c - 273.15, "--temp-unit K"),
     ("°F", lambda c: (c - 32.0) * 5.0 / 9.0, "--temp-unit F"),
     ("hundredths of a °C", lambda c: c / 100.0,
@@ -237,7 +237,7 @@ def temperature_problem(temp_c: np.ndarray) -> str | None:
     if t_lo < lo or t_hi > hi:
         looks = []
         for name, conv, fix in TEMPERATURE_LOOKS:
-            c_lo, c_hi = conv(t_lo), conv(t_hi)  # type: ignore[operator]
+            c_lo, c_hi = conv(t_lo), conv(t_hi)
             if lo <= c_lo and c_hi <= hi:
                 looks.append(f"{name} ({c_lo:.4g} .. {c_hi:.4g} °C: {fix})")
         hint = f"; it looks like {' or '.join(looks[:TEMPERATURE_LOOKS_SHOWN])}" if looks else ""

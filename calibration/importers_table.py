@@ -167,7 +167,8 @@ def read_table(
         if bad:
             notes.append(_bad_lines_note(bad, data.shape[0], timed="t" in wanted))
     del text
-    _check_no_repeated_block(p, data[:, [k for k, r in enumerate(wanted) if r != "t"]])
+    if "t" not in wanted:  # with a time column a block written twice goes back in time
+        _check_no_repeated_block(p, data)
     # each column its own array: a view would keep the whole table alive with the temperature
     col = {r: data[:, k].copy() for k, r in enumerate(wanted)}
     n_rows = data.shape[0]
@@ -319,39 +320,62 @@ def _check_no_repeated_block(p: str, values: np.ndarray) -> None:
         f"calibration would count as more data: remove the repeated rows")
 
 
+# An odd multiplier and its inverse modulo 2^64 (the windows' position weights).
+_P = np.uint64(0xD6E8FEB86659FD93)
+_P_INV = np.uint64(pow(0xD6E8FEB86659FD93, -1, 2**64))
+
+
 def repeated_block(values: np.ndarray, window: int = REPEAT_MIN_ROWS
                    ) -> tuple[int, int, int] | None:
     """(first, again, length): rows ``again…`` repeat rows ``first…`` for ``length`` rows
-    (the earliest repeat of at least ``window`` varying rows), or None."""
+    (the earliest repeat of at least ``window`` varying rows), or None.
+
+    Each row's bits are mixed into one 64-bit hash, each window's hash is the sum of its
+    rows' weighted by their place in it (a difference of one running sum: linear in the
+    rows), and windows with equal hashes are compared value for value. About 5 arrays of
+    8 bytes a row beside ``values``."""
     n = values.shape[0]
     if n < 2 * window:
         return None
-    rows = np.ascontiguousarray(values, dtype=float)
-    ids = np.unique(rows.view(np.dtype((np.void, 8 * rows.shape[1]))).ravel(),
-                    return_inverse=True)[1].ravel().astype(np.uint64)
+    mult = np.uint64(0x9E3779B97F4A7C15)
+    row_hash = np.zeros(n, np.uint64)
+    for k in range(values.shape[1]):  # splitmix-style mixing of each cell into the row's
+        row_hash ^= np.ascontiguousarray(values[:, k], dtype=np.float64).view(np.uint64)
+        row_hash *= mult
+        row_hash ^= row_hash >> np.uint64(31)
     m = n - window + 1
-    change = np.concatenate([[0], np.cumsum(ids[1:] != ids[:-1])])
+    change = np.concatenate([[0], np.cumsum(row_hash[1:] != row_hash[:-1])])
     varied = np.flatnonzero(change[window - 1:] - change[:m] >= window // 2)
+    del change
     if varied.size < 2:
         return None
-    coef = np.random.default_rng(0).integers(1, 2**62, size=window, dtype=np.uint64) | 1
-    h = np.zeros(m, np.uint64)
-    for k in range(window):  # a window's hash: Σ ids[i+k]·coef[k] (mod 2^64)
-        h += ids[k:k + m] * coef[k]
-    hv = h[varied]
+    # Σ_k row_hash[i+k]·P^-k (mod 2^64), from one running sum of row_hash[t]·P^-t: the
+    # weights make a window's hash depend on the order of its rows
+    running = np.full(n + 1, _P_INV, np.uint64)
+    running[0] = running[1] = 1
+    np.cumprod(running[1:], out=running[1:])
+    running[1:] *= row_hash
+    running[0] = 0
+    np.cumsum(running, out=running)
+    del row_hash
+    p_pow = np.full(m, _P, np.uint64)
+    p_pow[0] = 1
+    np.cumprod(p_pow, out=p_pow)
+    hv = ((running[window:] - running[:m]) * p_pow)[varied]
+    del running, p_pow
     order = np.argsort(hv, kind="stable")
     same = np.flatnonzero(hv[order][1:] == hv[order][:-1])
     best = None
     for s in same:
         i, j = sorted((int(varied[order[s]]), int(varied[order[s + 1]])))
-        if np.array_equal(rows[i:i + window], rows[j:j + window]) and (
-                best is None or j < best[1]):
+        if (best is None or j < best[1]) and np.array_equal(values[i:i + window],
+                                                           values[j:j + window]):
             best = (i, j)
     if best is None:
         return None
     i, j = best
     span = min(n - j, j - i)
-    differ = np.flatnonzero(~np.all(rows[i:i + span] == rows[j:j + span], axis=1))
+    differ = np.flatnonzero(~np.all(values[i:i + span] == values[j:j + span], axis=1))
     return i, j, int(differ[0]) if differ.size else span
 
 
