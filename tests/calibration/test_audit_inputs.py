@@ -17,6 +17,7 @@ import pytest
 from calibration import cli
 from calibration.importers_cli import run_import
 from calibration.recording import write_recording
+from simulators.warmup_log import warmup_log
 
 RATE_HZ = 500.0
 
@@ -231,3 +232,18 @@ def test_a_steep_tempco_refusal_names_a_temperature_in_another_unit(tmp_path, ca
     assert "beyond any MEMS accelerometer's offset drift (5 mg/°C)" in err
     assert "is not this sensor's die or is in another unit" in err
     assert "--temp-unit C|F|K" in err and len(err.splitlines()) == 1
+
+
+def test_a_warmup_read_ten_times_too_short_says_how_long_it_was_read(tmp_path, capsys):
+    # a 120-s warm-up at 50 Hz, its times read at 500 Hz (--rate-hz ×10): 12 s of 15 °C/min.
+    # "Record a longer warm-up" alone blames the recording; the line names the reading too.
+    rec, _ = warmup_log(seconds=120, rate_hz=50, t_start_c=20.0, t_end_c=23.0, tau_s=200)
+    cols = {k: (v / 10.0 if k == "t_s" else v) for k, v in rec.columns.items()}
+    src, model = tmp_path / "rec.csv", tmp_path / "model.json"
+    write_recording(src, cols)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model))) == 2
+    err = capsys.readouterr().err.strip()
+    assert "too few to judge a bias change by held-out error" in err
+    assert "its capture means span 8.5 s and 2.05 °C (14.4 °C/min)" in err
+    assert "if the log ran longer, its time unit or --rate-hz was read wrong" in err
+    assert len(err.splitlines()) == 1 and not model.exists()
