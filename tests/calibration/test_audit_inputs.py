@@ -247,3 +247,14 @@ def test_a_warmup_read_ten_times_too_short_says_how_long_it_was_read(tmp_path, c
     assert "its capture means span 8.5 s and 2.05 °C (14.4 °C/min)" in err
     assert "if the log ran longer, its time unit or --rate-hz was read wrong" in err
     assert len(err.splitlines()) == 1 and not model.exists()
+
+
+def test_a_table_given_as_a_dataflash_log_is_named_once(tmp_path, capsys):
+    # main: pymavlink's DFReader printed a "bad header" line per byte (3.6 M lines for the
+    # inclinometer's CSV), then the import blamed the IMU instance
+    acc, temp = _warmup(n=100)
+    src = _table(tmp_path, acc, temp)
+    err = _refusal(capsys, _args(src, tmp_path / "rec.csv", format="dataflash"))
+    assert "not an ArduPilot DataFlash .bin log: it begins '42652.0000,17.41', " in err
+    assert "not with a DataFlash message header (bytes A3 95): text" in err
+    assert "--format csv" in err and "instance" not in err
