@@ -177,6 +177,8 @@ def _cases() -> list[Case]:
              lambda d, s: _lines(d / "s30.csv", d_(s)[1][:15000]), [*INCL_ARGS, *mg]),
         Case("short_5s", "the first 5 s only",
              lambda d, s: _lines(d / "s5.csv", d_(s)[1][:2500]), [*INCL_ARGS, *mg]),
+        Case("csv_as_dataflash", "the inclinometer CSV given as `--format dataflash`", same,
+             ["--format", "dataflash"]),
         Case("flight", "ArduCopter DataFlash flight", lambda d, s: s["flight"],
              ["--format", "dataflash"]),
         Case("flight_blocks", "the flight as 5-s blocks", lambda d, s: s["flight"],
@@ -274,8 +276,13 @@ def run_case(case: Case, repo: Path, src: dict[str, Path], work: Path) -> tuple[
     rec = work / f"{case.name}.rec.csv"
     imp = _run(repo, ["import", *case.args, str(path), "-o", str(rec)])
     if imp.returncode:
-        return f"import {imp.returncode}", _first(
-            imp, work, {str(src[k]): v for k, v in PLACEHOLDERS.items()})
+        lines = len(imp.stderr.splitlines())
+        said = f" ({lines} lines on stderr; the first and the last shown)" if lines > 1 else ""
+        last = (" … " + imp.stderr.strip().splitlines()[-1][:SHOWN_CHARS].replace(
+            str(path), PLACEHOLDERS.get("incl") if path == src["incl"] else path.name)
+                if lines > 1 else "")
+        return f"import {imp.returncode}{said}", _first(
+            imp, work, {str(src[k]): v for k, v in PLACEHOLDERS.items()}) + last
     temp = next((x.strip() for x in imp.stdout.splitlines()
                  if x.startswith("temperature (")), "no temperature")
     model = work / f"{case.name}.json"
