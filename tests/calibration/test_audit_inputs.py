@@ -258,3 +258,10 @@ def test_a_table_given_as_a_dataflash_log_is_named_once(tmp_path, capsys):
     assert "not an ArduPilot DataFlash .bin log: it begins '42652.0000,17.41', " in err
     assert "not with a DataFlash message header (bytes A3 95): text" in err
     assert "--format csv" in err and "instance" not in err
+
+
+def test_m_s2_declared_as_mg_names_the_unit(tmp_path, capsys):
+    acc, temp = _warmup()
+    src = _table(tmp_path, acc * 9.80665e-3, temp)  # m/s²
+    err = _refusal(capsys, _args(src, tmp_path / "rec.csv", accel_unit="mg"))
+    assert "median |a| is 0.009885 g, not about 1 g; it looks like m/s² (read as mg)" in err
