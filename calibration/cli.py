@@ -187,6 +187,10 @@ def run_compensate(args: argparse.Namespace) -> int:
         rec = read_recording(args.recording)
     except CalibrationError as exc:  # ModelFileError, RecordingError
         return _fail(str(exc))
+    try:
+        gate.check_gravity(rec.raw_g, "nothing written")
+    except CalibrationError as exc:
+        return _fail(f"{args.recording}: {exc}")
     clash = [c for c in OUTPUT_COLUMNS if c in rec.header]
     if clash:
         return _fail(str(RecordingError(

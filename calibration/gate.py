@@ -96,6 +96,18 @@ BIAS_TEMPCO_SIGMAS = 2.0
 # dT/dt (°C/min) the refusal reports is read over this window when the model has no rate
 # term of its own (calibration.temperature_conditioning.RATE_WINDOWS_S).
 TEMPCO_RATE_WINDOW_S = 40.0
+# A still accelerometer on the Earth's surface reads local gravity, 0.9973 g at the
+# equator to 1.0026 g at the poles (a part's bias and scale error add a few %): a median
+# |a| outside this span is no calibration's concern but a unit or a sensitivity read wrong
+# (mg as g, counts with another range's sensitivity), and every model fitted to it is
+# wrong (Eq. 1 holds the scale near 1; a warm-up holds it at 1).
+PLAUSIBLE_MEDIAN_G: tuple[float, float] = (0.5, 2.0)
+# A median |a| within this of 1 g after a power-of-two factor names a range mix-up.
+RANGE_SCALE_TOLERANCE_G = 0.05
+# g per unit of the acceleration units a log may be written in (the importers' names).
+STANDARD_GRAVITY_M_S2 = 9.80665  # m/s² per g (CGPM 1901), converts m/s² files to g
+G_PER_UNIT: dict[str, float] = {"g": 1.0, "mg": 1e-3, "m/s2": 1.0 / STANDARD_GRAVITY_M_S2}
+UNIT_SHOWN = {"g": "g", "mg": "mg", "m/s2": "m/s²"}
 # |compensated| − g on the captures the model was fitted to: a calibrated sensor is
 # within a few mg; 50 mg off on its own data is not a calibration.
 NORM_MAX_DEV_G = 0.05
@@ -117,6 +129,69 @@ NO_STILL_READING = (
 
 class GateRefusal(CalibrationError):
     """The data cannot give a calibration that is not wrong; the message says what would."""
+
+
+def gravity_problem(median_g: float, unit: str = "g",
+                    counts_per_g: float | None = None) -> str | None:
+    """Why readings whose median |a| is ``median_g`` (in g, as read with ``unit``) are not a
+    still accelerometer's, or None when it is about 1 g (:data:`PLAUSIBLE_MEDIAN_G`).
+
+    The one judgement of |a| against gravity, for every reader (``soakcal import``'s
+    declared units, :func:`plan` on a recording's g). The reason names what the numbers
+    look like relative to the unit they were read with: for ``counts``, the counts per g
+    that would give 1 g (and a power of two of the given sensitivity: another full-scale
+    range's); otherwise the unit the file's numbers read as about 1 g in (m/s² given as g
+    or mg, mg as g), or a power of two (a firmware dividing by another range's
+    sensitivity prints a quarter or a half of the acceleration)."""
+    lo, hi = PLAUSIBLE_MEDIAN_G
+    if not math.isfinite(median_g) or lo <= median_g <= hi:
+        return None
+    head = f"median |a| is {median_g:.4g} g, not about 1 g"
+    if unit == "counts" and counts_per_g:
+        counts = median_g * counts_per_g
+        k = _power_of_two(median_g)
+        rng = (f"; ×{2.0 ** k:g} it is {median_g * 2.0 ** k:.4g} g: the sensitivity of "
+               f"another full-scale range? (--counts-per-g {counts_per_g / 2.0 ** k:g})"
+               if k else "")
+        return (f"{head}: the counts read about {counts:.4g} per g, not the "
+                f"{counts_per_g:g} given{rng}")
+    numbers = median_g / G_PER_UNIT.get(unit, 1.0)
+    for name, per in G_PER_UNIT.items():
+        if name != unit and lo <= numbers * per <= hi:
+            read = UNIT_SHOWN.get(unit, unit)
+            return f"{head}; it looks like {UNIT_SHOWN[name]} (read as {read})"
+    k = _power_of_two(median_g)
+    if k:
+        how = f" (as --accel-unit counts: --counts-per-g {2.0 ** -k:g})" if unit in (
+            "g", "counts") else ""
+        return (f"{head}; ×{2.0 ** k:g} it is {median_g * 2.0 ** k:.4g} g: read with the "
+                f"sensitivity of another full-scale range?{how}")
+    return head
+
+
+def check_gravity(raw_g: np.ndarray, outcome: str = "no model written") -> None:
+    """Refuse readings in g whose median |a| is not about 1 g (:func:`gravity_problem`):
+    a recording's ax, ay, az in another unit, or read with another range's sensitivity.
+    ``calibrate`` (through :func:`plan`), ``diagnose`` and ``compensate`` ask it."""
+    raw = np.atleast_2d(np.asarray(raw_g, float))
+    norm = np.linalg.norm(raw, axis=1)
+    norm = norm[np.isfinite(norm)]
+    problem = gravity_problem(float(np.median(norm))) if norm.size else None
+    if problem:
+        raise GateRefusal(
+            f"{problem}: a still accelerometer reads local gravity, and the recording's "
+            f"ax, ay, az are in g (docs/recording.md); {outcome}: convert them "
+            f"(soakcal import --format csv --accel-unit …)")
+
+
+def _power_of_two(median_g: float) -> int:
+    """k (±1…4) with median_g × 2^k within :data:`RANGE_SCALE_TOLERANCE_G` of 1 g, else 0."""
+    if median_g <= 0.0:
+        return 0
+    k = int(round(-np.log2(median_g)))
+    if k == 0 or abs(k) > 4 or abs(median_g * 2.0**k - 1.0) > RANGE_SCALE_TOLERANCE_G:
+        return 0
+    return k
 
 
 @dataclass
@@ -323,6 +398,7 @@ def plan(captures: Recording, *, continuous: bool = False,
         # capture_means leaves out only rows taken while the sensor moved: none was still
         raise GateRefusal(NO_STILL_READING)
     raw = captures.raw_g
+    check_gravity(raw)
     ori = orientations or distinct_orientations(raw, captures.sigma_g)
     mode = "reference" if captures.has_reference else "norm"
     summary = (f"{ori.count} distinct orientation(s) ({ori.names()}) in {len(captures)} "
@@ -487,6 +563,17 @@ def _check_bias_tempco(model: ThermalModel, captures: Recording | None = None,
     if not model.temperature_dependent or model.degree == 0:
         return
     lo, hi = _pinned_span_c(model, captures, temperature_c)
+    if hi > lo:
+        # The change the model applies across its data, by its point estimate: what is
+        # applied to a reading whatever its standard error (a channel that is not this
+        # sensor's temperature gives a slope of noise with an error as large).
+        change = (model.params_vector_at(hi, extrapolate=True)[sfem.BIAS]
+                  - model.params_vector_at(lo, extrapolate=True)[sfem.BIAS])
+        k = int(np.argmax(np.abs(change)))
+        if abs(change[k]) > BIAS_TEMPCO_MAX_G_PER_C * (hi - lo):
+            raise GateRefusal(mean_tempco_refusal(
+                sfem.PARAM_NAMES[k], float(change[k]), lo, hi,
+                _fastest_rate_c_per_min(model, captures)))
     temps = np.linspace(lo, hi, n_temps)
     slope, se = bias_slope_g_per_c(model, temps)
     excess = np.abs(slope) - BIAS_TEMPCO_SIGMAS * se
@@ -522,18 +609,34 @@ def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray
 def tempco_refusal(name: str, slope_g_per_c: float, stderr_g_per_c: float,
                    temperature_c: float, rate_c_per_min: float | None) -> str:
     """The refusal's line: the slope, and every cause that fits the data with its fix."""
-    rate = (f" (here up to {rate_c_per_min:.1f} °C/min)"
-            if rate_c_per_min is not None and np.isfinite(rate_c_per_min) else "")
     return (f"the fitted bias {name} changes by {slope_g_per_c * 1e3:+.2f} ± "
             f"{stderr_g_per_c * 1e3:.2f} mg/°C at {temperature_c:.2f} °C, beyond any MEMS "
             f"accelerometer's offset drift ({BIAS_TEMPCO_MAX_G_PER_C * 1e3:g} mg/°C) by more "
-            f"than {BIAS_TEMPCO_SIGMAS:g} standard errors: something else changed with the "
-            f"temperature. Causes that fit: a temperature channel lagging the die while the "
-            f"temperature changes fast{rate} (fix: heat more slowly, or record a rest and a "
-            f"heating, or a heating and a cooling, so that a rate term k·dT/dt can take the "
-            f"lag), or the "
-            f"board tilting or settling as it warms, 1 mrad reads 1 mg (fix: keep the board "
-            f"still), or a temperature channel that is not this sensor's; no model written")
+            f"than {BIAS_TEMPCO_SIGMAS:g} standard errors: {_tempco_causes(rate_c_per_min)}")
+
+
+def mean_tempco_refusal(name: str, change_g: float, lo_c: float, hi_c: float,
+                        rate_c_per_min: float | None) -> str:
+    """The refusal's line for a bias change beyond any part's drift across the data (the
+    point estimate: what the model would apply), and every cause that fits."""
+    return (f"the fitted bias {name} changes by {change_g * 1e3:+.3g} mg over the captures' "
+            f"{lo_c:.2f} .. {hi_c:.2f} °C ({change_g * 1e3 / (hi_c - lo_c):+.3g} mg/°C on "
+            f"average), beyond any MEMS accelerometer's offset drift "
+            f"({BIAS_TEMPCO_MAX_G_PER_C * 1e3:g} mg/°C): {_tempco_causes(rate_c_per_min)}")
+
+
+def _tempco_causes(rate_c_per_min: float | None) -> str:
+    """Every cause of a bias slope no part has, each with its fix (one sentence)."""
+    rate = (f" (here up to {rate_c_per_min:.1f} °C/min)"
+            if rate_c_per_min is not None and np.isfinite(rate_c_per_min) else "")
+    return (f"something else changed with the temperature. Causes that fit: a temperature "
+            f"channel lagging the die while the temperature changes fast{rate} (fix: heat "
+            f"more slowly, or record a rest and a heating, or a heating and a cooling, so "
+            f"that a rate term k·dT/dt can take the lag), or the board tilting or settling "
+            f"as it warms, 1 mrad reads 1 mg (fix: keep the board still), or a temperature "
+            f"channel that is not this sensor's die or is in another unit (fix: check the "
+            f"column and unit read as the temperature, soakcal import --columns temp=NAME "
+            f"--temp-unit C|F|K); no model written")
 
 
 def _pinned_span_c(model: ThermalModel, captures: Recording | None,

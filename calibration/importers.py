@@ -40,18 +40,19 @@ import csv
 import io
 import json
 import math
-from collections.abc import Iterator, Sequence
+import re
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from calibration.errors import RecordingError
+from calibration.gate import STANDARD_GRAVITY_M_S2, gravity_problem
 from calibration.importers_plain import is_plain, parse_plain_rows
 from calibration.placement import HAND_HELD_TOL_DEG, REF_TOL_COLUMN
 from calibration.recording import Recording
 
-STANDARD_GRAVITY_M_S2 = 9.80665  # m/s² per g (CGPM 1901), converts m/s² files to g
 FORMATS: tuple[str, ...] = (
     "openaxes", "imu_tk", "ferraris", "mpu6050", "ulog", "dataflash", "csv")
 # Formats that are time series of one (or a few) orientations with a temperature (a
@@ -60,8 +61,6 @@ LOG_FORMATS: tuple[str, ...] = ("ulog", "dataflash", "csv")
 # A die temperature outside this span is a unit or scale mistake, not a reading
 # (MEMS parts are specified over -40..+125 °C; margin for chamber overshoot).
 PLAUSIBLE_DIE_C: tuple[float, float] = (-60.0, 150.0)
-# A log at rest reads |a| ≈ 1 g; a median outside this span means a wrong unit.
-PLAUSIBLE_MEDIAN_G: tuple[float, float] = (0.5, 2.0)
 # A die sensor read in every sample of a powered board for this long moves by at least
 # its last digit (self-heating after power-up, the room, the readout's own noise): a
 # value bit-identical over a longer log is a placeholder, not a reading.
@@ -182,51 +181,78 @@ def drop_samples_without_temperature(raw: RawImport) -> RawImport:
                           "dropped"])
 
 
-def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str) -> None:
+def check_plausible(raw: RawImport, *, accel_fix: str, temp_fix: str, unit: str = "g",
+                    counts_per_g: float | None = None) -> None:
     """Refuse a unit mistake a lab engineer would catch by eye: the median |a| of a log
-    is about 1 g, a die temperature is within :data:`PLAUSIBLE_DIE_C`."""
-    g = float(np.median(np.linalg.norm(raw.acc_g, axis=1)))
-    lo, hi = PLAUSIBLE_MEDIAN_G
-    if not lo <= g <= hi:
-        hint = ""
-        for name, factor in (("m/s²", STANDARD_GRAVITY_M_S2), ("mg", 1000.0),
-                             ("g (the file is in g)", 1.0 / STANDARD_GRAVITY_M_S2)):
-            if lo <= g / factor <= hi:
-                hint = f"; it looks like {name}"
-                break
-        else:
-            hint = _range_scale_hint(g, counts="--accel-unit" in accel_fix)
-        raise RecordingError(raw.path, None, None,
-                             f"median |a| is {g:.4g} g, not about 1 g{hint}: {accel_fix}")
+    is about 1 g (:func:`calibration.gate.gravity_problem`, the one judgement of |a|, with
+    the ``unit`` the numbers were read in), a die temperature is within
+    :data:`PLAUSIBLE_DIE_C` (:func:`temperature_problem`)."""
+    problem = gravity_problem(float(np.median(np.linalg.norm(raw.acc_g, axis=1))), unit,
+                              counts_per_g)
+    if problem:
+        raise RecordingError(raw.path, None, None, f"{problem}: {accel_fix}")
     if raw.has_temperature:
         assert raw.temp_c is not None
-        finite = raw.temp_c[np.isfinite(raw.temp_c)]
-        t_lo, t_hi = float(finite.min()), float(finite.max())
-        if t_lo < PLAUSIBLE_DIE_C[0] or t_hi > PLAUSIBLE_DIE_C[1]:
-            hint = "; it looks like kelvin" if t_lo >= 200.0 and t_hi <= 420.0 else ""
-            raise RecordingError(
-                raw.path, None, None,
-                f"temperature spans {t_lo:.4g} .. {t_hi:.4g} °C, outside a die's "
-                f"{PLAUSIBLE_DIE_C[0]:g} .. {PLAUSIBLE_DIE_C[1]:g} °C{hint}: {temp_fix}")
+        why = temperature_problem(raw.temp_c)
+        if why:
+            raise RecordingError(raw.path, None, None, f"{why}: {temp_fix}")
 
 
-# A median |a| within this of 1 g after a power-of-two factor names a range mix-up.
-RANGE_SCALE_TOLERANCE_G = 0.05
+# Conversions a die temperature outside PLAUSIBLE_DIE_C is tried with, to name the mistake:
+# (what the numbers would be, °C from the °C read, the --temp-unit fix).
+TEMPERATURE_LOOKS: tuple[tuple[str, Callable[[float], float], str], ...] = (
+    ("kelvin", lambda c: c - 273.15, "--temp-unit K"),
+    ("°F", lambda c: (c - 32.0) * 5.0 / 9.0, "--temp-unit F"),
+    ("hundredths of a °C", lambda c: c / 100.0,
+     "--temp-unit counts --temp-c-per-count 0.01 --temp-offset-c 0"),
+    ("tenths of a °C", lambda c: c / 10.0,
+     "--temp-unit counts --temp-c-per-count 0.1 --temp-offset-c 0"),
+    ("thousandths of a °C", lambda c: c / 1000.0,
+     "--temp-unit counts --temp-c-per-count 0.001 --temp-offset-c 0"),
+)
+# At most this many of them are named (the first that fit, in that order).
+TEMPERATURE_LOOKS_SHOWN = 2
+# A die's temperature moves slowly: from one sample to the next it scatters by its
+# readout's noise and last digit (0.004 … 0.5 °C: a 1 °C-resolution channel flickering
+# between two codes reaches about 1 °C). An acceleration column read as the temperature
+# scatters by its noise in its own unit (the inclinometer log's x axis in mg: 7 "°C").
+TEMP_SAMPLE_SCATTER_MAX_C = 2.0
+# Fewer samples than this: the scatter is not judged.
+TEMP_SCATTER_MIN_SAMPLES = 20
 
 
-def _range_scale_hint(g: float, *, counts: bool) -> str:
-    """A median |a| a power of two (2…16) away from 1 g: a reading divided by the
-    sensitivity of another full-scale range (a firmware that sets ±8 g and divides by the
-    ±2 g 16384 LSB/g prints a quarter of the acceleration)."""
-    if g <= 0.0:
-        return ""
-    k = int(round(-np.log2(g)))
-    factor = 2.0**k
-    if k == 0 or abs(k) > 4 or abs(g * factor - 1.0) > RANGE_SCALE_TOLERANCE_G:
-        return ""
-    how = f" (as --accel-unit counts: --counts-per-g {1 / factor:g})" if counts else ""
-    return (f"; ×{factor:g} it is {g * factor:.4g} g: read with the sensitivity of another "
-            f"full-scale range?{how}")
+def temperature_problem(temp_c: np.ndarray) -> str | None:
+    """Why a temperature channel (°C, as read with the unit given) is not a die's, or None.
+
+    Outside :data:`PLAUSIBLE_DIE_C`: the reason names the conversions in
+    :data:`TEMPERATURE_LOOKS` that bring it inside, with their ``--temp-unit``. Inside it but
+    scattering from one sample to the next by more than :data:`TEMP_SAMPLE_SCATTER_MAX_C`
+    (robust: the median absolute successive difference, as a standard deviation, / √2):
+    not a temperature (an acceleration or a gyroscope column mapped to it)."""
+    finite = temp_c[np.isfinite(temp_c)]
+    if finite.size == 0:
+        return None
+    t_lo, t_hi = float(finite.min()), float(finite.max())
+    lo, hi = PLAUSIBLE_DIE_C
+    if t_lo < lo or t_hi > hi:
+        looks = []
+        for name, conv, fix in TEMPERATURE_LOOKS:
+            c_lo, c_hi = conv(t_lo), conv(t_hi)
+            if lo <= c_lo and c_hi <= hi:
+                looks.append(f"{name} ({c_lo:.4g} .. {c_hi:.4g} °C: {fix})")
+        hint = f"; it looks like {' or '.join(looks[:TEMPERATURE_LOOKS_SHOWN])}" if looks else ""
+        return (f"temperature spans {t_lo:.4g} .. {t_hi:.4g} °C, outside a die's {lo:g} .. "
+                f"{hi:g} °C{hint}")
+    if finite.size >= TEMP_SCATTER_MIN_SAMPLES:
+        step = np.abs(np.diff(finite))
+        scatter = float(1.4826 * np.median(step) / math.sqrt(2.0))
+        if scatter > TEMP_SAMPLE_SCATTER_MAX_C:
+            return (f"temperature scatters by {scatter:.3g} °C from one sample to the next "
+                    f"(median |step| {float(np.median(step)):.3g} °C over {t_lo:.4g} .. "
+                    f"{t_hi:.4g} °C); a die's reading moves by its last digit, under "
+                    f"{TEMP_SAMPLE_SCATTER_MAX_C:g} °C: the column is not a temperature (an "
+                    f"acceleration or a gyroscope column?)")
+    return None
 
 
 def vet_die_temperature(
@@ -692,9 +718,12 @@ def read_imu_tk(
     _check_monotonic(p, data[:, 0], "t", first_line=1)
     offset = np.broadcast_to(np.asarray(offset_counts, float), (3,))
     acc = (data[:, 1:4] - offset) / scale
-    return RawImport(p, "imu_tk", data[:, 0] - data[0, 0], acc, init_rest_s=init_rest_s,
-                     notes=[f"imu_tk counts: (c − {_fmt3(offset)}) / {_fmt3(scale)} → g",
-                            NO_TEMP_IN_FORMAT.format(fmt="imu_tk")])
+    raw = RawImport(p, "imu_tk", data[:, 0] - data[0, 0], acc, init_rest_s=init_rest_s,
+                    notes=[f"imu_tk counts: (c − {_fmt3(offset)}) / {_fmt3(scale)} → g",
+                           NO_TEMP_IN_FORMAT.format(fmt="imu_tk")])
+    check_plausible(raw, accel_fix="give the right --counts-per-g (and --offset)",
+                    temp_fix="", unit="counts", counts_per_g=float(np.mean(scale)))
+    return raw
 
 
 def read_mpu6050(path: str | Path, *, counts_per_g: float = MPU6050_COUNTS_PER_G) -> RawImport:
@@ -855,11 +884,22 @@ def _read_text(p: str) -> str:
         raise RecordingError(p, None, None, f"not UTF-8 text ({exc.reason})") from None
 
 
+# A cell like "21,973": a spreadsheet's decimal comma, not a garbled line (the whole table
+# is written so). Said in the refusal, with the fix.
+DECIMAL_COMMA = "a decimal comma"
+_DECIMAL_COMMA_CELL = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
+
+
 def _number(p: str, line_no: int, column: str, cell: str) -> float:
     try:
         v = float(cell.strip())
     except ValueError:
-        raise RecordingError(p, line_no, column, f"not a number: {cell.strip()!r}") from None
+        why = (f" ({DECIMAL_COMMA}: numbers are read with '.' as the decimal mark; write "
+               f"the table with '.' decimals, e.g. export it with ';' or tab between "
+               f"cells and '.' in numbers)" if _DECIMAL_COMMA_CELL.fullmatch(cell.strip())
+               else "")
+        raise RecordingError(p, line_no, column,
+                             f"not a number: {cell.strip()!r}{why}") from None
     if not math.isfinite(v):
         raise RecordingError(p, line_no, column, f"not a finite number: {cell.strip()!r}")
     return v

@@ -20,6 +20,8 @@ return every sample; :mod:`calibration.importers_cli` writes them as rows.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 from pathlib import Path
 from typing import Any
@@ -106,6 +108,64 @@ def read_dataflash(path: str | Path, *, instance: int = 0) -> RawImport:
     p = str(path)
     if not Path(p).is_file():
         raise RecordingError(p, None, None, "file not found")
+    _check_dataflash_head(p)
+    chatter = _LineCounter()  # DFReader prints a line per byte it cannot read
+    with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
+        raw = _read_dataflash(p, instance, DFReader)
+    if chatter.lines:
+        raw.notes.append(f"pymavlink's DFReader reported {chatter.lines} line(s) on bytes it "
+                         f"could not read as messages (the first: {chatter.first!r}): a "
+                         "corrupt or cut part of the log, left out")
+    return raw
+
+
+# Every ArduPilot DataFlash (.bin) message begins with these two bytes (HEAD_BYTE1 and
+# HEAD_BYTE2, libraries/AP_Logger/LogStructure.h), the file's first message included.
+DATAFLASH_HEAD = b"\xa3\x95"
+DATAFLASH_HEAD_SHOWN = 16
+
+
+def _check_dataflash_head(p: str) -> None:
+    """Refuse a file that does not begin as a DataFlash log, naming what it begins with:
+    DFReader would read such a file byte by byte, print a line for each (3.6 M lines for a
+    3.6 MB CSV) and find no IMU message, which blames the instance."""
+    with open(p, "rb") as f:
+        head = f.read(DATAFLASH_HEAD_SHOWN)
+    if head.startswith(DATAFLASH_HEAD):
+        return
+    if not head:
+        raise RecordingError(p, None, None, "empty file: not an ArduPilot DataFlash log")
+    text = all(32 <= b < 127 or b in (9, 10, 13) for b in head)
+    what = (": text, not a binary log (an ArduPilot .log text log is not read; a table: "
+            "--format csv)" if text else "")
+    raise RecordingError(
+        p, None, None, f"not an ArduPilot DataFlash .bin log: it begins "
+        f"{head.decode('latin-1')!r}, not with a DataFlash message header (bytes A3 95)"
+        f"{what}")
+
+
+# The lines DFReader prints about bytes it cannot read as messages (pymavlink/DFReader.py).
+DFREADER_SKIP_LINES = ("bad header", "unknown msg type", "Skipped", "bad msg")
+
+
+class _LineCounter(io.TextIOBase):
+    """A text sink that counts DFReader's lines about unreadable bytes
+    (:data:`DFREADER_SKIP_LINES`), keeps the first, and drops everything else."""
+
+    def __init__(self) -> None:
+        self.lines = 0
+        self.first = ""
+
+    def write(self, text: str) -> int:
+        for line in text.splitlines():
+            if line.startswith(DFREADER_SKIP_LINES):
+                self.lines += 1
+                self.first = self.first or line
+        return len(text)
+
+
+def _read_dataflash(p: str, instance: int, DFReader: Any) -> RawImport:
+    """:func:`read_dataflash` once the file is known to begin as a DataFlash log."""
     try:
         log = DFReader.DFReader_binary(p, zero_time_base=True)
     except Exception as exc:  # DFReader raises on truncated or foreign files

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from itertools import islice
@@ -27,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import RecordingError
+from calibration.gate import G_PER_UNIT
 from calibration.importers import (
-    STANDARD_GRAVITY_M_S2,
+    DECIMAL_COMMA,
     RawImport,
     _check_monotonic,
     _fmt3,
@@ -43,7 +45,7 @@ ROLES: tuple[str, ...] = ("t", "ax", "ay", "az", "temp")
 DEFAULT_COLUMNS: dict[str, str] = {
     "t": "t_s", "ax": "ax", "ay": "ay", "az": "az", "temp": "temp_c"}
 # g per unit of each acceleration unit ("counts" goes through counts_per_g).
-ACCEL_UNITS: dict[str, float] = {"g": 1.0, "mg": 1e-3, "m/s2": 1.0 / STANDARD_GRAVITY_M_S2}
+ACCEL_UNITS: dict[str, float] = G_PER_UNIT
 TEMP_UNITS: tuple[str, ...] = ("C", "F", "K", "counts")
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 # Leading lines searched for the start of the table (a logger's banner, a row cut short:
@@ -149,6 +151,9 @@ def read_table(
         if cmap[role] not in header:
             raise RecordingError(p, 1, cmap[role], f"column missing (--columns {role}=NAME; "
                                  f"{where})")
+    _check_distinct_columns(p, cmap, wanted)
+    if "t" in wanted:
+        _check_time_unit_name(p, cmap["t"], u.time)
     idx = [header.index(cmap[r]) for r in wanted]
     has_header = first_line == skip + 2
     data = None
@@ -162,6 +167,8 @@ def read_table(
         if bad:
             notes.append(_bad_lines_note(bad, data.shape[0], timed="t" in wanted))
     del text
+    if "t" not in wanted:  # with a time column a block written twice goes back in time
+        _check_no_repeated_block(p, data)
     # each column its own array: a view would keep the whole table alive with the temperature
     col = {r: data[:, k].copy() for k, r in enumerate(wanted)}
     n_rows = data.shape[0]
@@ -180,8 +187,12 @@ def read_table(
         temp_c, temp_note = _to_c(col["temp"], u)
         notes.append(temp_note)
     raw = RawImport(p, "csv", t, acc, init_rest_s=None, notes=notes, temp_c=temp_c)
-    check_plausible(raw, accel_fix="give the right --accel-unit",
-                    temp_fix="give the right --temp-unit")
+    cpg = float(np.mean(np.asarray(u.counts_per_g, float))) if u.accel == "counts" else None
+    check_plausible(raw, accel_fix=("give the right --counts-per-g" if u.accel == "counts"
+                                    else "give the right --accel-unit"),
+                    temp_fix=f"give the right --temp-unit, or check --columns temp= "
+                    f"(column {cmap['temp']!r} was read)", unit=str(u.accel),
+                    counts_per_g=cpg)
     # The range was checked above with the unit's hint; what is left: a 0 or a constant.
     vetted, why = vet_die_temperature(temp_c, t, f"temperature column {cmap['temp']!r}",
                                       check_range=False)
@@ -213,6 +224,8 @@ def _parse_cells(
         try:
             rows.append(_row_values(p, line_no, row, header, wanted, idx))
         except RecordingError as exc:
+            if DECIMAL_COMMA in exc.message:  # the whole table's, not one garbled line's
+                raise
             if not skip_bad:
                 raise RecordingError(exc.path, exc.line, exc.column,
                                      f"{exc.message} ({SKIP_HINT})") from None
@@ -240,6 +253,130 @@ def _row_values(p: str, line_no: int, row: Sequence[str], header: Sequence[str],
         empty_temp = r == "temp" and not cell
         vals.append(np.nan if empty_temp else _number(p, line_no, header[i], cell))
     return vals
+
+
+def _check_distinct_columns(p: str, cmap: Mapping[str, str], wanted: Sequence[str]) -> None:
+    """Each role read from its own column: ``--columns ax=2,…,temp=2`` would read an
+    acceleration as the temperature (or one axis twice), and a model of it is nonsense."""
+    seen: dict[str, str] = {}
+    for role in wanted:
+        name = cmap[role]
+        if name in seen:
+            raise RecordingError(
+                p, None, None, f"--columns: {seen[name]} and {role} both name column "
+                f"{name!r}: each of t, ax, ay, az, temp needs its own column (give --columns "
+                f"{role}=NAME with the right column)")
+        seen[name] = role
+
+
+# Words in a time column's name that state its unit (split at non-letters and at
+# camel-case humps: ``TimeUS``, ``t_ms``, ``time (ms)``, ``t[s]``).
+TIME_UNIT_WORDS: dict[str, str] = {
+    "s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
+    "ms": "ms", "msec": "ms", "millis": "ms", "millisecond": "ms", "milliseconds": "ms",
+    "us": "us", "µs": "us", "usec": "us", "micros": "us", "microsecond": "us",
+    "microseconds": "us"}
+
+
+def time_unit_in_name(name: str) -> str | None:
+    """The time unit a column's name states (:data:`TIME_UNIT_WORDS`), or None."""
+    words = re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-zµ]+", name)
+    units = {TIME_UNIT_WORDS[w.lower()] for w in words if w.lower() in TIME_UNIT_WORDS}
+    return units.pop() if len(units) == 1 else None
+
+
+def _check_time_unit_name(p: str, column: str, unit: str) -> None:
+    """A time column named in one unit and read in another (``t_ms`` read as seconds) makes
+    a 200-s warm-up 55 hours long: every rate, every 5-s capture and the model's rate term
+    are then wrong, and nothing in the numbers shows it. Refused, naming the fix."""
+    named = time_unit_in_name(column)
+    if named is not None and named != unit:
+        raise RecordingError(
+            p, 1, column, f"the time column is named in {named} but read in {unit} "
+            f"(--time-unit, default s): give --time-unit {named}, or --columns t=NAME for "
+            f"the right column")
+
+
+# A run of this many consecutive rows found again, identical in every value read, is a
+# block written twice (a logger re-sending its buffer, two copies of a file joined): a
+# sensor's noise never repeats 64 samples of 3 axes and a temperature (even rows that
+# flicker between two codes repeat a given 64 with probability 2^-64 per pair). Only
+# windows in which the rows change at least every other row count (a stuck sensor, or a
+# quiet one between codes, repeats itself).
+REPEAT_MIN_ROWS = 64
+
+
+def _check_no_repeated_block(p: str, values: np.ndarray) -> None:
+    """Refuse a table holding a block of rows twice (:data:`REPEAT_MIN_ROWS`); the message
+    names both copies by data row (1 = the first data row) and their length."""
+    found = repeated_block(values)
+    if found is None:
+        return
+    first, again, length = found
+    raise RecordingError(
+        p, None, None, f"data rows {again + 1}..{again + length} repeat rows {first + 1}.."
+        f"{first + length} value for value ({length} rows): a block written twice (a "
+        f"logger re-sending its buffer, a file joined to a copy of itself), which a "
+        f"calibration would count as more data: remove the repeated rows")
+
+
+# An odd multiplier and its inverse modulo 2^64 (the windows' position weights).
+_P = np.uint64(0xD6E8FEB86659FD93)
+_P_INV = np.uint64(pow(0xD6E8FEB86659FD93, -1, 2**64))
+
+
+def repeated_block(values: np.ndarray, window: int = REPEAT_MIN_ROWS
+                   ) -> tuple[int, int, int] | None:
+    """(first, again, length): rows ``again…`` repeat rows ``first…`` for ``length`` rows
+    (the earliest repeat of at least ``window`` varying rows), or None.
+
+    Each row's bits are mixed into one 64-bit hash, each window's hash is the sum of its
+    rows' weighted by their place in it (a difference of one running sum: linear in the
+    rows), and windows with equal hashes are compared value for value. About 5 arrays of
+    8 bytes a row beside ``values``."""
+    n = values.shape[0]
+    if n < 2 * window:
+        return None
+    mult = np.uint64(0x9E3779B97F4A7C15)
+    row_hash = np.zeros(n, np.uint64)
+    for k in range(values.shape[1]):  # splitmix-style mixing of each cell into the row's
+        row_hash ^= np.ascontiguousarray(values[:, k], dtype=np.float64).view(np.uint64)
+        row_hash *= mult
+        row_hash ^= row_hash >> np.uint64(31)
+    m = n - window + 1
+    change = np.concatenate([[0], np.cumsum(row_hash[1:] != row_hash[:-1])])
+    varied = np.flatnonzero(change[window - 1:] - change[:m] >= window // 2)
+    del change
+    if varied.size < 2:
+        return None
+    # Σ_k row_hash[i+k]·P^-k (mod 2^64), from one running sum of row_hash[t]·P^-t: the
+    # weights make a window's hash depend on the order of its rows
+    running = np.full(n + 1, _P_INV, np.uint64)
+    running[0] = running[1] = 1
+    np.cumprod(running[1:], out=running[1:])
+    running[1:] *= row_hash
+    running[0] = 0
+    np.cumsum(running, out=running)
+    del row_hash
+    p_pow = np.full(m, _P, np.uint64)
+    p_pow[0] = 1
+    np.cumprod(p_pow, out=p_pow)
+    hv = ((running[window:] - running[:m]) * p_pow)[varied]
+    del running, p_pow
+    order = np.argsort(hv, kind="stable")
+    same = np.flatnonzero(hv[order][1:] == hv[order][:-1])
+    best = None
+    for s in same:
+        i, j = sorted((int(varied[order[s]]), int(varied[order[s + 1]])))
+        if (best is None or j < best[1]) and np.array_equal(values[i:i + window],
+                                                           values[j:j + window]):
+            best = (i, j)
+    if best is None:
+        return None
+    i, j = best
+    span = min(n - j, j - i)
+    differ = np.flatnonzero(~np.all(values[i:i + span] == values[j:j + span], axis=1))
+    return i, j, int(differ[0]) if differ.size else span
 
 
 def _bad_lines_note(bad: Sequence[RecordingError], n_rows: int, *, timed: bool) -> str:

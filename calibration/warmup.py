@@ -178,7 +178,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             f"{len(captures)} capture(s) of {orientations.count} orientation(s) "
             f"({orientations.names()}): too few to judge a bias change by held-out error "
             f"(alternate temperature blocks); record a longer warm-up (more captures of "
-            f"{CAPTURE_BLOCK_S:g} s over a wider temperature change)")
+            f"{CAPTURE_BLOCK_S:g} s over a wider temperature change){_span_said(captures, T)}")
     top = judged[-1]
     heldout, totals = heldout[: top + 1], totals[: top + 1]
     degree = _choose_degree([e for e, _ in errors[: top + 1]], errors[0][1],
@@ -1026,3 +1026,16 @@ def _format_absolute(absolute: dict[str, Any] | None) -> list[str]:
         shown.append(f"{label} {value * scale:+.4g} ± {p['stderr'] * scale:.2g} {unit}")
     return [f"absolute at centre_c ({absolute['mode']} mode, degree {absolute['degree']} in "
             f"T; residual RMS {absolute['residual_rms_ug']:.1f} µg): " + ", ".join(shown)]
+
+
+def _span_said(captures: Recording, temperature_c: np.ndarray) -> str:
+    """How long and how far the readings go by their times: a log read with a wrong time
+    unit or --rate-hz is ten or a thousand times too short, which "record a longer
+    warm-up" alone would not tell its owner."""
+    span_s = float(np.ptp(captures.t_s)) if len(captures) else 0.0
+    if span_s <= 0.0:
+        return ""
+    dT = float(np.ptp(temperature_c))
+    return (f"; its capture means span {span_s:.3g} s and {dT:.3g} °C "
+            f"({dT / span_s * 60.0:.3g} °C/min): if the log ran longer, its time unit or "
+            f"--rate-hz was read wrong (soakcal import's summary says `over … s`)")

@@ -180,8 +180,8 @@ def test_imu_tk_reader_counts_and_options(tmp_path: Path) -> None:
     raw = importers.read_imu_tk(f)  # Xsens factory offsets, 415 counts per m/s²
     np.testing.assert_allclose(raw.acc_g[0], [0, 0, (36430 - 32360) / (415 * 9.80665)])
     np.testing.assert_allclose(raw.t_s, [0.0, 0.01])
-    raw2 = importers.read_imu_tk(f, counts_per_g=1000.0, offset_counts=32768)
-    np.testing.assert_allclose(raw2.acc_g[0], np.array([355, 508, 3662]) / 1000.0)
+    raw2 = importers.read_imu_tk(f, counts_per_g=3700.0, offset_counts=32768)
+    np.testing.assert_allclose(raw2.acc_g[0], np.array([355, 508, 3662]) / 3700.0)
     f.write_text("1.0 2.0 3.0\n")
     with pytest.raises(RecordingError) as info:
         importers.read_imu_tk(f)

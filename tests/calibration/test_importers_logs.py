@@ -161,7 +161,8 @@ def test_dataflash_says_when_the_autopilot_already_compensated(tmp_path):
 def test_a_file_that_is_not_a_log_is_refused_with_its_kind(tmp_path, fmt):
     src = tmp_path / "x.bin"
     src.write_text("t_s,ax\n1,2\n")
-    with pytest.raises(RecordingError, match="not a readable|no IMU messages|no sensor_accel"):
+    with pytest.raises(RecordingError,
+                       match="not a readable|not an ArduPilot DataFlash|no sensor_accel"):
         importers.read_source(fmt, src)
 
 
