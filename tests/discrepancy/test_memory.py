@@ -431,7 +431,7 @@ def test_direction_offsets_by_row_blocks_equal_the_dense_columns(monkeypatch):
     pb = build_problem(_six_tables_one_way())
     ctx = pb.ctx
     rng = np.random.default_rng(14)
-    dirs = sn.direction_ids(ctx.positions, ctx.input_g)
+    dirs = structure.direction_ids(ctx.positions, ctx.input_g)
     n_dir = int(dirs.max()) + 1
     assert n_dir >= 8
     # an offset at a few directions only (a band of codes), 1 σ on x and z
@@ -727,3 +727,39 @@ def test_single_precision_replicates_give_the_double_diagnosis(monkeypatch):
     assert ref["verdict"] == "mismatch" and ref["findings"]
     got["notes"] = [n for n in got["notes"] if "single precision" not in n]
     assert got == ref  # findings, their figures and p-values, to the reported digit
+
+
+def test_position_directions_by_one_sort_equal_the_per_position_masks():
+    """The reference direction of each position from one sort of the readings (issue 22: a
+    tiled schedule of 1 M readings has ~90 k position ids, and a mask over all readings per
+    id took 10 min of a diagnosis): the same directions and groups as the per-id masks,
+    positions in any order and with noisy inputs."""
+    from calibration.discrepancy.effects import structure
+
+    rng = np.random.default_rng(21)
+    faces = np.vstack([np.eye(3), -np.eye(3), np.array([[0.6, 0.8, 0.0], [0.0, -0.6, 0.8]])])
+    n_ids = 400
+    face_of_id = rng.integers(0, faces.shape[0], n_ids)
+    positions = rng.permutation(np.repeat(np.arange(n_ids) * 3 + 7, 5))  # sparse, shuffled
+    input_g = faces[face_of_id[(positions - 7) // 3]] + 0.004 * rng.standard_normal(
+        (positions.size, 3))
+
+    # the per-id masks, as the clustering was written before
+    ids = [int(p) for p in np.unique(positions)]
+    d = {p: np.median(input_g[positions == p], axis=0) for p in ids}
+    centre, of_pos = [], {}
+    for p in ids:
+        for j, c in enumerate(centre):
+            if np.all(np.abs(c - d[p]) < structure.SAME_DIRECTION_G):
+                of_pos[p] = j
+                break
+        else:
+            of_pos[p] = len(centre)
+            centre.append(d[p])
+    want = np.array([of_pos[int(p)] for p in positions])
+    got = structure.direction_ids(positions, input_g)
+    np.testing.assert_array_equal(got, want)
+    groups = structure.direction_groups(positions, input_g)
+    assert groups == [[p for p in ids if of_pos[p] == j] for j in range(len(centre))
+                      if sum(of_pos[p] == j for p in ids) >= 2]
+    assert len(groups) == faces.shape[0]

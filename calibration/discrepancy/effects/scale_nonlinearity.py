@@ -17,7 +17,7 @@ from calibration.discrepancy import stats
 from calibration.discrepancy.context import AXES, DesignContext
 from calibration.discrepancy.effects.base import UG, CatalogueEffect, fmt_pm, vec3
 from calibration.discrepancy.effects.structure import (
-    SAME_DIRECTION_G,
+    direction_ids,
     extend,
     extend_by_rows,
     fitted_after,
@@ -110,24 +110,6 @@ class ScaleNonlinearity(CatalogueEffect):
                 parts.append(f"{ax} output grows with the cube of its input: "
                              f"K3 = {fmt_pm(k3, s3, 'µg/g³')}")
         return "; ".join(parts)
-
-
-def direction_ids(positions: np.ndarray, input_g: np.ndarray) -> np.ndarray:
-    """(N,) index of each reading's reference direction (positions within
-    ``SAME_DIRECTION_G`` on every axis share one)."""
-    ids = [int(p) for p in np.unique(positions)]
-    centre: list[np.ndarray] = []
-    of_pos: dict[int, int] = {}
-    for p in ids:
-        d = np.median(input_g[positions == p], axis=0)
-        for j, c in enumerate(centre):
-            if np.all(np.abs(c - d) < SAME_DIRECTION_G):
-                of_pos[p] = j
-                break
-        else:
-            of_pos[p] = len(centre)
-            centre.append(d)
-    return np.array([of_pos[int(p)] for p in positions])
 
 
 BEND_FUNCTIONS = 4  # 1, a, a², a³: the base's bias and scale and the bend's two terms
