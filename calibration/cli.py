@@ -189,6 +189,7 @@ def run_compensate(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     try:
         gate.check_gravity(rec.raw_g, "nothing written")
+        gate.check_temperature_channels(rec, "nothing written")
     except CalibrationError as exc:
         return _fail(f"{args.recording}: {exc}")
     clash = [c for c in OUTPUT_COLUMNS if c in rec.header]

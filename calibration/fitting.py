@@ -125,12 +125,14 @@ def fit(recording: Recording, options: FitOptions | None = None) -> CalibrationF
     method = opts.method or DEFAULT_METHOD
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    gate.check_recording(recording)  # a recording that contradicts itself
     caps = capture_means(recording)
     captures = caps.recording
     # the captures' distinct orientations, clustered once for the steps, the gate and the fit
     ori = gate.distinct_orientations(captures.raw_g, captures.sigma_g)
     seg = segment_recording(captures, ori.labels)  # steps only where the die stood still
-    decided = gate.plan(captures, continuous=seg.is_continuous, orientations=ori)
+    decided = gate.plan(captures, continuous=seg.is_continuous, orientations=ori,
+                        source=recording)
     k = None if opts.rate_gain_ug_per_c_per_min is None else np.asarray(
         opts.rate_gain_ug_per_c_per_min, float)
     g_local = None if opts.gravity is None else opts.gravity.g

@@ -27,6 +27,7 @@ Three questions, answered in one place for ``calibrate`` and ``diagnose``:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -111,6 +112,12 @@ UNIT_SHOWN = {"g": "g", "mg": "mg", "m/s2": "m/s²"}
 # |compensated| − g on the captures the model was fitted to: a calibrated sensor is
 # within a few mg; 50 mg off on its own data is not a calibration.
 NORM_MAX_DEV_G = 0.05
+# A thermal polynomial that leaves a step more than this (Eq. 9, RMS) while the step's own
+# SFEM fit leaves POLY_MAX_RATIO times less follows no temperature law: a MEMS part's
+# parameters after a cubic in temperature are within tens of µg (hysteresis, session
+# offsets: docs/effects.md), not a milli-g.
+POLY_MAX_G = 1e-3
+POLY_MAX_RATIO = 20.0
 # The fix a refusal names when there are too few orientations.
 MORE_ORIENTATIONS = (
     f"record at least {NORM_MIN_ORIENTATIONS} distinct orientations per temperature step "
@@ -384,19 +391,21 @@ class Plan:
 
 
 def plan(captures: Recording, *, continuous: bool = False,
-         orientations: Orientations | None = None) -> Plan:
+         orientations: Orientations | None = None, source: Recording | None = None) -> Plan:
     """Decide from the capture means what the data identify (module docstring, 2.).
 
     ``continuous``: the recording has rows on no temperature plateau
     (:func:`calibration.plateaus.segment_recording`); its orientations are then counted
     over the whole recording, for the SFEM in each reading's own temperature
     (:mod:`calibration.continuous`), never per invented step. ``orientations``: the
-    captures' :func:`distinct_orientations`, when the caller has them. Raises
+    captures' :func:`distinct_orientations`, when the caller has them. ``source``: the
+    recording the captures were read from (its ``sd_*`` name a unit mistake when no row
+    was kept as still, :func:`_sd_unit_hint`). Raises
     :class:`GateRefusal` when nothing can be calibrated.
     """
     if len(captures) == 0:
         # capture_means leaves out only rows taken while the sensor moved: none was still
-        raise GateRefusal(NO_STILL_READING)
+        raise GateRefusal(_sd_unit_hint(source) or NO_STILL_READING)
     raw = captures.raw_g
     check_gravity(raw)
     ori = orientations or distinct_orientations(raw, captures.sigma_g)
@@ -473,7 +482,44 @@ def check_thermal_fit(fit: ThermalFit, captures: Recording) -> None:
                 f"step {st.step} has {cap.orientations.count} distinct orientation(s) for "
                 f"{fitted} fitted parameters ({spare} spare degrees of freedom); no model "
                 f"written: {MORE_ORIENTATIONS}")
+    _check_step_jumps(fit)
     check_model(fit.model, captures, fit.row_temperature_c)
+
+
+def _check_step_jumps(fit: ThermalFit) -> None:
+    """Refuse a thermal polynomial (Eq. 8) that leaves a step more than
+    :data:`POLY_MAX_G` (RMS, Eq. 9) while each step's own SFEM fit leaves
+    :data:`POLY_MAX_RATIO` times less: the parameters jump between steps (one step's
+    readings from another sensor, a re-mount), which no smooth temperature law follows;
+    the model would be off by the jump at every temperature. The step named is the one
+    whose per-step biases sit furthest from a straight line through the other steps'."""
+    steps = [st for st in fit.steps if np.isfinite(st.rmse_polynomial_ug)
+             and np.isfinite(st.temperature_c)]
+    if len(steps) < 3:
+        return
+    worst = max(steps, key=lambda st: st.rmse_polynomial_ug)
+    meas = max(st.rmse_measurement_ug for st in steps)
+    if worst.rmse_polynomial_ug <= max(POLY_MAX_G * 1e6, POLY_MAX_RATIO * meas):
+        return
+    T = np.array([st.temperature_c for st in steps])
+    b = np.array([st.fit.params.to_vector()[sfem.BIAS] for st in steps])
+    deg = 1  # a straight line: a cubic through the others swings at the ends
+    off = np.zeros_like(b)
+    for i in range(len(steps)):
+        rest = np.arange(len(steps)) != i
+        for k in range(3):
+            c = np.polyfit(T[rest], b[rest, k], deg)
+            off[i, k] = b[i, k] - np.polyval(c, T[i])
+    i, k = np.unravel_index(int(np.argmax(np.abs(off))), off.shape)
+    odd = steps[int(i)]
+    raise GateRefusal(
+        f"the temperature polynomial leaves step {worst.step} "
+        f"{worst.rmse_polynomial_ug / 1e3:.2f} mg off (RMS) while each step's own fit leaves "
+        f"at most {meas / 1e3:.3f} mg: the sensor's parameters jump between steps (step "
+        f"{odd.step}'s bias {sfem.PARAM_NAMES[int(k)]} is {off[i, k] * 1e3:+.2f} mg off the "
+        f"other steps' trend), which no temperature law follows: one step's readings from "
+        f"another sensor or another mounting?; no model written: re-record that step, or "
+        f"calibrate the steps of one sensor and mounting only")
 
 
 def check_model(model: ThermalModel, captures: Recording,
@@ -693,10 +739,14 @@ def cannot_judge(recording: Recording) -> str | None:
     from calibration.fitting import fit  # fitting imports this module
     from calibration.plateaus import segment_recording
 
+    try:
+        check_recording(recording)
+    except CalibrationError as exc:
+        return str(exc)
     captures = capture_means(recording).recording
     ori = distinct_orientations(captures.raw_g, captures.sigma_g)
     try:
-        decided = plan(captures, orientations=ori,
+        decided = plan(captures, orientations=ori, source=recording,
                        continuous=segment_recording(captures, ori.labels).is_continuous)
         if decided.kind != "continuous":  # cannot be judged either way (below)
             fit(recording)  # calibrate's refusal after the fit, if it refuses
@@ -710,3 +760,222 @@ def cannot_judge(recording: Recording) -> str | None:
         return (f"{decided.reason}; the SFEM cannot be fitted, so what it leaves out cannot "
                 f"be judged")
     return None
+
+
+# --- what a campaign recording says about itself (before the fit) ---------------
+# Chamber air, die channel and setpoint follow one another: across a campaign's span one
+# rises about as much as another (a die's self-heating and a channel's gain move this by a
+# few %). A slope outside this band between two of them is a unit or a scale (°F: 1.8, a
+# channel ×10), not physics. Judged only over at least TEMPERATURE_SPAN_MIN_C.
+CHANNEL_SLOPE_BAND: tuple[float, float] = (0.7, 1.4)
+TEMPERATURE_SPAN_MIN_C = 10.0
+FAHRENHEIT_PER_C = 1.8
+# A reading's direction and its reference's agree within the part's misalignment and its
+# bias' tilt of the direction (0.5 g at most: BIAS_MAX_G, under 30°; a few mrad and tens
+# of mg in practice); beyond this, the reference is not this reading's orientation.
+REF_AGREE_MAX_DEG = 25.0
+
+
+def check_recording(recording: Recording) -> None:
+    """Refuse a campaign recording that contradicts itself before anything is fitted.
+
+    The one place of these checks, for ``calibrate`` (:func:`calibration.fitting.fit`) and
+    ``diagnose`` (:func:`cannot_judge`: "cannot judge" with the same reason); ``compensate``
+    asks :func:`check_temperature_channels`. Each refusal names the column, the rows and
+    the fix:
+
+    - averaged readings that repeat an earlier one value for value (:func:`_check_repeats`);
+    - temperature channels in different units (:func:`check_temperature_channels`);
+    - reference vectors that are not the readings' orientation (:func:`_check_references`).
+    """
+    _check_repeats(recording)
+    check_temperature_channels(recording, "no model written")
+    _check_references(recording)
+
+
+def _where(rec: Recording, i: int) -> str:
+    """'t = 2503.6 s, step 0, position 5' of row ``i`` (what a person finds it by)."""
+    parts = [f"t = {float(rec.t_s[i]):.1f} s"]
+    for name in ("step", "position"):
+        if rec.has(name) and np.isfinite(rec.columns[name][i]):
+            parts.append(f"{name} {int(rec.columns[name][i])}")
+    return ", ".join(parts)
+
+
+def _check_repeats(rec: Recording) -> None:
+    """Refuse averaged readings (``n`` > 1 or ``sd_*``) whose ax, ay, az repeat an earlier
+    row's value for value: the mean of a noisy sensor's samples never comes out the same to
+    the last digit twice, so the rows are a plateau or a block written twice, and the fit
+    would count them as independent readings (their weight doubled, their noise halved).
+    Single samples of a quantised channel do repeat: not judged."""
+    from calibration.captures import is_raw_samples
+
+    if len(rec) < 2 or is_raw_samples(rec):
+        return
+    n = rec.columns.get("n")
+    if not any(rec.has(c) for c in ("sd_x", "sd_y", "sd_z")) and not (
+            n is not None and np.any(np.isfinite(n) & (n > 1))):
+        return
+    _, first, inverse, counts = np.unique(rec.raw_g, axis=0, return_index=True,
+                                          return_inverse=True, return_counts=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    repeat = first[inverse] != np.arange(len(rec))
+    if not repeat.any():
+        return
+    i = int(np.flatnonzero(repeat)[0])
+    j = int(first[inverse[i]])
+    raise GateRefusal(
+        f"the reading at {_where(rec, i)} repeats the one at {_where(rec, j)} in ax, ay, az "
+        f"value for value ({int(repeat.sum())} row(s) repeat an earlier one): the average of "
+        f"a sensor's noisy samples never comes out the same twice, so a plateau or a block "
+        f"was written twice; no model written: remove the repeated rows")
+
+
+def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    A = np.column_stack([x, np.ones_like(x)])
+    slope, offset = np.linalg.lstsq(A, y, rcond=None)[0]
+    return float(slope), float(offset)
+
+
+def check_temperature_channels(rec: Recording, outcome: str = "no model written") -> None:
+    """Refuse temperature columns (``setpoint_c``, ``chamber_c``, ``sensor_c``) that do not
+    move together: over a span of at least :data:`TEMPERATURE_SPAN_MIN_C` one rises about
+    as much as another (:data:`CHANNEL_SLOPE_BAND`). A slope of 1.8 is one in °F, 10 one
+    ×10. With a setpoint the odd channel is the one off the setpoint; without, ``sensor_c``
+    is named against ``chamber_c``."""
+    names = [c for c in ("setpoint_c", "chamber_c", "sensor_c") if rec.has(c)]
+    if len(names) < 2:
+        return
+    base = names[0]
+    lo, hi = CHANNEL_SLOPE_BAND
+    for other in names[1:]:
+        x, y = rec.columns[base], rec.columns[other]
+        ok = np.isfinite(x) & np.isfinite(y)
+        if ok.sum() < 3 or np.ptp(x[ok]) < TEMPERATURE_SPAN_MIN_C:
+            continue
+        slope, offset = _line(x[ok], y[ok])
+        if lo <= slope <= hi:
+            continue
+        if abs(slope / FAHRENHEIT_PER_C - 1.0) < 0.1:
+            unit = f"{other} looks like °F ({other} ≈ 1.8 × {base} + 32 is °F)"
+        elif abs(slope * FAHRENHEIT_PER_C - 1.0) < 0.1:
+            unit = f"{base} looks like °F, or {other} is in another unit"
+        else:
+            unit = f"one of them is in another unit or scale (×{slope:.3g}?)"
+        raise GateRefusal(
+            f"{other} rises {slope:.3g} °C per °C of {base} ({other} ≈ {slope:.3g} × {base} "
+            f"{offset:+.1f} over {base} {float(np.min(x[ok])):.1f} .. "
+            f"{float(np.max(x[ok])):.1f}): the temperature columns of one chamber and die "
+            f"move together, so {unit}; {outcome}: write every _c column in °C "
+            f"(docs/recording.md)")
+
+
+def _check_references(rec: Recording) -> None:
+    """Refuse reference vectors that are not the readings' orientations: more than
+    :data:`REF_AGREE_MAX_DEG` (plus any ``ref_tol_deg``) between a reading's direction and
+    its ``ref_*``. When most disagree, the axis permutation or sign flip that makes them
+    agree is named (ref_* in another frame); when a few do, the first of them (a reference
+    typed for another position, or the sensor placed on another face)."""
+    ref = rec.ref_g
+    if ref is None:
+        return
+    raw = rec.raw_g
+    ok = np.all(np.isfinite(ref), axis=1) & np.all(np.isfinite(raw), axis=1)
+    if not ok.any():
+        return
+    limit = REF_AGREE_MAX_DEG
+    if "ref_tol_deg" in rec.header:
+        from calibration.recording import optional_number_column
+
+        tol = optional_number_column(rec, "ref_tol_deg", "degrees")
+        if tol is not None and np.any(np.isfinite(tol)):
+            limit += float(np.nanmax(tol))
+
+    def angles(r: np.ndarray) -> np.ndarray:
+        u = raw[ok] / np.linalg.norm(raw[ok], axis=1, keepdims=True)
+        v = r[ok] / np.linalg.norm(r[ok], axis=1, keepdims=True)
+        return np.degrees(np.arccos(np.clip(np.sum(u * v, axis=1), -1.0, 1.0)))
+
+    ang = angles(ref)
+    bad = ang > limit
+    if not bad.any():
+        return
+    # ref_* in another frame: a signed axis permutation under which the readings agree
+    # (most of them; all, where only a few disagree as they are: a flipped y on the
+    # Ferraris faces disagrees on the two y faces only)
+    best = _best_frame(ref, angles, np.median if np.median(ang) > limit else np.max, limit)
+    if best is not None:
+        mapping, fix = best
+        raise GateRefusal(
+            f"{int(bad.sum())} of {int(ok.sum())} readings' directions are more than "
+            f"{limit:.0f}° from their reference vectors (median {float(np.median(ang)):.0f}°), "
+            f"and agree with them as {mapping}: {fix}; no model written: write ref_x, "
+            f"ref_y, ref_z in the sensor's axes (docs/recording.md)")
+    if np.median(ang) > limit:
+        raise GateRefusal(
+            f"the readings' directions are {float(np.median(ang)):.0f}° (median) from their "
+            f"reference vectors: ref_* are not these readings' orientations (another "
+            f"fixture's frame, or another schedule's); no model written: write ref_x, ref_y, "
+            f"ref_z in the sensor's axes, or leave them out for a norm-mode fit")
+    i = int(np.flatnonzero(ok)[np.flatnonzero(bad)[0]])
+    raise GateRefusal(
+        f"the reading at {_where(rec, i)} is {float(ang[bad][0]):.0f}° from its reference "
+        f"vector ({', '.join(f'{v:+.3g}' for v in ref[i])}), the others within "
+        f"{float(np.max(ang[~bad])):.1f}° of theirs ({int(bad.sum())} reading(s) so): a "
+        f"reference written for another position, or the sensor placed on another face; no "
+        f"model written: correct ref_* (or position) of those rows, or leave them out")
+
+
+def _best_frame(ref: np.ndarray, angles: Callable[[np.ndarray], np.ndarray],
+                stat: Callable[[np.ndarray], object], limit_deg: float
+                ) -> tuple[str, str] | None:
+    """The signed axis permutation of ``ref`` under which the readings' angles to it have
+    ``stat`` (median, or max) within ``limit_deg``, as ('ax ≈ +ref_y, …', what is wrong),
+    or None."""
+    import itertools
+
+    best: tuple[float, tuple[int, ...], tuple[int, ...]] | None = None
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1, -1), repeat=3):
+            if perm == (0, 1, 2) and signs == (1, 1, 1):
+                continue
+            r = ref[:, list(perm)] * np.asarray(signs, float)
+            med = float(stat(angles(r)))  # type: ignore[arg-type]
+            if best is None or med < best[0]:
+                best = (med, perm, signs)
+    if best is None or best[0] > limit_deg:
+        return None
+    _, perm, signs = best
+    mapping = ", ".join(f"a{'xyz'[i]} ≈ {'+' if s > 0 else '−'}ref_{'xyz'[j]}"
+                        for i, (j, s) in enumerate(zip(perm, signs, strict=True)))
+    wrong = []
+    swapped = [i for i in range(3) if perm[i] != i]
+    if swapped:
+        wrong.append(" and ".join(f"ref_{'xyz'[i]}" for i in swapped) + " are swapped")
+    flipped = [perm[i] for i in range(3) if signs[i] < 0]
+    if flipped:
+        wrong.append(" and ".join(f"ref_{'xyz'[j]}" for j in flipped) + " have their sign "
+                     "flipped" if len(flipped) > 1 else f"ref_{'xyz'[flipped[0]]} has its "
+                     "sign flipped")
+    return mapping, "; ".join(wrong)
+
+
+def _sd_unit_hint(source: Recording | None) -> str | None:
+    """The refusal for averaged rows all left out as moving whose ``sd_*`` are a still
+    accelerometer's scatter ÷ 1000 (written in mg, read in g), or None. Only for a
+    campaign's placements (a ``position`` column): a flight's block means also scatter
+    tens of mg, for real."""
+    from calibration.importers import STILL_NOISE_CEILING_G  # importers read recordings
+
+    if source is None or not source.has("position") or not all(
+            source.has(c) for c in ("sd_x", "sd_y", "sd_z")):
+        return None
+    sd = np.column_stack([source.columns[c] for c in ("sd_x", "sd_y", "sd_z")])
+    med = float(np.nanmedian(np.nanmax(sd, axis=1)))
+    if not (med > STILL_NOISE_CEILING_G and med * 1e-3 <= STILL_NOISE_CEILING_G):
+        return None
+    return (f"no still reading: the rows' sd_* (median {med:.4g} g) are more than any still "
+            f"accelerometer scatters ({STILL_NOISE_CEILING_G * 1e3:g} mg), so every row was "
+            f"left out as taken while the sensor moved; ÷1000 they are {med:.4g} mg, a still "
+            f"sensor's noise: sd_* written in mg? sd_* are in g (docs/recording.md); no model "
+            f"written: convert sd_x, sd_y, sd_z to g")

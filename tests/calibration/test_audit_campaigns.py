@@ -1,0 +1,180 @@
+"""Wrong campaign recordings a lab engineer might give (issues 20 and 22; docs/benchmarks.md,
+"Wrong campaign recordings"): each is refused by ``calibrate`` with its own cause and fix,
+and ``diagnose`` answers "cannot judge" with the same reason (calibration/gate.py,
+``check_recording``).
+
+Every recording is built here: Table 1's 24 positions with reference vectors at three
+temperature steps, a sensor 20 mg off on x and 1 % off in scale on y, 200-sample means."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from calibration import cli
+from calibration.recording import write_recording
+from calibration.schedules import table1
+
+Columns = dict[str, np.ndarray]
+
+
+def _campaign(seed: int = 1, setpoints_c: tuple[float, ...] = (-20.0, 20.0, 60.0)
+              ) -> Columns:
+    """Soaks (−20, 20, 60 °C), 24 positions each, reference vectors in g."""
+    rng = np.random.default_rng(seed)
+    refs = table1()
+    rows: dict[str, list[float]] = {k: [] for k in (
+        "t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position")}
+    raw, ref = [], []
+    t = 0.0
+    for s, sp in enumerate(setpoints_c):
+        t += 3600.0
+        for p, r in enumerate(refs):
+            t += 15.0
+            bias = np.array([0.020 + 2e-5 * sp, -0.010, 0.015 - 1e-5 * sp])
+            raw.append(r * np.array([1.0, 1.01, 0.995]) + bias + rng.normal(0, 1e-5, 3))
+            ref.append(r)
+            rows["t_s"].append(t)
+            rows["step"].append(s)
+            rows["setpoint_c"].append(sp)
+            rows["chamber_c"].append(sp + rng.normal(0, 0.02))
+            rows["sensor_c"].append(sp + 3.0 + rng.normal(0, 0.01))
+            rows["position"].append(p)
+    cols = {k: np.asarray(v, float) for k, v in rows.items()}
+    raw_g, ref_g = np.asarray(raw), np.asarray(ref)
+    n = len(raw_g)
+    cols.update(ax=raw_g[:, 0], ay=raw_g[:, 1], az=raw_g[:, 2], ref_x=ref_g[:, 0],
+                ref_y=ref_g[:, 1], ref_z=ref_g[:, 2], n=np.full(n, 200.0),
+                sd_x=np.full(n, 1.4e-4), sd_y=np.full(n, 1.4e-4), sd_z=np.full(n, 1.5e-4))
+    return cols
+
+
+def _run(tmp_path: Path, cols: Columns, capsys: pytest.CaptureFixture[str]
+         ) -> tuple[str, str]:
+    """``calibrate`` (must refuse: exit 2, one line, no model) and ``diagnose --json``
+    (must answer "cannot judge"): the line a person reads and diagnose's reason."""
+    src, out = tmp_path / "rec.csv", tmp_path / "model.json"
+    write_recording(src, cols)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(out))) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert not out.exists()
+    args = SimpleNamespace(recording=str(src), output=None, json=True, model=None,
+                           n_null=None, against=None, write_twin=None, report_dir=None,
+                           seed=None)
+    assert cli.run_diagnose(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["verdict"] == "cannot judge"
+    assert doc["mismatch"] is None
+    assert doc["reason"] in err  # the same reason as calibrate's
+    return err, doc["reason"]
+
+
+def test_the_unperturbed_campaign_is_calibrated(tmp_path: Path) -> None:
+    src, out = tmp_path / "rec.csv", tmp_path / "model.json"
+    write_recording(src, _campaign())
+    assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(out))) == 0
+    assert out.exists()
+
+
+def test_a_sensor_channel_in_fahrenheit_is_refused_naming_the_unit(tmp_path, capsys) -> None:
+    # main: exit 0, a model "valid for 1.4 .. 145 °C" in °F (1.4 mg off the right one)
+    cols = _campaign()
+    cols["sensor_c"] = cols["sensor_c"] * 1.8 + 32.0
+    err, _ = _run(tmp_path, cols, capsys)
+    assert "sensor_c rises 1.8 °C per °C of setpoint_c" in err
+    assert "sensor_c looks like °F" in err
+    assert "write every _c column in °C" in err
+
+
+def test_a_chamber_channel_in_fahrenheit_is_refused_by_compensate_too(tmp_path,
+                                                                      capsys) -> None:
+    cols = _campaign()
+    good, model = tmp_path / "good.csv", tmp_path / "good.json"
+    write_recording(good, cols)
+    assert cli.run_calibrate(SimpleNamespace(recording=str(good), output=str(model))) == 0
+    capsys.readouterr()
+    cols["chamber_c"] = cols["chamber_c"] * 1.8 + 32.0
+    _run(tmp_path, cols, capsys)
+    out = tmp_path / "out.csv"
+    assert cli.run_compensate(SimpleNamespace(
+        model=str(model), recording=str(tmp_path / "rec.csv"), output=str(out))) == 2
+    err = capsys.readouterr().err
+    assert "chamber_c looks like °F" in err and "nothing written" in err
+    assert not out.exists()
+
+
+def test_a_flipped_reference_axis_is_named_not_blamed_on_orientations(tmp_path,
+                                                                      capsys) -> None:
+    # main: "the fitted scale sz = -0.99 … is not physical …: record at least 10 distinct
+    # orientations": the wrong cause
+    cols = _campaign()
+    cols["ref_z"] = -cols["ref_z"]
+    err, _ = _run(tmp_path, cols, capsys)
+    assert "az ≈ −ref_z" in err and "ref_z has its sign flipped" in err
+    assert "distinct orientations" not in err
+
+
+def test_swapped_reference_axes_are_named(tmp_path, capsys) -> None:
+    cols = _campaign()
+    cols["ref_x"], cols["ref_y"] = cols["ref_y"].copy(), cols["ref_x"].copy()
+    err, _ = _run(tmp_path, cols, capsys)
+    assert "ax ≈ +ref_y, ay ≈ +ref_x, az ≈ +ref_z" in err
+    assert "ref_x and ref_y are swapped" in err
+
+
+def test_one_positions_wrong_reference_is_named_with_its_step_and_position(tmp_path,
+                                                                           capsys) -> None:
+    # main: "the model gives |g| = 0.72 g … average only what was recorded with the sensor
+    # still": the wrong cause
+    cols = _campaign()
+    five, zero = cols["position"] == 5, np.flatnonzero(cols["position"] == 0)[0]
+    for k in ("ref_x", "ref_y", "ref_z"):
+        cols[k][five] = cols[k][zero]
+    err, _ = _run(tmp_path, cols, capsys)
+    assert "step 0, position 5 is" in err and "from its reference vector" in err
+    assert "(3 reading(s) so)" in err
+    assert "a reference written for another position" in err
+
+
+def test_a_plateau_written_twice_is_refused(tmp_path, capsys) -> None:
+    # main: calibrate exit 0 (the plateau counted twice); diagnose "cannot judge: … on no
+    # temperature plateau" (the wrong cause)
+    cols = _campaign()
+    s1 = np.flatnonzero(cols["step"] == 1)
+    order = np.r_[np.flatnonzero(cols["step"] <= 1), s1, np.flatnonzero(cols["step"] > 1)]
+    dup = {k: v[order] for k, v in cols.items()}
+    dup["t_s"] = dup["t_s"] + np.r_[np.zeros(2 * 24), np.full(24 + 24, 2000.0)]
+    err, _ = _run(tmp_path, dup, capsys)
+    assert "step 1, position 0 repeats the one at" in err
+    assert "(24 row(s) repeat an earlier one)" in err
+    assert "remove the repeated rows" in err
+
+
+def test_sd_in_mg_names_the_unit_not_a_moving_sensor_alone(tmp_path, capsys) -> None:
+    # main: "no still reading: every row was left out as taken while the sensor moved",
+    # nothing about the unit
+    cols = _campaign()
+    for k in ("sd_x", "sd_y", "sd_z"):
+        cols[k] = cols[k] * 1e3
+    err, _ = _run(tmp_path, cols, capsys)
+    assert "the rows' sd_* (median 0.15 g)" in err
+    assert "sd_* written in mg? sd_* are in g" in err
+
+
+def test_one_steps_readings_from_another_sensor_are_refused_naming_the_step(tmp_path,
+                                                                           capsys) -> None:
+    # main: exit 0, a model 11 mg (RMS) off the right one, up to 22 mg; diagnose:
+    # "mismatch" with not_identifiable and unexplained findings
+    cols = _campaign(setpoints_c=(-20.0, 0.0, 20.0, 40.0, 60.0))
+    other = cols["step"] == 2
+    cols["ax"][other] += 0.020
+    cols["az"][other] -= 0.015
+    err, _ = _run(tmp_path, cols, capsys)
+    assert "the temperature polynomial leaves step" in err
+    assert "the sensor's parameters jump between steps (step 2's bias bx is +2" in err
+    assert "one step's readings from another sensor or another mounting?" in err
