@@ -746,16 +746,23 @@ def cannot_judge(recording: Recording) -> str | None:
     captures = capture_means(recording).recording
     ori = distinct_orientations(captures.raw_g, captures.sigma_g)
     try:
+        seg = segment_recording(captures, ori.labels)
         decided = plan(captures, orientations=ori, source=recording,
-                       continuous=segment_recording(captures, ori.labels).is_continuous)
+                       continuous=seg.is_continuous)
         if decided.kind != "continuous":  # cannot be judged either way (below)
             fit(recording)  # calibrate's refusal after the fit, if it refuses
     except CalibrationError as exc:
         return str(exc)
     if decided.kind == "continuous":
-        return (f"{decided.reason}; the diagnosis judges per-step residuals, so a recording "
-                f"without temperature plateaus cannot be judged: `soakcal calibrate` fits it "
-                f"continuously and reports its residuals per temperature band")
+        declared = [n for n in seg.notes if "are not temperature plateaus" in n
+                    or "fitted as continuous rows" in n]
+        why = (f" ({declared[0]}; at the readings' stated noise sd/√n, {seg.row_sigma_ug:.3g} "
+               f"µg: if these were soaks, one step id given to two temperatures, or n or sd_* "
+               f"too small?)" if declared else "")
+        return (f"{decided.reason}{why}; the diagnosis judges per-step residuals, so a "
+                f"recording without temperature plateaus cannot be judged: `soakcal "
+                f"calibrate` fits it continuously and reports its residuals per temperature "
+                f"band")
     if decided.kind == "warmup":
         return (f"{decided.reason}; the SFEM cannot be fitted, so what it leaves out cannot "
                 f"be judged")

@@ -178,3 +178,20 @@ def test_one_steps_readings_from_another_sensor_are_refused_naming_the_step(tmp_
     assert "the temperature polynomial leaves step" in err
     assert "the sensor's parameters jump between steps (step 2's bias bx is +2" in err
     assert "one step's readings from another sensor or another mounting?" in err
+
+
+def test_n_too_large_is_not_blamed_on_the_plateaus_alone(tmp_path, capsys) -> None:
+    # main: diagnose "cannot judge: … on no temperature plateau" and nothing else: the steps
+    # are soaks, but at a stated noise sd/√n of 0.3 µg none is flat enough
+    cols = _campaign()
+    cols["n"] = cols["n"] * 1000
+    src = tmp_path / "rec.csv"
+    write_recording(src, cols)
+    args = SimpleNamespace(recording=str(src), output=None, json=True, model=None,
+                           n_null=None, against=None, write_twin=None, report_dir=None,
+                           seed=None)
+    assert cli.run_diagnose(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["verdict"] == "cannot judge"
+    assert "at the readings' stated noise sd/√n, 0.3" in doc["reason"]
+    assert "or n or sd_* too small?" in doc["reason"]
