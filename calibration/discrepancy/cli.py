@@ -74,7 +74,7 @@ def run_diagnose(args: Any, rec: Any = None) -> int:
     return 0
 
 
-# From this many readings a diagnosis takes long enough (~10 s and up; ~10 min at 1 M) that
+# From this many readings a diagnosis takes long enough (~10 s and up; ~8 min at 1 M) that
 # its steps are shown on stderr as it works (stdout keeps the report or the JSON alone).
 PROGRESS_MIN_READINGS = 20_000
 

@@ -244,7 +244,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     after projecting out everything the base could absorb. ``progress``: called with one
     line at each step of the work (the base fit, each stage of the forward selection and
     its outcome, the checks, the final scan), for a caller that shows long work (the CLI
-    on a long recording: ~10 min at 1 M readings).
+    on a long recording: ~8 min at 1 M readings).
     """
     say = progress if progress is not None else _silent
     notes: list[str] = []
