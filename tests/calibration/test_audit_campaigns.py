@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from calibration import cli
-from calibration.recording import write_recording
+from calibration.recording import Recording, write_recording
 from calibration.schedules import table1
 
 Columns = dict[str, np.ndarray]
@@ -195,3 +195,24 @@ def test_n_too_large_is_not_blamed_on_the_plateaus_alone(tmp_path, capsys) -> No
     assert doc["verdict"] == "cannot judge"
     assert "at the readings' stated noise sd/√n, 0.3" in doc["reason"]
     assert "or n or sd_* too small?" in doc["reason"]
+
+
+def test_a_die_far_behind_short_soaks_is_not_a_unit(tmp_path: Path) -> None:
+    """The die follows the air, possibly far behind: a campaign whose sensor_c rises a
+    fifth as much as its setpoint (soaks too short to settle) is physics, not a unit, and
+    is calibrated on the die's own channel; only a channel rising faster than the one it
+    follows (°F: 1.8 per °C) is refused."""
+    from calibration import gate
+
+    def rec(sensor_c: list[float]) -> Recording:
+        n = 12
+        return Recording.from_columns({
+            "t_s": np.arange(n) * 60.0, "step": np.repeat([0, 1, 2], 4),
+            "ax": np.zeros(n), "ay": np.zeros(n), "az": np.ones(n),
+            "setpoint_c": np.repeat([20.0, 30.0, 40.0], 4),
+            "sensor_c": np.repeat(sensor_c, 4)})
+
+    gate.check_temperature_channels(rec([22.0, 24.0, 26.0]))  # 0.2 °C per °C: no refusal
+    hot = rec([68.0, 86.0, 104.0])
+    with pytest.raises(gate.GateRefusal, match="sensor_c looks like °F"):
+        gate.check_temperature_channels(hot)
