@@ -63,15 +63,21 @@ def _run(tmp_path: Path, cols: Columns, capsys: pytest.CaptureFixture[str]
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert not out.exists()
+    doc = _cannot_judge(src, capsys)
+    assert doc["mismatch"] is None
+    assert doc["reason"] in err  # the same reason as calibrate's
+    return err, doc["reason"]
+
+
+def _cannot_judge(src: Path, capsys: pytest.CaptureFixture[str]) -> dict:
+    """``diagnose --json`` on ``src``: exit 0 with the verdict "cannot judge"; its JSON."""
     args = SimpleNamespace(recording=str(src), output=None, json=True, model=None,
                            n_null=None, against=None, write_twin=None, report_dir=None,
                            seed=None)
     assert cli.run_diagnose(args) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["verdict"] == "cannot judge"
-    assert doc["mismatch"] is None
-    assert doc["reason"] in err  # the same reason as calibrate's
-    return err, doc["reason"]
+    return doc
 
 
 def test_the_unperturbed_campaign_is_calibrated(tmp_path: Path) -> None:
@@ -187,12 +193,7 @@ def test_n_too_large_is_not_blamed_on_the_plateaus_alone(tmp_path, capsys) -> No
     cols["n"] = cols["n"] * 1000
     src = tmp_path / "rec.csv"
     write_recording(src, cols)
-    args = SimpleNamespace(recording=str(src), output=None, json=True, model=None,
-                           n_null=None, against=None, write_twin=None, report_dir=None,
-                           seed=None)
-    assert cli.run_diagnose(args) == 0
-    doc = json.loads(capsys.readouterr().out)
-    assert doc["verdict"] == "cannot judge"
+    doc = _cannot_judge(src, capsys)
     assert "at the readings' stated noise sd/√n, 0.3" in doc["reason"]
     assert "or n or sd_* too small?" in doc["reason"]
 

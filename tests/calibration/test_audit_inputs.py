@@ -86,12 +86,7 @@ def test_a_recording_read_with_another_ranges_sensitivity_is_refused_by_calibrat
         tmp_path, capsys):
     # a firmware that sets ±8 g and divides by the ±2 g sensitivity: a quarter of the
     # acceleration, a warm-up nonetheless (calibrate would hold the scale and fit it)
-    n = 60
-    t = np.arange(n) * 5.0
-    temp = 20.0 + 6.0 * t / t[-1]
-    rec = {"t_s": t, "sensor_c": temp, "ax": np.full(n, 0.004), "ay": np.full(n, 0.005),
-           "az": 0.252 + 0.0007 * (temp - 20.0), "n": np.full(n, 2500.0),
-           "sd_x": np.full(n, 0.002), "sd_y": np.full(n, 0.002), "sd_z": np.full(n, 0.004)}
+    rec = _still_warmup(0.252)
     src, model = tmp_path / "rec.csv", tmp_path / "model.json"
     write_recording(src, rec)
     assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model))) == 2
@@ -193,12 +188,7 @@ def test_a_temperature_that_is_not_the_sensors_gets_no_steep_model(tmp_path, cap
 def test_compensate_refuses_readings_that_are_not_in_g(tmp_path, capsys):
     # a model calibrated on a warm-up in g, applied to the same board's log written by a
     # firmware that divides by the ±2 g sensitivity at ±8 g (a quarter of the acceleration)
-    n = 60
-    t = np.arange(n) * 5.0
-    temp = 20.0 + 6.0 * t / t[-1]
-    rec = {"t_s": t, "sensor_c": temp, "ax": np.full(n, 0.004), "ay": np.full(n, 0.005),
-           "az": 1.002 + 0.0007 * (temp - 20.0), "n": np.full(n, 2500.0),
-           "sd_x": np.full(n, 0.002), "sd_y": np.full(n, 0.002), "sd_z": np.full(n, 0.004)}
+    rec = _still_warmup(1.002)
     src, model = tmp_path / "rec.csv", tmp_path / "model.json"
     write_recording(src, rec)
     assert cli.run_calibrate(SimpleNamespace(recording=str(src), output=str(model))) == 0
@@ -265,3 +255,13 @@ def test_m_s2_declared_as_mg_names_the_unit(tmp_path, capsys):
     src = _table(tmp_path, acc * 9.80665e-3, temp)  # m/s²
     err = _refusal(capsys, _args(src, tmp_path / "rec.csv", accel_unit="mg"))
     assert "median |a| is 0.009885 g, not about 1 g; it looks like m/s² (read as mg)" in err
+
+
+def _still_warmup(az_g: float) -> dict[str, np.ndarray]:
+    """A 5-min warm-up of 60 capture means, z up at ``az_g`` with a 0.7 mg/°C bias change."""
+    n = 60
+    t = np.arange(n) * 5.0
+    temp = 20.0 + 6.0 * t / t[-1]
+    return {"t_s": t, "sensor_c": temp, "ax": np.full(n, 0.004), "ay": np.full(n, 0.005),
+            "az": az_g + 0.0007 * (temp - 20.0), "n": np.full(n, 2500.0),
+            "sd_x": np.full(n, 0.002), "sd_y": np.full(n, 0.002), "sd_z": np.full(n, 0.004)}
