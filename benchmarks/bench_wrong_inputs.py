@@ -30,7 +30,14 @@ from pathlib import Path
 import numpy as np
 
 G = 9.80665
-INCL_ARGS = ["--format", "csv", "--columns", "ax=2,ay=3,az=4,temp=5", "--rate-hz", "500"]
+def incl_args(temp: str = "5", rate_hz: str = "500") -> list[str]:
+    """``soakcal import`` arguments of the inclinometer log, with the column read as the
+    temperature and the sample rate the cases get wrong."""
+    return ["--format", "csv", "--columns", f"ax=2,ay=3,az=4,temp={temp}", "--rate-hz",
+            rate_hz]
+
+
+INCL_ARGS = incl_args()
 SHOWN_CHARS = 230
 
 
@@ -107,18 +114,15 @@ def _cases() -> list[Case]:
                                                np.round(d_(s)[0][:, 4] * 100)]),
              [*INCL_ARGS, *mg]),
         Case("temp_is_ax", "temperature mapped to the ax column (temp=2)", same,
-             ["--format", "csv", "--columns", "ax=2,ay=3,az=4,temp=2", "--rate-hz", "500",
-              *mg]),
+             [*incl_args("2", "500"), *mg]),
         Case("temp_is_az", "temperature mapped to the az column (temp=4)", same,
-             ["--format", "csv", "--columns", "ax=2,ay=3,az=4,temp=4", "--rate-hz", "500",
-              *mg]),
+             [*incl_args("4", "500"), *mg]),
         Case("temp_is_const", "temperature mapped to a constant column (25.0)",
              lambda d, s: _save(d / "k25.csv", [d_(s)[0][:, :4],
                                                 np.full(len(d_(s)[0]), 25.0)]),
              [*INCL_ARGS, *mg]),
         Case("temp_is_col1", "temperature mapped to the counter column (temp=1)", same,
-             ["--format", "csv", "--columns", "ax=2,ay=3,az=4,temp=1", "--rate-hz", "500",
-              *mg]),
+             [*incl_args("1", "500"), *mg]),
         Case("swap_xz", "x and z columns swapped",
              lambda d, s: _save(d / "sw.csv", [d_(s)[0][:, [0, 3, 2, 1, 4]]]),
              [*INCL_ARGS, *mg]),
@@ -127,11 +131,9 @@ def _cases() -> list[Case]:
                                                d_(s)[0][:, 4]]),
              [*INCL_ARGS, *mg]),
         Case("rate_x10", "--rate-hz 5000 (×10)", same,
-             ["--format", "csv", "--columns", "ax=2,ay=3,az=4,temp=5", "--rate-hz", "5000",
-              *mg]),
+             [*incl_args("5", "5000"), *mg]),
         Case("rate_div10", "--rate-hz 50 (÷10)", same,
-             ["--format", "csv", "--columns", "ax=2,ay=3,az=4,temp=5", "--rate-hz", "50",
-              *mg]),
+             [*incl_args("5", "50"), *mg]),
         Case("t_ms_as_s", "time column `t_ms` read as s (no --time-unit)",
              lambda d, s: _save(d / "tms.csv", [np.arange(len(d_(s)[0])) * 2.0,
                                                 d_(s)[0][:, 1:5]], "t_ms,ax,ay,az,temp"),
