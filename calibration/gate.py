@@ -841,12 +841,6 @@ def _check_repeats(rec: Recording) -> None:
         f"was written twice; no model written: remove the repeated rows")
 
 
-def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    A = np.column_stack([x, np.ones_like(x)])
-    slope, offset = np.linalg.lstsq(A, y, rcond=None)[0]
-    return float(slope), float(offset)
-
-
 def check_temperature_channels(rec: Recording, outcome: str = "no model written") -> None:
     """Refuse temperature columns (``setpoint_c``, ``chamber_c``, ``sensor_c``) of which a
     downstream one rises more than the one it follows can make it: over a span of at least
@@ -863,15 +857,12 @@ def check_temperature_channels(rec: Recording, outcome: str = "no model written"
         ok = np.isfinite(x) & np.isfinite(y)
         if ok.sum() < 3 or np.ptp(x[ok]) < TEMPERATURE_SPAN_MIN_C:
             continue
-        slope, offset = _line(x[ok], y[ok])
+        slope, offset = (float(c) for c in np.polyfit(x[ok], y[ok], 1))
         if slope <= CHANNEL_SLOPE_MAX:
             continue
-        if abs(slope / FAHRENHEIT_PER_C - 1.0) < 0.1:
-            unit = f"{other} looks like °F ({other} ≈ 1.8 × {base} + 32 is °F)"
-        elif abs(slope * FAHRENHEIT_PER_C - 1.0) < 0.1:
-            unit = f"{base} looks like °F, or {other} is in another unit"
-        else:
-            unit = f"one of them is in another unit or scale (×{slope:.3g}?)"
+        unit = (f"{other} looks like °F ({other} ≈ 1.8 × {base} + 32 is °F)"
+                if abs(slope / FAHRENHEIT_PER_C - 1.0) < 0.1 else
+                f"one of them is in another unit or scale (×{slope:.3g}?)")
         raise GateRefusal(
             f"{other} rises {slope:.3g} °C per °C of {base} ({other} ≈ {slope:.3g} × {base} "
             f"{offset:+.1f} over {base} {float(np.min(x[ok])):.1f} .. "
