@@ -20,7 +20,10 @@ from simulators.faults import SimFaults
 from simulators.modbus_server import ModbusSimServer, start_modbus_server
 from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage
 
-#: Short wall timeouts keep the fault tests fast; backoff is clock time (virtual).
+#: The rigs' links: a wall timeout long enough that a reply from a loaded test machine (four
+#: workers on two cores) is not taken for a lost one; backoff is clock time (virtual).
+STEADY = RetryPolicy(timeout_s=2.0, read_attempts=3, write_attempts=3, backoff_s=0.5)
+#: A short wall timeout for the tests whose replies never come, to keep them fast.
 FAST = RetryPolicy(timeout_s=0.15, read_attempts=3, write_attempts=3, backoff_s=0.5)
 
 
@@ -50,7 +53,7 @@ async def chamber_rig(request: pytest.FixtureRequest) -> AsyncIterator[ChamberRi
     physics = ChamberPhysics(clock, rng, faults=faults)
     regmap = CHAMBER_MAPS[request.param]
     server = await start_modbus_server(ChamberRegisterImage(physics, regmap), faults, rng)
-    driver = ModbusChamber(ModbusLink(server.url, clock, device="chamber", policy=FAST), regmap)
+    driver = ModbusChamber(ModbusLink(server.url, clock, device="chamber", policy=STEADY), regmap)
     yield ChamberRig(clock, physics, faults, server, driver)
     await driver.link.close()
     await server.stop()
@@ -64,7 +67,7 @@ async def table_rig() -> AsyncIterator[TableRig]:
                                settle_s=3.0)
     server = await start_modbus_server(TurntableRegisterImage(physics, SOAKCAL_TABLE), faults,
                                        np.random.default_rng(8))
-    driver = ModbusTurntable(ModbusLink(server.url, clock, device="turntable", policy=FAST),
+    driver = ModbusTurntable(ModbusLink(server.url, clock, device="turntable", policy=STEADY),
                              SOAKCAL_TABLE)
     yield TableRig(clock, physics, faults, server, driver)
     await driver.link.close()
@@ -187,16 +190,19 @@ async def test_persistent_busy_reports_exception_reply(chamber_rig: ChamberRig) 
     with pytest.raises(ExceptionReply) as err:
         await chamber_rig.driver.read_status()
     assert err.value.code == 6
-    assert chamber_rig.driver.link.stats["requests"] == FAST.read_attempts
+    assert chamber_rig.driver.link.stats["requests"] == STEADY.read_attempts
 
 
 async def test_no_reply_times_out_then_recovers(chamber_rig: ChamberRig) -> None:
-    ch = chamber_rig.driver
+    rig = chamber_rig
+    ch = ModbusChamber(ModbusLink(rig.server.url, rig.clock, device="chamber", policy=FAST),
+                       rig.driver.regmap)
     chamber_rig.faults.p_no_reply = 1.0
     with pytest.raises(DeviceTimeout):
         await ch.read_status()
     chamber_rig.faults.p_no_reply = 0.0
     st = await ch.read_status()
+    await ch.link.close()
     assert st.process_c == pytest.approx(23.0, abs=0.2)
 
 
