@@ -52,10 +52,10 @@ class MuxRig:
 
 @pytest.fixture
 async def mux() -> AsyncIterator[MuxRig]:
-    # The clock jumps to the next wake-up after idle_wall_s of wall time; these tests time
-    # overlapping captures on two servers, so a request still in flight on a loaded machine
-    # (3 test workers, a browser) must not let time jump past it: 20 ms, not 1 ms.
-    clock = VirtualClock(idle_wall_s=0.02)
+    # These tests time overlapping captures on two servers: a request still in flight must
+    # not let time jump past it, whatever the machine's load. The clock moves only when the
+    # event loop (the servers run on it) and the serial ports' reads are quiet.
+    clock = VirtualClock(idle="loop")
     device = MultiplexedBridgeDevice({i: _device(clock, i) for i in range(3)})
     server = await start_bridge_server(device)
     bridge = MultiplexedBridge(server.url, clock, timeout_s=0.3)
