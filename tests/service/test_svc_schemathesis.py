@@ -29,11 +29,13 @@ from schemathesis.specs.openapi.checks import (  # noqa: E402
     response_schema_conformance,
     status_code_conformance,
 )
+from sqlalchemy import delete  # noqa: E402
 
 from service.api.app import create_app  # noqa: E402
-from service.api.auth import create_token  # noqa: E402
+from service.api.auth import create_token, hash_token  # noqa: E402
 from service.campaigns import seed_sim_rig  # noqa: E402
 from service.config import Settings  # noqa: E402
+from service.db.models import Base  # noqa: E402
 from service.db.session import session_scope, upgrade_database  # noqa: E402
 
 POSTGRES_ENV = "SOAKCAL_TEST_DATABASE_URL"
@@ -71,6 +73,21 @@ class _Target:
             seed_sim_rig(session)
             token = create_token(session, "admin", "schemathesis")
         return {"Authorization": f"Bearer {token}"}
+
+    def reset(self, admin_headers: dict[str, str]) -> None:
+        """Every row but the admin's token gone, the simulated rig seeded again: what a
+        request returns must not depend on what an earlier scenario left (a campaign still
+        queued on the rig turns the next POST into a 409), or Hypothesis, replaying a
+        scenario, finds it draws differently and fails as "flaky" (FlakyStrategyDefinition)."""
+        admin_hash = hash_token(admin_headers["Authorization"].removeprefix("Bearer "))
+        with session_scope(self.app.state.session_factory) as session:
+            for table in reversed(Base.metadata.sorted_tables):
+                if table.name == "api_tokens":
+                    session.execute(delete(table).where(table.c.token_hash != admin_hash))
+                    session.execute(table.update().values(revoked_at=None, expires_at=None))
+                else:
+                    session.execute(delete(table))
+            seed_sim_rig(session)
 
 
 _CONFIG = schemathesis.config.SchemathesisConfig.from_dict({
@@ -129,6 +146,9 @@ def _stateful(target: _Target, admin_headers: dict[str, str]) -> None:
     base = target.schema.as_state_machine()
 
     class Machine(base):  # type: ignore[misc, valid-type]
+        def setup(self) -> None:
+            target.reset(admin_headers)
+
         def get_call_kwargs(self, case):  # type: ignore[no-untyped-def]
             return {"headers": admin_headers}
 
