@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy import by_fit, family_level, not_confirmed, stats
+from calibration.discrepancy import by_fit, not_confirmed, stats
 from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
@@ -70,11 +70,6 @@ WILD_NULL = True
 # plateaus inflates its own variance estimate and is lost (second generator, attribution at
 # 2x 63/120 -> 42/120; docs/diagnosis.md §2, docs/benchmarks.md).
 PLATEAU_NULL = False
-# The family test: each family's p calibrated on its own null before the minimum over
-# families (family_level.py, issue 22). Off: the minimum of the raw p over families against
-# the replicates' minimum, where the heaviest null decided for all.
-FAMILY_OWN_NULL = True
-FAMILY_NULL_GROUPS = True
 EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
 BASE_MODEL = "sfem-cubic"
 
@@ -398,7 +393,13 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         tests = {f.effect_id: tests[f.effect_id] for f in live if f.effect_id in tests}
         if not tests:
             break
-        best, p_family = _family_p(tests, n_null)
+        lmin_null = np.min(np.vstack([t.logp_adj_null for t in tests.values()]), axis=0)
+        # Ranked in log p: strong effects are far beyond double precision in p (docs §5).
+        best = min(tests.values(), key=lambda t: t.logp_adj)
+        count = int(np.sum(lmin_null <= best.logp_adj))
+        p_family = (1 + count) / (n_null + 1)
+        if count == 0:  # beyond the bootstrap's resolution: Bonferroni over the families
+            p_family = min(p_family, best.p_adj * len(tests))
         stage_log.append({"best": best.effect_id, "p_family": p_family,
                           **({"plateau_theta": [float(f"{t:.3g}") for t in shared[1]]}
                              if shared is not None else {}),
@@ -638,24 +639,6 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         t_s=ctx.t_s, steps=ctx.steps, positions=ctx.positions, stage_log=stage_log, problem=pb,
         protocol=protocol.to_json(), terms=terms,
     )
-
-
-def _family_p(tests: dict[str, stats.CandidateTest], n_null: int
-              ) -> tuple[stats.CandidateTest, float]:
-    """The stage's leading family and its family-wise p (docs/diagnosis.md §2)."""
-    if FAMILY_OWN_NULL:
-        group = ((lambda k: "parametric" if BY_ID[k].per_reading or not WILD_NULL
-                  else "sign flips") if FAMILY_NULL_GROUPS else None)
-        ft = family_level.family_test(tests, group)
-        return ft.best, ft.p_family
-    lmin_null = np.min(np.vstack([t.logp_adj_null for t in tests.values()]), axis=0)
-    # Ranked in log p: strong effects are far beyond double precision in p (docs §5).
-    best = min(tests.values(), key=lambda t: t.logp_adj)
-    count = int(np.sum(lmin_null <= best.logp_adj))
-    p_family = (1 + count) / (n_null + 1)
-    if count == 0:  # beyond the bootstrap's resolution: Bonferroni over the families
-        p_family = min(p_family, best.p_adj * len(tests))
-    return best, p_family
 
 
 def _silent(_line: str) -> None:
