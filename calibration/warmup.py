@@ -106,17 +106,22 @@ MIN_GAIN = 0.005
 # (:func:`_rate_check`): the part of it left after projecting out the orientations'
 # constants and the polynomial in T of the highest degree judged must be resolved
 # (RATE_NOISE_SHARE) and hold at least this share of the rate column's sum of squares.
-# What identifies the gain k is the residual's size in °C/min, not its share: k's standard
-# error is σ_bias / √Σ residual², whatever part of Σ rate² the polynomial in T took. A fast
-# heating at a near-steady rate leaves a small share of a large rate: a ramp at 2 °C/min
-# with a 16.6-s channel lag (gen2 w1001) leaves 0.7 %, 0.17 °C/min RMS, ten times dT/dt's
-# noise, and k·dT/dt there is the bias the polynomial cannot take. So this share only
-# guards the design's conditioning (1/share the variance inflation against a rate
-# uncorrelated with T: at most 1000, a condition far inside double precision); that the
-# residual is resolved is RATE_NOISE_SHARE's test, and whether the gain is then worth
-# having is the held-out error's (_rate_beats, _choose_model), which refuses a gain
-# within its own standard error.
+# What identifies the gain k is that residual's size in °C/min, not its share: k's
+# standard error is σ_bias / √Σ residual², whatever part of Σ rate² the polynomial in T
+# took. A fast heating at a near-steady rate leaves a small share of a large rate: a ramp
+# at 2 °C/min read by a channel lagging 16.6 s (gen2 w1001) leaves 0.7 %, 0.17 °C/min RMS,
+# several times dT/dt's noise, and k·dT/dt there is a bias the polynomial cannot take.
+# Since the residual's resolution is RATE_NOISE_SHARE's test and the gain's worth the
+# held-out error's (_rate_beats, _choose_model: a gain within its own standard error is
+# refused), this share only guards the design's conditioning: 1/share is the variance
+# inflation of k against a rate uncorrelated with T, at most 1000.
 RATE_MIN_SHARE = 0.001
+# The same share for each further column of the gain, dT/dt·x^j, j ≥ 1
+# (:func:`_gain_degree_identified`). These have no resolution test, so the share is
+# their only guard: at RATE_MIN_SHARE a heating and a 5-min cooling (a constant gain of
+# 40 µg/(°C/min)) got a degree-2 gain ranging −52 … +40 over the span, within the
+# held-out error; at 1 % the constant.
+GAIN_MIN_SHARE = 0.01
 # dT/dt is read over the shortest window (temperature_conditioning.RATE_WINDOWS_S) whose
 # noise is at most this share of that residual rate's RMS: errors in dT/dt then shrink the
 # fitted gain by at most 1 % (their variance over the residual's).
@@ -501,7 +506,8 @@ def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarra
 def _gain_degree_identified(rate: np.ndarray, x: np.ndarray, labels: np.ndarray,
                             degree: int) -> int:
     """The highest rate-gain degree m whose columns dT/dt·x^j (j ≤ m) each keep at least
-    :data:`RATE_MIN_SHARE` of their sum of squares after projecting out the degree-d
+    :data:`RATE_MIN_SHARE` (j = 0) or :data:`GAIN_MIN_SHARE` (j ≥ 1: no resolution test
+    guards these) of their sum of squares after projecting out the degree-d
     design and the lower rate columns (:func:`_rate_check`'s test, column by column). In
     a heating, dT/dt·x^j is as much a function of T as dT/dt is, so a gain that changes
     with T is identified only where the heating and the rest (or the cooling) overlap in
@@ -512,7 +518,8 @@ def _gain_degree_identified(rate: np.ndarray, x: np.ndarray, labels: np.ndarray,
     for j in range(max(degree, 1)):
         col = rate * x ** j
         res = col - X @ np.linalg.lstsq(X, col, rcond=None)[0]
-        if float(np.sum(res ** 2)) < RATE_MIN_SHARE * max(float(np.sum(col ** 2)), 1e-30):
+        least = RATE_MIN_SHARE if j == 0 else GAIN_MIN_SHARE
+        if float(np.sum(res ** 2)) < least * max(float(np.sum(col ** 2)), 1e-30):
             break
         top, X = j, np.column_stack([X, col])
     return top
