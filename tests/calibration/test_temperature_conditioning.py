@@ -12,6 +12,7 @@ from calibration.temperature_conditioning import (
     compensation_temperature,
     segments_for_conditioning,
     smooth_over_time,
+    temperature_rate_c_per_min,
 )
 
 
@@ -142,3 +143,32 @@ def test_smoothing_all_windows_at_once_equals_window_by_window(degree: int) -> N
             want[i] = _local_fit(ts[win], ys[win], ts[j], degree, quantum)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
     assert np.max(np.abs(got - temp)) > 1.0  # the glitches were smoothed away, not kept
+
+
+def _warmup_rows_with_gaps(pattern: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """1-s rows of a die warming from 20 °C toward 35 °C (τ 300 s) with rows missing:
+    ``blocks``, alternate 10-s blocks (a held-out split's fit rows); ``dropouts``, a log
+    losing 2-8 s at a time. Returns (t_s, T, the analytic dT/dt in °C/min)."""
+    t = np.arange(900.0)
+    if pattern == "blocks":
+        keep = (t // 10) % 2 == 0
+    else:
+        rng = np.random.default_rng(3)
+        keep = np.ones(t.size, bool)
+        for start in rng.choice(t.size - 10, 40, replace=False):
+            keep[start:start + rng.integers(2, 9)] = False
+    t = t[keep]
+    return t, 20.0 + 15.0 * (1.0 - np.exp(-t / 300.0)), 3.0 * np.exp(-t / 300.0)
+
+
+@pytest.mark.parametrize("pattern", ["blocks", "dropouts"])
+def test_the_rate_beside_a_gap_is_the_rate_not_a_difference_across_it(pattern: str) -> None:
+    # Over a 5-s window a row beside a gap has 3 rows on one side; the rate there must be
+    # the curve's, as at any other row (a parabola's fallback to their median read a
+    # 2 °C/min heating as 0.2-1.2 °C/min beside each gap)
+    t, temperature, truth = _warmup_rows_with_gaps(pattern)
+    rate = temperature_rate_c_per_min(t, temperature, 5.0)
+    beside = np.r_[np.diff(t) > 1.5, False] | np.r_[False, np.diff(t) > 1.5]
+    assert beside.sum() >= 40
+    np.testing.assert_allclose(rate[beside], truth[beside], rtol=0.02)
+    np.testing.assert_allclose(rate, truth, rtol=0.02)

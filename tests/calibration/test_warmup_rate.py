@@ -107,6 +107,26 @@ def test_a_rate_sensitive_part_gets_its_gain_back(tmp_path, capsys):
     np.testing.assert_allclose(gain[:, 0], [40.0, -24.0, 32.0], atol=4.0)
 
 
+
+def test_a_rate_sensitive_part_gets_its_gain_back_from_fit_rows_with_gaps(tmp_path, capsys):
+    # The held-out split's fit rows: alternate 10-s blocks of the log. A quiet channel
+    # (0.3 mK) makes the 5-s window dT/dt's, where the rows beside each gap have 3 rows in
+    # their window: read as a difference across the gap, dT/dt there was a fraction of the
+    # true rate and the fitted gain a polynomial in T far from the part's constant.
+    cols = _log(rate_ug_per_c_per_min=40.0)
+    cols["sensor_c"] = _die(cols["t_s"]) + np.random.default_rng(5).normal(0.0, 3e-4,
+                                                                             cols["t_s"].size)
+    fit_rows = (cols["t_s"] // 10) % 2 == 0
+    doc, model_path = _calibrate(tmp_path, {k: v[fit_rows] for k, v in cols.items()}, capsys)
+    assert doc["rate_term"]["window_s"] == 5.0
+    model = load_model(model_path)
+    gain = np.asarray(model.temperature_rate["gain_ug_per_c_per_min"])
+    # the gain k(T) over the log's temperatures is the part's constant, on every axis
+    x = model.x_of(cols["sensor_c"][fit_rows])
+    k_over_span = np.array([np.polyval(g[::-1], x) for g in gain])
+    truth = np.array([40.0, -24.0, 32.0])[:, None]
+    assert np.max(np.abs(k_over_span - truth)) < 4.0, (k_over_span.min(1), k_over_span.max(1))
+
 def test_a_one_way_warmup_has_no_rate_term(tmp_path, capsys):
     # Warming only, the channel reading the die: dT/dt = (45 °C − T)/10 min is a function
     # of T and the polynomial already absorbs it, so no rate term is even tried. (With a
