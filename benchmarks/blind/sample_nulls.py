@@ -2,7 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python -m benchmarks.blind.sample_nulls
         [--n 100] [--samples 20] [--effect scale_nonlinearity --size 40]
-        [--vibration-mg 0.5] [--placement-ug 20] [--n-null 200] [--out F.json]
+        [--vibration-mg 0.5] [--placement-ug 20] [--n-null 400] [--out F.json]
 
 Each case: its own simulated sensor and seed, 11 steps −40…60 °C, Table 1, 20 min soaks,
 the reference recorded, written in the *samples* shape of ``benchmarks.blind.memory``
@@ -23,6 +23,7 @@ import numpy as np
 
 from benchmarks.blind.score import clopper_pearson
 from calibration.discrepancy import diagnose
+from calibration.discrepancy.level import N_NULL
 from calibration.recording import Recording
 from simulators.truth import SensorTruth
 
@@ -122,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=100)
     ap.add_argument("--samples", type=int, default=20, help="rows per position capture")
-    ap.add_argument("--n-null", type=int, default=200)
+    # diagnose's own replicates: at the verdict's level (level.ALPHA) 200 cannot resolve α/2
+    ap.add_argument("--n-null", type=int, default=N_NULL)
     ap.add_argument("--effect", default=None)
     ap.add_argument("--size", type=float, default=0.0)
     ap.add_argument("--vibration-mg", type=float, default=0.0, help="below 0 °C, rms")
