@@ -47,7 +47,9 @@ class LiveService:
             c = self.call("GET", f"/api/v1/campaigns/{campaign_id}")
             if c["state"] in states:
                 return c
-            assert time.monotonic() < deadline, f"campaign {campaign_id} still {c['state']}"
+            assert time.monotonic() < deadline, (
+                f"campaign {campaign_id} still {c['state']} after {timeout_s:g} s: "
+                f"{c['progress']}, action {c['requested_action']}, error {c['error']}")
             time.sleep(0.1)
 
 
