@@ -47,9 +47,9 @@ class LiveService:
 
         The budget is this process's CPU time: the service, its engine and the fitting
         phase run in it (threads), and a fit is CPU work that a loaded machine stretches
-        in wall time (a ramp campaign's fit: 7 CPU-s, 110 s wall at a load of 12 on two
-        cores), while the rig's own time runs on the wall clock whatever the load.
-        ``wall_s`` only bounds a hang.
+        in wall time (a ramp campaign's continuous fit outlasted 60 s of wall under load),
+        while the rig's own time runs on the wall clock whatever the load. ``wall_s`` only
+        bounds a hang.
         """
         cpu_deadline = time.process_time() + cpu_s
         wall_deadline = time.monotonic() + wall_s
