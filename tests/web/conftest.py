@@ -10,6 +10,7 @@ from __future__ import annotations
 import socket
 import threading
 import time
+import urllib.error
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -58,6 +59,37 @@ def live_engine_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
                       session_factory=app.state.session_factory)
     server.should_exit = True
     thread.join(timeout=20)
+
+
+@pytest.fixture(autouse=True)
+def _abort_what_the_test_left(request: pytest.FixtureRequest) -> Iterator[None]:
+    """After a test on the live service, abort every campaign it started and left
+    unfinished, and wait until the rig is free: a test that fails half-way (its own abort
+    never reached) must not leave its campaign holding the sim rig, with the next test's
+    campaign queued behind it. Session fixtures' campaigns are made before this runs."""
+    if "live_engine_service" not in request.fixturenames:
+        yield
+        return
+    from sqlalchemy import func, select
+
+    from service.db.models import Campaign
+    from service.db.session import session_scope
+    from service.engine.states import TERMINAL
+
+    service: LiveService = request.getfixturevalue("live_engine_service")
+    with session_scope(service.session_factory) as session:
+        first_new = (session.scalar(select(func.max(Campaign.id))) or 0) + 1
+    yield
+    with session_scope(service.session_factory) as session:
+        left = session.scalars(select(Campaign.id).where(
+            Campaign.id >= first_new, Campaign.state.not_in(TERMINAL))).all()
+    for campaign_id in left:
+        try:
+            service.abort(campaign_id)
+        except urllib.error.HTTPError as exc:  # it finished meanwhile: nothing to abort
+            if exc.code != 409:
+                raise
+            service.wait_campaign(campaign_id, *TERMINAL)
 
 
 # Module scope, not session: Playwright's sync API keeps an event loop running on this thread

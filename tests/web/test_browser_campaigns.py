@@ -97,9 +97,16 @@ def test_the_header_stays_on_one_line_at_800_px(page, live_engine_service: LiveS
 def _wait_state(page, *states: str) -> None:  # type: ignore[no-untyped-def]
     """Until the campaign's state on the page is one of ``states`` (an arrow function: the
     page's CSP forbids eval, which a bare expression would need)."""
-    page.wait_for_function(
-        "(states) => states.includes(document.querySelector('#state')?.textContent)",
-        arg=list(states))
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    try:
+        page.wait_for_function(
+            "(states) => states.includes(document.querySelector('#state')?.textContent)",
+            arg=list(states))
+    except PlaywrightTimeout as exc:  # say what the page shows and what it saw happen
+        raise AssertionError(
+            f"the page shows {page.inner_text('#state')!r}, not one of {states}; "
+            f"its journal, newest first:\n{page.inner_text('#journal')}") from exc
 
 
 def test_watch_a_campaign_live_pause_and_abort_ask_first(
@@ -223,3 +230,41 @@ def test_a_two_sensor_campaign_shows_each_die_and_calibration(
     assert [t for t in links if t.startswith("calibration")] == [
         f"calibration {done['calibration_ids'][s]} ({s})" for s in ("SN-PAIR-B", "SN-PAIR-A")]
     assert "recording SN-PAIR-A (CSV)" in links
+
+
+def test_a_pause_answer_older_than_the_stream_does_not_stick(
+    page, live_engine_service: LiveService,  # type: ignore[no-untyped-def]
+) -> None:
+    """The pause's HTTP answer is read right after the request is stored; the runner pauses
+    at its next checkpoint and the progress stream shows "paused". On a loaded machine the
+    answer ("running, pause requested") can reach the page after that stream event, and the
+    stream sends only changes: the page must still end on what the database says. The
+    answer is held here until the page has shown "paused"."""
+    # a ramp of ≥ 28 s wall (23 → 30 °C at 0.005 °C/min, 3000×): running when paused
+    created = live_engine_service.start_campaign(
+        "SN-LATE", setpoints_c=[23, 30], soak_min=60, ramp_c_per_min=0.005)
+    cid = created["id"]
+    try:
+        sign_in(page, live_engine_service, "operator")
+        open_view(page, live_engine_service, f"#/campaigns/{cid}", "#pause-btn")
+        _wait_state(page, "running")
+        before = live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")
+        held: list = []
+        page.route(f"**/api/v1/campaigns/{cid}/pause",
+                   lambda route: held.append((route, route.fetch())))
+        page.once("dialog", lambda d: d.accept())
+        page.click("#pause-btn")
+        _wait_state(page, "paused")  # shown by the stream, the answer still held
+        route, answer = held[0]
+        late = answer.json()
+        if late["state"] == "paused":  # the checkpoint fell between the write and the read
+            late = {**before, "requested_action": "pause"}  # the answer read a moment earlier
+        assert late["state"] == "running" and late["requested_action"] == "pause"
+        route.fulfill(response=answer, json=late)
+        # the page shows the late answer (its journal says so), then what the database says
+        page.wait_for_function("(line) => document.querySelector('#journal').textContent"
+                               ".includes(line)", arg="state paused → running")
+        _wait_state(page, "paused")
+        assert live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")["state"] == "paused"
+    finally:
+        live_engine_service.abort(cid)

@@ -107,7 +107,7 @@ def test_a_ramp_started_from_the_form_shows_its_sweeps(
 
     live_engine_service.call("POST", f"/api/v1/campaigns/{cid}/resume")
     done = live_engine_service.wait_campaign(cid, "completed", "failed", "aborted",
-                                             timeout_s=180)
+                                             cpu_s=180)
     assert done["state"] == "completed", done.get("error")
     sweeps = _recording_sweeps(live_engine_service, cid)
     page.reload()

@@ -328,6 +328,10 @@ async function campaignView(id) {
   const control = (action) => h("button", { id: `${action}-btn`, onclick: () => guarded(async () => {
     if (ASK[action] && !confirm(ASK[action]())) return;
     c = await api("POST", `/api/v1/campaigns/${id}/${action}`); note(c); render();
+    // The answer was read when the request was stored; the stream may already have shown
+    // a later state (the runner's checkpoint), and it sends only changes, so it would never
+    // correct this older one: follow a new stream, whose first event is read after it.
+    follow();
   }) }, action);
 
   function render() {
@@ -398,16 +402,22 @@ async function campaignView(id) {
   note(c);
   render();
   await readHistory(true);
-  if (seq === viewSeq && !TERMINAL.includes(c.state)) {
-    stream = new EventSource(`/api/v1/campaigns/${id}/events`);
-    const mine = stream;
-    stream.addEventListener("progress", (ev) => {
+  follow();
+
+  // the campaign's progress stream (while it is not finished), replacing this view's last one
+  function follow() {
+    if (seq !== viewSeq) return; // another view owns the stream now
+    if (stream) { stream.close(); stream = null; }
+    if (TERMINAL.includes(c.state)) return;
+    const mine = stream = new EventSource(`/api/v1/campaigns/${id}/events`);
+    mine.addEventListener("progress", (ev) => {
+      if (stream !== mine) return;
       c = JSON.parse(ev.data); events += 1; note(c); render();
       quietly(() => readHistory(false));
     });
-    stream.addEventListener("end", () => { mine.close(); if (stream === mine) stream = null;
+    mine.addEventListener("end", () => { mine.close(); if (stream !== mine) return; stream = null;
       quietly(async () => { c = await api("GET", `/api/v1/campaigns/${id}`); note(c); render(); await readHistory(true); }); });
-    stream.onerror = () => { if (stream === mine && mine.readyState === EventSource.CLOSED) error("progress stream closed"); };
+    mine.onerror = () => { if (stream === mine && mine.readyState === EventSource.CLOSED) error("progress stream closed"); };
   }
 }
 
