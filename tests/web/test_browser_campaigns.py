@@ -244,27 +244,24 @@ def test_a_pause_answer_older_than_the_stream_does_not_stick(
     created = live_engine_service.start_campaign(
         "SN-LATE", setpoints_c=[23, 30], soak_min=60, ramp_c_per_min=0.005)
     cid = created["id"]
-    try:
-        sign_in(page, live_engine_service, "operator")
-        open_view(page, live_engine_service, f"#/campaigns/{cid}", "#pause-btn")
-        _wait_state(page, "running")
-        before = live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")
-        held: list = []
-        page.route(f"**/api/v1/campaigns/{cid}/pause",
-                   lambda route: held.append((route, route.fetch())))
-        page.once("dialog", lambda d: d.accept())
-        page.click("#pause-btn")
-        _wait_state(page, "paused")  # shown by the stream, the answer still held
-        route, answer = held[0]
-        late = answer.json()
-        if late["state"] == "paused":  # the checkpoint fell between the write and the read
-            late = {**before, "requested_action": "pause"}  # the answer read a moment earlier
-        assert late["state"] == "running" and late["requested_action"] == "pause"
-        route.fulfill(response=answer, json=late)
-        # the page shows the late answer (its journal says so), then what the database says
-        page.wait_for_function("(line) => document.querySelector('#journal').textContent"
-                               ".includes(line)", arg="state paused → running")
-        _wait_state(page, "paused")
-        assert live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")["state"] == "paused"
-    finally:
-        live_engine_service.abort(cid)
+    sign_in(page, live_engine_service, "operator")
+    open_view(page, live_engine_service, f"#/campaigns/{cid}", "#pause-btn")
+    _wait_state(page, "running")
+    before = live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")
+    held: list = []
+    page.route(f"**/api/v1/campaigns/{cid}/pause",
+               lambda route: held.append((route, route.fetch())))
+    page.once("dialog", lambda d: d.accept())
+    page.click("#pause-btn")
+    _wait_state(page, "paused")  # shown by the stream, the answer still held
+    route, answer = held[0]
+    late = answer.json()
+    if late["state"] == "paused":  # the checkpoint fell between the write and the read
+        late = {**before, "requested_action": "pause"}  # the answer read a moment earlier
+    assert late["state"] == "running" and late["requested_action"] == "pause"
+    route.fulfill(response=answer, json=late)
+    # the page shows the late answer (its journal says so), then what the database says
+    page.wait_for_function("(line) => document.querySelector('#journal').textContent"
+                           ".includes(line)", arg="state paused → running")
+    _wait_state(page, "paused")
+    assert live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")["state"] == "paused"
