@@ -19,8 +19,13 @@ def text_report(diag: Any) -> str:
              f"  held out: {diag.heldout_scheme}"]
     if getattr(diag, "cannot_judge", ""):
         return "\n".join(lines[:1] + [f"  Cannot judge: {diag.cannot_judge}."])
+    excess = excess_line(getattr(diag, "unexplained", None) or {})
     if not diag.findings:
-        lines.append("  No mismatch: the residuals are consistent with noise.")
+        # "Consistent with noise" only where the residuals are: a χ² well above the recorded
+        # noise that no test could place is said, not called noise.
+        lines.append("  No mismatch: the residuals are consistent with noise." if not excess
+                     else "  No effect found at the family-wise level, but the residuals are "
+                     "not at the recorded noise:")
     for k, f in enumerate(diag.findings, 1):
         w = f.where
         lines += [
@@ -44,6 +49,8 @@ def text_report(diag: Any) -> str:
                          + f"): {c['how_told_apart']}")
         for why, effs in alike.items():
             lines.append(f"   not told apart from {', '.join(effs)}: {why}")
+    if excess:
+        lines.append(excess)
     lines += protocol_lines(getattr(diag, "protocol", None) or {})
     if diag.not_identifiable:
         lines.append("Not identifiable in this recording:")
@@ -52,6 +59,28 @@ def text_report(diag: Any) -> str:
     for note in diag.notes:
         lines.append(f"Note: {note}")
     return "\n".join(lines)
+
+
+def excess_line(unexplained: dict[str, Any]) -> str:
+    """What the χ² excess test says, when it is significant (docs/diagnosis.md §7).
+
+    The test does not enter the verdict (its null, sd/√n, is often optimistic on real
+    averages), but a residual several times the recorded noise that no finding explains is
+    what a reader must not take for a fit at the noise: the report says how far above it
+    the final residual is and that no test placed it.
+    """
+    c = unexplained.get("chi_square") or {}
+    if not c.get("significant"):
+        return ""
+    where = ("the scan found no step or position block that stands out"
+             if unexplained.get("blocks") else
+             "the recording has no repeated step or position for the scan to place it")
+    return (f"  Left unexplained: the final residual is {c['rms_over_noise']:.2f} × the "
+            f"recorded noise (χ²/dof {c['chi2_per_dof']:.2f} on {c['dof']} dof, "
+            f"p = {c['p_value']:.2g}); {where}. Either the recorded noise understates the "
+            "scatter (correlated samples, vibration, placement repeatability) or structure "
+            "the catalogue does not name is spread over the recording: repeat positions "
+            "or plateaus to locate it.")
 
 
 def protocol_lines(pr: dict[str, Any]) -> list[str]:
