@@ -35,6 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from calibration import sfem
+from calibration.die_follows_air import die_leads_air
 from calibration.errors import CalibrationError
 
 if TYPE_CHECKING:  # thermal imports fit, which imports this module
@@ -795,7 +796,7 @@ def check_recording(recording: Recording) -> None:
     the fix:
 
     - averaged readings that repeat an earlier one value for value (:func:`_check_repeats`);
-    - temperature channels in different units (:func:`check_temperature_channels`);
+    - temperature channels in different units, or swapped (:func:`check_temperature_channels`);
     - reference vectors that are not the readings' orientation (:func:`_check_references`).
     """
     _check_repeats(recording)
@@ -847,7 +848,9 @@ def check_temperature_channels(rec: Recording, outcome: str = "no model written"
     :data:`TEMPERATURE_SPAN_MIN_C`, more than :data:`CHANNEL_SLOPE_MAX` °C per °C. A slope
     of 1.8 is one in °F, 10 one ×10. With a setpoint the odd channel is the one off the
     setpoint; without, ``sensor_c`` is named against ``chamber_c``. A channel that rises
-    less (a die behind short soaks) is not refused."""
+    less (a die behind short soaks) is not refused. Then a ``chamber_c`` that moves through
+    its plateaus while ``sensor_c`` holds (the two swapped) is refused
+    (:func:`calibration.die_follows_air.die_leads_air`)."""
     names = [c for c in ("setpoint_c", "chamber_c", "sensor_c") if rec.has(c)]
     if len(names) < 2:
         return
@@ -869,6 +872,9 @@ def check_temperature_channels(rec: Recording, outcome: str = "no model written"
             f"{float(np.max(x[ok])):.1f}): the temperature columns of one chamber and die "
             f"move together, so {unit}; {outcome}: write every _c column in °C "
             f"(docs/recording.md)")
+    led = die_leads_air(rec, outcome)
+    if led:
+        raise GateRefusal(led)
 
 
 def _check_references(rec: Recording) -> None:
