@@ -100,7 +100,12 @@ def protocol_lines(pr: dict[str, Any]) -> list[str]:
     for c in pr["not_separable"]:
         tail = " (a finding naming one is reported as not identifiable)" \
             if c["finding_withheld"] else ""
-        lines.append(f"  cannot separate {' / '.join(c['effects'])}: {c['why']}{tail}")
+        versus = c.get("versus") or []
+        # Two sides (time terms versus orientation terms): each is confused with the other
+        # side only, so the line says which from which, not one group of all of them.
+        group = (" / ".join(e for e in c["effects"] if e not in versus) + " from "
+                 + " / ".join(versus)) if versus else " / ".join(c["effects"])
+        lines.append(f"  cannot separate {group}: {c['why']}{tail}")
     return lines
 
 

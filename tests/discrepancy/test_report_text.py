@@ -1,4 +1,5 @@
-"""The text report says when the final residual is well above the recorded noise.
+"""The text report: a final residual well above the recorded noise is said, not called
+noise; a two-sided confusion says which effects from which.
 
 The χ² excess test does not enter the verdict (sd/√n of real averages is often optimistic),
 but "No mismatch: the residuals are consistent with noise" beside residuals at 2.8 × the
@@ -46,3 +47,23 @@ def test_residuals_at_the_recorded_noise_are_called_noise():
     text = text_report(d)
     assert "No mismatch: the residuals are consistent with noise." in text
     assert "Left unexplained" not in text
+
+
+def test_a_two_sided_confusion_says_which_from_which():
+    """One plateau read once per position: time terms are confused with orientation terms,
+    not scale_nonlinearity with cross_coupling (told apart by their own shapes)."""
+    from calibration.discrepancy.report import protocol_lines
+
+    pr = {"temperature": "none", "n_plateaus": 1, "temperature_source": "",
+          "position_order": "one plateau", "order_from": "t_s", "references": False,
+          "sessions": None, "oblique_positions": True, "separable": ["outlier"],
+          "not_separable": [{"effects": ["self_heating", "bias_drift", "scale_nonlinearity",
+                                         "cross_coupling"], "why": "one plateau",
+                             "finding_withheld": False,
+                             "versus": ["scale_nonlinearity", "cross_coupling"]},
+                            {"effects": ["thermal_lag", "bias_drift"], "why": "no temperature",
+                             "finding_withheld": False}]}
+    lines = protocol_lines(pr)
+    assert ("  cannot separate self_heating / bias_drift from scale_nonlinearity / "
+            "cross_coupling: one plateau") in lines
+    assert "  cannot separate thermal_lag / bias_drift: no temperature" in lines
