@@ -11,9 +11,12 @@ write is the chunk the board's USB stack sees.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import tracemalloc
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[1] / "firmware" / "rp2040"
 if str(FIRMWARE_DIR) not in sys.path:
@@ -75,32 +78,51 @@ def mux(stall_after: int | None = None) -> bridge_app.MuxBridge:
                                  1: bridge_app.Bridge(SyntheticSensor(stall_after), UID)})
 
 
+@contextlib.contextmanager
+def _alone() -> Iterator[None]:
+    """No other Python thread runs inside (tracemalloc counts every thread's allocations: a
+    test process may serve a web app from a thread beside it). The code measured writes to
+    memory only and never blocks, so holding the GIL for the switch interval holds it
+    throughout."""
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(60.0)
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(before)
+
+
 def peak_heap_serving(line: bytes) -> tuple[int, WriteMeter]:
     """Peak bytes allocated (tracemalloc) while the firmware serves ``line``."""
     board = mux()
     meter = WriteMeter()
+    with _alone():
+        return _peak_serving(board, line, meter), meter
+
+
+def _peak_serving(board: Any, line: bytes, meter: WriteMeter) -> int:
     tracemalloc.start()
     try:
         tracemalloc.reset_peak()
         base = tracemalloc.get_traced_memory()[0]
         board.serve_line(line, meter)
-        peak = tracemalloc.get_traced_memory()[1] - base
+        return tracemalloc.get_traced_memory()[1] - base
     finally:
         tracemalloc.stop()
-    return peak, meter
 
 
 def peak_heap_buffered(line: bytes) -> int:
     """Peak bytes allocated while the whole reply to ``line`` is built as a list first."""
     board = mux()
-    tracemalloc.start()
-    try:
-        tracemalloc.reset_peak()
-        base = tracemalloc.get_traced_memory()[0]
-        board.handle_line(line)
-        return tracemalloc.get_traced_memory()[1] - base
-    finally:
-        tracemalloc.stop()
+    with _alone():
+        tracemalloc.start()
+        try:
+            tracemalloc.reset_peak()
+            base = tracemalloc.get_traced_memory()[0]
+            board.handle_line(line)
+            return tracemalloc.get_traced_memory()[1] - base
+        finally:
+            tracemalloc.stop()
 
 
 def main() -> None:

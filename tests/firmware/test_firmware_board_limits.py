@@ -45,6 +45,30 @@ def test_raw_heap_does_not_grow_with_the_capture(address: tuple[str, ...]) -> No
     assert big_peak <= small_peak + 1_000, (small_peak, big_peak)
 
 
+def test_the_heap_measured_is_the_replys_not_another_threads() -> None:
+    """A test process may serve a web app from a thread beside this one (the browser tests'
+    live service): its allocations are not the reply's (32 kB were counted so)."""
+    import threading
+
+    stop = threading.Event()
+
+    def churn() -> None:
+        kept: list[bytearray] = []
+        while not stop.is_set():
+            kept.append(bytearray(4096))
+            if len(kept) > 50:
+                kept.clear()
+
+    thread = threading.Thread(target=churn, daemon=True)
+    thread.start()
+    try:
+        peak, _ = peak_heap_serving(encode_frame("RAW", 10_000))
+    finally:
+        stop.set()
+        thread.join()
+    assert peak < 8_000, peak
+
+
 def test_streamed_bytes_are_the_lines_the_host_parses() -> None:
     meter = WriteMeter(keep=True)
     board = mux()
