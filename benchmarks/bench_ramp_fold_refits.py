@@ -4,6 +4,7 @@
         [--sim-speed 3000 40000 80000] [--save-dir DIR]
     ... bench_ramp_fold_refits.py --sparse-ramp-every 15 25 40 [--hold-every 7]
         [--sensors 8] [--seed 0]
+    ... bench_ramp_fold_refits.py --fit-csv DIR/*.csv
 
 The browser tests' ramp campaign (``tests/web/conftest.py``: sim rig, 20 → 60 °C and back
 at 0.5 °C/min) run in this process by the service's engine at each ``--sim-speed`` (× wall).
@@ -27,6 +28,9 @@ moves), made from ``bench_ramp_fit.py``'s twin sensors (``--sensors``, 15 µg hy
 a hold and every K-th of the others. Fitted by ``fit_continuous``, judged as that bench
 judges (a fresh static run at −35, −5, 25, 45 °C; ratio = pooled RMS vector error / the
 oracle's), with the same solve counts.
+
+``--fit-csv FILE …``: the same counts and figures for recordings on disk (the campaigns'
+fitted recordings that ``--save-dir`` wrote: the same rows before and after a change).
 """
 
 from __future__ import annotations
@@ -141,13 +145,41 @@ def run_campaign(sim_speed: float, save: Path | None = None
     return state, rows[0] if rows else 0, summary
 
 
-def sparse_twins(ramp_every: int, hold_every: int, sensors: int, seed: int) -> None:
-    """``--sparse-ramp-every``: twin ramps with long holds, sparse (module docstring)."""
+def _fit_row(label: str, k: int, rec: Any, truth: Any = None, seed: int = 0
+             ) -> tuple[float, float]:
+    """Fit ``rec`` with the solves counted and print its table row; (model, oracle) held-out
+    sums of squares against ``truth`` (``bench_ramp_fit.heldout_sse``), zeros without."""
     import numpy as np
     from bench_ramp_fit import heldout_sse
 
     from calibration.continuous import fit_continuous
     from calibration.plateaus import segment_recording
+
+    SOLVES.clear()
+    NFEV.clear()
+    CPU_S.clear()
+    FALLBACKS.clear()
+    t0 = time.thread_time()
+    try:
+        fit = fit_continuous(rec, segment_recording(rec))
+    except Exception as exc:  # noqa: BLE001 (a refusal is a result here)
+        print(f"| {label} | {k} | {len(rec)} | refused: {exc} ||||||||", flush=True)
+        return 0.0, 0.0
+    cpu = time.thread_time() - t0
+    m, o = heldout_sse(fit.model, truth, seed) if truth is not None else (0.0, 0.0)
+    s = _fit_summary(fit)
+    a, f = "all-row solve", "fold refit (LM fallback)"
+    print(f"| {label} | {k} | {len(rec)} | {SOLVES[a]} ({NFEV[a]}) | {SOLVES[f]} ({NFEV[f]}) | "
+          f"{', '.join(FALLBACKS) or '–'} | {cpu:.2f} | {s['degree']} | {s['heldout_ug']} | "
+          f"{s['rmse_after_mg']} | {f'{np.sqrt(m / o):.3f}' if o else '–'} | "
+          f"{'; '.join(s['not_judged']) or '–'} |", flush=True)
+    return m, o
+
+
+def sparse_twins(ramp_every: int, hold_every: int, sensors: int, seed: int) -> None:
+    """``--sparse-ramp-every``: twin ramps with long holds, sparse (module docstring)."""
+    import numpy as np
+
     from simulators.ramp_sim import RampProfile, ramp_twin_sensors, simulate_ramp
 
     truths, taus = ramp_twin_sensors(sensors, seed, hysteresis_ug=15.0)
@@ -156,30 +188,13 @@ def sparse_twins(ramp_every: int, hold_every: int, sensors: int, seed: int) -> N
                          temp_lsb_c=0.11)
     sse_m = sse_o = 0.0
     for i, run in enumerate(runs):
-        SOLVES.clear()
-        NFEV.clear()
-        CPU_S.clear()
-        FALLBACKS.clear()
         held = np.flatnonzero((np.abs(run.die_c - profile.start_c) < 0.5)
                               | (np.abs(run.die_c - profile.peak_c) < 0.5))
         moving = np.setdiff1d(np.arange(len(run.recording)), held)
         rec = run.recording.subset(np.union1d(held[::hold_every], moving[::ramp_every]))
-        t0 = time.thread_time()
-        try:
-            fit = fit_continuous(rec, segment_recording(rec))
-        except Exception as exc:  # noqa: BLE001 (a refusal is a result here)
-            print(f"| 1/{ramp_every} | {i} | {len(rec)} | refused: {exc} ||||||||", flush=True)
-            continue
-        cpu = time.thread_time() - t0
-        m, o = heldout_sse(fit.model, run.truth, seed + 400 + i)
+        m, o = _fit_row(f"1/{ramp_every}", i, rec, run.truth, seed + 400 + i)
         sse_m += m
         sse_o += o
-        s = _fit_summary(fit)
-        a, f = "all-row solve", "fold refit (LM fallback)"
-        print(f"| 1/{ramp_every} | {i} | {len(rec)} | {SOLVES[a]} ({NFEV[a]}) | {SOLVES[f]} "
-              f"({NFEV[f]}) | {', '.join(FALLBACKS) or '–'} | {cpu:.2f} | {s['degree']} | "
-              f"{s['heldout_ug']} | {s['rmse_after_mg']} | {np.sqrt(m / o):.3f} | "
-              f"{'; '.join(s['not_judged']) or '–'} |", flush=True)
     if sse_o:
         print(f"| 1/{ramp_every} | pooled ||||||||| {np.sqrt(sse_m / sse_o):.3f} | |",
               flush=True)
@@ -190,12 +205,14 @@ def main() -> int:
     ap.add_argument("--sim-speed", type=float, nargs="+", default=[3000.0, 40000.0, 80000.0])
     ap.add_argument("--sparse-ramp-every", type=int, nargs="+", default=[])
     ap.add_argument("--hold-every", type=int, default=7)
+    ap.add_argument("--fit-csv", type=Path, nargs="+", default=[],
+                    help="fit these recordings (e.g. --save-dir's) with the solves counted")
     ap.add_argument("--sensors", type=int, default=8)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--save-dir", type=Path, default=None,
                     help="write each campaign's fitted recording here (ramp_<k>_<speed>.csv)")
     args = ap.parse_args()
-    if args.sparse_ramp_every:
+    if args.sparse_ramp_every or args.fit_csv:
         sys.path.insert(0, str(ROOT / "benchmarks"))
         print("| ramp rows kept | sensor | rows | all-row solves (nfev) | fold-refit LM "
               "fallbacks (nfev) | "
@@ -204,6 +221,11 @@ def main() -> int:
         print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for n in args.sparse_ramp_every:
             sparse_twins(n, args.hold_every, args.sensors, args.seed)
+        if args.fit_csv:
+            from calibration.recording import read_recording
+
+            for k, path in enumerate(args.fit_csv):
+                _fit_row(path.name, k, read_recording(path))
         return 0
     print("| sim speed | state | rows | all-row solves (nfev) | fold-refit LM fallbacks "
           "(nfev) | each fallback's nfev | CPU in LM, s | fit_continuous CPU, s | degree | "
