@@ -203,7 +203,8 @@ def _two_holds_and_a_few_ramp_rows() -> Recording:
     run = simulate_ramp(truths, taus, held, seed=6, temp_row_noise_c=0.1, temp_lsb_c=0.11)[0]
     at_hold = np.flatnonzero((np.abs(run.die_c + 20.0) < 0.5) | (np.abs(run.die_c - 40.0) < 0.5))
     moving = np.setdiff1d(np.arange(len(run.recording)), at_hold)
-    rows = np.union1d(at_hold[::7], moving[::15])  # 7 and 24 positions: every one visited
+    # every 7th held row: 7 is prime to the 24 positions of the sweep, so each is visited
+    rows = np.union1d(at_hold[::7], moving[::15])
     return run.recording.subset(rows)
 
 
