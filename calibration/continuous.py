@@ -22,7 +22,15 @@ projected σ (norm mode, Eq. 3; M not identifiable).
 * **Degree**: by held-out error. Rows are split into folds by 2 °C temperature bands
   (fold = the occupied band's rank mod 5); each degree 1…:data:`MAX_DEGREE` is refitted without each
   fold and scored by the fold's weighted residuals; the lowest held-out χ² wins (reported
-  as an rms residual in µg).
+  as an rms residual in µg). A degree is judged only where every fold's training rows
+  determine its coefficients: before any refit, the linearised design of each fold's
+  training rows (the all-row fit's Jacobian on them, columns scaled to unit norm) must
+  have full rank with a condition number within :data:`CONDITION_LIMIT` (beyond it JᵀJ is
+  singular in double precision), and each refit must converge. The first degree that
+  fails either (or whose folds leave fewer residuals than coefficients) is not judged and
+  the search stops there: the degree is chosen among the lower ones, and the model's notes
+  name the degree, the fold and why. Higher degrees only add columns to the same rows (a
+  design's condition number does not fall when a column is added).
 * **Valid range**: the conditioned die temperatures covered, widened by the soak
   model's ``RANGE_MARGIN_C``.
 """
@@ -73,7 +81,10 @@ MIN_LEG_ROWS = 24
 # conditioned rate's noise on a 0.1 °C channel, so noise alone does not flip it.
 DIRECTION_RATE_C_PER_MIN = 0.02
 AGREE_SIGMAS = 3.0
-CONDITION_LIMIT = 1e8  # Jacobian columns this close to dependent: not determined
+# Jacobian columns this close to dependent (condition number of the column-scaled Jacobian;
+# JᵀJ's is its square, 1e16 ≈ 1/ε of double precision): the parameters are not determined.
+# The orientations' check (degree 0, all rows) and each held-out fold's training rows.
+CONDITION_LIMIT = 1e8
 
 
 @dataclass
@@ -223,7 +234,9 @@ def fit_continuous(
     per_row = 3 if ref is not None else 1  # residuals per row (reference: x, y, z)
     # A degree is tried only when every fold's training rows outnumber its coefficients:
     # fewer residuals than unknowns has no least-squares answer (scipy's LM refuses it).
-    n_train_res = min(int(np.sum(folds != f)) for f in np.unique(folds)) * per_row
+    fold_ids = np.unique(folds)
+    n_train = np.array([int(np.sum(folds != f)) for f in fold_ids])
+    n_train_res = int(n_train.min()) * per_row
     for d in range(1, top + 1):
         q0 = _raise_degree(q_prev, prob, d)
         if n_train_res <= q0.size:
@@ -234,12 +247,21 @@ def fit_continuous(
                     f"choosing the degree by held-out error leaves {n_train_res} residuals "
                     "to fit them; soak until the die settles (each step a plateau: the step "
                     "fit needs far fewer rows) or measure more positions per step")
+            k = int(fold_ids[np.argmin(n_train)]) + 1
+            notes.append(f"degree {d} not judged: fold {k} of {fold_ids.size}'s training rows "
+                         f"give {n_train_res} residuals for its {q0.size} coefficients; "
+                         f"{_stopped_at(d)}")
             break
         q, sol_d = prob.solve(d + 1, q0)
         full[d] = q
-        scores[d] = _heldout_chi2(prob, folds, q, sol_d, d + 1)
+        try:
+            scores[d] = _heldout_chi2(prob, folds, q, sol_d, d + 1)
+        except _NotJudged as why:
+            notes.append(f"degree {d} not judged: {why}; {_stopped_at(d)}")
+            break
         q_prev = q
-    degree = min(scores, key=lambda d: scores[d])
+    # no degree judged (degree 1's folds not determined): degree 1, the note says so
+    degree = min(scores, key=lambda d: scores[d]) if scores else 1
     # as an rms held-out residual in µg (χ² per residual × the median σ): readable also when
     # the recording has no sd columns and every σ is 1 g
     sigma_ug = float(np.median(sigma)) * 1e6
@@ -283,19 +305,75 @@ def fit_continuous(
                       used_raw, SolverStatus(bool(sol.success), str(sol.message), int(sol.nfev)))
 
 
+class _NotJudged(Exception):
+    """A degree's held-out error is not computed: one fold's training rows do not determine
+    its coefficients, or the fold's refit does not converge (the message says which)."""
+
+
+def _stopped_at(degree: int) -> str:
+    """The degree search's stop, as the note ends it."""
+    if degree == 1:
+        return "degree 1 is used without a held-out score"
+    if degree == 2:
+        return "degree 1 is used, the only degree judged on every fold; higher degrees not tried"
+    return (f"the degree is chosen among 1…{degree - 1}, the degrees judged on every fold; "
+            "higher degrees not tried")
+
+
+def _design_condition(J: np.ndarray) -> float:
+    """Condition number of ``J`` with its columns scaled to unit norm (as ``x_scale="jac"``);
+    inf when a column is zero or ``J`` is rank-deficient."""
+    norms = np.linalg.norm(J, axis=0)
+    if J.shape[0] < J.shape[1] or not np.all(norms > 0):
+        return math.inf
+    s = np.linalg.svd(J / norms, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+
+
 def _heldout_chi2(prob: _Problem, folds: np.ndarray, q: np.ndarray, sol: Any,
                   n_coef: int) -> float:
     """Σ over the folds of the fold's weighted residuals² at the fit of the other folds
-    (module docstring, "Degree"); ``q``, ``sol``: the fit of every row at this degree."""
-    return sum(
-        float(np.sum(prob.subset(np.flatnonzero(folds == f)).residual(
-            _refit_without(prob, np.flatnonzero(folds != f), q, sol, n_coef), n_coef) ** 2))
-        for f in np.unique(folds))
+    (module docstring, "Degree"); ``q``, ``sol``: the fit of every row at this degree.
+
+    Every fold's training design is checked before any fold is refitted: the all-row fit's
+    Jacobian on the training rows (the refit's linearisation at its start) with a condition
+    number beyond :data:`CONDITION_LIMIT` does not determine the coefficients. Raises
+    :class:`_NotJudged` for that fold, or for the first fold whose refit does not converge:
+    no held-out error is scored from a fit that is not a minimum.
+    """
+    ids = np.unique(folds)
+    per_row = sol.fun.size // prob.x.size  # residuals per row: 3 (reference), 1 (norm)
+    # each fold's rows as the R of their QR: the training rows' design has the singular
+    # values (and column norms) of the other folds' R stacked, a few rows per coefficient
+    # instead of every training residual
+    r_of = {f: np.linalg.qr(sol.jac[(np.flatnonzero(folds == f)[:, None] * per_row
+                                     + np.arange(per_row)).ravel()], mode="r") for f in ids}
+    trains = []
+    for f in ids:
+        train = np.flatnonzero(folds != f)
+        cond = _design_condition(np.vstack([r_of[g] for g in ids if g != f]))
+        if not cond <= CONDITION_LIMIT:
+            raise _NotJudged(
+                f"fold {f + 1} of {ids.size}'s training rows ({train.size} of {prob.x.size}) "
+                f"do not determine its coefficients (their design's condition number "
+                f"{cond:.1e} is above {CONDITION_LIMIT:.0e})")
+        trains.append((f, train))
+    total = 0.0
+    for f, train in trains:
+        q_f, lm = _refit_without(prob, train, q, sol, n_coef)
+        if lm is not None and not lm.success:
+            raise _NotJudged(
+                f"fold {f + 1} of {ids.size}'s refit did not converge (Levenberg–Marquardt "
+                f"stopped after {int(lm.nfev)} evaluations: {str(lm.message).rstrip('.')})")
+        total += float(np.sum(prob.subset(np.flatnonzero(folds == f)).residual(
+            q_f, n_coef) ** 2))
+    return total
 
 
 def _refit_without(prob: _Problem, train: np.ndarray, q: np.ndarray, sol: Any,
-                   n_coef: int) -> np.ndarray:
-    """The minimum of the ``train`` rows' χ², from the fit of every row (``q``).
+                   n_coef: int) -> tuple[np.ndarray, Any]:
+    """The minimum of the ``train`` rows' χ², from the fit of every row (``q``), and the
+    Levenberg–Marquardt result when that solve ran (None: Gauss–Newton converged).
 
     Gauss–Newton on the normal equations, started with the all-row fit's own Jacobian and
     residuals (``sol.jac``, ``sol.fun``: its rows are the train rows' at ``q``), iterated
@@ -303,7 +381,7 @@ def _refit_without(prob: _Problem, train: np.ndarray, q: np.ndarray, sol: Any,
     Levenberg–Marquardt solve from ``q`` finds (the folds' start is already close to it:
     one fold of five is left out), without its QR factorisation per iteration and its
     first Jacobian. Where a step does not lower χ² or the normal equations are not
-    positive definite, the LM solve runs as before.
+    positive definite, the LM solve runs from the last iterate.
     """
     per_row = sol.fun.size // prob.x.size  # residuals per row: 3 (reference), 1 (norm)
     idx = (train[:, None] * per_row + np.arange(per_row)).ravel()
@@ -320,10 +398,10 @@ def _refit_without(prob: _Problem, train: np.ndarray, q: np.ndarray, sol: Any,
         if not chi2_new <= chi2 * (1.0 + CV_FTOL):
             break  # not a descent (or not finite): the damped solver's case
         if chi2 - chi2_new <= CV_FTOL * chi2_new:
-            return q_new if chi2_new <= chi2 else q
+            return (q_new if chi2_new <= chi2 else q), None
         q, r, chi2 = q_new, r_new, chi2_new
         J = sub.jacobian(q, n_coef)
-    return sub.solve(n_coef, q)[0]
+    return sub.solve(n_coef, q)
 
 
 def _normal_step(J: np.ndarray, r: np.ndarray) -> np.ndarray | None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from calibration.continuous import fit_continuous
 from calibration.errors import CalibrationError, NotIdentifiable
 from calibration.model_file import load_model
 from calibration.plateaus import segment_recording
-from calibration.recording import write_recording
+from calibration.recording import Recording, write_recording
 from calibration.temperature_conditioning import condition_continuous
 from simulators.ramp_sim import RampProfile, RampRun, ramp_twin_sensors, simulate_ramp
 from simulators.truth import SensorTruth
@@ -145,7 +146,6 @@ def test_a_short_soak_whose_steps_still_move_is_fitted_within_noise_either_way()
     # Declared by step numbers alone they are not plateaus: fitted continuously, and
     # steps 10 °C apart must still spread over the folds. Both within noise.
     from calibration.fitting import fit
-    from calibration.recording import Recording
     from simulators.campaign_sim import RigPhysics, simulate_campaign
 
     truth = SensorTruth.adxl355_typical(12)
@@ -192,3 +192,87 @@ def test_a_continuous_fit_over_few_rows_lowers_its_degree_or_refuses_with_the_re
     with pytest.raises(CalibrationError, match=r"10 rows on no temperature plateau are too "
                        r"few .* soak until the die settles"):
         fit_continuous(fewer, segment_recording(fewer))
+
+
+def _two_holds_and_a_few_ramp_rows() -> Recording:
+    """A sparse ramp like a loaded engine's: most rows at the two held temperatures (−20 and
+    40 °C), a few while the die moves; leaving out a held temperature's fold leaves rows
+    that pin a low-degree polynomial and no higher one."""
+    truths, taus = ramp_twin_sensors(1, 5, rate_ug_per_c_per_min=20.0, hysteresis_ug=15.0)
+    held = RampProfile(start_c=-20.0, peak_c=40.0, end_c=20.0, edge_hold_min=120.0)
+    run = simulate_ramp(truths, taus, held, seed=6, temp_row_noise_c=0.1, temp_lsb_c=0.11)[0]
+    at_hold = np.flatnonzero((np.abs(run.die_c + 20.0) < 0.5) | (np.abs(run.die_c - 40.0) < 0.5))
+    moving = np.setdiff1d(np.arange(len(run.recording)), at_hold)
+    # every 7th held row: 7 is prime to the 24 positions of the sweep, so each is visited
+    rows = np.union1d(at_hold[::7], moving[::15])
+    return run.recording.subset(rows)
+
+
+def test_a_degree_a_fold_does_not_determine_is_not_judged_and_the_note_says_so() -> None:
+    """Held-out error is computed only from folds whose training rows determine the
+    degree's coefficients (the design's condition number within CONDITION_LIMIT, checked
+    before any refit): the search stops at the first degree one fold does not determine,
+    the degree is chosen below it, and the notes name the degree, the fold and why."""
+    from calibration.continuous import CONDITION_LIMIT
+
+    rec = _two_holds_and_a_few_ramp_rows()
+    fit = fit_continuous(rec, segment_recording(rec))
+    notes = [n for n in fit.model.notes if "not judged" in n]
+    assert len(notes) == 1, fit.model.notes
+    m = re.match(r"degree (\d) not judged: fold (\d) of 5's training rows \((\d+) of "
+                 rf"{len(rec)}\) do not determine its coefficients \(their design's "
+                 r"condition number ([0-9.e+]+) is above 1e\+08\); ", notes[0])
+    assert m, notes[0]
+    stopped = int(m.group(1))
+    assert float(m.group(4)) > CONDITION_LIMIT
+    assert fit.model.degree < stopped
+    judged = sorted(int(d) for d in fit.model.provenance["degree_heldout_rms_ug"])
+    assert judged == list(range(1, stopped))  # none at or above the stop
+    assert notes[0] in fit.report["notes"]
+
+
+def test_a_fold_refit_that_does_not_converge_rules_its_degree_out(
+        ramp: RampRun, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A fold's Levenberg–Marquardt refit that stops unconverged gives no held-out error:
+    its degree is not judged (nor any above it) and the note says which fold and why."""
+    from types import SimpleNamespace
+
+    from calibration import continuous
+
+    real = continuous._refit_without
+
+    def refit(prob: object, train: np.ndarray, q: np.ndarray, sol: object,
+              n_coef: int) -> tuple[np.ndarray, object]:
+        if n_coef == 4:  # degree 3: the LM ran out of evaluations
+            return q, SimpleNamespace(success=False, nfev=5400, message="The maximum "
+                                      "number of function evaluations is exceeded.")
+        return real(prob, train, q, sol, n_coef)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(continuous, "_refit_without", refit)
+    fit = fit_continuous(ramp.recording, segment_recording(ramp.recording))
+    assert sorted(fit.model.provenance["degree_heldout_rms_ug"]) == ["1", "2"]
+    assert fit.model.degree in (1, 2)
+    assert any(n.startswith("degree 3 not judged: fold 1 of 5's refit did not converge "
+                            "(Levenberg–Marquardt stopped after 5400 evaluations: The "
+                            "maximum number of function evaluations is exceeded); the "
+                            "degree is chosen among 1…2") for n in fit.model.notes), \
+        fit.model.notes
+
+
+def test_when_not_even_degree_1_is_judged_it_is_fitted_without_a_held_out_score(
+        ramp: RampRun, monkeypatch: pytest.MonkeyPatch) -> None:
+    from calibration import continuous
+
+    def not_determined(J: np.ndarray) -> float:
+        return 1e12  # every fold's design beyond CONDITION_LIMIT, from degree 1
+
+    monkeypatch.setattr(continuous, "_design_condition", not_determined)
+    fit = fit_continuous(ramp.recording, segment_recording(ramp.recording))
+    assert fit.model.degree == 1
+    assert fit.model.provenance["degree_heldout_rms_ug"] == {}
+    notes = [n for n in fit.model.notes if "not judged" in n]
+    assert len(notes) == 1 and re.fullmatch(
+        r"degree 1 not judged: fold 1 of 5's training rows \(\d+ of "
+        rf"{len(ramp.recording)}\) do not determine its coefficients \(their design's "
+        r"condition number 1\.0e\+12 is above 1e\+08\); degree 1 is used without a "
+        r"held-out score", notes[0]), notes
