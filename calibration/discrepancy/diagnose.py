@@ -850,7 +850,9 @@ def _reading_dof(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
     t_row, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
                                   skip, pb.shared_t_loading)
     keep = np.array([i not in skip for i in range(pb.ctx.n)]) & (t_row > 0)
-    return stats.reading_tail_dof(t_row[keep], g)
+    # At the point estimate (stats.NULL_TAIL_Z): a tail too mild to show at 2 standard
+    # errors on a few hundred readings still sets the far tail of their max (issue 22).
+    return stats.reading_tail_dof(t_row[keep], g, stats.NULL_TAIL_Z)
 
 
 def _leaves_its_own_places(pb: LinearProblem, findings: list[Finding],

@@ -123,3 +123,38 @@ def test_a_reading_far_out_is_capped_in_the_sign_flips_with_its_direction():
     assert np.allclose(np.abs(v / np.linalg.norm(v)), [0.8, 0.6, 0.0])
     size2 = np.sum(v**2) / stats.robust_scale(e[:, None], 1.0)[0] ** 2
     assert size2 == pytest.approx(sps.chi2.isf(1 / (2 * n), 3), rel=1e-6)
+
+
+def _outlier_p_as_diagnosed(rng, e, row, n, g, B):
+    """The outlier test's bootstrap p of one recording's residual ``e`` (U empty), its null's
+    ν read from the recording as ``diagnose._reading_dof`` reads it (stats.NULL_TAIL_Z)."""
+    U = np.zeros((n * g, 0))
+    s = float(stats.robust_scale(e[:, None], 1.0)[0])
+    t, _, _ = stats.row_stats(U, e, np.zeros((n * g, 1)), row, n, s, np.ones(1), set())
+    nu = stats.reading_tail_dof(t, g, stats.NULL_TAIL_Z)
+    E = rng.standard_normal((n * g, B))
+    _, null_max, _ = stats.row_stats(U, e, E, row, n, s, stats.robust_scale(E, 1.0), set(),
+                                     None, nu, rng)
+    return (1 + np.sum(null_max >= t.max())) / (B + 1)
+
+
+def test_outlier_null_holds_a_tail_too_mild_to_show_at_two_standard_errors():
+    """Readings whose three axes share a Student-t scale with ν = 40 (the tail of the second
+    generator's null capture means, issue 22), 150 per recording: 100–300 readings cannot
+    show such a tail at 2 standard errors of the quantile ratio, and against the Gaussian
+    null their max was at its 5 % level in 15 % of 400 recordings (the verdict's excess of
+    `outlier` false alarms). With ν read at its point estimate (stats.NULL_TAIL_Z) it is at
+    most twice the nominal rate; on Gaussian readings it stays at or below nominal."""
+    n, g, B, nu_true = 150, 3, 200, 40.0
+    row = np.repeat(np.arange(n), g)
+    rng = np.random.default_rng(21)
+    mild = []
+    for _ in range(400):
+        w = np.sqrt(nu_true / rng.chisquare(nu_true, n))
+        mild.append(_outlier_p_as_diagnosed(rng, rng.standard_normal(n * g) * w[row], row, n,
+                                            g, B))
+    gauss = [_outlier_p_as_diagnosed(rng, rng.standard_normal(n * g), row, n, g, B)
+             for _ in range(200)]
+    assert np.mean(np.array(mild) <= 0.05) <= 2 * 0.05
+    # binomial sd at 200 recordings: 1.5 % at 5 %
+    assert np.mean(np.array(gauss) <= 0.05) <= 0.05 + 2 * 0.015

@@ -53,7 +53,7 @@ def test_a_null_with_slow_unrectified_vibration_is_not_an_outlier(seed, monkeypa
     # vibrating plateaus' readings were named outliers (the test can fail). (The null matched
     # to the readings' own tails alone catches this mis-weighting too: both are switched off.)
     monkeypatch.setattr(problem, "SCATTER_FROM_RESIDUAL", False)
-    monkeypatch.setattr(stats, "TAIL_Z", np.inf)
+    monkeypatch.setattr(stats, "NULL_TAIL_Z", np.inf)
     assert "outlier" in [f.effect for f in diagnose(rec, seed=0, n_null=100).findings]
 
 

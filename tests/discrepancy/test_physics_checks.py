@@ -87,7 +87,7 @@ def test_product_at_oblique_positions_is_unexplained_not_an_outlier(monkeypatch)
     (f,) = [f for f in d.findings if f.effect == "unexplained"]
     assert f.axes == ["z"] and set(f.where["positions"]) <= OBLIQUE_XY
     assert any("heavier-tailed than Gaussian" in n for n in d.notes)
-    monkeypatch.setattr(stats, "TAIL_Z", np.inf)  # the Gaussian null per reading
+    monkeypatch.setattr(stats, "NULL_TAIL_Z", np.inf)  # the Gaussian null per reading
     monkeypatch.setattr(sys.modules["calibration.discrepancy.diagnose"], "WILD_NULL", False)
     d = diagnose(rec, n_null=200, seed=0)
     assert "outlier" not in [f.effect for f in d.findings]
@@ -142,7 +142,7 @@ def test_a_run_of_readings_drifting_with_a_lagging_channel_is_not_an_outlier(mon
     rec = _lag_channel(_campaign(31016, 41016, []), tau_s)
     for tail_z in (None, np.inf):
         if tail_z is not None:
-            monkeypatch.setattr(stats, "TAIL_Z", tail_z)
+            monkeypatch.setattr(stats, "NULL_TAIL_Z", tail_z)
         d = diagnose(rec, n_null=200, seed=16)
         names = [f.effect for f in d.findings]
         assert d.mismatch and "outlier" not in names and "temperature_rate" not in names
