@@ -347,6 +347,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     told_apart: set[str] = set()  # named over significant rivals by a clear margin (by_fit)
     why_alike: dict[str, str] = {}  # named term → why an unobservable confuser fits alike
     tail_nu = np.inf
+    tail_shown = False  # the tail resolved at stats.TAIL_Z, not only at its point estimate
     groups = plateau_groups(pb) if WILD_NULL and PLATEAU_NULL else None
     channel = _quantised_channel(pb, notes, lsb_c) if WILD_NULL else None
     known = channel.known if channel is not None else None  # the scan's
@@ -373,8 +374,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading, rep_dtype)
         stats.project_out_inplace(U, E)
         s_null = stats.robust_scale(E, dof)
-        nu = _reading_dof(pb, U, e, s, terms)
+        nu, nu_shown = _reading_dof(pb, U, e, s, terms)
         tail_nu = min(tail_nu, nu)
+        tail_shown = tail_shown or bool(np.isfinite(nu_shown))
         # The outlier family against the Gaussian (or Student-t) replicates, the others
         # against sign flips of this residual, in the same buffer (stats.wild_replicates).
         rows = [f for f in live if f.per_reading]
@@ -505,9 +507,15 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             told_apart.discard(eff.effect_id)
         prev_tests = tests
     U = E = None  # the last stage's basis and replicates: the scan builds its own
-    if np.isfinite(tail_nu):
+    if np.isfinite(tail_nu) and tail_shown:
         notes.append(f"the readings are heavier-tailed than Gaussian (Student-t, nu = "
                      f"{tail_nu:.1f}, from their own scatter): the null draws them so")
+    elif np.isfinite(tail_nu):
+        # Said as what it is: the point estimate the outlier null uses, not a finding
+        # about the noise (on a few hundred readings it is not told from a Gaussian).
+        notes.append(f"the outlier test's null draws the readings with a Student-t tail at "
+                     f"its point estimate from their own scatter (nu = {tail_nu:.1f}); on "
+                     f"these readings that tail is not told from a Gaussian one")
     # Physics checks (issue 10, docs/diagnosis.md §7): a named term must have its physics'
     # shape (CatalogueEffect.misses: an outlier is isolated, a function of the specific force
     # is the same at every visit of a direction). One that is not is withdrawn, and the
@@ -836,8 +844,10 @@ def _shared(groups: stats.SharedGroups | None, e: np.ndarray, U: np.ndarray
 
 
 def _reading_dof(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
-                 terms: list[Term]) -> float:
-    """ν of the per-reading Student-t tail this residual shows (∞: Gaussian), for the null.
+                 terms: list[Term]) -> tuple[float, float]:
+    """ν of the per-reading Student-t tail this residual shows (∞: Gaussian), for the null
+    (at its point estimate, stats.NULL_TAIL_Z), and the same ν where the tail is resolved at
+    stats.TAIL_Z standard errors (∞ where it is not: what the notes may call heavier-tailed).
 
     Why: the readings of a real recording (capture means under unrectified vibration,
     settling, re-seating) are heavier-tailed than Gaussian, and the outlier test's max over
@@ -852,7 +862,8 @@ def _reading_dof(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
     keep = np.array([i not in skip for i in range(pb.ctx.n)]) & (t_row > 0)
     # At the point estimate (stats.NULL_TAIL_Z): a tail too mild to show at 2 standard
     # errors on a few hundred readings still sets the far tail of their max (issue 22).
-    return stats.reading_tail_dof(t_row[keep], g, stats.NULL_TAIL_Z)
+    return (stats.reading_tail_dof(t_row[keep], g, stats.NULL_TAIL_Z),
+            stats.reading_tail_dof(t_row[keep], g))
 
 
 def _leaves_its_own_places(pb: LinearProblem, findings: list[Finding],
