@@ -161,6 +161,25 @@ def test_a_plateau_written_twice_is_refused(tmp_path, capsys) -> None:
     assert "remove the repeated rows" in err
 
 
+def test_means_of_few_quantised_samples_may_repeat_when_their_scatter_does_not() -> None:
+    """The means of 50 samples of a 0.49 mg-LSB sensor lie on a 9.8 µg grid and do repeat
+    (a gen2 ICM-42688 warm-up's 1-s means, 27 s apart): not a block written twice unless
+    sd_* repeat as well."""
+    from calibration import gate
+
+    cols = _campaign()
+    lsb_g = 2.0**-11
+    for k, a in enumerate(("ax", "ay", "az")):
+        cols[a] = np.round(cols[a] / (lsb_g / 50)) * (lsb_g / 50)
+        cols[f"sd_{'xyz'[k]}"] = 4e-4 + 1e-6 * np.arange(len(cols[a]))
+    cols["ax"][29], cols["ay"][29], cols["az"][29] = cols["ax"][5], cols["ay"][5], cols["az"][5]
+    gate.check_recording(Recording.from_columns(cols))  # the means alone repeat: kept
+    for k in ("sd_x", "sd_y", "sd_z"):
+        cols[k][29] = cols[k][5]  # the same position, the next step
+    with pytest.raises(gate.GateRefusal, match="repeats the one at .* in ax, ay, az and sd_"):
+        gate.check_recording(Recording.from_columns(cols))
+
+
 def test_sd_in_mg_names_the_unit_not_a_moving_sensor_alone(tmp_path, capsys) -> None:
     # main: "no still reading: every row was left out as taken while the sensor moved",
     # nothing about the unit
