@@ -323,10 +323,16 @@ def _stopped_at(degree: int) -> str:
 def _design_condition(J: np.ndarray) -> float:
     """Condition number of ``J`` with its columns scaled to unit norm (as ``x_scale="jac"``);
     inf when a column is zero or ``J`` is rank-deficient."""
-    norms = np.linalg.norm(J, axis=0)
-    if J.shape[0] < J.shape[1] or not np.all(norms > 0):
+    if J.shape[0] < J.shape[1] or not np.all(np.linalg.norm(J, axis=0) > 0):
         return math.inf
-    s = np.linalg.svd(J / norms, compute_uv=False)
+    return _scaled_condition(J)
+
+
+def _scaled_condition(J: np.ndarray) -> float:
+    """s_max / s_min of ``J`` with its columns scaled to unit norm (no zero column); inf
+    when s_min is 0. The one test of :data:`CONDITION_LIMIT`, for the orientations
+    (:func:`_check_rank`) and each held-out fold (:func:`_design_condition`)."""
+    s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
     return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
 
 
@@ -464,8 +470,7 @@ def _check_rank(prob: _Problem, labels: np.ndarray) -> None:
                                                             "h_z"]
         bad = [names[i] for i in np.flatnonzero(norms == 0)]
         raise NotIdentifiable(f"no reading constrains {', '.join(bad)}")
-    s = np.linalg.svd(J / norms, compute_uv=False)
-    if s[-1] <= 0 or s[0] / s[-1] > CONDITION_LIMIT:
+    if _scaled_condition(J) > CONDITION_LIMIT:
         raise NotIdentifiable(
             f"the {np.unique(labels).size} orientations visited do not "
             f"determine the SFEM parameters (they lie too close to a plane or a line): "
