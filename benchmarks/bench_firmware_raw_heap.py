@@ -4,19 +4,20 @@ The firmware (firmware/rp2040) runs unchanged under CPython; tracemalloc measure
 bytes allocated while ``MuxBridge.serve_line`` answers one ``RAW,<n>`` with a synthetic
 sensor (samples made when read), for the streamed reply (each frame written as made) and
 for a reply built whole first (``handle_line``, what firmware 2.2 did). The largest single
-write is the chunk the board's USB stack sees.
+write is the chunk the board's USB stack sees. Each measurement runs in a process of its own
+(tracemalloc counts every thread of a process).
 
     .venv/bin/python benchmarks/bench_firmware_raw_heap.py
 """
 
 from __future__ import annotations
 
-import contextlib
+import json
+import os
+import subprocess
 import sys
 import tracemalloc
-from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[1] / "firmware" / "rp2040"
 if str(FIRMWARE_DIR) not in sys.path:
@@ -78,51 +79,57 @@ def mux(stall_after: int | None = None) -> bridge_app.MuxBridge:
                                  1: bridge_app.Bridge(SyntheticSensor(stall_after), UID)})
 
 
-@contextlib.contextmanager
-def _alone() -> Iterator[None]:
-    """No other Python thread runs inside (tracemalloc counts every thread's allocations: a
-    test process may serve a web app from a thread beside it). The code measured writes to
-    memory only and never blocks, so holding the GIL for the switch interval holds it
-    throughout."""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(60.0)
-    try:
-        yield
-    finally:
-        sys.setswitchinterval(before)
+def _measure_in_child(mode: str, line: bytes) -> dict[str, int]:
+    """Run one measurement in a fresh interpreter and return what it printed.
+
+    tracemalloc counts every thread's allocations, and a test process may serve a web app
+    from a thread beside this one (the browser tests' live service counted 32 kB so; holding
+    the GIL through a long switch interval did not keep it out: a thread already waiting for
+    the GIL takes it at the old interval). A child process has no other thread.
+    """
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(root), env.get("PYTHONPATH")]))
+    done = subprocess.run(
+        [sys.executable, "-m", "benchmarks.bench_firmware_raw_heap", "--child", mode,
+         line.hex()],
+        cwd=root, env=env, capture_output=True, text=True, timeout=120, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"heap measurement in a child process failed:\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def peak_heap_serving(line: bytes) -> tuple[int, WriteMeter]:
-    """Peak bytes allocated (tracemalloc) while the firmware serves ``line``."""
-    board = mux()
+    """Peak bytes allocated (tracemalloc) while the firmware serves ``line``, measured in a
+    process of its own; the meter holds that process' largest write, count and total."""
+    got = _measure_in_child("serve", line)
     meter = WriteMeter()
-    with _alone():
-        return _peak_serving(board, line, meter), meter
-
-
-def _peak_serving(board: Any, line: bytes, meter: WriteMeter) -> int:
-    tracemalloc.start()
-    try:
-        tracemalloc.reset_peak()
-        base = tracemalloc.get_traced_memory()[0]
-        board.serve_line(line, meter)
-        return tracemalloc.get_traced_memory()[1] - base
-    finally:
-        tracemalloc.stop()
+    meter.largest, meter.writes, meter.total = got["largest"], got["writes"], got["total"]
+    return got["peak"], meter
 
 
 def peak_heap_buffered(line: bytes) -> int:
     """Peak bytes allocated while the whole reply to ``line`` is built as a list first."""
+    return _measure_in_child("buffered", line)["peak"]
+
+
+def _peak_here(mode: str, line: bytes) -> dict[str, int]:
+    """The measurement itself, in this process (the child's side of ``_measure_in_child``)."""
     board = mux()
-    with _alone():
-        tracemalloc.start()
-        try:
-            tracemalloc.reset_peak()
-            base = tracemalloc.get_traced_memory()[0]
+    meter = WriteMeter()
+    tracemalloc.start()
+    try:
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        if mode == "serve":
+            board.serve_line(line, meter)
+        else:
             board.handle_line(line)
-            return tracemalloc.get_traced_memory()[1] - base
-        finally:
-            tracemalloc.stop()
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    return {"peak": peak, "largest": meter.largest, "writes": meter.writes,
+            "total": meter.total}
 
 
 def main() -> None:
@@ -138,4 +145,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    if len(sys.argv) == 4 and sys.argv[1] == "--child":
+        print(json.dumps(_peak_here(sys.argv[2], bytes.fromhex(sys.argv[3]))))
+    else:
+        main()
