@@ -41,6 +41,7 @@ import numpy as np
 from calibration.recording import Recording
 
 if TYPE_CHECKING:
+    from calibration.temperature_conditioning import CaptureTemperatureNoise
     from calibration.temperature_dequantise import Dequantised
 
 AXES = ("ax", "ay", "az")
@@ -144,6 +145,19 @@ def capture_means(rec: Recording, *, block_s: float = CAPTURE_BLOCK_S) -> Captur
     out.notes.extend(rec.notes)
     new_index = np.where(keep, np.cumsum(keep) - 1, -1)
     return Captures(out, n_rows, True, new_index[inv], notes)
+
+
+def own_temperature_noise(rec: Recording, caps: Captures) -> CaptureTemperatureNoise | None:
+    """What the raw samples of ``caps``' captures say of each capture mean's temperature
+    noise (:func:`calibration.temperature_conditioning.capture_temperature_noise`, read in
+    the capture means' temperature source); None where ``rec`` is not raw samples, has no
+    temperature or too few sub-blocks. Read only where a fit needs it (a warm-up's rate
+    check), not by every reader of raw rows: at 1 M readings it is another 60 MB."""
+    from calibration.temperature_conditioning import capture_temperature_noise
+
+    if not caps.is_raw or not rec.has_temperature or not np.any(caps.row_capture >= 0):
+        return None
+    return capture_temperature_noise(rec.t_s, rec.temperature_c(), caps.row_capture)
 
 
 def group_means(rec: Recording, group: np.ndarray) -> dict[str, np.ndarray]:

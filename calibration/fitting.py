@@ -37,7 +37,7 @@ from typing import Any, Literal
 import numpy as np
 
 from calibration import gate, sfem
-from calibration.captures import capture_means
+from calibration.captures import Captures, capture_means
 from calibration.errors import CalibrationError
 from calibration.gravity import NOT_IDENTIFIABLE_NOTE, LocalGravity
 from calibration.plateaus import segment_recording
@@ -137,7 +137,7 @@ def fit(recording: Recording, options: FitOptions | None = None) -> CalibrationF
         opts.rate_gain_ug_per_c_per_min, float)
     g_local = None if opts.gravity is None else opts.gravity.g
     if decided.kind == "warmup":
-        return _warmup(recording, captures, caps.notes, decided, k, opts.gravity)
+        return _warmup(recording, caps, decided, k, opts.gravity)
     if decided.kind == "continuous":
         from calibration.continuous import fit_continuous
 
@@ -223,13 +223,17 @@ def _from_thermal(tf: ThermalFit, decided: gate.Plan, captures: Recording) -> Ca
         raw_used_g=tf.raw_used_g)
 
 
-def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
-            decided: gate.Plan, rate_gain: np.ndarray | None,
-            gravity: LocalGravity | None = None) -> CalibrationFit:
+def _warmup(recording: Recording, caps: Captures, decided: gate.Plan,
+            rate_gain: np.ndarray | None, gravity: LocalGravity | None = None
+            ) -> CalibrationFit:
     """Too few orientations for the SFEM: each axis' bias change with temperature, and
     what 2 or more orientations determine absolutely (:mod:`calibration.warmup_absolute`)
-    with |g| the local gravity (``gravity``; default 1 g, or the references' median)."""
-    from calibration.captures import warmup_rebuild
+    with |g| the local gravity (``gravity``; default 1 g, or the references' median).
+    ``caps``: ``recording``'s capture means; where they are raw samples, what those say of
+    each capture mean's temperature noise is dT/dt's noise for the rate check
+    (:func:`calibration.captures.own_temperature_noise`), unless the temperature is
+    rebuilt from a coarse channel."""
+    from calibration.captures import own_temperature_noise, warmup_rebuild
     from calibration.export_firmware import firmware_reading_record, quantised_reading_lines
     from calibration.firmware_polynomial import quantised_reading_error, rate_fold_record
     from calibration.rebuild_rate_noise import rebuild_rate_noise
@@ -242,6 +246,7 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
             "rate_gain_ug_per_c_per_min",
             f"not applied to a warm-up ({decided.reason.split(':')[0]}); the bias change "
             f"fitted includes it")
+    captures, capture_notes = caps.recording, caps.notes
     temp = recording.temperature_c()
     if gravity is not None:
         g_local = gravity.g
@@ -263,9 +268,11 @@ def _warmup(recording: Recording, captures: Recording, capture_notes: list[str],
     unresolved = unresolved_record(captures, dq)
     if unresolved:
         capture_notes = [*capture_notes, unresolved_note(unresolved)]
+    # a rebuilt temperature is no capture's mean: its own samples do not say its noise
+    own_noise = None if dq is not None else own_temperature_noise(recording, caps)
     wf = fit_warmup(captures, decided.orientations,
                     span_c=(float(np.min(temp)), float(np.max(temp))), g_local=g_local,
-                    rebuild_noise=noise)
+                    rebuild_noise=noise, own_noise=own_noise)
     gate.check_model(wf.model, captures)
     # the orientations the fit used: a drifting board's clusters joined (warmup.py)
     orientations = wf.orientations

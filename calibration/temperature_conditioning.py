@@ -346,23 +346,135 @@ RATE_NOISE_DRAWS = 8
 
 def temperature_noise_c(t_s: np.ndarray, temperature_c: np.ndarray) -> float:
     """Per-reading noise SD (°C) of a temperature series: the robust SD of its second
-    differences over √6 (a smooth trend cancels in them; white noise gives √6·σ), and at
-    least quantum/√12 when the readings are quantised (:func:`channel_quantum_c`)."""
+    differences over √6 (:func:`_second_difference_noise_c`), and at least quantum/√12
+    when the readings are quantised (:func:`channel_quantum_c`)."""
     y = np.asarray(temperature_c, float)
     y = y[np.isfinite(y)]
     if y.size < 3:
         return 0.0
     second = y[2:] - 2.0 * y[1:-1] + y[:-2]
-    return max(_robust_sd(second) / math.sqrt(6.0), channel_quantum_c(y) / math.sqrt(12.0))
+    return max(_second_difference_noise_c(second), channel_quantum_c(y) / math.sqrt(12.0))
 
 
-def rate_noise_c_per_min(t_s: np.ndarray, window_s: float, noise_c: float) -> float:
-    """The noise (RMS, °C/min) :func:`temperature_rate_c_per_min` over ``window_s`` gives
-    at these reading times for white temperature noise of SD ``noise_c``: measured by
-    running it on :data:`RATE_NOISE_DRAWS` draws of such noise (a fixed seed), so it is
-    the method's own, gaps and ends included."""
+def _second_difference_noise_c(second_c: np.ndarray) -> float:
+    """White noise SD (°C) from second differences y[i+1] − 2·y[i] + y[i−1] of equally
+    spaced readings: their robust SD over √6 (a trend that is a line over the three
+    readings cancels; white noise of SD σ gives √6·σ). The one estimator of a temperature
+    channel's noise: :func:`temperature_noise_c` on a series, and
+    :func:`capture_temperature_noise` on the samples and sub-means inside each capture."""
+    return _robust_sd(np.asarray(second_c, float)) / math.sqrt(6.0)
+
+
+# A capture's temperature noise is read from its means over sub-blocks this long
+# (:func:`capture_temperature_noise`): 3 or more in a capture of CAPTURE_BLOCK_S.
+CAPTURE_SUB_BLOCK_S = 1.0
+# Fewer second differences of sub-means than this over all captures: no estimate.
+MIN_SUB_TRIPLETS = 10
+# The sub-means may scatter up to this multiple of what their samples' noise predicts for
+# white noise (σ_sample / √m) and still count as white: the ratio's estimate is within
+# ±15 % (one SD) at 60 second differences of sub-means (20 captures of 5 s), so 1.5 is
+# about 3 SD. The inclinometer's channel (issue 20) reads 2.6: its 1-s means scatter by
+# 0.012 °C where 0.1 °C samples at 500 Hz predict 0.0045, and its 5-s means by 0.023 °C.
+WHITE_TOLERANCE = 1.5
+
+
+@dataclass(frozen=True)
+class CaptureTemperatureNoise:
+    """What a raw log's own samples say of its capture means' temperature noise
+    (:func:`capture_temperature_noise`)."""
+
+    per_capture_c: np.ndarray | None  # (G,) °C, None: not shown to average down as white
+    sample_c: float  # one sample's noise SD (second differences within captures)
+    sub_c: float  # one sub-block mean's (the same, of consecutive sub-means)
+    samples_per_sub: float
+    sub_block_s: float
+
+    @property
+    def white_ratio(self) -> float:
+        """The sub-means' scatter over white noise's prediction, σ_sub·√m / σ_sample."""
+        if self.sample_c <= 0:
+            return math.inf
+        return self.sub_c * math.sqrt(self.samples_per_sub) / self.sample_c
+
+    def said(self) -> str:
+        """The sentence for the fit's notes: which estimate, and why."""
+        shown = (f"{self.sub_block_s:g}-s means inside the captures scatter by "
+                 f"{self.sub_c:.2g} °C, {self.white_ratio:.2g}x what {self.sample_c:.2g} °C "
+                 f"samples predict as white noise")
+        if self.per_capture_c is None:
+            return (f"from the capture means' second differences: the channel's noise does "
+                    f"not average down as white noise inside a capture ({shown}; at most "
+                    f"{WHITE_TOLERANCE:g}x), so a capture's own samples cannot say its mean's")
+        return (f"{float(np.nanmedian(self.per_capture_c)):.2g} °C per capture mean, from "
+                f"each capture's own samples ({shown})")
+
+
+def capture_temperature_noise(t_s: np.ndarray, temperature_c: np.ndarray,
+                              group: np.ndarray, sub_block_s: float = CAPTURE_SUB_BLOCK_S
+                              ) -> CaptureTemperatureNoise | None:
+    """The noise SD (°C) of each capture's mean temperature from the capture's own samples,
+    where they show it; None where too few sub-blocks say anything.
+
+    ``group``: each raw row's capture, 0 … G − 1 (rows in time order, −1: in none). The
+    capture means' own second differences (:func:`temperature_noise_c` on the means) hold
+    the warm-up's curvature between captures as well as their noise, and on captures 5 and
+    15 s apart (the alternate 10-s blocks a held-out test fits) in a heating that turns from
+    rest, the curvature is as large as the noise. Inside a capture the spacing plays no part:
+
+    * one sample's noise σ_sample and one ``sub_block_s`` mean's σ_sub, each from second
+      differences of consecutive samples or sub-means within a capture (never across two),
+      pooled over the captures (:func:`_second_difference_noise_c`; the die's trend over
+      three sub-blocks is a line and cancels);
+    * white noise averages down: σ_sub = σ_sample / √m over m samples. Where σ_sub is within
+      :data:`WHITE_TOLERANCE` of that, a capture of n samples has noise σ_sub / √(n / m),
+      the sub-means taken as independent (white over the sub-block shown white below it);
+    * otherwise (noise correlated beyond a sample, slower than a sub-block, or a quantised
+      channel that does not dither: its readings' second differences are mostly 0) the
+      samples cannot say what a capture mean's noise is, and ``per_capture_c`` is None:
+      the capture means' own second differences are used, as without raw samples."""
     t = np.asarray(t_s, float)
-    if noise_c <= 0 or t.size < 3:
+    y = np.asarray(temperature_c, float)
+    g = np.asarray(group, np.int64)
+    ok = (g >= 0) & np.isfinite(y) & np.isfinite(t)
+    if ok.sum() < 3:
+        return None
+    n_groups = int(g.max()) + 1
+    if not ok.all():
+        t, y, g = t[ok], y[ok], g[ok]
+    start = np.full(n_groups, np.inf)
+    np.minimum.at(start, g, t)
+    sub = np.floor((t - start[g]) / sub_block_s).astype(np.int64)
+    key = g * (int(sub.max()) + 1) + sub
+    first = np.r_[0, np.flatnonzero(np.diff(key)) + 1]  # runs: rows are in time order
+    counts = np.diff(np.r_[first, key.size])
+    means = np.add.reduceat(y, first) / counts
+    owner = g[first]
+    full = counts >= 0.8 * np.median(counts)
+    same = (owner[2:] == owner[:-2]) & full[2:] & full[1:-1] & full[:-2]
+    second_sub = (means[2:] - 2.0 * means[1:-1] + means[:-2])[same]
+    if second_sub.size < MIN_SUB_TRIPLETS:
+        return None
+    sample = _second_difference_noise_c(np.diff(y, 2)[g[2:] == g[:-2]])
+    per_sub = float(np.median(counts[full]))
+    sigma_sub = _second_difference_noise_c(second_sub)
+    record = CaptureTemperatureNoise(None, sample, sigma_sub, per_sub, sub_block_s)
+    if record.white_ratio > WHITE_TOLERANCE:
+        return record
+    n = np.bincount(g, minlength=n_groups).astype(float)
+    noise = sigma_sub / np.sqrt(np.maximum(n / per_sub, 1.0))
+    return CaptureTemperatureNoise(np.where(n > 0, noise, np.nan), sample, sigma_sub,
+                                   per_sub, sub_block_s)
+
+
+def rate_noise_c_per_min(t_s: np.ndarray, window_s: float,
+                         noise_c: float | np.ndarray) -> float:
+    """The noise (RMS, °C/min) :func:`temperature_rate_c_per_min` over ``window_s`` gives
+    at these reading times for white temperature noise of SD ``noise_c`` (one for every
+    reading, or each reading's own): measured by running it on :data:`RATE_NOISE_DRAWS`
+    draws of such noise (a fixed seed), so it is the method's own, gaps and ends
+    included."""
+    t = np.asarray(t_s, float)
+    if np.all(np.asarray(noise_c) <= 0) or t.size < 3:
         return 0.0
     rng = np.random.default_rng(0)
     sq = [np.mean(temperature_rate_c_per_min(t, rng.normal(0.0, noise_c, t.size),
@@ -373,6 +485,7 @@ def rate_noise_c_per_min(t_s: np.ndarray, window_s: float, noise_c: float) -> fl
 def rate_window_s(t_s: np.ndarray, temperature_c: np.ndarray,
                   signal_c_per_min: Callable[[np.ndarray], float], share: float,
                   other_noise_c_per_min: Callable[[float], float] | None = None,
+                  noise_c: np.ndarray | None = None,
                   ) -> tuple[float, float] | None:
     """The shortest of :data:`RATE_WINDOWS_S` over which dT/dt's noise
     (:func:`rate_noise_c_per_min`, the channel's noise from :func:`temperature_noise_c`)
@@ -384,21 +497,24 @@ def rate_window_s(t_s: np.ndarray, temperature_c: np.ndarray,
     local: a window over the whole record is one parabola's slope) and quiet enough.
     ``other_noise_c_per_min``: window ↦ an error of dT/dt independent of the white noise
     (a rebuilt temperature's own, :mod:`calibration.rebuild_rate_noise`), added in
-    quadrature."""
+    quadrature. ``noise_c``: each reading's own noise SD where known (a capture mean's,
+    from its samples: :func:`capture_temperature_noise`); None: the series' own
+    (:func:`temperature_noise_c`)."""
     t = np.asarray(t_s, float)
-    noise_c = temperature_noise_c(t, temperature_c)
+    noise = (temperature_noise_c(t, temperature_c) if noise_c is None
+             else np.nan_to_num(np.asarray(noise_c, float), nan=float(np.nanmax(noise_c))))
     span_s = float(np.ptp(t)) if t.size else 0.0
     for window in (w for w in RATE_WINDOWS_S if w <= 0.5 * span_s):
         counts = (np.searchsorted(t, t + window / 2, side="right")
                   - np.searchsorted(t, t - window / 2, side="left"))
         if t.size < RATE_MIN_READINGS or np.median(counts) < RATE_MIN_READINGS:
             continue
-        noise = rate_noise_c_per_min(t, window, noise_c)
+        rate_noise = rate_noise_c_per_min(t, window, noise)
         if other_noise_c_per_min is not None:
-            noise = math.hypot(noise, other_noise_c_per_min(window))
+            rate_noise = math.hypot(rate_noise, other_noise_c_per_min(window))
         rate = temperature_rate_c_per_min(t, temperature_c, window)
-        if noise <= share * float(signal_c_per_min(rate)):
-            return window, noise
+        if rate_noise <= share * float(signal_c_per_min(rate)):
+            return window, rate_noise
     return None
 
 

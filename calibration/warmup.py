@@ -90,7 +90,11 @@ from calibration.gate import (
     check_warmup_residuals,
 )
 from calibration.recording import Recording
-from calibration.temperature_conditioning import rate_window_s, temperature_rate_c_per_min
+from calibration.temperature_conditioning import (
+    CaptureTemperatureNoise,
+    rate_window_s,
+    temperature_rate_c_per_min,
+)
 from calibration.thermal import ThermalModel
 from calibration.warmup_absolute import AbsoluteFit, absolute_part, fitted_note, held_note
 from calibration.warmup_scatter import scatter_check
@@ -156,7 +160,8 @@ class WarmupFit:
 def fit_warmup(captures: Recording, orientations: Orientations,
                span_c: tuple[float, float] | None = None,
                max_degree: int = MAX_DEGREE, g_local: float = 1.0,
-               rebuild_noise: Callable[[float], float] | None = None) -> WarmupFit:
+               rebuild_noise: Callable[[float], float] | None = None,
+               own_noise: CaptureTemperatureNoise | None = None) -> WarmupFit:
     """Fit each axis' bias change with temperature (module docstring) to capture means.
 
     The warm-up solver behind :func:`calibration.fitting.fit`: to calibrate a
@@ -164,8 +169,11 @@ def fit_warmup(captures: Recording, orientations: Orientations,
 
     ``span_c``: the temperature span of the data as read (the raw rows'); default the
     captures'. ``g_local``: |g| for a norm-mode absolute fit of 2 or more orientations
-    (:func:`absolute_part`). Raises :class:`GateRefusal` when the temperature does not change enough
-    to see anything.
+    (:func:`absolute_part`). ``own_noise``: what the raw samples say of each capture mean's
+    temperature noise (:func:`calibration.temperature_conditioning.
+    capture_temperature_noise`), for the rate check (:func:`_rate_check`); None: the
+    capture means' second differences. Raises :class:`GateRefusal` when the temperature
+    does not change enough to see anything.
     """
     T = captures.temperature_c()
     raw = captures.raw_g
@@ -206,7 +214,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     candidates = sorted(((d, m) for d in range(top + 1) for m in range(max(d, 1))),
                         key=lambda dm: (dm[0] + dm[1], dm[0]))
     with_rate: list[float] = []
-    check = _rate_check(captures.t_s, T, x, labels, top, rebuild_noise)
+    check = _rate_check(captures.t_s, T, x, labels, top, rebuild_noise, own_noise)
     rate = np.zeros(T.size)
     if check.tried:
         rate = temperature_rate_c_per_min(captures.t_s, T, float(check.window_s))  # type: ignore[arg-type]
@@ -456,18 +464,20 @@ class RateCheck:
     share: float = 0.0  # of the rate's sum of squares left after the polynomial in T
     noise_c_per_min: float = float("nan")  # dT/dt's noise over window_s
     residual_c_per_min: float = 0.0  # RMS of the rate left after the polynomial in T
+    noise_source: str = ""  # which estimate of the temperature's noise, and why
 
     def to_dict(self) -> dict[str, Any]:
         return {"tried": self.tried, "why": self.why, "window_s": self.window_s,
                 "share_not_a_function_of_t": round(self.share, 4),
                 "noise_c_per_min": (round(self.noise_c_per_min, 4)
                                     if np.isfinite(self.noise_c_per_min) else None),
-                "residual_rms_c_per_min": round(self.residual_c_per_min, 4)}
+                "residual_rms_c_per_min": round(self.residual_c_per_min, 4),
+                "temperature_noise": self.noise_source}
 
 
 def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarray,
-                top: int, rebuild_noise: Callable[[float], float] | None = None
-                ) -> RateCheck:
+                top: int, rebuild_noise: Callable[[float], float] | None = None,
+                own_noise: CaptureTemperatureNoise | None = None) -> RateCheck:
     """Whether dT/dt is identifiable beside the polynomial in T, and its window.
 
     A rate gain k and the bias polynomial are separable only where dT/dt is not itself a
@@ -481,31 +491,42 @@ def _rate_check(t_s: np.ndarray, T: np.ndarray, x: np.ndarray, labels: np.ndarra
     (:func:`calibration.temperature_conditioning.rate_window_s`); on a temperature rebuilt
     from a coarse channel that noise includes the rebuild's own error in dT/dt
     (``rebuild_noise``, :mod:`calibration.rebuild_rate_noise`): slow, largest where the die
-    turns inside a step, and invisible in the rebuilt trace's second differences."""
+    turns inside a step, and invisible in the rebuilt trace's second differences.
+
+    The channel's noise is each capture mean's own where its raw samples show it
+    (``own_noise``: :func:`calibration.temperature_conditioning.capture_temperature_noise`,
+    their sub-means' scatter inside the capture, where it averages down as white noise),
+    else the capture means' second differences (:func:`calibration.temperature_conditioning.
+    temperature_noise_c`), which on sparse captures of a turning warm-up read its
+    curvature as noise; the check's text and ``noise_source`` say which."""
     k = int(labels.max()) + 1
     P = _design(x, labels, k, max(top, 1))
 
     def residual(rate: np.ndarray) -> np.ndarray:
         return rate - P @ np.linalg.lstsq(P, rate, rcond=None)[0]
 
+    source = ("from the capture means' second differences" if own_noise is None
+              else own_noise.said())
     found = rate_window_s(t_s, T, lambda r: float(np.sqrt(np.mean(residual(r) ** 2))),
-                          RATE_NOISE_SHARE, rebuild_noise)
+                          RATE_NOISE_SHARE, rebuild_noise,
+                          None if own_noise is None else own_noise.per_capture_c)
     if found is None:
         return RateCheck(False, "dT/dt not resolved: over every window its noise exceeds "
                                 f"{RATE_NOISE_SHARE:.0%} of the part of it that is not a "
-                                "function of T (a steady warm-up, or a channel's jitter)")
+                                "function of T (a steady warm-up, or a channel's jitter; "
+                                f"temperature noise {source})", noise_source=source)
     window, noise = found
     rate = temperature_rate_c_per_min(t_s, T, window)
     res = residual(rate)
     share = float(np.sum(res ** 2) / max(float(np.sum(rate ** 2)), 1e-30))
     rms = float(np.sqrt(np.mean(res ** 2)))
-    shown = (f"{share:.1%} of dT/dt (read over {window:g} s, noise {noise:.2g} °C/min) is "
-             f"not a function of T, RMS {rms:.2g} °C/min")
+    shown = (f"{share:.1%} of dT/dt (read over {window:g} s, noise {noise:.2g} °C/min, "
+             f"temperature noise {source}) is not a function of T, RMS {rms:.2g} °C/min")
     if share < RATE_MIN_SHARE:
         return RateCheck(False, f"dT/dt is nearly a function of T over these captures "
                                 f"({shown}; {RATE_MIN_SHARE:.1%} needed): the polynomial in "
-                                "T absorbs a rate term", window, share, noise, rms)
-    return RateCheck(True, shown, window, share, noise, rms)
+                                "T absorbs a rate term", window, share, noise, rms, source)
+    return RateCheck(True, shown, window, share, noise, rms, source)
 
 
 def _gain_degree_identified(rate: np.ndarray, x: np.ndarray, labels: np.ndarray,
