@@ -283,7 +283,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # recording is flagged with probability up to 2α (measured: 1.3 % at α = 1 %, issue 10).
     # Bonferroni over the two: each at α/2, so the verdict's false-alarm rate is ≤ α.
     alpha_sel = alpha_scan = alpha / 2
-    fold_masks, scheme = folds(ctx)
+    fold_masks, scheme = folds(ctx, pb.degree)
     n_fit = max(MIN_N_NULL, min(n_null, int(NULL_BUDGET_BYTES // (8 * pb.m))))
     if n_fit < n_null:
         # Why: each replicate is a full residual vector (m entries), and the projections and
