@@ -42,9 +42,9 @@ def trace_case(csv_path: Path) -> dict[str, Any]:
         calls.append(out)
         return out
 
-    def rec_dof(*a: Any, **k: Any) -> float:
-        nu = orig_dof(*a, **k)
-        nus.append(float(nu))
+    def rec_dof(*a: Any, **k: Any) -> tuple[float, float]:
+        nu = orig_dof(*a, **k)  # (the null's ν, the ν resolved at 2 standard errors)
+        nus.append(float(nu[0]))
         return nu
 
     dmod._evaluate, dmod._reading_dof = rec_eval, rec_dof
