@@ -76,7 +76,7 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
     steps = rec.steps() if rec.has_temperature or rec.has("step") else np.zeros(n, int)
     positions = rec.positions()
     step_temp = {int(s): float(np.median(temp[steps == s])) for s in np.unique(steps)}
-    direction = _directions(steps, step_temp)
+    direction = _directions(steps, _step_targets_c(rec, steps, step_temp))
     since = np.zeros(n)
     for s in step_temp:
         m = steps == s
@@ -100,6 +100,31 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
         time_since_step_s=since, input_g=np.asarray(input_g, float),
         sd_g=sd, draw_dtemp_g_per_c=np.zeros((n, 3)), session=session, n_samples=n_samples,
     )
+
+
+def _step_targets_c(rec: Recording, steps: np.ndarray,
+                    step_temp: dict[int, float]) -> dict[int, float]:
+    """Each plateau's commanded temperature (°C): its median ``setpoint_c`` when every
+    plateau has one, else ``step_temp`` (the median recorded temperature).
+
+    Why (issue 22): the heating/cooling direction of a plateau is the chamber's excursion to
+    it. With soaks shorter than ~3 die time constants the die is still moving when the
+    readings are taken, so plateau medians can fall out of setpoint order: cooled from room
+    temperature to −20 °C and still −9 °C there, the die reads −12 °C on the next plateau
+    (−11 °C, reached by heating), and medians called both plateaus' directions the wrong way
+    round (a hysteresis at twice its detectable size was named ``temperature_rate``).
+    """
+    if not rec.has("setpoint_c"):
+        return step_temp
+    sp = np.asarray(rec.columns["setpoint_c"], float)
+    out: dict[int, float] = {}
+    for s in step_temp:
+        v = sp[steps == s]
+        v = v[np.isfinite(v)]
+        if v.size == 0:
+            return step_temp
+        out[s] = float(np.median(v))
+    return out
 
 
 def _directions(steps: np.ndarray, step_temp: dict[int, float]) -> np.ndarray:
