@@ -21,7 +21,6 @@ noise law would call the case when no null reading comes near it (docs/benchmark
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import tempfile
 from dataclasses import fields
@@ -31,24 +30,16 @@ import numpy as np
 
 from benchmarks.blind.gen2 import simulate as sim
 from benchmarks.blind.gen2.protocol import Protocol2
+from benchmarks.blind.gen2.reading_tail import first_stage_row_stats
 from benchmarks.blind.gen2.realnoise import load_pools, realdata_dir
 from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.discrepancy import stats
-from calibration.discrepancy.problem import build_problem
 from calibration.recording import Recording, read_recording, write_recording
-
-dmod = importlib.import_module("calibration.discrepancy.diagnose")  # the module
 
 
 def first_stage_stats(rec: Recording) -> tuple[np.ndarray, float]:
     """(the per-reading statistic of the outlier test's first stage, its null's tail ν)."""
-    pb = build_problem(rec)
-    U, yw = dmod._basis(pb, [])
-    e = yw - U @ (U.T @ yw)
-    dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
-    s = float(stats.robust_scale(e[:, None], dof)[0])
-    t, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
-                              set(), pb.shared_t_loading)
+    t, g = first_stage_row_stats(rec)
     return t, stats.reading_tail_dof(t, g, stats.NULL_TAIL_Z)
 
 

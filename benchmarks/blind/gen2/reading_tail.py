@@ -21,9 +21,22 @@ from scipy import stats as sps
 
 from calibration.discrepancy import stats
 from calibration.discrepancy.problem import build_problem
-from calibration.recording import read_recording
+from calibration.recording import Recording, read_recording
 
 dmod = importlib.import_module("calibration.discrepancy.diagnose")  # the module
+
+
+def first_stage_row_stats(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """The outlier test's first-stage statistic of every reading against the base model
+    (``stats.row_stats``) and its readings' groups, as ``diagnose`` reads them."""
+    pb = build_problem(rec)
+    U, yw = dmod._basis(pb, [])
+    e = yw - U @ (U.T @ yw)
+    dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
+    s = float(stats.robust_scale(e[:, None], dof)[0])
+    t, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
+                              set(), pb.shared_t_loading)
+    return t, g
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,13 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     pooled, used = [], 0
     for p in sorted(a.cases.glob("*.csv"))[: a.first]:
-        pb = build_problem(read_recording(p))
-        U, yw = dmod._basis(pb, [])
-        e = yw - U @ (U.T @ yw)
-        dof = np.sqrt(pb.m / max(pb.m - U.shape[1], 1))
-        s = float(stats.robust_scale(e[:, None], dof)[0])
-        t, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
-                                  set(), pb.shared_t_loading)
+        t, g = first_stage_row_stats(read_recording(p))
         if np.isfinite(stats.reading_tail_dof(t, g)):
             continue
         used += 1
