@@ -34,6 +34,7 @@ from scipy import stats as sps
 
 from calibration import sfem
 from calibration.discrepancy.context import AXES
+from calibration.discrepancy.heldout import plateau_folds
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import _group_rms as locate_group_rms
 from calibration.discrepancy.problem import pooled_sigma_g
@@ -200,6 +201,7 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
                         dtemp_dtau=dtemp_dtau(die_minus_air, tau))
     shift = _shift_table(model, fit, alpha_each, temp_c)
     heldout = _heldout(model, raw, ref, air_c, sigma, fitted, steps, recording.t_s,
+                       recording.positions(),
                        None if tau is None else (die_minus_air, tau_given, tau))
     if rig.get("significant"):
         findings.append({
@@ -501,32 +503,24 @@ def _corrected_model(model: ThermalModel, fit: ShiftFit, against: str,
                                               f"{rec.path} by diagnose --against"])
 
 
-def _folds(steps: np.ndarray, t_s: np.ndarray) -> tuple[list[np.ndarray], str]:
-    ids = np.unique(steps)
-    if len(ids) >= 4:
-        return [steps == s for s in ids[1:-1]], "leave-one-step-out (interior steps)"
-    order = np.argsort(t_s, kind="stable")
-    out = []
-    for b in np.array_split(order, 5):
-        m = np.zeros(t_s.size, bool)
-        m[b] = True
-        out.append(m)
-    return out, "leave-one-interval-out (5 contiguous time intervals)"
-
-
-def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s, lag=None) -> dict[str, Any]:
+def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s, positions,
+             lag=None) -> dict[str, Any]:
     """RMS on held-out plateaus: the given model vs the shift fitted on the other plateaus.
 
-    The end steps are never held out (a cubic does not extrapolate: that would test the
-    polynomial, not the shift), and the same rows enter both figures. ``lag``:
-    (die − air of τ, the twin's τ, the corrected τ): the given twin predicts at its τ, the
+    The folds are ``diagnose``'s (:func:`calibration.discrepancy.heldout.plateau_folds`, for
+    the given model's degree in temperature): the end steps are never held out (a cubic does
+    not extrapolate: that would test the polynomial, not the shift), nor an interior step
+    whose others would determine the polynomial exactly; the same rows enter both figures.
+    ``lag``: (die − air of τ, the twin's τ, the corrected τ): the given twin predicts at its τ, the
     corrected one at the corrected τ (τ itself is fitted on all rows: one scalar).
     """
     given_c = temp_c
     if lag is not None:
         dma, tau_g, tau_c = lag
         given_c, temp_c = temp_c + dma(tau_g), temp_c + dma(tau_c)
-    masks, scheme = _folds(steps, t_s)
+    step_temp_c = {int(s): float(np.median(temp_c[steps == s])) for s in np.unique(steps)}
+    masks, scheme = plateau_folds(steps, step_temp_c, t_s, positions,
+                                  degree=model.coeffs.shape[1] - 1)
     sq_g = sq_c = 0.0
     cnt = 0
     for m in masks:

@@ -20,39 +20,49 @@ N_INTERVALS = 5
 
 
 def folds(ctx: DesignContext, degree: int = 3) -> tuple[list[np.ndarray], str]:
-    """Row masks of the held-out folds and a description of the scheme.
+    """Row masks of the held-out folds and a description of the scheme (:func:`plateau_folds`
+    on the design's plateaus)."""
+    return plateau_folds(ctx.steps, ctx.step_temp_c, ctx.t_s, ctx.positions, degree)
 
-    ``degree``: the base model's polynomial degree in temperature (``LinearProblem.degree``).
-    An interior step is held out only when the other plateaus hold more temperatures than
-    that polynomial has coefficients; when none is, every plateau's readings are split
-    into interleaved visit groups (:func:`visit_group_folds`).
+
+def plateau_folds(steps: np.ndarray, step_temp_c: dict[int, float], t_s: np.ndarray,
+                  positions: np.ndarray, degree: int = 3) -> tuple[list[np.ndarray], str]:
+    """Row masks of the held-out folds and a description of the scheme: the one fold rule of
+    ``diagnose`` and ``diagnose --against``.
+
+    ``steps``/``positions``: per-reading step and position indices; ``step_temp_c``: each
+    step's temperature; ``degree``: the base model's polynomial degree in temperature. An
+    interior step is held out only when the other plateaus hold more temperatures than that
+    polynomial has coefficients; when none is, every plateau's readings are split into
+    interleaved visit groups (:func:`visit_group_folds`).
     """
-    ids = ctx.step_ids
+    ids = sorted(step_temp_c)
     if len(ids) >= 4:
-        kept = [s for s in ids[1:-1] if training_levels(ctx, s) > degree + 1]
+        kept = [s for s in ids[1:-1] if training_levels(step_temp_c, s) > degree + 1]
         if kept:
-            return [ctx.steps == s for s in kept], "leave-one-step-out (interior steps)"
-        return visit_group_folds(ctx), (
+            return [steps == s for s in kept], "leave-one-step-out (interior steps)"
+        return visit_group_folds(steps, ids, t_s, positions), (
             f"leave-one-visit-group-out ({N_INTERVALS} interleaved groups of every plateau's "
             "visits: holding out a whole plateau would leave the base's temperature "
             "polynomial fitted exactly through the others)")
-    order = np.argsort(ctx.t_s, kind="stable")
+    order = np.argsort(t_s, kind="stable")
     blocks = np.array_split(order, N_INTERVALS)
     out = []
     for b in blocks:
-        m = np.zeros(ctx.n, bool)
+        m = np.zeros(t_s.size, bool)
         m[b] = True
         out.append(m)
     return out, f"leave-one-interval-out ({N_INTERVALS} contiguous time intervals)"
 
 
-def training_levels(ctx: DesignContext, held_step: int) -> int:
+def training_levels(step_temp_c: dict[int, float], held_step: int) -> int:
     """Distinct plateau temperatures (0.1 °C, as ``problem._powers`` counts them) left when
     step ``held_step`` is held out."""
-    return len({round(float(ctx.step_temp_c[s]), 1) for s in ctx.step_ids if s != held_step})
+    return len({round(float(t), 1) for s, t in step_temp_c.items() if s != held_step})
 
 
-def visit_group_folds(ctx: DesignContext) -> list[np.ndarray]:
+def visit_group_folds(steps: np.ndarray, step_ids: list[int], t_s: np.ndarray,
+                      positions: np.ndarray) -> list[np.ndarray]:
     """Folds of interleaved visits: the k-th visit of plateau j (in time order; a visit is
     a run of readings at one position) goes to group (k + j) mod ``N_INTERVALS``.
 
@@ -68,11 +78,11 @@ def visit_group_folds(ctx: DesignContext) -> list[np.ndarray]:
     slot of every plateau in a different group on each, so a term with one parameter per
     pose has seen each held-out pose on the other plateaus.
     """
-    groups = np.zeros(ctx.n, int)
-    for j, s in enumerate(ctx.step_ids):
-        idx = np.flatnonzero(ctx.steps == s)
-        idx = idx[np.argsort(ctx.t_s[idx], kind="stable")]
-        visit = np.concatenate([[0], np.cumsum(np.diff(ctx.positions[idx]) != 0)])
+    groups = np.zeros(t_s.size, int)
+    for j, s in enumerate(step_ids):
+        idx = np.flatnonzero(steps == s)
+        idx = idx[np.argsort(t_s[idx], kind="stable")]
+        visit = np.concatenate([[0], np.cumsum(np.diff(positions[idx]) != 0)])
         groups[idx] = (visit + j) % N_INTERVALS
     return [groups == g for g in range(N_INTERVALS)]
 

@@ -126,3 +126,20 @@ def test_cli_against_bad_file_exit_2(tmp_path, capsys):
     assert run_diagnose(args) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "bad.json" in err and "format" in err
+
+
+def test_five_setpoints_are_held_out_by_visit_groups_as_diagnose_does(sensor):
+    """With five plateaus and the given model's cubic, holding out an interior plateau
+    would leave the cubic fitted exactly through the other four: ``--against`` then
+    holds out interleaved visit groups, the fold rule of ``diagnose`` (heldout.py), and
+    the shift still predicts the held-out visits."""
+    truth, model = sensor
+    assert model.coeffs.shape[1] == 4  # a cubic in temperature
+    aged = replace(truth, coeffs=truth.coeffs.copy())
+    aged.coeffs[1, 0] += 0.4e-3
+    five = simulate_campaign(aged, [-40.0, -15.0, 10.0, 35.0, 60.0], seed=107, soak_min=30)
+    d = diagnose_against(five, Twin(model), refit=False)
+    assert d.heldout["scheme"].startswith("leave-one-visit-group-out")
+    assert d.heldout["rmse_corrected_ug"] < 0.5 * d.heldout["rmse_given_ug"]
+    eleven = diagnose_against(record(aged, 108), Twin(model), refit=False)
+    assert eleven.heldout["scheme"] == "leave-one-step-out (interior steps)"

@@ -53,7 +53,7 @@ def test_five_plateaus_are_held_out_by_visits_of_every_plateau():
     pb = build_problem(_record(1, "sparse"))
     ctx = pb.ctx
     assert len(ctx.step_ids) == 5 and pb.degree == 3
-    assert all(training_levels(ctx, s) == pb.degree + 1 for s in ctx.step_ids[1:-1])
+    assert all(training_levels(ctx.step_temp_c, s) == pb.degree + 1 for s in ctx.step_ids[1:-1])
     masks, scheme = folds(ctx, pb.degree)
     assert scheme.startswith("leave-one-visit-group-out")
     assert len(masks) == N_INTERVALS
