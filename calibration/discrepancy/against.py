@@ -33,7 +33,7 @@ import numpy as np
 from scipy import stats as sps
 
 from calibration import sfem
-from calibration.discrepancy.context import AXES
+from calibration.discrepancy.context import AXES, plateau_directions
 from calibration.discrepancy.heldout import plateau_folds
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import _group_rms as locate_group_rms
@@ -651,11 +651,9 @@ def _locate(r: np.ndarray, sigma: np.ndarray, steps: np.ndarray,
     if pos is not None and np.all(np.isfinite(pos)):
         out["by_position"] = _group_rms(zr, pos.astype(int))
     if rec.has_temperature:
-        from calibration.discrepancy.context import _directions  # noqa: PLC0415
-
         temp = rec.temperature_c()
         step_temp = {int(s): float(np.nanmedian(temp[steps == s])) for s in np.unique(steps)}
-        d = _directions(steps, step_temp)
+        d = plateau_directions(rec, steps, step_temp)
         out["by_direction"] = {{1: "heating", -1: "cooling", 0: "unknown"}[int(k)]:
                                float(round(np.sqrt(np.mean(zr[d == k] ** 2)), 2))
                                for k in np.unique(d)}

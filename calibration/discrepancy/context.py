@@ -76,7 +76,7 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
     steps = rec.steps() if rec.has_temperature or rec.has("step") else np.zeros(n, int)
     positions = rec.positions()
     step_temp = {int(s): float(np.median(temp[steps == s])) for s in np.unique(steps)}
-    direction = _directions(steps, _step_targets_c(rec, steps, step_temp))
+    direction = plateau_directions(rec, steps, step_temp)
     since = np.zeros(n)
     for s in step_temp:
         m = steps == s
@@ -100,6 +100,14 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
         time_since_step_s=since, input_g=np.asarray(input_g, float),
         sd_g=sd, draw_dtemp_g_per_c=np.zeros((n, 3)), session=session, n_samples=n_samples,
     )
+
+
+def plateau_directions(rec: Recording, steps: np.ndarray,
+                       step_temp: dict[int, float]) -> np.ndarray:
+    """Heating (+1) / cooling (−1) / unknown (0) per reading: each plateau's last excursion,
+    read from the commanded temperatures where recorded (:func:`_step_targets_c`), else from
+    ``step_temp``. The one reading of direction for ``diagnose`` and ``--against``."""
+    return _directions(steps, _step_targets_c(rec, steps, step_temp))
 
 
 def _step_targets_c(rec: Recording, steps: np.ndarray,

@@ -21,6 +21,7 @@ from benchmarks.blind.gen2 import simulate as sim
 from benchmarks.blind.gen2.realnoise import NoisePools
 from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.discrepancy import diagnose
+from calibration.discrepancy.against import _locate
 from calibration.discrepancy.context import base_context
 from calibration.recording import Recording
 
@@ -81,3 +82,14 @@ def test_a_hysteresis_under_short_soaks_is_named_hysteresis():
     d = diagnose(rec, seed=0, n_null=100)
     assert [f.effect for f in d.findings][:1] == ["thermal_hysteresis"], (
         [(f.effect, f.where.get("candidates")) for f in d.findings], d.notes)
+
+
+def test_against_locates_by_the_same_directions():
+    """``diagnose --against`` reports its residual by heating/cooling with the same reading
+    of direction: a residual of 2 noise units on heating plateaus and 1 on cooling ones is
+    located so, not mixed by the lagging plateau medians."""
+    rec, truth = _case()
+    steps = rec.steps()
+    z = np.where(truth > 0, 2.0, 1.0)[:, None] * np.ones((len(rec), 3))
+    located = _locate(z, np.ones_like(z), steps, rec)
+    assert located["by_direction"] == {"cooling": 1.0, "heating": 2.0}
