@@ -1,4 +1,5 @@
-"""benchmarks/blind/gen2/outlier_tail_fitout.py: a reading fitted out by its own columns.
+"""benchmarks/blind/gen2/outlier_tail_fitout.py and outlier_plateau_scale.py: the variants
+of the outlier null's tail measured and not kept.
 
 The measured variant of the outlier null's tail (docs/benchmarks.md, "The outlier null's
 tail with the largest readings fitted out: measured, not kept") reads the other readings
@@ -31,3 +32,19 @@ def test_a_reading_fitted_out_is_the_fit_without_it():
     np.testing.assert_allclose(e2[~rest], 0.0, atol=1e-10)
     np.testing.assert_allclose(U2.T @ U2, np.eye(U2.shape[1]), atol=1e-10)
     assert not np.allclose(e[rest], e2[rest])  # the far reading had leaked into the others
+
+
+def test_studentised_per_plateau_sets_each_plateaus_median_and_leaves_small_ones():
+    from scipy import stats as sps
+
+    from benchmarks.blind.gen2.outlier_plateau_scale import MIN_PLATEAU, _studentise
+
+    rng = np.random.default_rng(7)
+    steps = np.repeat([0, 1, 2], [20, 30, MIN_PLATEAU - 1])
+    scale = np.repeat([1.0, 4.0, 9.0], [20, 30, MIN_PLATEAU - 1])
+    t = rng.chisquare(3, (steps.size, 4)) * scale[:, None]
+    live = np.ones(steps.size, bool)
+    out = _studentise(t, steps, live, 3)
+    for k in (0, 1):
+        np.testing.assert_allclose(np.median(out[steps == k], axis=0), sps.chi2.ppf(0.5, 3))
+    np.testing.assert_array_equal(out[steps == 2], t[steps == 2])
