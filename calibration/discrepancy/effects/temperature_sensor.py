@@ -112,8 +112,11 @@ class TemperatureSensor(CatalogueEffect):
     def misses(self, pb, U, e, theta, where, axes, alpha):
         """A step holds through each plateau: the channel's error must not change with time
         within the plateaus (a lagging or settling channel does; issue 22). Tested as the
-        model's ∂raw/∂T times the time within each plateau (centred), after the term."""
-        from calibration.discrepancy.effects.structure import log_p, whitened
+        model's ∂raw/∂T times the time within each plateau (centred), after the term, with
+        the noise read reading by reading (:func:`.structure.log_p_by_reading`): the column
+        lives on the plateaus where ∂raw/∂T is large against the noise, the quiet ones,
+        and a scale pooled over the recording ran it above its level there."""
+        from calibration.discrepancy.effects.structure import log_p_by_reading, whitened
 
         ctx = pb.ctx
         frac = np.zeros(ctx.n)
@@ -123,7 +126,7 @@ class TemperatureSensor(CatalogueEffect):
             if span > 0:
                 frac[m] = ctx.time_since_step_s[m] / span - 0.5
         col = (ctx.draw_dtemp_g_per_c * frac[:, None])[:, :, None]
-        lp, k = log_p(U, e, whitened(pb, col))
+        lp, k = log_p_by_reading(pb, U, e, whitened(pb, col))
         if k == 0 or lp > np.log(alpha):
             return None
         steps = [int(s) for s in ctx.step_ids]
