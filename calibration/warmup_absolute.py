@@ -96,14 +96,17 @@ def absolute_part(captures: Recording, orientations: Orientations, x: np.ndarray
     else:
         ref = None
         directions = orientations.directions * g_local
-    names = identified(directions, mode)
+    free = visible(directions, mode)
+    # Only a parameter that is fitted can be reported determined: directions a degree or
+    # so apart (noisy captures of one face) pass the rank test for an angle (ayx) that
+    # moves |g| at second order only, below VISIBLE_REL, so it is not among ``free``.
+    names = tuple(n for n in identified(directions, mode) if n in free)
     empty = AbsoluteFit(mode, (), np.zeros((0, 1)), np.zeros((0, 1)), 0, float("nan"),
                         float("nan"), 0.0)
     if not names:
         return empty
     raw = captures.raw_g if rate_offset_g is None else captures.raw_g - rate_offset_g
     base = np.vander(x, coeffs.shape[1], increasing=True) @ coeffs.T
-    free = visible(directions, mode)
     degree = _choose_degree(raw, x, coeffs, free, names, top_degree, folds, g_local, ref)
     if mode == "reference":
         fit = fit_absolute(raw, x, coeffs, free, names, degree, g_local=g_local, ref_g=ref)
