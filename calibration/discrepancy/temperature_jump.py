@@ -109,7 +109,7 @@ def rival_fits_as_well(lead: float) -> bool:
 def fits_as_well(effect: str, lead: float) -> str:
     """The clause that says so, for the reason of :func:`withheld`."""
     return (f"fits the structure as well (the {effect} term leads it by {lead:.1f} noise "
-            f"variances after 2 per column, under {MARGIN:g})")
+            f"variances after 2 per column, under {MARGIN:.3g})")
 
 
 def withheld(f: Any, rival: str, why: str, experiment: str, not_ident: dict[str, dict],

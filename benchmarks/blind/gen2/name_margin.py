@@ -3,14 +3,15 @@
 Usage::
 
     python -m benchmarks.blind.gen2.name_margin --realdata DIR --key OUT/keys/0167.json \
-        --draws 40 [--white]
+        --draws 40 [--white] [--pair thermal_hysteresis,bias_drift]
 
 Why (issue 22): a ``thermal_hysteresis`` case at twice its detectable size was named
 ``temperature_rate`` by :func:`calibration.discrepancy.by_fit.name_by_fit`. One case cannot
 say whether that protocol separates the two; the same protocol, sensor and effect drawn
 with ``--draws`` noise seeds can. For each draw it prints the top finding and each
 confuser's explained sum of squares in noise variances (``q / s²``, the quantity the
-margin compares), then the spread of ``q_rate − q_hysteresis``. Under the margin's model
+margin compares), then the spread of ``q_rate − q_hysteresis`` (``--pair TRUE,RIVAL``: of
+``q_RIVAL − q_TRUE``). Under the margin's model
 (white Gaussian noise, the truth in one span) that difference is N(−λ², 2λ), so its sd
 should be 2·√(−mean); a larger sd is evidence the margin's error bound (≤ 2.5 % per pair)
 does not hold on this noise. ``--white``: independent Gaussian samples instead of the real
@@ -35,7 +36,7 @@ from calibration.discrepancy import by_fit
 from calibration.discrepancy.effects import BY_ID
 from calibration.recording import read_recording, write_recording
 
-PAIR = ("thermal_hysteresis", "temperature_rate", "session_offset")
+PAIR = ("thermal_hysteresis", "temperature_rate", "session_offset", "bias_drift")
 MARGIN_SD_PER_ROOT = 2.0  # sd of Δq = 2λ under the margin's model (by_fit.MARGIN)
 
 
@@ -88,7 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--protocol", default="{}",
                     help='protocol fields to change, JSON (e.g. \'{"sensor_c_sd_c": 0.0005, '
                          '"sensor_c_lsb_c": 0.0001}\': a near-exact temperature channel)')
+    ap.add_argument("--pair", default=f"{PAIR[0]},{PAIR[1]}",
+                    help="TRUE,RIVAL: the spread of q_RIVAL − q_TRUE is reported")
     a = ap.parse_args(argv)
+    true_id, rival_id = a.pair.split(",")
     diagnose_mod = importlib.import_module("calibration.discrepancy.diagnose")
     log: list[dict] = []
     by_fit.name_by_fit = _logging_name_by_fit(log)
@@ -110,16 +114,16 @@ def main(argv: list[str] | None = None) -> int:
         top = top_of(d)
         tally[top] = tally.get(top, 0) + 1
         q = log[0] if log else {}
-        if PAIR[0] in q and PAIR[1] in q:
-            diff.append(q[PAIR[1]] - q[PAIR[0]])
+        if true_id in q and rival_id in q:
+            diff.append(q[rival_id] - q[true_id])
         print(i, top, " ".join(f"{g}={v:.1f}" for g, v in q.items()), flush=True)
     print(json.dumps(tally, indent=1))
     if len(diff) > 2:
         dq = np.array(diff)
         mu, sd = float(dq.mean()), float(dq.std(ddof=1))
-        print(f"q_rate - q_hysteresis over {dq.size} draws: mean {mu:.2f}, sd {sd:.2f} "
+        print(f"q_{rival_id} - q_{true_id} over {dq.size} draws: mean {mu:.2f}, sd {sd:.2f} "
               f"(the margin's model: sd {MARGIN_SD_PER_ROOT * np.sqrt(max(-mu, 0.0)):.2f}); "
-              f"≥ {by_fit.MARGIN:g}: {int(np.sum(dq >= by_fit.MARGIN))}/{dq.size}")
+              f"≥ {by_fit.MARGIN:.3g}: {int(np.sum(dq >= by_fit.MARGIN))}/{dq.size}")
     return 0
 
 
