@@ -31,8 +31,11 @@ from calibration import warmup
 NOISE_G = 20e-3
 
 
-def degree_chosen(rows: int, change_g: float, seed: int, strong: bool) -> int:
-    """The solver's first-stage degree on one synthetic single-sample log."""
+def first_stage_errors(rows: int, change_g: float, seed: int
+                       ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """One synthetic single-sample log through the solver's held-out machinery: the held-out
+    errors (n, 3) g at degrees 0 … 3, the held-out rows' indices, and every row's
+    temperature block."""
     rng = np.random.default_rng(seed)
     temp_c = np.linspace(20.0, 30.0, rows)
     raw = rng.normal(0.0, NOISE_G, (rows, 3))
@@ -42,12 +45,17 @@ def degree_chosen(rows: int, change_g: float, seed: int, strong: bool) -> int:
     folds = warmup._folds(temp_c)
     errors = [warmup._heldout_errors_g(x, labels, raw, folds, d)
               for d in range(warmup.MAX_DEGREE + 1)]
-    block = warmup._block_index(temp_c)
+    return [e for e, _ in errors], errors[0][1], warmup._block_index(temp_c)
+
+
+def degree_chosen(rows: int, change_g: float, seed: int, strong: bool) -> int:
+    """The solver's first-stage degree on one synthetic single-sample log."""
+    errors, held, block = first_stage_errors(rows, change_g, seed)
     saved = warmup._block_means_beat
     if not strong:
         warmup._block_means_beat = lambda *_: False  # the share rule alone
     try:
-        return warmup._choose_degree([e for e, _ in errors], errors[0][1], block)
+        return warmup._choose_degree(errors, held, block)
     finally:
         warmup._block_means_beat = saved
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from benchmarks.bench_warmup_single_sample_rows import NOISE_G, first_stage_errors
 from calibration import warmup
 from calibration.fitting import fit
 from calibration.recording import Recording
 
-NOISE_G = 20e-3
 ROWS = 18000
 
 
@@ -19,16 +19,8 @@ def _held_out(change_g: float, seed: int) -> tuple[np.ndarray, np.ndarray, np.nd
     """A warm-up of single-sample rows (20 mg white noise, z up, 20 → 30 °C) with a linear
     bias change of z, through the solver's own held-out machinery: the held-out errors of
     degree 0 and degree 1, (n, 3) g, and each held-out row's temperature block."""
-    rng = np.random.default_rng(seed)
-    temp_c = np.linspace(20.0, 30.0, ROWS)
-    raw = rng.normal(0.0, NOISE_G, (ROWS, 3))
-    raw[:, 2] += 1.0 + change_g * (temp_c - 25.0) / 10.0
-    x = (temp_c - 25.0) / 5.0
-    labels = np.zeros(ROWS, int)
-    folds = warmup._folds(temp_c)
-    (low, held), (high, _) = (warmup._heldout_errors_g(x, labels, raw, folds, d)
-                              for d in (0, 1))
-    return low, high, warmup._block_index(temp_c)[held]
+    errors, held, block = first_stage_errors(ROWS, change_g, seed)
+    return errors[0], errors[1], block[held]
 
 
 def test_a_change_far_beyond_its_standard_error_is_evidence_at_any_share_of_the_noise():

@@ -60,9 +60,10 @@ def _problem():
     return pb, U
 
 
-def _rejections(pb, U, test) -> int:
-    """How often ``test`` rejects the time column at ALPHA_CHECK on pure noise whitened
-    unevenly: variance 1 on the quiet plateaus, LOUD_VARIANCE on the vibrating ones."""
+def _time_column_and_scale(pb) -> tuple[np.ndarray, np.ndarray]:
+    """The check's time column (∂output/∂T times the time within each plateau, centred),
+    whitened, and each whitened row's noise SD: 1 on the quiet plateaus, √LOUD_VARIANCE on
+    the vibrating ones."""
     ctx = pb.ctx
     frac = np.zeros(ctx.n)
     for s in ctx.step_ids:
@@ -70,6 +71,13 @@ def _rejections(pb, U, test) -> int:
         frac[m] = ctx.time_since_step_s[m] / float(np.ptp(ctx.time_since_step_s[m])) - 0.5
     Xw = pb.whiten(pb.lift((ctx.draw_dtemp_g_per_c * frac[:, None])[:, :, None]))
     sd = np.where(ctx.steps[pb.row] >= LOUD_FROM, np.sqrt(LOUD_VARIANCE), 1.0)
+    return Xw, sd
+
+
+def _rejections(pb, U, test) -> int:
+    """How often ``test`` rejects the time column at ALPHA_CHECK on pure noise whitened
+    unevenly: variance 1 on the quiet plateaus, LOUD_VARIANCE on the vibrating ones."""
+    Xw, sd = _time_column_and_scale(pb)
     rng = np.random.default_rng(1)
     hits = 0
     for _ in range(DRAWS):
@@ -93,13 +101,7 @@ def test_the_check_uses_it():
     """``TemperatureSensor.misses`` is the by-reading test: on one unevenly whitened draw
     its verdict at a level is the by-reading test's, not the pooled F's."""
     pb, U = _problem()
-    ctx = pb.ctx
-    frac = np.zeros(ctx.n)
-    for s in ctx.step_ids:
-        m = ctx.steps == s
-        frac[m] = ctx.time_since_step_s[m] / float(np.ptp(ctx.time_since_step_s[m])) - 0.5
-    Xw = pb.whiten(pb.lift((ctx.draw_dtemp_g_per_c * frac[:, None])[:, :, None]))
-    sd = np.where(ctx.steps[pb.row] >= LOUD_FROM, np.sqrt(LOUD_VARIANCE), 1.0)
+    Xw, sd = _time_column_and_scale(pb)
     rng = np.random.default_rng(2)
     for _ in range(200):
         e = stats.project_out(U, sd * rng.standard_normal(pb.m))
