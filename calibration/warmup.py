@@ -651,11 +651,12 @@ def _block_means_beat(lo: np.ndarray, hi: np.ndarray, inverse: np.ndarray,
     :data:`STRONG_GAIN_P` (never reached with 7 blocks or fewer). A capture's white noise
     averages out of a block's mean; a bias change the higher degree models does not."""
     counts = np.bincount(inverse, minlength=n_blocks).astype(float)
-    mean_lo = np.column_stack([np.bincount(inverse, weights=c, minlength=n_blocks)
-                               for c in lo.T]) / counts[:, None]
-    mean_hi = np.column_stack([np.bincount(inverse, weights=c, minlength=n_blocks)
-                               for c in hi.T]) / counts[:, None]
-    g = np.sum(mean_lo ** 2 - mean_hi ** 2, axis=1)
+
+    def block_means(err: np.ndarray) -> np.ndarray:  # (B, axes)
+        return np.column_stack([np.bincount(inverse, weights=c, minlength=n_blocks)
+                                for c in err.T]) / counts[:, None]
+
+    g = np.sum(block_means(lo) ** 2 - block_means(hi) ** 2, axis=1)
     if not np.any(g):
         return False
     p = float(sp_stats.wilcoxon(g, alternative="greater").pvalue)
