@@ -33,10 +33,8 @@ Per log this prints, in °C:
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
-import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -52,7 +50,8 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     WarmupLog,
     add_log_arguments,
     blocks,
-    gather_logs,
+    evaluate_logs,
+    write_results,
 )
 from calibration import captures as captures_module  # noqa: E402
 from calibration import temperature_conditioning as tc  # noqa: E402
@@ -199,17 +198,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
     add_log_arguments(ap)
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        logs, results = gather_logs(args, Path(tmp))
-        for log in logs:
-            results.append(evaluate(log))
-            print(json.dumps(results[-1], default=float), flush=True)
+    results = evaluate_logs(args, lambda log, _work: evaluate(log), default=float)
     text = table(results)
     print(text)
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "results.json").write_text(json.dumps(results, indent=1, default=float))
-        (args.out / "table.md").write_text(text + "\n")
+    write_results(args.out, results, text, default=float)
     return 0
 
 

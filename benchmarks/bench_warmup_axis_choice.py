@@ -32,9 +32,7 @@ models score on the benchmark's own held-out 5-s means is ``bench_warmup_peers``
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -49,8 +47,9 @@ from benchmarks.bench_warmup_peers import (  # noqa: E402
     _write_rows,
     add_log_arguments,
     blocks,
-    gather_logs,
+    evaluate_logs,
     rows_1s,
+    write_results,
 )
 from calibration import warmup  # noqa: E402
 from calibration.errors import CalibrationError  # noqa: E402
@@ -167,16 +166,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
     add_log_arguments(ap)
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        logs, unusable = gather_logs(args, Path(tmp))
-        results = [analyse(log, Path(tmp)) for log in logs]
-    results += unusable
+    results = evaluate_logs(args, analyse, default=str)
     text = table([r for r in results if "unusable" not in r])
     print(text)
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "results.json").write_text(json.dumps(results, indent=1, default=str))
-        (args.out / "table.md").write_text(text + "\n")
+    write_results(args.out, results, text, default=str)
     return 0
 
 

@@ -87,6 +87,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -911,6 +912,28 @@ def gather_logs(args: argparse.Namespace, workdir: Path
     return logs, unusable
 
 
+def evaluate_logs(args: argparse.Namespace,
+                  evaluate: Callable[[WarmupLog, Path], dict[str, Any]],
+                  default: Callable[[Any], Any] | None = None) -> list[dict[str, Any]]:
+    """Every log :func:`gather_logs` chooses, through ``evaluate(log, workdir)``, each
+    result printed as a JSON line as it comes; the unusable logs' rows first."""
+    with tempfile.TemporaryDirectory() as tmp:
+        logs, results = gather_logs(args, Path(tmp))
+        for log in logs:
+            results.append(evaluate(log, Path(tmp)))
+            print(json.dumps(results[-1], default=default), flush=True)
+    return results
+
+
+def write_results(out: Path | None, results: list[dict[str, Any]], text: str,
+                  default: Callable[[Any], Any] | None = None) -> None:
+    """``results.json`` and ``table.md`` in ``out`` (nothing when it is None)."""
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "results.json").write_text(json.dumps(results, indent=1, default=default))
+        (out / "table.md").write_text(text + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, help="write results.json and table.md here")
@@ -927,12 +950,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="also each file as its firmware flies it: PX4's 1-s poll and 1 degC "
                          "gate, ArduPilot's 1-Hz temperature filter (soakcal's with --export)")
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        logs, results = gather_logs(args, Path(tmp))
-        for log in logs:
-            results.append(evaluate(log, Path(tmp), args.fixed_degrees, args.whole,
-                                    args.export, args.as_flown))
-            print(json.dumps(results[-1]), flush=True)
+    results = evaluate_logs(args, lambda log, work: evaluate(
+        log, work, args.fixed_degrees, args.whole, args.export, args.as_flown))
     text = table(results)
     if args.fixed_degrees:
         text += "\n\nFixed degrees, fitted as soakcal fits a warm-up:\n\n" + \
@@ -956,10 +975,7 @@ def main(argv: list[str] | None = None) -> int:
             for key in ("whole_heldout_note", "whole_log_note"):
                 if key in r:
                     print(f"{r['log']}: {key}: {r[key]}")
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "results.json").write_text(json.dumps(results, indent=2))
-        (args.out / "table.md").write_text(text + "\n")
+    write_results(args.out, results, text)
     return 0
 
 
