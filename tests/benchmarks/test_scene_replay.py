@@ -1,10 +1,11 @@
 """benchmarks/blind/gen2/scene_replay.py: the scatter the second generator draws.
 
-``scene_replay --first-stage`` compares the noise scale ``diagnose`` whitens by with the
-scatter of a capture mean as ``simulate.record`` draws it (docs/benchmarks.md, "Wrong names
-at 1× on min12 schedules"). Its re-seating part must be what ``record`` draws: three angle
-components of sd ``placement_rad`` each, crossed with the force, so ρ²(1 − f_a²) on axis a
-(``simulate.reading_sigma_g`` counts it twice).
+``simulate.reading_sigma_g`` is the scatter ``detect.py`` sizes every effect by and
+``scene_replay --first-stage`` compares the noise scale ``diagnose`` whitens by with
+(docs/benchmarks.md, "Wrong names at 1× on min12 schedules"). Its re-seating part must be
+what ``simulate.record`` draws: three angle components of sd ``placement_rad`` each, crossed
+with the force, so ρ²(1 − f_a²) on axis a (it counted it twice: √2 too large across the
+force on a hand-placed fixture).
 """
 
 from dataclasses import replace
@@ -15,7 +16,6 @@ from benchmarks.blind.gen2 import effects as fx
 from benchmarks.blind.gen2 import simulate as sim
 from benchmarks.blind.gen2.protocol import draw_protocol
 from benchmarks.blind.gen2.realnoise import NoisePools
-from benchmarks.blind.gen2.scene_replay import scatter_g
 from benchmarks.blind.gen2.sensor import draw_sensor
 
 
@@ -39,9 +39,6 @@ def test_the_reseating_scatter_is_what_record_draws():
         cols = sim.record(proto, sensor, pools, None, 0.0, pat, seed + 7919 * (k + 1))
         draws.append(np.column_stack([cols[c] for c in ("ax", "ay", "az")]) - clean)
     sd = np.std(np.stack(draws), axis=0)  # (N, 3) over the draws
-    want = scatter_g(proto, pools, sc)
+    want = sim.reading_sigma_g(proto, pools, sc)
     across = (1.0 - sc.ref_g**2) > 0.5
-    ratio = sd[across] / want[across]
-    assert 0.9 < np.median(ratio) < 1.1
-    old = sim.reading_sigma_g(proto, pools, sc)[across]
-    assert np.median(sd[across] / old) < 0.8  # counted twice there: √2 too large
+    assert 0.9 < np.median(sd[across] / want[across]) < 1.1

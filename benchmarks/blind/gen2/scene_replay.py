@@ -93,17 +93,6 @@ def replay(out: Path, case: str, pools, draws: int, multiple: float | None, firs
             "outlier_named": len(named), "outliers": named}
 
 
-def scatter_g(proto, pools, sc) -> np.ndarray:
-    """(N, 3) sd of one capture mean as ``simulate.record`` draws it: sensor and bench noise
-    (their correlation within a capture), quantisation, and the re-seating angle (three
-    components of sd ``placement_rad`` each: ρ²(1 − f_a²) on axis a)."""
-    n = proto.n_samples
-    v = (proto.sensor_noise_g**2 * pools.mean_variance("sensor", n)
-         + sc.vib_sd_g**2 * pools.mean_variance("vibration", n) + sim.LSB_G**2 / 12 / n)
-    f = sc.ref_g / np.linalg.norm(sc.ref_g, axis=1, keepdims=True)
-    return np.sqrt(v[:, None] + proto.placement_rad**2 * (1.0 - f**2))
-
-
 def capture_mean_tail(pools, n: int, draws: int = 20000) -> dict:
     """Excess kurtosis and P(|z| > 4) of the sensor pool's capture means of n samples."""
     rng = np.random.default_rng(0)
@@ -124,7 +113,7 @@ def first_stage(out: Path, cases: list[str], pools, draws: int, first: int,
             sensor = draw_sensor(np.random.default_rng(seed))
             ns.add(proto.n_samples)
             sc = scene(proto, None, 0.0, pat, seed)
-            true = scatter_g(proto, pools, sc)
+            true = sim.reading_sigma_g(proto, pools, sc)
             quiet = sc.vib_sd_g == 0
             sim.scene = (lambda p, e, mm, pt, _s, die_tau_s=None, seed=seed:
                          scene(p, e, mm, pt, seed, die_tau_s))

@@ -177,10 +177,12 @@ def record(proto: pr.Protocol2, sensor: Sensor2, pools: NoisePools, eid: str | N
 
 
 def reading_sigma_g(proto: pr.Protocol2, pools: NoisePools, sc: Scene) -> np.ndarray:
-    """True scatter (N,3) of one capture mean: sensor + bench (their real correlation within
-    a capture), placement, quantisation."""
+    """True scatter (N,3) of one capture mean as :func:`record` draws it: sensor + bench
+    (their real correlation within a capture), quantisation, and the re-seating: three
+    angle components of sd ``placement_rad`` crossed with the force, ρ²(1 − f_a²) on axis a
+    (f the unit force)."""
     n = proto.n_samples
     v = (proto.sensor_noise_g**2 * pools.mean_variance("sensor", n)
          + sc.vib_sd_g**2 * pools.mean_variance("vibration", n) + LSB_G**2 / 12 / n)
-    place = proto.placement_rad**2 * (1.0 - sc.ref_g**2) * 2.0
-    return np.sqrt(v[:, None] + place)
+    f = sc.ref_g / np.linalg.norm(sc.ref_g, axis=1, keepdims=True)
+    return np.sqrt(v[:, None] + proto.placement_rad**2 * (1.0 - f**2))
