@@ -462,9 +462,14 @@ def test_direction_offsets_by_row_blocks_equal_the_dense_columns(monkeypatch):
     fit_b = structure.fitted_by_labels(pb, Ut_b, et_b, labels, 2 * n_dir)
     np.testing.assert_allclose(fit_b, fit_d, atol=1e-8 * np.linalg.norm(fit_d))
 
-    want = sn.direction_offsets_needed(pb, U, e, ax, 0.01, "terms")  # dense: below the size
+    # Dense, below the size, with its pooled F: a long recording keeps one noise scale (the
+    # dense form scales each plateau by its own, structure.log_p_by_plateau, which would
+    # need the model's basis again, an (m × r) array).
+    with monkeypatch.context() as mp:
+        mp.setattr(sn, "log_p_by_plateau", lambda pb, U, e, X: structure.log_p(U, e, X))
+        want = sn.direction_offsets_needed(pb, U, e, ax, 0.01, "terms")
     monkeypatch.setattr(stats, "TALL_BYTES", 1024)
-    for name in ("per_axis_indicator", "extend", "log_p", "fitted_after"):
+    for name in ("per_axis_indicator", "extend", "log_p", "log_p_by_plateau", "fitted_after"):
         monkeypatch.setattr(sn, name, None)
     got = sn.direction_offsets_needed(pb, U, e, ax, 0.01, "terms")
     assert want is not None and got == want

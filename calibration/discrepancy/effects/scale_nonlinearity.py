@@ -24,6 +24,7 @@ from calibration.discrepancy.effects.structure import (
     fitted_by_labels,
     log_p,
     log_p_by_labels,
+    log_p_by_plateau,
     per_axis_indicator,
     whitened,
 )
@@ -192,7 +193,9 @@ def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[in
     n_turn = turn_columns(u[:1]).shape[2]
     if 8 * pb.m * n_turn > stats.TALL_BYTES and pb.m > 20 * n_turn:
         # A long recording (issue 22, memory): the turn's columns by row blocks and the
-        # direction offsets in their own space, the same test as the dense form below.
+        # direction offsets in their own space, the dense form's test with one noise scale
+        # for the recording (scaling each plateau by its own, as below, would need the
+        # model's basis again: an (m × r) array).
         Ut, et = extend_by_rows(U, e, _turn_rows(pb, u), n_turn)
         labels = np.full(pb.m, -1)
         on = np.isin(pb.axis, ax)
@@ -208,7 +211,9 @@ def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[in
                             for j in range(n_dir)], axis=2)
         Ut, et = extend(U, e, whitened(pb, turn_columns(u)))
         Xw = whitened(pb, X)
-        lp, k = log_p(Ut, et, Xw)
+        # Each plateau at its own noise scale (issue 22: one scale ran the test above its
+        # level where plateaus are whitened unevenly; structure.log_p_by_plateau).
+        lp, k = log_p_by_plateau(pb, Ut, et, Xw)
         if k == 0 or lp > np.log(alpha):
             return None
         fit = fitted_after(Ut, et, Xw)

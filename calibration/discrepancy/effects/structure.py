@@ -100,6 +100,39 @@ def log_p_by_reading(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray) -> tuple[fl
         return float(stats.f_logsf(t / k, k, n_read - k)), k
 
 
+def log_p_by_plateau(pb: Any, U: np.ndarray, e: np.ndarray, Xw: np.ndarray
+                     ) -> tuple[float, int]:
+    """:func:`log_p` with each plateau's entries scaled by that plateau's own noise scale,
+    and its dof (0: none).
+
+    The scale of plateau j is ``s_j² = Σ e² / Σ (1 − h)`` over its entries (``e`` the
+    residual of the model ``U`` without the columns, h the leverage of U); rows of the
+    model, residual and columns are divided by it, the model re-orthonormalised, and the
+    pooled F test taken on that. With one plateau it is :func:`log_p`.
+
+    Why (issue 22): on the second generator a recording's quiet plateaus whiten to
+    0.9–1.0 of unit variance and its vibrating ones to 0.7–0.8, and :func:`log_p`'s one scale
+    ran the checks whose columns live on some plateaus above their level: on 600 nulls of
+    seed 2, at 5 %, the input-only check's per-visit offsets rejected 7.2 % and the free
+    offset per direction 8.3 % (9.5 % after the products of two axes' inputs); scaled by
+    plateau, 4.8 %, 5.5 % and 4.5 %. :func:`log_p_by_reading` is no substitute there: with
+    many columns, each carried by a few readings, its sign-flip variance reads a
+    self-normalised sum, whose tail is far lighter than F(k, ·)'s (0 of 600 at 5 %).
+    """
+    step = pb.ctx.steps[pb.row]
+    h = stats.leverage(U)
+    d = np.ones(e.size)
+    for j in np.unique(step):
+        on = step == j
+        v = float(e[on] @ e[on]) / max(float(np.sum(1.0 - h[on])), 1e-12)
+        d[on] = 1.0 / np.sqrt(max(v, 1e-300))
+    if np.ptp(d) == 0.0:
+        return log_p(U, e, Xw)
+    Ud = stats.orthonormal_basis(U * d[:, None])
+    ed = d * e
+    return log_p(Ud, ed - Ud @ (Ud.T @ ed), Xw * d[:, None])
+
+
 def per_axis_indicator(n: int, rows: np.ndarray, axes: tuple[int, ...] = (0, 1, 2)) -> np.ndarray:
     """(N,3,len(axes)): 1 on ``rows`` of each listed axis (an offset there)."""
     out = np.zeros((n, 3, len(axes)))
@@ -162,7 +195,8 @@ def visits_differ(
     offset per position is tested after an offset per direction (the contrast between
     visits). A function of the specific force predicts no contrast, so under it
     the test rejects with probability α; an orientation history (the previous position)
-    makes it. Returns the place (positions, axes, log10 p) when significant at α.
+    makes it. Returns the place (positions, axes, log10 p) when significant at α. The
+    F test scales each plateau by its own noise (:func:`log_p_by_plateau`).
     """
     ctx = pb.ctx
     groups = direction_groups(ctx.positions, ctx.input_g)
@@ -189,7 +223,9 @@ def visits_differ(
             common.append(per_axis_indicator(ctx.n, np.isin(ctx.positions, g), ax))
             visit += [per_axis_indicator(ctx.n, ctx.positions == p, ax) for p in g]
         Uc, ec = extend(U, e, whitened(pb, np.concatenate(common, axis=2)))
-        lp, k = log_p(Uc, ec, whitened(pb, np.concatenate(visit, axis=2)))
+        # Each plateau at its own noise scale (issue 22, :func:`log_p_by_plateau`); a long
+        # recording's form by labels above keeps one scale for the recording.
+        lp, k = log_p_by_plateau(pb, Uc, ec, whitened(pb, np.concatenate(visit, axis=2)))
     if k == 0 or lp > np.log(alpha):
         return None
     return {
