@@ -121,9 +121,17 @@ def replicate(key: dict[str, Any], pools, n: int, quiet_temperature: bool = Fals
                     given = Recording.from_columns(cols)
                 else:
                     rec = Recording.from_columns(cols)
-            model = fit_campaign(given).model
+            fit = fit_campaign(given)
+            model = fit.model
             d = diagnose_against(rec, Twin(model), refit=False)
-            out.append({"p_family": d.shift.get("p_family"),
+            chi2 = float(((fit.report or {}).get("joint_fit") or {}).get("chi2_red", np.nan))
+            p_floor = d.shift.get("p_family")
+            if model.coeff_stderr is not None and np.isfinite(chi2) and chi2 < 1.0:
+                floored = replace(model, coeff_stderr=model.coeff_stderr / np.sqrt(chi2))
+                p_floor = diagnose_against(rec, Twin(floored), refit=False).shift.get(
+                    "p_family")
+            out.append({"p_family": d.shift.get("p_family"), "p_family_given_floor": p_floor,
+                        "chi2_given": chi2,
                         "z": {f"{c['parameter']}^{c['power']}": c["z"]
                               for c in d.shift.get("coefficients", [])}})
     finally:
@@ -381,7 +389,10 @@ def _replicate_main(a: argparse.Namespace) -> int:
     rows = replicate(key, pools, a.n, a.quiet_temperature)
     res = {"case": a.replicate, "protocol": key.get("protocol"),
            "quiet_temperature": a.quiet_temperature,
-           "p_family": describe([r["p_family"] for r in rows]), "z": z_spread(rows)}
+           "p_family": describe([r["p_family"] for r in rows]),
+           "p_family, given stderr not below its information bound": describe(
+               [r.get("p_family_given_floor", r["p_family"]) for r in rows]),
+           "z": z_spread(rows), "coefficient p": coefficient_p(rows)}
     if a.json:
         a.json.write_text(json.dumps({"summary": res, "rows": rows}, indent=1))
     print(json.dumps(res, indent=1))
