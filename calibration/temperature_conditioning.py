@@ -126,6 +126,52 @@ def _slope_significant(tt: np.ndarray, yy: np.ndarray, coef: np.ndarray, t0: flo
     return abs(float(coef[0])) > SLOPE_SIGMAS * sd / np.sqrt(sxx)
 
 
+CURVE_SIGMAS = 3.0  # a plateau's curvature in time is kept beyond this many standard errors
+MIN_ROWS_CURVE = 8
+
+
+def curved_plateaus_c(t_s: np.ndarray, temp_c: np.ndarray, steps: np.ndarray,
+            line_c: np.ndarray) -> np.ndarray:
+    """The conditioned rows, a plateau's parabola in time where its curvature is significant.
+
+    Why: ``calibrate``'s conditioning draws a line per plateau (a settling die creeps by a
+    few hundredths of a degree). On a short soak the die is still on its exponential while
+    the positions are read, and the line misses the curve by ±10 mK at the ends and the
+    middle of every plateau, the same way on every plateau of a one-way staircase; with a
+    fixed order of positions that error follows the positions. A model held fixed cannot
+    absorb it: ``diagnose --against`` reads the re-measurement this way (noise-free, on the
+    second generator's unchanged sensors, the line moved the shift by up to 2 σ on 10-min
+    one-way recordings, docs/benchmarks.md). ``calibrate`` keeps the line.
+    A parabola is kept only beyond :data:`CURVE_SIGMAS` standard errors of its curvature
+    (the rows within 4 × (robust σ + quantum) of the line), so a settled or a creeping
+    plateau keeps its line.
+    """
+    out = np.asarray(line_c, float).copy()
+    quantum = channel_quantum_c(temp_c)
+    for s in np.unique(steps):
+        idx = np.flatnonzero(steps == s)
+        tt, yy = t_s[idx], temp_c[idx]
+        ok = np.isfinite(yy) & np.isfinite(out[idx])
+        if ok.sum() < MIN_ROWS_CURVE or np.ptp(tt[ok]) <= 0:
+            continue
+        res = yy - out[idx]
+        sd = _robust_sd(res[ok])
+        keep = ok & (np.abs(res) <= 4.0 * (sd + quantum)) if sd > 0 else ok
+        if keep.sum() < MIN_ROWS_CURVE:
+            continue
+        t0, span = float(np.mean(tt[keep])), float(np.ptp(tt[keep]))
+        x = (tt - t0) / span
+        X = np.vander(x[keep], 3)
+        coef, *_ = np.linalg.lstsq(X, yy[keep], rcond=None)
+        dof = int(keep.sum()) - 3
+        r = yy[keep] - X @ coef
+        s2 = float(r @ r) / dof
+        cov = np.linalg.pinv(X.T @ X) * s2
+        if cov[0, 0] > 0 and abs(coef[0]) > CURVE_SIGMAS * np.sqrt(cov[0, 0]):
+            out[idx] = np.vander(x, 3) @ coef
+    return out
+
+
 def channel_quantum_c(temperature_c: np.ndarray) -> float:
     """The temperature channel's resolution (°C) when it is quantised, else 0.
 

@@ -5,7 +5,8 @@ docs/diagnosis.md §9. The given model's prediction is *not* refitted: its resid
 ``|f| − 1``) is what the recording says about it.
 
 * The prediction is at the temperature ``calibrate`` conditions (a line per plateau), a
-  parabola where a plateau curves beyond 3 standard errors (:func:`_curved`: a short soak).
+  parabola where a plateau curves beyond 3 standard errors (a short soak:
+  :func:`calibration.temperature_conditioning.curved_plateaus_c`).
 * ``parameter_shift``: the base parameters that moved. The shift δ of the model's
   polynomial coefficients is fitted to ``r`` by Gauss–Newton (the SFEM Jacobian of
   ``calibration.sfem`` times powers of T), and each coefficient is tested with
@@ -43,11 +44,7 @@ from calibration.discrepancy.problem import pooled_sigma_g
 from calibration.discrepancy.twin_file import Twin
 from calibration.fit import NORM_FREE
 from calibration.recording import Recording
-from calibration.temperature_conditioning import (
-    _robust_sd,
-    channel_quantum_c,
-    condition_temperature,
-)
+from calibration.temperature_conditioning import condition_temperature, curved_plateaus_c
 from calibration.thermal import ThermalModel
 
 GN_ITERATIONS = 8
@@ -296,7 +293,8 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
 # --- the model's prediction ----------------------------------------------------
 def _temperature(rec: Recording, model: ThermalModel, notes: list[str]) -> np.ndarray:
     """Per-row temperature conditioned as ``calibrate`` conditions it (per-step line fit),
-    a plateau that curves in time beyond :data:`CURVE_SIGMAS` on its parabola (:func:`_curved`)."""
+    a plateau that curves in time significantly on its parabola
+    (:func:`calibration.temperature_conditioning.curved_plateaus_c`)."""
     if not model.temperature_dependent:
         return np.zeros(len(rec))
     if not rec.has_temperature:
@@ -305,58 +303,13 @@ def _temperature(rec: Recording, model: ThermalModel, notes: list[str]) -> np.nd
         notes.append(f"the model was fitted on {model.temperature_source}, the recording's "
                      f"thermal-model temperature is {rec.temperature_source}")
     steps = rec.steps()
-    temp = _curved(rec.t_s, rec.temperature_c(), steps,
+    temp = curved_plateaus_c(rec.t_s, rec.temperature_c(), steps,
                    condition_temperature(rec.t_s, rec.temperature_c(), steps).row_c)
     lo, hi = model.valid_c or (-np.inf, np.inf)
     if np.any((temp < lo - 0.5) | (temp > hi + 0.5)):
         notes.append(f"the recording reaches {np.min(temp):.1f}…{np.max(temp):.1f} °C, beyond "
                      f"the model's valid {lo:g}…{hi:g} °C: the model is extrapolated there")
     return temp
-
-
-CURVE_SIGMAS = 3.0  # a plateau's curvature in time is kept beyond this many standard errors
-MIN_ROWS_CURVE = 8
-
-
-def _curved(t_s: np.ndarray, temp_c: np.ndarray, steps: np.ndarray,
-            line_c: np.ndarray) -> np.ndarray:
-    """The conditioned rows, a plateau's parabola in time where its curvature is significant.
-
-    Why: ``calibrate``'s conditioning draws a line per plateau (a settling die creeps by a
-    few hundredths of a degree). On a short soak the die is still on its exponential while
-    the positions are read, and the line misses the curve by ±10 mK at the ends and the
-    middle of every plateau, the same way on every plateau of a one-way staircase; with a
-    fixed order of positions that error follows the positions. Noise-free, on the second
-    generator's unchanged sensors, it moved the shift by up to 2 σ (bias and misalignment of
-    10-min, one-way recordings, docs/benchmarks.md); the model held fixed cannot absorb it.
-    A parabola is kept only beyond :data:`CURVE_SIGMAS` standard errors of its curvature
-    (the rows within 4 × (robust σ + quantum) of the line), so a settled or a creeping
-    plateau keeps its line.
-    """
-    out = np.asarray(line_c, float).copy()
-    quantum = channel_quantum_c(temp_c)
-    for s in np.unique(steps):
-        idx = np.flatnonzero(steps == s)
-        tt, yy = t_s[idx], temp_c[idx]
-        ok = np.isfinite(yy) & np.isfinite(out[idx])
-        if ok.sum() < MIN_ROWS_CURVE or np.ptp(tt[ok]) <= 0:
-            continue
-        res = yy - out[idx]
-        sd = _robust_sd(res[ok])
-        keep = ok & (np.abs(res) <= 4.0 * (sd + quantum)) if sd > 0 else ok
-        if keep.sum() < MIN_ROWS_CURVE:
-            continue
-        t0, span = float(np.mean(tt[keep])), float(np.ptp(tt[keep]))
-        x = (tt - t0) / span
-        X = np.vander(x[keep], 3)
-        coef, *_ = np.linalg.lstsq(X, yy[keep], rcond=None)
-        dof = int(keep.sum()) - 3
-        r = yy[keep] - X @ coef
-        s2 = float(r @ r) / dof
-        cov = np.linalg.pinv(X.T @ X) * s2
-        if cov[0, 0] > 0 and abs(coef[0]) > CURVE_SIGMAS * np.sqrt(cov[0, 0]):
-            out[idx] = np.vander(x, 3) @ coef
-    return out
 
 
 def _params(coeffs: np.ndarray, model: ThermalModel, temp_c: np.ndarray) -> np.ndarray:
