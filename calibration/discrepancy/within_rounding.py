@@ -18,7 +18,10 @@ at the coarsest LSB Q the codes admit, can put into its columns: the term's scor
 box's reach (stats.BoundedShared.reach), against χ²ₖ at the level of the family test.
 Otherwise it is not named and not modelled, and reported as not established with the
 reason and what settles it: the LSB declared. A verdict on one finding, read only where the
-LSB is not declared (a declared LSB's box is already in every family's test).
+LSB is not declared (a declared LSB's box is already in every family's test). Where Q is
+coarser than the q the null draws, the localised scan takes each block's data score net of
+the same box (:func:`coarser_box`, scan.scan(bounded=...)): without it the plateau a
+withdrawn step leaves largest was reported ``unexplained`` (docs/benchmarks.md).
 """
 
 from __future__ import annotations
