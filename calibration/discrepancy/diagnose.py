@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy import by_fit, not_confirmed, stats
+from calibration.discrepancy import by_fit, not_confirmed, stats, within_rounding
 from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
@@ -361,6 +361,19 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     declared = channel is not None and channel.declared
     bounded = channel.bounded if declared else None
     wild_known = known if channel is not None and not declared else None
+    # The scan, where the LSB is not declared and the channel's codes admit a coarser one
+    # than its null draws (every code a whole degree): any rounding at that LSB is taken
+    # out of each block's data score (within_rounding.py, issue 22).
+    scan_box = None if lsb_c is not None else within_rounding.coarser_box(
+        pb, channel.q_c if channel is not None else None)
+    if scan_box is not None:
+        notes.append(f"temperature channel ({ctx.temperature_source}): its codes admit an LSB "
+                     f"of {2 * scan_box.half:g} °C, coarser than the null draws, which the "
+                     "recording does not declare "
+                     f"({LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')}); the "
+                     "localised scan takes each block's score net of any rounding error "
+                     f"within ±{scan_box.half:g} °C per plateau and recorded value, and a "
+                     "channel step within that rounding is not named")
     for _stage in range(MAX_STAGES):
         # The previous stage's (m × p) and (m × n_null) arrays go before the new ones are
         # built: two generations alive at once doubled the peak (issue 10, memory).
@@ -525,8 +538,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     findings = [_turned_or_bent(pb, terms, f, alpha, not_ident, notes) for f in findings]
     terms, findings, after_turn = _shape_after_turn(pb, terms, findings, alpha, notes)
     not_named += after_turn
+    if lsb_c is None:  # a declared LSB's box is in every family's test already
+        terms, findings = _within_channel_rounding(pb, terms, findings, alpha_sel, not_ident,
+                                                   notes)
     say("localised scan of the final residual")
-    scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
+    scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known, scan_box)
     if scanned.significant:
         # Confuser check (issue 10): an outlier is "isolated in time". A flagged reading
         # inside a step or position where the scan still finds structure is part of that
@@ -538,7 +554,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             notes.append(f"reading(s) {sorted(r for k in gone for r in k[1])} not named "
                          "outlier: they lie where the local scan finds structure beyond them "
                          "(not isolated)")
-            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
+            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known, scan_box)
     left_structure: list[str] = []  # effects fitted here whose terms left their places
     if scanned.significant:
         # "A named finding must explain most of the located structure" (issue 10): when
@@ -554,7 +570,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
             notes.append(f"{', '.join(left_structure)} not named or modelled: "
                          "after it, structure remains at the steps/positions where it acts, "
                          "so it does not explain the located structure")
-            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known)
+            scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known, scan_box)
     # A finding's numbers were fitted at its stage, in the model of that moment; a term
     # withdrawn since (a turn of the table beside a bend, say) may have shared its columns,
     # and the stale coefficients then cancel across the two (K3 = −3·10⁵ µg/g³ "± 49").
@@ -616,6 +632,13 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                              left_structure if scanned.significant else []))
     # Found by the family test, withheld as one plateau's: reported, not dropped (issue 22).
     # One still_seen for both reports: it builds the final model's basis once, when asked.
+    if lsb_c is None and one_step_seen:  # a channel step withheld as one plateau's, too
+        kept = _within_channel_rounding_one_step(pb, terms, one_step_seen, alpha_sel,
+                                                 not_ident, notes)
+        if len(kept) < len(one_step_seen):
+            one_step_seen = kept
+            protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
+                                               for e in effects})
     seen = one_step_report.still_seen(pb, _basis, terms, alpha)
     final_rms = _rms(final_res, flagged)
     findings, shown = one_step_report.report(pb, findings, one_step_seen, Finding, seen,
@@ -767,10 +790,11 @@ def _one_step_block(pb: LinearProblem, step: int) -> np.ndarray | AxisBlockDesig
 
 
 def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, n_null: int,
-                alpha: float, known: tuple[stats.SharedGroups, np.ndarray] | None
-                ) -> scan_mod.ScanResult:
+                alpha: float, known: tuple[stats.SharedGroups, np.ndarray] | None,
+                bounded: stats.BoundedShared | None = None) -> scan_mod.ScanResult:
     """The localised scan (scan.py) on the residual of the final model; ``known``, the
-    quantised channel's shared noise (:func:`_quantised_channel`), read once per diagnosis."""
+    quantised channel's shared noise (:func:`_quantised_channel`), read once per diagnosis;
+    ``bounded``, the rounding at a coarser LSB the codes admit (within_rounding.coarser_box)."""
     U, yw = _basis(pb, terms)  # the replicates below are the largest array
     e = yw - U @ (U.T @ yw)
     dtype = stats.replicate_dtype(pb.m, n_null, NULL_BUDGET_BYTES)
@@ -781,7 +805,7 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     else:
         E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading, dtype)
         stats.project_out_inplace(U, E)
-    return scan_mod.scan(pb, U, e, E, alpha)
+    return scan_mod.scan(pb, U, e, E, alpha, bounded)
 
 
 def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float | None
@@ -801,8 +825,8 @@ def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float 
                          "and its codes, whole degrees, bound nothing (a die settled on "
                          "setpoints writes them whatever the LSB); "
                          "each plateau's temperature may be off by up to half that LSB, which "
-                         "the null does not include (a channel step, rate or hysteresis of "
-                         "that size is not told from it)")
+                         "the families' null does not include (a rate or hysteresis of that "
+                         "size is not told from it; a channel step within it is not named)")
         return None
     how = ("declared by the recording" if found.declared else
            f"without dither ({100 * found.fraction:.0f} % of the readings on its codes)")
@@ -961,6 +985,50 @@ def _note_not_named(not_named: list[dict[str, Any]], notes: list[str]) -> None:
               "step(s) " + ", ".join(str(s) for s in n["steps"]) if n.get("kind") == "time"
               else "position(s) " + ", ".join(str(p) for p in n["positions"]))
         notes.append(f"{n['effect']} not named at {at}: {n['why']}")
+
+
+def _within_channel_rounding(pb: LinearProblem, terms: list[Term], findings: list[Finding],
+                             level: float, not_ident: dict[str, dict[str, str]],
+                             notes: list[str]) -> tuple[list[Term], list[Finding]]:
+    """Withdraw a channel finding whose evidence the rounding at the coarsest LSB the
+    channel's codes admit can make (within_rounding.py, issue 22), and report it as not
+    established with the reason (``not_ident``, ``notes``): the recording cannot separate it
+    from the rounding unless it declares the LSB."""
+    found = within_rounding.within(pb, terms, level, _basis)
+    if not found:
+        return terms, findings
+    _say_within_rounding(pb, found, not_ident, notes)
+    terms, findings, _ = withdraw(terms, findings, {w.key for w in found})
+    return terms, findings
+
+
+def _within_channel_rounding_one_step(pb: LinearProblem, terms: list[Term],
+                                      records: list[one_step_report.OneStep], level: float,
+                                      not_ident: dict[str, dict[str, str]], notes: list[str]
+                                      ) -> list[one_step_report.OneStep]:
+    """The one-plateau records (one_step.py) kept: a channel step withheld as one plateau's
+    whose evidence the admitted rounding can make is reported as that, not as a one-plateau
+    change (:func:`_within_channel_rounding`)."""
+    found = within_rounding.within(pb, terms, level, _basis, one_step=records)
+    if not found:
+        return records
+    _say_within_rounding(pb, found, not_ident, notes)
+    gone = [id(w.key) for w in found]
+    return [r for r in records if id(r) not in gone]
+
+
+def _say_within_rounding(pb: LinearProblem, found: list[within_rounding.WithinRounding],
+                         not_ident: dict[str, dict[str, str]], notes: list[str]) -> None:
+    """The note and the not-identifiable entry of each channel finding not named."""
+    src = pb.ctx.temperature_source
+    col = LSB_COLUMNS.get(src, "an _lsb_c column")
+    for w in found:
+        why = within_rounding.why(w, src, col)
+        notes.append(f"{w.effect} not named: {why}")
+        not_ident[w.effect] = {
+            "effect": w.effect, "why": why,
+            "experiment": (f"declare the channel's LSB ({col}), or record the temperature with "
+                           f"a channel that dithers or is finer; {BY_ID[w.effect].experiment}")}
 
 
 def _shape_after_turn(pb: LinearProblem, terms: list[Term], findings: list[Finding],

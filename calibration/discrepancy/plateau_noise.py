@@ -50,6 +50,10 @@ GRID_MIN_C, GRID_MAX_C = 0.02, 1.0
 GRID_MIN_READINGS = 10
 GRID_MAX_DECIMALS = 6
 GRID_CANDIDATES = 64
+# A plateau holds a code (admitted_lsb_c) where one value is recorded on more than half its
+# readings: capture means across a code's edge repeat where two codes mix alike, but not on
+# most of a plateau.
+HELD_MAJORITY = 0.5
 
 
 def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
@@ -206,6 +210,67 @@ def held_code_resolution_c(temp_c: np.ndarray, steps: np.ndarray) -> float | Non
     return None if d == 0 else 10.0**-d
 
 
+def admitted_lsb_c(temp_c: np.ndarray, steps: np.ndarray) -> float | None:
+    """The coarsest LSB a non-dithering channel's codes admit (at most :data:`GRID_MAX_C`),
+    or None (a dithered or continuous channel: its readings are not codes).
+
+    Why (issue 22): a channel that does not dither holds one code through a settled
+    plateau: one value on more than :data:`HELD_MAJORITY` of the plateau's readings (and
+    :data:`GRID_CODE_READINGS` or more). Where such plateaus hold :data:`GRID_ON_FRACTION`
+    of the readings, on two plateaus or more, their held codes are the channel's. Codes
+    written to d decimals could come from any channel whose LSB is 10⁻ᵈ °C or a multiple of
+    it, up to a whole degree, so the recording admits an LSB of max(10⁻ᵈ, the grid's q,
+    :func:`temperature_grid`) — a whole degree where every held code is one (a die settled on
+    setpoints that lie on codes writes the setpoints whatever the LSB). The other readings
+    narrow nothing: a plateau that does not hold one value (an approach, its capture means
+    written to 3 decimals, some repeated where two codes mix alike) records means of codes,
+    which a coarser channel writes too. Where no plateau holds a code, a grid's q. This is
+    not the LSB but the coarsest one the recording cannot rule out; each plateau's
+    temperature is known to ±Q/2 and no better, and a pattern of the channel within what
+    that rounding can make is not told from it (within_rounding.py).
+    """
+    t = np.asarray(temp_c, float)
+    st = np.asarray(steps)
+    ok = np.isfinite(t)
+    if int(ok.sum()) < GRID_MIN_READINGS:
+        return None
+    codes: list[float] = []
+    on = 0
+    for s_ in np.unique(st[ok]):
+        u, c = np.unique(t[ok & (st == s_)], return_counts=True)
+        i = int(np.argmax(c))
+        if c[i] >= GRID_CODE_READINGS and c[i] > HELD_MAJORITY * c.sum():
+            codes.append(float(u[i]))
+            on += int(c.sum())
+    grid = temperature_grid(t, st)
+    held = len(codes) >= MIN_PLATEAUS and on >= GRID_ON_FRACTION * int(ok.sum())
+    if not held:
+        return None if grid is None else min(grid.q_c, GRID_MAX_C)
+    q = 10.0 ** -_decimals(np.asarray(codes))
+    if grid is not None:
+        q = max(q, grid.q_c)
+    return min(q, GRID_MAX_C)
+
+
+def rounding_box(pb: LinearProblem, q_c: float) -> stats.BoundedShared | None:
+    """Any rounding error within ±``q_c``/2 per plateau and recorded value, through the
+    base model's whitened ∂output/∂T (the groups of :func:`quantised_channel`); None where
+    the base has no temperature dependence."""
+    lt = temperature_loading(pb)
+    if lt is None:
+        return None
+    return stats.BoundedShared(_value_groups(pb), lt, q_c / 2.0)
+
+
+def _value_groups(pb: LinearProblem) -> np.ndarray:
+    """(m,) the entries' groups: one per plateau and recorded temperature value."""
+    ctx = pb.ctx
+    t = np.asarray(ctx.temp_c, float)
+    key = np.where(np.isfinite(t), t, np.arange(ctx.n) + 1e9)
+    _, g_read = np.unique(np.column_stack([ctx.steps, key]), axis=0, return_inverse=True)
+    return np.asarray(g_read).ravel()[pb.row]
+
+
 @dataclass(frozen=True)
 class QuantisedChannel:
     """A temperature channel quantised to ``q_c`` without dither, and what the null makes of
@@ -255,10 +320,7 @@ def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
         return None
     q = float(declared_q_c) if declared_q_c is not None else \
         grid.q_c if grid is not None else float(held_q_c)
-    t = np.asarray(ctx.temp_c, float)
-    key = np.where(np.isfinite(t), t, np.arange(ctx.n) + 1e9)
-    _, g_read = np.unique(np.column_stack([ctx.steps, key]), axis=0, return_inverse=True)
-    group = np.asarray(g_read).ravel()[pb.row]
+    group = _value_groups(pb)
     sg = stats.SharedGroups([lt], [group], ["quantised temperature channel"])
     return QuantisedChannel(q, declared_q_c is not None,
                             1.0 if grid is None else grid.fraction, held_q_c is not None,

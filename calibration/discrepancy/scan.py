@@ -48,13 +48,19 @@ class ScanResult:
                 "where": self.places}
 
 
-def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> ScanResult:
+def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float,
+         bounded: stats.BoundedShared | None = None) -> ScanResult:
     """Scan the residual ``e`` (whitened, model projected out; ``E`` its null replicates).
 
     Blocks with the same (k, dof) share one F law, so the minimum p over them is the p of
     their largest F: the null needs one tail evaluation per group, not per block.
+    ``bounded``: an error the data may hold and the null does not (a channel's rounding at
+    an LSB its codes admit and the replicates do not draw, within_rounding.py): each
+    block's data score is taken net of the most it can put into the block (its reach,
+    :class:`stats.BoundedShared`), as the families' tests do with a declared LSB.
     """
     m = e.size
+    C = _group_loads(U, bounded) if bounded is not None else None
     # Σ E² per replicate without an (m × B) temporary (E is the largest array here).
     ee, EE = float(e @ e), stats.sum_sq_columns(E)
     F: list[float] = []
@@ -86,7 +92,10 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
         Zs = Xs - U[S] @ UX  # the projected block on its support
         q = float(np.sum((W.T @ _score_without_largest(Xs, Zs, e[S][:, None])[:, 0]) ** 2))
         qn = np.sum((W.T @ _score_without_largest(Xs, Zs, E[S])) ** 2, axis=0)
-        F.append(q / k / max((ee - q) / dof, 1e-300))
+        q_data = q
+        if bounded is not None:  # net of the box's reach (the denominator stays the data's)
+            q_data = max(np.sqrt(q) - _block_reach(bounded, C, S, Xs @ W, UX @ W), 0.0) ** 2
+        F.append(q_data / k / max((ee - q) / dof, 1e-300))
         fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
         null_max[(k, dof)] = np.maximum(null_max.get((k, dof), 0.0), fn)
         kd.append((k, dof))
@@ -114,6 +123,36 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float) -> 
         places.append({label: int(key), "axis": AXES[axis] if axis >= 0 else "norm",
                        "log10_p": round(float(lp_arr[i] / np.log(10)), 1)})
     return ScanResult(float(p_family), bool(p_family <= alpha), len(F), places)
+
+
+def _group_loads(U: Any, box: stats.BoundedShared) -> np.ndarray:
+    """(G, p) Σ over each group's entries of loading·U (by row blocks: U may be held as
+    its recipe on a long recording)."""
+    g = np.asarray(box.group)
+    n_g = int(g.max()) + 1 if g.size else 0
+    p = U.shape[1]
+    out = np.zeros((n_g, p))
+    step = max(1, stats.CHUNK_BYTES // (8 * max(p, 1)))
+    for i in range(0, g.size, step):
+        Ui = np.asarray(U[i:i + step]) * box.loading[i:i + step, None]
+        for j in range(p):
+            out[:, j] += np.bincount(g[i:i + step], Ui[:, j], minlength=n_g)
+    return out
+
+
+def _block_reach(box: stats.BoundedShared, C: np.ndarray, S: np.ndarray, XW: np.ndarray,
+                 UXW: np.ndarray) -> float:
+    """The box's reach on a block's projected orthonormal columns B = (I − UUᵀ)X·W, X
+    nonzero on its support S only: per group Σ_{i∈S∩g} (XW)_i·z_i − (C·UXW)_g (C from
+    :func:`_group_loads`), then as :meth:`stats.BoundedShared.reach`."""
+    g = np.asarray(box.group)
+    n_g = C.shape[0]
+    M = -(C @ UXW)
+    for j in range(XW.shape[1]):
+        M[:, j] += np.bincount(g[S], XW[:, j] * box.loading[S], minlength=n_g)
+    by_group = float(np.sum(np.linalg.norm(M, axis=1)))
+    spectral = float(np.linalg.norm(M, 2)) * np.sqrt(n_g)
+    return box.half * min(by_group, spectral)
 
 
 def _score_without_largest(Xs: np.ndarray, Zs: np.ndarray, R: np.ndarray) -> np.ndarray:

@@ -140,9 +140,12 @@ def _settling_null(seed: int) -> dict[str, np.ndarray]:
 def test_a_settling_die_on_a_declared_channel_is_no_mismatch(seed):
     """The recording declares its LSB (``sensor_lsb_c``): no mismatch (before: a channel
     step between the legs at p ≈ 1e-11). Without the column the LSB is not shown and the
-    step is (still) reported — what the column is for."""
+    step is (still) reported, or, within the rounding of the coarsest LSB the codes admit,
+    listed as not established (within_rounding.py) — what the column is for."""
     cols = _settling_null(seed)
-    assert diagnose(Recording.from_columns(cols), seed=1, n_null=100).mismatch
+    d = diagnose(Recording.from_columns(cols), seed=1, n_null=100)
+    assert d.mismatch or [n for n in d.not_identifiable if n["effect"] == "temperature_sensor"
+                          and "possible rounding" in n["why"]]
     cols["sensor_lsb_c"] = np.full(len(cols["t_s"]), 0.1)
     d = diagnose(Recording.from_columns(cols), seed=1, n_null=100)
     assert not d.mismatch, [(f.effect, f.p_value) for f in d.findings]

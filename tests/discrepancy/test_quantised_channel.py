@@ -168,7 +168,7 @@ def test_diagnose_draws_the_held_codes_resolution_and_says_it_is_a_least_error()
     assert np.all(held == np.round(held))
     for codes, says in ((held - 0.1, ("codes are written to 0.1 °C", "±0.05 °C at best",
                                        "the null includes that least error")),
-                        (held, ("whole degrees, bound nothing", "the null does not include"))):
+                        (held, ("whole degrees, bound nothing", "null does not include"))):
         rec = Recording.from_columns({**clean.columns, "sensor_c": codes})
         note = [x for x in diagnose(rec, n_null=50).notes if "holds one value" in x]
         assert len(note) == 1 and all(w in note[0] for w in says), note
