@@ -51,6 +51,8 @@ from benchmarks.blind.score import clopper_pearson
 from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.base import per_axis
+from calibration.discrepancy.effects.thermal_lag import WARMUP_TAU_GRID_S
+from calibration.discrepancy.effects.thermal_lag import _age_s as lag_age_s
 from calibration.discrepancy.effects.turntable_geometry import turn_columns
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.plateau_settling import since_plateau_start_s
@@ -149,6 +151,12 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
     if m:
         th = min(thresholds_c(ctx.step_temp_c), key=lambda t: abs(t - float(m.group(1))))
         return [o.w(per_axis(ctx, jump_column(ctx, th)))]
+    if rival == "self_heating" and key_id == "thermal_lag":
+        # the warm-up after power-on that ThermalLag.not_told_from puts beside the lag: the
+        # model's own ∂raw/∂T times exp(−age/τw), one option per τw of its grid
+        age = lag_age_s(ctx)
+        return [o.w(-ctx.draw_dtemp_g_per_c[:, :, None] * np.exp(-age / t)[:, None, None])
+                for t in WARMUP_TAU_GRID_S]
     if rival not in BY_ID:
         return []
     eff = BY_ID[rival]
