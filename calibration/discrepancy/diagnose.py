@@ -1124,7 +1124,7 @@ def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: flo
     U = stats.orthonormal_basis(Xw)
     del Xw
     e = yw - U @ (U.T @ yw)
-    lp = along_log_p(pb, U, e, pb.whiten(pb.lift(along)))
+    lp = stats.linear_stats(U, pb.whiten(pb.lift(along)), e, e[:, None])[0]  # F on the data
     p_along = float(np.exp(lp))
     if p_along <= alpha:
         return f
@@ -1145,51 +1145,6 @@ def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: flo
                      f"{why}. It is modelled (with the {f.effect} term) but not named; "
                      f"to separate them: {geo.experiment}."),
         parameters={}, parameter_sd={}, confusers=[])
-
-
-MIN_ALONG_DOF = 10  # readings' along-reference scatter left to scale the check by
-
-
-def along_log_p(pb: LinearProblem, U: np.ndarray, e: np.ndarray, Zw: np.ndarray) -> float:
-    """log p of the whitened columns ``Zw`` (a term's part along the reference) after the
-    model ``U`` (residual ``e``), judged against the scatter *along* the reference.
-
-    Each reading's three whitened entries are split into the two directions across its
-    reference (``turntable_geometry._reading_across_basis``) and the one orthogonal to them,
-    ``c = c₁ × c₂``. The columns are kept in ``c`` (their part across the reference is a
-    turn's, which the model holds), and their F is taken against the residual along ``c``
-    only, with its dof net of what the model and the columns span there.
-
-    Why (issue 22): re-seating the sensor at each visit turns the force by a small angle,
-    which adds scatter across the reference and none along it. The noise model whitens
-    the two alike, so on the second generator the whitened residual along the reference is
-    about 0.86 of its sd across it. The F against the pooled residual then read the
-    along-reference columns against a noise ~1.2–1.35 times their own variance: on 345
-    nulls it rejected 2.6 % at 5 % and 0 at 0.5 %, and a cross coupling or bend at twice
-    its detectable size was reported "not separable from a turn" at p = 0.005–0.04. The
-    pose turns are judged against the scatter across the reference for the same reason
-    (``TurntableGeometry.test_stats``). Falls back to the pooled F where the residual is
-    not three entries per reading or too few along-reference dof are left.
-    """
-    from calibration.discrepancy.effects.turntable_geometry import _reading_across_basis
-
-    n = pb.ctx.n
-    if pb.mode != "reference" or U.shape[0] != 3 * n:
-        return float(stats.linear_stats(U, Zw, e, e[:, None])[0])
-    C = _reading_across_basis(pb)
-    c = np.cross(C[:, :, 0], C[:, :, 1])  # (N,3): whitened, orthogonal to both
-    Z = (np.sum(Zw.reshape(n, 3, -1) * c[:, :, None], axis=1)[:, None, :]
-         * c[:, :, None]).reshape(3 * n, -1)
-    B = stats.orthonormal_basis(stats.project_out(U, Z), 1e-6)
-    k = B.shape[1]
-    W = np.hstack([U, B]).reshape(n, 3, -1)
-    dof = int(round(n - float(np.sum(np.einsum("na,nap->np", c, W) ** 2))))
-    if k == 0 or dof < MIN_ALONG_DOF:
-        return float(stats.linear_stats(U, Zw, e, e[:, None])[0])
-    r = (e - B @ (B.T @ e)).reshape(n, 3)
-    den = float(np.sum(np.sum(r * c, axis=1) ** 2)) / dof
-    q = float(np.sum((B.T @ e) ** 2))
-    return float(stats.f_logsf(q / k / max(den, 1e-300), k, dof))
 
 
 def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
