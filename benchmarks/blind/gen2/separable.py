@@ -152,11 +152,16 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
         th = min(thresholds_c(ctx.step_temp_c), key=lambda t: abs(t - float(m.group(1))))
         return [o.w(per_axis(ctx, jump_column(ctx, th)))]
     if rival == "self_heating" and key_id == "thermal_lag":
-        # the warm-up after power-on that ThermalLag.not_told_from puts beside the lag: the
-        # model's own ∂raw/∂T times exp(−age/τw), one option per τw of its grid
+        # what ThermalLag.not_told_from puts beside the lag's amplitude: a warm-up after
+        # power-on, the model's own ∂raw/∂T times exp(−age/τw), and the lag's own nuisance
+        # (its second column: the first plateau's unknown start); one option per τw of its
+        # grid and τ of the lag's. The check tests the amplitude alone after both.
         age = lag_age_s(ctx)
-        return [o.w(-ctx.draw_dtemp_g_per_c[:, :, None] * np.exp(-age / t)[:, None, None])
-                for t in WARMUP_TAU_GRID_S]
+        lag = BY_ID["thermal_lag"]
+        return [np.hstack([o.w(-ctx.draw_dtemp_g_per_c[:, :, None]
+                               * np.exp(-age / t)[:, None, None]),
+                           o.w(lag.regressors(ctx, th)[:, :, 1:])])
+                for t in WARMUP_TAU_GRID_S for th in lag.grid(ctx)]
     if rival not in BY_ID:
         return []
     eff = BY_ID[rival]
@@ -237,10 +242,14 @@ def outcome(d: dict, key: dict) -> tuple[str, list[str]]:
         if m:
             rivals += [x.strip() for x in m.group(1).split(",") if x.strip() in BY_ID]
         if "same order on every plateau" in why or SLOT_SETTLING in why or (
-                kid == "turntable_geometry" and time_and_position_confounded(
+                (kid == "turntable_geometry" or BY_ID[kid].input_only)
+                and time_and_position_confounded(
                     *(np.asarray(d["_order"][k]) for k in ("steps", "positions", "t_s")))):
             # the protocol-level reason turntable_geometry is withheld (its identifiable()),
-            # even where another check's reason was recorded over it
+            # even where another check's reason was recorded over it; an input-only term
+            # (cross_coupling, scale_nonlinearity) is withheld by slot_settling_alike on
+            # such a protocol whatever an earlier check (a turn of the reference) said: the
+            # slots span every function of the position
             rivals.append(SLOT)
         # slot_settling's candidate is this oracle's SLOT (the same columns)
         return "not_established", list(dict.fromkeys(SLOT if r == SLOT_SETTLING else r
