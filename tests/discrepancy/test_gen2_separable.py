@@ -111,3 +111,15 @@ def test_an_input_only_term_on_a_repeated_order_has_the_slots_as_rival() -> None
     status, rivals = sep.outcome({**turned, "_order": shuffled},
                                  {"catalogue_id": "cross_coupling"})
     assert rivals == ["turntable_geometry"]
+
+
+def test_a_bend_withheld_for_too_few_levels_has_their_functions_as_rival() -> None:
+    # scale_nonlinearity.bends_otherwise withholds a bend whose axes hold ≤ 4 input levels:
+    # bias, scale, a² and a³ fit any function of them there (a band of codes included)
+    why = ("the structure is a function of each axis's own input, but the protocol holds too "
+           "few input levels on the term's axes (x: 4, z: 4; bias, scale, a² and a³ fit any "
+           "function of up to 4 levels): ...")
+    d = {"findings": [{"effect": "unexplained", "where": {"places": [
+        {"not_named": "scale_nonlinearity", "why": why}]}}]}
+    status, rivals = sep.outcome(d, {"catalogue_id": "scale_nonlinearity"})
+    assert (status, rivals) == ("not_established", [sep.LEVELS + "x,z"])

@@ -51,6 +51,7 @@ from benchmarks.blind.score import clopper_pearson
 from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.base import per_axis
+from calibration.discrepancy.effects.scale_nonlinearity import LEVEL_G
 from calibration.discrepancy.effects.thermal_lag import WARMUP_TAU_GRID_S
 from calibration.discrepancy.effects.thermal_lag import _age_s as lag_age_s
 from calibration.discrepancy.effects.turntable_geometry import turn_columns
@@ -66,6 +67,7 @@ from calibration.discrepancy.temperature_jump import jump_column, thresholds_c
 from calibration.recording import read_recording
 
 SLOT = "a settling after each move, the same on every plateau"
+LEVELS = "any function of each axis's input levels on "  # + the axes, e.g. "x,z"
 POWER_SEPARABLE = 0.5  # oracle power above which "not established" is a power deficit
 
 
@@ -138,6 +140,20 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
         for a in range(3):
             block[:, a, 4 * a:4 * a + 4] = u
         return [o.w(block)]
+    if rival.startswith(LEVELS):
+        # a free per-axis output at each input level of those axes (LEVEL_G apart)
+        cols = []
+        for name in rival[len(LEVELS):].split(","):
+            a = "xyz".index(name)
+            v = ctx.input_g[:, a]
+            lv = np.concatenate([[0], np.cumsum(np.diff(np.sort(v)) > LEVEL_G)])
+            ids = np.empty(ctx.n, int)
+            ids[np.argsort(v)] = lv
+            for j in range(int(ids.max()) + 1):
+                x = np.zeros((ctx.n, 3, 1))
+                x[ids == j, a, 0] = 1.0
+                cols.append(x)
+        return [o.w(np.concatenate(cols, axis=2))] if cols else []
     if rival == SLOT:
         # a free per-axis offset at each slot of the (repeated) visiting order: a settling
         # after each move that repeats on every plateau, whatever its shape (the columns
@@ -232,8 +248,16 @@ def outcome(d: dict, key: dict) -> tuple[str, list[str]]:
     listed = {n.get("effect"): n.get("why", "") for n in d.get("not_identifiable") or []}
     if _not_confirmed(d, kid):
         # structure found and withheld by a held-out or physics check (not_confirmed.py,
-        # diagnose._physics_checks): no rival; the oracle asks whether it is beyond noise
-        return "not_established", []
+        # diagnose._physics_checks): no rival; the oracle asks whether it is beyond noise.
+        # Except where the check is the protocol's: too few input levels on the term's axes
+        # (scale_nonlinearity.bends_otherwise), where bias, scale, a² and a³ fit any function
+        # of those levels, a converter error in a band of codes included (outside the
+        # catalogue; the outside sets draw it): that function is the rival.
+        levels = [re.search(r"too few input levels on the term's axes \(([^;]*);", p.get("why", ""))
+                  for p in where.get("places") or [] if p.get("not_named") == kid]
+        axes = sorted({a.split(":")[0].strip() for m in levels if m
+                       for a in m.group(1).split(",")})
+        return "not_established", ([LEVELS + ",".join(axes)] if axes else [])
     if _not_separable(d, kid) or (top in (None, "unexplained") and kid in listed):
         rivals = [c for c in where.get("candidates") or [] if c != kid] if (
             top == "not_identifiable") else []
