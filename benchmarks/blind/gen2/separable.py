@@ -51,6 +51,9 @@ from benchmarks.blind.score import clopper_pearson
 from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.base import per_axis
+from calibration.discrepancy.effects.scale_nonlinearity import LEVEL_G
+from calibration.discrepancy.effects.thermal_lag import WARMUP_TAU_GRID_S
+from calibration.discrepancy.effects.thermal_lag import _age_s as lag_age_s
 from calibration.discrepancy.effects.turntable_geometry import turn_columns
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.plateau_settling import since_plateau_start_s
@@ -64,6 +67,7 @@ from calibration.discrepancy.temperature_jump import jump_column, thresholds_c
 from calibration.recording import read_recording
 
 SLOT = "a settling after each move, the same on every plateau"
+LEVELS = "any function of each axis's input levels on "  # + the axes, e.g. "x,z"
 POWER_SEPARABLE = 0.5  # oracle power above which "not established" is a power deficit
 
 
@@ -136,6 +140,20 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
         for a in range(3):
             block[:, a, 4 * a:4 * a + 4] = u
         return [o.w(block)]
+    if rival.startswith(LEVELS):
+        # a free per-axis output at each input level of those axes (LEVEL_G apart)
+        cols = []
+        for name in rival[len(LEVELS):].split(","):
+            a = "xyz".index(name)
+            v = ctx.input_g[:, a]
+            lv = np.concatenate([[0], np.cumsum(np.diff(np.sort(v)) > LEVEL_G)])
+            ids = np.empty(ctx.n, int)
+            ids[np.argsort(v)] = lv
+            for j in range(int(ids.max()) + 1):
+                x = np.zeros((ctx.n, 3, 1))
+                x[ids == j, a, 0] = 1.0
+                cols.append(x)
+        return [o.w(np.concatenate(cols, axis=2))] if cols else []
     if rival == SLOT:
         # a free per-axis offset at each slot of the (repeated) visiting order: a settling
         # after each move that repeats on every plateau, whatever its shape (the columns
@@ -149,6 +167,17 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
     if m:
         th = min(thresholds_c(ctx.step_temp_c), key=lambda t: abs(t - float(m.group(1))))
         return [o.w(per_axis(ctx, jump_column(ctx, th)))]
+    if rival == "self_heating" and key_id == "thermal_lag":
+        # what ThermalLag.not_told_from puts beside the lag's amplitude: a warm-up after
+        # power-on, the model's own ∂raw/∂T times exp(−age/τw), and the lag's own nuisance
+        # (its second column: the first plateau's unknown start); one option per τw of its
+        # grid and τ of the lag's. The check tests the amplitude alone after both.
+        age = lag_age_s(ctx)
+        lag = BY_ID["thermal_lag"]
+        return [np.hstack([o.w(-ctx.draw_dtemp_g_per_c[:, :, None]
+                               * np.exp(-age / t)[:, None, None]),
+                           o.w(lag.regressors(ctx, th)[:, :, 1:])])
+                for t in WARMUP_TAU_GRID_S for th in lag.grid(ctx)]
     if rival not in BY_ID:
         return []
     eff = BY_ID[rival]
@@ -219,8 +248,16 @@ def outcome(d: dict, key: dict) -> tuple[str, list[str]]:
     listed = {n.get("effect"): n.get("why", "") for n in d.get("not_identifiable") or []}
     if _not_confirmed(d, kid):
         # structure found and withheld by a held-out or physics check (not_confirmed.py,
-        # diagnose._physics_checks): no rival; the oracle asks whether it is beyond noise
-        return "not_established", []
+        # diagnose._physics_checks): no rival; the oracle asks whether it is beyond noise.
+        # Except where the check is the protocol's: too few input levels on the term's axes
+        # (scale_nonlinearity.bends_otherwise), where bias, scale, a² and a³ fit any function
+        # of those levels, a converter error in a band of codes included (outside the
+        # catalogue; the outside sets draw it): that function is the rival.
+        levels = [re.search(r"too few input levels on the term's axes \(([^;]*);", p.get("why", ""))
+                  for p in where.get("places") or [] if p.get("not_named") == kid]
+        axes = sorted({a.split(":")[0].strip() for m in levels if m
+                       for a in m.group(1).split(",")})
+        return "not_established", ([LEVELS + ",".join(axes)] if axes else [])
     if _not_separable(d, kid) or (top in (None, "unexplained") and kid in listed):
         rivals = [c for c in where.get("candidates") or [] if c != kid] if (
             top == "not_identifiable") else []
@@ -229,10 +266,14 @@ def outcome(d: dict, key: dict) -> tuple[str, list[str]]:
         if m:
             rivals += [x.strip() for x in m.group(1).split(",") if x.strip() in BY_ID]
         if "same order on every plateau" in why or SLOT_SETTLING in why or (
-                kid == "turntable_geometry" and time_and_position_confounded(
+                (kid == "turntable_geometry" or BY_ID[kid].input_only)
+                and time_and_position_confounded(
                     *(np.asarray(d["_order"][k]) for k in ("steps", "positions", "t_s")))):
             # the protocol-level reason turntable_geometry is withheld (its identifiable()),
-            # even where another check's reason was recorded over it
+            # even where another check's reason was recorded over it; an input-only term
+            # (cross_coupling, scale_nonlinearity) is withheld by slot_settling_alike on
+            # such a protocol whatever an earlier check (a turn of the reference) said: the
+            # slots span every function of the position
             rivals.append(SLOT)
         # slot_settling's candidate is this oracle's SLOT (the same columns)
         return "not_established", list(dict.fromkeys(SLOT if r == SLOT_SETTLING else r
