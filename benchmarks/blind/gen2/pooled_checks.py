@@ -116,10 +116,7 @@ def by_reading_f(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray, beta: bool = Tr
     n = int(np.unique(pb.row).size)
     if k == 0 or n <= k + 1:
         return 0.0, 0
-    et = e / np.sqrt(1.0 - np.minimum(stats.leverage(U), stats.LEVERAGE_MAX))
-    G = np.zeros((int(pb.row.max()) + 1, k))
-    np.add.at(G, pb.row, Z * et[:, None])
-    s = Z.T @ e
+    G, s = structure.reading_shares(pb, U, e, Z)
     q = float(s @ np.linalg.lstsq(G.T @ G, s, rcond=None)[0])
     f = (q / k) / max((n - q) / (n - k), 1e-300) if beta else q / k
     return float(stats.f_logsf(f, k, n - k)), k
@@ -135,12 +132,9 @@ def by_sign_flips(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray, n_flip: int = 
     n = int(np.unique(pb.row).size)
     if k == 0 or n <= k + 1:
         return 0.0, 0
-    et = e / np.sqrt(1.0 - np.minimum(stats.leverage(U), stats.LEVERAGE_MAX))
-    G = np.zeros((int(pb.row.max()) + 1, k))
-    np.add.at(G, pb.row, Z * et[:, None])
+    G, s = structure.reading_shares(pb, U, e, Z)
     G = G[np.any(G != 0, axis=1)]
     Qg = stats.orthonormal_basis(G, 1e-9)  # P = G V⁻¹ Gᵀ = Qg Qgᵀ
-    s = Z.T @ e
     q = float(s @ np.linalg.lstsq(G.T @ G, s, rcond=None)[0])
     rng = np.random.default_rng(20261127)
     eps = rng.choice((-1.0, 1.0), size=(G.shape[0], n_flip))
@@ -176,22 +170,6 @@ def by_wild_bootstrap(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray, n_boot: in
     return float(np.log((1 + np.sum(qb >= q * (1 - 1e-12))) / (n_boot + 1))), k
 
 
-def by_plateau_scale(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray) -> tuple[float, int]:
-    """The pooled F after rescaling each plateau's entries by its own residual scale
-    (s_j² = Σ e² / Σ (1 − h) over the plateau's entries)."""
-    step = pb.ctx.steps[pb.row]
-    h = stats.leverage(U)
-    d = np.ones(e.size)
-    for j in np.unique(step):
-        on = step == j
-        v = float(e[on] @ e[on]) / max(float(np.sum(1 - h[on])), 1e-9)
-        d[on] = 1.0 / np.sqrt(max(v, 1e-300))
-    U2 = stats.orthonormal_basis(U * d[:, None])
-    e2 = d * e
-    e2 = e2 - U2 @ (U2.T @ e2)
-    return _POOLED(U2, e2, Xw * d[:, None])
-
-
 def _install(rec: Recorder) -> None:
     for mod in _PATCHED:
         mod.log_p = rec.pooled
@@ -212,7 +190,7 @@ def _uninstall() -> None:
 FORMS = {"log10_p_by_reading": structure.log_p_by_reading,
          "log10_p_by_reading_basis": lambda *a: by_reading_f(*a, beta=False),
          "log10_p_by_reading_f": by_reading_f,
-         "log10_p_by_plateau": by_plateau_scale,
+         "log10_p_by_plateau": structure.log_p_by_plateau,
          "log10_p_sign_flips": by_sign_flips}
 
 

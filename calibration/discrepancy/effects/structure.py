@@ -58,6 +58,17 @@ def log_p(U: np.ndarray, e: np.ndarray, Xw: np.ndarray) -> tuple[float, int]:
     return (float(lp), int(k)) if k > 0 else (0.0, 0)
 
 
+def reading_shares(pb: Any, U: Any, e: np.ndarray, Z: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Each reading's share of the score of the columns ``Z`` (U already projected out) and
+    the score itself: ``G[r] = Σ_{entries of reading r} Z ẽ`` on the HC2 residual
+    ``ẽ = e/√(1 − h)`` (h the leverage of U), and ``s = Zᵀe`` (:func:`log_p_by_reading`)."""
+    et = e / np.sqrt(1.0 - np.minimum(stats.leverage(U), stats.LEVERAGE_MAX))
+    G = np.zeros((int(pb.row.max()) + 1, Z.shape[1]))
+    np.add.at(G, pb.row, Z * et[:, None])
+    return G, Z.T @ e
+
+
 def log_p_by_reading(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray) -> tuple[float, int]:
     """log p of the columns ``Xw`` after ``U`` with the noise read reading by reading (a
     heteroscedasticity-robust score test), and its dof (0: none).
@@ -87,10 +98,7 @@ def log_p_by_reading(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray) -> tuple[fl
     n_read = int(np.unique(pb.row).size)
     if k == 0 or n_read <= k + 1:
         return 0.0, 0
-    et = e / np.sqrt(1.0 - np.minimum(stats.leverage(U), stats.LEVERAGE_MAX))
-    G = np.zeros((int(pb.row.max()) + 1, k))
-    np.add.at(G, pb.row, Z * et[:, None])
-    s = Z.T @ e
+    G, s = reading_shares(pb, U, e, Z)
     V = G.T @ G
     try:
         t = float(s @ np.linalg.solve(V, s))
