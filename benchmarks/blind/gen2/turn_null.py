@@ -16,7 +16,7 @@ again (its own seed, ``n_null``) with two spies on its first stage:
   encoder): its data log10 p and dof, and its replicates' median log10 p and share at
   p ≤ 0.01 (−0.30 and 1 % under a calibrated null).
 
-Issue 22 (docs/benchmarks.md, "Why a 2× tilt the oracle separates is missed").
+Issue 22 (docs/benchmarks.md, "Why 2× tilts the oracle separates are missed").
 """
 
 from __future__ import annotations
