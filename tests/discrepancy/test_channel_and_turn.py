@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from calibration.discrepancy import diagnose
+from calibration.schedules import get_schedule
 from simulators import effects as E  # noqa: N812 (short name for many effects)
 from simulators.campaign_sim import simulate_campaign
 from simulators.truth import SensorTruth
@@ -57,22 +58,27 @@ def test_a_tilted_table_is_not_named_a_nonlinearity():
     assert "turntable_geometry" in {n["effect"] for n in d.not_identifiable}
 
 
-def _tilted(tilt_rad, order: str = "random"):
+def _tilted(tilt_rad, order: str = "random", schedule: str | None = None):
     effects = [E.TurntableGeometry(base_tilt_rad=np.array(tilt_rad))] if any(tilt_rad) else []
     return simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=effects),
                              setpoints_c=ONE_WAY, seed=16, position_order=order,
-                             position_order_seed=3)
+                             position_order_seed=3,
+                             schedule=None if schedule is None else get_schedule(schedule))
 
 
 def test_a_tilted_table_visited_in_a_random_order_is_named_with_its_tilt():
     """A turn of each pose, the same at every visit and none along the reference, is the
-    table's (issue 22); its lab-frame tilt is read back in the twin's pose convention."""
-    d = diagnose(_tilted((20e-6, -10e-6)), n_null=30, seed=6)
+    table's (issue 22); its lab-frame tilt is read back in the twin's pose convention.
+    On a schedule whose references show no table sweeps (a sphere): there the free turn of
+    each pose is tested. (On Table 1, whose references lie on sweeps, only a tilt's and an
+    encoder error's sweep shapes are; this simulator's tilt, in the twin's pose convention,
+    is neither, and is not named.)"""
+    d = diagnose(_tilted((20e-6, -10e-6), schedule="sphere48"), n_null=30, seed=6)
     assert [f.effect for f in d.findings] == ["turntable_geometry"]
     p = d.findings[0].parameters
     assert p["tilt_x_urad"] == pytest.approx(20.0, abs=3.0)
     assert p["tilt_y_urad"] == pytest.approx(-10.0, abs=3.0)
-    assert p["n_poses"] == 24
+    assert p["n_poses"] == 48 and p["shape"] == 0.0
     assert "turns the specific force" in d.findings[0].explanation
 
 

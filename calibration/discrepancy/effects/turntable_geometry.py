@@ -196,12 +196,13 @@ class TurntableGeometry(CatalogueEffect):
     may turn differently (a sensor nonlinearity is one function of the direction).
 
     Where the references show the table's sweeps (great circles, ``turntable_circles``),
-    two shapes with far fewer parameters are tested beside the free turn, as grid values
-    (Šidák over the grid within the effect, the family's bootstrap null takes the minimum
-    over it as over candidates): a tilted axis (2 per circle) and an encoder error (its
-    first two harmonics in the commanded angle, 4 per circle). Why (issue 22): the free
+    two shapes with far fewer parameters are tested instead of the free turn, as grid
+    values (Šidák over the grid within the effect, the family's bootstrap null takes the
+    minimum over it as over candidates): a tilted axis (2 per circle) and an encoder error
+    (its first two harmonics in the commanded angle, 4 per circle). Why (issue 22): the free
     turn spends 28–64 dof on a structure of a few, and missed half the tilts and encoder
-    errors at twice their detectable size on the second generator.
+    errors at twice their detectable size on the second generator. The free turn is tested
+    only where no sweeps are found (:meth:`grid`).
     """
 
     effect_id: str = "turntable_geometry"
@@ -224,12 +225,22 @@ class TurntableGeometry(CatalogueEffect):
         return pose_ids(ctx.positions, ctx.input_g, ctx.steps)
 
     def grid(self, ctx: DesignContext) -> list[float]:
-        """nan: the free turn of each pose; ``SHAPE_TILT``, ``SHAPE_ENCODER``: the sweep
-        shapes, when ≥ ``MIN_POSES`` poses lie on exactly one sweep circle."""
+        """``SHAPE_TILT``, ``SHAPE_ENCODER``: the sweep shapes, when ≥ ``MIN_POSES`` poses
+        lie on exactly one sweep circle; otherwise nan, the free turn of each pose.
+
+        Why not the free turn beside the shapes (issue 22): a tilt or an encoder error of a
+        swept table *is* one of the shapes, so the free turn adds no power for them, while
+        it costs the effect a third grid value (Šidák ×3 instead of ×2) and brings the
+        heaviest null of the family: its 33–69 columns, each on the few visits of one pose,
+        have sign-flip replicates at a median p of 0.09 on the second generator's 2× tilt
+        0307 (p ≤ 0.01 in 19 % of them), and their minimum (10⁻⁶·³¹ adjusted) beat that
+        tilt's own p (10⁻⁶·⁴⁹ in its 6-dof shape, 10⁻⁶·⁰¹ adjusted): p_family 2/401 > α/2,
+        the tilt missed, though the oracle's power in its columns is 1.00 at α/2 and 0.96 at
+        α/2 over 30 (3 grid values × about 10 families; ``gen2.turn_null``, docs/benchmarks.md)."""
         _, axes, circle = sweep_layout(ctx)
         pose = self._poses(ctx)
         on = np.unique(pose[circle >= 0]).size if axes else 0
-        return [float("nan")] + ([tc.SHAPE_TILT, tc.SHAPE_ENCODER] if on >= MIN_POSES else [])
+        return [tc.SHAPE_TILT, tc.SHAPE_ENCODER] if on >= MIN_POSES else [float("nan")]
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         if np.isnan(theta):
