@@ -7,7 +7,8 @@
 * ``scale_nonlinearity`` is named only where the data show a *bend*: an input dependence
   that a free offset per direction still needs after a², a³ (an ADC error confined to a
   band of codes), or a schedule with too few input levels on the term's axes to tell a bend
-  from any function of that input, is reported where it is, not named.
+  from any function of that input (and the axes with more levels do not show it), is
+  reported where it is, not named.
 
 Recordings come from the second generator with synthetic noise pools (as
 test_own_scatter.py: the benchmark's pools come from real recordings outside the repository).
@@ -142,3 +143,27 @@ def test_a_crack_within_a_plateau_is_not_an_outlier(monkeypatch):
     assert any("lies in the run of readings withdrawn" in n for n in d.notes)
     monkeypatch.setattr(diagnose_mod, "_inside_withdrawn_runs", lambda *a: [])
     assert "outlier" in [f.effect for f in diagnose(rec, seed=0, n_null=100).findings]
+
+
+def test_a_bend_is_judged_on_the_axes_with_enough_input_levels():
+    """sparse18: z holds 4 input levels, x and y 5. A bend the term resolved on z only is
+    still shown by x's and y's a², a³ after any function of z's levels (issue 22, seed 2
+    case 0026): it is judged there (a free offset per direction, none needed: no place),
+    not withheld for z's levels. A band of codes on z leaves nothing on x and y: withheld."""
+    from calibration.discrepancy import stats
+    from calibration.discrepancy.effects.scale_nonlinearity import bends_otherwise, own_powers
+    from calibration.discrepancy.effects.structure import whitened
+    from calibration.discrepancy.problem import build_problem
+
+    def place(rec):
+        pb = build_problem(rec)
+        U = stats.orthonormal_basis(np.hstack([pb.whiten(np.asarray(pb.X0)),
+                                               whitened(pb, own_powers(pb.ctx.input_g))]))
+        yw = pb.y * pb.w
+        return bends_otherwise(pb, U, yw - U @ (U.T @ yw), ["z"], 0.005)
+
+    bend = _record(6, "sparse18", "scale_nonlinearity", 40.0)
+    assert [input_levels(bend.ref_g[:, a]) for a in range(3)] == [5, 5, 4]
+    assert place(bend) is None
+    band = place(_record(6, "sparse18", "adc_band", 80.0, axis=2, band_lo_g=0.45))
+    assert band is not None and "too few input levels" in band["why"]

@@ -134,6 +134,37 @@ def _own_log10_p(pb: Any, ax: tuple[int, ...]) -> float | None:
     return round(float(lp / np.log(10)), 1) if k else None
 
 
+def level_columns(a_g: np.ndarray, axis: int) -> np.ndarray:
+    """(N,3,L): a free output on ``axis`` at each of its input levels (:data:`LEVEL_G`
+    apart), any function of that axis's input."""
+    v = np.asarray(a_g, float)
+    lv = np.concatenate([[0], np.cumsum(np.diff(np.sort(v)) > LEVEL_G)])
+    ids = np.empty(v.size, int)
+    ids[np.argsort(v)] = lv
+    out = np.zeros((v.size, 3, int(ids.max()) + 1 if v.size else 0))
+    out[np.arange(v.size), axis, ids] = 1.0
+    return out
+
+
+def _beyond_levels_log10_p(pb: Any, many: tuple[int, ...]) -> float | None:
+    """log10 p of the a², a³ columns on axes ``many`` (each with more than
+    :data:`BEND_FUNCTIONS` input levels) after the base model and any function of each
+    other axis's own input levels (single test), or None (no such axis, or too tall)."""
+    if not many:
+        return None
+    a = pb.ctx.input_g
+    few = [level_columns(a[:, i], i) for i in range(3) if i not in many]
+    cols = own_powers(a)[:, :, [c for i in many for c in (i, 3 + i)]]
+    k0 = pb.X0.shape[1] + sum(f.shape[2] for f in few)
+    if 8 * pb.m * (k0 + cols.shape[2]) > stats.TALL_BYTES:
+        return None
+    U0 = stats.orthonormal_basis(np.hstack([pb.whiten(np.asarray(pb.X0))]
+                                           + [whitened(pb, f) for f in few]))
+    yw = pb.y * pb.w
+    lp, k = log_p(U0, yw - U0 @ (U0.T @ yw), whitened(pb, cols))
+    return float(lp / np.log(10)) if k else None
+
+
 def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
                     alpha: float) -> dict[str, Any] | None:
     """An input dependence the own-axis a², a³ do not describe, or None (issue 22).
@@ -148,7 +179,10 @@ def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
     took only the share of it a parabola can carry. Where the term's axes see at most
     :data:`BEND_FUNCTIONS` input levels (Table-1-like sparse schedules: |a_z| of 0.5 and 1 g
     only), bias, scale, a² and a³ fit *any* function of that input: the bend is then not
-    shown, and the structure is reported where it is, not named. Reference mode only (a direction's
+    shown there, and the structure is reported where it is, not named, unless the axes with
+    more levels show it (their a², a³ after the base and any function of the other axes'
+    levels, :func:`_beyond_levels_log10_p`, at α): the free offset per direction is then
+    tested on those axes. Reference mode only (a direction's
     offset per axis needs the axes). Returns the place (positions, axes, log10 p).
     """
     if pb.mode != "reference":
@@ -157,6 +191,13 @@ def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
     ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
     levels = {a: input_levels(ctx.input_g[:, a]) for a in ax}
     if max(levels.values()) <= BEND_FUNCTIONS:
+        # The term's axes cannot show a bend; axes with more input levels may (issue 22:
+        # a sparse schedule's x and y hold 5). Their a², a³ after any function of the
+        # few-level axes' levels: beyond α, the bend is judged there.
+        many = tuple(a for a in range(3) if input_levels(ctx.input_g[:, a]) > BEND_FUNCTIONS)
+        lp_many = _beyond_levels_log10_p(pb, many)
+        if lp_many is not None and lp_many <= np.log10(alpha):
+            return direction_offsets_needed(pb, U, e, many, alpha, "own-axis a² and a³ terms")
         shown = ", ".join(f"{AXES[a]}: {levels[a]}" for a in ax)
         return {"positions": sorted({int(p) for p in ctx.positions}),
                 "axes": [AXES[a] for a in ax], "log10_p": _own_log10_p(pb, ax),
