@@ -60,7 +60,7 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float,
     :class:`stats.BoundedShared`), as the families' tests do with a declared LSB.
     """
     m = e.size
-    C = _group_loads(U, bounded) if bounded is not None else None
+    C = bounded.group_sums(U) if bounded is not None else None
     # Σ E² per replicate without an (m × B) temporary (E is the largest array here).
     ee, EE = float(e @ e), stats.sum_sq_columns(E)
     F: list[float] = []
@@ -125,34 +125,18 @@ def scan(pb: Any, U: np.ndarray, e: np.ndarray, E: np.ndarray, alpha: float,
     return ScanResult(float(p_family), bool(p_family <= alpha), len(F), places)
 
 
-def _group_loads(U: Any, box: stats.BoundedShared) -> np.ndarray:
-    """(G, p) Σ over each group's entries of loading·U (by row blocks: U may be held as
-    its recipe on a long recording)."""
-    g = np.asarray(box.group)
-    n_g = int(g.max()) + 1 if g.size else 0
-    p = U.shape[1]
-    out = np.zeros((n_g, p))
-    step = max(1, stats.CHUNK_BYTES // (8 * max(p, 1)))
-    for i in range(0, g.size, step):
-        Ui = np.asarray(U[i:i + step]) * box.loading[i:i + step, None]
-        for j in range(p):
-            out[:, j] += np.bincount(g[i:i + step], Ui[:, j], minlength=n_g)
-    return out
-
-
 def _block_reach(box: stats.BoundedShared, C: np.ndarray, S: np.ndarray, XW: np.ndarray,
                  UXW: np.ndarray) -> float:
     """The box's reach on a block's projected orthonormal columns B = (I − UUᵀ)X·W, X
-    nonzero on its support S only: per group Σ_{i∈S∩g} (XW)_i·z_i − (C·UXW)_g (C from
-    :func:`_group_loads`), then as :meth:`stats.BoundedShared.reach`."""
+    nonzero on its support S only: per group Σ_{i∈S∩g} (XW)_i·z_i − (C·UXW)_g (C the
+    box's group sums of U, :meth:`stats.BoundedShared.group_sums`), then
+    :meth:`stats.BoundedShared.bound`."""
     g = np.asarray(box.group)
     n_g = C.shape[0]
     M = -(C @ UXW)
     for j in range(XW.shape[1]):
         M[:, j] += np.bincount(g[S], XW[:, j] * box.loading[S], minlength=n_g)
-    by_group = float(np.sum(np.linalg.norm(M, axis=1)))
-    spectral = float(np.linalg.norm(M, 2)) * np.sqrt(n_g)
-    return box.half * min(by_group, spectral)
+    return box.bound(M)
 
 
 def _score_without_largest(Xs: np.ndarray, Zs: np.ndarray, R: np.ndarray) -> np.ndarray:

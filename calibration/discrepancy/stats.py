@@ -552,20 +552,36 @@ class BoundedShared:
     half: float  # the bound on each group's error, in the loading's units
 
     def reach(self, B: np.ndarray) -> float:
-        """An upper bound of ‖Bᵀ Z δ‖ over the box (Z the groups' loading columns, M = BᵀZ):
-        the smaller of Σ_g ‖m_g‖·half (exact for one column: the worst δ_g is ±half by
-        the sign of bᵀz_g; the triangle inequality for more) and ‖M‖₂·half·√G (the
-        box's corners are half·√G from its centre; tighter where M spreads over several
-        columns)."""
+        """An upper bound of ‖Bᵀ Z δ‖ over the box (Z the groups' loading columns):
+        :meth:`bound` of M = BᵀZ (:meth:`group_sums`)."""
+        if B.shape[1] == 0 or np.asarray(self.group).size == 0:
+            return 0.0
+        return self.bound(self.group_sums(B))
+
+    def group_sums(self, U: Any) -> np.ndarray:
+        """(G, p) Σ over each group's entries of loading·U, i.e. (UᵀZ)ᵀ; by row blocks (U
+        may be held as its recipe on a long recording)."""
         g = np.asarray(self.group)
         n_g = int(g.max()) + 1 if g.size else 0
-        if B.shape[1] == 0 or n_g == 0:
+        p = U.shape[1]
+        out = np.zeros((n_g, p))
+        step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
+        for i in range(0, g.size, step):
+            Ui = np.asarray(U[i:i + step]) * self.loading[i:i + step, None]
+            for j in range(p):
+                out[:, j] += np.bincount(g[i:i + step], Ui[:, j], minlength=n_g)
+        return out
+
+    def bound(self, M: np.ndarray) -> float:
+        """An upper bound of ‖M δ‖ over the box, M (G, k) a set of columns' sums per group:
+        the smaller of Σ_g ‖m_g‖·half (exact for one column: the worst δ_g is ±half by the
+        sign of its sum; the triangle inequality for more) and ‖M‖₂·half·√G (the box's
+        corners are half·√G from its centre; tighter where M spreads over several
+        columns)."""
+        if M.size == 0:
             return 0.0
-        BL = np.asarray(B) * self.loading[:, None]
-        M = np.stack([np.bincount(g, BL[:, j], minlength=n_g) for j in range(B.shape[1])],
-                     axis=1)
         by_group = float(np.sum(np.linalg.norm(M, axis=1)))
-        spectral = float(np.linalg.norm(M, 2)) * np.sqrt(n_g)
+        spectral = float(np.linalg.norm(M, 2)) * np.sqrt(M.shape[0])
         return self.half * min(by_group, spectral)
 
     def shortened(self, B: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -589,8 +605,7 @@ class BoundedShared:
         grp = np.asarray(self.group)
         n_g = int(grp.max()) + 1 if grp.size else 0
         n, g = idx.shape
-        C = np.stack([np.bincount(grp, U[:, j] * self.loading, minlength=n_g)
-                      for j in range(U.shape[1])]) if U.shape[1] else np.zeros((0, n_g))
+        C = self.group_sums(U).T  # (p, G)
         own_g = grp[idx[:, 0]]  # a reading's entries are in one group
         z_own = self.loading[idx]  # (N, g)
         out = np.empty(n)

@@ -51,7 +51,7 @@ def test_a_channel_step_within_whole_degree_codes_rounding_is_not_named():
 
 
 def test_a_scan_block_s_reach_is_the_box_s_reach_of_its_projected_columns():
-    """scan._block_reach (from the block's support and the groups' loads on U) equals the
+    """scan._block_reach (from the block's support and the box's group sums of U) equals the
     box's reach on the block's full projected orthonormal columns."""
     rng = np.random.default_rng(3)
     m, p = 60, 5
@@ -66,5 +66,5 @@ def test_a_scan_block_s_reach_is_the_box_s_reach_of_its_projected_columns():
     X[S] = Xs
     B = (X - U @ (U.T @ X)) @ W
     assert np.allclose(B.T @ B, np.eye(2))
-    got = scan._block_reach(box, scan._group_loads(U, box), S, Xs @ W, UX @ W)
+    got = scan._block_reach(box, box.group_sums(U), S, Xs @ W, UX @ W)
     assert np.isclose(got, box.reach(B))
