@@ -364,8 +364,9 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # The scan, where the LSB is not declared and the channel's codes admit a coarser one
     # than its null draws (every code a whole degree): any rounding at that LSB is taken
     # out of each block's data score (within_rounding.py, issue 22).
-    scan_box = None if lsb_c is not None else within_rounding.coarser_box(
-        pb, channel.q_c if channel is not None else None)
+    admitted = None if lsb_c is not None else within_rounding.admitted(pb)
+    scan_box = within_rounding.coarser_box(admitted, channel.q_c if channel is not None
+                                           else None)
     if scan_box is not None:
         notes.append(f"temperature channel ({ctx.temperature_source}): its codes admit an LSB "
                      f"of {2 * scan_box.half:g} °C, coarser than the null draws, which the "
@@ -539,8 +540,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     terms, findings, after_turn = _shape_after_turn(pb, terms, findings, alpha, notes)
     not_named += after_turn
     if lsb_c is None:  # a declared LSB's box is in every family's test already
-        terms, findings = _within_channel_rounding(pb, terms, findings, alpha_sel, not_ident,
-                                                   notes)
+        terms, findings = _within_channel_rounding(pb, terms, findings, alpha_sel, admitted,
+                                                   not_ident, notes)
     say("localised scan of the final residual")
     scanned = _scan_final(pb, terms, rng, n_null, alpha_scan, known, scan_box)
     if scanned.significant:
@@ -634,7 +635,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # One still_seen for both reports: it builds the final model's basis once, when asked.
     if lsb_c is None and one_step_seen:  # a channel step withheld as one plateau's, too
         kept = _within_channel_rounding_one_step(pb, terms, one_step_seen, alpha_sel,
-                                                 not_ident, notes)
+                                                 admitted, not_ident, notes)
         if len(kept) < len(one_step_seen):
             one_step_seen = kept
             protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
@@ -988,13 +989,14 @@ def _note_not_named(not_named: list[dict[str, Any]], notes: list[str]) -> None:
 
 
 def _within_channel_rounding(pb: LinearProblem, terms: list[Term], findings: list[Finding],
-                             level: float, not_ident: dict[str, dict[str, str]],
+                             level: float, admitted: within_rounding.Admitted | None,
+                             not_ident: dict[str, dict[str, str]],
                              notes: list[str]) -> tuple[list[Term], list[Finding]]:
     """Withdraw a channel finding whose evidence the rounding at the coarsest LSB the
     channel's codes admit can make (within_rounding.py, issue 22), and report it as not
     established with the reason (``not_ident``, ``notes``): the recording cannot separate it
     from the rounding unless it declares the LSB."""
-    found = within_rounding.within(pb, terms, level, _basis)
+    found = within_rounding.within(pb, terms, level, _basis, admitted)
     if not found:
         return terms, findings
     _say_within_rounding(pb, found, not_ident, notes)
@@ -1004,12 +1006,13 @@ def _within_channel_rounding(pb: LinearProblem, terms: list[Term], findings: lis
 
 def _within_channel_rounding_one_step(pb: LinearProblem, terms: list[Term],
                                       records: list[one_step_report.OneStep], level: float,
+                                      admitted: within_rounding.Admitted | None,
                                       not_ident: dict[str, dict[str, str]], notes: list[str]
                                       ) -> list[one_step_report.OneStep]:
     """The one-plateau records (one_step.py) kept: a channel step withheld as one plateau's
     whose evidence the admitted rounding can make is reported as that, not as a one-plateau
     change (:func:`_within_channel_rounding`)."""
-    found = within_rounding.within(pb, terms, level, _basis, one_step=records)
+    found = within_rounding.within(pb, terms, level, _basis, admitted, one_step=records)
     if not found:
         return records
     _say_within_rounding(pb, found, not_ident, notes)

@@ -54,29 +54,48 @@ class WithinRounding:
     sd: float | None
 
 
+@dataclass(frozen=True)
+class Admitted:
+    """The coarsest LSB a channel's codes admit and its rounding box (:func:`admitted`)."""
+
+    q_c: float
+    box: stats.BoundedShared
+
+
+def admitted(pb: Any) -> Admitted | None:
+    """The coarsest LSB the channel's codes admit (plateau_noise.admitted_lsb_c) and the box
+    of any rounding within ±Q/2 per plateau and value through the base model
+    (plateau_noise.rounding_box), read once per diagnosis; None where the recording has no
+    temperature, the channel admits no LSB (dithered or continuous) or the base has no
+    temperature dependence."""
+    ctx = pb.ctx
+    if ctx.temperature_source == "none":
+        return None
+    q = admitted_lsb_c(ctx.temp_c, ctx.steps)
+    box = rounding_box(pb, q) if q is not None else None
+    return None if box is None else Admitted(q, box)
+
+
 def within(pb: Any, terms: list, level: float,
            basis: Callable[..., tuple[np.ndarray, np.ndarray]],
-           one_step: list | None = None) -> list[WithinRounding]:
+           admitted_q: Admitted | None, one_step: list | None = None) -> list[WithinRounding]:
     """The channel terms of ``terms`` (:data:`CHANNEL_EFFECTS`) whose evidence does not go
     beyond the rounding the channel's codes admit, at ``level``, each judged against the
     rest of the model; with ``one_step`` (one_step.OneStep records), those records instead,
     each judged against all of ``terms`` (a channel step withheld as one plateau's is the
     same structure, reported). ``basis(pb, terms)``: the orthonormal basis of the whitened
-    design and the whitened data (diagnose._basis). Empty where no such term stands or the
-    channel admits no LSB (a dithered or continuous channel)."""
+    design and the whitened data (diagnose._basis); ``admitted_q``: :func:`admitted`. Empty
+    where no such term stands or the channel admits no LSB (a dithered or continuous
+    channel)."""
     if one_step is None:
         cands = [(t.effect_id, t.key, t.X, [u for u in terms if u is not t])
                  for t in terms if t.effect_id in CHANNEL_EFFECTS and not t.rows]
     else:
         cands = [(r.effect_id, r, r.X, terms) for r in one_step
                  if r.effect_id in CHANNEL_EFFECTS]
-    ctx = pb.ctx
-    if not cands or ctx.temperature_source == "none":
+    if not cands or admitted_q is None:
         return []
-    q = admitted_lsb_c(ctx.temp_c, ctx.steps)
-    box = rounding_box(pb, q) if q is not None else None
-    if box is None:
-        return []
+    q, box = admitted_q.q_c, admitted_q.box
     out: list[WithinRounding] = []
     for eid, key, X, others in cands:
         U, yw = basis(pb, others)
@@ -106,19 +125,18 @@ def within(pb: Any, terms: list, level: float,
     return out
 
 
-def coarser_box(pb: Any, shown_q_c: float | None) -> stats.BoundedShared | None:
-    """The rounding box at the coarsest LSB the channel's codes admit, where that is coarser
-    than the q the null already draws (``shown_q_c``: a grid's, or the held codes' written
-    resolution; None: none drawn), for the scan's blocks (scan.scan(bounded=...)); None
-    where it is not (or the channel admits no LSB). The caller takes it only where the LSB
-    is not declared (a declared LSB is q itself)."""
-    ctx = pb.ctx
-    if ctx.temperature_source == "none":
+def coarser_box(admitted_q: Admitted | None, shown_q_c: float | None
+                ) -> stats.BoundedShared | None:
+    """The rounding box at the coarsest LSB the channel's codes admit (``admitted_q``:
+    :func:`admitted`), where that is coarser than the q the null already draws
+    (``shown_q_c``: a grid's, or the held codes' written resolution; None: none drawn), for
+    the scan's blocks (scan.scan(bounded=...)); None where it is not (or the channel admits
+    no LSB). The caller takes it only where the LSB is not declared (a declared LSB is q
+    itself)."""
+    if admitted_q is None or (shown_q_c is not None
+                              and admitted_q.q_c <= shown_q_c * (1.0 + 1e-6)):
         return None
-    q = admitted_lsb_c(ctx.temp_c, ctx.steps)
-    if q is None or (shown_q_c is not None and q <= shown_q_c * (1.0 + 1e-6)):
-        return None
-    return rounding_box(pb, q)
+    return admitted_q.box
 
 
 def why(w: WithinRounding, source: str, lsb_column: str) -> str:
