@@ -106,17 +106,28 @@ class Recorder:
         return out
 
 
+def _shares(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, int, int] | None:
+    """The readings' shares G and the score s of ``Xw``'s orthonormal basis after U
+    (structure.reading_shares), its dof k and the readings n; None where k = 0 or n ≤ k + 1."""
+    Z = stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6)
+    k = Z.shape[1]
+    n = int(np.unique(pb.row).size)
+    if k == 0 or n <= k + 1:
+        return None
+    G, s = structure.reading_shares(pb, U, e, Z)
+    return G, s, k, n
+
+
 def by_reading_f(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray, beta: bool = True
                  ) -> tuple[float, int]:
     """``log_p_by_reading``'s Q = sᵀV⁻¹s judged as F = (Q/k) / ((n − Q)/(n − k)), n the
     readings: under sign flips Q = εᵀPε with εᵀε = n (P the projection on the readings'
     score shares), whose Gaussian analogue is that F."""
-    Z = stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6)
-    k = Z.shape[1]
-    n = int(np.unique(pb.row).size)
-    if k == 0 or n <= k + 1:
+    shares = _shares(pb, U, e, Xw)
+    if shares is None:
         return 0.0, 0
-    G, s = structure.reading_shares(pb, U, e, Z)
+    G, s, k, n = shares
     q = float(s @ np.linalg.lstsq(G.T @ G, s, rcond=None)[0])
     f = (q / k) / max((n - q) / (n - k), 1e-300) if beta else q / k
     return float(stats.f_logsf(f, k, n - k)), k
@@ -127,12 +138,10 @@ def by_sign_flips(pb: Any, U: Any, e: np.ndarray, Xw: np.ndarray, n_flip: int = 
     """``log_p_by_reading``'s Q = sᵀV⁻¹s (Z an orthonormal basis of the columns after U)
     against its own sign-flip law, one sign per reading: Q_b = ‖VỠ½ Gᵀε_b‖² (G the
     readings' shares of Zᵀẽ), p = (1 + #{Q_b ≥ Q}) / (B + 1)."""
-    Z = stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6)
-    k = Z.shape[1]
-    n = int(np.unique(pb.row).size)
-    if k == 0 or n <= k + 1:
+    shares = _shares(pb, U, e, Xw)
+    if shares is None:
         return 0.0, 0
-    G, s = structure.reading_shares(pb, U, e, Z)
+    G, s, k, n = shares
     G = G[np.any(G != 0, axis=1)]
     Qg = stats.orthonormal_basis(G, 1e-9)  # P = G V⁻¹ Gᵀ = Qg Qgᵀ
     q = float(s @ np.linalg.lstsq(G.T @ G, s, rcond=None)[0])
