@@ -1575,7 +1575,7 @@ def _stated(pb: LinearProblem, eff: CatalogueEffect, term: Term, coef: np.ndarra
 
 
 def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a,
-             fitted=None, *, alpha: float) -> Finding:
+             fitted=None, *, alpha: float = ALPHA) -> Finding:
     coef, se = _term_coefficients(pb, terms, term, fitted)
     contrib = term.X @ coef
     params, sd, axes, text = _stated(pb, eff, term, coef, se, alpha)
@@ -1594,10 +1594,11 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
     )
 
 
-def _restated(pb: LinearProblem, terms: list[Term], findings: list[Finding], alpha: float
-              ) -> list[Finding]:
+def _restated(pb: LinearProblem, terms: list[Term], findings: list[Finding],
+              alpha: float = ALPHA) -> list[Finding]:
     """The named findings' parameters, axes and sentences in the model of ``terms`` (one
-    fit of it); any other finding, or one whose term is not there, as it is."""
+    fit of it; ``alpha``: the physics checks' level, :func:`_stated`); any other finding,
+    or one whose term is not there, as it is."""
     fitted: tuple[np.ndarray, np.ndarray] | None = None
     out = []
     for f in findings:
