@@ -508,7 +508,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         res_after = _residual(pb, terms)
         findings.append(_finding(pb, eff, best, term, terms, tests, p_family,
                                  _rms(res_before, excl_before), _rms(res_after, excl_after),
-                                 ho_before, ho_after, fitted))
+                                 ho_before, ho_after, fitted, alpha=alpha))
         if close:
             unresolved[eff.effect_id] = close
         elif by_fit.rivals(best, tests, alpha):
@@ -576,7 +576,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # withdrawn since (a turn of the table beside a bend, say) may have shared its columns,
     # and the stale coefficients then cancel across the two (K3 = −3·10⁵ µg/g³ "± 49").
     # The named findings are stated in the model that is kept.
-    findings = _restated(pb, terms, findings)
+    findings = _restated(pb, terms, findings, alpha)
     # What the protocol separates: the effects still testable after the absorbed fractions.
     protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                        for e in effects})
@@ -1559,22 +1559,26 @@ def _term_coefficients(pb: LinearProblem, terms: list[Term], term: Term,
 
 
 def _stated(pb: LinearProblem, eff: CatalogueEffect, term: Term, coef: np.ndarray,
-            se: np.ndarray) -> tuple[dict[str, float], dict[str, float], list[str]]:
-    """What a finding states of its term's fit: parameters, their sd, the axes."""
+            se: np.ndarray, alpha: float
+            ) -> tuple[dict[str, float], dict[str, float], list[str], str]:
+    """What a finding states of its term's fit: parameters, their sd, the axes and the
+    sentence. The one place of them (issue 22): the axes are those the effect is judged on
+    (``CatalogueEffect.stated_axes``, the level ``alpha`` of its physics check), which the
+    sentence names and the physics checks then read from the finding."""
     params, sd = eff.parameters(coef, se, term.theta, pb.ctx)
     if eff.continuous and eff.theta_name:
         sd[eff.theta_name] = term.theta_sd
-    axes = eff.axes(coef, se)
+    axes, clause = eff.stated_axes(pb, coef, se, alpha)
     if pb.mode == "norm" and eff.per_reading:
         axes = ["norm"]  # a |g| residual has no axis
-    return params, sd, axes
+    return params, sd, axes, _sentence(eff, params, sd, axes, pb.ctx, clause)
 
 
 def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho_a,
-             fitted=None) -> Finding:
+             fitted=None, *, alpha: float = ALPHA) -> Finding:
     coef, se = _term_coefficients(pb, terms, term, fitted)
     contrib = term.X @ coef
-    params, sd, axes = _stated(pb, eff, term, coef, se)
+    params, sd, axes, text = _stated(pb, eff, term, coef, se, alpha)
     conf = []
     for c in eff.confusers:
         if c in tests:
@@ -1582,7 +1586,7 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
                          "p_after": None, "how_told_apart": how_told_apart(eff, BY_ID[c])})
     return Finding(
         effect=eff.effect_id, axes=axes, where=where_of(pb, contrib, term.rows),
-        explanation=_sentence(eff, params, sd, axes, pb.ctx), parameters=_round(params),
+        explanation=text, parameters=_round(params),
         parameter_sd=_round(sd), rmse_before_ug=rms_b, rmse_after_ug=rms_a,
         heldout_rmse_before_ug=ho_b, heldout_rmse_after_ug=ho_a, p_value=p_family,
         test=eff.test_name(), confusers=conf, theta=term.theta, rows=list(term.rows),
@@ -1590,10 +1594,11 @@ def _finding(pb, eff, test, term, terms, tests, p_family, rms_b, rms_a, ho_b, ho
     )
 
 
-def _restated(pb: LinearProblem, terms: list[Term], findings: list[Finding]
-              ) -> list[Finding]:
+def _restated(pb: LinearProblem, terms: list[Term], findings: list[Finding],
+              alpha: float = ALPHA) -> list[Finding]:
     """The named findings' parameters, axes and sentences in the model of ``terms`` (one
-    fit of it); any other finding, or one whose term is not there, as it is."""
+    fit of it; ``alpha``: the physics checks' level, :func:`_stated`); any other finding,
+    or one whose term is not there, as it is."""
     fitted: tuple[np.ndarray, np.ndarray] | None = None
     out = []
     for f in findings:
@@ -1606,14 +1611,16 @@ def _restated(pb: LinearProblem, terms: list[Term], findings: list[Finding]
             fitted = _fit(pb, terms)[:2]
         eff = BY_ID[f.effect]
         coef, se = _term_coefficients(pb, terms, term, fitted)
-        params, sd, axes = _stated(pb, eff, term, coef, se)
+        params, sd, axes, text = _stated(pb, eff, term, coef, se, alpha)
         out.append(replace(f, axes=axes, parameters=_round(params), parameter_sd=_round(sd),
-                           explanation=_sentence(eff, params, sd, axes, pb.ctx)))
+                           explanation=text))
     return out
 
 
-def _sentence(eff: CatalogueEffect, params, sd, axes, ctx) -> str:
+def _sentence(eff: CatalogueEffect, params, sd, axes, ctx, clause: str = "") -> str:
     text = eff.sentence(params, sd, [a for a in axes if a in AXES] or list(AXES), ctx)
+    if clause:
+        text = text.rstrip(".") + "; " + clause
     return text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")
 
 

@@ -43,6 +43,11 @@ def _pools() -> NoisePools:
 
 def _record(seed: int, schedule: str, eid: str | None, m: float, irregular: bool = False,
             **pat) -> Recording:
+    return Recording.from_columns(_columns(seed, schedule, eid, m, irregular, **pat))
+
+
+def _columns(seed: int, schedule: str, eid: str | None, m: float, irregular: bool = False,
+             **pat) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(500 + seed)
     pr = protocol.draw_protocol(rng, kind="oneway", schedule=schedule, columns=("sensor_c",),
                                 soak_min=20.0)
@@ -52,7 +57,7 @@ def _record(seed: int, schedule: str, eid: str | None, m: float, irregular: bool
                                                  for t in pr.setpoints_c)})
     sensor = draw_sensor(rng)
     p = {**fx.pattern(rng, len(pr.setpoints_c), 10), **pat}
-    return Recording.from_columns(sim.record(pr, sensor, _pools(), eid, m, p, seed))
+    return sim.record(pr, sensor, _pools(), eid, m, p, seed)
 
 
 def test_heldout_errors_count_by_their_noise():
@@ -167,3 +172,39 @@ def test_a_bend_is_judged_on_the_axes_with_enough_input_levels():
     assert place(bend) is None
     band = place(_record(6, "sparse18", "adc_band", 80.0, axis=2, band_lo_g=0.45))
     assert band is not None and "too few input levels" in band["why"]
+
+
+def _stated_bend(rec: Recording):
+    """The recording's one finding, a named ``scale_nonlinearity``, and its z coefficients
+    as the sentence would state them."""
+    from calibration.discrepancy.effects.base import fmt_pm
+
+    (f,) = diagnose(rec, seed=0, n_null=100).findings
+    assert f.effect == "scale_nonlinearity"
+    p, sd = f.parameters, f.parameter_sd
+    z = [fmt_pm(p[k], sd[k], u) for k, u in (("k2_z_ug_per_g2", "µg/g²"),
+                                              ("k3_z_ug_per_g3", "µg/g³"))]
+    return f, z
+
+
+def test_the_finding_names_the_axes_the_bend_was_judged_on():
+    """sparse18 (z: 4 input levels, x and y: 5). A bend the term resolved on z only, shown
+    by x's and y's a², a³ after any function of z's levels (issue 22, seed 2 case 0026),
+    is named on x and y with their coefficients, and z is said to hold too few levels: not
+    "Z output grows with the square of its input" (which any function of 4 levels fits).
+    A band of codes on z beside a bend on x and y: z's coefficient (the band's) is not
+    stated as the bend."""
+    bend = _record(15, "sparse18", "scale_nonlinearity", 12.0, irregular=True,
+                   axes=[0.6, -0.6, 1.0])
+    assert [input_levels(bend.ref_g[:, a]) for a in range(3)] == [5, 5, 4]
+    cols = _columns(15, "sparse18", "adc_band", 40.0, irregular=True, axis=2, band_lo_g=0.45)
+    for a, k2, k3 in (("x", 10.0, 20.0), ("y", -10.0, -20.0)):  # µg/g², µg/g³; none on z
+        r = cols[f"ref_{a}"]
+        cols[f"a{a}"] = cols[f"a{a}"] + (k2 * r**2 + k3 * r**3) * 1e-6
+    for rec in (bend, Recording.from_columns(cols)):
+        f, z = _stated_bend(rec)
+        assert f.axes == ["x", "y"] and f.to_json()["axes"] == ["x", "y"]
+        text = f.explanation
+        assert text.startswith("X output") and "; y output" in text and "z output" not in text
+        assert "z, where the term's coefficients are resolved, holds too few input levels" in text
+        assert not any(s in text for s in z)

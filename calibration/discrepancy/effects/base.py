@@ -180,6 +180,17 @@ class CatalogueEffect:
             return hit or [AXES[int(np.argmax(np.max(z, axis=0)))]]
         return list(AXES)
 
+    def stated_axes(self, pb: Any, coef: np.ndarray, se: np.ndarray,
+                    alpha: float) -> tuple[list[str], str]:
+        """The axes a finding names, and a clause its sentence adds about them ("" none).
+
+        Default: the axes its coefficients resolve (:meth:`axes`). An effect whose physics
+        check judges it on other axes than those (``scale_nonlinearity``: a bend where the
+        resolved axes hold too few input levels, issue 22) names the axes it was judged on
+        and says why, so the finding states what the data showed.
+        """
+        return self.axes(coef, se), ""
+
     def sentence(self, params: dict[str, float], sd: dict[str, float], axes: list[str],
                  ctx: DesignContext | None = None) -> str:
         """One plain sentence; ``ctx`` lets it say only what this recording can show."""

@@ -92,6 +92,16 @@ class ScaleNonlinearity(CatalogueEffect):
         hit = [AXES[a] for a in range(3) if np.max(z[:, a]) >= 3.0]
         return hit or list(AXES)  # jointly significant, no axis resolved
 
+    def stated_axes(self, pb, coef, se, alpha):
+        """The axes the bend is judged on (:func:`bend_axes`), and what the finding says of
+        the term's own axes when those hold too few input levels to show it (issue 22: a
+        bend shown on x and y was stated as z's K2, which a band of codes on z makes too)."""
+        resolved = self.axes(coef, se)
+        b = bend_axes(pb, resolved, alpha)
+        if not b.moved:
+            return resolved, ""
+        return [AXES[a] for a in b.axes], moved_clause(b)
+
     def sentence(self, params, sd, axes, ctx=None):
         z = {k: abs(v) / max(sd.get(k, 0.0), 1e-12) for k, v in params.items()}
         if max(z.values()) < 3.0:  # jointly significant, no single coefficient resolved
@@ -100,17 +110,23 @@ class ScaleNonlinearity(CatalogueEffect):
             return ("the outputs bend with their input (second/third-order terms, significant "
                     "together but not resolved coefficient by coefficient; largest "
                     f"{top} = {fmt_pm(params[top], sd[top], unit)})")
-        parts = []
-        for ax in axes:
-            k2, s2 = params[f"k2_{ax}_ug_per_g2"], sd[f"k2_{ax}_ug_per_g2"]
-            k3, s3 = params[f"k3_{ax}_ug_per_g3"], sd[f"k3_{ax}_ug_per_g3"]
-            if abs(k2) / max(s2, 1e-12) >= abs(k3) / max(s3, 1e-12):
-                parts.append(f"{ax} output grows with the square of its input: "
-                             f"K2 = {fmt_pm(k2, s2, 'µg/g²')}")
-            else:
-                parts.append(f"{ax} output grows with the cube of its input: "
-                             f"K3 = {fmt_pm(k3, s3, 'µg/g³')}")
-        return "; ".join(parts)
+        return "; ".join(_axis_part(ax, params, sd) for ax in axes)
+
+
+def _axis_part(ax: str, params: Mapping[str, float], sd: Mapping[str, float]) -> str:
+    """One axis's bend in words: its resolved coefficient (the larger in sd), or both when
+    neither is resolved alone (an axis the bend is judged on by its a², a³ together,
+    :meth:`ScaleNonlinearity.stated_axes`; issue 22)."""
+    k2, s2 = params[f"k2_{ax}_ug_per_g2"], sd[f"k2_{ax}_ug_per_g2"]
+    k3, s3 = params[f"k3_{ax}_ug_per_g3"], sd[f"k3_{ax}_ug_per_g3"]
+    z2, z3 = abs(k2) / max(s2, 1e-12), abs(k3) / max(s3, 1e-12)
+    if max(z2, z3) < 3.0:
+        return (f"{ax} output bends with its input (its a² and a³ terms together, neither "
+                f"resolved alone): K2 = {fmt_pm(k2, s2, 'µg/g²')}, "
+                f"K3 = {fmt_pm(k3, s3, 'µg/g³')}")
+    if z2 >= z3:
+        return f"{ax} output grows with the square of its input: K2 = {fmt_pm(k2, s2, 'µg/g²')}"
+    return f"{ax} output grows with the cube of its input: K3 = {fmt_pm(k3, s3, 'µg/g³')}"
 
 
 BEND_FUNCTIONS = 4  # 1, a, a², a³: the base's bias and scale and the bend's two terms
@@ -165,42 +181,102 @@ def _beyond_levels_log10_p(pb: Any, many: tuple[int, ...]) -> float | None:
     return float(lp / np.log(10)) if k else None
 
 
+@dataclass(frozen=True)
+class BendAxes:
+    """Where a recording judges a bend of the a², a³ term (issue 22; :func:`bend_axes`).
+
+    ``axes``: the axes the bend is judged on (indices). ``few``: the term's axes and their
+    input levels when none holds more than :data:`BEND_FUNCTIONS` (they cannot show a
+    bend); empty in the ordinary case. ``log10_p``: the test that showed the bend on the
+    axes with more levels instead (:func:`_beyond_levels_log10_p`), or None.
+    """
+
+    axes: tuple[int, ...]
+    few: dict[int, int]
+    log10_p: float | None = None
+
+    @property
+    def moved(self) -> bool:
+        """Judged on other axes than the term's own, which hold too few input levels."""
+        return bool(self.few) and self.log10_p is not None
+
+    @property
+    def withheld(self) -> bool:
+        """Too few levels on the term's axes and no other axis shows the bend."""
+        return bool(self.few) and self.log10_p is None
+
+
+def bend_axes(pb: Any, axes: list[str], alpha: float) -> BendAxes:
+    """The axes on which this recording judges a bend of the term resolved on ``axes``.
+
+    The one place of that choice (issue 22): :func:`bends_otherwise` tests the bend there,
+    and the finding names them (:meth:`ScaleNonlinearity.stated_axes`), so a bend shown on
+    x and y is not reported as z's coefficients. Ordinarily the term's own axes. Where they
+    hold at most :data:`BEND_FUNCTIONS` input levels (Table-1-like sparse schedules: |a_z|
+    of 0.5 and 1 g only), bias, scale, a² and a³ fit *any* function of that input and
+    cannot show a bend; the axes with more levels may (a sparse schedule's x and y hold 5):
+    their a², a³ after the base and any function of the other axes' levels, at α. Reference
+    mode only (a bend per axis needs the axes); otherwise the term's axes.
+    """
+    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
+    if pb.mode != "reference":
+        return BendAxes(ax, {})
+    a_g = pb.ctx.input_g
+    levels = {a: input_levels(a_g[:, a]) for a in ax}
+    if max(levels.values()) > BEND_FUNCTIONS:
+        return BendAxes(ax, {})
+    many = tuple(a for a in range(3) if input_levels(a_g[:, a]) > BEND_FUNCTIONS)
+    lp = _beyond_levels_log10_p(pb, many)
+    if lp is not None and lp <= np.log10(alpha):
+        return BendAxes(many, levels, round(lp, 1))
+    return BendAxes(ax, levels)
+
+
+def _names(ax: Any) -> str:
+    """Axis indices as words: "z", "x and y"."""
+    n = [AXES[a] for a in ax]
+    return n[0] if len(n) == 1 else ", ".join(n[:-1]) + " and " + n[-1]
+
+
+def moved_clause(b: BendAxes) -> str:
+    """What a finding judged on other axes than its term's says of both (issue 22)."""
+    others = tuple(a for a in range(3) if a not in b.axes)
+    few = tuple(b.few)
+    shown = ", ".join(f"{AXES[a]}: {n}" for a, n in b.few.items())
+    return (f"shown on {_names(b.axes)} (their a² and a³ after any function of "
+            f"{_names(others)}'s input levels: log10 p = {b.log10_p}); {_names(few)}, where "
+            f"the term's coefficients are resolved, {'holds' if len(few) == 1 else 'hold'} "
+            f"too few input levels to resolve a bend ({shown}; bias, scale, a² and a³ fit "
+            f"any function of up to {BEND_FUNCTIONS} levels): "
+            f"{'its' if len(few) == 1 else 'their'} coefficients fit those levels whatever "
+            "their cause (a bend, or a converter error confined to a band of codes) and are "
+            "not stated as a bend")
+
+
 def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
                     alpha: float) -> dict[str, Any] | None:
     """An input dependence the own-axis a², a³ do not describe, or None (issue 22).
 
     ``U``, ``e``: the model with the nonlinearity. A free offset per reference direction on
-    the term's axes, the same at every plateau, is tested after the model and a turn of the
-    reference (``turntable_geometry.turn_columns``, whose own confusion with a bend is judged
-    apart). A smooth bend of the output with its input leaves nothing there but noise (the
-    test rejects with probability α); a converter error confined to a band of codes (an
-    offset at the directions whose input falls in the band, none at those on either side)
-    or any other non-polynomial function of the direction does, and the a², a³ term then
-    took only the share of it a parabola can carry. Where the term's axes see at most
-    :data:`BEND_FUNCTIONS` input levels (Table-1-like sparse schedules: |a_z| of 0.5 and 1 g
-    only), bias, scale, a² and a³ fit *any* function of that input: the bend is then not
-    shown there, and the structure is reported where it is, not named, unless the axes with
-    more levels show it (their a², a³ after the base and any function of the other axes'
-    levels, :func:`_beyond_levels_log10_p`, at α): the free offset per direction is then
-    tested on those axes. Reference mode only (a direction's
-    offset per axis needs the axes). Returns the place (positions, axes, log10 p).
+    the axes the bend is judged on (:func:`bend_axes`: ordinarily the term's), the same at
+    every plateau, is tested after the model and a turn of the reference
+    (``turntable_geometry.turn_columns``, whose own confusion with a bend is judged apart).
+    A smooth bend of the output with its input leaves nothing there but noise (the test
+    rejects with probability α); a converter error confined to a band of codes (an offset
+    at the directions whose input falls in the band, none at those on either side) or any
+    other non-polynomial function of the direction does, and the a², a³ term then took only
+    the share of it a parabola can carry. Where the term's axes see too few input levels and
+    no other axis shows the bend, the structure is reported where it is, not named.
+    Reference mode only (a direction's offset per axis needs the axes). Returns the place
+    (positions, axes, log10 p).
     """
     if pb.mode != "reference":
         return None
-    ctx = pb.ctx
-    ax = tuple(AXES.index(a) for a in axes if a in AXES) or (0, 1, 2)
-    levels = {a: input_levels(ctx.input_g[:, a]) for a in ax}
-    if max(levels.values()) <= BEND_FUNCTIONS:
-        # The term's axes cannot show a bend; axes with more input levels may (issue 22:
-        # a sparse schedule's x and y hold 5). Their a², a³ after any function of the
-        # few-level axes' levels: beyond α, the bend is judged there.
-        many = tuple(a for a in range(3) if input_levels(ctx.input_g[:, a]) > BEND_FUNCTIONS)
-        lp_many = _beyond_levels_log10_p(pb, many)
-        if lp_many is not None and lp_many <= np.log10(alpha):
-            return direction_offsets_needed(pb, U, e, many, alpha, "own-axis a² and a³ terms")
-        shown = ", ".join(f"{AXES[a]}: {levels[a]}" for a in ax)
-        return {"positions": sorted({int(p) for p in ctx.positions}),
-                "axes": [AXES[a] for a in ax], "log10_p": _own_log10_p(pb, ax),
+    b = bend_axes(pb, axes, alpha)
+    if b.withheld:
+        shown = ", ".join(f"{AXES[a]}: {n}" for a, n in b.few.items())
+        return {"positions": sorted({int(p) for p in pb.ctx.positions}),
+                "axes": [AXES[a] for a in b.axes], "log10_p": _own_log10_p(pb, b.axes),
                 "why": (f"the structure is a function of each axis's own input, but the "
                         f"protocol holds too few input levels on the term's axes ({shown}; "
                         f"bias, scale, a² and a³ fit any function of up to {BEND_FUNCTIONS} "
@@ -208,7 +284,7 @@ def bends_otherwise(pb: Any, U: np.ndarray, e: np.ndarray, axes: list[str],
                         "bend cannot be told from any other input dependence there, e.g. a "
                         "converter error confined to a band of codes (positions with more "
                         "input levels on those axes, such as oblique ones, tell them apart)")}
-    return direction_offsets_needed(pb, U, e, ax, alpha, "own-axis a² and a³ terms")
+    return direction_offsets_needed(pb, U, e, b.axes, alpha, "own-axis a² and a³ terms")
 
 
 def direction_offsets_needed(pb: Any, U: np.ndarray, e: np.ndarray, ax: tuple[int, ...],
