@@ -208,3 +208,19 @@ def test_the_finding_names_the_axes_the_bend_was_judged_on():
         assert text.startswith("X output") and "; y output" in text and "z output" not in text
         assert "z, where the term's coefficients are resolved, holds too few input levels" in text
         assert not any(s in text for s in z)
+
+
+def test_an_axis_with_too_few_levels_beside_one_with_enough_is_not_stated_as_a_bend():
+    """sparse18, a band of codes on z (4 input levels) beside a bend on x and y: the term
+    resolves y and z, and z's coefficients fit the band whatever it is. The bend is judged
+    on the axes with enough levels after any function of z's, and the finding states
+    those, not z's K2 (issue 22: before, named on y and z with the band's coefficient)."""
+    cols = _columns(15, "sparse18", "adc_band", 30.0, irregular=True, axis=2, band_lo_g=0.45)
+    for a, k2, k3 in (("x", 10.0, 20.0), ("y", -10.0, -20.0)):  # µg/g², µg/g³; none on z
+        r = cols[f"ref_{a}"]
+        cols[f"a{a}"] = cols[f"a{a}"] + (k2 * r**2 + k3 * r**3) * 1e-6
+    f, z = _stated_bend(Recording.from_columns(cols))
+    assert f.axes == ["x", "y"]
+    assert "z output" not in f.explanation and not any(s in f.explanation for s in z)
+    assert "z, where the term's coefficients are resolved, holds too few input levels" in (
+        f.explanation)

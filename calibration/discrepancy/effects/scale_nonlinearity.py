@@ -185,9 +185,9 @@ def _beyond_levels_log10_p(pb: Any, many: tuple[int, ...]) -> float | None:
 class BendAxes:
     """Where a recording judges a bend of the a², a³ term (issue 22; :func:`bend_axes`).
 
-    ``axes``: the axes the bend is judged on (indices). ``few``: the term's axes and their
-    input levels when none holds more than :data:`BEND_FUNCTIONS` (they cannot show a
-    bend); empty in the ordinary case. ``log10_p``: the test that showed the bend on the
+    ``axes``: the axes the bend is judged on (indices). ``few``: those of the term's axes
+    that hold at most :data:`BEND_FUNCTIONS` input levels, with their levels (they cannot
+    show a bend); empty in the ordinary case. ``log10_p``: the test that showed the bend on the
     axes with more levels instead (:func:`_beyond_levels_log10_p`), or None.
     """
 
@@ -197,12 +197,12 @@ class BendAxes:
 
     @property
     def moved(self) -> bool:
-        """Judged on other axes than the term's own, which hold too few input levels."""
+        """Judged on the axes with more input levels than some of the term's own hold."""
         return bool(self.few) and self.log10_p is not None
 
     @property
     def withheld(self) -> bool:
-        """Too few levels on the term's axes and no other axis shows the bend."""
+        """Too few levels on some of the term's axes and no axis with more shows the bend."""
         return bool(self.few) and self.log10_p is None
 
 
@@ -211,8 +211,8 @@ def bend_axes(pb: Any, axes: list[str], alpha: float) -> BendAxes:
 
     The one place of that choice (issue 22): :func:`bends_otherwise` tests the bend there,
     and the finding names them (:meth:`ScaleNonlinearity.stated_axes`), so a bend shown on
-    x and y is not reported as z's coefficients. Ordinarily the term's own axes. Where they
-    hold at most :data:`BEND_FUNCTIONS` input levels (Table-1-like sparse schedules: |a_z|
+    x and y is not reported as z's coefficients. Ordinarily the term's own axes. Where any of
+    them holds at most :data:`BEND_FUNCTIONS` input levels (Table-1-like sparse schedules: |a_z|
     of 0.5 and 1 g only), bias, scale, a² and a³ fit *any* function of that input and
     cannot show a bend; the axes with more levels may (a sparse schedule's x and y hold 5):
     their a², a³ after the base and any function of the other axes' levels, at α. Reference
@@ -222,14 +222,17 @@ def bend_axes(pb: Any, axes: list[str], alpha: float) -> BendAxes:
     if pb.mode != "reference":
         return BendAxes(ax, {})
     a_g = pb.ctx.input_g
-    levels = {a: input_levels(a_g[:, a]) for a in ax}
-    if max(levels.values()) > BEND_FUNCTIONS:
+    few = {a: n for a in ax if (n := input_levels(a_g[:, a])) <= BEND_FUNCTIONS}
+    if not few:
         return BendAxes(ax, {})
+    # Any of the term's axes with too few levels (all of them, or z beside y: its
+    # coefficients would be stated as a bend whatever made them): judged on the axes with
+    # more levels after any function of the others', as where all are few.
     many = tuple(a for a in range(3) if input_levels(a_g[:, a]) > BEND_FUNCTIONS)
     lp = _beyond_levels_log10_p(pb, many)
     if lp is not None and lp <= np.log10(alpha):
-        return BendAxes(many, levels, round(lp, 1))
-    return BendAxes(ax, levels)
+        return BendAxes(many, few, round(lp, 1))
+    return BendAxes(ax, few)
 
 
 def _names(ax: Any) -> str:
