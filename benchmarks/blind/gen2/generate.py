@@ -4,6 +4,7 @@
                                              [--nulls N] [--seed S]
                                              [--outside-set default|unseen]
                                              [--temperature-channel dithered|clean|clean-declared]
+                                             [--poses]
 
 Writes ``OUT/cases/NNNN.csv`` (and ``OUT/given/NNNN.csv`` for twin-against-recording
 pairs: the recording a model is calibrated on) and, apart, ``OUT/keys/NNNN.json``. Nothing
@@ -32,6 +33,8 @@ the readings of a settled plateau share one rounding error, uniform in ±LSB/2. 
 otherwise (the default cases with only that channel's noise changed).
 ``--temperature-channel clean-declared``: the same cases, each recording declaring its
 sensor_c LSB in the optional ``sensor_lsb_c`` column (calibration/temperature_lsb.py).
+``--poses``: every recording also gives the table's commanded pose of each reading
+(``pose_qw`` … ``pose_qz``), as soakcal's engine writes it; the same draws otherwise.
 """
 
 from __future__ import annotations
@@ -44,9 +47,11 @@ from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from benchmarks.blind.gen2 import detect
 from benchmarks.blind.gen2 import effects as fx
+from benchmarks.blind.gen2 import protocol as pr
 from benchmarks.blind.gen2 import simulate as sim
 from benchmarks.blind.gen2 import unseen_effects as ux
 from benchmarks.blind.gen2.protocol import KINDS, draw_protocol
@@ -73,7 +78,7 @@ def _need(eid: str) -> dict:
 
 def plan(quick: bool, reps: int, n_null: int, seed0: int,
          protocols: str = "default", outside_set: str = "default",
-         temperature_channel: str = "dithered") -> list[dict]:
+         temperature_channel: str = "dithered", poses: bool = False) -> list[dict]:
     """The cases. ``protocols="unseen"`` draws every protocol from the unseen family
     (unseen.py; nulls cycle through its variants); ``outside_set="unseen"`` plans the
     outside effects of unseen_effects.py instead of ``adc_band`` and ``crack``. The default
@@ -82,6 +87,8 @@ def plan(quick: bool, reps: int, n_null: int, seed0: int,
     extra = {} if protocols == "default" else {"family": protocols}
     if temperature_channel != "dithered":
         extra["temperature_channel"] = temperature_channel
+    if poses:
+        extra["poses"] = True
     kinds = KINDS if protocols == "default" else UNSEEN_KINDS
 
     def add(**kw) -> None:
@@ -165,11 +172,26 @@ def _channel(proto, spec: dict):
 
 
 def _declared(cols: dict, proto, spec: dict) -> dict:
-    """The recording's columns with its sensor_c LSB declared (``sensor_lsb_c``) when the
-    spec's channel is ``clean-declared``; else as they are."""
+    """The recording's columns with what the spec has it declare: its sensor_c LSB
+    (``sensor_lsb_c``) when the channel is ``clean-declared``; the table's commanded pose
+    of each reading (``pose_qw`` … ``pose_qz``, the rotation from sensor to lab as a unit
+    quaternion, scalar first) when the spec asks for ``poses``; else as they are."""
     if spec.get("temperature_channel") == "clean-declared" and "sensor_c" in cols:
-        return {**cols, "sensor_lsb_c": np.full(len(cols["t_s"]), proto.sensor_c_lsb_c)}
+        cols = {**cols, "sensor_lsb_c": np.full(len(cols["t_s"]), proto.sensor_c_lsb_c)}
+    if spec.get("poses"):
+        cols = {**cols, **_pose_columns(proto, cols["position"])}
     return cols
+
+
+def _pose_columns(proto, position: np.ndarray) -> dict:
+    """The commanded pose of each reading: force = Rz(α)ᵀ·Rx(β)ᵀ·up (protocol.py), so the
+    rotation from sensor to lab is R = Rx(β)·Rz(α); commanded, so an encoder's error is
+    not in it."""
+    ang = np.deg2rad(proto.angles_deg())[np.asarray(position, int)]
+    R = np.array([pr.rot_x(b) @ pr.rot_z(a) for a, b in ang])
+    xyzw = Rotation.from_matrix(R).as_quat()
+    q = xyzw[:, [3, 0, 1, 2]] * np.where(xyzw[:, 3:] < 0, -1.0, 1.0)
+    return {f"pose_q{c}": q[:, i] for i, c in enumerate("wxyz")}
 
 
 def _slow_die_key(proto, sensor, pools, pat: dict, seed: int) -> dict:
@@ -242,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="the sensor_c channel's per-sample noise: 0.04 °C (dithers its LSB) or "
                          "0.003 °C (clean: a settled plateau's readings share one rounding "
                          "error; clean-declared: the same, its LSB in a sensor_lsb_c column)")
+    ap.add_argument("--poses", action="store_true",
+                    help="each recording also gives the table's commanded pose per reading "
+                         "(pose_qw … pose_qz), as soakcal's engine writes it")
     a = ap.parse_args(argv)
     try:
         rd = realdata_dir(a.realdata)
@@ -250,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     n_null = a.nulls if a.nulls is not None else (15 if a.quick else 300)
     specs = plan(a.quick, a.reps, n_null, a.seed, a.protocols, a.outside_set,
-                 a.temperature_channel)
+                 a.temperature_channel, a.poses)
     if a.only:
         keep = set(a.only.split(","))
         specs = [s for s in specs if keep & {s["kind"], s.get("effect"), s.get("change")}]

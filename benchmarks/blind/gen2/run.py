@@ -6,6 +6,7 @@
                                         [--protocols default|unseen]
                                         [--outside-set default|unseen]
                                         [--temperature-channel dithered|clean|clean-declared]
+                                        [--poses]
     python -m benchmarks.blind.gen2.run --out OUT --score-only [--results STEM]
 
 Cases with a ``given/NNNN.csv`` are twin-against-recording pairs: a model is calibrated on
@@ -92,6 +93,8 @@ def main(argv: list[str] | None = None) -> int:
                     default="dithered",
                     help="sensor_c channel of generated cases (see generate "
                          "--temperature-channel)")
+    ap.add_argument("--poses", action="store_true",
+                    help="the recordings give the table's commanded pose per reading (generate)")
     ap.add_argument("--results", type=Path, default=None, help="results stem (no suffix)")
     ap.add_argument("--score-only", action="store_true",
                     help="score OUT/diagnoses.json of an earlier run again (no diagnosis)")
@@ -111,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         gen += ["--outside-set", a.outside_set] if a.outside_set != "default" else []
         gen += (["--temperature-channel", a.temperature_channel]
                 if a.temperature_channel != "dithered" else [])
+        gen += ["--poses"] if a.poses else []
         if generate.main(gen):
             return 2
     n_null = a.n_null if a.n_null is not None else (100 if a.quick else N_NULL)

@@ -7,7 +7,7 @@ from itertools import combinations_with_replacement
 
 import numpy as np
 
-from calibration import sfem
+from calibration import sfem, table_pose
 from calibration.discrepancy.context import DesignContext
 from calibration.discrepancy.effects import turntable_circles as tc
 from calibration.discrepancy.effects.base import CatalogueEffect
@@ -45,6 +45,10 @@ def tilted_ref_g(ref_g: np.ndarray, base_tilt_rad: np.ndarray) -> np.ndarray:
     mag = np.linalg.norm(ref_g, axis=1)
     return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
 
+
+# ``turntable_geometry``'s grid value for a tilt of the base read through the recorded poses
+# (turntable_circles' SHAPE_TILT, SHAPE_ENCODER are the sweep shapes; nan the free turn).
+SHAPE_LAB_TILT = 3.0
 
 TURN_DEGREE = 2  # a_i², a_i·a_j: the catalogue nonlinearities' degree (their a³ aliases)
 
@@ -240,13 +244,22 @@ class TurntableGeometry(CatalogueEffect):
         _, axes, circle = sweep_layout(ctx)
         pose = self._poses(ctx)
         on = np.unique(pose[circle >= 0]).size if axes else 0
-        return [tc.SHAPE_TILT, tc.SHAPE_ENCODER] if on >= MIN_POSES else [float("nan")]
+        swept = on >= MIN_POSES
+        if ctx.lab_to_sensor is not None:
+            # The poses recorded (``pose_q*``): a tilted base is its two lab-frame angles,
+            # one pair for every pose (SHAPE_LAB_TILT), where the sweep shape fits a tilt per
+            # circle found from the references; beside it the encoder's shape, or the free
+            # turn where no sweeps are found.
+            return [SHAPE_LAB_TILT, tc.SHAPE_ENCODER if swept else float("nan")]
+        return [tc.SHAPE_TILT, tc.SHAPE_ENCODER] if swept else [float("nan")]
 
     def regressors(self, ctx: DesignContext, theta: float) -> np.ndarray:
         if np.isnan(theta):
             return pose_turn_columns(ctx, self._poses(ctx))
-        _, axes, circle = sweep_layout(ctx)
         mag = np.linalg.norm(ctx.input_g, axis=1)
+        if theta == SHAPE_LAB_TILT:
+            return table_pose.lab_tilt_columns(ctx.lab_to_sensor, mag)
+        _, axes, circle = sweep_layout(ctx)
         return tc.shape_columns(ctx.input_g / mag[:, None], mag, circle, axes, theta)
 
     def identifiable(self, ctx: DesignContext) -> tuple[bool, str, str]:
@@ -381,7 +394,8 @@ class TurntableGeometry(CatalogueEffect):
         disp = np.einsum("nak,k->na", X, coef) / mag
         sd = np.sqrt(np.einsum("nak,k->n", X**2, se**2)) / mag[:, 0]
         _, _, circle = sweep_layout(ctx)
-        ps = np.unique(pose[(circle >= 0) & (pose >= 0)])
+        on = (pose >= 0) if theta == SHAPE_LAB_TILT else (circle >= 0) & (pose >= 0)
+        ps = np.unique(pose[on])
         turn = np.array([disp[pose == p].mean(axis=0) for p in ps])
         return u[ps], turn, np.array([sd[pose == p].mean() for p in ps])
 
@@ -409,6 +423,9 @@ class TurntableGeometry(CatalogueEffect):
                               for d in ((1.0, 0.0), (0.0, 1.0))], axis=1)
         both = np.hstack([maps.reshape(-1, 9), tilt_cols])
         tilt = np.linalg.lstsq(both, turn.ravel(), rcond=None)[0][9:]
+        tilt_sd = np.full(2, np.nan)
+        if theta == SHAPE_LAB_TILT:  # the columns' own coefficients: the lab-frame tilt
+            tilt, tilt_sd = np.asarray(coef[:2], float), np.asarray(se[:2], float)
         rms = float(np.sqrt(np.mean(rest**2)))
         d_rms = float(np.sqrt(np.sum((rest * sd_pose) ** 2)) / max(n_pose * rms, 1e-300))
         top = int(np.argmax(rest))
@@ -419,7 +436,8 @@ class TurntableGeometry(CatalogueEffect):
                  "tilt_y_urad": float(tilt[1] * 1e6), "shape": shape,
                  "n_circles": n_circles},
                 {"turn_rms_urad": d_rms * 1e6, "turn_largest_urad": float(sd_pose[top] * 1e6),
-                 "n_poses": 0.0, "tilt_x_urad": float("nan"), "tilt_y_urad": float("nan"),
+                 "n_poses": 0.0, "tilt_x_urad": float(tilt_sd[0] * 1e6),
+                 "tilt_y_urad": float(tilt_sd[1] * 1e6),
                  "shape": 0.0, "n_circles": 0.0})
 
     def axes(self, coef, se):
@@ -427,6 +445,13 @@ class TurntableGeometry(CatalogueEffect):
 
     def sentence(self, params, sd, axes, ctx=None):
         shape = params.get("shape", 0.0)
+        if shape == SHAPE_LAB_TILT:
+            return (f"the table's base is tilted by {params['tilt_x_urad']:.1f} ± "
+                    f"{sd['tilt_x_urad']:.1f} µrad about lab x and {params['tilt_y_urad']:.1f} "
+                    f"± {sd['tilt_y_urad']:.1f} µrad about lab y (read through the table pose "
+                    "the recording gives each reading): it turns the specific force by "
+                    f"{params['turn_rms_urad']:.1f} µrad rms over {int(params['n_poses'])} "
+                    "poses, the same at every visit and with no change of its length")
         if shape:
             what = ("a constant turn about and across each sweep axis, as a tilted table "
                     "axis makes" if shape == tc.SHAPE_TILT else

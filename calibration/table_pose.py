@@ -1,0 +1,85 @@
+"""The table's commanded pose per reading: the ``pose_q*`` columns (docs/recording.md).
+
+A reference ``ref_*`` says where gravity lies in the sensor frame, not how the table holds
+the sensor about it: two poses with one reference differ by a turn about gravity. A tilted
+table base turns gravity by an angle constant in the *lab* frame, so its effect on each
+reading is ``Rᵀ·(T − I)·up``, which needs the pose R (issue 22). soakcal's engine writes
+the pose it commanded as a unit quaternion (scalar first) of the rotation R from sensor to
+lab coordinates, lab z up, so that ``ref = |g|·Rᵀ·(0, 0, 1)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from calibration.errors import RecordingError
+from calibration.recording import Recording, optional_number_column
+
+POSE_COLUMNS: tuple[str, ...] = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
+# A pose and its reference are written from one commanded pose: they agree to rounding.
+# Beyond this the two columns describe different orientations (one of them mistyped or
+# from another convention) and neither can be trusted to place gravity.
+POSE_REF_TOL_DEG = 0.5
+UNIT_TOL = 1e-3  # |q| − 1 beyond this: not a rotation written to the column's precision
+
+
+def lab_to_sensor(rec: Recording) -> np.ndarray | None:
+    """(N, 3, 3) ``Rᵀ`` of every reading (lab vectors into the sensor frame), or None
+    where the recording has no pose on some reading (a hand-placed fixture, an older
+    export): a pose known for part of a recording cannot be told from the rest.
+
+    A cell that is not a number, a quaternion off unit length, or a pose that puts
+    gravity more than :data:`POSE_REF_TOL_DEG` from the row's ``ref_*`` is an error naming
+    the line and column: a confident answer built on it would be wrong."""
+    cols = [optional_number_column(rec, c, "a pose quaternion component")
+            for c in POSE_COLUMNS]
+    if any(c is None for c in cols):
+        return None
+    q = np.column_stack(cols)
+    if not np.all(np.isfinite(q)):
+        return None
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(norm - 1.0) > UNIT_TOL)
+    if bad.size:
+        i = int(bad[0])
+        raise RecordingError(rec.path, i + 2, "pose_qw",
+                             f"pose_qw..pose_qz have length {norm[i]:.6g}, not 1: a pose "
+                             "is a unit quaternion (scalar first)")
+    # scipy's order is (x, y, z, w); scalar_first needs scipy >= 1.14
+    R_t = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix().transpose(0, 2, 1)
+    ref = rec.ref_g
+    if ref is not None:
+        u = ref / np.maximum(np.linalg.norm(ref, axis=1, keepdims=True), 1e-300)
+        cos = np.clip(np.sum(R_t[:, :, 2] * u, axis=1), -1.0, 1.0)
+        off = np.degrees(np.arccos(cos))
+        worst = int(np.argmax(off))
+        if off[worst] > POSE_REF_TOL_DEG:
+            g = R_t[worst, :, 2]
+            raise RecordingError(
+                rec.path, worst + 2, "pose_qw",
+                f"the pose puts gravity at ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) in the "
+                f"sensor frame, {off[worst]:.1f}° from ref_* "
+                f"({u[worst, 0]:+.3f}, {u[worst, 1]:+.3f}, {u[worst, 2]:+.3f}); both are "
+                "written from one commanded pose (ref = Rᵀ·up): check the pose columns' "
+                "order (w, x, y, z) and frame (sensor to lab)")
+    return R_t
+
+
+def pose_quaternion(R: np.ndarray) -> np.ndarray:
+    """(…, 4) unit quaternions (w, x, y, z), w ≥ 0, of rotations ``R`` (…, 3, 3) from
+    sensor to lab: what the ``pose_q*`` columns hold."""
+    xyzw = Rotation.from_matrix(np.asarray(R, float).reshape(-1, 3, 3)).as_quat()
+    q = xyzw[:, [3, 0, 1, 2]]
+    q = np.where(q[:, :1] < 0, -q, q)
+    return q.reshape(np.shape(R)[:-2] + (4,))
+
+
+def lab_tilt_columns(R_t: np.ndarray, mag_g: np.ndarray) -> np.ndarray:
+    """(N, 3, 2) change of the specific force per radian of base tilt about lab x and y.
+
+    The tilted base turns lab up to ``Rx(tx)·Ry(ty)·up ≈ (ty, −tx, 1)``, so the force in
+    the sensor frame moves by ``|g|·(ty·Rᵀe_x − tx·Rᵀe_y)``: across the reference always
+    (Rᵀe_x, Rᵀe_y ⊥ Rᵀe_z), by an amount and direction each pose's heading sets."""
+    m = np.asarray(mag_g, float)[:, None]
+    return np.stack([-R_t[:, :, 1] * m, R_t[:, :, 0] * m], axis=2)
