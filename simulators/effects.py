@@ -287,7 +287,8 @@ class TurntableGeometry(_RawOnly):
     """``turntable_geometry``: the rig's base is tilted by ``base_tilt_rad`` (about lab x, y).
 
     Gravity is constant in the lab frame but tilted: the true specific force is
-    ``C_pos · R_tilt · up`` instead of ``C_pos · up`` (C_pos: :func:`lab_to_sensor`),
+    ``C_pos · R_tilt · up`` instead of ``C_pos · up`` (C_pos: the table's pose where the
+    context has it, ``Context.lab_to_sensor``, else :func:`lab_to_sensor`'s convention),
     so ``raw delta = A⁻¹ (ref' − ref)``. A constant rotation in the *sensor*
     frame would be misalignment; this one is constant in the lab frame.
     """
@@ -297,16 +298,20 @@ class TurntableGeometry(_RawOnly):
 
     @classmethod
     def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> TurntableGeometry:
-        """The lab-frame tilt the finding fitted to its pose turns (lab_to_sensor poses)."""
+        """The lab-frame tilt the finding fitted: through the recorded poses (its shape 3),
+        else to its pose turns in :func:`lab_to_sensor`'s convention."""
         return cls(base_tilt_rad=np.array([float(p["tilt_x_urad"]),
                                            float(p["tilt_y_urad"])]) * 1e-6)
 
-    def true_ref_g(self, ref_g: np.ndarray) -> np.ndarray:
-        return tilted_ref_g(ref_g, self.base_tilt_rad)
+    def true_ref_g(self, ref_g: np.ndarray, pose_lab_to_sensor: np.ndarray | None = None
+                   ) -> np.ndarray:
+        return tilted_ref_g(ref_g, self.base_tilt_rad, pose_lab_to_sensor)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        return truth.ideal_raw_g(self.true_ref_g(ctx.ref_g), ctx.die_c) - truth.ideal_raw_g(
-            ctx.ref_g, ctx.die_c)
+        """Through the table's pose of each reading where the context has it (a rig twin
+        knows its commanded angles), else the minimal-rotation convention."""
+        true = self.true_ref_g(ctx.ref_g, ctx.lab_to_sensor)
+        return truth.ideal_raw_g(true, ctx.die_c) - truth.ideal_raw_g(ctx.ref_g, ctx.die_c)
 
 
 @dataclass

@@ -44,6 +44,9 @@ class Context:
     n_samples: np.ndarray  # (N,) samples averaged per reading
     vib_sd_g: np.ndarray  # (N,) rms vibration acceleration at the sensor (g)
     omega_rad_s: np.ndarray | None = None  # (N,3) table angular rate (None = static)
+    # (N,3,3) Rᵀ of the table's pose (lab vectors into the sensor frame) as the rig holds it;
+    # None: only the reference is known (a schedule without a table)
+    lab_to_sensor: np.ndarray | None = None
 
 
 class Effect(Protocol):

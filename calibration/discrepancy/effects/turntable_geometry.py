@@ -34,16 +34,21 @@ def lab_to_sensor(ref_g: np.ndarray) -> np.ndarray:
     return R
 
 
-def tilted_ref_g(ref_g: np.ndarray, base_tilt_rad: np.ndarray) -> np.ndarray:
+def tilted_ref_g(ref_g: np.ndarray, base_tilt_rad: np.ndarray,
+                 pose_lab_to_sensor: np.ndarray | None = None) -> np.ndarray:
     """True specific force (N,3) g on a rig whose base is tilted about lab x, y (effects.md).
 
     Gravity is constant in the lab frame but tilted: ``C_pos · R_tilt · up``
-    instead of ``C_pos · up`` (C_pos: :func:`lab_to_sensor`), same magnitude.
+    instead of ``C_pos · up``, same magnitude. ``C_pos``: the table's pose of each reading
+    (``pose_lab_to_sensor``, Rᵀ, as the rig holds it: calibration/table_pose.py) where
+    known, else the minimal rotation onto the reference (:func:`lab_to_sensor`, a
+    convention: the heading about gravity is not in ``ref``).
     """
     tx, ty = np.asarray(base_tilt_rad, float)
     up = sfem.rotation_x(tx) @ sfem.rotation_y(ty) @ np.array([0.0, 0.0, 1.0])
     mag = np.linalg.norm(ref_g, axis=1)
-    return np.einsum("nij,j->ni", lab_to_sensor(ref_g), up) * mag[:, None]
+    C = lab_to_sensor(ref_g) if pose_lab_to_sensor is None else pose_lab_to_sensor
+    return np.einsum("nij,j->ni", C, up) * mag[:, None]
 
 
 # ``turntable_geometry``'s grid value for a tilt of the base read through the recorded poses
