@@ -113,7 +113,7 @@ class BenchTruth(SensorTruth):
                                                                 init=False)
 
     def sample_g(self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator,
-                 t_s: float = 0.0) -> np.ndarray:
+                 t_s: float = 0.0, lab_to_sensor: np.ndarray | None = None) -> np.ndarray:
         rate = 0.0
         if self.chamber is not None:
             # The die's instantaneous rate: it follows the air first-order (ChamberPhysics).
@@ -126,7 +126,7 @@ class BenchTruth(SensorTruth):
             key = self._capture_key(ref_g)
             rng = np.random.default_rng(key)
             self._temp_rng = np.random.default_rng([*key, 1])
-        out = super().sample_g(ref_g, die_c, n, rng, t_s)
+        out = super().sample_g(ref_g, die_c, n, rng, t_s, lab_to_sensor)
         effect = (np.zeros(3) if self.rate_g_per_c_per_s is None
                   else rate * self.rate_g_per_c_per_s)
         if n != self.probe_n:

@@ -141,3 +141,14 @@ def _rz(a: float) -> np.ndarray:
 def angles_for_references(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
     """Table angles (n, axes) of each unit gravity reference (n, 3): what the engine commands."""
     return np.array([angles_for_reference(r, n_axes) for r in np.asarray(refs_g, float)])
+
+
+def pose_lab_to_sensor(angles_deg: tuple[float, ...] | list[float]) -> np.ndarray:
+    """``Rᵀ`` (3, 3) of table angles (outer first, 2 or 3 axes): lab vectors into the
+    sensor frame, the pose :func:`reference_for_angles` turns gravity by. A tilted base
+    turns gravity by a rotation constant in the lab frame, which reaches the sensor through
+    this pose (calibration/table_pose.py), not through the reference alone."""
+    if len(angles_deg) not in (2, 3):
+        raise ValueError(f"expected 2 or 3 table angles, got {len(angles_deg)}")
+    a = [math.radians(float(x)) for x in angles_deg] + [0.0] * (3 - len(angles_deg))
+    return (_rx(a[0]) @ _ry(a[1]) @ _rz(a[2])).T

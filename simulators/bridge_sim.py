@@ -26,7 +26,7 @@ from drivers import adxl355
 from drivers.bridge_protocol import Framing, channel_field, encode_frame, parse_frame, split_channel
 from drivers.clock import Clock
 from drivers.faults import ProtocolError
-from drivers.geometry import reference_for_angles
+from drivers.geometry import pose_lab_to_sensor, reference_for_angles
 from simulators.faults import SimFaults
 from simulators.line_server import LineServer, start_line_server
 
@@ -76,8 +76,10 @@ class BridgeDevice:
         """Wait the capture time on the clock, then return (counts (n,3), temp raw (n,))."""
         await self.clock.sleep(n / self.truth.odr_hz)
         die_c = self.die_c()
-        ref = self.reference_g()
-        g = self.truth.sample_g(ref, die_c, n, self.rng, t_s=self.clock.now())
+        angles = tuple(self.angles_deg())
+        ref = _reference(angles, self.g_local)
+        g = self.truth.sample_g(ref, die_c, n, self.rng, t_s=self.clock.now(),
+                                lab_to_sensor=_pose(angles))
         counts = adxl355.g_to_counts(g, self.truth.range_g)
         temps_c = _temperature_samples(self.truth, die_c, n, self.rng)
         return counts, adxl355.temp_c_to_raw(temps_c)
@@ -232,6 +234,15 @@ class MultiplexedBridgeDevice:
             out += [ch, dev.eeprom_serial if dev.eeprom_serial is not None else
                     getattr(dev.truth, "serial", "")]
         return out
+
+
+@functools.lru_cache(maxsize=1024)
+def _pose(angles_deg: tuple[float, ...]) -> np.ndarray:
+    """The table's pose (Rᵀ) at these angles, once per pose (as :func:`_reference`): a tilted
+    base reaches the sensor through it. Read-only (shared)."""
+    R_t = pose_lab_to_sensor(angles_deg)
+    R_t.flags.writeable = False
+    return R_t
 
 
 @functools.lru_cache(maxsize=1024)

@@ -27,6 +27,7 @@ import numpy as np
 from calibration import campaign_plan as plan
 from calibration.campaign_spec import DEFAULT_SETPOINTS_C, CampaignSpec
 from calibration.recording import Recording
+from calibration.table_pose import POSE_COLUMNS, pose_quaternion
 from calibration.thermal_plant import (
     AMBIENT_C,
     DEFAULT_AIR_TAU_S,
@@ -34,6 +35,7 @@ from calibration.thermal_plant import (
     lag_step,
     rate_limited,
 )
+from drivers.geometry import angles_for_references, pose_lab_to_sensor
 from drivers.protocols import ChamberStatus
 from simulators.truth import Context, SensorTruth, averaged_readings
 
@@ -85,6 +87,7 @@ def simulate_campaign(
     return_truth: bool = False,
     position_order: str = "table",
     position_order_seed: int | None = None,
+    record_poses: bool = False,
 ) -> Recording | SimCampaign:
     """Simulate a soak campaign and return its v1 recording (or a :class:`SimCampaign`).
 
@@ -93,7 +96,10 @@ def simulate_campaign(
     a power-session index per step (default: one session). ``position_order`` /
     ``position_order_seed`` are the campaign spec's keys (docs/engine.md, "Position
     order"; default the schedule's order here); the recording's ``visit`` column is
-    each row's index within its step in time order.
+    each row's index within its step in time order. The table holds each reference in the
+    pose the engine commands for it (``drivers.geometry.angles_for_reference``), which a
+    tilted base turns gravity through; ``record_poses``: the recording also gives those
+    poses (``pose_q*``, as the engine writes them).
     """
     from calibration.schedules import table1
 
@@ -180,6 +186,7 @@ def simulate_campaign(
     ref = np.asarray(rows["ref"], float).reshape(N, 3)  # each row's own, in visiting order
     die_c = np.asarray(rows["die"])
     air_c = np.asarray(rows["air"])
+    poses = table_poses(ref)
     ctx = Context(
         t_s=np.asarray(rows["t_s"]),
         die_c=die_c,
@@ -191,16 +198,27 @@ def simulate_campaign(
         session=np.asarray(rows["session"], int),
         n_samples=np.full(N, float(n)),
         vib_sd_g=_vibration(ph, np.asarray(rows["step"], int), N),
+        lab_to_sensor=poses,
     )
     rec = readings_to_recording(truth, ctx, rng, temperature_columns, pv_noise_c=ph.pv_noise_c,
                                 setpoint_c=np.asarray(rows["setpoint_c"]),
                                 position=np.asarray(rows["position"], float))
+    extra: dict[str, np.ndarray] = {}
     if position_order != "table":  # the table order's recordings stay exactly as they were
-        rec = Recording.from_columns({**rec.columns,
-                                      "visit": np.asarray(rows["visit"], float)})
+        extra["visit"] = np.asarray(rows["visit"], float)
+    if record_poses:  # as the engine records a motorised table's commanded pose
+        q = pose_quaternion(poses.transpose(0, 2, 1))
+        extra.update({c: q[:, j] for j, c in enumerate(POSE_COLUMNS)})
+    if extra:
+        rec = Recording.from_columns({**rec.columns, **extra})
     if return_truth:
         return SimCampaign(rec, die_c, air_c, truth, {"context": ctx})
     return rec
+
+
+def table_poses(ref_g: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) Rᵀ of the pose the engine commands for each reference (3 axes, inner 0)."""
+    return np.array([pose_lab_to_sensor(a) for a in angles_for_references(ref_g, 3)])
 
 
 def _vibration(ph: RigPhysics, step: np.ndarray, n_rows: int) -> np.ndarray:

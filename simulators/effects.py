@@ -42,8 +42,8 @@ from calibration.discrepancy.effects.session_offset import session_offset_g
 from calibration.discrepancy.effects.temperature_rate import rate_offset_g
 from calibration.discrepancy.effects.temperature_sensor import channel_error_c, channel_step_c
 from calibration.discrepancy.effects.thermal_hysteresis import hysteresis_offset_g
+from calibration.discrepancy.effects.turntable_geometry import SHAPE_LAB_TILT, tilted_ref_g
 from calibration.discrepancy.effects.turntable_geometry import lab_to_sensor as lab_to_sensor
-from calibration.discrepancy.effects.turntable_geometry import tilted_ref_g
 from calibration.discrepancy.effects.vibration_rectification import rectified_offset_g
 from calibration.gravity import STANDARD_GRAVITY_M_S2
 from simulators.truth import Context, SensorTruth
@@ -287,29 +287,33 @@ class TurntableGeometry(_RawOnly):
     """``turntable_geometry``: the rig's base is tilted by ``base_tilt_rad`` (about lab x, y).
 
     Gravity is constant in the lab frame but tilted: the true specific force is
-    ``C_pos · R_tilt · up`` instead of ``C_pos · up`` (C_pos: the table's pose where the
-    context has it, ``Context.lab_to_sensor``, else :func:`lab_to_sensor`'s convention),
-    so ``raw delta = A⁻¹ (ref' − ref)``. A constant rotation in the *sensor*
-    frame would be misalignment; this one is constant in the lab frame.
+    ``C_pos · R_tilt · up`` instead of ``C_pos · up``, so ``raw delta = A⁻¹ (ref' − ref)``.
+    A constant rotation in the *sensor* frame would be misalignment; this one is constant
+    in the lab frame. ``C_pos``: the table's pose of each reading where the context has it
+    (``Context.lab_to_sensor``: the twin's table holds each reference in the pose the
+    engine commands), else, or with ``through_poses`` False, the minimal rotation onto the
+    reference (:func:`lab_to_sensor`: the convention a tilt found without recorded poses is
+    fitted in, so a twin built from such a finding reproduces what was fitted).
     """
 
     base_tilt_rad: np.ndarray
     effect_id: str = "turntable_geometry"
+    through_poses: bool = True
 
     @classmethod
     def from_finding(cls, p: dict, rows: Sequence[int] = ()) -> TurntableGeometry:
         """The lab-frame tilt the finding fitted: through the recorded poses (its shape 3),
         else to its pose turns in :func:`lab_to_sensor`'s convention."""
         return cls(base_tilt_rad=np.array([float(p["tilt_x_urad"]),
-                                           float(p["tilt_y_urad"])]) * 1e-6)
+                                           float(p["tilt_y_urad"])]) * 1e-6,
+                   through_poses=p.get("shape") == SHAPE_LAB_TILT)
 
     def true_ref_g(self, ref_g: np.ndarray, pose_lab_to_sensor: np.ndarray | None = None
                    ) -> np.ndarray:
-        return tilted_ref_g(ref_g, self.base_tilt_rad, pose_lab_to_sensor)
+        pose = pose_lab_to_sensor if self.through_poses else None
+        return tilted_ref_g(ref_g, self.base_tilt_rad, pose)
 
     def raw_delta_g(self, ctx: Context, truth: SensorTruth, rng: np.random.Generator) -> np.ndarray:
-        """Through the table's pose of each reading where the context has it (a rig twin
-        knows its commanded angles), else the minimal-rotation convention."""
         true = self.true_ref_g(ctx.ref_g, ctx.lab_to_sensor)
         return truth.ideal_raw_g(true, ctx.die_c) - truth.ideal_raw_g(ctx.ref_g, ctx.die_c)
 

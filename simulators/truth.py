@@ -151,16 +151,21 @@ class SensorTruth:
         n: int,
         rng: np.random.Generator,
         t_s: float = 0.0,
+        lab_to_sensor: np.ndarray | None = None,
     ) -> np.ndarray:
         """``n`` raw samples (n,3) in g for one orientation at one die temperature.
 
         Effects are evaluated for a static reading at ``t_s`` (the bridge
-        simulator uses this path); saturated at ±range_g.
+        simulator uses this path); saturated at ±range_g. ``lab_to_sensor``: the
+        table's pose Rᵀ (3, 3) holding this orientation, when known (a tilted base
+        reaches the sensor through it).
         """
         ideal = self.ideal_raw_g(np.asarray(ref_g, float)[None, :], die_c)[0]
         if self.effects:
             ref = np.asarray(ref_g, float)[None, :]
             ctx = static_context(ref, np.array([die_c]), np.array([t_s]), n)
+            if lab_to_sensor is not None:
+                ctx.lab_to_sensor = np.asarray(lab_to_sensor, float)[None]
             for eff in self.effects:
                 ideal = ideal + eff.raw_delta_g(ctx, self, rng)[0]
         samples = ideal + rng.normal(0.0, self.sample_sd_g(), size=(n, 3))

@@ -26,9 +26,10 @@ ONE_WAY = [float(t) for t in range(-40, 61, 10)]
 
 
 def _tilted_with_a_pose_offset(offset_ug: float):
-    """A tilted table (50, −30 µrad) visited in the same order on every plateau, plus an
-    offset of one pose's z output (position 1, reference in the x–y plane: across it)."""
-    tilt = E.TurntableGeometry(base_tilt_rad=np.array([50e-6, -30e-6]))
+    """A tilted table (50, −30 µrad; in the minimal-rotation convention, a turn smooth in
+    the reference) visited in the same order on every plateau, plus an offset of one pose's
+    z output (position 1, reference in the x–y plane: across it)."""
+    tilt = E.TurntableGeometry(base_tilt_rad=np.array([50e-6, -30e-6]), through_poses=False)
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=[tilt]),
                             setpoints_c=ONE_WAY, seed=16)
     at_pose = rec.columns["position"] == 1

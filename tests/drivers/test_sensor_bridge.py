@@ -37,7 +37,7 @@ class FakeTruth:
     serial: str = "FAKE-1"
 
     def sample_g(self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator,
-                 t_s: float = 0.0) -> np.ndarray:
+                 t_s: float = 0.0, lab_to_sensor: np.ndarray | None = None) -> np.ndarray:
         out = self.scale * np.asarray(ref_g) + np.asarray(self.bias_g)
         return np.clip(np.tile(out, (n, 1)), -self.range_g, self.range_g)
 

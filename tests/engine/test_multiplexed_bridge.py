@@ -72,9 +72,10 @@ class DeadAxisTruth:
             setattr(self._part, name, value)
 
     def sample_g(
-        self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator, t_s: float = 0.0
+        self, ref_g: np.ndarray, die_c: float, n: int, rng: np.random.Generator, t_s: float = 0.0,
+        lab_to_sensor: np.ndarray | None = None,
     ) -> np.ndarray:
-        g = self._part.sample_g(ref_g, die_c, n, rng, t_s=t_s)
+        g = self._part.sample_g(ref_g, die_c, n, rng, t_s=t_s, lab_to_sensor=lab_to_sensor)
         return g * 0.1
 
 
