@@ -19,6 +19,12 @@ axis, one by hand") is this 2-axis convention with axis 0 on the motor and axis 
 by the operator, possibly only at an indexer's steps: :func:`angles_for_hand_axis`
 picks, of the two poses that put a reference along gravity, one the motor and the
 hand steps can take, or says why none can.
+
+:func:`pose_quaternion` gives ``R`` itself as a unit quaternion (scalar first, ``qw ≥ 0``):
+the ``pose_q*`` columns a campaign records with every reading (docs/recording.md,
+"Project additions"), so a reader can test a rotation fixed in the lab frame (a tilted
+table base), which the reference ``Rᵀ up`` alone cannot show (its heading about gravity
+is lost).
 """
 
 from __future__ import annotations
@@ -31,11 +37,43 @@ import numpy as np
 def reference_for_angles(angles_deg: tuple[float, ...] | list[float],
                          g_local: float = 1.0) -> np.ndarray:
     """Table angles (outer first, 2 or 3 axes) → specific force in the sensor frame, in g."""
+    return rotation_for_angles(angles_deg).T @ np.array([0.0, 0.0, g_local])
+
+
+def rotation_for_angles(angles_deg: tuple[float, ...] | list[float]) -> np.ndarray:
+    """``R = Rx(a0) · Ry(a1) · Rz(a2)`` (3×3, sensor → lab) of table angles (deg, outer
+    first, 2 or 3 axes; a missing inner angle is 0)."""
     if len(angles_deg) not in (2, 3):
         raise ValueError(f"expected 2 or 3 table angles, got {len(angles_deg)}")
     a = [math.radians(float(x)) for x in angles_deg] + [0.0] * (3 - len(angles_deg))
-    R = _rx(a[0]) @ _ry(a[1]) @ _rz(a[2])
-    return R.T @ np.array([0.0, 0.0, g_local])
+    return _rx(a[0]) @ _ry(a[1]) @ _rz(a[2])
+
+
+#: |qw| below this is a half turn's rounding (:func:`pose_quaternion`): 1e-12 moves Rᵀ up by
+#: ~1e-12, far below any reading's noise.
+_HALF_TURN_QW = 1e-12
+
+
+def pose_quaternion(angles_deg: tuple[float, ...] | list[float]
+                    ) -> tuple[float, float, float, float]:
+    """``(qw, qx, qy, qz)``: the unit quaternion of :func:`rotation_for_angles`, scalar
+    first, sign chosen so that ``qw ≥ 0`` (at ``qw = 0``, a half turn, the first of ``qx, qy, qz``
+    not zero in rounding is positive): one spelling per rotation, so equal poses give equal cells.
+
+    The conversion is scipy's (``Rotation.from_matrix``), of the same matrix the reference
+    comes from, so ``Rᵀ (0, 0, 1)`` of the quaternion is :func:`reference_for_angles`.
+    """
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = (float(v) for v in Rotation.from_matrix(rotation_for_angles(angles_deg))
+                  .as_quat())  # scalar last: the order every scipy ≥ 1.11 returns
+    # A half turn: qw is cos 90° in rounding (±6e-17 as the angle came as +180° or −180°);
+    # taken as 0 so that the vector part's sign, not the rounding, picks the spelling.
+    w = 0.0 if abs(w) < _HALF_TURN_QW else w
+    lead = next((v for v in (w, x, y, z) if abs(v) >= _HALF_TURN_QW), 1.0)
+    sign = -1.0 if w < 0.0 or (w == 0.0 and lead < 0.0) else 1.0
+    # + 0.0 turns a −0.0 into 0.0: the cells read the same whichever way the sign fell
+    return (sign * w + 0.0, sign * x + 0.0, sign * y + 0.0, sign * z + 0.0)
 
 
 def angles_for_reference(ref_g_unit: np.ndarray | tuple[float, float, float],
