@@ -66,12 +66,23 @@ def lab_to_sensor(rec: Recording) -> np.ndarray | None:
     return R_t
 
 
+# |qw| below this is a half turn's rounding (±6e-17 as the angle came as +180° or −180°):
+# taken as 0, so that the vector part's sign, not the rounding, picks the spelling
+HALF_TURN_QW = 1e-12
+
+
 def pose_quaternion(R: np.ndarray) -> np.ndarray:
-    """(…, 4) unit quaternions (w, x, y, z), w ≥ 0, of rotations ``R`` (…, 3, 3) from
-    sensor to lab: what the ``pose_q*`` columns hold."""
+    """(…, 4) unit quaternions (w, x, y, z) of rotations ``R`` (…, 3, 3) from sensor to
+    lab: what the ``pose_q*`` columns hold. One spelling per rotation, so equal poses give
+    equal cells: ``qw ≥ 0``, and at a half turn (``qw`` 0 in rounding) the first of ``qx,
+    qy, qz`` not zero in rounding is positive. scipy's conversion (scalar last in every
+    scipy ≥ 1.11, reordered here)."""
     xyzw = Rotation.from_matrix(np.asarray(R, float).reshape(-1, 3, 3)).as_quat()
     q = xyzw[:, [3, 0, 1, 2]]
-    q = np.where(q[:, :1] < 0, -q, q)
+    q[:, 0] = np.where(np.abs(q[:, 0]) < HALF_TURN_QW, 0.0, q[:, 0])
+    big = np.abs(q) >= HALF_TURN_QW
+    lead = np.where(big.any(axis=1), q[np.arange(len(q)), np.argmax(big, axis=1)], 1.0)
+    q = q * np.where(lead < 0.0, -1.0, 1.0)[:, None] + 0.0  # + 0.0: no −0.0 cells
     return q.reshape(np.shape(R)[:-2] + (4,))
 
 

@@ -19,6 +19,12 @@ axis, one by hand") is this 2-axis convention with axis 0 on the motor and axis 
 by the operator, possibly only at an indexer's steps: :func:`angles_for_hand_axis`
 picks, of the two poses that put a reference along gravity, one the motor and the
 hand steps can take, or says why none can.
+
+:func:`pose_quaternion` gives ``R`` itself as a unit quaternion (scalar first, ``qw ≥ 0``):
+the ``pose_q*`` columns a campaign records with every reading (docs/recording.md,
+"Project additions"), so a reader can test a rotation fixed in the lab frame (a tilted
+table base), which the reference ``Rᵀ up`` alone cannot show (its heading about gravity
+is lost).
 """
 
 from __future__ import annotations
@@ -27,15 +33,32 @@ import math
 
 import numpy as np
 
+from calibration.table_pose import pose_quaternion as pose_quaternion_of
+
 
 def reference_for_angles(angles_deg: tuple[float, ...] | list[float],
                          g_local: float = 1.0) -> np.ndarray:
     """Table angles (outer first, 2 or 3 axes) → specific force in the sensor frame, in g."""
+    return rotation_for_angles(angles_deg).T @ np.array([0.0, 0.0, g_local])
+
+
+def rotation_for_angles(angles_deg: tuple[float, ...] | list[float]) -> np.ndarray:
+    """``R = Rx(a0) · Ry(a1) · Rz(a2)`` (3×3, sensor → lab) of table angles (deg, outer
+    first, 2 or 3 axes; a missing inner angle is 0)."""
     if len(angles_deg) not in (2, 3):
         raise ValueError(f"expected 2 or 3 table angles, got {len(angles_deg)}")
     a = [math.radians(float(x)) for x in angles_deg] + [0.0] * (3 - len(angles_deg))
-    R = _rx(a[0]) @ _ry(a[1]) @ _rz(a[2])
-    return R.T @ np.array([0.0, 0.0, g_local])
+    return _rx(a[0]) @ _ry(a[1]) @ _rz(a[2])
+
+
+def pose_quaternion(angles_deg: tuple[float, ...] | list[float]
+                    ) -> tuple[float, float, float, float]:
+    """``(qw, qx, qy, qz)``: the unit quaternion of :func:`rotation_for_angles`, scalar
+    first, one spelling per rotation (``calibration.table_pose.pose_quaternion``: what the
+    recordings' ``pose_q*`` columns hold), so ``Rᵀ (0, 0, 1)`` of it is
+    :func:`reference_for_angles`."""
+    q = pose_quaternion_of(rotation_for_angles(angles_deg))
+    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
 
 def angles_for_reference(ref_g_unit: np.ndarray | tuple[float, float, float],
@@ -144,11 +167,8 @@ def angles_for_references(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
 
 
 def pose_lab_to_sensor(angles_deg: tuple[float, ...] | list[float]) -> np.ndarray:
-    """``Rᵀ`` (3, 3) of table angles (outer first, 2 or 3 axes): lab vectors into the
-    sensor frame, the pose :func:`reference_for_angles` turns gravity by. A tilted base
-    turns gravity by a rotation constant in the lab frame, which reaches the sensor through
-    this pose (calibration/table_pose.py), not through the reference alone."""
-    if len(angles_deg) not in (2, 3):
-        raise ValueError(f"expected 2 or 3 table angles, got {len(angles_deg)}")
-    a = [math.radians(float(x)) for x in angles_deg] + [0.0] * (3 - len(angles_deg))
-    return (_rx(a[0]) @ _ry(a[1]) @ _rz(a[2])).T
+    """``Rᵀ`` (3, 3) of table angles: lab vectors into the sensor frame, the pose
+    :func:`reference_for_angles` turns gravity by. A tilted base turns gravity by a rotation
+    constant in the lab frame, which reaches the sensor through this pose
+    (calibration/table_pose.py), not through the reference alone."""
+    return rotation_for_angles(angles_deg).T

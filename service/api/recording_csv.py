@@ -25,19 +25,38 @@ def render_recording_csv(measurements: Iterable[Measurement],
     ``ref_tol_deg``: the references were hand-placed (a manual fixture) with about this
     orientation uncertainty; written on every row so a refit treats them as approximate
     (docs/recording.md, ``ref_tol_deg``), as the campaign's own calibration did.
+    ``pose_qw, pose_qx, pose_qy, pose_qz`` (docs/recording.md, project additions): the
+    pose the rig commanded for each reading, after ``ref_z``, written only when some row
+    has one (empty cells on the others): a campaign without poses (a hand-placed fixture,
+    rows stored before migration 0009) exports exactly as before.
     """
+    rows = list(measurements)
+    columns = _with_pose(rows)
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     extra = () if ref_tol_deg is None else ("ref_tol_deg",)
-    writer.writerow(RECORDING_COLUMNS + extra)
+    writer.writerow(columns + extra)
     tail = [] if ref_tol_deg is None else [_cell(float(ref_tol_deg))]
     visits: dict[int, int] = {}  # rows written so far per step
-    for m in measurements:
+    for m in rows:
         visit = visits.get(m.step, 0)
         visits[m.step] = visit + 1
         writer.writerow([_cell(visit if column == "visit" else getattr(m, column))
-                         for column in RECORDING_COLUMNS] + tail)
+                         for column in columns] + tail)
     return out.getvalue()
+
+
+#: The commanded pose's quaternion (migration 0009), after ``ref_z`` when written.
+POSE_COLUMNS: tuple[str, ...] = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
+
+
+def _with_pose(rows: list[Measurement]) -> tuple[str, ...]:
+    """:data:`RECORDING_COLUMNS`, with :data:`POSE_COLUMNS` after ``ref_z`` when any row
+    has a pose."""
+    if not any(getattr(m, "pose_qw", None) is not None for m in rows):
+        return RECORDING_COLUMNS
+    at = RECORDING_COLUMNS.index("ref_z") + 1
+    return RECORDING_COLUMNS[:at] + POSE_COLUMNS + RECORDING_COLUMNS[at:]
 
 
 # The soak probes (docs/recording.md, "Project additions"): recording-v1 columns, no

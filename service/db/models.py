@@ -147,6 +147,15 @@ class Measurement(Base):
     n: Mapped[int] = mapped_column(Integer)
     attempts: Mapped[int] = mapped_column(Integer, default=1)
     flags: Mapped[str | None] = mapped_column(String(256))  # comma list of failed quality checks
+    # The pose the rig commanded for this reading (migration 0009_measurement_pose): the
+    # unit quaternion, scalar first, qw ≥ 0, of R mapping sensor to lab coordinates, so
+    # ref = |g| Rᵀ (0, 0, 1) (drivers.geometry.pose_quaternion; docs/recording.md,
+    # "Project additions"). NULL where the pose is not known: a hand-placed fixture is
+    # asked for a direction only, its heading about gravity is the operator's.
+    pose_qw: Mapped[float | None] = mapped_column(Float)
+    pose_qx: Mapped[float | None] = mapped_column(Float)
+    pose_qy: Mapped[float | None] = mapped_column(Float)
+    pose_qz: Mapped[float | None] = mapped_column(Float)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 

@@ -160,8 +160,11 @@ def manual_devices(rig: dict[str, Any], devices: Any, sf: sessionmaker[Session] 
     table = ManualTurntable(board, devices.accelerometer,
                             check_samples=int(cfg.get("check_samples", 64)),
                             noise_g=float(cfg.get("noise_g", 0.2e-3)))
+    # No pose_for: the operator places the asked direction, the heading about gravity is
+    # theirs, so the angles here are a label, not a pose (no ``pose_q*`` recorded).
     return replace(devices, turntable=table,
-                   angles_for=lambda ref: tuple(angles_for_reference(np.asarray(ref), 3)))
+                   angles_for=lambda ref: tuple(angles_for_reference(np.asarray(ref), 3)),
+                   pose_for=None)
 
 
 def hand_placed_references(turntable: dict[str, Any] | None) -> bool:

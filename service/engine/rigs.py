@@ -71,6 +71,8 @@ from drivers.protocols import Accelerometer, Chamber, Turntable
 from service.engine.identity import SerialBinding, binding_for_rig
 
 AnglesFor = Callable[[np.ndarray], tuple[float, ...]]
+# Commanded table angles → the pose's unit quaternion (qw, qx, qy, qz), sensor → lab.
+PoseFor = Callable[[tuple[float, ...]], tuple[float, float, float, float]]
 
 
 @dataclass
@@ -89,6 +91,13 @@ class RigDevices:
     # A real rig's several sensors: each sensor entry's own binding, by serial (else
     # ``serial_binding`` applies).
     bindings: dict[str, SerialBinding] = field(default_factory=dict)
+    # The rotation the commanded angles put the sensor in (the geometry of ``angles_for``),
+    # recorded with every measurement (``pose_q*``, docs/recording.md): a reader can then
+    # test a rotation fixed in the lab frame, which ``ref_*`` alone cannot show. None where
+    # the pose is not known: a hand-placed fixture is asked for a direction only (its
+    # heading about gravity is the operator's), and a rig whose geometry is not
+    # drivers/geometry.py's convention.
+    pose_for: PoseFor | None = None
 
 
 @asynccontextmanager
@@ -126,7 +135,7 @@ async def open_rig(
         raise RigConfigError(
             f"rig {rig.get('name')!r}: unknown chamber driver {driver!r} "
             f"(expected one of {', '.join(DRIVERS)})")
-    from drivers.geometry import angles_for_reference
+    from drivers.geometry import angles_for_reference, pose_quaternion
     from simulators.rig import connect_rig, connect_sensors, start_sim_rig
 
     kwargs: dict[str, Any] = {"seed": seed, **(sim_options or {})}
@@ -145,7 +154,7 @@ async def open_rig(
         try:
             yield RigDevices(chamber, turntable, accel,
                              lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
-                             accelerometers=accels)
+                             accelerometers=accels, pose_for=pose_quaternion)
         finally:
             for dev in (chamber, turntable, *(accels.values() or [accel])):
                 # Modbus drivers close through their link; the serial bridge directly.
@@ -178,7 +187,7 @@ def hand_axis_devices(rig: dict[str, Any], devices: RigDevices, sf: Any = None) 
     hand steps cannot reach raises :class:`drivers.geometry.UnreachablePose` with why."""
     from dataclasses import replace
 
-    from drivers.geometry import angles_for_hand_axis
+    from drivers.geometry import angles_for_hand_axis, pose_quaternion
     from drivers.manual_table import HandAxisTurntable
     from service.engine.placement import PlacementBoard
 
@@ -194,9 +203,12 @@ def hand_axis_devices(rig: dict[str, Any], devices: RigDevices, sf: Any = None) 
                               noise_g=float(cfg.get("noise_g", 0.2e-3)))
     steps = hand_axis_steps(cfg)
     motor_range = float(getattr(getattr(motor, "regmap", None), "range_deg", 180.0))
+    # The pose is known: the motor's angle and the hand axis' (an indexer step) are the
+    # 2-axis convention's (motor, hand), placed as asked or refused by the driver's check.
     return replace(devices, turntable=table,
                    angles_for=lambda ref: angles_for_hand_axis(np.asarray(ref), steps,
-                                                               motor_range))
+                                                               motor_range),
+                   pose_for=pose_quaternion)
 _NO_TABLE = "none"  # internal: the manual fixture's devices, opened without a table driver
 
 
@@ -557,7 +569,7 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
                           serials: Sequence[str] = ()) -> AsyncIterator[RigDevices]:
     """Real drivers on the URLs of the config (see the module docstring); with two or more
     ``serials``, one driver per serial on the port of the entry that declares it."""
-    from drivers.geometry import angles_for_reference
+    from drivers.geometry import angles_for_reference, pose_quaternion
     from drivers.modbus_link import ModbusLink
     from drivers.registermaps import load_turntable_map
     from drivers.sensor_config import (
@@ -615,7 +627,8 @@ async def _open_modbus_rig(rig: dict[str, Any], clock: Clock,
     try:
         yield RigDevices(chamber, table, accel,
                          lambda ref: tuple(angles_for_reference(np.asarray(ref), n_axes)),
-                         binding, accelerometers=accels, bindings=bindings)
+                         binding, accelerometers=accels, bindings=bindings,
+                         pose_for=pose_quaternion)
     finally:
         await chamber.close()
         if table is not None:

@@ -96,6 +96,8 @@ TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
+#: The measurements' pose columns (migration 0009): the commanded pose's unit quaternion.
+POSE_COLUMNS = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
 POSE_ATTEMPTS = 3  # captures of one position off its pose before the campaign fails
 LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)
@@ -137,6 +139,9 @@ class CampaignRunner:
         self.rate_book = rate_gain.RateGainBook(False, 0, {})
         self._pose = "unknown"  # the table's commanded angles, the probes' orientation key
         self._pose_ref: tuple[float, float, float] | None = None
+        # The pose the table was commanded to for a position: ((step, position), its
+        # quaternion or None), recorded with the position's readings (:meth:`_commit`).
+        self._position_pose: tuple[tuple[int, int], tuple[float, ...] | None] | None = None
         self._abort_checked_s = -math.inf
         # Every capture found off its pose and measured again (step, position, attempt, angle).
         self.pose_log: list[dict[str, Any]] = []
@@ -454,7 +459,29 @@ class CampaignRunner:
         if self._cursor != (msg.step, "positions"):  # first position of this step's sweep
             store.set_cursor(self.sf, self.id, msg.step, "positions", msg.position)
             self._cursor = (msg.step, "positions")
-        await self._move_to(self.dev.angles_for(np.asarray(msg.ref_g)))
+        angles = self.dev.angles_for(np.asarray(msg.ref_g))
+        await self._move_to(angles)
+        self._position_pose = ((msg.step, msg.position), self._pose_quaternion(angles))
+
+    def _pose_quaternion(self, angles_deg: tuple[float, ...]) -> tuple[float, ...] | None:
+        """The commanded pose's quaternion by the rig's geometry (``RigDevices.pose_for``);
+        None where the rig does not know it (a hand-placed fixture) or its geometry does
+        not cover these angles."""
+        pose_for = getattr(self.dev, "pose_for", None)
+        if pose_for is None:
+            return None
+        try:
+            return tuple(float(v) for v in pose_for(tuple(angles_deg)))
+        except ValueError:  # a table geometry the convention does not cover
+            return None
+
+    def _pose_columns(self, step: int, position: int) -> dict[str, float | None]:
+        """``pose_q*`` of the reading of (step, position): the quaternion of the move made
+        for exactly this position (docs/recording.md), else empty: a capture whose
+        commanded angles are not known exactly gets no pose rather than a guessed one."""
+        known = self._position_pose
+        q = known[1] if known is not None and known[0] == (step, position) else None
+        return dict(zip(POSE_COLUMNS, q if q is not None else (None,) * 4, strict=True))
 
     async def _settle(self, msg: Settle) -> None:
         await self._wait(msg.settle_s)
@@ -550,6 +577,7 @@ class CampaignRunner:
         """Commit every live sensor's reading of a position and the cursor past it in one
         transaction (the crash rule)."""
         ref = msg.ref_g
+        pose = self._pose_columns(msg.step, msg.position)
         rows = []
         for serial in msg.sensors:
             if serial not in readings:
@@ -563,6 +591,7 @@ class CampaignRunner:
                 "ax": acq.mean_g[0], "ay": acq.mean_g[1], "az": acq.mean_g[2],
                 "sd_x": acq.sd_g[0], "sd_y": acq.sd_g[1], "sd_z": acq.sd_g[2], "n": acq.n,
                 "attempts": attempts, "flags": ",".join(flags) or None, "sensor": serial,
+                **pose,
             })
         progress = self._publish(msg.step, "positions", msg.position, status, msg.setpoint_c,
                                  write=False)
@@ -736,6 +765,7 @@ class CampaignRunner:
         from drivers.geometry import reference_for_angles
 
         self._pose = ",".join(f"{float(a):.1f}" for a in angles_deg)
+        self._position_pose = None  # a move of its own (home, park): no position's pose
         try:
             ref = reference_for_angles(angles_deg)
             self._pose_ref = (float(ref[0]), float(ref[1]), float(ref[2]))

@@ -43,3 +43,41 @@ def test_rejects_bad_input() -> None:
         angles_for_reference((0.0, 0.0, 1.0), n_axes=4)
     with pytest.raises(ValueError):
         reference_for_angles((1.0,))
+
+
+@pytest.mark.parametrize("n_axes", [2, 3])
+def test_pose_quaternion_is_the_tables_rotation(n_axes: int) -> None:
+    """The recorded pose (docs/recording.md, ``pose_q*``): a unit quaternion, ``qw ≥ 0``,
+    whose ``Rᵀ up`` is the reference of the same angles."""
+    from scipy.spatial.transform import Rotation
+
+    from drivers.geometry import pose_quaternion
+
+    rng = np.random.default_rng(22)
+    corners = [(180.0, 0.0, 0.0), (0.0, 180.0, 0.0), (-90.0, 180.0, 0.0), (90.0, -90.0, 45.0)]
+    for angles in [c[:n_axes] for c in corners] + list(rng.uniform(-180, 180, (200, n_axes))):
+        q = pose_quaternion(tuple(angles))
+        assert len(q) == 4 and q[0] >= 0.0
+        assert abs(np.linalg.norm(q) - 1.0) < 1e-12
+        R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+        np.testing.assert_allclose(R.T @ [0.0, 0.0, 1.0], reference_for_angles(angles),
+                                   atol=1e-12)
+        # the whole rotation, not only its up: intrinsic x-y-z is Rx(a0)·Ry(a1)·Rz(a2)
+        full = list(angles) + [0.0] * (3 - n_axes)
+        np.testing.assert_allclose(R, Rotation.from_euler("XYZ", full, degrees=True)
+                                   .as_matrix(), atol=1e-12)
+
+
+def test_pose_quaternion_spells_each_rotation_once() -> None:
+    from drivers.geometry import pose_quaternion
+
+    assert pose_quaternion((0.0, 0.0, 0.0)) == (1.0, 0.0, 0.0, 0.0)
+    np.testing.assert_allclose(pose_quaternion((90.0, 0.0)),
+                               [np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0], atol=1e-15)
+    # a half turn about x, reached as +180° and −180°: one quaternion, not its negative
+    np.testing.assert_allclose(pose_quaternion((180.0, 0.0)), pose_quaternion((-180.0, 0.0)),
+                               atol=1e-15)
+    assert pose_quaternion((-180.0, 0.0))[1] > 0.999
+    # ... and where the half turn's axis has a component that is zero only in rounding
+    np.testing.assert_allclose(pose_quaternion((-90.0, 180.0)), pose_quaternion((-90.0, -180.0)),
+                               atol=1e-15)

@@ -48,3 +48,21 @@ def fake_calibrate(columns, provenance):  # type: ignore[no-untyped-def]
 
 
 fake_calibrate.calls = []  # type: ignore[attr-defined]
+
+
+POSE_COLUMNS = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
+
+
+def assert_poses_give_references(rows: list[dict[str, Any]], atol: float = 1e-9) -> None:
+    """Every row's recorded pose (docs/recording.md, ``pose_q*``) is a unit quaternion with
+    ``qw ≥ 0`` whose ``|g| Rᵀ (0, 0, 1)`` is the row's ``ref_*``."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    assert rows
+    for row in rows:
+        q = np.array([float(row[c]) for c in POSE_COLUMNS])
+        ref = np.array([float(row[c]) for c in ("ref_x", "ref_y", "ref_z")])
+        assert abs(np.linalg.norm(q) - 1.0) < 1e-12 and q[0] >= 0.0, q
+        R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+        np.testing.assert_allclose(np.linalg.norm(ref) * R.T @ [0.0, 0.0, 1.0], ref, atol=atol)

@@ -22,7 +22,9 @@ from service.engine.rigs import open_rig, rig_config_errors
 from service.engine.runner import CampaignRunner
 from simulators.rig import start_sim_rig
 
-from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate  # isort: skip
+from engine_helpers import (  # isort: skip
+    POSE_COLUMNS, SMALL_SPEC, SQLITE_ONLY, add_campaign, assert_poses_give_references,
+    fake_calibrate)
 
 HAND_SPEC: dict[str, Any] = {"setpoints_c": [5.0, 20.0], "soak_min": 10, "positions": "six",
                              "samples_per_position": 30, "move_timeout_s": 3600.0}
@@ -147,6 +149,10 @@ async def test_a_one_axis_stage_with_a_hand_axis_completes_with_the_operator(
     assert sorted(m.position for m in rows) == sorted(list(range(6)) * len(spec["setpoints_c"]))
     for m in rows:  # the motor and the operator together put each reference along gravity
         assert _angle_deg(m) < 3.0
+    # The pose is known from the motor's and the hand axis' angles: recorded, and the six
+    # directions lie on the hand steps, so each is exactly its reference's.
+    assert_poses_give_references([{c: getattr(m, c) for c in (*POSE_COLUMNS, "ref_x", "ref_y",
+                                                               "ref_z")} for m in rows])
     # Only hand-angle changes were asked (six positions need hand 0, ±90, 180; the motor
     # does ±y on its own), each once per step at most.
     # The operator was asked only for the hand axis, at the indexer's steps, at most once

@@ -133,6 +133,8 @@ async def test_manual_campaign_on_the_twin_completes_with_the_operator_over_rest
     assert sorted(m.position for m in rows) == sorted(list(range(6)) * len(spec["setpoints_c"]))
     for m in rows:  # each averaged reading is where the schedule asked: the operator placed it
         assert np.dot([m.ax, m.ay, m.az], [m.ref_x, m.ref_y, m.ref_z]) > 0.95
+        # asked for a direction only: the heading about gravity is the operator's, no pose
+        assert (m.pose_qw, m.pose_qx, m.pose_qy, m.pose_qz) == (None,) * 4
     rejections = devices.turntable.rejections
     if wrong_first:
         assert len(rejections) == 1 and "looks down, not up" in rejections[0]
@@ -155,6 +157,7 @@ async def test_manual_campaign_on_the_twin_completes_with_the_operator_over_rest
         r = await client.get(f"/api/v1/campaigns/{cid}/recording.csv", headers=headers)
     lines = r.text.splitlines()
     assert lines[0].endswith(",ref_tol_deg") and all(x.endswith(",2.0") for x in lines[1:])
+    assert "pose_q" not in lines[0]  # no pose known: the columns are left out
 
 
 async def test_board_keeps_an_open_request_and_reissues_with_the_reason(sf) -> None:

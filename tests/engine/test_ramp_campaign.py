@@ -11,7 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from engine_helpers import SQLITE_ONLY, add_campaign, fake_calibrate
+from engine_helpers import (
+    POSE_COLUMNS,
+    SQLITE_ONLY,
+    add_campaign,
+    assert_poses_give_references,
+    fake_calibrate,
+)
 from sqlalchemy import func, select
 
 from calibration.ramp_plan import legs_done_from, ramp_legs
@@ -76,6 +82,12 @@ async def test_a_ramp_campaign_sweeps_while_the_chamber_moves_and_is_fitted_cont
     # The chamber moved during sweeps: most sweeps are not plateaus.
     moving = sum(np.ptp(rows["chamber_c"][rows["step"] == s]) > 0.5 for s in sweeps)
     assert moving >= sweeps.size // 2
+    # The table stands still at each capture (move, settle, acquire) while the air ramps:
+    # its commanded pose is known exactly and recorded (docs/recording.md, ``pose_q*``).
+    with sf() as s:
+        stored = s.scalars(select(Measurement).where(Measurement.campaign_id == cid)).all()
+        assert_poses_give_references([{c: getattr(m, c) for c in (
+            *POSE_COLUMNS, "ref_x", "ref_y", "ref_z")} for m in stored])
     with sf() as s:
         camp = s.get(Campaign, cid)
         cal = s.get(Calibration, camp.calibration_id)

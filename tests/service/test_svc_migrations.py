@@ -63,3 +63,36 @@ def test_downgrade_to_base_drops_everything(db_url: str) -> None:
             assert set(inspect(conn).get_table_names()) <= {"alembic_version"}
     finally:
         engine.dispose()
+
+
+def test_the_pose_columns_come_and_go_with_0009(db_url: str) -> None:
+    """Migration 0009 adds the measurements' nullable pose quaternion and its downgrade
+    drops it, on both backends (docs/recording.md, ``pose_q*``)."""
+    pose = {"pose_qw", "pose_qx", "pose_qy", "pose_qz"}
+
+    def columns() -> dict[str, bool]:
+        engine = make_engine(db_url)
+        try:
+            with engine.connect() as conn:
+                return {c["name"]: c["nullable"]
+                        for c in inspect(conn).get_columns("measurements")}
+        finally:
+            engine.dispose()
+
+    def downgrade(revision: str) -> None:
+        engine = make_engine(db_url)
+        try:
+            with engine.begin() as conn:
+                cfg = alembic_config()
+                cfg.attributes["connection"] = conn
+                command.downgrade(cfg, revision)
+        finally:
+            engine.dispose()
+
+    upgrade_database(db_url, "0008_stored_dry_run")
+    assert not pose & set(columns())
+    upgrade_database(db_url)
+    cols = columns()
+    assert pose <= set(cols) and all(cols[name] for name in pose)  # nullable: no backfill
+    downgrade("0008_stored_dry_run")
+    assert not pose & set(columns()) and "ref_z" in columns()

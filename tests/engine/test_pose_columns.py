@@ -1,0 +1,80 @@
+"""The pose the rig commanded, recorded with every measurement (issue 22, turntable
+geometry; docs/recording.md, ``pose_q*``): a motorised campaign's export carries it after
+``ref_z``, one consistent with ``ref_*``; rows without a pose export as before."""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import io
+
+from engine_helpers import (  # isort: skip
+    POSE_COLUMNS, SMALL_SPEC, add_campaign, assert_poses_give_references, fake_calibrate)
+from sqlalchemy import select
+
+from calibration.recording import parse_recording
+from drivers.clock import VirtualClock
+from drivers.geometry import angles_for_reference, pose_quaternion
+from service.api.recording_csv import RECORDING_COLUMNS, render_recording_csv
+from service.db.models import Campaign, Measurement
+from service.engine.rigs import open_rig
+from service.engine.runner import CampaignRunner
+
+SIM = {"name": "sim", "chamber": {"driver": "sim", "range_c": [-70, 180]},
+       "turntable": {"driver": "sim"}}
+
+
+def _measurements(sf, cid: int) -> list[Measurement]:  # type: ignore[no-untyped-def]
+    with sf() as s:
+        return list(s.scalars(select(Measurement).where(Measurement.campaign_id == cid)
+                              .order_by(Measurement.t_s, Measurement.step,
+                                        Measurement.position)))
+
+
+def _parse(text: str) -> tuple[list[str], list[dict[str, str]]]:
+    reader = csv.DictReader(io.StringIO(text))
+    return list(reader.fieldnames or []), list(reader)
+
+
+async def test_a_soak_campaign_records_the_commanded_pose_of_every_reading(sf) -> None:  # type: ignore[no-untyped-def]
+    spec = {**SMALL_SPEC, "setpoints_c": [10.0, 30.0], "samples_per_position": 20,
+            "soak_min": 10}
+    cid = add_campaign(sf, spec)
+    clock = VirtualClock()
+    async with open_rig(SIM, clock, seed=4, sim_options={"modbus_in_memory": True}) as dev:
+        state = await asyncio.wait_for(
+            CampaignRunner(sf, cid, dev, clock, calibrate=fake_calibrate).run(), 60.0)
+    with sf() as s:
+        assert state == "completed", s.get(Campaign, cid).error
+    rows = _measurements(sf, cid)
+    assert len(rows) == 12
+    text = render_recording_csv(rows)
+    header, parsed = _parse(text)
+    at = header.index("ref_z") + 1
+    assert tuple(header[at:at + 4]) == POSE_COLUMNS
+    assert [c for c in header if c not in POSE_COLUMNS] == list(RECORDING_COLUMNS)
+    assert_poses_give_references(parsed)
+    # The twin's table is 3-axis: each pose is that of the angles the engine commanded.
+    for row in parsed:
+        ref = [float(row[c]) for c in ("ref_x", "ref_y", "ref_z")]
+        assert tuple(float(row[c]) for c in POSE_COLUMNS) == pose_quaternion(
+            angles_for_reference(ref, 3))
+    # still a recording the commands read (an unknown column is kept, not refused)
+    assert parse_recording(text).header == header
+
+
+def _row(t_s: float, pose: tuple[float, float, float, float] | None) -> Measurement:
+    q = pose or (None, None, None, None)
+    return Measurement(step=0, position=0, t_s=t_s, setpoint_c=20.0, chamber_c=20.0,
+                       sensor_c=21.0, ref_x=0.0, ref_y=0.0, ref_z=1.0, ax=0.0, ay=0.0,
+                       az=1.0, n=10, **dict(zip(POSE_COLUMNS, q, strict=True)))
+
+
+def test_rows_without_a_pose_export_as_before_and_a_missing_one_is_empty() -> None:
+    header, _ = _parse(render_recording_csv([_row(1.0, None), _row(2.0, None)]))
+    assert header == list(RECORDING_COLUMNS)  # no pose anywhere: the old export, unchanged
+    header, parsed = _parse(render_recording_csv(
+        [_row(1.0, None), _row(2.0, (1.0, 0.0, 0.0, 0.0))], ref_tol_deg=2.0))
+    assert header[-1] == "ref_tol_deg" and set(POSE_COLUMNS) <= set(header)
+    assert [parsed[0][c] for c in POSE_COLUMNS] == ["", "", "", ""]  # not known: empty
+    assert [parsed[1][c] for c in POSE_COLUMNS] == ["1.0", "0.0", "0.0", "0.0"]
