@@ -17,10 +17,11 @@ from calibration.errors import RecordingError
 from calibration.recording import Recording, optional_number_column
 
 POSE_COLUMNS: tuple[str, ...] = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
-# A pose and its reference are written from one commanded pose: they agree to rounding.
-# Beyond this the two columns describe different orientations (one of them mistyped or
-# from another convention) and neither can be trusted to place gravity.
-POSE_REF_TOL_DEG = 0.5
+# A pose and its reference are written from one commanded pose: they agree to rounding,
+# or within a hand axis' step tolerance (0.5°: the step taken for the angle a reference
+# needs, docs/recording.md). Beyond this the two columns describe different orientations
+# (one of them mistyped or from another convention) and neither can be trusted.
+POSE_REF_TOL_DEG = 1.0
 UNIT_TOL = 1e-3  # |q| − 1 beyond this: not a rotation written to the column's precision
 
 

@@ -87,7 +87,7 @@ def simulate_campaign(
     return_truth: bool = False,
     position_order: str = "table",
     position_order_seed: int | None = None,
-    record_poses: bool = False,
+    record_poses: bool = True,
 ) -> Recording | SimCampaign:
     """Simulate a soak campaign and return its v1 recording (or a :class:`SimCampaign`).
 

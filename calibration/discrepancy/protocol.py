@@ -76,6 +76,7 @@ class Protocol:
     sd_recorded: bool
     oblique: bool
     separable: tuple[str, ...] = ()
+    table_poses: bool = False  # the pose_q* columns (calibration/table_pose.py) on every row
     not_separable: tuple[Confusion, ...] = field(default_factory=tuple)
 
     def withheld_with(self, effect_id: str) -> Confusion | None:
@@ -95,7 +96,8 @@ class Protocol:
             "n_plateaus": self.n_plateaus, "position_order": self.position_order,
             "order_from": self.order_from, "references": self.references,
             "sessions": self.sessions, "sd_recorded": self.sd_recorded,
-            "oblique_positions": self.oblique, "separable": list(self.separable),
+            "oblique_positions": self.oblique, "table_poses": self.table_poses,
+            "separable": list(self.separable),
             "not_separable": [c.to_json() for c in self.not_separable],
         }
 
@@ -206,7 +208,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
         order_from="t_s within steps" if visit is None else "visit column",
         references=ctx.mode == "reference", sessions=sessions,
         sd_recorded=ctx.sd_g is not None, oblique=oblique,
-        not_separable=tuple(conf)).with_testable(identifiable or {})
+        not_separable=tuple(conf),
+        table_poses=ctx.lab_to_sensor is not None).with_testable(identifiable or {})
 
 
 def visit_column(columns: dict[str, np.ndarray]) -> np.ndarray | None:

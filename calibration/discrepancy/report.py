@@ -93,7 +93,8 @@ def protocol_lines(pr: dict[str, Any]) -> list[str]:
                 else f"{pr['sessions']} session(s) recorded")
     lines = ["Protocol: " + "; ".join([
         temp, f"position order {pr['position_order']} (from {pr['order_from']})",
-        "references" if pr["references"] else "no references (norm mode)", sessions,
+        ("references and the table's poses" if pr.get("table_poses") else "references")
+        if pr["references"] else "no references (norm mode)", sessions,
         "oblique positions" if pr["oblique_positions"] else "axis-aligned positions only"])]
     if pr["separable"]:
         lines.append(f"  separates: {', '.join(pr['separable'])}")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import logging
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -19,6 +20,7 @@ from sqlalchemy import insert, select, text, update
 from sqlalchemy.exc import DBAPIError, IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from calibration.table_pose import POSE_COLUMNS
 from service.db.models import Calibration, Campaign, Measurement, RigLease, SoakProbe, utcnow
 from service.db.timestamps import as_utc
 from service.engine.calibrate import CalibrationRow
@@ -440,9 +442,10 @@ def soak_probe_rows(sf: SessionFactory, campaign_id: int,
 
 def measurement_columns(sf: SessionFactory, campaign_id: int,
                         sensor: str | None = None) -> dict[str, list[float]]:
-    """The stored measurements (of ``sensor`` when given) as recording-v1 columns, time order."""
+    """The stored measurements (of ``sensor`` when given) as recording-v1 columns, time order;
+    the commanded poses (``pose_q*``, docs/recording.md) where any row has one."""
     names = ("t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position", "ref_x", "ref_y",
-             "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")
+             "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z", *POSE_COLUMNS)
     with sf() as s:
         rows = s.execute(
             select(*(getattr(Measurement, n) for n in names))
@@ -454,6 +457,9 @@ def measurement_columns(sf: SessionFactory, campaign_id: int,
     for r in rows:
         for n, v in zip(names, r, strict=True):
             cols[n].append(float("nan") if v is None else float(v))
+    if all(math.isnan(v) for c in POSE_COLUMNS for v in cols[c]):
+        for c in POSE_COLUMNS:  # no pose recorded (a hand-placed fixture): no columns
+            del cols[c]
     return cols
 
 

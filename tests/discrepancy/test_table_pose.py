@@ -38,10 +38,12 @@ def _posed_columns(tilt_urad, seed: int = 6, poses: bool = True) -> dict[str, np
     ``tilt_urad`` about lab x, y as this rig's table holds each pose (the engine's
     commanded angles), with the poses as the engine records them."""
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=seed), setpoints_c=ONE_WAY,
-                            seed=10 + seed, position_order="random", position_order_seed=3)
+                            seed=10 + seed, position_order="random", position_order_seed=3,
+                            record_poses=False)
     ref = rec.ref_g
     R = np.array([_pose(angles_for_reference(r, 3)) for r in ref])
     cols = {k: np.array(v) for k, v in rec.columns.items()}
+    assert not set(table_pose.POSE_COLUMNS) & set(cols)
     turn = table_pose.lab_tilt_columns(R.transpose(0, 2, 1), np.linalg.norm(ref, axis=1))
     moved = turn @ (np.asarray(tilt_urad, float) * 1e-6)
     for j, c in enumerate(("ax", "ay", "az")):  # the scale is 1 within 1e-3 of 20 µrad
@@ -98,3 +100,15 @@ def test_a_pose_that_disagrees_with_its_reference_is_refused_with_where(tmp_path
     err = capsys.readouterr().err
     assert "swapped.csv:" in err and "column 'pose_qw'" in err
     assert "check the pose columns' order (w, x, y, z)" in err
+
+
+def test_the_report_says_the_poses_were_read(tmp_path, capsys):
+    path = tmp_path / "posed.csv"
+    write_recording(path, _posed_columns((0.0, 0.0)))
+    assert main(["diagnose", str(path), "--n-null", "20"]) == 0
+    assert "references and the table's poses;" in capsys.readouterr().out
+    cols = _posed_columns((0.0, 0.0), poses=False)
+    write_recording(path, cols)
+    assert main(["diagnose", str(path), "--n-null", "20"]) == 0
+    out = capsys.readouterr().out
+    assert "; references;" in out and "table's poses" not in out
