@@ -25,14 +25,16 @@ POSE_REF_TOL_DEG = 1.0
 UNIT_TOL = 1e-3  # |q| − 1 beyond this: not a rotation written to the column's precision
 
 
-def lab_to_sensor(rec: Recording) -> np.ndarray | None:
-    """(N, 3, 3) ``Rᵀ`` of every reading (lab vectors into the sensor frame), or None
-    where the recording has no pose on some reading (a hand-placed fixture, an older
-    export): a pose known for part of a recording cannot be told from the rest.
+def read_poses(rec: Recording) -> np.ndarray | None:
+    """(N, 4) unit quaternions (w, x, y, z) of every reading's pose, or None where the
+    recording has no pose on some reading (a hand-placed fixture, an older export): a pose
+    known for part of a recording cannot be told from the rest.
 
-    A cell that is not a number, a quaternion off unit length, or a pose that puts
-    gravity more than :data:`POSE_REF_TOL_DEG` from the row's ``ref_*`` is an error naming
-    the line and column: a confident answer built on it would be wrong."""
+    Kept as quaternions, not (N, 3, 3) matrices: 32 bytes a reading against 72 on a long
+    recording (:func:`pose_rows` gives the matrix rows by blocks). A cell that is not a
+    number, a quaternion off unit length, or a pose that puts gravity more than
+    :data:`POSE_REF_TOL_DEG` from the row's ``ref_*`` is an error naming the line and
+    column: a confident answer built on it would be wrong."""
     cols = [optional_number_column(rec, c, "a pose quaternion component")
             for c in POSE_COLUMNS]
     if any(c is None for c in cols):
@@ -47,24 +49,42 @@ def lab_to_sensor(rec: Recording) -> np.ndarray | None:
         raise RecordingError(rec.path, i + 2, "pose_qw",
                              f"pose_qw..pose_qz have length {norm[i]:.6g}, not 1: a pose "
                              "is a unit quaternion (scalar first)")
-    # scipy's order is (x, y, z, w); scalar_first needs scipy >= 1.14
-    R_t = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix().transpose(0, 2, 1)
+    q /= norm[:, None]
     ref = rec.ref_g
     if ref is not None:
         u = ref / np.maximum(np.linalg.norm(ref, axis=1, keepdims=True), 1e-300)
-        cos = np.clip(np.sum(R_t[:, :, 2] * u, axis=1), -1.0, 1.0)
-        off = np.degrees(np.arccos(cos))
+        g = pose_rows(q, (2,))[:, :, 0]  # Rᵀ·up: gravity in the sensor frame
+        off = np.degrees(np.arccos(np.clip(np.sum(g * u, axis=1), -1.0, 1.0)))
         worst = int(np.argmax(off))
         if off[worst] > POSE_REF_TOL_DEG:
-            g = R_t[worst, :, 2]
             raise RecordingError(
                 rec.path, worst + 2, "pose_qw",
-                f"the pose puts gravity at ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) in the "
-                f"sensor frame, {off[worst]:.1f}° from ref_* "
+                f"the pose puts gravity at ({g[worst, 0]:+.3f}, {g[worst, 1]:+.3f}, "
+                f"{g[worst, 2]:+.3f}) in the sensor frame, {off[worst]:.1f}° from ref_* "
                 f"({u[worst, 0]:+.3f}, {u[worst, 1]:+.3f}, {u[worst, 2]:+.3f}); both are "
                 "written from one commanded pose (ref = Rᵀ·up): check the pose columns' "
                 "order (w, x, y, z) and frame (sensor to lab)")
-    return R_t
+    return q
+
+
+POSE_BLOCK = 65_536  # readings converted at a time (an (n, 3, 3) block of 4.7 MB)
+
+
+def pose_rows(q: np.ndarray, rows: tuple[int, ...]) -> np.ndarray:
+    """(N, 3, len(rows)) the rows ``rows`` of each pose's R (sensor to lab): row k of R is
+    ``Rᵀ·e_k``, lab axis k seen in the sensor frame. By blocks of :data:`POSE_BLOCK`
+    readings, so no (N, 3, 3) array is held."""
+    out = np.empty((q.shape[0], 3, len(rows)))
+    for i in range(0, q.shape[0], POSE_BLOCK):
+        R = Rotation.from_quat(q[i:i + POSE_BLOCK][:, [1, 2, 3, 0]]).as_matrix()
+        out[i:i + POSE_BLOCK] = R[:, list(rows), :].transpose(0, 2, 1)
+    return out
+
+
+def lab_to_sensor(q: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) ``Rᵀ`` of poses ``q``: lab vectors into the sensor frame (for a short
+    recording or a simulator; :func:`pose_rows` for the rows alone)."""
+    return pose_rows(q, (0, 1, 2))
 
 
 # |qw| below this is a half turn's rounding (±6e-17 as the angle came as +180° or −180°):
@@ -87,11 +107,12 @@ def pose_quaternion(R: np.ndarray) -> np.ndarray:
     return q.reshape(np.shape(R)[:-2] + (4,))
 
 
-def lab_tilt_columns(R_t: np.ndarray, mag_g: np.ndarray) -> np.ndarray:
-    """(N, 3, 2) change of the specific force per radian of base tilt about lab x and y.
+def lab_tilt_columns(q: np.ndarray, mag_g: np.ndarray) -> np.ndarray:
+    """(N, 3, 2) change of the specific force per radian of base tilt about lab x and y,
+    for poses ``q`` (:func:`read_poses`).
 
     The tilted base turns lab up to ``Rx(tx)·Ry(ty)·up ≈ (ty, −tx, 1)``, so the force in
     the sensor frame moves by ``|g|·(ty·Rᵀe_x − tx·Rᵀe_y)``: across the reference always
     (Rᵀe_x, Rᵀe_y ⊥ Rᵀe_z), by an amount and direction each pose's heading sets."""
-    m = np.asarray(mag_g, float)[:, None]
-    return np.stack([-R_t[:, :, 1] * m, R_t[:, :, 0] * m], axis=2)
+    xy = pose_rows(q, (0, 1)) * np.asarray(mag_g, float)[:, None, None]
+    return np.stack([-xy[:, :, 1], xy[:, :, 0]], axis=2)

@@ -46,9 +46,9 @@ class DesignContext:
     # (N,) samples averaged per reading (the ``n`` column), when recorded: how noisy each
     # reading's own ``sd_*`` is as an estimate of its window's variance.
     n_samples: np.ndarray | None = None
-    # (N,3,3) Rᵀ of the table's commanded pose per reading (lab vectors into the sensor
-    # frame; calibration/table_pose.py), when the recording has the ``pose_q*`` columns.
-    lab_to_sensor: np.ndarray | None = None
+    # (N,4) unit quaternions of the table's commanded pose per reading (sensor to lab;
+    # calibration/table_pose.py), when the recording has the ``pose_q*`` columns.
+    pose_q: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -103,7 +103,7 @@ def base_context(rec: Recording, mode: str, input_g: np.ndarray) -> DesignContex
         steps=steps, positions=positions, step_temp_c=step_temp, direction=direction,
         time_since_step_s=since, input_g=np.asarray(input_g, float),
         sd_g=sd, draw_dtemp_g_per_c=np.zeros((n, 3)), session=session, n_samples=n_samples,
-        lab_to_sensor=table_pose.lab_to_sensor(rec) if mode == "reference" else None,
+        pose_q=table_pose.read_poses(rec) if mode == "reference" else None,
     )
 
 

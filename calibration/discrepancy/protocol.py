@@ -209,7 +209,7 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
         references=ctx.mode == "reference", sessions=sessions,
         sd_recorded=ctx.sd_g is not None, oblique=oblique,
         not_separable=tuple(conf),
-        table_poses=ctx.lab_to_sensor is not None).with_testable(identifiable or {})
+        table_poses=ctx.pose_q is not None).with_testable(identifiable or {})
 
 
 def visit_column(columns: dict[str, np.ndarray]) -> np.ndarray | None:

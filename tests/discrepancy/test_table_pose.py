@@ -44,12 +44,12 @@ def _posed_columns(tilt_urad, seed: int = 6, poses: bool = True) -> dict[str, np
     R = np.array([_pose(angles_for_reference(r, 3)) for r in ref])
     cols = {k: np.array(v) for k, v in rec.columns.items()}
     assert not set(table_pose.POSE_COLUMNS) & set(cols)
-    turn = table_pose.lab_tilt_columns(R.transpose(0, 2, 1), np.linalg.norm(ref, axis=1))
+    q = table_pose.pose_quaternion(R)
+    turn = table_pose.lab_tilt_columns(q, np.linalg.norm(ref, axis=1))
     moved = turn @ (np.asarray(tilt_urad, float) * 1e-6)
     for j, c in enumerate(("ax", "ay", "az")):  # the scale is 1 within 1e-3 of 20 µrad
         cols[c] = cols[c] + moved[:, j]
     if poses:
-        q = table_pose.pose_quaternion(R)
         cols.update({c: q[:, j] for j, c in enumerate(table_pose.POSE_COLUMNS)})
     return cols
 
@@ -65,7 +65,7 @@ def test_the_pose_columns_give_back_the_references_of_the_rigs_angles():
             "ax": ref[:, 0], "ay": ref[:, 1], "az": ref[:, 2],
             "ref_x": ref[:, 0], "ref_y": ref[:, 1], "ref_z": ref[:, 2],
             **{c: q[:, j] for j, c in enumerate(table_pose.POSE_COLUMNS)}}
-    R_t = table_pose.lab_to_sensor(Recording.from_columns(cols))
+    R_t = table_pose.lab_to_sensor(table_pose.read_poses(Recording.from_columns(cols)))
     assert np.allclose(R_t, R.transpose(0, 2, 1), atol=1e-12)
     assert np.allclose(R_t[:, :, 2], ref, atol=1e-12)
 

@@ -250,7 +250,7 @@ class TurntableGeometry(CatalogueEffect):
         pose = self._poses(ctx)
         on = np.unique(pose[circle >= 0]).size if axes else 0
         swept = on >= MIN_POSES
-        if ctx.lab_to_sensor is not None:
+        if ctx.pose_q is not None:
             # The poses recorded (``pose_q*``): a tilted base is its two lab-frame angles,
             # one pair for every pose (SHAPE_LAB_TILT), where the sweep shape fits a tilt per
             # circle found from the references; beside it the encoder's shape, or the free
@@ -263,7 +263,7 @@ class TurntableGeometry(CatalogueEffect):
             return pose_turn_columns(ctx, self._poses(ctx))
         mag = np.linalg.norm(ctx.input_g, axis=1)
         if theta == SHAPE_LAB_TILT:
-            return table_pose.lab_tilt_columns(ctx.lab_to_sensor, mag)
+            return table_pose.lab_tilt_columns(ctx.pose_q, mag)
         _, axes, circle = sweep_layout(ctx)
         return tc.shape_columns(ctx.input_g / mag[:, None], mag, circle, axes, theta)
 
