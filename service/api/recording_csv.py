@@ -6,6 +6,7 @@ import csv
 import io
 from collections.abc import Iterable
 
+from calibration.table_pose import POSE_COLUMNS
 from service.db.models import Measurement, SoakProbe
 
 RECORDING_COLUMNS: tuple[str, ...] = (
@@ -44,10 +45,6 @@ def render_recording_csv(measurements: Iterable[Measurement],
         writer.writerow([_cell(visit if column == "visit" else getattr(m, column))
                          for column in columns] + tail)
     return out.getvalue()
-
-
-#: The commanded pose's quaternion (migration 0009), after ``ref_z`` when written.
-POSE_COLUMNS: tuple[str, ...] = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
 
 
 def _with_pose(rows: list[Measurement]) -> tuple[str, ...]:

@@ -55,6 +55,7 @@ from calibration.campaign_plan import (
     wait_for_chamber,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
+from calibration.table_pose import POSE_COLUMNS
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import polls, rate_gain, store
@@ -96,8 +97,6 @@ TURNTABLE_POLL_S = 1.0
 HOLD_POLL_S = 30.0  # chamber poll while a suspender holds the campaign, clock s
 ABORT_CHECK_S = 60.0  # longest wait between two abort checks, clock s
 ABORT_READ_EVERY_S = 0.05  # the guard's pre-call abort read, at most this often (loop time)
-#: The measurements' pose columns (migration 0009): the commanded pose's unit quaternion.
-POSE_COLUMNS = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
 POSE_ATTEMPTS = 3  # captures of one position off its pose before the campaign fails
 LEASE_LOST_REPORT = "not sent: lease lost"
 log = logging.getLogger(__name__)

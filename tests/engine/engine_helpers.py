@@ -6,6 +6,7 @@ from typing import Any
 
 import pytest
 
+from calibration.table_pose import POSE_COLUMNS
 from service.db.models import Campaign, Rig
 from service.engine.calibrate import CalibrationRow
 
@@ -48,9 +49,6 @@ def fake_calibrate(columns, provenance):  # type: ignore[no-untyped-def]
 
 
 fake_calibrate.calls = []  # type: ignore[attr-defined]
-
-
-POSE_COLUMNS = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
 
 
 def assert_poses_give_references(rows: list[dict[str, Any]], atol: float = 1e-9) -> None:
