@@ -27,6 +27,9 @@ from calibration.errors import RecordingError
 
 REQUIRED = ("t_s", "ax", "ay", "az")
 TEMPERATURE = ("sensor_c", "chamber_c")
+# Project addition: the table's commanded pose of each reading, a unit quaternion (scalar
+# first) of the rotation from sensor to lab (docs/recording.md; calibration/table_pose.py)
+POSE_COLUMNS: tuple[str, ...] = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
 NUMERIC = (
     "t_s",
     "ax",
@@ -45,6 +48,8 @@ NUMERIC = (
     "sd_y",
     "sd_z",
     "visit",  # project addition: the row's visit index within its step (docs/recording.md)
+    # parsed as numbers, so a file that has them keeps no text for them (issue 22, memory)
+    *POSE_COLUMNS,
 )
 # Order used when soakcal writes a recording (readers accept any order).
 CANONICAL_ORDER = (
@@ -58,6 +63,7 @@ CANONICAL_ORDER = (
     "ref_x",
     "ref_y",
     "ref_z",
+    *POSE_COLUMNS,
     "ax",
     "ay",
     "az",

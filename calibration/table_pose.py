@@ -14,9 +14,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calibration.errors import RecordingError
-from calibration.recording import Recording, optional_number_column
+from calibration.recording import POSE_COLUMNS, Recording, optional_number_column
 
-POSE_COLUMNS: tuple[str, ...] = ("pose_qw", "pose_qx", "pose_qy", "pose_qz")
 # A pose and its reference are written from one commanded pose: they agree to rounding,
 # or within a hand axis' step tolerance (0.5°: the step taken for the angle a reference
 # needs, docs/recording.md). Beyond this the two columns describe different orientations

@@ -112,3 +112,16 @@ def test_the_report_says_the_poses_were_read(tmp_path, capsys):
     assert main(["diagnose", str(path), "--n-null", "20"]) == 0
     out = capsys.readouterr().out
     assert "; references;" in out and "table's poses" not in out
+
+
+def test_a_recording_with_poses_keeps_no_text_for_them(tmp_path):
+    """The pose columns are numbers the reader parses: a file of them keeps no text
+    (calibrate and diagnose read with raw_cells=False; issue 22, memory: kept as text they
+    cost calibrate a third more on a 1 M-reading recording)."""
+    from calibration.recording import read_recording
+
+    path = tmp_path / "posed.csv"
+    write_recording(path, _posed_columns((0.0, 0.0)))
+    rec = read_recording(path, raw_cells=False)
+    assert rec.cells is None
+    assert np.allclose(table_pose.read_poses(rec)[:, 0], rec.columns["pose_qw"])
