@@ -16,10 +16,10 @@ from scipy.spatial.transform import Rotation
 from calibration.errors import RecordingError
 from calibration.recording import POSE_COLUMNS, Recording, optional_number_column
 
-# A pose and its reference are written from one commanded pose: they agree to rounding,
-# or within a hand axis' step tolerance (0.5°: the step taken for the angle a reference
-# needs, docs/recording.md). Beyond this the two columns describe different orientations
-# (one of them mistyped or from another convention) and neither can be trusted.
+# A pose and its reference are written from one commanded pose: soakcal's agree to
+# rounding (a hand axis' step included: the row's reference is the step's). Beyond this the
+# two columns describe different orientations (one of them mistyped or from another
+# convention) and neither can be trusted; 1° leaves room for another writer's rounding.
 POSE_REF_TOL_DEG = 1.0
 UNIT_TOL = 1e-3  # |q| − 1 beyond this: not a rotation written to the column's precision
 

@@ -55,7 +55,7 @@ from calibration.campaign_plan import (
     wait_for_chamber,
 )
 from calibration.placement import MAX_ANGLE_DEG, check_pose
-from calibration.table_pose import POSE_COLUMNS
+from calibration.table_pose import POSE_COLUMNS, pose_rows
 from drivers.clock import Clock
 from drivers.protocols import Acquisition, ChamberStatus
 from service.engine import polls, rate_gain, store
@@ -575,8 +575,8 @@ class CampaignRunner:
     def _commit(self, msg: Save, status: ChamberStatus, readings: dict[str, Any]) -> None:
         """Commit every live sensor's reading of a position and the cursor past it in one
         transaction (the crash rule)."""
-        ref = msg.ref_g
         pose = self._pose_columns(msg.step, msg.position)
+        ref = commanded_reference(msg.ref_g, pose)
         rows = []
         for serial in msg.sensors:
             if serial not in readings:
@@ -1052,3 +1052,24 @@ class Rewind(Exception):  # noqa: N818 - a control-flow signal, not an error
 
 def _finite(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (v if math.isfinite(v) else None) for k, v in d.items()}
+
+
+def commanded_reference(ref_g: Any, pose: dict[str, float | None]) -> tuple[float, ...]:
+    """The reference a row stores: the direction its commanded pose puts gravity along,
+    |ref| kept, where the pose is known and differs from the schedule's direction.
+
+    Why: a hand axis stops only at its indexer's steps, and a step within
+    ``drivers.geometry.HAND_STEP_TOL_DEG`` (0.5°) of the angle a reference needs is taken
+    for it; the sensor then stands at the step, not at the schedule's direction, and a
+    reference-mode fit takes ``ref_*`` as the truth (0.5° is 8.7 mg across it). Elsewhere
+    the two agree to rounding and the schedule's reference is kept exactly."""
+    ref = np.asarray(ref_g, float)
+    q = [pose.get(c) for c in POSE_COLUMNS]
+    if any(v is None for v in q):
+        return tuple(float(v) for v in ref)
+    g = pose_rows(np.array([q], float), (2,))[0, :, 0]
+    mag = float(np.linalg.norm(ref))
+    if float(np.linalg.norm(g * mag - ref)) <= 1e-9 * max(mag, 1.0):
+        return tuple(float(v) for v in ref)
+    return tuple(float(v) for v in g * mag)
+

@@ -8,6 +8,8 @@ import asyncio
 import csv
 import io
 
+import pytest
+
 from engine_helpers import (  # isort: skip
     POSE_COLUMNS, SMALL_SPEC, add_campaign, assert_poses_give_references, fake_calibrate)
 from sqlalchemy import select
@@ -78,3 +80,23 @@ def test_rows_without_a_pose_export_as_before_and_a_missing_one_is_empty() -> No
     assert header[-1] == "ref_tol_deg" and set(POSE_COLUMNS) <= set(header)
     assert [parsed[0][c] for c in POSE_COLUMNS] == ["", "", "", ""]  # not known: empty
     assert [parsed[1][c] for c in POSE_COLUMNS] == ["1.0", "0.0", "0.0", "0.0"]
+
+
+def test_a_hand_step_off_the_schedule_is_stored_as_the_reference_it_gives() -> None:
+    """A hand axis at its 45° step where the schedule asked for 44.7° (within the indexer's
+    0.5° tolerance): the row's reference is the direction the commanded pose puts gravity
+    along, not the schedule's, 0.26° (4.5 mg) across it (a reference-mode fit takes ref_* as the
+    truth). Where the two agree the schedule's reference is kept to the bit."""
+    import numpy as np
+
+    from drivers.geometry import reference_for_angles
+    from service.engine.runner import commanded_reference
+
+    asked = reference_for_angles((30.0, 44.7))
+    pose = dict(zip(POSE_COLUMNS, pose_quaternion((30.0, 45.0)), strict=True))
+    stored = np.array(commanded_reference(asked, pose))
+    np.testing.assert_allclose(stored, reference_for_angles((30.0, 45.0)), atol=1e-12)
+    assert np.degrees(np.arccos(stored @ asked)) == pytest.approx(0.26, abs=0.01)  # 4.5 mg
+    same = dict(zip(POSE_COLUMNS, pose_quaternion((30.0, 44.7)), strict=True))
+    assert commanded_reference(asked, same) == tuple(asked)
+    assert commanded_reference(asked, dict.fromkeys(POSE_COLUMNS)) == tuple(asked)
