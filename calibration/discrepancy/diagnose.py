@@ -1134,20 +1134,37 @@ def _turned_or_bent(pb: LinearProblem, terms: list[Term], f: Finding, alpha: flo
     geo = TURNTABLE_GEOMETRY
     why = (f"the structure turns the reference direction without changing its length (the "
            f"{f.effect} term's part along the reference is not needed once each direction "
-           f"may turn: p = {p_along:.2g} > α); a tilted table axis or an encoder error does "
-           "exactly that, and the recording holds the reference in the sensor frame, not the "
-           "table angles that would tell them apart")
+           f"may turn: p = {p_along:.2g} > α); {_table_turn_clause(pb, not_ident)}")
     candidates = [f.effect, geo.effect_id]
     for c in candidates:
         other = candidates[1] if c == candidates[0] else candidates[0]
         not_ident[c] = {"effect": c, "why": f"not separable from {other}: {why}",
-                        "experiment": BY_ID[c].experiment}
+                        "experiment": (geo.experiment_for(pb.ctx) if c == geo.effect_id
+                                       else BY_ID[c].experiment)}
     return replace(
         f, effect="not_identifiable", where={**f.where, "candidates": candidates},
         explanation=(f"Structure beyond noise that {' or '.join(candidates)} explain alike: "
                      f"{why}. It is modelled (with the {f.effect} term) but not named; "
-                     f"to separate them: {geo.experiment}."),
+                     f"to separate them: {geo.experiment_for(pb.ctx)}."),
         parameters={}, parameter_sd={}, confusers=[])
+
+
+def _table_turn_clause(pb: LinearProblem, not_ident: dict[str, dict[str, str]]) -> str:
+    """What the table's geometry could say of a turn of the reference, as this recording
+    allows: without poses nothing tells them apart; with them a tilted base was tested
+    (not an encoder error's or a wobble's turn of each pose), unless the protocol kept the
+    table's test from running (then why)."""
+    geo = TURNTABLE_GEOMETRY.effect_id
+    if pb.ctx.pose_q is None:
+        return ("a tilted table axis or an encoder error does exactly that, and the recording "
+                "holds the reference in the sensor frame, not the table angles that would "
+                "tell them apart")
+    if geo in not_ident:
+        return ("a tilted table axis or an encoder error does exactly that; the recorded "
+                "poses would test the tilt, but not here: " + not_ident[geo]["why"])
+    return ("a tilted table base, tested through the recorded poses, does not explain it, "
+            "but an encoder error or a wobbling axis turns each pose by its own angle, and "
+            "the poses give no axis angles to tell them apart")
 
 
 def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,

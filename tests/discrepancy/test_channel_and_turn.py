@@ -49,7 +49,8 @@ def test_a_tilted_table_is_not_named_a_nonlinearity():
     poses this rig's table holds (the engine's commanded angles): no nonlinearity or
     coupling is named. The tilt is no smooth function of the reference here (the table turns
     each Table 1 great circle in two half-sweeps), so it is reported where it is, and the
-    table's geometry is listed as not separable without the table angles (issue 22)."""
+    table's geometry is listed as not separable, the recorded poses untestable in this order
+    (issue 22)."""
     tilt = E.TurntableGeometry(base_tilt_rad=np.array([3e-3, -2e-3]))
     rec = simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=[tilt]),
                             setpoints_c=ONE_WAY, seed=16)
@@ -58,7 +59,8 @@ def test_a_tilted_table_is_not_named_a_nonlinearity():
     assert d.mismatch and named and set(named) <= {"unexplained", "not_identifiable"}
     assert "Not named scale_nonlinearity" in d.findings[0].explanation
     why = {n["effect"]: n["why"] for n in d.not_identifiable}["turntable_geometry"]
-    assert "table angles that would tell them apart" in why
+    assert "the recorded poses would test the tilt, but not here" in why
+    assert "same order on every plateau" in why
 
 
 def test_a_turn_smooth_in_the_reference_is_listed_not_separable_from_the_table():
@@ -66,16 +68,21 @@ def test_a_turn_smooth_in_the_reference_is_listed_not_separable_from_the_table()
     poses) turns the force as a smooth function of the reference: on Table 1 it is listed
     `not_identifiable` between a nonlinearity and the table, with the experiment."""
     tilt = E.TurntableGeometry(base_tilt_rad=np.array([3e-3, -2e-3]), through_poses=False)
-    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=[tilt]),
-                            setpoints_c=ONE_WAY, seed=16)
-    d = diagnose(rec, n_null=30, seed=6)
-    named = [f.effect for f in d.findings]
-    assert not {"scale_nonlinearity", "cross_coupling"} & set(named)
-    turned = [f for f in d.findings if f.effect == "not_identifiable"]
-    assert turned and all("turntable_geometry" in f.where["candidates"] for f in turned)
-    assert "without changing its length" in turned[0].explanation
-    assert "record the gimbal angles" in turned[0].explanation
-    assert "turntable_geometry" in {n["effect"] for n in d.not_identifiable}
+    for poses, advice in ((False, "record the gimbal angles"),
+                          (True, "repeat the tumble with the sensor remounted at 90°")):
+        rec = simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=[tilt]),
+                                setpoints_c=ONE_WAY, seed=16, record_poses=poses)
+        d = diagnose(rec, n_null=30, seed=6)
+        named = [f.effect for f in d.findings]
+        assert not {"scale_nonlinearity", "cross_coupling"} & set(named)
+        turned = [f for f in d.findings if f.effect == "not_identifiable"]
+        assert turned and all("turntable_geometry" in f.where["candidates"] for f in turned)
+        text = turned[0].explanation
+        assert "without changing its length" in text and advice in text
+        # with the poses recorded, asking for the gimbal angles again is no advice
+        assert ("record the gimbal angles" in text) is not poses
+        assert ("the recorded poses would test the tilt, but not here" in text) is poses
+        assert "turntable_geometry" in {n["effect"] for n in d.not_identifiable}
 
 
 def _tilted(tilt_rad, order: str = "random", schedule: str | None = None,

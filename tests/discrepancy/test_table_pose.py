@@ -125,3 +125,23 @@ def test_a_recording_with_poses_keeps_no_text_for_them(tmp_path):
     rec = read_recording(path, raw_cells=False)
     assert rec.cells is None
     assert np.allclose(table_pose.read_poses(rec)[:, 0], rec.columns["pose_qw"])
+
+
+def test_a_turn_the_recorded_poses_do_not_explain_is_said_so():
+    """A turn of each pose that is not a tilted base of this table (here a tilt in the
+    minimal-rotation convention, as a wobbling axis would turn poses its own way), visited
+    in a random order with the poses recorded: listed not separable from a coupling, and the
+    report says the base's tilt was tested through the poses and does not explain it."""
+    from simulators import effects as E  # noqa: N812 (as the other discrepancy tests)
+
+    tilt = E.TurntableGeometry(base_tilt_rad=np.array([3e-3, -2e-3]), through_poses=False)
+    rec = simulate_campaign(SensorTruth.adxl355_typical(seed=6, effects=[tilt]),
+                            setpoints_c=ONE_WAY, seed=16, position_order="random",
+                            position_order_seed=3)
+    d = diagnose(rec, n_null=30, seed=6)
+    turned = [f for f in d.findings if f.effect == "not_identifiable"]
+    assert turned and "turntable_geometry" in turned[0].where["candidates"]
+    text = turned[0].explanation
+    assert "a tilted table base, tested through the recorded poses, does not explain it" in text
+    assert "repeat the tumble with the sensor remounted at 90°" in text
+    assert "record the gimbal angles" not in text

@@ -230,6 +230,15 @@ class TurntableGeometry(CatalogueEffect):
          "between poses with one reference; a², a³ also move it along the reference"),
     )
 
+    def experiment_for(self, ctx: DesignContext) -> str:
+        """The experiment that separates the table's turn from a sensor's, for this
+        recording: with the poses recorded, asking for them again would be no advice."""
+        if ctx.pose_q is None:
+            return self.experiment
+        return ("repeat the tumble with the sensor remounted at 90° about the table axis "
+                "(a turn of the table's stays where it was, misalignment and a nonlinearity "
+                "turn with the sensor)")
+
     def _poses(self, ctx: DesignContext) -> np.ndarray:
         return pose_ids(ctx.positions, ctx.input_g, ctx.steps)
 
@@ -273,21 +282,21 @@ class TurntableGeometry(CatalogueEffect):
                     "has no reference (norm mode)", self.experiment)
         if 8 * 3 * ctx.n * 2 * MIN_POSES > MAX_TURN_BYTES:
             return (False, f"{ctx.n} readings: too large a design to test a turn of each "
-                    "pose here", self.experiment)
+                    "pose here", self.experiment_for(ctx))
         pose = self._poses(ctx)
         n_pose = int(pose.max()) + 1 if pose.size else 0
         if n_pose < MIN_POSES:
             return (False, f"{n_pose} pose(s) visited on ≥ {MIN_POSE_PLATEAUS} plateaus (need "
                     f"{MIN_POSES}): a turn of each pose is then the sensor's own misalignment "
-                    "(the base model's)", self.experiment)
+                    "(the base model's)", self.experiment_for(ctx))
         if time_and_position_confounded(ctx.steps, ctx.positions, ctx.t_s):
             return (False, "the positions are visited in the same order on every plateau: a "
                     "turn of each pose is then also a settling at each time within the "
                     "plateaus; a seeded or balanced order per plateau separates them",
-                    self.experiment)
+                    self.experiment_for(ctx))
         if 8 * 3 * ctx.n * 2 * n_pose > MAX_TURN_BYTES:
             return (False, f"{n_pose} poses over {ctx.n} readings: too large a design to test "
-                    "a turn of each pose here", self.experiment)
+                    "a turn of each pose here", self.experiment_for(ctx))
         return True, "", self.experiment
 
     def test_stats(self, pb, U, Xw, e, E):
