@@ -11,7 +11,8 @@ import io
 import pytest
 
 from engine_helpers import (  # isort: skip
-    POSE_COLUMNS, SMALL_SPEC, add_campaign, assert_poses_give_references, fake_calibrate)
+    POSE_COLUMNS, SMALL_SPEC, SQLITE_ONLY, add_campaign, assert_poses_give_references,
+    fake_calibrate)
 from sqlalchemy import select
 
 from calibration.recording import parse_recording
@@ -100,3 +101,38 @@ def test_a_hand_step_off_the_schedule_is_stored_as_the_reference_it_gives() -> N
     same = dict(zip(POSE_COLUMNS, pose_quaternion((30.0, 44.7)), strict=True))
     assert commanded_reference(asked, same) == tuple(asked)
     assert commanded_reference(asked, dict.fromkeys(POSE_COLUMNS)) == tuple(asked)
+
+
+@SQLITE_ONLY  # the diagnosis of what was stored; the storing is tested on both above
+async def test_a_tilted_base_on_the_twin_rig_is_named_from_the_engines_recording(sf) -> None:  # type: ignore[no-untyped-def]
+    """End to end (issue 22): the twin rig's table base tilted 200 / −100 µrad; the engine
+    runs Table 1 in a balanced order per plateau and records each reading's commanded pose;
+    `diagnose` on the exported recording names the table's geometry with the lab-frame
+    tilt it was given."""
+    import numpy as np
+
+    from calibration.discrepancy import diagnose
+    from simulators.effects import TurntableGeometry
+    from simulators.truth import SensorTruth
+
+    truth = SensorTruth.adxl355_typical(seed=6, effects=[
+        TurntableGeometry(base_tilt_rad=np.array([200e-6, -100e-6]))])
+    spec = {**SMALL_SPEC, "setpoints_c": [-20.0, 10.0, 40.0, 60.0], "positions": "table1",
+            "samples_per_position": 20, "soak_min": 10, "position_order": "balanced"}
+    cid = add_campaign(sf, spec)
+    clock = VirtualClock()
+    async with open_rig(SIM, clock, seed=4, sim_options={"modbus_in_memory": True,
+                                                         "truth": truth}) as dev:
+        state = await asyncio.wait_for(
+            CampaignRunner(sf, cid, dev, clock, calibrate=fake_calibrate).run(), 120.0)
+    with sf() as s:
+        assert state == "completed", s.get(Campaign, cid).error
+    d = diagnose(parse_recording(render_recording_csv(_measurements(sf, cid))), n_null=60,
+                 seed=1)
+    named = [f for f in d.findings if f.effect == "turntable_geometry"]
+    assert named, [f.effect for f in d.findings]
+    p, sd = named[0].parameters, named[0].parameter_sd
+    assert p["shape"] == 3.0
+    # 205.4 ± 5.0 and −97.3 ± 7.5 µrad on this draw
+    assert abs(p["tilt_x_urad"] - 200.0) <= 4 * sd["tilt_x_urad"] and sd["tilt_x_urad"] < 20
+    assert abs(p["tilt_y_urad"] + 100.0) <= 4 * sd["tilt_y_urad"] and sd["tilt_y_urad"] < 20
