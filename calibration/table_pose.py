@@ -80,12 +80,6 @@ def pose_rows(q: np.ndarray, rows: tuple[int, ...]) -> np.ndarray:
     return out
 
 
-def lab_to_sensor(q: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) ``Rᵀ`` of poses ``q``: lab vectors into the sensor frame (for a short
-    recording or a simulator; :func:`pose_rows` for the rows alone)."""
-    return pose_rows(q, (0, 1, 2))
-
-
 # |qw| below this is a half turn's rounding (±6e-17 as the angle came as +180° or −180°):
 # taken as 0, so that the vector part's sign, not the rounding, picks the spelling
 HALF_TURN_QW = 1e-12

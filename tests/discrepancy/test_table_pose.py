@@ -65,7 +65,7 @@ def test_the_pose_columns_give_back_the_references_of_the_rigs_angles():
             "ax": ref[:, 0], "ay": ref[:, 1], "az": ref[:, 2],
             "ref_x": ref[:, 0], "ref_y": ref[:, 1], "ref_z": ref[:, 2],
             **{c: q[:, j] for j, c in enumerate(table_pose.POSE_COLUMNS)}}
-    R_t = table_pose.lab_to_sensor(table_pose.read_poses(Recording.from_columns(cols)))
+    R_t = table_pose.pose_rows(table_pose.read_poses(Recording.from_columns(cols)), (0, 1, 2))
     assert np.allclose(R_t, R.transpose(0, 2, 1), atol=1e-12)
     assert np.allclose(R_t[:, :, 2], ref, atol=1e-12)
 
