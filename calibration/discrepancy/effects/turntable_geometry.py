@@ -198,7 +198,7 @@ class TurntableGeometry(CatalogueEffect):
     """A tilted table axis or an encoder error: each pose of the table turns the specific
     force by its own small angle, the same at every visit of that pose (effects.md).
 
-    Without the table angles (not in the recording format) the turn of each pose is free:
+    Without the table's poses (the optional ``pose_q*`` columns) the turn of each pose is free:
     two angles across its reference per pose visited on ≥ ``MIN_POSE_PLATEAUS`` plateaus.
     What makes it the rig's: it repeats at every temperature and visit of the pose, it has
     no part along the reference (a rotation keeps |f|), and poses with the same reference
@@ -430,8 +430,9 @@ class TurntableGeometry(CatalogueEffect):
         fit = np.linalg.lstsq(maps.reshape(-1, 9), turn.ravel(), rcond=None)[0]
         rest = np.linalg.norm(turn - (maps.reshape(-1, 9) @ fit).reshape(n_pose, 3), axis=1)
         # The lab-frame tilt that best makes these turns with the misalignment, poses taken
-        # as the minimal rotation onto their reference (lab_to_sensor: the twin's convention,
-        # so a twin can be built from the finding; a real table's heading may differ).
+        # as the minimal rotation onto their reference (lab_to_sensor: the convention a twin
+        # built from this finding tilts in; a real table's heading differs). With the poses
+        # recorded (SHAPE_LAB_TILT) the tilt is the columns' own coefficients instead.
         h = 1e-6
         tilt_cols = np.stack([(tilted_ref_g(u, np.array(d) * h) - u).ravel() / h
                               for d in ((1.0, 0.0), (0.0, 1.0))], axis=1)
