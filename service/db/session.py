@@ -96,6 +96,18 @@ def upgrade_database(url: str | None = None, revision: str = "head") -> None:
     as the service; concurrent starts are safe on PostgreSQL (transactional DDL)
     and serialised by the file lock on SQLite.
     """
+    _migrate(url, "upgrade", revision)
+
+
+def downgrade_database(url: str | None, revision: str) -> None:
+    """Undo the migrations above ``revision`` (``"base"``: all of them) on the database at
+    ``url``, as :func:`upgrade_database` runs them: rolling a release back, and the
+    migrations' own tests (each downgrade must undo its upgrade)."""
+    _migrate(url, "downgrade", revision)
+
+
+def _migrate(url: str | None, direction: str, revision: str) -> None:
+    """Alembic's ``upgrade`` or ``downgrade`` to ``revision`` in one transaction."""
     from sqlalchemy.exc import InterfaceError, OperationalError
 
     from alembic import command
@@ -105,7 +117,7 @@ def upgrade_database(url: str | None = None, revision: str = "head") -> None:
         with engine.begin() as connection:
             cfg = alembic_config()
             cfg.attributes["connection"] = connection
-            command.upgrade(cfg, revision)
+            getattr(command, direction)(cfg, revision)
     except (OperationalError, InterfaceError) as exc:
         raise DatabaseUnavailable(engine.url, exc) from exc
     finally:

@@ -6,9 +6,8 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import Column, Integer, MetaData, inspect
 
-from alembic import command
 from service.db.models import Base
-from service.db.session import alembic_config, make_engine, upgrade_database
+from service.db.session import downgrade_database, make_engine, upgrade_database
 
 
 def test_head_matches_the_models(migrated_db_url: str) -> None:
@@ -53,12 +52,9 @@ def test_upgrade_is_idempotent_and_creates_every_table(db_url: str) -> None:
 
 def test_downgrade_to_base_drops_everything(db_url: str) -> None:
     upgrade_database(db_url)
+    downgrade_database(db_url, "base")
     engine = make_engine(db_url)
     try:
-        with engine.begin() as conn:
-            cfg = alembic_config()
-            cfg.attributes["connection"] = conn
-            command.downgrade(cfg, "base")
         with engine.connect() as conn:
             assert set(inspect(conn).get_table_names()) <= {"alembic_version"}
     finally:
@@ -79,20 +75,10 @@ def test_the_pose_columns_come_and_go_with_0009(db_url: str) -> None:
         finally:
             engine.dispose()
 
-    def downgrade(revision: str) -> None:
-        engine = make_engine(db_url)
-        try:
-            with engine.begin() as conn:
-                cfg = alembic_config()
-                cfg.attributes["connection"] = conn
-                command.downgrade(cfg, revision)
-        finally:
-            engine.dispose()
-
     upgrade_database(db_url, "0008_stored_dry_run")
     assert not pose & set(columns())
     upgrade_database(db_url)
     cols = columns()
     assert pose <= set(cols) and all(cols[name] for name in pose)  # nullable: no backfill
-    downgrade("0008_stored_dry_run")
+    downgrade_database(db_url, "0008_stored_dry_run")
     assert not pose & set(columns()) and "ref_z" in columns()
