@@ -20,40 +20,25 @@ import importlib
 
 import numpy as np
 
-from benchmarks.blind.gen2 import protocol as gp
-from benchmarks.blind.gen2 import simulate as sim
-from benchmarks.blind.gen2.realnoise import NoisePools
-from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.effects.structure import log_p, log_p_by_reading
 from calibration.discrepancy.problem import build_problem
-from calibration.recording import Recording
+from tests.discrepancy.uneven_staircase import loud_sd, uneven_staircase
 
 diagnose_mod = importlib.import_module("calibration.discrepancy.diagnose")
 STEP = BY_ID["temperature_sensor"]
 STAIRCASE_C = (50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0, -30.0, -40.0)
 FROM_STEP = 3
 LOUD_FROM = 5  # plateaus at or below 0 °C vibrate (the generator's bench below 5 °C)
-LOUD_VARIANCE = 0.25  # their whitened variance (quiet 1; the generator: 0.7–0.8 against 0.9–1.0)
 ALPHA_CHECK = 0.05
 DRAWS = 400
 
 
 def _problem():
-    rng = np.random.default_rng(0)
-    pools = NoisePools(rng.standard_normal((20000, 3)), rng.standard_normal((20000, 3)),
-                       rng.standard_normal(400))
-    vib = tuple(5e-4 if k >= LOUD_FROM else 0.0 for k in range(len(STAIRCASE_C)))
-    proto = gp.Protocol2(name="staircase_down/oblique36/sensor_c/10min",
-                         setpoints_c=STAIRCASE_C, soak_min=10.0, schedule="oblique36",
-                         columns=("sensor_c",), die_tau_s=470.0, n_samples=200, vib_sd_g=vib,
-                         irregular=False, power_cycle_at=None, sensor_noise_g=1e-4)
-    pat = {"axes": [1.0, -0.7, -0.4], "from_step": FROM_STEP, "rows": [0, 1], "axis": 0,
-           "band_lo_g": 0.3, "tilt_dir": 0.0, "crack_frac": 0.5}
-    sensor = draw_sensor(np.random.default_rng(3))
-    cols = sim.record(proto, sensor, pools, "temperature_sensor", 0.12, pat, 3)
-    pb = build_problem(Recording.from_columns(cols))
+    pb = build_problem(uneven_staircase(STAIRCASE_C, "oblique36", LOUD_FROM,
+                                        effect="temperature_sensor", size=0.12,
+                                        from_step=FROM_STEP))
     term = diagnose_mod.Term("temperature_sensor", float(FROM_STEP),
                              pb.lift(STEP.regressors(pb.ctx, float(FROM_STEP))))
     U, _ = diagnose_mod._basis(pb, [term])
@@ -70,8 +55,7 @@ def _time_column_and_scale(pb) -> tuple[np.ndarray, np.ndarray]:
         m = ctx.steps == s
         frac[m] = ctx.time_since_step_s[m] / float(np.ptp(ctx.time_since_step_s[m])) - 0.5
     Xw = pb.whiten(pb.lift((ctx.draw_dtemp_g_per_c * frac[:, None])[:, :, None]))
-    sd = np.where(ctx.steps[pb.row] >= LOUD_FROM, np.sqrt(LOUD_VARIANCE), 1.0)
-    return Xw, sd
+    return Xw, loud_sd(pb, LOUD_FROM)
 
 
 def _rejections(pb, U, test) -> int:

@@ -12,7 +12,7 @@ plateau by its own residual scale (``structure.log_p_by_plateau``): here, with t
 whitening exaggerated (quiet 1.0, vibrating 0.25 in variance), they reject pure noise at
 about their level where the pooled F does not.
 
-Noise pools are synthetic (as test_channel_step_time_check_level.py).
+Noise pools are synthetic (``uneven_staircase``, as test_channel_step_time_check_level.py).
 """
 
 from __future__ import annotations
@@ -21,43 +21,26 @@ import importlib
 
 import numpy as np
 
-from benchmarks.blind.gen2 import protocol as gp
-from benchmarks.blind.gen2 import simulate as sim
-from benchmarks.blind.gen2.realnoise import NoisePools
-from benchmarks.blind.gen2.sensor import draw_sensor
 from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID, scale_nonlinearity, structure
 from calibration.discrepancy.effects.structure import log_p, log_p_by_plateau
 from calibration.discrepancy.problem import build_problem
-from calibration.recording import Recording
+from tests.discrepancy.uneven_staircase import loud_sd, uneven_staircase
 
 diagnose_mod = importlib.import_module("calibration.discrepancy.diagnose")
 BEND = BY_ID["scale_nonlinearity"]
 STAIRCASE_C = (50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0)
 LOUD_FROM = 4  # plateaus from here on vibrate
-LOUD_VARIANCE = 0.25  # their whitened variance (quiet 1; the generator: 0.7–0.8 against 0.9–1.0)
 ALPHA_CHECK = 0.05
 DRAWS = 60
 
 
 def _problem():
-    rng = np.random.default_rng(0)
-    pools = NoisePools(rng.standard_normal((20000, 3)), rng.standard_normal((20000, 3)),
-                       rng.standard_normal(400))
-    vib = tuple(5e-4 if k >= LOUD_FROM else 0.0 for k in range(len(STAIRCASE_C)))
-    proto = gp.Protocol2(name="staircase_down/sparse18/sensor_c/10min",
-                         setpoints_c=STAIRCASE_C, soak_min=10.0, schedule="sparse18",
-                         columns=("sensor_c",), die_tau_s=470.0, n_samples=200, vib_sd_g=vib,
-                         irregular=False, power_cycle_at=None, sensor_noise_g=1e-4)
-    pat = {"axes": [1.0, -0.7, -0.4], "from_step": 3, "rows": [0, 1], "axis": 0,
-           "band_lo_g": 0.3, "tilt_dir": 0.0, "crack_frac": 0.5}
-    cols = sim.record(proto, draw_sensor(np.random.default_rng(3)), pools, None, 0.0, pat, 3)
-    pb = build_problem(Recording.from_columns(cols))
+    pb = build_problem(uneven_staircase(STAIRCASE_C, "sparse18", LOUD_FROM))
     term = diagnose_mod.Term("scale_nonlinearity", 0.0,
                              pb.lift(BEND.regressors(pb.ctx, 0.0)))
     U, _ = diagnose_mod._basis(pb, [term])
-    sd = np.where(pb.ctx.steps[pb.row] >= LOUD_FROM, np.sqrt(LOUD_VARIANCE), 1.0)
-    return pb, U, sd
+    return pb, U, loud_sd(pb, LOUD_FROM)
 
 
 def _visit_columns(pb, U):
@@ -70,6 +53,20 @@ def _visit_columns(pb, U):
     Uc = structure.extend(U, np.zeros(pb.m), structure.whitened(
         pb, np.concatenate(common, axis=2)))[0]
     return Uc, structure.whitened(pb, np.concatenate(visit, axis=2))
+
+
+def _disagreeing_draw(pb, U, Ut, Xw, sd, rng):  # type: ignore[no-untyped-def]
+    """A draw of unevenly whitened noise (after ``U``) on which the by-plateau test of
+    ``Xw`` after ``Ut`` and the pooled F differ by more than a factor e in p: the draw, the
+    by-plateau log p, and a level between the two p values."""
+    for _ in range(200):
+        e = stats.project_out(U, sd * rng.standard_normal(pb.m))
+        et = e - Ut @ (Ut.T @ e)
+        lp_q, _ = log_p_by_plateau(pb, Ut, et, Xw)
+        lp_f, _ = log_p(Ut, et, Xw)
+        if abs(lp_q - lp_f) > 1.0:
+            break
+    return e, lp_q, float(np.exp(0.5 * (lp_q + lp_f)))
 
 
 def test_the_visit_test_reads_each_plateau_at_its_own_scale():
@@ -94,14 +91,7 @@ def test_the_checks_use_it():
     pb, U, sd = _problem()
     Uc, Xw = _visit_columns(pb, U)
     rng = np.random.default_rng(2)
-    for _ in range(200):
-        e = stats.project_out(U, sd * rng.standard_normal(pb.m))
-        ec = e - Uc @ (Uc.T @ e)
-        lp_q, _ = log_p_by_plateau(pb, Uc, ec, Xw)
-        lp_f, _ = log_p(Uc, ec, Xw)
-        if abs(lp_q - lp_f) > 1.0:
-            break
-    level = float(np.exp(0.5 * (lp_q + lp_f)))  # between the two p values
+    e, lp_q, level = _disagreeing_draw(pb, U, Uc, Xw, sd, rng)
     found = structure.visits_differ(pb, U, e, [], ["x", "y", "z"], level)
     assert (found is None) == (lp_q > np.log(level))
     # The free offset per direction, after the term and a turn of the reference.
@@ -113,14 +103,6 @@ def test_the_checks_use_it():
     Xd = np.concatenate([structure.per_axis_indicator(ctx.n, np.flatnonzero(dirs == j))
                          for j in range(int(dirs.max()) + 1)], axis=2)
     Ut, _ = structure.extend(U, e, structure.whitened(pb, turn_columns(u)))
-    Xdw = structure.whitened(pb, Xd)
-    for _ in range(200):
-        e = stats.project_out(U, sd * rng.standard_normal(pb.m))
-        et = e - Ut @ (Ut.T @ e)
-        lp_q, _ = log_p_by_plateau(pb, Ut, et, Xdw)
-        lp_f, _ = log_p(Ut, et, Xdw)
-        if abs(lp_q - lp_f) > 1.0:
-            break
-    level = float(np.exp(0.5 * (lp_q + lp_f)))
+    e, lp_q, level = _disagreeing_draw(pb, U, Ut, structure.whitened(pb, Xd), sd, rng)
     found = scale_nonlinearity.direction_offsets_needed(pb, U, e, (0, 1, 2), level, "a², a³")
     assert (found is None) == (lp_q > np.log(level))
