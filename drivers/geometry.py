@@ -165,10 +165,3 @@ def angles_for_references(refs_g: np.ndarray, n_axes: int = 3) -> np.ndarray:
     """Table angles (n, axes) of each unit gravity reference (n, 3): what the engine commands."""
     return np.array([angles_for_reference(r, n_axes) for r in np.asarray(refs_g, float)])
 
-
-def pose_lab_to_sensor(angles_deg: tuple[float, ...] | list[float]) -> np.ndarray:
-    """``Rᵀ`` (3, 3) of table angles: lab vectors into the sensor frame, the pose
-    :func:`reference_for_angles` turns gravity by. A tilted base turns gravity by a rotation
-    constant in the lab frame, which reaches the sensor through this pose
-    (calibration/table_pose.py), not through the reference alone."""
-    return rotation_for_angles(angles_deg).T

@@ -26,7 +26,7 @@ from drivers import adxl355
 from drivers.bridge_protocol import Framing, channel_field, encode_frame, parse_frame, split_channel
 from drivers.clock import Clock
 from drivers.faults import ProtocolError
-from drivers.geometry import pose_lab_to_sensor, reference_for_angles
+from drivers.geometry import reference_for_angles, rotation_for_angles
 from simulators.faults import SimFaults
 from simulators.line_server import LineServer, start_line_server
 
@@ -240,7 +240,7 @@ class MultiplexedBridgeDevice:
 def _pose(angles_deg: tuple[float, ...]) -> np.ndarray:
     """The table's pose (Rᵀ) at these angles, once per pose (as :func:`_reference`): a tilted
     base reaches the sensor through it. Read-only (shared)."""
-    R_t = pose_lab_to_sensor(angles_deg)
+    R_t = rotation_for_angles(angles_deg).T
     R_t.flags.writeable = False
     return R_t
 

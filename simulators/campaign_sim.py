@@ -35,7 +35,7 @@ from calibration.thermal_plant import (
     lag_step,
     rate_limited,
 )
-from drivers.geometry import angles_for_references, pose_lab_to_sensor
+from drivers.geometry import angles_for_references, rotation_for_angles
 from drivers.protocols import ChamberStatus
 from simulators.truth import Context, SensorTruth, averaged_readings
 
@@ -217,8 +217,11 @@ def simulate_campaign(
 
 
 def table_poses(ref_g: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) Rᵀ of the pose the engine commands for each reference (3 axes, inner 0)."""
-    return np.array([pose_lab_to_sensor(a) for a in angles_for_references(ref_g, 3)])
+    """(N, 3, 3) Rᵀ of the pose the engine commands for each reference (3 axes, inner 0),
+    once per distinct reference (a schedule's few dozen, repeated on every plateau)."""
+    refs, inverse = np.unique(np.asarray(ref_g, float), axis=0, return_inverse=True)
+    poses = np.array([rotation_for_angles(a).T for a in angles_for_references(refs, 3)])
+    return poses[inverse.ravel()]
 
 
 def _vibration(ph: RigPhysics, step: np.ndarray, n_rows: int) -> np.ndarray:
