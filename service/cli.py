@@ -277,10 +277,13 @@ def _add_export(sub: Any) -> None:
 def _add_twin(sub: Any) -> None:
     twin = sub.add_parser("twin", help="digital twins fitted to real recordings")
     tsub = twin.add_subparsers(dest="twin_command", metavar="ACTION", required=True)
-    fit = tsub.add_parser("fit", help="fit a twin (sensor model, die lag, noise) to a recording")
+    fit = tsub.add_parser("fit", help="fit a twin (sensor model with its effects, die lag, "
+                          "noise) to a recording")
     fit.add_argument("recording", metavar="RECORDING", help="recording v1 CSV")
     fit.add_argument("-o", "--output", required=True, metavar="TWIN", help="twin JSON to write")
     fit.add_argument("--json", action="store_true", help="print the report as JSON")
+    fit.add_argument("--no-effects", action="store_true",
+                     help="do not diagnose the recording: the twin carries no catalogue effect")
     fit.set_defaults(handler=_delegate("calibration.discrepancy.twin_cli", "run_twin_fit",
                                        "twin fit"))
 

@@ -104,6 +104,8 @@ class SensorTruth:
         are re-expanded exactly in (T − 25 °C); its temperature is the die's, so the
         channel offset is 0. Noise: the twin's per-sample sd (mean over axes) as a density
         at this ODR, and its temperature-channel noise per reading scaled to one sample.
+        Effects: the catalogue effects the twin carries, each its simulator counterpart
+        (``simulators.effects.to_truth_effects``).
         """
         model = twin.model  # type: ignore[attr-defined]
         if model.degree > 3:
@@ -122,6 +124,11 @@ class SensorTruth:
         n = getattr(twin, "samples_per_reading", None) or 1.0
         if tn is not None:
             out.temp_noise_c = float(tn) * float(np.sqrt(n))
+        effects = getattr(twin, "effects", None) or []
+        if effects:  # the catalogue effects the twin carries (twin_effects.py), as findings
+            from simulators.effects import to_truth_effects
+
+            out.effects = to_truth_effects(effects)  # type: ignore[assignment]
         return out
 
     # --- physics --------------------------------------------------------

@@ -64,6 +64,10 @@ class ShiftFit:
     fitted: np.ndarray  # (12, d+1) bool: coefficients the shift was fitted for
     chi2_red: float
     residual: np.ndarray  # (N,3) or (N,) residual after the shift, g
+    # The twin's effect coefficients refitted beside the base (twin_effects.py): their change
+    # from the twin's and its σ from this recording; empty without effects.
+    effect_delta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    effect_sd_recording: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -160,6 +164,20 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
     """Compare ``recording`` with the given model/twin held fixed (docs/diagnosis.md §9)."""
     model = given.model
     notes: list[str] = []
+    eff_x = eff_ctx = None
+    if given.effects:
+        # The twin's prediction is its base plus its effects (twin_effects.py): the recording
+        # is compared less the effects' output, their coefficients refitted beside the base's
+        # and tested with the twin's own σ, so what they explain is not a shift or a finding
+        # and a change of their size is (issue 22).
+        from calibration.discrepancy import twin_effects as tfx
+
+        eff_ctx = tfx.context_of(recording)
+        eff_x = tfx.effects_design(given.effects, eff_ctx)
+        recording = tfx.without_effects(recording, given.effects)
+        notes.append(f"the twin's effects ({tfx.summary(given.effects)}) are part of its "
+                     "prediction: the recording is compared less their output, their "
+                     "coefficients tested beside the base's")
     mode = "reference" if recording.has_reference else "norm"
     n = len(recording)
     steps = recording.steps()
@@ -185,7 +203,7 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
     if sigma is None:
         notes.append("no sd_* columns: noise scale taken from the residual after the shift")
         sigma = np.ones_like(r0)
-    fit = fit_shift(model, raw, ref, temp_c, sigma, fitted)
+    fit = fit_shift(model, raw, ref, temp_c, sigma, fitted, effects_x=eff_x)
     findings: list[dict[str, Any]] = []
     tau = tau_given
     rig: dict[str, Any] = {}
@@ -194,18 +212,19 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
     alpha_each = level["alpha_each"]
     if tau_given is not None and die_minus_air is not None:
         rig = rig_check(model, raw, ref, air_c, die_minus_air, tau_given, sigma, fitted,
-                        alpha_each, given.die_tau_sd_s or 0.0)
+                        alpha_each, given.die_tau_sd_s or 0.0, eff_x)
         if rig["significant"]:
             tau = rig["tau_s"]
             temp_c = air_c + die_minus_air(tau)
-            fit = fit_shift(model, raw, ref, temp_c, sigma, fitted)
+            fit = fit_shift(model, raw, ref, temp_c, sigma, fitted, effects_x=eff_x)
     if tau is not None and die_minus_air is not None and tau > 0:
         fit = fit_shift(model, raw, ref, temp_c, sigma, fitted,
-                        dtemp_dtau=dtemp_dtau(die_minus_air, tau))
-    shift = _shift_table(model, fit, alpha_each, temp_c)
+                        dtemp_dtau=dtemp_dtau(die_minus_air, tau), effects_x=eff_x)
+    shift = _shift_table(model, fit, alpha_each, temp_c,
+                         None if eff_x is None else (given.effects, eff_ctx))
     heldout = _heldout(model, raw, ref, air_c, sigma, fitted, steps, recording.t_s,
                        recording.positions(),
-                       None if tau is None else (die_minus_air, tau_given, tau))
+                       None if tau is None else (die_minus_air, tau_given, tau), eff_x)
     if rig.get("significant"):
         findings.append({
             "effect": "thermal_lag", "axes": list(AXES), "where": {"steps": "all (lag after "
@@ -248,10 +267,19 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
         from calibration.discrepancy.diagnose import diagnose
 
         rec_frame = recording
+        if eff_x is not None and fit.effect_delta.size:
+            # What the refitted base and the refitted effects leave: the effects' change
+            # taken out too, or a twin's effect fitted on another recording is "found" again
+            # for its own estimation error.
+            cols = dict(recording.columns)
+            d_raw = eff_x @ fit.effect_delta
+            for a, c in enumerate(("ax", "ay", "az")):
+                cols[c] = np.asarray(cols[c], float) - d_raw[:, a]
+            rec_frame = replace(recording, columns=cols, cells=None)
         if tau is not None and die_minus_air is not None and tau > 0:
             # Why: the twin already holds the die lag; what the refitted base leaves must be
             # judged on the twin's die temperature, or the lag the twin carries is "found".
-            cols = dict(recording.columns)
+            cols = dict(rec_frame.columns)
             cols["chamber_c"] = cols["chamber_c"] + die_minus_air(tau)
             rec_frame = Recording.from_columns(cols)
             rec_frame.path = recording.path
@@ -266,7 +294,10 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
     if mismatch:
         parts = []
         if shift["significant"]:
-            parts.append(f"base parameters moved (family p = {shift['p_family']:.3g})")
+            what = " and ".join(w for w, on in (("base parameters", shift["base_moved"]),
+                                                ("the twin's effects", shift["effects_moved"]))
+                                if on)
+            parts.append(f"{what} moved (family p = {shift['p_family']:.3g})")
         if refit_mismatch:
             parts.append("the recording has structure the base model leaves out")
         if rig.get("significant"):
@@ -278,6 +309,7 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
                   if refit else f"no coefficient moved (family p = {shift['p_family']:.3g})")
     reason += f"; each test at α/{len(level['tests'])} = {alpha_each:.3g}"
     corrected = replace(given, model=_corrected_model(model, fit, against, recording),
+                        effects=_corrected_effects(given.effects, fit),
                         die_tau_s=tau if tau is not None else given.die_tau_s,
                         provenance={**given.provenance, "corrected_against": str(recording.path)})
     if rig:
@@ -357,12 +389,17 @@ def _sigma_g(rec: Recording, steps: np.ndarray, model: ThermalModel, raw: np.nda
 # --- the shift ---------------------------------------------------------------
 def fit_shift(model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None, temp_c: np.ndarray,
               sigma: np.ndarray, fitted: np.ndarray, rows: np.ndarray | None = None,
-              dtemp_dtau: np.ndarray | None = None) -> ShiftFit:
+              dtemp_dtau: np.ndarray | None = None,
+              effects_x: np.ndarray | None = None) -> ShiftFit:
     """Gauss–Newton for the coefficient shift δ (weighted by 1/σ), on ``rows`` if given.
 
     ``dtemp_dtau`` (∂T/∂τ per row, °C/s): the temperature came from a profiled die lag τ;
     its column joins the covariance, so σ of δ is marginal over τ (a lag slightly off is
     partly absorbed by the tempcos; conditional σ would be too small).
+    ``effects_x`` (N, 3, K): the raw output per unit coefficient of the twin's effects
+    (``raw`` already taken less their output at the twin's coefficients); the change of
+    those coefficients is fitted with δ (``effect_delta``), so it can be tested beside the
+    base's own (issue 22: a twin's effect fitted on one recording is not exact either).
     """
     sel = np.ones(raw.shape[0], bool) if rows is None else rows
     w = 1.0 / sigma[sel]
@@ -370,19 +407,27 @@ def fit_shift(model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None, temp
     cols = np.argwhere(fitted)  # (p,2): parameter, power
     x = model.x_of(temp_c[sel]) if model.temperature_dependent else np.zeros(int(sel.sum()))
     V = np.vander(x, model.coeffs.shape[1], increasing=True)
+    Xe = None if effects_x is None or effects_x.shape[-1] == 0 else effects_x[sel]
+    dc = np.zeros(0 if Xe is None else Xe.shape[-1])
+    refs = None if ref is None else ref[sel]
+
+    def jac_res() -> tuple[np.ndarray, np.ndarray]:
+        raw_now = raw[sel] if Xe is None else raw[sel] - Xe @ dc
+        return _jacobian(coeffs, model, raw_now, refs, temp_c[sel], V, cols, Xe)
+
     J = np.zeros((1, 1))
     r = np.zeros(1)
+    p = cols.shape[0]
     for _ in range(GN_ITERATIONS):
-        J, r = _jacobian(coeffs, model, raw[sel], None if ref is None else ref[sel],
-                         temp_c[sel], V, cols)
+        J, r = jac_res()
         Jw = J * w.reshape(-1)[:, None]
         scale = np.where(np.linalg.norm(Jw, axis=0) > 0, np.linalg.norm(Jw, axis=0), 1.0)
         step = np.linalg.lstsq(Jw / scale, -(r * w).reshape(-1), rcond=1e-12)[0] / scale
-        coeffs[cols[:, 0], cols[:, 1]] += step
+        coeffs[cols[:, 0], cols[:, 1]] += step[:p]
+        dc += step[p:]
         if np.max(np.abs(step)) < 1e-13:
             break
-    J, r = _jacobian(coeffs, model, raw[sel], None if ref is None else ref[sel], temp_c[sel],
-                     V, cols)
+    J, r = jac_res()
     Jw = J * w.reshape(-1)[:, None]
     if dtemp_dtau is not None:
         h = 0.01  # °C: the residual's slope in T, times ∂T/∂τ
@@ -396,8 +441,10 @@ def fit_shift(model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None, temp
     chi2_red = float(rw @ rw) / dof
     scale = np.where(np.linalg.norm(Jw, axis=0) > 0, np.linalg.norm(Jw, axis=0), 1.0)
     G = (Jw / scale).T @ (Jw / scale)
-    cov = np.linalg.pinv(G, rcond=1e-12, hermitian=True) / np.outer(scale, scale)
-    cov = cov[: cols.shape[0], : cols.shape[0]]
+    cov_all = np.linalg.pinv(G, rcond=1e-12, hermitian=True) / np.outer(scale, scale)
+    cov = cov_all[: cols.shape[0], : cols.shape[0]]
+    k = dc.size
+    sd_eff = np.sqrt(np.clip(np.diag(cov_all)[p:p + k], 0, None) * max(chi2_red, 1.0))
     sd_rec = np.zeros(model.coeffs.shape)
     # Scaled up by χ²/dof when the residual exceeds sd/√n (an optimistic sd cannot raise an
     # alarm), never down: on the second generator's re-measurements χ²/dof was < 1 in 4 of
@@ -408,13 +455,14 @@ def fit_shift(model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None, temp
                                              * max(chi2_red, 1.0))
     se = model.coeff_stderr
     sd_given = np.zeros(model.coeffs.shape) if se is None else np.nan_to_num(se, nan=0.0)
-    return ShiftFit(coeffs - model.coeffs, sd_rec, sd_given, fitted, chi2_red, r)
+    return ShiftFit(coeffs - model.coeffs, sd_rec, sd_given, fitted, chi2_red, r, dc, sd_eff)
 
 
 def _jacobian(coeffs: np.ndarray, model: ThermalModel, raw: np.ndarray, ref: np.ndarray | None,
-              temp_c: np.ndarray, V: np.ndarray, cols: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """Residual and its Jacobian in the fitted coefficients: ∂f/∂p (seed Eq. 1) × x^j."""
+              temp_c: np.ndarray, V: np.ndarray, cols: np.ndarray,
+              effects_x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Residual and its Jacobian in the fitted coefficients: ∂f/∂p (seed Eq. 1) × x^j, and
+    in the twin's effect coefficients (raw less ``effects_x`` @ c: ∂f/∂b · X, ∂f/∂b = −A)."""
     P = V @ coeffs.T
     f, jac = sfem.forward_jacobian(P, raw)
     if model.extensions:
@@ -422,22 +470,40 @@ def _jacobian(coeffs: np.ndarray, model: ThermalModel, raw: np.ndarray, ref: np.
 
         f = ext.apply_extensions(model.extensions, raw, temp_c, f)
     Jp = sfem.coefficient_jacobian(jac, V, cols)  # (N,3,p)
+    if effects_x is not None:
+        Jp = np.concatenate([Jp, np.einsum("nij,njk->nik", jac[:, :, sfem.BIAS], effects_x)],
+                            axis=2)
     if ref is not None:
-        return Jp.reshape(-1, cols.shape[0]), f - ref
+        return Jp.reshape(-1, Jp.shape[2]), f - ref
     return sfem.norm_jacobian(f, Jp), np.linalg.norm(f, axis=1) - 1.0
 
 
 def _shift_table(model: ThermalModel, fit: ShiftFit, alpha: float,
-                 temp_c: np.ndarray) -> dict[str, Any]:
-    """Per-coefficient z and Holm's family decision; words for what moved."""
+                 temp_c: np.ndarray, effects: tuple[list[dict[str, Any]], Any] | None = None
+                 ) -> dict[str, Any]:
+    """Per-coefficient z and Holm's family decision; words for what moved.
+
+    ``effects`` (the twin's effects, their design context): their coefficients' changes
+    (``fit.effect_delta``) join the family, each with the twin's own σ beside this
+    recording's.
+    """
     idx = np.argwhere(fit.fitted)
     if idx.size == 0:
         return {"significant": False, "p_family": 1.0, "coefficients": [], "axes": [],
                 "parameters": {}, "parameter_sd": {}, "sentence": ""}
     sd = np.sqrt(fit.sd_recording**2 + fit.sd_given**2)
     z = np.array([fit.delta[k, j] / sd[k, j] if sd[k, j] > 0 else 0.0 for k, j in idx])
+    z_eff = np.zeros(0)
+    sd_eff = np.zeros(0)
+    if effects is not None and fit.effect_delta.size:
+        from calibration.discrepancy.twin_effects import coefficients
+
+        sd_eff = np.sqrt(fit.effect_sd_recording**2 + coefficients(effects[0])[1] ** 2)
+        z_eff = np.where(sd_eff > 0, fit.effect_delta / np.where(sd_eff > 0, sd_eff, 1.0), 0.0)
+    n_base = z.size
+    z = np.concatenate([z, z_eff])
     logp = np.log(2.0) + sps.norm.logsf(np.abs(z))
-    m = idx.shape[0]
+    m = z.size
     order = np.argsort(logp)
     holm = np.minimum(logp[order] + np.log(m - np.arange(m)), 0.0)
     holm = np.maximum.accumulate(holm)
@@ -452,6 +518,11 @@ def _shift_table(model: ThermalModel, fit: ShiftFit, alpha: float,
     words = []
     axes: set[str] = set()
     phys = model.t_scale_c ** np.arange(model.coeffs.shape[1])  # x-basis → per °C^j
+    for i in range(n_base, m):
+        rows.append({"parameter": f"effect coefficient {i - n_base}", "power": 0,
+                     "shift": float(f"{fit.effect_delta[i - n_base]:.4g}"),
+                     "sd": float(f"{sd_eff[i - n_base]:.3g}"), "unit": "g per unit regressor",
+                     "z": round(float(z[i]), 2), "significant": bool(significant[i])})
     for i, (k, j) in enumerate(idx):
         name = sfem.PARAM_NAMES[k]
         unit, mult = _unit(sfem.PARAM_UNITS[k])
@@ -473,7 +544,17 @@ def _shift_table(model: ThermalModel, fit: ShiftFit, alpha: float,
     if words:
         sentence = ("The base parameters differ from the given model's (at " + centre + "): "
                     + "; ".join(words))
+    if effects is not None and np.any(significant[n_base:]):
+        from calibration.discrepancy.twin_effects import changed
+
+        z_min = float(np.min(np.abs(z[n_base:][significant[n_base:]])))
+        said = changed(effects[0], fit.effect_delta, fit.effect_sd_recording, z_min,
+                       effects[1])
+        sentence = "; ".join(s for s in [sentence, *said] if s)
+        axes.update(AXES)
     return {"significant": bool(significant.any()), "p_family": float(f"{p_family:.3g}"),
+            "base_moved": bool(significant[:n_base].any()),
+            "effects_moved": bool(significant[n_base:].any()),
             "coefficients": rows, "axes": sorted(axes), "parameters": params,
             "parameter_sd": psd, "sentence": sentence,
             "chi2_per_dof_after_shift": round(fit.chi2_red, 3),
@@ -510,8 +591,20 @@ def _corrected_model(model: ThermalModel, fit: ShiftFit, against: str,
                                               f"{rec.path} by diagnose --against"])
 
 
+def _corrected_effects(effects: list[dict[str, Any]], fit: ShiftFit) -> list[dict[str, Any]]:
+    """The twin's effects with their coefficients refitted on this recording."""
+    out, i = [], 0
+    for e in effects:
+        k = len(e["coef"])
+        out.append({**e, "coef": [float(c + d) for c, d in
+                                  zip(e["coef"], fit.effect_delta[i:i + k], strict=True)],
+                    "coef_sd": [float(s) for s in fit.effect_sd_recording[i:i + k]]})
+        i += k
+    return out
+
+
 def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s, positions,
-             lag=None) -> dict[str, Any]:
+             lag=None, effects_x: np.ndarray | None = None) -> dict[str, Any]:
     """RMS on held-out plateaus: the given model vs the shift fitted on the other plateaus.
 
     The folds are ``diagnose``'s (:func:`calibration.discrepancy.heldout.plateau_folds`, for
@@ -535,11 +628,12 @@ def _heldout(model, raw, ref, temp_c, sigma, fitted, steps, t_s, positions,
             continue
         fm = _fitted_mask(model, "reference" if ref is not None else "norm", temp_c[~m],
                           steps[~m]) & fitted
-        f = fit_shift(model, raw, ref, temp_c, sigma, fm, rows=~m)
+        f = fit_shift(model, raw, ref, temp_c, sigma, fm, rows=~m, effects_x=effects_x)
         shifted = replace(model, coeffs=model.coeffs + f.delta)
+        raw_c = raw[m] if effects_x is None else raw[m] - effects_x[m] @ f.effect_delta
         r_g = _residual(model.coeffs, model, raw[m], None if ref is None else ref[m],
                         given_c[m])
-        r_c = _residual(shifted.coeffs, model, raw[m], None if ref is None else ref[m],
+        r_c = _residual(shifted.coeffs, model, raw_c, None if ref is None else ref[m],
                         temp_c[m])
         sq_g += float(np.sum(r_g**2))
         sq_c += float(np.sum(r_c**2))
@@ -592,7 +686,8 @@ def dtemp_dtau(dma, tau_s: float) -> np.ndarray:
 
 
 def rig_check(model: ThermalModel, raw, ref, air_c, dma, tau_given: float, sigma, fitted,
-              alpha: float, tau_given_sd: float = 0.0) -> dict[str, Any]:
+              alpha: float, tau_given_sd: float = 0.0,
+              effects_x: np.ndarray | None = None) -> dict[str, Any]:
     """Profile the die lag τ (the shift refitted at each τ) against the twin's τ.
 
     Two conditions, both at α: the likelihood ratio of the best τ over the twin's (scaled by
@@ -605,7 +700,7 @@ def rig_check(model: ThermalModel, raw, ref, air_c, dma, tau_given: float, sigma
     from calibration.discrepancy.effects.thermal_lag import TAU_GRID_S
 
     def rss(tau_s: float) -> float:
-        f = fit_shift(model, raw, ref, air_c + dma(tau_s), sigma, fitted)
+        f = fit_shift(model, raw, ref, air_c + dma(tau_s), sigma, fitted, effects_x=effects_x)
         return float(np.sum((f.residual / sigma) ** 2))
 
     grid = sorted({0.0, *TAU_GRID_S, float(tau_given)})

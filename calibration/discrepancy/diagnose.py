@@ -1470,6 +1470,28 @@ def _fit(pb: LinearProblem, terms: list[Term]) -> tuple[np.ndarray, np.ndarray, 
     return beta_s / scale, cov, r / pb.w
 
 
+def term_coefficients(diag: Diagnosis) -> list[tuple[Term, np.ndarray, np.ndarray]]:
+    """Each final term of ``diag`` with its coefficients in the joint fit with the base and
+    their standard errors (the fit's covariance, scaled by its reduced χ² as :func:`_fit`
+    scales it).
+
+    Why: a term's raw output at any reading is its effect's regressors times these
+    (``lift`` is linear), which is what a twin carries to another recording
+    (:mod:`calibration.discrepancy.twin_effects`). Empty when nothing was modelled.
+    """
+    pb = diag.problem
+    if pb is None or not diag.terms:
+        return []
+    beta, cov, _ = _fit(pb, diag.terms)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out, i = [], pb.X0.shape[1]
+    for t in diag.terms:
+        k = t.X.shape[1]
+        out.append((t, beta[i:i + k].copy(), sd[i:i + k].copy()))
+        i += k
+    return out
+
+
 def _fit_by_blocks(pb: LinearProblem, terms: list[Term]
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_fit` by row blocks of the whitened design (see :func:`_tall_rows`).

@@ -25,7 +25,7 @@ def run_twin_fit(args: Any) -> int:
         print(str(exc), file=sys.stderr)
         return 2
     try:
-        twin, report = fit_twin(rec)
+        twin, report = fit_twin(rec, effects=not getattr(args, "no_effects", False))
     except (CalibrationError, ValueError, np.linalg.LinAlgError) as exc:
         print(f"{args.recording}: cannot fit a twin: {exc}", file=sys.stderr)
         return 2

@@ -104,6 +104,9 @@ def twin_from_dict(doc: Any) -> Twin:
     effects = doc.get("effects") or []
     if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
         raise ModelFileError("effects: expected a list of objects")
+    from calibration.discrepancy.twin_effects import check_effects
+
+    check_effects(effects)
     return Twin(model, die_tau_s=tau, noise_sd_g=sd, temperature_noise_c=tn, effects=effects,
                 provenance=dict(doc.get("provenance") or {}), sample_sd_g=ssd,
                 samples_per_reading=spr, air_tau_s=air_tau, ramp_c_per_min=ramp,

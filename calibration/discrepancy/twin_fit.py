@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from calibration.discrepancy import against as ag
+from calibration.discrepancy import twin_effects
 from calibration.discrepancy.twin_file import Twin
 from calibration.recording import Recording
 from calibration.thermal import fit_campaign
@@ -31,8 +32,47 @@ from calibration.thermal import fit_campaign
 UG = 1e6
 
 
-def fit_twin(rec: Recording) -> tuple[Twin, dict[str, Any]]:
-    """The twin of ``rec`` and a report of how close it comes (per plateau)."""
+def fit_twin(rec: Recording, *, effects: bool = True, seed: int = 0
+             ) -> tuple[Twin, dict[str, Any]]:
+    """The twin of ``rec`` and a report of how close it comes (per plateau).
+
+    ``effects``: the recording is diagnosed first (``diagnose``, ``seed``) and the effects it
+    names that a twin carries go into the twin, its base fitted to the recording less their
+    output (:mod:`calibration.discrepancy.twin_effects`); the report lists them and the
+    findings left out, each with why.
+    """
+    carried: list[dict[str, Any]] = []
+    omitted: list[dict[str, str]] = []
+    diagnosis: dict[str, Any] = {"verdict": "not run"}
+    if effects:
+        carried, omitted, diagnosis = _diagnosed_effects(rec, seed)
+    twin, report = _fit_base(twin_effects.without_effects(rec, carried))
+    report.update({"recording": str(rec.path), "diagnosis": diagnosis,
+                   "effects": [{k: e[k] for k in ("effect", "parameters", "parameter_sd",
+                                                  "explanation")} for e in carried],
+                   "effects_not_carried": omitted})
+    return replace(twin, effects=carried), report
+
+
+def _diagnosed_effects(rec: Recording, seed: int
+                       ) -> tuple[list[dict[str, Any]], list[dict[str, str]], dict[str, Any]]:
+    """What the diagnosis of ``rec`` names, split into carried and left out."""
+    from calibration.discrepancy.diagnose import diagnose
+    from calibration.errors import CalibrationError
+
+    try:
+        d = diagnose(rec, seed=seed)
+    except (CalibrationError, ValueError, np.linalg.LinAlgError) as exc:
+        return [], [], {"verdict": "not diagnosed", "reason": str(exc)}
+    if d.cannot_judge:
+        return [], [], {"verdict": "cannot judge", "reason": d.cannot_judge}
+    carried, omitted = twin_effects.carried_effects(d)
+    return carried, omitted, {"verdict": "mismatch" if d.mismatch else "consistent",
+                              "findings": [f.effect for f in d.findings]}
+
+
+def _fit_base(rec: Recording) -> tuple[Twin, dict[str, Any]]:
+    """The base model, die lag and noise of the twin of ``rec`` (effects already out)."""
     notes: list[str] = []
     start = fit_campaign(rec).model
     twin0 = Twin(start)
@@ -144,5 +184,23 @@ def report_text(report: dict[str, Any], out: str) -> str:
     for p in report["per_plateau"]:
         lines.append(f"    step {p['step']:>3}: {p['rms_ug']:8.2f} µg  "
                      f"(noise {p['noise_ug']:.2f} µg, ×{p['rms_over_noise']})")
+    lines += _effect_lines(report)
     lines += [f"  note: {x}" for x in report["notes"]]
     return "\n".join(lines)
+
+
+def _effect_lines(report: dict[str, Any]) -> list[str]:
+    """What the twin carries from the recording's diagnosis, and what it leaves out."""
+    diag = report.get("diagnosis") or {}
+    if diag.get("verdict") in ("cannot judge", "not diagnosed"):
+        return [f"  effects: none carried: the recording's diagnosis: {diag['verdict']} "
+                f"({diag.get('reason', '')})"]
+    if diag.get("verdict") == "not run":
+        return ["  effects: not diagnosed (--no-effects)"]
+    carried = report.get("effects") or []
+    lines = [f"  effects carried: {twin_effects.summary(carried)}"
+             + ("" if carried else " (the diagnosis names no effect a twin carries)")]
+    lines += [f"    {e['effect']}: {e['explanation']}" for e in carried]
+    lines += [f"  not carried: {o['effect']}: {o['why']}"
+              for o in report.get("effects_not_carried") or []]
+    return lines

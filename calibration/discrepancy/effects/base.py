@@ -80,6 +80,11 @@ class CatalogueEffect:
     # Named among its significant confusers (that set it too) only as the clearly best fit,
     # else reported not identifiable with the close ones (by_fit.py, issue 22).
     named_by_fit: bool = False
+    # ``twin fit`` (twin_effects.py, docs/diagnosis.md §10) carries a finding of this effect
+    # into the twin when its coefficients mean the same in any recording of the sensor:
+    # physics a new campaign meets again. Otherwise ``twin_omitted`` says why it is left out.
+    twin_carries: bool = False
+    twin_omitted: str = "the twin does not carry it in this build"
 
     # --- design -----------------------------------------------------------
     def grid(self, ctx: DesignContext) -> list[float]:

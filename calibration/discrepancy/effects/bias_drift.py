@@ -32,6 +32,7 @@ def drift_offset_g(t_h: np.ndarray, rate_g_per_h: np.ndarray, relax_g: np.ndarra
 @dataclass(frozen=True)
 class BiasDrift(CatalogueEffect):
     effect_id: str = "bias_drift"
+    twin_carries: bool = True
     confusers: tuple[str, ...] = ("thermal_hysteresis", "thermal_lag", "session_offset")
     experiment: str = ("revisit a temperature hours later (e.g. a return step to the first "
                        "setpoint at the end) or hold one plateau for several hours")

@@ -41,6 +41,7 @@ def cross_coupling_g(a: np.ndarray, k_per_g: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class CrossCoupling(CatalogueEffect):
     effect_id: str = "cross_coupling"
+    twin_carries: bool = True
     confusers: tuple[str, ...] = ("scale_nonlinearity", "turntable_geometry")
     experiment: str = ("add oblique positions where two axes see gravity at once "
                        "(45° between axes, e.g. table1 or cube14)")

@@ -47,6 +47,8 @@ def spike_mean_fraction(spike_samples: int | None, n_samples: np.ndarray) -> np.
 @dataclass(frozen=True)
 class Outlier(CatalogueEffect):
     effect_id: str = "outlier"
+    twin_omitted: str = ("an event of this recording (a reading far off), not physics a new "
+                         "campaign meets again")
     confusers: tuple[str, ...] = ("thermal_lag",)
     experiment: str = "repeat the flagged positions"
     per_reading: bool = True

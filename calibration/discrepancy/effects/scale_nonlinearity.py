@@ -54,6 +54,7 @@ def scale_nonlinearity_g(a: np.ndarray, k2_per_g: np.ndarray, k3_per_g2: np.ndar
 @dataclass(frozen=True)
 class ScaleNonlinearity(CatalogueEffect):
     effect_id: str = "scale_nonlinearity"
+    twin_carries: bool = True
     confusers: tuple[str, ...] = ("cross_coupling", "bias_drift")
     experiment: str = ("add oblique positions (e.g. the cube14 diagonals) so a³ and a² differ "
                        "from scale and bias")

@@ -37,6 +37,7 @@ def session_offset_g(session: np.ndarray, offsets_g: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class SessionOffset(CatalogueEffect):
     effect_id: str = "session_offset"
+    twin_omitted: str = "a power cycle of this recording, not physics a new campaign repeats"
     confusers: tuple[str, ...] = ("thermal_hysteresis", "bias_drift", "temperature_rate",
                                   "vibration_rectification")
     experiment: str = ("power-cycle the sensor at one plateau and take the same positions "

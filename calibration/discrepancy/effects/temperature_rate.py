@@ -39,6 +39,7 @@ def rate_offset_g(rate_c_per_time: np.ndarray, k_g_per_c_per_time: np.ndarray) -
 @dataclass(frozen=True)
 class TemperatureRate(CatalogueEffect):
     effect_id: str = "temperature_rate"
+    twin_carries: bool = True
     # session_offset: in a one-way staircase the rate is largest on the first plateau and of
     # one sign, i.e. a jump after it (issue 10; protocol.py withholds the name then).
     # thermal_hysteresis: on a plateau the die still settles towards the setpoint, so the

@@ -62,6 +62,7 @@ def channel_step_c(steps: np.ndarray, from_step: float, step_c: float) -> np.nda
 @dataclass(frozen=True)
 class TemperatureSensor(CatalogueEffect):
     effect_id: str = "temperature_sensor"
+    twin_omitted: str = "an error of this recording's temperature channel, not of the sensor"
     # Why thermal_lag: a die soaked for several τ still lags the air by a remnant that is
     # nearly constant through each plateau and takes the sign of the last step; on an
     # up-down campaign that is a step of the channel at the turn (issue 22: a chamber-only

@@ -37,6 +37,7 @@ def hysteresis_offset_g(direction: np.ndarray | float, h_g: np.ndarray) -> np.nd
 @dataclass(frozen=True)
 class ThermalHysteresis(CatalogueEffect):
     effect_id: str = "thermal_hysteresis"
+    twin_carries: bool = True
     confusers: tuple[str, ...] = ("thermal_lag", "bias_drift", "session_offset")
     experiment: str = ("revisit the same setpoints on a heating and a cooling leg "
                        "(e.g. −40 → 60 → −40 °C) so each temperature is seen from both sides")

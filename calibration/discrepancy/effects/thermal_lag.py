@@ -46,6 +46,8 @@ WARMUP_TAU_GRID_S = tuple(float(v) for v in np.geomspace(300.0, 7200.0, 8))
 @dataclass(frozen=True)
 class ThermalLag(CatalogueEffect):
     effect_id: str = "thermal_lag"
+    twin_omitted: str = ("the twin's die lag (rig.die_tau_s, profiled by twin fit itself) "
+                         "carries it")
     confusers: tuple[str, ...] = ("thermal_hysteresis", "temperature_rate", "bias_drift",
                                   "self_heating")
     experiment: str = ("fit on the chamber air temperature (chamber_c) with soaks shorter than "

@@ -215,6 +215,8 @@ class TurntableGeometry(CatalogueEffect):
     """
 
     effect_id: str = "turntable_geometry"
+    twin_omitted: str = ("the table's geometry is fitted in this recording's own poses or "
+                         "sweeps; the twin's rig does not carry it")
     shrunk_heldout: bool = True
     confusers: tuple[str, ...] = ("cross_coupling", "scale_nonlinearity")
     experiment: str = ("record the gimbal angles and repeat the tumble with the sensor remounted "

@@ -117,6 +117,7 @@ def power_step(ctx: DesignContext) -> int | None:
 @dataclass(frozen=True)
 class VibrationRectification(CatalogueEffect):
     effect_id: str = "vibration_rectification"
+    twin_carries: bool = True
     confusers: tuple[str, ...] = ("bias_drift", "session_offset")
     experiment: str = ("record sd_* and take positions with the chamber compressor on and off "
                        "at the same temperature")
