@@ -37,8 +37,9 @@ RAW_COLUMNS = ("ax", "ay", "az")
 def carried_effects(diag: Any) -> tuple[list[dict[str, Any]], list[dict[str, str]]]:
     """(effects the twin carries, findings it leaves out with why) of a diagnosis.
 
-    Every named finding of a catalogue effect is one or the other; ``unexplained`` and
-    ``not_identifiable`` name no effect and are neither.
+    Every finding is one or the other: ``unexplained`` and ``not_identifiable`` name no
+    effect to carry, and are listed as left out so the report says the twin does not
+    reproduce that structure.
     """
     from calibration.discrepancy.diagnose import term_coefficients
 
@@ -48,6 +49,10 @@ def carried_effects(diag: Any) -> tuple[list[dict[str, Any]], list[dict[str, str
     for f in diag.findings:
         eff = BY_ID.get(f.effect)
         if eff is None:
+            axes = "/".join(f.axes) if f.axes else "?"
+            omitted.append({"effect": f.effect,
+                            "why": f"no catalogue term names this structure (axis {axes}): "
+                                   "the twin does not reproduce it"})
             continue
         keys = f.term_keys
         if not eff.twin_carries or len(keys) != 1 or next(iter(keys)) not in coef_of:

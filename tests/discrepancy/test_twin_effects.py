@@ -107,6 +107,21 @@ def test_an_outlier_is_left_out_of_the_twin_with_why():
     assert "not carried: outlier: an event of this recording" in report_text(report, "t.json")
 
 
+def test_structure_no_term_names_is_said_not_to_be_in_the_twin():
+    from calibration.discrepancy.twin_effects import carried_effects
+
+    class Finding:  # what carried_effects reads of an ``unexplained`` finding
+        effect, axes, term_keys = "unexplained", ["z"], set()
+
+    class Diag:
+        findings, terms, problem = [Finding()], [], None
+
+    carried, left = carried_effects(Diag())
+    assert carried == []
+    assert left == [{"effect": "unexplained", "why": "no catalogue term names this structure "
+                     "(axis z): the twin does not reproduce it"}]
+
+
 def test_a_twin_file_keeps_its_effects_and_refuses_one_it_cannot_evaluate(fitted, tmp_path):
     twin, _ = fitted
     path = tmp_path / "twin.json"
