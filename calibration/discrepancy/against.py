@@ -518,8 +518,10 @@ def _shift_table(model: ThermalModel, fit: ShiftFit, alpha: float,
     words = []
     axes: set[str] = set()
     phys = model.t_scale_c ** np.arange(model.coeffs.shape[1])  # x-basis → per °C^j
+    eff_names = [] if effects is None else [f"{e['effect']}.coef[{j}]" for e in effects[0]
+                                            for j in range(len(e["coef"]))]
     for i in range(n_base, m):
-        rows.append({"parameter": f"effect coefficient {i - n_base}", "power": 0,
+        rows.append({"parameter": eff_names[i - n_base], "power": 0,
                      "shift": float(f"{fit.effect_delta[i - n_base]:.4g}"),
                      "sd": float(f"{sd_eff[i - n_base]:.3g}"), "unit": "g per unit regressor",
                      "z": round(float(z[i]), 2), "significant": bool(significant[i])})

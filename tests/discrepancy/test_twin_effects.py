@@ -82,6 +82,8 @@ def test_a_changed_effect_is_named_as_the_twins_effect_that_moved(fitted):
     (shift,) = [f for f in d.findings if f["effect"] == "parameter_shift"]
     assert "the twin's scale_nonlinearity differs: k2_x_ug_per_g2 17" in shift["explanation"]
     assert "in the twin" in shift["explanation"]
+    moved = [c["parameter"] for c in d.shift["coefficients"] if c["significant"]]
+    assert moved == ["scale_nonlinearity.coef[0]"]  # K2 on x, by its place in the twin file
     # The corrected twin carries the effect as this recording has it.
     assert d.corrected is not None
     assert d.corrected.effects[0]["coef"][0] == pytest.approx(175e-6, abs=8e-6)
