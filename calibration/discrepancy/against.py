@@ -271,11 +271,7 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
             # What the refitted base and the refitted effects leave: the effects' change
             # taken out too, or a twin's effect fitted on another recording is "found" again
             # for its own estimation error.
-            cols = dict(recording.columns)
-            d_raw = eff_x @ fit.effect_delta
-            for a, c in enumerate(("ax", "ay", "az")):
-                cols[c] = np.asarray(cols[c], float) - d_raw[:, a]
-            rec_frame = replace(recording, columns=cols, cells=None)
+            rec_frame = tfx.less_raw(recording, eff_x @ fit.effect_delta)
         if tau is not None and die_minus_air is not None and tau > 0:
             # Why: the twin already holds the die lag; what the refitted base leaves must be
             # judged on the twin's die temperature, or the lag the twin carries is "found".

@@ -136,11 +136,15 @@ def without_effects(rec: Recording, effects: list[dict[str, Any]],
     (``input_g``: :func:`context_of`)."""
     if not effects:
         return rec
-    delta = effects_raw_g(effects, context_of(rec, input_g))
+    return less_raw(rec, effects_raw_g(effects, context_of(rec, input_g)))
+
+
+def less_raw(rec: Recording, delta_g: np.ndarray) -> Recording:
+    """``rec`` with ``delta_g`` (N, 3) taken out of ``ax``, ``ay``, ``az``; the same recording
+    otherwise (header, path, notes), without its text rows, which no longer match."""
     cols = dict(rec.columns)
     for a, c in enumerate(RAW_COLUMNS):
-        cols[c] = np.asarray(cols[c], float) - delta[:, a]
-    # The same recording otherwise (header, path, notes); its text rows no longer match.
+        cols[c] = np.asarray(cols[c], float) - delta_g[:, a]
     return replace(rec, columns=cols, cells=None)
 
 
