@@ -40,6 +40,7 @@ from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import (
     QuantisedChannel,
     held_code_resolution_c,
+    mean_code_lsb_c,
     one_code_per_plateau,
     plateau_groups,
     quantised_channel,
@@ -257,6 +258,13 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # before raw samples become capture means.
     lsb_c = (declared_lsb_c(recording, recording.temperature_source)
              if recording.has_temperature else None)
+    # Not declared: capture means that are averages of the channel's codes show its LSB as
+    # a lattice (plateau_noise.mean_code_lsb_c), as sure as a declared one (issue 22).
+    lsb_from_means = lsb_c is None and recording.has_temperature
+    if lsb_from_means:
+        lsb_c = mean_code_lsb_c(recording.columns[recording.temperature_source],
+                                recording.columns.get("n"), recording.steps())
+    lsb_from_means = lsb_from_means and lsb_c is not None
     capture_means = samples_mod.is_raw_samples(recording)
     if capture_means:
         n_rows = len(recording)
@@ -349,7 +357,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     tail_nu = np.inf
     tail_shown = False  # the tail resolved at stats.TAIL_Z, not only at its point estimate
     groups = plateau_groups(pb) if WILD_NULL and PLATEAU_NULL else None
-    channel = _quantised_channel(pb, notes, lsb_c) if WILD_NULL else None
+    channel = _quantised_channel(pb, notes, lsb_c, lsb_from_means) if WILD_NULL else None
     known = channel.known if channel is not None else None  # the scan's
     # The families: with the LSB declared (a channel the recording says is quantised
     # without dither), any rounding error within ±q/2 per plateau and value (the bound);
@@ -809,12 +817,13 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     return scan_mod.scan(pb, U, e, E, alpha, bounded)
 
 
-def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float | None
-                       ) -> QuantisedChannel | None:
+def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float | None,
+                       from_means: bool = False) -> QuantisedChannel | None:
     """The rounding error of a non-dithering quantised temperature channel
     (plateau_noise.quantised_channel), said in ``notes``; or None. ``declared_q_c``: the LSB
-    the recording declares (temperature_lsb.py)."""
-    found = quantised_channel(pb, declared_q_c)
+    the recording declares (temperature_lsb.py), or, ``from_means``, the one its capture
+    means show (plateau_noise.mean_code_lsb_c), taken as declared."""
+    found = quantised_channel(pb, declared_q_c, by_plateau=from_means)
     ctx = pb.ctx
     if found is None:
         if ctx.temperature_source != "none" and one_code_per_plateau(ctx.temp_c, ctx.steps) \
@@ -829,7 +838,9 @@ def _quantised_channel(pb: LinearProblem, notes: list[str], declared_q_c: float 
                          "the families' null does not include (a rate or hysteresis of that "
                          "size is not told from it; a channel step within it is not named)")
         return None
-    how = ("declared by the recording" if found.declared else
+    how = ("read from its capture means, averages of its codes on a lattice of LSB/n (not "
+           f"declared: {LSB_COLUMNS.get(ctx.temperature_source, 'an _lsb_c column')})"
+           if from_means else "declared by the recording" if found.declared else
            f"without dither ({100 * found.fraction:.0f} % of the readings on its codes)")
     if found.lower_bound:
         notes.append(f"temperature channel ({ctx.temperature_source}) holds one value "

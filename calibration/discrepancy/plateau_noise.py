@@ -252,6 +252,65 @@ def admitted_lsb_c(temp_c: np.ndarray, steps: np.ndarray) -> float | None:
     return min(q, GRID_MAX_C)
 
 
+# A lattice of means of codes is read only where its spacing is this many times the
+# resolution the means are written to (finer, the writing's own rounding hides it) and a
+# plateau holds this many distinct means on it.
+LATTICE_MIN_SPACING_RES = 8.0
+LATTICE_MIN_VALUES = 5
+
+
+def mean_code_lsb_c(temp_c: np.ndarray, n_samples: np.ndarray | None,
+                    steps: np.ndarray) -> float | None:
+    """The LSB (°C) of a channel whose capture means are averages of ``n`` of its codes, read
+    from the lattice of spacing LSB/n the means lie on; None where they do not.
+
+    Why (issue 22): a channel quantised at q whose own noise is well below q does not dither,
+    and each plateau's mean of its codes keeps a rounding error up to ±q/2, shared by the
+    plateau (on the third generator's nulls, 30 of 47 false alarms: LSB 0.25–0.5 °C, noise
+    below 0.4 LSB, docs/benchmarks.md). Such means are not on the code grid
+    (:func:`temperature_grid`), but a mean of n codes is (k/n)·q plus the codes' offset: the
+    distinct means of a plateau differ by multiples of q/n. Where every plateau's distinct
+    means (≥ :data:`LATTICE_MIN_VALUES` of them) fit one such lattice to the resolution they
+    are written to, q is the channel's LSB as surely as a declared one; a channel that is not
+    quantised, or means written too coarsely, fit no lattice (the project's twin, the
+    second generator's channels: none).
+    """
+    if n_samples is None:
+        return None
+    t = np.asarray(temp_c, float)
+    n = np.asarray(n_samples, float)
+    st = np.asarray(steps)
+    ok = np.isfinite(t) & np.isfinite(n) & (n > 1)
+    if int(ok.sum()) < GRID_MIN_READINGS:
+        return None
+    res = 10.0 ** -_decimals(t[ok])
+    q_found: list[float] = []
+    for nv in np.unique(n[ok]):
+        sel = ok & (n == nv)
+        spacings = []
+        for s_ in np.unique(st[sel]):
+            x = np.unique(t[sel & (st == s_)])
+            d = np.diff(x)
+            d = d[d > res / 2]
+            if x.size < LATTICE_MIN_VALUES or d.size == 0:
+                continue
+            s = float(np.min(d))  # the smallest step between two means: one lattice spacing
+            if s < LATTICE_MIN_SPACING_RES * res:
+                return None  # finer than the writing: not told from a continuous channel
+            k = np.round((x - x[0]) / s)
+            A = np.column_stack([np.ones_like(k), k])
+            coef, *_ = np.linalg.lstsq(A, x, rcond=None)
+            if np.max(np.abs(x - A @ coef)) > 1.01 * res:
+                return None  # one plateau off the lattice: not means of codes
+            spacings.append(float(coef[1]))
+        if len(spacings) >= MIN_PLATEAUS:
+            q_found.append(float(np.median(spacings)) * float(nv))
+    if not q_found:
+        return None
+    q = max(q_found)
+    return q if q <= GRID_MAX_C * 10 else None
+
+
 def rounding_box(pb: LinearProblem, q_c: float) -> stats.BoundedShared | None:
     """Any rounding error within ±``q_c``/2 per plateau and recorded value, through the
     base model's whitened ∂output/∂T (the groups of :func:`quantised_channel`); None where
@@ -284,8 +343,8 @@ class QuantisedChannel:
     bounded: stats.BoundedShared  # the families': any error within ±q/2 per group
 
 
-def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
-                      ) -> QuantisedChannel | None:
+def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None,
+                      by_plateau: bool = False) -> QuantisedChannel | None:
     """The rounding error of a non-dithering quantised temperature channel, or None (no LSB
     declared, no grid found and no held codes' resolution, or no temperature dependence).
 
@@ -306,6 +365,9 @@ def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
     position) take a draw per group at the uniform error's variance q²/12 (``known``):
     for one group's error a Gaussian of that variance has the heavier tail. Known, not
     fitted: an effect in the data does not raise it (docs/diagnosis.md §2).
+    ``by_plateau``: one group per plateau, for a channel whose capture means average its
+    codes (:func:`mean_code_lsb_c`): every mean is a value of its own, yet the rounding
+    error is the settled die's against the codes, one per plateau.
     """
     ctx = pb.ctx
     if ctx.temperature_source == "none":
@@ -320,7 +382,7 @@ def quantised_channel(pb: LinearProblem, declared_q_c: float | None = None
         return None
     q = float(declared_q_c) if declared_q_c is not None else \
         grid.q_c if grid is not None else float(held_q_c)
-    group = _value_groups(pb)
+    group = np.asarray(ctx.steps)[pb.row] if by_plateau else _value_groups(pb)
     sg = stats.SharedGroups([lt], [group], ["quantised temperature channel"])
     return QuantisedChannel(q, declared_q_c is not None,
                             1.0 if grid is None else grid.fraction, held_q_c is not None,
