@@ -67,7 +67,8 @@ def summary(results: list[dict[str, Any]], meta: dict[str, Any]) -> dict[str, An
     return {"meta": meta, "cases": len(results), "judged": n,
             "cannot_judge": len(results) - n, "false_alarms": k,
             "rate": k / n if n else None, "ci95": [lo, hi],
-            "breakdown": breakdown(results), "alarms": alarms(results)}
+            "breakdown": breakdown(results), "alarms": alarms(results),
+            "refused": [r for r in results if r.get("mismatch") is None]}
 
 
 def _features_text(f: dict[str, Any]) -> str:
@@ -84,6 +85,11 @@ def _features_text(f: dict[str, Any]) -> str:
     return ", ".join(bits)
 
 
+def _case(r: dict[str, Any]) -> str:
+    """seed/index (the run's seed where the report spans several runs)."""
+    return f"{r['seed']}/{r['index']}" if "seed" in r else str(r["index"])
+
+
 def _p(v: Any) -> str:
     return "–" if v is None else f"{float(v):.2g}"
 
@@ -93,16 +99,21 @@ def markdown(doc: dict[str, Any]) -> str:
              f"False alarms (mismatch true): {rate_text(doc['false_alarms'], doc['judged'])}"
              f" (Clopper–Pearson 95 %); cannot judge: {doc['cannot_judge']}.", "",
              "## Alarms", "",
-             "| case | seed | features | effect (test, p_family, p) | baseline / noise µg "
+             "| case | case seed | features | effect (test, p_family) | baseline / noise µg "
              "| T-channel error µg |", "|---|---|---|---|---|---|"]
     for r in doc["alarms"]:
-        fx = "; ".join(f"{f['effect']} ({f['test']}, {_p(f['p_family'])}, {_p(f['p_value'])})"
+        fx = "; ".join(f"{f['effect']} ({f['test']}, {_p(f['p_family'] or f['p_value'])})"
                        for f in r["findings"]) or "(no finding)"
         if r.get("scan_significant"):
             fx += f"; scan p={_p(r.get('scan_p'))}"
-        lines.append(f"| {r['index']} | {r['case_seed']} | {_features_text(r['features'])} | "
+        lines.append(f"| {_case(r)} | {r['case_seed']} | {_features_text(r['features'])} | "
                      f"{fx} | {r['baseline_rmse_ug']} / {r['baseline_noise_ug']} | "
                      f"{r.get('channel_error_ug', '–')} |")
+    lines += ["", "## Cannot judge (the gate's reason, first words)", "",
+              "| case | schedule | reason |", "|---|---|---|"]
+    for r in doc["refused"]:
+        lines.append(f"| {_case(r)} | {r['features']['schedule']} | "
+                     f"{(r.get('reason') or r.get('verdict') or '')[:90]} |")
     for name, groups in doc["breakdown"].items():
         lines += ["", f"## By {name}", "", "| value | false alarms | 95 % |", "|---|---|---|"]
         for g, s in groups.items():

@@ -13,6 +13,7 @@ import io
 import json
 import shutil
 import sys
+import tempfile
 import time
 from multiprocessing import Pool
 from pathlib import Path
@@ -50,18 +51,29 @@ def diagnose_json(path: Path) -> dict[str, Any]:
     return json.loads(buf.getvalue())
 
 
-VARIANTS = ("none", "t-lsb-column", "t-dithered")
+VARIANTS = ("none", "t-lsb-column", "t-dithered", "no-vibration", "gaussian-mean",
+            "no-reseat")
 
 
 def variant_case(case: Case, variant: str) -> Case:
-    """``t-dithered``: the same case with the temperature channel's noise raised to at
-    least 0.6 LSB per sample (its rounding averaged away); everything else, and every other
-    draw, unchanged: an ablation of the channel's rounding."""
-    if variant != "t-dithered":
-        return case
-    th = case.thermal
-    noise = max(th.channel_noise_c, 0.6 * th.channel_lsb_c)
-    return dataclasses.replace(case, thermal=dataclasses.replace(th, channel_noise_c=noise))
+    """Ablations of one feature, everything else drawn the same: ``t-dithered`` raises the
+    temperature channel's noise to at least 0.6 LSB per sample (its rounding averaged away;
+    the other draws unchanged, so a case already dithered is the same recording);
+    ``no-vibration``, ``gaussian-mean`` and ``no-reseat`` drop the vibration, the Student-t
+    capture mean or the hand fixture's re-seating turns (the noise is then a new draw);
+    ``t-lsb-column`` only writes ``sensor_lsb_c``."""
+    if variant == "t-dithered":
+        th = case.thermal
+        noise = max(th.channel_noise_c, 0.6 * th.channel_lsb_c)
+        return dataclasses.replace(case, thermal=dataclasses.replace(th, channel_noise_c=noise))
+    if variant == "no-vibration":
+        return dataclasses.replace(case, noise=dataclasses.replace(case.noise, vibration=None))
+    if variant == "no-reseat":
+        return dataclasses.replace(
+            case, protocol=dataclasses.replace(case.protocol, place_max_rad=0.0))
+    if variant == "gaussian-mean":
+        return dataclasses.replace(case, noise=dataclasses.replace(case.noise, nu=None))
+    return case
 
 
 def run_case(task: tuple[int, int, str, str]) -> dict[str, Any]:
@@ -133,14 +145,20 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _enriched(r: dict[str, Any], seed: int) -> dict[str, Any]:
-    """An alarm's line from before the error columns existed, with them recomputed from its
-    seed (the same draws)."""
-    if not r.get("mismatch") or "channel_error_ug" in r:
+    """An alarm's or a refusal's line from before the error columns (and the gate's reason)
+    were recorded, with them recomputed from its seed (the same draws)."""
+    if r.get("mismatch") is False or ("channel_error_ug" in r and "reason" in r):
         return r
     rows = simulate(variant_case(draw_case(case_seed(seed, r["index"])),
                                  r.get("variant", "none")))
-    return {**r, "drawn_error_ug": round(drawn_error_ug(rows), 2),
-            "channel_error_ug": round(channel_error_ug(rows), 2)}
+    out = {**r, "drawn_error_ug": round(drawn_error_ug(rows), 2),
+           "channel_error_ug": round(channel_error_ug(rows), 2)}
+    if r.get("mismatch") is None and "reason" not in r:  # a refusal: ask the gate again
+        path = Path(tempfile.mkdtemp()) / "case.csv"
+        write_csv(rows, path)
+        out["reason"] = diagnose_json(path).get("reason")
+        shutil.rmtree(path.parent)
+    return out
 
 
 def _record(fh: Any, r: dict[str, Any], done: dict[int, dict[str, Any]]) -> None:

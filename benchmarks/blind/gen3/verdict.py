@@ -53,6 +53,7 @@ def summarise(doc: dict[str, Any]) -> dict[str, Any]:
             "explanation": f.get("explanation")})
     return {
         "mismatch": doc.get("mismatch"), "verdict": doc.get("verdict"),
+        "reason": doc.get("reason"),
         "baseline_rmse_ug": (doc.get("baseline") or {}).get("rmse_ug"),
         "baseline_noise_ug": (doc.get("baseline") or {}).get("noise_ug"),
         "scan_significant": scan, "scan_p": unexplained.get("p_value"),
