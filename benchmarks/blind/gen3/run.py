@@ -56,6 +56,13 @@ VARIANTS = ("none", "t-lsb-column", "t-dithered", "no-vibration", "gaussian-mean
 
 
 def variant_case(case: Case, variant: str) -> Case:
+    """``A+B``: both ablations."""
+    for name in variant.split("+"):
+        case = _one_variant(case, name)
+    return case
+
+
+def _one_variant(case: Case, variant: str) -> Case:
     """Ablations of one feature, everything else drawn the same: ``t-dithered`` raises the
     temperature channel's noise to at least 0.6 LSB per sample (its rounding averaged away;
     the other draws unchanged, so a case already dithered is the same recording);
@@ -82,7 +89,7 @@ def run_case(task: tuple[int, int, str, str]) -> dict[str, Any]:
     case = variant_case(draw_case(cs), variant)
     rows = simulate(case)
     path = Path(out) / "cases" / f"gen3-{seed}-{index:04d}.csv"
-    lsb = case.thermal.channel_lsb_c if variant == "t-lsb-column" else None
+    lsb = case.thermal.channel_lsb_c if "t-lsb-column" in variant.split("+") else None
     write_csv(rows, path, sensor_lsb_c=lsb)
     t0 = time.perf_counter()
     doc = diagnose_json(path)
@@ -116,11 +123,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", required=True)
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--variant", choices=VARIANTS, default="none",
-                    help="an ablation of the temperature channel (see variant_case)")
+    ap.add_argument("--variant", default="none",
+                    help="one-feature ablations (variant_case), joined by '+': "
+                    + ", ".join(VARIANTS))
     ap.add_argument("--only", default=None,
                     help="comma-separated case indices (e.g. a run's alarms) instead of all")
     args = ap.parse_args(argv)
+    if any(v not in VARIANTS for v in args.variant.split("+")):
+        ap.error(f"--variant: each of {args.variant!r} must be one of {', '.join(VARIANTS)}")
     out = Path(args.out)
     (out / "cases").mkdir(parents=True, exist_ok=True)
     jsonl = out / "cases.jsonl"
