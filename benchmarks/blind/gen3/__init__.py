@@ -1,0 +1,12 @@
+"""A third blind generator for ``soakcal diagnose`` (issue 22), written apart from the twin
+(``simulators/truth.py``), the first blind generator and ``gen2``: the sensor is a full 3×3
+gain matrix K(T) quadratic in temperature plus a cubic bias, not the seed's SFEM chain; the
+noise is built from raw samples (white, heavy-tailed per capture, slow vibration,
+quantisation, re-seating of a hand fixture, a quantised temperature channel on a lagging
+die). Every case is a null: nothing outside the base model's class is drawn.
+
+Modules: ``sensor`` (the gain-and-bias sensor), ``schedules`` (orientations),
+``thermal`` (air, die, channels), ``noise`` (one capture from its raw samples),
+``protocol`` (plateaus, visits, timing), ``case`` (one seeded case → CSV rows),
+``writer`` (the recording CSV), ``stats`` (Clopper–Pearson), ``run`` (the benchmark).
+"""
