@@ -1298,8 +1298,9 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             Xw = pb.whiten(lifted(eff, theta))
             if Xw.shape[1] == 0 or not np.any(Xw):
                 continue
-            own = eff.test_stats(pb, U, Xw, e, _own_replicates(stage, U, Xw, E)
-                                 if _has_own_test(eff) else E)  # its own noise scale
+            own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
+            if own is not None and stage is not None and stage.applies(own[0]):
+                own = eff.test_stats(pb, U, Xw, e, _own_replicates(stage, U, Xw, E))
             if own is not None and bounded is not None:
                 # With a quantised channel its data score is taken on the residual whose
                 # part along its columns is shortened by the box's reach, as linear_stats
@@ -1331,11 +1332,6 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             eff.effect_id, float(best_lp), usable, float(stats.sidak_log(best_lp, usable)),
             stats.sidak_log(null_lp, usable), best_theta, absorbed_min, best_q, profile)
     return tests
-
-
-def _has_own_test(eff: CatalogueEffect) -> bool:
-    """Whether ``eff`` scales its test by a noise of its own (``test_stats``)."""
-    return type(eff).test_stats is not CatalogueEffect.test_stats
 
 
 def _own_replicates(stage: unrestricted.StageSigns | None, U: np.ndarray, Xw: np.ndarray,

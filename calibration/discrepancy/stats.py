@@ -713,6 +713,8 @@ def linear_stats(
 
             qn_d, t_d = float(np.sum((Nb.T @ e) ** 2)), float(b1 @ e)
             lp = float(stat(np.asarray(qn_d), np.asarray(t_d), np.asarray(ee)))
+            if wild is not None and not wild.applies(lp):
+                wild = None
             if bounded is not None:  # the data's evidence at the least the box allows
                 t_b = t_d - bounded.reach(b1[:, None])
                 qn_b = _shrunk(np.sqrt(qn_d), bounded.reach(Nb)) ** 2
@@ -733,7 +735,7 @@ def linear_stats(
     q = float(np.sum((B.T @ e) ** 2))
     q_score = q if bounded is None else _shrunk(np.sqrt(q), bounded.reach(B)) ** 2
     f = q_score / k / max((ee - q) / dof, 1e-300)
-    if wild is not None:
+    if wild is not None and wild.applies(float(f_logsf(f, k, dof))):
         BtE, EE = wild.scores(B)
     else:
         BtE = t_matmul(B, E)

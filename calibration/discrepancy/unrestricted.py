@@ -32,6 +32,12 @@ from calibration.discrepancy import stats
 # (a very long recording, where the replicates are cut to their floor for memory) every
 # candidate keeps the stage's restricted replicates, as before issue 22's change.
 BUDGET_BYTES = 64 * 2**20
+# Only candidates whose data log p is below this take the unrestricted replicates (None: every
+# candidate): elsewhere the residual after the candidate is the stage's up to the noise along
+# its few columns, and a new draw of the replicates' tail only reshuffles the minimum over
+# families (measured, docs/benchmarks.md).
+DATA_LOG_P_GATE: float | None = float(np.log(0.01))
+CANDIDATE_LEVERAGE = True  # HC2 by the leverage of [U, B] (False: of U alone, as the stage's)
 
 
 @dataclass
@@ -50,10 +56,14 @@ class StageSigns:
     EE: np.ndarray  # (B,) Σ E² per replicate
     sum_rows: sp.csr_matrix  # (N, m): each reading's entries summed
 
+    def applies(self, data_log_p: float) -> bool:
+        """Whether a candidate with this data log p takes the unrestricted replicates."""
+        return DATA_LOG_P_GATE is None or data_log_p < DATA_LOG_P_GATE
+
     def difference(self, B: np.ndarray) -> np.ndarray:
         """(m,) d = scale_f − scale for the residual after U and B (B ⊥ U, orthonormal)."""
         e_f = self.e - B @ (B.T @ self.e)
-        h_f = self.h + np.einsum("ij,ij->i", B, B)
+        h_f = self.h + np.einsum("ij,ij->i", B, B) if CANDIDATE_LEVERAGE else self.h
         return stats.wild_scale(e_f, h_f, self.row, self.leave_out, self.groups) - self.scale
 
     def scores(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
