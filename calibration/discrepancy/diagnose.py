@@ -74,6 +74,9 @@ PLATEAU_NULL = False
 # own columns, with the stage's signs (unrestricted.py, issue 22): an effect in the data no
 # longer flips back into its own family's null.
 UNRESTRICTED_NULL = True
+# ... for the families whose best data p is below this (None: every family, every candidate
+# by its own data p, unrestricted.DATA_LOG_P_GATE)
+UNRESTRICTED_FAMILY_LOG_P: float | None = float(np.log(0.01))
 EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
 BASE_MODEL = "sfem-cubic"
 
@@ -1290,36 +1293,15 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                 float(t_row[i]))
             continue
         grid = eff.grid(pb.ctx)
-        best_lp, best_theta, best_q, absorbed_min = np.inf, float("nan"), 0.0, 1.0
-        profile: dict[float, float] = {}
-        null_lp = np.zeros(E.shape[1])
-        usable = 0
-        for theta in grid:
-            Xw = pb.whiten(lifted(eff, theta))
-            if Xw.shape[1] == 0 or not np.any(Xw):
-                continue
-            own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
-            if own is not None and stage is not None and stage.applies(own[0]):
-                own = eff.test_stats(pb, U, Xw, e, _own_replicates(stage, U, Xw, E))
-            if own is not None and bounded is not None:
-                # With a quantised channel its data score is taken on the residual whose
-                # part along its columns is shortened by the box's reach, as linear_stats
-                # takes the others' (else it escaped the bound and won the name over those
-                # that did not: cross_coupling named turntable_geometry on the clean channel)
-                e_net = bounded.shortened(
-                    stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6), e)
-                own = (eff.test_stats(pb, U, Xw, e_net, E[:, :1])[0], *own[1:])
-            lp, lpn, k, absorbed, q = (own if own is not None else
-                                       stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
-                                                          bounded, stage))
-            absorbed_min = min(absorbed_min, absorbed)
-            if k == 0 or absorbed > eff.absorbed_max:
-                continue
-            usable += 1
-            profile[theta] = lp
-            null_lp = np.minimum(null_lp, lpn)
-            if lp < best_lp:
-                best_lp, best_theta, best_q = lp, theta, q
+        best_lp, best_theta, best_q, absorbed_min, profile, null_lp, usable = _family(
+            pb, eff, grid, U, e, E, EE, lifted, bounded,
+            stage if UNRESTRICTED_FAMILY_LOG_P is None else None)
+        if (stage is not None and usable and UNRESTRICTED_FAMILY_LOG_P is not None
+                and best_lp < UNRESTRICTED_FAMILY_LOG_P):
+            # A family the data point to: every grid value's replicates from the residual
+            # after its own columns (unrestricted.py, issue 22)
+            best_lp, best_theta, best_q, absorbed_min, profile, null_lp, usable = _family(
+                pb, eff, grid, U, e, E, EE, lifted, bounded, stage)
         if usable == 0:
             if not terms and eff.effect_id not in not_ident:
                 not_ident[eff.effect_id] = {
@@ -1332,6 +1314,43 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             eff.effect_id, float(best_lp), usable, float(stats.sidak_log(best_lp, usable)),
             stats.sidak_log(null_lp, usable), best_theta, absorbed_min, best_q, profile)
     return tests
+
+
+def _family(pb, eff: CatalogueEffect, grid, U, e, E, EE, lifted,
+            bounded: stats.BoundedShared | None, stage: unrestricted.StageSigns | None):
+    """One family's grid: (best data log p, its θ, its explained SS, the least absorbed
+    fraction, the profile, the replicates' minimum log p, usable grid values)."""
+    best_lp, best_theta, best_q, absorbed_min = np.inf, float("nan"), 0.0, 1.0
+    profile: dict[float, float] = {}
+    null_lp = np.zeros(E.shape[1])
+    usable = 0
+    for theta in grid:
+        Xw = pb.whiten(lifted(eff, theta))
+        if Xw.shape[1] == 0 or not np.any(Xw):
+            continue
+        own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
+        if own is not None and stage is not None and stage.applies(own[0]):
+            own = eff.test_stats(pb, U, Xw, e, _own_replicates(stage, U, Xw, E))
+        if own is not None and bounded is not None:
+            # With a quantised channel its data score is taken on the residual whose
+            # part along its columns is shortened by the box's reach, as linear_stats
+            # takes the others' (else it escaped the bound and won the name over those
+            # that did not: cross_coupling named turntable_geometry on the clean channel)
+            e_net = bounded.shortened(
+                stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6), e)
+            own = (eff.test_stats(pb, U, Xw, e_net, E[:, :1])[0], *own[1:])
+        lp, lpn, k, absorbed, q = (own if own is not None else
+                                   stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
+                                                      bounded, stage))
+        absorbed_min = min(absorbed_min, absorbed)
+        if k == 0 or absorbed > eff.absorbed_max:
+            continue
+        usable += 1
+        profile[theta] = lp
+        null_lp = np.minimum(null_lp, lpn)
+        if lp < best_lp:
+            best_lp, best_theta, best_q = lp, theta, q
+    return best_lp, best_theta, best_q, absorbed_min, profile, null_lp, usable
 
 
 def _own_replicates(stage: unrestricted.StageSigns | None, U: np.ndarray, Xw: np.ndarray,

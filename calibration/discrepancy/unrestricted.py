@@ -36,7 +36,7 @@ BUDGET_BYTES = 64 * 2**20
 # candidate): elsewhere the residual after the candidate is the stage's up to the noise along
 # its few columns, and a new draw of the replicates' tail only reshuffles the minimum over
 # families (measured, docs/benchmarks.md).
-DATA_LOG_P_GATE: float | None = float(np.log(0.01))
+DATA_LOG_P_GATE: float | None = None
 CANDIDATE_LEVERAGE = True  # HC2 by the leverage of [U, B] (False: of U alone, as the stage's)
 
 
