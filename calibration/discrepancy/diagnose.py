@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy import by_fit, not_confirmed, stats, unrestricted, within_rounding
+from calibration.discrepancy import by_fit, not_confirmed, stats, within_rounding
 from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
@@ -70,13 +70,6 @@ WILD_NULL = True
 # plateaus inflates its own variance estimate and is lost (second generator, attribution at
 # 2x 63/120 -> 42/120; docs/diagnosis.md §2, docs/benchmarks.md).
 PLATEAU_NULL = False
-# Each family candidate's sign-flip replicates from the residual after the model *and* its
-# own columns, with the stage's signs (unrestricted.py, issue 22): an effect in the data no
-# longer flips back into its own family's null.
-UNRESTRICTED_NULL = True
-# ... for the families whose best data p is below this (None: every family, every candidate
-# by its own data p, unrestricted.DATA_LOG_P_GATE)
-UNRESTRICTED_FAMILY_LOG_P: float | None = float(np.log(0.01))
 EXCESS_CHI2_RED = 2.0  # residual variance this far above sd²/n is a mismatch even if unnamed
 BASE_MODEL = "sfem-cubic"
 
@@ -404,16 +397,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         tests = _evaluate(pb, rows, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                           (nu, rng), bounded)
         shared = _shared(groups, e, U)
-        stage = None
         if WILD_NULL:
-            leave_out = tuple(int(t.theta) for t in tests.values())
-            signs: list[np.ndarray] | None = [] if UNRESTRICTED_NULL else None
-            stats.wild_replicates(rng, e, U, pb.row, E, leave_out, shared, wild_known, signs)
-            stage = (unrestricted.stage_signs(signs, e, U, pb.row, E, leave_out, shared)
-                     if signs is not None else None)
+            stats.wild_replicates(rng, e, U, pb.row, E,
+                                  tuple(int(t.theta) for t in tests.values()), shared,
+                                  wild_known)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
-                               e, E, s, s_null, lifted, not_ident, (nu, rng), bounded, stage))
-        stage = None
+                               e, E, s, s_null, lifted, not_ident, (nu, rng), bounded))
         # The replicates are read: the term's checks below must not hold them too (issue 22,
         # memory: 480 MB at 1 M readings beside the one-plateau check's arrays).
         E = None
@@ -1266,12 +1255,9 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
 
 
 def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
-              tail=(np.inf, None), bounded: stats.BoundedShared | None = None,
-              stage: unrestricted.StageSigns | None = None):
+              tail=(np.inf, None), bounded: stats.BoundedShared | None = None):
     """Each live effect's test at this stage. ``bounded``: a quantised channel's rounding
-    error, which each data score is taken net of (stats.linear_stats, stats.row_stats).
-    ``stage``: the stage's sign draw, each candidate's replicates then flip the residual
-    after its own columns (unrestricted.py, issue 22)."""
+    error, which each data score is taken net of (stats.linear_stats, stats.row_stats)."""
     tests: dict[str, stats.CandidateTest] = {}
     # A per-reading effect may be accepted again at another reading; any other once.
     chosen = {t.effect_id for t in terms if not BY_ID[t.effect_id].per_reading}
@@ -1293,15 +1279,34 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
                 float(t_row[i]))
             continue
         grid = eff.grid(pb.ctx)
-        best_lp, best_theta, best_q, absorbed_min, profile, null_lp, usable = _family(
-            pb, eff, grid, U, e, E, EE, lifted, bounded,
-            stage if UNRESTRICTED_FAMILY_LOG_P is None else None)
-        if (stage is not None and usable and UNRESTRICTED_FAMILY_LOG_P is not None
-                and best_lp < UNRESTRICTED_FAMILY_LOG_P):
-            # A family the data point to: every grid value's replicates from the residual
-            # after its own columns (unrestricted.py, issue 22)
-            best_lp, best_theta, best_q, absorbed_min, profile, null_lp, usable = _family(
-                pb, eff, grid, U, e, E, EE, lifted, bounded, stage)
+        best_lp, best_theta, best_q, absorbed_min = np.inf, float("nan"), 0.0, 1.0
+        profile: dict[float, float] = {}
+        null_lp = np.zeros(E.shape[1])
+        usable = 0
+        for theta in grid:
+            Xw = pb.whiten(lifted(eff, theta))
+            if Xw.shape[1] == 0 or not np.any(Xw):
+                continue
+            own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
+            if own is not None and bounded is not None:
+                # With a quantised channel its data score is taken on the residual whose
+                # part along its columns is shortened by the box's reach, as linear_stats
+                # takes the others' (else it escaped the bound and won the name over those
+                # that did not: cross_coupling named turntable_geometry on the clean channel)
+                e_net = bounded.shortened(
+                    stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6), e)
+                own = (eff.test_stats(pb, U, Xw, e_net, E[:, :1])[0], *own[1:])
+            lp, lpn, k, absorbed, q = (own if own is not None else
+                                       stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
+                                                          bounded))
+            absorbed_min = min(absorbed_min, absorbed)
+            if k == 0 or absorbed > eff.absorbed_max:
+                continue
+            usable += 1
+            profile[theta] = lp
+            null_lp = np.minimum(null_lp, lpn)
+            if lp < best_lp:
+                best_lp, best_theta, best_q = lp, theta, q
         if usable == 0:
             if not terms and eff.effect_id not in not_ident:
                 not_ident[eff.effect_id] = {
@@ -1314,53 +1319,6 @@ def _evaluate(pb, live, rejected, terms, U, e, E, s, s_null, lifted, not_ident,
             eff.effect_id, float(best_lp), usable, float(stats.sidak_log(best_lp, usable)),
             stats.sidak_log(null_lp, usable), best_theta, absorbed_min, best_q, profile)
     return tests
-
-
-def _family(pb, eff: CatalogueEffect, grid, U, e, E, EE, lifted,
-            bounded: stats.BoundedShared | None, stage: unrestricted.StageSigns | None):
-    """One family's grid: (best data log p, its θ, its explained SS, the least absorbed
-    fraction, the profile, the replicates' minimum log p, usable grid values)."""
-    best_lp, best_theta, best_q, absorbed_min = np.inf, float("nan"), 0.0, 1.0
-    profile: dict[float, float] = {}
-    null_lp = np.zeros(E.shape[1])
-    usable = 0
-    for theta in grid:
-        Xw = pb.whiten(lifted(eff, theta))
-        if Xw.shape[1] == 0 or not np.any(Xw):
-            continue
-        own = eff.test_stats(pb, U, Xw, e, E)  # an effect with its own noise scale
-        if own is not None and stage is not None and stage.applies(own[0]):
-            own = eff.test_stats(pb, U, Xw, e, _own_replicates(stage, U, Xw, E))
-        if own is not None and bounded is not None:
-            # With a quantised channel its data score is taken on the residual whose
-            # part along its columns is shortened by the box's reach, as linear_stats
-            # takes the others' (else it escaped the bound and won the name over those
-            # that did not: cross_coupling named turntable_geometry on the clean channel)
-            e_net = bounded.shortened(
-                stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6), e)
-            own = (eff.test_stats(pb, U, Xw, e_net, E[:, :1])[0], *own[1:])
-        lp, lpn, k, absorbed, q = (own if own is not None else
-                                   stats.linear_stats(U, Xw, e, E, eff.one_sided, EE,
-                                                      bounded, stage))
-        absorbed_min = min(absorbed_min, absorbed)
-        if k == 0 or absorbed > eff.absorbed_max:
-            continue
-        usable += 1
-        profile[theta] = lp
-        null_lp = np.minimum(null_lp, lpn)
-        if lp < best_lp:
-            best_lp, best_theta, best_q = lp, theta, q
-    return best_lp, best_theta, best_q, absorbed_min, profile, null_lp, usable
-
-
-def _own_replicates(stage: unrestricted.StageSigns | None, U: np.ndarray, Xw: np.ndarray,
-                    E: np.ndarray) -> np.ndarray:
-    """The replicates an effect's own ``test_stats`` reads: the stage's sign draw of the
-    residual after U and its columns (issue 22, unrestricted.py), or ``E`` without one."""
-    if stage is None:
-        return E
-    B = stats.orthonormal_basis(stats.project_out(U, Xw), 1e-6)
-    return stage.replicates(B) if B.shape[1] else E
 
 
 REFINE_XTOL_LOG = 1e-3  # relative resolution of a refined continuous theta

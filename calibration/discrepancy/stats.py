@@ -225,7 +225,6 @@ def wild_replicates(
     leave_out: tuple[int, ...] = (),
     shared: tuple[SharedGroups, np.ndarray, float] | None = None,
     known: tuple[SharedGroups, np.ndarray] | None = None,
-    signs_out: list[np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
     written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
@@ -255,53 +254,34 @@ def wild_replicates(
     (a non-dithering quantised temperature channel, plateau_noise.quantised_channel), drawn
     in the same way (variances in the loadings' units); the data's residual is flipped as
     it is, since no variance is read from it.
-    ``signs_out``: a list the (N × B) signs are appended to (unrestricted.py, issue 22: the
-    replicates after a candidate's columns flip the same signs); drawn as without it.
     """
-    scale = wild_scale(e, leverage(U), row, leave_out,
-                       shared[0] if shared is not None else None)
+    if shared is not None:
+        e = within_groups(e, shared[0])
+    scale = e / np.sqrt(1.0 - np.minimum(leverage(U), LEVERAGE_MAX))
+    if leave_out:
+        scale[np.isin(row, leave_out)] = 0.0
+    scale *= reading_cap(scale, row)[row]
     n, b = int(row.max()) + 1, out.shape[1]
-    kept: list[np.ndarray] = []
     step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
     if np.all(row[1:] >= row[:-1]):  # entries by reading (every problem's layout)
         # Each block of readings' signs drawn as it is used: the (N × B) signs were 160 MB
         # beside the replicates at 1 M readings (issue 22, memory); the same draws in the
         # same order (reading_signs), so the same replicates and the generator's state.
         for r0, signs in sign_blocks(rng, n, b):
-            if signs_out is not None:
-                kept.append(signs)
             i, j = np.searchsorted(row, [r0, r0 + signs.shape[0]])
             for k in range(i, j, step):  # by row blocks: no second (m × B) array
                 sl = slice(k, min(k + step, j))
                 np.multiply(scale[sl, None], signs[row[sl] - r0], out=out[sl])
     else:
         signs = reading_signs(rng, n, b)
-        kept.append(signs)
         for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
             sl = slice(i, i + step)
             np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
-    if signs_out is not None:
-        signs_out.append(np.concatenate(kept) if len(kept) > 1 else kept[0])
     if shared is not None:
         add_shared(rng, shared[0], shared[1], shared[2], out)
     if known is not None:
         add_shared(rng, known[0], known[1], 1.0, out)
     return project_out_inplace(U, out)
-
-
-def wild_scale(e: np.ndarray, h: np.ndarray, row: np.ndarray, leave_out: tuple[int, ...] = (),
-               groups: SharedGroups | None = None) -> np.ndarray:
-    """(m,) the entries :func:`wild_replicates` flips: ``e`` (less its groups' offsets when
-    ``groups``), HC2-scaled by the leverage ``h``, the ``leave_out`` readings zero, each
-    reading capped (:func:`reading_cap`). One rule for the restricted residual and for the
-    residual after a candidate's columns (unrestricted.py, issue 22)."""
-    if groups is not None:
-        e = within_groups(e, groups)
-    scale = e / np.sqrt(1.0 - np.minimum(h, LEVERAGE_MAX))
-    if leave_out:
-        scale[np.isin(row, leave_out)] = 0.0
-    scale *= reading_cap(scale, row)[row]
-    return scale
 
 
 def reading_signs(rng: np.random.Generator, n: int, b: int) -> np.ndarray:
@@ -662,7 +642,6 @@ def linear_stats(
     one_sided: bool = False,
     EE: np.ndarray | None = None,
     bounded: BoundedShared | None = None,
-    wild: Any = None,
 ) -> tuple[float, np.ndarray, int, float, float]:
     """F-type score test of free-gain columns after projecting out U.
 
@@ -685,14 +664,8 @@ def linear_stats(
     (‖Bᵀ(ε + Zδ)‖ − reach ≤ ‖Bᵀε‖); the replicates are the noise's. One-sided: the signed
     score less its own reach, no evidence unless still > 0. The denominator (the residual
     after the candidate) and the explained sum of squares returned are the data's own.
-
-    ``wild`` (unrestricted.StageSigns): the replicates are the stage's sign draw of the
-    residual after U *and* these columns (issue 22), their scores and sums of squares
-    formed from E's (``wild.scores``); None: ``E`` as given.
     """
-    if wild is not None and is_tall(*Xw.shape):
-        wild = None  # a tall candidate keeps the stage's replicates (no (m × k) basis here)
-    if not one_sided and bounded is None and wild is None and is_tall(*Xw.shape):
+    if not one_sided and bounded is None and is_tall(*Xw.shape):
         return _linear_stats_by_rows(U, Xw, e, E, EE)
     absorbed = absorbed_fraction(U, Xw)
     m = e.size
@@ -713,19 +686,13 @@ def linear_stats(
 
             qn_d, t_d = float(np.sum((Nb.T @ e) ** 2)), float(b1 @ e)
             lp = float(stat(np.asarray(qn_d), np.asarray(t_d), np.asarray(ee)))
-            if wild is not None and not wild.applies(lp):
-                wild = None
             if bounded is not None:  # the data's evidence at the least the box allows
                 t_b = t_d - bounded.reach(b1[:, None])
                 qn_b = _shrunk(np.sqrt(qn_d), bounded.reach(Nb)) ** 2
                 c = (qn_b + t_b**2) / max((ee - qn_d - t_d**2) / dof, 1e-300)
                 lp = (float(np.log(0.5) + f_logsf(c / (j + 1), j + 1, dof)) if t_b > 0
                       else 0.0)
-            if wild is not None:  # the scores of [N, b1] on the unrestricted replicates
-                BtE, EE = wild.scores(np.hstack([Nb, b1[:, None]]))
-                lpn = stat(np.sum(BtE[:j] ** 2, axis=0), BtE[j], EE)
-            else:
-                lpn = stat(np.sum(t_matmul(Nb, E) ** 2, axis=0), t_matmul(b1, E), EE)
+            lpn = stat(np.sum(t_matmul(Nb, E) ** 2, axis=0), t_matmul(b1, E), EE)
             return lp, lpn, j + 1, absorbed, (qn_d + t_d**2) if t_d > 0 else 0.0
     B = orthonormal_basis(project_out(U, Xw), 1e-6)
     k = B.shape[1]
@@ -735,11 +702,7 @@ def linear_stats(
     q = float(np.sum((B.T @ e) ** 2))
     q_score = q if bounded is None else _shrunk(np.sqrt(q), bounded.reach(B)) ** 2
     f = q_score / k / max((ee - q) / dof, 1e-300)
-    if wild is not None and wild.applies(float(f_logsf(f, k, dof))):
-        BtE, EE = wild.scores(B)
-    else:
-        BtE = t_matmul(B, E)
-    qn = np.sum(BtE ** 2, axis=0)
+    qn = np.sum(t_matmul(B, E) ** 2, axis=0)
     # the same floor as the data's F: a replicate whose residual lies wholly in B (EE = qn)
     # gave 0/0 = nan, which no comparison counts
     fn = qn / k / np.maximum((EE - qn) / dof, 1e-300)
