@@ -4,6 +4,8 @@ The twin is the sensor model (SFEM with cubic parameters, seed Eq. 1 and 8), the
 behind the chamber air, and the noise, estimated from one recording so that a simulated
 campaign reproduces it:
 
+0. the recording's diagnosis: the effects a twin carries are kept and their output taken
+   out of the recording the base is fitted to (:mod:`calibration.discrepancy.twin_effects`);
 1. ``calibrate``'s thermal fit (:func:`calibration.thermal.fit_campaign`) as the start;
 2. on a recording whose only temperature is the chamber air, the die lag τ is profiled
    (the model's coefficients refitted at every τ by
