@@ -28,7 +28,7 @@ import numpy as np
 
 from calibration.discrepancy.context import DesignContext, base_context
 from calibration.discrepancy.effects import BY_ID
-from calibration.errors import ModelFileError
+from calibration.errors import CalibrationError, ModelFileError
 from calibration.recording import Recording
 
 RAW_COLUMNS = ("ax", "ay", "az")
@@ -110,7 +110,13 @@ def effects_design(effects: list[dict[str, Any]], ctx: DesignContext) -> np.ndar
     for i, e in enumerate(effects):
         eff = BY_ID[e["effect"]]
         theta = float("nan") if e.get("theta") is None else float(e["theta"])
-        X = eff.regressors(ctx, theta)  # (N, 3, k): raw output per unit coefficient
+        try:
+            X = eff.regressors(ctx, theta)  # (N, 3, k): raw output per unit coefficient
+        except (AssertionError, ValueError, TypeError, IndexError) as exc:
+            # What the effect reads is missing here (a vibration's sd_* columns): say so.
+            why = eff.identifiable(ctx)[1] or str(exc)
+            raise CalibrationError(f"the twin's {e['effect']} cannot be evaluated on this "
+                                   f"recording: {why}") from exc
         if X.shape[-1] != len(e["coef"]):
             raise ModelFileError(f"effects[{i}] ({e['effect']}): {len(e['coef'])} "
                                  f"coefficient(s), its regressors have {X.shape[-1]}")

@@ -9,6 +9,7 @@ with the twin's own σ beside the base's.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from calibration.discrepancy.twin_effects import coefficients
 from calibration.discrepancy.twin_file import load_model_or_twin, save_twin
 from calibration.discrepancy.twin_fit import fit_twin, report_text
 from calibration.errors import ModelFileError
-from calibration.recording import write_recording
+from calibration.recording import Recording, write_recording
 from service.cli import main as soakcal
 from simulators import effects as fx
 from simulators.campaign_sim import simulate_campaign
@@ -149,3 +150,21 @@ def test_the_cli_says_what_the_twin_carries(tmp_path, capsys):
                     "--no-effects"]) == 0
     assert "effects: not diagnosed (--no-effects)" in capsys.readouterr().out
     assert load_model_or_twin(tmp_path / "t0.json").effects == []
+
+
+def test_a_twin_effect_the_recording_cannot_feed_is_refused_with_the_reason(fitted, tmp_path,
+                                                                           capsys):
+    twin, _ = fitted
+    vib = {"effect": "vibration_rectification", "theta": None, "coef": [0.01, 0.0, 0.0],
+           "coef_sd": [0.001, 0.001, 0.001], "parameters": {}, "parameter_sd": {},
+           "explanation": "x output shifts with the vibration power"}
+    save_twin(tmp_path / "vib.json", replace(twin, effects=[vib]))
+    rec = campaign(truth_with(bent(K2_X)), 2)
+    cols = {k: v for k, v in rec.columns.items() if not k.startswith("sd_")}
+    write_recording(tmp_path / "nosd.csv", Recording.from_columns(cols))
+    code = soakcal(["diagnose", str(tmp_path / "nosd.csv"), "--against",
+                    str(tmp_path / "vib.json")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "the twin's vibration_rectification cannot be evaluated on this recording" in err
+    assert "no sd_* columns" in err
