@@ -27,6 +27,7 @@ import numpy as np
 
 from calibration.discrepancy import stats
 from calibration.discrepancy.problem import LinearProblem
+from calibration.temperature_lsb import MAX_LSB_C
 
 MIN_PLATEAUS = 2  # one plateau has no between-plateau variance to speak of
 # A quantised channel (temperature_grid): its codes are values recorded on at least
@@ -308,7 +309,7 @@ def mean_code_lsb_c(temp_c: np.ndarray, n_samples: np.ndarray | None,
     if not q_found:
         return None
     q = max(q_found)
-    return q if q <= GRID_MAX_C * 10 else None
+    return q if q <= MAX_LSB_C else None  # coarser is no temperature channel's LSB
 
 
 def rounding_box(pb: LinearProblem, q_c: float) -> stats.BoundedShared | None:
