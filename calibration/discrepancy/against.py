@@ -174,7 +174,7 @@ def diagnose_against(recording: Recording, given: Twin, *, against: str = "", se
 
         eff_ctx = tfx.context_of(recording)
         eff_x = tfx.effects_design(given.effects, eff_ctx)
-        recording = tfx.without_effects(recording, given.effects)
+        recording = tfx.less_raw(recording, eff_x @ tfx.coefficients(given.effects)[0])
         notes.append(f"the twin's effects ({tfx.summary(given.effects)}) are part of its "
                      "prediction: the recording is compared less their output, their "
                      "coefficients tested beside the base's")

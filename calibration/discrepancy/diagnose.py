@@ -260,11 +260,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
              if recording.has_temperature else None)
     # Not declared: capture means that are averages of the channel's codes show its LSB as
     # a lattice (plateau_noise.mean_code_lsb_c), as sure as a declared one (issue 22).
-    lsb_from_means = lsb_c is None and recording.has_temperature
-    if lsb_from_means:
+    if lsb_c is None and recording.has_temperature:
         lsb_c = mean_code_lsb_c(recording.columns[recording.temperature_source],
                                 recording.columns.get("n"), recording.steps())
-    lsb_from_means = lsb_from_means and lsb_c is not None
+        lsb_from_means = lsb_c is not None
+    else:
+        lsb_from_means = False
     capture_means = samples_mod.is_raw_samples(recording)
     if capture_means:
         n_rows = len(recording)

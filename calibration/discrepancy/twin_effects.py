@@ -103,13 +103,18 @@ def context_of(rec: Recording, input_g: np.ndarray | None = None) -> DesignConte
     return base_context(rec, mode, np.asarray(input_g, float))
 
 
+def theta_of(effect: dict[str, Any]) -> float:
+    """A carried effect's nonlinear parameter θ (nan for a linear effect: ``null``)."""
+    return float("nan") if effect.get("theta") is None else float(effect["theta"])
+
+
 def effects_design(effects: list[dict[str, Any]], ctx: DesignContext) -> np.ndarray:
     """(N, 3, K) raw output (g) per unit coefficient of the carried effects, side by side in
     the order of :func:`coefficients`."""
     blocks = []
     for i, e in enumerate(effects):
         eff = BY_ID[e["effect"]]
-        theta = float("nan") if e.get("theta") is None else float(e["theta"])
+        theta = theta_of(e)
         try:
             X = eff.regressors(ctx, theta)  # (N, 3, k): raw output per unit coefficient
         except (AssertionError, ValueError, TypeError, IndexError) as exc:
@@ -163,7 +168,7 @@ def changed(effects: list[dict[str, Any]], delta: np.ndarray, sd: np.ndarray,
     for e in effects:
         k = len(e["coef"])
         eff = BY_ID[e["effect"]]
-        theta = float("nan") if e.get("theta") is None else float(e["theta"])
+        theta = theta_of(e)
         c_twin = np.asarray(e["coef"], float)
         s_twin = np.asarray(e.get("coef_sd") or [0.0] * k, float)
         here, s_here = eff.parameters(c_twin + delta[i:i + k], sd[i:i + k], theta, ctx)
