@@ -225,8 +225,10 @@ async def test_lost_lease_leaves_the_rig_to_its_new_holder(sf, monkeypatch) -> N
         # The takeover below is written, not waited for, so the lease's length is not what
         # this test times. A 0.3 s lease (renewed every 0.1 s of wall time) expired under
         # load before the campaign had started, and the test then waited its 60 s for a
-        # measurement that never came.
-        mgr = CampaignManager(sf, clock_factory=lambda: clock, owner="me", lease_s=3.0)
+        # measurement that never came; so did a 3 s lease once in four runs of the suite on
+        # a slower 2-core machine (four workers). 9 s (renewed every 3 s) bounds the wait for
+        # the takeover to be seen at 3 s of wall time.
+        mgr = CampaignManager(sf, clock_factory=lambda: clock, owner="me", lease_s=9.0)
         await mgr.run_once()
         await until(lambda: n_measured(sf, cid) >= 2)
         with sf() as s:  # the lease expired and another process took it
