@@ -28,7 +28,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from calibration.temperature_conditioning import temperature_rate_c_per_min
+from calibration.temperature_conditioning import (
+    temperature_rate_c_per_min,
+    temperature_rates_c_per_min,
+)
 from calibration.temperature_dequantise import Dequantised, dequantise
 from calibration.temperature_dither import inverse_level, smoother_matrix
 
@@ -74,8 +77,8 @@ def rebuild_rate_noise(t_s: np.ndarray, dq: Dequantised, samples: np.ndarray | N
     def noise(window_s: float) -> float:
         if window_s not in cache:
             own = temperature_rate_c_per_min(t, trace, window_s)
-            sq = [np.mean((temperature_rate_c_per_min(t, x, window_s) - own) ** 2)
-                  for x in draws]
+            sq = [np.mean((rate - own) ** 2)
+                  for rate in temperature_rates_c_per_min(t, np.stack(draws), window_s)]
             cache[window_s] = float(np.sqrt(np.mean(sq)))
         return cache[window_s]
 

@@ -223,26 +223,49 @@ def smooth_over_time(
     different soak temperatures are never mixed. Rows more than 4 robust σ off
     their local line are ignored in the fit.
     """
-    t = np.asarray(t_s, float)
     y = np.asarray(temperature_c, float)
-    n = y.size
+    return smooth_many_over_time(t_s, y[None, :], window_s, jump_c, degree)[0]
+
+
+def smooth_many_over_time(
+    t_s: np.ndarray, temperatures_c: np.ndarray, window_s: float, jump_c: float = 1.0,
+    degree: int = 1,
+) -> np.ndarray:
+    """:func:`smooth_over_time` of each row of ``temperatures_c`` (D, n), all read at the
+    times ``t_s``: the same values as D calls (each window's fit is its own; equal to
+    rounding), in one pass per set of rows that share their cuts at jumps. Why: dT/dt's
+    noise is measured on draws of noise (:func:`rate_noise_c_per_min`), a warm-up fit's
+    most repeated step."""
+    t = np.asarray(t_s, float)
+    Y = np.atleast_2d(np.asarray(temperatures_c, float))
+    n = Y.shape[1]
     if n < 3 or window_s <= 0:
-        return y.copy()
-    med = np.median(np.column_stack([np.r_[y[0], y[:-1]], y, np.r_[y[1:], y[-1]]]), axis=1)
-    seg = np.r_[0, np.cumsum(np.abs(np.diff(med)) > jump_c)]
-    out = y.copy()
+        return Y.copy()
+    med = np.median(np.stack([np.c_[Y[:, :1], Y[:, :-1]], Y, np.c_[Y[:, 1:], Y[:, -1:]]]),
+                    axis=0)
+    seg = np.c_[np.zeros((Y.shape[0], 1), np.int64),
+                np.cumsum(np.abs(np.diff(med, axis=1)) > jump_c, axis=1)]
+    if Y.shape[0] > 1 and np.any(seg != seg[:1]):  # cut differently: by the rows' cuts
+        _, group = np.unique(seg, axis=0, return_inverse=True)
+        out = np.empty(Y.shape)
+        for g in np.unique(group):
+            rows = np.flatnonzero(group.ravel() == g)
+            out[rows] = smooth_many_over_time(t, Y[rows], window_s, jump_c, degree)
+        return out
+    out = Y.copy()
     half = 0.5 * window_s
-    quantum = channel_quantum_c(y)
-    for s in np.unique(seg):
-        idx = np.flatnonzero(seg == s)
-        ts, ys = t[idx], y[idx]
+    quantum = np.array([channel_quantum_c(y) for y in Y])
+    for s in np.unique(seg[0]):
+        idx = np.flatnonzero(seg[0] == s)
+        ts, ys = t[idx], Y[:, idx]
         lo = np.searchsorted(ts, ts - half, side="left")
         hi = np.searchsorted(ts, ts + half, side="right")
         if np.all(np.diff(ts) > 0) and np.all(np.isfinite(ys)):
-            out[idx] = _local_fits(ts, ys, lo, hi, degree, quantum, half)
+            out[:, idx] = _local_fits(ts, ys, lo, hi, degree, quantum, half)
         else:  # repeated times or missing readings: window by window
-            out[idx] = [_local_fit(ts[lo[j]:hi[j]], ys[lo[j]:hi[j]], ts[j], degree, quantum)
-                        for j in range(idx.size)]
+            for d in range(Y.shape[0]):
+                out[d, idx] = [_local_fit(ts[lo[j]:hi[j]], ys[d, lo[j]:hi[j]], ts[j], degree,
+                                          float(quantum[d])) for j in range(idx.size)]
     return out
 
 
@@ -266,49 +289,58 @@ _WINDOW_CHUNK = 1 << 18
 
 
 def _local_fits(ts: np.ndarray, ys: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                degree: int, quantum: float, half_s: float) -> np.ndarray:
+                degree: int, quantum: np.ndarray, half_s: float) -> np.ndarray:
     """:func:`_local_fit` of every row of a run with increasing times and finite readings,
     all windows at once: each window's least squares from its moment sums, the powers of
     the time offset scaled by ``half_s`` (so the normal equations are well conditioned);
-    the same fits and medians row by row, equal to them to rounding."""
-    out = np.empty(ts.size)
+    the same fits and medians row by row, equal to them to rounding. ``ys`` (D, m): D
+    series read at the times ``ts``, ``quantum`` (D,) each one's channel resolution."""
+    out = np.empty(ys.shape)
     width = int(np.max(hi - lo))
-    step = max(1, _WINDOW_CHUNK // max(width, 1))
+    step = max(1, _WINDOW_CHUNK // max(width * ys.shape[0], 1))
     for a in range(0, ts.size, step):
         rows = np.arange(a, min(a + step, ts.size))
-        out[rows] = _window_values(ts, ys, rows, lo[rows], hi[rows], width, degree, quantum,
-                                   half_s)
+        out[:, rows] = _window_values(ts, ys, rows, lo[rows], hi[rows], width, degree,
+                                      quantum, half_s)
     return out
 
 
 def _window_values(ts: np.ndarray, ys: np.ndarray, rows: np.ndarray, lo: np.ndarray,
-                   hi: np.ndarray, width: int, degree: int, quantum: float,
+                   hi: np.ndarray, width: int, degree: int, quantum: np.ndarray,
                    half_s: float) -> np.ndarray:
+    """(D, rows) values of the windows of ``rows`` for each of the D series ``ys``: their
+    windows are stacked series by series (each window's fit and medians are its own)."""
+    n_series, n_rows = ys.shape[0], rows.size
     pos = lo[:, None] + np.arange(width)
     inside = pos < hi[:, None]
     pos = np.minimum(pos, ts.size - 1)
-    yy = ys[pos]
+    yy = ys[:, pos].reshape(n_series * n_rows, width)
+    inside_all = np.tile(inside, (n_series, 1))
     count = hi - lo
     # too few rows for the polynomial, or no time span: the median (times increase, so
     # the span is the last minus the first)
-    value = _masked_median(yy, inside)
-    fit = (count >= degree + 2) & (ts[hi - 1] - ts[lo] > 0)
-    if not fit.any():
-        return value
-    inside, yy = inside[fit], yy[fit]
-    V = ((ts[pos[fit]] - ts[rows[fit], None]) / half_s)[..., None] ** np.arange(degree + 1)
+    value = _masked_median(yy, inside_all)
+    fit_row = (count >= degree + 2) & (ts[hi - 1] - ts[lo] > 0)
+    if not fit_row.any():
+        return value.reshape(n_series, n_rows)
+    fit = np.tile(fit_row, n_series)
+    inside, yy = inside_all[fit], yy[fit]
+    V1 = ((ts[pos[fit_row]] - ts[rows[fit_row], None]) / half_s)[..., None] ** np.arange(
+        degree + 1)
+    V = np.broadcast_to(V1, (n_series,) + V1.shape).reshape((-1,) + V1.shape[1:])
     coef = _weighted_polyfit(V, yy, inside)
     res = yy - np.einsum("rwi,ri->rw", V, coef)
     dev = np.abs(res - _masked_median(res, inside)[:, None])
     sd = 1.4826 * _masked_median(dev, inside)
-    keep = np.where((sd > 0)[:, None], np.abs(res) <= 4.0 * (sd + quantum)[:, None], True)
+    q = np.repeat(np.asarray(quantum, float), int(fit_row.sum()))
+    keep = np.where((sd > 0)[:, None], np.abs(res) <= 4.0 * (sd + q)[:, None], True)
     keep &= inside
     n_keep = keep.sum(axis=1)
     again = (n_keep >= degree + 2) & (n_keep < inside.sum(axis=1))
     if again.any():
         coef[again] = _weighted_polyfit(V[again], yy[again], keep[again])
     value[fit] = coef[:, 0]
-    return value
+    return value.reshape(n_series, n_rows)
 
 
 def _weighted_polyfit(V: np.ndarray, y: np.ndarray, use: np.ndarray) -> np.ndarray:
@@ -343,18 +375,28 @@ def temperature_rate_c_per_min(t_s: np.ndarray, temperature_c: np.ndarray,
     a time step over :data:`RATE_GAP_STEPS` × the median step), never across one. Without
     that, a 10-s gap in a 2 °C/min heating read 0.18-1.19 °C/min at the rows beside it.
     A run of one row takes its neighbour run's nearest rate (no rate within it)."""
+    y = np.asarray(temperature_c, float)
+    return temperature_rates_c_per_min(t_s, y[None, :], window_s)[0]
+
+
+def temperature_rates_c_per_min(t_s: np.ndarray, temperatures_c: np.ndarray,
+                                window_s: float) -> np.ndarray:
+    """:func:`temperature_rate_c_per_min` of each row of ``temperatures_c`` (D, n), all read
+    at the times ``t_s``: the same values as D calls, to rounding
+    (:func:`smooth_many_over_time`)."""
     t = np.asarray(t_s, float)
+    Y = np.atleast_2d(np.asarray(temperatures_c, float))
     if t.size < 2 or np.ptp(t) <= 0:
-        return np.zeros(t.size)
-    parabola = smooth_over_time(t, temperature_c, window_s, degree=2)
+        return np.zeros(Y.shape)
+    parabola = smooth_many_over_time(t, Y, window_s, degree=2)
     half = 0.5 * window_s
     count = (np.searchsorted(t, t + half, side="right")
              - np.searchsorted(t, t - half, side="left"))
     smooth = parabola
     if np.any(count == 3):
-        line = smooth_over_time(t, temperature_c, window_s, degree=1)
+        line = smooth_many_over_time(t, Y, window_s, degree=1)
         smooth = np.where(count == 3, line, parabola)
-    return 60.0 * _gradient_within_runs(smooth, t)
+    return np.vstack([60.0 * _gradient_within_runs(row, t) for row in smooth])
 
 
 # A time step longer than this many median steps is a gap: a rate is not read across it.
@@ -523,8 +565,8 @@ def rate_noise_c_per_min(t_s: np.ndarray, window_s: float,
     if np.all(np.asarray(noise_c) <= 0) or t.size < 3:
         return 0.0
     rng = np.random.default_rng(0)
-    sq = [np.mean(temperature_rate_c_per_min(t, rng.normal(0.0, noise_c, t.size),
-                                             window_s) ** 2) for _ in range(RATE_NOISE_DRAWS)]
+    draws = np.stack([rng.normal(0.0, noise_c, t.size) for _ in range(RATE_NOISE_DRAWS)])
+    sq = [np.mean(rate**2) for rate in temperature_rates_c_per_min(t, draws, window_s)]
     return float(np.sqrt(np.mean(sq)))
 
 

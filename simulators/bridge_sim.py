@@ -68,6 +68,9 @@ class BridgeDevice:
     part_ids: tuple[int, int, int, int] = PART_IDS
     #: The simulated fixture EEPROM; ``None`` reports the truth model's serial.
     eeprom_serial: str | None = None
+    #: The die's (dT/dt °C/s, last excursion's direction) now, for a truth whose effects
+    #: act on them (rate sensitivity, hysteresis); ``None``: a die at rest, never moved.
+    die_motion: Callable[[], tuple[float, int]] | None = None
 
     def reference_g(self) -> np.ndarray:
         return _reference(tuple(self.angles_deg()), self.g_local)
@@ -79,10 +82,18 @@ class BridgeDevice:
         angles = tuple(self.angles_deg())
         ref = _reference(angles, self.g_local)
         g = self.truth.sample_g(ref, die_c, n, self.rng, t_s=self.clock.now(),
-                                lab_to_sensor=_pose(angles))
+                                lab_to_sensor=_pose(angles), **self._motion())
         counts = adxl355.g_to_counts(g, self.truth.range_g)
         temps_c = _temperature_samples(self.truth, die_c, n, self.rng)
         return counts, adxl355.temp_c_to_raw(temps_c)
+
+    def _motion(self) -> dict[str, float | int]:
+        """The die's motion for ``sample_g``, where the truth has effects that act on it
+        (a truth without effects, such as a test's stand-in, is called as before)."""
+        if self.die_motion is None or not getattr(self.truth, "effects", None):
+            return {}
+        rate, direction = self.die_motion()
+        return {"die_rate_c_per_s": rate, "direction": direction}
 
     def route(self, fields: list[str]) -> Route:
         """Every command is this sensor's: "@1,ID" is an unknown command (a pre-channel bridge)."""

@@ -20,6 +20,9 @@ from drivers.registermaps import ChamberMap, Field
 from simulators.faults import SimFaults
 from simulators.modbus_server import read_block
 
+# The die counts as moving (its hysteresis direction set) above this rate: 0.01 °C/min.
+DIRECTION_RATE_C_PER_S = 0.01 / 60.0
+
 # Simulated condition -> the names a map may give its bit, first match wins.
 ALARM_ALIASES: dict[str, tuple[str, ...]] = {
     "deviation_high": ("deviation_high", "alarm_1"),
@@ -60,6 +63,11 @@ class ChamberPhysics:
     faults: SimFaults = field(default_factory=SimFaults)
     working_setpoint_c: float = field(init=False)
     die_c: float = field(init=False)
+    # The die's dT/dt over the last integration substep (°C/s) and the direction of its last
+    # excursion (+1 heating, −1 cooling, 0 none yet): what a rate-sensitive or hysteretic
+    # sensor's output depends on (simulators.truth.Context), kept as the die moves.
+    die_rate_c_per_s: float = field(init=False, default=0.0)
+    die_direction: int = field(init=False, default=0)
     t_s: float = field(init=False)
     _stuck_pv_c: float | None = field(init=False, default=None)
 
@@ -110,7 +118,11 @@ class ChamberPhysics:
         new_air = rate_limited(self.air_c, new_air, self.max_rate_c_per_min / 60.0 * dt)
         # Die: exact first-order step for the mean air over the substep.
         mean_air = 0.5 * (self.air_c + new_air)
-        self.die_c = float(lag_step(self.die_c, mean_air, dt, self.die_tau_s))
+        new_die = float(lag_step(self.die_c, mean_air, dt, self.die_tau_s))
+        self.die_rate_c_per_s = (new_die - self.die_c) / dt if dt > 0 else 0.0
+        if abs(self.die_rate_c_per_s) > DIRECTION_RATE_C_PER_S:
+            self.die_direction = 1 if self.die_rate_c_per_s > 0 else -1
+        self.die_c = new_die
         self.air_c = new_air
 
 

@@ -35,11 +35,9 @@ import numpy as np
 from calibration.recording import Recording
 from calibration.schedules import table1
 from calibration.thermal_plant import DEFAULT_AIR_TAU_S, lag_series
+from simulators.chamber_sim import DIRECTION_RATE_C_PER_S
 from simulators.effects import TemperatureRate, ThermalHysteresis
 from simulators.truth import Context, SensorTruth, averaged_readings
-
-# The die counts as moving (its hysteresis direction set) above this rate: 0.01 °C/min.
-DIRECTION_RATE_C_PER_S = 0.01 / 60.0
 
 
 @dataclass(frozen=True)

@@ -251,8 +251,12 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
         chamber.advance_to()
         return chamber.die_c
 
+    def die_motion() -> tuple[float, int]:
+        chamber.advance_to()
+        return chamber.die_rate_c_per_s, chamber.die_direction
+
     bridge = BridgeDevice(truth, clock, rng_s, die_now, table.true_angles_deg,
-                          faults=faults.sensor)
+                          faults=faults.sensor, die_motion=die_motion)
     modbus_host = host
     if modbus_in_memory:
         modbus_host = IN_MEMORY_HOST
@@ -278,7 +282,8 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
         try:
             for i, serial in enumerate(serials[1:], start=2):
                 rig.sensors.append(await _start_sensor(clock, serial, i, seed, die_now,
-                                                       table, host, truths.get(serial)))
+                                                       table, host, truths.get(serial),
+                                                       die_motion))
         except BaseException:
             await rig.stop()
             raise
@@ -298,7 +303,7 @@ async def _start_multiplexed(clock: Clock, serials: Sequence[str], seed: int,
     devices = [first]
     for serial in serials[1:]:
         devices.append(_sensor_device(clock, serial, seed, die_now, table,
-                                      truths.get(serial), first.board_uid))
+                                      truths.get(serial), first.board_uid, first.die_motion))
     mux = MultiplexedBridgeDevice(dict(enumerate(devices)))
     try:
         server = await start_bridge_server(mux, host=host, port=port)
@@ -320,22 +325,24 @@ def _serial_truth(serial: str) -> Any:
 
 
 async def _start_sensor(clock: Clock, serial: str, index: int, seed: int, die_now: Any,
-                        table: TurntablePhysics, host: str, truth: Any = None) -> SimSensor:
+                        table: TurntablePhysics, host: str, truth: Any = None,
+                        die_motion: Any = None) -> SimSensor:
     """The ``index``-th bridge of a fixture: its own truth, noise stream, faults and port.
 
     ``truth``: an injected truth for this serial; default the serial's own part.
     """
     bridge = _sensor_device(clock, serial, seed, die_now, table, truth,
-                            f"SIM-BRIDGE-{index:04d}")
+                            f"SIM-BRIDGE-{index:04d}", die_motion)
     server = await start_bridge_server(bridge, host=host, port=0)
     return SimSensor(serial, bridge, server, bridge.faults)
 
 
 def _sensor_device(clock: Clock, serial: str, seed: int, die_now: Any,
-                   table: TurntablePhysics, truth: Any, board_uid: str) -> BridgeDevice:
+                   table: TurntablePhysics, truth: Any, board_uid: str,
+                   die_motion: Any = None) -> BridgeDevice:
     """One extra sensor's simulated device: its part, its noise stream, its own faults."""
     # Noise differs per sensor and per campaign seed; the part is its serial's unless injected.
     rng = np.random.default_rng(np.random.SeedSequence([seed, sensor_seed(serial)]))
     return BridgeDevice(_serial_truth(serial) if truth is None else truth, clock, rng,
                         die_now, table.true_angles_deg, faults=SimFaults(),
-                        board_uid=board_uid)
+                        board_uid=board_uid, die_motion=die_motion)

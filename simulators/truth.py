@@ -159,18 +159,24 @@ class SensorTruth:
         rng: np.random.Generator,
         t_s: float = 0.0,
         lab_to_sensor: np.ndarray | None = None,
+        die_rate_c_per_s: float = 0.0,
+        direction: int = 0,
     ) -> np.ndarray:
         """``n`` raw samples (n,3) in g for one orientation at one die temperature.
 
-        Effects are evaluated for a static reading at ``t_s`` (the bridge
-        simulator uses this path); saturated at ±range_g. ``lab_to_sensor``: the
-        table's pose Rᵀ (3, 3) holding this orientation, when known (a tilted base
-        reaches the sensor through it).
+        Effects are evaluated for one reading at ``t_s`` (the bridge simulator uses this
+        path); saturated at ±range_g. ``lab_to_sensor``: the table's pose Rᵀ (3, 3)
+        holding this orientation, when known (a tilted base reaches the sensor through
+        it). ``die_rate_c_per_s`` and ``direction`` (+1 after heating, −1 after cooling,
+        0 before any excursion): the die's motion, which a ``temperature_rate`` and a
+        ``thermal_hysteresis`` effect act on (default: a die at rest, never moved).
         """
         ideal = self.ideal_raw_g(np.asarray(ref_g, float)[None, :], die_c)[0]
         if self.effects:
             ref = np.asarray(ref_g, float)[None, :]
             ctx = static_context(ref, np.array([die_c]), np.array([t_s]), n)
+            ctx.die_rate_c_per_s = np.array([float(die_rate_c_per_s)])
+            ctx.direction = np.array([int(direction)])
             if lab_to_sensor is not None:
                 ctx.lab_to_sensor = np.asarray(lab_to_sensor, float)[None]
             for eff in self.effects:

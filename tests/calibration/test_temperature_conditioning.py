@@ -11,8 +11,10 @@ from calibration.temperature_conditioning import (
     channel_quantum_c,
     compensation_temperature,
     segments_for_conditioning,
+    smooth_many_over_time,
     smooth_over_time,
     temperature_rate_c_per_min,
+    temperature_rates_c_per_min,
 )
 
 
@@ -143,6 +145,28 @@ def test_smoothing_all_windows_at_once_equals_window_by_window(degree: int) -> N
             want[i] = _local_fit(ts[win], ys[win], ts[j], degree, quantum)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
     assert np.max(np.abs(got - temp)) > 1.0  # the glitches were smoothed away, not kept
+
+
+def test_many_series_at_once_are_each_series_alone() -> None:
+    """Draws of noise read at one set of times (how dT/dt's noise is measured) give, smoothed
+    together, what each gives alone (to rounding: batched sums may round differently): rows
+    cut at different jumps, a quantised series, a missing reading (its run window by window)
+    and gaps between runs."""
+    rng = np.random.default_rng(5)
+    t = np.cumsum(np.where(np.arange(120) % 30 == 29, 12.0, 1.0))
+    Y = 20.0 + 0.02 * t + rng.normal(0.0, 0.05, (6, t.size))
+    Y[1, 70:] += 2.0  # cut at a jump no other row has
+    Y[2] = np.round(Y[2] / 0.0625) * 0.0625
+    Y[3, 10] = np.nan
+    for degree in (1, 2):
+        together = smooth_many_over_time(t, Y, 20.0, degree=degree)
+        alone = np.vstack([smooth_over_time(t, y, 20.0, degree=degree) for y in Y])
+        np.testing.assert_allclose(together, alone, rtol=1e-12, atol=0)
+    rates = temperature_rates_c_per_min(t, Y, 10.0)
+    np.testing.assert_allclose(
+        rates, np.vstack([temperature_rate_c_per_min(t, y, 10.0) for y in Y]), rtol=0,
+        atol=1e-9)
+    assert np.all(np.isfinite(rates[0])) and abs(np.median(rates[0]) - 1.2) < 0.3  # °C/min
 
 
 def _warmup_rows_with_gaps(pattern: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

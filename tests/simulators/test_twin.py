@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from drivers import adxl355
 from drivers.clock import VirtualClock
 from drivers.geometry import angles_for_reference, reference_for_angles
 from drivers.protocols import Accelerometer, Chamber, Turntable
@@ -38,6 +39,51 @@ def test_chamber_cannot_exceed_its_own_rate() -> None:
     clock.advance(60.0)
     p.advance_to()
     assert p.air_c == pytest.approx(28.0)  # 5 °C/min cap, not the 60 s first-order step
+
+
+async def test_the_served_sensor_reads_its_die_history_hysteresis_and_rate() -> None:
+    """A twin carrying hysteresis and rate sensitivity (``twin fit`` writes them) served on
+    the bridge: z reads +h after a heating and −h after a cooling at the same die
+    temperature, and k·dT/dt while the die moves. Before, the served bridge read every
+    capture as a die at rest that never moved (only the offline simulator had them)."""
+    from simulators.bridge_sim import BridgeDevice
+    from simulators.effects import TemperatureRate, ThermalHysteresis
+
+    h_z, k_z = 2e-3, 0.05  # g; g per °C/s (0.83 mg per °C/min)
+    truth = SensorTruth.adxl355_typical(3)
+    truth.effects = [ThermalHysteresis(h_g=np.array([0.0, 0.0, h_z])),
+                     TemperatureRate(k_g_per_c_per_s=np.array([0.0, 0.0, k_z]))]
+    clock = VirtualClock()
+    p = ChamberPhysics(clock, np.random.default_rng(0), air_c=20.0, setpoint_c=20.0,
+                       running=True, ramp_c_per_min=0.0, die_tau_s=300.0)
+
+    def die_now() -> float:
+        p.advance_to()
+        return p.die_c
+
+    def die_motion() -> tuple[float, int]:
+        p.advance_to()
+        return p.die_rate_c_per_s, p.die_direction
+
+    dev = BridgeDevice(truth, clock, np.random.default_rng(1), die_now, lambda: (0.0, 0.0),
+                       die_motion=die_motion)
+
+    async def z_offset_g() -> float:  # the capture's mean less the base model at its die
+        counts, _ = await dev.capture(4000)
+        mean_g = adxl355.counts_to_g(counts, truth.range_g).mean(axis=0)
+        return float(mean_g[2] - truth.ideal_raw_g(dev.reference_g()[None, :], p.die_c)[0, 2])
+
+    assert abs(await z_offset_g()) < 1e-4  # never moved, at rest
+    p.setpoint_c = 40.0
+    clock.advance(300.0)
+    offset = await z_offset_g()
+    assert p.die_direction == 1 and p.die_rate_c_per_s > 0.01
+    assert offset == pytest.approx(h_z + k_z * p.die_rate_c_per_s, abs=1e-4)
+    clock.advance(6 * 3600.0)  # settled at 40 °C: +h after the heating
+    assert await z_offset_g() == pytest.approx(h_z, abs=1e-4)
+    p.setpoint_c = 20.0
+    clock.advance(6 * 3600.0)  # back at 20 °C after a cooling: −h
+    assert await z_offset_g() == pytest.approx(-h_z, abs=1e-4)
 
 
 def test_table_profile_is_trapezoidal() -> None:
