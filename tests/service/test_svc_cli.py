@@ -136,9 +136,10 @@ def live_service(clean_db_url: str) -> Iterator[tuple[str, str, object]]:
     )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 120  # seconds when idle; generous under load
     while not server.started and time.monotonic() < deadline:
         time.sleep(0.01)
+    assert server.started, "the service did not start within 120 s"
     sf = make_session_factory(clean_db_url)
     with session_scope(sf) as session:
         from service.api.auth import create_token
