@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any
+from typing import Protocol as Hook
 
 import numpy as np
 
@@ -101,8 +102,30 @@ ROW_COLUMNS = ("t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "position",
                "ref_x", "ref_y", "ref_z", "ax", "ay", "az", "n", "sd_x", "sd_y", "sd_z")
 
 
-def simulate(case: Case) -> list[dict[str, Any]]:
-    """The recording's rows, in time order (``err_g``: the drawn error, not written)."""
+class EffectHook(Hook):
+    """What an effect adds (``gen3.effects``): to the output before the raw samples are
+    drawn (g) and to the die temperature the channel reads (°C), capture by capture. It
+    draws nothing from the case's generator, so the noise is the null's draw for draw."""
+
+    def extra_g(self, i: int, force: np.ndarray, die_c: float,
+                vib_var: np.ndarray) -> np.ndarray: ...
+
+    def channel_c(self, i: int) -> float: ...
+
+
+def vibration_variance(nz: NoiseSpec, level: float) -> np.ndarray:
+    """The vibration's variance per axis (g²) at a plateau's level: the common sinusoid's
+    share along its direction plus the per-axis one (``noise.vibration_samples``)."""
+    if nz.vibration is None:
+        return np.zeros(3)
+    v = nz.vibration
+    return (v.rms_g * level) ** 2 * (v.common_share * v.direction**2 + 1.0 - v.common_share)
+
+
+def simulate(case: Case, effect: EffectHook | None = None) -> list[dict[str, Any]]:
+    """The recording's rows, in time order (``err_g``: the drawn error, not written;
+    ``die_c``, ``vib_var``, ``extra_g``: the die temperature, the vibration's variance per
+    axis and what ``effect`` added, not written either)."""
     rng = np.random.default_rng([case.seed, 1])
     lay = layout(rng, case)
     prof = air_profile(case.thermal, lay.holds, phase=float(rng.uniform(0, 2 * np.pi)))
@@ -110,16 +133,20 @@ def simulate(case: Case) -> list[dict[str, Any]]:
     levels = rng.uniform(0.3, 1.0, len(p.setpoints_c))  # vibration per plateau
     sample_dt = np.arange(nz.n) / nz.odr_hz
     rows = []
-    for slot in lay.slots:
+    for i, slot in enumerate(lay.slots):
         die = prof.die_at(slot.start_s + sample_dt)
         ref = p.directions[slot.position]
         force = ref
         if p.place_max_rad > 0.0:
             force = small_rotation(rng, p.place_max_rad) @ ref
         true_g = case.sensor.output_g(force, float(die.mean()))
-        mean, sd = capture(rng, nz, true_g, float(levels[slot.step]))
+        vib_var = vibration_variance(nz, float(levels[slot.step]))
+        extra = np.zeros(3) if effect is None else effect.extra_g(
+            i, force, float(die.mean()), vib_var)
+        mean, sd = capture(rng, nz, true_g + extra, float(levels[slot.step]))
         mid = slot.start_s + nz.window_s / 2.0
-        sensor_c = channel_reading(rng, case.thermal, die)
+        sensor_c = channel_reading(
+            rng, case.thermal, die if effect is None else die + effect.channel_c(i))
         t_err_c = sensor_c - case.thermal.channel_offset_c - float(die.mean())
         rows.append({
             "t_s": mid, "step": slot.step, "setpoint_c": slot.setpoint_c,
@@ -128,7 +155,8 @@ def simulate(case: Case) -> list[dict[str, Any]]:
             "ref_x": ref[0], "ref_y": ref[1], "ref_z": ref[2],
             "ax": mean[0], "ay": mean[1], "az": mean[2], "n": nz.n,
             "sd_x": sd[0], "sd_y": sd[1], "sd_z": sd[2],
-            "err_g": mean - case.sensor.output_g(ref, float(die.mean())),
+            "err_g": mean - extra - case.sensor.output_g(ref, float(die.mean())),
+            "die_c": float(die.mean()), "vib_var": vib_var, "extra_g": extra,
             "t_err_g": case.sensor.output_g(ref, float(die.mean()) + t_err_c)
             - case.sensor.output_g(ref, float(die.mean()))})
     return rows

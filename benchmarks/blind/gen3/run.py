@@ -2,7 +2,11 @@
 generate gen3 nulls, run ``soakcal diagnose FILE --json`` on each in-process (the CLI entry,
 so the gate applies as it does for a user), and write OUT/results.json and OUT/results.md.
 Per-case lines go to OUT/cases.jsonl as they finish; a rerun skips the cases already there.
-An alarm's CSV is kept under OUT/alarms/."""
+An alarm's CSV is kept under OUT/alarms/.
+
+``--effect NAME [--size S]`` draws the same cases with one catalogue effect at S × its
+detectable size (``gen3.effects``; default none: the nulls, draw for draw) and scores each
+case (``gen3.score``: right, not established, wrong, missed) into OUT/results.md."""
 
 from __future__ import annotations
 
@@ -29,7 +33,10 @@ from benchmarks.blind.gen3.case import (
     simulate,
     stated_noise_ug,
 )
+from benchmarks.blind.gen3.effects import EFFECTS, draw_effect
 from benchmarks.blind.gen3.report import write
+from benchmarks.blind.gen3.score import classify
+from benchmarks.blind.gen3.score import markdown as score_markdown
 from benchmarks.blind.gen3.verdict import summarise
 from benchmarks.blind.gen3.writer import write_csv
 
@@ -83,11 +90,21 @@ def _one_variant(case: Case, variant: str) -> Case:
     return case
 
 
-def run_case(task: tuple[int, int, str, str]) -> dict[str, Any]:
-    index, seed, out, variant = task
+def run_case(task: tuple[Any, ...]) -> dict[str, Any]:
+    index, seed, out, variant = task[:4]
+    effect, size = (task[4], task[5]) if len(task) > 4 else ("none", 0.0)
     cs = case_seed(seed, index)
     case = variant_case(draw_case(cs), variant)
-    rows = simulate(case)
+    if effect == "none":
+        rows = simulate(case)
+    else:
+        drawn, info = draw_effect(effect, case, size)
+        case = drawn.case
+        if info.get("absorbed"):
+            return {"index": index, "case_seed": cs, "variant": variant, "absorbed": True,
+                    "effect": info, "features": case.features(), "mismatch": None,
+                    "findings": [], "seconds": 0.0, "class": "absorbed"}
+        rows = simulate(case, drawn)
     path = Path(out) / "cases" / f"gen3-{seed}-{index:04d}.csv"
     lsb = case.thermal.channel_lsb_c if "t-lsb-column" in variant.split("+") else None
     write_csv(rows, path, sensor_lsb_c=lsb)
@@ -99,6 +116,13 @@ def run_case(task: tuple[int, int, str, str]) -> dict[str, Any]:
               "channel_error_ug": round(channel_error_ug(rows), 2),
               "features": case.features(), "seconds": round(time.perf_counter() - t0, 2),
               **summarise(doc)}
+    if effect != "none":
+        prot = doc.get("protocol") or {}
+        result["effect"] = info
+        result["not_separable"] = sorted({e for entry in prot.get("not_separable", [])
+                                          for e in entry.get("effects", [])})
+        result["position_order"] = prot.get("position_order")
+        result["class"] = classify(effect, result)
     if result["mismatch"]:
         (Path(out) / "alarms").mkdir(exist_ok=True)
         shutil.copy(path, Path(out) / "alarms" / path.name)
@@ -128,6 +152,10 @@ def main(argv: list[str] | None = None) -> int:
                     + ", ".join(VARIANTS))
     ap.add_argument("--only", default=None,
                     help="comma-separated case indices (e.g. a run's alarms) instead of all")
+    ap.add_argument("--effect", default="none", choices=("none", *EFFECTS),
+                    help="draw this catalogue effect into every case (gen3.effects)")
+    ap.add_argument("--size", type=float, default=2.0,
+                    help="the effect's amplitude in units of its detectable size")
     args = ap.parse_args(argv)
     if any(v not in VARIANTS for v in args.variant.split("+")):
         ap.error(f"--variant: each of {args.variant!r} must be one of {', '.join(VARIANTS)}")
@@ -136,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
     jsonl = out / "cases.jsonl"
     done = _done(jsonl)
     wanted = range(args.n) if args.only is None else [int(v) for v in args.only.split(",")]
-    todo = [(i, args.seed, str(out), args.variant) for i in wanted if i not in done]
+    extra = () if args.effect == "none" else (args.effect, args.size)
+    todo = [(i, args.seed, str(out), args.variant, *extra) for i in wanted if i not in done]
     with open(jsonl, "a", encoding="utf-8") as fh:
         if args.jobs > 1:
             with Pool(args.jobs) as pool:
@@ -145,6 +174,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             for task in todo:
                 _record(fh, run_case(task), done)
+    if args.effect != "none":
+        results = [done[i] for i in sorted(done) if i in set(wanted)]
+        text = score_markdown(results)
+        (out / "results.md").write_text(text, encoding="utf-8")
+        print(text.split("\n\n")[0])
+        return 0
     results = [_enriched(done[i], args.seed) for i in sorted(done) if i in set(wanted)]
     doc = write(out, results, {"title": f"seed {args.seed}, {len(results)} cases, "
                                f"variant {args.variant}", "seed": args.seed, "n": args.n,
@@ -176,6 +211,8 @@ def _record(fh: Any, r: dict[str, Any], done: dict[int, dict[str, Any]]) -> None
     fh.flush()
     done[r["index"]] = r
     flag = "ALARM " + ",".join(f["effect"] for f in r["findings"]) if r["mismatch"] else "ok"
+    if "class" in r:
+        flag = f"{r['class']}: {flag}"
     print(f"[{r['index']}] {r['seconds']} s {flag}", file=sys.stderr, flush=True)
 
 
