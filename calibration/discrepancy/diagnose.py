@@ -661,6 +661,12 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         protocol = protocol.with_testable({e.effect_id: e.effect_id not in not_ident
                                            for e in effects})
     base_rmse = _rms(base_res, np.zeros(n, bool)) if given_rmse is None else given_rmse
+    located = locate_residuals(pb, base_res, final_res, flagged)
+    if not findings and unexplained["chi_square"].get("significant"):
+        # Never "consistent" beside a residual far above the noise (issue 22: seven captures
+        # 13x the noise on 90 readings drew the outlier null's tail from themselves, and the
+        # verdict said consistent at chi2/dof 7.7, p 1e-226).
+        findings = [_excess_finding(pb, unexplained["chi_square"], located, final_res)]
     say(f"done: {len(findings)} finding(s)")
     return Diagnosis(
         unexplained=unexplained,
@@ -673,7 +679,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                       "sd/sqrt(n)" if pb.noise_from_sd else "residual MAD"),
         findings=findings, not_identifiable=list(not_ident.values()) + [
             v for k, v in one_step.items() if k not in not_ident],
-        located=locate_residuals(pb, base_res, final_res, flagged), heldout_scheme=scheme,
+        located=located, heldout_scheme=scheme,
         n_null=n_null, alpha=alpha, notes=notes, final_rmse_ug=_rms(final_res, flagged),
         residuals_before_ug=(base_res * 1e6).reshape(shape),
         residuals_after_ug=(final_res * 1e6).reshape(shape),
@@ -1235,6 +1241,36 @@ def _unexplained_finding(pb: LinearProblem, res: scan_mod.ScanResult,
         parameters={}, parameter_sd={}, rmse_before_ug=rms, rmse_after_ug=rms,
         heldout_rmse_before_ug=float("nan"), heldout_rmse_after_ug=float("nan"),
         p_value=p_value, test=test)
+
+
+def _excess_finding(pb: LinearProblem, chi_square: dict[str, Any], located: dict[str, Any],
+                    final_res: np.ndarray) -> Finding:
+    """``unexplained``: residuals far above the recorded noise (the χ² excess test, p < α and
+    χ²/dof > :data:`EXCESS_CHI2_RED`) that no test located or named. Its ``where`` holds the
+    readings whose residual stands out most (``located["outlying_rows"]``), or the whole
+    recording. The verdict is then "mismatch", not "consistent": the residuals are not
+    consistent with noise (the CLI contract), whichever of the two causes the text names."""
+    ctx = pb.ctx
+    rows = np.asarray(located.get("outlying_rows") or [], int)
+    steps = sorted({int(s) for s in ctx.steps[rows]})
+    pos = sorted({int(q) for q in ctx.positions[rows]})
+    t = ctx.t_s[rows] if rows.size else ctx.t_s
+    rms = _rms(final_res, np.zeros(ctx.n, bool))
+    at = (f"; the readings that stand out most: {', '.join(str(int(r)) for r in rows)}"
+          if rows.size else "")
+    return Finding(
+        effect="unexplained", axes=list(AXES) if pb.mode == "reference" else ["norm"],
+        where={"steps": steps, "positions": pos, "time_s": [float(t.min()), float(t.max())],
+               "rows": [int(r) for r in rows], "spread": True},
+        explanation=(f"The final residual is {chi_square['rms_over_noise']:.2f} × the recorded "
+                     f"noise (χ²/dof {chi_square['chi2_per_dof']:.2f} on {chi_square['dof']} "
+                     "dof) and no test located or named it: either the recorded noise "
+                     "understates the scatter (correlated samples, vibration, placement "
+                     "repeatability) or structure the catalogue does not name is spread over "
+                     f"the recording{at}. Repeat positions or plateaus to locate it."),
+        parameters={}, parameter_sd={}, rmse_before_ug=rms, rmse_after_ug=rms,
+        heldout_rmse_before_ug=float("nan"), heldout_rmse_after_ug=float("nan"),
+        p_value=float(chi_square["p_value"]), test=chi_square["test"])
 
 
 def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,

@@ -49,8 +49,8 @@ def text_report(diag: Any) -> str:
                          + f"): {c['how_told_apart']}")
         for why, effs in alike.items():
             lines.append(f"   not told apart from {', '.join(effs)}: {why}")
-    if excess:
-        lines.append(excess)
+    if excess and not any(f.where.get("spread") for f in diag.findings):
+        lines.append(excess)  # (the excess's own finding says it already)
     lines += protocol_lines(getattr(diag, "protocol", None) or {})
     if diag.not_identifiable:
         lines.append("Not identifiable in this recording:")
