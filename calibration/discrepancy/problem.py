@@ -124,6 +124,8 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
     return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
 
 
+# The least averaging factor of the scatter above the floor (capture_noise): as κ₀'s.
+KAPPA_MIN = 1e-3
 FAR_ALPHA = 0.01  # entries beyond this family-wise χ²₁ tail do not set the noise (capture_noise)
 
 
@@ -210,7 +212,12 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
 
     start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0), 1.0, 0.0])
     q0_bounds = (0.0, 1e6) if floor is None else (1e-3, 1e4)
-    bounds = [(0.0, 1e4), (0.0, 1e6), (1.0, 1.0) if floor is None else q0_bounds,
+    # κ on the scatter above the floor: ≥ 1 without a floor (all of sd²/n is then one
+    # source); with one, any factor down to KAPPA_MIN — a vibration of many cycles per
+    # capture averages down faster than white noise (issue 22, the third generator: sd/√n
+    # stated 1.05–7.3× the residual of its vibrating plateaus).
+    bounds = [(0.0, 1e4) if floor is None else (KAPPA_MIN - 1.0, 1e4), (0.0, 1e6),
+              (1.0, 1.0) if floor is None else q0_bounds,
               (0.0, 0.0) if across is None else (0.0, 1e6)]
     # Why the tight tolerances: with four parameters the default stop left σ at ~1e-6
     # relative, enough to differ between the dense and the row-block design (issue 10).
