@@ -137,7 +137,7 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     ``e`` (N, a) is the base residual of the capture means, ``sig`` (N, a) their sd/√n
     (pooled per step and axis). A mean's error is not its samples' scatter over √n
     alone: samples correlated in time (slow vibration, 1/f noise) average down more
-    slowly (κ ≥ 1, in proportion to the scatter, so it grows on vibrating steps), and
+    slowly (κ > 1, in proportion to the scatter, so it grows on vibrating steps), and
     what a capture shares whatever its scatter — its placement on the table, the
     temperature state — adds τ², the same at every step and axis. Neither shows in the
     scatter. Both are fitted by Gaussian maximum likelihood to all residuals at once
@@ -158,6 +158,15 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     recordings: 0.4–0.5 × white for the ADXL355's own noise, up to 20× for slow bench
     motion); one κ for both over-stated the quiet plateaus' noise threefold, the outlier
     test's global scale sat at their level and vibrating plateaus' readings were outliers.
+    That κ may also fall below 1 (down to :data:`KAPPA_MIN`): a vibration of many cycles
+    per capture leaves in the mean only the part of a cycle left over, at most
+    rms/(π·cycles), far below the sd/√n its samples state. Held at κ ≥ 1, such plateaus'
+    σ stood 1.4–6.9× above the scatter they show on the third blind generator's nulls,
+    unequally from plateau to plateau as the vibration's level; whitened so, the outlier
+    test's robust scale and the sign-flip null's reading cap (stats.reading_cap) sat at the
+    vibrating plateaus' low whitened scatter, the quiet plateaus' readings were capped in
+    the replicates and not in the data, and the scan and the family test fired (issue 22).
+    Without a floor (raw samples, norm mode) κ ≥ 1 as before: all of sd²/n is one source.
 
     ``across`` (N, a): ``1 − û_a²`` of each entry (û the unit reference). Re-seating the
     sensor at each visit turns it by a small random angle δθ (per-axis rms ρ, isotropic):
