@@ -124,8 +124,6 @@ def temperature_noise_c(ctx: DesignContext) -> np.ndarray:
     return np.full(ctx.n, float(np.median(per_step)) if per_step else 0.0)
 
 
-# The least averaging factor of the scatter above the floor (capture_noise): as κ₀'s.
-KAPPA_MIN = 1e-3
 FAR_ALPHA = 0.01  # entries beyond this family-wise χ²₁ tail do not set the noise (capture_noise)
 
 
@@ -137,7 +135,7 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     ``e`` (N, a) is the base residual of the capture means, ``sig`` (N, a) their sd/√n
     (pooled per step and axis). A mean's error is not its samples' scatter over √n
     alone: samples correlated in time (slow vibration, 1/f noise) average down more
-    slowly (κ > 1, in proportion to the scatter, so it grows on vibrating steps), and
+    slowly (κ ≥ 1, in proportion to the scatter, so it grows on vibrating steps), and
     what a capture shares whatever its scatter — its placement on the table, the
     temperature state — adds τ², the same at every step and axis. Neither shows in the
     scatter. Both are fitted by Gaussian maximum likelihood to all residuals at once
@@ -158,15 +156,6 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
     recordings: 0.4–0.5 × white for the ADXL355's own noise, up to 20× for slow bench
     motion); one κ for both over-stated the quiet plateaus' noise threefold, the outlier
     test's global scale sat at their level and vibrating plateaus' readings were outliers.
-    That κ may also fall below 1 (down to :data:`KAPPA_MIN`): a vibration of many cycles
-    per capture leaves in the mean only the part of a cycle left over, at most
-    rms/(π·cycles), far below the sd/√n its samples state. Held at κ ≥ 1, such plateaus'
-    σ stood 1.4–6.9× above the scatter they show on the third blind generator's nulls,
-    unequally from plateau to plateau as the vibration's level; whitened so, the outlier
-    test's robust scale and the sign-flip null's reading cap (stats.reading_cap) sat at the
-    vibrating plateaus' low whitened scatter, the quiet plateaus' readings were capped in
-    the replicates and not in the data, and the scan and the family test fired (issue 22).
-    Without a floor (raw samples, norm mode) κ ≥ 1 as before: all of sd²/n is one source.
 
     ``across`` (N, a): ``1 − û_a²`` of each entry (û the unit reference). Re-seating the
     sensor at each visit turns it by a small random angle δθ (per-axis rms ρ, isotropic):
@@ -221,12 +210,7 @@ def capture_noise(e: np.ndarray, sig: np.ndarray, dof_corr: float,
 
     start = np.array([0.0, max(0.0, float(np.mean(e2 - w - kv)) / w0), 1.0, 0.0])
     q0_bounds = (0.0, 1e6) if floor is None else (1e-3, 1e4)
-    # κ on the scatter above the floor: ≥ 1 without a floor (all of sd²/n is then one
-    # source); with one, any factor down to KAPPA_MIN — a vibration of many cycles per
-    # capture averages down faster than white noise (issue 22, the third generator: sd/√n
-    # stated 1.05–7.3× the residual of its vibrating plateaus).
-    bounds = [(0.0, 1e4) if floor is None else (KAPPA_MIN - 1.0, 1e4), (0.0, 1e6),
-              (1.0, 1.0) if floor is None else q0_bounds,
+    bounds = [(0.0, 1e4), (0.0, 1e6), (1.0, 1.0) if floor is None else q0_bounds,
               (0.0, 0.0) if across is None else (0.0, 1e6)]
     # Why the tight tolerances: with four parameters the default stop left σ at ~1e-6
     # relative, enough to differ between the dense and the row-block design (issue 10).
