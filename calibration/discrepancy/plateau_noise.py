@@ -77,6 +77,18 @@ def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
     return stats.SharedGroups(loads, groups, names)
 
 
+def cap_cells(pb: LinearProblem) -> tuple[np.ndarray, np.ndarray] | None:
+    """(each entry's plateau, its plateau × axis cell), ids from 0, for the sign-flip null's
+    reading cap at each plateau's own scatter (stats.reading_cap); None with < 2 plateaus."""
+    _, k = np.unique(np.asarray(pb.ctx.steps), return_inverse=True)
+    k = np.asarray(k).ravel()
+    if k.size == 0 or int(k.max()) + 1 < MIN_PLATEAUS:
+        return None
+    plateau = k[pb.row]
+    axis = np.maximum(pb.axis, 0)
+    return plateau, plateau * (int(axis.max()) + 1) + axis
+
+
 def temperature_loading(pb: LinearProblem) -> np.ndarray | None:
     """(m,) whitened ∂output/∂T of each entry (per °C of the reading's temperature error),
     from the base model's derivative; None where the base has no temperature dependence."""
