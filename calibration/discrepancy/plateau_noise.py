@@ -318,9 +318,10 @@ def mean_code_lsb_c(temp_c: np.ndarray, n_samples: np.ndarray | None,
             s = float(np.min(d))  # the smallest step between two means: one lattice spacing
             if s < LATTICE_MIN_SPACING_RES * res:
                 return None  # finer than the writing: not told from a continuous channel
-            coef = _lattice_fit(x, s)
-            if np.max(np.abs(x - coef[0] - coef[1] * np.round((x - coef[0]) / coef[1]))) \
-                    > 1.01 * res:
+            k = np.round((x - x[0]) / s)
+            A = np.column_stack([np.ones_like(k), k])
+            coef, *_ = np.linalg.lstsq(A, x, rcond=None)
+            if np.max(np.abs(x - A @ coef)) > 1.01 * res:
                 return None  # one plateau off the lattice: not means of codes
             spacings.append(float(coef[1]))
         if len(spacings) >= MIN_PLATEAUS:
@@ -333,25 +334,6 @@ def mean_code_lsb_c(temp_c: np.ndarray, n_samples: np.ndarray | None,
         return None
     q = max(q_found)
     return q if q <= MAX_LSB_C else None  # coarser is no temperature channel's LSB
-
-
-def _lattice_fit(x: np.ndarray, s: float) -> np.ndarray:
-    """(offset, spacing) of the lattice the sorted values ``x`` lie on, from ``s``, the
-    smallest step between two of them, refitted by least squares on their lattice indices
-    as the span doubles at a time. Why: ``s`` is known only to the resolution the
-    values are written to, so over a span of a few hundred steps its indices slip by one
-    (a 0.11 °C channel's means over 366 samples, 0.0003 for 0.00030055 °C)."""
-    coef = np.array([float(x[0]), s])
-    span = 10.0 * s
-    while True:
-        near = x - x[0] <= span
-        k = np.round((x[near] - coef[0]) / coef[1])
-        if np.ptp(k) > 0:
-            A = np.column_stack([np.ones_like(k), k])
-            coef = np.linalg.lstsq(A, x[near], rcond=None)[0]
-        if near.all():
-            return coef
-        span *= 2.0
 
 
 def _one_lattice_and_held_codes(t: np.ndarray, st: np.ndarray, spacing: float, n: float,
