@@ -1,8 +1,9 @@
-"""``python -m benchmarks.blind.gen3.compare --before OUT1 OUT2 … --after OUTA OUTB …``
-(issue 22): two builds' runs of the same gen3 nulls (the same seeds, so the same case seeds)
-compared case by case: false alarms with their Clopper–Pearson 95 % intervals, the alarms
-each side has alone, the refusals that changed, and the rates with and without slow
-vibration. Prints markdown."""
+"""``python -m benchmarks.blind.gen3.compare --before OUT1 OUT2 … --after OUTA OUTB …
+[--replace OUTR …]`` (issue 22): two builds' runs of the same gen3 nulls (the same seeds, so
+the same case seeds) compared case by case (``--replace``: a run over some cases of the
+"after" build, ``run --only``, in place of the same cases of its runs): false alarms with
+their Clopper–Pearson 95 % intervals, the alarms each side has alone, the refusals that
+changed, and the rates with and without slow vibration. Prints markdown."""
 
 from __future__ import annotations
 
@@ -67,8 +68,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--before", nargs="+", required=True)
     ap.add_argument("--after", nargs="+", required=True)
+    ap.add_argument("--replace", nargs="*", default=[])
     args = ap.parse_args(argv)
     before, after = _cases(args.before), _cases(args.after)
+    for seed, r in _cases(args.replace).items():
+        if seed in after:
+            after[seed] = r
     common = sorted(set(before) & set(after), key=lambda c: (before[c]["seed"],
                                                              before[c]["index"]))
     print(f"cases in both: {len(common)} (before only {len(set(before) - set(after))}, "
