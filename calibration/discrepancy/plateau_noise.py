@@ -78,15 +78,14 @@ def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
 
 
 def cap_cells(pb: LinearProblem) -> tuple[np.ndarray, np.ndarray] | None:
-    """(each entry's plateau, its plateau × axis cell), ids from 0, for the sign-flip null's
-    reading cap at each plateau's own scatter (stats.reading_cap); None with < 2 plateaus."""
+    """(each reading's plateau (N,), ids from 0; each entry's axis (m,)), for the sign-flip
+    null's reading cap at each plateau's own scatter (stats.reading_cap); None with < 2
+    plateaus."""
     _, k = np.unique(np.asarray(pb.ctx.steps), return_inverse=True)
     k = np.asarray(k).ravel()
     if k.size == 0 or int(k.max()) + 1 < MIN_PLATEAUS:
         return None
-    plateau = k[pb.row]
-    axis = np.maximum(pb.axis, 0)
-    return plateau, plateau * (int(axis.max()) + 1) + axis
+    return k, np.asarray(pb.axis)
 
 
 def temperature_loading(pb: LinearProblem) -> np.ndarray | None:

@@ -212,43 +212,35 @@ def reading_cap(r: np.ndarray, row: np.ndarray,
     its direction and counts as the largest noise reading would; under the null the cap
     touches about one reading in 2N.
 
-    ``plateaus`` (each entry's plateau, its plateau × axis cell; plateau_noise.cap_cells):
-    s is each plateau's own scatter where it is larger than all entries' — the MAD of its
-    entries' deviations from their cell's median, so an offset of a plateau (what the
-    families test) does not loosen its cap. Why (issue 22): where a plateau's stated noise
-    is far above its scatter (a vibration whose mean averages down faster than white, the
-    third generator's nulls) and another's is not, the whitened entries of the second are
-    several times the first's; the global s sat at the first's level and the second's
-    readings were capped in the replicates and not in the data, and the scan and the family
-    test fired on null recordings.
+    ``plateaus`` (each reading's plateau (N,), each entry's axis (m,);
+    plateau_noise.cap_cells): s is each plateau's own scatter where it is larger than all
+    entries' — the MAD of its entries' deviations from their plateau × axis median, so an
+    offset of a plateau (what the families test) does not loosen its cap. Why (issue 22):
+    where a plateau's stated noise is far above its scatter (a vibration whose mean
+    averages down faster than white, the third generator's nulls) and another's is not,
+    the whitened entries of the second are several times the first's; the global s sat at
+    the first's level and the second's readings were capped in the replicates and not in
+    the data, and the scan and the family test fired on null recordings.
     """
     n = int(row.max()) + 1
     g = max(int(np.bincount(row).max()), 1)
     s = float(robust_scale(r[:, None], 1.0)[0])
-    if plateaus is None:
-        size2 = np.bincount(row, r**2, minlength=n) / max(s, 1e-300) ** 2
-    else:
-        s2_entry = max(s, 1e-300) ** 2 * np.ones(r.size)
-        plateau, cell = plateaus
-        dev = r - _group_medians(r, cell)[cell]
+    s_read = np.full(n, max(s, 1e-300))
+    if plateaus is not None:
+        plateau, axis = plateaus
         for k in np.unique(plateau):
-            on = plateau == k
-            s_k = 1.4826 * float(np.median(np.abs(dev[on])))
+            idx = np.flatnonzero((plateau == k)[row])  # the plateau's entries
+            dev = r[idx]
+            ax = axis[idx]
+            for a in np.unique(ax):
+                dev[ax == a] -= np.median(dev[ax == a])
+            s_k = 1.4826 * float(np.median(np.abs(dev)))
             if s_k > s:
-                s2_entry[on] = s_k**2
-        # each reading against its entries' mean variance (a reading is on one plateau)
-        size2 = np.bincount(row, r**2 / s2_entry, minlength=n)
+                s_read[plateau == k] = s_k
+    size2 = np.bincount(row, r**2, minlength=n) / s_read**2
     cap2 = float(sps.chi2.isf(1.0 / (2 * n), g))
     with np.errstate(divide="ignore"):
         return np.where(size2 > cap2, np.sqrt(cap2 / np.maximum(size2, 1e-300)), 1.0)
-
-
-def _group_medians(r: np.ndarray, group: np.ndarray) -> np.ndarray:
-    """The median of ``r`` within each ``group`` (ids 0…G−1), by group id."""
-    order = np.argsort(group, kind="stable")
-    bounds = np.cumsum(np.bincount(group))[:-1]
-    return np.array([np.median(part) if part.size else 0.0
-                     for part in np.split(r[order], bounds)])
 
 
 def wild_replicates(
@@ -286,7 +278,7 @@ def wild_replicates(
     (a non-dithering quantised temperature channel, plateau_noise.quantised_channel), drawn
     in the same way (variances in the loadings' units); the data's residual is flipped as
     it is, since no variance is read from it.
-    ``plateaus``: each entry's plateau and plateau × axis cell, for the reading cap at each
+    ``plateaus``: each reading's plateau and each entry's axis, for the reading cap at each
     plateau's own scatter (:func:`reading_cap`).
     """
     if shared is not None:

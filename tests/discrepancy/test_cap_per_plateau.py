@@ -25,10 +25,10 @@ def _two_plateaus(rng: np.random.Generator, quiet: float, n_each: int = 60):
     """Entries of two plateaus (3 axes per reading): the first whitened at ``quiet`` (its
     noise over-stated), the second at 1."""
     row = np.repeat(np.arange(2 * n_each), 3)
-    plateau = (row >= n_each).astype(np.int64)
+    plateau = (np.arange(2 * n_each) >= n_each).astype(np.int64)  # per reading
     axis = np.tile(np.arange(3), 2 * n_each)
-    r = rng.standard_normal(row.size) * np.where(plateau == 0, quiet, 1.0)
-    return r, row, (plateau, plateau * 3 + axis)
+    r = rng.standard_normal(row.size) * np.where(plateau[row] == 0, quiet, 1.0)
+    return r, row, (plateau, axis)
 
 
 def test_a_plateau_whitened_at_one_is_not_capped_beside_an_overstated_one():
@@ -47,7 +47,7 @@ def test_an_offset_of_a_plateau_does_not_loosen_its_cap():
     scale is read from deviations about each plateau × axis median."""
     rng = np.random.default_rng(3)
     r, row, cells = _two_plateaus(rng, 1.0)
-    r[cells[0] == 1] += 8.0  # a jump of the second plateau, 8 σ
+    r[cells[0][row] == 1] += 8.0  # a jump of the second plateau, 8 σ
     assert np.allclose(stats.reading_cap(r, row, cells), stats.reading_cap(r, row))
 
 
