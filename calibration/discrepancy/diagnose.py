@@ -39,6 +39,7 @@ from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
 from calibration.discrepancy.plateau_noise import (
     QuantisedChannel,
+    cap_cells,
     held_code_resolution_c,
     mean_code_lsb_c,
     one_code_per_plateau,
@@ -358,6 +359,8 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     tail_nu = np.inf
     tail_shown = False  # the tail resolved at stats.TAIL_Z, not only at its point estimate
     groups = plateau_groups(pb) if WILD_NULL and PLATEAU_NULL else None
+    # The sign flips' reading cap at each plateau's own scatter (stats.reading_cap, issue 22).
+    cells = cap_cells(pb)
     channel = _quantised_channel(pb, notes, lsb_c, lsb_from_means) if WILD_NULL else None
     known = channel.known if channel is not None else None  # the scan's
     # The families: with the LSB declared (a channel the recording says is quantised
@@ -409,7 +412,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
         if WILD_NULL:
             stats.wild_replicates(rng, e, U, pb.row, E,
                                   tuple(int(t.theta) for t in tests.values()), shared,
-                                  wild_known)
+                                  wild_known, cells)
         tests.update(_evaluate(pb, [f for f in live if not f.per_reading], rejected, terms, U,
                                e, E, s, s_null, lifted, not_ident, (nu, rng), bounded))
         # The replicates are read: the term's checks below must not hold them too (issue 22,
@@ -817,7 +820,8 @@ def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, 
     if WILD_NULL:  # sign flips of this residual (stats.wild_replicates)
         groups = plateau_groups(pb) if PLATEAU_NULL else None
         E = stats.wild_replicates(rng, e, U, pb.row, np.empty((pb.m, n_null), dtype),
-                                  shared=_shared(groups, e, U), known=known)
+                                  shared=_shared(groups, e, U), known=known,
+                                  plateaus=cap_cells(pb))
     else:
         E = stats.null_replicates(rng, pb.m, n_null, pb.row, pb.shared_t_loading, dtype)
         stats.project_out_inplace(U, E)

@@ -77,6 +77,17 @@ def plateau_groups(pb: LinearProblem) -> stats.SharedGroups | None:
     return stats.SharedGroups(loads, groups, names)
 
 
+def cap_cells(pb: LinearProblem) -> tuple[np.ndarray, np.ndarray] | None:
+    """(each reading's plateau (N,), ids from 0; each entry's axis (m,)), for the sign-flip
+    null's reading cap at each plateau's own scatter (stats.reading_cap); None with < 2
+    plateaus."""
+    _, k = np.unique(np.asarray(pb.ctx.steps), return_inverse=True)
+    k = np.asarray(k).ravel()
+    if k.size == 0 or int(k.max()) + 1 < MIN_PLATEAUS:
+        return None
+    return k, np.asarray(pb.axis)
+
+
 def temperature_loading(pb: LinearProblem) -> np.ndarray | None:
     """(m,) whitened ∂output/∂T of each entry (per °C of the reading's temperature error),
     from the base model's derivative; None where the base has no temperature dependence."""
@@ -275,6 +286,14 @@ def mean_code_lsb_c(temp_c: np.ndarray, n_samples: np.ndarray | None,
     are written to, q is the channel's LSB as surely as a declared one; a channel that is not
     quantised, or means written too coarsely, fit no lattice (the project's twin, the
     second generator's channels: none).
+
+    A channel whose noise is so far below q that the settled plateaus hold one code each
+    shows the lattice on one plateau only, the one whose die sits at a code's edge: there
+    q is read where every other plateau holds one code (more than :data:`HELD_MAJORITY` of
+    its readings, :data:`GRID_CODE_READINGS` or more), two plateaus or more, and those codes
+    lie on the multiples of q to the resolution they are written to
+    (:func:`_one_lattice_and_held_codes`; on the third generator's nulls a 0.5 °C channel of
+    noise 0.03 LSB: four plateaus on one code each, one with seven means 0.5/304 °C apart).
     """
     if n_samples is None:
         return None
@@ -306,10 +325,41 @@ def mean_code_lsb_c(temp_c: np.ndarray, n_samples: np.ndarray | None,
             spacings.append(float(coef[1]))
         if len(spacings) >= MIN_PLATEAUS:
             q_found.append(float(np.median(spacings)) * float(nv))
+        elif len(spacings) == 1:
+            q1 = _one_lattice_and_held_codes(t[sel], st[sel], spacings[0], float(nv), res)
+            if q1 is not None:
+                q_found.append(q1)
     if not q_found:
         return None
     q = max(q_found)
     return q if q <= MAX_LSB_C else None  # coarser is no temperature channel's LSB
+
+
+def _one_lattice_and_held_codes(t: np.ndarray, st: np.ndarray, spacing: float, n: float,
+                                res: float) -> float | None:
+    """q = ``spacing``·``n`` where one plateau's means lie on a lattice of ``spacing`` and
+    every other plateau holds one code, :data:`MIN_PLATEAUS` or more of them, their codes
+    on the multiples of q to the written resolution (:func:`mean_code_lsb_c`); else None."""
+    q = spacing * n
+    held: list[float] = []
+    for s_ in np.unique(st):
+        u, c = np.unique(t[st == s_], return_counts=True)
+        i = int(np.argmax(c))
+        if c[i] >= GRID_CODE_READINGS and c[i] > HELD_MAJORITY * c.sum():
+            held.append(float(u[i]))
+        elif u.size < LATTICE_MIN_VALUES:
+            return None  # a plateau neither on one code nor showing the lattice
+    if len(held) < MIN_PLATEAUS or len(held) != np.unique(st).size - 1:
+        return None
+    d = np.asarray(held[1:]) - held[0]
+    k = np.round(d / q)  # the lattice's q is known to ~res/spacing: refitted on the codes
+    if not np.any(k != 0):
+        return None  # one code on every plateau: q not shown by the codes
+    q_codes = float(np.dot(d, k) / np.dot(k, k))
+    if abs(q_codes - q) > 0.5 * q / np.max(np.abs(k)) or \
+            np.max(np.abs(d - k * q_codes)) > 1.01 * res:
+        return None  # held codes not q apart: not one channel quantised at q
+    return q_codes
 
 
 def rounding_box(pb: LinearProblem, q_c: float) -> stats.BoundedShared | None:

@@ -199,7 +199,8 @@ def leverage(U: np.ndarray) -> np.ndarray:
     return h
 
 
-def reading_cap(r: np.ndarray, row: np.ndarray) -> np.ndarray:
+def reading_cap(r: np.ndarray, row: np.ndarray,
+                plateaus: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N,) factor ≤ 1 per reading that caps its residual vector's size at the largest a
     Gaussian reading of this recording reaches: ‖r_g‖²/s² ≤ χ²_g's 1 − 1/(2N) quantile,
     s the MAD scale of all entries.
@@ -210,11 +211,33 @@ def reading_cap(r: np.ndarray, row: np.ndarray) -> np.ndarray:
     as the data (a jump at p = 1e-17 scored p_family = 0.01). Capped, such a reading keeps
     its direction and counts as the largest noise reading would; under the null the cap
     touches about one reading in 2N.
+
+    ``plateaus`` (each reading's plateau (N,), each entry's axis (m,);
+    plateau_noise.cap_cells): s is each plateau's own scatter where it is larger than all
+    entries' — the MAD of its entries' deviations from their plateau × axis median, so an
+    offset of a plateau (what the families test) does not loosen its cap. Why (issue 22):
+    where a plateau's stated noise is far above its scatter (a vibration whose mean
+    averages down faster than white, the third generator's nulls) and another's is not,
+    the whitened entries of the second are several times the first's; the global s sat at
+    the first's level and the second's readings were capped in the replicates and not in
+    the data, and the scan and the family test fired on null recordings.
     """
     n = int(row.max()) + 1
     g = max(int(np.bincount(row).max()), 1)
     s = float(robust_scale(r[:, None], 1.0)[0])
-    size2 = np.bincount(row, r**2, minlength=n) / max(s, 1e-300) ** 2
+    s_read = np.full(n, max(s, 1e-300))
+    if plateaus is not None:
+        plateau, axis = plateaus
+        for k in np.unique(plateau):
+            idx = np.flatnonzero((plateau == k)[row])  # the plateau's entries
+            dev = r[idx]
+            ax = axis[idx]
+            for a in np.unique(ax):
+                dev[ax == a] -= np.median(dev[ax == a])
+            s_k = 1.4826 * float(np.median(np.abs(dev)))
+            if s_k > s:
+                s_read[plateau == k] = s_k
+    size2 = np.bincount(row, r**2, minlength=n) / s_read**2
     cap2 = float(sps.chi2.isf(1.0 / (2 * n), g))
     with np.errstate(divide="ignore"):
         return np.where(size2 > cap2, np.sqrt(cap2 / np.maximum(size2, 1e-300)), 1.0)
@@ -225,6 +248,7 @@ def wild_replicates(
     leave_out: tuple[int, ...] = (),
     shared: tuple[SharedGroups, np.ndarray, float] | None = None,
     known: tuple[SharedGroups, np.ndarray] | None = None,
+    plateaus: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sign-flip (wild) replicates of the whitened residual ``e``, one sign per reading,
     written into ``out`` (m × B) and projected off ``U``: ``(I − P)(r_row ⊙ e/√(1 − h))``.
@@ -254,13 +278,15 @@ def wild_replicates(
     (a non-dithering quantised temperature channel, plateau_noise.quantised_channel), drawn
     in the same way (variances in the loadings' units); the data's residual is flipped as
     it is, since no variance is read from it.
+    ``plateaus``: each reading's plateau and each entry's axis, for the reading cap at each
+    plateau's own scatter (:func:`reading_cap`).
     """
     if shared is not None:
         e = within_groups(e, shared[0])
     scale = e / np.sqrt(1.0 - np.minimum(leverage(U), LEVERAGE_MAX))
     if leave_out:
         scale[np.isin(row, leave_out)] = 0.0
-    scale *= reading_cap(scale, row)[row]
+    scale *= reading_cap(scale, row, plateaus)[row]
     n, b = int(row.max()) + 1, out.shape[1]
     step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
     if np.all(row[1:] >= row[:-1]):  # entries by reading (every problem's layout)
