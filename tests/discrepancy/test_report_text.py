@@ -1,10 +1,10 @@
 """The text report: a final residual well above the recorded noise is said, not called
 noise; a two-sided confusion says which effects from which.
 
-The χ² excess test does not enter the verdict (sd/√n of real averages is often optimistic),
-but "No mismatch: the residuals are consistent with noise" beside residuals at 2.8 × the
-recorded noise is a confident wrong sentence (calibration/discrepancy/report.py,
-``excess_line``).
+"No mismatch: the residuals are consistent with noise" beside residuals at 2.8 × the
+recorded noise is a confident wrong sentence: where no test located or named the excess,
+the χ² excess test's own `unexplained` finding makes the verdict a mismatch and says both
+possible causes (calibration/discrepancy/diagnose.py ``_excess_finding``).
 """
 
 from __future__ import annotations
@@ -32,14 +32,16 @@ def _norm_recording(sd_scale: float) -> Recording:
 
 def test_residuals_above_an_understated_noise_are_not_called_noise():
     d = diagnose(_norm_recording(1 / 3), n_null=30, seed=1)
-    assert d.findings == [] and d.mode == "norm"
+    assert d.mode == "norm" and d.mismatch
+    (f,) = d.findings
+    assert f.effect == "unexplained" and f.where["spread"]
     text = text_report(d)
     assert "consistent with noise" not in text
-    (line,) = [ln for ln in text.splitlines() if "Left unexplained" in ln]
     ratio = d.unexplained["chi_square"]["rms_over_noise"]
     assert ratio > 2
+    (line,) = [ln for ln in text.splitlines() if "× the recorded noise" in ln]
     assert f"{ratio:.2f} × the recorded noise" in line
-    assert "repeat positions or plateaus" in line
+    assert "understates the scatter" in line and "Repeat positions or plateaus" in line
 
 
 def test_residuals_at_the_recorded_noise_are_called_noise():
