@@ -889,16 +889,16 @@ def _reading_dof(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
     Why: the readings of a real recording (capture means under unrectified vibration,
     settling, re-seating) are heavier-tailed than Gaussian, and the outlier test's max over
     readings against a Gaussian null named the largest of them an outlier (2 % of nulls on
-    the second generator). The per-reading statistic of the readings not yet excluded is
-    read for its tail away from its largest values (stats.reading_tail_dof), so an outlier
-    does not make its own null heavier.
+    the second generator). The tail is read from the residual's entries (stats.
+    entry_tail_dof) of the readings not yet excluded and not among the largest
+    (_tail_entries), so an outlier does not make its own null heavier.
     """
     skip = {r for t in terms for r in t.rows}
-    t_row, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
+    t_row, _, _ = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
                                   skip, pb.shared_t_loading)
     keep = np.array([i not in skip for i in range(pb.ctx.n)]) & (t_row > 0)
-    return (stats.entry_tail_dof(_tail_entries(pb, U, e, s, t_row, keep)),
-            stats.reading_tail_dof(t_row[keep], g))
+    z = _tail_entries(pb, U, e, s, t_row, keep)
+    return stats.entry_tail_dof(z, stats.NULL_TAIL_Z), stats.entry_tail_dof(z)
 
 
 def _tail_entries(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,

@@ -389,9 +389,9 @@ ENTRY_P_HI = 0.99
 ENTRY_MIN_RANK = 3
 
 
-def entry_tail_dof(z: np.ndarray) -> float:
-    """ν of the Student-t the whitened residual's entries show, at its point estimate (∞:
-    none), from the ratio of |z|'s order statistic near :data:`ENTRY_P_HI` to its median.
+def entry_tail_dof(z: np.ndarray, z_se: float | None = None) -> float:
+    """ν of the Student-t the whitened residual's entries show (∞: none), from the ratio of
+    |z|'s order statistic near :data:`ENTRY_P_HI` to its median.
 
     ``z``: the entries (each over its own standard deviation) of the readings the test does
     not hold as candidates (the :data:`TAIL_OUTLIERS` largest readings' entries left out,
@@ -404,6 +404,11 @@ def entry_tail_dof(z: np.ndarray) -> float:
     percentile against the median already sets it apart from Gaussian's on 100–300
     readings. The ν so read goes to the per-reading Student-t mixture of the null
     (:func:`row_stats`), which at the same ν has the heavier tail of the two laws.
+
+    ``z_se``: the margin, in standard errors of the log ratio (asymptotic order-statistic
+    covariance), by which the ratio must exceed the Gaussian's for a finite ν, as in
+    :func:`reading_tail_dof` (default :data:`TAIL_Z`: a resolved tail; the outlier null
+    takes :data:`NULL_TAIL_Z`, 0: the point estimate; ∞: always the Gaussian).
     """
     a = np.sort(np.abs(np.asarray(z, float)[np.isfinite(z)]))
     m = a.size
@@ -416,7 +421,12 @@ def entry_tail_dof(z: np.ndarray) -> float:
         return np.inf
     log_r = float(np.log(q_hi / q_lo))
     u = (1 + p_hi) / 2  # |z| at p_hi is the (1 + p_hi)/2 point of z
-    if log_r <= float(np.log(sps.norm.ppf(u) / sps.norm.ppf(0.75))):
+    c_lo, c_hi = sps.norm.ppf([0.75, u])
+    # var(log Q_p) ≈ p(1 − p) / (m (f q)²), cov for p1 < p2: p1(1 − p2) / (m f1 q1 f2 q2),
+    # f = 2φ the density of |z|
+    a_lo, a_hi = 1.0 / (2 * sps.norm.pdf(c_lo) * c_lo), 1.0 / (2 * sps.norm.pdf(c_hi) * c_hi)
+    var = (0.25 * a_lo**2 + p_hi * (1 - p_hi) * a_hi**2 - 2 * 0.5 * (1 - p_hi) * a_lo * a_hi) / m
+    if log_r <= float(np.log(c_hi / c_lo)) + (TAIL_Z if z_se is None else z_se) * np.sqrt(var):
         return np.inf
 
     def excess(nu: float) -> float:
