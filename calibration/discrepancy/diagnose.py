@@ -916,7 +916,7 @@ def _tail_entries(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
     cand = cand[np.argsort(t_row[cand])[::-1][:stats.TAIL_OUTLIERS]]
     use = keep.copy()
     use[cand] = False
-    h = np.einsum("ij,ij->i", U, U)  # leverage per entry, without an (m × p) temporary
+    h = stats.leverage(U)  # by row blocks: no (m × p) temporary, no dense basis
     z = e / (s * np.sqrt(np.maximum(1.0 - h, 1e-12)))
     return z[use[pb.row] & (h < 1.0 - 1e-6)]
 

@@ -314,9 +314,10 @@ def sign_blocks(rng: np.random.Generator, n: int, b: int) -> Iterator[tuple[int,
 TAIL_P_LO, TAIL_P_HI = 0.5, 0.95
 TAIL_OUTLIERS = 2
 TAIL_Z = 2.0
-# The outlier test's null (diagnose._reading_dof) reads ν at its point estimate: the
-# Student-t mixture wherever the ratio exceeds χ²_g's at all, not only by TAIL_Z standard
-# errors. Why (issue 22): capture means of a real sensor are mildly heavy-tailed (per
+# The outlier test's null (diagnose._reading_dof, from the entries: entry_tail_dof) reads
+# ν at its point estimate: the Student-t mixture wherever the ratio exceeds the Gaussian's
+# at all, not only by TAIL_Z standard errors (a margin of ∞ keeps the Gaussian null).
+# Why (issue 22): capture means of a real sensor are mildly heavy-tailed (per
 # reading about a Student-t mixture with ν ≈ 40 on the second generator's nulls: the
 # per-reading statistic's tail 1.3×, 2.7× and 5× χ²_3's at its 95 %, 99.9 % and 99.99 %
 # points), which 100–300 readings cannot show at 2 standard errors; against the Gaussian

@@ -36,8 +36,8 @@ def _outlier_p(rng, e, n, g, B=200):
 def test_student_t_capture_means_per_axis_are_not_outliers():
     """Per-axis Student-t (ν = 5, unit variance) over 300 readings: the largest reading is
     at the null's 5 % level in at most 12 % of 60 recordings (binomial sd 3 % at a true 6 %;
-    the per-reading tail read from the statistic's 95th percentile left it there in about
-    a quarter)."""
+    the per-reading tail read from the statistic's 95th percentile left it there in 21 of
+    these 60)."""
     rng = np.random.default_rng(7)
     n, g, nu = 300, 3, 5.0
     ps = [_outlier_p(rng, rng.standard_t(nu, n * g) * np.sqrt((nu - 2) / nu), n, g, 100)[0]

@@ -2,17 +2,22 @@
 
     python -m benchmarks.blind.gen3.outlier_tail collect --seed S --only I,J,… --out F.npz
     python -m benchmarks.blind.gen3.outlier_tail collect --gen2 OUT [--only 0012,…] --out F.npz
-    python -m benchmarks.blind.gen3.outlier_tail score F.npz [F2.npz …]
+    python -m benchmarks.blind.gen3.outlier_tail score F.npz [F2.npz …] [--cases 1/46,…]
+    python -m benchmarks.blind.gen3.outlier_tail min gen2|gen3 -- RUN_ARGS
 
 ``collect`` runs ``diagnose`` on gen3 cases (drawn as ``benchmarks.blind.gen3.run`` draws
 them) or on a second-generator run's case files (OUT/cases, OUT/keys) as far as the first
-stage's outlier null, and keeps the per-reading statistic the tail is read from
-(``diagnose._reading_dof``'s input to ``stats.reading_tail_dof``), with the case's
-features. ``score`` reads, per case, ν as main reads it (two order statistics) and as
-:func:`calibration.discrepancy.stats.reading_tail_dof` reads it now, and the first stage's
-outlier p (the largest reading against n readings of the Student-t mixture with that ν,
-Šidák over the readings, as ``diagnose`` ranks it), so estimators can be compared on the
-same statistics without rerunning the diagnosis.
+stage's outlier null, and keeps what its tail is read from: the per-reading statistic of
+the readings not excluded, the entries (``diagnose._tail_entries``), and ν both ways
+(``stats.reading_tail_dof`` on the statistic, at its point estimate: the null's ν before
+issue 22's third generator; ``stats.entry_tail_dof`` on the entries: the null's ν now),
+with the case's features. ``score`` gives, per case and per group of cases, the first
+stage's outlier p (the largest reading against n readings of the Student-t mixture with
+that ν, Šidák over the readings, as ``diagnose`` ranks it) with ν read each way, so
+estimators can be compared on the same statistics without rerunning the diagnosis (an
+approximation of the first stage: not the bootstrap count against the other families).
+``min``: ``benchmarks.blind.gen2.run`` or ``gen3.run`` with the null's ν the heavier of the
+two (:func:`reading_dof_min`; ``--jobs 1``, the patch is in-process).
 """
 
 from __future__ import annotations
@@ -86,6 +91,7 @@ def collect_gen3(seed: int, indices: list[int]) -> list[dict[str, Any]]:
             continue
         out.append({"case": f"{seed}/{i}", **got, "features": case.features()})
         print(f"{seed}/{i}: n {got['t'].size}", file=sys.stderr, flush=True)
+    tmp.rmdir()
     return out
 
 
@@ -127,6 +133,43 @@ def outlier_logp(t: np.ndarray, g: int, nu: float) -> float:
     return float(stats.sidak_log(lp, t.size))
 
 
+# ν of the first stage's outlier null: as main read it (the per-reading statistic's 95th
+# percentile), as diagnose reads it now (the entries' 99th percentile), and the heavier
+# of the two.
+ESTIMATORS = {
+    "reading (before)": lambda r: float(r["nu_reading"]),
+    "entries (after)": lambda r: float(r["nu_entry"]),
+    "min of the two": lambda r: min(float(r["nu_reading"]), float(r["nu_entry"])),
+}
+
+
+def _groups(rows: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    out: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        f = r["features"]
+        if "heavy_nu" in f:
+            key = "gen3 t means" if f["heavy_nu"] else "gen3 Gaussian means"
+        else:
+            key = f"gen2 {f.get('effect')} {f.get('multiple')}x"
+        out.setdefault(key, []).append(r)
+    return out
+
+
+def reading_dof_min(pb: Any, U: Any, e: np.ndarray, s: float,
+                    terms: list[Any]) -> tuple[float, float]:
+    """The variant measured, not kept: the null's ν the heavier of the entries' and the
+    per-reading statistic's (both at their point estimates)."""
+    nu, shown = _READING_DOF(pb, U, e, s, terms)
+    skip = {r for t in terms for r in t.rows}
+    t_row, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
+                                  skip, pb.shared_t_loading)
+    keep = np.array([i not in skip for i in range(pb.ctx.n)]) & (t_row > 0)
+    return min(nu, stats.reading_tail_dof(t_row[keep], g, stats.NULL_TAIL_Z)), shown
+
+
+_READING_DOF = dmod._reading_dof
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -138,6 +181,12 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--out", required=True)
     s = sub.add_parser("score")
     s.add_argument("files", nargs="+")
+    s.add_argument("--cases", default=None, help="print these cases (seed/index or NNNN)")
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["min"]:  # python -m … outlier_tail min gen2|gen3 -- RUN_ARGS
+        dmod._reading_dof = reading_dof_min
+        mod = importlib.import_module(f"benchmarks.blind.{argv[1]}.run")
+        return int(mod.main(argv[3:] if argv[2:3] == ["--"] else argv[2:]))
     args = ap.parse_args(argv)
     if args.cmd == "collect":
         if args.gen2:
@@ -149,14 +198,22 @@ def main(argv: list[str] | None = None) -> int:
             rows = collect_gen3(args.seed, idx)
         _save(rows, Path(args.out))
         return 0
-    for f in args.files:
-        for r in load(Path(f)):
+    rows = [r for f in args.files for r in load(Path(f))]
+    show = None if args.cases is None else set(args.cases.split(","))
+    for r in rows:
+        if show is not None and r["case"] in show:
             t, g = r["t"], r["g"]
-            nu0, nu1 = float(r["nu_reading"]), float(r["nu_entry"])
             top = " ".join(f"{v:.1f}" for v in np.sort(t)[::-1][:4])
-            print(f"{r['case']:>8} n {t.size:4d} top {top:>24} ν reading {nu0:7.1f} "
-                  f"entry {nu1:7.1f}  log10 p {outlier_logp(t, g, nu0) / np.log(10):7.2f} "
-                  f"→ {outlier_logp(t, g, nu1) / np.log(10):7.2f}")
+            print(f"{r['case']:>8} n {t.size:4d} top {top:>24} ν reading "
+                  f"{float(r['nu_reading']):7.1f} entry {float(r['nu_entry']):7.1f}  log10 p "
+                  + "  ".join(f"{outlier_logp(t, g, nu(r)) / np.log(10):7.2f}"
+                              for nu in ESTIMATORS.values()))
+    print(f"{'group':>28} {'estimator':>16}  p ≤ 1/401  ≤ 1 %  ≤ 5 %")
+    for name, sel in _groups(rows).items():
+        for est, nu in ESTIMATORS.items():
+            lp = np.array([outlier_logp(r["t"], r["g"], nu(r)) for r in sel]) / np.log(10)
+            print(f"{name:>28} {est:>16}  {np.sum(lp <= np.log10(1 / 401)):4d}/{len(sel)}"
+                  f"  {np.sum(lp <= -2):4d}  {np.sum(lp <= np.log10(0.05)):4d}")
     return 0
 
 
