@@ -899,18 +899,36 @@ def _reading_dof(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
     Why: the readings of a real recording (capture means under unrectified vibration,
     settling, re-seating) are heavier-tailed than Gaussian, and the outlier test's max over
     readings against a Gaussian null named the largest of them an outlier (2 % of nulls on
-    the second generator). The per-reading statistic of the readings not yet excluded is
-    read for its tail away from its largest values (stats.reading_tail_dof), so an outlier
-    does not make its own null heavier.
+    the second generator). The tail is read from the residual's entries (stats.
+    entry_tail_dof) of the readings not yet excluded and not among the largest
+    (_tail_entries), so an outlier does not make its own null heavier.
     """
     skip = {r for t in terms for r in t.rows}
-    t_row, _, g = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
+    t_row, _, _ = stats.row_stats(U, e, np.zeros((pb.m, 1)), pb.row, pb.ctx.n, s, np.ones(1),
                                   skip, pb.shared_t_loading)
     keep = np.array([i not in skip for i in range(pb.ctx.n)]) & (t_row > 0)
-    # At the point estimate (stats.NULL_TAIL_Z): a tail too mild to show at 2 standard
-    # errors on a few hundred readings still sets the far tail of their max (issue 22).
-    return (stats.reading_tail_dof(t_row[keep], g, stats.NULL_TAIL_Z),
-            stats.reading_tail_dof(t_row[keep], g))
+    z = _tail_entries(pb, U, e, s, t_row, keep)
+    return stats.entry_tail_dof(z, stats.NULL_TAIL_Z), stats.entry_tail_dof(z)
+
+
+def _tail_entries(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
+                  t_row: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The entries the outlier null's ν is read from (stats.entry_tail_dof): those of the
+    readings in ``keep`` other than the stats.TAIL_OUTLIERS largest (the test's candidates),
+    each over its residual's standard deviation s·√(1 − h).
+
+    Why (issue 22): a capture mean's error heavy-tailed on each axis (the third generator's
+    Student-t means) shows in the per-reading statistic only where one axis dominates it:
+    its 95th percentile stays near χ²_g's and the tail shows only in the top few readings,
+    so the null was Gaussian where the recording's own entries are not.
+    """
+    cand = np.flatnonzero(keep)
+    cand = cand[np.argsort(t_row[cand])[::-1][:stats.TAIL_OUTLIERS]]
+    use = keep.copy()
+    use[cand] = False
+    h = stats.leverage(U)  # by row blocks: no (m × p) temporary, no dense basis
+    z = e / (s * np.sqrt(np.maximum(1.0 - h, 1e-12)))
+    return z[use[pb.row] & (h < 1.0 - 1e-6)]
 
 
 def _leaves_its_own_places(pb: LinearProblem, findings: list[Finding],

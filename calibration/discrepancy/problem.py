@@ -277,7 +277,7 @@ def _plateau_residual(X: np.ndarray, y: np.ndarray, far_q: float
     0.5), so one reading far off is spread into every other reading's residual: on the
     second generator an outlier at twice its detectable size raised its plateau's σ by up
     to a quarter (:func:`step_inflation`), its neighbours' statistics fell, and the outlier
-    test's tail estimate (stats.reading_tail_dof) read that as a heavier tail than the
+    test's tail estimate (then stats.reading_tail_dof) read that as a heavier tail than the
     noise has (ν 8–22 where the same protocol's nulls gave a median ν > 50). A reading far
     off is the outlier test's question, not the plateau's noise.
     """

@@ -5,6 +5,9 @@ each at α/2; a null recording is "mismatch" only through one of them. These tes
 level of the pieces whose null is not a plain Gaussian bootstrap.
 """
 
+import importlib
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy import stats as sps
@@ -130,8 +133,10 @@ def _outlier_p_as_diagnosed(rng, e, row, n, g, B):
     ν read from the recording as ``diagnose._reading_dof`` reads it (stats.NULL_TAIL_Z)."""
     U = np.zeros((n * g, 0))
     s = float(stats.robust_scale(e[:, None], 1.0)[0])
+    pb = SimpleNamespace(m=n * g, row=row, ctx=SimpleNamespace(n=n), shared_t_loading=None)
+    nu, _ = importlib.import_module("calibration.discrepancy.diagnose")._reading_dof(
+        pb, U, e, s, [])
     t, _, _ = stats.row_stats(U, e, np.zeros((n * g, 1)), row, n, s, np.ones(1), set())
-    nu = stats.reading_tail_dof(t, g, stats.NULL_TAIL_Z)
     E = rng.standard_normal((n * g, B))
     _, null_max, _ = stats.row_stats(U, e, E, row, n, s, stats.robust_scale(E, 1.0), set(),
                                      None, nu, rng)

@@ -78,15 +78,15 @@ def test_a_tail_only_at_its_point_estimate_is_not_called_heavier(monkeypatch):
 
     rec = _norm_recording(1.0)
 
-    def point_only(t_row, g, z_se=None):  # type: ignore[no-untyped-def]
+    def point_only(z, z_se=None):  # type: ignore[no-untyped-def]
         return 40.0 if z_se == stats.NULL_TAIL_Z else np.inf
 
-    monkeypatch.setattr(stats, "reading_tail_dof", point_only)
+    monkeypatch.setattr(stats, "entry_tail_dof", point_only)
     notes = " ".join(diagnose(rec, n_null=30, seed=1).notes)
     assert "heavier-tailed" not in notes
     assert "Student-t tail at its point estimate" in notes and "nu = 40.0" in notes
     assert "not told from a Gaussian" in notes
 
-    monkeypatch.setattr(stats, "reading_tail_dof", lambda t_row, g, z_se=None: 12.0)
+    monkeypatch.setattr(stats, "entry_tail_dof", lambda z, z_se=None: 12.0)
     notes = " ".join(diagnose(rec, n_null=30, seed=1).notes)
     assert "heavier-tailed than Gaussian (Student-t, nu = 12.0" in notes
