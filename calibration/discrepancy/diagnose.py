@@ -1312,8 +1312,6 @@ def _excess_within_rounding(pb: LinearProblem, res_g: np.ndarray, flagged: np.nd
     loading·δ_g) is fitted out of the final residual: per group the least-squares δ_g
     clipped to the box, one degree of freedom per group taken. Not an error the
     recording can resolve, so not a mismatch it can call (docs/diagnosis.md §7)."""
-    from scipy.stats import chi2
-
     z = res_g * pb.w
     keep = ~flagged[pb.row]
     grp = np.asarray(box.group)
@@ -1324,10 +1322,25 @@ def _excess_within_rounding(pb: LinearProblem, res_g: np.ndarray, flagged: np.nd
     delta = np.clip(np.divide(num, den, out=np.zeros(n_g), where=den > 0), -box.half,
                     box.half)
     net = (z - load * delta[grp])[keep]
-    n_cols = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms) + n_g
-    dof = max(net.size - n_cols, 1)
-    c2 = float(net @ net)
-    return not (chi2.sf(c2, dof) < alpha and c2 / dof > EXCESS_CHI2_RED)
+    return not _chi2_excess(net, _n_columns(pb, terms) + n_g, alpha)[3]
+
+
+def _n_columns(pb: LinearProblem, terms: list[Term]) -> int:
+    """The final model's columns: the base's and every accepted term's (no (m × p) copy)."""
+    return pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
+
+
+def _chi2_excess(z: np.ndarray, n_cols: int, alpha: float) -> tuple[float, int, float, bool]:
+    """(χ²/dof, dof, p, significant) of whitened residual entries ``z`` after ``n_cols``
+    fitted columns: significant only if p < α *and* χ²/dof > :data:`EXCESS_CHI2_RED` (the
+    one rule of :func:`_excess_test` and :func:`_excess_within_rounding`)."""
+    from scipy.stats import chi2
+
+    dof = max(z.size - n_cols, 1)
+    c2 = float(z @ z)
+    p = float(chi2.sf(c2, dof))
+    red = c2 / dof
+    return red, dof, p, bool(p < alpha and red > EXCESS_CHI2_RED)
 
 
 def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
@@ -1343,19 +1356,13 @@ def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
         # σ was matched to this residual: χ² ≈ dof by design
         return {"test": "not run: raw samples, the between-capture noise is estimated from "
                         "the residuals"}
-    from scipy.stats import chi2
-
-    z = (res_g * pb.w)[~flagged[pb.row]]
-    n_cols = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)  # not an (m × p) copy for it
-    dof = max(z.size - n_cols, 1)
-    c2 = float(z @ z)
-    p = float(chi2.sf(c2, dof))
-    red = c2 / dof
+    red, dof, p, significant = _chi2_excess((res_g * pb.w)[~flagged[pb.row]],
+                                            _n_columns(pb, terms), alpha)
     against = ("the scatter within plateaus (kappa*sd^2/n + tau^2)"
                if pb.noise_within_plateaus else "sd/sqrt(n)")
     return {"test": f"chi-square of the residuals against {against}", "chi2_per_dof":
             round(red, 3), "dof": dof, "p_value": float(f"{p:.3g}"),
-            "significant": bool(p < alpha and red > EXCESS_CHI2_RED),
+            "significant": significant,
             "rms_over_noise": round(float(np.sqrt(red)), 3)}
 
 

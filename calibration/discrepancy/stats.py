@@ -479,7 +479,8 @@ def tail_scale(nu: float) -> float:
 
 def reading_logsf(t: np.ndarray | float, g: int, nu: float = np.inf) -> np.ndarray:
     """log P(statistic > t) of a per-reading statistic: χ²_g, or under the Student-t
-    mixture with ν (:func:`reading_tail_dof`) g·F(g, ν) on the MAD-scaled statistic."""
+    mixture with ν (:func:`entry_tail_dof`, as diagnose reads it) g·F(g, ν) on the MAD-scaled
+    statistic."""
     if not np.isfinite(nu):
         return chi2_logsf(t, g)
     x = np.maximum(np.asarray(t, float), 0.0) * tail_scale(nu) / g
@@ -945,12 +946,12 @@ def row_stats(
     reading scored p ≈ 0.
 
     ``reading_dof`` ν finite (with ``rng``): the recording's readings are heavier-tailed
-    than Gaussian (:func:`reading_tail_dof`). Each null reading's statistic is multiplied
-    by w / k, w ~ ν/χ²_ν drawn per reading and replicate and k = :func:`tail_scale` (ν): the
-    Student-t scale mixture of that reading's noise (w), divided by the MAD scale² such noise
-    gives (k), since the data's statistic is divided by its own MAD scale² (≈ k under the
-    mixture) and the Gaussian replicates' by theirs (≈ 1); w·k would make the null k² too
-    heavy (at ν = 5 the test at half its level).
+    than Gaussian (:func:`entry_tail_dof`, as diagnose reads it). Each null reading's
+    statistic is multiplied by w / k, w ~ ν/χ²_ν drawn per reading and replicate and k =
+    :func:`tail_scale` (ν): the Student-t scale mixture of that reading's noise (w), divided
+    by the MAD scale² such noise gives (k), since the data's statistic is divided by its own
+    MAD scale² (≈ k under the mixture) and the Gaussian replicates' by theirs (≈ 1); w·k
+    would make the null k² too heavy (at ν = 5 the test at half its level).
     Only the per-reading family sees it; the replicates stay Gaussian for the others.
 
     ``bounded`` (:class:`BoundedShared`): each reading's data statistic is taken net of the
