@@ -103,7 +103,12 @@ def test_a_ramp_started_from_the_form_shows_its_sweeps(
     page.reload()
     _wait_state(page, "paused")
     for series in ("chamber", "setpoint", "die:SN-RAMP"):
-        page.wait_for_selector(f"#temp-chart polyline[data-series='{series}']")
+        # attached, not "visible": paused at the first captures a series may be a level
+        # line, which a person sees but whose bounding box has no height (Playwright calls
+        # it hidden); the line is drawn when it has two points or more
+        line = page.wait_for_selector(f"#temp-chart polyline[data-series='{series}']",
+                                      state="attached")
+        assert line is not None and len((line.get_attribute("points") or "").split()) >= 2
 
     live_engine_service.call("POST", f"/api/v1/campaigns/{cid}/resume")
     done = live_engine_service.wait_campaign(cid, "completed", "failed", "aborted",
