@@ -19,6 +19,7 @@ from simulators.chamber_sim import ChamberPhysics, ChamberRegisterImage
 from simulators.faults import SimFaults
 from simulators.modbus_server import ModbusSimServer, start_modbus_server
 from simulators.turntable_sim import TurntablePhysics, TurntableRegisterImage
+from tests.drivers.refusing_port import refusing_port
 
 #: The rigs' links: a wall timeout long enough that a reply from a loaded test machine (four
 #: workers on two cores) is not taken for a lost one; backoff is clock time (virtual).
@@ -227,9 +228,11 @@ async def test_intermittent_drops_are_absorbed(chamber_rig: ChamberRig) -> None:
 
 async def test_nobody_listening_is_connection_lost(chamber_rig: ChamberRig) -> None:
     await chamber_rig.server.stop()
-    link = ModbusLink(chamber_rig.server.url, chamber_rig.clock, device="gone", policy=FAST)
-    with pytest.raises(ConnectionLost):
-        await link.read_registers(1, 1)
+    with refusing_port(chamber_rig.server.port) as port:
+        link = ModbusLink(f"tcp://127.0.0.1:{port}", chamber_rig.clock, device="gone",
+                          policy=FAST)
+        with pytest.raises(ConnectionLost):
+            await link.read_registers(1, 1)
 
 
 async def test_table_moves_and_reports_in_position(table_rig: TableRig) -> None:

@@ -24,6 +24,7 @@ from drivers.faults import (
 from drivers.sensor_bridge import SerialAccelerometer
 from simulators.bridge_sim import BridgeDevice, BridgeServer, start_bridge_server
 from simulators.faults import SimFaults
+from tests.drivers.refusing_port import refusing_port
 
 
 @dataclass
@@ -144,9 +145,10 @@ async def test_faults_recovered_or_reported(bridge: BridgeRig) -> None:
 
 async def test_server_gone_is_connection_lost(bridge: BridgeRig) -> None:
     await bridge.server.stop()
-    sensor = SerialAccelerometer(bridge.server.url, bridge.clock, timeout_s=0.2)
-    with pytest.raises(ConnectionLost):
-        await sensor.identify()
+    with refusing_port(bridge.server.port) as port:
+        sensor = SerialAccelerometer(f"socket://127.0.0.1:{port}", bridge.clock, timeout_s=0.2)
+        with pytest.raises(ConnectionLost):
+            await sensor.identify()
 
 
 async def test_works_over_a_pseudo_terminal() -> None:
