@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-import socket
 import threading
 import time
 from collections.abc import Iterator
 
 import pytest
-import uvicorn
 from sqlalchemy import select
 
 from service.api.app import create_app
@@ -18,6 +16,7 @@ from service.cli import build_parser, main
 from service.config import Settings
 from service.db.models import ApiToken, Campaign
 from service.db.session import make_session_factory, session_scope
+from tests.live_uvicorn import serve_in_thread
 
 
 def test_token_create_prints_the_token_as_the_last_line(
@@ -128,27 +127,14 @@ def live_service(clean_db_url: str) -> Iterator[tuple[str, str, object]]:
         migrate=False,
         events_poll_s=0.02,
     )
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    server = uvicorn.Server(
-        uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
-    )
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 120  # seconds when idle; generous under load
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert server.started, "the service did not start within 120 s"
-    sf = make_session_factory(clean_db_url)
-    with session_scope(sf) as session:
-        from service.api.auth import create_token
+    with serve_in_thread(create_app(settings)) as url:
+        sf = make_session_factory(clean_db_url)
+        with session_scope(sf) as session:
+            from service.api.auth import create_token
 
-        token = create_token(session, "operator")
-    yield f"http://127.0.0.1:{port}", token, sf
-    server.should_exit = True
-    thread.join(timeout=10)
-    sf.kw["bind"].dispose()
+            token = create_token(session, "operator")
+        yield url, token, sf
+        sf.kw["bind"].dispose()
 
 
 def test_campaign_start_list_pause_and_watch(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]

@@ -4,13 +4,9 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import socket
-import threading
-import time
 from collections.abc import Iterator
 
 import pytest
-import uvicorn
 
 from service.api.app import create_app
 from service.api.auth import create_token
@@ -18,6 +14,7 @@ from service.cli import main
 from service.config import Settings
 from service.db.models import ApiToken, Calibration
 from service.db.session import make_session_factory, session_scope
+from tests.live_uvicorn import serve_in_thread
 
 
 def _last_line(out: str) -> str:
@@ -71,25 +68,12 @@ def live_service(clean_db_url: str) -> Iterator[tuple[str, str, object]]:
     settings = Settings(
         database_url=clean_db_url, run_engine=False, run_scheduler=False, migrate=False
     )
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    server = uvicorn.Server(
-        uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
-    )
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 120  # seconds when idle; generous under load
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert server.started, "the service did not start within 120 s"
-    sf = make_session_factory(clean_db_url)
-    with session_scope(sf) as session:
-        token = create_token(session, "operator")
-    yield f"http://127.0.0.1:{port}", token, sf
-    server.should_exit = True
-    thread.join(timeout=10)
-    sf.kw["bind"].dispose()
+    with serve_in_thread(create_app(settings)) as url:
+        sf = make_session_factory(clean_db_url)
+        with session_scope(sf) as session:
+            token = create_token(session, "operator")
+        yield url, token, sf
+        sf.kw["bind"].dispose()
 
 
 def test_schedule_add_list_rm(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]

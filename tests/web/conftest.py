@@ -7,16 +7,14 @@ are short accelerated ones on the shared service.
 
 from __future__ import annotations
 
-import socket
-import threading
-import time
 import urllib.error
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import uvicorn
 from web_helpers import LiveService, chromium_or_skip
+
+from tests.live_uvicorn import serve_in_thread
 
 TIMEOUT_MS = 30_000
 # 3000× wall: a three-step campaign of 10-min soaks ends in a few seconds.
@@ -41,24 +39,12 @@ def live_engine_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
         events_poll_s=0.1,
     )
     app = create_app(settings)
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 120  # seconds when idle; generous under load
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert server.started, "the service did not start within 120 s"
-    tokens = {}
-    with session_scope(app.state.session_factory) as session:
-        for role in ("viewer", "operator", "admin"):
-            tokens[role] = create_token(session, role, f"browser {role}")
-    yield LiveService(url=f"http://127.0.0.1:{port}", tokens=tokens,
-                      session_factory=app.state.session_factory)
-    server.should_exit = True
-    thread.join(timeout=20)
+    with serve_in_thread(app) as url:
+        tokens = {}
+        with session_scope(app.state.session_factory) as session:
+            for role in ("viewer", "operator", "admin"):
+                tokens[role] = create_token(session, role, f"browser {role}")
+        yield LiveService(url=url, tokens=tokens, session_factory=app.state.session_factory)
 
 
 @pytest.fixture(autouse=True)
