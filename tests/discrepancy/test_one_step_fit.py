@@ -47,7 +47,9 @@ def test_a_power_cycle_on_a_random_plateau_order_is_named(tmp_path):
 def test_an_offset_of_one_plateau_is_not_named_a_family_effect(seed, step):
     """A null staircase (the second generator's, 7 plateaus) with one plateau's output off
     by 30–40 µg (60 µg noise per reading, 24 positions): found, never named as a power
-    cycle, a channel step or a rate; reported as a change confined to that plateau."""
+    cycle, a channel step or a rate; reported as a change confined to that plateau (the
+    nested check put steps 3 and 5 at step 0, the first plateau whose block removed the
+    evidence)."""
     proto, pools = _protocol(), _pools()
     cols = sim.record(proto, draw_sensor(np.random.default_rng(seed)), pools, None, 0.0,
                       _pattern(2), seed)
