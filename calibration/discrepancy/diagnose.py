@@ -37,6 +37,7 @@ from calibration.discrepancy.heldout import (
 )
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
+from calibration.discrepancy.one_step_fit import one_plateau_fits_as_well
 from calibration.discrepancy.plateau_noise import (
     QuantisedChannel,
     cap_cells,
@@ -776,6 +777,14 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
     name is not given. Returns the step.
     """
     ctx = pb.ctx
+    eff = BY_ID[term.effect_id]
+    if eff.named_by_fit:
+        # The thermal/time family: by fit against a change of each plateau alone, the
+        # question by_fit answers for its rivals (one_step_fit.py, issue 22).
+        decided, step = one_plateau_fits_as_well(pb, terms, term, eff.one_sided, _design,
+                                                 partial(_shape_at, pb, eff))
+        if decided:
+            return step
     beta = _fit(pb, terms + [term])[0]
     contrib = term.X @ beta[-term.X.shape[1]:]
     per_step = {int(s_): float(np.sum((contrib * pb.w)[ctx.steps[pb.row] == s_] ** 2))
@@ -801,6 +810,16 @@ def _concentrated_on_one_step(pb: LinearProblem, terms: list[Term], term: Term,
         if k == 0 or lp > np.log(alpha) or gone:
             return step
     return None
+
+
+def _shape_at(pb: LinearProblem, eff: CatalogueEffect, step: int) -> np.ndarray | None:
+    """``eff``'s lifted columns with plateau ``step`` on, for an effect profiled over the
+    plateaus (a jump from step k on, a channel step); None for any other (one_step_fit)."""
+    grid = eff.grid(pb.ctx)
+    plateaus = {float(s) for s in pb.ctx.step_ids}
+    if not grid or not set(grid) <= plateaus:
+        return None
+    return pb.lift(eff.regressors(pb.ctx, float(step)))
 
 
 def _one_step_block(pb: LinearProblem, step: int) -> np.ndarray | AxisBlockDesign:
