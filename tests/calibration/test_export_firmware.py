@@ -95,11 +95,11 @@ def _ap_correct(p: dict[str, float], raw_ms2: np.ndarray, temp_c: np.ndarray,
 
     lo, hi = F32(p["INS_TCAL1_TMIN"]), F32(p["INS_TCAL1_TMAX"])
     cal = F32(min(max(cal_temp_c, lo), hi))
-    out = np.empty_like(raw_ms2, dtype=F32)
-    for n, (r, t) in enumerate(zip(raw_ms2, temp_c, strict=True)):
-        tc = F32(min(max(F32(t), lo), hi))
-        v = r.astype(F32) - poly(tc - F32(35.0)) + poly(cal - F32(35.0))
-        out[n] = v
+    # All samples at once, each operation in float32 as the firmware's per-sample code
+    # (elementwise float32 arithmetic rounds as the scalar one does, in the same order).
+    tc = np.clip(np.asarray(temp_c).astype(F32), lo, hi)[:, None]
+    assert len(tc) == len(raw_ms2)
+    out = np.asarray(raw_ms2).astype(F32) - poly(tc - F32(35.0)) + poly(cal - F32(35.0))
     return out.astype(float)
 
 
