@@ -17,6 +17,7 @@ import shutil
 import tempfile
 import warnings
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from pg_schemas import new_schema_name, postgres_schema
@@ -55,12 +56,38 @@ def db_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:  # type: 
 
 
 @pytest.fixture
-def migrated_db_url(db_url: str) -> str:
-    """``db_url`` with the schema at Alembic head."""
+def migrated_db_url(db_url: str, request: pytest.FixtureRequest) -> str:
+    """``db_url`` with the schema at Alembic head.
+
+    On SQLite, a copy of a file migrated once per session (``_migrated_sqlite_file``): the
+    same bytes the migrations write, without running them for every engine test (~0.35 s
+    wall and 0.15 s CPU each, a migration per test of ~180). PostgreSQL migrates each
+    schema: a schema cannot be copied.
+    """
     from service.db.session import upgrade_database
 
+    if db_url.startswith(SQLITE_PREFIX):
+        template: Path = request.getfixturevalue("_migrated_sqlite_file")
+        shutil.copyfile(template, db_url.removeprefix(SQLITE_PREFIX))
+        return db_url
     upgrade_database(db_url)
     return db_url
+
+
+SQLITE_PREFIX = "sqlite:///"
+
+
+@pytest.fixture(scope="session")
+def _migrated_sqlite_file(tmp_path_factory) -> Path:  # type: ignore[no-untyped-def]
+    """A SQLite file at Alembic head, for ``migrated_db_url`` to copy. The engine is
+    disposed after migrating, so the write-ahead log is folded into the file (checked:
+    a copy of the file alone would otherwise miss what the log held)."""
+    from service.db.session import upgrade_database
+
+    path = tmp_path_factory.mktemp("migrated") / "soakcal-head.db"
+    upgrade_database(f"{SQLITE_PREFIX}{path}")
+    assert not path.with_name(path.name + "-wal").exists(), "migrations left a WAL behind"
+    return path
 
 
 @pytest.fixture(scope="session", params=["sqlite", "postgresql"])

@@ -6,7 +6,7 @@ import asyncio
 
 import numpy as np
 import pytest
-from engine_helpers import SMALL_SPEC, add_campaign, fake_calibrate
+from engine_helpers import SMALL_SPEC, add_campaign, cursor_of, fake_calibrate
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
@@ -44,11 +44,9 @@ async def _run(sf, cid: int, *, break_sensor=None, binding: str = "any",  # type
             task = asyncio.create_task(CampaignRunner(sf, cid, devices, clock,
                                                       calibrate=fake_calibrate).run())
             while stop_at is not None and not task.done():
-                with sf() as s:
-                    c = s.get(Campaign, cid)
-                    # anywhere in the sweep of that step (a poll can miss a narrower window)
-                    if (c.cursor_step, c.cursor_phase) == (stop_at, "positions"):
-                        break
+                # anywhere in the sweep of that step (a poll can miss a narrower window)
+                if cursor_of(sf, cid)[:2] == (stop_at, "positions"):
+                    break
                 await asyncio.sleep(0.0005)
             if stop_at is not None:
                 assert not task.done(), "campaign ended before the interruption point"

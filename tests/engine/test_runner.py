@@ -9,7 +9,14 @@ from typing import Any
 
 import pytest
 from engine_fakes import Faults, make_fake_rig
-from engine_helpers import SMALL_SPEC, SQLITE_ONLY, add_campaign, fake_calibrate
+from engine_helpers import (
+    SMALL_SPEC,
+    SQLITE_ONLY,
+    add_campaign,
+    cursor_of,
+    fake_calibrate,
+    n_measurements,
+)
 from sqlalchemy import select
 
 from drivers.clock import VirtualClock
@@ -95,9 +102,9 @@ async def test_resume_after_interruption_in_every_phase_loses_and_duplicates_not
         CampaignRunner(sf, cid, rig.devices, clock, calibrate=slow).run())
 
     def reached() -> bool:
-        c = campaign(sf, cid)
-        return (c.cursor_step, c.cursor_phase) == (step, phase) and (
-            phase != "positions" or c.cursor_position >= 3)
+        at_step, at_phase, at_position = cursor_of(sf, cid)
+        return (at_step, at_phase) == (step, phase) and (
+            phase != "positions" or at_position >= 3)
 
     while not reached():
         assert not task.done(), "campaign ended before reaching the interruption point"
@@ -130,7 +137,7 @@ async def test_resume_in_a_step_resoaks_before_measuring(sf) -> None:
     rig = make_fake_rig(clock)
     task = asyncio.create_task(CampaignRunner(sf, cid, rig.devices, clock,
                                               calibrate=fake_calibrate).run())
-    while len(measurements(sf, cid)) < 9:  # mid step 1
+    while n_measurements(sf, cid) < 9:  # mid step 1
         await asyncio.sleep(0.001)
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
