@@ -73,6 +73,24 @@ def test_capture_noise_gives_the_vibration_its_own_averaging_factor():
     assert np.median(ratio[100:]) == pytest.approx(1.0, rel=0.25)
 
 
+def test_a_quiet_plateau_without_a_residual_of_its_own_keeps_a_third_of_its_sd():
+    """The quietest plateau sets the floor but has no within-plateau residual (too few
+    readings); the others scatter above it. Its κ₀ is then unconstrained: it must not
+    claim a capture mean 30× more precise than its samples' sd/√n (the second generator's
+    null 0224: 0.4 µg against 9 µg, and a χ² excess of 9 on a null)."""
+    rng = np.random.default_rng(4)
+    sig2 = np.full((120, 3), 10e-6**2)
+    sig2[20:] = 11e-6**2  # the informed plateaus, a little above the floor
+    floor = np.full((120, 3), 10e-6**2)
+    # Their residuals scatter as much as their sd²/n exceeds the floor: κ on that excess
+    # alone explains them, and nothing ties κ₀ down.
+    e = rng.standard_normal((120, 3)) * np.sqrt(sig2 - floor)
+    e[:20] = np.nan  # the floor's plateau: no residual of its own
+    sig, kappa, tau = problem.capture_noise(e, np.sqrt(sig2), 1.0, None, floor)
+    assert np.all(sig[:20] >= np.sqrt(problem.KAPPA0_MIN) * 10e-6 * (1 - 1e-9))
+    assert np.all(sig[:20] > 0.3 * 10e-6)
+
+
 def test_within_plateau_residual_keeps_noise_and_drops_plateau_changes():
     """Bias jumps, a scale change and a settling trend per plateau leave only the noise."""
     rng = np.random.default_rng(3)
