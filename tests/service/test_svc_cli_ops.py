@@ -4,17 +4,13 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-from collections.abc import Iterator
 
 import pytest
+from test_svc_cli import live_service  # noqa: F401  (the fixture: uvicorn in a thread)
 
-from service.api.app import create_app
-from service.api.auth import create_token
 from service.cli import main
-from service.config import Settings
 from service.db.models import ApiToken, Calibration
 from service.db.session import make_session_factory, session_scope
-from tests.live_uvicorn import serve_in_thread
 
 
 def _last_line(out: str) -> str:
@@ -62,21 +58,7 @@ def test_token_expiry_must_be_a_sensible_number_of_days(
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
-@pytest.fixture
-def live_service(clean_db_url: str) -> Iterator[tuple[str, str, object]]:
-    """uvicorn in a thread on a free port, engine off; yields (url, operator token, sf)."""
-    settings = Settings(
-        database_url=clean_db_url, run_engine=False, run_scheduler=False, migrate=False
-    )
-    with serve_in_thread(create_app(settings)) as url:
-        sf = make_session_factory(clean_db_url)
-        with session_scope(sf) as session:
-            token = create_token(session, "operator")
-        yield url, token, sf
-        sf.kw["bind"].dispose()
-
-
-def test_schedule_add_list_rm(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_schedule_add_list_rm(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]  # noqa: F811
     url, token, _ = live_service
     monkeypatch.setenv("SOAKCAL_TOKEN", token)
     assert main(["schedule", "add", "--url", url, "--sensor", "SN-9", "--cron", "0 20 * * 1-5",
@@ -109,7 +91,7 @@ def test_schedule_add_needs_exactly_one_trigger(capsys) -> None:  # type: ignore
     assert "not allowed with" in capsys.readouterr().err
 
 
-def test_coefficients_at_a_temperature(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_coefficients_at_a_temperature(live_service, capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]  # noqa: F811
     url, token, sf = live_service
     monkeypatch.setenv("SOAKCAL_TOKEN", token)
     assert main(["coefficients", "--url", url, "SN/1", "--temperature-c", "25"]) == 2
