@@ -43,6 +43,10 @@ class Confusion:
     # Two sides (e.g. time-within-plateau terms versus orientation terms): only members of
     # opposite sides look alike. Empty: every member looks like every other.
     versus: tuple[str, ...] = ()
+    # Rivals outside the catalogue (phrases, not effect ids): no finding can name them, so
+    # they never become ``alternatives`` or ``confusers``; the report states them.
+    outside: tuple[str, ...] = ()
+    experiment: str = ""  # what would separate them, when ``why`` does not say it
 
     def alternatives(self, effect_id: str) -> list[str]:
         """The members that ``effect_id`` cannot be told from here."""
@@ -59,6 +63,10 @@ class Confusion:
                                "finding_withheld": self.withhold}
         if self.versus:
             out["versus"] = list(self.versus)
+        if self.outside:
+            out["outside_catalogue"] = list(self.outside)
+        if self.experiment:
+            out["experiment"] = self.experiment
         return out
 
 
@@ -180,6 +188,8 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
             "plateau or a constant direction term; plateaus approached from both sides (or a "
             "recorded session column) separate them",
             withhold=True))
+    if temperature == "one way" and sessions is None and temperature_changes(ctx):
+        conf.append(power_cycle_is_a_jump_at_a_temperature())
     if temperature == "one way":
         conf.append(Confusion(
             ("bias_drift", "thermal_hysteresis"),
@@ -210,6 +220,39 @@ def assess(ctx: DesignContext, visit: np.ndarray | None = None,
         sd_recorded=ctx.sd_g is not None, oblique=oblique,
         not_separable=tuple(conf),
         table_poses=ctx.pose_q is not None).with_testable(identifiable or {})
+
+
+def temperature_changes(ctx: DesignContext) -> bool:
+    """Some plateaus differ in temperature by more than ``DesignContext.one_way``'s 0.5 °C:
+    a staircase, not one temperature held over several plateaus."""
+    temps = np.asarray([ctx.step_temp_c[s] for s in ctx.step_ids], float)
+    return temps.size > 1 and float(np.ptp(temps)) > 0.5
+
+
+def power_cycle_is_a_jump_at_a_temperature() -> Confusion:
+    """``session_offset`` without a session column on a one-way staircase (issue 22).
+
+    The jump is profiled over plateau boundaries (``effects/session_offset.py``), and on a
+    staircase that never comes back every plateau after boundary k is hotter (or colder)
+    than every plateau before it: the jump's column is the per-axis jump where the
+    temperature crosses a T* between plateaus k − 1 and k (``temperature_jump.py``), a rival
+    outside the catalogue. This holds whether or not plateau slopes are measurable (the
+    rate rule above needs them), so it is its own entry. It does not withhold: the finding
+    is compared with that jump by fit in ``temperature_jump_alike``; the entry only says
+    what the protocol cannot tell, and never adds a confuser (the rival is no effect id).
+    """
+    return Confusion(
+        ("session_offset",),
+        "without a session column a power cycle is seen only as a bias jump between two "
+        "plateaus, and on a one-way staircase every plateau after the jump is hotter (or "
+        "colder) than every plateau before it: the jump is the same per-axis offset as a jump "
+        "of the output where the temperature crosses a T* between those plateaus",
+        outside=("a jump of the output where the temperature crosses a T* (a package or "
+                 "solder change at a temperature; outside the catalogue)",),
+        experiment=("revisit a temperature after the power cycle (an up-down or repeated "
+                    "staircase, or plateaus in a random temperature order: a jump at a "
+                    "temperature re-occurs at every crossing, a power cycle once), or record "
+                    "the power cycles in a session column"))
 
 
 def visit_column(columns: dict[str, np.ndarray]) -> np.ndarray | None:

@@ -106,7 +106,11 @@ def protocol_lines(pr: dict[str, Any]) -> list[str]:
         # side only, so the line says which from which, not one group of all of them.
         group = (" / ".join(e for e in c["effects"] if e not in versus) + " from "
                  + " / ".join(versus)) if versus else " / ".join(c["effects"])
-        lines.append(f"  cannot separate {group}: {c['why']}{tail}")
+        outside = c.get("outside_catalogue") or []
+        if outside:
+            group += " from " + " / ".join(outside)
+        how = f"; to separate them: {c['experiment']}" if c.get("experiment") else ""
+        lines.append(f"  cannot separate {group}: {c['why']}{tail}{how}")
     return lines
 
 

@@ -206,3 +206,41 @@ def test_diagnosed_drift_without_a_temperature_does_not_claim_one():
     block = d.to_dict()["protocol"]
     assert block["temperature"] == "none"
     assert not {"thermal_lag", "thermal_hysteresis"} & set(block["separable"])
+
+
+def identifiable_in(ctx: DesignContext) -> dict[str, bool]:
+    """What ``diagnose`` passes to ``assess``: each catalogue effect's own identifiability."""
+    return {e.effect_id: e.identifiable(ctx)[0] for e in BY_ID.values()}
+
+
+def test_one_way_settled_staircase_lists_the_power_cycle_as_not_separable():
+    """Issue 22: settled plateaus (no rate term in the data) on a one-way staircase with no
+    session column: a power cycle between plateaus is a jump where the temperature crosses
+    a T*; the protocol block says so, with the reason and the experiment, and no longer
+    calls session_offset separable. Nothing is withheld on it (findings are unchanged)."""
+    ctx = ctx_of(ONE_WAY)
+    testable = identifiable_in(ctx)
+    assert testable["session_offset"] and not testable["temperature_rate"]  # settled
+    pr = assess(ctx, identifiable=testable)
+    entry = next(c for c in pr.not_separable if "session_offset" in c.effects)
+    assert not entry.withhold and entry.alternatives("session_offset") == []
+    assert any("T*" in o and "outside the catalogue" in o for o in entry.outside)
+    assert "one-way staircase" in entry.why and "revisit a temperature" in entry.experiment
+    assert "session_offset" not in pr.separable
+    js = next(c for c in pr.to_json()["not_separable"] if "session_offset" in c["effects"])
+    assert js["outside_catalogue"] == list(entry.outside) and js["experiment"]
+    line = next(x for x in protocol_lines(pr.to_json()) if "session_offset" in x)
+    assert "cannot separate session_offset from a jump of the output" in line
+    assert "to separate them: revisit a temperature" in line
+
+
+def test_power_cycle_is_not_listed_where_the_protocol_separates_it():
+    """Plateaus in a non-monotonic temperature order, a session column, or one temperature
+    held over every plateau: a power cycle is not a jump at a temperature there."""
+    up_down = ctx_of(UP_DOWN)
+    logged = replace(ctx_of(ONE_WAY), session=np.repeat([0, 1], 33))
+    held = ctx_of([20.0] * 6)
+    for ctx in (up_down, logged, held):
+        pr = assess(ctx, identifiable=identifiable_in(ctx))
+        assert not any("session_offset" in c.effects for c in pr.not_separable), ctx
+        assert "session_offset" in pr.separable
