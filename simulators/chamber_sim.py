@@ -101,6 +101,17 @@ class ChamberPhysics:
         return (1 if dev > self.deviation_alarm_c else 0) | (
             2 if dev < -self.deviation_alarm_c else 0)
 
+    def die_now_c(self) -> float:
+        """The die's temperature (°C) at the clock's now: what a sensor's capture reads."""
+        self.advance_to()
+        return self.die_c
+
+    def die_motion_now(self) -> tuple[float, int]:
+        """(the die's dT/dt in °C/s, the direction of its last excursion) at the clock's now:
+        what a capture's hysteresis and rate terms read (simulators.bridge_sim)."""
+        self.advance_to()
+        return self.die_rate_c_per_s, self.die_direction
+
     # --- internals -----------------------------------------------------------
     def _step(self, dt: float) -> None:
         if self.running and self.manual:

@@ -247,14 +247,7 @@ async def _start(clock: Clock, *, seed: int, truth: Any, chamber_map: str,
                              homed_at_start="home" not in table_regmap.sequences,
                              settled_at_start=bool(table_regmap.unit_ids))
 
-    def die_now() -> float:
-        chamber.advance_to()
-        return chamber.die_c
-
-    def die_motion() -> tuple[float, int]:
-        chamber.advance_to()
-        return chamber.die_rate_c_per_s, chamber.die_direction
-
+    die_now, die_motion = chamber.die_now_c, chamber.die_motion_now
     bridge = BridgeDevice(truth, clock, rng_s, die_now, table.true_angles_deg,
                           faults=faults.sensor, die_motion=die_motion)
     modbus_host = host

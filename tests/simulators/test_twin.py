@@ -57,16 +57,8 @@ async def test_the_served_sensor_reads_its_die_history_hysteresis_and_rate() -> 
     p = ChamberPhysics(clock, np.random.default_rng(0), air_c=20.0, setpoint_c=20.0,
                        running=True, ramp_c_per_min=0.0, die_tau_s=300.0)
 
-    def die_now() -> float:
-        p.advance_to()
-        return p.die_c
-
-    def die_motion() -> tuple[float, int]:
-        p.advance_to()
-        return p.die_rate_c_per_s, p.die_direction
-
-    dev = BridgeDevice(truth, clock, np.random.default_rng(1), die_now, lambda: (0.0, 0.0),
-                       die_motion=die_motion)
+    dev = BridgeDevice(truth, clock, np.random.default_rng(1), p.die_now_c, lambda: (0.0, 0.0),
+                       die_motion=p.die_motion_now)
 
     async def z_offset_g() -> float:  # the capture's mean less the base model at its die
         counts, _ = await dev.capture(4000)
