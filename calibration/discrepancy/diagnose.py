@@ -37,7 +37,11 @@ from calibration.discrepancy.heldout import (
 )
 from calibration.discrepancy.level import ALPHA, N_NULL
 from calibration.discrepancy.locate import locate_residuals, where_of
-from calibration.discrepancy.one_step_fit import one_plateau_fits_as_well
+from calibration.discrepancy.one_step_fit import (
+    one_plateau_fits_as_well,
+    plateau_inputs,
+    sfem_block,
+)
 from calibration.discrepancy.plateau_noise import (
     QuantisedChannel,
     cap_cells,
@@ -827,14 +831,9 @@ def _one_step_block(pb: LinearProblem, step: int) -> np.ndarray | AxisBlockDesig
 
     In reference mode these are the axis blocks of an (N × 4) block (problem.AxisBlockDesign
     above the size: not an (m × 12) array that is zero off the plateau)."""
-    ctx = pb.ctx
-    u = np.column_stack([np.ones(ctx.n), ctx.input_g]) * (ctx.steps == step)[:, None]
     if pb.mode == "reference":
-        return axis_block_design(u)
-    block = np.zeros((ctx.n, 3, 12))
-    for a in range(3):
-        block[:, a, 4 * a:4 * a + 4] = u
-    return pb.lift(block)
+        return axis_block_design(plateau_inputs(pb.ctx, step))
+    return pb.lift(sfem_block(pb.ctx, step))
 
 
 def _scan_final(pb: LinearProblem, terms: list[Term], rng: np.random.Generator, n_null: int,

@@ -45,10 +45,16 @@ from calibration.discrepancy.effects.base import per_axis
 N_RIVAL_COLUMNS = 12  # the widest rival: a free SFEM block of the plateau
 
 
+def plateau_inputs(ctx: Any, step: int) -> np.ndarray:
+    """(N,4): 1, a_x, a_y, a_z on plateau ``step``'s readings, 0 elsewhere — the columns of
+    "plateau ``step`` differs" (offset and gains) for one axis."""
+    return np.column_stack([np.ones(ctx.n), ctx.input_g]) * (ctx.steps == step)[:, None]
+
+
 def sfem_block(ctx: Any, step: int) -> np.ndarray:
-    """(N,3,12) raw columns: per axis 1, a_x, a_y, a_z on plateau ``step``'s readings (the
-    nested check's "plateau differs" block, diagnose._one_step_block)."""
-    u = np.column_stack([np.ones(ctx.n), ctx.input_g]) * (ctx.steps == step)[:, None]
+    """(N,3,12) raw columns: :func:`plateau_inputs` in each axis' own four (the nested
+    check's "plateau differs" block, diagnose._one_step_block)."""
+    u = plateau_inputs(ctx, step)
     block = np.zeros((ctx.n, 3, 12))
     for a in range(3):
         block[:, a, 4 * a:4 * a + 4] = u
