@@ -199,6 +199,38 @@ def leverage(U: np.ndarray) -> np.ndarray:
     return h
 
 
+def leave_entries_out(U: Any, e: np.ndarray, h: np.ndarray, entries: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Residual and leverage of the other entries when ``entries`` are fitted by their own
+    columns (a unit vector each): the model refitted without them, in closed form.
+
+    Adding the columns I_J to an orthonormal basis U (residual e ⊥ U): with Z = (I − P)I_J
+    and M = ZᵀZ = I − U_J U_Jᵀ, the residual is e − Z M⁺ e_J (Zᵀe = e_J) and the leverage of
+    an entry i outside J grows by U_i A U_iᵀ, A = U_Jᵀ M⁺ U_J (p × p); the entries of J are
+    returned with residual 0 and leverage 1. U by row blocks (a RowBlockBasis is not made
+    dense). Why (issue 22): a reading far off pulls the fit, and on a few readings per
+    column (4 plateaus of 12 positions, 48 columns) that pull puts a share of its
+    deviation into its plateau's and its position's other readings; their entries were
+    then the heavy tail the outlier's null was drawn with.
+    """
+    J = np.asarray(entries, int)
+    e_out, h_out = np.array(e, float), np.array(h, float)
+    if J.size == 0:
+        return e_out, h_out
+    UJ = np.asarray(U[J], float)  # (q × p)
+    Minv = np.linalg.pinv(np.eye(J.size) - UJ @ UJ.T, rcond=1e-9, hermitian=True)
+    c = Minv @ np.asarray(e, float)[J]
+    A = UJ.T @ Minv @ UJ
+    v = UJ.T @ c
+    step = max(1, CHUNK_BYTES // (8 * max(UJ.shape[1], 1)))
+    for i in range(0, e_out.size, step):
+        b = np.asarray(U[i : i + step])
+        e_out[i : i + step] += b @ v
+        h_out[i : i + step] += np.einsum("ij,jk,ik->i", b, A, b)
+    e_out[J], h_out[J] = 0.0, 1.0
+    return e_out, h_out
+
+
 def reading_cap(r: np.ndarray, row: np.ndarray,
                 plateaus: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N,) factor ≤ 1 per reading that caps its residual vector's size at the largest a
@@ -338,7 +370,7 @@ def sign_blocks(rng: np.random.Generator, n: int, b: int) -> Iterator[tuple[int,
 # ratio exceeds χ²_g's by TAIL_Z standard errors; ν no lower than TAIL_DOF_MIN (finite
 # kurtosis); at least TAIL_MIN_READINGS readings (fewer cannot show a tail).
 TAIL_P_LO, TAIL_P_HI = 0.5, 0.95
-TAIL_OUTLIERS = 2
+TAIL_OUTLIERS = 3
 TAIL_Z = 2.0
 # The outlier test's null (diagnose._reading_dof, from the entries: entry_tail_dof) reads
 # ν at its point estimate: the Student-t mixture wherever the ratio exceeds the Gaussian's
