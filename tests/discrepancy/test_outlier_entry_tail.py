@@ -4,7 +4,7 @@ The third blind generator draws each capture mean's error as a Student-t per axi
 the same σ). A reading's statistic sums three axes, so its 95th percentile is nearly χ²_g's
 and the per-reading tail estimate kept the Gaussian null; the t means' largest readings
 (5–7 σ on one axis) were then named outliers. The null's ν is read from the entries of the
-readings other than the two largest (``diagnose._tail_entries``, ``stats.entry_tail_dof``).
+readings other than the three largest (``diagnose._tail_entries``, ``stats.entry_tail_dof``).
 """
 
 import importlib
