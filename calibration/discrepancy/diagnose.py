@@ -955,7 +955,7 @@ def _tail_entries(pb: LinearProblem, U: np.ndarray, e: np.ndarray, s: float,
     a share of its size — those entries made the tail heavy (ν at its floor), and one
     reading 3.8 mg off against 122 µg noise on 48 readings was not an outlier by it. Three
     candidates, not two: with a third outlier's entries among the others the tail was read
-    from that outlier (three readings 1.1–3.1 mg off on 90 readings: ν 5 in place of ∞).
+    from that outlier (three readings 1.6–2.3 mg off on 90 readings: ν 5 in place of ∞).
     """
     cand = np.flatnonzero(keep)
     cand = cand[np.argsort(t_row[cand])[::-1][:stats.TAIL_OUTLIERS]]

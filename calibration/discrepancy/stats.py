@@ -209,7 +209,7 @@ def leave_entries_out(U: Any, e: np.ndarray, h: np.ndarray, entries: np.ndarray
     an entry i outside J grows by U_i A U_iᵀ, A = U_Jᵀ M⁺ U_J (p × p); the entries of J are
     returned with residual 0 and leverage 1. U by row blocks (a RowBlockBasis is not made
     dense). Why (issue 22): a reading far off pulls the fit, and on a few readings per
-    column (4 plateaus of 12 positions, 48 columns) that pull puts a share of its
+    column (4 plateaus of 12 positions) that pull puts a share of its
     deviation into its plateau's and its position's other readings; their entries were
     then the heavy tail the outlier's null was drawn with.
     """
