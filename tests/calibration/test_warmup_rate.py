@@ -108,6 +108,27 @@ def test_a_rate_sensitive_part_gets_its_gain_back(tmp_path, capsys):
 
 
 
+def test_a_rate_term_is_kept_only_on_the_axes_whose_bias_follows_dt_dt(tmp_path, capsys):
+    # y and z follow dT/dt (-24 and +32 µg per °C/min), x does not: the three axes
+    # together choose a rate term, but x's own held-out error gains nothing beyond that
+    # gain's standard error, so x gets none (a gain fitted to x's noise would move x by
+    # k·dT/dt where nothing moves it).
+    cols = _log()
+    rate_c_per_min = 60.0 * np.gradient(_die(cols["t_s"]), cols["t_s"])
+    cols["ay"] = cols["ay"] - 24e-6 * rate_c_per_min
+    cols["az"] = cols["az"] + 32e-6 * rate_c_per_min
+    doc, model_path = _calibrate(tmp_path, cols, capsys)
+    choice = doc["axis_choice"]
+    assert [choice[a]["rate_term"] for a in ("bx", "by", "bz")] == [False, True, True]
+    assert choice["bx"]["degree"] >= 1  # x's bias still changes with temperature
+    gain = np.asarray(load_model(model_path).temperature_rate["gain_ug_per_c_per_min"])
+    assert np.all(gain[0] == 0.0)
+    np.testing.assert_allclose(gain[1:, 0], [-24.0, 32.0], atol=4.0)
+    assert any(n.startswith("bx: degree") and "the rate term does not lower" in n
+               for n in doc["notes"]), doc["notes"]
+    assert any("rate term k·dT/dt fitted on by, bz" in n for n in doc["notes"])
+
+
 def test_a_rate_sensitive_part_gets_its_gain_back_from_fit_rows_with_gaps(tmp_path, capsys):
     # The held-out split's fit rows: alternate 10-s blocks of the log. A quiet channel
     # (0.3 mK) makes the 5-s window dT/dt's, where the rows beside each gap have 3 rows in
