@@ -28,11 +28,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from calibration.series_memo import memo_by_value
 from calibration.temperature_conditioning import (
     temperature_rate_c_per_min,
     temperature_rates_c_per_min,
 )
-from calibration.temperature_dequantise import Dequantised, dequantise
+from calibration.temperature_dequantise import Dequantised, dequantise_uncached
 from calibration.temperature_dither import inverse_level, smoother_matrix
 
 DRAWS = 6
@@ -42,27 +43,41 @@ SUBSAMPLES = 10
 def rebuild_rate_noise(t_s: np.ndarray, dq: Dequantised, samples: np.ndarray | None = None
                        ) -> Callable[[float], float]:
     """window_s ↦ the RMS error (°C/min) of dT/dt read over that window from ``dq``'s
-    rebuilt temperature (module docstring); 0 for a channel used as read."""
+    rebuilt temperature (module docstring); 0 for a channel used as read.
+
+    A function of the times, the rebuilt trace, its LSB and dither and the samples alone
+    (the draws' seed is fixed): computed once per distinct series
+    (:mod:`calibration.series_memo`), so refits of one log's temperatures redo no draw."""
     t = np.asarray(t_s, float)
     trace = np.asarray(dq.temperature_c, float)
+    return _rebuild_rate_noise(t, trace, float(dq.lsb_c), float(dq.dither_lsb),
+                               float(dq.window_s),
+                               None if samples is None else np.asarray(samples, float))
+
+
+@memo_by_value
+def _rebuild_rate_noise(t: np.ndarray, trace: np.ndarray, q: float, dither_lsb: float,
+                        smooth_s: float, samples: np.ndarray | None
+                        ) -> Callable[[float], float]:
+    """:func:`rebuild_rate_noise` on the rebuilt trace's values: ``q`` its LSB (0: not
+    rebuilt), ``dither_lsb`` and ``smooth_s`` the dithered regime's noise and window."""
     ok = np.isfinite(t) & np.isfinite(trace)
-    if not dq.rebuilt or ok.sum() < 4:
+    if q <= 0 or ok.sum() < 4:
         return lambda window_s: 0.0
     t, trace = t[ok], trace[ok]
-    q = dq.lsb_c
     rng = np.random.default_rng(0)
     draws: list[np.ndarray] = []
-    if dq.dither_lsb > 0:
+    if dither_lsb > 0:
         n = (np.full(t.size, 50.0) if samples is None
-             else np.clip(np.nan_to_num(np.asarray(samples, float)[ok], nan=1.0), 1, 2000))
-        H = smoother_matrix(t, dq.window_s)
+             else np.clip(np.nan_to_num(samples[ok], nan=1.0), 1, 2000))
+        H = smoother_matrix(t, smooth_s)
         z = trace / q
         for _ in range(DRAWS):
             # each capture's mean of n noisy readings, rounded: its level and the binomial
             # scatter of the share one level up, drawn exactly (reading k or k+1 or beyond)
-            reads = np.array([np.mean(np.round(zi + rng.normal(0.0, dq.dither_lsb, int(ni))))
+            reads = np.array([np.mean(np.round(zi + rng.normal(0.0, dither_lsb, int(ni))))
                               for zi, ni in zip(z, n, strict=True)])
-            draws.append(q * inverse_level(H @ reads, dq.dither_lsb))
+            draws.append(q * inverse_level(H @ reads, dither_lsb))
     else:
         d = float(np.median(np.diff(t)))
         offsets = (np.arange(SUBSAMPLES) + 0.5) / SUBSAMPLES - 0.5
@@ -70,7 +85,7 @@ def rebuild_rate_noise(t_s: np.ndarray, dq: Dequantised, samples: np.ndarray | N
         for _ in range(DRAWS):
             shift = rng.uniform(-0.5, 0.5) * q
             reads = (np.round((sub + shift) / q) * q - shift).reshape(t.size, SUBSAMPLES)
-            again = dequantise(t, reads.mean(axis=1))
+            again = dequantise_uncached(t, reads.mean(axis=1))
             draws.append(again.temperature_c)
     cache: dict[float, float] = {}
 

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.series_memo import memo_by_value
+
 DESCRIPTION = (
     "per step: robust straight line of temperature vs time (rows > 4 robust sigma "
     "from the first line dropped; slope kept only if > 3 standard errors, else the "
@@ -554,13 +556,15 @@ def capture_temperature_noise(t_s: np.ndarray, temperature_c: np.ndarray,
                                    per_sub, sub_block_s)
 
 
+@memo_by_value
 def rate_noise_c_per_min(t_s: np.ndarray, window_s: float,
                          noise_c: float | np.ndarray) -> float:
     """The noise (RMS, °C/min) :func:`temperature_rate_c_per_min` over ``window_s`` gives
     at these reading times for white temperature noise of SD ``noise_c`` (one for every
     reading, or each reading's own): measured by running it on :data:`RATE_NOISE_DRAWS`
     draws of such noise (a fixed seed), so it is the method's own, gaps and ends
-    included."""
+    included. Computed once per distinct times, window and noise
+    (:mod:`calibration.series_memo`)."""
     t = np.asarray(t_s, float)
     if np.all(np.asarray(noise_c) <= 0) or t.size < 3:
         return 0.0

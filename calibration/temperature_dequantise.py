@@ -70,11 +70,12 @@ regime was used. A channel that never dithers is rebuilt from its crossings as a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from calibration.series_memo import memo_by_value
 from calibration.temperature_dither import rebuild_dithered
 
 # A channel quantised this coarsely (°C per LSB) or coarser is rebuilt: against the change
@@ -258,6 +259,17 @@ def _lattice(y: np.ndarray) -> tuple[float, float] | None:
 
 def dequantise(t_s: np.ndarray, temperature_c: np.ndarray,
                samples: np.ndarray | None = None) -> Dequantised:
+    """:func:`dequantise_uncached`, computed once per distinct series
+    (:mod:`calibration.series_memo`: refits of one log's temperatures rebuild it once);
+    the arrays handed out are copies."""
+    dq = _dequantise_memo(np.asarray(t_s, float), np.asarray(temperature_c, float),
+                          None if samples is None else np.asarray(samples, float))
+    return replace(dq, temperature_c=dq.temperature_c.copy(),
+                   read_c=None if dq.read_c is None else dq.read_c.copy())
+
+
+def dequantise_uncached(t_s: np.ndarray, temperature_c: np.ndarray,
+                        samples: np.ndarray | None = None) -> Dequantised:
     """The die temperature rebuilt from a coarsely quantised channel's transitions in time
     (module docstring); the readings unchanged when the channel is not coarse or never
     changes level. ``t_s`` increasing; each reading covers the median spacing of the times
@@ -535,3 +547,6 @@ def _toward(start: float, level: float, moved: np.ndarray) -> np.ndarray:
     """From ``start`` toward ``level`` by ``moved`` (level units), stopping at ``level``."""
     step = np.minimum(moved, abs(level - start))
     return start + np.sign(level - start) * step
+
+
+_dequantise_memo = memo_by_value(dequantise_uncached)

@@ -75,7 +75,62 @@ class Dithered:
 
 def smoother_matrix(t: np.ndarray, window_s: float) -> sparse.csr_matrix:
     """The linear smoother of a tricube-weighted local quadratic over ±window_s/2 at each
-    row of ``t`` (a row whose window holds too few rows keeps its own value)."""
+    row of ``t`` (a row whose window holds too few rows keeps its own value).
+
+    Row i is ``(X (XᵀWX)⁻¹ e₀) · w`` over the rows of its window (``u`` the offsets in
+    half-windows, ``w = (1 − |u|³)³``, ``X = [1, u, u²]``, so ``XᵀWX`` holds the weighted
+    moments Σw·uⁿ, n = 0…4). The rows are taken a block at a time (about
+    :data:`SMOOTHER_BLOCK_CELLS` window cells), each window padded to the block's widest
+    with cells of weight 0, which add nothing to the moments; the same matrix as
+    :func:`smoother_matrix_rowwise` to rounding."""
+    t = np.asarray(t, float)
+    n = t.size
+    lo = np.searchsorted(t, t - window_s / 2, side="left")
+    hi = np.searchsorted(t, t + window_s / 2, side="right")
+    half = window_s / 2
+    width = int((hi - lo).max()) if n else 0
+    step = max(1, SMOOTHER_BLOCK_CELLS // max(width, 1))
+    rows, cols, vals = [], [], []
+    for start in range(0, n, step):
+        i = np.arange(start, min(start + step, n))
+        a, m = lo[i], hi[i] - lo[i]
+        k = np.arange(int(m.max()))
+        inside = k[None, :] < m[:, None]
+        j = np.where(inside, a[:, None] + k[None, :], i[:, None])
+        u = np.where(inside, (t[j] - t[i][:, None]) / half, 0.0)
+        w = np.where(inside, (1.0 - np.abs(u) ** 3) ** 3, 0.0)
+        wu = w * u
+        wu2 = wu * u
+        s0, s1, s2 = w.sum(axis=1), wu.sum(axis=1), wu2.sum(axis=1)
+        s3, s4 = (wu2 * u).sum(axis=1), (wu2 * u * u).sum(axis=1)
+        A = np.stack([np.stack([s0, s1, s2], -1), np.stack([s1, s2, s3], -1),
+                      np.stack([s2, s3, s4], -1)], -2)
+        fits = m >= 4
+        fits[fits] = np.linalg.cond(A[fits]) < 1e10
+        c = np.zeros((i.size, 3))
+        if fits.any():
+            e0 = np.zeros((int(fits.sum()), 3, 1))
+            e0[:, 0] = 1.0
+            c[fits] = np.linalg.solve(A[fits], e0)[..., 0]
+        row = (c[:, :1] + c[:, 1:2] * u + c[:, 2:] * u * u) * w
+        keep = inside & fits[:, None]
+        alone = i[~fits]  # too few rows, or too ill-conditioned: the row's own value
+        rows += [np.repeat(i[fits], m[fits]), alone]
+        cols += [j[keep], alone]
+        vals += [row[keep], np.ones(alone.size)]
+    if not rows:
+        return sparse.csr_matrix((n, n))
+    return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                     np.concatenate(cols))), shape=(n, n))
+
+
+# Window cells (rows × the widest window) solved at a time: bounds the block's arrays.
+SMOOTHER_BLOCK_CELLS = 200_000
+
+
+def smoother_matrix_rowwise(t: np.ndarray, window_s: float) -> sparse.csr_matrix:
+    """:func:`smoother_matrix` one row at a time (the reference its blocks are checked
+    against in the tests)."""
     n = t.size
     lo = np.searchsorted(t, t - window_s / 2, side="left")
     hi = np.searchsorted(t, t + window_s / 2, side="right")

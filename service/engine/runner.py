@@ -649,9 +649,9 @@ class CampaignRunner:
                                  f"{ramp.limit_s:.0f} s (PV {status.process_c:.2f} °C; "
                                  f"limit: {ramp.limit_basis})")
         polled_s = self.clock.now()
-        if ramp.probe:
-            await self._probe_dies(ramp.dies, msg.step, target_c, status, self._t(ramp.start_s))
-        self._publish(msg.step, "ramp", 0, status, target_c)
+        probes = (await self._probe_dies(ramp.dies, msg.step, target_c, status,
+                                         self._t(ramp.start_s)) if ramp.probe else [])
+        self._publish(msg.step, "ramp", 0, status, target_c, probes=probes)
         # The probe's capture (≈ 4 s) is part of the poll period, not added to it: the
         # ramp's end is seen as soon as without probes.
         return Poll(False, spec.soak_poll_s - (self.clock.now() - polled_s))
@@ -710,14 +710,20 @@ class CampaignRunner:
         # must not end the soak as max_soak_reached).
         soaked_s = polls.active_s(now_s, soak.start_s, self._held_total_s(), soak.held0_s)
         soak.record_chamber(now_s, status, target_c)
-        if soak.cfg.policy == "predictive":
-            await self._probe_dies(soak.dies, step, target_c, status, self._t(soak.start_s))
-        decision = polls.decide_round(
-            soak, soaked_s, target_c, self._live,
-            lambda serial, probes: self.rate_book.for_decision(serial, self._pose, probes),
-            n_positions=self.n_pos, edge=msg.soak.edge, order_repeats=msg.soak.order_repeats)
+        probes = (await self._probe_dies(soak.dies, step, target_c, status,
+                                         self._t(soak.start_s))
+                  if soak.cfg.policy == "predictive" else [])
+        try:
+            decision = polls.decide_round(
+                soak, soaked_s, target_c, self._live,
+                lambda serial, taken: self.rate_book.for_decision(serial, self._pose, taken),
+                n_positions=self.n_pos, edge=msg.soak.edge,
+                order_repeats=msg.soak.order_repeats)
+        except BaseException:
+            store.add_soak_probes(self.sf, self.id, probes)  # kept, whatever the decision did
+            raise
         self._publish(step, "soak", 0, status, target_c,
-                      soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s))
+                      soak_remaining_s=max(0.0, self.eta.soak_s - soaked_s), probes=probes)
         return Poll(decision.stable, polls.soak_poll_wait_s(decision, spec.soak_poll_s))
 
     def _no_dies(self) -> dict[str, list[rate_gain.Probe]]:
@@ -725,9 +731,10 @@ class CampaignRunner:
 
     async def _probe_dies(self, dies: dict[str, list[rate_gain.Probe]], step: int,
                           setpoint_c: float, status: ChamberStatus, soak_start_t_s: float
-                          ) -> None:
-        """One die-temperature probe of every live sensor, each stored as it is taken
-        (``soak_probes``: the measured rate gain and a resume need them).
+                          ) -> list[dict[str, Any]]:
+        """One die-temperature probe of every live sensor: kept in ``dies`` and returned as
+        ``soak_probes`` rows (the measured rate gain and a resume need them), which the
+        poll stores with its progress in one commit (:meth:`_publish`), as they are taken.
 
         Every live die at once, as a position's captures (:func:`sensors.read_all`): a
         poll of eight sensors takes one capture's time, not eight.
@@ -756,7 +763,7 @@ class CampaignRunner:
                 "ax": probe.mean_g[0], "ay": probe.mean_g[1], "az": probe.mean_g[2],
                 "n": probe.n,
             })
-        store.add_soak_probes(self.sf, self.id, rows)
+        return rows
 
     # --- the table's pose: the probes' orientation key (rate_gain.py) -------------------
     def _set_pose(self, angles_deg: tuple[float, ...]) -> None:
@@ -1019,7 +1026,10 @@ class CampaignRunner:
 
     def _publish(self, step: int, phase: str, position: int, status: ChamberStatus,
                  target_c: float, *, soak_remaining_s: float | None = None,
-                 write: bool = True) -> dict[str, Any]:
+                 write: bool = True, probes: Sequence[dict[str, Any]] = ()
+                 ) -> dict[str, Any]:
+        """The progress of this point of the run, written to the campaign (``write``) with
+        the poll's die ``probes`` in the same commit (:func:`store.add_soak_probes`)."""
         n_done = self.eta.n_done
         progress = {
             "step": step, "steps": self.spec.n_steps, "phase": phase, "position": position,
@@ -1037,7 +1047,10 @@ class CampaignRunner:
             progress.update(self._ramp.fields(status, target_c))
             progress["eta_wall_s"] = round(progress["eta_s"] / clock_speed(self.clock), 1)
         self._progress = progress
-        if write:
+        if probes:
+            store.add_soak_probes(self.sf, self.id, list(probes),
+                                  progress=progress if write else None)
+        elif write:
             store.update_campaign(self.sf, self.id, progress=progress)
         return progress
 

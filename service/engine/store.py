@@ -413,13 +413,24 @@ PROBE_COLUMNS = ("t_s", "step", "setpoint_c", "chamber_c", "sensor_c", "ref_x", 
                  "ref_z", "ax", "ay", "az", "n")
 
 
-def add_soak_probes(sf: SessionFactory, campaign_id: int, rows: list[dict[str, Any]]) -> None:
+def add_soak_probes(sf: SessionFactory, campaign_id: int, rows: list[dict[str, Any]],
+                    progress: dict[str, Any] | None = None) -> None:
     """Store one poll's soak probes (every sensor's) as they are taken, in one short commit;
-    keys: SoakProbe's columns."""
-    if not rows:
+    keys: SoakProbe's columns. ``progress``: the poll's progress, written in the same
+    commit (one transaction a poll, not two: the probes and what the poll published are
+    stored together or not at all).
+
+    One multi-row INSERT (executemany), not one ORM object per row, as
+    :func:`commit_measurements`: a ``Session.execute``, so a fenced factory's write hook
+    confirms the lease in this transaction."""
+    if not rows and progress is None:
         return
     with sf() as s:
-        s.add_all([SoakProbe(campaign_id=campaign_id, **row) for row in rows])
+        if rows:
+            s.execute(insert(SoakProbe), [{"campaign_id": campaign_id, **row} for row in rows])
+        if progress is not None:
+            s.execute(update(Campaign).where(Campaign.id == campaign_id)
+                      .values(progress=progress))
         s.commit()
 
 

@@ -66,13 +66,14 @@ def test_a_dithered_channel_is_read_from_its_share_of_upper_readings(profile, no
 
 
 def dequantise_crossings(t: np.ndarray, read: np.ndarray):
-    """The crossing-instant rebuild alone (the dithered regime switched off)."""
+    """The crossing-instant rebuild alone (the dithered regime switched off; uncached: the
+    memo of ``dequantise`` holds the rebuild with the dithered regime on)."""
     import calibration.temperature_dequantise as tdq
 
     saved = tdq.rebuild_dithered
     tdq.rebuild_dithered = lambda *a: None
     try:
-        return tdq.dequantise(t, read, np.full(t.size, RATE_HZ))
+        return tdq.dequantise_uncached(t, read, np.full(t.size, RATE_HZ))
     finally:
         tdq.rebuild_dithered = saved
 
