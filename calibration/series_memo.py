@@ -29,6 +29,11 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 # Distinct series kept per function: one log's fits and its redone rebuilds use a few.
 MEMO_SIZE = 16
+# Calls whose array arguments hold more than this are computed, not kept: a service that
+# calibrates many long logs must not hold 16 of each one's series (a 2.4 M-row log's times
+# and temperatures are 19 MB each), and on such a log the computation is a small share of
+# the fit anyway.
+MEMO_MAX_BYTES = 1 << 20
 
 
 def value_key(value: Any) -> Hashable:
@@ -42,14 +47,27 @@ def value_key(value: Any) -> Hashable:
     return (type(value).__name__, value)
 
 
+def _array_bytes(values: tuple[Any, ...]) -> int:
+    """The bytes of the arrays among ``values`` (inside tuples and lists too)."""
+    total = 0
+    for v in values:
+        if isinstance(v, np.ndarray):
+            total += v.nbytes
+        elif isinstance(v, (tuple, list)):
+            total += _array_bytes(tuple(v))
+    return total
+
+
 def memo_by_value(fn: F) -> F:
     """``fn`` computed once per distinct argument values (module docstring); at most
-    :data:`MEMO_SIZE` results kept, least recently used dropped first. An array result is
-    handed out as a copy."""
+    :data:`MEMO_SIZE` results kept, least recently used dropped first; calls on more than
+    :data:`MEMO_MAX_BYTES` of arrays are not kept. An array result is handed out as a copy."""
     memo: OrderedDict[Hashable, Any] = OrderedDict()
 
     @functools.wraps(fn)
     def wrapped(*args: Any, **kwargs: Any) -> Any:
+        if _array_bytes((*args, *kwargs.values())) > MEMO_MAX_BYTES:
+            return fn(*args, **kwargs)
         key = (value_key(args), value_key(tuple(sorted(kwargs.items()))))
         if key in memo:
             memo.move_to_end(key)

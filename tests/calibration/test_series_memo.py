@@ -75,3 +75,22 @@ def test_the_rate_noise_of_equal_times_is_computed_once(monkeypatch):
     assert len(calls) == 1
     rate_noise_c_per_min(t, 40.0, 0.0124)
     assert len(calls) == 2
+
+
+def test_a_long_series_is_computed_each_time_not_kept():
+    # A service calibrating many long logs must not hold each one's series: calls on more
+    # than MEMO_MAX_BYTES of arrays go straight to the function.
+    calls: list[int] = []
+
+    @memo_by_value
+    def total(x: np.ndarray) -> float:
+        calls.append(1)
+        return float(np.sum(x))
+
+    long = np.ones(series_memo.MEMO_MAX_BYTES // 8 + 1)
+    assert total(long) == total(long.copy()) == long.size
+    assert len(calls) == 2
+    short = np.ones(10)
+    total(short)
+    total(short.copy())
+    assert len(calls) == 3
