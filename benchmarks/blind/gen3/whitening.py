@@ -24,17 +24,18 @@ from benchmarks.blind.gen3.case import draw_case, simulate
 from benchmarks.blind.gen3.effects import draw_effect, drawn_sigma_g
 from benchmarks.blind.gen3.run import case_seed
 from benchmarks.blind.gen3.writer import write_csv
+from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.problem import build_problem
 from calibration.recording import read_recording
 
 
 def _score(X0: np.ndarray, y: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[float, float]:
-    """(χ² of the columns X after the base X0, residual variance), both whitened by w."""
-    Q, _ = np.linalg.qr(X0 * w[:, None])
-    yw, Xw = y * w, X * w[:, None]
-    e = yw - Q @ (Q.T @ yw)
-    Qx, _ = np.linalg.qr(Xw - Q @ (Q.T @ Xw))
+    """(χ² of the columns X after the base X0, residual variance), both whitened by w; the
+    bases rank-revealing, as the diagnosis' own (stats.orthonormal_basis)."""
+    Q = stats.orthonormal_basis(X0 * w[:, None])
+    e = stats.project_out(Q, y * w)
+    Qx = stats.orthonormal_basis(stats.project_out(Q, X * w[:, None]))
     s2 = float(e @ e) / (e.size - Q.shape[1] - Qx.shape[1])
     return float(np.sum((Qx.T @ e) ** 2)) / s2, s2
 
@@ -56,7 +57,7 @@ def case_figures(seed: int, index: int, effect: str, size: float) -> dict[str, f
     pb = build_problem(rec)
     eff = BY_ID[effect]
     X = pb.lift(eff.regressors(pb.ctx, eff.grid(pb.ctx)[0]))
-    X0 = np.asarray(pb.X0) if isinstance(pb.X0, np.ndarray) else pb.X0.dense()
+    X0 = np.asarray(pb.X0)  # an AxisBlockDesign too (its __array__)
     sigma_drawn = drawn_sigma_g(rows, drawn.case.protocol.place_max_rad)[pb.row, pb.axis]
     chi2_diag, _ = _score(X0, pb.y, X, pb.w)
     chi2_drawn, _ = _score(X0, pb.y, X, 1.0 / sigma_drawn)
