@@ -871,7 +871,7 @@ def _axis_choices(errors: list[tuple[np.ndarray, np.ndarray]],
     axis, and a rate-sensitive part or a lagging channel need not show on every axis; on
     issue 20's inclinometer x's gain was −55 ± 26 µg/(°C/min) and its held-out gain
     within its standard error: kept, x read 0.2773 mg on the benchmark's held-out 5-s
-    means, without it 0.2308, against 0.2619 uncompensated). A
+    means, without it 0.2462, against 0.2619 uncompensated). A
     z-only cubic with a rate term gave a flat x or y a model of a change (9 with z's rate
     term) on 15 of 80 axes by the earlier rule (no higher held-out error), on 0 by this
     one. An axis whose change is established but whose own held-out error is no lower
@@ -891,19 +891,15 @@ def _axis_choices(errors: list[tuple[np.ndarray, np.ndarray]],
     simpler = [(d, False) for d in range(degree + with_rate)]
     choice = [joint, joint, joint]
     rms = joint_rms.copy()
-    e0, idx0 = errors[0]
-    unproven = [False, False, False]
-    if joint != (0, False) and np.array_equal(idx0, joint_idx) and idx0.size:
-        for a in range(3):
-            if not _beats(e0[:, a], joint_e[:, a], block[idx0]):
-                choice[a], rms[a], unproven[a] = (0, False), float(_rms(e0)[a]), True
-    rate_unproven = [False, False, False]
-    e_d, idx_d = errors[degree]
-    if with_rate and np.array_equal(idx_d, joint_idx) and idx_d.size:
-        for a in range(3):
-            if choice[a] == joint and not _beats(e_d[:, a], joint_e[:, a], block[idx_d]):
-                choice[a], rms[a] = (degree, False), float(_rms(e_d)[a])
-                rate_unproven[a] = True
+    unproven = (_not_beaten(errors[0], joint_errors, block) if joint != (0, False)
+                else [False, False, False])
+    for a in (a for a in range(3) if unproven[a]):
+        choice[a], rms[a] = (0, False), float(_rms(errors[0][0])[a])
+    rate_unproven = [c == joint and u for c, u in
+                     zip(choice, _not_beaten(errors[degree], joint_errors, block), strict=True)
+                     ] if with_rate else [False, False, False]
+    for a in (a for a in range(3) if rate_unproven[a]):
+        choice[a], rms[a] = (degree, False), float(_rms(errors[degree][0])[a])
     for d, _ in simpler:  # simplest first: the first no worse than the axis' model wins
         e, idx = errors[d]
         if not np.array_equal(idx, joint_idx) or idx.size == 0:
@@ -930,6 +926,18 @@ def _axis_choices(errors: list[tuple[np.ndarray, np.ndarray]],
         if d == 0:
             flat[n] = why
     return AxisChoices(tuple(choice), rms, joint_rms, joint, tuple(notes), flat)
+
+
+def _not_beaten(simpler: tuple[np.ndarray, np.ndarray],
+                joint: tuple[np.ndarray, np.ndarray], block: np.ndarray) -> list[bool]:
+    """Per axis: True where the joint model's held-out errors do not beat the simpler
+    model's on that axis beyond the gain's standard error (:func:`_beats`); all False where
+    the two were not judged on the same held-out captures. ``simpler``, ``joint``: (errors
+    (n, 3), captures) as :func:`_heldout_errors_g` gives them."""
+    (e_lo, idx_lo), (e_joint, idx_joint) = simpler, joint
+    if not (np.array_equal(idx_lo, idx_joint) and idx_lo.size):
+        return [False, False, False]
+    return [not _beats(e_lo[:, a], e_joint[:, a], block[idx_lo]) for a in range(3)]
 
 
 def _fit_axes(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
