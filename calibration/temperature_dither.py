@@ -81,8 +81,8 @@ def smoother_matrix(t: np.ndarray, window_s: float) -> sparse.csr_matrix:
     half-windows, ``w = (1 − |u|³)³``, ``X = [1, u, u²]``, so ``XᵀWX`` holds the weighted
     moments Σw·uⁿ, n = 0…4). The rows are taken a block at a time (about
     :data:`SMOOTHER_BLOCK_CELLS` window cells), each window padded to the block's widest
-    with cells of weight 0, which add nothing to the moments; the same matrix as
-    :func:`smoother_matrix_rowwise` to rounding."""
+    with cells of weight 0, which add nothing to the moments; the same matrix as one
+    solve per row to rounding (tests/calibration/test_smoother_matrix.py)."""
     t = np.asarray(t, float)
     n = t.size
     lo = np.searchsorted(t, t - window_s / 2, side="left")
@@ -126,32 +126,6 @@ def smoother_matrix(t: np.ndarray, window_s: float) -> sparse.csr_matrix:
 
 # Window cells (rows × the widest window) solved at a time: bounds the block's arrays.
 SMOOTHER_BLOCK_CELLS = 200_000
-
-
-def smoother_matrix_rowwise(t: np.ndarray, window_s: float) -> sparse.csr_matrix:
-    """:func:`smoother_matrix` one row at a time (the reference its blocks are checked
-    against in the tests)."""
-    n = t.size
-    lo = np.searchsorted(t, t - window_s / 2, side="left")
-    hi = np.searchsorted(t, t + window_s / 2, side="right")
-    rows, cols, vals = [], [], []
-    for i in range(n):
-        a, b = int(lo[i]), int(hi[i])
-        row = None
-        if b - a >= 4:
-            u = (t[a:b] - t[i]) / (window_s / 2)
-            w = (1.0 - np.abs(u) ** 3) ** 3
-            X = np.column_stack([np.ones(b - a), u, u * u])
-            A = X.T @ (w[:, None] * X)
-            if np.linalg.cond(A) < 1e10:
-                row = (X @ np.linalg.solve(A, np.array([1.0, 0.0, 0.0]))) * w
-        if row is None:
-            a, b, row = i, i + 1, np.ones(1)
-        rows.append(np.full(b - a, i))
-        cols.append(np.arange(a, b))
-        vals.append(row)
-    return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                                     np.concatenate(cols))), shape=(n, n))
 
 
 def expected_level(z: np.ndarray, sigma_lsb: float) -> np.ndarray:

@@ -5,9 +5,36 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import sparse
 
 from calibration import temperature_dither
-from calibration.temperature_dither import smoother_matrix, smoother_matrix_rowwise
+from calibration.temperature_dither import smoother_matrix
+
+
+def smoother_matrix_rowwise(t: np.ndarray, window_s: float) -> sparse.csr_matrix:
+    """The smoother one row at a time, one 3 × 3 solve per row: the reference the blocked
+    :func:`smoother_matrix` is checked against."""
+    n = t.size
+    lo = np.searchsorted(t, t - window_s / 2, side="left")
+    hi = np.searchsorted(t, t + window_s / 2, side="right")
+    rows, cols, vals = [], [], []
+    for i in range(n):
+        a, b = int(lo[i]), int(hi[i])
+        row = None
+        if b - a >= 4:
+            u = (t[a:b] - t[i]) / (window_s / 2)
+            w = (1.0 - np.abs(u) ** 3) ** 3
+            X = np.column_stack([np.ones(b - a), u, u * u])
+            A = X.T @ (w[:, None] * X)
+            if np.linalg.cond(A) < 1e10:
+                row = (X @ np.linalg.solve(A, np.array([1.0, 0.0, 0.0]))) * w
+        if row is None:
+            a, b, row = i, i + 1, np.ones(1)
+        rows.append(np.full(b - a, i))
+        cols.append(np.arange(a, b))
+        vals.append(row)
+    return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                     np.concatenate(cols))), shape=(n, n))
 
 
 def _times() -> list[np.ndarray]:
