@@ -1,5 +1,6 @@
 """What the crash and stall tests share: a worker process running one campaign over the
-simulated rig, and the measurements it stored."""
+simulated rig, and the measurements it stored
+(counted with ``engine_helpers.n_measurements``)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,6 @@ import os
 import subprocess
 import sys
 from pathlib import Path
-
-from engine_helpers import n_measurements
 
 WORKER = Path(__file__).with_name("crash_worker.py")
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,9 +24,3 @@ def start_worker(url: str, cid: int) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.Popen([sys.executable, str(WORKER), url, str(cid), "1.5"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-
-
-def count(sf, cid: int) -> int:  # type: ignore[no-untyped-def]
-    """The campaign's measurement rows, counted by the database on a bare connection: the
-    tests poll it every 20 ms while a worker runs (``engine_helpers.n_measurements``)."""
-    return n_measurements(sf, cid)

@@ -11,8 +11,8 @@ import signal
 import time
 from collections import Counter
 
-from crash_helpers import N_POS, N_STEPS, SPEC, count, start_worker
-from engine_helpers import add_campaign
+from crash_helpers import N_POS, N_STEPS, SPEC, start_worker
+from engine_helpers import add_campaign, n_measurements
 from sqlalchemy import select
 
 from service.db.models import Campaign, Measurement, RigLease
@@ -24,7 +24,7 @@ def test_sigkill_mid_campaign_then_another_process_completes(sf, migrated_db_url
     for target in (10, 40):  # kill once in step 0, once in step 1
         p = start_worker(migrated_db_url, cid)
         deadline = time.monotonic() + 60
-        while count(sf, cid) < target and p.poll() is None and time.monotonic() < deadline:
+        while n_measurements(sf, cid) < target and p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.02)
         assert p.poll() is None, p.stdout.read() if p.stdout else ""
         p.send_signal(signal.SIGKILL)

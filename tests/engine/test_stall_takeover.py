@@ -8,8 +8,8 @@ import signal
 import time
 from collections import Counter
 
-from crash_helpers import N_POS, N_STEPS, SPEC, count, start_worker
-from engine_helpers import add_campaign
+from crash_helpers import N_POS, N_STEPS, SPEC, start_worker
+from engine_helpers import add_campaign, n_measurements
 from sqlalchemy import select
 
 from service.db.models import Campaign, Measurement
@@ -30,13 +30,13 @@ def test_stalled_lease_holder_writes_nothing_after_it_resumes(sf, migrated_db_ur
         lines_a += line.startswith("commit")
     a.send_signal(signal.SIGSTOP)
     time.sleep(0.2)
-    rows_at_stop = count(sf, cid)  # only A wrote so far
+    rows_at_stop = n_measurements(sf, cid)  # only A wrote so far
     time.sleep(1.5 + 0.5)  # past A's 1.5 s lease
     b = start_worker(migrated_db_url, cid)
     deadline = time.monotonic() + 60
-    while count(sf, cid) < rows_at_stop + 5 and time.monotonic() < deadline:
+    while n_measurements(sf, cid) < rows_at_stop + 5 and time.monotonic() < deadline:
         time.sleep(0.02)
-    assert count(sf, cid) >= rows_at_stop + 5, "B did not take the rig over"
+    assert n_measurements(sf, cid) >= rows_at_stop + 5, "B did not take the rig over"
     a.send_signal(signal.SIGCONT)  # A wakes up believing it still runs the rig
     time.sleep(2.0)  # A finishes what it was doing; B holds (and renews) the lease meanwhile
     a.send_signal(signal.SIGKILL)
