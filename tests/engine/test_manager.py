@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import time
+import datetime as dt
 
 from engine_helpers import SMALL_SPEC, add_campaign
 
@@ -10,15 +10,25 @@ from service.engine import store
 from service.engine.manager import CampaignManager
 
 
-def test_one_lease_per_rig_and_takeover_after_expiry(sf) -> None:
+def test_one_lease_per_rig_and_takeover_after_expiry(sf, monkeypatch) -> None:
+    # The lease's clock is set here, not slept on: with a 0.3-s lease and real sleeps the
+    # "live lease" check failed on a loaded machine, where the two claims were > 0.3 s apart.
+    from service.engine import manager
+
+    t0 = manager.utcnow()
+    now = [t0]
+    monkeypatch.setattr(manager, "utcnow", lambda: now[0])
     cid = add_campaign(sf)
-    a = CampaignManager(sf, owner="proc-a", lease_s=0.3)
-    b = CampaignManager(sf, owner="proc-b", lease_s=0.3)
+    a = CampaignManager(sf, owner="proc-a", lease_s=30.0)
+    b = CampaignManager(sf, owner="proc-b", lease_s=30.0)
     assert a._claim("sim", cid)
+    now[0] = t0 + dt.timedelta(seconds=29.0)
     assert not b._claim("sim", cid)  # live lease held by a
-    assert a._claim("sim", cid)  # re-claiming our own lease is fine
+    assert a._claim("sim", cid)  # re-claiming our own lease is fine (until t0 + 59 s)
     assert a._renew("sim")
-    time.sleep(0.45)  # a "dies": no renewal
+    now[0] = t0 + dt.timedelta(seconds=58.0)
+    assert not b._claim("sim", cid)  # the renewal moved the lease on
+    now[0] = t0 + dt.timedelta(seconds=60.0)  # a "dies": no renewal
     assert b._claim("sim", cid)
     assert not a._renew("sim")  # a learns it lost the rig
     b._release("sim")
