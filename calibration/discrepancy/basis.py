@@ -25,11 +25,6 @@ import numpy as np
 from calibration.discrepancy import stats
 
 
-def _step(width: int) -> int:
-    """Rows per working block of an array ``width`` float64 wide."""
-    return max(1, stats.CHUNK_BYTES // (8 * max(width, 1)))
-
-
 def _by_rows(w: np.ndarray, a: np.ndarray) -> np.ndarray:
     return a * (w if a.ndim == 1 else w.reshape((-1,) + (1,) * (a.ndim - 1)))
 
@@ -88,15 +83,14 @@ class RowBlockBasis:
         (m × r) array is built.
         """
         rows, m, p = design.rows, design.m, design.p
-        step = _step(p)
         gram = np.zeros((p, p))
-        for i in range(0, m, step):
-            B = rows(slice(i, i + step))
+        for sl in stats.row_blocks(m, p):
+            B = rows(sl)
             gram += B.T @ B
         T = stats.eigen_cut_map(gram)
         H = np.zeros((T.shape[1], T.shape[1]))
-        for i in range(0, m, step):
-            B1 = rows(slice(i, i + step)) @ T
+        for sl in stats.row_blocks(m, p):
+            B1 = rows(sl) @ T
             H += B1.T @ B1
         R = np.linalg.cholesky(H).T  # upper: U₁ = U R
         return cls(design, T @ np.linalg.inv(R))
@@ -131,9 +125,8 @@ class RowBlockBasis:
         r = self.S.shape[1]
         C = self.S @ B[:r]
         out = np.empty((self._m,) + B.shape[1:])
-        step = _step(self._p)
-        for i in range(0, self._m, step):
-            out[i:i + step] = self.design.mul(i, min(i + step, self._m), C)
+        for sl in stats.row_blocks(self._m, self._p):
+            out[sl] = self.design.mul(sl.start, sl.stop, C)
         if self.extra.shape[1]:
             out += self.extra @ B[r:]
         return out
@@ -149,12 +142,11 @@ class RowBlockBasis:
             A = np.asarray(A, float)
         acc = np.zeros((self._p,) + A.shape[1:])
         more = np.zeros((self.extra.shape[1],) + A.shape[1:])
-        step = _step(self._p)
-        for i in range(0, self._m, step):
-            block = np.asarray(A[i:i + step], float)
-            acc += self.design.tmul(i, min(i + step, self._m), block)
+        for sl in stats.row_blocks(self._m, self._p):
+            block = np.asarray(A[sl], float)
+            acc += self.design.tmul(sl.start, sl.stop, block)
             if single and self.extra.shape[1]:
-                more += self.extra[i:i + step].T @ block
+                more += self.extra[sl].T @ block
         out = self.S.T @ acc
         if self.extra.shape[1]:
             out = np.concatenate([out, more if single else self.extra.T @ A])
@@ -168,9 +160,8 @@ class RowBlockBasis:
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
         out = np.empty(self.shape)
-        step = _step(self._p + self.shape[1])
-        for i in range(0, self._m, step):
-            out[i:i + step] = self._dense(slice(i, min(i + step, self._m)))
+        for sl in stats.row_blocks(self._m, self._p + self.shape[1]):
+            out[sl] = self._dense(sl)
         return out if dtype is None else out.astype(dtype)
 
     def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
@@ -247,15 +238,13 @@ def _einsum_by_readings(subscripts: str, operands: tuple, view: _ReadingBlocks
         return None
     if any(getattr(o, "shape", (None,))[:1] != (n,) for o in operands):
         return None
-    step = max(1, stats.CHUNK_BYTES // (8 * view.g * max(view.shape[2], 1)))
     out = None
-    for i in range(0, n, step):
+    for sl in stats.row_blocks(n, view.g * max(view.shape[2], 1)):
         blocks: dict[int, np.ndarray] = {}  # an operand given twice is formed once
-        part = np.einsum(subscripts, *[blocks.setdefault(id(o), o[i:i + step])
-                                       for o in operands])
+        part = np.einsum(subscripts, *[blocks.setdefault(id(o), o[sl]) for o in operands])
         if out is None:
             out = np.empty((n,) + part.shape[1:], part.dtype)
-        out[i:i + step] = part
+        out[sl] = part
     return out
 
 

@@ -1641,19 +1641,18 @@ def _fit_by_blocks(pb: LinearProblem, terms: list[Term]
     yw = pb.y * pb.w
     p = pb.X0.shape[1] + sum(t.X.shape[1] for t in terms)
     G, h = np.zeros((p, p)), np.zeros(p)
-    step = max(1, stats.CHUNK_BYTES // (8 * p))
-    for i in range(0, pb.m, step):
-        B = rows(i, i + step)
+    for sl in stats.row_blocks(pb.m, p):
+        B = rows(sl.start, sl.stop)
         G += B.T @ B
-        h += B.T @ yw[i:i + step]
+        h += B.T @ yw[sl]
     scale = np.sqrt(np.diag(G))
     scale = np.where(scale > 0, scale, 1.0)
     Gs = G / np.outer(scale, scale)
     Ginv = np.linalg.pinv(Gs, rcond=1e-12, hermitian=True)
     beta = (Ginv @ (h / scale)) / scale
     r = yw.copy()
-    for i in range(0, pb.m, step):
-        r[i:i + step] -= rows(i, i + step) @ beta
+    for sl in stats.row_blocks(pb.m, p):
+        r[sl] -= rows(sl.start, sl.stop) @ beta
     dof = max(pb.m - int(round(np.trace(Ginv @ Gs))), 1)
     chi2_red = float(r @ r) / dof
     cov = Ginv * chi2_red / np.outer(scale, scale)

@@ -148,13 +148,12 @@ def heldout_rms_ug_by_blocks(design: Any, y: np.ndarray, row: np.ndarray,
     tests = [hold & ~exclude_rows[row] for hold in holds]
     G, h = np.zeros((p, p)), np.zeros(p)
     Gf, hf, yyf = np.zeros((len(holds), p, p)), np.zeros((len(holds), p)), np.zeros(len(holds))
-    step = max(1, stats.CHUNK_BYTES // (8 * max(p, 1)))
-    for i in range(0, m, step):
-        B, yb = design.rows(slice(i, i + step)), yw[i:i + step]
+    for sl in stats.row_blocks(m, p):
+        B, yb = design.rows(sl), yw[sl]
         G += B.T @ B
         h += B.T @ yb
         for f, hold in enumerate(holds):
-            sel = hold[i:i + step]
+            sel = hold[sl]
             if sel.any():
                 Gf[f] += B[sel].T @ B[sel]
                 hf[f] += B[sel].T @ yb[sel]
@@ -171,10 +170,10 @@ def heldout_rms_ug_by_blocks(design: Any, y: np.ndarray, row: np.ndarray,
                          int((~hold).sum()), shrunk)
         betas[f] = beta / scale  # on the unscaled whitened columns
     sq, cnt = 0.0, 0.0
-    for i in range(0, m, step):
-        B, yb = design.rows(slice(i, i + step)), yw[i:i + step]
+    for sl in stats.row_blocks(m, p):
+        B, yb = design.rows(sl), yw[sl]
         for f, beta in betas.items():
-            sel = tests[f][i:i + step]
+            sel = tests[f][sl]
             if sel.any():
                 err = yb[sel] - B[sel] @ beta
                 sq += float(err @ err)

@@ -504,11 +504,10 @@ def _wls(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.linalg.lstsq(X * w[:, None], y * w, rcond=None)[0]
     p = X.shape[1]
     G, h = np.zeros((p, p)), np.zeros(p)
-    step = max(1, stats.CHUNK_BYTES // (8 * p))
-    for i in range(0, X.shape[0], step):
-        Xc = X[i:i + step] * w[i:i + step, None]
+    for sl in stats.row_blocks(X.shape[0], p):
+        Xc = X[sl] * w[sl, None]
         G += Xc.T @ Xc
-        h += Xc.T @ (y[i:i + step] * w[i:i + step])
+        h += Xc.T @ (y[sl] * w[sl])
     d = np.sqrt(np.diag(G))
     d = np.where(d > 0, d, 1.0)
     beta = np.linalg.lstsq(G / np.outer(d, d), h / d, rcond=1e-12)[0]

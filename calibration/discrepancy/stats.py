@@ -85,20 +85,19 @@ def orthonormal_basis_of_blocks(
     whitened design is 1.15 GB next to the base design and the basis). ``gram`` (XᵀX) when
     the caller has it; else it is summed over the blocks.
     """
-    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
     if gram is None:
         gram = np.zeros((p, p))
-        for i in range(0, m, step):
-            B = rows(i, i + step)
+        for sl in row_blocks(m, p):
+            B = rows(sl.start, sl.stop)
             gram += B.T @ B
     T = eigen_cut_map(gram)
     U = np.empty((m, T.shape[1]))
-    for i in range(0, m, step):
-        U[i : i + step] = rows(i, i + step) @ T
+    for sl in row_blocks(m, p):
+        U[sl] = rows(sl.start, sl.stop) @ T
     R = np.linalg.cholesky(U.T @ U).T  # upper: U₁ = U R
     Rinv = np.linalg.inv(R)
-    for i in range(0, m, step):
-        U[i : i + step] = U[i : i + step] @ Rinv
+    for sl in row_blocks(m, p):
+        U[sl] = U[sl] @ Rinv
     return U
 
 
@@ -107,6 +106,21 @@ def project_out(U: np.ndarray, X: np.ndarray) -> np.ndarray:
 
 
 CHUNK_BYTES = 16 * 2**20  # working block of the null replicates' row/column loops
+
+
+def rows_per_block(width: int) -> int:
+    """Rows of an array ``width`` float64 wide that fit one working block (CHUNK_BYTES)."""
+    return max(1, CHUNK_BYTES // (8 * max(width, 1)))
+
+
+def row_blocks(m: int, width: int, start: int = 0) -> Iterator[slice]:
+    """Slices of the rows ``start`` … ``m``, each a working block of an array ``width``
+    float64 wide. Every row loop over the diagnosis' large arrays goes by these blocks
+    (issue 10, memory): a product with an (m × B) array is formed one block at a time, so
+    no second (m × B) array exists."""
+    step = rows_per_block(width)
+    for i in range(start, m, step):
+        yield slice(i, min(i + step, m))
 
 
 def t_matmul(A: Any, E: np.ndarray) -> np.ndarray:
@@ -121,9 +135,8 @@ def t_matmul(A: Any, E: np.ndarray) -> np.ndarray:
     if E.dtype == np.float64 or not isinstance(A, np.ndarray):
         return A.T @ E  # a RowBlockBasis casts by its own row blocks (basis.rmatmul_t)
     out = np.zeros(A.shape[1:] + E.shape[1:])
-    step = max(1, CHUNK_BYTES // (8 * max(int(np.prod(A.shape[1:])) + E.shape[1], 1)))
-    for i in range(0, E.shape[0], step):
-        out += A[i : i + step].T @ E[i : i + step].astype(np.float64)
+    for sl in row_blocks(E.shape[0], int(np.prod(A.shape[1:])) + E.shape[1]):
+        out += A[sl].T @ E[sl].astype(np.float64)
     return out
 
 
@@ -147,9 +160,8 @@ def project_out_inplace(U: np.ndarray, E: np.ndarray) -> np.ndarray:
     ``UᵀE`` is (p × B), small; the product ``U·(UᵀE)`` is formed one row block at a time.
     """
     UtE = t_matmul(U, E)
-    step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
-    for i in range(0, E.shape[0], step):
-        E[i : i + step] -= U[i : i + step] @ UtE
+    for sl in row_blocks(E.shape[0], E.shape[1]):
+        E[sl] -= U[sl] @ UtE
     return E
 
 
@@ -170,17 +182,14 @@ def null_replicates(
         E = rng.standard_normal((m, n_null))
     else:
         E = np.empty((m, n_null), dtype)
-        step = max(1, CHUNK_BYTES // (8 * max(n_null, 1)))
-        for i in range(0, m, step):  # the generator's stream consumed as by the one draw
-            E[i : i + step] = rng.standard_normal((min(step, m - i), n_null))
+        for sl in row_blocks(m, n_null):  # the generator's stream consumed as by the one draw
+            E[sl] = rng.standard_normal((sl.stop - sl.start, n_null))
     if shared is None:
         return E
     xi = rng.standard_normal((int(row.max()) + 1, n_null))
     c = np.clip(shared, -1.0, 1.0)
     own = np.sqrt(1.0 - c**2)
-    step = max(1, CHUNK_BYTES // (8 * max(n_null, 1)))
-    for i in range(0, m, step):  # by row blocks: no second (m × B) array
-        sl = slice(i, i + step)
+    for sl in row_blocks(m, n_null):  # by row blocks: no second (m × B) array
         E[sl] *= own[sl, None]
         E[sl] += c[sl, None] * xi[row[sl]]
     return E
@@ -192,10 +201,9 @@ LEVERAGE_MAX = 0.95  # a residual entry with leverage above this is rescaled as 
 def leverage(U: np.ndarray) -> np.ndarray:
     """(m,) leverage h = ‖U_i‖² of each whitened entry (U orthonormal), by row blocks."""
     h = np.empty(U.shape[0])
-    step = max(1, CHUNK_BYTES // (8 * max(U.shape[1], 1)))
-    for i in range(0, U.shape[0], step):
-        b = np.asarray(U[i : i + step])
-        h[i : i + step] = np.einsum("ij,ij->i", b, b)
+    for sl in row_blocks(U.shape[0], U.shape[1]):
+        b = np.asarray(U[sl])
+        h[sl] = np.einsum("ij,ij->i", b, b)
     return h
 
 
@@ -222,11 +230,10 @@ def leave_entries_out(U: Any, e: np.ndarray, h: np.ndarray, entries: np.ndarray
     c = Minv @ np.asarray(e, float)[J]
     A = UJ.T @ Minv @ UJ
     v = UJ.T @ c
-    step = max(1, CHUNK_BYTES // (8 * max(UJ.shape[1], 1)))
-    for i in range(0, e_out.size, step):
-        b = np.asarray(U[i : i + step])
-        e_out[i : i + step] += b @ v
-        h_out[i : i + step] += np.einsum("ij,jk,ik->i", b, A, b)
+    for sl in row_blocks(e_out.size, UJ.shape[1]):
+        b = np.asarray(U[sl])
+        e_out[sl] += b @ v
+        h_out[sl] += np.einsum("ij,jk,ik->i", b, A, b)
     e_out[J], h_out[J] = 0.0, 1.0
     return e_out, h_out
 
@@ -320,20 +327,17 @@ def wild_replicates(
         scale[np.isin(row, leave_out)] = 0.0
     scale *= reading_cap(scale, row, plateaus)[row]
     n, b = int(row.max()) + 1, out.shape[1]
-    step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
     if np.all(row[1:] >= row[:-1]):  # entries by reading (every problem's layout)
         # Each block of readings' signs drawn as it is used: the (N × B) signs were 160 MB
         # beside the replicates at 1 M readings (issue 22, memory); the same draws in the
         # same order (reading_signs), so the same replicates and the generator's state.
         for r0, signs in sign_blocks(rng, n, b):
             i, j = np.searchsorted(row, [r0, r0 + signs.shape[0]])
-            for k in range(i, j, step):  # by row blocks: no second (m × B) array
-                sl = slice(k, min(k + step, j))
+            for sl in row_blocks(j, b, start=i):  # by row blocks: no second (m × B) array
                 np.multiply(scale[sl, None], signs[row[sl] - r0], out=out[sl])
     else:
         signs = reading_signs(rng, n, b)
-        for i in range(0, out.shape[0], step):  # by row blocks: no second (m × B) array
-            sl = slice(i, i + step)
+        for sl in row_blocks(out.shape[0], b):  # by row blocks: no second (m × B) array
             np.multiply(scale[sl, None], signs[row[sl]], out=out[sl])
     if shared is not None:
         add_shared(rng, shared[0], shared[1], shared[2], out)
@@ -356,12 +360,11 @@ def reading_signs(rng: np.random.Generator, n: int, b: int) -> np.ndarray:
 def sign_blocks(rng: np.random.Generator, n: int, b: int) -> Iterator[tuple[int, np.ndarray]]:
     """The signs of :func:`reading_signs` block by block: (first reading, (r × b) signs),
     about CHUNK_BYTES each, in reading order; the generator consumed as by the one draw."""
-    step = max(1, CHUNK_BYTES // (8 * max(b, 1)))
-    for i in range(0, n, step):
-        block = np.empty((min(step, n - i), b))
+    for sl in row_blocks(n, b):
+        block = np.empty((sl.stop - sl.start, b))
         np.multiply(rng.integers(0, 2, block.shape), 2.0, out=block)
         block -= 1.0
-        yield i, block
+        yield sl.start, block
 
 
 # Tail of the per-reading statistic (reading_tail_dof): the order statistics at the median
@@ -540,22 +543,19 @@ def _residual_cov_blocks(
         return np.eye(g)[None] * (1.0 - cb[:, :, None] ** 2) + cb[:, :, None] * cb[:, None, :]
 
     W = np.eye(p)
-    step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
-    for i in range(0, n, step):  # v by blocks of readings: no (N × p) array (issue 22)
-        V = np.einsum("ng,ngp->np", cg[i : i + step], Ug[i : i + step])
+    for sl in row_blocks(n, g * max(p, 1)):  # v by blocks of readings: no (N × p) array
+        V = np.einsum("ng,ngp->np", cg[sl], Ug[sl])
         W += V.T @ V
     c2 = c**2
-    step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
-    for i in range(0, U.shape[0], step):
-        Ub = U[i : i + step]
-        W -= (Ub * c2[i : i + step, None]).T @ Ub
+    for sl in row_blocks(U.shape[0], p):
+        Ub = U[sl]
+        W -= (Ub * c2[sl, None]).T @ Ub
     out = np.empty((n, g, g))
-    step = max(1, CHUNK_BYTES // (8 * g * max(p, 1)))
-    for i in range(0, n, step):  # by blocks of readings: U_g W is an (m × p) array at once
-        Ub, Cb = Ug[i : i + step], c_blocks(slice(i, i + step))
+    for sl in row_blocks(n, g * max(p, 1)):  # by readings: U_g W is an (m × p) array at once
+        Ub, Cb = Ug[sl], c_blocks(sl)
         UUtC = np.einsum("ngp,nhp->ngh", Ub, Ub) @ Cb
         UWU = np.einsum("ngq,nhq->ngh", Ub @ W, Ub)
-        out[i : i + step] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
+        out[sl] = Cb - UUtC - np.transpose(UUtC, (0, 2, 1)) + UWU
     return out
 
 
@@ -565,9 +565,8 @@ def sum_sq_columns(E: np.ndarray) -> np.ndarray:
     if E.dtype == np.float64:
         return np.einsum("ij,ij->j", E, E)
     out = np.zeros(E.shape[1])
-    step = max(1, CHUNK_BYTES // (8 * max(E.shape[1], 1)))
-    for i in range(0, E.shape[0], step):
-        b = E[i : i + step].astype(np.float64)
+    for sl in row_blocks(E.shape[0], E.shape[1]):
+        b = E[sl].astype(np.float64)
         out += np.einsum("ij,ij->j", b, b)
     return out
 
@@ -577,10 +576,9 @@ def robust_scale(E: np.ndarray, dof_corr: float) -> np.ndarray:
 
     By blocks of columns: the median of |E| needs a copy, of one block at a time only.
     """
-    step = max(1, CHUNK_BYTES // (8 * max(E.shape[0], 1)))
     med = (
         np.concatenate(
-            [np.median(np.abs(E[:, j : j + step]), axis=0) for j in range(0, E.shape[1], step)]
+            [np.median(np.abs(E[:, sl]), axis=0) for sl in row_blocks(E.shape[1], E.shape[0])]
         )
         if E.shape[1]
         else np.zeros(0)
@@ -686,11 +684,10 @@ class BoundedShared:
         n_g = int(g.max()) + 1 if g.size else 0
         p = U.shape[1]
         out = np.zeros((n_g, p))
-        step = max(1, CHUNK_BYTES // (8 * max(p, 1)))
-        for i in range(0, g.size, step):
-            Ui = np.asarray(U[i:i + step]) * self.loading[i:i + step, None]
+        for sl in row_blocks(g.size, p):
+            Ui = np.asarray(U[sl]) * self.loading[sl, None]
             for j in range(p):
-                out[:, j] += np.bincount(g[i:i + step], Ui[:, j], minlength=n_g)
+                out[:, j] += np.bincount(g[sl], Ui[:, j], minlength=n_g)
         return out
 
     def bound(self, M: np.ndarray) -> float:
@@ -737,9 +734,7 @@ class BoundedShared:
             own_norm = np.sqrt(np.maximum(np.einsum("ng,ngh,nh->n", own, Minv, own), 0.0))
             c_norm = np.linalg.norm(C, axis=0)
             return self.half * (own_norm + u_norm * (c_norm.sum() - c_norm[own_g]))
-        step = max(1, CHUNK_BYTES // (8 * g * max(n_g, 1)))
-        for i in range(0, n, step):
-            sl = slice(i, i + step)
+        for sl in row_blocks(n, g * max(n_g, 1)):
             R = -np.einsum("ngp,pk->ngk", U[idx[sl]], C)  # (c, g, G): −(U Uᵀ z_h)_n
             R[np.arange(R.shape[0]), :, own_g[sl]] += z_own[sl]
             out[sl] = np.sqrt(np.maximum(np.einsum("ngk,ngh,nhk->nk", R, Minv[sl], R),
@@ -874,18 +869,17 @@ def scores_after(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray | N
     m, p = Xw.shape
     C = U.T @ Xw
     n_e = 0 if E is None else E.shape[1]
-    step = max(1, CHUNK_BYTES // (8 * max(p + U.shape[1] + n_e, 1)))
+    width = p + U.shape[1] + n_e
 
     def z_rows(i: int, j: int) -> np.ndarray:
         return Xw[i:j] - np.asarray(U[i:j]) @ C
 
     gram = np.zeros((p, p))
     tot = 0.0
-    for i in range(0, m, step):
-        j = min(i + step, m)
-        Z = z_rows(i, j)
+    for sl in row_blocks(m, width):
+        Z = z_rows(sl.start, sl.stop)
         gram += Z.T @ Z
-        tot += float(np.einsum("ij,ij->", Xw[i:j], Xw[i:j]))
+        tot += float(np.einsum("ij,ij->", Xw[sl], Xw[sl]))
     zz = float(np.trace(gram))
     T = eigen_cut_map(gram)
     k = T.shape[1]
@@ -894,13 +888,12 @@ def scores_after(U: np.ndarray, Xw: np.ndarray, e: np.ndarray, E: np.ndarray | N
     H = np.zeros((k, k))
     Ze = np.zeros(k)
     ZE = None if E is None else np.zeros((k, n_e))
-    for i in range(0, m, step):
-        j = min(i + step, m)
-        B1 = z_rows(i, j) @ T
+    for sl in row_blocks(m, width):
+        B1 = z_rows(sl.start, sl.stop) @ T
         H += B1.T @ B1
-        Ze += B1.T @ e[i:j]
+        Ze += B1.T @ e[sl]
         if E is not None:
-            ZE += B1.T @ E[i:j]
+            ZE += B1.T @ E[sl]
     Rt = np.linalg.cholesky(H)  # Rᵀ (lower): B = B1·R⁻¹, so Bᵀx = R⁻ᵀ·B1ᵀx
     Be = np.linalg.solve(Rt, Ze)
     BE = None if ZE is None else np.linalg.solve(Rt, ZE)
@@ -934,9 +927,7 @@ def inverse_where(M: np.ndarray, ok: np.ndarray) -> np.ndarray:
     blocks of readings (each block inverted on its own, as in one batch). Why (issue 22,
     memory): ``M[ok]`` and its inverse were two more (N, g, g) arrays at once."""
     Minv = np.zeros_like(M)
-    step = max(1, CHUNK_BYTES // (8 * M[0].size if M.shape[0] else 8))
-    for i in range(0, M.shape[0], step):
-        sl = slice(i, i + step)
+    for sl in row_blocks(M.shape[0], M[0].size if M.shape[0] else 1):
         keep = ok[sl]
         if keep.any():
             Minv[sl][keep] = np.linalg.inv(M[sl][keep])
@@ -1026,9 +1017,8 @@ def row_stats(
     # The max over readings by blocks of readings: no (N × B) array. s_null is one scale per
     # replicate, so max(q / s²) = max(q) / s².
     tn_max = np.full(E.shape[1], -np.inf)
-    step = max(1, CHUNK_BYTES // (8 * g * max(E.shape[1], 1)))
-    for i in range(0, n_rows, step):
-        q = np.einsum("ngb,ngh,nhb->nb", Eg[i : i + step], Minv[i : i + step], Eg[i : i + step])
+    for sl in row_blocks(n_rows, g * max(E.shape[1], 1)):
+        q = np.einsum("ngb,ngh,nhb->nb", Eg[sl], Minv[sl], Eg[sl])
         if mix:
             # w·q/k: the mixture's reading against the MAD scale k the mixture gives; the
             # replicates' own MAD scale (s_null) is the Gaussian's, 1.
@@ -1094,13 +1084,11 @@ def shared_variance(e: np.ndarray, U: np.ndarray, sg: SharedGroups
     G = np.zeros((nk, nk))
     c = np.zeros(nk)
     UZ = np.zeros((U.shape[1], nk))
-    step = max(1, CHUNK_BYTES // (8 * max(nk, U.shape[1], 1)))
-    for i in range(0, m, step):
-        j = min(i + step, m)
-        Z = _group_columns(sg, i, j)
+    for sl in row_blocks(m, max(nk, U.shape[1])):
+        Z = _group_columns(sg, sl.start, sl.stop)
         G += Z.T @ Z
-        c += Z.T @ e[i:j]
-        UZ += np.asarray(U[i:j]).T @ Z
+        c += Z.T @ e[sl]
+        UZ += np.asarray(U[sl]).T @ Z
     G -= UZ.T @ UZ
     sizes = sg.sizes
     lam, V = np.linalg.eigh(G)
@@ -1151,11 +1139,9 @@ def add_shared(rng: np.random.Generator, sg: SharedGroups, theta: np.ndarray, s2
     replicate (in place, by row blocks; not projected)."""
     draws = [rng.standard_normal((k, out.shape[1])) * np.sqrt(max(t, 0.0) * s2)
              for k, t in zip(sg.sizes, theta, strict=True)]
-    step = max(1, CHUNK_BYTES // (8 * max(out.shape[1], 1)))
     for L, g, b, t in zip(sg.loading, sg.group, draws, theta, strict=True):
         if t <= 0:
             continue
-        for i in range(0, out.shape[0], step):
-            sl = slice(i, i + step)
+        for sl in row_blocks(out.shape[0], out.shape[1]):
             out[sl] += L[sl, None] * b[g[sl]]
     return out

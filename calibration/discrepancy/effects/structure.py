@@ -311,9 +311,8 @@ def _label_parts(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_labels: i
     c = np.bincount(labels[on], (w * e)[on], minlength=n_labels) * inv
     r = U.shape[1]
     A = np.zeros((n_labels, r))
-    step = max(1, stats.CHUNK_BYTES // (8 * max(r, 1)))
-    for i in range(0, e.size, step):
-        j = min(i + step, e.size)
+    for blk in stats.row_blocks(e.size, r):
+        i, j = blk.start, blk.stop
         sel = np.flatnonzero(on[i:j])
         S = sparse.csr_matrix((w[i:j][sel], (labels[i:j][sel], sel)), shape=(n_labels, j - i))
         A += S @ np.asarray(U[i:j])
@@ -338,10 +337,8 @@ def fitted_by_labels(pb: Any, U: Any, e: np.ndarray, labels: np.ndarray, n_label
     on = labels >= 0
     fit = np.zeros(e.size)
     fit[on] = pb.w[on] * inv[labels[on]] * coef[labels[on]]
-    step = max(1, stats.CHUNK_BYTES // (8 * max(U.shape[1], 1)))
-    for i in range(0, e.size, step):
-        j = min(i + step, e.size)
-        fit[i:j] += np.asarray(U[i:j]) @ g
+    for sl in stats.row_blocks(e.size, U.shape[1]):
+        fit[sl] += np.asarray(U[sl]) @ g
     return fit
 
 
@@ -387,30 +384,29 @@ def extend_by_rows(U: Any, e: np.ndarray, rows: Any, p: int
     reference's 60 columns are 1.4 GB each as raw, lifted, projected and basis arrays).
     """
     m, r = e.size, U.shape[1]
-    step = max(1, stats.CHUNK_BYTES // (8 * max(p + r, 1)))
+    width = p + r
     C = np.zeros((r, p))
-    for i in range(0, m, step):
-        C += np.asarray(U[i : i + step]).T @ rows(i, min(i + step, m))
+    for sl in stats.row_blocks(m, width):
+        C += np.asarray(U[sl]).T @ rows(sl.start, sl.stop)
 
     def z_rows(i: int, j: int) -> np.ndarray:
         return rows(i, j) - np.asarray(U[i:j]) @ C
 
     gram = np.zeros((p, p))
-    for i in range(0, m, step):
-        Z = z_rows(i, min(i + step, m))
+    for sl in stats.row_blocks(m, width):
+        Z = z_rows(sl.start, sl.stop)
         gram += Z.T @ Z
     T = stats.eigen_cut_map(gram)
     H = np.zeros((T.shape[1], T.shape[1]))
-    for i in range(0, m, step):
-        B1 = z_rows(i, min(i + step, m)) @ T
+    for sl in stats.row_blocks(m, width):
+        B1 = z_rows(sl.start, sl.stop) @ T
         H += B1.T @ B1
     M = T @ np.linalg.inv(np.linalg.cholesky(H).T)
     Ut = StackedRows(U, z_rows, M)
     be = np.zeros(M.shape[1])
-    for i in range(0, m, step):
-        be += Ut.extra(i, min(i + step, m)).T @ e[i : i + step]
+    for sl in stats.row_blocks(m, width):
+        be += Ut.extra(sl.start, sl.stop).T @ e[sl]
     et = e.copy()
-    for i in range(0, m, step):
-        j = min(i + step, m)
-        et[i:j] -= Ut.extra(i, j) @ be
+    for sl in stats.row_blocks(m, width):
+        et[sl] -= Ut.extra(sl.start, sl.stop) @ be
     return Ut, et
