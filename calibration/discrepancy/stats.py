@@ -652,6 +652,14 @@ def min_p_family(logp: np.ndarray, logp_null: np.ndarray) -> tuple[float, int]:
 
     The leading family is the one with the smallest calibrated p on the recording, among
     those tied there the one with the smallest nominal p.
+
+    Resolution: count 0 here holds exactly when no replicate of any family is at or beyond
+    the recording's smallest nominal p (such a replicate makes its family's most extreme
+    replicate, at rank 1, at or beyond it too), i.e. when the nominal minimum's count is 0,
+    and the leading family is then the nominal minimum's. So at B = 400 and the selection's
+    α/2 = 0.0025 (below 2/401, only count 0 is significant) the decision is the nominal
+    minimum's; the calibration decides where count 1 or more can be significant (more
+    replicates: about one per family beyond α/2·(B + 1) − 1, or a larger α).
     """
     lp = np.asarray(logp, float)
     L = np.column_stack([lp, np.asarray(logp_null, float)])  # (k, B + 1), item 0 the data

@@ -76,3 +76,23 @@ def test_beyond_every_replicate_in_nominal_p_it_is_the_bonferroni_bound():
     p, best = stats.min_p_family(data, null)
     assert best == 1
     assert p == _nominal_minimum(data, null) == 4 * np.exp(-30.0)
+
+
+def test_count_zero_exactly_where_the_nominal_minimum_has_count_zero():
+    """At B = 400 and α/2 = 0.0025 only count 0 is significant: there min-P and the nominal
+    minimum decide alike and lead with the same family (stats.min_p_family, Resolution)."""
+    rng = np.random.default_rng(3)
+    seen = 0
+    for _ in range(300):
+        k = int(rng.integers(2, 8))
+        c = rng.uniform(0.3, 4.0, size=(k, 1))  # each family's own (mis)calibration
+        null = c * np.log(rng.uniform(size=(k, B)))
+        data = c[:, 0] * np.log(rng.uniform(size=k)) * rng.uniform(0.5, 6.0)
+        p, best = stats.min_p_family(data, null)
+        zero = p <= 1 / (B + 1)
+        assert zero == (null.min(axis=0) > data.min()).all()
+        if zero:
+            seen += 1
+            assert best == int(np.argmin(data))
+            assert p == _nominal_minimum(data, null)
+    assert seen > 10
