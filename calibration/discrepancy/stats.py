@@ -658,8 +658,9 @@ def min_p_family(logp: np.ndarray, logp_null: np.ndarray) -> tuple[float, int]:
     replicate, at rank 1, at or beyond it too), i.e. when the nominal minimum's count is 0,
     and the leading family is then the nominal minimum's. So at B = 400 and the selection's
     α/2 = 0.0025 (below 2/401, only count 0 is significant) the decision is the nominal
-    minimum's; the calibration decides where count 1 or more can be significant (more
-    replicates: about one per family beyond α/2·(B + 1) − 1, or a larger α).
+    minimum's; the calibration decides where count 1 or more can be significant (a larger
+    α, or B + 1 ≥ k/(α/2): at the floor the most extreme replicate of each of the other
+    k − 1 families can count).
     """
     lp = np.asarray(logp, float)
     L = np.column_stack([lp, np.asarray(logp_null, float)])  # (k, B + 1), item 0 the data
