@@ -618,6 +618,67 @@ class CandidateTest:
         return float(np.exp(self.logp_adj))
 
 
+def min_p_family(logp: np.ndarray, logp_null: np.ndarray) -> tuple[float, int]:
+    """The family-wise p of a stage's test over k candidate families, each family's nominal
+    p first calibrated on its own replicates (the min-P of Westfall & Young 1993, *Resampling-
+    Based Multiple Testing*, Wiley). Returns (p_family, index of the leading family).
+
+    ``logp`` (k,): each family's nominal (Šidák-adjusted) log p on the recording;
+    ``logp_null`` (k, B): the same on each of the B null replicates. The recording and its
+    replicates are B + 1 items, exchangeable under the null. For each family the calibrated
+    p of an item is its rank among the B + 1 values, ties counted against it (the number of
+    items at or below its log p, itself included) over B + 1; each item's statistic is the
+    smallest calibrated p over the families, and p_family = (1 + #{replicates at or below
+    the recording})/(B + 1). The map is symmetric in the B + 1 items, so the rank test is
+    exact under exchangeability whatever each family's nominal law.
+
+    Why: the minimum over *nominal* p lets the family whose nominal p is least calibrated
+    (a sign-flip null whose own replicates reach small p often) set every family's
+    threshold: an outlier beyond all 400 of its own replicates (nominal 10⁻⁷·⁰) was judged
+    against the pose turns' replicates, 160 of which reach 10⁻⁶·⁹ (p_family 0.45;
+    docs/benchmarks.md). Calibrated on its own replicates, each family counts alike.
+
+    Ties between families: at one calibrated level every family has an item (rank 1 is the
+    most extreme value of each), so by that level alone a recording beyond all replicates of
+    one family ties with the most extreme replicate of each other family and p_family could
+    not fall below about k/(B + 1) (10 families, B = 400: 0.025, above the selection's α/2).
+    Items at the same calibrated level are therefore ordered by the nominal log p of their
+    leading family (the lexicographic order (calibrated p, nominal p), still a symmetric
+    function of the items, so the test stays exact). A recording beyond every replicate of
+    every family in nominal p has count 0 as under the nominal minimum, and then, beyond the
+    bootstrap's resolution, the Bonferroni bound k·p of the leading family's nominal p.
+
+    The leading family is the one with the smallest calibrated p on the recording, among
+    those tied there the one with the smallest nominal p.
+
+    Resolution: count 0 here holds exactly when no replicate of any family is at or beyond
+    the recording's smallest nominal p (such a replicate makes its family's most extreme
+    replicate, at rank 1, at or beyond it too), i.e. when the nominal minimum's count is 0,
+    and the leading family is then the nominal minimum's. So at B = 400 and the selection's
+    α/2 = 0.0025 (below 2/401, only count 0 is significant) the decision is the nominal
+    minimum's; the calibration decides where count 1 or more can be significant (a larger
+    α, or B + 1 ≥ k/(α/2): at the floor the most extreme replicate of each of the other
+    k − 1 families can count).
+    """
+    lp = np.asarray(logp, float)
+    L = np.column_stack([lp, np.asarray(logp_null, float)])  # (k, B + 1), item 0 the data
+    L = np.where(np.isnan(L), 0.0, L)  # no statistic: p = 1
+    k, n1 = L.shape
+    S = np.sort(L, axis=1)
+    # Integer ranks (ties counted against each item), compared exactly.
+    rank = np.vstack([np.searchsorted(S[f], L[f], side="right") for f in range(k)])
+    r_min = rank.min(axis=0)  # (B + 1,) each item's smallest calibrated p × (B + 1)
+    at_min = np.where(rank == r_min, L, np.inf).min(axis=0)  # its leading family's log p
+    lead = np.flatnonzero(rank[:, 0] == r_min[0])
+    best = int(lead[np.argmin(L[lead, 0])])
+    rep_r, rep_l = r_min[1:], at_min[1:]
+    count = int(np.sum((rep_r < r_min[0]) | ((rep_r == r_min[0]) & (rep_l <= at_min[0]))))
+    p_family = (1 + count) / n1
+    if count == 0:  # beyond the bootstrap's resolution: Bonferroni over the families
+        p_family = min(p_family, float(np.exp(L[best, 0])) * k)
+    return p_family, best
+
+
 def sidak_log(logp: np.ndarray | float, mult: int) -> np.ndarray:
     """log of the Šidák adjustment 1 − (1 − p)^mult, accurate for p down to exp(−1e300)."""
     lp = np.minimum(np.asarray(logp, float), 0.0)
