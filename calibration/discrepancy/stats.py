@@ -108,17 +108,12 @@ def project_out(U: np.ndarray, X: np.ndarray) -> np.ndarray:
 CHUNK_BYTES = 16 * 2**20  # working block of the null replicates' row/column loops
 
 
-def rows_per_block(width: int) -> int:
-    """Rows of an array ``width`` float64 wide that fit one working block (CHUNK_BYTES)."""
-    return max(1, CHUNK_BYTES // (8 * max(width, 1)))
-
-
 def row_blocks(m: int, width: int, start: int = 0) -> Iterator[slice]:
-    """Slices of the rows ``start`` … ``m``, each a working block of an array ``width``
-    float64 wide. Every row loop over the diagnosis' large arrays goes by these blocks
-    (issue 10, memory): a product with an (m × B) array is formed one block at a time, so
-    no second (m × B) array exists."""
-    step = rows_per_block(width)
+    """Slices of the rows ``start`` … ``m``, each a working block (CHUNK_BYTES) of an array
+    ``width`` float64 wide. Every row loop over the diagnosis' large arrays goes by these
+    blocks (issue 10, memory): a product with an (m × B) array is formed one block at a
+    time, so no second (m × B) array exists."""
+    step = max(1, CHUNK_BYTES // (8 * max(width, 1)))
     for i in range(start, m, step):
         yield slice(i, min(i + step, m))
 
