@@ -94,6 +94,11 @@ MIN_LEVELS_READ = 0.8
 MAX_CANDIDATES = 64
 # A dithered channel's capture sums (n × mean) must lie on the lattice this often.
 MIN_SUMMED_SHARE = 0.95
+# A channel whose capture sums all move by one same whole number of LSB from each capture
+# to the next (more often than this) is a smooth ramp sampled evenly, not a dithered
+# quantised channel: its readings' noise would scatter the sums by several LSB
+# (σ/√n per mean) while the die moves by a fraction of one.
+MAX_UNIFORM_STEP_SHARE = 0.9
 # At least this share of the readings must be exactly a level's value (_lattice): what a
 # quantised channel prints, again and again.
 MIN_PRINTED_SHARE = 0.25
@@ -326,7 +331,10 @@ def summed_lattice(y: np.ndarray, samples: np.ndarray) -> tuple[float, float] | 
     common n those sums differ by whole LSBs. The LSB is the most common spacing of the
     distinct sums (at least :data:`MIN_LSB_C`, and repeated: a continuous channel's sums
     are all spaced differently), accepted when nearly all the sums
-    (:data:`MIN_SUMMED_SHARE`) are on its lattice. A level: the most
+    (:data:`MIN_SUMMED_SHARE`) are on its lattice and they do not move by one same number
+    of LSB from each capture to the next (:data:`MAX_UNIFORM_STEP_SHARE`: an evenly
+    sampled straight ramp, whose sums are spaced alike, e.g. 0.169 °C per 50-sample
+    capture read as an 8.47-°C LSB). A level: the most
     repeated mean where one repeats (a capture all on one level), else the first capture's
     sum ÷ n (a level up to q/n; the channel then dithers by ≳ ½ LSB and the rebuild does
     not depend on it)."""
@@ -348,6 +356,10 @@ def summed_lattice(y: np.ndarray, samples: np.ndarray) -> tuple[float, float] | 
     k = (s - s[0]) / q
     if np.mean(np.abs(k - np.round(k)) <= ON_LEVEL_TOL) < MIN_SUMMED_SHARE:
         return None
+    steps = np.diff(np.round(k))
+    modal = float(np.median(steps))
+    if modal != 0 and np.mean(steps == modal) > MAX_UNIFORM_STEP_SHARE:
+        return None  # every capture one step further: a ramp, not a dithered lattice
     values, counts = np.unique(np.round(y[ok], 9), return_counts=True)
     base = float(values[np.argmax(counts)]) if counts.max() >= 3 else float(s[0] / n0)
     return q, base

@@ -128,6 +128,18 @@ def test_a_finely_quantised_channel_is_returned_unchanged() -> None:
     np.testing.assert_array_equal(dequantise(t, smooth).temperature_c, smooth)
 
 
+def test_an_evenly_sampled_straight_ramp_of_capture_means_is_not_a_lattice() -> None:
+    # 50-sample capture means 0.169 °C apart: their sums are spaced 8.47 °C alike, which
+    # read as a dithered channel's lattice claimed an 8.47-°C LSB; a dithered channel's
+    # sums scatter by several LSB from capture to capture instead of one step each
+    t = np.arange(60, dtype=float) * 5.0
+    ramp = 20.0 + 10.0 * t / t[-1]
+    n = np.full(t.size, 50.0)
+    dq = dequantise(t, ramp, n)
+    assert not dq.rebuilt and dq.note() is None
+    np.testing.assert_array_equal(dq.temperature_c, ramp)
+
+
 def test_half_and_twice_the_lsb_are_not_taken_for_it() -> None:
     # a capture mean midway between levels now and then (a crossing at mid-capture) does not
     # make the LSB 0.5 °C; rests on even levels do not make it 2 °C
