@@ -632,10 +632,14 @@ def _check_bias_tempco(model: ThermalModel, captures: Recording | None = None,
         _fastest_rate_c_per_min(model, captures)))
 
 
-def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
+def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray, *,
+                       with_choice: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(3, n) slope of each axis' bias polynomial (Eq. 8) at ``temperature_c``, g/°C, and
-    its standard error (0 where the model carries no covariance of its coefficients)."""
+    its standard error (0 where the model carries no covariance of its coefficients).
+
+    The error is the fitted curve's own (``coeff_cov``: what the gate judges), or with
+    ``with_choice`` the one that carries the choice of the degree as well
+    (``coeff_cov_choice``: what the report states)."""
     d = model.degree
     x = model.x_of(np.asarray(temperature_c, float))
     # d/dT Σ_j c_j x^j = Σ_j j c_j x^(j−1) / scale
@@ -644,7 +648,7 @@ def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray
         D[:, j] = j * x ** (j - 1) / model.t_scale_c
     slope = model.coeffs[sfem.BIAS] @ D.T
     se = np.zeros_like(slope)
-    cov = model.coeff_cov
+    cov = model.coeff_cov_choice if with_choice else model.coeff_cov
     if cov is not None and cov.shape[1:] == (d + 1, d + 1):
         for k in range(3):
             if np.all(np.isfinite(cov[k])):

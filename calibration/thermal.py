@@ -96,6 +96,11 @@ class ThermalModel:
     # gives it (a warm-up's bias), NaN elsewhere; not saved: the gate's slope check
     # (calibration.gate) reads it at fit time.
     coeff_cov: np.ndarray | None = None
+    # The same with the choice of the model's degree in it (a warm-up's bias:
+    # calibration.warmup._selection_cov), from which ``coeff_stderr`` is taken: the error
+    # of the coefficients as the data know them. The gate judges the applied curve by
+    # ``coeff_cov``. Not saved.
+    coeff_cov_choice: np.ndarray | None = None
 
     @property
     def degree(self) -> int:

@@ -88,6 +88,7 @@ from calibration.gate import (
     BIAS_TEMPCO_MAX_G_PER_C,
     GateRefusal,
     Orientations,
+    bias_slope_g_per_c,
     check_warmup_residuals,
 )
 from calibration.recording import Recording
@@ -266,15 +267,21 @@ def fit_warmup(captures: Recording, orientations: Orientations,
     if axes.reduced:
         chosen = axes.heldout_rms_g
     coef, se, k_rate, k_se, cov = _fit_axes(x, labels, raw, degree, rate_cols, axes.choice)
+    choice_cov = cov + _selection_cov(x, labels, raw, folds, coef, axes.choice, errors,
+                                      joint_errors, rate_cols, _block_index(T))
     coeffs = np.tile(sfem.identity_vector()[:, None], (1, degree + 1))
     coeffs[:, 1:] = 0.0
     coeffs[sfem.BIAS, 0] = 0.0
     coeffs[sfem.BIAS, 1:] = coef
     coeff_se = np.full_like(coeffs, np.nan)
-    coeff_se[sfem.BIAS, 1:] = se
+    # the stated error carries the choice of degree (the model file and the report)
+    coeff_se[sfem.BIAS, 1:] = np.sqrt(np.clip(np.diagonal(choice_cov, axis1=1, axis2=2),
+                                              0.0, None))
     coeff_cov = np.full((sfem.N_PARAMS, degree + 1, degree + 1), np.nan)
     coeff_cov[sfem.BIAS] = 0.0  # the constant (x⁰) is referred to centre_c: no error
+    coeff_cov_choice = coeff_cov.copy()
     coeff_cov[sfem.BIAS, 1:, 1:] = cov
+    coeff_cov_choice[sfem.BIAS, 1:, 1:] = choice_cov
     identifiable = np.zeros(sfem.N_PARAMS, bool)
     identifiable[sfem.BIAS] = [d > 0 for d, _ in axes.choice]
     fitted = {n: BIAS_NOTE for n, (d, _) in zip(sfem.PARAM_NAMES[:3], axes.choice,
@@ -306,14 +313,16 @@ def fit_warmup(captures: Recording, orientations: Orientations,
             pad = absolute.degree - degree
             coeffs = np.hstack([coeffs, np.zeros((sfem.N_PARAMS, pad))])
             coeff_se = np.hstack([coeff_se, np.full((sfem.N_PARAMS, pad), np.nan)])
-            coeff_cov = np.pad(coeff_cov, ((0, 0), (0, pad), (0, pad)),
-                               constant_values=np.nan)
+            coeff_cov, coeff_cov_choice = (
+                np.pad(c, ((0, 0), (0, pad), (0, pad)), constant_values=np.nan)
+                for c in (coeff_cov, coeff_cov_choice))
         rows = [sfem.PARAM_NAMES.index(n) for n in absolute.names]
         coeffs[rows] = 0.0
         coeffs[rows, : absolute.degree + 1] = absolute.coeffs
         coeff_se[rows] = np.nan
         coeff_se[rows, : absolute.degree + 1] = absolute.stderr
         coeff_cov[rows] = np.nan  # the absolute fit gives standard errors only
+        coeff_cov_choice[rows] = np.nan
         identifiable[rows] = True
         for n in absolute.names:
             fitted[n] = fitted_note(absolute, orientations)
@@ -385,6 +394,7 @@ def fit_warmup(captures: Recording, orientations: Orientations,
         coeffs=coeffs, t_centre_c=centre, t_scale_c=scale, valid_c=(lo, hi), mode="warmup",
         identifiable=identifiable, coeff_stderr=coeff_se, method="warmup",
         temperature_rate=temperature_rate, coeff_cov=coeff_cov,
+        coeff_cov_choice=coeff_cov_choice,
         temperature_source=captures.temperature_source, temperature_conditioning=conditioning,
         notes=list(notes), fitted=fitted, held=held,
         provenance={
@@ -955,6 +965,50 @@ def _fit_axes(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
     return coef, se, k_rate, k_se, cov
 
 
+def _selection_cov(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np.ndarray,
+                   coef: np.ndarray, choice: tuple[tuple[int, bool], ...],
+                   errors: list[tuple[np.ndarray, np.ndarray]],
+                   joint_errors: tuple[np.ndarray, np.ndarray],
+                   rate_cols: np.ndarray | None, block: np.ndarray) -> np.ndarray:
+    """(3, d, d) each axis' model-selection term of its drift coefficients' covariance, g².
+
+    Held-out error chooses the degree, and where the noise looks curved a higher degree
+    is chosen and its slope moves with that curvature; the chosen model's own covariance
+    (:func:`_fit`), as if it had been the only one tried, then understates the slope's
+    spread over noise draws (1.6–1.7× at the span's edge on a straight line;
+    docs/benchmarks.md, "A warm-up's stated bias slope error"). The term is that of a
+    model-averaged variance (Buckland, Burnham & Augustin 1997), at full weight over the
+    models the data could not tell from the chosen one: for each lower degree d' ≥ 1 that
+    the axis' chosen model (``choice``: degree, rate term) does not beat on that axis'
+    own held-out error beyond the gain's standard error (:func:`_beats`), the outer
+    product of the two coefficient vectors' difference (d' fitted with the axis' own rate
+    setting, zero-padded). Zero where degree 1 is chosen or every lower degree is beaten.
+
+    It is the error of the slope as the data know it (the model file's standard errors,
+    the report's slope); the gate judges the curve that is applied by its own fit's
+    covariance (:attr:`ThermalModel.coeff_cov`): a steep local slope a lower degree
+    cannot be told from is still the slope the compensation applies.
+    """
+    term = np.zeros((3, coef.shape[1], coef.shape[1]))
+    for a, (d_a, r_a) in enumerate(choice):
+        # the axis' own held-out errors: the joint model's, or a simpler one's without
+        # the rate term (:func:`_axis_choices`)
+        own = joint_errors if (d_a, r_a) == (coef.shape[1], rate_cols is not None) \
+            else errors[d_a]
+        for d in range(1, d_a):
+            lower = (_heldout_errors_g(x, labels, raw, folds, d, rate_cols) if r_a
+                     else errors[d])
+            if not (np.array_equal(lower[1], own[1]) and lower[1].size):
+                continue
+            if _beats(lower[0][:, a], own[0][:, a], block[own[1]]):
+                continue
+            c_lower = _fit(x, labels, raw, d, rate_cols if r_a else None)[0][a]
+            diff = -coef[a].copy()
+            diff[:d] += c_lower
+            term[a] += np.outer(diff, diff)
+    return term
+
+
 def _fit(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, degree: int,
          rate_cols: np.ndarray | None = None
          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -1091,10 +1145,35 @@ def _report(model: ThermalModel, captures: Recording, orientations: Orientations
             n: [round(float(v) * 1e6, 3) for v in phys[k, 1:]]
             for k, n in enumerate(sfem.PARAM_NAMES[:3])
         },
+        "bias_slope_ug_per_c": _slope_report(model),
         "fitted": dict(model.fitted),
         "held": dict(model.held),
         "notes": list(model.notes),
     }
+
+
+def _slope_report(model: ThermalModel) -> dict[str, Any]:
+    """Each fitted axis' bias slope d b/dT (Eq. 8) at the valid range's ends and centre,
+    µg/°C, ± 1σ with the choice of the degree in it (:func:`_selection_cov`)."""
+    lo, hi = model.valid_c  # type: ignore[misc]
+    temps = np.array([lo, model.t_centre_c, hi])
+    slope, se = bias_slope_g_per_c(model, temps, with_choice=True)
+    fitted = [k for k, n in enumerate(sfem.PARAM_NAMES[:3]) if n in model.fitted]
+    return {"temperature_c": [round(float(t), 3) for t in temps],
+            **{sfem.PARAM_NAMES[k]: {"value": [round(float(v) * 1e6, 3) for v in slope[k]],
+                                     "stderr": [round(float(v) * 1e6, 3) for v in se[k]]}
+               for k in fitted}}
+
+
+def _format_slopes(slopes: dict[str, Any] | None) -> list[str]:
+    axes = {k: v for k, v in (slopes or {}).items() if k != "temperature_c"}
+    if not axes:
+        return []
+    temps = " / ".join(f"{t:.2f}" for t in slopes["temperature_c"])  # type: ignore[index]
+    return [f"bias slope at {temps} °C (µg/°C, ± 1σ with the choice of degree): "
+            + "; ".join(f"{n} " + " / ".join(f"{v:+.1f} ± {e:.1f}" for v, e in
+                                             zip(d["value"], d["stderr"], strict=True))
+                        for n, d in axes.items())]
 
 
 def format_warmup(report: dict[str, Any]) -> str:
@@ -1115,6 +1194,7 @@ def format_warmup(report: dict[str, Any]) -> str:
         + " ".join(f"{v:.4f}" for v in report["heldout_rms_mg_xyz"]["compensated"]),
         "bias change over the valid range (mg): "
         + ", ".join(f"{k} {v:+.4f}" for k, v in report["bias_change_mg"].items()),
+        *_format_slopes(report.get("bias_slope_ug_per_c")),
         "fitted: " + (", ".join(report["fitted"]) or "nothing (no change with temperature "
                                                        "above the noise)"),
         *_format_absolute(report.get("absolute")),
