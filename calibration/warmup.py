@@ -1145,18 +1145,20 @@ def _report(model: ThermalModel, captures: Recording, orientations: Orientations
             n: [round(float(v) * 1e6, 3) for v in phys[k, 1:]]
             for k, n in enumerate(sfem.PARAM_NAMES[:3])
         },
-        "bias_slope_ug_per_c": _slope_report(model),
+        "bias_slope_ug_per_c": _slope_report(model, captures.temperature_c()),
         "fitted": dict(model.fitted),
         "held": dict(model.held),
         "notes": list(model.notes),
     }
 
 
-def _slope_report(model: ThermalModel) -> dict[str, Any]:
-    """Each fitted axis' bias slope d b/dT (Eq. 8) at the valid range's ends and centre,
+def _slope_report(model: ThermalModel, temperature_c: np.ndarray) -> dict[str, Any]:
+    """Each fitted axis' bias slope d b/dT (Eq. 8) at the ends of the capture means'
+    temperatures (``temperature_c``: where the data pin it; the valid range reaches the raw
+    rows' extremes, and a cubic's slope out there is an extrapolation) and at the centre,
     µg/°C, ± 1σ with the choice of the degree in it (:func:`_selection_cov`)."""
-    lo, hi = model.valid_c  # type: ignore[misc]
-    temps = np.array([lo, model.t_centre_c, hi])
+    T = np.asarray(temperature_c, float)
+    temps = np.array([np.nanmin(T), model.t_centre_c, np.nanmax(T)])
     slope, se = bias_slope_g_per_c(model, temps, with_choice=True)
     fitted = [k for k, n in enumerate(sfem.PARAM_NAMES[:3]) if n in model.fitted]
     return {"temperature_c": [round(float(t), 3) for t in temps],
