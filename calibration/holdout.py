@@ -117,9 +117,11 @@ def leave_one_out(rec: Recording, fit: ThermalFit) -> dict[str, Any]:
         if dof["spare"] < MIN_SPARE_DOF:
             where = (f"{names.size} positions" if n_ori >= names.size else
                      f"{names.size} positions, {n_ori} distinct orientations")
+            counted = ("; counted on |g|, one per position: the hand-placed labels are a "
+                       "prior of ref_tol_deg, not observations" if tol is not None else "")
             warnings.append(
                 f"step {st.step}: {dof['spare']} spare degree(s) of freedom "
-                f"({where}, {n_params} parameters, {mode} mode): the fit "
+                f"({where}, {n_params} parameters, {mode} mode{counted}): the fit "
                 f"can follow its readings, so its in-sample {st.fit.rmse_norm_ug / 1e3:.4f} mg "
                 f"says little; no held-out figure is given (loo_rmse_ug null); measure "
                 f"more positions")

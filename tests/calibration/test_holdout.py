@@ -104,6 +104,19 @@ def test_hand_placed_column_reaches_the_fit_through_calibrate() -> None:
     assert fh.steps[0].rmse_measurement_ug < 20.0 < fe.steps[0].rmse_measurement_ug
 
 
+def test_hand_placed_faces_warn_that_their_spare_dof_count_only_g() -> None:
+    # Six hand-placed faces fit all 12 parameters (the labels a prior of ref_tol_deg), but
+    # only the six |g| are observations: the warning says what it counted, so "-3 spare"
+    # beside "12 of 12 identifiable" is not read as a contradiction
+    hand = _static_recording(schedules.six_position(), seed=6, ref=True, tilt_deg=1.0,
+                             tol_deg=2.0)
+    held = holdout.holdout_fields(hand, fit_campaign(hand), warn=io.StringIO())
+    assert held["loo_rmse_ug"] is None and held["dof"]["spare"] == 6 - 9
+    assert ("9 parameters, reference mode; counted on |g|, one per position: the "
+            "hand-placed labels are a prior of ref_tol_deg, not observations"
+            in held["warnings"][0])
+
+
 def test_ref_tol_column_read_from_a_file_and_bad_cells_named(tmp_path: Path) -> None:
     from calibration.recording import read_recording
 
