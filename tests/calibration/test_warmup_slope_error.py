@@ -71,3 +71,25 @@ def test_a_line_chosen_states_its_own_fits_error():
     np.testing.assert_array_equal(model.coeff_cov_choice[2], model.coeff_cov[2])
     slope, stated = gate.bias_slope_g_per_c(model, np.array([25.0]), with_choice=True)
     assert abs(slope[2, 0] - SLOPE_G_PER_C) < 3 * stated[2, 0]
+
+
+def test_an_axis_fitted_absolutely_states_no_slope_error_rather_than_zero():
+    # z up and z down alternating while the board warms: bz is fitted absolutely (its
+    # coefficients carry standard errors only, no covariance), so its slope's error is not
+    # known; it is given as null, never as ± 0
+    rng = np.random.default_rng(3)
+    t = np.arange(120, dtype=float) * 5.0
+    T = 20.0 + 10.0 * t / t[-1] + rng.normal(0.0, 0.01, t.size)
+    up = np.where((np.arange(t.size) // 4) % 2 == 0, 1.0, -1.0)
+    ones = np.ones(t.size)
+    rec = Recording.from_columns({
+        "t_s": t, "sensor_c": T, "ax": rng.normal(0.0, 2e-4, t.size),
+        "ay": rng.normal(0.0, 2e-4, t.size),
+        "az": up + 0.01 + SLOPE_G_PER_C * (T - 20.0) + rng.normal(0.0, 2e-4, t.size),
+        "sd_x": 1e-3 * ones, "sd_y": 1e-3 * ones, "sd_z": 1e-3 * ones, "n": 50.0 * ones})
+    result = fit(rec)
+    assert "bz" in result.model.fitted and "bz" in result.report["absolute"]["parameters"]
+    bz = result.report["bias_slope_ug_per_c"]["bz"]
+    assert bz["stderr"] == [None, None, None]
+    assert abs(bz["value"][1] - SLOPE_G_PER_C * 1e6) < 100.0
+    assert "(fitted absolutely: its error is the absolute fit's)" in format_warmup(result.report)
