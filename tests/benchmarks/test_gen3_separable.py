@@ -16,6 +16,7 @@ from benchmarks.blind.gen3.protocol import Protocol
 from benchmarks.blind.gen3.schedules import faces
 from benchmarks.blind.gen3.separable import (
     JUMP,
+    ChannelOracle,
     named_rivals,
     noise_check,
     signature_g,
@@ -60,3 +61,28 @@ def test_a_power_cycle_on_a_one_way_staircase_is_honestly_not_established(tmp_pa
     assert sep[rivals[0]]["lam_known"] < 1e-6  # the jump is the power cycle's own column
     assert oracle_class("not_established", sep, rivals) == "honest"
     assert oracle_class("not_established", sep, []) == "deficit"
+
+
+def test_a_coarse_channels_rounding_is_noise_along_the_slope_in_the_channel_oracle(tmp_path):
+    # one plateau's rounding error of the channel, u °C along ∂output/∂T: with a prior
+    # variance pv per plateau, GLS leaves it λ = λ₀/(1 + pv·λ₀) ≤ 1/pv
+    case = _staircase(5)
+    rows = simulate(case)
+    csv = tmp_path / "case.csv"
+    write_csv(rows, csv)
+    slope = np.array([case.sensor.output_g(np.array([r["ref_x"], r["ref_y"], r["ref_z"]]),
+                                           r["die_c"] + 0.01)
+                      - case.sensor.output_g(np.array([r["ref_x"], r["ref_y"], r["ref_z"]]),
+                                             r["die_c"] - 0.01) for r in rows]) / 0.02
+    steps = np.array([r["step"] for r in rows])
+    sig = slope * 0.3 * (steps == 2)[:, None]  # 0.3 °C on plateau 2
+    key = {"catalogue_id": "temperature_sensor", "pattern": {"rows": []}}
+    plain = separability(Oracle(csv), key, sig, [], ALPHA / 2)["base"]["lam_known"]
+    pv = 0.25  # (0.5 °C)²
+    coarse = separability(ChannelOracle(csv, slope, steps, pv), key, sig, [],
+                          ALPHA / 2)["base"]["lam_known"]
+    none = separability(ChannelOracle(csv, slope, steps, 0.0), key, sig, [],
+                        ALPHA / 2)["base"]["lam_known"]
+    assert plain > 10.0
+    np.testing.assert_allclose(none, plain, rtol=1e-9)
+    assert coarse < 0.3**2 / pv * 1.01  # the plateau's rounding takes it

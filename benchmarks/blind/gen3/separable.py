@@ -67,11 +67,12 @@ from benchmarks.blind.gen2.separable import (
 )
 from benchmarks.blind.gen2.separable import classify as oracle_class
 from benchmarks.blind.gen3.case import draw_case, simulate
-from benchmarks.blind.gen3.effects import draw_effect
+from benchmarks.blind.gen3.effects import channel_noise, draw_effect
 from benchmarks.blind.gen3.run import diagnose_json, variant_case
 from benchmarks.blind.gen3.score import classify as score_class
 from benchmarks.blind.gen3.stats import clopper_pearson
 from benchmarks.blind.gen3.writer import write_csv
+from calibration.discrepancy import stats
 from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.protocol_order import time_and_position_confounded
@@ -80,6 +81,38 @@ from calibration.discrepancy.temperature_jump import thresholds_c
 
 JUMP = "a jump of the output where the temperature crosses"
 SAME_ORDER = "same order on every plateau"
+
+
+class ChannelOracle(Oracle):
+    """gen2's ``Oracle`` with the temperature channel's per-plateau rounding as a random
+    effect: the diagnosis' whitening does not carry it, gen3's size rule does
+    (``effects.noncentrality``: u_j ~ N(0, ``plateau_var``) per plateau j along
+    ∂output/∂T). In the oracle's noise units the covariance is I + pv·GGᵀ (G: the whitened
+    per-plateau ∂output/∂T columns); ``w`` applies (I + pv·GGᵀ)^(−1/2) after the
+    diagnosis' whitening and the base is re-projected in that metric, so λ and power are
+    generalised least squares against the drawn channel as well."""
+
+    def __init__(self, csv: Path, slope_g_per_c: np.ndarray, steps: np.ndarray,
+                 plateau_var: float) -> None:
+        super().__init__(csv)
+        self._q: np.ndarray | None = None
+        if plateau_var > 0.0:
+            cols = np.concatenate([(slope_g_per_c * (steps == k)[:, None])[:, :, None]
+                                   for k in np.unique(steps)], axis=2)
+            G = Oracle.w(self, cols) * np.sqrt(plateau_var)
+            q, sv, _ = np.linalg.svd(G, full_matrices=False)
+            keep = sv > 1e-9 * max(float(sv.max(initial=0.0)), 1e-300)
+            self._q, self._f = q[:, keep], 1.0 / np.sqrt(1.0 + sv[keep] ** 2) - 1.0
+        Xw = np.asarray(self.pb.X0) * self.pb.w[:, None]
+        self.U0 = stats.orthonormal_basis(self._t(Xw))
+
+    def _t(self, A: np.ndarray) -> np.ndarray:
+        if self._q is None:
+            return A
+        return A + self._q @ (self._f[:, None] * (self._q.T @ A))
+
+    def w(self, X: np.ndarray) -> np.ndarray:
+        return self._t(super().w(X))
 
 
 def regenerate(r: dict[str, Any]) -> tuple[list[dict[str, Any]], Any, dict[str, Any]]:
@@ -229,8 +262,10 @@ def oracle_case(out: Path, r: dict[str, Any], alpha: float = ALPHA) -> dict[str,
         kept = sorted((out / "alarms").glob(f"gen3-*-{r['index']:04d}.csv"))
         same = None if not kept else kept[0].read_bytes() == csv.read_bytes()
         o = Oracle(csv)
+        chan = channel_noise(drawn.case, rows)
+        oc = ChannelOracle(csv, chan.slope, chan.steps, chan.plateau_var)
         sig_g = signature_g(rows, drawn)
-        sig = o.w(sig_g[:, :, None])
+        sig = oc.w(sig_g[:, :, None])
         rivals: list[str] = []
         named = None
         if status == "not established":
@@ -241,23 +276,31 @@ def oracle_case(out: Path, r: dict[str, Any], alpha: float = ALPHA) -> dict[str,
                 doc = diagnose_json(csv)
                 cache.parent.mkdir(exist_ok=True)
                 cache.write_text(json.dumps(doc, default=str), encoding="utf-8")
-            rivals = named_rivals(doc, kid, o, sig)
+            rivals = named_rivals(doc, kid, oc, sig)
             named = kid_named(doc, kid)
         key = {"catalogue_id": kid, "pattern": {"rows": list(drawn.outlier_rows)}}
-        sep = separability(o, key, sig_g, rivals, alpha / 2)
+        sep = separability(oc, key, sig_g, rivals, alpha / 2)
+        plain = separability(o, key, sig_g, rivals, alpha / 2)
         check, null = noise_check(o, rows), null_check(o, sig_g)
+        null_c = null_check(oc, sig_g)
     finally:
         shutil.rmtree(tmp)
-    cls = oracle_class("not_established" if status == "not established" else status, sep,
-                       rivals)
-    if status == "missed":
-        cls = ("missed detectable" if sep["base"]["power_cols"] >= POWER_SEPARABLE
-               else "missed undetectable")
+    def _class(sp: dict[str, Any]) -> str:
+        if status == "missed":
+            return ("missed detectable" if sp["base"]["power_cols"] >= POWER_SEPARABLE
+                    else "missed undetectable")
+        return oracle_class("not_established" if status == "not established" else status,
+                            sp, rivals)
+
+    cls = _class(sep)
     f = r["features"]
     return {"effect": kid, "index": r["index"], "case_seed": r["case_seed"],
             "protocol": f"{f['plateaus']} pl {f['order']}", "status": status,
             "class": cls, "rivals": rivals, "csv_same_as_kept": same,
             "signal_rms_ug": float(np.sqrt(np.mean(sig_g**2)) * 1e6), "noise_s": o.s,
+            "class_without_channel": _class(plain), "sep_without_channel": plain,
+            "plateau_var_c2": chan.plateau_var, "null_rms_with_channel": null_c,
+            "hand": f["fixture"] == "hand", "t_lsb_c": f["t_lsb_c"],
             "kid_named": named, "share_left": info.get("share_left"),
             "base_absorbs": info.get("share_left") is not None
             and info["share_left"] < 1.0 - BY_ID[kid].absorbed_max,
@@ -279,13 +322,16 @@ def _ci(k: int, n: int) -> str:
     return f"{k}/{n} [{100 * lo:.0f}, {100 * hi:.0f}] %"
 
 
-def markdown(rows: list[dict[str, Any]]) -> str:
+def summary(rows: list[dict[str, Any]], key: str = "class") -> list[str]:
+    """The per-effect table of the classes under ``key`` (``class``: with the channel's
+    rounding; ``class_without_channel``: the diagnosis' whitening alone)."""
     by: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     for r in rows:
-        by[r["effect"]][r["class"]] += 1
-        if r["class"] in ("honest", "deficit") and not r["kid_named"]:
-            by[r["effect"]][r["class"] + " unnamed"] += 1
-        by[r["effect"]]["missed detectable absorbed"] += (r["class"] == "missed detectable"
+        c = r[key]
+        by[r["effect"]][c] += 1
+        if c in ("honest", "deficit") and not r["kid_named"]:
+            by[r["effect"]][c + " unnamed"] += 1
+        by[r["effect"]]["missed detectable absorbed"] += (c == "missed detectable"
                                                           and r["base_absorbs"])
     head = ["| effect | n | right | not established: honest (effect not among the "
             "candidates) | not established: power deficit (effect not among the candidates) "
@@ -308,10 +354,20 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         for k in (*CLASSES, "honest unnamed", "deficit unnamed", "missed detectable absorbed"):
             tot[k] += by[e][k]
     head.append(line("all", tot))
+    return head
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    head = summary(rows)
+    head += ["", "Without the temperature channel's rounding (the diagnosis' whitening "
+             "alone):", ""] + summary(rows, "class_without_channel")
+    head += ["", "Table fixture only (a hand fixture's re-seating turns are noise the "
+             "diagnosis' whitening spreads over every row):", ""] + summary(
+                 [r for r in rows if not r["hand"]])
     head += ["", "| effect | case | protocol | class | rivals named | λ base (dof) | power base "
              "| λ after rivals (dof) | power after rivals | λ known-shape after rivals "
-             "| hardest single rival's power | check rms (null rms) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| hardest single rival's power | class without the channel | check rms (null rms) "
+             "|", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r["status"] not in ("not established", "missed"):
             continue
@@ -322,6 +378,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
                     f"{riv} | {b['lam_cols']:.1f} ({b['dof']}) | {b['power_cols']:.2f} | "
                     f"{w['lam_cols']:.1f} ({w['dof']}) | {w['power_cols']:.2f} | "
                     f"{w['lam_known']:.1f} | {_p(r['power_hardest_single'])} | "
+                    f"{r['class_without_channel']} | "
                     f"{r['check_noise_rms']:.2f} ({r['null_rms']:.2f}) |")
     return "\n".join(head) + "\n"
 
