@@ -8,8 +8,11 @@ A scorer, not part of the generator: it imports the diagnosis (gen2's oracle,
 (the same draws: ``case_seed``, ``variant_case``, ``effects.draw_effect``, ``simulate``),
 writes its recording (checked against the kept ``OUT/alarms`` CSV when there is one) and
 asks, in the diagnosis' own whitened residual space (gen2's ``Oracle``: ``build_problem``,
-``robust_scale``): could the data have told the drawn effect from the base model and from
-the rival(s) the diagnosis named beside it, at this size?
+``robust_scale``) with the temperature channel's per-plateau rounding added as a random
+effect along ∂output/∂T (``ChannelOracle``: gen3's size rule counts it, the diagnosis'
+whitening does not): could the data have told the drawn effect from the base model and
+from the rival(s) the diagnosis named beside it, at this size? (A hand fixture's re-seating
+turns are not added: ``markdown`` reports the table fixture's cases apart.)
 
 * the signature (``signature_g``): what the effect put into the recording, noise-free —
   the rows' ``extra_g`` (``amplitude × pattern``; an outlier's per-row amplitudes ×
