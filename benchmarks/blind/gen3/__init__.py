@@ -12,5 +12,6 @@ Modules: ``sensor`` (the gain-and-bias sensor), ``schedules`` (orientations),
 ``protocol`` (plateaus, visits, timing), ``case`` (one seeded case → CSV rows),
 ``writer`` (the recording CSV), ``stats`` (Clopper–Pearson), ``run`` (the benchmark),
 ``effects`` (catalogue effects and their size rule), ``score`` (right / not established /
-wrong / missed).
+wrong / missed); ``separable`` (a scorer that imports the diagnosis, as no generator
+module does: gen2's oracle of separability on gen3's cases).
 """
