@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.discrepancy import by_fit, not_confirmed, stats, within_rounding
+from calibration.discrepancy import absorbed_alike, by_fit, not_confirmed, stats, within_rounding
 from calibration.discrepancy import one_step as one_step_report
 from calibration.discrepancy import samples as samples_mod
 from calibration.discrepancy import scan as scan_mod
@@ -672,6 +672,11 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
                                              final_rms)
     # Found by the family test, not confirmed on held-out data: reported (not_confirmed.py).
     findings = not_confirmed.report(findings, unconfirmed, Finding, seen, final_rms)
+    # An effect the base absorbs (not tested) whose remnant is a not-identifiable finding's
+    # structure is among that finding's candidates too (absorbed_alike.py, issue 22).
+    findings = absorbed_alike.extend(
+        pb, findings, partial(_columns_of, terms, one_step_seen), not_ident, lifted,
+        _basis(pb, []))
     if shown:  # the protocol block must not call them separable beside that finding
         for k in shown:
             not_ident.setdefault(k, one_step[k])
@@ -1376,6 +1381,16 @@ def _chi2_excess(z: np.ndarray, n_cols: int, alpha: float) -> tuple[float, int, 
     p = float(chi2.sf(c2, dof))
     red = c2 / dof
     return red, dof, p, bool(p < alpha and red > EXCESS_CHI2_RED)
+
+
+def _columns_of(terms: list[Term], one_step_seen: list[one_step_report.OneStep],
+                f: Finding) -> np.ndarray | None:
+    """The raw columns a finding's structure was found with: its terms' (a finding kept in
+    the model), else the one-plateau candidates' the family test chose; None without."""
+    keys = f.term_keys
+    X = [t.X for t in terms if t.key in keys] if keys else [
+        r.X for r in one_step_seen if r.effect_id in (f.where.get("candidates") or [])]
+    return np.hstack(X) if X else None
 
 
 def _excess_test(pb: LinearProblem, res_g: np.ndarray, flagged: np.ndarray,
