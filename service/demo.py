@@ -97,6 +97,19 @@ def demo_spec(fast: bool = False) -> dict[str, Any]:
     }
 
 
+def step_line(entry: dict[str, Any], wall_s: float) -> str:
+    """One progress line per finished step. The step is numbered as the recording, the
+    report and the event log number it (from 0), with its place in the campaign beside it:
+    "step 7 (8/11)" next to the event "soak ended step=7" (a 1-based "8/11" alone read as
+    step 8 beside the event log's step=8, which is the next setpoint)."""
+    tau = entry.get("tau_s")
+    tau_txt = f", τ {tau / 60:.1f} min" if tau else ""
+    return (f"  step {entry['step']:2d} ({entry['step'] + 1}/{entry['steps']})  "
+            f"{entry['setpoint_c']:6.1f} °C  chamber {entry['chamber_c']:7.2f} °C  "
+            f"soak {entry['soak_s'] / 60:5.1f} min ({entry['reason']}{tau_txt})  "
+            f"[wall {wall_s:5.1f} s]")
+
+
 async def _demo(out: Path, spec: dict[str, Any],
                 sim_options: dict[str, Any] | None = None) -> int:
     """``sim_options``: passed to the twin (``open_rig``), e.g. ``{"multiplexed": True}`` to
@@ -125,12 +138,7 @@ async def _demo(out: Path, spec: dict[str, Any],
               flush=True)
 
     def on_step(entry: dict[str, Any]) -> None:
-        tau = entry.get("tau_s")
-        tau_txt = f", τ {tau / 60:.1f} min" if tau else ""
-        print(f"  step {entry['step'] + 1:2d}/{entry['steps']}  {entry['setpoint_c']:6.1f} °C  "
-              f"chamber {entry['chamber_c']:7.2f} °C  soak {entry['soak_s'] / 60:5.1f} min "
-              f"({entry['reason']}{tau_txt})  [wall {time.monotonic() - wall0:5.1f} s]",
-              flush=True)
+        print(step_line(entry, time.monotonic() - wall0), flush=True)
 
     clock = VirtualClock(idle_wall_s=IDLE_WALL_S, idle="loop")
     serials = list(spec.get("sensors") or [])
