@@ -86,3 +86,17 @@ def test_a_coarse_channels_rounding_is_noise_along_the_slope_in_the_channel_orac
     assert plain > 10.0
     np.testing.assert_allclose(none, plain, rtol=1e-9)
     assert coarse < 0.3**2 / pv * 1.01  # the plateau's rounding takes it
+
+
+def test_an_outlier_in_student_t_means_is_judged_against_that_tail():
+    # gen3 sizes an outlier from the Gaussian σ of a mean; among 700 means drawn from t_5 a
+    # reading that far off is a chance event, and the χ² threshold called it detectable
+    from scipy import stats as sps
+
+    from benchmarks.blind.gen3.separable import tail_power
+
+    level, n = ALPHA / 2, 700
+    gauss = sps.ncx2.sf(sps.chi2.isf(level / n, 3), 3, 100.0)
+    assert tail_power(100.0, 3, level, n, float("inf")) == gauss > 0.99
+    assert tail_power(100.0, 3, level, n, 5.0) < 0.01
+    assert tail_power(100.0, 3, level, n, 1e4) > 0.98  # a t with ν → ∞ is Gaussian
