@@ -21,11 +21,8 @@ from service.db.models import Campaign, Measurement, RigLease
 def test_sigkill_mid_campaign_then_another_process_completes(sf, migrated_db_url) -> None:
     cid = add_campaign(sf, SPEC)
     kills = 0
-    p = start_worker(migrated_db_url, cid)
     for target in (10, 40):  # kill once in step 0, once in step 1
-        # The next process starts now and waits for the rig's lease: its start-up (imports,
-        # the simulated rig) overlaps this one's run instead of following the kill.
-        after = start_worker(migrated_db_url, cid)
+        p = start_worker(migrated_db_url, cid)
         deadline = time.monotonic() + 60
         while n_measurements(sf, cid) < target and p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.02)
@@ -37,7 +34,7 @@ def test_sigkill_mid_campaign_then_another_process_completes(sf, migrated_db_url
             c = s.get(Campaign, cid)
             assert c.state == "running"  # as the dead process left it
             assert s.get(RigLease, "sim") is not None  # its lease stays until it expires
-        p = after
+    p = start_worker(migrated_db_url, cid)
     out, _ = p.communicate(timeout=120)
     assert p.returncode == 0, out
     with sf() as s:
