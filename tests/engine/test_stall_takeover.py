@@ -5,6 +5,8 @@ nothing: three processes on one database, the simulated rig over loopback Modbus
 from __future__ import annotations
 
 import signal
+import subprocess
+import threading
 import time
 from collections import Counter
 
@@ -13,6 +15,17 @@ from engine_helpers import add_campaign, n_measurements
 from sqlalchemy import select
 
 from service.db.models import Campaign, Measurement
+
+LOST = ("lost the lease", "lease no longer held")
+
+
+def _read_lines(p: subprocess.Popen, lines: list[str], lost: threading.Event) -> None:
+    """Every line ``p`` prints, until it exits; ``lost`` set at its first loss of the lease."""
+    assert p.stdout is not None
+    for line in p.stdout:
+        lines.append(line)
+        if any(what in line for what in LOST):
+            lost.set()
 
 
 def test_stalled_lease_holder_writes_nothing_after_it_resumes(sf, migrated_db_url) -> None:
@@ -31,16 +44,30 @@ def test_stalled_lease_holder_writes_nothing_after_it_resumes(sf, migrated_db_ur
     a.send_signal(signal.SIGSTOP)
     time.sleep(0.2)
     rows_at_stop = n_measurements(sf, cid)  # only A wrote so far
-    time.sleep(1.5 + 0.5)  # past A's 1.5 s lease
+    # B starts at once: it cannot have the rig before A's 1.5 s lease (renewed by A until the
+    # stop) has run out, so its start-up overlaps that wait instead of following a sleep.
     b = start_worker(migrated_db_url, cid)
     deadline = time.monotonic() + 60
     while n_measurements(sf, cid) < rows_at_stop + 5 and time.monotonic() < deadline:
         time.sleep(0.02)
     assert n_measurements(sf, cid) >= rows_at_stop + 5, "B did not take the rig over"
+    lines: list[str] = []
+    lost = threading.Event()
+    reader = threading.Thread(target=_read_lines, args=(a, lines, lost), daemon=True)
+    reader.start()
     a.send_signal(signal.SIGCONT)  # A wakes up believing it still runs the rig
-    time.sleep(2.0)  # A finishes what it was doing; B holds (and renews) the lease meanwhile
+    # A runs until it finds the lease lost (its renewal, or its next, fenced, commit), and
+    # on while B stores five more rows: B holds (and renews) the lease meanwhile.
+    assert lost.wait(60), "".join(lines)
+    rows_at_loss = n_measurements(sf, cid)
+    deadline = time.monotonic() + 60
+    while n_measurements(sf, cid) < rows_at_loss + 5 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert n_measurements(sf, cid) >= rows_at_loss + 5, "B stopped after A woke up"
     a.send_signal(signal.SIGKILL)
-    out_a, _ = a.communicate(timeout=60)
+    a.wait(60)
+    reader.join(60)
+    out_a = "".join(lines)
     commits_a = lines_a + sum(1 for ln in out_a.splitlines() if ln.startswith("commit"))
     assert commits_a == rows_at_stop, out_a  # nothing after SIGCONT
     assert "lost the lease" in out_a or "lease no longer held" in out_a, out_a

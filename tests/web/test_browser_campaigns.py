@@ -64,6 +64,7 @@ def test_a_refused_token_says_why(
 
 
 def test_a_refusal_stays_until_the_next_action(page, live_engine_service: LiveService) -> None:  # type: ignore[no-untyped-def]
+    page.clock.install()  # the page's timers on a clock the test moves (time still flows)
     sign_in(page, live_engine_service, "operator")  # lands on the campaigns
     page.fill("input[name=sensor]", "SN-REFUSED")
     page.fill("input[name=positions]", "sphere1")
@@ -73,6 +74,7 @@ def test_a_refusal_stays_until_the_next_action(page, live_engine_service: LiveSe
     assert refusal.startswith("HTTP 422: body.positions") and "sphere1" in refusal, refusal
     # the list re-reads every 5 s: the refusal must survive it
     reads = page.evaluate("() => window.__listReads")
+    page.clock.run_for(5_000)  # the re-read's 5 s, without waiting them on the wall clock
     page.wait_for_function("(n) => window.__listReads > n", arg=reads, timeout=15_000)
     assert page.inner_text("#error") == refusal
     # the next action clears it
