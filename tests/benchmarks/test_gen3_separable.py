@@ -22,6 +22,7 @@ from benchmarks.blind.gen3.separable import (
     signature_g,
 )
 from benchmarks.blind.gen3.writer import write_csv
+from calibration.discrepancy.effects import BY_ID
 from calibration.discrepancy.level import ALPHA
 
 
@@ -100,3 +101,18 @@ def test_an_outlier_in_student_t_means_is_judged_against_that_tail():
     assert tail_power(100.0, 3, level, n, float("inf")) == gauss > 0.99
     assert tail_power(100.0, 3, level, n, 5.0) < 0.01
     assert tail_power(100.0, 3, level, n, 1e4) > 0.98  # a t with ν → ∞ is Gaussian
+
+
+def test_the_family_multiplicity_counts_testable_families_and_the_effects_own_grid(tmp_path):
+    from benchmarks.blind.gen3.separable import family_multiplicity
+
+    drawn, _ = draw_effect("session_offset", _staircase(5), 2.0)
+    csv = tmp_path / "case.csv"
+    write_csv(simulate(drawn.case, drawn), csv)
+    ctx = Oracle(csv).ctx
+    k, g = family_multiplicity(ctx, "session_offset")
+    testable = [e for e in ("session_offset", "outlier", "thermal_hysteresis")
+                if BY_ID[e].identifiable(ctx)[0]]
+    assert "thermal_hysteresis" not in testable  # one way: the direction never changes
+    assert 2 <= k < 15 and g == max(len(BY_ID["session_offset"].grid(ctx)), 1) >= 2
+    assert family_multiplicity(ctx, "outlier") == (k, ctx.n)

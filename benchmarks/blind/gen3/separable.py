@@ -78,13 +78,26 @@ from benchmarks.blind.gen3.score import classify as score_class
 from benchmarks.blind.gen3.stats import clopper_pearson
 from benchmarks.blind.gen3.writer import write_csv
 from calibration.discrepancy import stats
-from calibration.discrepancy.effects import BY_ID
+from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID
 from calibration.discrepancy.level import ALPHA
 from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.discrepancy.slot_settling import SLOT_SETTLING
 from calibration.discrepancy.temperature_jump import thresholds_c
 
 JUMP = "a jump of the output where the temperature crosses"
+
+
+def family_multiplicity(ctx: Any, kid: str) -> tuple[int, int]:
+    """(K, G): the catalogue families the diagnosis can test on this recording
+    (``identifiable``), and the drawn effect's own multiplicity within its family (its grid
+    values; a per-reading effect: the readings). The family test's level for the effect is
+    then at most α/2 / (K·G) (Bonferroni over the families of its min-P, Šidák over the
+    grid within): a lower bound on its power, where the oracle's one test of the effect's
+    own columns at α/2 is an upper bound."""
+    k = sum(1 for e in ALL_EFFECTS if e.identifiable(ctx)[0])
+    eff = BY_ID[kid]
+    g = int(ctx.n) if eff.per_reading else max(len(eff.grid(ctx)), 1)
+    return max(k, 1), g
 
 
 def tail_power(lam: float, dof: int, level: float, readings: int, nu: float) -> float:
@@ -315,6 +328,15 @@ def oracle_case(out: Path, r: dict[str, Any], alpha: float = ALPHA) -> dict[str,
                     v["power_cols_gaussian"] = v["power_cols"]
                     v["power_cols"] = tail_power(v["lam_cols"], v["dof"], alpha / 2,
                                                  o.ctx.n, float(nu))
+        k_fam, g_own = family_multiplicity(o.ctx, kid)
+        b = sep["base"]
+        level_fam = alpha / 2 / (k_fam * g_own)
+        if BY_ID[kid].per_reading:  # tail_power spreads the level over the readings itself
+            power_family = tail_power(b["lam_cols"], b["dof"], alpha / 2 / k_fam, o.ctx.n,
+                                      float(nu) if nu else np.inf)
+        else:
+            power_family = float(sps.ncx2.sf(sps.chi2.isf(level_fam, b["dof"]), b["dof"],
+                                             max(b["lam_cols"], 1e-12))) if b["dof"] else 0.0
         check, null = noise_check(o, rows), null_check(o, sig_g)
         null_c = null_check(oc, sig_g)
     finally:
@@ -343,6 +365,7 @@ def oracle_case(out: Path, r: dict[str, Any], alpha: float = ALPHA) -> dict[str,
             "unmodelled_rivals": [x for x in rivals if not sep.get(x, {}).get(
                 "rivals_modelled")],
             "readings": int(o.ctx.n), "sep": sep,
+            "families": k_fam, "own_multiplicity": g_own, "power_family": power_family,
             "size": float(info.get("size", r["effect"]["size"]))}
 
 
@@ -391,8 +414,27 @@ def summary(rows: list[dict[str, Any]], key: str = "class") -> list[str]:
     return head
 
 
+def multiplicity_split(rows: list[dict[str, Any]]) -> list[str]:
+    """The detectable misses split by the family test's multiplicity (``power_family``):
+    detectable even at α/2 / (K·G), or only at one test's α/2."""
+    by: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+    for r in rows:
+        if r["class"] == "missed detectable" and not r["base_absorbs"]:
+            by[r["effect"]][0 if r["power_family"] >= POWER_SEPARABLE else 1] += 1
+    out = ["| effect | missed, tested (not absorbed): detectable at the family's level "
+           "α/2 / (K·G) | only at one test's α/2 |", "|---|---|---|"]
+    tot = [0, 0]
+    for e in sorted(by):
+        out.append(f"| `{e}` | {by[e][0]} | {by[e][1]} |")
+        tot = [tot[0] + by[e][0], tot[1] + by[e][1]]
+    out.append(f"| all | {tot[0]} | {tot[1]} |")
+    return out
+
+
 def markdown(rows: list[dict[str, Any]]) -> str:
     head = summary(rows)
+    head += ["", "The tested misses by the family test's multiplicity (K families testable "
+             "here, G the effect's grid values or readings):", ""] + multiplicity_split(rows)
     head += ["", "Without the temperature channel's rounding (the diagnosis' whitening "
              "alone):", ""] + summary(rows, "class_without_channel")
     head += ["", "Table fixture only (a hand fixture's re-seating turns are noise the "
