@@ -96,6 +96,25 @@ def test_the_header_stays_on_one_line_at_800_px(page, live_engine_service: LiveS
     assert page.eval_on_selector("header", "(e) => e.scrollWidth <= e.clientWidth")
 
 
+def _click_and_answer(page, selector: str, *, accept: bool) -> str:  # type: ignore[no-untyped-def]
+    """Click ``selector`` and answer the confirm it opens; its message. Fails at once when the
+    click opened none: a handler left waiting would answer the next click's dialog."""
+    answered: list[str] = []
+
+    def answer(dialog) -> None:  # type: ignore[no-untyped-def]
+        answered.append(dialog.message)
+        dialog.accept() if accept else dialog.dismiss()
+
+    page.once("dialog", answer)
+    page.click(selector)
+    for _ in range(100):  # the dialog's event may follow the click by a few ms
+        if answered:
+            return answered[0]
+        page.wait_for_timeout(50)
+    page.remove_listener("dialog", answer)
+    raise AssertionError(f"clicking {selector} opened no dialog")
+
+
 def _wait_state(page, *states: str) -> None:  # type: ignore[no-untyped-def]
     """Until the campaign's state on the page is one of ``states`` (an arrow function: the
     page's CSP forbids eval, which a bare expression would need)."""
@@ -146,18 +165,10 @@ def test_watch_a_campaign_live_pause_and_abort_ask_first(
     assert page.locator("#temp-chart polyline[data-series=setpoint]").count() == 1
 
     # pause asks first; "no" leaves it running
-    page.once("dialog", lambda d: d.dismiss())
-    page.click("#pause-btn")
+    _click_and_answer(page, "#pause-btn", accept=False)
     page.wait_for_timeout(300)
     assert page.inner_text("#state") in ("queued", "running")
-    asked: list[str] = []
-
-    def accept(dialog) -> None:  # type: ignore[no-untyped-def]
-        asked.append(dialog.message)
-        dialog.accept()
-
-    page.once("dialog", accept)
-    page.click("#pause-btn")
+    asked = [_click_and_answer(page, "#pause-btn", accept=True)]
     _wait_state(page, "paused")
     assert asked and asked[0].startswith("Pause campaign")
     # reloaded mid-campaign, the chart still has everything stored before the page opened
@@ -168,12 +179,10 @@ def test_watch_a_campaign_live_pause_and_abort_ask_first(
     assert int(page.get_attribute("#temp-chart polyline[data-series=chamber]", "data-n")) >= seen
     assert page.locator("#temp-chart polyline[data-series='die:SN-LIVE']").count() == 1
     # abort asks too: "no" keeps it paused, "yes" aborts
-    page.once("dialog", lambda d: d.dismiss())
-    page.click("#abort-btn")
+    _click_and_answer(page, "#abort-btn", accept=False)
     page.wait_for_timeout(300)
     assert page.inner_text("#state") == "paused"
-    page.once("dialog", accept)
-    page.click("#abort-btn")
+    asked.append(_click_and_answer(page, "#abort-btn", accept=True))
     _wait_state(page, "aborted")
     assert "cannot be resumed" in asked[1]
     journal = page.inner_text("#journal")
@@ -267,3 +276,24 @@ def test_a_pause_answer_older_than_the_stream_does_not_stick(
                            ".includes(line)", arg="state paused → running")
     _wait_state(page, "paused")
     assert live_engine_service.call("GET", f"/api/v1/campaigns/{cid}")["state"] == "paused"
+
+
+def test_the_controls_stay_put_while_progress_streams_in(
+    page, live_engine_service: LiveService,  # type: ignore[no-untyped-def]
+) -> None:
+    """A progress event redraws the campaign's facts, not its buttons: a button replaced
+    under the pointer between mousedown and mouseup never fires its click (an operator's
+    pause was lost while a fast rig streamed progress, and the live pause test's dialog
+    was then answered by the handler meant for the click before)."""
+    created = live_engine_service.start_campaign(
+        "SN-STILL", setpoints_c=[23, 30], soak_min=60, ramp_c_per_min=0.005)
+    sign_in(page, live_engine_service, "operator")
+    open_view(page, live_engine_service, f"#/campaigns/{created['id']}", "#pause-btn")
+    _wait_state(page, "running")
+    pause = page.query_selector("#pause-btn")
+    recording = page.query_selector("#recording")
+    seen = int(page.inner_text("#events"))
+    page.wait_for_function("(n) => Number(document.querySelector('#events').textContent) >= n",
+                           arg=seen + 3)  # three more progress events drawn
+    assert pause.evaluate("(b) => b.isConnected") and recording.evaluate("(a) => a.isConnected")
+    assert page.inner_text("#controls") == "pause abort"

@@ -294,6 +294,11 @@ async function campaignView(id) {
   const chartBox = h("div", { id: "chart-box" });
   const buttons = h("p", { id: "controls" });
   const links = h("p", { id: "links" });
+  // What the buttons and links were last drawn from: a progress event (several a second at
+  // a fast rig) redraws the facts, not these, unless they change. A button replaced under
+  // the pointer between mousedown and mouseup never fires its click: an operator's pause
+  // was lost (and the live pause test's dialog answered by a stale handler).
+  let buttonsKey = null, linksKey = null;
   let events = 0;
   const journal = h("ul", { id: "journal" });
   let prev = null;
@@ -367,13 +372,21 @@ async function campaignView(id) {
         h("dt", {}, "progress events"), h("dd", { id: "events" }, String(events)));
     }
     facts.replaceChildren(...rows);
-    buttons.replaceChildren();
+    const actions = [];
     if (atLeast("operator") && !done) {
-      if (["queued", "running"].includes(c.state)) buttons.append(control("pause"), " ");
-      if (c.state === "paused") buttons.append(control("resume"), " ");
-      buttons.append(control("abort"));
+      if (["queued", "running"].includes(c.state)) actions.push("pause");
+      if (c.state === "paused") actions.push("resume");
+      actions.push("abort");
+    }
+    if (actions.join(",") !== buttonsKey) {
+      buttonsKey = actions.join(",");
+      buttons.replaceChildren(...actions.flatMap((a, i) => (i ? [" ", control(a)] : [control(a)])));
     }
     const several = c.sensors.length > 1;
+    const linksNow = JSON.stringify([c.sensors, c.calibration_ids || null,
+      c.sensors_dropped || null, c.calibration_id || null]);
+    if (linksNow === linksKey) return;
+    linksKey = linksNow;
     links.replaceChildren(...(several
       ? c.sensors.map((sn, i) => [i ? " · " : "", h("a", { href: `/api/v1/campaigns/${id}/recording.csv?sensor=${encodeURIComponent(sn)}` }, `recording ${sn} (CSV)`)]).flat()
       : [h("a", { href: `/api/v1/campaigns/${id}/recording.csv`, id: "recording" }, "recording (CSV, format v1)")]));
