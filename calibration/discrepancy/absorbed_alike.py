@@ -47,26 +47,26 @@ SHARE_ALIKE = 0.9
 
 def extend(pb: Any, findings: list, columns_of: Callable[[Any], np.ndarray | None],
            not_ident: dict[str, dict[str, Any]], lifted: Callable[[Any, float], np.ndarray],
-           base: tuple[Any, np.ndarray]) -> list:
+           base: Callable[[], tuple[Any, np.ndarray]]) -> list:
     """``findings`` with each ``not_identifiable`` one's candidates extended by the absorbed
     effects (``not_ident`` entries "the base model absorbs …") that would leave its
     structure (module docstring). ``columns_of(f)``: the finding's raw lifted columns (m, k)
-    or None; ``lifted(eff, theta)``: an effect's; ``base``: the base's orthonormal basis and
-    whitened data (``diagnose._basis(pb, [])``)."""
+    or None; ``lifted(eff, theta)``: an effect's; ``base()``: the base's orthonormal basis
+    and whitened data (``diagnose._basis(pb, [])``), built only when a finding is judged —
+    not on every diagnosis."""
     absorbed = [e for e, v in not_ident.items()
                 if str(v.get("why", "")).startswith(ABSORBED_WHY)
                 and e in BY_ID and not BY_ID[e].per_reading]
-    if not absorbed or not any(f.effect == "not_identifiable" for f in findings):
+    if not absorbed or not any(_judged(f) for f in findings):
         return findings
-    U0, yw = base
+    U0, yw = base()
     e0 = yw - U0 @ (U0.T @ yw)
     dof = np.sqrt(pb.m / max(pb.m - U0.shape[1], 1))
     noise2 = float(stats.robust_scale(e0[:, None], dof)[0]) ** 2  # the stages' noise scale
     out = []
     for f in findings:
         cands = list(f.where.get("candidates") or [])
-        X = (columns_of(f) if f.effect == "not_identifiable" and cands and not f.rows
-             else None)
+        X = columns_of(f) if _judged(f) else None
         if X is None or X.shape[1] == 0:
             out.append(f)
             continue
@@ -78,6 +78,12 @@ def extend(pb: Any, findings: list, columns_of: Callable[[Any], np.ndarray | Non
             if share >= SHARE_ALIKE and ss * (1.0 - share) < MARGIN * noise2]
         out.append(f if not alike else _with(f, cands, alike))
     return out
+
+
+def _judged(f: Any) -> bool:
+    """A finding this step looks at: ``not_identifiable`` with candidates, not of single
+    readings (module docstring)."""
+    return f.effect == "not_identifiable" and bool(f.where.get("candidates")) and not f.rows
 
 
 def _structure(pb: Any, U0: Any, e0: np.ndarray, X: np.ndarray) -> np.ndarray:

@@ -676,7 +676,7 @@ def diagnose(recording: Recording, model: object | None = None, *, seed: int = 0
     # structure is among that finding's candidates too (absorbed_alike.py, issue 22).
     findings = absorbed_alike.extend(
         pb, findings, partial(_columns_of, terms, one_step_seen), not_ident, lifted,
-        _basis(pb, []))
+        partial(_basis, pb, []))
     if shown:  # the protocol block must not call them separable beside that finding
         for k in shown:
             not_ident.setdefault(k, one_step[k])
