@@ -990,21 +990,25 @@ def _selection_cov(x: np.ndarray, labels: np.ndarray, raw: np.ndarray, folds: np
     cannot be told from is still the slope the compensation applies.
     """
     term = np.zeros((3, coef.shape[1], coef.shape[1]))
+    lower_errors: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # degree d with the rate term
+    lower_coef: dict[tuple[int, bool], np.ndarray] = {}  # each lower model fitted once
     for a, (d_a, r_a) in enumerate(choice):
         # the axis' own held-out errors: the joint model's, or a simpler one's without
         # the rate term (:func:`_axis_choices`)
         own = joint_errors if (d_a, r_a) == (coef.shape[1], rate_cols is not None) \
             else errors[d_a]
         for d in range(1, d_a):
-            lower = (_heldout_errors_g(x, labels, raw, folds, d, rate_cols) if r_a
-                     else errors[d])
+            if r_a and d not in lower_errors:
+                lower_errors[d] = _heldout_errors_g(x, labels, raw, folds, d, rate_cols)
+            lower = lower_errors[d] if r_a else errors[d]
             if not (np.array_equal(lower[1], own[1]) and lower[1].size):
                 continue
             if _beats(lower[0][:, a], own[0][:, a], block[own[1]]):
                 continue
-            c_lower = _fit(x, labels, raw, d, rate_cols if r_a else None)[0][a]
+            if (d, r_a) not in lower_coef:
+                lower_coef[d, r_a] = _fit(x, labels, raw, d, rate_cols if r_a else None)[0]
             diff = -coef[a].copy()
-            diff[:d] += c_lower
+            diff[:d] += lower_coef[d, r_a][a]
             term[a] += np.outer(diff, diff)
     return term
 
