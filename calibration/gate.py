@@ -623,6 +623,7 @@ def _check_bias_tempco(model: ThermalModel, captures: Recording | None = None,
                 _fastest_rate_c_per_min(model, captures)))
     temps = np.linspace(lo, hi, n_temps)
     slope, se = bias_slope_g_per_c(model, temps)
+    se = np.nan_to_num(se)  # no covariance (a soak's, a ramp's): its point estimate judged
     excess = np.abs(slope) - BIAS_TEMPCO_SIGMAS * se
     k, i = np.unravel_index(int(np.argmax(excess)), excess.shape)
     if excess[k, i] <= BIAS_TEMPCO_MAX_G_PER_C:
@@ -635,7 +636,8 @@ def _check_bias_tempco(model: ThermalModel, captures: Recording | None = None,
 def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray, *,
                        with_choice: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(3, n) slope of each axis' bias polynomial (Eq. 8) at ``temperature_c``, g/°C, and
-    its standard error (0 where the model carries no covariance of its coefficients).
+    its standard error (NaN where the model carries no covariance of that axis'
+    coefficients: a soak's or a ramp's, an axis a warm-up fitted absolutely).
 
     The error is the fitted curve's own (``coeff_cov``: what the gate judges), or with
     ``with_choice`` the one that carries the choice of the degree as well
@@ -647,7 +649,7 @@ def bias_slope_g_per_c(model: ThermalModel, temperature_c: np.ndarray, *,
     for j in range(1, d + 1):
         D[:, j] = j * x ** (j - 1) / model.t_scale_c
     slope = model.coeffs[sfem.BIAS] @ D.T
-    se = np.zeros_like(slope)
+    se = np.full_like(slope, np.nan)
     cov = model.coeff_cov_choice if with_choice else model.coeff_cov
     if cov is not None and cov.shape[1:] == (d + 1, d + 1):
         for k in range(3):

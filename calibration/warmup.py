@@ -1165,14 +1165,12 @@ def _slope_report(model: ThermalModel, temperature_c: np.ndarray) -> dict[str, A
     temps = np.array([np.nanmin(T), model.t_centre_c, np.nanmax(T)])
     slope, se = bias_slope_g_per_c(model, temps, with_choice=True)
     fitted = [k for k, n in enumerate(sfem.PARAM_NAMES[:3]) if n in model.fitted]
-    cov = model.coeff_cov_choice
     # an axis fitted absolutely (two or more orientations) has standard errors of its
     # coefficients only, no covariance: its slope's error is not given (null), not 0
-    known = [cov is not None and bool(np.all(np.isfinite(cov[k]))) for k in range(3)]
     return {"temperature_c": [round(float(t), 3) for t in temps],
             **{sfem.PARAM_NAMES[k]: {"value": [round(float(v) * 1e6, 3) for v in slope[k]],
-                                     "stderr": [round(float(v) * 1e6, 3) if known[k] else None
-                                                for v in se[k]]}
+                                     "stderr": [round(float(v) * 1e6, 3) if np.isfinite(v)
+                                                else None for v in se[k]]}
                for k in fitted}}
 
 
