@@ -190,7 +190,8 @@ def rival_columns(o: Oracle, rival: str, key_id: str, sig: np.ndarray) -> list[n
     return out
 
 
-def _power(lam: float, dof: int, level: float) -> float:
+def chi2_power(lam: float, dof: int, level: float) -> float:
+    """P(χ²_dof(λ) > χ²_dof quantile at 1 − ``level``): a test of ``dof`` columns' power."""
     if dof <= 0:
         return 0.0
     return float(sps.ncx2.sf(sps.chi2.isf(level, dof), dof, max(lam, 1e-12)))
@@ -227,12 +228,12 @@ def separability(o: Oracle, key: dict, s_g: np.ndarray, rivals: list[str],
             Xo = o.off(U, X)
             Q = stats.orthonormal_basis(Xo) if np.linalg.norm(Xo) > 1e-9 else Xo[:, :0]
             lam = float(np.sum((Q.T @ r_sig) ** 2))
-            pw = _power(lam, Q.shape[1], level)
+            pw = chi2_power(lam, Q.shape[1], level)
             if pw > best["power_cols"]:
                 best = {"lam_cols": lam, "dof": int(Q.shape[1]), "power_cols": pw}
         if eff.per_reading:  # a max over readings: the level per reading (Bonferroni)
-            best["power_cols"] = _power(best["lam_cols"], best["dof"], level / o.ctx.n)
-        out[name] = {"lam_known": lam_known, "power_known": _power(lam_known, 1, level),
+            best["power_cols"] = chi2_power(best["lam_cols"], best["dof"], level / o.ctx.n)
+        out[name] = {"lam_known": lam_known, "power_known": chi2_power(lam_known, 1, level),
                      "rivals_modelled": len(chosen), **best}
     return out
 

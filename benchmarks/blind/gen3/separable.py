@@ -67,6 +67,7 @@ from benchmarks.blind.gen2.separable import (
     POWER_SEPARABLE,
     SLOT,
     Oracle,
+    chi2_power,
     rival_columns,
     separability,
 )
@@ -80,11 +81,13 @@ from benchmarks.blind.gen3.writer import write_csv
 from calibration.discrepancy import stats
 from calibration.discrepancy.effects import ALL_EFFECTS, BY_ID
 from calibration.discrepancy.level import ALPHA
+from calibration.discrepancy.protocol import Confusion
 from calibration.discrepancy.protocol_order import time_and_position_confounded
 from calibration.discrepancy.slot_settling import SLOT_SETTLING
 from calibration.discrepancy.temperature_jump import thresholds_c
 
 JUMP = "a jump of the output where the temperature crosses"
+SAME_ORDER = "same order on every plateau"
 
 
 def family_multiplicity(ctx: Any, kid: str) -> tuple[int, int]:
@@ -111,16 +114,14 @@ def tail_power(lam: float, dof: int, level: float, readings: int, nu: float) -> 
     chance event among a few hundred, and a χ² threshold called such a miss detectable."""
     if dof <= 0:
         return 0.0
-    target = float(np.log(level / max(readings, 1)))
     if not np.isfinite(nu):
-        return float(sps.ncx2.sf(sps.chi2.isf(level / max(readings, 1), dof), dof,
-                                 max(lam, 1e-12)))
+        return chi2_power(lam, dof, level / max(readings, 1))
+    target = float(np.log(level / max(readings, 1)))
     hi = 1.0
     while float(stats.reading_logsf(hi, dof, nu)) > target:
         hi *= 2.0
     t_star = brentq(lambda t: float(stats.reading_logsf(t, dof, nu)) - target, 0.0, hi)
     return float(sps.ncx2.sf(t_star, dof, max(lam, 1e-12)))
-SAME_ORDER = "same order on every plateau"
 
 
 class ChannelOracle(Oracle):
@@ -206,13 +207,8 @@ def hardest_single(sep: dict[str, Any], rivals: list[str]) -> float | None:
 
 def _alternatives(entry: dict[str, Any], kid: str) -> list[str]:
     """``Confusion.alternatives`` on the report's JSON of one entry."""
-    effects, versus = entry.get("effects") or [], entry.get("versus") or []
-    if kid not in effects:
-        return []
-    if versus:
-        side = versus if kid not in versus else [e for e in effects if e not in versus]
-        return [e for e in side if e != kid]
-    return [e for e in effects if e != kid]
+    return Confusion(tuple(entry.get("effects") or ()), entry.get("why", ""),
+                     versus=tuple(entry.get("versus") or ())).alternatives(kid)
 
 
 def best_jump(o: Oracle, kid: str, sig: np.ndarray) -> str | None:
@@ -330,13 +326,11 @@ def oracle_case(out: Path, r: dict[str, Any], alpha: float = ALPHA) -> dict[str,
                                                  o.ctx.n, float(nu))
         k_fam, g_own = family_multiplicity(o.ctx, kid)
         b = sep["base"]
-        level_fam = alpha / 2 / (k_fam * g_own)
         if BY_ID[kid].per_reading:  # tail_power spreads the level over the readings itself
             power_family = tail_power(b["lam_cols"], b["dof"], alpha / 2 / k_fam, o.ctx.n,
                                       float(nu) if nu else np.inf)
         else:
-            power_family = float(sps.ncx2.sf(sps.chi2.isf(level_fam, b["dof"]), b["dof"],
-                                             max(b["lam_cols"], 1e-12))) if b["dof"] else 0.0
+            power_family = chi2_power(b["lam_cols"], b["dof"], alpha / 2 / (k_fam * g_own))
         check, null = noise_check(o, rows), null_check(o, sig_g)
         null_c = null_check(oc, sig_g)
     finally:
